@@ -1,0 +1,174 @@
+//! EtherCAT Slave Information (ESI) files (ETG.2000): a vendor's XML description of its devices.
+//!
+//! [`EsiFile::parse`] reads the parts a master and a simulator need: identity, SyncManagers,
+//! FMMUs, PDOs with their entries, DC op-modes, mailbox protocols, EEPROM settings and the CoE
+//! object dictionary. [`Device::to_sii`] builds the SII EEPROM image a device programmed from
+//! this description would carry. Every error names the line and column in the XML.
+mod build;
+mod dictionary;
+mod parse;
+
+pub use build::coe_data_type;
+pub use dictionary::{Access, DataType, Dictionary, Object, SubObject};
+pub use parse::parse_number;
+
+/// An error in an ESI file, with its 1-based line and column.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("line {line}, column {column}: {message}")]
+pub struct EsiError {
+    pub line: u32,
+    pub column: u32,
+    pub message: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EsiFile {
+    pub vendor_id: u32,
+    pub vendor_name: String,
+    pub devices: Vec<Device>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Device {
+    /// Line of the `<Device>` element, for messages.
+    pub line: u32,
+    /// The `<Type>` text, e.g. "EK1100" (used as the order number).
+    pub type_name: String,
+    /// The English `<Name>`, or the first one.
+    pub name: String,
+    pub product_code: u32,
+    pub revision: u32,
+    /// Physics attribute: one character per port ('Y' 100BASE-TX, 'K' E-Bus, ...).
+    pub physics: String,
+    pub group_type: String,
+    pub profile_no: Option<u32>,
+    pub fmmus: Vec<FmmuKind>,
+    pub sync_managers: Vec<SmDesc>,
+    pub rx_pdos: Vec<PdoDesc>,
+    pub tx_pdos: Vec<PdoDesc>,
+    pub mailbox: Option<MailboxDesc>,
+    pub dc_op_modes: Vec<DcOpModeDesc>,
+    pub eeprom: Option<EepromDesc>,
+    /// E-Bus current in mA (negative: supplied).
+    pub ebus_current_ma: i16,
+    pub dictionary: Option<Dictionary>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FmmuKind {
+    Outputs,
+    Inputs,
+    MailboxState,
+    Other(String),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SmKind {
+    MailboxOut,
+    MailboxIn,
+    Outputs,
+    Inputs,
+    /// Declared but without a known role.
+    Unused,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SmDesc {
+    pub kind: SmKind,
+    pub start: u16,
+    pub default_size: Option<u16>,
+    pub control: u8,
+    pub enable: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct PdoDesc {
+    pub index: u16,
+    pub name: String,
+    /// SyncManager the PDO is assigned to by default, if any.
+    pub sm: Option<u8>,
+    pub fixed: bool,
+    pub mandatory: bool,
+    pub entries: Vec<PdoEntryDesc>,
+}
+
+impl PdoDesc {
+    pub fn bit_len(&self) -> u32 {
+        self.entries.iter().map(|e| e.bit_len as u32).sum()
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct PdoEntryDesc {
+    pub index: u16,
+    pub subindex: u8,
+    pub bit_len: u8,
+    pub name: String,
+    pub data_type: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct MailboxDesc {
+    pub coe: Option<CoeDesc>,
+    pub foe: bool,
+    pub eoe: bool,
+    pub soe: bool,
+    pub aoe: bool,
+    pub voe: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct CoeDesc {
+    pub sdo_info: bool,
+    pub pdo_assign: bool,
+    pub pdo_config: bool,
+    pub pdo_upload: bool,
+    pub complete_access: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DcOpModeDesc {
+    pub name: String,
+    pub description: String,
+    pub assign_activate: u16,
+    pub cycle_time_sync0_ns: u32,
+    pub cycle_time_sync0_factor: Option<i16>,
+    pub shift_time_sync0_ns: i32,
+    pub cycle_time_sync1_ns: u32,
+    pub cycle_time_sync1_factor: Option<i16>,
+    pub shift_time_sync1_ns: i32,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct EepromDesc {
+    pub byte_size: Option<u32>,
+    /// Words 0–6 of the SII header (up to 14 bytes).
+    pub config_data: Vec<u8>,
+    /// Bootstrap mailbox: rx offset, rx size, tx offset, tx size (8 bytes).
+    pub bootstrap: Vec<u8>,
+}
+
+impl EsiFile {
+    /// Parses the text of an ESI file.
+    pub fn parse(xml: &str) -> Result<EsiFile, EsiError> {
+        parse::parse_file(xml)
+    }
+
+    /// The device with `product_code` (and `revision`, if given).
+    pub fn device(&self, product_code: u32, revision: Option<u32>) -> Option<&Device> {
+        self.devices.iter().find(|d| d.product_code == product_code && revision.is_none_or(|r| d.revision == r))
+    }
+}
+
+impl Device {
+    /// The SII image this description implies, filled to the EEPROM size with 0xFF.
+    pub fn to_sii(&self, vendor_id: u32) -> Result<Vec<u8>, ferrocat_wire::Error> {
+        let info = self.sii_info(vendor_id);
+        info.to_image_sized(build::eeprom_size(self, &info))
+    }
+
+    /// The owned SII description this device implies.
+    pub fn sii_info(&self, vendor_id: u32) -> ferrocat_wire::sii::SiiInfo {
+        build::sii_info(self, vendor_id)
+    }
+}

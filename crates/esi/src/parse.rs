@@ -1,0 +1,261 @@
+//! Reading the XML: small helpers that turn a missing or malformed element into an error that
+//! points at it.
+use roxmltree::{Document, Node};
+
+use crate::dictionary::parse_dictionary;
+use crate::*;
+
+pub(crate) type R<T> = Result<T, EsiError>;
+
+pub(crate) fn err(node: Node<'_, '_>, message: impl Into<String>) -> EsiError {
+    let p = node.document().text_pos_at(node.range().start);
+    EsiError { line: p.row, column: p.col, message: message.into() }
+}
+
+pub(crate) fn line_of(node: Node<'_, '_>) -> u32 {
+    node.document().text_pos_at(node.range().start).row
+}
+
+pub(crate) fn children<'a, 'i>(node: Node<'a, 'i>, name: &'static str) -> impl Iterator<Item = Node<'a, 'i>> {
+    node.children().filter(move |c| c.is_element() && c.tag_name().name() == name)
+}
+
+pub(crate) fn child<'a, 'i>(node: Node<'a, 'i>, name: &'static str) -> Option<Node<'a, 'i>> {
+    children(node, name).next()
+}
+
+pub(crate) fn text<'a>(node: Node<'a, '_>) -> &'a str {
+    node.text().unwrap_or("").trim()
+}
+
+pub(crate) fn child_text(node: Node<'_, '_>, name: &'static str) -> Option<String> {
+    child(node, name).map(|c| text(c).to_string())
+}
+
+/// ESI numbers: `#x1A00` (hex), `0x1A00`, or decimal with an optional sign.
+pub fn parse_number(s: &str) -> Option<i64> {
+    let s = s.trim();
+    let (neg, body) = match s.strip_prefix('-') {
+        Some(b) => (true, b),
+        None => (false, s),
+    };
+    let v = if let Some(h) =
+        body.strip_prefix("#x").or_else(|| body.strip_prefix("0x")).or_else(|| body.strip_prefix("#X"))
+    {
+        i64::from_str_radix(h, 16).ok()?
+    } else {
+        body.parse::<i64>().ok()?
+    };
+    Some(if neg { -v } else { v })
+}
+
+/// A number that must fit `T`; `what` names it in the error.
+pub(crate) fn number<T: TryFrom<i64>>(node: Node<'_, '_>, s: &str, what: &str) -> R<T> {
+    let v = parse_number(s).ok_or_else(|| err(node, format!("{what}: '{s}' is not a number")))?;
+    T::try_from(v).map_err(|_| err(node, format!("{what}: {v} is out of range")))
+}
+
+pub(crate) fn attr_number<T: TryFrom<i64>>(node: Node<'_, '_>, attr: &str) -> R<Option<T>> {
+    node.attribute(attr)
+        .map(|s| number(node, s, &format!("attribute {attr} of <{}>", node.tag_name().name())))
+        .transpose()
+}
+
+pub(crate) fn child_number<T: TryFrom<i64>>(node: Node<'_, '_>, name: &'static str) -> R<Option<T>> {
+    child(node, name).map(|c| number(c, text(c), &format!("<{name}>"))).transpose()
+}
+
+pub(crate) fn req_child_number<T: TryFrom<i64>>(node: Node<'_, '_>, name: &'static str) -> R<T> {
+    child_number(node, name)?.ok_or_else(|| err(node, format!("<{}> lacks <{name}>", node.tag_name().name())))
+}
+
+pub(crate) fn flag(node: Node<'_, '_>, attr: &str) -> bool {
+    matches!(node.attribute(attr).map(str::trim), Some("1") | Some("true"))
+}
+
+/// Hex text (e.g. `<ConfigData>05060B0E</ConfigData>`) as bytes.
+pub(crate) fn hex_bytes(node: Node<'_, '_>, s: &str) -> R<Vec<u8>> {
+    let s: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+    if s.len() % 2 != 0 {
+        return Err(err(node, format!("hex data of odd length {}", s.len())));
+    }
+    (0..s.len())
+        .step_by(2)
+        .map(|i| {
+            u8::from_str_radix(&s[i..i + 2], 16)
+                .map_err(|_| err(node, format!("'{}' at character {i} is not hex", &s[i..i + 2])))
+        })
+        .collect()
+}
+
+/// The English `<Name>` (LcId 1033), else the first one.
+pub(crate) fn name_of(node: Node<'_, '_>) -> String {
+    let first = children(node, "Name").next();
+    children(node, "Name")
+        .find(|n| n.attribute("LcId") == Some("1033"))
+        .or(first)
+        .map(|n| text(n).to_string())
+        .unwrap_or_default()
+}
+
+pub(crate) fn parse_file(xml: &str) -> R<EsiFile> {
+    let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+    let doc = Document::parse_with_options(xml, opts).map_err(|e| {
+        let p = e.pos();
+        EsiError { line: p.row, column: p.col, message: format!("malformed XML: {e}") }
+    })?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "EtherCATInfo" {
+        return Err(err(root, format!("root element is <{}>, expected <EtherCATInfo>", root.tag_name().name())));
+    }
+    let vendor = child(root, "Vendor").ok_or_else(|| err(root, "no <Vendor>"))?;
+    let vendor_id = req_child_number::<i64>(vendor, "Id")?;
+    // Vendor IDs are 32-bit; some files write them as negative decimals.
+    let vendor_id = if vendor_id < 0 {
+        vendor_id as i32 as u32
+    } else {
+        u32::try_from(vendor_id).map_err(|_| err(vendor, "vendor Id out of range"))?
+    };
+    let devices_node = child(root, "Descriptions")
+        .and_then(|d| child(d, "Devices"))
+        .ok_or_else(|| err(root, "no <Descriptions><Devices>"))?;
+    let devices = children(devices_node, "Device").map(parse_device).collect::<R<Vec<_>>>()?;
+    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices })
+}
+
+fn parse_device(d: Node<'_, '_>) -> R<Device> {
+    let ty = child(d, "Type").ok_or_else(|| err(d, "<Device> lacks <Type>"))?;
+    let product_code = attr_number::<i64>(ty, "ProductCode")?.ok_or_else(|| err(ty, "<Type> lacks ProductCode"))?;
+    let revision = attr_number::<i64>(ty, "RevisionNo")?.unwrap_or(0);
+    let as_u32 = |v: i64, what: &str| -> R<u32> {
+        if v < 0 {
+            Ok(v as i32 as u32)
+        } else {
+            u32::try_from(v).map_err(|_| err(ty, format!("{what} {v} out of range")))
+        }
+    };
+    let mut dev = Device {
+        line: line_of(d),
+        type_name: text(ty).to_string(),
+        name: name_of(d),
+        product_code: as_u32(product_code, "ProductCode")?,
+        revision: as_u32(revision, "RevisionNo")?,
+        physics: d.attribute("Physics").unwrap_or("").to_string(),
+        group_type: child_text(d, "GroupType").unwrap_or_default(),
+        ..Default::default()
+    };
+    if let Some(profile) = child(d, "Profile") {
+        dev.profile_no = child_number(profile, "ProfileNo")?;
+        if let Some(dict) = child(profile, "Dictionary") {
+            dev.dictionary = Some(parse_dictionary(dict)?);
+        }
+    }
+    for f in children(d, "Fmmu") {
+        dev.fmmus.push(match text(f) {
+            "Outputs" => FmmuKind::Outputs,
+            "Inputs" => FmmuKind::Inputs,
+            "MBoxState" => FmmuKind::MailboxState,
+            other => FmmuKind::Other(other.to_string()),
+        });
+    }
+    for sm in children(d, "Sm") {
+        dev.sync_managers.push(SmDesc {
+            kind: match text(sm) {
+                "MBoxOut" => SmKind::MailboxOut,
+                "MBoxIn" => SmKind::MailboxIn,
+                "Outputs" => SmKind::Outputs,
+                "Inputs" => SmKind::Inputs,
+                _ => SmKind::Unused,
+            },
+            start: attr_number(sm, "StartAddress")?.ok_or_else(|| err(sm, "<Sm> lacks StartAddress"))?,
+            default_size: attr_number(sm, "DefaultSize")?,
+            control: attr_number(sm, "ControlByte")?.unwrap_or(0),
+            enable: attr_number::<i64>(sm, "Enable")?.unwrap_or(0) != 0 || flag(sm, "Enable"),
+        });
+    }
+    for p in children(d, "RxPdo") {
+        dev.rx_pdos.push(parse_pdo(p)?);
+    }
+    for p in children(d, "TxPdo") {
+        dev.tx_pdos.push(parse_pdo(p)?);
+    }
+    if let Some(m) = child(d, "Mailbox") {
+        dev.mailbox = Some(MailboxDesc {
+            coe: child(m, "CoE").map(|c| CoeDesc {
+                sdo_info: flag(c, "SdoInfo"),
+                pdo_assign: flag(c, "PdoAssign"),
+                pdo_config: flag(c, "PdoConfig"),
+                pdo_upload: flag(c, "PdoUpload"),
+                complete_access: flag(c, "CompleteAccess"),
+            }),
+            foe: child(m, "FoE").is_some(),
+            eoe: child(m, "EoE").is_some(),
+            soe: child(m, "SoE").is_some(),
+            aoe: child(m, "AoE").is_some(),
+            voe: child(m, "VoE").is_some(),
+        });
+    }
+    if let Some(dc) = child(d, "Dc") {
+        for m in children(dc, "OpMode") {
+            let cyc = |name| -> R<(u32, Option<i16>)> {
+                match child(m, name) {
+                    Some(c) => Ok((number(c, text(c), name)?, attr_number(c, "Factor")?)),
+                    None => Ok((0, None)),
+                }
+            };
+            let (cycle_time_sync0_ns, cycle_time_sync0_factor) = cyc("CycleTimeSync0")?;
+            let (cycle_time_sync1_ns, cycle_time_sync1_factor) = cyc("CycleTimeSync1")?;
+            dev.dc_op_modes.push(DcOpModeDesc {
+                name: child_text(m, "Name").unwrap_or_default(),
+                description: child_text(m, "Desc").unwrap_or_default(),
+                assign_activate: child_number(m, "AssignActivate")?.unwrap_or(0),
+                cycle_time_sync0_ns,
+                cycle_time_sync0_factor,
+                shift_time_sync0_ns: child_number(m, "ShiftTimeSync0")?.unwrap_or(0),
+                cycle_time_sync1_ns,
+                cycle_time_sync1_factor,
+                shift_time_sync1_ns: child_number(m, "ShiftTimeSync1")?.unwrap_or(0),
+            });
+        }
+    }
+    if let Some(e) = child(d, "Eeprom") {
+        let hex = |name| -> R<Vec<u8>> {
+            match child(e, name) {
+                Some(c) => hex_bytes(c, text(c)),
+                None => Ok(Vec::new()),
+            }
+        };
+        dev.eeprom = Some(EepromDesc {
+            byte_size: child_number(e, "ByteSize")?,
+            config_data: hex("ConfigData")?,
+            bootstrap: hex("BootStrap")?,
+        });
+    }
+    if let Some(el) = child(d, "Info").and_then(|i| child(i, "Electrical")) {
+        dev.ebus_current_ma = child_number(el, "EBusCurrent")?.unwrap_or(0);
+    }
+    Ok(dev)
+}
+
+fn parse_pdo(p: Node<'_, '_>) -> R<PdoDesc> {
+    let mut pdo = PdoDesc {
+        index: req_child_number(p, "Index")?,
+        name: name_of(p),
+        sm: attr_number(p, "Sm")?,
+        fixed: flag(p, "Fixed"),
+        mandatory: flag(p, "Mandatory"),
+        entries: Vec::new(),
+    };
+    for e in children(p, "Entry") {
+        let index: u16 = req_child_number(e, "Index")?;
+        pdo.entries.push(PdoEntryDesc {
+            index,
+            // Padding entries (index 0) usually omit the subindex.
+            subindex: child_number(e, "SubIndex")?.unwrap_or(0),
+            bit_len: req_child_number(e, "BitLen")?,
+            name: name_of(e),
+            data_type: child_text(e, "DataType").unwrap_or_default(),
+        });
+    }
+    Ok(pdo)
+}
