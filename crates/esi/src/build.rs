@@ -152,10 +152,10 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
     if dev.profile_no == Some(402) {
         general.ds402_channels = 1;
     }
-    info.categories.push(CategoryRepr::General(general));
+    info.push(CategoryRepr::General(general));
 
     if !dev.fmmus.is_empty() {
-        info.categories.push(CategoryRepr::Fmmu(
+        info.push(CategoryRepr::Fmmu(
             dev.fmmus
                 .iter()
                 .map(|f| match f {
@@ -168,7 +168,7 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
         ));
     }
     if !dev.sync_managers.is_empty() {
-        info.categories.push(CategoryRepr::SyncManagers(
+        info.push(CategoryRepr::SyncManagers(
             dev.sync_managers
                 .iter()
                 .map(|s| SmEntry {
@@ -190,11 +190,11 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
     }
     if !dev.tx_pdos.is_empty() {
         let p = pdos(&dev.tx_pdos, &mut info);
-        info.categories.push(CategoryRepr::TxPdos(p));
+        info.push(CategoryRepr::TxPdos(p));
     }
     if !dev.rx_pdos.is_empty() {
         let p = pdos(&dev.rx_pdos, &mut info);
-        info.categories.push(CategoryRepr::RxPdos(p));
+        info.push(CategoryRepr::RxPdos(p));
     }
     if !dev.dc_op_modes.is_empty() {
         let modes = dev
@@ -212,7 +212,7 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
                 reserved: [0; 4],
             })
             .collect();
-        info.categories.push(CategoryRepr::Dc(modes));
+        info.push(CategoryRepr::Dc(modes));
     }
     info
 }

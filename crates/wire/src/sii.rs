@@ -689,6 +689,8 @@ impl DcOpMode {
 }
 
 #[cfg(feature = "alloc")]
+pub mod dump;
+#[cfg(feature = "alloc")]
 mod owned;
 #[cfg(feature = "alloc")]
-pub use owned::{CategoryRepr, Pdo, SiiInfo};
+pub use owned::{CategoryRepr, Pdo, SiiCategory, SiiInfo};

@@ -53,7 +53,7 @@ impl CategoryRepr {
         }
     }
 
-    /// The category's data, padded with zero to a whole number of words.
+    /// The category's data as the typed form encodes it (before padding).
     pub fn data_bytes(&self) -> Vec<u8> {
         let mut d = Vec::new();
         match self {
@@ -83,9 +83,6 @@ impl CategoryRepr {
             }
             CategoryRepr::Dc(m) => m.iter().for_each(|e| d.extend_from_slice(&e.to_bytes())),
             CategoryRepr::Other { data, .. } => d.extend_from_slice(data),
-        }
-        if d.len() % 2 == 1 {
-            d.push(0);
         }
         d
     }
@@ -128,26 +125,52 @@ impl CategoryRepr {
     }
 }
 
+/// A category and the bytes its size covers beyond the typed content (padding, which real
+/// images fill with 0x00 or 0xFF, or vendor data), so that images re-encode byte for byte.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SiiCategory {
+    pub repr: CategoryRepr,
+    pub trailing: Vec<u8>,
+}
+
+impl SiiCategory {
+    pub fn new(repr: CategoryRepr) -> Self {
+        SiiCategory { repr, trailing: Vec::new() }
+    }
+
+    /// The category's data: typed content, trailing bytes, and a zero byte if needed to fill
+    /// the last word.
+    pub fn data(&self) -> Vec<u8> {
+        let mut d = self.repr.data_bytes();
+        d.extend_from_slice(&self.trailing);
+        if d.len() % 2 == 1 {
+            d.push(0);
+        }
+        d
+    }
+}
+
 /// The owned description of an SII image.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct SiiInfo {
     pub header: SiiHeader,
-    pub categories: Vec<CategoryRepr>,
+    pub categories: Vec<SiiCategory>,
 }
 
 impl SiiInfo {
-    /// Reads a whole image. Malformed known categories are errors naming the byte offset;
-    /// categories that would not re-encode byte for byte are kept raw.
+    /// Reads a whole image. Malformed known categories are errors naming the byte offset.
+    /// A typed category keeps the bytes after its content; one whose typed form would not
+    /// reproduce its bytes is kept raw.
     pub fn from_image(bytes: &[u8]) -> Result<Self> {
         let image = SiiImage::parse(bytes)?;
         let mut categories = Vec::new();
         for c in image.categories() {
             let c = c?;
             let typed = CategoryRepr::parse_typed(&c)?;
-            categories.push(if typed.data_bytes() == c.data {
-                typed
-            } else {
-                CategoryRepr::Other { kind: c.kind, data: c.data.to_vec() }
+            let encoded = typed.data_bytes();
+            categories.push(match c.data.strip_prefix(&encoded[..]) {
+                Some(rest) if encoded.len() <= c.data.len() => SiiCategory { repr: typed, trailing: rest.to_vec() },
+                _ => SiiCategory::new(CategoryRepr::Other { kind: c.kind, data: c.data.to_vec() }),
             });
         }
         Ok(SiiInfo { header: *image.header(), categories })
@@ -157,8 +180,8 @@ impl SiiInfo {
     pub fn to_image(&self) -> Vec<u8> {
         let mut out = Vec::from(self.header.to_bytes());
         for c in &self.categories {
-            let d = c.data_bytes();
-            out.extend_from_slice(&c.kind().to_le_bytes());
+            let d = c.data();
+            out.extend_from_slice(&c.repr.kind().to_le_bytes());
             out.extend_from_slice(&((d.len() / 2) as u16).to_le_bytes());
             out.extend_from_slice(&d);
         }
@@ -178,7 +201,12 @@ impl SiiInfo {
     }
 
     fn find(&self, kind: u16) -> Option<&CategoryRepr> {
-        self.categories.iter().find(|c| c.kind() == kind)
+        self.categories.iter().map(|c| &c.repr).find(|c| c.kind() == kind)
+    }
+
+    /// Appends a category.
+    pub fn push(&mut self, repr: CategoryRepr) {
+        self.categories.push(SiiCategory::new(repr));
     }
 
     pub fn strings(&self) -> &[Vec<u8>] {
@@ -201,12 +229,12 @@ impl SiiInfo {
         }
         // ISO-8859-1 where possible; other characters become '?'. Strings are capped at 255 bytes.
         let bytes: Vec<u8> = s.chars().map(|c| if (c as u32) < 256 { c as u8 } else { b'?' }).take(255).collect();
-        let pos = self.categories.iter().position(|c| matches!(c, CategoryRepr::Strings(_)));
+        let pos = self.categories.iter().position(|c| matches!(c.repr, CategoryRepr::Strings(_)));
         let idx = pos.unwrap_or_else(|| {
-            self.categories.insert(0, CategoryRepr::Strings(Vec::new()));
+            self.categories.insert(0, SiiCategory::new(CategoryRepr::Strings(Vec::new())));
             0
         });
-        let CategoryRepr::Strings(list) = &mut self.categories[idx] else { unreachable!() };
+        let CategoryRepr::Strings(list) = &mut self.categories[idx].repr else { return 0 };
         if let Some(i) = list.iter().position(|x| *x == bytes) {
             return (i + 1) as u8;
         }

@@ -1,0 +1,143 @@
+//! `ferrocat esi`: devices of an ESI file, and the SII images built from them.
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use ferrocat_esi::{parse_number, Device, EsiFile};
+use serde_json::json;
+
+use crate::outln;
+
+fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
+    if let Ok(i) = sel.parse::<usize>() {
+        return file.devices.get(i).with_context(|| {
+            format!(
+                "device {i}: the file has {} devices (0–{})",
+                file.devices.len(),
+                file.devices.len().saturating_sub(1)
+            )
+        });
+    }
+    let (p, r) = match sel.split_once(':') {
+        Some((p, r)) => (p, Some(r)),
+        None => (sel, None),
+    };
+    let num = |s: &str| -> anyhow::Result<u32> {
+        parse_number(s)
+            .and_then(|v| u32::try_from(v).ok())
+            .with_context(|| format!("--device {sel}: '{s}' is not a number"))
+    };
+    let product = num(p)?;
+    let revision = r.map(num).transpose()?;
+    // Without a revision, take the newest.
+    file.devices
+        .iter()
+        .filter(|d| d.product_code == product && revision.is_none_or(|r| d.revision == r))
+        .max_by_key(|d| d.revision)
+        .with_context(|| {
+            format!(
+                "no device with product code {product:#010x}{}",
+                revision.map(|r| format!(" revision {r:#010x}")).unwrap_or_default()
+            )
+        })
+}
+
+pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool) -> anyhow::Result<ExitCode> {
+    let xml = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    let chosen = match (device, sii_out) {
+        (Some(sel), _) => Some(select(&file, sel)?),
+        (None, Some(_)) if file.devices.len() == 1 => Some(&file.devices[0]),
+        (None, Some(_)) => {
+            bail!("{} describes {} devices: choose one with --device", path.display(), file.devices.len())
+        }
+        (None, None) => None,
+    };
+    let Some(d) = chosen else {
+        if json {
+            let v: Vec<_> = file.devices.iter().enumerate().map(|(i, d)| json!({
+                "position": i, "type": d.type_name, "name": d.name, "product_code": d.product_code, "revision": d.revision,
+            })).collect();
+            outln!("{}", json!({"vendor_id": file.vendor_id, "vendor": file.vendor_name, "devices": v}));
+        } else {
+            outln!("{}: vendor {:#010x} {}", path.display(), file.vendor_id, file.vendor_name);
+            for (i, d) in file.devices.iter().enumerate() {
+                outln!(
+                    "{i:3}  product {:#010x} revision {:#010x}  {:14} {}",
+                    d.product_code,
+                    d.revision,
+                    d.type_name,
+                    d.name
+                );
+            }
+        }
+        return Ok(ExitCode::SUCCESS);
+    };
+    if let Some(out) = sii_out {
+        let img = d.to_sii(file.vendor_id).with_context(|| format!("building the SII image of {}", d.type_name))?;
+        std::fs::write(out, &img).with_context(|| format!("writing {}", out.display()))?;
+        eprintln!("wrote {} ({} bytes) for {} revision {:#010x}", out.display(), img.len(), d.type_name, d.revision);
+    }
+    if json {
+        outln!(
+            "{}",
+            json!({
+                "type": d.type_name, "name": d.name, "vendor_id": file.vendor_id, "product_code": d.product_code, "revision": d.revision,
+                "profile": d.profile_no,
+                "sync_managers": d.sync_managers.iter().map(|s| json!({"kind": format!("{:?}", s.kind), "start": s.start, "default_size": s.default_size, "control": s.control, "enable": s.enable})).collect::<Vec<_>>(),
+                "rx_pdos": d.rx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "sm": p.sm, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
+                "tx_pdos": d.tx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "sm": p.sm, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
+                "dc_op_modes": d.dc_op_modes.iter().map(|m| json!({"name": m.name, "assign_activate": m.assign_activate, "cycle_time_sync0_ns": m.cycle_time_sync0_ns, "shift_time_sync0_ns": m.shift_time_sync0_ns})).collect::<Vec<_>>(),
+                "objects": d.dictionary.as_ref().map(|x| x.objects.len()).unwrap_or(0),
+            })
+        );
+    } else if sii_out.is_none() {
+        outln!(
+            "{} — {} (vendor {:#010x} product {:#010x} revision {:#010x}, line {})",
+            d.type_name,
+            d.name,
+            file.vendor_id,
+            d.product_code,
+            d.revision,
+            d.line
+        );
+        for s in &d.sync_managers {
+            outln!(
+                "  SM  {:?} start {:#06x} size {:?} control {:#04x} enable {}",
+                s.kind,
+                s.start,
+                s.default_size,
+                s.control,
+                s.enable
+            );
+        }
+        for (kind, pdos) in [("RxPDO", &d.rx_pdos), ("TxPDO", &d.tx_pdos)] {
+            for p in pdos {
+                outln!("  {kind} {:#06x} {:?} SM {:?} ({} bits)", p.index, p.name, p.sm, p.bit_len());
+                for e in &p.entries {
+                    outln!(
+                        "        {:#06x}:{:02x} {:2} bits {} {:?}",
+                        e.index,
+                        e.subindex,
+                        e.bit_len,
+                        e.data_type,
+                        e.name
+                    );
+                }
+            }
+        }
+        for m in &d.dc_op_modes {
+            outln!(
+                "  DC  {:?} AssignActivate {:#06x} SYNC0 {} ns shift {} ns",
+                m.name,
+                m.assign_activate,
+                m.cycle_time_sync0_ns,
+                m.shift_time_sync0_ns
+            );
+        }
+        if let Some(dict) = &d.dictionary {
+            outln!("  object dictionary: {} objects", dict.objects.len());
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,75 @@
+//! `ferrocat`: one binary for every tool of the project.
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod esi;
+mod pcap;
+mod sii;
+
+#[derive(Parser)]
+#[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List every EtherCAT datagram of a pcap or pcapng file, one line per datagram.
+    Pcap {
+        file: PathBuf,
+        /// One JSON object per line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Decode an SII EEPROM image (raw binary, Intel HEX or hex text).
+    Sii {
+        file: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the devices of an ESI file, show one, or write its SII image.
+    Esi {
+        file: PathBuf,
+        /// Device to show or build: its position in the listing (0-based) or `#xPRODUCT[:#xREVISION]`.
+        #[arg(long)]
+        device: Option<String>,
+        /// Write the device's SII EEPROM image to this file.
+        #[arg(long, value_name = "OUT")]
+        sii: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Pcap { file, json } => pcap::run(&file, json),
+        Command::Sii { file, json } => sii::run(&file, json),
+        Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("ferrocat: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Writes a line to stdout; a closed pipe (e.g. `| head`) ends the program quietly.
+pub(crate) fn out(line: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    if writeln!(o, "{line}").is_err() {
+        std::process::exit(0);
+    }
+}
+
+#[macro_export]
+macro_rules! outln {
+    ($($t:tt)*) => { $crate::out(format_args!($($t)*)) };
+}
