@@ -495,6 +495,8 @@ pub mod fmmu_usage {
     pub const OUTPUTS: u8 = 1;
     pub const INPUTS: u8 = 2;
     pub const SM_STATUS: u8 = 3;
+    /// Fill byte of an odd-length list; reads as "unused".
+    pub const PAD: u8 = 0xFF;
 }
 
 /// One SyncManager entry of category 41 (8 bytes).

@@ -65,7 +65,13 @@ impl CategoryRepr {
                 }
             }
             CategoryRepr::General(g) => d.extend_from_slice(&g.to_bytes()),
-            CategoryRepr::Fmmu(f) => d.extend_from_slice(f),
+            CategoryRepr::Fmmu(f) => {
+                d.extend_from_slice(f);
+                // Pad to a whole word with 0xFF ("unused"), as Beckhoff images do.
+                if f.len() % 2 == 1 {
+                    d.push(fmmu_usage::PAD);
+                }
+            }
             CategoryRepr::SyncManagers(s) => s.iter().for_each(|e| d.extend_from_slice(&e.to_bytes())),
             CategoryRepr::TxPdos(p) | CategoryRepr::RxPdos(p) => {
                 for pdo in p {
@@ -96,7 +102,11 @@ impl CategoryRepr {
                 CategoryRepr::Strings(s.iter().map(|x| x.to_vec()).collect())
             }
             category::GENERAL => CategoryRepr::General(General::parse(d).map_err(|e| e.shifted(at))?),
-            category::FMMU => CategoryRepr::Fmmu(d.to_vec()),
+            category::FMMU => {
+                // A final 0xFF in an even-sized list is the word padding, not a fifth FMMU.
+                let n = if d.len() % 2 == 0 && d.last() == Some(&fmmu_usage::PAD) { d.len() - 1 } else { d.len() };
+                CategoryRepr::Fmmu(d[..n].to_vec())
+            }
             category::SYNC_MANAGER => {
                 CategoryRepr::SyncManagers(records(d, SmEntry::LEN).map(SmEntry::parse).collect::<Result<_>>()?)
             }
