@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# The whole test suite, from a fresh machine: installs what the tests need when it is missing
+# (tshark from Debian, cargo-nextest and cargo-fuzz from crates.io), then runs unit, property and
+# integration tests with nextest, and every fuzz target for a bounded time.
+#
+#   scripts/test.sh                 everything
+#   FUZZ_SECONDS=0 scripts/test.sh  skip fuzzing
+#   FERROCAT_SHARED=/path/to/shared scripts/test.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+FUZZ_SECONDS="${FUZZ_SECONDS:-20}"
+log() { printf '\n== %s\n' "$*"; }
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else
+  echo "need root to run: $*" >&2; exit 1; fi; }
+
+# --- tools ---------------------------------------------------------------------------------
+if ! command -v tshark >/dev/null; then
+  log "installing tshark (Debian package; Wireshark's dissectors are the independent decoder)"
+  export DEBIAN_FRONTEND=noninteractive
+  echo "wireshark-common wireshark-common/install-setuid boolean false" | as_root debconf-set-selections || true
+  as_root apt-get update -qq
+  as_root apt-get install -y -qq --no-install-recommends tshark >/dev/null
+fi
+if ! cargo nextest --version >/dev/null 2>&1; then
+  log "installing cargo-nextest"
+  cargo install cargo-nextest --locked
+fi
+if [ "$FUZZ_SECONDS" != 0 ] && ! cargo fuzz --version >/dev/null 2>&1; then
+  log "installing cargo-fuzz"
+  cargo install cargo-fuzz --locked
+fi
+
+# --- shared data ---------------------------------------------------------------------------
+shared="${FERROCAT_SHARED:-$(pwd)/../shared}"
+filter=()
+if [ -d "$shared/captures" ]; then
+  export FERROCAT_SHARED="$(cd "$shared" && pwd)"
+  echo "shared test data: $FERROCAT_SHARED"
+else
+  echo "SKIPPED: tests named needs_shared_* — shared test data not found at $shared (set FERROCAT_SHARED)"
+  filter=(-E 'not test(needs_shared)')
+fi
+
+# --- checks and tests ----------------------------------------------------------------------
+log "cargo fmt --check"
+cargo fmt --all -- --check
+
+log "tests (cargo nextest)"
+cargo nextest run --workspace --no-fail-fast "${filter[@]}"
+
+log "doc tests"
+cargo test --workspace --doc -q
+
+# --- fuzzing -------------------------------------------------------------------------------
+if [ "$FUZZ_SECONDS" != 0 ]; then
+  # cargo-fuzz needs nightly flags: use a nightly toolchain if rustup has one, else let the
+  # stable compiler accept them.
+  if rustup toolchain list 2>/dev/null | grep -q '^nightly'; then fuzz=(cargo +nightly fuzz); else
+    export RUSTC_BOOTSTRAP=1; fuzz=(cargo fuzz); fi
+  log "fuzzing each target for ${FUZZ_SECONDS}s"
+  (cd fuzz && "${fuzz[@]}" build -O)
+  for t in $(cd fuzz && "${fuzz[@]}" list); do
+    echo "-- fuzz target $t"
+    (cd fuzz && "${fuzz[@]}" run -O "$t" -- -max_total_time="$FUZZ_SECONDS" -max_len=4096 -print_final_stats=0 2>&1 \
+      | grep -E 'DONE|ERROR|panicked|SUMMARY' || true; exit "${PIPESTATUS[0]}")
+  done
+fi
+
+log "all tests passed"
