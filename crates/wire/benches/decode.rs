@@ -39,7 +39,9 @@ fn decode(c: &mut Criterion) {
             for f in &frames {
                 let frame = Frame::parse(black_box(f)).unwrap().unwrap();
                 for d in frame.pdu.datagrams() {
-                    acc = acc.wrapping_add(d.wkc() as u64 + d.header().len as u64 + d.data().first().copied().unwrap_or(0) as u64);
+                    acc = acc.wrapping_add(
+                        d.wkc() as u64 + d.header().len as u64 + d.data().first().copied().unwrap_or(0) as u64,
+                    );
                 }
             }
             acc
