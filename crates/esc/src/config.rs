@@ -1,0 +1,95 @@
+//! What kind of ESC is simulated: identification and feature registers, memory sizes, DC width.
+use ferrocat_wire::register::Features;
+
+/// Width of the DC system time (esc-spec §3.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DcWidth {
+    /// No DC unit: the DC registers read as absent (WKC 0).
+    None,
+    /// 32-bit system time (ESC20-like), wrapping every ≈4.29 s.
+    Bits32,
+    Bits64,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EscConfig {
+    pub esc_type: u8,
+    pub revision: u8,
+    pub build: u16,
+    pub fmmu_count: u8,
+    pub sm_count: u8,
+    pub ram_kb: u8,
+    /// 0x0007: two bits per port (00 none, 01 not configured, 10 E-Bus, 11 MII).
+    pub port_descriptor: u8,
+    pub features: u16,
+    pub dc: DcWidth,
+    /// SII interface reads 8 bytes (bit 6 of 0x0502) rather than 4.
+    pub sii_read_8: bool,
+}
+
+impl EscConfig {
+    /// Beckhoff ET1100: 4 ports, 8 FMMUs, 8 SMs, 8 KiB, 64-bit DC.
+    pub fn et1100() -> Self {
+        EscConfig {
+            esc_type: 0x11,
+            revision: 0x00,
+            build: 0x0003,
+            fmmu_count: 8,
+            sm_count: 8,
+            ram_kb: 8,
+            port_descriptor: 0b10_10_10_11,
+            features: Features::DC | Features::DC_64BIT | Features::EBUS_ENHANCED_LINK_DETECTION | 0x0180,
+            dc: DcWidth::Bits64,
+            sii_read_8: true,
+        }
+    }
+
+    /// Microchip LAN9252: 2 MII ports, 3 FMMUs, 4 SMs, 4 KiB, 64-bit DC (esc-spec §7).
+    pub fn lan9252() -> Self {
+        EscConfig {
+            esc_type: 0xC0,
+            revision: 0x01,
+            build: 0x0001,
+            fmmu_count: 3,
+            sm_count: 4,
+            ram_kb: 4,
+            port_descriptor: 0b00_00_11_11,
+            features: Features::DC | Features::DC_64BIT | Features::MII_ENHANCED_LINK_DETECTION,
+            dc: DcWidth::Bits64,
+            sii_read_8: false,
+        }
+    }
+
+    /// An ESC20-like controller with a 32-bit DC.
+    pub fn esc20() -> Self {
+        EscConfig {
+            esc_type: 0x02,
+            revision: 0x02,
+            build: 0x0001,
+            fmmu_count: 4,
+            sm_count: 4,
+            ram_kb: 4,
+            port_descriptor: 0b00_00_11_11,
+            features: Features::DC,
+            dc: DcWidth::Bits32,
+            sii_read_8: false,
+        }
+    }
+
+    /// An ESC without a DC unit (EK1100 couplers have one; some simple devices do not).
+    pub fn without_dc(mut self) -> Self {
+        self.features &= !(Features::DC | Features::DC_64BIT);
+        self.dc = DcWidth::None;
+        self
+    }
+
+    /// Bytes of the whole address space: registers, user RAM and process RAM.
+    pub fn memory_len(&self) -> usize {
+        0x1000 + self.ram_kb as usize * 1024
+    }
+
+    /// Whether port `n` exists.
+    pub fn has_port(&self, n: u8) -> bool {
+        (self.port_descriptor >> (2 * (n & 3))) & 3 != 0
+    }
+}

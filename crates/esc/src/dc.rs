@@ -1,0 +1,346 @@
+//! The distributed-clock unit (esc-spec §3).
+//!
+//! Time model, all in exact integer arithmetic so that a simulation gives the same numbers on
+//! any machine:
+//! - the oscillator advances a phase in attoseconds at `1 + drift_ppb·10⁻⁹` of true time;
+//! - the local time counts whole 10 ns ticks of that phase, plus the time control loop's
+//!   corrections, which are whole nanoseconds (the datasheet's 9 ns / 11 ns ticks);
+//! - the correction rate is the datasheet's `SCD / (5·(SCS+SCD+2)·(SCS−SCD+2))` (esc-spec §3.5).
+//!
+//! The loop that turns samples (writes of 0x0910) into SCD is not documented; ours is described
+//! in docs/esc-model.md.
+use crate::config::DcWidth;
+
+const AS_PER_NS: i128 = 1_000_000_000;
+const TICK_AS: i128 = 10 * AS_PER_NS;
+/// Phase time constant of the loop: an offset is slewed out over about this long.
+pub const TCL_PHASE_TAU_NS: i128 = 50_000_000;
+
+/// Clock deviation of a speed-counter difference, as a fraction `num/den` (esc-spec §3.5).
+fn scd_rate(scs: u16, scd: i16) -> (i128, i128) {
+    let (s, d) = (scs as i128, scd as i128);
+    (d, 5 * (s + d + 2) * (s - d + 2))
+}
+
+#[derive(Debug, Clone)]
+pub struct DcUnit {
+    pub width: DcWidth,
+    /// True time up to which the accumulators are folded.
+    t_ns: u64,
+    phase_as: i128,
+    corr_as: i128,
+    pub drift_ppb: i64,
+    pub offset: u64,
+    pub delay: u32,
+    pub scs: u16,
+    pub scd: i16,
+    pub depth_diff: u8,
+    pub depth_speed: u8,
+    /// Filtered `local − received` (0x092C), in ns.
+    pub diff_mean_ns: i64,
+    /// Estimated free-running frequency error, in units of 10⁻¹⁵.
+    freq_est_fpp: i128,
+    last_sample: Option<(u64, i64)>,
+    pub sync: SyncUnit,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct SyncUnit {
+    pub activation: u8,
+    pub pulse_len_10ns: u16,
+    pub start_time: u64,
+    pub cycle0_ns: u32,
+    pub cycle1_ns: u32,
+    /// System time of the next SYNC0 pulse, when armed.
+    pub next_sync0: Option<u64>,
+    pub activation_status: u8,
+    pub sync0_count: u64,
+    pub sync1_count: u64,
+}
+
+impl DcUnit {
+    /// A DC unit at true time `t_ns` whose local time starts at `local0_ns` (power-on).
+    pub fn new(width: DcWidth, t_ns: u64, local0_ns: u64, drift_ppb: i64) -> Self {
+        DcUnit {
+            width,
+            t_ns,
+            phase_as: local0_ns as i128 * AS_PER_NS,
+            corr_as: 0,
+            drift_ppb,
+            offset: 0,
+            delay: 0,
+            scs: 0x1000,
+            scd: 0,
+            depth_diff: 4,
+            depth_speed: 12,
+            diff_mean_ns: 0,
+            freq_est_fpp: 0,
+            last_sample: None,
+            sync: SyncUnit::default(),
+        }
+    }
+
+    fn mask(&self, v: u64) -> u64 {
+        match self.width {
+            DcWidth::Bits32 => v & 0xFFFF_FFFF,
+            _ => v,
+        }
+    }
+
+    /// Local time (ns) at true time `t_ns` (which may lie slightly before the folded time).
+    pub fn local_at(&self, t_ns: u64) -> u64 {
+        self.mask(self.local_ext_at(t_ns))
+    }
+
+    /// System time without the 32-bit wrap of a 32-bit DC: what the SYNC unit schedules on.
+    fn system_ext_at(&self, t_ns: u64) -> u64 {
+        self.local_ext_at(t_ns).wrapping_add(self.offset)
+    }
+
+    fn local_ext_at(&self, t_ns: u64) -> u64 {
+        let dt = t_ns as i128 - self.t_ns as i128;
+        let phase = self.phase_as + dt * (AS_PER_NS + self.drift_ppb as i128);
+        let (num, den) = scd_rate(self.scs, self.scd);
+        let corr = self.corr_as - dt * AS_PER_NS * num / den;
+        let local = 10 * phase.div_euclid(TICK_AS) + corr.div_euclid(AS_PER_NS);
+        local.max(0) as u64
+    }
+
+    /// Local copy of the system time at true time `t_ns`.
+    pub fn system_at(&self, t_ns: u64) -> u64 {
+        self.mask(self.local_at(t_ns).wrapping_add(self.offset))
+    }
+
+    /// What an ECAT read of 0x0910 returns for a frame that reached this ESC at `t_ns`.
+    pub fn ecat_system_time(&self, t_ns: u64) -> u64 {
+        self.mask(self.system_at(t_ns).wrapping_sub(self.delay as u64))
+    }
+
+    /// Folds the accumulators forward to `t_ns` (never backward).
+    pub fn fold_to(&mut self, t_ns: u64) {
+        if t_ns <= self.t_ns {
+            return;
+        }
+        let dt = (t_ns - self.t_ns) as i128;
+        self.phase_as += dt * (AS_PER_NS + self.drift_ppb as i128);
+        let (num, den) = scd_rate(self.scs, self.scd);
+        self.corr_as -= dt * AS_PER_NS * num / den;
+        self.t_ns = t_ns;
+    }
+
+    /// Changes the oscillator's frequency error from `t_ns` on (wander, temperature steps).
+    pub fn set_drift_ppb(&mut self, t_ns: u64, drift_ppb: i64) {
+        self.fold_to(t_ns);
+        self.drift_ppb = drift_ppb;
+    }
+
+    /// The TCL filters are reset by any write of 0x0930 (esc-spec §3.2).
+    pub fn reset_filters(&mut self, t_ns: u64) {
+        self.fold_to(t_ns);
+        self.diff_mean_ns = 0;
+        self.scd = 0;
+        self.freq_est_fpp = 0;
+        self.last_sample = None;
+    }
+
+    /// A write of `received` to 0x0910 by a frame that reached this ESC at `t_ns`: one sample of
+    /// the time control loop, on the lower 32 bits (esc-spec §3.5).
+    pub fn tcl_sample(&mut self, t_ns: u64, received: u32) {
+        self.fold_to(t_ns);
+        let local_copy = self.ecat_system_time(t_ns) as u32;
+        let dt = local_copy.wrapping_sub(received) as i32 as i64;
+        // Mean of the difference over 2^depth samples (0x092C).
+        let n1 = (self.depth_diff & 0x0F) as u32;
+        self.diff_mean_ns += (dt - self.diff_mean_ns) >> n1;
+        // Frequency: the change of the difference since the last sample, plus what the loop
+        // was already correcting, filtered over 2^depth samples.
+        let local = self.local_at(t_ns);
+        let (num, den) = scd_rate(self.scs, self.scd);
+        let applied_fpp = 1_000_000_000_000_000 * num / den;
+        if let Some((l0, dt0)) = self.last_sample {
+            let span = local.wrapping_sub(l0) as i128;
+            if span > 0 {
+                let meas = applied_fpp + (dt - dt0) as i128 * 1_000_000_000_000_000 / span;
+                let n2 = (self.depth_speed & 0x0F) as u32;
+                self.freq_est_fpp += (meas - self.freq_est_fpp) >> n2.min(6);
+            }
+        }
+        self.last_sample = Some((local, dt));
+        // Command: cancel the frequency error and slew the mean difference out over TAU.
+        let want_fpp = self.freq_est_fpp + self.diff_mean_ns as i128 * 1_000_000_000_000_000 / TCL_PHASE_TAU_NS;
+        self.scd = self.scd_for(want_fpp);
+    }
+
+    /// The speed-counter difference whose rate is closest to `fpp` (10⁻¹⁵), within the bound.
+    fn scd_for(&self, fpp: i128) -> i16 {
+        let max = (self.scs as i32 - 0x7F).max(0);
+        let rate = |d: i32| -> i128 {
+            let (n, den) = scd_rate(self.scs, d as i16);
+            1_000_000_000_000_000 * n / den
+        };
+        let (mut lo, mut hi) = (-max, max);
+        while lo < hi {
+            let mid = (lo + hi).div_euclid(2);
+            if rate(mid) < fpp {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        let best = if lo > -max && (rate(lo - 1) - fpp).abs() <= (rate(lo) - fpp).abs() { lo - 1 } else { lo };
+        best as i16
+    }
+
+    /// 0x092C as sign–magnitude.
+    pub fn difference_register(&self) -> u32 {
+        ferrocat_wire::register::SystemTimeDifference::from_ns(self.diff_mean_ns).0
+    }
+
+    /// Arms or disarms SYNC generation after a write of 0x0981 or 0x0990 at `t_ns`.
+    pub fn sync_activation_written(&mut self, t_ns: u64) {
+        use ferrocat_wire::register::dc_activation as act;
+        let a = self.sync.activation;
+        if a & act::CYCLIC_OPERATION == 0 || a & (act::SYNC0 | act::SYNC1) == 0 {
+            self.sync.next_sync0 = None;
+            self.sync.activation_status = 0;
+            return;
+        }
+        let now = self.system_ext_at(t_ns);
+        let range_mask = if self.width == DcWidth::Bits32 { 0xFFFF_FFFF } else { u64::MAX };
+        let ahead = self.sync.start_time.wrapping_sub(now) & range_mask;
+        let near = if a & act::NEAR_FUTURE_2S != 0 {
+            2_100_000_000
+        } else if self.width == DcWidth::Bits32 {
+            1 << 31
+        } else {
+            1 << 63
+        };
+        let in_future = ahead > 0 && ahead < near;
+        let s = &mut self.sync;
+        s.activation_status = 0b01;
+        s.next_sync0 = if in_future {
+            Some(now + ahead)
+        } else if a & act::START_TIME_CHECK != 0 {
+            // Plausibility check: a start time outside the near future fires at once.
+            s.activation_status |= 0b100;
+            Some(now)
+        } else if self.width == DcWidth::Bits32 {
+            // Without the check a past start time waits for the time to come round again:
+            // ≈4.3 s on a 32-bit DC, never on a 64-bit one.
+            Some(now + ahead)
+        } else {
+            None
+        };
+    }
+
+    /// System times of the SYNC0 pulses up to true time `t_ns`, advancing the schedule.
+    pub fn take_sync0_until(&mut self, t_ns: u64, out: &mut Vec<u64>) {
+        let now = self.system_ext_at(t_ns);
+        while let Some(next) = self.sync.next_sync0 {
+            if now < next {
+                break;
+            }
+            out.push(self.mask(next));
+            self.sync.sync0_count += 1;
+            self.sync.activation_status &= !0b01;
+            if self.sync.cycle1_ns == 0 || self.sync.cycle1_ns < self.sync.cycle0_ns {
+                self.sync.sync1_count += 1;
+            }
+            self.sync.next_sync0 = match self.sync.cycle0_ns {
+                0 => None, // single shot
+                c => Some(next + c as u64),
+            };
+        }
+    }
+
+    /// The next SYNC0 as the register 0x0990 shows it.
+    pub fn next_sync0_register(&self) -> u64 {
+        self.sync.next_sync0.map(|n| self.mask(n)).unwrap_or(self.sync.start_time)
+    }
+
+    /// True time of the next SYNC0 pulse, searching from `from_ns`.
+    pub fn next_sync0_true(&self, from_ns: u64) -> Option<u64> {
+        let next = self.sync.next_sync0?;
+        let now = self.system_ext_at(from_ns);
+        if next <= now {
+            return Some(from_ns);
+        }
+        let ahead = next - now;
+        let reached = |t: u64| self.system_ext_at(t) >= next;
+        let mut t = from_ns.saturating_add(ahead.saturating_sub(ahead / 1000 + 10));
+        let mut step = 1u64 << 16;
+        while !reached(t) {
+            t = t.saturating_add(step);
+        }
+        while step > 0 {
+            if t >= from_ns + step && reached(t - step) {
+                t -= step;
+            } else {
+                step >>= 1;
+            }
+        }
+        Some(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_and_drift() {
+        let dc = DcUnit::new(DcWidth::Bits64, 0, 0, 50_000);
+        assert_eq!(dc.local_at(9), 0);
+        assert_eq!(dc.local_at(10), 10);
+        // 50 ppm fast: after 1 s the local clock is 50 µs ahead.
+        assert_eq!(dc.local_at(1_000_000_000), 1_000_050_000);
+        let slow = DcUnit::new(DcWidth::Bits64, 0, 0, -100_000);
+        assert_eq!(slow.local_at(1_000_000_000), 999_900_000);
+    }
+
+    #[test]
+    fn wrap_on_32_bit() {
+        let mut dc = DcUnit::new(DcWidth::Bits32, 0, 0, 0);
+        dc.offset = 0xFFFF_FFF0;
+        assert_eq!(dc.system_at(100), 84);
+    }
+
+    #[test]
+    fn loop_locks_a_50ppm_clock_to_a_reference() {
+        // Reference = true time; the slave runs 50 ppm fast, starts 3 µs ahead; samples every 1 ms.
+        let mut dc = DcUnit::new(DcWidth::Bits64, 0, 3_000, 50_000);
+        let mut worst_late = 0i64;
+        for k in 1..=20_000u64 {
+            let t = k * 1_000_000;
+            dc.tcl_sample(t, t as u32);
+            if k > 10_000 {
+                worst_late = worst_late.max((dc.system_at(t) as i64 - t as i64).abs());
+            }
+        }
+        assert!(worst_late <= 20, "error after lock {worst_late} ns, scd {}", dc.scd);
+        assert!(dc.scd > 2000, "50 ppm needs a large SCD, got {}", dc.scd);
+    }
+
+    #[test]
+    fn sync0_single_shot_and_past_start() {
+        use ferrocat_wire::register::dc_activation as act;
+        let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
+        dc.sync.start_time = 1_000;
+        dc.sync.cycle0_ns = 0;
+        dc.sync.activation = act::CYCLIC_OPERATION | act::SYNC0;
+        dc.sync_activation_written(0);
+        let mut v = Vec::new();
+        dc.take_sync0_until(5_000, &mut v);
+        dc.take_sync0_until(50_000, &mut v);
+        assert_eq!(v, [1_000]);
+        // A start time in the past never fires on 64 bit without the check, at once with it.
+        dc.sync.start_time = 10;
+        dc.sync_activation_written(60_000);
+        dc.take_sync0_until(70_000, &mut v);
+        assert_eq!(v.len(), 1);
+        dc.sync.activation |= act::START_TIME_CHECK;
+        dc.sync_activation_written(80_000);
+        dc.take_sync0_until(80_000, &mut v);
+        assert_eq!(v.len(), 2);
+    }
+}

@@ -1,0 +1,873 @@
+//! The slave controller: memory, datagram processing, end-of-frame effects.
+use ferrocat_wire::datagram::HEADER_LEN;
+use ferrocat_wire::register::{addr, AlState, AlStatus, AlStatusCode, Fmmu, SiiControl, SyncManager};
+use ferrocat_wire::sii::{SiiInfo, SmEntry};
+use ferrocat_wire::Command;
+
+use crate::al::AlMachine;
+use crate::app::{Application, Pdi};
+use crate::config::{DcWidth, EscConfig};
+use crate::dc::DcUnit;
+use crate::eeprom::Eeprom;
+use crate::regs::{ecat_writable, is_dc};
+
+/// When a frame met this ESC: the true time its first bit reached each port, and the time it
+/// passed the processing unit.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameTiming {
+    pub port_ns: [Option<u64>; 4],
+    pub epu_ns: u64,
+}
+
+/// Link of one port, as the segment wires it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkState {
+    pub link: bool,
+}
+
+#[derive(Debug, Clone, Default)]
+struct SmState {
+    /// Mailbox mode: the buffer holds a message.
+    full: bool,
+    /// Buffered mode, ECAT writes: the buffer being written (committed when its last byte is).
+    staging: Vec<u8>,
+    last_byte_written: bool,
+    last_byte_read: bool,
+}
+
+/// What the SII says the device needs, for the AL checks.
+#[derive(Debug, Clone, Default)]
+struct Expected {
+    mailbox: Option<(SmEntry, SmEntry)>,
+    /// SM index, SII entry, expected length in bytes.
+    process_data: Vec<(u8, SmEntry, u16)>,
+}
+
+impl Expected {
+    fn from_sii(info: &SiiInfo) -> Self {
+        let h = &info.header;
+        let sms = info.sync_managers();
+        let mailbox = (h.mailbox_rx_size > 0 && h.mailbox_tx_size > 0).then(|| {
+            let out = sms.first().copied().unwrap_or(SmEntry {
+                start: h.mailbox_rx_offset,
+                length: h.mailbox_rx_size,
+                control: 0x26,
+                ..Default::default()
+            });
+            let inp = sms.get(1).copied().unwrap_or(SmEntry {
+                start: h.mailbox_tx_offset,
+                length: h.mailbox_tx_size,
+                control: 0x22,
+                ..Default::default()
+            });
+            (
+                SmEntry { start: h.mailbox_rx_offset, length: h.mailbox_rx_size, ..out },
+                SmEntry { start: h.mailbox_tx_offset, length: h.mailbox_tx_size, ..inp },
+            )
+        });
+        let mut process_data = Vec::new();
+        for (i, s) in sms.iter().enumerate() {
+            if s.sm_type == SmEntry::TYPE_OUTPUTS || s.sm_type == SmEntry::TYPE_INPUTS {
+                let pdos = if s.sm_type == SmEntry::TYPE_OUTPUTS { info.rx_pdos() } else { info.tx_pdos() };
+                let bits: u32 = pdos.iter().filter(|p| p.sync_manager as usize == i).map(|p| p.bit_len()).sum();
+                let len = if s.length > 0 { s.length } else { bits.div_ceil(8) as u16 };
+                process_data.push((i as u8, *s, len));
+            }
+        }
+        Expected { mailbox, process_data }
+    }
+}
+
+/// Per-frame bookkeeping of writes with side effects.
+#[derive(Debug, Default)]
+struct FrameEffects {
+    latch_ports: bool,
+    latch_epu: bool,
+    tcl: Option<[Option<u8>; 4]>,
+}
+
+#[derive(Debug)]
+pub struct Esc {
+    pub config: EscConfig,
+    mem: Vec<u8>,
+    pending: Vec<(u16, u8)>,
+    eeprom: Eeprom,
+    pub dc: Option<DcUnit>,
+    links: [bool; 4],
+    pub al: AlMachine,
+    app: Box<dyn Application>,
+    now_ns: u64,
+    sms: Vec<SmState>,
+    expected: Expected,
+    effects: FrameEffects,
+    wd_last_trigger_ns: u64,
+    reset_seq: u8,
+    sync_scratch: Vec<u64>,
+    /// Frames this ESC processed.
+    pub frames: u64,
+    /// AL status changes, for tests and tracing.
+    pub al_changes: u64,
+    /// Drift (ppb) and power-on local time the DC unit restarts with after a power cycle.
+    dc_init: (i64, u64),
+}
+
+impl Esc {
+    /// An ESC loaded with an SII image, running `app`; its DC oscillator has `drift_ppb`.
+    pub fn new(config: EscConfig, sii: Vec<u8>, app: Box<dyn Application>, drift_ppb: i64, t_ns: u64) -> Self {
+        let expected = SiiInfo::from_image(&sii).map(|i| Expected::from_sii(&i)).unwrap_or_default();
+        let mut esc = Esc {
+            mem: vec![0; config.memory_len()],
+            sms: vec![SmState::default(); config.sm_count as usize],
+            config,
+            pending: Vec::with_capacity(64),
+            eeprom: Eeprom::new(sii),
+            dc: None,
+            links: [false; 4],
+            al: AlMachine::default(),
+            app,
+            now_ns: t_ns,
+            expected,
+            effects: FrameEffects::default(),
+            wd_last_trigger_ns: t_ns,
+            reset_seq: 0,
+            sync_scratch: Vec::new(),
+            frames: 0,
+            al_changes: 0,
+            dc_init: (drift_ppb, 0),
+        };
+        esc.power_on(t_ns);
+        esc
+    }
+
+    /// Power-on (or a reset): registers to their reset values, configuration words from the
+    /// EEPROM, a fresh DC unit whose local time starts at zero.
+    pub fn power_on(&mut self, t_ns: u64) {
+        let c = self.config.clone();
+        self.mem.fill(0);
+        self.pending.clear();
+        self.sms.iter_mut().for_each(|s| *s = SmState::default());
+        self.al = AlMachine::default();
+        self.now_ns = t_ns;
+        self.wd_last_trigger_ns = t_ns;
+        let m = &mut self.mem;
+        m[0] = c.esc_type;
+        m[1] = c.revision;
+        m[2..4].copy_from_slice(&c.build.to_le_bytes());
+        m[4] = c.fmmu_count;
+        m[5] = c.sm_count;
+        m[6] = c.ram_kb;
+        m[7] = c.port_descriptor;
+        m[8..10].copy_from_slice(&c.features.to_le_bytes());
+        m[0x0100] = 0x01; // forwarding rule: destroy non-EtherCAT frames
+        m[0x0102] = 0x07; // RX FIFO size
+        m[0x0400..0x0402].copy_from_slice(&2498u16.to_le_bytes());
+        m[0x0410..0x0412].copy_from_slice(&1000u16.to_le_bytes());
+        m[0x0420..0x0422].copy_from_slice(&1000u16.to_le_bytes());
+        m[0x0440] = 1;
+        let e = &self.eeprom;
+        m[0x0140..0x0142].copy_from_slice(&e.word(0).to_le_bytes());
+        m[0x0150..0x0152].copy_from_slice(&e.word(1).to_le_bytes());
+        m[0x0982..0x0984].copy_from_slice(&e.word(2).to_le_bytes());
+        m[0x0152..0x0154].copy_from_slice(&e.word(3).to_le_bytes());
+        m[0x0012..0x0014].copy_from_slice(&e.word(4).to_le_bytes());
+        let size_kbit = e.word(0x3E) as u32 + 1;
+        let ctl = if c.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 }
+            | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 };
+        m[0x0502..0x0504].copy_from_slice(&ctl.to_le_bytes());
+        self.dc = match c.dc {
+            DcWidth::None => None,
+            w => {
+                let (drift, local0) = self.dc_init;
+                Some(DcUnit::new(w, t_ns, local0, drift))
+            }
+        };
+        self.refresh_registers();
+    }
+
+    pub fn app(&self) -> &dyn Application {
+        self.app.as_ref()
+    }
+    pub fn app_mut(&mut self) -> &mut dyn Application {
+        self.app.as_mut()
+    }
+
+    /// A frame arrived broken on `port`: the invalid-frame counter (0x0300 + 2·port) counts,
+    /// saturating at 255.
+    pub fn count_rx_error(&mut self, port: u8) {
+        let a = 0x0300 + 2 * (port as usize & 3);
+        self.mem[a] = self.mem[a].saturating_add(1);
+    }
+
+    pub fn station_address(&self) -> u16 {
+        u16::from_le_bytes([self.mem[0x10], self.mem[0x11]])
+    }
+
+    pub fn set_link(&mut self, port: u8, link: bool) {
+        self.links[(port & 3) as usize] = link;
+        self.refresh_registers();
+    }
+
+    /// Whether a frame leaves through `port` (link up and loop open), or loops back.
+    pub fn port_open(&self, port: u8) -> bool {
+        let p = (port & 3) as usize;
+        if !self.config.has_port(port) || !self.links[p] {
+            return false;
+        }
+        // Loop control 0x0101: 00 auto, 01 auto-close, 10 open, 11 closed.
+        match (self.mem[0x0101] >> (2 * p)) & 3 {
+            3 => false,
+            _ => true,
+        }
+    }
+
+    /// Reads memory as the PDI sees it (tests, tools).
+    pub fn peek(&self, a: u16, len: usize) -> &[u8] {
+        let a = a as usize;
+        &self.mem[a.min(self.mem.len())..(a + len).min(self.mem.len())]
+    }
+
+    /// Current time of this ESC's model.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns
+    }
+
+    /// Advances the ESC to true time `t_ns`: SYNC pulses, watchdogs, EEPROM busy.
+    pub fn advance_to(&mut self, t_ns: u64) {
+        if t_ns < self.now_ns {
+            return;
+        }
+        if let Some(dc) = self.dc.as_mut() {
+            let mut pulses = std::mem::take(&mut self.sync_scratch);
+            dc.take_sync0_until(t_ns, &mut pulses);
+            for sys in pulses.drain(..) {
+                let mut pdi = Pdi { mem: &mut self.mem, now_ns: t_ns };
+                self.app.sync0(&mut pdi, sys);
+            }
+            self.sync_scratch = pulses;
+            dc.fold_to(t_ns);
+        }
+        self.now_ns = t_ns;
+        self.check_watchdog();
+        if self.eeprom.reloaded && !self.eeprom.busy(t_ns) {
+            self.eeprom.reloaded = false;
+        }
+    }
+
+    /// True time of the next internal event (a SYNC0 pulse), for a virtual-time scheduler.
+    pub fn next_event_ns(&self) -> Option<u64> {
+        self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns))
+    }
+
+    fn process_data_watchdog_ns(&self) -> Option<u64> {
+        let div = u16::from_le_bytes([self.mem[0x0400], self.mem[0x0401]]) as u64;
+        let n = u16::from_le_bytes([self.mem[0x0420], self.mem[0x0421]]) as u64;
+        (n > 0).then(|| n * (div + 2) * 40)
+    }
+
+    fn check_watchdog(&mut self) {
+        let Some(wd) = self.process_data_watchdog_ns() else { return };
+        let armed = (0..self.config.sm_count).any(|n| {
+            let s = self.sm(n);
+            s.enabled() && !s.is_mailbox() && s.ecat_writes() && s.control & SyncManager::WATCHDOG != 0
+        });
+        if armed && self.al.state == AlState::Op && self.now_ns.saturating_sub(self.wd_last_trigger_ns) > wd {
+            self.mem[0x0440] = 0;
+            self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
+            self.al.fail(AlState::SafeOp, AlStatusCode::SM_WATCHDOG);
+            self.al_changes += 1;
+            self.refresh_registers();
+        }
+    }
+
+    fn sm(&self, n: u8) -> SyncManager {
+        let a = addr::sm(n) as usize;
+        SyncManager::parse(&self.mem[a..a + 8]).unwrap_or_default()
+    }
+
+    /// Rewrites registers whose value follows from state: DL status, AL status, SM status,
+    /// SII busy, DC times.
+    fn refresh_registers(&mut self) {
+        let mut dl = 1u16; // EEPROM loaded, PDI operational
+        for p in 0..4u8 {
+            let link = self.links[p as usize] && self.config.has_port(p);
+            if link {
+                dl |= 1 << (4 + p);
+                dl |= 1 << (9 + 2 * p);
+            }
+            if !self.port_open(p) && !(p == 0 && link) {
+                dl |= 1 << (8 + 2 * p);
+            }
+        }
+        self.mem[0x0110..0x0112].copy_from_slice(&dl.to_le_bytes());
+        self.mem[0x0130..0x0132].copy_from_slice(&self.al.status().0.to_le_bytes());
+        self.mem[0x0134..0x0136].copy_from_slice(&self.al.code.0.to_le_bytes());
+        for n in 0..self.config.sm_count {
+            let a = addr::sm(n) as usize;
+            let s = &self.sms[n as usize];
+            let mut status = self.mem[a + 5] & !0x08;
+            if s.full {
+                status |= SyncManager::STATUS_MAILBOX_FULL;
+            }
+            self.mem[a + 5] = status;
+        }
+        let busy = if self.eeprom.busy(self.now_ns) { SiiControl::BUSY } else { 0 };
+        let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800);
+        self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | self.eeprom.errors).to_le_bytes());
+        if let Some(dc) = &self.dc {
+            let wide = dc.width == DcWidth::Bits64;
+            let put = |m: &mut [u8], a: usize, v: u64| {
+                let n = if wide { 8 } else { 4 };
+                m[a..a + n].copy_from_slice(&v.to_le_bytes()[..n]);
+            };
+            put(&mut self.mem, 0x0920, dc.offset);
+            self.mem[0x0928..0x092C].copy_from_slice(&dc.delay.to_le_bytes());
+            self.mem[0x092C..0x0930].copy_from_slice(&dc.difference_register().to_le_bytes());
+            self.mem[0x0930..0x0932].copy_from_slice(&dc.scs.to_le_bytes());
+            self.mem[0x0932..0x0934].copy_from_slice(&dc.scd.to_le_bytes());
+            self.mem[0x0934] = dc.depth_diff;
+            self.mem[0x0935] = dc.depth_speed;
+            self.mem[0x0984] = dc.sync.activation_status;
+            put(&mut self.mem, 0x0990, dc.next_sync0_register());
+        }
+    }
+
+    /// Processes the datagram chain of one frame passing the processing unit.
+    pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming) {
+        self.advance_to(timing.epu_ns);
+        self.frames += 1;
+        self.refresh_registers();
+        if let Some(dc) = &self.dc {
+            // ECAT reads of 0x0910 see the time the frame passed, minus the delay.
+            let v = dc.ecat_system_time(timing.epu_ns);
+            let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
+            self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
+        }
+        self.effects = FrameEffects::default();
+        let mut off = 0;
+        while off + HEADER_LEN + 2 <= chain.len() {
+            let len = (u16::from_le_bytes([chain[off + 6], chain[off + 7]]) & 0x07FF) as usize;
+            let end = off + HEADER_LEN + len + 2;
+            if end > chain.len() {
+                break;
+            }
+            let more = chain[off + 7] & 0x80 != 0;
+            self.datagram(&mut chain[off..end]);
+            off = end;
+            if !more {
+                break;
+            }
+        }
+        self.end_of_frame(timing);
+    }
+
+    fn addressed_fp(&self, adp: u16) -> bool {
+        let alias_on = self.mem[0x0103] & 0x01 != 0;
+        adp == self.station_address() || (alias_on && adp == u16::from_le_bytes([self.mem[0x12], self.mem[0x13]]))
+    }
+
+    fn datagram(&mut self, d: &mut [u8]) {
+        let cmd = Command(d[0]);
+        let adp = u16::from_le_bytes([d[2], d[3]]);
+        let ado = u16::from_le_bytes([d[4], d[5]]);
+        let logical = u32::from_le_bytes([d[2], d[3], d[4], d[5]]);
+        let n = d.len() - 2;
+        let (head, rest) = d.split_at_mut(HEADER_LEN);
+        let (data, wkc) = rest.split_at_mut(n - HEADER_LEN);
+        let rw_offset = u16::from_le_bytes([self.mem[0x0108], self.mem[0x0109]]);
+        let mut inc = 0u16;
+        match cmd {
+            Command::APRD | Command::FPRD | Command::BRD => {
+                let hit = match cmd {
+                    Command::APRD => adp == 0,
+                    Command::FPRD => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit && self.read(ado, data, cmd == Command::BRD) {
+                    inc = 1;
+                }
+            }
+            Command::APWR | Command::FPWR | Command::BWR => {
+                let hit = match cmd {
+                    Command::APWR => adp == 0,
+                    Command::FPWR => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit && self.write(ado, data, cmd) {
+                    inc = 1;
+                }
+            }
+            Command::APRW | Command::FPRW | Command::BRW => {
+                let hit = match cmd {
+                    Command::APRW => adp == 0,
+                    Command::FPRW => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit {
+                    let out = data.to_vec();
+                    if self.read(ado, data, cmd == Command::BRW) {
+                        inc += 1;
+                    }
+                    if self.write(ado.wrapping_add(rw_offset), &out, cmd) {
+                        inc += 2;
+                    }
+                }
+            }
+            Command::ARMW | Command::FRMW => {
+                let reader = if cmd == Command::ARMW { adp == 0 } else { self.addressed_fp(adp) };
+                let ok = if reader { self.read(ado, data, false) } else { self.write(ado, data, cmd) };
+                if ok {
+                    inc = 1;
+                }
+            }
+            Command::LRD | Command::LWR | Command::LRW => inc = self.logical(cmd, logical, data),
+            _ => {}
+        }
+        if cmd.increments_adp() {
+            head[2..4].copy_from_slice(&adp.wrapping_add(1).to_le_bytes());
+        }
+        let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+        wkc.copy_from_slice(&w.to_le_bytes());
+    }
+
+    fn sm_at(&self, a: u16) -> Option<(u8, SyncManager)> {
+        (0..self.config.sm_count)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, s)| s.enabled() && s.length > 0 && a >= s.start && (a as u32) < s.start as u32 + s.length as u32)
+    }
+
+    /// One byte read by the master; `None` if it cannot be read.
+    fn read_byte(&mut self, a: u16) -> Option<u8> {
+        if a as usize >= self.mem.len() || (is_dc(a) && self.dc.is_none()) {
+            return None;
+        }
+        if let Some((n, s)) = self.sm_at(a) {
+            let st = &mut self.sms[n as usize];
+            if s.is_mailbox() {
+                if s.ecat_writes() || !st.full {
+                    return None;
+                }
+                if a as u32 == s.start as u32 + s.length as u32 - 1 {
+                    st.last_byte_read = true;
+                }
+            }
+        }
+        Some(self.mem[a as usize])
+    }
+
+    fn read(&mut self, ado: u16, data: &mut [u8], or: bool) -> bool {
+        let mut ok = false;
+        for (i, b) in data.iter_mut().enumerate() {
+            let Some(a) = ado.checked_add(i as u16) else { break };
+            if let Some(v) = self.read_byte(a) {
+                *b = if or { *b | v } else { v };
+                ok = true;
+            }
+        }
+        ok
+    }
+
+    /// One byte written by the master; false if the write does not succeed.
+    fn write_byte(&mut self, a: u16, v: u8, cmd: Command) -> bool {
+        if a as usize >= self.mem.len() || (is_dc(a) && self.dc.is_none()) {
+            return false;
+        }
+        if let Some((n, s)) = self.sm_at(a) {
+            let st = &mut self.sms[n as usize];
+            let last = a as u32 == s.start as u32 + s.length as u32 - 1;
+            if s.is_mailbox() {
+                if !s.ecat_writes() || st.full {
+                    return false;
+                }
+                self.mem[a as usize] = v;
+            } else if s.ecat_writes() {
+                if st.staging.len() != s.length as usize {
+                    st.staging = self.mem[s.start as usize..s.start as usize + s.length as usize].to_vec();
+                }
+                st.staging[(a - s.start) as usize] = v;
+            } else {
+                self.mem[a as usize] = v;
+            }
+            if last {
+                st.last_byte_written = true;
+            }
+            return true;
+        }
+        if a < 0x1000 {
+            if ecat_writable(a) {
+                self.pending.push((a, v));
+                match a {
+                    0x0900..=0x0903 => {
+                        self.effects.latch_epu = true;
+                        if matches!(cmd, Command::BWR | Command::FPWR | Command::BRW | Command::FPRW) {
+                            self.effects.latch_ports = true;
+                        }
+                    }
+                    0x0910..=0x0913 => {
+                        let t = self.effects.tcl.get_or_insert([None; 4]);
+                        t[(a - 0x0910) as usize] = Some(v);
+                    }
+                    _ => {}
+                }
+            }
+            return true;
+        }
+        self.mem[a as usize] = v;
+        true
+    }
+
+    fn write(&mut self, ado: u16, data: &[u8], cmd: Command) -> bool {
+        let mut ok = false;
+        for (i, &v) in data.iter().enumerate() {
+            let Some(a) = ado.checked_add(i as u16) else { break };
+            ok |= self.write_byte(a, v, cmd);
+        }
+        ok
+    }
+
+    /// LRD/LWR/LRW through the FMMUs, bit by bit where they are not byte-aligned. Returns the
+    /// WKC increment: +1 if something was read, +2 if something was written (LWR: +1).
+    fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
+        let original = data.to_vec();
+        let (mut read_ok, mut write_ok) = (false, false);
+        let dg_start = logical as u64 * 8;
+        let dg_end = dg_start + data.len() as u64 * 8;
+        for i in 0..self.config.fmmu_count {
+            let a = addr::fmmu(i) as usize;
+            let Ok(f) = Fmmu::parse(&self.mem[a..a + 16]) else { continue };
+            if !f.active || f.length == 0 {
+                continue;
+            }
+            let f_start = f.logical_start as u64 * 8 + (f.logical_start_bit & 7) as u64;
+            let f_end = (f.logical_start as u64 + f.length as u64 - 1) * 8 + (f.logical_stop_bit & 7) as u64 + 1;
+            let (lo, hi) = (f_start.max(dg_start), f_end.min(dg_end));
+            if lo >= hi {
+                continue;
+            }
+            let phys0 = f.physical_start as u64 * 8 + (f.physical_start_bit & 7) as u64;
+            let reads = f.fmmu_type & Fmmu::READ != 0 && matches!(cmd, Command::LRD | Command::LRW);
+            let writes = f.fmmu_type & Fmmu::WRITE != 0 && matches!(cmd, Command::LWR | Command::LRW);
+            // Walk the overlap in runs that stay within one physical and one frame byte.
+            let mut bit = lo;
+            while bit < hi {
+                let pbit = phys0 + (bit - f_start);
+                let fbit = bit - dg_start;
+                let run = (8 - pbit % 8).min(8 - fbit % 8).min(hi - bit);
+                let pa = (pbit / 8) as u16;
+                let fi = (fbit / 8) as usize;
+                let mask_p = (((1u16 << run) - 1) << (pbit % 8)) as u8;
+                let mask_f = (((1u16 << run) - 1) << (fbit % 8)) as u8;
+                let shift = |v: u8, from: u64, to: u64| -> u8 {
+                    if to >= from {
+                        v << (to - from)
+                    } else {
+                        v >> (from - to)
+                    }
+                };
+                if writes {
+                    let cur = self.current_byte(pa);
+                    let bits = shift(original[fi] & mask_f, fbit % 8, pbit % 8);
+                    if self.write_byte(pa, (cur & !mask_p) | bits, cmd) {
+                        write_ok = true;
+                    }
+                }
+                if reads {
+                    if let Some(v) = self.read_byte(pa) {
+                        data[fi] = (data[fi] & !mask_f) | shift(v & mask_p, pbit % 8, fbit % 8);
+                        read_ok = true;
+                    }
+                }
+                bit += run;
+            }
+        }
+        match cmd {
+            Command::LRD => read_ok as u16,
+            Command::LWR => write_ok as u16,
+            _ => read_ok as u16 + 2 * write_ok as u16,
+        }
+    }
+
+    /// The value a partial (bit-wise) write builds on: the staging buffer of a buffered output
+    /// SM, a pending register write, or memory.
+    fn current_byte(&self, a: u16) -> u8 {
+        if let Some((n, s)) = self.sm_at(a) {
+            let st = &self.sms[n as usize];
+            if !s.is_mailbox() && s.ecat_writes() && st.staging.len() == s.length as usize {
+                return st.staging[(a - s.start) as usize];
+            }
+        }
+        if let Some(&(_, v)) = self.pending.iter().rev().find(|(p, _)| *p == a) {
+            return v;
+        }
+        self.mem.get(a as usize).copied().unwrap_or(0)
+    }
+
+    fn end_of_frame(&mut self, timing: &FrameTiming) {
+        let t = timing.epu_ns;
+        let pending = std::mem::take(&mut self.pending);
+        let wrote = |lo: u16, hi: u16| pending.iter().any(|(a, _)| (lo..=hi).contains(a));
+        let (al_ctl, sii_cmd, dc_offset, dc_delay, scs, depths, sync_cfg, activation, start_time, sm_cfg, reset) = (
+            wrote(0x0120, 0x0121),
+            wrote(0x0502, 0x0503),
+            wrote(0x0920, 0x0927),
+            wrote(0x0928, 0x092B),
+            wrote(0x0930, 0x0931),
+            wrote(0x0934, 0x0935),
+            wrote(0x0980, 0x09A7),
+            wrote(0x0981, 0x0981),
+            wrote(0x0990, 0x0997),
+            wrote(0x0800, 0x087F),
+            wrote(0x0040, 0x0040),
+        );
+        for &(a, v) in &pending {
+            self.mem[a as usize] = v;
+            if (0x0300..=0x0313).contains(&a) {
+                self.mem[a as usize] = 0; // a write clears an error counter
+            }
+        }
+        if reset {
+            // ESC reset: 'R' 'E' 'S' in three consecutive frames.
+            let v = self.mem[0x0040];
+            self.reset_seq = match (self.reset_seq, v) {
+                (_, b'R') => 1,
+                (1, b'E') => 2,
+                (2, b'S') => 3,
+                _ => 0,
+            };
+            if self.reset_seq == 3 {
+                self.power_on(t);
+                return;
+            }
+        }
+        if sm_cfg {
+            for n in 0..self.config.sm_count {
+                let a = addr::sm(n);
+                if pending.iter().any(|(p, _)| (a..a + 8).contains(p)) {
+                    let s = self.sm(n);
+                    let st = &mut self.sms[n as usize];
+                    if !s.enabled() {
+                        st.full = false;
+                    }
+                    st.staging.clear();
+                }
+            }
+        }
+        // SyncManager buffers completed by this frame.
+        for n in 0..self.config.sm_count {
+            let s = self.sm(n);
+            let st = &mut self.sms[n as usize];
+            let (written, read) = (std::mem::take(&mut st.last_byte_written), std::mem::take(&mut st.last_byte_read));
+            if !s.enabled() {
+                continue;
+            }
+            if s.is_mailbox() {
+                if s.ecat_writes() && written {
+                    st.full = true;
+                    self.mailbox_request(n);
+                } else if !s.ecat_writes() && read {
+                    st.full = false;
+                }
+            } else if s.ecat_writes() && written {
+                let staged = std::mem::take(&mut st.staging);
+                if staged.len() == s.length as usize {
+                    let a = s.start as usize;
+                    self.mem[a..a + staged.len()].copy_from_slice(&staged);
+                }
+                if s.control & SyncManager::WATCHDOG != 0 {
+                    self.wd_last_trigger_ns = t;
+                    self.mem[0x0440] = 1;
+                }
+                if matches!(self.al.state, AlState::Op) {
+                    let mut pdi = Pdi { mem: &mut self.mem, now_ns: t };
+                    self.app.outputs_written(&mut pdi, n);
+                }
+            }
+        }
+        if sii_cmd {
+            let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]);
+            let word = u32::from_le_bytes([self.mem[0x0504], self.mem[0x0505], self.mem[0x0506], self.mem[0x0507]]);
+            let data = u16::from_le_bytes([self.mem[0x0508], self.mem[0x0509]]);
+            if let Some(out) = self.eeprom.command(t, ctl, word, data, self.config.sii_read_8) {
+                self.mem[0x0508..0x0510].copy_from_slice(&out);
+            }
+            let keep = ctl & (SiiControl::READ_8_BYTES | SiiControl::TWO_BYTE_ADDRESS | SiiControl::WRITE_ENABLE);
+            let base = if self.config.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 };
+            self.mem[0x0502..0x0504].copy_from_slice(&(keep | base).to_le_bytes());
+        }
+        if let Some(dc) = self.dc.as_mut() {
+            if self.effects.latch_epu {
+                let local = dc.local_at(t);
+                self.mem[0x0918..0x0920].copy_from_slice(&local.to_le_bytes());
+            }
+            if self.effects.latch_ports {
+                for (p, at) in timing.port_ns.iter().enumerate() {
+                    // Ports the frame did not reach keep their old value (esc-spec §3.3).
+                    if let Some(at) = at {
+                        let v = dc.local_at(*at) as u32;
+                        self.mem[0x0900 + 4 * p..0x0904 + 4 * p].copy_from_slice(&v.to_le_bytes());
+                    }
+                }
+            }
+            let wide = dc.width == DcWidth::Bits64;
+            let rd64 = |m: &[u8], a: usize| -> u64 {
+                let mut b = [0u8; 8];
+                b.copy_from_slice(&m[a..a + 8]);
+                let v = u64::from_le_bytes(b);
+                if wide {
+                    v
+                } else {
+                    v & 0xFFFF_FFFF
+                }
+            };
+            if dc_offset {
+                dc.fold_to(t);
+                dc.offset = rd64(&self.mem, 0x0920);
+            }
+            if dc_delay {
+                dc.delay = u32::from_le_bytes([self.mem[0x0928], self.mem[0x0929], self.mem[0x092A], self.mem[0x092B]]);
+            }
+            if let Some(bytes) = self.effects.tcl {
+                // Only a write that includes byte 0x0910 produces a sample (esc-spec §3.2).
+                if bytes[0].is_some() {
+                    let cur = dc.ecat_system_time(t) as u32;
+                    let mut v = cur.to_le_bytes();
+                    for (i, b) in bytes.iter().enumerate() {
+                        if let Some(b) = b {
+                            v[i] = *b;
+                        }
+                    }
+                    dc.tcl_sample(t, u32::from_le_bytes(v));
+                }
+            }
+            if depths {
+                dc.depth_diff = self.mem[0x0934] & 0x0F;
+                dc.depth_speed = self.mem[0x0935] & 0x0F;
+            }
+            if scs {
+                let v = u16::from_le_bytes([self.mem[0x0930], self.mem[0x0931]]) & 0x7FFF;
+                dc.scs = v.clamp(0x0080, 0x3FFF);
+                dc.reset_filters(t);
+            }
+            if sync_cfg {
+                dc.sync.activation = self.mem[0x0981];
+                dc.sync.pulse_len_10ns = u16::from_le_bytes([self.mem[0x0982], self.mem[0x0983]]);
+                dc.sync.start_time = rd64(&self.mem, 0x0990);
+                dc.sync.cycle0_ns =
+                    u32::from_le_bytes([self.mem[0x09A0], self.mem[0x09A1], self.mem[0x09A2], self.mem[0x09A3]]);
+                dc.sync.cycle1_ns =
+                    u32::from_le_bytes([self.mem[0x09A4], self.mem[0x09A5], self.mem[0x09A6], self.mem[0x09A7]]);
+                let auto = dc.sync.activation & ferrocat_wire::register::dc_activation::AUTO_ACTIVATE != 0;
+                if activation || (start_time && auto) {
+                    dc.sync_activation_written(t);
+                }
+            }
+        }
+        if al_ctl {
+            let control = u16::from_le_bytes([self.mem[0x0120], self.mem[0x0121]]);
+            self.al_control(control);
+        }
+        self.refresh_registers();
+    }
+
+    fn al_control(&mut self, control: u16) {
+        let before = self.al.clone();
+        if self.mem[0x0141] & 0x01 != 0 {
+            // Device emulation: the ESC copies AL control to AL status (esc-spec §5.1).
+            if let Some(s) = AlState::from_bits(control as u8) {
+                self.al.state = s;
+                self.al.error = false;
+                self.al.code = AlStatusCode::NO_ERROR;
+            }
+        } else {
+            let expected = self.expected.clone();
+            let sms: Vec<SyncManager> = (0..self.config.sm_count).map(|n| self.sm(n)).collect();
+            let Esc { app, mem, now_ns, .. } = self;
+            let mut check = |from: AlState, to: AlState| -> Result<(), AlStatusCode> {
+                if from == AlState::Init && to == AlState::PreOp {
+                    if let Some((out, inp)) = &expected.mailbox {
+                        let good = |s: Option<&SyncManager>, e: &SmEntry, writes: bool| {
+                            s.is_some_and(|s| {
+                                s.enabled()
+                                    && s.is_mailbox()
+                                    && s.ecat_writes() == writes
+                                    && s.start == e.start
+                                    && s.length == e.length
+                            })
+                        };
+                        if !good(sms.first(), out, true) || !good(sms.get(1), inp, false) {
+                            return Err(AlStatusCode::INVALID_MAILBOX_CONFIG);
+                        }
+                    }
+                }
+                if from == AlState::PreOp && to == AlState::SafeOp {
+                    for (n, e, len) in &expected.process_data {
+                        let s = sms.get(*n as usize).copied().unwrap_or_default();
+                        let outputs = e.sm_type == SmEntry::TYPE_OUTPUTS;
+                        let good = if *len == 0 {
+                            !s.enabled() || s.length == 0
+                        } else {
+                            s.enabled() && s.length == *len && s.ecat_writes() == outputs && !s.is_mailbox()
+                        };
+                        if !good {
+                            return Err(if outputs {
+                                AlStatusCode::INVALID_OUTPUT_CONFIG
+                            } else {
+                                AlStatusCode::INVALID_INPUT_CONFIG
+                            });
+                        }
+                    }
+                }
+                let mut pdi = Pdi { mem, now_ns: *now_ns };
+                app.check_transition(&mut pdi, from, to)
+            };
+            self.al.request(control, &mut check);
+        }
+        if self.al.state == AlState::Op && before.state != AlState::Op {
+            self.wd_last_trigger_ns = self.now_ns;
+        }
+        if self.al != before {
+            self.al_changes += 1;
+        }
+    }
+
+    /// A complete request arrived in the mailbox SM: the application answers into SM1.
+    fn mailbox_request(&mut self, sm: u8) {
+        let s = self.sm(sm);
+        let req = self.mem[s.start as usize..s.start as usize + s.length as usize].to_vec();
+        // SM0 is consumed by the PDI at once.
+        self.sms[sm as usize].full = false;
+        let reply = {
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.mailbox(&mut pdi, &req)
+        };
+        let reply = reply.unwrap_or_else(|| unsupported_protocol_reply(&req));
+        if let Some((n, out)) = (0..self.config.sm_count)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, s)| s.enabled() && s.is_mailbox() && !s.ecat_writes())
+        {
+            if self.sms[n as usize].full {
+                return; // the master has not read the last reply; the new one is lost
+            }
+            let a = out.start as usize;
+            let len = (out.length as usize).min(reply.len());
+            self.mem[a..a + out.length as usize].fill(0);
+            self.mem[a..a + len].copy_from_slice(&reply[..len]);
+            self.sms[n as usize].full = true;
+        }
+    }
+}
+
+/// A mailbox error reply "protocol not supported" for a request no application handles.
+fn unsupported_protocol_reply(req: &[u8]) -> Vec<u8> {
+    use ferrocat_wire::mailbox::{MailboxErrorCode, MailboxHeader, MailboxType};
+    let counter = req.get(5).map(|b| (b >> 4) & 7).unwrap_or(0);
+    let mut v = MailboxHeader::new(MailboxType::ERR, 4, counter).to_bytes().to_vec();
+    v.extend_from_slice(&MailboxErrorCode::UNSUPPORTED_PROTOCOL.to_bytes());
+    v
+}
+
+/// AL status as the master reads it (tests).
+impl Esc {
+    pub fn al_status(&self) -> AlStatus {
+        self.al.status()
+    }
+}

@@ -1,0 +1,18 @@
+//! A simulated EtherCAT slave controller (ESC), following `../shared/reference/esc-spec.md`.
+//!
+//! The [`Esc`] is sans-IO: the segment hands it each frame as the frame passes its processing
+//! unit, together with the true times at which the frame reached its ports, and advances it in
+//! time between frames. Register writes are shadow-buffered and take effect at the end of the
+//! frame (esc-spec §1.4); every command's addressing and working-counter rule is applied.
+mod al;
+mod app;
+mod config;
+pub mod dc;
+mod eeprom;
+mod esc;
+mod regs;
+
+pub use al::AlMachine;
+pub use app::{Application, DigitalIo, NoApplication, Pdi};
+pub use config::{DcWidth, EscConfig};
+pub use esc::{Esc, FrameTiming, LinkState};

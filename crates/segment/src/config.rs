@@ -1,0 +1,372 @@
+//! Segment descriptions: a TOML file, or a line of devices from the command line.
+//!
+//! ```toml
+//! seed = 7
+//! [[device]]
+//! eeprom = "../shared/captures/eeprom/ek1100.hex"
+//! [[device]]
+//! esi = "../shared/esi/Nanotec_C5-E-2-21.xml"
+//! product = 0x4F
+//! drift_ppm = 12.5
+//! parent = 0        # index or name; default: the device before
+//! parent_port = 1   # default: the parent's next free port in processing order
+//! ```
+use std::path::{Path, PathBuf};
+
+use ferrocat_esc::{Application, DigitalIo, Esc, EscConfig, NoApplication};
+use ferrocat_esi::EsiFile;
+use ferrocat_wire::sii::dump::parse_dump;
+use ferrocat_wire::sii::SiiInfo;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Deserialize;
+
+use crate::segment::{Node, Segment};
+use crate::timing::{link_delay_ns, EscTiming, PortKind};
+
+#[derive(Debug, thiserror::Error)]
+pub enum SegmentError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{place}: {message}")]
+    Device { place: String, message: String },
+}
+
+fn device_err(place: impl Into<String>, message: impl Into<String>) -> SegmentError {
+    SegmentError::Device { place: place.into(), message: message.into() }
+}
+
+/// Where a device's SII comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DeviceSource {
+    Eeprom(PathBuf),
+    Esi { path: PathBuf, product: Option<u32>, revision: Option<u32> },
+    Builtin(String),
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TimingToml {
+    pub processing_ns: Option<u32>,
+    pub forwarding_ns: Option<u32>,
+    pub loopback_ns: Option<u32>,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum NodeRef {
+    Index(usize),
+    Name(String),
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum Number {
+    Int(i64),
+    Text(String),
+}
+
+impl Number {
+    fn get(&self) -> Option<u32> {
+        match self {
+            Number::Int(v) => u32::try_from(*v).ok(),
+            Number::Text(s) => ferrocat_esi::parse_number(s).and_then(|v| u32::try_from(v).ok()),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceToml {
+    pub name: Option<String>,
+    pub eeprom: Option<PathBuf>,
+    pub esi: Option<PathBuf>,
+    pub product: Option<Number>,
+    pub revision: Option<Number>,
+    pub builtin: Option<String>,
+    /// "et1100" (default), "lan9252", "esc20" (32-bit DC) or "nodc".
+    pub esc: Option<String>,
+    pub drift_ppm: Option<f64>,
+    pub wander_ppb_per_sqrt_s: Option<f64>,
+    pub parent: Option<NodeRef>,
+    pub parent_port: Option<u8>,
+    pub port: Option<u8>,
+    pub cable_m: Option<f64>,
+    pub link_ns: Option<u32>,
+    pub timing: Option<TimingToml>,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentConfig {
+    #[serde(default)]
+    pub seed: u64,
+    /// Oscillator errors not given per device are drawn uniformly from ±this (ppm).
+    pub drift_spread_ppm: Option<f64>,
+    pub master_link_ns: Option<u32>,
+    pub loss_probability: Option<f64>,
+    #[serde(default, rename = "device")]
+    pub devices: Vec<DeviceToml>,
+    /// Folder relative paths are resolved against (the TOML file's folder).
+    #[serde(skip)]
+    pub base: PathBuf,
+}
+
+impl SegmentConfig {
+    pub fn from_file(path: &Path) -> Result<Self, SegmentError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SegmentError::Io { path: path.into(), source })?;
+        let mut cfg: SegmentConfig =
+            toml::from_str(&text).map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })?;
+        cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        if cfg.devices.is_empty() {
+            return Err(SegmentError::Parse { path: path.into(), message: "no [[device]]".into() });
+        }
+        Ok(cfg)
+    }
+
+    /// A line of devices from `--device FILE[:PRODUCT]` arguments, first one next to the master.
+    pub fn from_device_args(args: &[String]) -> Result<Self, SegmentError> {
+        let mut cfg = SegmentConfig::default();
+        for a in args {
+            let mut d = DeviceToml::default();
+            let (file, product) = match a.rsplit_once(':') {
+                Some((f, p)) if !f.is_empty() && ferrocat_esi::parse_number(p).is_some() => (f, Some(p)),
+                _ => (a.as_str(), None),
+            };
+            if file.ends_with(".xml") || file.ends_with(".XML") {
+                d.esi = Some(file.into());
+                d.product = product.map(|p| Number::Text(p.into()));
+            } else if Path::new(file).exists() || file.contains('/') || file.contains('.') {
+                d.eeprom = Some(file.into());
+            } else {
+                d.builtin = Some(file.into());
+            }
+            cfg.devices.push(d);
+        }
+        if cfg.devices.is_empty() {
+            return Err(device_err("--device", "no devices given"));
+        }
+        Ok(cfg)
+    }
+
+    fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.into()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    fn source(&self, i: usize, d: &DeviceToml) -> Result<DeviceSource, SegmentError> {
+        let place = format!("device {i}");
+        match (&d.eeprom, &d.esi, &d.builtin) {
+            (Some(p), None, None) => Ok(DeviceSource::Eeprom(self.resolve(p))),
+            (None, Some(p), None) => Ok(DeviceSource::Esi {
+                path: self.resolve(p),
+                product: d
+                    .product
+                    .as_ref()
+                    .map(|n| n.get().ok_or_else(|| device_err(&place, "product: not a 32-bit number")))
+                    .transpose()?,
+                revision: d
+                    .revision
+                    .as_ref()
+                    .map(|n| n.get().ok_or_else(|| device_err(&place, "revision: not a 32-bit number")))
+                    .transpose()?,
+            }),
+            (None, None, Some(b)) => Ok(DeviceSource::Builtin(b.clone())),
+            _ => Err(device_err(place, "give exactly one of eeprom, esi, builtin")),
+        }
+    }
+
+    /// Builds the segment: loads every device, wires the topology, draws oscillators.
+    pub fn build(&self) -> Result<Segment, SegmentError> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5EED_05C1);
+        let spread = self.drift_spread_ppm.unwrap_or(25.0);
+        let mut nodes = Vec::new();
+        let mut names = Vec::new();
+        for (i, d) in self.devices.iter().enumerate() {
+            let src = self.source(i, d)?;
+            let (sii, default_name) = load_device(&src)?;
+            let info = SiiInfo::from_image(&sii)
+                .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
+            let mut config = match d.esc.as_deref().unwrap_or("et1100") {
+                "et1100" => EscConfig::et1100(),
+                "lan9252" => EscConfig::lan9252(),
+                "esc20" => EscConfig::esc20(),
+                "nodc" => EscConfig::et1100().without_dc(),
+                other => {
+                    return Err(device_err(
+                        format!("device {i}"),
+                        format!("unknown esc '{other}' (et1100, lan9252, esc20, nodc)"),
+                    ))
+                }
+            };
+            let kinds = port_kinds(&info);
+            config.port_descriptor = kinds.iter().enumerate().fold(0u8, |acc, (p, k)| {
+                acc | match k {
+                    Some(PortKind::Ebus) => 0b10,
+                    Some(PortKind::Mii) => 0b11,
+                    None => 0,
+                } << (2 * p)
+            });
+            let drift_ppb = match d.drift_ppm {
+                Some(ppm) => (ppm * 1000.0).round() as i64,
+                None => (rng.gen_range(-spread..=spread) * 1000.0).round() as i64,
+            };
+            let app: Box<dyn Application> = if info.header.mailbox_rx_size > 0 {
+                Box::new(NoApplication)
+            } else {
+                Box::new(DigitalIo::new(config.sm_count))
+            };
+            let esc = Esc::new(config, sii, app, drift_ppb, 0);
+            let name = d.name.clone().unwrap_or(default_name);
+            let mut node = Node::new(name.clone(), esc, kinds, drift_ppb);
+            node.wander_ppb_per_sqrt_s = d.wander_ppb_per_sqrt_s.unwrap_or(0.0);
+            if let Some(t) = d.timing {
+                let def = EscTiming::default();
+                node.timing = EscTiming {
+                    processing_ns: t.processing_ns.unwrap_or(def.processing_ns),
+                    forwarding_ns: t.forwarding_ns.unwrap_or(def.forwarding_ns),
+                    loopback_ns: t.loopback_ns.unwrap_or(def.loopback_ns),
+                };
+            }
+            nodes.push(node);
+            names.push(name);
+        }
+        let mut seg = Segment::new(nodes, self.seed);
+        if let Some(m) = self.master_link_ns {
+            seg.master_link_ns = m;
+        }
+        seg.loss_probability = self.loss_probability.unwrap_or(0.0);
+        for (i, d) in self.devices.iter().enumerate().skip(1) {
+            let place = format!("device {i} ({})", names[i]);
+            let parent = match &d.parent {
+                None => i - 1,
+                Some(NodeRef::Index(p)) if *p < i => *p,
+                Some(NodeRef::Index(p)) => return Err(device_err(place, format!("parent {p} must come before it"))),
+                Some(NodeRef::Name(n)) => names[..i]
+                    .iter()
+                    .position(|x| x == n)
+                    .ok_or_else(|| device_err(&place, format!("no earlier device named '{n}'")))?,
+            };
+            let port = d.port.unwrap_or(0);
+            if port > 3 || seg.nodes[i].port_kinds[port as usize].is_none() {
+                return Err(device_err(place, format!("port {port} does not exist on this device")));
+            }
+            let pport = match d.parent_port {
+                Some(p) => p,
+                None => {
+                    // The parent's next free port in processing order after its entry port.
+                    let pn = &seg.nodes[parent];
+                    let mut q = pn.entry_port;
+                    let mut found = None;
+                    for _ in 0..3 {
+                        q = [3, 2, 0, 1][q as usize];
+                        if pn.port_kinds[q as usize].is_some() && pn.peers[q as usize].is_none() && q != pn.entry_port {
+                            found = Some(q);
+                            break;
+                        }
+                    }
+                    found.ok_or_else(|| device_err(&place, format!("parent '{}' has no free port", names[parent])))?
+                }
+            };
+            let pn = &seg.nodes[parent];
+            let Some(pkind) = pn.port_kinds.get(pport as usize).copied().flatten() else {
+                return Err(device_err(place, format!("parent '{}' has no port {pport}", names[parent])));
+            };
+            if pn.peers[pport as usize].is_some() || pport == pn.entry_port {
+                return Err(device_err(place, format!("port {pport} of '{}' is already in use", names[parent])));
+            }
+            let kind = seg.nodes[i].port_kinds[port as usize].unwrap_or(PortKind::Ebus);
+            let delay = d.link_ns.unwrap_or_else(|| link_delay_ns(pkind, kind, d.cable_m.unwrap_or(2.0)));
+            seg.connect(parent, pport, i, port, delay);
+        }
+        seg.refresh_links();
+        Ok(seg)
+    }
+}
+
+fn describe(src: &DeviceSource) -> String {
+    match src {
+        DeviceSource::Eeprom(p) => p.display().to_string(),
+        DeviceSource::Esi { path, .. } => path.display().to_string(),
+        DeviceSource::Builtin(b) => format!("builtin {b}"),
+    }
+}
+
+/// Port kinds from the SII general category (4 bits per port: 1 MII, 3 E-Bus, 4 fast
+/// hot-connect MII, 0 unused); two MII ports when the image has no general category.
+fn port_kinds(info: &SiiInfo) -> [Option<PortKind>; 4] {
+    let Some(g) = info.general() else { return [Some(PortKind::Mii), Some(PortKind::Mii), None, None] };
+    let mut k = [None; 4];
+    for (p, slot) in k.iter_mut().enumerate() {
+        *slot = match (g.physical_ports >> (4 * p)) & 0xF {
+            1 | 2 | 4 => Some(PortKind::Mii),
+            3 => Some(PortKind::Ebus),
+            _ => None,
+        };
+    }
+    if k[0].is_none() {
+        k[0] = Some(PortKind::Mii);
+    }
+    k
+}
+
+/// Loads the SII image of a device and a default name for it.
+pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String), SegmentError> {
+    match src {
+        DeviceSource::Eeprom(path) => {
+            let raw = std::fs::read(path).map_err(|source| SegmentError::Io { path: path.clone(), source })?;
+            let (img, _) =
+                parse_dump(&raw).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
+            let info = SiiInfo::from_image(&img)
+                .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("not an SII image: {e}") })?;
+            let name = info.string(1).unwrap_or_else(|| format!("{:#010x}", info.header.product_code));
+            Ok((img, name))
+        }
+        DeviceSource::Esi { path, product, revision } => {
+            let xml =
+                std::fs::read_to_string(path).map_err(|source| SegmentError::Io { path: path.clone(), source })?;
+            let f =
+                EsiFile::parse(&xml).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
+            let dev = match product {
+                Some(p) => f
+                    .devices
+                    .iter()
+                    .filter(|d| d.product_code == *p && revision.is_none_or(|r| d.revision == r))
+                    .max_by_key(|d| d.revision)
+                    .ok_or_else(|| SegmentError::Parse {
+                        path: path.clone(),
+                        message: format!("no device with product code {p:#x}"),
+                    })?,
+                None if f.devices.len() == 1 => &f.devices[0],
+                None => {
+                    return Err(SegmentError::Parse {
+                        path: path.clone(),
+                        message: format!(
+                            "{} devices: give the product code (FILE:PRODUCT or product = ...)",
+                            f.devices.len()
+                        ),
+                    })
+                }
+            };
+            let img = dev
+                .to_sii(f.vendor_id)
+                .map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
+            Ok((img, dev.type_name.clone()))
+        }
+        DeviceSource::Builtin(name) => {
+            let dev = crate::builtin::device(name).ok_or_else(|| {
+                device_err(
+                    format!("builtin {name}"),
+                    format!("unknown built-in device (known: {})", crate::builtin::NAMES.join(", ")),
+                )
+            })?;
+            let img = dev.to_sii(2).map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
+            Ok((img, dev.type_name.clone()))
+        }
+    }
+}

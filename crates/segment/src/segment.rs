@@ -1,0 +1,347 @@
+//! The segment: ESCs wired into a topology, frames walking it in processing order.
+use ferrocat_esc::{Esc, FrameTiming};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::timing::{EscTiming, PortKind, FCS_BYTES, NS_PER_BYTE, PREAMBLE_BYTES};
+
+/// The far end of a link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Peer {
+    pub node: usize,
+    pub port: u8,
+    pub delay_ns: u32,
+}
+
+/// One slave: its ESC and how it is wired.
+#[derive(Debug)]
+pub struct Node {
+    pub name: String,
+    pub esc: Esc,
+    pub timing: EscTiming,
+    pub port_kinds: [Option<PortKind>; 4],
+    pub peers: [Option<Peer>; 4],
+    /// Links pulled (the wiring stays, so they can be restored).
+    pub cut: [bool; 4],
+    /// Port facing the master.
+    pub entry_port: u8,
+    pub powered: bool,
+    /// Oscillator: base error and its random walk (ppb per √s).
+    pub drift_ppb: i64,
+    pub wander_ppb_per_sqrt_s: f64,
+}
+
+impl Node {
+    pub fn new(name: String, esc: Esc, port_kinds: [Option<PortKind>; 4], drift_ppb: i64) -> Self {
+        Node {
+            name,
+            esc,
+            timing: EscTiming::default(),
+            port_kinds,
+            peers: [None; 4],
+            cut: [false; 4],
+            entry_port: 0,
+            powered: true,
+            drift_ppb,
+            wander_ppb_per_sqrt_s: 0.0,
+        }
+    }
+}
+
+/// A scheduled change of the segment.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    LinkDown {
+        node: usize,
+        port: u8,
+    },
+    LinkUp {
+        node: usize,
+        port: u8,
+    },
+    PowerOff {
+        node: usize,
+    },
+    PowerOn {
+        node: usize,
+    },
+    /// An oscillator's frequency error jumps (a temperature step).
+    DriftStep {
+        node: usize,
+        delta_ppb: i64,
+    },
+}
+
+/// Counters of what the segment did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SegmentStats {
+    pub frames: u64,
+    pub returned: u64,
+    pub lost: u64,
+    pub destroyed_circulating: u64,
+}
+
+#[derive(Debug)]
+pub struct Segment {
+    pub nodes: Vec<Node>,
+    /// One-way delay between the master's NIC and the first slave's entry port.
+    pub master_link_ns: u32,
+    rng: ChaCha8Rng,
+    /// Probability that a frame is corrupted on its way (it then reaches no further ESC and
+    /// never returns; the ESC behind the fault counts an RX error).
+    pub loss_probability: f64,
+    events: Vec<(u64, Event)>,
+    now_ns: u64,
+    wander_step_ns: u64,
+    next_wander_ns: u64,
+    pub stats: SegmentStats,
+    visits: Vec<(usize, FrameTiming)>,
+}
+
+/// Processing order: after port 0 comes 3, after 3 comes 1, after 1 comes 2, after 2 comes 0.
+fn next_port(p: u8) -> u8 {
+    [3, 2, 0, 1][p as usize & 3]
+}
+
+impl Segment {
+    pub fn new(nodes: Vec<Node>, seed: u64) -> Self {
+        Segment {
+            nodes,
+            master_link_ns: 500,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            loss_probability: 0.0,
+            events: Vec::new(),
+            now_ns: 0,
+            wander_step_ns: 100_000_000,
+            next_wander_ns: 100_000_000,
+            stats: SegmentStats::default(),
+            visits: Vec::new(),
+        }
+    }
+
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns
+    }
+
+    /// Schedules `event` at true time `t_ns`.
+    pub fn schedule(&mut self, t_ns: u64, event: Event) {
+        let at = self.events.partition_point(|(t, _)| *t <= t_ns);
+        self.events.insert(at, (t_ns, event));
+    }
+
+    /// Wires `a.port_a` to `b.port_b` (b is the child) with a one-way delay.
+    pub fn connect(&mut self, a: usize, port_a: u8, b: usize, port_b: u8, delay_ns: u32) {
+        self.nodes[a].peers[port_a as usize] = Some(Peer { node: b, port: port_b, delay_ns });
+        self.nodes[b].peers[port_b as usize] = Some(Peer { node: a, port: port_a, delay_ns });
+        self.nodes[b].entry_port = port_b;
+    }
+
+    fn link_up(&self, node: usize, port: u8) -> bool {
+        let n = &self.nodes[node];
+        if !n.powered || n.cut[port as usize] {
+            return false;
+        }
+        if node == 0 && port == n.entry_port {
+            return true; // the master's NIC
+        }
+        n.peers[port as usize].is_some_and(|p| self.nodes[p.node].powered && !self.nodes[p.node].cut[p.port as usize])
+    }
+
+    /// Sets every ESC's link bits from the wiring.
+    pub fn refresh_links(&mut self) {
+        for i in 0..self.nodes.len() {
+            for p in 0..4u8 {
+                let up = self.link_up(i, p);
+                self.nodes[i].esc.set_link(p, up);
+            }
+        }
+    }
+
+    fn apply(&mut self, t: u64, e: Event) {
+        match e {
+            Event::LinkDown { node, port } | Event::LinkUp { node, port } => {
+                let cut = matches!(e, Event::LinkDown { .. });
+                self.nodes[node].cut[port as usize] = cut;
+                if let Some(p) = self.nodes[node].peers[port as usize] {
+                    self.nodes[p.node].cut[p.port as usize] = cut;
+                }
+            }
+            Event::PowerOff { node } => self.nodes[node].powered = false,
+            Event::PowerOn { node } => {
+                self.nodes[node].powered = true;
+                self.nodes[node].esc.power_on(t);
+            }
+            Event::DriftStep { node, delta_ppb } => {
+                let n = &mut self.nodes[node];
+                n.drift_ppb += delta_ppb;
+                if let Some(dc) = n.esc.dc.as_mut() {
+                    dc.set_drift_ppb(t, n.drift_ppb);
+                }
+            }
+        }
+        self.refresh_links();
+    }
+
+    /// Advances every ESC, scheduled event and oscillator to true time `t_ns`.
+    pub fn advance_to(&mut self, t_ns: u64) {
+        while let Some(&(t, _)) = self.events.first() {
+            if t > t_ns {
+                break;
+            }
+            let (t, e) = self.events.remove(0);
+            self.advance_escs(t);
+            self.apply(t, e);
+        }
+        while self.next_wander_ns <= t_ns {
+            let t = self.next_wander_ns;
+            self.advance_escs(t);
+            let dt_s = self.wander_step_ns as f64 * 1e-9;
+            for n in &mut self.nodes {
+                if n.wander_ppb_per_sqrt_s > 0.0 {
+                    // Random walk of the frequency error: a sum of uniform steps with the
+                    // variance of the configured wander.
+                    let u: f64 = self.rng.gen_range(-1.0..1.0);
+                    let step = u * 3f64.sqrt() * n.wander_ppb_per_sqrt_s * dt_s.sqrt();
+                    n.drift_ppb += step.round() as i64;
+                    if let Some(dc) = n.esc.dc.as_mut() {
+                        dc.set_drift_ppb(t, n.drift_ppb);
+                    }
+                }
+            }
+            self.next_wander_ns += self.wander_step_ns;
+        }
+        self.advance_escs(t_ns);
+        self.now_ns = self.now_ns.max(t_ns);
+    }
+
+    fn advance_escs(&mut self, t: u64) {
+        for n in &mut self.nodes {
+            if n.powered {
+                n.esc.advance_to(t);
+            }
+        }
+    }
+
+    /// Earliest internal event (a SYNC0 pulse, a scheduled change) after now.
+    pub fn next_event_ns(&self) -> Option<u64> {
+        let esc = self.nodes.iter().filter(|n| n.powered).filter_map(|n| n.esc.next_event_ns()).min();
+        let ev = self.events.first().map(|(t, _)| *t);
+        [esc, ev].into_iter().flatten().min()
+    }
+
+    /// The frame's walk through `node`, entered on `entry` at `t_in`: records the timing of
+    /// every ESC it passes and returns when it leaves `entry` again.
+    fn walk(&mut self, node: usize, entry: u8, t_in: u64, depth: usize) -> u64 {
+        let mut timing = FrameTiming::default();
+        timing.port_ns[entry as usize] = Some(t_in);
+        let (proc_ns, fwd_ns, loop_ns) = {
+            let t = &self.nodes[node].timing;
+            (t.processing_ns as u64, t.forwarding_ns as u64, t.loopback_ns as u64)
+        };
+        let mut slot = None;
+        let (mut p, mut t, mut from_wire) = (entry, t_in, true);
+        loop {
+            let mut t_tx = t;
+            if p == 0 {
+                timing.epu_ns = t;
+                slot = Some(self.visits.len());
+                self.visits.push((node, timing));
+                t_tx += proc_ns;
+            } else if from_wire {
+                t_tx += fwd_ns;
+            }
+            let q = next_port(p);
+            if q == entry {
+                if let Some(i) = slot {
+                    self.visits[i].1.port_ns = timing.port_ns;
+                }
+                return t_tx;
+            }
+            let exists = self.nodes[node].esc.config.has_port(q);
+            if !exists {
+                (p, t, from_wire) = (q, t_tx, false);
+                continue;
+            }
+            match self.nodes[node].peers[q as usize] {
+                Some(peer) if depth < 64 && self.link_up(node, q) && self.nodes[node].esc.port_open(q) => {
+                    let d = peer.delay_ns as u64;
+                    let back = self.walk(peer.node, peer.port, t_tx + d, depth + 1) + d;
+                    timing.port_ns[q as usize] = Some(back);
+                    (p, t, from_wire) = (q, back, true);
+                }
+                _ => (p, t, from_wire) = (q, t_tx + loop_ns, false),
+            }
+        }
+    }
+
+    /// Sends an Ethernet frame (without FCS) whose first preamble bit leaves the master at
+    /// `t_tx_ns`. Returns the true time at which the master has received the whole frame back,
+    /// with `frame` modified in place, or `None` if it does not come back.
+    pub fn exchange(&mut self, frame: &mut [u8], t_tx_ns: u64) -> Option<u64> {
+        self.advance_to(t_tx_ns);
+        self.stats.frames += 1;
+        if self.nodes.is_empty() || !self.nodes[0].powered {
+            self.stats.lost += 1;
+            return None;
+        }
+        let Some(pdu_at) = crate::frame_pdu_offset(frame) else {
+            return None;
+        };
+        // Timing pass: where the frame head is when.
+        let head_at_first = t_tx_ns + (PREAMBLE_BYTES * NS_PER_BYTE) + self.master_link_ns as u64;
+        self.visits.clear();
+        let entry = self.nodes[0].entry_port;
+        let back_at_nic = self.walk(0, entry, head_at_first, 0) + self.master_link_ns as u64;
+        // Faults: a corrupted frame is processed by the ESCs before the fault only.
+        let mut reach = self.visits.len();
+        let mut lost = false;
+        if self.loss_probability > 0.0 && self.rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
+            reach = self.rng.gen_range(0..=self.visits.len());
+            lost = true;
+        }
+        // Processing pass, in the order the frame passes the processing units.
+        let visits = std::mem::take(&mut self.visits);
+        let hdr = ECAT_HEADER_LEN;
+        for (i, (node, timing)) in visits.iter().enumerate() {
+            if i >= reach {
+                if let Some(n) = self.nodes.get_mut(*node) {
+                    n.esc.count_rx_error(n.entry_port);
+                }
+                break;
+            }
+            let n = &mut self.nodes[*node];
+            let Some((len, _)) = crate::pdu_len(&frame[pdu_at..]) else { break };
+            let chain = &mut frame[pdu_at + hdr..pdu_at + hdr + len];
+            if !n.esc.port_open(0) && n.entry_port != 0 {
+                // Circulating-frame prevention at an auto-closed port 0 (esc-spec §1.6).
+                if crate::circulating(chain) {
+                    self.stats.destroyed_circulating += 1;
+                    lost = true;
+                    break;
+                }
+                crate::set_circulating(chain);
+            }
+            n.esc.process_frame(chain, timing);
+        }
+        self.visits = visits;
+        // The ESC marks frames it processed by setting the locally administered bit of the
+        // source MAC (DL control bit 0, esc-spec §1.1).
+        if frame.len() > 6 {
+            frame[6] |= 0x02;
+        }
+        if lost {
+            self.stats.lost += 1;
+            return None;
+        }
+        self.stats.returned += 1;
+        let wire = (frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
+        Some(back_at_nic + wire)
+    }
+
+    /// The true time at which each ESC saw the last frame at its processing unit.
+    pub fn last_visits(&self) -> &[(usize, FrameTiming)] {
+        &self.visits
+    }
+}
+
+use ferrocat_wire::frame::ECAT_HEADER_LEN;

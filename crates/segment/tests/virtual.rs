@@ -1,0 +1,143 @@
+//! The virtual segment in-process, driven by a minimal master written here from the spec.
+use ferrocat_esc::DigitalIo;
+use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+use ferrocat_wire::register::{AlState, AlStatus, Fmmu, SyncManager};
+use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
+
+struct Bus {
+    seg: Segment,
+    t: u64,
+}
+
+impl Bus {
+    /// One datagram in one frame; returns (data, wkc, adp as returned).
+    fn tx(&mut self, cmd: Command, address: Address, data: &[u8]) -> (Vec<u8>, u16, Address) {
+        let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
+        let mut buf = [0u8; 1514];
+        let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
+        w.push(&DatagramHeader::new(cmd, 1, address, data.len() as u16), data, 0).unwrap();
+        let n = w.finish().unwrap();
+        let back = self.seg.exchange(&mut buf[..n], self.t).expect("frame returns");
+        assert!(back > self.t);
+        self.t = back + 10_000;
+        let f = Frame::parse(&buf[..n]).unwrap().unwrap();
+        let d = f.pdu.datagrams().next().unwrap();
+        (d.data().to_vec(), d.wkc(), d.header().address)
+    }
+    fn fp(&mut self, cmd: Command, station: u16, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
+        let (d, w, _) = self.tx(cmd, Address::Device { adp: station, ado }, data);
+        (d, w)
+    }
+    fn sii_read(&mut self, station: u16, word: u32) -> [u8; 4] {
+        let mut req = vec![0x00, 0x01];
+        req.extend_from_slice(&word.to_le_bytes());
+        assert_eq!(self.fp(Command::FPWR, station, 0x0502, &req).1, 1);
+        loop {
+            let (d, _) = self.fp(Command::FPRD, station, 0x0502, &[0; 2]);
+            if u16::from_le_bytes([d[0], d[1]]) & 0x8000 == 0 {
+                break;
+            }
+        }
+        let (d, _) = self.fp(Command::FPRD, station, 0x0508, &[0; 4]);
+        [d[0], d[1], d[2], d[3]]
+    }
+}
+
+fn ek1100_el2004_el2004() -> Segment {
+    let dir = ferrocat_testdata::shared("captures/eeprom");
+    let toml = format!(
+        "seed = 1\n[[device]]\neeprom = '{0}/ek1100.hex'\n[[device]]\neeprom = '{0}/el2004.bin'\n[[device]]\neeprom = '{0}/el2004.bin'\n",
+        dir.display()
+    );
+    let path = std::env::temp_dir().join(format!("ferrocat-seg-{}.toml", std::process::id()));
+    std::fs::write(&path, toml).unwrap();
+    let cfg = SegmentConfig::from_file(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    cfg.build().unwrap()
+}
+
+#[test]
+fn needs_shared_bring_up_delays_and_outputs() {
+    let mut bus = Bus { seg: ek1100_el2004_el2004(), t: 1_000_000 };
+    // Count: BRD increments ADP at every slave and WKC at every one that answers.
+    let (_, wkc, addr) = bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]);
+    assert_eq!((wkc, addr), (3, Address::Device { adp: 3, ado: 0 }));
+    // Station addresses by position, then identity from the SII through the EEPROM interface.
+    for pos in 0..3u16 {
+        let (_, w, _) = bus.tx(Command::APWR, Address::position(pos, 0x0010), &(0x1001 + pos).to_le_bytes());
+        assert_eq!(w, 1);
+    }
+    let ek = bus.sii_read(0x1001, 0x0A);
+    assert_eq!(u32::from_le_bytes(ek), 0x044C_2C52);
+    assert_eq!(u32::from_le_bytes(bus.sii_read(0x1003, 0x0A)), 0x07D4_3052);
+    // DC: latch receive times, compute delays the way SOEM does.
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 3);
+    let mut t = vec![];
+    for s in 0x1001..=0x1003 {
+        let (d, _) = bus.fp(Command::FPRD, s, 0x0900, &[0; 16]);
+        let p: Vec<u32> = d.chunks(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        t.push(p);
+    }
+    let loop_time = |k: usize| t[k][1].wrapping_sub(t[k][0]) as i64;
+    let d1 = (loop_time(0) - loop_time(1)) / 2;
+    let d2 = d1 + loop_time(1) / 2;
+    println!("loop times {} {} ns; SOEM-style delays {d1} {d2} ns", loop_time(0), loop_time(1));
+    assert!((d1 - 144).abs() <= 10 && (d2 - 299).abs() <= 10, "delays {d1} {d2}");
+    // DL status: EK1100 ports 0 and 1 active, the last EL2004 only port 0.
+    let (dl, _) = bus.fp(Command::FPRD, 0x1003, 0x0110, &[0; 2]);
+    let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes([dl[0], dl[1]]));
+    assert!(dl.port_active(0) && !dl.port_active(1));
+    // AL: PREOP, SAFEOP (after SM + FMMU), OP.
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &[2, 0]).1, 3);
+    let (st, w, _) = bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0x0130 }, &[0, 0]);
+    assert_eq!((AlStatus(u16::from_le_bytes([st[0], st[1]])).state(), w), (Some(AlState::PreOp), 3));
+    for (k, s) in [0x1002u16, 0x1003].into_iter().enumerate() {
+        let sm = SyncManager { start: 0x0F00, length: 1, control: 0x44, status: 0, activate: 1, pdi_control: 0 };
+        assert_eq!(bus.fp(Command::FPWR, s, 0x0800, &sm.to_bytes()).1, 1);
+        // SOEM packs both 4-bit terminals into one logical byte: bits 0-3 and 4-7.
+        let f = Fmmu {
+            logical_start: 0,
+            length: 1,
+            logical_start_bit: 4 * k as u8,
+            logical_stop_bit: 4 * k as u8 + 3,
+            physical_start: 0x0F00,
+            physical_start_bit: 0,
+            fmmu_type: Fmmu::WRITE,
+            active: true,
+        };
+        assert_eq!(bus.fp(Command::FPWR, s, 0x0600, &f.to_bytes()).1, 1);
+    }
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &[4, 0]);
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &[8, 0]);
+    let (st, _, _) = bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0x0130 }, &[0, 0]);
+    assert_eq!(AlStatus(u16::from_le_bytes([st[0], st[1]])).state(), Some(AlState::Op));
+    // Process data: 0xA5 → first EL2004 gets 0x5, the second 0xA; WKC: two writers.
+    let (_, wkc, _) = bus.tx(Command::LRW, Address::Logical(0), &[0xA5]);
+    assert_eq!(wkc, 4);
+    let outs: Vec<Vec<u8>> = bus.seg.nodes[1..]
+        .iter()
+        .map(|n| n.esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone())
+        .collect();
+    assert_eq!(outs, [vec![0x05], vec![0x0A]]);
+}
+
+#[test]
+fn builtin_devices_and_bad_descriptions() {
+    let cfg = SegmentConfig::from_device_args(&["EK1100".into(), "EL1004".into(), "EL2004".into()]).unwrap();
+    let mut bus = Bus { seg: cfg.build().unwrap(), t: 0 };
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3);
+    assert!(SegmentConfig::from_device_args(&["EL9999".into()])
+        .unwrap()
+        .build()
+        .unwrap_err()
+        .to_string()
+        .contains("unknown built-in"));
+    let p = std::env::temp_dir().join(format!("ferrocat-bad-{}.toml", std::process::id()));
+    std::fs::write(&p, "seed = 1\n[[device]]\nbuiltin = 'EK1100'\ncolour = 'red'\n").unwrap();
+    let e = SegmentConfig::from_file(&p).unwrap_err().to_string();
+    std::fs::remove_file(&p).ok();
+    assert!(e.contains("line 4") && e.contains("colour"), "{e}");
+    let e = SegmentConfig::from_device_args(&["/nonexistent/x.bin".into()]).unwrap().build().unwrap_err().to_string();
+    assert!(e.contains("/nonexistent/x.bin"), "{e}");
+}
