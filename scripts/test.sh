@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark from Debian, cargo-nextest and cargo-fuzz from crates.io), then runs unit, property and
+# (tshark and iproute2 from Debian, pysoem from PyPI into .venv, cargo-nextest and cargo-fuzz from
+# crates.io), then runs unit, property and
 # integration tests with nextest, and every fuzz target for a bounded time (before the tests,
 # so that the run ends on the test summary).
 #
@@ -23,6 +24,17 @@ if ! command -v tshark >/dev/null; then
   as_root apt-get update -qq
   as_root apt-get install -y -qq --no-install-recommends tshark >/dev/null
 fi
+if ! command -v ip >/dev/null; then
+  log "installing iproute2 (network namespaces and veth pairs for the live tests)"
+  as_root apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iproute2 >/dev/null
+fi
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem' 2>/dev/null; then
+  log "creating .venv with pysoem (SOEM as an independent master)"
+  python3 -m venv .venv
+  .venv/bin/pip install -q --disable-pip-version-check pysoem
+fi
+export FERROCAT_PYTHON="$(pwd)/.venv/bin/python"
 if ! cargo nextest --version >/dev/null 2>&1; then
   log "installing cargo-nextest"
   cargo install cargo-nextest --locked

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod esi;
 mod pcap;
 mod sii;
+mod sim;
 
 #[derive(Parser)]
 #[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]
@@ -42,6 +43,28 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Serve a virtual segment on a network interface (raw socket) or over UDP, until SIGINT/SIGTERM.
+    Sim {
+        /// Segment description (TOML).
+        #[arg(long, value_name = "SEG.toml")]
+        config: Option<PathBuf>,
+        /// A device of a line segment, in order from the master: EEPROM dump, ESI file with
+        /// `:PRODUCT`, or a built-in name (EK1100, EL1004, EL2004).
+        #[arg(long, value_name = "FILE[:PRODUCT]")]
+        device: Vec<String>,
+        /// Network interface to serve (AF_PACKET raw socket; needs CAP_NET_RAW).
+        #[arg(long)]
+        iface: Option<String>,
+        /// Serve EtherCAT over UDP on this address instead, e.g. 127.0.0.1:34980.
+        #[arg(long, value_name = "ADDR:PORT")]
+        udp: Option<String>,
+        /// Write a JSON report of the devices (state, outputs) here on exit.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// Seed for oscillators and faults (overrides the file's).
+        #[arg(long)]
+        seed: Option<u64>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -50,6 +73,9 @@ fn main() -> ExitCode {
         Command::Pcap { file, json } => pcap::run(&file, json),
         Command::Sii { file, json } => sii::run(&file, json),
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
+        Command::Sim { config, device, iface, udp, report, seed } => {
+            sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
+        }
     };
     match result {
         Ok(code) => code,

@@ -2,6 +2,7 @@
 //! oscillators and injectable faults, run in virtual time (deterministic for a seed).
 mod builtin;
 mod config;
+pub mod live;
 mod segment;
 pub mod timing;
 

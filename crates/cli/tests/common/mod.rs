@@ -1,0 +1,123 @@
+//! Test hosts: network namespaces joined by a veth pair, created and removed by the test.
+#![allow(dead_code)]
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip").args(args).output().expect("the ip command (iproute2) is needed");
+    assert!(out.status.success(), "ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+}
+
+/// Two namespaces, `master` and `segment`, with a veth pair between them. Dropping it removes
+/// both (and with them the veth pair).
+pub struct VethPair {
+    pub master_ns: String,
+    pub segment_ns: String,
+    pub master_if: String,
+    pub segment_if: String,
+}
+
+impl VethPair {
+    pub fn new(tag: &str) -> Self {
+        assert!(
+            unsafe_is_root(),
+            "this test creates network namespaces and raw sockets: it must run as root (CI does)"
+        );
+        let id = format!("{}{}", tag, std::process::id() % 100_000);
+        let p = VethPair {
+            master_ns: format!("fc{id}m"),
+            segment_ns: format!("fc{id}s"),
+            master_if: format!("fc{id}a"),
+            segment_if: format!("fc{id}b"),
+        };
+        let _ = Command::new("ip").args(["netns", "del", &p.master_ns]).output();
+        let _ = Command::new("ip").args(["netns", "del", &p.segment_ns]).output();
+        ip(&["netns", "add", &p.master_ns]);
+        ip(&["netns", "add", &p.segment_ns]);
+        ip(&["link", "add", &p.master_if, "type", "veth", "peer", "name", &p.segment_if]);
+        ip(&["link", "set", &p.master_if, "netns", &p.master_ns]);
+        ip(&["link", "set", &p.segment_if, "netns", &p.segment_ns]);
+        for (ns, ifc) in [(&p.master_ns, &p.master_if), (&p.segment_ns, &p.segment_if)] {
+            ip(&["-n", ns, "link", "set", ifc, "up"]);
+            ip(&["-n", ns, "link", "set", "lo", "up"]);
+        }
+        p
+    }
+
+    /// A command run inside `ns`.
+    pub fn cmd(ns: &str, program: &str) -> Command {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", ns, program]);
+        c
+    }
+}
+
+impl Drop for VethPair {
+    fn drop(&mut self) {
+        let _ = Command::new("ip").args(["netns", "del", &self.master_ns]).output();
+        let _ = Command::new("ip").args(["netns", "del", &self.segment_ns]).output();
+    }
+}
+
+fn unsafe_is_root() -> bool {
+    Command::new("id").arg("-u").output().map(|o| o.stdout.starts_with(b"0")).unwrap_or(false)
+}
+
+/// The Python with pysoem that scripts/test.sh prepares.
+pub fn python() -> PathBuf {
+    let p = std::env::var_os("FERROCAT_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python"));
+    assert!(
+        p.exists(),
+        "{} not found: scripts/test.sh creates .venv with pysoem (or set FERROCAT_PYTHON)",
+        p.display()
+    );
+    p
+}
+
+/// `ferrocat sim` serving `segment_if` in its namespace; stopped with SIGTERM on drop.
+pub struct Sim {
+    child: Child,
+}
+
+impl Sim {
+    pub fn start(net: &VethPair, args: &[&str]) -> Self {
+        let mut c = VethPair::cmd(&net.segment_ns, env!("CARGO_BIN_EXE_ferrocat"));
+        c.arg("sim").args(args).args(["--iface", &net.segment_if]).stdout(Stdio::null()).stderr(Stdio::piped());
+        let mut child = c.spawn().unwrap();
+        // Ready once it has bound its socket and said so.
+        let mut err = child.stderr.take().unwrap();
+        let t0 = Instant::now();
+        let mut seen = Vec::new();
+        let mut b = [0u8; 256];
+        use std::io::Read;
+        while !String::from_utf8_lossy(&seen).contains(" on ") {
+            let n = err.read(&mut b).unwrap_or(0);
+            assert!(
+                n > 0 && t0.elapsed() < Duration::from_secs(20),
+                "ferrocat sim did not start: {}",
+                String::from_utf8_lossy(&seen)
+            );
+            seen.extend_from_slice(&b[..n]);
+        }
+        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+        Sim { child }
+    }
+
+    /// Stops the simulator with SIGTERM and waits for it to exit cleanly.
+    pub fn stop(mut self) {
+        let pid = self.child.id().to_string();
+        Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "ferrocat sim exited with {status}");
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

@@ -1,0 +1,61 @@
+"""SOEM (through pysoem, unmodified) against a segment: what slaveinfo prints, then OP and outputs.
+
+Usage: soem_slaveinfo.py IFACE OUTPUT_BYTE
+Prints one JSON object on stdout.
+"""
+import json
+import struct
+import sys
+import time
+
+import pysoem
+
+iface, out_byte = sys.argv[1], int(sys.argv[2], 0)
+m = pysoem.Master()
+m.open(iface)
+result = {"slaves": []}
+try:
+    n = m.config_init()
+    result["found"] = n
+    m.config_map()
+    result["has_dc"] = bool(m.config_dc())
+    for i, s in enumerate(m.slaves):
+        station = 0x1001 + i
+        info = {"name": s.name, "man": s.man, "id": s.id, "rev": s.rev, "station": station}
+        sm = []
+        for k in range(4):
+            start, length, ctl, status, act, pdi = struct.unpack("<HHBBBB", s._fprd(0x0800 + 8 * k, 8))
+            if start:
+                sm.append({"start": start, "length": length, "control": ctl, "activate": act})
+        info["sm"] = sm
+        fm = []
+        for k in range(4):
+            ls, ll, lsb, leb, ps, psb, ty, act = struct.unpack("<IHBBHBBB3x", s._fprd(0x0600 + 16 * k, 16))
+            if act:
+                fm.append({"ls": ls, "ll": ll, "lsb": lsb, "leb": leb, "ps": ps, "psb": psb, "type": ty})
+        info["fmmu"] = fm
+        (dl,) = struct.unpack("<H", s._fprd(0x0110, 2))
+        info["active_ports"] = [int(bool(dl & (1 << (9 + 2 * p))) and not dl & (1 << (8 + 2 * p))) for p in range(4)]
+        (info["delay_ns"],) = struct.unpack("<I", s._fprd(0x0928, 4))
+        result["slaves"].append(info)
+    m.state = pysoem.SAFEOP_STATE
+    m.write_state()
+    m.state_check(pysoem.SAFEOP_STATE, 500_000)
+    # Cyclic exchange: SOEM packs both EL2004 into one byte; write it through the first one.
+    m.slaves[1].output = bytes([out_byte])
+    m.send_processdata()
+    m.receive_processdata(2000)
+    m.state = pysoem.OP_STATE
+    m.write_state()
+    wkc = 0
+    for _ in range(200):
+        m.send_processdata()
+        wkc = m.receive_processdata(2000)
+        time.sleep(0.001)
+    result["wkc"] = wkc
+    result["expected_wkc"] = m.expected_wkc
+    result["op"] = m.state_check(pysoem.OP_STATE, 500_000) == pysoem.OP_STATE
+    result["states"] = [s.state for s in m.slaves]
+finally:
+    m.close()
+print(json.dumps(result))

@@ -1,0 +1,131 @@
+//! SOEM (pysoem, unmodified) against `ferrocat sim` over a veth pair: a segment built from the
+//! real EK1100 and EL2004 EEPROM dumps must look like the real hardware did to SOEM
+//! (../shared/captures/soem-sdinfo-2-el2004.txt), reach OP, and receive its outputs.
+mod common;
+
+use common::{python, Sim, VethPair};
+
+fn printout_slaves() -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(ferrocat_testdata::shared("captures/soem-sdinfo-2-el2004.txt")).unwrap();
+    let mut v: Vec<Vec<String>> = Vec::new();
+    for l in text.lines().map(str::trim) {
+        if l.starts_with("Slave:") {
+            v.push(Vec::new());
+        } else if let Some(s) = v.last_mut() {
+            s.push(l.to_string());
+        }
+    }
+    v
+}
+
+fn field<'a>(lines: &'a [String], prefix: &str) -> &'a str {
+    lines.iter().find_map(|l| l.strip_prefix(prefix)).unwrap_or_else(|| panic!("no {prefix}")).trim()
+}
+
+#[test]
+fn needs_shared_soem_sees_the_real_hardware() {
+    let eeprom = ferrocat_testdata::shared("captures/eeprom");
+    let (ek, el) = (eeprom.join("ek1100.hex"), eeprom.join("el2004.bin"));
+    let net = VethPair::new("so");
+    let report = std::env::temp_dir().join(format!("ferrocat-soem-report-{}.json", std::process::id()));
+    let sim = Sim::start(
+        &net,
+        &[
+            "--device",
+            ek.to_str().unwrap(),
+            "--device",
+            el.to_str().unwrap(),
+            "--device",
+            el.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ],
+    );
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/soem_slaveinfo.py");
+    let out = VethPair::cmd(&net.master_ns, python().to_str().unwrap())
+        .args([script, &net.master_if, "0xA5"])
+        .output()
+        .unwrap();
+    sim.stop();
+    assert!(out.status.success(), "pysoem: {}", String::from_utf8_lossy(&out.stderr));
+    let soem: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    println!("SOEM saw: {soem}");
+    let real = printout_slaves();
+    assert_eq!(soem["found"], 3);
+    for (i, (s, lines)) in soem["slaves"].as_array().unwrap().iter().zip(&real).enumerate() {
+        assert_eq!(s["name"], field(lines, "Name:"), "slave {i}");
+        let ident = format!(
+            "{:08x} ID: {:08x} Rev: {:08x}",
+            s["man"].as_u64().unwrap(),
+            s["id"].as_u64().unwrap(),
+            s["rev"].as_u64().unwrap()
+        );
+        assert_eq!(ident, field(lines, "Man:"), "slave {i}");
+        assert_eq!(
+            s["station"].as_u64().unwrap(),
+            u64::from_str_radix(field(lines, "Configured address:"), 16).unwrap()
+        );
+        let ports: Vec<String> = s["active_ports"].as_array().unwrap().iter().map(|p| p.to_string()).collect();
+        assert_eq!(ports.join("."), field(lines, "Activeports:"), "slave {i}");
+        let want_delay: i64 = field(lines, "Delay:").trim_end_matches("[ns]").parse().unwrap();
+        let delay = s["delay_ns"].as_i64().unwrap();
+        assert!((delay - want_delay).abs() <= 10, "slave {i}: delay {delay} ns, real hardware {want_delay} ns");
+        let sm: Vec<String> = s["sm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .enumerate()
+            .map(|(k, m)| {
+                let flags = m["control"].as_u64().unwrap() | m["activate"].as_u64().unwrap() << 16;
+                format!(
+                    "SM{k} A:{:04x} L:{:4} F:{flags:08x}",
+                    m["start"].as_u64().unwrap(),
+                    m["length"].as_u64().unwrap()
+                )
+            })
+            .collect();
+        let real_sm: Vec<String> = lines
+            .iter()
+            .filter(|l| l.starts_with("SM"))
+            .map(|l| l.rsplit_once(" Type").unwrap().0.to_string())
+            .collect();
+        assert_eq!(sm, real_sm, "slave {i}: SM lines");
+        let fm: Vec<String> = s["fmmu"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let g = |x: &str| f[x].as_u64().unwrap();
+                format!(
+                    "FMMU{k} Ls:{:08x} Ll:{:4} Lsb:{} Leb:{} Ps:{:04x} Psb:{} Ty:{:02x} Act:01",
+                    g("ls"),
+                    g("ll"),
+                    g("lsb"),
+                    g("leb"),
+                    g("ps"),
+                    g("psb"),
+                    g("type")
+                )
+            })
+            .collect();
+        let real_fm: Vec<&String> =
+            lines.iter().filter(|l| l.starts_with("FMMU") && !l.starts_with("FMMUfunc")).collect();
+        assert_eq!(fm.iter().collect::<Vec<_>>(), real_fm, "slave {i}: FMMU lines");
+    }
+    assert_eq!(soem["op"], true, "slaves reached OP");
+    // The working counter SOEM calculated on the real hardware.
+    let calculated: u64 = std::fs::read_to_string(ferrocat_testdata::shared("captures/soem-sdinfo-2-el2004.txt"))
+        .unwrap()
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("Calculated workcounter ").map(|v| v.trim().parse().unwrap()))
+        .unwrap();
+    assert_eq!(soem["wkc"].as_u64().unwrap(), calculated);
+    // Outputs 0xA5: the first EL2004 holds the low nibble, the second the high one.
+    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    std::fs::remove_file(&report).ok();
+    let devs = rep["devices"].as_array().unwrap();
+    assert_eq!(devs[1]["outputs"], serde_json::json!([0x05]));
+    assert_eq!(devs[2]["outputs"], serde_json::json!([0x0A]));
+    assert!(devs.iter().all(|d| d["al_state"] == "OP"), "{rep}");
+}
