@@ -299,6 +299,24 @@ mod tests {
     }
 
     #[test]
+    fn speed_counter_deviation_formula() {
+        // esc-spec §3.2, 0x0932: Deviation = SCD / (5·(SCS+SCD+2)·(SCS−SCD+2)).
+        for (scs, scd) in [(0x1000u16, 100i16), (0x1000, -2565), (0x0080, 1), (0x3FFF, 3000)] {
+            let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
+            dc.scs = scs;
+            dc.scd = scd;
+            let span = 10_000_000_000u64;
+            let measured = dc.local_at(span) as f64 - span as f64;
+            let (s, d) = (scs as f64, scd as f64);
+            let expected = -(d / (5.0 * (s + d + 2.0) * (s - d + 2.0))) * span as f64;
+            assert!(
+                (measured - expected).abs() <= 11.0,
+                "SCS {scs} SCD {scd}: {measured} ns vs {expected} ns over 10 s"
+            );
+        }
+    }
+
+    #[test]
     fn wrap_on_32_bit() {
         let mut dc = DcUnit::new(DcWidth::Bits32, 0, 0, 0);
         dc.offset = 0xFFFF_FFF0;

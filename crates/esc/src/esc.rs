@@ -78,6 +78,23 @@ impl Expected {
     }
 }
 
+/// A bounded record of recent SYNC0 pulses (system time, true time).
+#[derive(Debug, Clone, Default)]
+pub struct SyncLog {
+    pub pulses: std::collections::VecDeque<(u64, u64)>,
+    pub count: u64,
+}
+
+impl SyncLog {
+    fn push(&mut self, p: (u64, u64)) {
+        if self.pulses.len() == 64 {
+            self.pulses.pop_front();
+        }
+        self.pulses.push_back(p);
+        self.count += 1;
+    }
+}
+
 /// Per-frame bookkeeping of writes with side effects.
 #[derive(Debug, Default)]
 struct FrameEffects {
@@ -103,6 +120,8 @@ pub struct Esc {
     wd_last_trigger_ns: u64,
     reset_seq: u8,
     sync_scratch: Vec<u64>,
+    /// The last SYNC0 pulses: (system time, true time), newest last, at most 64.
+    pub sync0_log: SyncLog,
     /// Frames this ESC processed.
     pub frames: u64,
     /// AL status changes, for tests and tracing.
@@ -131,6 +150,7 @@ impl Esc {
             wd_last_trigger_ns: t_ns,
             reset_seq: 0,
             sync_scratch: Vec::new(),
+            sync0_log: SyncLog::default(),
             frames: 0,
             al_changes: 0,
             dc_init: (drift_ppb, 0),
@@ -236,14 +256,24 @@ impl Esc {
         if t_ns < self.now_ns {
             return;
         }
-        if let Some(dc) = self.dc.as_mut() {
+        // SYNC0 pulses up to t, each delivered at its exact true instant.
+        while let Some(tp) = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns)) {
+            if tp > t_ns {
+                break;
+            }
             let mut pulses = std::mem::take(&mut self.sync_scratch);
-            dc.take_sync0_until(t_ns, &mut pulses);
+            if let Some(dc) = self.dc.as_mut() {
+                dc.take_sync0_until(tp, &mut pulses);
+            }
+            self.now_ns = self.now_ns.max(tp);
             for sys in pulses.drain(..) {
-                let mut pdi = Pdi { mem: &mut self.mem, now_ns: t_ns };
+                self.sync0_log.push((sys, tp));
+                let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
                 self.app.sync0(&mut pdi, sys);
             }
             self.sync_scratch = pulses;
+        }
+        if let Some(dc) = self.dc.as_mut() {
             dc.fold_to(t_ns);
         }
         self.now_ns = t_ns;

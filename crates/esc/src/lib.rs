@@ -15,4 +15,4 @@ mod regs;
 pub use al::AlMachine;
 pub use app::{Application, DigitalIo, NoApplication, Pdi};
 pub use config::{DcWidth, EscConfig};
-pub use esc::{Esc, FrameTiming, LinkState};
+pub use esc::{Esc, FrameTiming, LinkState, SyncLog};

@@ -230,7 +230,8 @@ impl Segment {
     }
 
     /// The frame's walk through `node`, entered on `entry` at `t_in`: records the timing of
-    /// every ESC it passes and returns when it leaves `entry` again.
+    /// every ESC it passes and returns when it leaves `entry` again. The wiring is a tree
+    /// (every device hangs off an earlier one), so the depth never exceeds the node count.
     fn walk(&mut self, node: usize, entry: u8, t_in: u64, depth: usize) -> u64 {
         let mut timing = FrameTiming::default();
         timing.port_ns[entry as usize] = Some(t_in);
@@ -263,7 +264,9 @@ impl Segment {
                 continue;
             }
             match self.nodes[node].peers[q as usize] {
-                Some(peer) if depth < 64 && self.link_up(node, q) && self.nodes[node].esc.port_open(q) => {
+                Some(peer)
+                    if depth < self.nodes.len() && self.link_up(node, q) && self.nodes[node].esc.port_open(q) =>
+                {
                     let d = peer.delay_ns as u64;
                     let back = self.walk(peer.node, peer.port, t_tx + d, depth + 1) + d;
                     timing.port_ns[q as usize] = Some(back);

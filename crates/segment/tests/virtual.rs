@@ -1,48 +1,11 @@
 //! The virtual segment in-process, driven by a minimal master written here from the spec.
+mod common;
+
+use common::Bus;
 use ferrocat_esc::DigitalIo;
 use ferrocat_segment::{Segment, SegmentConfig};
-use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
 use ferrocat_wire::register::{AlState, AlStatus, Fmmu, SyncManager};
-use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
-
-struct Bus {
-    seg: Segment,
-    t: u64,
-}
-
-impl Bus {
-    /// One datagram in one frame; returns (data, wkc, adp as returned).
-    fn tx(&mut self, cmd: Command, address: Address, data: &[u8]) -> (Vec<u8>, u16, Address) {
-        let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
-        let mut buf = [0u8; 1514];
-        let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
-        w.push(&DatagramHeader::new(cmd, 1, address, data.len() as u16), data, 0).unwrap();
-        let n = w.finish().unwrap();
-        let back = self.seg.exchange(&mut buf[..n], self.t).expect("frame returns");
-        assert!(back > self.t);
-        self.t = back + 10_000;
-        let f = Frame::parse(&buf[..n]).unwrap().unwrap();
-        let d = f.pdu.datagrams().next().unwrap();
-        (d.data().to_vec(), d.wkc(), d.header().address)
-    }
-    fn fp(&mut self, cmd: Command, station: u16, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
-        let (d, w, _) = self.tx(cmd, Address::Device { adp: station, ado }, data);
-        (d, w)
-    }
-    fn sii_read(&mut self, station: u16, word: u32) -> [u8; 4] {
-        let mut req = vec![0x00, 0x01];
-        req.extend_from_slice(&word.to_le_bytes());
-        assert_eq!(self.fp(Command::FPWR, station, 0x0502, &req).1, 1);
-        loop {
-            let (d, _) = self.fp(Command::FPRD, station, 0x0502, &[0; 2]);
-            if u16::from_le_bytes([d[0], d[1]]) & 0x8000 == 0 {
-                break;
-            }
-        }
-        let (d, _) = self.fp(Command::FPRD, station, 0x0508, &[0; 4]);
-        [d[0], d[1], d[2], d[3]]
-    }
-}
+use ferrocat_wire::{Address, Command};
 
 fn ek1100_el2004_el2004() -> Segment {
     let dir = ferrocat_testdata::shared("captures/eeprom");
@@ -59,7 +22,7 @@ fn ek1100_el2004_el2004() -> Segment {
 
 #[test]
 fn needs_shared_bring_up_delays_and_outputs() {
-    let mut bus = Bus { seg: ek1100_el2004_el2004(), t: 1_000_000 };
+    let mut bus = Bus::new(ek1100_el2004_el2004());
     // Count: BRD increments ADP at every slave and WKC at every one that answers.
     let (_, wkc, addr) = bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]);
     assert_eq!((wkc, addr), (3, Address::Device { adp: 3, ado: 0 }));
@@ -125,7 +88,7 @@ fn needs_shared_bring_up_delays_and_outputs() {
 #[test]
 fn builtin_devices_and_bad_descriptions() {
     let cfg = SegmentConfig::from_device_args(&["EK1100".into(), "EL1004".into(), "EL2004".into()]).unwrap();
-    let mut bus = Bus { seg: cfg.build().unwrap(), t: 0 };
+    let mut bus = Bus::new(cfg.build().unwrap());
     assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3);
     assert!(SegmentConfig::from_device_args(&["EL9999".into()])
         .unwrap()

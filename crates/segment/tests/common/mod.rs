@@ -1,0 +1,71 @@
+//! A minimal master for the segment's tests: one datagram per frame, written from the spec.
+#![allow(dead_code)]
+use ferrocat_segment::Segment;
+use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
+
+pub struct Bus {
+    pub seg: Segment,
+    pub t: u64,
+}
+
+impl Bus {
+    pub fn new(seg: Segment) -> Self {
+        Bus { seg, t: 1_000_000 }
+    }
+
+    /// One datagram in one frame, sent at `self.t`; returns (data, wkc, address as returned).
+    pub fn tx(&mut self, cmd: Command, address: Address, data: &[u8]) -> (Vec<u8>, u16, Address) {
+        let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
+        let mut buf = [0u8; 1514];
+        let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
+        w.push(&DatagramHeader::new(cmd, 1, address, data.len() as u16), data, 0).unwrap();
+        let n = w.finish().unwrap();
+        let back = self.seg.exchange(&mut buf[..n], self.t).expect("frame returns");
+        assert!(back > self.t);
+        self.t = back + 10_000;
+        let f = Frame::parse(&buf[..n]).unwrap().unwrap();
+        let d = f.pdu.datagrams().next().unwrap();
+        (d.data().to_vec(), d.wkc(), d.header().address)
+    }
+
+    pub fn fp(&mut self, cmd: Command, station: u16, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
+        let (d, w, _) = self.tx(cmd, Address::Device { adp: station, ado }, data);
+        (d, w)
+    }
+
+    pub fn fprd_u64(&mut self, station: u16, ado: u16) -> u64 {
+        let (d, w) = self.fp(Command::FPRD, station, ado, &[0; 8]);
+        assert_eq!(w, 1);
+        u64::from_le_bytes(d.try_into().unwrap())
+    }
+
+    pub fn fprd_u32(&mut self, station: u16, ado: u16) -> u32 {
+        let (d, w) = self.fp(Command::FPRD, station, ado, &[0; 4]);
+        assert_eq!(w, 1);
+        u32::from_le_bytes(d.try_into().unwrap())
+    }
+
+    /// Reads 4 bytes of the SII at `word` through the EEPROM interface, polling busy.
+    pub fn sii_read(&mut self, station: u16, word: u32) -> [u8; 4] {
+        let mut req = vec![0x00, 0x01];
+        req.extend_from_slice(&word.to_le_bytes());
+        assert_eq!(self.fp(Command::FPWR, station, 0x0502, &req).1, 1);
+        loop {
+            let (d, _) = self.fp(Command::FPRD, station, 0x0502, &[0; 2]);
+            if u16::from_le_bytes([d[0], d[1]]) & 0x8000 == 0 {
+                break;
+            }
+        }
+        let (d, _) = self.fp(Command::FPRD, station, 0x0508, &[0; 4]);
+        [d[0], d[1], d[2], d[3]]
+    }
+
+    /// Station addresses 0x1001, 0x1002, … by position.
+    pub fn address_all(&mut self) {
+        for pos in 0..self.seg.nodes.len() as u16 {
+            let (_, w, _) = self.tx(Command::APWR, Address::position(pos, 0x0010), &(0x1001 + pos).to_le_bytes());
+            assert_eq!(w, 1);
+        }
+    }
+}

@@ -1,0 +1,112 @@
+//! The DC unit against the datasheet facts (esc-spec §3), observed through the wire.
+mod common;
+
+use common::Bus;
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::register::dc_activation as act;
+use ferrocat_wire::{Address, Command};
+
+fn line(devices: &[&str], esc: &str) -> Bus {
+    let mut toml = String::from("seed = 3\n");
+    for d in devices {
+        toml += &format!("[[device]]\nbuiltin = '{d}'\nesc = '{esc}'\n");
+    }
+    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
+    let mut bus = Bus::new(cfg.build().unwrap());
+    bus.address_all();
+    bus
+}
+
+#[test]
+fn low_word_of_0918_equals_port0_time_and_write_latches_ports() {
+    let mut bus = line(&["EK1100", "EL2004", "EL2004"], "et1100");
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 3);
+    for s in 0x1001..=0x1003 {
+        let p0 = bus.fprd_u32(s, 0x0900);
+        let epu = bus.fprd_u64(s, 0x0918);
+        assert_eq!(epu as u32, p0, "slave {s:#x}");
+    }
+    // An APWR to 0x0900 counts but does not latch the ports (esc-spec §3.2).
+    let before = bus.fprd_u32(0x1002, 0x0904);
+    assert_eq!(bus.tx(Command::APWR, Address::position(1, 0x0900), &[0; 4]).1, 1);
+    assert_eq!(bus.fprd_u32(0x1002, 0x0904), before);
+}
+
+#[test]
+fn ecat_read_of_0910_subtracts_the_delay_and_a_write_does_not_overwrite() {
+    let mut bus = line(&["EK1100", "EL2004"], "et1100");
+    let delay = 12_345u32;
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0928, &delay.to_le_bytes()).1, 1);
+    let read = bus.fprd_u64(0x1002, 0x0910);
+    let (node, timing) = bus.seg.last_visits()[1];
+    assert_eq!(node, 1);
+    let dc = bus.seg.nodes[1].esc.dc.as_ref().unwrap();
+    assert_eq!(read, dc.system_at(timing.epu_ns) - delay as u64);
+    // A write is a sample for the control loop; the register keeps counting.
+    let far = 0x7777_0000_0000u64;
+    bus.fp(Command::FPWR, 0x1002, 0x0910, &far.to_le_bytes());
+    let after = bus.fprd_u64(0x1002, 0x0910);
+    assert!(after > read && after < read + 1_000_000, "{after} vs {read}");
+    assert!(bus.fprd_u32(0x1002, 0x092C) & 0x7FFF_FFFF > 0, "the sample shows in 0x092C");
+}
+
+#[test]
+fn writing_0930_resets_the_filters() {
+    let mut bus = line(&["EK1100", "EL2004"], "et1100");
+    // FRMW of the reference's time into the second slave, a few hundred times.
+    for _ in 0..300 {
+        bus.tx(Command::FRMW, Address::Device { adp: 0x1001, ado: 0x0910 }, &[0; 8]);
+    }
+    let diff = bus.fprd_u32(0x1002, 0x092C);
+    let (scd, _) = bus.fp(Command::FPRD, 0x1002, 0x0932, &[0; 2]);
+    assert!(diff != 0 || scd != [0, 0], "the loop ran");
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0930, &0x1000u16.to_le_bytes()).1, 1);
+    assert_eq!(bus.fprd_u32(0x1002, 0x092C), 0);
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0932, &[0; 2]).0, [0, 0]);
+}
+
+#[test]
+fn sync0_fires_on_the_system_time_grid() {
+    let mut bus = line(&["EK1100", "EL2004"], "et1100");
+    let now = bus.fprd_u64(0x1002, 0x0910);
+    let cycle = 250_000u64;
+    let start = (now / cycle + 4) * cycle;
+    bus.fp(Command::FPWR, 0x1002, 0x0981, &[0]);
+    bus.fp(Command::FPWR, 0x1002, 0x09A0, &(cycle as u32).to_le_bytes());
+    bus.fp(Command::FPWR, 0x1002, 0x0990, &start.to_le_bytes());
+    bus.fp(Command::FPWR, 0x1002, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0]);
+    let t = bus.t + 20 * cycle;
+    bus.seg.advance_to(t);
+    let esc = &bus.seg.nodes[1].esc;
+    assert!(esc.sync0_log.count >= 15, "{} pulses", esc.sync0_log.count);
+    let dc = esc.dc.as_ref().unwrap();
+    for &(sys, true_ns) in &esc.sync0_log.pulses {
+        assert_eq!((sys - start) % cycle, 0, "pulse {sys} off the grid");
+        // At the pulse's true instant the system time has just reached it.
+        let at = dc.system_at(true_ns);
+        assert!(at >= sys && at - sys <= 10, "system time {at} at the pulse for {sys}");
+    }
+    let sys_now = dc.system_at(t);
+    // 0x0990 reads the next pulse.
+    let next = bus.fprd_u64(0x1002, 0x0990);
+    assert_eq!((next - start) % cycle, 0);
+    assert!(next > sys_now);
+}
+
+#[test]
+fn a_32_bit_dc_wraps() {
+    let mut bus = line(&["EK1100", "EL2004"], "esc20");
+    // Put the system time 1 ms before the 32-bit wrap.
+    let now = bus.fprd_u32(0x1002, 0x0910);
+    let offset = (u32::MAX - 1_000_000).wrapping_sub(now);
+    bus.fp(Command::FPWR, 0x1002, 0x0920, &offset.to_le_bytes());
+    let a = bus.fprd_u32(0x1002, 0x0910);
+    bus.t += 2_000_000;
+    let b = bus.fprd_u32(0x1002, 0x0910);
+    assert!(a > 0xFFF0_0000 && b < 0x0020_0000, "{a:#x} then {b:#x}");
+    let elapsed = b.wrapping_sub(a);
+    assert!((2_000_000..2_100_000).contains(&elapsed), "2 ms (and a frame) later across the wrap: {elapsed} ns");
+    // 8-byte reads of the 32-bit system time: the upper half does not exist.
+    let (d, _) = bus.fp(Command::FPRD, 0x1002, 0x0910, &[0; 8]);
+    assert_eq!(&d[4..], &[0, 0, 0, 0]);
+}
