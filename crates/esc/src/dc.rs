@@ -27,8 +27,14 @@ pub struct DcUnit {
     pub width: DcWidth,
     /// True time up to which the accumulators are folded.
     t_ns: u64,
-    phase_as: i128,
-    corr_as: i128,
+    /// Whole 10 ns ticks of the oscillator, and the phase past the last tick (attoseconds).
+    ticks: i64,
+    phase_rem_as: i64,
+    /// Whole nanoseconds of TCL correction, and the remainder (attoseconds, 0..10⁹).
+    corr_ns: i64,
+    corr_rem_as: i64,
+    /// Correction rate, attoseconds per ns × 2³², from SCS and SCD.
+    corr_rate_q32: i128,
     pub drift_ppb: i64,
     pub offset: u64,
     pub delay: u32,
@@ -38,8 +44,11 @@ pub struct DcUnit {
     pub depth_speed: u8,
     /// Filtered `local − received` (0x092C), in ns.
     pub diff_mean_ns: i64,
-    /// Estimated free-running frequency error, in units of 10⁻¹⁵.
-    freq_est_fpp: i128,
+    /// Estimated free-running frequency error, in units of 10⁻¹⁵ (f64: exact IEEE operations
+    /// in a fixed order, so every machine computes the same value).
+    freq_est_fpp: f64,
+    /// The rate the current SCD applies, in units of 10⁻¹⁵.
+    applied_fpp: i128,
     last_sample: Option<(u64, i64)>,
     pub sync: SyncUnit,
 }
@@ -64,8 +73,11 @@ impl DcUnit {
         DcUnit {
             width,
             t_ns,
-            phase_as: local0_ns as i128 * AS_PER_NS,
-            corr_as: 0,
+            ticks: (local0_ns / 10) as i64,
+            phase_rem_as: (local0_ns % 10) as i64 * AS_PER_NS as i64,
+            corr_ns: 0,
+            corr_rem_as: 0,
+            corr_rate_q32: 0,
             drift_ppb,
             offset: 0,
             delay: 0,
@@ -74,7 +86,8 @@ impl DcUnit {
             depth_diff: 4,
             depth_speed: 12,
             diff_mean_ns: 0,
-            freq_est_fpp: 0,
+            freq_est_fpp: 0.0,
+            applied_fpp: 0,
             last_sample: None,
             sync: SyncUnit::default(),
         }
@@ -98,12 +111,39 @@ impl DcUnit {
     }
 
     fn local_ext_at(&self, t_ns: u64) -> u64 {
-        let dt = t_ns as i128 - self.t_ns as i128;
-        let phase = self.phase_as + dt * (AS_PER_NS + self.drift_ppb as i128);
-        let (num, den) = scd_rate(self.scs, self.scd);
-        let corr = self.corr_as - dt * AS_PER_NS * num / den;
-        let local = 10 * phase.div_euclid(TICK_AS) + corr.div_euclid(AS_PER_NS);
-        local.max(0) as u64
+        let (ticks, _, corr_ns, _) = self.project(t_ns as i128 - self.t_ns as i128);
+        (10 * ticks + corr_ns).max(0) as u64
+    }
+
+    /// The accumulators `dt` ns after the folded time: (ticks, phase remainder, correction ns,
+    /// correction remainder). Exact integer arithmetic; i64 on the hot path (|dt| < 2³² ns).
+    fn project(&self, dt: i128) -> (i64, i64, i64, i64) {
+        const TICK: i64 = TICK_AS as i64;
+        const NS: i64 = AS_PER_NS as i64;
+        let per_ns = AS_PER_NS as i64 + self.drift_ppb;
+        let corr_delta = (dt * self.corr_rate_q32) >> 32;
+        if (0..1 << 32).contains(&dt) {
+            let dt = dt as i64;
+            let ph = self.phase_rem_as + dt * per_ns;
+            let c = self.corr_rem_as - corr_delta as i64;
+            (self.ticks + ph.div_euclid(TICK), ph.rem_euclid(TICK), self.corr_ns + c.div_euclid(NS), c.rem_euclid(NS))
+        } else {
+            let ph = self.phase_rem_as as i128 + dt * per_ns as i128;
+            let c = self.corr_rem_as as i128 - corr_delta;
+            (
+                self.ticks + ph.div_euclid(TICK_AS) as i64,
+                ph.rem_euclid(TICK_AS) as i64,
+                self.corr_ns + c.div_euclid(AS_PER_NS) as i64,
+                c.rem_euclid(AS_PER_NS) as i64,
+            )
+        }
+    }
+
+    fn set_scd(&mut self, scd: i16) {
+        self.scd = scd;
+        let (num, den) = scd_rate(self.scs, scd);
+        self.corr_rate_q32 = (AS_PER_NS * num << 32) / den;
+        self.applied_fpp = 1_000_000_000_000_000 * num / den;
     }
 
     /// Local copy of the system time at true time `t_ns`.
@@ -121,10 +161,7 @@ impl DcUnit {
         if t_ns <= self.t_ns {
             return;
         }
-        let dt = (t_ns - self.t_ns) as i128;
-        self.phase_as += dt * (AS_PER_NS + self.drift_ppb as i128);
-        let (num, den) = scd_rate(self.scs, self.scd);
-        self.corr_as -= dt * AS_PER_NS * num / den;
+        (self.ticks, self.phase_rem_as, self.corr_ns, self.corr_rem_as) = self.project((t_ns - self.t_ns) as i128);
         self.t_ns = t_ns;
     }
 
@@ -138,8 +175,8 @@ impl DcUnit {
     pub fn reset_filters(&mut self, t_ns: u64) {
         self.fold_to(t_ns);
         self.diff_mean_ns = 0;
-        self.scd = 0;
-        self.freq_est_fpp = 0;
+        self.set_scd(0);
+        self.freq_est_fpp = 0.0;
         self.last_sample = None;
     }
 
@@ -155,39 +192,44 @@ impl DcUnit {
         // Frequency: the change of the difference since the last sample, plus what the loop
         // was already correcting, filtered over 2^depth samples.
         let local = self.local_at(t_ns);
-        let (num, den) = scd_rate(self.scs, self.scd);
-        let applied_fpp = 1_000_000_000_000_000 * num / den;
+        let applied_fpp = self.applied_fpp as f64;
         if let Some((l0, dt0)) = self.last_sample {
-            let span = local.wrapping_sub(l0) as i128;
+            let span = local.wrapping_sub(l0) as i64;
             if span > 0 {
-                let meas = applied_fpp + (dt - dt0) as i128 * 1_000_000_000_000_000 / span;
-                let n2 = (self.depth_speed & 0x0F) as u32;
-                self.freq_est_fpp += (meas - self.freq_est_fpp) >> n2.min(6);
+                let meas = applied_fpp + (dt - dt0) as f64 * 1e15 / span as f64;
+                let n2 = (self.depth_speed & 0x0F).min(6) as i32;
+                self.freq_est_fpp += (meas - self.freq_est_fpp) / (1u32 << n2) as f64;
             }
         }
         self.last_sample = Some((local, dt));
         // Command: cancel the frequency error and slew the mean difference out over TAU.
-        let want_fpp = self.freq_est_fpp + self.diff_mean_ns as i128 * 1_000_000_000_000_000 / TCL_PHASE_TAU_NS;
-        self.scd = self.scd_for(want_fpp);
+        let want_fpp = self.freq_est_fpp + self.diff_mean_ns as f64 * 1e15 / TCL_PHASE_TAU_NS as f64;
+        let scd = self.scd_for(want_fpp);
+        if scd != self.scd {
+            self.set_scd(scd);
+        }
     }
 
     /// The speed-counter difference whose rate is closest to `fpp` (10⁻¹⁵), within the bound.
-    fn scd_for(&self, fpp: i128) -> i16 {
-        let max = (self.scs as i32 - 0x7F).max(0);
-        let rate = |d: i32| -> i128 {
-            let (n, den) = scd_rate(self.scs, d as i16);
-            1_000_000_000_000_000 * n / den
+    /// Closed form: `d = 5r((S+2)² − d²)` is a quadratic in d; its root is refined exactly.
+    fn scd_for(&self, fpp: f64) -> i16 {
+        let max = (self.scs as i64 - 0x7F).max(0);
+        let s = self.scs as f64;
+        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754).
+        let rate = |d: i64| -> f64 {
+            let d = d as f64;
+            d / (5.0 * (s + d + 2.0) * (s - d + 2.0))
         };
-        let (mut lo, mut hi) = (-max, max);
-        while lo < hi {
-            let mid = (lo + hi).div_euclid(2);
-            if rate(mid) < fpp {
-                lo = mid + 1;
-            } else {
-                hi = mid;
+        let r = fpp * 1e-15;
+        let guess =
+            if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
+        let g = (guess.round() as i64).clamp(-max, max);
+        let mut best = g;
+        for d in [g - 1, g + 1] {
+            if d.abs() <= max && (rate(d) - r).abs() < (rate(best) - r).abs() {
+                best = d;
             }
         }
-        let best = if lo > -max && (rate(lo - 1) - fpp).abs() <= (rate(lo) - fpp).abs() { lo - 1 } else { lo };
         best as i16
     }
 
@@ -304,7 +346,7 @@ mod tests {
         for (scs, scd) in [(0x1000u16, 100i16), (0x1000, -2565), (0x0080, 1), (0x3FFF, 3000)] {
             let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
             dc.scs = scs;
-            dc.scd = scd;
+            dc.set_scd(scd);
             let span = 10_000_000_000u64;
             let measured = dc.local_at(span) as f64 - span as f64;
             let (s, d) = (scs as f64, scd as f64);

@@ -128,6 +128,16 @@ pub struct Esc {
     pub al_changes: u64,
     /// Drift (ppb) and power-on local time the DC unit restarts with after a power cycle.
     dc_init: (i64, u64),
+    /// Decoded SyncManagers and active FMMUs, refreshed when their registers are written.
+    sm_cache: Vec<SyncManager>,
+    /// Lowest start and highest end of the enabled SyncManagers' areas.
+    sm_span: (u32, u32),
+    fmmu_cache: Vec<Fmmu>,
+    scratch: Vec<u8>,
+    sii_busy_shown: bool,
+    sync_pulsed: bool,
+    /// An enabled output SyncManager triggers the process-data watchdog.
+    wd_armed: bool,
 }
 
 impl Esc {
@@ -154,6 +164,13 @@ impl Esc {
             frames: 0,
             al_changes: 0,
             dc_init: (drift_ppb, 0),
+            sm_cache: Vec::new(),
+            sm_span: (0, 0),
+            fmmu_cache: Vec::new(),
+            scratch: Vec::new(),
+            sii_busy_shown: false,
+            sync_pulsed: false,
+            wd_armed: false,
         };
         esc.power_on(t_ns);
         esc
@@ -201,7 +218,32 @@ impl Esc {
                 Some(DcUnit::new(w, t_ns, local0, drift))
             }
         };
+        self.reload_sm_fmmu();
         self.refresh_registers();
+    }
+
+    /// Decodes the SyncManager and FMMU registers after they were written.
+    fn reload_sm_fmmu(&mut self) {
+        self.sm_cache = (0..self.config.sm_count)
+            .map(|n| {
+                let a = addr::sm(n) as usize;
+                SyncManager::parse(&self.mem[a..a + 8]).unwrap_or_default()
+            })
+            .collect();
+        let active = self.sm_cache.iter().filter(|s| s.enabled() && s.length > 0);
+        let lo = active.clone().map(|s| s.start as u32).min().unwrap_or(0);
+        let hi = active.map(|s| s.start as u32 + s.length as u32).max().unwrap_or(0);
+        self.sm_span = (lo, hi);
+        self.wd_armed = self
+            .sm_cache
+            .iter()
+            .any(|s| s.enabled() && !s.is_mailbox() && s.ecat_writes() && s.control & SyncManager::WATCHDOG != 0);
+        self.fmmu_cache = (0..self.config.fmmu_count)
+            .filter_map(|i| {
+                let a = addr::fmmu(i) as usize;
+                Fmmu::parse(&self.mem[a..a + 16]).ok().filter(|f| f.active && f.length > 0)
+            })
+            .collect();
     }
 
     pub fn app(&self) -> &dyn Application {
@@ -266,6 +308,7 @@ impl Esc {
                 dc.take_sync0_until(tp, &mut pulses);
             }
             self.now_ns = self.now_ns.max(tp);
+            self.sync_pulsed = true;
             for sys in pulses.drain(..) {
                 self.sync0_log.push((sys, tp));
                 let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
@@ -275,6 +318,9 @@ impl Esc {
         }
         if let Some(dc) = self.dc.as_mut() {
             dc.fold_to(t_ns);
+        }
+        if std::mem::take(&mut self.sync_pulsed) {
+            self.refresh_registers();
         }
         self.now_ns = t_ns;
         self.check_watchdog();
@@ -295,12 +341,11 @@ impl Esc {
     }
 
     fn check_watchdog(&mut self) {
+        if !self.wd_armed || self.al.state != AlState::Op {
+            return;
+        }
         let Some(wd) = self.process_data_watchdog_ns() else { return };
-        let armed = (0..self.config.sm_count).any(|n| {
-            let s = self.sm(n);
-            s.enabled() && !s.is_mailbox() && s.ecat_writes() && s.control & SyncManager::WATCHDOG != 0
-        });
-        if armed && self.al.state == AlState::Op && self.now_ns.saturating_sub(self.wd_last_trigger_ns) > wd {
+        if self.al.state == AlState::Op && self.now_ns.saturating_sub(self.wd_last_trigger_ns) > wd {
             self.mem[0x0440] = 0;
             self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
             self.al.fail(AlState::SafeOp, AlStatusCode::SM_WATCHDOG);
@@ -310,8 +355,7 @@ impl Esc {
     }
 
     fn sm(&self, n: u8) -> SyncManager {
-        let a = addr::sm(n) as usize;
-        SyncManager::parse(&self.mem[a..a + 8]).unwrap_or_default()
+        self.sm_cache.get(n as usize).copied().unwrap_or_default()
     }
 
     /// Rewrites registers whose value follows from state: DL status, AL status, SM status,
@@ -340,9 +384,15 @@ impl Esc {
             }
             self.mem[a + 5] = status;
         }
-        let busy = if self.eeprom.busy(self.now_ns) { SiiControl::BUSY } else { 0 };
+        self.sii_busy_shown = self.eeprom.busy(self.now_ns);
+        let busy = if self.sii_busy_shown { SiiControl::BUSY } else { 0 };
         let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800);
         self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | self.eeprom.errors).to_le_bytes());
+        self.refresh_dc_registers();
+    }
+
+    /// The DC registers that follow from the DC unit's state.
+    fn refresh_dc_registers(&mut self) {
         if let Some(dc) = &self.dc {
             let wide = dc.width == DcWidth::Bits64;
             let put = |m: &mut [u8], a: usize, v: u64| {
@@ -365,7 +415,9 @@ impl Esc {
     pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming) {
         self.advance_to(timing.epu_ns);
         self.frames += 1;
-        self.refresh_registers();
+        if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
+            self.refresh_registers();
+        }
         if let Some(dc) = &self.dc {
             // ECAT reads of 0x0910 see the time the frame passed, minus the delay.
             let v = dc.ecat_system_time(timing.epu_ns);
@@ -557,16 +609,14 @@ impl Esc {
     /// LRD/LWR/LRW through the FMMUs, bit by bit where they are not byte-aligned. Returns the
     /// WKC increment: +1 if something was read, +2 if something was written (LWR: +1).
     fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
-        let original = data.to_vec();
+        let mut original = std::mem::take(&mut self.scratch);
+        original.clear();
+        original.extend_from_slice(data);
         let (mut read_ok, mut write_ok) = (false, false);
         let dg_start = logical as u64 * 8;
         let dg_end = dg_start + data.len() as u64 * 8;
-        for i in 0..self.config.fmmu_count {
-            let a = addr::fmmu(i) as usize;
-            let Ok(f) = Fmmu::parse(&self.mem[a..a + 16]) else { continue };
-            if !f.active || f.length == 0 {
-                continue;
-            }
+        for i in 0..self.fmmu_cache.len() {
+            let f = self.fmmu_cache[i];
             let f_start = f.logical_start as u64 * 8 + (f.logical_start_bit & 7) as u64;
             let f_end = (f.logical_start as u64 + f.length as u64 - 1) * 8 + (f.logical_stop_bit & 7) as u64 + 1;
             let (lo, hi) = (f_start.max(dg_start), f_end.min(dg_end));
@@ -609,6 +659,7 @@ impl Esc {
                 bit += run;
             }
         }
+        self.scratch = original;
         match cmd {
             Command::LRD => read_ok as u16,
             Command::LWR => write_ok as u16,
@@ -633,21 +684,38 @@ impl Esc {
 
     fn end_of_frame(&mut self, timing: &FrameTiming) {
         let t = timing.epu_ns;
-        let pending = std::mem::take(&mut self.pending);
-        let wrote = |lo: u16, hi: u16| pending.iter().any(|(a, _)| (lo..=hi).contains(a));
-        let (al_ctl, sii_cmd, dc_offset, dc_delay, scs, depths, sync_cfg, activation, start_time, sm_cfg, reset) = (
-            wrote(0x0120, 0x0121),
-            wrote(0x0502, 0x0503),
-            wrote(0x0920, 0x0927),
-            wrote(0x0928, 0x092B),
-            wrote(0x0930, 0x0931),
-            wrote(0x0934, 0x0935),
-            wrote(0x0980, 0x09A7),
-            wrote(0x0981, 0x0981),
-            wrote(0x0990, 0x0997),
-            wrote(0x0800, 0x087F),
-            wrote(0x0040, 0x0040),
-        );
+        let mut pending = std::mem::take(&mut self.pending);
+        if pending.is_empty() && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read) {
+            self.pending = pending;
+            return;
+        }
+        let (mut al_ctl, mut sii_cmd, mut dc_offset, mut dc_delay, mut scs, mut depths) =
+            (false, false, false, false, false, false);
+        let (mut sync_cfg, mut activation, mut start_time, mut sm_cfg, mut fmmu_cfg, mut reset) =
+            (false, false, false, false, false, false);
+        for &(a, _) in &pending {
+            match a {
+                0x0040 => reset = true,
+                0x0120..=0x0121 => al_ctl = true,
+                0x0502..=0x0503 => sii_cmd = true,
+                0x0600..=0x06FF => fmmu_cfg = true,
+                0x0800..=0x087F => sm_cfg = true,
+                0x0920..=0x0927 => dc_offset = true,
+                0x0928..=0x092B => dc_delay = true,
+                0x0930..=0x0931 => scs = true,
+                0x0934..=0x0935 => depths = true,
+                0x0981 => {
+                    sync_cfg = true;
+                    activation = true;
+                }
+                0x0990..=0x0997 => {
+                    sync_cfg = true;
+                    start_time = true;
+                }
+                0x0980..=0x09A7 => sync_cfg = true,
+                _ => {}
+            }
+        }
         for &(a, v) in &pending {
             self.mem[a as usize] = v;
             if (0x0300..=0x0313).contains(&a) {
@@ -667,6 +735,9 @@ impl Esc {
                 self.power_on(t);
                 return;
             }
+        }
+        if sm_cfg || fmmu_cfg {
+            self.reload_sm_fmmu();
         }
         if sm_cfg {
             for n in 0..self.config.sm_count {
@@ -795,7 +866,14 @@ impl Esc {
             let control = u16::from_le_bytes([self.mem[0x0120], self.mem[0x0121]]);
             self.al_control(control);
         }
-        self.refresh_registers();
+        let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset) && !self.sms.iter().any(|s| s.full);
+        if dc_only {
+            self.refresh_dc_registers();
+        } else {
+            self.refresh_registers();
+        }
+        pending.clear();
+        self.pending = pending;
     }
 
     fn al_control(&mut self, control: u16) {

@@ -2,8 +2,26 @@
 //! side and ignores writes), after the ET1100 register description.
 use ferrocat_wire::register::addr;
 
-/// Whether a byte at `a` is writable from the EtherCAT side.
+/// Whether a byte at `a` is writable from the EtherCAT side (table lookup).
+#[inline]
 pub(crate) fn ecat_writable(a: u16) -> bool {
+    a < 0x1000 && WRITABLE[(a >> 6) as usize] & (1 << (a & 63)) != 0
+}
+
+/// One bit per register byte, built at compile time from the rules below.
+static WRITABLE: [u64; 64] = {
+    let mut t = [0u64; 64];
+    let mut a = 0u16;
+    while a < 0x1000 {
+        if writable_rule(a) {
+            t[(a >> 6) as usize] |= 1 << (a & 63);
+        }
+        a += 1;
+    }
+    t
+};
+
+const fn writable_rule(a: u16) -> bool {
     matches!(a,
         0x0010..=0x0011            // station address
         | 0x0020..=0x0021 | 0x0030..=0x0031 // write enable/protection
@@ -30,8 +48,8 @@ pub(crate) fn ecat_writable(a: u16) -> bool {
 
 /// SyncManager registers: start, length, control and activate are ECAT-writable; status and
 /// PDI control are not.
-fn sm_writable(a: u16) -> bool {
-    if !(addr::SM0..addr::SM0 + 16 * 8).contains(&a) {
+const fn sm_writable(a: u16) -> bool {
+    if a < addr::SM0 || a >= addr::SM0 + 16 * 8 {
         return false;
     }
     matches!((a - addr::SM0) % 8, 0..=4 | 6)

@@ -1,5 +1,6 @@
 //! A virtual EtherCAT segment: simulated ESCs in any topology, with exact wire timing,
 //! oscillators and injectable faults, run in virtual time (deterministic for a seed).
+pub mod bench;
 mod builtin;
 mod config;
 pub mod live;
