@@ -43,6 +43,8 @@ pub trait Application: Debug + Send {
     fn check_transition(&mut self, _pdi: &mut Pdi<'_>, _from: AlState, _to: AlState) -> Result<(), AlStatusCode> {
         Ok(())
     }
+    /// The AL state changed (device emulation or not).
+    fn state_changed(&mut self, _pdi: &mut Pdi<'_>, _state: AlState) {}
     /// A buffered output SyncManager received a complete buffer.
     fn outputs_written(&mut self, _pdi: &mut Pdi<'_>, _sm: u8) {}
     /// The SYNC0 signal fired at system time `sys_ns`.
@@ -51,6 +53,12 @@ pub trait Application: Debug + Send {
     fn mailbox(&mut self, _pdi: &mut Pdi<'_>, _request: &[u8]) -> Option<Vec<u8>> {
         None
     }
+    /// True time of the application's next own event (a free-running timer), if any.
+    fn next_event_ns(&self) -> Option<u64> {
+        None
+    }
+    /// The application's own event at `pdi.now_ns()`.
+    fn tick(&mut self, _pdi: &mut Pdi<'_>) {}
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -107,6 +115,129 @@ impl Application for DigitalIo {
         self.outputs = pdi.read(s.start, s.length as usize).to_vec();
         self.output_updates += 1;
         self.publish_inputs(pdi);
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+/// How an application is synchronised to the master (ETG.1020; Chen 2016 §2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyncMode {
+    /// On the device's own timer: `period_ns` of its crystal.
+    FreeRun { period_ns: u64 },
+    /// On every complete output buffer (SM2 event).
+    SmSynchronous,
+    /// On every SYNC0 pulse.
+    DcSynchronous,
+}
+
+/// An I/O application that consumes its output buffer in one of the synchronisation modes and
+/// counts the process-data cycles it lost (overwritten before it consumed them) and repeated
+/// (consumed twice): the packet loss Chen et al. 2016 (Table 2) measure.
+#[derive(Debug, Clone)]
+pub struct SyncApp {
+    pub mode: SyncMode,
+    pub io: DigitalIo,
+    /// The device crystal's error, which a free-running timer follows.
+    pub drift_ppb: i64,
+    written: u64,
+    consumed_seq: u64,
+    pub consumed: u64,
+    pub lost: u64,
+    pub repeated: u64,
+    running: bool,
+    timer_t0: u64,
+    timer_k: u64,
+}
+
+impl SyncApp {
+    pub fn new(mode: SyncMode, sm_count: u8, drift_ppb: i64) -> Self {
+        SyncApp {
+            mode,
+            io: DigitalIo::new(sm_count),
+            drift_ppb,
+            written: 0,
+            consumed_seq: 0,
+            consumed: 0,
+            lost: 0,
+            repeated: 0,
+            running: false,
+            timer_t0: 0,
+            timer_k: 0,
+        }
+    }
+
+    fn consume(&mut self, pdi: &mut Pdi<'_>) {
+        if !self.running || self.written == 0 {
+            return;
+        }
+        if self.consumed > 0 {
+            if self.written == self.consumed_seq {
+                self.repeated += 1;
+            } else {
+                self.lost += self.written - self.consumed_seq - 1;
+            }
+        }
+        self.consumed_seq = self.written;
+        self.consumed += 1;
+        if let Some((_, sm)) = pdi.process_data_sm(true, self.io.sm_count) {
+            self.io.outputs = pdi.read(sm.start, sm.length as usize).to_vec();
+        }
+    }
+}
+
+impl Application for SyncApp {
+    fn check_transition(&mut self, pdi: &mut Pdi<'_>, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
+        if to == AlState::Op && self.mode == SyncMode::DcSynchronous {
+            // DC-synchronous operation needs the SYNC unit running with SYNC0.
+            let act = pdi.read(0x0981, 1).first().copied().unwrap_or(0);
+            if act & 0x03 != 0x03 {
+                return Err(AlStatusCode::INVALID_DC_SYNC_CONFIG);
+            }
+        }
+        self.io.check_transition(pdi, from, to)
+    }
+    fn state_changed(&mut self, pdi: &mut Pdi<'_>, state: AlState) {
+        let was = self.running;
+        self.running = state == AlState::Op;
+        if self.running && !was {
+            self.timer_t0 = pdi.now_ns();
+            self.timer_k = 0;
+        }
+    }
+    fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
+        self.written += 1;
+        self.io.output_updates += 1;
+        if self.mode == SyncMode::SmSynchronous {
+            self.consume(pdi);
+        }
+        let _ = sm;
+    }
+    fn sync0(&mut self, pdi: &mut Pdi<'_>, _sys_ns: u64) {
+        if self.mode == SyncMode::DcSynchronous {
+            self.consume(pdi);
+        }
+    }
+    fn next_event_ns(&self) -> Option<u64> {
+        match self.mode {
+            SyncMode::FreeRun { period_ns } if self.running => {
+                // The timer counts periods of the device's crystal.
+                let k = self.timer_k as u128 + 1;
+                Some(
+                    self.timer_t0
+                        + (k * period_ns as u128 * 1_000_000_000 / (1_000_000_000 + self.drift_ppb) as u128) as u64,
+                )
+            }
+            _ => None,
+        }
+    }
+    fn tick(&mut self, pdi: &mut Pdi<'_>) {
+        self.timer_k += 1;
+        self.consume(pdi);
     }
     fn as_any(&self) -> &dyn Any {
         self

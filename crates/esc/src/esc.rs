@@ -298,23 +298,31 @@ impl Esc {
         if t_ns < self.now_ns {
             return;
         }
-        // SYNC0 pulses up to t, each delivered at its exact true instant.
-        while let Some(tp) = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns)) {
+        // SYNC0 pulses and the application's own events up to t, each at its exact true instant.
+        loop {
+            let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
+            let own = self.app.next_event_ns();
+            let Some(tp) = [sync, own].into_iter().flatten().min() else { break };
             if tp > t_ns {
                 break;
             }
-            let mut pulses = std::mem::take(&mut self.sync_scratch);
-            if let Some(dc) = self.dc.as_mut() {
-                dc.take_sync0_until(tp, &mut pulses);
-            }
             self.now_ns = self.now_ns.max(tp);
-            self.sync_pulsed = true;
-            for sys in pulses.drain(..) {
-                self.sync0_log.push((sys, tp));
+            if sync == Some(tp) {
+                let mut pulses = std::mem::take(&mut self.sync_scratch);
+                if let Some(dc) = self.dc.as_mut() {
+                    dc.take_sync0_until(tp, &mut pulses);
+                }
+                self.sync_pulsed = true;
+                for sys in pulses.drain(..) {
+                    self.sync0_log.push((sys, tp));
+                    let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
+                    self.app.sync0(&mut pdi, sys);
+                }
+                self.sync_scratch = pulses;
+            } else {
                 let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
-                self.app.sync0(&mut pdi, sys);
+                self.app.tick(&mut pdi);
             }
-            self.sync_scratch = pulses;
         }
         if let Some(dc) = self.dc.as_mut() {
             dc.fold_to(t_ns);
@@ -331,7 +339,8 @@ impl Esc {
 
     /// True time of the next internal event (a SYNC0 pulse), for a virtual-time scheduler.
     pub fn next_event_ns(&self) -> Option<u64> {
-        self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns))
+        let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
+        [sync, self.app.next_event_ns()].into_iter().flatten().min()
     }
 
     fn process_data_watchdog_ns(&self) -> Option<u64> {
@@ -350,6 +359,8 @@ impl Esc {
             self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
             self.al.fail(AlState::SafeOp, AlStatusCode::SM_WATCHDOG);
             self.al_changes += 1;
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.state_changed(&mut pdi, AlState::SafeOp);
             self.refresh_registers();
         }
     }
@@ -934,6 +945,8 @@ impl Esc {
         }
         if self.al != before {
             self.al_changes += 1;
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.state_changed(&mut pdi, self.al.state);
         }
     }
 

@@ -13,6 +13,6 @@ mod esc;
 mod regs;
 
 pub use al::AlMachine;
-pub use app::{Application, DigitalIo, NoApplication, Pdi};
+pub use app::{Application, DigitalIo, NoApplication, Pdi, SyncApp, SyncMode};
 pub use config::{DcWidth, EscConfig};
 pub use esc::{Esc, FrameTiming, LinkState, SyncLog};

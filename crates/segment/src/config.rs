@@ -13,7 +13,7 @@
 //! ```
 use std::path::{Path, PathBuf};
 
-use ferrocat_esc::{Application, DigitalIo, Esc, EscConfig, NoApplication};
+use ferrocat_esc::{Application, DigitalIo, Esc, EscConfig, NoApplication, SyncApp, SyncMode};
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::sii::dump::parse_dump;
 use ferrocat_wire::sii::SiiInfo;
@@ -96,6 +96,10 @@ pub struct DeviceToml {
     pub cable_m: Option<f64>,
     pub link_ns: Option<u32>,
     pub timing: Option<TimingToml>,
+    /// Device application: "io" (default for devices without mailbox), "sm", "dc" or
+    /// "free-run" (with `app_period_us`), the last three counting lost and repeated cycles.
+    pub app: Option<String>,
+    pub app_period_us: Option<f64>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -216,10 +220,27 @@ impl SegmentConfig {
                 Some(ppm) => (ppm * 1000.0).round() as i64,
                 None => (rng.gen_range(-spread..=spread) * 1000.0).round() as i64,
             };
-            let app: Box<dyn Application> = if info.header.mailbox_rx_size > 0 {
-                Box::new(NoApplication)
-            } else {
-                Box::new(DigitalIo::new(config.sm_count))
+            let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
+            let app: Box<dyn Application> = match d.app.as_deref() {
+                None if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
+                None | Some("io") => Box::new(DigitalIo::new(config.sm_count)),
+                Some("sm") => sync(SyncMode::SmSynchronous),
+                Some("dc") => sync(SyncMode::DcSynchronous),
+                Some("free-run") => {
+                    let us = d
+                        .app_period_us
+                        .ok_or_else(|| device_err(format!("device {i}"), "app = \"free-run\" needs app_period_us"))?;
+                    if !(us > 0.0 && us < 1e9) {
+                        return Err(device_err(format!("device {i}"), format!("app_period_us {us} out of range")));
+                    }
+                    sync(SyncMode::FreeRun { period_ns: (us * 1000.0).round() as u64 })
+                }
+                Some(other) => {
+                    return Err(device_err(
+                        format!("device {i}"),
+                        format!("unknown app '{other}' (io, sm, dc, free-run)"),
+                    ))
+                }
             };
             let esc = Esc::new(config, sii, app, drift_ppb, 0);
             let name = d.name.clone().unwrap_or(default_name);
