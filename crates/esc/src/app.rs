@@ -29,6 +29,10 @@ impl Pdi<'_> {
         let a = ferrocat_wire::register::addr::sm(n) as usize;
         SyncManager::parse(&self.mem[a..a + 8]).unwrap_or_default()
     }
+    /// Length of the send mailbox (SM1), which bounds what one reply can carry.
+    pub fn process_mailbox_len(&self) -> usize {
+        self.sm(1).length as usize
+    }
     /// The SyncManager whose control byte says "ECAT writes, buffered" (outputs) or "ECAT
     /// reads, buffered" (inputs), among the first `count`.
     pub fn process_data_sm(&self, outputs: bool, count: u8) -> Option<(u8, SyncManager)> {
@@ -51,6 +55,16 @@ pub trait Application: Debug + Send {
     fn sync0(&mut self, _pdi: &mut Pdi<'_>, _sys_ns: u64) {}
     /// A complete mailbox request arrived in SM0; the reply (if any) goes to SM1.
     fn mailbox(&mut self, _pdi: &mut Pdi<'_>, _request: &[u8]) -> Option<Vec<u8>> {
+        None
+    }
+    /// A message the application wants to send unasked (SDO-information fragments,
+    /// emergencies); the ESC delivers it when the send mailbox is free.
+    fn pending_mailbox(&mut self) -> Option<Vec<u8>> {
+        None
+    }
+    /// Process-image bytes the application expects in the output or input SyncManager, when
+    /// it decides them (PDO mapping through CoE) rather than the SII.
+    fn process_data_bytes(&self, _outputs: bool) -> Option<u16> {
         None
     }
     /// True time of the application's next own event (a free-running timer), if any.

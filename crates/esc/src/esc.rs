@@ -138,6 +138,8 @@ pub struct Esc {
     sync_pulsed: bool,
     /// An enabled output SyncManager triggers the process-data watchdog.
     wd_armed: bool,
+    /// Messages waiting for the send mailbox (SM1) to be read.
+    mbx_queue: std::collections::VecDeque<Vec<u8>>,
 }
 
 impl Esc {
@@ -171,6 +173,7 @@ impl Esc {
             sii_busy_shown: false,
             sync_pulsed: false,
             wd_armed: false,
+            mbx_queue: Default::default(),
         };
         esc.power_on(t_ns);
         esc
@@ -183,6 +186,7 @@ impl Esc {
         self.mem.fill(0);
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
+        self.mbx_queue.clear();
         self.al = AlMachine::default();
         self.now_ns = t_ns;
         self.wd_last_trigger_ns = t_ns;
@@ -426,6 +430,9 @@ impl Esc {
     pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming) {
         self.advance_to(timing.epu_ns);
         self.frames += 1;
+        if self.expected.mailbox.is_some() {
+            self.deliver_mailbox();
+        }
         if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
             self.refresh_registers();
         }
@@ -764,6 +771,7 @@ impl Esc {
             }
         }
         // SyncManager buffers completed by this frame.
+        let mut deliver = false;
         for n in 0..self.config.sm_count {
             let s = self.sm(n);
             let st = &mut self.sms[n as usize];
@@ -777,6 +785,7 @@ impl Esc {
                     self.mailbox_request(n);
                 } else if !s.ecat_writes() && read {
                     st.full = false;
+                    deliver = true;
                 }
             } else if s.ecat_writes() && written {
                 let staged = std::mem::take(&mut st.staging);
@@ -793,6 +802,9 @@ impl Esc {
                     self.app.outputs_written(&mut pdi, n);
                 }
             }
+        }
+        if deliver || sm_cfg {
+            self.deliver_mailbox();
         }
         if sii_cmd {
             let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]);
@@ -897,7 +909,12 @@ impl Esc {
                 self.al.code = AlStatusCode::NO_ERROR;
             }
         } else {
-            let expected = self.expected.clone();
+            let mut expected = self.expected.clone();
+            for (_, e, len) in expected.process_data.iter_mut() {
+                if let Some(b) = self.app.process_data_bytes(e.sm_type == SmEntry::TYPE_OUTPUTS) {
+                    *len = b;
+                }
+            }
             let sms: Vec<SyncManager> = (0..self.config.sm_count).map(|n| self.sm(n)).collect();
             let Esc { app, mem, now_ns, .. } = self;
             let mut check = |from: AlState, to: AlState| -> Result<(), AlStatusCode> {
@@ -961,19 +978,33 @@ impl Esc {
             self.app.mailbox(&mut pdi, &req)
         };
         let reply = reply.unwrap_or_else(|| unsupported_protocol_reply(&req));
-        if let Some((n, out)) = (0..self.config.sm_count)
+        self.mbx_queue.push_back(reply);
+        self.deliver_mailbox();
+    }
+
+    /// Moves the next waiting message into the send mailbox if it is free.
+    fn deliver_mailbox(&mut self) {
+        let Some((n, out)) = (0..self.config.sm_count)
             .map(|n| (n, self.sm(n)))
             .find(|(_, s)| s.enabled() && s.is_mailbox() && !s.ecat_writes())
-        {
-            if self.sms[n as usize].full {
-                return; // the master has not read the last reply; the new one is lost
-            }
-            let a = out.start as usize;
-            let len = (out.length as usize).min(reply.len());
-            self.mem[a..a + out.length as usize].fill(0);
-            self.mem[a..a + len].copy_from_slice(&reply[..len]);
-            self.sms[n as usize].full = true;
+        else {
+            return;
+        };
+        if self.sms[n as usize].full {
+            return;
         }
+        let msg = match self.mbx_queue.pop_front() {
+            Some(m) => m,
+            None => match self.app.pending_mailbox() {
+                Some(m) => m,
+                None => return,
+            },
+        };
+        let a = out.start as usize;
+        let len = (out.length as usize).min(msg.len());
+        self.mem[a..a + out.length as usize].fill(0);
+        self.mem[a..a + len].copy_from_slice(&msg[..len]);
+        self.sms[n as usize].full = true;
     }
 }
 

@@ -6,13 +6,16 @@
 //! frame (esc-spec §1.4); every command's addressing and working-counter rule is applied.
 mod al;
 mod app;
+mod coe_server;
 mod config;
 pub mod dc;
 mod eeprom;
 mod esc;
+pub mod od;
 mod regs;
 
 pub use al::AlMachine;
 pub use app::{Application, DigitalIo, NoApplication, Pdi, SyncApp, SyncMode};
+pub use coe_server::{CoeDevice, DeviceLogic, Mapped, PassiveLogic};
 pub use config::{DcWidth, EscConfig};
 pub use esc::{Esc, FrameTiming, LinkState, SyncLog};

@@ -65,6 +65,8 @@ pub struct Object {
     pub default_data: Option<Vec<u8>>,
     /// Subindices of a record or array (empty for a simple variable).
     pub subs: Vec<SubObject>,
+    /// The object's type lays its entries out as an array (else a record).
+    pub is_array: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
@@ -143,6 +145,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
         pdo_mapping: child(o, "Flags").and_then(|f| child_text(f, "PdoMapping")),
         default_data: default_of(info)?,
         subs: Vec::new(),
+        is_array: false,
         type_name,
     };
     // Expand records and arrays into subindices.
@@ -150,6 +153,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
         for si in &t.subitems {
             match d.data_type(&si.type_name).filter(|at| at.array.is_some()) {
                 Some(at) => {
+                    obj.is_array = true;
                     let (_, n) = at.array.unwrap_or((0, 0));
                     let base = at.base_type.as_deref().and_then(|b| d.data_type(b)).map(|b| b.bit_size).unwrap_or(0);
                     let elem_bits = if n > 0 { at.bit_size / n } else { base };

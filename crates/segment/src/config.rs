@@ -13,7 +13,7 @@
 //! ```
 use std::path::{Path, PathBuf};
 
-use ferrocat_esc::{Application, DigitalIo, Esc, EscConfig, NoApplication, SyncApp, SyncMode};
+use ferrocat_esc::{Application, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, SyncApp, SyncMode};
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::sii::dump::parse_dump;
 use ferrocat_wire::sii::SiiInfo;
@@ -193,7 +193,7 @@ impl SegmentConfig {
         let mut names = Vec::new();
         for (i, d) in self.devices.iter().enumerate() {
             let src = self.source(i, d)?;
-            let (sii, default_name) = load_device(&src)?;
+            let (sii, default_name, esi_dev) = load_device(&src)?;
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
             let mut config = match d.esc.as_deref().unwrap_or("et1100") {
@@ -222,6 +222,13 @@ impl SegmentConfig {
             };
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
             let app: Box<dyn Application> = match d.app.as_deref() {
+                None if info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0 => {
+                    let od = match &esi_dev {
+                        Some(dev) => crate::od_build::from_esi(dev, &info),
+                        None => crate::od_build::from_sii(&info),
+                    };
+                    Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic)))
+                }
                 None if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
                 None | Some("io") => Box::new(DigitalIo::new(config.sm_count)),
                 Some("sm") => sync(SyncMode::SmSynchronous),
@@ -337,7 +344,7 @@ fn port_kinds(info: &SiiInfo) -> [Option<PortKind>; 4] {
 }
 
 /// Loads the SII image of a device and a default name for it.
-pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String), SegmentError> {
+pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferrocat_esi::Device>), SegmentError> {
     match src {
         DeviceSource::Eeprom(path) => {
             let raw = std::fs::read(path).map_err(|source| SegmentError::Io { path: path.clone(), source })?;
@@ -346,7 +353,7 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String), SegmentError
             let info = SiiInfo::from_image(&img)
                 .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("not an SII image: {e}") })?;
             let name = info.string(1).unwrap_or_else(|| format!("{:#010x}", info.header.product_code));
-            Ok((img, name))
+            Ok((img, name, None))
         }
         DeviceSource::Esi { path, product, revision } => {
             let xml =
@@ -377,7 +384,7 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String), SegmentError
             let img = dev
                 .to_sii(f.vendor_id)
                 .map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
-            Ok((img, dev.type_name.clone()))
+            Ok((img, dev.type_name.clone(), Some(dev.clone())))
         }
         DeviceSource::Builtin(name) => {
             let dev = crate::builtin::device(name).ok_or_else(|| {
@@ -387,7 +394,7 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String), SegmentError
                 )
             })?;
             let img = dev.to_sii(2).map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
-            Ok((img, dev.type_name.clone()))
+            Ok((img, dev.type_name.clone(), Some(dev)))
         }
     }
 }

@@ -4,6 +4,7 @@ pub mod bench;
 mod builtin;
 mod config;
 pub mod live;
+pub mod od_build;
 mod segment;
 pub mod timing;
 

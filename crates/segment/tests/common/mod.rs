@@ -61,6 +61,27 @@ impl Bus {
         [d[0], d[1], d[2], d[3]]
     }
 
+    /// Sends one mailbox message (written whole into SM0 at `out`) and polls SM1 at `inp`
+    /// until the reply arrives.
+    pub fn mailbox(&mut self, station: u16, out: (u16, u16), inp: (u16, u16), msg: &[u8]) -> Vec<u8> {
+        let mut buf = msg.to_vec();
+        buf.resize(out.1 as usize, 0);
+        assert_eq!(self.fp(Command::FPWR, station, out.0, &buf).1, 1, "SM0 write");
+        self.read_mailbox(station, inp).expect("a reply")
+    }
+
+    /// Reads SM1 once it is full (up to 100 polls).
+    pub fn read_mailbox(&mut self, station: u16, inp: (u16, u16)) -> Option<Vec<u8>> {
+        for _ in 0..100 {
+            let (d, w) = self.fp(Command::FPRD, station, inp.0, &vec![0; inp.1 as usize]);
+            if w == 1 {
+                return Some(d);
+            }
+            self.t += 100_000;
+        }
+        None
+    }
+
     /// Station addresses 0x1001, 0x1002, … by position.
     pub fn address_all(&mut self) {
         for pos in 0..self.seg.nodes.len() as u16 {
