@@ -64,6 +64,22 @@ enum Command {
         /// Seed for oscillators and faults (overrides the file's).
         #[arg(long)]
         seed: Option<u64>,
+        /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
+        #[arg(long, conflicts_with_all = ["config", "device", "iface", "udp", "report"])]
+        bench: bool,
+        #[arg(long, requires = "bench")]
+        json: bool,
+    },
+    /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
+    Rtt {
+        #[arg(long)]
+        iface: String,
+        /// Frames to send.
+        #[arg(long, default_value_t = 2000)]
+        frames: u32,
+        /// Slaves the frame is built for (one process-data nibble each, after the coupler).
+        #[arg(long, default_value_t = 6)]
+        slaves: u16,
     },
 }
 
@@ -73,9 +89,11 @@ fn main() -> ExitCode {
         Command::Pcap { file, json } => pcap::run(&file, json),
         Command::Sii { file, json } => sii::run(&file, json),
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
-        Command::Sim { config, device, iface, udp, report, seed } => {
+        Command::Sim { bench: true, json, .. } => sim::bench(json),
+        Command::Sim { config, device, iface, udp, report, seed, .. } => {
             sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
         }
+        Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
     };
     match result {
         Ok(code) => code,

@@ -59,8 +59,47 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
         "not_ethercat": stats.not_ethercat,
         "malformed": stats.malformed,
         "busy_ns_per_frame": if stats.frames_out > 0 { stats.busy_ns / stats.frames_out } else { 0 },
+        "busy_ns_median": stats.busy_quantile_ns(0.5),
+        "busy_ns_p99": stats.busy_quantile_ns(0.99),
         "devices": devices,
     })
+}
+
+/// Peak resident memory of this process (VmHWM), in KiB.
+fn peak_rss_kib() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    s.lines().find_map(|l| l.strip_prefix("VmHWM:")).and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+}
+
+/// `ferrocat sim --bench`: virtual-time speed with one LRW + FRMW frame per cycle.
+pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
+    use ferrocat_segment::bench::CyclicBench;
+    let mut rows = Vec::new();
+    for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 20.0f64), (64, 1000, 5.0), (256, 100, 0.5)] {
+        let mut b = CyclicBench::new(slaves, cycle_us * 1000, 1);
+        let cycles = (sim_s * 1e6 / cycle_us as f64) as u64;
+        let t0 = std::time::Instant::now();
+        b.run(cycles);
+        let wall = t0.elapsed().as_secs_f64();
+        let speed = sim_s / wall;
+        if !json {
+            println!(
+                "{slaves:4} slaves, {cycle_us:5} us cycle: {sim_s:5.1} s simulated in {wall:6.3} s wall = {speed:8.1}x real time ({:.0} ns per cycle, {} lost)",
+                wall * 1e9 / cycles as f64,
+                b.lost
+            );
+        }
+        rows.push(
+            json!({"slaves": slaves, "cycle_us": cycle_us, "simulated_s": sim_s, "wall_s": wall, "speedup": speed}),
+        );
+    }
+    let peak = peak_rss_kib();
+    if json {
+        println!("{}", json!({"rows": rows, "peak_rss_kib": peak}));
+    } else if let Some(k) = peak {
+        println!("peak resident memory (all three runs, 256 slaves the largest): {:.1} MiB", k as f64 / 1024.0);
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
@@ -88,8 +127,66 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         "ferrocat sim: stopped after {} frames in, {} answered, {} not EtherCAT, {} malformed",
         stats.frames_in, stats.frames_out, stats.not_ethercat, stats.malformed
     );
+    if let (Some(m), Some(p99)) = (stats.busy_quantile_ns(0.5), stats.busy_quantile_ns(0.99)) {
+        eprintln!(
+            "ferrocat sim: time per frame (receive to send) median {:.1} us, p99 {:.1} us",
+            m as f64 / 1000.0,
+            p99 as f64 / 1000.0
+        );
+    }
     if let Some(p) = a.report {
         std::fs::write(&p, format!("{r:#}\n")).with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `ferrocat rtt`: round trips of an LRW + FRMW frame through whatever answers on `iface`.
+pub fn rtt(iface: &str, frames: u32, slaves: u16) -> anyhow::Result<ExitCode> {
+    use ferrocat_segment::live::{monotonic_ns, RawSocket};
+    use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+    use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
+    let sock = RawSocket::open(iface).with_context(|| format!("opening {iface}"))?;
+    let image = (slaves.saturating_sub(1) as usize * 4).div_ceil(8).max(1);
+    let eth = EthernetRepr { dst: BROADCAST, src: [0x02, 0, 0, 0, 0, 0x01], vlan_tci: None, ethertype: 0 };
+    let mut frame = [0u8; 1514];
+    let mut w = FrameWriter::new(&mut frame, &eth)?;
+    w.push_chained(&DatagramHeader::new(Command::LRW, 0x42, Address::Logical(0), image as u16), &vec![0; image], 0)?;
+    w.push_chained(
+        &DatagramHeader::new(Command::FRMW, 0x43, Address::Device { adp: 0x1001, ado: 0x0910 }, 8),
+        &[0; 8],
+        0,
+    )?;
+    let len = w.finish()?;
+    let mut rtts = Vec::new();
+    let mut buf = [0u8; 2048];
+    let mut lost = 0;
+    for _ in 0..frames {
+        let t0 = monotonic_ns();
+        sock.send(&frame[..len])?;
+        let mut got = false;
+        while monotonic_ns() - t0 < 50_000_000 {
+            match sock.recv(&mut buf)? {
+                Some(n) if n >= len && buf[12..14] == [0x88, 0xA4] && buf[16 + 1] == 0x42 => {
+                    rtts.push(monotonic_ns() - t0);
+                    got = true;
+                    break;
+                }
+                _ => {}
+            }
+        }
+        lost += !got as u32;
+    }
+    rtts.sort_unstable();
+    let q = |p: f64| {
+        rtts.get(((rtts.len().max(1) - 1) as f64 * p).round() as usize).map(|v| *v as f64 / 1000.0).unwrap_or(f64::NAN)
+    };
+    println!(
+        "{} frames, {lost} lost; round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        frames,
+        q(0.5),
+        q(0.9),
+        q(0.99),
+        q(1.0)
+    );
+    Ok(if lost == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

@@ -128,7 +128,7 @@ impl RawSocket {
 }
 
 /// Counters of a live run.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct ServeStats {
     pub frames_in: u64,
     pub frames_out: u64,
@@ -138,6 +138,27 @@ pub struct ServeStats {
     pub malformed: u64,
     /// Wall-clock time the simulator spent per frame, for the figures in docs/benchmarks.md.
     pub busy_ns: u64,
+    /// The first 100 000 per-frame times (receive to send), for percentiles.
+    pub busy_samples_ns: Vec<u32>,
+}
+
+impl ServeStats {
+    fn record(&mut self, ns: u64) {
+        self.busy_ns += ns;
+        if self.busy_samples_ns.len() < 100_000 {
+            self.busy_samples_ns.push(ns.min(u32::MAX as u64) as u32);
+        }
+    }
+
+    /// The `q`-quantile (0–1) of the per-frame times, in ns.
+    pub fn busy_quantile_ns(&self, q: f64) -> Option<u32> {
+        let mut v = self.busy_samples_ns.clone();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_unstable();
+        Some(v[((v.len() - 1) as f64 * q).round() as usize])
+    }
 }
 
 fn is_ethercat(frame: &[u8]) -> Result<bool, ()> {
@@ -175,7 +196,7 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool) -> io::
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
         }
-        stats.busy_ns += monotonic_ns() - start;
+        stats.record(monotonic_ns() - start);
     }
     Ok(stats)
 }
@@ -222,7 +243,7 @@ pub fn serve_udp(seg: &mut Segment, sock: &UdpSocket, stop: &AtomicBool) -> io::
             sock.send_to(&buf[HDR..HDR + n], from)?;
             stats.frames_out += 1;
         }
-        stats.busy_ns += monotonic_ns() - start;
+        stats.record(monotonic_ns() - start);
     }
     Ok(stats)
 }
