@@ -28,7 +28,9 @@ pub struct EscConfig {
 }
 
 impl EscConfig {
-    /// Beckhoff ET1100: 4 ports, 8 FMMUs, 8 SMs, 8 KiB, 64-bit DC.
+    /// Beckhoff ET1100: 4 ports, 8 FMMUs, 8 SMs, 8 KiB, 64-bit DC. Type, build and features
+    /// as real EK1100 couplers report them (0x0000 reads in the shared captures: type 0x11,
+    /// build 3, features 0x00FC).
     pub fn et1100() -> Self {
         EscConfig {
             esc_type: 0x11,
@@ -38,7 +40,25 @@ impl EscConfig {
             sm_count: 8,
             ram_kb: 8,
             port_descriptor: 0b10_10_10_11,
-            features: Features::DC | Features::DC_64BIT | Features::EBUS_ENHANCED_LINK_DETECTION | 0x0180,
+            features: 0x00FC,
+            dc: DcWidth::Bits64,
+            sii_read_8: true,
+        }
+    }
+
+    /// Beckhoff ET1200, the ESC of E-Bus terminals: 3 FMMUs, 4 SMs, 1 KiB, 64-bit DC. Type and
+    /// features as real EL terminals report them in the shared captures (features 0x0184; a BRD
+    /// of 0x0000 over ET1100 + ET1200 reads 0x13).
+    pub fn et1200() -> Self {
+        EscConfig {
+            esc_type: 0x12,
+            revision: 0x00,
+            build: 0x0001,
+            fmmu_count: 3,
+            sm_count: 4,
+            ram_kb: 1,
+            port_descriptor: 0b00_00_10_10,
+            features: 0x0184,
             dc: DcWidth::Bits64,
             sii_read_8: true,
         }

@@ -261,7 +261,7 @@ impl DcUnit {
         let s = &mut self.sync;
         s.activation_status = 0b01;
         s.next_sync0 = if in_future {
-            Some(now + ahead)
+            Some(now.wrapping_add(ahead))
         } else if a & act::START_TIME_CHECK != 0 {
             // Plausibility check: a start time outside the near future fires at once.
             s.activation_status |= 0b100;
@@ -269,7 +269,7 @@ impl DcUnit {
         } else if self.width == DcWidth::Bits32 {
             // Without the check a past start time waits for the time to come round again:
             // ≈4.3 s on a 32-bit DC, never on a 64-bit one.
-            Some(now + ahead)
+            Some(now.wrapping_add(ahead))
         } else {
             None
         };
@@ -278,8 +278,9 @@ impl DcUnit {
     /// System times of the SYNC0 pulses up to true time `t_ns`, advancing the schedule.
     pub fn take_sync0_until(&mut self, t_ns: u64, out: &mut Vec<u64>) {
         let now = self.system_ext_at(t_ns);
+        // Wrapping, half-range comparisons: the schedule never overflows, whatever the offset.
         while let Some(next) = self.sync.next_sync0 {
-            if now < next {
+            if (now.wrapping_sub(next) as i64) < 0 {
                 break;
             }
             out.push(self.mask(next));
@@ -290,7 +291,7 @@ impl DcUnit {
             }
             self.sync.next_sync0 = match self.sync.cycle0_ns {
                 0 => None, // single shot
-                c => Some(next + c as u64),
+                c => Some(next.wrapping_add(c as u64)),
             };
         }
     }
@@ -304,11 +305,12 @@ impl DcUnit {
     pub fn next_sync0_true(&self, from_ns: u64) -> Option<u64> {
         let next = self.sync.next_sync0?;
         let now = self.system_ext_at(from_ns);
-        if next <= now {
+        let ahead = next.wrapping_sub(now) as i64;
+        if ahead <= 0 {
             return Some(from_ns);
         }
-        let ahead = next - now;
-        let reached = |t: u64| self.system_ext_at(t) >= next;
+        let ahead = ahead as u64;
+        let reached = |t: u64| (self.system_ext_at(t).wrapping_sub(next) as i64) >= 0;
         let mut t = from_ns.saturating_add(ahead.saturating_sub(ahead / 1000 + 10));
         let mut step = 1u64 << 16;
         while !reached(t) {

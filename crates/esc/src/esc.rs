@@ -9,7 +9,7 @@ use crate::app::{Application, Pdi};
 use crate::config::{DcWidth, EscConfig};
 use crate::dc::DcUnit;
 use crate::eeprom::Eeprom;
-use crate::regs::{ecat_writable, is_dc};
+use crate::regs::ecat_writable;
 
 /// When a frame met this ESC: the true time its first bit reached each port, and the time it
 /// passed the processing unit.
@@ -140,6 +140,10 @@ pub struct Esc {
     wd_armed: bool,
     /// Messages waiting for the send mailbox (SM1) to be read.
     mbx_queue: std::collections::VecDeque<Vec<u8>>,
+    /// Without device emulation the firmware reads AL control this long after the master
+    /// wrote it; until then the register is locked (ESC datasheet, 0x0120).
+    pub al_response_ns: u64,
+    pending_al: Option<(u16, u64)>,
 }
 
 impl Esc {
@@ -174,6 +178,8 @@ impl Esc {
             sync_pulsed: false,
             wd_armed: false,
             mbx_queue: Default::default(),
+            al_response_ns: 1_000_000,
+            pending_al: None,
         };
         esc.power_on(t_ns);
         esc
@@ -187,6 +193,7 @@ impl Esc {
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
         self.mbx_queue.clear();
+        self.pending_al = None;
         self.al = AlMachine::default();
         self.now_ns = t_ns;
         self.wd_last_trigger_ns = t_ns;
@@ -334,6 +341,14 @@ impl Esc {
         if std::mem::take(&mut self.sync_pulsed) {
             self.refresh_registers();
         }
+        if let Some((control, due)) = self.pending_al {
+            if due <= t_ns {
+                self.pending_al = None;
+                self.now_ns = self.now_ns.max(due);
+                self.al_control(control);
+                self.refresh_registers();
+            }
+        }
         self.now_ns = t_ns;
         self.check_watchdog();
         if self.eeprom.reloaded && !self.eeprom.busy(t_ns) {
@@ -344,7 +359,11 @@ impl Esc {
     /// True time of the next internal event (a SYNC0 pulse), for a virtual-time scheduler.
     pub fn next_event_ns(&self) -> Option<u64> {
         let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
-        [sync, self.app.next_event_ns()].into_iter().flatten().min()
+        [sync, self.app.next_event_ns(), self.pending_al.map(|p| p.1)].into_iter().flatten().min()
+    }
+
+    fn device_emulation(&self) -> bool {
+        self.mem[0x0141] & 0x01 != 0
     }
 
     fn process_data_watchdog_ns(&self) -> Option<u64> {
@@ -535,9 +554,20 @@ impl Esc {
             .find(|(_, s)| s.enabled() && s.length > 0 && a >= s.start && (a as u32) < s.start as u32 + s.length as u32)
     }
 
+    /// Whether `a` is a register this ESC does not implement: FMMUs and SyncManagers beyond its
+    /// count, the DC block without a DC unit. Accesses to them do not count in the WKC.
+    fn absent(&self, a: u16) -> bool {
+        match a {
+            0x0600..=0x06FF => (a - 0x0600) / 16 >= self.config.fmmu_count as u16,
+            0x0800..=0x087F => (a - 0x0800) / 8 >= self.config.sm_count as u16,
+            0x0900..=0x09FF => self.dc.is_none(),
+            _ => a as usize >= self.mem.len(),
+        }
+    }
+
     /// One byte read by the master; `None` if it cannot be read.
     fn read_byte(&mut self, a: u16) -> Option<u8> {
-        if a as usize >= self.mem.len() || (is_dc(a) && self.dc.is_none()) {
+        if self.absent(a) {
             return None;
         }
         if let Some((n, s)) = self.sm_at(a) {
@@ -568,7 +598,7 @@ impl Esc {
 
     /// One byte written by the master; false if the write does not succeed.
     fn write_byte(&mut self, a: u16, v: u8, cmd: Command) -> bool {
-        if a as usize >= self.mem.len() || (is_dc(a) && self.dc.is_none()) {
+        if self.absent(a) {
             return false;
         }
         if let Some((n, s)) = self.sm_at(a) {
@@ -593,6 +623,10 @@ impl Esc {
             return true;
         }
         if a < 0x1000 {
+            if (0x0120..=0x0121).contains(&a) && self.pending_al.is_some() && !self.device_emulation() {
+                // AL control is locked until the firmware has read the last write.
+                return false;
+            }
             if ecat_writable(a) {
                 self.pending.push((a, v));
                 match a {
@@ -887,7 +921,11 @@ impl Esc {
         }
         if al_ctl {
             let control = u16::from_le_bytes([self.mem[0x0120], self.mem[0x0121]]);
-            self.al_control(control);
+            if self.device_emulation() || self.al_response_ns == 0 {
+                self.al_control(control);
+            } else {
+                self.pending_al = Some((control, t + self.al_response_ns));
+            }
         }
         let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset) && !self.sms.iter().any(|s| s.full);
         if dc_only {
@@ -901,7 +939,7 @@ impl Esc {
 
     fn al_control(&mut self, control: u16) {
         let before = self.al.clone();
-        if self.mem[0x0141] & 0x01 != 0 {
+        if self.device_emulation() {
             // Device emulation: the ESC copies AL control to AL status (esc-spec §5.1).
             if let Some(s) = AlState::from_bits(control as u8) {
                 self.al.state = s;

@@ -54,8 +54,3 @@ const fn sm_writable(a: u16) -> bool {
     }
     matches!((a - addr::SM0) % 8, 0..=4 | 6)
 }
-
-/// Whether `a` lies in the distributed-clock block.
-pub(crate) fn is_dc(a: u16) -> bool {
-    (0x0900..=0x09FF).contains(&a)
-}

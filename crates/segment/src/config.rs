@@ -100,6 +100,9 @@ pub struct DeviceToml {
     /// "free-run" (with `app_period_us`), the last three counting lost and repeated cycles.
     pub app: Option<String>,
     pub app_period_us: Option<f64>,
+    /// How long the firmware of a device without device emulation takes to act on a write of
+    /// AL control (µs, default 1000).
+    pub al_response_us: Option<f64>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -196,19 +199,22 @@ impl SegmentConfig {
             let (sii, default_name, esi_dev) = load_device(&src)?;
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
-            let mut config = match d.esc.as_deref().unwrap_or("et1100") {
+            let kinds = port_kinds(&info);
+            // E-Bus terminals carry an ET1200, everything with an MII port an ET1100.
+            let default_esc = if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) { "et1200" } else { "et1100" };
+            let mut config = match d.esc.as_deref().unwrap_or(default_esc) {
                 "et1100" => EscConfig::et1100(),
+                "et1200" => EscConfig::et1200(),
                 "lan9252" => EscConfig::lan9252(),
                 "esc20" => EscConfig::esc20(),
                 "nodc" => EscConfig::et1100().without_dc(),
                 other => {
                     return Err(device_err(
                         format!("device {i}"),
-                        format!("unknown esc '{other}' (et1100, lan9252, esc20, nodc)"),
+                        format!("unknown esc '{other}' (et1100, et1200, lan9252, esc20, nodc)"),
                     ))
                 }
             };
-            let kinds = port_kinds(&info);
             config.port_descriptor = kinds.iter().enumerate().fold(0u8, |acc, (p, k)| {
                 acc | match k {
                     Some(PortKind::Ebus) => 0b10,
@@ -249,7 +255,13 @@ impl SegmentConfig {
                     ))
                 }
             };
-            let esc = Esc::new(config, sii, app, drift_ppb, 0);
+            let mut esc = Esc::new(config, sii, app, drift_ppb, 0);
+            if let Some(us) = d.al_response_us {
+                if !(0.0..=10e6).contains(&us) {
+                    return Err(device_err(format!("device {i}"), format!("al_response_us {us} out of range")));
+                }
+                esc.al_response_ns = (us * 1000.0) as u64;
+            }
             let name = d.name.clone().unwrap_or(default_name);
             let mut node = Node::new(name.clone(), esc, kinds, drift_ppb);
             node.wander_ppb_per_sqrt_s = d.wander_ppb_per_sqrt_s.unwrap_or(0.0);

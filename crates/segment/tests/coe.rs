@@ -28,8 +28,7 @@ impl Client {
             let sm = SyncManager { start, length: len, control: ctl, status: 0, activate: 1, pdi_control: 0 };
             assert_eq!(bus.fp(Command::FPWR, S, 0x0800 + 8 * n, &sm.to_bytes()).1, 1);
         }
-        bus.fp(Command::FPWR, S, 0x0120, &[2, 0]);
-        assert_eq!(bus.fp(Command::FPRD, S, 0x0130, &[0; 2]).0[0], 2, "PREOP");
+        assert_eq!(bus.request_state(S, 2).0, 2, "PREOP");
         Client { bus, counter: 0 }
     }
 
@@ -228,14 +227,8 @@ fn needs_shared_pdo_remapping_changes_the_process_image() {
     c.bus.fp(Command::FPWR, S, 0x0818, &sm3.to_bytes());
     // Default assignment 0x1600: controlword + mode, 16 + 8 bits = 3 bytes.
     c.bus.fp(Command::FPWR, S, 0x0810, &sm2(8).to_bytes());
-    c.bus.fp(Command::FPWR, S, 0x0120, &[4, 0]);
-    let (st, _) = c.bus.fp(Command::FPRD, S, 0x0130, &[0; 6]);
-    assert_eq!(
-        (st[0], u16::from_le_bytes([st[4], st[5]])),
-        (0x12, AlStatusCode::INVALID_OUTPUT_CONFIG.0),
-        "8-byte SM2 refused"
-    );
-    c.bus.fp(Command::FPWR, S, 0x0120, &[0x12, 0]);
+    assert_eq!(c.bus.request_state(S, 4), (0x12, AlStatusCode::INVALID_OUTPUT_CONFIG.0), "8-byte SM2 refused");
+    assert_eq!(c.bus.request_state(S, 0x12).0, 2, "error acknowledged");
     // Remap: only 0x1601 (target position + profile velocity): 8 bytes.
     let r = c.sdo(Sdo::DownloadNormalRequest {
         index: 0x1C12,
@@ -246,9 +239,8 @@ fn needs_shared_pdo_remapping_changes_the_process_image() {
     });
     c.result(&r).unwrap();
     assert_eq!(c.upload(0x1C12, 0, true).unwrap()[..4], [1, 0, 0x01, 0x16]);
-    c.bus.fp(Command::FPWR, S, 0x0120, &[4, 0]);
-    let (st, _) = c.bus.fp(Command::FPRD, S, 0x0130, &[0; 6]);
-    assert_eq!(st[0], 4, "SAFEOP with the remapped image; status code {:#06x}", u16::from_le_bytes([st[4], st[5]]));
+    let (st, code) = c.bus.request_state(S, 4);
+    assert_eq!(st, 4, "SAFEOP with the remapped image; status code {code:#06x}");
     // PDO assignment is PREOP-only.
     let r = c.sdo(Sdo::DownloadNormalRequest {
         index: 0x1C12,
@@ -270,7 +262,7 @@ fn needs_shared_pdo_remapping_changes_the_process_image() {
         active: true,
     };
     c.bus.fp(Command::FPWR, S, 0x0600, &f.to_bytes());
-    c.bus.fp(Command::FPWR, S, 0x0120, &[8, 0]);
+    assert_eq!(c.bus.request_state(S, 8).0, 8, "OP");
     let target = 123_456i32.to_le_bytes();
     let (_, wkc, _) =
         c.bus.tx(Command::LWR, Address::Logical(0), &[target[0], target[1], target[2], target[3], 0xE8, 3, 0, 0]);

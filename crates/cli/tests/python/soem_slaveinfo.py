@@ -23,14 +23,22 @@ try:
         station = 0x1001 + i
         info = {"name": s.name, "man": s.man, "id": s.id, "rev": s.rev, "station": station}
         sm = []
-        for k in range(4):
-            start, length, ctl, status, act, pdi = struct.unpack("<HHBBBB", s._fprd(0x0800 + 8 * k, 8))
+        for k in range(8):
+            try:
+                raw = s._fprd(0x0800 + 8 * k, 8)
+            except pysoem.WkcError:
+                break  # the ESC has no more SyncManagers
+            start, length, ctl, status, act, pdi = struct.unpack("<HHBBBB", raw)
             if start:
                 sm.append({"start": start, "length": length, "control": ctl, "activate": act})
         info["sm"] = sm
         fm = []
-        for k in range(4):
-            ls, ll, lsb, leb, ps, psb, ty, act = struct.unpack("<IHBBHBBB3x", s._fprd(0x0600 + 16 * k, 16))
+        for k in range(8):
+            try:
+                raw = s._fprd(0x0600 + 16 * k, 16)
+            except pysoem.WkcError:
+                break  # the ESC has no more FMMUs
+            ls, ll, lsb, leb, ps, psb, ty, act = struct.unpack("<IHBBHBBB3x", raw)
             if act:
                 fm.append({"ls": ls, "ll": ll, "lsb": lsb, "leb": leb, "ps": ps, "psb": psb, "type": ty})
         info["fmmu"] = fm

@@ -82,6 +82,23 @@ impl Bus {
         None
     }
 
+    /// Requests an AL state and polls AL status until it is reached or refused (firmware
+    /// takes its time, as real slaves do). Returns (AL status, AL status code).
+    pub fn request_state(&mut self, station: u16, state: u8) -> (u8, u16) {
+        let (before, _) = self.fp(Command::FPRD, station, 0x0130, &[0; 2]);
+        assert_eq!(self.fp(Command::FPWR, station, 0x0120, &[state, 0]).1, 1, "AL control write");
+        let mut last = (before[0], 0);
+        for _ in 0..50 {
+            let (d, _) = self.fp(Command::FPRD, station, 0x0130, &[0; 6]);
+            last = (d[0], u16::from_le_bytes([d[4], d[5]]));
+            if d[0] != before[0] {
+                break;
+            }
+            self.t += 200_000;
+        }
+        last
+    }
+
     /// Station addresses 0x1001, 0x1002, … by position.
     pub fn address_all(&mut self) {
         for pos in 0..self.seg.nodes.len() as u16 {

@@ -1,0 +1,309 @@
+//! Replaying the master side of every real capture against a segment of the devices it came
+//! from, as far as the shared EEPROM dumps describe them: the working counters the real
+//! hardware gave, and identical data for reads of identity, SII and configuration registers.
+//! A report lists every mismatch with its reason.
+use std::collections::BTreeMap;
+
+use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_wire::{Address, Command, Frame};
+
+struct Packet {
+    t_ns: u64,
+    data: Vec<u8>,
+}
+
+fn packets(path: &std::path::Path) -> Vec<Packet> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut v = Vec::new();
+    ferrocat_capture::for_each_packet(&bytes, |p| {
+        if matches!(Frame::parse(&p.data), Ok(Some(f)) if f.pdu.datagram_count() > 0) {
+            v.push(Packet { t_ns: p.timestamp.as_nanos() as u64, data: p.data.to_vec() });
+        }
+        Ok(())
+    })
+    .unwrap();
+    v
+}
+
+fn shape(f: &[u8]) -> Vec<(u8, u8, u16)> {
+    let f = Frame::parse(f).unwrap().unwrap();
+    f.pdu.datagrams().map(|d| (d.header().command.0, d.header().index, d.header().len)).collect()
+}
+
+/// Request/response pairs: a frame followed by one with the same datagram shape. A frame
+/// followed by an identical one was lost and sent again: the second is the request.
+fn pairs(p: &[Packet]) -> Vec<(usize, usize)> {
+    let mut v = Vec::new();
+    let mut i = 0;
+    while i + 1 < p.len() {
+        if p[i].data == p[i + 1].data {
+            i += 1;
+        } else if shape(&p[i].data) == shape(&p[i + 1].data) {
+            v.push((i, i + 1));
+            i += 2;
+        } else {
+            i += 1;
+        }
+    }
+    v
+}
+
+/// Product codes by slave position, from the SII reads in the capture (word 0x0A).
+fn identities(p: &[Packet], pairs: &[(usize, usize)]) -> (usize, BTreeMap<u16, u32>) {
+    let mut count = 0;
+    let mut pending: BTreeMap<(u8, u16), u32> = BTreeMap::new();
+    let mut ids = BTreeMap::new();
+    for &(_, resp) in pairs {
+        let f = Frame::parse(&p[resp].data).unwrap().unwrap();
+        for d in f.pdu.datagrams() {
+            let h = d.header();
+            let Address::Device { adp, ado } = h.address else { continue };
+            match (h.command, ado) {
+                (Command::BRD, 0x0000) if count == 0 => count = d.wkc() as usize,
+                (Command::APWR | Command::FPWR, 0x0502) if d.data().len() >= 6 => {
+                    pending.insert((h.command.0, adp), u32::from_le_bytes(d.data()[2..6].try_into().unwrap()));
+                }
+                (Command::APRD | Command::FPRD, 0x0508) if d.wkc() == 1 => {
+                    let Some(&a) = pending.get(&(h.command.0 + 1, adp)) else { continue };
+                    if a <= 0x0A && (0x0A - a) as usize * 2 + 4 <= d.data().len() {
+                        let off = (0x0A - a) as usize * 2;
+                        ids.insert(adp, u32::from_le_bytes(d.data()[off..off + 4].try_into().unwrap()));
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    (count.max(ids.len()), ids)
+}
+
+fn source(product: Option<u32>) -> (String, Option<&'static str>) {
+    let eeprom = ferrocat_testdata::shared("captures/eeprom");
+    let e = |f: &str| format!("eeprom = '{}/{f}'", eeprom.display());
+    match product {
+        Some(0x044C_2C52) => (e("ek1100.hex"), None),
+        Some(0x07D4_3052) => (e("el2004.bin"), None),
+        Some(0x0B0C_3052) => (e("el2828.hex"), None),
+        Some(0x0041_4B44) => (e("akd.hex"), None),
+        Some(0x0B49_3052) => (e("el2828.hex"), Some("EL2889: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
+        Some(0x077A_2C52) => (e("ek1100.hex"), Some("EK1914: no EEPROM dump or ESI in shared data (EK1100 stands in)")),
+        Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
+        Some(0x9252) => (e("el2004.bin"), Some("LAN9252 board: no EEPROM dump in shared data (EL2004 stands in)")),
+        Some(0x03EC_3052) => (
+            "builtin = 'EL1004'".into(),
+            Some("EL1004: no EEPROM dump in shared data (built-in description stands in)"),
+        ),
+        _ => (e("ek1100.hex"), Some("device unknown from the capture (EK1100 stands in)")),
+    }
+}
+
+/// Registers whose read data must be identical: identity and features, station address and
+/// alias, SII data, FMMU and SyncManager configuration (not the SM status bytes).
+fn compared(ado: u16, i: usize) -> bool {
+    let a = ado as usize + i;
+    matches!(a, 0x0000..=0x000B | 0x0010..=0x0013 | 0x0508..=0x050F | 0x0600..=0x06FF)
+        || ((0x0800..=0x087F).contains(&a) && (a - 0x0800) % 8 < 5)
+}
+
+/// Whether the capture assigns station addresses, and the configured addresses it uses.
+fn addressing(p: &[Packet], pairs: &[(usize, usize)]) -> (bool, Vec<u16>) {
+    let mut assigns = false;
+    let mut fixed = std::collections::BTreeSet::new();
+    for &(req, _) in pairs {
+        let f = Frame::parse(&p[req].data).unwrap().unwrap();
+        for d in f.pdu.datagrams() {
+            let h = d.header();
+            if let Address::Device { adp, ado } = h.address {
+                match h.command {
+                    Command::APWR | Command::BWR if (0x0010..=0x0011).contains(&ado) => assigns = true,
+                    Command::FPRD | Command::FPWR | Command::FPRW | Command::FRMW => {
+                        fixed.insert(adp);
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    (assigns, fixed.into_iter().collect())
+}
+
+fn setup_frame(cmd: Command, address: Address, data: &[u8]) -> Vec<u8> {
+    use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+    use ferrocat_wire::{DatagramHeader, FrameWriter};
+    let eth = EthernetRepr { dst: BROADCAST, src: [0x02; 6], vlan_tci: None, ethertype: 0 };
+    let mut buf = vec![0u8; 128];
+    let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
+    w.push(&DatagramHeader::new(cmd, 0, address, data.len() as u16), data, 0).unwrap();
+    let n = w.finish().unwrap();
+    buf.truncate(n);
+    buf
+}
+
+#[derive(Default)]
+struct Report {
+    datagrams: usize,
+    wkc_same: usize,
+    compared_reads: usize,
+    data_same: usize,
+    reasons: BTreeMap<String, usize>,
+    examples: Vec<String>,
+}
+
+fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str) -> String {
+    let broadcast =
+        matches!(cmd, Command::BRD | Command::BWR | Command::BRW | Command::LRD | Command::LWR | Command::LRW);
+    if broadcast && !standins.is_empty() {
+        return format!(
+            "{what}: the segment includes stand-ins ({})",
+            standins.iter().map(|s| s.1).collect::<Vec<_>>().join("; ")
+        );
+    }
+    if let Some((_, why)) = standins
+        .iter()
+        .find(|(pos, _)| *pos == adp || 0x1000 + *pos == adp || 0x1001 + *pos == adp || 0u16.wrapping_sub(*pos) == adp)
+    {
+        return format!("{what}: {why}");
+    }
+    let r = match ado {
+        0x0000..=0x000B => "ESC identity registers: the simulated ESC (ET1100/ET1200 as the captures show them) is not this unit's silicon revision",
+        0x0120..=0x0121 => "AL control: the real firmware read it at another moment than the modelled 1 ms",
+        0x0130..=0x0135 => "AL status: the simulated slave changes state at another moment than the real one",
+        0x0500..=0x050F => "SII interface: busy timing differs (20 µs per read here)",
+        0x0900..=0x09FF => "DC registers: times are the simulation's",
+        0x1000..=0x1FFF | 0x0F00..=0x0FFF => "mailbox/process RAM: the simulated slave answers at once, the real one took time",
+        0x0300..=0x0313 => "error counters: the real segment saw link errors",
+        _ => "not explained",
+    };
+    if matches!(cmd, Command::LRD | Command::LWR | Command::LRW) {
+        return format!("{what}: process data before the slaves were in the same state");
+    }
+    format!("{what}: {r}")
+}
+
+fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
+    let p = packets(path);
+    let pairs = pairs(&p);
+    let (count, ids) = identities(&p, &pairs);
+    let mut positions: Vec<u16> = ids.keys().copied().collect();
+    positions.sort();
+    let fp = addressing(&p, &pairs).1.len();
+    let count = count.max(fp);
+    let mut toml = String::from("seed = 1\ndrift_spread_ppm = 0\n");
+    let mut standins = Vec::new();
+    let mut notes = Vec::new();
+    for k in 0..count.max(1) {
+        let product = positions.get(k).and_then(|a| ids.get(a)).copied();
+        let (src, why) = source(product);
+        if let Some(w) = why {
+            standins.push((k as u16, w));
+            notes.push(format!("slave {k}: {w}"));
+        }
+        toml += &format!("[[device]]\n{src}\n");
+    }
+    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
+    let mut seg: Segment = cfg.build().unwrap();
+    // A capture that starts after the master configured the slaves never assigns station
+    // addresses: give them the ones it uses, in ascending order.
+    let (assigns, fixed) = addressing(&p, &pairs);
+    if !assigns && !fixed.is_empty() {
+        notes.push(format!(
+            "the capture starts with the slaves already configured: station addresses {fixed:?} pre-assigned, their AL state before the capture is unknown"
+        ));
+        let mut t = 0;
+        for (k, a) in fixed.iter().enumerate().take(seg.nodes.len()) {
+            let mut f = setup_frame(Command::APWR, Address::position(k as u16, 0x0010), &a.to_le_bytes());
+            t = seg.exchange(&mut f, t).unwrap_or(t) + 1000;
+        }
+    }
+    let mut r = Report::default();
+    let t0 = p.first().map(|x| x.t_ns).unwrap_or(0);
+    let mut last_t = 0;
+    for &(req, resp) in &pairs {
+        let t = (p[req].t_ns - t0).max(last_t) + 1_000_000;
+        let mut frame = p[req].data.clone();
+        let back = seg.exchange(&mut frame, t);
+        last_t = back.unwrap_or(t);
+        let real = Frame::parse(&p[resp].data).unwrap().unwrap();
+        let ours = Frame::parse(&frame).unwrap().unwrap();
+        for (a, b) in real.pdu.datagrams().zip(ours.pdu.datagrams()) {
+            r.datagrams += 1;
+            let h = a.header();
+            let (adp, ado) = match h.address {
+                Address::Device { adp, ado } => (adp, ado),
+                Address::Logical(_) => (0xFFFF, 0),
+            };
+            if a.wkc() == b.wkc() && back.is_some() {
+                r.wkc_same += 1;
+            } else {
+                let why = reason(h.command, adp, ado, &standins, &format!("WKC {} vs real {}", b.wkc(), a.wkc()));
+                *r.reasons.entry(why.clone()).or_default() += 1;
+                if r.examples.len() < 8 && why.contains("not explained") {
+                    r.examples.push(format!("frame {}: {} adp {adp:#06x} ado {ado:#06x}: {why}", req + 1, h.command));
+                }
+            }
+            if h.command.reads() && !h.command.is_logical() && a.wkc() > 0 && a.wkc() == b.wkc() {
+                let idx: Vec<usize> = (0..a.data().len()).filter(|&i| compared(ado, i)).collect();
+                if !idx.is_empty() {
+                    r.compared_reads += 1;
+                    if idx.iter().all(|&i| a.data()[i] == b.data()[i]) {
+                        r.data_same += 1;
+                    } else {
+                        let why = reason(h.command, adp, ado, &standins, "data");
+                        let why = if why.contains("not explained") {
+                            format!("data of {ado:#06x} differs: not explained")
+                        } else {
+                            why
+                        };
+                        *r.reasons.entry(why.clone()).or_default() += 1;
+                        if r.examples.len() < 8 && why.contains("not explained") {
+                            r.examples.push(format!(
+                                "frame {}: {} adp {adp:#06x} ado {ado:#06x}: ours {:02x?} real {:02x?}",
+                                req + 1,
+                                h.command,
+                                b.data(),
+                                a.data()
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (r, notes)
+}
+
+#[test]
+fn needs_shared_replay_every_capture() {
+    let mut failures = Vec::new();
+    for path in ferrocat_testdata::shared_files("captures", ".pcapng") {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let (r, notes) = replay(&path);
+        let wkc = 100.0 * r.wkc_same as f64 / r.datagrams.max(1) as f64;
+        let data = 100.0 * r.data_same as f64 / r.compared_reads.max(1) as f64;
+        println!(
+            "{name}: {} datagrams, WKC as real {wkc:.2} %, identity/SII/config reads identical {}/{} ({data:.1} %)",
+            r.datagrams, r.data_same, r.compared_reads
+        );
+        for n in &notes {
+            println!("    {n}");
+        }
+        for (why, n) in &r.reasons {
+            println!("    {n:6} × {why}");
+        }
+        for e in &r.examples {
+            println!("    e.g. {e}");
+        }
+        // Captures whose devices the shared data fully describes must match.
+        if notes.is_empty() && r.datagrams > 0 {
+            if wkc < 99.0 {
+                failures.push(format!("{name}: WKC as real on {wkc:.2} % of datagrams"));
+            }
+            let unexplained: usize =
+                r.reasons.iter().filter(|(k, _)| k.contains("not explained")).map(|(_, v)| v).sum();
+            if unexplained > 0 {
+                failures.push(format!("{name}: {unexplained} unexplained mismatches"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
