@@ -41,6 +41,10 @@ fn needs_shared_soem_sees_the_real_hardware() {
             report.to_str().unwrap(),
         ],
     );
+    // Frames an ESC drops must not stop the simulator.
+    let garbage = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/send_garbage.py");
+    let g = VethPair::cmd(&net.master_ns, python().to_str().unwrap()).args([garbage, &net.master_if]).output().unwrap();
+    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/soem_slaveinfo.py");
     let out = VethPair::cmd(&net.master_ns, python().to_str().unwrap())
         .args([script, &net.master_if, "0xA5"])
@@ -128,4 +132,8 @@ fn needs_shared_soem_sees_the_real_hardware() {
     assert_eq!(devs[1]["outputs"], serde_json::json!([0x05]));
     assert_eq!(devs[2]["outputs"], serde_json::json!([0x0A]));
     assert!(devs.iter().all(|d| d["al_state"] == "OP"), "{rep}");
+    // Two lying lengths and a runt with the EtherCAT type are malformed; the ARP-like frame is not
+    // EtherCAT. (The kernel may add frames of its own, such as IPv6 neighbour discovery.)
+    assert!(rep["malformed"].as_u64().unwrap() >= 3, "lying lengths counted: {rep}");
+    assert!(rep["not_ethercat"].as_u64().unwrap() >= 1, "others counted: {rep}");
 }

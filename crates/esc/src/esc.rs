@@ -264,6 +264,31 @@ impl Esc {
         self.app.as_mut()
     }
 
+    /// The LATCH`unit` input pin changes to `level` at true time `t_ns`: the edge's system time
+    /// goes to 0x09B0/0x09B8 (unit 0, rising/falling) or 0x09C0/0x09C8 (unit 1). In single-event
+    /// mode (0x09A8/0x09A9 bit 0/1) only the first edge is kept until the master reads its time.
+    pub fn latch_input(&mut self, unit: u8, level: bool, t_ns: u64) {
+        let Some(dc) = self.dc.as_ref() else { return };
+        let unit = (unit & 1) as usize;
+        let status_at = 0x09AE + unit;
+        let was = self.mem[status_at] & 0x04 != 0;
+        self.mem[status_at] = (self.mem[status_at] & !0x04) | if level { 0x04 } else { 0 };
+        if was == level {
+            return;
+        }
+        let edge = if level { 0 } else { 1 };
+        let single = self.mem[0x09A8 + unit] & (1 << edge) != 0;
+        if single && self.mem[status_at] & (1 << edge) != 0 {
+            return;
+        }
+        let at = 0x09B0 + 16 * unit + 8 * edge;
+        let time = dc.system_at(t_ns);
+        self.mem[at..at + 8].copy_from_slice(&time.to_le_bytes());
+        if single {
+            self.mem[status_at] |= 1 << edge;
+        }
+    }
+
     /// A frame arrived broken on `port`: the invalid-frame counter (0x0300 + 2·port) counts,
     /// saturating at 255.
     pub fn count_rx_error(&mut self, port: u8) {
@@ -569,6 +594,14 @@ impl Esc {
     fn read_byte(&mut self, a: u16) -> Option<u8> {
         if self.absent(a) {
             return None;
+        }
+        if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
+            // Reading a latch time clears its single-event flag (ECAT-controlled latch units).
+            let unit = ((a - 0x09B0) / 16) as usize;
+            let edge = ((a - 0x09B0) / 8 % 2) as u8;
+            if self.mem[0x0980] & (0x10 << unit) == 0 {
+                self.mem[0x09AE + unit] &= !(1 << edge);
+            }
         }
         if let Some((n, s)) = self.sm_at(a) {
             let st = &mut self.sms[n as usize];

@@ -114,6 +114,7 @@ pub struct SegmentConfig {
     pub drift_spread_ppm: Option<f64>,
     pub master_link_ns: Option<u32>,
     pub loss_probability: Option<f64>,
+    pub corruption_probability: Option<f64>,
     #[serde(default, rename = "device")]
     pub devices: Vec<DeviceToml>,
     /// Folder relative paths are resolved against (the TOML file's folder).
@@ -280,7 +281,17 @@ impl SegmentConfig {
         if let Some(m) = self.master_link_ns {
             seg.master_link_ns = m;
         }
+        for (what, p) in
+            [("loss_probability", self.loss_probability), ("corruption_probability", self.corruption_probability)]
+        {
+            if let Some(p) = p {
+                if !(0.0..=1.0).contains(&p) {
+                    return Err(device_err("segment", format!("{what} {p} is not a probability")));
+                }
+            }
+        }
         seg.loss_probability = self.loss_probability.unwrap_or(0.0);
+        seg.corruption_probability = self.corruption_probability.unwrap_or(0.0);
         for (i, d) in self.devices.iter().enumerate().skip(1) {
             let place = format!("device {i} ({})", names[i]);
             let parent = match &d.parent {

@@ -78,6 +78,7 @@ pub struct SegmentStats {
     pub frames: u64,
     pub returned: u64,
     pub lost: u64,
+    pub corrupted: u64,
     pub destroyed_circulating: u64,
 }
 
@@ -87,9 +88,12 @@ pub struct Segment {
     /// One-way delay between the master's NIC and the first slave's entry port.
     pub master_link_ns: u32,
     rng: ChaCha8Rng,
-    /// Probability that a frame is corrupted on its way (it then reaches no further ESC and
-    /// never returns; the ESC behind the fault counts an RX error).
+    /// Probability that a frame vanishes on its way (a link glitch): it reaches no further ESC
+    /// and never returns.
     pub loss_probability: f64,
+    /// Probability that a frame is corrupted on its way: the ESCs behind the fault do not
+    /// process it, the first of them counts an invalid frame, the master's NIC drops it.
+    pub corruption_probability: f64,
     events: Vec<(u64, Event)>,
     now_ns: u64,
     wander_step_ns: u64,
@@ -110,6 +114,7 @@ impl Segment {
             master_link_ns: 500,
             rng: ChaCha8Rng::seed_from_u64(seed),
             loss_probability: 0.0,
+            corruption_probability: 0.0,
             events: Vec::new(),
             now_ns: 0,
             wander_step_ns: 100_000_000,
@@ -295,20 +300,28 @@ impl Segment {
         self.visits.clear();
         let entry = self.nodes[0].entry_port;
         let back_at_nic = self.walk(0, entry, head_at_first, 0) + self.master_link_ns as u64;
-        // Faults: a corrupted frame is processed by the ESCs before the fault only.
+        // Faults: a lost or corrupted frame is processed by the ESCs before the fault only.
         let mut reach = self.visits.len();
         let mut lost = false;
+        let mut corrupted = false;
         if self.loss_probability > 0.0 && self.rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
             reach = self.rng.gen_range(0..=self.visits.len());
             lost = true;
+        } else if self.corruption_probability > 0.0 && self.rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0)) {
+            reach = self.rng.gen_range(0..=self.visits.len());
+            lost = true;
+            corrupted = true;
+            self.stats.corrupted += 1;
         }
         // Processing pass, in the order the frame passes the processing units.
         let visits = std::mem::take(&mut self.visits);
         let hdr = ECAT_HEADER_LEN;
         for (i, (node, timing)) in visits.iter().enumerate() {
             if i >= reach {
-                if let Some(n) = self.nodes.get_mut(*node) {
-                    n.esc.count_rx_error(n.entry_port);
+                if corrupted {
+                    if let Some(n) = self.nodes.get_mut(*node) {
+                        n.esc.count_rx_error(n.entry_port);
+                    }
                 }
                 break;
             }

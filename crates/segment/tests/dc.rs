@@ -110,3 +110,25 @@ fn a_32_bit_dc_wraps() {
     let (d, _) = bus.fp(Command::FPRD, 0x1002, 0x0910, &[0; 8]);
     assert_eq!(&d[4..], &[0, 0, 0, 0]);
 }
+
+#[test]
+fn latch_inputs_single_event_and_continuous() {
+    let mut bus = line(&["EK1100", "EL2004"], "et1100");
+    // Unit 0: rising edge single event, falling edge continuous.
+    bus.fp(Command::FPWR, 0x1002, 0x09A8, &[0x01]);
+    let t = bus.t;
+    let esc = &mut bus.seg.nodes[1].esc;
+    esc.latch_input(0, true, t + 1_000);
+    let first = esc.dc.as_ref().unwrap().system_at(t + 1_000);
+    esc.latch_input(0, false, t + 2_000);
+    esc.latch_input(0, true, t + 3_000); // ignored: the first rising edge is not read yet
+    esc.latch_input(0, false, t + 4_000);
+    let last_fall = esc.dc.as_ref().unwrap().system_at(t + 4_000);
+    bus.t = t + 10_000;
+    let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x09AE, &[0]);
+    assert_eq!(st[0] & 0x01, 0x01, "rising event pending");
+    assert_eq!(bus.fprd_u64(0x1002, 0x09B0), first, "the first rising edge kept");
+    assert_eq!(bus.fprd_u64(0x1002, 0x09B8), last_fall, "continuous: the latest falling edge");
+    let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x09AE, &[0]);
+    assert_eq!(st[0] & 0x01, 0, "reading the time cleared the event");
+}

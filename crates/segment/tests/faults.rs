@@ -1,0 +1,85 @@
+//! Injected faults and determinism.
+mod common;
+
+use common::Bus;
+use ferrocat_segment::{Event, SegmentConfig};
+use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
+
+fn line(extra: &str) -> SegmentConfig {
+    toml::from_str(&format!(
+        "seed = 21\n{extra}\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n"
+    ))
+    .unwrap()
+}
+
+fn brd_frame() -> Vec<u8> {
+    let eth = EthernetRepr { dst: BROADCAST, src: [2; 6], vlan_tci: None, ethertype: 0 };
+    let mut b = vec![0u8; 64];
+    let mut w = FrameWriter::new(&mut b, &eth).unwrap();
+    w.push(&DatagramHeader::new(Command::BRD, 0, Address::Device { adp: 0, ado: 0x0130 }, 2), &[0, 0], 0).unwrap();
+    let n = w.finish().unwrap();
+    b.truncate(n);
+    b
+}
+
+/// Returns, per cycle, the time the frame came back (or None) and its WKC.
+fn run(cfg: &SegmentConfig, cycles: u64) -> Vec<(Option<u64>, u16)> {
+    let mut seg = cfg.build().unwrap();
+    (0..cycles)
+        .map(|k| {
+            let mut f = brd_frame();
+            let back = seg.exchange(&mut f, 1_000_000 + k * 100_000);
+            (back, u16::from_le_bytes([f[28], f[29]]))
+        })
+        .collect()
+}
+
+#[test]
+fn one_percent_loss_and_corruption_are_seeded() {
+    for key in ["loss_probability", "corruption_probability"] {
+        let cfg = line(&format!("{key} = 0.01"));
+        let a = run(&cfg, 20_000);
+        let lost = a.iter().filter(|(b, _)| b.is_none()).count();
+        println!("{key} 0.01: {lost} of 20000 frames lost");
+        assert!((120..=280).contains(&lost), "{key}: {lost} lost");
+        assert_eq!(a, run(&cfg, 20_000), "same seed, same frames, same times");
+        let mut other = cfg.clone();
+        other.seed = 22;
+        assert_ne!(a, run(&other, 20_000), "another seed, other losses");
+    }
+    // Corruption shows in the error counters of the ESC behind the fault; a plain loss does not.
+    let mut seg = line("corruption_probability = 0.05").build().unwrap();
+    for k in 0..2000 {
+        seg.exchange(&mut brd_frame(), 1_000_000 + k * 100_000);
+    }
+    let errors: u32 = seg.nodes.iter().map(|n| n.esc.peek(0x0300, 1)[0] as u32).sum();
+    assert!(errors > 0 && seg.stats.corrupted > 0, "{errors} invalid frames counted");
+}
+
+#[test]
+fn link_pulled_and_restored_and_slave_power_cycled() {
+    let mut bus = Bus::new(line("").build().unwrap());
+    bus.address_all();
+    let t = bus.t;
+    // Pull the link between the EL2004 (node 1) and the EL1004 (node 2), restore it 5 ms later.
+    bus.seg.schedule(t + 1_000_000, Event::LinkDown { node: 1, port: 1 });
+    bus.seg.schedule(t + 6_000_000, Event::LinkUp { node: 1, port: 1 });
+    bus.t = t + 2_000_000;
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 2, "EL1004 unreachable");
+    bus.t = t + 7_000_000;
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3, "back");
+    // The EL2004 keeps its configuration across a link loss...
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0010, &[0; 2]).0, [0x02, 0x10]);
+    // ...but loses it when powered off and on: station address 0, AL state INIT.
+    let t = bus.t;
+    bus.seg.schedule(t + 1_000_000, Event::PowerOff { node: 1 });
+    bus.seg.schedule(t + 3_000_000, Event::PowerOn { node: 1 });
+    bus.t = t + 2_000_000;
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 1, "only the EK1100 answers");
+    bus.t = t + 4_000_000;
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3);
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0010, &[0; 2]).1, 0, "address forgotten");
+    let (d, _, _) = bus.tx(Command::APRD, Address::position(1, 0x0130), &[0; 2]);
+    assert_eq!(d[0], 1, "INIT after power-on");
+}
