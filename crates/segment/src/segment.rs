@@ -189,6 +189,14 @@ impl Segment {
 
     /// Advances every ESC, scheduled event and oscillator to true time `t_ns`.
     pub fn advance_to(&mut self, t_ns: u64) {
+        self.advance_shared(t_ns);
+        self.advance_escs(t_ns);
+    }
+
+    /// Scheduled events and oscillator wander up to `t_ns`. ESCs interact only through frames,
+    /// so each one otherwise catches up (its SYNC pulses at their exact instants) when a frame
+    /// reaches it or when `advance_to` is called.
+    fn advance_shared(&mut self, t_ns: u64) {
         while let Some(&(t, _)) = self.events.first() {
             if t > t_ns {
                 break;
@@ -199,10 +207,10 @@ impl Segment {
         }
         while self.next_wander_ns <= t_ns {
             let t = self.next_wander_ns;
-            self.advance_escs(t);
             let dt_s = self.wander_step_ns as f64 * 1e-9;
             for n in &mut self.nodes {
                 if n.wander_ppb_per_sqrt_s > 0.0 {
+                    n.esc.advance_to(t);
                     // Random walk of the frequency error: a sum of uniform steps with the
                     // variance of the configured wander.
                     let u: f64 = self.rng.gen_range(-1.0..1.0);
@@ -215,7 +223,6 @@ impl Segment {
             }
             self.next_wander_ns += self.wander_step_ns;
         }
-        self.advance_escs(t_ns);
         self.now_ns = self.now_ns.max(t_ns);
     }
 
@@ -286,7 +293,7 @@ impl Segment {
     /// `t_tx_ns`. Returns the true time at which the master has received the whole frame back,
     /// with `frame` modified in place, or `None` if it does not come back.
     pub fn exchange(&mut self, frame: &mut [u8], t_tx_ns: u64) -> Option<u64> {
-        self.advance_to(t_tx_ns);
+        self.advance_shared(t_tx_ns);
         self.stats.frames += 1;
         if self.nodes.is_empty() || !self.nodes[0].powered {
             self.stats.lost += 1;

@@ -83,3 +83,69 @@ fn link_pulled_and_restored_and_slave_power_cycled() {
     let (d, _, _) = bus.tx(Command::APRD, Address::position(1, 0x0130), &[0; 2]);
     assert_eq!(d[0], 1, "INIT after power-on");
 }
+
+#[test]
+fn expired_process_data_watchdog_takes_op_to_safeop() {
+    use ferrocat_wire::register::{AlStatusCode, Fmmu, SyncManager};
+    let mut bus = Bus::new(line("").build().unwrap());
+    bus.address_all();
+    // EL2004 outputs SM with the watchdog trigger (control 0x44), default 100 ms watchdog.
+    let sm = SyncManager { start: 0x0F00, length: 1, control: 0x44, status: 0, activate: 1, pdi_control: 0 };
+    bus.fp(Command::FPWR, 0x1002, 0x0800, &sm.to_bytes());
+    let f = Fmmu {
+        logical_start: 0,
+        length: 1,
+        logical_start_bit: 0,
+        logical_stop_bit: 7,
+        physical_start: 0x0F00,
+        physical_start_bit: 0,
+        fmmu_type: Fmmu::WRITE,
+        active: true,
+    };
+    bus.fp(Command::FPWR, 0x1002, 0x0600, &f.to_bytes());
+    for s in [2u8, 4, 8] {
+        bus.fp(Command::FPWR, 0x1002, 0x0120, &[s, 0]);
+    }
+    // Process data every millisecond keeps it in OP...
+    for _ in 0..300 {
+        bus.tx(Command::LWR, Address::Logical(0), &[0x0F]);
+        bus.t += 1_000_000;
+    }
+    let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x0130, &[0; 6]);
+    assert_eq!(st[0], 8, "still OP");
+    // ...150 ms without it do not.
+    bus.t += 150_000_000;
+    let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x0130, &[0; 6]);
+    assert_eq!((st[0], u16::from_le_bytes([st[4], st[5]])), (0x14, AlStatusCode::SM_WATCHDOG.0));
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0440, &[0; 2]).0[0] & 1, 0, "0x0440: expired");
+}
+
+#[test]
+fn a_tree_through_a_junction() {
+    // EK1100 with an EL2004 on its E-Bus port 1 and an EL1004 line on its port 2 (MII, 10 m).
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\nparent = 0\nparent_port = 1\n\
+         [[device]]\nbuiltin = 'EL1004'\nparent = 0\nparent_port = 2\ncable_m = 10.0\n[[device]]\nbuiltin = 'EL1004'\n",
+    )
+    .unwrap();
+    let mut bus = Bus::new(cfg.build().unwrap());
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 4);
+    bus.address_all();
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 4);
+    let ports: Vec<u32> = (0..4).map(|p| bus.fprd_u32(0x1001, 0x0900 + 4 * p)).collect();
+    // The frame goes 0 → 1 (EL2004 branch) → 2 (EL1004 branch, 100BASE-TX) → back to 0.
+    let branch1 = ports[1].wrapping_sub(ports[0]);
+    let branch2 = ports[2].wrapping_sub(ports[1]);
+    println!("EK1100 port times: {ports:?}; branch loops {branch1} ns and {branch2} ns");
+    // E-Bus branch with one terminal: 65 + 2·80 + 85 = 310 ns; the MII branch: two terminals,
+    // 2·(420 + 40) cable + their loops.
+    assert!((300..=320).contains(&branch1), "{branch1}");
+    assert!(branch2 > 2 * (420 + 40), "{branch2}");
+    let (dl, _) = bus.fp(Command::FPRD, 0x1001, 0x0110, &[0; 2]);
+    let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes([dl[0], dl[1]]));
+    assert!(dl.port_active(0) && dl.port_active(1) && dl.port_active(2) && !dl.port_active(3));
+    // The EL1004 on port 2 sees the frame only after the whole port-1 branch came back.
+    let t_el2004 = bus.seg.last_visits().iter().find(|(n, _)| *n == 1).unwrap().1.epu_ns;
+    let t_el1004 = bus.seg.last_visits().iter().find(|(n, _)| *n == 2).unwrap().1.epu_ns;
+    assert!(t_el1004 > t_el2004 + 200);
+}
