@@ -111,8 +111,7 @@ impl DigitalIo {
     fn publish_inputs(&self, pdi: &mut Pdi<'_>) {
         if let Some((_, sm)) = pdi.process_data_sm(false, self.sm_count) {
             let n = (sm.length as usize).min(self.inputs.len());
-            let data = self.inputs[..n].to_vec();
-            pdi.write(sm.start, &data);
+            pdi.write(sm.start, &self.inputs[..n]);
         }
     }
 }
@@ -126,7 +125,9 @@ impl Application for DigitalIo {
     }
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         let s = pdi.sm(sm);
-        self.outputs = pdi.read(s.start, s.length as usize).to_vec();
+        // Reuse the buffer: a steady cycle allocates nothing.
+        self.outputs.clear();
+        self.outputs.extend_from_slice(pdi.read(s.start, s.length as usize));
         self.output_updates += 1;
         self.publish_inputs(pdi);
     }
@@ -199,7 +200,8 @@ impl SyncApp {
         self.consumed_seq = self.written;
         self.consumed += 1;
         if let Some((_, sm)) = pdi.process_data_sm(true, self.io.sm_count) {
-            self.io.outputs = pdi.read(sm.start, sm.length as usize).to_vec();
+            self.io.outputs.clear();
+            self.io.outputs.extend_from_slice(pdi.read(sm.start, sm.length as usize));
         }
     }
 }

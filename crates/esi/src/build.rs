@@ -142,9 +142,10 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
     }
     info.header = h.with_checksum();
 
+    // Real images start their strings with the type name (what SOEM shows as the name).
+    general.order_idx = info.intern(&dev.type_name);
     general.group_idx = info.intern(&dev.group_type);
     general.group_idx_dup = general.group_idx;
-    general.order_idx = info.intern(&dev.type_name);
     general.name_idx = info.intern(&dev.name);
     general.current_on_ebus_ma = dev.ebus_current_ma;
     general.physical_ports =

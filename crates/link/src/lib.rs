@@ -1,0 +1,233 @@
+//! Linux links for EtherCAT: an AF_PACKET raw socket bound to one interface, CLOCK_MONOTONIC,
+//! and what a real-time cyclic task needs (absolute sleeps, SCHED_FIFO, locked memory, a pinned
+//! CPU). Shared by the live segment and the master.
+use std::io;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+
+/// CLOCK_MONOTONIC in ns.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes into the timespec we own.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// A raw socket bound to one interface, receiving every frame on it.
+#[derive(Debug)]
+pub struct RawSocket {
+    fd: OwnedFd,
+    ifindex: i32,
+}
+
+fn check(r: libc::c_int, what: &str) -> io::Result<libc::c_int> {
+    if r < 0 {
+        let e = io::Error::last_os_error();
+        Err(io::Error::new(e.kind(), format!("{what}: {e}")))
+    } else {
+        Ok(r)
+    }
+}
+
+impl RawSocket {
+    pub fn open(iface: &str) -> io::Result<Self> {
+        let name = std::ffi::CString::new(iface)
+            .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "interface name contains NUL"))?;
+        // SAFETY: plain libc calls on values we own; results are checked.
+        unsafe {
+            let ifindex = libc::if_nametoindex(name.as_ptr()) as i32;
+            if ifindex == 0 {
+                return Err(io::Error::new(io::ErrorKind::NotFound, format!("no network interface named '{iface}'")));
+            }
+            let proto = (libc::ETH_P_ALL as u16).to_be() as i32;
+            let fd = check(libc::socket(libc::AF_PACKET, libc::SOCK_RAW, proto), "raw socket (needs CAP_NET_RAW)")?;
+            let fd = OwnedFd::from_raw_fd(fd);
+            let mut sll: libc::sockaddr_ll = std::mem::zeroed();
+            sll.sll_family = libc::AF_PACKET as u16;
+            sll.sll_protocol = proto as u16;
+            sll.sll_ifindex = ifindex;
+            check(
+                libc::bind(
+                    fd.as_raw_fd(),
+                    &sll as *const _ as *const libc::sockaddr,
+                    std::mem::size_of::<libc::sockaddr_ll>() as u32,
+                ),
+                "bind",
+            )?;
+            // Our own transmissions are not for us.
+            let one: libc::c_int = 1;
+            libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_PACKET,
+                libc::PACKET_IGNORE_OUTGOING,
+                &one as *const _ as *const libc::c_void,
+                4,
+            );
+            let mut mr: libc::packet_mreq = std::mem::zeroed();
+            mr.mr_ifindex = ifindex;
+            mr.mr_type = libc::PACKET_MR_PROMISC as u16;
+            libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_PACKET,
+                libc::PACKET_ADD_MEMBERSHIP,
+                &mr as *const _ as *const libc::c_void,
+                std::mem::size_of::<libc::packet_mreq>() as u32,
+            );
+            let tv = libc::timeval { tv_sec: 0, tv_usec: 50_000 };
+            check(
+                libc::setsockopt(
+                    fd.as_raw_fd(),
+                    libc::SOL_SOCKET,
+                    libc::SO_RCVTIMEO,
+                    &tv as *const _ as *const libc::c_void,
+                    std::mem::size_of::<libc::timeval>() as u32,
+                ),
+                "SO_RCVTIMEO",
+            )?;
+            Ok(RawSocket { fd, ifindex })
+        }
+    }
+
+    /// Sets the receive timeout (at least 1 µs; the kernel rounds to its tick).
+    pub fn set_timeout_ns(&self, ns: u64) -> io::Result<()> {
+        let ns = ns.clamp(1_000, 1_000_000_000);
+        let tv = libc::timeval {
+            tv_sec: (ns / 1_000_000_000) as libc::time_t,
+            tv_usec: ((ns % 1_000_000_000) / 1000) as libc::suseconds_t,
+        };
+        // SAFETY: setsockopt reads the timeval we own.
+        let r = unsafe {
+            libc::setsockopt(
+                self.fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_RCVTIMEO,
+                &tv as *const _ as *const libc::c_void,
+                std::mem::size_of::<libc::timeval>() as u32,
+            )
+        };
+        check(r, "SO_RCVTIMEO").map(|_| ())
+    }
+
+    /// The next frame, or `None` after the receive timeout.
+    pub fn recv(&self, buf: &mut [u8]) -> io::Result<Option<usize>> {
+        // SAFETY: recv writes at most buf.len() bytes into buf.
+        let n = unsafe { libc::recv(self.fd.as_raw_fd(), buf.as_mut_ptr() as *mut libc::c_void, buf.len(), 0) };
+        if n < 0 {
+            let e = io::Error::last_os_error();
+            return match e.kind() {
+                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted => Ok(None),
+                _ => Err(e),
+            };
+        }
+        Ok(Some(n as usize))
+    }
+
+    pub fn send(&self, frame: &[u8]) -> io::Result<()> {
+        // SAFETY: sockaddr_ll is fully initialised; send reads frame.len() bytes.
+        unsafe {
+            let mut sll: libc::sockaddr_ll = std::mem::zeroed();
+            sll.sll_family = libc::AF_PACKET as u16;
+            sll.sll_ifindex = self.ifindex;
+            sll.sll_halen = 6;
+            sll.sll_addr[..6].copy_from_slice(&frame[..6.min(frame.len())]);
+            let n = libc::sendto(
+                self.fd.as_raw_fd(),
+                frame.as_ptr() as *const libc::c_void,
+                frame.len(),
+                0,
+                &sll as *const _ as *const libc::sockaddr,
+                std::mem::size_of::<libc::sockaddr_ll>() as u32,
+            );
+            check(n as libc::c_int, "send")?;
+        }
+        Ok(())
+    }
+}
+
+/// Sleeps until CLOCK_MONOTONIC reaches `t_ns` (clock_nanosleep with TIMER_ABSTIME).
+pub fn sleep_until_ns(t_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (t_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (t_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: clock_nanosleep reads the timespec we own; EINTR just ends the sleep early.
+    unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut()) };
+}
+
+/// What real-time setup was possible for this process.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct RealTime {
+    pub memory_locked: bool,
+    pub fifo_priority: Option<i32>,
+    pub cpu: Option<usize>,
+    /// Why something could not be set, one line each.
+    pub refused: Vec<String>,
+}
+
+/// Locks memory, switches the calling thread to SCHED_FIFO at `priority` and pins it to `cpu`,
+/// as far as permitted; reports what took effect.
+pub fn real_time(priority: i32, cpu: Option<usize>) -> RealTime {
+    let mut rt = RealTime::default();
+    // SAFETY: plain libc calls with valid arguments; failures are reported, not fatal.
+    unsafe {
+        if libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) == 0 {
+            rt.memory_locked = true;
+        } else {
+            rt.refused.push(format!("mlockall: {}", io::Error::last_os_error()));
+        }
+        let p = libc::sched_param { sched_priority: priority };
+        if libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) == 0 {
+            rt.fifo_priority = Some(priority);
+        } else {
+            rt.refused.push(format!("SCHED_FIFO {priority}: {}", io::Error::last_os_error()));
+        }
+        if let Some(c) = cpu {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(c, &mut set);
+            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0 {
+                rt.cpu = Some(c);
+            } else {
+                rt.refused.push(format!("pin to CPU {c}: {}", io::Error::last_os_error()));
+            }
+        }
+    }
+    rt
+}
+
+/// Addresses an interface carries that say it is on an office network: any IPv4 address or a
+/// global IPv6 address. EtherCAT broadcasts do not belong there.
+pub fn routable_addresses(iface: &str) -> io::Result<Vec<String>> {
+    let mut found = Vec::new();
+    // SAFETY: getifaddrs allocates a list we walk read-only and free with freeifaddrs.
+    unsafe {
+        let mut list: *mut libc::ifaddrs = std::ptr::null_mut();
+        if libc::getifaddrs(&mut list) != 0 {
+            return Err(io::Error::last_os_error());
+        }
+        let mut p = list;
+        while !p.is_null() {
+            let a = &*p;
+            let name = std::ffi::CStr::from_ptr(a.ifa_name).to_string_lossy();
+            if name == iface && !a.ifa_addr.is_null() {
+                match (*a.ifa_addr).sa_family as i32 {
+                    libc::AF_INET => {
+                        let sin = &*(a.ifa_addr as *const libc::sockaddr_in);
+                        found.push(std::net::Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)).to_string());
+                    }
+                    libc::AF_INET6 => {
+                        let sin6 = &*(a.ifa_addr as *const libc::sockaddr_in6);
+                        let ip = std::net::Ipv6Addr::from(sin6.sin6_addr.s6_addr);
+                        // Link-local (fe80::/10) and unique-local (fc00::/7) are not global.
+                        let seg0 = ip.segments()[0];
+                        if (seg0 & 0xFFC0) != 0xFE80 && (seg0 & 0xFE00) != 0xFC00 && !ip.is_loopback() {
+                            found.push(ip.to_string());
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            p = a.ifa_next;
+        }
+        libc::freeifaddrs(list);
+    }
+    Ok(found)
+}

@@ -1,0 +1,332 @@
+//! The CoE client: SDO upload and download (expedited, normal, segmented, complete access),
+//! SDO information, and emergencies handed to the application as events.
+use ferrocat_wire::coe::{self, CoeHeader, CoeMessage, CoeService, InfoHeader, InfoOpcode, Sdo, SdoInfo};
+use ferrocat_wire::mailbox::{next_counter, Mailbox, MailboxErrorCode, MailboxHeader, MailboxType};
+use ferrocat_wire::{Address, Command};
+
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+use crate::master::{Master, MasterEvent};
+
+/// An object's description from SDO information.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ObjectInfo {
+    pub index: u16,
+    pub data_type: u16,
+    pub max_subindex: u8,
+    pub object_code: u8,
+    pub name: String,
+}
+
+/// An entry's description from SDO information.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EntryInfo {
+    pub subindex: u8,
+    pub data_type: u16,
+    pub bit_length: u16,
+    pub access: u16,
+    pub name: String,
+}
+
+impl<I: Io> Master<I> {
+    fn mailbox_of(&self, position: u16) -> Result<(u16, String, crate::slave::MailboxConfig)> {
+        let s = self.slave(position)?;
+        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &s.name, "has no mailbox"))?;
+        if !s.has_coe() {
+            return Err(MasterError::slave(position, &s.name, "does not support CoE"));
+        }
+        Ok((s.station, s.name.clone(), m))
+    }
+
+    /// Writes one mailbox message into SM0 (waiting while it is full).
+    fn mbx_send(&mut self, position: u16, service: CoeService, body: &[u8]) -> Result<()> {
+        let (st, name, m) = self.mailbox_of(position)?;
+        let c = next_counter(self.slaves[position as usize].mbx_counter);
+        self.slaves[position as usize].mbx_counter = c;
+        let mut buf = vec![0u8; m.out.1 as usize];
+        if 8 + body.len() > buf.len() {
+            return Err(MasterError::slave(
+                position,
+                &name,
+                format!("request of {} bytes exceeds the {}-byte mailbox", body.len(), buf.len()),
+            ));
+        }
+        MailboxHeader::new(MailboxType::COE, (2 + body.len()) as u16, c).emit(&mut buf)?;
+        CoeHeader::new(service).emit(&mut buf[6..])?;
+        buf[8..8 + body.len()].copy_from_slice(body);
+        let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
+        loop {
+            if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: m.out.0 }, &mut buf)? == 1 {
+                return Ok(());
+            }
+            if self.engine.io.now_ns() > deadline {
+                return Err(MasterError::slave(position, &name, "mailbox stays full"));
+            }
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 100_000);
+        }
+    }
+
+    /// The next CoE message from SM1 that is not an emergency (emergencies become events).
+    fn mbx_receive(&mut self, position: u16) -> Result<Vec<u8>> {
+        let (st, name, m) = self.mailbox_of(position)?;
+        let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
+        let mut buf = vec![0u8; m.inp.1 as usize];
+        loop {
+            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? == 1 {
+                let mbx = Mailbox::parse(&buf)
+                    .map_err(|e| MasterError::slave(position, &name, format!("mailbox reply: {e}")))?;
+                if mbx.header.mailbox_type == MailboxType::ERR {
+                    let code = MailboxErrorCode::parse(mbx.payload)?;
+                    return Err(MasterError::slave(position, &name, code.to_string()));
+                }
+                if mbx.header.mailbox_type == MailboxType::COE {
+                    if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
+                        self.events.push(MasterEvent::Emergency {
+                            position,
+                            name: name.clone(),
+                            error_code: e.error_code,
+                            error_register: e.error_register,
+                            data: e.data,
+                        });
+                        continue;
+                    }
+                    return Ok(mbx.payload.to_vec());
+                }
+            }
+            if self.engine.io.now_ns() > deadline {
+                return Err(MasterError::slave(position, &name, "no mailbox reply (timeout)"));
+            }
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 50_000);
+        }
+    }
+
+    fn sdo_exchange(&mut self, position: u16, req: Sdo<'_>) -> Result<Vec<u8>> {
+        let mut b = vec![0u8; 2048];
+        let n = req.emit(&mut b)?;
+        self.mbx_send(position, CoeService::SDO_REQUEST, &b[..n])?;
+        self.mbx_receive(position)
+    }
+
+    fn abort(&self, position: u16, index: u16, subindex: u8, code: ferrocat_wire::coe::AbortCode) -> MasterError {
+        let name = self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default();
+        MasterError::Abort { position, name, index, subindex, code }
+    }
+
+    /// Reads an object entry (or, with `complete_access`, the whole object).
+    pub fn sdo_upload(&mut self, position: u16, index: u16, subindex: u8, complete_access: bool) -> Result<Vec<u8>> {
+        let reply =
+            self.sdo_exchange(position, Sdo::UploadRequest { index, subindex, complete_access, reserved: [0; 4] })?;
+        let name = self.slave(position)?.name.clone();
+        let unexpected = |m: &CoeMessage<'_>| MasterError::slave(position, &name, format!("unexpected reply {m:?}"));
+        let (_, msg) = coe::parse(&reply)?;
+        match msg {
+            CoeMessage::Sdo(Sdo::UploadExpeditedResponse { size, data, .. }) => {
+                Ok(data[..size.unwrap_or(4) as usize].to_vec())
+            }
+            CoeMessage::Sdo(Sdo::UploadNormalResponse { complete_size, data, .. }) => {
+                let total = complete_size as usize;
+                let mut all = data[..data.len().min(total)].to_vec();
+                let mut toggle = false;
+                while all.len() < total {
+                    let r = self.sdo_exchange(position, Sdo::UploadSegmentRequest { toggle, reserved: [0; 7] })?;
+                    let (_, m) = coe::parse(&r)?;
+                    match m {
+                        CoeMessage::Sdo(s @ Sdo::UploadSegmentResponse { toggle: t, last, .. }) => {
+                            if t != toggle {
+                                return Err(MasterError::slave(position, &name, "segment toggle bit out of step"));
+                            }
+                            all.extend_from_slice(s.segment_data().unwrap_or(&[]));
+                            toggle = !toggle;
+                            if last {
+                                break;
+                            }
+                        }
+                        CoeMessage::Sdo(Sdo::Abort { code, .. }) => {
+                            return Err(self.abort(position, index, subindex, code))
+                        }
+                        other => return Err(unexpected(&other)),
+                    }
+                }
+                all.truncate(total);
+                Ok(all)
+            }
+            CoeMessage::Sdo(Sdo::Abort { code, .. }) => Err(self.abort(position, index, subindex, code)),
+            other => Err(unexpected(&other)),
+        }
+    }
+
+    pub fn sdo_read(&mut self, position: u16, index: u16, subindex: u8) -> Result<Vec<u8>> {
+        self.sdo_upload(position, index, subindex, false)
+    }
+
+    /// Writes an object entry (or, with `complete_access`, the whole object): expedited up to
+    /// 4 bytes, normal when it fits the mailbox, segmented beyond.
+    pub fn sdo_download(
+        &mut self,
+        position: u16,
+        index: u16,
+        subindex: u8,
+        complete_access: bool,
+        data: &[u8],
+    ) -> Result<()> {
+        let (_, name, m) = self.mailbox_of(position)?;
+        let first_max = (m.out.1 as usize).saturating_sub(6 + 2 + 8);
+        let seg_max = (m.out.1 as usize).saturating_sub(6 + 2 + 1);
+        let check = |me: &Self, reply: &[u8]| -> Result<()> {
+            match coe::parse(reply)?.1 {
+                CoeMessage::Sdo(Sdo::DownloadResponse { .. })
+                | CoeMessage::Sdo(Sdo::DownloadSegmentResponse { .. }) => Ok(()),
+                CoeMessage::Sdo(Sdo::Abort { code, .. }) => Err(me.abort(position, index, subindex, code)),
+                other => Err(MasterError::slave(position, &name, format!("unexpected reply {other:?}"))),
+            }
+        };
+        if data.len() <= 4 && !data.is_empty() {
+            let mut four = [0u8; 4];
+            four[..data.len()].copy_from_slice(data);
+            let r = self.sdo_exchange(
+                position,
+                Sdo::DownloadExpeditedRequest {
+                    index,
+                    subindex,
+                    complete_access,
+                    size: Some(data.len() as u8),
+                    data: four,
+                },
+            )?;
+            return check(self, &r);
+        }
+        let first = data.len().min(first_max);
+        let r = self.sdo_exchange(
+            position,
+            Sdo::DownloadNormalRequest {
+                index,
+                subindex,
+                complete_access,
+                complete_size: data.len() as u32,
+                data: &data[..first],
+            },
+        )?;
+        check(self, &r)?;
+        let mut at = first;
+        let mut toggle = false;
+        while at < data.len() {
+            let n = (data.len() - at).min(seg_max);
+            let mut seg = data[at..at + n].to_vec();
+            let unused = if n < 7 { (7 - n) as u8 } else { 0 };
+            seg.resize(n.max(7), 0);
+            at += n;
+            let r = self.sdo_exchange(
+                position,
+                Sdo::DownloadSegmentRequest { toggle, last: at >= data.len(), unused, segment: &seg },
+            )?;
+            check(self, &r)?;
+            toggle = !toggle;
+        }
+        Ok(())
+    }
+
+    pub fn sdo_write(&mut self, position: u16, index: u16, subindex: u8, data: &[u8]) -> Result<()> {
+        self.sdo_download(position, index, subindex, false, data)
+    }
+
+    fn info(&mut self, position: u16, req: SdoInfo<'_>) -> Result<Vec<Vec<u8>>> {
+        let mut b = vec![0u8; 64];
+        let n = req.emit(&mut b)?;
+        self.mbx_send(position, CoeService::SDO_INFORMATION, &b[..n])?;
+        let mut parts = Vec::new();
+        loop {
+            let r = self.mbx_receive(position)?;
+            let fragments_left = match coe::parse(&r)?.1 {
+                CoeMessage::Information(SdoInfo::Error { code, .. }) => {
+                    let index = match req {
+                        SdoInfo::ObjectDescriptionRequest { index, .. }
+                        | SdoInfo::EntryDescriptionRequest { index, .. } => index,
+                        _ => 0,
+                    };
+                    return Err(self.abort(position, index, 0, code));
+                }
+                CoeMessage::Information(i) => i.header().fragments_left,
+                other => {
+                    let name = self.slave(position)?.name.clone();
+                    return Err(MasterError::slave(position, &name, format!("unexpected reply {other:?}")));
+                }
+            };
+            parts.push(r);
+            if fragments_left == 0 {
+                return Ok(parts);
+            }
+        }
+    }
+
+    /// The indices of every object in the dictionary (SDO information, list type 1).
+    pub fn od_list(&mut self, position: u16) -> Result<Vec<u16>> {
+        let h =
+            InfoHeader { opcode: InfoOpcode::GET_OD_LIST_REQUEST, incomplete: false, reserved: 0, fragments_left: 0 };
+        let parts = self.info(position, SdoInfo::OdListRequest { header: h, list_type: 1 })?;
+        let mut data = Vec::new();
+        for p in &parts {
+            if let CoeMessage::Information(SdoInfo::OdListResponse { data: d, .. }) = coe::parse(p)?.1 {
+                data.extend_from_slice(d);
+            }
+        }
+        // The first fragment starts with the list type.
+        Ok(data.chunks_exact(2).skip(1).map(|c| u16::from_le_bytes([c[0], c[1]])).collect())
+    }
+
+    pub fn object_info(&mut self, position: u16, index: u16) -> Result<ObjectInfo> {
+        let h = InfoHeader {
+            opcode: InfoOpcode::GET_OBJECT_DESCRIPTION_REQUEST,
+            incomplete: false,
+            reserved: 0,
+            fragments_left: 0,
+        };
+        let parts = self.info(position, SdoInfo::ObjectDescriptionRequest { header: h, index })?;
+        match coe::parse(&parts[0])?.1 {
+            CoeMessage::Information(SdoInfo::ObjectDescriptionResponse {
+                index,
+                data_type,
+                max_subindex,
+                object_code,
+                name,
+                ..
+            }) => Ok(ObjectInfo {
+                index,
+                data_type,
+                max_subindex,
+                object_code,
+                name: String::from_utf8_lossy(name).into_owned(),
+            }),
+            other => Err(MasterError::Config(format!("unexpected SDO information reply {other:?}"))),
+        }
+    }
+
+    pub fn entry_info(&mut self, position: u16, index: u16, subindex: u8) -> Result<EntryInfo> {
+        let h = InfoHeader {
+            opcode: InfoOpcode::GET_ENTRY_DESCRIPTION_REQUEST,
+            incomplete: false,
+            reserved: 0,
+            fragments_left: 0,
+        };
+        let parts =
+            self.info(position, SdoInfo::EntryDescriptionRequest { header: h, index, subindex, value_info: 0 })?;
+        match coe::parse(&parts[0])?.1 {
+            CoeMessage::Information(SdoInfo::EntryDescriptionResponse {
+                subindex,
+                data_type,
+                bit_length,
+                object_access,
+                rest,
+                ..
+            }) => Ok(EntryInfo {
+                subindex,
+                data_type,
+                bit_length,
+                access: object_access,
+                name: String::from_utf8_lossy(rest).into_owned(),
+            }),
+            other => Err(MasterError::Config(format!("unexpected SDO information reply {other:?}"))),
+        }
+    }
+}

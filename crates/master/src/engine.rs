@@ -1,0 +1,234 @@
+//! The frame engine: packs datagrams into frames, keeps several frames in flight, matches
+//! replies by index, retries on timeout and counts what went missing. The cyclic path does not
+//! allocate: frame buffers are made once.
+use ferrocat_wire::datagram::{HEADER_LEN, WKC_LEN};
+use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+use ferrocat_wire::frame::MAX_PDU_LEN;
+use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
+
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+
+/// One datagram to send: its data goes out and the reply's data comes back in place.
+#[derive(Debug)]
+pub struct Pdu<'a> {
+    pub cmd: Command,
+    pub address: Address,
+    pub data: &'a mut [u8],
+    pub wkc: u16,
+}
+
+impl<'a> Pdu<'a> {
+    pub fn new(cmd: Command, address: Address, data: &'a mut [u8]) -> Self {
+        Pdu { cmd, address, data, wkc: 0 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EngineStats {
+    pub frames_sent: u64,
+    pub frames_received: u64,
+    /// Frames never answered, even after retries.
+    pub lost: u64,
+    /// Replies that came after their frame had been given up or answered.
+    pub late: u64,
+    pub retries: u64,
+}
+
+const SLOTS: usize = 16;
+const FRAME: usize = 1536;
+
+#[derive(Debug)]
+struct Slot {
+    busy: bool,
+    idx: u8,
+    /// PDUs `first..first + count` travel in this frame.
+    first: usize,
+    count: usize,
+    len: usize,
+    tries: u32,
+    deadline: u64,
+    buf: Box<[u8; FRAME]>,
+}
+
+#[derive(Debug)]
+pub struct Engine<I: Io> {
+    pub io: I,
+    pub timeout_ns: u64,
+    pub retries: u32,
+    pub stats: EngineStats,
+    next_idx: u8,
+    slots: Vec<Slot>,
+    rx: Box<[u8; FRAME]>,
+    eth: EthernetRepr,
+}
+
+impl<I: Io> Engine<I> {
+    pub fn new(io: I) -> Self {
+        Engine {
+            io,
+            timeout_ns: 20_000_000,
+            retries: 3,
+            stats: EngineStats::default(),
+            next_idx: 0,
+            slots: (0..SLOTS)
+                .map(|_| Slot {
+                    busy: false,
+                    idx: 0,
+                    first: 0,
+                    count: 0,
+                    len: 0,
+                    tries: 0,
+                    deadline: 0,
+                    buf: Box::new([0; FRAME]),
+                })
+                .collect(),
+            rx: Box::new([0; FRAME]),
+            // Locally administered source address; ESCs set bit 1 of the first byte on the way.
+            eth: EthernetRepr {
+                dst: BROADCAST,
+                src: [0x10, 0x10, 0x10, 0x10, 0x10, 0x10],
+                vlan_tci: None,
+                ethertype: 0,
+            },
+        }
+    }
+
+    /// Sends all `pdus` (as few frames as fit), waits for every reply and fills in data and
+    /// working counters. Fails if a frame stays unanswered after the retries.
+    pub fn transact(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
+        let mut next = 0;
+        loop {
+            // Fill free slots with the next frames.
+            while next < pdus.len() {
+                let Some(s) = self.slots.iter().position(|s| !s.busy) else { break };
+                next = self.build(s, pdus, next)?;
+                self.send(s)?;
+            }
+            if self.slots.iter().all(|s| !s.busy) {
+                return Ok(());
+            }
+            self.receive(pdus)?;
+        }
+    }
+
+    fn build(&mut self, s: usize, pdus: &[Pdu<'_>], first: usize) -> Result<usize> {
+        self.next_idx = self.next_idx.wrapping_add(1);
+        let idx = self.next_idx;
+        let slot = &mut self.slots[s];
+        let mut w = FrameWriter::new(&mut slot.buf[..], &self.eth)?;
+        let mut used = 0;
+        let mut k = first;
+        while k < pdus.len() {
+            let need = HEADER_LEN + pdus[k].data.len() + WKC_LEN;
+            if k > first && used + need > MAX_PDU_LEN {
+                break;
+            }
+            if need > MAX_PDU_LEN {
+                return Err(MasterError::Config(format!(
+                    "{} of {} bytes does not fit a frame",
+                    pdus[k].cmd,
+                    pdus[k].data.len()
+                )));
+            }
+            let h = DatagramHeader::new(pdus[k].cmd, idx, pdus[k].address, pdus[k].data.len() as u16);
+            w.push_chained(&h, pdus[k].data, 0)?;
+            used += need;
+            k += 1;
+        }
+        slot.len = w.finish()?;
+        slot.idx = idx;
+        slot.first = first;
+        slot.count = k - first;
+        slot.tries = 0;
+        slot.busy = true;
+        Ok(k)
+    }
+
+    fn send(&mut self, s: usize) -> Result<()> {
+        let now = self.io.now_ns();
+        let slot = &mut self.slots[s];
+        slot.tries += 1;
+        slot.deadline = now + self.timeout_ns;
+        self.io.send(&slot.buf[..slot.len])?;
+        self.stats.frames_sent += 1;
+        Ok(())
+    }
+
+    fn receive(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
+        let deadline = self.slots.iter().filter(|s| s.busy).map(|s| s.deadline).min().unwrap_or(0);
+        match self.io.recv(&mut self.rx[..], deadline)? {
+            Some((n, _t)) => {
+                let Ok(Some(f)) = Frame::parse(&self.rx[..n]) else { return Ok(()) };
+                let mut ds = f.pdu.datagrams();
+                let Some(first) = ds.clone().next() else { return Ok(()) };
+                let idx = first.header().index;
+                let Some(s) =
+                    self.slots.iter().position(|s| s.busy && s.idx == idx && s.count == f.pdu.datagram_count())
+                else {
+                    self.stats.late += 1;
+                    return Ok(());
+                };
+                let slot = &mut self.slots[s];
+                for p in &mut pdus[slot.first..slot.first + slot.count] {
+                    let Some(d) = ds.next() else { break };
+                    let n = p.data.len().min(d.data().len());
+                    p.data[..n].copy_from_slice(&d.data()[..n]);
+                    p.wkc = d.wkc();
+                }
+                slot.busy = false;
+                self.stats.frames_received += 1;
+                Ok(())
+            }
+            None => {
+                let now = self.io.now_ns();
+                for s in 0..self.slots.len() {
+                    if !self.slots[s].busy || self.slots[s].deadline > now {
+                        continue;
+                    }
+                    if self.slots[s].tries > self.retries {
+                        self.stats.lost += 1;
+                        self.slots.iter_mut().for_each(|x| x.busy = false);
+                        let p = &pdus[self.slots[s].first];
+                        return Err(MasterError::Timeout {
+                            what: describe(p.cmd, p.address, p.data.len()),
+                            tries: self.retries + 1,
+                        });
+                    }
+                    self.stats.retries += 1;
+                    self.send(s)?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// One datagram; returns its working counter.
+    pub fn one(&mut self, cmd: Command, address: Address, data: &mut [u8]) -> Result<u16> {
+        let mut p = [Pdu::new(cmd, address, data)];
+        self.transact(&mut p)?;
+        Ok(p[0].wkc)
+    }
+
+    /// One datagram that must reach `expected` slaves.
+    pub fn expect(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
+        let wkc = self.one(cmd, address, data)?;
+        if wkc != expected {
+            return Err(MasterError::Wkc {
+                what: describe(cmd, address, data.len()),
+                expected,
+                got: wkc,
+                slaves: String::new(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// "FPRD 0x1001:0x0130 (2 bytes)": a datagram in words.
+pub fn describe(cmd: Command, address: Address, len: usize) -> String {
+    match address {
+        Address::Device { adp, ado } => format!("{cmd} {adp:#06x}:{ado:#06x} ({len} bytes)"),
+        Address::Logical(a) => format!("{cmd} logical {a:#010x} ({len} bytes)"),
+    }
+}

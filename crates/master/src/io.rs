@@ -1,0 +1,186 @@
+//! The two worlds the master runs in, behind one small trait: virtual time with the in-process
+//! segment and a model of the host, or real time on a network interface.
+use ferrocat_segment::Segment;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+/// Time and frames. All times are ns of the world's clock (CLOCK_MONOTONIC in real time).
+pub trait Io {
+    fn now_ns(&mut self) -> u64;
+    /// Sends one Ethernet frame (without FCS).
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()>;
+    /// The next received frame, waiting until `deadline_ns` at most: its length and receive time.
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>>;
+    /// Sleeps until `t_ns` (absolute); the world may wake late.
+    fn sleep_until(&mut self, t_ns: u64);
+}
+
+/// A latency distribution: normal, clipped below, with rare outliers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Latency {
+    pub mean_ns: f64,
+    pub sd_ns: f64,
+    pub min_ns: f64,
+    /// Probability of an outlier, and its extra delay (uniform up to this).
+    pub outlier_p: f64,
+    pub outlier_ns: f64,
+}
+
+impl Latency {
+    pub const ZERO: Latency = Latency { mean_ns: 0.0, sd_ns: 0.0, min_ns: 0.0, outlier_p: 0.0, outlier_ns: 0.0 };
+
+    pub fn fixed(ns: f64) -> Self {
+        Latency { mean_ns: ns, min_ns: ns, ..Latency::ZERO }
+    }
+
+    pub fn sample(&self, rng: &mut ChaCha8Rng) -> u64 {
+        let mut v = if self.sd_ns > 0.0 {
+            Normal::new(self.mean_ns, self.sd_ns).map(|n| n.sample(rng)).unwrap_or(self.mean_ns)
+        } else {
+            self.mean_ns
+        };
+        if self.outlier_p > 0.0 && rng.gen_bool(self.outlier_p.clamp(0.0, 1.0)) {
+            v += rng.gen_range(0.0..=self.outlier_ns.max(0.0));
+        }
+        v.max(self.min_ns).max(0.0) as u64
+    }
+}
+
+/// How long the master's own host takes: to hand a frame to the wire, to deliver a received
+/// frame to the master, and how late its timer wakes it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HostModel {
+    pub name: &'static str,
+    pub send: Latency,
+    pub recv: Latency,
+    pub wake: Latency,
+}
+
+impl HostModel {
+    /// No host at all: frames leave and arrive instantly, timers are exact.
+    pub fn ideal() -> Self {
+        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO }
+    }
+
+    /// A PC with a PREEMPT_RT kernel and a raw socket: a few µs through the stack, timer
+    /// latency of a few µs with rare tens of µs.
+    pub fn pc_rt() -> Self {
+        HostModel {
+            name: "pc-rt",
+            send: Latency { mean_ns: 4_000.0, sd_ns: 1_000.0, min_ns: 2_000.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
+            recv: Latency { mean_ns: 5_000.0, sd_ns: 1_500.0, min_ns: 2_500.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
+            wake: Latency { mean_ns: 3_000.0, sd_ns: 1_500.0, min_ns: 1_000.0, outlier_p: 0.001, outlier_ns: 30_000.0 },
+        }
+    }
+}
+
+/// The virtual world: the in-process segment, a virtual clock, and the host model.
+#[derive(Debug)]
+pub struct VirtualIo {
+    pub seg: Segment,
+    pub host: HostModel,
+    now: u64,
+    rng: ChaCha8Rng,
+    /// Frames on their way back: (time the master has them, length, bytes). Preallocated.
+    slots: Vec<(u64, usize, Box<[u8; 1536]>, bool)>,
+    /// Frames the segment did not return.
+    pub lost: u64,
+}
+
+impl VirtualIo {
+    pub fn new(seg: Segment, host: HostModel, seed: u64) -> Self {
+        VirtualIo {
+            seg,
+            host,
+            now: 0,
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x4057),
+            slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),
+            lost: 0,
+        }
+    }
+}
+
+impl Io for VirtualIo {
+    fn now_ns(&mut self) -> u64 {
+        self.now
+    }
+
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        let t_wire = self.now + self.host.send.sample(&mut self.rng);
+        let Some(slot) = self.slots.iter_mut().find(|s| !s.3) else {
+            return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
+        };
+        let n = frame.len().min(slot.2.len());
+        slot.2[..n].copy_from_slice(&frame[..n]);
+        match self.seg.exchange(&mut slot.2[..n], t_wire) {
+            Some(back) => {
+                slot.0 = back + self.host.recv.sample(&mut self.rng);
+                slot.1 = n;
+                slot.3 = true;
+            }
+            None => self.lost += 1,
+        }
+        // The send itself costs the master its host's send time.
+        self.now = t_wire;
+        Ok(())
+    }
+
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        let next = self.slots.iter_mut().filter(|s| s.3).min_by_key(|s| s.0);
+        match next {
+            Some(s) if s.0 <= deadline_ns => {
+                self.now = self.now.max(s.0);
+                let n = s.1.min(buf.len());
+                buf[..n].copy_from_slice(&s.2[..n]);
+                s.3 = false;
+                Ok(Some((n, self.now)))
+            }
+            _ => {
+                self.now = self.now.max(deadline_ns);
+                Ok(None)
+            }
+        }
+    }
+
+    fn sleep_until(&mut self, t_ns: u64) {
+        let late = self.host.wake.sample(&mut self.rng);
+        self.now = self.now.max(t_ns + late);
+    }
+}
+
+/// Real time on a network interface through an AF_PACKET raw socket.
+#[derive(Debug)]
+pub struct RawIo {
+    sock: ferrocat_link::RawSocket,
+}
+
+impl RawIo {
+    pub fn open(iface: &str) -> std::io::Result<Self> {
+        Ok(RawIo { sock: ferrocat_link::RawSocket::open(iface)? })
+    }
+}
+
+impl Io for RawIo {
+    fn now_ns(&mut self) -> u64 {
+        ferrocat_link::monotonic_ns()
+    }
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.sock.send(frame)
+    }
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        loop {
+            let now = ferrocat_link::monotonic_ns();
+            if now >= deadline_ns {
+                return Ok(None);
+            }
+            self.sock.set_timeout_ns(deadline_ns - now)?;
+            if let Some(n) = self.sock.recv(buf)? {
+                return Ok(Some((n, ferrocat_link::monotonic_ns())));
+            }
+        }
+    }
+    fn sleep_until(&mut self, t_ns: u64) {
+        ferrocat_link::sleep_until_ns(t_ns);
+    }
+}

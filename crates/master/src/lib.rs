@@ -1,0 +1,20 @@
+//! The ferrocat EtherCAT master.
+//!
+//! One codebase for two worlds: [`io::VirtualIo`] runs the master in virtual time against the
+//! in-process segment with a model of the host (fast, deterministic), [`io::RawIo`] in real time
+//! on a network interface. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
+//! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
+mod coe;
+mod engine;
+mod error;
+pub mod io;
+mod master;
+mod process;
+mod slave;
+
+pub use coe::{EntryInfo, ObjectInfo};
+pub use engine::{describe, Engine, EngineStats, Pdu};
+pub use error::{MasterError, Result};
+pub use master::{Master, MasterEvent, STATION_BASE};
+pub use process::{CycleStats, Handle};
+pub use slave::{MailboxConfig, Mapped, Slave};

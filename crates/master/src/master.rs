@@ -1,0 +1,637 @@
+//! Bring-up: finding the slaves, reading what they are, configuring mailboxes and process data,
+//! and walking them through the AL states.
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus, Fmmu, SyncManager};
+use ferrocat_wire::sii::{SiiHeader, SiiInfo, SmEntry, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
+use ferrocat_wire::{Address, Command};
+
+use crate::engine::Engine;
+use crate::error::{code_text, MasterError, Result};
+use crate::io::Io;
+use crate::slave::{MailboxConfig, Mapped, Slave};
+
+/// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).
+pub const STATION_BASE: u16 = 0x1001;
+
+/// Something that happened to a slave during operation, reported once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// The slave left OP (its AL status and code).
+    LeftOp { position: u16, name: String, status: AlStatus, code: AlStatusCode },
+    /// The slave stopped answering (link lost or powered off).
+    Lost { position: u16, name: String },
+    /// The slave is back in OP.
+    Recovered { position: u16, name: String },
+    /// A CoE emergency.
+    Emergency { position: u16, name: String, error_code: u16, error_register: u8, data: [u8; 5] },
+}
+
+#[derive(Debug)]
+pub struct Master<I: Io> {
+    pub engine: Engine<I>,
+    pub slaves: Vec<Slave>,
+    /// The process image: all outputs, then all inputs.
+    pub image: Vec<u8>,
+    pub out_bytes: u32,
+    pub in_bytes: u32,
+    /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
+    /// with inputs.
+    pub expected_wkc: u16,
+    pub events: Vec<MasterEvent>,
+    /// How long a state transition may take before it is an error.
+    pub state_timeout_ns: u64,
+    /// How long an SDO may take.
+    pub mailbox_timeout_ns: u64,
+    pub(crate) cyc: crate::process::CycleState,
+}
+
+impl<I: Io> Master<I> {
+    pub fn new(io: I) -> Self {
+        Master {
+            engine: Engine::new(io),
+            slaves: Vec::new(),
+            image: Vec::new(),
+            out_bytes: 0,
+            in_bytes: 0,
+            expected_wkc: 0,
+            events: Vec::new(),
+            state_timeout_ns: 10_000_000_000,
+            mailbox_timeout_ns: 2_000_000_000,
+            cyc: Default::default(),
+        }
+    }
+
+    pub fn slave(&self, position: u16) -> Result<&Slave> {
+        self.slaves
+            .get(position as usize)
+            .ok_or_else(|| MasterError::Config(format!("no slave at position {position}")))
+    }
+
+    /// Finds the slaves and reads everything about them: count, station addresses, identity
+    /// and the whole SII, ESC features, DL status and topology, DC receive times and delays.
+    pub fn scan(&mut self) -> Result<()> {
+        // Reset: every slave to INIT, DL control default, no FMMUs/SMs (as SOEM and IgH do).
+        let mut buf = [0u8; 2];
+        let count = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut buf)?;
+        if count == 0 {
+            return Err(MasterError::NoSlaves);
+        }
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [0x11, 0])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0600 }, &mut [0u8; 256])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0800 }, &mut [0u8; 128])?;
+        self.slaves.clear();
+        for pos in 0..count {
+            let station = STATION_BASE + pos;
+            self.engine.expect(Command::APWR, Address::position(pos, 0x0010), &mut station.to_le_bytes(), 1)?;
+            let slave = self.read_slave(pos, station)?;
+            self.slaves.push(slave);
+        }
+        self.wait_state_all(AlState::Init)?;
+        self.topology();
+        self.measure_delays()?;
+        Ok(())
+    }
+
+    fn fprd(&mut self, station: u16, ado: u16, out: &mut [u8]) -> Result<()> {
+        self.engine.expect(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
+    }
+
+    fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
+        let mut d = data.to_vec();
+        self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
+    }
+
+    fn read_slave(&mut self, pos: u16, station: u16) -> Result<Slave> {
+        let mut id = [0u8; 10];
+        self.fprd(station, 0x0000, &mut id)?;
+        let mut alias = [0u8; 2];
+        self.fprd(station, 0x0012, &mut alias)?;
+        let mut dl = [0u8; 2];
+        self.fprd(station, 0x0110, &mut dl)?;
+        let sii_bytes = self.read_sii(station)?;
+        let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
+        let h = sii.header;
+        let features = u16::from_le_bytes([id[8], id[9]]);
+        let dl_status = DlStatus(u16::from_le_bytes(dl));
+        let mailbox = (h.mailbox_rx_size > 0 && h.mailbox_tx_size > 0).then(|| MailboxConfig {
+            out: (h.mailbox_rx_offset, h.mailbox_rx_size),
+            inp: (h.mailbox_tx_offset, h.mailbox_tx_size),
+            protocols: h.mailbox_protocols,
+        });
+        Ok(Slave {
+            position: pos,
+            station,
+            alias: u16::from_le_bytes(alias),
+            name: sii.string(1).unwrap_or_else(|| format!("{:#010x}", h.product_code)),
+            description: sii.name().unwrap_or_default(),
+            vendor_id: h.vendor_id,
+            product_code: h.product_code,
+            revision: h.revision,
+            serial: h.serial,
+            esc_type: id[0],
+            fmmu_count: id[4],
+            sm_count: id[5],
+            features,
+            dl_status,
+            active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
+            entry_port: 0,
+            parent: None,
+            parent_port: 0,
+            has_dc: features & 0x04 != 0,
+            dc_64bit: features & 0x08 != 0,
+            receive_times: [0; 4],
+            receive_time_epu: 0,
+            delay_ns: 0,
+            mailbox,
+            mbx_counter: 0,
+            outputs: Vec::new(),
+            inputs: Vec::new(),
+            out_sm: None,
+            in_sm: None,
+            out_area: (0, 0),
+            in_area: (0, 0),
+            state: AlState::Init,
+            sii,
+        })
+    }
+
+    /// Reads the SII through the EEPROM interface: the header, then category by category up to
+    /// the end marker (or the EEPROM's size).
+    fn read_sii(&mut self, station: u16) -> Result<Vec<u8>> {
+        // Take the EEPROM for the EtherCAT side.
+        self.fpwr(station, 0x0500, &[0])?;
+        let mut img = Vec::with_capacity(2048);
+        let mut word = 0u32;
+        let read = |m: &mut Self, img: &mut Vec<u8>, word: &mut u32| -> Result<()> {
+            let chunk = m.sii_read(station, *word)?;
+            img.extend_from_slice(&chunk);
+            *word += (chunk.len() / 2) as u32;
+            Ok(())
+        };
+        while img.len() < SII_HEADER {
+            read(self, &mut img, &mut word)?;
+        }
+        let header = SiiHeader::parse(&img)?;
+        let max = header.eeprom_size_bytes().clamp(SII_HEADER, 65536);
+        let mut at = SII_HEADER;
+        loop {
+            while img.len() < at + CATEGORY_HEADER_LEN && img.len() < max {
+                read(self, &mut img, &mut word)?;
+            }
+            if img.len() < at + CATEGORY_HEADER_LEN {
+                break;
+            }
+            let kind = u16::from_le_bytes([img[at], img[at + 1]]);
+            if kind == 0xFFFF {
+                break;
+            }
+            let len = u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+            at += CATEGORY_HEADER_LEN + len;
+            if at >= max {
+                break;
+            }
+        }
+        img.truncate(max.min(img.len()));
+        if img.len() < at.min(max) + 2 {
+            img.resize(at.min(max) + 2, 0xFF);
+        }
+        Ok(img)
+    }
+
+    /// 4 or 8 bytes of the SII at `word`.
+    fn sii_read(&mut self, station: u16, word: u32) -> Result<Vec<u8>> {
+        let mut ctl = [0u8; 2];
+        self.fprd(station, 0x0502, &mut ctl)?;
+        let eight = u16::from_le_bytes(ctl) & 0x0040 != 0;
+        let mut cmd = [0x00, 0x01, 0, 0, 0, 0];
+        cmd[2..6].copy_from_slice(&word.to_le_bytes());
+        self.fpwr(station, 0x0502, &cmd)?;
+        let deadline = self.engine.io.now_ns() + 100_000_000;
+        loop {
+            self.fprd(station, 0x0502, &mut ctl)?;
+            let v = u16::from_le_bytes(ctl);
+            if v & 0x8000 == 0 {
+                if v & 0x2000 != 0 {
+                    return Err(MasterError::Config(format!(
+                        "slave {station:#06x}: SII read of word {word:#x} not acknowledged"
+                    )));
+                }
+                break;
+            }
+            if self.engine.io.now_ns() > deadline {
+                return Err(MasterError::Config(format!("slave {station:#06x}: SII stays busy")));
+            }
+        }
+        let mut data = vec![0u8; if eight { 8 } else { 4 }];
+        self.fprd(station, 0x0508, &mut data)?;
+        Ok(data)
+    }
+
+    /// Parents and ports from the active ports, as SOEM infers them for a segment walked in
+    /// processing order.
+    fn topology(&mut self) {
+        let count = self.slaves.len();
+        let topo: Vec<i32> = self.slaves.iter().map(|s| s.active_ports.iter().filter(|&&a| a).count() as i32).collect();
+        for i in 1..count {
+            let mut c = 0i32;
+            let mut j = i - 1;
+            loop {
+                match topo[j] {
+                    1 => c -= 1,
+                    3 => c += 1,
+                    4 => c += 2,
+                    _ => {}
+                }
+                if (c >= 0 && topo[j] > 1) || j == 0 {
+                    self.slaves[i].parent = Some(j as u16);
+                    break;
+                }
+                j -= 1;
+            }
+        }
+        // A child hangs on its parent's next active port, in processing order after the entry.
+        for p in 0..count {
+            let children: Vec<usize> = (0..count).filter(|&c| self.slaves[c].parent == Some(p as u16)).collect();
+            let mut port = self.slaves[p].entry_port;
+            for c in children {
+                for _ in 0..4 {
+                    port = [3, 2, 0, 1][port as usize];
+                    if self.slaves[p].active_ports[port as usize] && port != self.slaves[p].entry_port {
+                        break;
+                    }
+                }
+                self.slaves[c].parent_port = port;
+            }
+        }
+    }
+
+    /// Latches the receive times (BWR 0x0900) and computes every DC slave's propagation delay
+    /// from the reference (the first DC slave) for any tree: a child's hop is half of its
+    /// parent's round trip through that port minus the child's own loop; slaves behind a later
+    /// port also wait for the earlier branches (esc-spec §3.6).
+    pub fn measure_delays(&mut self) -> Result<()> {
+        let dc = self.slaves.iter().filter(|s| s.has_dc).count() as u16;
+        if dc == 0 {
+            return Ok(());
+        }
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+        for k in 0..self.slaves.len() {
+            if !self.slaves[k].has_dc {
+                continue;
+            }
+            let st = self.slaves[k].station;
+            let mut t = [0u8; 16];
+            self.fprd(st, 0x0900, &mut t)?;
+            let mut epu = [0u8; 8];
+            self.fprd(st, 0x0918, &mut epu)?;
+            let s = &mut self.slaves[k];
+            for p in 0..4 {
+                s.receive_times[p] = u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap());
+            }
+            s.receive_time_epu = u64::from_le_bytes(epu);
+            // The entry port saw the frame first (reversed cabling puts it elsewhere).
+            let active: Vec<usize> = (0..4).filter(|&p| s.active_ports[p]).collect();
+            if let Some(&e) = active.iter().min_by_key(|&&p| s.receive_times[p].wrapping_sub(s.receive_times[0]) as i32)
+            {
+                s.entry_port = e as u8;
+            }
+        }
+        self.topology();
+        // Loop time behind each port: time from the previous active port to this one.
+        let prev_active = |s: &Slave, port: u8| -> u8 {
+            let mut q = port;
+            for _ in 0..4 {
+                q = [2, 3, 1, 0][q as usize];
+                if s.active_ports[q as usize] || q == s.entry_port {
+                    return q;
+                }
+            }
+            s.entry_port
+        };
+        // A slave's own loop: from its entry to the last active port before returning.
+        let own_loop = |s: &Slave| -> i64 {
+            let mut q = s.entry_port;
+            let mut last = s.entry_port;
+            for _ in 0..3 {
+                q = [3, 2, 0, 1][q as usize];
+                if q == s.entry_port {
+                    break;
+                }
+                if s.active_ports[q as usize] {
+                    last = q;
+                }
+            }
+            s.receive_times[last as usize].wrapping_sub(s.receive_times[s.entry_port as usize]) as i32 as i64
+        };
+        let reference = self.slaves.iter().position(|s| s.has_dc);
+        for k in 0..self.slaves.len() {
+            if Some(k) == reference || !self.slaves[k].has_dc {
+                continue;
+            }
+            let Some(p) = self.slaves[k].parent.map(|p| p as usize) else { continue };
+            let parent = &self.slaves[p];
+            if !parent.has_dc {
+                // A non-DC parent: carry its delay through (its hop folds into the wire).
+                self.slaves[k].delay_ns = parent.delay_ns;
+                continue;
+            }
+            let port = self.slaves[k].parent_port;
+            let before = prev_active(parent, port);
+            let rtt =
+                parent.receive_times[port as usize].wrapping_sub(parent.receive_times[before as usize]) as i32 as i64;
+            let hop = (rtt - own_loop(&self.slaves[k])) / 2;
+            let earlier = parent.receive_times[before as usize]
+                .wrapping_sub(parent.receive_times[parent.entry_port as usize]) as i32 as i64;
+            self.slaves[k].delay_ns = (parent.delay_ns as i64 + earlier + hop).max(0) as u32;
+        }
+        Ok(())
+    }
+
+    /// Requests `state` from every slave and waits until all are there.
+    pub fn request_state_all(&mut self, state: AlState) -> Result<()> {
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [state as u8, 0])?;
+        self.wait_state_all(state)
+    }
+
+    /// Requests `state` from one slave and waits for it.
+    pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
+        let st = self.slave(position)?.station;
+        self.fpwr(st, 0x0120, &[state as u8, 0])?;
+        self.wait_state(position, state)
+    }
+
+    fn wait_state_all(&mut self, state: AlState) -> Result<()> {
+        for k in 0..self.slaves.len() as u16 {
+            self.wait_state(k, state)?;
+        }
+        Ok(())
+    }
+
+    /// Polls AL status until `state` or an error; an error is acknowledged and reported by name.
+    pub fn wait_state(&mut self, position: u16, state: AlState) -> Result<()> {
+        let (st, name) = {
+            let s = self.slave(position)?;
+            (s.station, s.name.clone())
+        };
+        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        loop {
+            let mut d = [0u8; 6];
+            self.fprd(st, 0x0130, &mut d)?;
+            let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
+            let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
+            if status.state() == Some(state) && !status.error() {
+                self.slaves[position as usize].state = state;
+                return Ok(());
+            }
+            if status.error() || self.engine.io.now_ns() > deadline {
+                let reached = status.state().map(|s| s.name()).unwrap_or("an unknown state");
+                if status.error() {
+                    // Acknowledge, so that the slave accepts requests again.
+                    let ack = status.state_bits() as u16 | AlStatus::ERROR;
+                    let _ = self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut ack.to_le_bytes(),
+                    );
+                }
+                return Err(MasterError::State {
+                    position,
+                    name,
+                    requested: state,
+                    status: format!(
+                        "stays in {reached}{}",
+                        if status.error() { " with an error" } else { " (timeout)" }
+                    ),
+                    code: code_text(code),
+                });
+            }
+            // Give the slave time between polls.
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 100_000);
+        }
+    }
+
+    /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
+    /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
+    pub fn configure(&mut self) -> Result<()> {
+        for k in 0..self.slaves.len() {
+            let s = &self.slaves[k];
+            if let Some(m) = s.mailbox.clone() {
+                let st = s.station;
+                let sm0 = SyncManager {
+                    start: m.out.0,
+                    length: m.out.1,
+                    control: 0x26,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                };
+                let sm1 = SyncManager {
+                    start: m.inp.0,
+                    length: m.inp.1,
+                    control: 0x22,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                };
+                let mut both = [0u8; 16];
+                both[..8].copy_from_slice(&sm0.to_bytes());
+                both[8..].copy_from_slice(&sm1.to_bytes());
+                self.fpwr(st, 0x0800, &both)?;
+            }
+        }
+        self.request_state_all(AlState::PreOp)?;
+        for k in 0..self.slaves.len() as u16 {
+            self.read_mapping(k)?;
+        }
+        self.layout()
+    }
+
+    /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects)
+    /// when it speaks CoE, else the PDOs its SII assigns to SyncManagers.
+    pub fn read_mapping(&mut self, position: u16) -> Result<()> {
+        let k = position as usize;
+        let sms = self.slaves[k].sii.sync_managers().to_vec();
+        let out_sm =
+            sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_OUTPUTS).map(|(i, s)| (i as u8, *s));
+        let in_sm = sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_INPUTS).map(|(i, s)| (i as u8, *s));
+        let (outputs, inputs) = if self.slaves[k].has_coe() {
+            (self.coe_mapping(position, 0x1C12)?, self.coe_mapping(position, 0x1C13)?)
+        } else {
+            let sii = &self.slaves[k].sii;
+            let from = |pdos: &[ferrocat_wire::sii::Pdo], sm: Option<(u8, SmEntry)>| -> Vec<Mapped> {
+                pdos.iter()
+                    .filter(|p| sm.is_some_and(|(n, _)| p.sync_manager == n))
+                    .flat_map(|p| p.entries.iter())
+                    .map(|e| Mapped {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bits: e.bit_len,
+                        name: sii.string(e.name_idx).unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex)),
+                        image_bit: 0,
+                    })
+                    .collect()
+            };
+            (from(sii.rx_pdos(), out_sm), from(sii.tx_pdos(), in_sm))
+        };
+        let s = &mut self.slaves[k];
+        s.outputs = outputs;
+        s.inputs = inputs;
+        s.out_sm = out_sm;
+        s.in_sm = in_sm;
+        Ok(())
+    }
+
+    fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
+        let mut v = Vec::new();
+        let n = self.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+        for k in 1..=n {
+            let p = self.sdo_read(position, assign, k)?;
+            let pdo = u16::from_le_bytes([p[0], *p.get(1).unwrap_or(&0)]);
+            let m = self.sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
+            for j in 1..=m {
+                let e = self.sdo_read(position, pdo, j)?;
+                if e.len() < 4 {
+                    continue;
+                }
+                let w = u32::from_le_bytes([e[0], e[1], e[2], e[3]]);
+                let (index, subindex, bits) = ((w >> 16) as u16, (w >> 8) as u8, w as u8);
+                let name = self.slaves[position as usize]
+                    .sii
+                    .rx_pdos()
+                    .iter()
+                    .chain(self.slaves[position as usize].sii.tx_pdos())
+                    .flat_map(|p| p.entries.iter())
+                    .find(|e| e.index == index && e.subindex == subindex)
+                    .and_then(|e| self.slaves[position as usize].sii.string(e.name_idx))
+                    .unwrap_or_else(|| format!("{index:#06x}:{subindex:02x}"));
+                v.push(Mapped { index, subindex, bits, name, image_bit: 0 });
+            }
+        }
+        Ok(v)
+    }
+
+    /// Lets the application choose the PDOs of one slave (PREOP only): writes the assignment
+    /// object and reads the mapping back.
+    pub fn remap(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
+        let assign = if outputs { 0x1C12 } else { 0x1C13 };
+        self.sdo_write(position, assign, 0, &[0])?;
+        for (k, p) in pdos.iter().enumerate() {
+            self.sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
+        }
+        self.sdo_write(position, assign, 0, &[pdos.len() as u8])?;
+        self.read_mapping(position)?;
+        self.layout()
+    }
+
+    /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
+    /// writes the SyncManagers and FMMUs.
+    pub fn layout(&mut self) -> Result<()> {
+        let mut out = 0u32;
+        for s in &mut self.slaves {
+            let bytes = s.output_bits().div_ceil(8);
+            s.out_area = (out, bytes);
+            out += bytes;
+        }
+        let mut inp = out;
+        for s in &mut self.slaves {
+            let bytes = s.input_bits().div_ceil(8);
+            s.in_area = (inp, bytes);
+            inp += bytes;
+        }
+        self.out_bytes = out;
+        self.in_bytes = inp - out;
+        self.image = vec![0; inp as usize];
+        self.expected_wkc = 0;
+        for k in 0..self.slaves.len() {
+            let s = &mut self.slaves[k];
+            let mut bit = s.out_area.0 * 8;
+            for m in &mut s.outputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            let mut bit = s.in_area.0 * 8;
+            for m in &mut s.inputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            let st = s.station;
+            let mut fmmus: Vec<Fmmu> = Vec::new();
+            let mut sms: Vec<(u8, SyncManager)> = Vec::new();
+            for (area, sm, write) in [(s.out_area, s.out_sm, true), (s.in_area, s.in_sm, false)] {
+                let Some((n, e)) = sm else { continue };
+                if area.1 == 0 {
+                    sms.push((n, SyncManager::default()));
+                    continue;
+                }
+                sms.push((
+                    n,
+                    SyncManager {
+                        start: e.start,
+                        length: area.1 as u16,
+                        control: e.control,
+                        status: 0,
+                        activate: 1,
+                        pdi_control: 0,
+                    },
+                ));
+                fmmus.push(Fmmu {
+                    logical_start: area.0,
+                    length: area.1 as u16,
+                    logical_start_bit: 0,
+                    logical_stop_bit: 7,
+                    physical_start: e.start,
+                    physical_start_bit: 0,
+                    fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
+                    active: true,
+                });
+            }
+            let has_out = s.out_area.1 > 0;
+            let has_in = s.in_area.1 > 0;
+            self.expected_wkc += 2 * has_out as u16 + has_in as u16;
+            for (n, sm) in sms {
+                self.fpwr(st, 0x0800 + 8 * n as u16, &sm.to_bytes())?;
+            }
+            for (i, f) in fmmus.iter().enumerate() {
+                self.fpwr(st, 0x0600 + 16 * i as u16, &f.to_bytes())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// PREOP → SAFEOP → OP for every slave, exchanging process data meanwhile (slaves with an
+    /// SM watchdog want outputs before OP).
+    pub fn start(&mut self) -> Result<()> {
+        self.request_state_all(AlState::SafeOp)?;
+        self.cycle()?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [AlState::Op as u8, 0])?;
+        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        loop {
+            let now = self.engine.io.now_ns();
+            self.cycle()?;
+            let mut d = [0u8; 2];
+            let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0x0130 }, &mut d)?;
+            if wkc as usize == self.slaves.len() && d[0] & 0x1F == AlState::Op as u8 {
+                // BRD ORs every slave's state: all OP and no error flag.
+                break;
+            }
+            if d[0] & 0x10 != 0 || now > deadline {
+                for k in 0..self.slaves.len() as u16 {
+                    self.wait_state(k, AlState::Op)?;
+                }
+                break;
+            }
+            self.engine.io.sleep_until(now + 1_000_000);
+        }
+        for s in &mut self.slaves {
+            s.state = AlState::Op;
+        }
+        Ok(())
+    }
+
+    /// Scan, configure, start: the whole bring-up.
+    pub fn bring_up(&mut self) -> Result<()> {
+        self.scan()?;
+        self.configure()?;
+        self.start()
+    }
+}

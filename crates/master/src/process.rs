@@ -1,0 +1,147 @@
+//! The cyclic exchange of the process image. `cycle` does not allocate: the image is split
+//! over frames with slices of the image itself, and statistics are plain counters.
+use ferrocat_wire::datagram::{HEADER_LEN, WKC_LEN};
+use ferrocat_wire::frame::MAX_PDU_LEN;
+use ferrocat_wire::{Address, Command};
+
+use crate::engine::Pdu;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+use crate::master::Master;
+
+/// Data bytes of one LRW that still fit a frame.
+const CHUNK: usize = MAX_PDU_LEN - HEADER_LEN - WKC_LEN;
+/// Up to this many frames per cycle (8 × 1486 bytes of process image).
+const MAX_CHUNKS: usize = 8;
+
+/// Where an entry sits in the image: bit offset and width.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Handle {
+    pub bit: u32,
+    pub bits: u8,
+}
+
+/// Statistics of the cyclic exchange.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CycleStats {
+    pub cycles: u64,
+    pub wkc_errors: u64,
+    pub last_wkc: u16,
+    /// Time between the starts of the last two cycles, and the largest deviation from the
+    /// nominal period seen (when `nominal_period_ns` is set).
+    pub last_period_ns: u64,
+    pub nominal_period_ns: u64,
+    pub max_jitter_ns: u64,
+    pub last_round_trip_ns: u64,
+    pub max_round_trip_ns: u64,
+}
+
+#[derive(Debug, Default)]
+pub(crate) struct CycleState {
+    pub stats: CycleStats,
+    last_start: Option<u64>,
+}
+
+impl<I: Io> Master<I> {
+    /// The handle of an output entry of slave `position` by its name (first match).
+    pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
+        let s = self.slave(position)?;
+        s.outputs
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+            .ok_or_else(|| MasterError::slave(position, &s.name, format!("no output named '{name}'")))
+    }
+
+    pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
+        let s = self.slave(position)?;
+        s.inputs
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+            .ok_or_else(|| MasterError::slave(position, &s.name, format!("no input named '{name}'")))
+    }
+
+    /// Writes `value` (its low `bits` bits) into the image.
+    pub fn set(&mut self, h: Handle, value: u64) {
+        for b in 0..h.bits as u32 {
+            let at = (h.bit + b) as usize;
+            let Some(byte) = self.image.get_mut(at / 8) else { return };
+            let bit = 1u8 << (at % 8);
+            if value >> b & 1 == 1 {
+                *byte |= bit;
+            } else {
+                *byte &= !bit;
+            }
+        }
+    }
+
+    /// Reads an entry from the image.
+    pub fn get(&self, h: Handle) -> u64 {
+        let mut v = 0u64;
+        for b in 0..h.bits as u32 {
+            let at = (h.bit + b) as usize;
+            if self.image.get(at / 8).is_some_and(|byte| byte >> (at % 8) & 1 == 1) {
+                v |= 1 << b;
+            }
+        }
+        v
+    }
+
+    pub fn cycle_stats(&self) -> CycleStats {
+        self.cyc.stats
+    }
+
+    /// Sets the nominal period the jitter figures are measured against.
+    pub fn set_period_ns(&mut self, ns: u64) {
+        self.cyc.stats.nominal_period_ns = ns;
+    }
+
+    /// One exchange of the whole process image (LRW, split over frames when it is larger than
+    /// one). Returns the working counter; a shortfall is counted, not an error, so that the
+    /// control loop keeps running.
+    pub fn cycle(&mut self) -> Result<u16> {
+        let start = self.engine.io.now_ns();
+        let st = &mut self.cyc.stats;
+        if let Some(prev) = self.cyc.last_start {
+            st.last_period_ns = start - prev;
+            if st.nominal_period_ns > 0 {
+                st.max_jitter_ns = st.max_jitter_ns.max(st.last_period_ns.abs_diff(st.nominal_period_ns));
+            }
+        }
+        self.cyc.last_start = Some(start);
+        if self.image.is_empty() {
+            return Ok(0);
+        }
+        let chunks = self.image.len().div_ceil(CHUNK);
+        if chunks > MAX_CHUNKS {
+            return Err(MasterError::Config(format!(
+                "process image of {} bytes exceeds {} frames",
+                self.image.len(),
+                MAX_CHUNKS
+            )));
+        }
+        let mut empty: [[u8; 0]; MAX_CHUNKS] = [[]; MAX_CHUNKS];
+        let mut parts = self.image.chunks_mut(CHUNK);
+        let mut e = empty.iter_mut();
+        let mut pdus: [Pdu<'_>; MAX_CHUNKS] = std::array::from_fn(|k| {
+            let data: &mut [u8] = match parts.next() {
+                Some(p) => p,
+                None => e.next().map(|x| &mut x[..]).unwrap_or_default(),
+            };
+            Pdu::new(Command::LRW, Address::Logical((k * CHUNK) as u32), data)
+        });
+        self.engine.transact(&mut pdus[..chunks])?;
+        let wkc = pdus[..chunks].iter().map(|p| p.wkc).min().unwrap_or(0);
+        let end = self.engine.io.now_ns();
+        let st = &mut self.cyc.stats;
+        st.cycles += 1;
+        st.last_wkc = wkc;
+        st.last_round_trip_ns = end - start;
+        st.max_round_trip_ns = st.max_round_trip_ns.max(end - start);
+        if wkc != self.expected_wkc {
+            st.wkc_errors += 1;
+        }
+        Ok(wkc)
+    }
+}

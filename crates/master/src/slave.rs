@@ -1,0 +1,82 @@
+//! What the master knows about each slave.
+use ferrocat_wire::register::{AlState, DlStatus};
+use ferrocat_wire::sii::{SiiInfo, SmEntry};
+
+/// A mapped process-data entry and where it sits in the process image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Mapped {
+    pub index: u16,
+    pub subindex: u8,
+    pub bits: u8,
+    pub name: String,
+    /// Bit offset in the whole process image.
+    pub image_bit: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MailboxConfig {
+    /// Master → slave (SM0): start, length.
+    pub out: (u16, u16),
+    /// Slave → master (SM1): start, length.
+    pub inp: (u16, u16),
+    pub protocols: u16,
+}
+
+#[derive(Debug, Clone)]
+pub struct Slave {
+    pub position: u16,
+    pub station: u16,
+    pub alias: u16,
+    /// The first string of the SII (what SOEM calls the name), e.g. "EL2004".
+    pub name: String,
+    /// The general category's name string.
+    pub description: String,
+    pub vendor_id: u32,
+    pub product_code: u32,
+    pub revision: u32,
+    pub serial: u32,
+    pub esc_type: u8,
+    pub fmmu_count: u8,
+    pub sm_count: u8,
+    pub features: u16,
+    pub sii: SiiInfo,
+    pub dl_status: DlStatus,
+    pub active_ports: [bool; 4],
+    pub entry_port: u8,
+    pub parent: Option<u16>,
+    /// Port of the parent this slave hangs on.
+    pub parent_port: u8,
+    pub has_dc: bool,
+    pub dc_64bit: bool,
+    /// Receive times of ports 0–3 (local time, low 32 bits) and at the processing unit.
+    pub receive_times: [u32; 4],
+    pub receive_time_epu: u64,
+    /// Propagation delay from the reference clock (the first DC slave), in ns.
+    pub delay_ns: u32,
+    pub mailbox: Option<MailboxConfig>,
+    pub(crate) mbx_counter: u8,
+    pub outputs: Vec<Mapped>,
+    pub inputs: Vec<Mapped>,
+    pub out_sm: Option<(u8, SmEntry)>,
+    pub in_sm: Option<(u8, SmEntry)>,
+    /// Byte offset and length of this slave's outputs and inputs in the process image.
+    pub out_area: (u32, u32),
+    pub in_area: (u32, u32),
+    pub state: AlState,
+}
+
+impl Slave {
+    pub fn output_bits(&self) -> u32 {
+        self.outputs.iter().map(|m| m.bits as u32).sum()
+    }
+    pub fn input_bits(&self) -> u32 {
+        self.inputs.iter().map(|m| m.bits as u32).sum()
+    }
+    pub fn has_coe(&self) -> bool {
+        self.mailbox.as_ref().is_some_and(|m| m.protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0)
+    }
+    /// Active ports as SOEM prints them: "1.1.0.0".
+    pub fn active_ports_text(&self) -> String {
+        self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
+    }
+}

@@ -1,0 +1,97 @@
+//! The master in virtual time against the in-process segment.
+use ferrocat_esc::DigitalIo;
+use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_master::Master;
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::register::AlState;
+
+fn master(toml: &str, host: HostModel) -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(toml).unwrap();
+    Master::new(VirtualIo::new(cfg.build().unwrap(), host, 1))
+}
+
+fn real_io_segment() -> String {
+    let e = ferrocat_testdata::shared("captures/eeprom");
+    format!(
+        "seed = 4\n[[device]]\neeprom = '{0}/ek1100.hex'\n[[device]]\neeprom = '{0}/el2004.bin'\n[[device]]\neeprom = '{0}/el2004.bin'\n",
+        e.display()
+    )
+}
+
+#[test]
+fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
+    let mut m = master(&real_io_segment(), HostModel::pc_rt());
+    m.bring_up().unwrap();
+    let names: Vec<_> = m.slaves.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["EK1100", "EL2004", "EL2004"]);
+    assert_eq!(
+        m.slaves.iter().map(|s| s.delay_ns).collect::<Vec<_>>(),
+        [0, 145, 300],
+        "SOEM on the real hardware: 0, 144, 299"
+    );
+    assert_eq!(m.slaves.iter().map(|s| s.parent).collect::<Vec<_>>(), [None, Some(0), Some(1)]);
+    assert_eq!(m.slaves.iter().map(|s| s.active_ports_text()).collect::<Vec<_>>(), ["1.1.0.0", "1.1.0.0", "1.0.0.0"]);
+    assert!(m.slaves.iter().all(|s| s.state == AlState::Op));
+    assert_eq!(m.expected_wkc, 4);
+    // Outputs by entry name: channel 1 of the first terminal, channel 4 of the second.
+    let a = m.output(1, "Output").unwrap();
+    m.set(a, 1);
+    let b = m.slaves[2].outputs[3].clone();
+    let hb = ferrocat_master::Handle { bit: b.image_bit, bits: b.bits };
+    m.set(hb, 1);
+    for _ in 0..10 {
+        let now = ferrocat_master::io::Io::now_ns(&mut m.engine.io);
+        ferrocat_master::io::Io::sleep_until(&mut m.engine.io, now + 1_000_000);
+        assert_eq!(m.cycle().unwrap(), 4);
+    }
+    let outs: Vec<Vec<u8>> = m.engine.io.seg.nodes[1..]
+        .iter()
+        .map(|n| n.esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone())
+        .collect();
+    assert_eq!(outs, [vec![0x01], vec![0x08]]);
+    assert_eq!(m.cycle_stats().wkc_errors, 0);
+}
+
+#[test]
+fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
+    let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
+    let toml = format!("seed = 2\n[[device]]\nesi = '{}'\nproduct = 0x4F\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n", esi.display());
+    let mut m = master(&toml, HostModel::pc_rt());
+    m.scan().unwrap();
+    assert_eq!(m.slaves[0].name, "C5-E-2-21");
+    m.configure().unwrap();
+    // Expedited, normal (a name of more than 4 bytes), segmented (≈1 KiB), complete access.
+    assert_eq!(m.sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
+    let name = m.sdo_read(0, 0x1008, 0).unwrap();
+    assert!(name.len() > 4, "{name:?}");
+    let big = m.sdo_upload(0, 0x2701, 0, true).unwrap();
+    assert!(big.len() > 1000);
+    let mut pattern = big.clone();
+    pattern[2..].iter_mut().enumerate().for_each(|(i, b)| *b = i as u8);
+    m.sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
+    assert_eq!(m.sdo_upload(0, 0x2701, 0, true).unwrap(), pattern);
+    assert_eq!(m.sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
+    m.sdo_write(0, 0x6060, 0, &[8]).unwrap();
+    assert_eq!(m.sdo_read(0, 0x6060, 0).unwrap(), [8]);
+    // Aborts by name.
+    let e = m.sdo_read(0, 0x1234, 0).unwrap_err().to_string();
+    assert!(e.contains("does not exist"), "{e}");
+    // SDO information.
+    let list = m.od_list(0).unwrap();
+    assert!(list.len() > 150 && list.contains(&0x6040));
+    assert_eq!(m.object_info(0, 0x1018).unwrap().max_subindex, 4);
+    // Remapping: 0x1601 (target position, profile velocity) instead of 0x1600.
+    let before = m.out_bytes;
+    m.remap(0, true, &[0x1601]).unwrap();
+    assert_ne!(m.out_bytes, before);
+    assert_eq!(m.slaves[0].outputs.iter().map(|e| e.index).collect::<Vec<_>>(), [0x607A, 0x6081]);
+    m.start().unwrap();
+    let target = m.slaves[0].outputs[0].clone();
+    m.set(ferrocat_master::Handle { bit: target.image_bit, bits: target.bits }, 4242);
+    for _ in 0..5 {
+        let now = ferrocat_master::io::Io::now_ns(&mut m.engine.io);
+        ferrocat_master::io::Io::sleep_until(&mut m.engine.io, now + 1_000_000);
+        m.cycle().unwrap();
+    }
+    assert_eq!(m.sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
+}
