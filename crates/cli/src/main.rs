@@ -5,9 +5,11 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod esi;
+mod master_cmd;
 mod pcap;
 mod sii;
 mod sim;
+mod target;
 
 #[derive(Parser)]
 #[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]
@@ -25,9 +27,13 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Decode an SII EEPROM image (raw binary, Intel HEX or hex text).
+    /// Decode an SII EEPROM image file (raw binary, Intel HEX or hex text), or read/write a
+    /// slave's EEPROM with `sii read` / `sii write`.
+    #[command(args_conflicts_with_subcommands = true)]
     Sii {
-        file: PathBuf,
+        #[command(subcommand)]
+        action: Option<EepromCmd>,
+        file: Option<PathBuf>,
         #[arg(long)]
         json: bool,
     },
@@ -70,6 +76,27 @@ enum Command {
         #[arg(long, requires = "bench")]
         json: bool,
     },
+    /// Find the slaves and print what they are and how they are wired (like SOEM's slaveinfo).
+    Scan {
+        #[command(flatten)]
+        target: target::Target,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Read, write or list CoE objects of a slave.
+    Sdo {
+        #[command(subcommand)]
+        action: SdoCmd,
+    },
+    /// Bring the segment to OP and exchange process data for a while, with live statistics.
+    Run {
+        #[command(flatten)]
+        target: target::Target,
+        #[arg(long, default_value_t = 5.0)]
+        seconds: f64,
+        #[arg(long, default_value_t = 1000)]
+        cycle_us: u64,
+    },
     /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
     Rtt {
         #[arg(long)]
@@ -83,17 +110,89 @@ enum Command {
     },
 }
 
+#[derive(Subcommand)]
+enum SdoCmd {
+    /// Read INDEX[:SUB] of the slave at POSITION (0-based).
+    Read {
+        position: u16,
+        object: String,
+        /// Complete access (the whole object).
+        #[arg(long)]
+        complete: bool,
+        /// How to show the value: u8 i8 u16 i16 u32 i32 u64 string hex.
+        #[arg(long = "type", default_value = "hex")]
+        ty: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// Write VALUE to INDEX[:SUB].
+    Write {
+        position: u16,
+        object: String,
+        value: String,
+        #[arg(long)]
+        complete: bool,
+        #[arg(long = "type", default_value = "u32")]
+        ty: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// List the object dictionary (SDO information).
+    List {
+        position: u16,
+        #[command(flatten)]
+        target: target::Target,
+    },
+}
+
+#[derive(Subcommand)]
+enum EepromCmd {
+    /// Read the SII of the slave at POSITION (hex dump, or --out FILE).
+    Read {
+        position: u16,
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// Program the SII of the slave at POSITION from an image file.
+    Write {
+        position: u16,
+        file: PathBuf,
+        #[command(flatten)]
+        target: target::Target,
+    },
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Pcap { file, json } => pcap::run(&file, json),
-        Command::Sii { file, json } => sii::run(&file, json),
+        Command::Sii { action: None, file: Some(file), json } => sii::run(&file, json),
+        Command::Sii { action: None, file: None, .. } => {
+            Err(anyhow::anyhow!("give an EEPROM image file, or `sii read` / `sii write`"))
+        }
+        Command::Sii { action: Some(action), .. } => match action {
+            EepromCmd::Read { position, out, target } => master_cmd::sii_read(&target, position, out.as_deref()),
+            EepromCmd::Write { position, file, target } => master_cmd::sii_write(&target, position, &file),
+        },
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
         Command::Sim { bench: true, json, .. } => sim::bench(json),
         Command::Sim { config, device, iface, udp, report, seed, .. } => {
             sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
+        Command::Scan { target, json } => master_cmd::scan(&target, json),
+        Command::Sdo { action } => match action {
+            SdoCmd::Read { position, object, complete, ty, target } => {
+                master_cmd::sdo(&target, position, master_cmd::SdoAction::Read { object, complete, ty })
+            }
+            SdoCmd::Write { position, object, value, complete, ty, target } => {
+                master_cmd::sdo(&target, position, master_cmd::SdoAction::Write { object, value, complete, ty })
+            }
+            SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
+        },
+        Command::Run { target, seconds, cycle_us } => master_cmd::run(&target, seconds, cycle_us),
     };
     match result {
         Ok(code) => code,

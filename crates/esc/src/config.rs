@@ -46,9 +46,9 @@ impl EscConfig {
         }
     }
 
-    /// Beckhoff ET1200, the ESC of E-Bus terminals: 3 FMMUs, 4 SMs, 1 KiB, 64-bit DC. Type and
-    /// features as real EL terminals report them in the shared captures (features 0x0184; a BRD
-    /// of 0x0000 over ET1100 + ET1200 reads 0x13).
+    /// Beckhoff ET1200, the ESC of E-Bus terminals: 3 FMMUs, 4 SMs, 1 KiB. Type and features as
+    /// real EL terminals report them in the shared captures (features 0x0184: DC present, bit 3
+    /// clear, so a 32-bit system time; a BRD of 0x0000 over ET1100 + ET1200 reads 0x13).
     pub fn et1200() -> Self {
         EscConfig {
             esc_type: 0x12,
@@ -59,7 +59,7 @@ impl EscConfig {
             ram_kb: 1,
             port_descriptor: 0b00_00_10_10,
             features: 0x0184,
-            dc: DcWidth::Bits64,
+            dc: DcWidth::Bits32,
             sii_read_8: true,
         }
     }

@@ -226,6 +226,58 @@ impl<I: Io> Master<I> {
         Ok(data)
     }
 
+    /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
+    /// Returns the number of words written.
+    pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
+        let (st, current) = {
+            let s = self.slave(position)?;
+            (s.station, s.sii.to_image())
+        };
+        self.fpwr(st, 0x0500, &[0])?;
+        let mut written = 0;
+        for (w, pair) in image.chunks(2).enumerate() {
+            let v = u16::from_le_bytes([pair[0], *pair.get(1).unwrap_or(&0xFF)]);
+            let old = current.get(2 * w..2 * w + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+            if old == Some(v) {
+                continue;
+            }
+            // The data first, then "write" with write enable and the word address.
+            self.fpwr(st, 0x0508, &v.to_le_bytes())?;
+            let mut cmd = [0u8; 6];
+            cmd[0..2].copy_from_slice(&0x0201u16.to_le_bytes());
+            cmd[2..6].copy_from_slice(&(w as u32).to_le_bytes());
+            self.fpwr(st, 0x0502, &cmd)?;
+            let deadline = self.engine.io.now_ns() + 100_000_000;
+            loop {
+                let mut ctl = [0u8; 2];
+                self.fprd(st, 0x0502, &mut ctl)?;
+                let c = u16::from_le_bytes(ctl);
+                if c & 0x8000 == 0 {
+                    if c & 0x6000 != 0 {
+                        let name = self.slaves[position as usize].name.clone();
+                        return Err(MasterError::slave(
+                            position,
+                            &name,
+                            format!("EEPROM write of word {w:#x} failed (status {c:#06x})"),
+                        ));
+                    }
+                    break;
+                }
+                if self.engine.io.now_ns() > deadline {
+                    return Err(MasterError::Config(format!("slave {position}: EEPROM stays busy")));
+                }
+                let now = self.engine.io.now_ns();
+                self.engine.io.sleep_until(now + 500_000);
+            }
+            written += 1;
+        }
+        let sii = self.read_sii(st)?;
+        if let Ok(info) = SiiInfo::from_image(&sii) {
+            self.slaves[position as usize].sii = info;
+        }
+        Ok(written)
+    }
+
     /// Parents and ports from the active ports, as SOEM infers them for a segment walked in
     /// processing order.
     fn topology(&mut self) {

@@ -92,6 +92,13 @@ impl<I: Io> Master<I> {
         self.cyc.stats
     }
 
+    /// Starts the statistics afresh (at the start of cyclic operation).
+    pub fn reset_cycle_stats(&mut self) {
+        let nominal = self.cyc.stats.nominal_period_ns;
+        self.cyc = CycleState::default();
+        self.cyc.stats.nominal_period_ns = nominal;
+    }
+
     /// Sets the nominal period the jitter figures are measured against.
     pub fn set_period_ns(&mut self, ns: u64) {
         self.cyc.stats.nominal_period_ns = ns;

@@ -1,0 +1,254 @@
+//! Commands that run the master: scan, sdo, sii, run.
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use ferrocat_master::Master;
+use serde_json::json;
+
+use crate::outln;
+use crate::target::{finish, CliIo, Target};
+
+pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
+    let mut m = t.master()?;
+    m.scan()?;
+    if json {
+        let v: Vec<_> = m
+            .slaves
+            .iter()
+            .map(|s| {
+                json!({
+                    "position": s.position, "station_address": s.station, "alias": s.alias,
+                    "name": s.name, "description": s.description,
+                    "vendor_id": s.vendor_id, "product_code": s.product_code, "revision": s.revision, "serial": s.serial,
+                    "esc_type": s.esc_type, "fmmus": s.fmmu_count, "sync_managers": s.sm_count,
+                    "has_dc": s.has_dc, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
+                    "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
+                    "active_ports": s.active_ports,
+                    "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
+                })
+            })
+            .collect();
+        outln!("{}", serde_json::Value::Array(v));
+    } else {
+        outln!("{} slaves found", m.slaves.len());
+        for s in &m.slaves {
+            outln!("");
+            outln!("Slave:{} {} ({})", s.position + 1, s.name, s.description);
+            outln!(" Configured address: {:04x}  alias {}", s.station, s.alias);
+            outln!(
+                " Man: {:08x} ID: {:08x} Rev: {:08x} Serial: {:08x}",
+                s.vendor_id,
+                s.product_code,
+                s.revision,
+                s.serial
+            );
+            outln!(" ESC type {:#04x}, {} FMMUs, {} SMs", s.esc_type, s.fmmu_count, s.sm_count);
+            outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
+            if let Some(mb) = &s.mailbox {
+                outln!(
+                    " MBX out {:#06x}/{} in {:#06x}/{} protocols {:#04x}",
+                    mb.out.0,
+                    mb.out.1,
+                    mb.inp.0,
+                    mb.inp.1,
+                    mb.protocols
+                );
+            }
+            for (k, sm) in s.sii.sync_managers().iter().enumerate() {
+                outln!(" SM{k} A:{:04x} L:{:4} C:{:02x} Type:{}", sm.start, sm.length, sm.control, sm.sm_type);
+            }
+        }
+        outln!("");
+        outln!("Topology:");
+        fn tree(m: &Master<CliIo>, parent: Option<u16>, depth: usize) {
+            for s in m.slaves.iter().filter(|s| s.parent == parent) {
+                outln!(
+                    "{}{} {} (port {} of its parent, {} ns)",
+                    "  ".repeat(depth + 1),
+                    s.position + 1,
+                    s.name,
+                    s.parent_port,
+                    s.delay_ns
+                );
+                tree(m, Some(s.position), depth + 1);
+            }
+        }
+        tree(&m, None, 0);
+    }
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `INDEX[:SUB]` with numbers in hex (0x…, #x…) or decimal.
+fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
+    let (i, sub) = s.split_once(':').unwrap_or((s, "0"));
+    let n = |t: &str| ferrocat_esi::parse_number(t).with_context(|| format!("'{t}' in '{s}' is not a number"));
+    let index = u16::try_from(n(i)?).with_context(|| format!("index '{i}' out of range"))?;
+    let sub = u8::try_from(n(sub)?).with_context(|| format!("subindex '{sub}' out of range"))?;
+    Ok((index, sub))
+}
+
+fn encode(value: &str, ty: &str) -> anyhow::Result<Vec<u8>> {
+    let int = || ferrocat_esi::parse_number(value).with_context(|| format!("'{value}' is not a number"));
+    Ok(match ty {
+        "u8" => u8::try_from(int()?)?.to_le_bytes().to_vec(),
+        "i8" => i8::try_from(int()?)?.to_le_bytes().to_vec(),
+        "u16" => u16::try_from(int()?)?.to_le_bytes().to_vec(),
+        "i16" => i16::try_from(int()?)?.to_le_bytes().to_vec(),
+        "u32" => u32::try_from(int()?)?.to_le_bytes().to_vec(),
+        "i32" => i32::try_from(int()?)?.to_le_bytes().to_vec(),
+        "u64" => u64::try_from(int()?)?.to_le_bytes().to_vec(),
+        "string" => value.as_bytes().to_vec(),
+        "hex" => {
+            let v: String = value.chars().filter(|c| !c.is_whitespace()).collect();
+            if v.len() % 2 != 0 {
+                bail!("hex value of odd length");
+            }
+            (0..v.len())
+                .step_by(2)
+                .map(|i| u8::from_str_radix(&v[i..i + 2], 16).with_context(|| format!("'{}' is not hex", &v[i..i + 2])))
+                .collect::<anyhow::Result<_>>()?
+        }
+        other => bail!("unknown type '{other}' (u8 i8 u16 i16 u32 i32 u64 string hex)"),
+    })
+}
+
+fn show(bytes: &[u8], ty: &str) -> String {
+    let le = |n: usize| {
+        let mut b = [0u8; 8];
+        b[..n.min(bytes.len())].copy_from_slice(&bytes[..n.min(bytes.len())]);
+        u64::from_le_bytes(b)
+    };
+    match ty {
+        "u8" | "u16" | "u32" | "u64" => le(bytes.len().min(8)).to_string(),
+        "i8" => (le(1) as u8 as i8).to_string(),
+        "i16" => (le(2) as u16 as i16).to_string(),
+        "i32" => (le(4) as u32 as i32).to_string(),
+        "string" => String::from_utf8_lossy(bytes).trim_end_matches('\0').to_string(),
+        _ => bytes.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "),
+    }
+}
+
+pub enum SdoAction {
+    Read { object: String, complete: bool, ty: String },
+    Write { object: String, value: String, complete: bool, ty: String },
+    List,
+}
+
+pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitCode> {
+    let mut m = t.master()?;
+    m.scan()?;
+    m.configure()?;
+    match action {
+        SdoAction::Read { object, complete, ty } => {
+            let (i, s) = parse_object(&object)?;
+            let v = m.sdo_upload(position, i, s, complete)?;
+            outln!("{}", show(&v, &ty));
+        }
+        SdoAction::Write { object, value, complete, ty } => {
+            let (i, s) = parse_object(&object)?;
+            m.sdo_download(position, i, s, complete, &encode(&value, &ty)?)?;
+        }
+        SdoAction::List => {
+            for index in m.od_list(position)? {
+                let o = m.object_info(position, index)?;
+                outln!(
+                    "{index:#06x} {:<40} type {:#06x} max sub {} code {}",
+                    o.name,
+                    o.data_type,
+                    o.max_subindex,
+                    o.object_code
+                );
+            }
+        }
+    }
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
+    let mut m = t.master()?;
+    m.scan()?;
+    let img = m.slave(position)?.sii.to_image();
+    match out {
+        Some(p) => {
+            std::fs::write(p, &img).with_context(|| format!("writing {}", p.display()))?;
+            eprintln!("wrote {} bytes of slave {position}'s SII to {}", img.len(), p.display());
+        }
+        None => {
+            for (k, c) in img.chunks(16).enumerate() {
+                outln!("{:04x}: {}", k * 8, c.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "));
+            }
+        }
+    }
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn sii_write(t: &Target, position: u16, file: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let img = crate::sii::load(file)?;
+    ferrocat_wire::sii::SiiInfo::from_image(&img).with_context(|| format!("{}: not an SII image", file.display()))?;
+    let mut m = t.master()?;
+    m.scan()?;
+    let words = m.sii_write(position, &img)?;
+    eprintln!("wrote {words} words to slave {position}'s EEPROM");
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> {
+    if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
+        bail!("--seconds must be positive and --cycle-us at least 1");
+    }
+    let mut m = t.master()?;
+    if !m.engine.io.is_virtual() {
+        let rt = ferrocat_link::real_time(80, Some(1));
+        eprintln!(
+            "real time: memory locked {}, SCHED_FIFO {:?}, CPU {:?}{}",
+            rt.memory_locked,
+            rt.fifo_priority,
+            rt.cpu,
+            if rt.refused.is_empty() { String::new() } else { format!(" (refused: {})", rt.refused.join("; ")) }
+        );
+    }
+    m.bring_up()?;
+    let period = cycle_us * 1000;
+    m.set_period_ns(period);
+    m.reset_cycle_stats();
+    use ferrocat_master::io::Io;
+    let start = m.engine.io.now_ns();
+    let end = start + (seconds * 1e9) as u64;
+    let mut next = start;
+    let mut report = start + 1_000_000_000;
+    while m.engine.io.now_ns() < end {
+        next += period;
+        m.cycle()?;
+        if m.engine.io.now_ns() >= report {
+            let s = m.cycle_stats();
+            eprintln!(
+                "t={:5.1} s  cycles {}  wkc {}/{} ({} errors)  max jitter {:.1} us  round trip {:.1} us (max {:.1})",
+                (m.engine.io.now_ns() - start) as f64 * 1e-9,
+                s.cycles,
+                s.last_wkc,
+                m.expected_wkc,
+                s.wkc_errors,
+                s.max_jitter_ns as f64 / 1000.0,
+                s.last_round_trip_ns as f64 / 1000.0,
+                s.max_round_trip_ns as f64 / 1000.0
+            );
+            report += 1_000_000_000;
+        }
+        m.engine.io.sleep_until(next);
+    }
+    let s = m.cycle_stats();
+    outln!(
+        "{} cycles of {cycle_us} us; {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
+        s.cycles,
+        s.wkc_errors,
+        s.max_jitter_ns as f64 / 1000.0,
+        s.max_round_trip_ns as f64 / 1000.0,
+        m.engine.stats.lost
+    );
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}

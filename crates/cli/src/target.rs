@@ -1,0 +1,138 @@
+//! Where a master command talks to: a real interface, or the embedded virtual segment.
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use ferrocat_capture::{CaptureWriter, Format};
+use ferrocat_master::io::{HostModel, Io, RawIo, VirtualIo};
+use ferrocat_master::Master;
+
+#[derive(Args, Debug, Clone)]
+pub struct Target {
+    /// Network interface with the EtherCAT segment (raw socket; needs CAP_NET_RAW).
+    #[arg(long, conflicts_with_all = ["config", "device"])]
+    pub iface: Option<String>,
+    /// Send even on an interface that has an IPv4 or a global IPv6 address.
+    #[arg(long, requires = "iface")]
+    pub force: bool,
+    /// Use the embedded virtual segment described by this file.
+    #[arg(long, value_name = "SEG.toml")]
+    pub config: Option<PathBuf>,
+    /// Use an embedded virtual line of these devices (EEPROM dump, ESI:PRODUCT, or built-in name).
+    #[arg(long, value_name = "FILE[:PRODUCT]")]
+    pub device: Vec<String>,
+    /// Seed of the virtual segment.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Write every frame sent and received to this pcapng file.
+    #[arg(long, value_name = "FILE")]
+    pub pcap: Option<PathBuf>,
+}
+
+enum World {
+    Virtual(Box<VirtualIo>),
+    Raw(RawIo),
+}
+
+/// The master's I/O for the CLI: a virtual or a raw world, optionally recorded to pcapng.
+pub struct CliIo {
+    world: World,
+    capture: Option<CaptureWriter<BufWriter<File>>>,
+}
+
+impl std::fmt::Debug for CliIo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self.world {
+            World::Virtual(_) => "CliIo(virtual)",
+            World::Raw(_) => "CliIo(raw)",
+        })
+    }
+}
+
+impl CliIo {
+    fn record(&mut self, t_ns: u64, frame: &[u8]) {
+        if let Some(c) = &mut self.capture {
+            let _ = c.write(Duration::from_nanos(t_ns), frame);
+        }
+    }
+    pub fn is_virtual(&self) -> bool {
+        matches!(self.world, World::Virtual(_))
+    }
+}
+
+impl Io for CliIo {
+    fn now_ns(&mut self) -> u64 {
+        match &mut self.world {
+            World::Virtual(v) => v.now_ns(),
+            World::Raw(r) => r.now_ns(),
+        }
+    }
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        let t = self.now_ns();
+        self.record(t, frame);
+        match &mut self.world {
+            World::Virtual(v) => v.send(frame),
+            World::Raw(r) => r.send(frame),
+        }
+    }
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        let r = match &mut self.world {
+            World::Virtual(v) => v.recv(buf, deadline_ns),
+            World::Raw(r) => r.recv(buf, deadline_ns),
+        }?;
+        if let Some((n, t)) = r {
+            self.record(t, &buf[..n]);
+        }
+        Ok(r)
+    }
+    fn sleep_until(&mut self, t_ns: u64) {
+        match &mut self.world {
+            World::Virtual(v) => v.sleep_until(t_ns),
+            World::Raw(r) => r.sleep_until(t_ns),
+        }
+    }
+}
+
+impl Target {
+    /// Opens the world this target names and a master on it.
+    pub fn master(&self) -> anyhow::Result<Master<CliIo>> {
+        let world = match (&self.iface, self.config.is_some() || !self.device.is_empty()) {
+            (Some(iface), false) => {
+                let addrs = ferrocat_link::routable_addresses(iface)
+                    .with_context(|| format!("reading the addresses of {iface}"))?;
+                if !addrs.is_empty() && !self.force {
+                    bail!(
+                        "{iface} has address(es) {}: EtherCAT broadcasts do not belong on an office LAN (use --force to send anyway)",
+                        addrs.join(", ")
+                    );
+                }
+                World::Raw(RawIo::open(iface).with_context(|| format!("opening {iface}"))?)
+            }
+            (None, true) => {
+                let seg = crate::sim::segment_from(self.config.as_deref(), &self.device, self.seed)?;
+                World::Virtual(Box::new(VirtualIo::new(seg, HostModel::pc_rt(), self.seed.unwrap_or(0))))
+            }
+            _ => bail!("give --iface IF, or --config SEG.toml / --device FILE for the embedded virtual segment"),
+        };
+        let capture = match &self.pcap {
+            Some(p) => {
+                let f = File::create(p).with_context(|| format!("creating {}", p.display()))?;
+                Some(CaptureWriter::new(BufWriter::new(f), Format::PcapNg)?)
+            }
+            None => None,
+        };
+        Ok(Master::new(CliIo { world, capture }))
+    }
+}
+
+/// Flushes the pcap file, if any.
+pub fn finish(m: Master<CliIo>) -> anyhow::Result<()> {
+    if let Some(c) = m.engine.io.capture {
+        use std::io::Write;
+        c.into_inner().flush()?;
+    }
+    Ok(())
+}
