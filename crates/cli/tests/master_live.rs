@@ -131,3 +131,12 @@ fn refuses_interfaces_with_addresses_and_bad_targets() {
     assert!(!out.status.success() && err.lines().count() == 1 && err.contains("nonexistent0"), "{err}");
     assert!(!err.contains("panicked"));
 }
+
+#[test]
+fn a_segment_that_answers_nothing_is_one_line() {
+    let net = VethPair::new("nn");
+    let out = ferrocat_in(&net.master_ns).args(["scan", "--iface", &net.master_if]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.lines().count() == 1, "{err}");
+    assert!(err.contains("no answer") && !err.contains("panicked"), "{err}");
+}

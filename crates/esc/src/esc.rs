@@ -30,7 +30,9 @@ struct SmState {
     /// Mailbox mode: the buffer holds a message.
     full: bool,
     /// Buffered mode, ECAT writes: the buffer being written (committed when its last byte is).
+    /// The allocation is kept across cycles; `staged` says whether it holds a write in progress.
     staging: Vec<u8>,
+    staged: bool,
     last_byte_written: bool,
     last_byte_read: bool,
 }
@@ -643,8 +645,10 @@ impl Esc {
                 }
                 self.mem[a as usize] = v;
             } else if s.ecat_writes() {
-                if st.staging.len() != s.length as usize {
-                    st.staging = self.mem[s.start as usize..s.start as usize + s.length as usize].to_vec();
+                if !st.staged || st.staging.len() != s.length as usize {
+                    st.staging.clear();
+                    st.staging.extend_from_slice(&self.mem[s.start as usize..s.start as usize + s.length as usize]);
+                    st.staged = true;
                 }
                 st.staging[(a - s.start) as usize] = v;
             } else {
@@ -757,7 +761,7 @@ impl Esc {
     fn current_byte(&self, a: u16) -> u8 {
         if let Some((n, s)) = self.sm_at(a) {
             let st = &self.sms[n as usize];
-            if !s.is_mailbox() && s.ecat_writes() && st.staging.len() == s.length as usize {
+            if !s.is_mailbox() && s.ecat_writes() && st.staged && st.staging.len() == s.length as usize {
                 return st.staging[(a - s.start) as usize];
             }
         }
@@ -833,7 +837,7 @@ impl Esc {
                     if !s.enabled() {
                         st.full = false;
                     }
-                    st.staging.clear();
+                    st.staged = false;
                 }
             }
         }
@@ -855,11 +859,11 @@ impl Esc {
                     deliver = true;
                 }
             } else if s.ecat_writes() && written {
-                let staged = std::mem::take(&mut st.staging);
-                if staged.len() == s.length as usize {
+                if st.staged && st.staging.len() == s.length as usize {
                     let a = s.start as usize;
-                    self.mem[a..a + staged.len()].copy_from_slice(&staged);
+                    self.mem[a..a + st.staging.len()].copy_from_slice(&st.staging);
                 }
+                st.staged = false;
                 if s.control & SyncManager::WATCHDOG != 0 {
                     self.wd_last_trigger_ns = t;
                     self.mem[0x0440] = 1;

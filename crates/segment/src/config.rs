@@ -103,6 +103,9 @@ pub struct DeviceToml {
     /// How long the firmware of a device without device emulation takes to act on a write of
     /// AL control (µs, default 1000).
     pub al_response_us: Option<f64>,
+    /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
+    /// puts a firmware behind AL control that checks each transition.
+    pub device_emulation: Option<bool>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -197,7 +200,15 @@ impl SegmentConfig {
         let mut names = Vec::new();
         for (i, d) in self.devices.iter().enumerate() {
             let src = self.source(i, d)?;
-            let (sii, default_name, esi_dev) = load_device(&src)?;
+            let (mut sii, default_name, esi_dev) = load_device(&src)?;
+            if let Some(emulate) = d.device_emulation {
+                // Word 0 high byte is the ESC configuration (→ 0x0141); keep the CRC right.
+                if sii.len() >= 16 {
+                    sii[1] = (sii[1] & !1) | emulate as u8;
+                    let crc = ferrocat_wire::sii::header_crc(&sii);
+                    sii[14] = crc;
+                }
+            }
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
             let kinds = port_kinds(&info);

@@ -1,0 +1,49 @@
+//! Failures of the master are one clear line with the reason and a non-zero exit, never a panic.
+use std::process::Command;
+
+fn ferrocat(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+#[test]
+fn a_slave_refusing_op_is_named_with_its_status_code() {
+    // A DC-synchronous terminal with firmware: without SYNC0 it refuses OP (0x0030).
+    let seg = std::env::temp_dir().join(format!("ferrocat-refuse-{}.toml", std::process::id()));
+    std::fs::write(&seg, "seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\ndevice_emulation = false\n").unwrap();
+    let (ok, _, err) = ferrocat(&["run", "--seconds", "1", "--config", seg.to_str().unwrap()]);
+    std::fs::remove_file(&seg).ok();
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("slave 1 (EL2004) did not reach OP") && err.contains("0x0030 (Invalid DC SYNC configuration)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn needs_shared_an_sdo_abort_is_named() {
+    let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
+    let dev = format!("{}:0x4F", esi.display());
+    let (ok, out, _) = ferrocat(&["sdo", "read", "0", "0x1018:1", "--type", "u32", "--device", &dev]);
+    assert!(ok && out.trim() == "620", "{out}");
+    let (ok, _, err) = ferrocat(&["sdo", "read", "0", "0x1234", "--device", &dev]);
+    assert!(!ok && err.lines().count() == 1, "{err}");
+    assert!(err.contains("SDO 0x1234:00 aborted") && err.contains("does not exist in the object dictionary"), "{err}");
+    let (ok, _, err) = ferrocat(&["sdo", "write", "0", "0x1018:1", "5", "--device", &dev]);
+    assert!(!ok && err.contains("read-only"), "{err}");
+}
+
+#[test]
+fn bad_arguments_are_errors_not_panics() {
+    for args in [
+        &["scan"][..],
+        &["scan", "--device", "/nonexistent.bin"],
+        &["sdo", "read", "0", "zz:1", "--device", "EK1100"],
+        &["run", "--seconds", "-1", "--device", "EK1100"],
+        &["sii", "write", "0", "/nonexistent.bin", "--device", "EK1100"],
+    ] {
+        let (ok, _, err) = ferrocat(args);
+        assert!(!ok && !err.contains("panicked") && !err.trim().is_empty(), "{args:?}: {err}");
+    }
+}

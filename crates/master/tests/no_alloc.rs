@@ -1,0 +1,60 @@
+//! The steady-state cycle allocates nothing: 10 000 cycles of the master against the virtual
+//! segment (which runs in the same thread and is counted too) under a counting allocator.
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::Master;
+use ferrocat_segment::SegmentConfig;
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+// SAFETY: forwards to the system allocator, only counting calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn ten_thousand_cycles_allocate_nothing() {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.bring_up().unwrap();
+    let out = m.output(1, "Output").unwrap();
+    let inp = m.input(2, "Input").unwrap();
+    let period = 1_000_000;
+    let mut next = m.engine.io.now_ns();
+    let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
+        for k in 0..cycles {
+            m.set(out, k & 1);
+            let _ = m.get(inp);
+            m.cycle().unwrap();
+            next += period;
+            m.engine.io.sleep_until(next);
+        }
+    };
+    run(&mut m, 200);
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    run(&mut m, 10_000);
+    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let s = m.cycle_stats();
+    println!("10 000 cycles: {allocations} allocations, {} WKC errors, last WKC {}", s.wkc_errors, s.last_wkc);
+    assert_eq!(s.wkc_errors, 0);
+    assert_eq!(allocations, 0);
+}
