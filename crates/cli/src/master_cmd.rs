@@ -220,9 +220,14 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> 
     let end = start + (seconds * 1e9) as u64;
     let mut next = start;
     let mut report = start + 1_000_000_000;
+    let mut shown = m.events.len();
     while m.engine.io.now_ns() < end {
         next += period;
         m.cycle()?;
+        for e in &m.events[shown..] {
+            eprintln!("t={:7.3} s  {e}", (m.engine.io.now_ns() - start) as f64 * 1e-9);
+        }
+        shown = m.events.len();
         if m.engine.io.now_ns() >= report {
             let s = m.cycle_stats();
             eprintln!(

@@ -17,4 +17,4 @@ pub use engine::{describe, Engine, EngineStats, Pdu};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};
 pub use process::{CycleStats, Handle};
-pub use slave::{MailboxConfig, Mapped, Slave};
+pub use slave::{Health, MailboxConfig, Mapped, Slave};

@@ -25,6 +25,27 @@ pub enum MasterEvent {
     Emergency { position: u16, name: String, error_code: u16, error_register: u8, data: [u8; 5] },
 }
 
+impl std::fmt::Display for MasterEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MasterEvent::LeftOp { position, name, status, code } => {
+                let st = status.state().map(|s| s.name()).unwrap_or("?");
+                write!(
+                    f,
+                    "slave {position} ({name}) left OP: now {st}{}{}",
+                    if status.error() { " with an error" } else { "" },
+                    code_text(*code)
+                )
+            }
+            MasterEvent::Lost { position, name } => write!(f, "slave {position} ({name}) is not answering"),
+            MasterEvent::Recovered { position, name } => write!(f, "slave {position} ({name}) is back in OP"),
+            MasterEvent::Emergency { position, name, error_code, error_register, data } => {
+                write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
+            }
+        }
+    }
+}
+
 #[derive(Debug)]
 pub struct Master<I: Io> {
     pub engine: Engine<I>,
@@ -42,6 +63,10 @@ pub struct Master<I: Io> {
     /// How long an SDO may take.
     pub mailbox_timeout_ns: u64,
     pub(crate) cyc: crate::process::CycleState,
+    /// How long a cyclic frame may take before it counts as lost.
+    pub cyclic_timeout_ns: u64,
+    /// Check the slaves after a cycle with a short working counter.
+    pub supervise_on_wkc: bool,
 }
 
 impl<I: Io> Master<I> {
@@ -57,6 +82,8 @@ impl<I: Io> Master<I> {
             state_timeout_ns: 10_000_000_000,
             mailbox_timeout_ns: 2_000_000_000,
             cyc: Default::default(),
+            cyclic_timeout_ns: 1_000_000,
+            supervise_on_wkc: true,
         }
     }
 
@@ -150,6 +177,8 @@ impl<I: Io> Master<I> {
             out_area: (0, 0),
             in_area: (0, 0),
             state: AlState::Init,
+            health: Default::default(),
+            assignment: [None, None],
             sii,
         })
     }
@@ -565,14 +594,100 @@ impl<I: Io> Master<I> {
     /// Lets the application choose the PDOs of one slave (PREOP only): writes the assignment
     /// object and reads the mapping back.
     pub fn remap(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
+        self.slaves[position as usize].assignment[!outputs as usize] = Some(pdos.to_vec());
+        self.write_assignment(position, outputs, pdos)?;
+        self.read_mapping(position)?;
+        self.layout()
+    }
+
+    fn write_assignment(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
         let assign = if outputs { 0x1C12 } else { 0x1C13 };
         self.sdo_write(position, assign, 0, &[0])?;
         for (k, p) in pdos.iter().enumerate() {
             self.sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
         }
-        self.sdo_write(position, assign, 0, &[pdos.len() as u8])?;
-        self.read_mapping(position)?;
-        self.layout()
+        self.sdo_write(position, assign, 0, &[pdos.len() as u8])
+    }
+
+    /// Checks every slave after a cycle came back short, reports what changed once per slave,
+    /// and takes one step of bringing each fallen slave back to OP (so that the cyclic exchange
+    /// keeps running meanwhile). Returns how many slaves are not operational.
+    pub fn supervise(&mut self) -> Result<usize> {
+        let mut down = 0;
+        for k in 0..self.slaves.len() {
+            let (st, name, pos) = (self.slaves[k].station, self.slaves[k].name.clone(), k as u16);
+            let mut d = [0u8; 6];
+            let mut wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+            if wkc == 0 {
+                // Powered off and on again it has lost its station address: give it back.
+                let mut a = [0u8; 2];
+                if self.engine.one(Command::APRD, Address::position(pos, 0x0010), &mut a)? == 1 && a == [0, 0] {
+                    self.engine.one(Command::APWR, Address::position(pos, 0x0010), &mut st.to_le_bytes())?;
+                    wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+                }
+            }
+            if wkc == 0 {
+                if self.slaves[k].health != crate::slave::Health::Lost {
+                    self.slaves[k].health = crate::slave::Health::Lost;
+                    self.events.push(MasterEvent::Lost { position: pos, name });
+                }
+                down += 1;
+                continue;
+            }
+            let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
+            let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
+            if status.state() == Some(AlState::Op) && !status.error() {
+                if self.slaves[k].health != crate::slave::Health::Operational {
+                    self.slaves[k].health = crate::slave::Health::Operational;
+                    self.events.push(MasterEvent::Recovered { position: pos, name });
+                }
+                continue;
+            }
+            down += 1;
+            if self.slaves[k].health == crate::slave::Health::Operational {
+                self.events.push(MasterEvent::LeftOp { position: pos, name, status, code });
+            }
+            self.slaves[k].health = crate::slave::Health::Recovering;
+            // One step towards OP.
+            if status.error() {
+                let ack = status.state_bits() as u16 | AlStatus::ERROR;
+                self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut ack.to_le_bytes())?;
+                continue;
+            }
+            match status.state() {
+                Some(AlState::Init) | Some(AlState::Bootstrap) | None => {
+                    self.write_mailbox_config(pos)?;
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::PreOp as u8, 0],
+                    )?;
+                }
+                Some(AlState::PreOp) => {
+                    if self.slaves[k].has_coe() {
+                        for (i, outputs) in [(0usize, true), (1, false)] {
+                            if let Some(p) = self.slaves[k].assignment[i].clone() {
+                                self.write_assignment(pos, outputs, &p)?;
+                            }
+                        }
+                    }
+                    self.write_process_config(pos)?;
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::SafeOp as u8, 0],
+                    )?;
+                }
+                Some(AlState::SafeOp) | Some(AlState::Op) => {
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::Op as u8, 0],
+                    )?;
+                }
+            }
+        }
+        Ok(down)
     }
 
     /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
@@ -606,27 +721,37 @@ impl<I: Io> Master<I> {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
-            let st = s.station;
-            let mut fmmus: Vec<Fmmu> = Vec::new();
-            let mut sms: Vec<(u8, SyncManager)> = Vec::new();
-            for (area, sm, write) in [(s.out_area, s.out_sm, true), (s.in_area, s.in_sm, false)] {
-                let Some((n, e)) = sm else { continue };
-                if area.1 == 0 {
-                    sms.push((n, SyncManager::default()));
-                    continue;
+            let has_out = s.out_area.1 > 0;
+            let has_in = s.in_area.1 > 0;
+            self.expected_wkc += 2 * has_out as u16 + has_in as u16;
+            self.write_process_config(k as u16)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the SyncManagers and FMMUs of one slave's process data, from its layout.
+    pub(crate) fn write_process_config(&mut self, position: u16) -> Result<()> {
+        let s = &self.slaves[position as usize];
+        let st = s.station;
+        let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
+        let mut fmmu = 0u16;
+        for (area, sm, write) in [(s.out_area, s.out_sm, true), (s.in_area, s.in_sm, false)] {
+            let Some((n, e)) = sm else { continue };
+            let smr = if area.1 == 0 {
+                SyncManager::default()
+            } else {
+                SyncManager {
+                    start: e.start,
+                    length: area.1 as u16,
+                    control: e.control,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
                 }
-                sms.push((
-                    n,
-                    SyncManager {
-                        start: e.start,
-                        length: area.1 as u16,
-                        control: e.control,
-                        status: 0,
-                        activate: 1,
-                        pdi_control: 0,
-                    },
-                ));
-                fmmus.push(Fmmu {
+            };
+            writes.push((0x0800 + 8 * n as u16, smr.to_bytes().to_vec()));
+            if area.1 > 0 {
+                let f = Fmmu {
                     logical_start: area.0,
                     length: area.1 as u16,
                     logical_start_bit: 0,
@@ -635,19 +760,30 @@ impl<I: Io> Master<I> {
                     physical_start_bit: 0,
                     fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
                     active: true,
-                });
-            }
-            let has_out = s.out_area.1 > 0;
-            let has_in = s.in_area.1 > 0;
-            self.expected_wkc += 2 * has_out as u16 + has_in as u16;
-            for (n, sm) in sms {
-                self.fpwr(st, 0x0800 + 8 * n as u16, &sm.to_bytes())?;
-            }
-            for (i, f) in fmmus.iter().enumerate() {
-                self.fpwr(st, 0x0600 + 16 * i as u16, &f.to_bytes())?;
+                };
+                writes.push((0x0600 + 16 * fmmu, f.to_bytes().to_vec()));
+                fmmu += 1;
             }
         }
+        for (a, d) in writes {
+            self.fpwr(st, a, &d)?;
+        }
         Ok(())
+    }
+
+    /// Writes the mailbox SyncManagers of one slave.
+    pub(crate) fn write_mailbox_config(&mut self, position: u16) -> Result<()> {
+        let s = &self.slaves[position as usize];
+        let Some(m) = s.mailbox.clone() else { return Ok(()) };
+        let sm0 =
+            SyncManager { start: m.out.0, length: m.out.1, control: 0x26, status: 0, activate: 1, pdi_control: 0 };
+        let sm1 =
+            SyncManager { start: m.inp.0, length: m.inp.1, control: 0x22, status: 0, activate: 1, pdi_control: 0 };
+        let mut both = [0u8; 16];
+        both[..8].copy_from_slice(&sm0.to_bytes());
+        both[8..].copy_from_slice(&sm1.to_bytes());
+        let st = s.station;
+        self.fpwr(st, 0x0800, &both)
     }
 
     /// PREOP → SAFEOP → OP for every slave, exchanging process data meanwhile (slaves with an

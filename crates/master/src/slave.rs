@@ -63,6 +63,21 @@ pub struct Slave {
     pub out_area: (u32, u32),
     pub in_area: (u32, u32),
     pub state: AlState,
+    /// Operation: answering and in OP, or being brought back.
+    pub health: Health,
+    /// The PDO assignment the application chose (written again after a power cycle).
+    pub(crate) assignment: [Option<Vec<u16>>; 2],
+}
+
+/// Where a slave stands during cyclic operation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Health {
+    #[default]
+    Operational,
+    /// Not answering at its station address (powered off, link lost).
+    Lost,
+    /// Answering but not in OP: being walked back.
+    Recovering,
 }
 
 impl Slave {
