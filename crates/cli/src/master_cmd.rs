@@ -211,7 +211,20 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> 
             if rt.refused.is_empty() { String::new() } else { format!(" (refused: {})", rt.refused.join("; ")) }
         );
     }
+    eprintln!("timestamps: {}", m.engine.io.timestamps());
+    let t_start = {
+        use ferrocat_master::io::Io;
+        m.engine.io.now_ns()
+    };
     m.bring_up()?;
+    eprintln!(
+        "bring-up to OP: {:.1} ms",
+        ({
+            use ferrocat_master::io::Io;
+            m.engine.io.now_ns()
+        } - t_start) as f64
+            / 1e6
+    );
     let period = cycle_us * 1000;
     m.set_period_ns(period);
     m.reset_cycle_stats();

@@ -7,7 +7,7 @@ use std::time::Duration;
 use anyhow::{bail, Context};
 use clap::Args;
 use ferrocat_capture::{CaptureWriter, Format};
-use ferrocat_master::io::{HostModel, Io, RawIo, VirtualIo};
+use ferrocat_master::io::{HostModel, Io, RawIo, UdpIo, VirtualIo};
 use ferrocat_master::Master;
 
 #[derive(Args, Debug, Clone)]
@@ -15,6 +15,9 @@ pub struct Target {
     /// Network interface with the EtherCAT segment (raw socket; needs CAP_NET_RAW).
     #[arg(long, conflicts_with_all = ["config", "device"])]
     pub iface: Option<String>,
+    /// EtherCAT over UDP to this address (e.g. 127.0.0.1:34980).
+    #[arg(long, value_name = "ADDR:PORT", conflicts_with_all = ["iface", "config", "device"])]
+    pub udp: Option<String>,
     /// Send even on an interface that has an IPv4 or a global IPv6 address.
     #[arg(long, requires = "iface")]
     pub force: bool,
@@ -35,6 +38,7 @@ pub struct Target {
 enum World {
     Virtual(Box<VirtualIo>),
     Raw(RawIo),
+    Udp(UdpIo),
 }
 
 /// The master's I/O for the CLI: a virtual or a raw world, optionally recorded to pcapng.
@@ -48,6 +52,7 @@ impl std::fmt::Debug for CliIo {
         f.write_str(match self.world {
             World::Virtual(_) => "CliIo(virtual)",
             World::Raw(_) => "CliIo(raw)",
+            World::Udp(_) => "CliIo(udp)",
         })
     }
 }
@@ -61,6 +66,14 @@ impl CliIo {
     pub fn is_virtual(&self) -> bool {
         matches!(self.world, World::Virtual(_))
     }
+    /// Which timestamps the link gives, in words.
+    pub fn timestamps(&self) -> &'static str {
+        match &self.world {
+            World::Virtual(_) => "exact virtual time",
+            World::Raw(r) => r.timestamps(),
+            World::Udp(_) => "no kernel timestamps (UDP)",
+        }
+    }
 }
 
 impl Io for CliIo {
@@ -68,6 +81,7 @@ impl Io for CliIo {
         match &mut self.world {
             World::Virtual(v) => v.now_ns(),
             World::Raw(r) => r.now_ns(),
+            World::Udp(u) => u.now_ns(),
         }
     }
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
@@ -76,12 +90,14 @@ impl Io for CliIo {
         match &mut self.world {
             World::Virtual(v) => v.send(frame),
             World::Raw(r) => r.send(frame),
+            World::Udp(u) => u.send(frame),
         }
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
         let r = match &mut self.world {
             World::Virtual(v) => v.recv(buf, deadline_ns),
             World::Raw(r) => r.recv(buf, deadline_ns),
+            World::Udp(u) => u.recv(buf, deadline_ns),
         }?;
         if let Some((n, t)) = r {
             self.record(t, &buf[..n]);
@@ -92,6 +108,14 @@ impl Io for CliIo {
         match &mut self.world {
             World::Virtual(v) => v.sleep_until(t_ns),
             World::Raw(r) => r.sleep_until(t_ns),
+            World::Udp(u) => u.sleep_until(t_ns),
+        }
+    }
+    fn last_tx_ns(&mut self) -> Option<u64> {
+        match &mut self.world {
+            World::Virtual(v) => v.last_tx_ns(),
+            World::Raw(r) => r.last_tx_ns(),
+            World::Udp(u) => u.last_tx_ns(),
         }
     }
 }
@@ -100,6 +124,10 @@ impl Target {
     /// Opens the world this target names and a master on it.
     pub fn master(&self) -> anyhow::Result<Master<CliIo>> {
         let world = match (&self.iface, self.config.is_some() || !self.device.is_empty()) {
+            _ if self.udp.is_some() => {
+                let a = self.udp.as_deref().unwrap_or_default();
+                World::Udp(UdpIo::open(a).with_context(|| format!("UDP to {a}"))?)
+            }
             (Some(iface), false) => {
                 let addrs = ferrocat_link::routable_addresses(iface)
                     .with_context(|| format!("reading the addresses of {iface}"))?;
@@ -115,7 +143,7 @@ impl Target {
                 let seg = crate::sim::segment_from(self.config.as_deref(), &self.device, self.seed)?;
                 World::Virtual(Box::new(VirtualIo::new(seg, HostModel::pc_rt(), self.seed.unwrap_or(0))))
             }
-            _ => bail!("give --iface IF, or --config SEG.toml / --device FILE for the embedded virtual segment"),
+            _ => bail!("give --iface IF, --udp ADDR:PORT, or --config SEG.toml / --device FILE for the embedded virtual segment"),
         };
         let capture = match &self.pcap {
             Some(p) => {

@@ -90,6 +90,12 @@ fn run_to_op_and_tshark_decodes_every_frame() {
     let summary = String::from_utf8_lossy(&run.stdout).to_string();
     println!("{summary}");
     assert!(summary.contains(" 0 working-counter errors"), "{summary}");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("timestamps: kernel software timestamps") || err.contains("timestamps: NIC hardware"),
+        "{err}"
+    );
+    assert!(err.contains("bring-up to OP"), "{err}");
     // Every frame ferrocat sent (source MAC 10:10:…), decoded by Wireshark's dissector.
     let out = Command::new("tshark")
         .args(["-n", "-r"])

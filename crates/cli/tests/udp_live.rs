@@ -46,9 +46,18 @@ fn sim_over_udp_on_loopback() {
     let reply = EcatPdu::parse(&back[..n]).unwrap();
     let d = reply.datagrams().next().unwrap();
     assert_eq!((d.header().index, d.wkc(), d.data()[0]), (7, 2, 0x11 | 0x12), "two slaves, ET1100 | ET1200");
+    // The ferrocat master over UDP: a scan of the two slaves.
+    let scan = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["scan", "--json", "--udp", &addr]).output().unwrap();
+    assert!(scan.status.success(), "{}", String::from_utf8_lossy(&scan.stderr));
+    let slaves: serde_json::Value = serde_json::from_slice(&scan.stdout).unwrap();
+    assert_eq!(
+        slaves.as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect::<Vec<_>>(),
+        ["EK1100", "EL2004"]
+    );
     Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     assert!(child.wait().unwrap().success());
     let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     std::fs::remove_file(&report).ok();
-    assert_eq!((rep["frames_out"].as_u64(), rep["malformed"].as_u64()), (Some(1), Some(1)), "{rep}");
+    assert_eq!(rep["malformed"].as_u64(), Some(1), "{rep}");
+    assert!(rep["frames_out"].as_u64().unwrap() > 10, "{rep}");
 }

@@ -17,6 +17,44 @@ pub fn monotonic_ns() -> u64 {
 pub struct RawSocket {
     fd: OwnedFd,
     ifindex: i32,
+    stamps: Timestamps,
+}
+
+/// Which timestamps the kernel gives this socket.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Timestamps {
+    /// None: the application's own clock readings are all there is.
+    None,
+    /// Kernel software timestamps, on receive and transmit (SO_TIMESTAMPING).
+    Software,
+    /// The NIC's hardware timestamps (SIOCSHWTSTAMP accepted).
+    Hardware,
+}
+
+impl Timestamps {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Timestamps::None => "no kernel timestamps (user-space clock readings only)",
+            Timestamps::Software => "kernel software timestamps on receive and transmit (the NIC does not timestamp)",
+            Timestamps::Hardware => "NIC hardware timestamps on receive and transmit",
+        }
+    }
+}
+
+/// CLOCK_REALTIME − CLOCK_MONOTONIC now: kernel timestamps are realtime.
+fn realtime_offset_ns() -> i128 {
+    let mut r = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes into the timespec we own.
+    unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
+    let real = r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128;
+    real - monotonic_ns() as i128
+}
+
+#[repr(C)]
+struct IfreqHwts {
+    name: [libc::c_char; 16],
+    data: *mut libc::c_void,
+    _pad: [u8; 16],
 }
 
 fn check(r: libc::c_int, what: &str) -> io::Result<libc::c_int> {
@@ -72,6 +110,42 @@ impl RawSocket {
                 &mr as *const _ as *const libc::c_void,
                 std::mem::size_of::<libc::packet_mreq>() as u32,
             );
+            // Timestamps: ask the NIC first, then the kernel.
+            let mut cfg = libc::hwtstamp_config {
+                flags: 0,
+                tx_type: libc::HWTSTAMP_TX_ON as _,
+                rx_filter: libc::HWTSTAMP_FILTER_ALL as _,
+            };
+            let mut req = IfreqHwts { name: [0; 16], data: &mut cfg as *mut _ as *mut libc::c_void, _pad: [0; 16] };
+            for (d, c) in req.name.iter_mut().zip(iface.bytes().take(15)) {
+                *d = c as libc::c_char;
+            }
+            let hw = libc::ioctl(fd.as_raw_fd(), libc::SIOCSHWTSTAMP as _, &mut req) == 0;
+            let mut flags = libc::SOF_TIMESTAMPING_RX_SOFTWARE
+                | libc::SOF_TIMESTAMPING_TX_SOFTWARE
+                | libc::SOF_TIMESTAMPING_SOFTWARE
+                | libc::SOF_TIMESTAMPING_OPT_TSONLY;
+            if hw {
+                flags |= libc::SOF_TIMESTAMPING_RX_HARDWARE
+                    | libc::SOF_TIMESTAMPING_TX_HARDWARE
+                    | libc::SOF_TIMESTAMPING_RAW_HARDWARE;
+            }
+            let stamps = if libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_TIMESTAMPING,
+                &flags as *const _ as *const libc::c_void,
+                4,
+            ) == 0
+            {
+                if hw {
+                    Timestamps::Hardware
+                } else {
+                    Timestamps::Software
+                }
+            } else {
+                Timestamps::None
+            };
             let tv = libc::timeval { tv_sec: 0, tv_usec: 50_000 };
             check(
                 libc::setsockopt(
@@ -83,7 +157,7 @@ impl RawSocket {
                 ),
                 "SO_RCVTIMEO",
             )?;
-            Ok(RawSocket { fd, ifindex })
+            Ok(RawSocket { fd, ifindex, stamps })
         }
     }
 
@@ -105,6 +179,62 @@ impl RawSocket {
             )
         };
         check(r, "SO_RCVTIMEO").map(|_| ())
+    }
+
+    /// Which timestamps this socket gets.
+    pub fn timestamps(&self) -> Timestamps {
+        self.stamps
+    }
+
+    /// recvmsg with a control buffer; returns the length and the kernel timestamp (CLOCK_MONOTONIC
+    /// ns) if there is one.
+    fn recvmsg(&self, buf: &mut [u8], flags: libc::c_int) -> io::Result<Option<(usize, Option<u64>)>> {
+        let mut control = [0u64; 64];
+        let mut iov = libc::iovec { iov_base: buf.as_mut_ptr() as *mut libc::c_void, iov_len: buf.len() };
+        // SAFETY: msghdr points at our iovec and control buffer, both live for the call; the
+        // cmsg walk stays within the control length the kernel reports.
+        unsafe {
+            let mut msg: libc::msghdr = std::mem::zeroed();
+            msg.msg_iov = &mut iov;
+            msg.msg_iovlen = 1;
+            msg.msg_control = control.as_mut_ptr() as *mut libc::c_void;
+            msg.msg_controllen = std::mem::size_of_val(&control) as _;
+            let n = libc::recvmsg(self.fd.as_raw_fd(), &mut msg, flags);
+            if n < 0 {
+                let e = io::Error::last_os_error();
+                return match e.kind() {
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted => Ok(None),
+                    _ => Err(e),
+                };
+            }
+            let mut stamp = None;
+            let mut c = libc::CMSG_FIRSTHDR(&msg);
+            while !c.is_null() {
+                if (*c).cmsg_level == libc::SOL_SOCKET && (*c).cmsg_type == libc::SO_TIMESTAMPING {
+                    let ts = libc::CMSG_DATA(c) as *const libc::timespec;
+                    let sw = std::ptr::read_unaligned(ts);
+                    let hw = std::ptr::read_unaligned(ts.add(2));
+                    let pick = if hw.tv_sec != 0 || hw.tv_nsec != 0 { hw } else { sw };
+                    if pick.tv_sec != 0 || pick.tv_nsec != 0 {
+                        let real = pick.tv_sec as i128 * 1_000_000_000 + pick.tv_nsec as i128;
+                        stamp = Some((real - realtime_offset_ns()).max(0) as u64);
+                    }
+                }
+                c = libc::CMSG_NXTHDR(&msg, c);
+            }
+            Ok(Some((n as usize, stamp)))
+        }
+    }
+
+    /// The next frame with its kernel receive timestamp, or `None` after the receive timeout.
+    pub fn recv_stamped(&self, buf: &mut [u8]) -> io::Result<Option<(usize, Option<u64>)>> {
+        self.recvmsg(buf, 0)
+    }
+
+    /// The kernel's transmit timestamp of the last frame sent, if it has arrived.
+    pub fn tx_timestamp(&self) -> Option<u64> {
+        let mut b = [0u8; 64];
+        self.recvmsg(&mut b, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT).ok().flatten().and_then(|(_, t)| t)
     }
 
     /// The next frame, or `None` after the receive timeout.

@@ -14,6 +14,10 @@ pub trait Io {
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>>;
     /// Sleeps until `t_ns` (absolute); the world may wake late.
     fn sleep_until(&mut self, t_ns: u64);
+    /// When the last frame sent actually left, if the world knows (a kernel or NIC timestamp).
+    fn last_tx_ns(&mut self) -> Option<u64> {
+        None
+    }
 }
 
 /// A latency distribution: normal, clipped below, with rare outliers.
@@ -149,7 +153,8 @@ impl Io for VirtualIo {
     }
 }
 
-/// Real time on a network interface through an AF_PACKET raw socket.
+/// Real time on a network interface through an AF_PACKET raw socket, with kernel (or NIC)
+/// timestamps where available.
 #[derive(Debug)]
 pub struct RawIo {
     sock: ferrocat_link::RawSocket,
@@ -158,6 +163,11 @@ pub struct RawIo {
 impl RawIo {
     pub fn open(iface: &str) -> std::io::Result<Self> {
         Ok(RawIo { sock: ferrocat_link::RawSocket::open(iface)? })
+    }
+
+    /// Which timestamps are in use, in words.
+    pub fn timestamps(&self) -> &'static str {
+        self.sock.timestamps().describe()
     }
 }
 
@@ -175,9 +185,58 @@ impl Io for RawIo {
                 return Ok(None);
             }
             self.sock.set_timeout_ns(deadline_ns - now)?;
-            if let Some(n) = self.sock.recv(buf)? {
-                return Ok(Some((n, ferrocat_link::monotonic_ns())));
+            if let Some((n, stamp)) = self.sock.recv_stamped(buf)? {
+                return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
             }
+        }
+    }
+    fn sleep_until(&mut self, t_ns: u64) {
+        ferrocat_link::sleep_until_ns(t_ns);
+    }
+    fn last_tx_ns(&mut self) -> Option<u64> {
+        self.sock.tx_timestamp()
+    }
+}
+
+/// EtherCAT over UDP (port 0x88A4): the EtherCAT PDU of each frame travels as a UDP payload.
+#[derive(Debug)]
+pub struct UdpIo {
+    sock: std::net::UdpSocket,
+}
+
+impl UdpIo {
+    /// A socket sending to `target` (e.g. "192.0.2.10:34980").
+    pub fn open(target: &str) -> std::io::Result<Self> {
+        let sock = std::net::UdpSocket::bind("0.0.0.0:0")?;
+        sock.connect(target)?;
+        Ok(UdpIo { sock })
+    }
+}
+
+impl Io for UdpIo {
+    fn now_ns(&mut self) -> u64 {
+        ferrocat_link::monotonic_ns()
+    }
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        // The engine builds Ethernet frames: the PDU follows the 14-byte header.
+        let (_, off) = ferrocat_wire::EthernetRepr::parse(frame)
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
+        self.sock.send(&frame[off..]).map(|_| ())
+    }
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        let now = ferrocat_link::monotonic_ns();
+        if now >= deadline_ns || buf.len() < 15 {
+            return Ok(None);
+        }
+        self.sock.set_read_timeout(Some(std::time::Duration::from_nanos((deadline_ns - now).max(1_000))))?;
+        match self.sock.recv(&mut buf[14..]) {
+            Ok(n) => {
+                buf[..12].fill(0xFF);
+                buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
+                Ok(Some((14 + n, ferrocat_link::monotonic_ns())))
+            }
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => Ok(None),
+            Err(e) => Err(e),
         }
     }
     fn sleep_until(&mut self, t_ns: u64) {
