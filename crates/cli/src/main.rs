@@ -96,6 +96,13 @@ enum Command {
         seconds: f64,
         #[arg(long, default_value_t = 1000)]
         cycle_us: u64,
+        /// Distribute the reference clock's time with an FRMW in every cyclic frame.
+        #[arg(long)]
+        dc: bool,
+        /// Cycle back to back, as fast as the segment answers (a benchmark), instead of every
+        /// --cycle-us.
+        #[arg(long)]
+        max_rate: bool,
     },
     /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
     Rtt {
@@ -192,7 +199,9 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
-        Command::Run { target, seconds, cycle_us } => master_cmd::run(&target, seconds, cycle_us),
+        Command::Run { target, seconds, cycle_us, dc, max_rate } => {
+            master_cmd::run(&target, seconds, cycle_us, dc, max_rate)
+        }
     };
     match result {
         Ok(code) => code,

@@ -196,7 +196,16 @@ pub fn sii_write(t: &Target, position: u16, file: &std::path::Path) -> anyhow::R
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> {
+/// User + system CPU time of this process, in ns.
+fn cpu_ns() -> u64 {
+    // SAFETY: getrusage fills the struct we own.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+    let t = |tv: libc::timeval| tv.tv_sec as u64 * 1_000_000_000 + tv.tv_usec as u64 * 1000;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
+pub fn run(t: &Target, seconds: f64, cycle_us: u64, dc: bool, max_rate: bool) -> anyhow::Result<ExitCode> {
     if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
         bail!("--seconds must be positive and --cycle-us at least 1");
     }
@@ -225,9 +234,16 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> 
         } - t_start) as f64
             / 1e6
     );
-    let period = cycle_us * 1000;
+    if dc {
+        match m.distribute_dc() {
+            Some(p) => eprintln!("DC: slave {p} is the reference clock; FRMW in every cycle"),
+            None => bail!("--dc: no slave has a distributed clock"),
+        }
+    }
+    let period = if max_rate { 0 } else { cycle_us * 1000 };
     m.set_period_ns(period);
     m.reset_cycle_stats();
+    let cpu0 = cpu_ns();
     use ferrocat_master::io::Io;
     let start = m.engine.io.now_ns();
     let end = start + (seconds * 1e9) as u64;
@@ -256,9 +272,18 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64) -> anyhow::Result<ExitCode> 
             );
             report += 1_000_000_000;
         }
-        m.engine.io.sleep_until(next);
+        if !max_rate {
+            m.engine.io.sleep_until(next);
+        }
     }
+    let cpu = cpu_ns() - cpu0;
+    let wall = m.engine.io.now_ns() - start;
     let s = m.cycle_stats();
+    eprintln!(
+        "cyclic rate {:.0} cycles/s; master CPU time {:.2} us per cycle",
+        s.cycles as f64 / (wall as f64 * 1e-9),
+        cpu as f64 / 1000.0 / s.cycles.max(1) as f64
+    );
     outln!(
         "{} cycles of {cycle_us} us; {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
         s.cycles,

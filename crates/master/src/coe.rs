@@ -102,6 +102,36 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// Reads every CoE slave's send mailbox once: emergencies waiting there become events.
+    /// Returns how many messages were read.
+    pub fn poll_mailboxes(&mut self) -> Result<usize> {
+        let mut read = 0;
+        for k in 0..self.slaves.len() {
+            let s = &self.slaves[k];
+            let (Some(m), true) = (s.mailbox.clone(), s.has_coe()) else { continue };
+            let (st, name) = (s.station, s.name.clone());
+            let mut buf = vec![0u8; m.inp.1 as usize];
+            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
+                continue;
+            }
+            read += 1;
+            let Ok(mbx) = Mailbox::parse(&buf) else { continue };
+            if mbx.header.mailbox_type != MailboxType::COE {
+                continue;
+            }
+            if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
+                self.events.push(MasterEvent::Emergency {
+                    position: k as u16,
+                    name,
+                    error_code: e.error_code,
+                    error_register: e.error_register,
+                    data: e.data,
+                });
+            }
+        }
+        Ok(read)
+    }
+
     fn sdo_exchange(&mut self, position: u16, req: Sdo<'_>) -> Result<Vec<u8>> {
         let mut b = vec![0u8; 2048];
         let n = req.emit(&mut b)?;

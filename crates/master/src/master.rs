@@ -4,7 +4,7 @@ use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus, Fmmu, S
 use ferrocat_wire::sii::{SiiHeader, SiiInfo, SmEntry, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
 use ferrocat_wire::{Address, Command};
 
-use crate::engine::Engine;
+use crate::engine::{Engine, Pdu};
 use crate::error::{code_text, MasterError, Result};
 use crate::io::Io;
 use crate::slave::{MailboxConfig, Mapped, Slave};
@@ -67,6 +67,11 @@ pub struct Master<I: Io> {
     pub cyclic_timeout_ns: u64,
     /// Check the slaves after a cycle with a short working counter.
     pub supervise_on_wkc: bool,
+    /// Station address of the reference clock when the cycle distributes it (FRMW of 0x0910).
+    pub dc_reference: Option<u16>,
+    /// The reference clock's system time as the last cycle's FRMW read it.
+    pub dc_time: u64,
+    pub(crate) frmw: [u8; 8],
 }
 
 impl<I: Io> Master<I> {
@@ -84,6 +89,9 @@ impl<I: Io> Master<I> {
             cyc: Default::default(),
             cyclic_timeout_ns: 1_000_000,
             supervise_on_wkc: true,
+            dc_reference: None,
+            dc_time: 0,
+            frmw: [0; 8],
         }
     }
 
@@ -109,7 +117,11 @@ impl<I: Io> Master<I> {
         for pos in 0..count {
             let station = STATION_BASE + pos;
             self.engine.expect(Command::APWR, Address::position(pos, 0x0010), &mut station.to_le_bytes(), 1)?;
-            let slave = self.read_slave(pos, station)?;
+        }
+        let stations: Vec<u16> = (0..count).map(|p| STATION_BASE + p).collect();
+        let images = self.read_all_sii(&stations)?;
+        for (pos, img) in images.into_iter().enumerate() {
+            let slave = self.read_slave(pos as u16, stations[pos], img)?;
             self.slaves.push(slave);
         }
         self.wait_state_all(AlState::Init)?;
@@ -127,14 +139,22 @@ impl<I: Io> Master<I> {
         self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
     }
 
-    fn read_slave(&mut self, pos: u16, station: u16) -> Result<Slave> {
-        let mut id = [0u8; 10];
-        self.fprd(station, 0x0000, &mut id)?;
-        let mut alias = [0u8; 2];
-        self.fprd(station, 0x0012, &mut alias)?;
-        let mut dl = [0u8; 2];
-        self.fprd(station, 0x0110, &mut dl)?;
-        let sii_bytes = self.read_sii(station)?;
+    fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
+        let (mut id, mut alias, mut dl) = ([0u8; 10], [0u8; 2], [0u8; 2]);
+        let mut p = [
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0000 }, &mut id),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0012 }, &mut alias),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0110 }, &mut dl),
+        ];
+        self.engine.transact(&mut p)?;
+        if p.iter().any(|x| x.wkc != 1) {
+            return Err(MasterError::Wkc {
+                what: format!("identity of slave {pos}"),
+                expected: 1,
+                got: 0,
+                slaves: format!(" (station {station:#06x})"),
+            });
+        }
         let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
         let h = sii.header;
         let features = u16::from_le_bytes([id[8], id[9]]);
@@ -181,6 +201,80 @@ impl<I: Io> Master<I> {
             assignment: [None, None],
             sii,
         })
+    }
+
+    /// Reads every slave's whole SII at once: each read command goes to all slaves in one frame,
+    /// each status-and-data read in another, so the time does not grow with the slave count.
+    fn read_all_sii(&mut self, stations: &[u16]) -> Result<Vec<Vec<u8>>> {
+        let n = stations.len();
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0500 }, &mut [0])?;
+        let mut imgs: Vec<Vec<u8>> = vec![Vec::with_capacity(2048); n];
+        let mut done = vec![false; n];
+        let mut ctl = vec![[0u8; 2]; n];
+        {
+            let mut p: Vec<Pdu<'_>> = stations
+                .iter()
+                .zip(ctl.iter_mut())
+                .map(|(&st, c)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0502 }, c))
+                .collect();
+            self.engine.transact(&mut p)?;
+        }
+        let eight: Vec<bool> = ctl.iter().map(|c| u16::from_le_bytes(*c) & 0x0040 != 0).collect();
+        let deadline = self.engine.io.now_ns() + 10_000_000_000;
+        while done.iter().any(|d| !d) {
+            let active: Vec<usize> = (0..n).filter(|&k| !done[k]).collect();
+            let mut cmds: Vec<[u8; 6]> = active
+                .iter()
+                .map(|&k| {
+                    let mut c = [0x00, 0x01, 0, 0, 0, 0];
+                    c[2..6].copy_from_slice(&((imgs[k].len() / 2) as u32).to_le_bytes());
+                    c
+                })
+                .collect();
+            {
+                let mut p: Vec<Pdu<'_>> = active
+                    .iter()
+                    .zip(cmds.iter_mut())
+                    .map(|(&k, c)| Pdu::new(Command::FPWR, Address::Device { adp: stations[k], ado: 0x0502 }, c))
+                    .collect();
+                self.engine.transact(&mut p)?;
+            }
+            // Status, address and data in one read; poll again only those still busy.
+            let mut pending = active.clone();
+            while !pending.is_empty() {
+                let mut regs: Vec<[u8; 14]> = vec![[0; 14]; pending.len()];
+                {
+                    let mut p: Vec<Pdu<'_>> = pending
+                        .iter()
+                        .zip(regs.iter_mut())
+                        .map(|(&k, r)| Pdu::new(Command::FPRD, Address::Device { adp: stations[k], ado: 0x0502 }, r))
+                        .collect();
+                    self.engine.transact(&mut p)?;
+                }
+                let mut still = Vec::new();
+                for (&k, r) in pending.iter().zip(&regs) {
+                    let c = u16::from_le_bytes([r[0], r[1]]);
+                    if c & 0x8000 != 0 {
+                        still.push(k);
+                        continue;
+                    }
+                    if c & 0x2000 != 0 {
+                        return Err(MasterError::Config(format!("slave {k}: SII read not acknowledged")));
+                    }
+                    imgs[k].extend_from_slice(&r[6..if eight[k] { 14 } else { 10 }]);
+                    done[k] = sii_complete(&imgs[k]);
+                }
+                pending = still;
+                if self.engine.io.now_ns() > deadline {
+                    return Err(MasterError::Config("SII reads stay busy".into()));
+                }
+            }
+        }
+        for img in &mut imgs {
+            let len = sii_used_len(img);
+            img.truncate(len);
+        }
+        Ok(imgs)
     }
 
     /// Reads the SII through the EEPROM interface: the header, then category by category up to
@@ -816,10 +910,65 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// Adds an FRMW of the reference clock's system time (the first DC slave) to every cyclic
+    /// frame, as SOEM and ethercrab do; returns the reference's position.
+    pub fn distribute_dc(&mut self) -> Option<u16> {
+        let r = self.slaves.iter().find(|s| s.has_dc)?;
+        self.dc_reference = Some(r.station);
+        Some(r.position)
+    }
+
     /// Scan, configure, start: the whole bring-up.
     pub fn bring_up(&mut self) -> Result<()> {
         self.scan()?;
         self.configure()?;
         self.start()
+    }
+}
+
+/// Bytes of an SII image up to and including its end marker (or the whole of it).
+fn sii_used_len(img: &[u8]) -> usize {
+    if img.len() < SII_HEADER {
+        return img.len();
+    }
+    let max = SiiHeader::parse(img).map(|h| h.eeprom_size_bytes()).unwrap_or(img.len()).clamp(SII_HEADER, 65536);
+    let mut at = SII_HEADER;
+    while at + 2 <= img.len().min(max) {
+        let kind = u16::from_le_bytes([img[at], img[at + 1]]);
+        if kind == 0xFFFF {
+            return at + 2;
+        }
+        if at + CATEGORY_HEADER_LEN > img.len() {
+            return img.len();
+        }
+        at += CATEGORY_HEADER_LEN + u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+    }
+    img.len().min(max)
+}
+
+/// Whether `img` holds the whole SII: the end marker, or as much as the EEPROM is large.
+fn sii_complete(img: &[u8]) -> bool {
+    if img.len() < SII_HEADER {
+        return false;
+    }
+    let max = SiiHeader::parse(img).map(|h| h.eeprom_size_bytes()).unwrap_or(2048).clamp(SII_HEADER, 65536);
+    if img.len() >= max {
+        return true;
+    }
+    let mut at = SII_HEADER;
+    loop {
+        if at + 2 > img.len() {
+            return false;
+        }
+        if u16::from_le_bytes([img[at], img[at + 1]]) == 0xFFFF {
+            return true;
+        }
+        if at + CATEGORY_HEADER_LEN > img.len() {
+            return false;
+        }
+        at += CATEGORY_HEADER_LEN + u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+        if at >= max {
+            return true;
+        }
     }
 }

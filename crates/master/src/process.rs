@@ -13,6 +13,8 @@ use crate::master::Master;
 const CHUNK: usize = MAX_PDU_LEN - HEADER_LEN - WKC_LEN;
 /// Up to this many frames per cycle (8 × 1486 bytes of process image).
 const MAX_CHUNKS: usize = 8;
+/// The image's LRWs and, with DC distribution, one FRMW.
+const MAX_PDUS: usize = MAX_CHUNKS + 1;
 
 /// Where an entry sits in the image: bit offset and width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -119,7 +121,7 @@ impl<I: Io> Master<I> {
             }
         }
         self.cyc.last_start = Some(start);
-        if self.image.is_empty() {
+        if self.image.is_empty() && self.dc_reference.is_none() {
             return Ok(0);
         }
         let chunks = self.image.len().div_ceil(CHUNK);
@@ -130,25 +132,43 @@ impl<I: Io> Master<I> {
                 MAX_CHUNKS
             )));
         }
-        let mut empty: [[u8; 0]; MAX_CHUNKS] = [[]; MAX_CHUNKS];
-        let mut parts = self.image.chunks_mut(CHUNK);
+        let mut empty: [[u8; 0]; MAX_PDUS] = [[]; MAX_PDUS];
+        let Master { image, frmw, engine, dc_reference, cyclic_timeout_ns, .. } = self;
+        let mut parts = image.chunks_mut(CHUNK);
         let mut e = empty.iter_mut();
-        let mut pdus: [Pdu<'_>; MAX_CHUNKS] = std::array::from_fn(|k| {
-            let data: &mut [u8] = match parts.next() {
-                Some(p) => p,
-                None => e.next().map(|x| &mut x[..]).unwrap_or_default(),
-            };
-            Pdu::new(Command::LRW, Address::Logical((k * CHUNK) as u32), data)
+        let mut frmw = Some(&mut frmw[..]);
+        let reference = *dc_reference;
+        let mut pdus: [Pdu<'_>; MAX_PDUS] = std::array::from_fn(|k| {
+            if let Some(p) = parts.next() {
+                return Pdu::new(Command::LRW, Address::Logical((k * CHUNK) as u32), p);
+            }
+            match (reference, frmw.take()) {
+                (Some(st), Some(f)) => Pdu::new(Command::FRMW, Address::Device { adp: st, ado: 0x0910 }, f),
+                _ => Pdu::new(
+                    Command::NOP,
+                    Address::Device { adp: 0, ado: 0 },
+                    e.next().map(|x| &mut x[..]).unwrap_or_default(),
+                ),
+            }
         });
+        let n = chunks + reference.is_some() as usize;
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
-        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
-        self.engine.timeout_ns = self.cyclic_timeout_ns;
-        self.engine.retries = 0;
-        let r = self.engine.transact(&mut pdus[..chunks]);
-        self.engine.timeout_ns = timeout;
-        self.engine.retries = retries;
+        let (timeout, retries) = (engine.timeout_ns, engine.retries);
+        engine.timeout_ns = *cyclic_timeout_ns;
+        engine.retries = 0;
+        let r = engine.transact(&mut pdus[..n]);
+        engine.timeout_ns = timeout;
+        engine.retries = retries;
         let wkc = match r {
-            Ok(()) => pdus[..chunks].iter().map(|p| p.wkc).min().unwrap_or(0),
+            Ok(()) => {
+                if reference.is_some() {
+                    let f = &pdus[chunks];
+                    let mut b = [0u8; 8];
+                    b.copy_from_slice(&f.data[..8]);
+                    self.dc_time = u64::from_le_bytes(b);
+                }
+                pdus[..chunks].iter().map(|p| p.wkc).min().unwrap_or(self.expected_wkc)
+            }
             Err(MasterError::Timeout { .. }) => {
                 self.cyc.stats.lost_frames += 1;
                 0

@@ -95,3 +95,25 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     }
     assert_eq!(m.sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
 }
+
+#[test]
+fn needs_shared_emergencies_reach_the_application() {
+    use ferrocat_master::MasterEvent;
+    let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
+    let toml = format!("seed = 2\n[[device]]\nesi = '{}'\nproduct = 0x4F\n", esi.display());
+    let mut m = master(&toml, HostModel::pc_rt());
+    m.scan().unwrap();
+    m.configure().unwrap();
+    assert_eq!(m.poll_mailboxes().unwrap(), 0, "nothing waiting");
+    let e = ferrocat_wire::coe::Emergency { error_code: 0x8611, error_register: 0x20, data: [1, 2, 3, 4, 5] };
+    let dev = m.engine.io.seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::CoeDevice>().unwrap();
+    dev.emergency(e);
+    // The ESC delivers it to SM1 with the next frame; the application's poll finds it.
+    m.poll_mailboxes().unwrap();
+    m.poll_mailboxes().unwrap();
+    let got: Vec<_> =
+        m.events.iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
+    assert_eq!(got, ["slave 0 (C5-E-2-21): emergency 0x8611, error register 0x20, data [01, 02, 03, 04, 05]"]);
+    // And an SDO still works afterwards.
+    assert_eq!(m.sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
+}
