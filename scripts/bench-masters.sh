@@ -2,15 +2,19 @@
 # ferrocat, ethercrab and SOEM (pysoem) side by side, in one run, against the same release
 # `ferrocat sim` serving 16 slaves on a veth pair in namespaces this script makes and removes:
 # time from start to OP, the highest sustained rate of a one-frame LRW + FRMW cycle, and the
-# master's CPU time per cycle. Needs root and scripts/test.sh's .venv (pysoem).
+# master's CPU time per cycle. The masters take turns for ROUNDS rounds (load on the machine
+# changes over time, so each round gives all three the same conditions); medians are printed.
+# Needs root and scripts/test.sh's .venv (pysoem).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECONDS_EACH="${SECONDS_EACH:-3}"
+ROUNDS="${ROUNDS:-5}"
 cargo build -q --release -p ferrocat --example ethercrab_bench
 cargo build -q --release -p ferrocat
 bin=target/release/ferrocat
 id=$$; m=fcmm$id; s=fcms$id
-cleanup() { ip netns del "$m" 2>/dev/null || true; ip netns del "$s" 2>/dev/null || true; }
+out=$(mktemp)
+cleanup() { ip netns del "$m" 2>/dev/null || true; ip netns del "$s" 2>/dev/null || true; rm -f "$out"; }
 trap cleanup EXIT
 ip netns add "$m"; ip netns add "$s"
 ip link add "fcm${id}a" type veth peer name "fcm${id}b"
@@ -18,14 +22,27 @@ ip link set "fcm${id}a" netns "$m"; ip link set "fcm${id}b" netns "$s"
 ip -n "$m" link set "fcm${id}a" up; ip -n "$s" link set "fcm${id}b" up
 devices=(--device EK1100)
 for k in $(seq 1 15); do if (( k % 2 )); then devices+=(--device EL1004); else devices+=(--device EL2004); fi; done
-run_sim() { ip netns exec "$s" "$bin" sim "${devices[@]}" --iface "fcm${id}b" >/dev/null 2>&1 & echo $!; }
+for round in $(seq 1 "$ROUNDS"); do
+  for master in ferrocat ethercrab soem; do
+    ip netns exec "$s" "$bin" sim "${devices[@]}" --iface "fcm${id}b" >/dev/null 2>&1 &
+    sim=$!
+    sleep 0.5
+    case $master in
+      ferrocat) line=$(ip netns exec "$m" "$bin" run --iface "fcm${id}a" --dc --max-rate --seconds "$SECONDS_EACH" 2>&1 | tr '\n' ' ') ;;
+      ethercrab) line=$(ip netns exec "$m" target/release/examples/ethercrab_bench "fcm${id}a" "$SECONDS_EACH") ;;
+      soem) line=$(ip netns exec "$m" .venv/bin/python crates/cli/tests/python/soem_bench.py "fcm${id}a" "$SECONDS_EACH") ;;
+    esac
+    kill -TERM "$sim"; while kill -0 "$sim" 2>/dev/null; do sleep 0.1; done
+    op=$(grep -oE 'bring-up to OP:? [0-9.]+ ms' <<<"$line" | grep -oE '[0-9.]+' | head -1)
+    rate=$(grep -oE '[0-9.]+ cycles/s' <<<"$line" | grep -oE '[0-9.]+' | head -1)
+    cpu=$(grep -oE '[0-9.]+ us per cycle' <<<"$line" | grep -oE '[0-9.]+' | head -1)
+    echo "round $round  $master  to-OP ${op} ms  ${rate} cycles/s  CPU ${cpu} us/cycle"
+    echo "$master $op $rate $cpu" >> "$out"
+  done
+done
+echo
+echo "medians over $ROUNDS rounds (16 slaves, one LRW + FRMW frame per cycle):"
 for master in ferrocat ethercrab soem; do
-  sim=$(run_sim); sleep 0.5
-  case $master in
-    ferrocat) ip netns exec "$m" "$bin" run --iface "fcm${id}a" --dc --max-rate --seconds "$SECONDS_EACH" 2>&1 \
-                | grep -E "bring-up|cyclic rate" | tr '\n' ' '; echo ;;
-    ethercrab) ip netns exec "$m" target/release/examples/ethercrab_bench "fcm${id}a" "$SECONDS_EACH" ;;
-    soem) ip netns exec "$m" .venv/bin/python crates/cli/tests/python/soem_bench.py "fcm${id}a" "$SECONDS_EACH" ;;
-  esac
-  kill -TERM "$sim"; while kill -0 "$sim" 2>/dev/null; do sleep 0.1; done
+  med() { grep "^$master " "$out" | awk -v c="$1" '{print $c}' | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
+  printf "  %-10s start to OP %8s ms   %8s cycles/s   %7s us CPU per cycle\n" "$master" "$(med 2)" "$(med 3)" "$(med 4)"
 done

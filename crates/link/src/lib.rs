@@ -18,6 +18,9 @@ pub struct RawSocket {
     fd: OwnedFd,
     ifindex: i32,
     stamps: Timestamps,
+    flags: libc::c_uint,
+    /// The receive timeout last set, so that an unchanged one costs no system call.
+    timeout_ns: std::cell::Cell<u64>,
 }
 
 /// Which timestamps the kernel gives this socket.
@@ -157,13 +160,36 @@ impl RawSocket {
                 ),
                 "SO_RCVTIMEO",
             )?;
-            Ok(RawSocket { fd, ifindex, stamps })
+            Ok(RawSocket { fd, ifindex, stamps, flags, timeout_ns: std::cell::Cell::new(0) })
         }
     }
 
-    /// Sets the receive timeout (at least 1 µs; the kernel rounds to its tick).
+    /// Asks for transmit timestamps too (read them with `tx_timestamp`).
+    pub fn enable_tx_timestamps(&mut self) -> io::Result<()> {
+        let mut f = self.flags | libc::SOF_TIMESTAMPING_TX_SOFTWARE;
+        if self.stamps == Timestamps::Hardware {
+            f |= libc::SOF_TIMESTAMPING_TX_HARDWARE;
+        }
+        // SAFETY: setsockopt reads the flags we own.
+        let r = unsafe {
+            libc::setsockopt(
+                self.fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_TIMESTAMPING,
+                &f as *const _ as *const libc::c_void,
+                4,
+            )
+        };
+        check(r, "SO_TIMESTAMPING").map(|_| self.flags = f)
+    }
+
+    /// Sets the receive timeout (at least 1 µs, rounded to 10 µs; the kernel rounds to its tick).
     pub fn set_timeout_ns(&self, ns: u64) -> io::Result<()> {
-        let ns = ns.clamp(1_000, 1_000_000_000);
+        let ns = ns.clamp(1_000, 1_000_000_000) / 10_000 * 10_000 + 10_000;
+        if ns == self.timeout_ns.get() {
+            return Ok(());
+        }
+        self.timeout_ns.set(ns);
         let tv = libc::timeval {
             tv_sec: (ns / 1_000_000_000) as libc::time_t,
             tv_usec: ((ns % 1_000_000_000) / 1000) as libc::suseconds_t,
