@@ -30,6 +30,9 @@ pub struct Target {
     /// Seed of the virtual segment.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// ESI files describing the slaves (their PDOs are used where CoE and the SII say nothing).
+    #[arg(long, value_name = "FILE")]
+    pub esi: Vec<PathBuf>,
     /// Write every frame sent and received to this pcapng file.
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
@@ -152,7 +155,13 @@ impl Target {
             }
             None => None,
         };
-        Ok(Master::new(CliIo { world, capture }))
+        let mut m = Master::new(CliIo { world, capture });
+        for f in &self.esi {
+            let xml = std::fs::read_to_string(f).with_context(|| format!("reading {}", f.display()))?;
+            let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
+            m.esi.extend(file.devices.into_iter().map(|d| (file.vendor_id, d)));
+        }
+        Ok(m)
     }
 }
 

@@ -47,6 +47,9 @@ pub trait Application: Debug + Send {
     fn check_transition(&mut self, _pdi: &mut Pdi<'_>, _from: AlState, _to: AlState) -> Result<(), AlStatusCode> {
         Ok(())
     }
+    /// A frame is about to be processed in SAFEOP or OP: inputs the application samples
+    /// continuously go to the input buffer now.
+    fn sample_inputs(&mut self, _pdi: &mut Pdi<'_>) {}
     /// The AL state changed (device emulation or not).
     fn state_changed(&mut self, _pdi: &mut Pdi<'_>, _state: AlState) {}
     /// A buffered output SyncManager received a complete buffer.
@@ -98,9 +101,10 @@ pub struct DigitalIo {
     pub outputs: Vec<u8>,
     /// How many complete output buffers arrived.
     pub output_updates: u64,
-    /// Values presented to the master.
+    /// Values presented to the master (published with the next frame after a change).
     pub inputs: Vec<u8>,
     pub sm_count: u8,
+    published: Vec<u8>,
 }
 
 impl DigitalIo {
@@ -117,6 +121,13 @@ impl DigitalIo {
 }
 
 impl Application for DigitalIo {
+    fn sample_inputs(&mut self, pdi: &mut Pdi<'_>) {
+        if self.inputs != self.published {
+            self.publish_inputs(pdi);
+            self.published.clear();
+            self.published.extend_from_slice(&self.inputs);
+        }
+    }
     fn check_transition(&mut self, pdi: &mut Pdi<'_>, _from: AlState, to: AlState) -> Result<(), AlStatusCode> {
         if to == AlState::SafeOp {
             self.publish_inputs(pdi);
@@ -224,6 +235,9 @@ impl Application for SyncApp {
             self.timer_t0 = pdi.now_ns();
             self.timer_k = 0;
         }
+    }
+    fn sample_inputs(&mut self, pdi: &mut Pdi<'_>) {
+        self.io.sample_inputs(pdi);
     }
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         self.written += 1;

@@ -479,6 +479,10 @@ impl Esc {
         if self.expected.mailbox.is_some() {
             self.deliver_mailbox();
         }
+        if matches!(self.al.state, AlState::SafeOp | AlState::Op) {
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.sample_inputs(&mut pdi);
+        }
         if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
             self.refresh_registers();
         }

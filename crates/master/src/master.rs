@@ -67,6 +67,9 @@ pub struct Master<I: Io> {
     pub cyclic_timeout_ns: u64,
     /// Check the slaves after a cycle with a short working counter.
     pub supervise_on_wkc: bool,
+    /// Device descriptions from ESI files: the PDO mapping of slaves whose CoE and SII do not
+    /// give one (vendor, device).
+    pub esi: Vec<(u32, ferrocat_esi::Device)>,
     /// Station address of the reference clock when the cycle distributes it (FRMW of 0x0910).
     pub dc_reference: Option<u16>,
     /// The reference clock's system time as the last cycle's FRMW read it.
@@ -89,6 +92,7 @@ impl<I: Io> Master<I> {
             cyc: Default::default(),
             cyclic_timeout_ns: 1_000_000,
             supervise_on_wkc: true,
+            esi: Vec::new(),
             dc_reference: None,
             dc_time: 0,
             frmw: [0; 8],
@@ -629,8 +633,36 @@ impl<I: Io> Master<I> {
         let out_sm =
             sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_OUTPUTS).map(|(i, s)| (i as u8, *s));
         let in_sm = sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_INPUTS).map(|(i, s)| (i as u8, *s));
+        let esi_dev = {
+            let s = &self.slaves[k];
+            self.esi
+                .iter()
+                .filter(|(v, d)| *v == s.vendor_id && d.product_code == s.product_code)
+                .max_by_key(|(_, d)| (d.revision == s.revision, d.revision))
+                .map(|(_, d)| d.clone())
+        };
+        let sii_has_mapping = {
+            let sii = &self.slaves[k].sii;
+            sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
+        };
         let (outputs, inputs) = if self.slaves[k].has_coe() {
             (self.coe_mapping(position, 0x1C12)?, self.coe_mapping(position, 0x1C13)?)
+        } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
+            // The ESI's default assignment: PDOs with an Sm attribute.
+            let from = |pdos: &[ferrocat_esi::PdoDesc]| -> Vec<Mapped> {
+                pdos.iter()
+                    .filter(|p| p.sm.is_some())
+                    .flat_map(|p| p.entries.iter())
+                    .map(|e| Mapped {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bits: e.bit_len,
+                        name: e.name.clone(),
+                        image_bit: 0,
+                    })
+                    .collect()
+            };
+            (from(&dev.rx_pdos), from(&dev.tx_pdos))
         } else {
             let sii = &self.slaves[k].sii;
             let from = |pdos: &[ferrocat_wire::sii::Pdo], sm: Option<(u8, SmEntry)>| -> Vec<Mapped> {

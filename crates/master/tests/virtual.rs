@@ -117,3 +117,69 @@ fn needs_shared_emergencies_reach_the_application() {
     // And an SDO still works afterwards.
     assert_eq!(m.sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
 }
+
+#[test]
+fn inputs_come_back_and_esi_describes_a_bare_slave() {
+    // EL1004 inputs set on the simulated terminal arrive in the image, by entry name.
+    let mut m = master(
+        "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\n",
+        HostModel::pc_rt(),
+    );
+    m.bring_up().unwrap();
+    let io = m.engine.io.seg.nodes[1].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap();
+    io.inputs = vec![0b0101];
+    for _ in 0..3 {
+        m.cycle().unwrap();
+    }
+    let bits: Vec<u64> =
+        m.slaves[1].inputs.iter().map(|e| m.get(ferrocat_master::Handle { bit: e.image_bit, bits: e.bits })).collect();
+    assert_eq!(bits, [1, 0, 1, 0]);
+    assert_eq!(m.get(m.input(1, "Input").unwrap()), 1);
+}
+
+/// An ESI for a 2-channel output terminal; `pdos` says whether it describes its PDOs.
+fn terminal_esi(pdos: bool) -> String {
+    let pdo = if pdos {
+        "<RxPdo Fixed=\"1\" Sm=\"0\"><Index>#x1600</Index><Name>Ch1</Name><Entry><Index>#x7000</Index><SubIndex>1</SubIndex><BitLen>1</BitLen><Name>Out 1</Name><DataType>BOOL</DataType></Entry></RxPdo>\
+         <RxPdo Fixed=\"1\" Sm=\"0\"><Index>#x1601</Index><Name>Ch2</Name><Entry><Index>#x7010</Index><SubIndex>1</SubIndex><BitLen>1</BitLen><Name>Out 2</Name><DataType>BOOL</DataType></Entry></RxPdo>"
+    } else {
+        ""
+    };
+    format!(
+        "<EtherCATInfo><Vendor><Id>#x2</Id><Name>Test</Name></Vendor><Descriptions><Devices><Device Physics=\"KK\">\
+         <Type ProductCode=\"#x12345678\" RevisionNo=\"#x1\">XT0002</Type><Name>Two outputs</Name>\
+         <Fmmu>Outputs</Fmmu><Sm StartAddress=\"#xF00\" ControlByte=\"#x44\" Enable=\"1\">Outputs</Sm>{pdo}\
+         <Eeprom><ByteSize>2048</ByteSize><ConfigData>0401</ConfigData></Eeprom></Device></Devices></Descriptions></EtherCATInfo>"
+    )
+}
+
+#[test]
+fn esi_describes_a_slave_whose_sii_does_not() {
+    let dir = std::env::temp_dir();
+    let (bare, full) = (
+        dir.join(format!("ferrocat-bare-{}.xml", std::process::id())),
+        dir.join(format!("ferrocat-full-{}.xml", std::process::id())),
+    );
+    std::fs::write(&bare, terminal_esi(false)).unwrap();
+    std::fs::write(&full, terminal_esi(true)).unwrap();
+    let toml = format!(
+        "seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nesi = '{}'\nproduct = 0x12345678\n",
+        bare.display()
+    );
+    let mut m = master(&toml, HostModel::ideal());
+    m.bring_up().unwrap();
+    assert!(m.slaves[1].outputs.is_empty(), "the SII alone says nothing");
+    // The same bring-up with the ESI: two outputs, in OP, reaching the terminal.
+    let mut m = master(&toml, HostModel::ideal());
+    let f = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(&full).unwrap()).unwrap();
+    m.esi.extend(f.devices.into_iter().map(|d| (f.vendor_id, d)));
+    m.bring_up().unwrap();
+    std::fs::remove_file(&bare).ok();
+    std::fs::remove_file(&full).ok();
+    assert_eq!(m.slaves[1].outputs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["Out 1", "Out 2"]);
+    let h = m.output(1, "Out 2").unwrap();
+    m.set(h, 1);
+    m.cycle().unwrap();
+    let io = m.engine.io.seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap();
+    assert_eq!(io.outputs, [0b10]);
+}
