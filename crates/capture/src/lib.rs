@@ -58,8 +58,8 @@ pub fn read_packets(bytes: &[u8]) -> Result<Vec<Packet<'static>>, CaptureError> 
 }
 
 /// Calls `f` for every packet, in file order, without collecting them.
-pub fn for_each_packet<'a>(
-    bytes: &'a [u8],
+pub fn for_each_packet(
+    bytes: &[u8],
     mut f: impl FnMut(Packet<'_>) -> Result<(), CaptureError>,
 ) -> Result<(), CaptureError> {
     if bytes.len() < 4 {

@@ -142,7 +142,7 @@ impl DcUnit {
     fn set_scd(&mut self, scd: i16) {
         self.scd = scd;
         let (num, den) = scd_rate(self.scs, scd);
-        self.corr_rate_q32 = (AS_PER_NS * num << 32) / den;
+        self.corr_rate_q32 = ((AS_PER_NS * num) << 32) / den;
         self.applied_fpp = 1_000_000_000_000_000 * num / den;
     }
 

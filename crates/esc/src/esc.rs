@@ -314,10 +314,7 @@ impl Esc {
             return false;
         }
         // Loop control 0x0101: 00 auto, 01 auto-close, 10 open, 11 closed.
-        match (self.mem[0x0101] >> (2 * p)) & 3 {
-            3 => false,
-            _ => true,
-        }
+        (self.mem[0x0101] >> (2 * p)) & 3 != 3
     }
 
     /// Reads memory as the PDI sees it (tests, tools).
@@ -429,7 +426,7 @@ impl Esc {
                 dl |= 1 << (4 + p);
                 dl |= 1 << (9 + 2 * p);
             }
-            if !self.port_open(p) && !(p == 0 && link) {
+            if !(self.port_open(p) || p == 0 && link) {
                 dl |= 1 << (8 + 2 * p);
             }
         }
@@ -968,7 +965,7 @@ impl Esc {
                 self.pending_al = Some((control, t + self.al_response_ns));
             }
         }
-        let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset) && !self.sms.iter().any(|s| s.full);
+        let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset || self.sms.iter().any(|s| s.full));
         if dc_only {
             self.refresh_dc_registers();
         } else {

@@ -156,7 +156,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
                     obj.is_array = true;
                     let (_, n) = at.array.unwrap_or((0, 0));
                     let base = at.base_type.as_deref().and_then(|b| d.data_type(b)).map(|b| b.bit_size).unwrap_or(0);
-                    let elem_bits = if n > 0 { at.bit_size / n } else { base };
+                    let elem_bits = at.bit_size.checked_div(n).unwrap_or(base);
                     let first = si.subindex.unwrap_or(1);
                     for k in 0..n {
                         let Ok(sub) = u8::try_from(first as u32 + k) else { break };

@@ -43,11 +43,22 @@ impl ServeStats {
     }
 }
 
-fn is_ethercat(frame: &[u8]) -> Result<bool, ()> {
+/// One received frame through the segment: counted, dropped as an ESC drops it (not EtherCAT,
+/// or malformed), or processed. Returns whether there is an answer to send.
+fn handle(seg: &mut Segment, frame: &mut [u8], t_ns: u64, stats: &mut ServeStats) -> bool {
+    stats.frames_in += 1;
     match ferrocat_wire::Frame::parse(frame) {
-        Ok(Some(f)) => Ok(f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU),
-        Ok(None) => Ok(false),
-        Err(_) => Err(()),
+        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => {
+            seg.exchange(frame, t_ns).is_some()
+        }
+        Ok(_) => {
+            stats.not_ethercat += 1;
+            false
+        }
+        Err(_) => {
+            stats.malformed += 1;
+            false
+        }
     }
 }
 
@@ -62,23 +73,11 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool) -> io::
             continue;
         };
         let start = monotonic_ns();
-        stats.frames_in += 1;
-        match is_ethercat(&buf[..n]) {
-            Ok(true) => {}
-            Ok(false) => {
-                stats.not_ethercat += 1;
-                continue;
-            }
-            Err(()) => {
-                stats.malformed += 1;
-                continue;
-            }
-        }
-        if seg.exchange(&mut buf[..n], start - t0).is_some() {
+        if handle(seg, &mut buf[..n], start - t0, &mut stats) {
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
+            stats.record(monotonic_ns() - start);
         }
-        stats.record(monotonic_ns() - start);
     }
     Ok(stats)
 }
@@ -106,26 +105,14 @@ pub fn serve_udp(seg: &mut Segment, sock: &UdpSocket, stop: &AtomicBool) -> io::
             Err(e) => return Err(e),
         };
         let start = monotonic_ns();
-        stats.frames_in += 1;
         // Wrap the PDU in an Ethernet header so that the segment sees a frame.
         buf[..12].fill(0xFF);
         buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
-        match is_ethercat(&buf[..HDR + n]) {
-            Ok(true) => {}
-            Ok(false) => {
-                stats.not_ethercat += 1;
-                continue;
-            }
-            Err(()) => {
-                stats.malformed += 1;
-                continue;
-            }
-        }
-        if seg.exchange(&mut buf[..HDR + n], start - t0).is_some() {
+        if handle(seg, &mut buf[..HDR + n], start - t0, &mut stats) {
             sock.send_to(&buf[HDR..HDR + n], from)?;
             stats.frames_out += 1;
+            stats.record(monotonic_ns() - start);
         }
-        stats.record(monotonic_ns() - start);
     }
     Ok(stats)
 }

@@ -299,9 +299,7 @@ impl Segment {
             self.stats.lost += 1;
             return None;
         }
-        let Some(pdu_at) = crate::frame_pdu_offset(frame) else {
-            return None;
-        };
+        let pdu_at = crate::frame_pdu_offset(frame)?;
         // Timing pass: where the frame head is when.
         let head_at_first = t_tx_ns + (PREAMBLE_BYTES * NS_PER_BYTE) + self.master_link_ns as u64;
         self.visits.clear();
