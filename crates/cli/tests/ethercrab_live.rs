@@ -61,7 +61,7 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
     std::thread::sleep(Duration::from_millis(200));
     let md = Arc::new(MainDevice::new(
         pdu_loop,
-        Timeouts { pdu: Duration::from_millis(200), state_transition: Duration::from_secs(10), ..Timeouts::default() },
+        Timeouts { pdu: Duration::from_millis(1000), state_transition: Duration::from_secs(10), ..Timeouts::default() },
         MainDeviceConfig { dc_static_sync_iterations: 10_000, ..MainDeviceConfig::default() },
     ));
     let result = futures_lite::future::block_on(async {
