@@ -23,8 +23,9 @@ fn sim_over_udp_on_loopback() {
         let n = err.read(&mut b).unwrap();
         assert!(n > 0, "sim exited: {seen}");
         seen += &String::from_utf8_lossy(&b[..n]);
-        if let Some(line) = seen.lines().find(|l| l.contains(" on UDP ")) {
-            break line.rsplit(' ').next().unwrap().to_string();
+        // A whole line: the address may arrive in two reads.
+        if let Some(line) = seen.split_inclusive('\n').find(|l| l.contains(" on UDP ") && l.ends_with('\n')) {
+            break line.trim_end().rsplit(' ').next().unwrap().to_string();
         }
     };
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();

@@ -102,7 +102,14 @@ impl Sim {
             );
             seen.extend_from_slice(&b[..n]);
         }
-        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+        // Keep what the simulator says (its statistics on exit) for failure messages.
+        std::thread::spawn(move || {
+            let mut rest = String::new();
+            let _ = err.read_to_string(&mut rest);
+            if !rest.trim().is_empty() {
+                eprintln!("ferrocat sim said: {}", rest.trim());
+            }
+        });
         Sim { child }
     }
 
@@ -117,6 +124,9 @@ impl Sim {
 
 impl Drop for Sim {
     fn drop(&mut self) {
+        // SIGTERM first, so that the simulator reports its statistics.
+        let _ = Command::new("kill").args(["-TERM", &self.child.id().to_string()]).status();
+        std::thread::sleep(Duration::from_millis(200));
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
