@@ -103,6 +103,10 @@ enum Command {
         /// --cycle-us.
         #[arg(long)]
         max_rate: bool,
+        /// With --dc: at most this many frames of static drift compensation (it stops earlier
+        /// once converged).
+        #[arg(long, default_value_t = 15_000, requires = "dc")]
+        dc_static_frames: u32,
     },
     /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
     Rtt {
@@ -199,8 +203,8 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
-        Command::Run { target, seconds, cycle_us, dc, max_rate } => {
-            master_cmd::run(&target, seconds, cycle_us, dc, max_rate)
+        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames } => {
+            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate)
         }
     };
     match result {

@@ -205,7 +205,14 @@ fn cpu_ns() -> u64 {
     t(u.ru_utime) + t(u.ru_stime)
 }
 
-pub fn run(t: &Target, seconds: f64, cycle_us: u64, dc: bool, max_rate: bool) -> anyhow::Result<ExitCode> {
+pub fn run(
+    t: &Target,
+    seconds: f64,
+    cycle_us: u64,
+    dc_static_frames: Option<u32>,
+    max_rate: bool,
+) -> anyhow::Result<ExitCode> {
+    let dc = dc_static_frames.is_some();
     if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
         bail!("--seconds must be positive and --cycle-us at least 1");
     }
@@ -225,21 +232,31 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64, dc: bool, max_rate: bool) ->
         use ferrocat_master::io::Io;
         m.engine.io.now_ns()
     };
-    m.bring_up()?;
-    eprintln!(
-        "bring-up to OP: {:.1} ms",
-        ({
-            use ferrocat_master::io::Io;
-            m.engine.io.now_ns()
-        } - t_start) as f64
-            / 1e6
-    );
+    m.scan()?;
+    m.configure()?;
     if dc {
-        match m.distribute_dc() {
-            Some(p) => eprintln!("DC: slave {p} is the reference clock; FRMW in every cycle"),
-            None => bail!("--dc: no slave has a distributed clock"),
-        }
+        // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
+        let cfg = ferrocat_master::DcConfig {
+            sync0_cycle_ns: (cycle_us * 1000).min(u32::MAX as u64) as u32,
+            max_frames: dc_static_frames.unwrap_or(15_000),
+            ..Default::default()
+        };
+        let r = m.init_dc(&cfg)?;
+        eprintln!(
+            "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on slaves {:?}",
+            r.reference,
+            r.static_frames,
+            if r.converged { "converged" } else { "not converged" },
+            r.max_difference_ns,
+            r.sync0_slaves
+        );
     }
+    m.start()?;
+    let t_op = {
+        use ferrocat_master::io::Io;
+        m.engine.io.now_ns()
+    };
+    eprintln!("bring-up to OP: {:.1} ms", (t_op - t_start) as f64 / 1e6);
     let period = if max_rate { 0 } else { cycle_us * 1000 };
     m.set_period_ns(period);
     m.reset_cycle_stats();
@@ -277,6 +294,9 @@ pub fn run(t: &Target, seconds: f64, cycle_us: u64, dc: bool, max_rate: bool) ->
         }
     }
     let cpu = cpu_ns() - cpu0;
+    if dc {
+        eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc_monitor()?);
+    }
     let wall = m.engine.io.now_ns() - start;
     let s = m.cycle_stats();
     eprintln!(

@@ -114,6 +114,9 @@ impl Io for CliIo {
             World::Udp(u) => u.sleep_until(t_ns),
         }
     }
+    fn is_virtual(&self) -> bool {
+        matches!(self.world, World::Virtual(_))
+    }
     fn last_tx_ns(&mut self) -> Option<u64> {
         match &mut self.world {
             World::Virtual(v) => v.last_tx_ns(),

@@ -18,6 +18,10 @@ pub trait Io {
     fn last_tx_ns(&mut self) -> Option<u64> {
         None
     }
+    /// Virtual time (deterministic) rather than a real clock.
+    fn is_virtual(&self) -> bool {
+        false
+    }
 }
 
 /// A latency distribution: normal, clipped below, with rare outliers.
@@ -108,6 +112,9 @@ impl VirtualIo {
 impl Io for VirtualIo {
     fn now_ns(&mut self) -> u64 {
         self.now
+    }
+    fn is_virtual(&self) -> bool {
+        true
     }
 
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {

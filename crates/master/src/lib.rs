@@ -5,6 +5,7 @@
 //! on a network interface. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
 //! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
 mod coe;
+mod dc;
 mod engine;
 mod error;
 pub mod io;
@@ -13,6 +14,7 @@ mod process;
 mod slave;
 
 pub use coe::{EntryInfo, ObjectInfo};
+pub use dc::{DcConfig, DcReport};
 pub use engine::{describe, Engine, EngineStats, Pdu};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};

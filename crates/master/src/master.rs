@@ -75,6 +75,8 @@ pub struct Master<I: Io> {
     /// The reference clock's system time as the last cycle's FRMW read it.
     pub dc_time: u64,
     pub(crate) frmw: [u8; 8],
+    /// Master clock → DC system time (ns since 2000), fixed at first use.
+    pub(crate) epoch_offset_ns: Option<u64>,
 }
 
 impl<I: Io> Master<I> {
@@ -96,6 +98,7 @@ impl<I: Io> Master<I> {
             dc_reference: None,
             dc_time: 0,
             frmw: [0; 8],
+            epoch_offset_ns: None,
         }
     }
 

@@ -1,0 +1,220 @@
+//! Distributed-clock initialisation: delays and offsets written, the time control loops reset,
+//! static drift compensation until every slave has converged, SYNC0/SYNC1 started on the cycle
+//! grid, and a sync monitor (esc-spec §3.4).
+use ferrocat_wire::register::{dc_activation as act, SystemTimeDifference};
+use ferrocat_wire::{Address, Command};
+
+use crate::engine::Pdu;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+use crate::master::Master;
+
+/// Nanoseconds from 1970-01-01 to 2000-01-01, the epoch of DC system time.
+const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DcConfig {
+    /// Static drift compensation stops when every |0x092C| stays at or below this…
+    pub converged_ns: u32,
+    /// …for this many checks in a row (one check every `check_every` frames)…
+    pub stable_checks: u32,
+    pub check_every: u32,
+    /// …or after this many frames at the most (the ETG example: 15 000).
+    pub max_frames: u32,
+    /// SYNC0 cycle and shift; SYNC1 delay after SYNC0 (0: no SYNC1).
+    pub sync0_cycle_ns: u32,
+    pub sync0_shift_ns: i32,
+    pub sync1_ns: u32,
+    /// The first SYNC0 this far after the reference's present time, rounded to the cycle.
+    pub start_delay_ns: u64,
+    /// Slaves to start SYNC0 on (positions); `None`: those whose SII declares a DC op-mode.
+    pub sync0_slaves: Option<Vec<u16>>,
+}
+
+impl Default for DcConfig {
+    fn default() -> Self {
+        DcConfig {
+            converged_ns: 50,
+            stable_checks: 3,
+            check_every: 250,
+            max_frames: 15_000,
+            sync0_cycle_ns: 1_000_000,
+            sync0_shift_ns: 0,
+            sync1_ns: 0,
+            start_delay_ns: 100_000_000,
+            sync0_slaves: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DcReport {
+    pub reference: u16,
+    pub static_frames: u32,
+    pub converged: bool,
+    /// Largest |0x092C| at the end of the static drift compensation.
+    pub max_difference_ns: u32,
+    /// System time of the first SYNC0, and the slaves it was started on.
+    pub sync0_start: Option<u64>,
+    pub sync0_slaves: Vec<u16>,
+}
+
+impl<I: Io> Master<I> {
+    /// The master's clock as DC system time (ns since 2000): the world's clock plus a fixed
+    /// offset taken once (for real time from CLOCK_REALTIME).
+    pub fn master_system_time(&mut self) -> u64 {
+        let now = self.engine.io.now_ns();
+        if self.epoch_offset_ns.is_none() {
+            self.epoch_offset_ns = Some(if self.engine.io.is_virtual() {
+                // Virtual time starts at 2026-01-01 00:00 UTC.
+                1_767_225_600_000_000_000 - EPOCH_2000_NS
+            } else {
+                let real = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_nanos() as u64)
+                    .unwrap_or(EPOCH_2000_NS);
+                real.saturating_sub(EPOCH_2000_NS).saturating_sub(now)
+            });
+        }
+        now.wrapping_add(self.epoch_offset_ns.unwrap_or(0))
+    }
+
+    /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
+    pub fn init_dc(&mut self, cfg: &DcConfig) -> Result<DcReport> {
+        let reference = self
+            .slaves
+            .iter()
+            .position(|s| s.has_dc)
+            .ok_or_else(|| MasterError::Config("no slave has a distributed clock".into()))?;
+        // 1–3. Latch receive times, take the master's time at the latch, compute delays.
+        let t_master = self.master_system_time();
+        self.measure_delays()?;
+        // 4. Offsets, including each slave's delay: all local copies equal the reference's,
+        //    and the reference's equals the master's time at the latch.
+        let r_ref = self.slaves[reference].receive_time_epu;
+        let offset_ref = t_master.wrapping_sub(r_ref);
+        for k in 0..self.slaves.len() {
+            let s = &self.slaves[k];
+            if !s.has_dc {
+                continue;
+            }
+            let offset =
+                r_ref.wrapping_add(offset_ref).wrapping_sub(s.receive_time_epu).wrapping_add(s.delay_ns as u64);
+            let mut d = [0u8; 12];
+            let n = if s.dc_64bit { 8 } else { 4 };
+            d[..8].copy_from_slice(&offset.to_le_bytes());
+            let (st, delay) = (s.station, s.delay_ns);
+            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0920 }, &mut d[..n], 1)?;
+            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0928 }, &mut delay.to_le_bytes(), 1)?;
+        }
+        // 5. Reset the time control loops: filter depth first, then the speed counter start.
+        let dc_count = self.slaves.iter().filter(|s| s.has_dc).count() as u16;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0934 }, &mut [4])?;
+        self.engine.expect(
+            Command::BWR,
+            Address::Device { adp: 0, ado: 0x0930 },
+            &mut 0x1000u16.to_le_bytes(),
+            dc_count,
+        )?;
+        // 6. Static drift compensation, until converged (checked, not a fixed count).
+        let ref_station = self.slaves[reference].station;
+        let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
+        let mut converged = false;
+        while frames < cfg.max_frames {
+            let mut t = [0u8; 8];
+            self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
+            frames += 1;
+            if frames % cfg.check_every.max(1) == 0 {
+                max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
+                stable = if max_diff <= cfg.converged_ns { stable + 1 } else { 0 };
+                if stable >= cfg.stable_checks {
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        if !converged {
+            max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
+        }
+        // 7. Cyclic distribution from now on.
+        self.distribute_dc();
+        // 9. SYNC0 on the cycle grid of the reference's time.
+        let targets: Vec<u16> = match &cfg.sync0_slaves {
+            Some(v) => v.clone(),
+            None => self
+                .slaves
+                .iter()
+                .filter(|s| s.has_dc && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
+                .map(|s| s.position)
+                .collect(),
+        };
+        let sync0_start = if targets.is_empty() { None } else { Some(self.start_sync(&targets, cfg)?) };
+        Ok(DcReport {
+            reference: reference as u16,
+            static_frames: frames,
+            converged,
+            max_difference_ns: max_diff,
+            sync0_start,
+            sync0_slaves: targets,
+        })
+    }
+
+    fn start_sync(&mut self, targets: &[u16], cfg: &DcConfig) -> Result<u64> {
+        let cycle = cfg.sync0_cycle_ns.max(1) as u64;
+        // Stop first: a restart with 0x0981 still set is a classic cause of "no sync" errors.
+        for &p in targets {
+            let st = self.slave(p)?.station;
+            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0], 1)?;
+            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0980 }, &mut [0], 1)?;
+        }
+        let ref_station = self.dc_reference.ok_or_else(|| MasterError::Config("no reference clock".into()))?;
+        let mut now = [0u8; 8];
+        self.engine.expect(Command::FPRD, Address::Device { adp: ref_station, ado: 0x0910 }, &mut now, 1)?;
+        let now = u64::from_le_bytes(now);
+        let start = ((now + cfg.start_delay_ns) / cycle + 1) * cycle;
+        let start = (start as i128 + cfg.sync0_shift_ns as i128).max(0) as u64;
+        for &p in targets {
+            let (st, wide) = {
+                let s = self.slave(p)?;
+                (s.station, s.dc_64bit)
+            };
+            let fp = |m: &mut Self, ado: u16, d: &mut [u8]| {
+                m.engine.expect(Command::FPWR, Address::Device { adp: st, ado }, d, 1)
+            };
+            fp(self, 0x09A0, &mut (cfg.sync0_cycle_ns).to_le_bytes())?;
+            fp(self, 0x09A4, &mut cfg.sync1_ns.to_le_bytes())?;
+            let mut s = start.to_le_bytes();
+            fp(self, 0x0990, &mut s[..if wide { 8 } else { 4 }])?;
+            let a = act::CYCLIC_OPERATION | act::SYNC0 | if cfg.sync1_ns > 0 { act::SYNC1 } else { 0 };
+            fp(self, 0x0981, &mut [a])?;
+        }
+        Ok(start)
+    }
+
+    /// Every DC slave's filtered system time difference (0x092C), signed.
+    pub fn dc_differences(&mut self) -> Result<Vec<(u16, i64)>> {
+        let dc: Vec<(u16, u16)> = self.slaves.iter().filter(|s| s.has_dc).map(|s| (s.position, s.station)).collect();
+        let mut bufs = vec![[0u8; 4]; dc.len()];
+        {
+            let mut p: Vec<Pdu<'_>> = dc
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&(_, st), b)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x092C }, b))
+                .collect();
+            self.engine.transact(&mut p)?;
+        }
+        Ok(dc
+            .iter()
+            .zip(&bufs)
+            .map(|(&(pos, _), b)| (pos, SystemTimeDifference(u32::from_le_bytes(*b)).as_ns()))
+            .collect())
+    }
+
+    /// The sync monitor: one BRD of 0x092C, the OR of every slave's |difference| (an upper
+    /// bound of the largest), as IgH's monitor reads it.
+    pub fn dc_monitor(&mut self) -> Result<u32> {
+        let mut d = [0u8; 4];
+        self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0x092C }, &mut d)?;
+        Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
+    }
+}

@@ -1,0 +1,68 @@
+//! DC initialisation in virtual time, judged by the true clocks the simulator knows.
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::SegmentConfig;
+
+fn segment() -> Master<VirtualIo> {
+    // Six DC slaves with crystals between −45 and +50 ppm, 64-bit and 32-bit DCs mixed.
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 9\n\
+         [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 12.0\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 3.5\nesc = 'et1100'\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = -20.0\nesc = 'et1100'\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 33.0\nesc = 'et1100'\n",
+    )
+    .unwrap();
+    Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 9))
+}
+
+/// The spread of the slaves' true system times at one true instant (32-bit ones compared on
+/// their low 32 bits).
+fn spread_ns(m: &Master<VirtualIo>, t: u64) -> i64 {
+    let times: Vec<u32> =
+        m.engine.io.seg.nodes.iter().map(|n| n.esc.dc.as_ref().unwrap().system_at(t) as u32).collect();
+    let r = times[0];
+    let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(r) as i32 as i64).collect();
+    d.iter().max().unwrap() - d.iter().min().unwrap()
+}
+
+#[test]
+fn init_dc_converges_and_starts_sync0_together() {
+    let mut m = segment();
+    m.bring_up().unwrap();
+    let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), ..DcConfig::default() };
+    let r = m.init_dc(&cfg).unwrap();
+    let t = m.engine.io.now_ns();
+    println!("{r:?}; true spread {} ns", spread_ns(&m, t));
+    assert!(r.converged && r.static_frames < cfg.max_frames, "{r:?}");
+    assert!(r.max_difference_ns <= 50);
+    assert_eq!(m.dc_reference, Some(0x1001));
+    // One second of 1 ms cycles with the FRMW: every slave's true system time within 100 ns of
+    // the others (the target of the clock issues). What is left is mostly the delay estimate's
+    // forward/return asymmetry, which 0x092C cannot see.
+    let mut next = t;
+    let mut worst = 0;
+    for k in 0..1000 {
+        m.cycle().unwrap();
+        next += 1_000_000;
+        m.engine.io.sleep_until(next);
+        if k > 200 {
+            let now = m.engine.io.now_ns();
+            worst = worst.max(spread_ns(&m, now));
+        }
+    }
+    println!("worst true spread over the last 800 cycles: {worst} ns; monitor {} ns", m.dc_monitor().unwrap());
+    assert!(worst <= 100, "{worst}");
+    // SYNC0 on all six: their pulses for the same system time within 100 ns of each other.
+    let start = r.sync0_start.unwrap();
+    let last: Vec<(u64, u64)> =
+        m.engine.io.seg.nodes.iter().map(|n| *n.esc.sync0_log.pulses.back().expect("pulses")).collect();
+    assert!(last.iter().all(|(sys, _)| (sys.wrapping_sub(start) as u32) % 1_000_000 == 0), "on the grid: {last:?}");
+    let same: Vec<u64> = last.iter().filter(|(s, _)| *s as u32 == last[0].0 as u32).map(|(_, t)| *t).collect();
+    assert_eq!(same.len(), 6, "{last:?}");
+    let spread = same.iter().max().unwrap() - same.iter().min().unwrap();
+    println!("SYNC0 of six slaves within {spread} ns");
+    assert!(spread <= 100, "{spread}");
+}
