@@ -541,6 +541,24 @@ impl<I: Io> Master<I> {
         self.wait_state(position, state)
     }
 
+    /// Requests `state` from a group of slaves at once and waits until all of them are there.
+    pub fn request_state_group(&mut self, positions: &[u16], state: AlState) -> Result<()> {
+        let mut bufs: Vec<[u8; 2]> = vec![[state as u8, 0]; positions.len()];
+        let stations: Vec<u16> = positions.iter().map(|&p| self.slave(p).map(|s| s.station)).collect::<Result<_>>()?;
+        {
+            let mut p: Vec<Pdu<'_>> = stations
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, b))
+                .collect();
+            self.engine.transact(&mut p)?;
+        }
+        for &p in positions {
+            self.wait_state(p, state)?;
+        }
+        Ok(())
+    }
+
     fn wait_state_all(&mut self, state: AlState) -> Result<()> {
         for k in 0..self.slaves.len() as u16 {
             self.wait_state(k, state)?;

@@ -50,6 +50,11 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
         .collect();
     assert_eq!(outs, [vec![0x01], vec![0x08]]);
     assert_eq!(m.cycle_stats().wkc_errors, 0);
+    // A group of two goes back to SAFEOP and returns to OP; the coupler stays in OP.
+    m.request_state_group(&[1, 2], AlState::SafeOp).unwrap();
+    assert_eq!(m.slaves.iter().map(|s| s.state).collect::<Vec<_>>(), [AlState::Op, AlState::SafeOp, AlState::SafeOp]);
+    m.request_state_group(&[1, 2], AlState::Op).unwrap();
+    assert!(m.slaves.iter().all(|s| s.state == AlState::Op));
 }
 
 #[test]
@@ -66,10 +71,15 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     assert!(name.len() > 4, "{name:?}");
     let big = m.sdo_upload(0, 0x2701, 0, true).unwrap();
     assert!(big.len() > 1000);
+    // A long string into the drive's customer storage (segmented download), and back
+    // (segmented upload).
+    let text = "ferrocat writes a long string through a 128-byte mailbox, segment by segment. ".repeat(12);
     let mut pattern = big.clone();
-    pattern[2..].iter_mut().enumerate().for_each(|(i, b)| *b = i as u8);
+    pattern[2..2 + text.len()].copy_from_slice(text.as_bytes());
     m.sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
-    assert_eq!(m.sdo_upload(0, 0x2701, 0, true).unwrap(), pattern);
+    let back = m.sdo_upload(0, 0x2701, 0, true).unwrap();
+    assert_eq!(&back[2..2 + text.len()], text.as_bytes());
+    assert_eq!(back, pattern);
     assert_eq!(m.sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
     m.sdo_write(0, 0x6060, 0, &[8]).unwrap();
     assert_eq!(m.sdo_read(0, 0x6060, 0).unwrap(), [8]);
