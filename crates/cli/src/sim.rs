@@ -58,7 +58,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
         "frames_out": stats.frames_out,
         "not_ethercat": stats.not_ethercat,
         "malformed": stats.malformed,
-        "busy_ns_per_frame": if stats.frames_out > 0 { stats.busy_ns / stats.frames_out } else { 0 },
+        "busy_ns_per_frame": stats.busy_ns.checked_div(stats.frames_out).unwrap_or(0),
         "busy_ns_median": stats.busy_quantile_ns(0.5),
         "busy_ns_p99": stats.busy_quantile_ns(0.99),
         "devices": devices,

@@ -64,11 +64,7 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
         Timeouts { pdu: Duration::from_millis(200), state_transition: Duration::from_secs(10), ..Timeouts::default() },
         // Under a loaded test run the kernel's veth path has dropped a frame now and then (the
         // simulator answered every frame it received): retry, as on any real network.
-        MainDeviceConfig {
-            dc_static_sync_iterations: 10_000,
-            retry_behaviour: RetryBehaviour::Count(3),
-            ..MainDeviceConfig::default()
-        },
+        MainDeviceConfig { dc_static_sync_iterations: 10_000, retry_behaviour: RetryBehaviour::Count(3) },
     ));
     let result = futures_lite::future::block_on(async {
         let mut group = md.init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now).await.expect("init");

@@ -61,6 +61,17 @@ pub struct Engine<I: Io> {
     slots: Vec<Slot>,
     rx: Box<[u8; FRAME]>,
     eth: EthernetRepr,
+    /// Who is on the segment, so that an error can name the slave a datagram was meant for.
+    pub directory: Vec<SlaveTag>,
+}
+
+/// A slave as errors name it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SlaveTag {
+    pub position: u16,
+    pub station: u16,
+    pub alias: u16,
+    pub name: String,
 }
 
 impl<I: Io> Engine<I> {
@@ -71,6 +82,7 @@ impl<I: Io> Engine<I> {
             retries: 3,
             stats: EngineStats::default(),
             next_idx: 0,
+            directory: Vec::new(),
             slots: (0..SLOTS)
                 .map(|_| Slot {
                     busy: false,
@@ -218,10 +230,36 @@ impl<I: Io> Engine<I> {
                 what: describe(cmd, address, data.len()),
                 expected,
                 got: wkc,
-                slaves: String::new(),
+                slaves: self.who(cmd, address, expected, wkc),
             });
         }
         Ok(())
+    }
+
+    /// Names the slave(s) a datagram was meant for, for an error message.
+    fn who(&self, cmd: Command, address: Address, expected: u16, got: u16) -> String {
+        let tag = |t: &SlaveTag| format!("slave {} ({}, station {:#06x})", t.position, t.name, t.station);
+        let known = !self.directory.is_empty();
+        match (cmd.0, address) {
+            // Before the scan has named anyone, the address says it all.
+            (1..=6 | 13 | 14, _) if !known => String::new(),
+            // APxx / ARMW: auto-increment, the master sends −position.
+            (1..=3 | 13, Address::Device { adp, .. }) => {
+                let pos = 0u16.wrapping_sub(adp);
+                match self.directory.iter().find(|t| t.position == pos) {
+                    Some(t) => format!(": {}", tag(t)),
+                    None => format!(": no slave at position {pos} ({} found)", self.directory.len()),
+                }
+            }
+            // FPxx / FRMW: configured station address, or alias where the slave enabled it.
+            (4..=6 | 14, Address::Device { adp, .. }) => {
+                match self.directory.iter().find(|t| t.station == adp || (t.alias != 0 && t.alias == adp)) {
+                    Some(t) => format!(": {}", tag(t)),
+                    None => format!(": no slave has station address or alias {adp:#06x}"),
+                }
+            }
+            _ => format!(": {got} of {expected} expected answers"),
+        }
     }
 }
 

@@ -15,7 +15,7 @@ mod slave;
 
 pub use coe::{EntryInfo, ObjectInfo};
 pub use dc::{DcConfig, DcReport};
-pub use engine::{describe, Engine, EngineStats, Pdu};
+pub use engine::{describe, Engine, EngineStats, Pdu, SlaveTag};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};
 pub use process::{CycleStats, Handle};

@@ -4,7 +4,7 @@ use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus, Fmmu, S
 use ferrocat_wire::sii::{SiiHeader, SiiInfo, SmEntry, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
 use ferrocat_wire::{Address, Command};
 
-use crate::engine::{Engine, Pdu};
+use crate::engine::{Engine, Pdu, SlaveTag};
 use crate::error::{code_text, MasterError, Result};
 use crate::io::Io;
 use crate::slave::{MailboxConfig, Mapped, Slave};
@@ -131,6 +131,11 @@ impl<I: Io> Master<I> {
             let slave = self.read_slave(pos as u16, stations[pos], img)?;
             self.slaves.push(slave);
         }
+        self.engine.directory = self
+            .slaves
+            .iter()
+            .map(|s| SlaveTag { position: s.position, station: s.station, alias: s.alias, name: s.name.clone() })
+            .collect();
         self.wait_state_all(AlState::Init)?;
         self.topology();
         self.measure_delays()?;
@@ -539,6 +544,36 @@ impl<I: Io> Master<I> {
         let st = self.slave(position)?.station;
         self.fpwr(st, 0x0120, &[state as u8, 0])?;
         self.wait_state(position, state)
+    }
+
+    /// Lets a slave be addressed by its configured station alias (0x0012, from its EEPROM) as
+    /// well as by its station address (DL control bit 24), and checks that it answers to it.
+    pub fn enable_alias(&mut self, position: u16) -> Result<u16> {
+        let (st, alias, name) = {
+            let s = self.slave(position)?;
+            (s.station, s.alias, s.name.clone())
+        };
+        if alias == 0 {
+            return Err(MasterError::slave(position, &name, "has no station alias"));
+        }
+        if self
+            .slaves
+            .iter()
+            .any(|s| s.position != position && (s.alias == alias && s.alias != 0 || s.station == alias))
+        {
+            return Err(MasterError::slave(
+                position,
+                &name,
+                format!("alias {alias:#06x} is not unique on this segment"),
+            ));
+        }
+        let mut dl = [0u8; 4];
+        self.fprd(st, 0x0100, &mut dl)?;
+        dl[3] |= 0x01;
+        self.fpwr(st, 0x0100, &dl)?;
+        let mut check = [0u8; 2];
+        self.engine.expect(Command::FPRD, Address::Device { adp: alias, ado: 0x0010 }, &mut check, 1)?;
+        Ok(alias)
     }
 
     /// Requests `state` from a group of slaves at once and waits until all of them are there.

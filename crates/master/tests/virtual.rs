@@ -193,3 +193,37 @@ fn esi_describes_a_slave_whose_sii_does_not() {
     let io = m.engine.io.seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap();
     assert_eq!(io.outputs, [0b10]);
 }
+
+#[test]
+fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
+    let mut m = master(
+        "seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\nstation_alias = 0x0777\n",
+        HostModel::ideal(),
+    );
+    m.scan().unwrap();
+    assert_eq!((m.slaves[0].alias, m.slaves[1].alias), (0, 0x0777));
+    let mut d = [0u8; 2];
+    let fprd_alias = ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 };
+    assert_eq!(m.engine.one(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(), 0, "alias not yet enabled");
+    assert_eq!(m.enable_alias(1).unwrap(), 0x0777);
+    assert_eq!(
+        m.engine
+            .one(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 }, &mut d)
+            .unwrap(),
+        1
+    );
+    assert_eq!(u16::from_le_bytes(d), 0x1002, "the alias reaches the slave with station address 0x1002");
+    assert!(m.enable_alias(0).unwrap_err().to_string().contains("no station alias"));
+    let e = m
+        .engine
+        .expect(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x4242, ado: 0x0130 }, &mut d, 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("FPRD 0x4242:0x0130") && e.contains("station address or alias 0x4242"), "{e}");
+    let e = m
+        .engine
+        .expect(ferrocat_wire::Command::BRD, ferrocat_wire::Address::Device { adp: 0, ado: 0x0130 }, &mut d, 5)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("2 of 5 expected answers"), "{e}");
+}

@@ -103,6 +103,8 @@ pub struct DeviceToml {
     /// How long the firmware of a device without device emulation takes to act on a write of
     /// AL control (µs, default 1000).
     pub al_response_us: Option<f64>,
+    /// Overrides the configured station alias of the SII (word 4, loaded into 0x0012).
+    pub station_alias: Option<u16>,
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
     /// puts a firmware behind AL control that checks each transition.
     pub device_emulation: Option<bool>,
@@ -201,6 +203,13 @@ impl SegmentConfig {
         for (i, d) in self.devices.iter().enumerate() {
             let src = self.source(i, d)?;
             let (mut sii, default_name, esi_dev) = load_device(&src)?;
+            if let Some(alias) = d.station_alias {
+                if sii.len() >= 16 {
+                    sii[8..10].copy_from_slice(&alias.to_le_bytes());
+                    let crc = ferrocat_wire::sii::header_crc(&sii);
+                    sii[14] = crc;
+                }
+            }
             if let Some(emulate) = d.device_emulation {
                 // Word 0 high byte is the ESC configuration (→ 0x0141); keep the CRC right.
                 if sii.len() >= 16 {
