@@ -153,3 +153,24 @@ fn a_segment_that_answers_nothing_is_one_line() {
     assert!(!out.status.success() && err.lines().count() == 1, "{err}");
     assert!(err.contains("no answer") && !err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn an_interface_without_permission_is_one_line() {
+    // As an unprivileged user (no CAP_NET_RAW) inside a namespace this test made.
+    let net = VethPair::new("np");
+    // A copy the unprivileged user can execute wherever the checkout lives.
+    let bin = std::env::temp_dir().join(format!("ferrocat-np-{}", std::process::id()));
+    std::fs::copy(env!("CARGO_BIN_EXE_ferrocat"), &bin).unwrap();
+    std::fs::set_permissions(&bin, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let out = VethPair::cmd(&net.master_ns, "setpriv")
+        .args(["--reuid=65534", "--regid=65534", "--clear-groups", "--inh-caps=-all", "--bounding-set=-all"])
+        .arg(&bin)
+        .args(["scan", "--iface", &net.master_if])
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_file(&bin);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.lines().count() == 1, "{err}");
+    assert!(err.contains(&net.master_if) && err.contains("CAP_NET_RAW"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -364,6 +364,20 @@ impl<I: Io> Master<I> {
     /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
     /// Returns the number of words written.
     pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
+        // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
+        if image.len() < 16 {
+            return Err(MasterError::Config(format!(
+                "SII image of {} bytes: shorter than its 16-byte header",
+                image.len()
+            )));
+        }
+        let crc = ferrocat_wire::sii::header_crc(image);
+        if image[14] != crc {
+            return Err(MasterError::Config(format!(
+                "SII image: header CRC at byte 14 is {:#04x}, bytes 0–13 give {crc:#04x}; an ESC would not load it",
+                image[14]
+            )));
+        }
         let (st, current) = {
             let s = self.slave(position)?;
             (s.station, s.sii.to_image())

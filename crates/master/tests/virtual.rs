@@ -227,3 +227,24 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
         .to_string();
     assert!(e.contains("2 of 5 expected answers"), "{e}");
 }
+
+#[test]
+fn sii_write_programs_only_changed_words_and_reads_back() {
+    let mut m =
+        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
+    m.scan().unwrap();
+    let mut info = m.slaves[1].sii.clone();
+    assert_eq!(info.header.station_alias, 0);
+    info.header.station_alias = 0x0321;
+    let mut image = info.to_image();
+    let e = m.sii_write(1, &image).unwrap_err().to_string();
+    assert!(e.contains("header CRC"), "a stale CRC is refused: {e}");
+    image[14] = ferrocat_wire::sii::header_crc(&image);
+    // The alias word and the header CRC word differ; nothing else.
+    assert_eq!(m.sii_write(1, &image).unwrap(), 2);
+    assert_eq!(m.slaves[1].sii.header.station_alias, 0x0321);
+    m.scan().unwrap();
+    assert_eq!(m.slaves[1].sii.header.station_alias, 0x0321, "what a new scan reads from the EEPROM");
+    assert_eq!(m.slaves[1].name, "EL2004");
+    assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
+}
