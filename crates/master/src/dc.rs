@@ -218,3 +218,135 @@ impl<I: Io> Master<I> {
         Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
     }
 }
+
+/// State of cyclic synchronisation kept by the master between steps.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SyncState {
+    pub cycle: u64,
+    /// Time the frame spends behind the reference (from the latched receive times).
+    pub loop_ns: u64,
+    pub lost: u64,
+}
+
+impl<I: Io> Master<I> {
+    fn reference_index(&self) -> Result<usize> {
+        let st =
+            self.dc_reference.ok_or_else(|| MasterError::Config("no reference clock: run init_dc first".into()))?;
+        self.slaves
+            .iter()
+            .position(|s| s.station == st)
+            .ok_or_else(|| MasterError::Config("reference clock gone".into()))
+    }
+
+    /// How long a frame spends behind the reference before it passes it again on its way
+    /// back: the latest receive time of its other open ports minus that of its entry port.
+    pub fn reference_loop_ns(&self) -> Result<u64> {
+        let s = &self.slaves[self.reference_index()?];
+        let e = s.entry_port as usize;
+        Ok((0..4)
+            .filter(|&p| p != e && s.active_ports[p])
+            .map(|p| s.receive_times[p].wrapping_sub(s.receive_times[e]) as i32 as i64)
+            .max()
+            .unwrap_or(0)
+            .max(0) as u64)
+    }
+
+    /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master,
+    /// then the reference's port 0/1 receive times. Returns the averaged delay.
+    pub fn park_delay(&mut self, n: u32) -> Result<i64> {
+        let st = self.slaves[self.reference_index()?].station;
+        let mut trips = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            let t0 = self.engine.io.now_ns();
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+            let t1 = self.engine.io.now_ns();
+            let mut r = [0u8; 8];
+            self.fprd(st, 0x0900, &mut r)?;
+            let p0 = u32::from_le_bytes(r[0..4].try_into().unwrap_or_default());
+            let p1 = u32::from_le_bytes(r[4..8].try_into().unwrap_or_default());
+            trips.push((t1 - t0, p1.wrapping_sub(p0) as u64));
+        }
+        Ok(crate::sync::Park2020::delay_from(&trips))
+    }
+
+    /// One cycle of clock synchronisation: one frame with the master's time for the reference
+    /// (reference-follows-master methods), the FRMW that distributes the reference's time and a
+    /// read of its 0x092C; the sample goes to `sync`, and an offset shift it asks for is
+    /// written to every DC slave. Returns the correction (the next period for
+    /// master-follows-reference methods). Lost frames are counted, not errors.
+    pub fn sync_step(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut SyncState,
+    ) -> Result<crate::sync::Correction> {
+        use crate::sync::{Coupling, Sample};
+        let r = self.reference_index()?;
+        let station = self.slaves[r].station;
+        st.cycle += 1;
+        let built_ns = self.master_system_time();
+        let mut w = sync.reference_time(built_ns).to_le_bytes();
+        let mut frmw = [0u8; 8];
+        let mut diff = [0u8; 4];
+        let rfm = sync.coupling() == Coupling::ReferenceFollowsMaster;
+        let mut nop: [u8; 0] = [];
+        let mut pdus = [
+            if rfm {
+                Pdu::new(Command::FPWR, Address::Device { adp: station, ado: 0x0910 }, &mut w)
+            } else {
+                Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut nop)
+            },
+            Pdu::new(Command::FRMW, Address::Device { adp: station, ado: 0x0910 }, &mut frmw),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x092C }, &mut diff),
+        ];
+        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
+        self.engine.timeout_ns = self.cyclic_timeout_ns;
+        self.engine.retries = 0;
+        let res = self.engine.transact(&mut pdus);
+        self.engine.timeout_ns = timeout;
+        self.engine.retries = retries;
+        let answered = res.is_ok() && pdus[1].wkc > 0 && pdus[2].wkc == 1;
+        let to_sys = |m: &mut Self, world: u64| -> u64 {
+            let now = m.engine.io.now_ns();
+            m.master_system_time().wrapping_sub(now.wrapping_sub(world))
+        };
+        let sample = if answered {
+            let tx = self.engine.io.last_tx_ns();
+            let rx = self.engine.last_rx_ns;
+            Some(Sample {
+                cycle: st.cycle,
+                built_ns,
+                tx_ns: tx.map(|t| to_sys(self, t)),
+                rx_ns: to_sys(self, rx),
+                reference_ns: u64::from_le_bytes(frmw),
+                difference_ns: SystemTimeDifference(u32::from_le_bytes(diff)).as_ns(),
+                loop_ns: st.loop_ns,
+                // Ethernet header, EtherCAT header, the three datagrams; FCS and preamble.
+                frame_ns: if tx.is_some() { 0 } else { (16 + 3 * 12 + 8 + 8 + 4 + 4 + 8) * 80 },
+            })
+        } else {
+            st.lost += 1;
+            None
+        };
+        let c = sync.update(sample.as_ref());
+        if c.shift_offsets_ns != 0 {
+            self.shift_offsets(c.shift_offsets_ns)?;
+        }
+        Ok(c)
+    }
+
+    /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
+    pub fn shift_offsets(&mut self, shift_ns: i64) -> Result<()> {
+        for k in 0..self.slaves.len() {
+            let (has, st, wide) = (self.slaves[k].has_dc, self.slaves[k].station, self.slaves[k].dc_64bit);
+            if !has {
+                continue;
+            }
+            let n = if wide { 8 } else { 4 };
+            let mut d = [0u8; 8];
+            self.fprd(st, 0x0920, &mut d[..n])?;
+            let v = u64::from_le_bytes(d).wrapping_add_signed(shift_ns);
+            self.fpwr(st, 0x0920, &v.to_le_bytes()[..n])?;
+        }
+        Ok(())
+    }
+}

@@ -61,6 +61,8 @@ pub struct Engine<I: Io> {
     slots: Vec<Slot>,
     rx: Box<[u8; FRAME]>,
     eth: EthernetRepr,
+    /// When the last frame came in, as the link stamped it (world clock).
+    pub last_rx_ns: u64,
     /// Who is on the segment, so that an error can name the slave a datagram was meant for.
     pub directory: Vec<SlaveTag>,
 }
@@ -83,6 +85,7 @@ impl<I: Io> Engine<I> {
             stats: EngineStats::default(),
             next_idx: 0,
             directory: Vec::new(),
+            last_rx_ns: 0,
             slots: (0..SLOTS)
                 .map(|_| Slot {
                     busy: false,
@@ -170,7 +173,8 @@ impl<I: Io> Engine<I> {
     fn receive(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
         let deadline = self.slots.iter().filter(|s| s.busy).map(|s| s.deadline).min().unwrap_or(0);
         match self.io.recv(&mut self.rx[..], deadline)? {
-            Some((n, _t)) => {
+            Some((n, t)) => {
+                self.last_rx_ns = t;
                 let Ok(Some(f)) = Frame::parse(&self.rx[..n]) else { return Ok(()) };
                 let mut ds = f.pdu.datagrams();
                 let Some(first) = ds.clone().next() else { return Ok(()) };

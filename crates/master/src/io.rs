@@ -63,12 +63,14 @@ pub struct HostModel {
     pub send: Latency,
     pub recv: Latency,
     pub wake: Latency,
+    /// The NIC stamps when each frame really left and when each reply began to arrive.
+    pub tx_timestamps: bool,
 }
 
 impl HostModel {
     /// No host at all: frames leave and arrive instantly, timers are exact.
     pub fn ideal() -> Self {
-        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO }
+        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO, tx_timestamps: false }
     }
 
     /// A PC with a PREEMPT_RT kernel and a raw socket: a few µs through the stack, timer
@@ -79,7 +81,13 @@ impl HostModel {
             send: Latency { mean_ns: 4_000.0, sd_ns: 1_000.0, min_ns: 2_000.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
             recv: Latency { mean_ns: 5_000.0, sd_ns: 1_500.0, min_ns: 2_500.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
             wake: Latency { mean_ns: 3_000.0, sd_ns: 1_500.0, min_ns: 1_000.0, outlier_p: 0.001, outlier_ns: 30_000.0 },
+            tx_timestamps: false,
         }
+    }
+
+    /// `pc_rt` with a NIC that stamps each frame's departure in hardware.
+    pub fn nic_hwts() -> Self {
+        HostModel { name: "nic-hwts", tx_timestamps: true, ..HostModel::pc_rt() }
     }
 }
 
@@ -94,6 +102,9 @@ pub struct VirtualIo {
     slots: Vec<(u64, usize, Box<[u8; 1536]>, bool)>,
     /// Frames the segment did not return.
     pub lost: u64,
+    last_tx: Option<u64>,
+    /// The NIC's receive stamp of the frame in each slot.
+    rx_stamps: [u64; 32],
 }
 
 impl VirtualIo {
@@ -105,6 +116,8 @@ impl VirtualIo {
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x4057),
             slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),
             lost: 0,
+            last_tx: None,
+            rx_stamps: [0; 32],
         }
     }
 }
@@ -119,13 +132,17 @@ impl Io for VirtualIo {
 
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let t_wire = self.now + self.host.send.sample(&mut self.rng);
-        let Some(slot) = self.slots.iter_mut().find(|s| !s.3) else {
+        self.last_tx = Some(t_wire);
+        let Some(k) = self.slots.iter().position(|s| !s.3) else {
             return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
         };
+        let slot = &mut self.slots[k];
         let n = frame.len().min(slot.2.len());
         slot.2[..n].copy_from_slice(&frame[..n]);
         match self.seg.exchange(&mut slot.2[..n], t_wire) {
             Some(back) => {
+                // A NIC stamps the start of the frame: its end minus the frame and FCS at 100 Mbit/s.
+                self.rx_stamps[k] = back.saturating_sub((n as u64 + 4) * 80);
                 slot.0 = back + self.host.recv.sample(&mut self.rng);
                 slot.1 = n;
                 slot.3 = true;
@@ -138,14 +155,15 @@ impl Io for VirtualIo {
     }
 
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
-        let next = self.slots.iter_mut().filter(|s| s.3).min_by_key(|s| s.0);
+        let next = self.slots.iter_mut().enumerate().filter(|(_, s)| s.3).min_by_key(|(_, s)| s.0);
         match next {
-            Some(s) if s.0 <= deadline_ns => {
+            Some((k, s)) if s.0 <= deadline_ns => {
                 self.now = self.now.max(s.0);
                 let n = s.1.min(buf.len());
                 buf[..n].copy_from_slice(&s.2[..n]);
                 s.3 = false;
-                Ok(Some((n, self.now)))
+                let stamp = if self.host.tx_timestamps { self.rx_stamps[k] } else { self.now };
+                Ok(Some((n, stamp)))
             }
             _ => {
                 self.now = self.now.max(deadline_ns);
@@ -157,6 +175,15 @@ impl Io for VirtualIo {
     fn sleep_until(&mut self, t_ns: u64) {
         let late = self.host.wake.sample(&mut self.rng);
         self.now = self.now.max(t_ns + late);
+    }
+
+    fn last_tx_ns(&mut self) -> Option<u64> {
+        if self.host.tx_timestamps {
+            // A NIC stamps the end of the start-of-frame delimiter: 8 bytes after the first bit.
+            self.last_tx.map(|t| t + 8 * 80)
+        } else {
+            None
+        }
     }
 }
 

@@ -12,9 +12,10 @@ pub mod io;
 mod master;
 mod process;
 mod slave;
+pub mod sync;
 
 pub use coe::{EntryInfo, ObjectInfo};
-pub use dc::{DcConfig, DcReport};
+pub use dc::{DcConfig, DcReport, SyncState};
 pub use engine::{describe, Engine, EngineStats, Pdu, SlaveTag};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};

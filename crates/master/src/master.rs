@@ -142,11 +142,11 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    fn fprd(&mut self, station: u16, ado: u16, out: &mut [u8]) -> Result<()> {
+    pub(crate) fn fprd(&mut self, station: u16, ado: u16, out: &mut [u8]) -> Result<()> {
         self.engine.expect(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
     }
 
-    fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
+    pub(crate) fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
         let mut d = data.to_vec();
         self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
     }

@@ -1,0 +1,446 @@
+//! Cyclic clock synchronisation between the master and the reference clock. Every method sits
+//! behind one small interface, as linuxptp's servos do: each cycle the master hands a
+//! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
+use std::collections::VecDeque;
+
+/// Who follows whom.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coupling {
+    /// The master writes its time into the reference's 0x0910 every cycle (IgH, Park 2020).
+    ReferenceFollowsMaster,
+    /// The reference runs free; the master adjusts its cycle to it (SOEM's examples, Chen 2016).
+    MasterFollowsReference,
+}
+
+/// What one cycle's DC frame measured. Times are DC system time (ns since 2000) on the
+/// master's clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sample {
+    /// Cycle number (gaps mean lost frames).
+    pub cycle: u64,
+    /// When the master built the frame (the time it wrote into it).
+    pub built_ns: u64,
+    /// When the frame left and when its reply began to arrive, if the link stamps them;
+    /// otherwise `tx_ns` is `None` and `rx_ns` is when the master had the reply.
+    pub tx_ns: Option<u64>,
+    pub rx_ns: u64,
+    /// The reference's system time as the frame passed it (the FRMW reply).
+    pub reference_ns: u64,
+    /// The reference's 0x092C (local − received, filtered), signed.
+    pub difference_ns: i64,
+    /// How long the frame spent behind the reference before it came back through it
+    /// (receive time of its return port minus port 0).
+    pub loop_ns: u64,
+    /// Time on the wire the stamps include beyond the frame's head: the whole frame at
+    /// 100 Mbit/s when the receive time is taken after the last byte (software), 0 for a
+    /// NIC that stamps the start of frame.
+    pub frame_ns: u64,
+}
+
+impl Sample {
+    /// The one-way time from building the frame to its passing the reference, as a round trip
+    /// shows it: the send delay where the link stamps it, plus half of what remains of the
+    /// round trip once the loop behind the reference and the frame's own length are taken out
+    /// (Park 2020 eq. 3 per sample, without its frame-length bias).
+    pub fn lead_ns(&self) -> i64 {
+        let sent = self.tx_ns.unwrap_or(self.built_ns);
+        let send = sent as i64 - self.built_ns as i64;
+        let rtt = self.rx_ns as i64 - sent as i64 - self.loop_ns as i64 - self.frame_ns as i64;
+        send + rtt / 2
+    }
+}
+
+/// What the master does after a sample.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Correction {
+    /// Add this to every DC slave's System_Time_Offset (0x0920).
+    pub shift_offsets_ns: i64,
+    /// The master's next cycle period (master-follows-reference methods).
+    pub next_period_ns: Option<u64>,
+}
+
+pub trait ClockSync {
+    fn name(&self) -> &'static str;
+    fn coupling(&self) -> Coupling;
+    /// Reference-follows-master: the time to write into the reference's 0x0910 for a frame
+    /// built at `built_ns`.
+    fn reference_time(&mut self, built_ns: u64) -> u64 {
+        built_ns
+    }
+    /// Takes one cycle's sample (`None`: the frame was lost).
+    fn update(&mut self, sample: Option<&Sample>) -> Correction;
+}
+
+/// IgH's way: the master's present time to the reference, no delay compensation.
+#[derive(Debug, Default)]
+pub struct Conventional;
+
+impl ClockSync for Conventional {
+    fn name(&self) -> &'static str {
+        "conventional"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::ReferenceFollowsMaster
+    }
+    fn update(&mut self, _: Option<&Sample>) -> Correction {
+        Correction::default()
+    }
+}
+
+/// Park et al. 2020: compensated time sent (delay from eq. 3, averaged over many round trips
+/// before cyclic operation), then every `period_ns` an EMA of the reference's 0x092C (eq. 4)
+/// subtracted from every slave's offset (eq. 5).
+#[derive(Debug)]
+pub struct Park2020 {
+    pub delay_ns: i64,
+    pub alpha: f64,
+    pub period_ns: u64,
+    ema_ns: Option<f64>,
+    last_ns: Option<u64>,
+}
+
+impl Park2020 {
+    pub fn new(delay_ns: i64) -> Self {
+        Park2020 { delay_ns, alpha: 0.25, period_ns: 100_000_000, ema_ns: None, last_ns: None }
+    }
+
+    /// Eq. 3 over many round trips: (master round trip − reference's port 1 − port 0) / 2, averaged.
+    pub fn delay_from(round_trips: &[(u64, u64)]) -> i64 {
+        if round_trips.is_empty() {
+            return 0;
+        }
+        let sum: i128 = round_trips.iter().map(|&(m, r)| (m as i128 - r as i128) / 2).sum();
+        (sum / round_trips.len() as i128) as i64
+    }
+}
+
+impl ClockSync for Park2020 {
+    fn name(&self) -> &'static str {
+        "park2020"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::ReferenceFollowsMaster
+    }
+    fn reference_time(&mut self, built_ns: u64) -> u64 {
+        built_ns.wrapping_add_signed(self.delay_ns)
+    }
+    fn update(&mut self, s: Option<&Sample>) -> Correction {
+        let Some(s) = s else { return Correction::default() };
+        if self.last_ns.is_some_and(|l| s.built_ns.wrapping_sub(l) < self.period_ns) {
+            return Correction::default();
+        }
+        self.last_ns = Some(s.built_ns);
+        let d = s.difference_ns as f64;
+        // Eq. 4, with ΔT⁰ = Δt⁰.
+        let ema = match self.ema_ns {
+            None => d,
+            Some(e) => self.alpha * d + (1.0 - self.alpha) * e,
+        };
+        self.ema_ns = Some(ema);
+        // Eq. 5: t_new_offset = t_offset − ΔT.
+        Correction { shift_offsets_ns: -(ema.round() as i64), next_period_ns: None }
+    }
+}
+
+/// Chen et al. 2016: the master's period rescaled by the reference's speed (eqs. 3–5, the
+/// average of `n` timestamp differences), rounded to the timer's resolution with the
+/// truncation error carried over (Algorithm 1).
+#[derive(Debug)]
+pub struct Chen2016 {
+    pub nominal_ns: u64,
+    pub n: u32,
+    pub resolution_ns: u64,
+    ideal_ns: f64,
+    prev: Option<(u64, u64)>,
+    sum_ns: f64,
+    count: u32,
+    truncation_ns: f64,
+}
+
+impl Chen2016 {
+    pub fn new(nominal_ns: u64, n: u32, resolution_ns: u64) -> Self {
+        Chen2016 {
+            nominal_ns,
+            n: n.max(1),
+            resolution_ns: resolution_ns.max(1),
+            ideal_ns: nominal_ns as f64,
+            prev: None,
+            sum_ns: 0.0,
+            count: 0,
+            truncation_ns: 0.0,
+        }
+    }
+
+    /// Algorithm 1: round the ideal period down to the resolution, accumulate what was cut
+    /// off, and add one resolution step whenever the accumulated error exceeds it.
+    pub fn truncate(&mut self, ideal_ns: f64) -> u64 {
+        let res = self.resolution_ns as f64;
+        let mut rounded = (ideal_ns / res).floor() * res;
+        self.truncation_ns += ideal_ns - rounded;
+        if self.truncation_ns > res {
+            rounded += res;
+            self.truncation_ns -= res;
+        }
+        rounded.max(res) as u64
+    }
+}
+
+impl ClockSync for Chen2016 {
+    fn name(&self) -> &'static str {
+        "chen2016"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::MasterFollowsReference
+    }
+    fn update(&mut self, s: Option<&Sample>) -> Correction {
+        if let Some(s) = s {
+            if let Some((c0, t0)) = self.prev {
+                let cycles = s.cycle.saturating_sub(c0).max(1);
+                // ΔT_k, per master cycle even across a lost frame.
+                self.sum_ns += s.reference_ns.wrapping_sub(t0) as i64 as f64 / cycles as f64;
+                self.count += 1;
+            }
+            self.prev = Some((s.cycle, s.reference_ns));
+            if self.count >= self.n {
+                let t_ref_test = self.sum_ns / self.count as f64;
+                if t_ref_test > 0.0 {
+                    // Eq. 5: T_cycle_m(k+1) = T_cycle_ref / T_ref_test · T_cycle_m(k).
+                    self.ideal_ns *= self.nominal_ns as f64 / t_ref_test;
+                }
+                self.sum_ns = 0.0;
+                self.count = 0;
+            }
+        }
+        let ideal = self.ideal_ns;
+        Correction { shift_offsets_ns: 0, next_period_ns: Some(self.truncate(ideal)) }
+    }
+}
+
+/// The PI loop of SOEM's examples: the reference's time modulo the cycle, minus a shift, is
+/// the phase error; the next period is the cycle minus error/100 minus the error sign's
+/// running sum/20.
+#[derive(Debug)]
+pub struct SoemPi {
+    pub cycle_ns: u64,
+    pub shift_ns: i64,
+    integral: i64,
+}
+
+impl SoemPi {
+    pub fn new(cycle_ns: u64, shift_ns: i64) -> Self {
+        SoemPi { cycle_ns: cycle_ns.max(2), shift_ns, integral: 0 }
+    }
+}
+
+impl ClockSync for SoemPi {
+    fn name(&self) -> &'static str {
+        "pi"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::MasterFollowsReference
+    }
+    fn update(&mut self, s: Option<&Sample>) -> Correction {
+        let c = self.cycle_ns as i64;
+        let Some(s) = s else { return Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) } };
+        let mut delta = (s.reference_ns.wrapping_sub(self.shift_ns as u64) % self.cycle_ns) as i64;
+        if delta > c / 2 {
+            delta -= c;
+        }
+        self.integral += delta.signum();
+        let period = c - delta / 100 - self.integral / 20;
+        Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1) as u64) }
+    }
+}
+
+/// ferrocat's method. Every cycle's round trip gives a fresh estimate of how long a frame
+/// takes from being built to passing the reference (transmit and receive stamps where the
+/// link has them); a trimmed mean over a short window rejects the outliers of a busy host
+/// without the settling time of a long average.
+/// - Reference follows master: the master writes its time plus that lead, so the reference's
+///   time control loop steers to the master's time at the instant the frame passes.
+/// - Master follows reference: a least-squares line through (master time at passage,
+///   reference time) gives offset and rate; the next period puts the frame at `phase_ns` of the
+///   reference's cycle, removing 1/16 of the phase error per cycle.
+#[derive(Debug)]
+pub struct Ferrocat {
+    pub coupling: Coupling,
+    pub cycle_ns: u64,
+    pub phase_ns: u64,
+    leads: VecDeque<i64>,
+    lead_ns: Option<i64>,
+    fit: VecDeque<(f64, f64)>,
+}
+
+const WINDOW: usize = 64;
+
+impl Ferrocat {
+    pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
+        Ferrocat {
+            coupling,
+            cycle_ns: cycle_ns.max(1),
+            phase_ns: 0,
+            leads: VecDeque::with_capacity(WINDOW),
+            lead_ns: None,
+            fit: VecDeque::with_capacity(WINDOW),
+        }
+    }
+
+    /// The lead in use (None before the first sample).
+    pub fn lead_ns(&self) -> Option<i64> {
+        self.lead_ns
+    }
+
+    fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
+        // On the stack: the cyclic path does not allocate.
+        let mut buf = [0i64; WINDOW];
+        let n = v.len().min(WINDOW);
+        for (d, x) in buf.iter_mut().zip(v) {
+            *d = *x;
+        }
+        let s = &mut buf[..n];
+        s.sort_unstable();
+        let cut = n / 8;
+        let kept = &s[cut..n - cut];
+        (kept.iter().map(|&x| x as i128).sum::<i128>() / kept.len().max(1) as i128) as i64
+    }
+}
+
+impl ClockSync for Ferrocat {
+    fn name(&self) -> &'static str {
+        "ferrocat"
+    }
+    fn coupling(&self) -> Coupling {
+        self.coupling
+    }
+    fn reference_time(&mut self, built_ns: u64) -> u64 {
+        built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0))
+    }
+    fn update(&mut self, s: Option<&Sample>) -> Correction {
+        let Some(s) = s else {
+            return Correction {
+                shift_offsets_ns: 0,
+                next_period_ns: (self.coupling == Coupling::MasterFollowsReference).then_some(self.cycle_ns),
+            };
+        };
+        if self.leads.len() == WINDOW {
+            self.leads.pop_front();
+        }
+        self.leads.push_back(s.lead_ns());
+        self.lead_ns = Some(Self::trimmed_mean(&self.leads));
+        if self.coupling == Coupling::ReferenceFollowsMaster {
+            return Correction::default();
+        }
+        // Master follows reference: fit reference time against master time at passage,
+        // relative to the newest point so that f64 keeps ns precision.
+        let x = s.built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0));
+        if self.fit.len() == WINDOW {
+            self.fit.pop_front();
+        }
+        let (x0, y0) = (x, s.reference_ns);
+        self.fit.push_back((x as f64, s.reference_ns as f64));
+        let n = self.fit.len() as f64;
+        let (mx, my) = self.fit.iter().fold((0.0, 0.0), |(a, b), &(x, y)| (a + (x - x0 as f64), b + (y - y0 as f64)));
+        let (mx, my) = (mx / n, my / n);
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for &(x, y) in &self.fit {
+            let (dx, dy) = (x - x0 as f64 - mx, y - y0 as f64 - my);
+            sxy += dx * dy;
+            sxx += dx * dx;
+        }
+        let rate = if sxx > 0.0 { (sxy / sxx).clamp(0.999, 1.001) } else { 1.0 };
+        // Reference time now, from the fit; its phase in the cycle against the target.
+        let y_now = my + rate * (0.0 - mx);
+        let t_ref = y0 as f64 + y_now;
+        let c = self.cycle_ns as f64;
+        let mut phase = (t_ref - self.phase_ns as f64).rem_euclid(c);
+        if phase > c / 2.0 {
+            phase -= c;
+        }
+        // One cycle of reference time is cycle/rate of master time. Each phase carries the
+        // host's wake-up jitter, which no period can undo: take out 1/16 of it per cycle so
+        // that the jitter averages away instead of being fed back.
+        let period = (c - phase / 16.0) / rate;
+        Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(cycle: u64, reference_ns: u64, difference_ns: i64) -> Sample {
+        Sample {
+            cycle,
+            built_ns: cycle * 1_000_000,
+            tx_ns: None,
+            rx_ns: cycle * 1_000_000 + 20_000,
+            reference_ns,
+            difference_ns,
+            loop_ns: 4_000,
+            frame_ns: 6_000,
+        }
+    }
+
+    #[test]
+    fn park_ema_follows_eq4_and_shifts_by_eq5_every_period() {
+        let mut p = Park2020::new(3_000);
+        p.period_ns = 2_000_000;
+        assert_eq!(p.reference_time(10), 3_010);
+        // ΔT⁰ = Δt⁰ = 400 → offsets −400.
+        assert_eq!(p.update(Some(&sample(1, 0, 400))).shift_offsets_ns, -400);
+        // Within the period: nothing.
+        assert_eq!(p.update(Some(&sample(2, 0, 800))).shift_offsets_ns, 0);
+        // ΔT¹ = 0.25·800 + 0.75·400 = 500.
+        assert_eq!(p.update(Some(&sample(3, 0, 800))).shift_offsets_ns, -500);
+        assert_eq!(Park2020::delay_from(&[(10_000, 4_000), (12_000, 4_000)]), 3_500);
+    }
+
+    #[test]
+    fn chen_truncation_carries_the_error_over() {
+        let mut c = Chen2016::new(1_000_000, 10, 10_000);
+        // 1 003 333.3 ns on a 10 µs timer: mostly 1 000 000, one step up every third cycle.
+        let periods: Vec<u64> = (0..300).map(|_| c.truncate(1_003_333.3)).collect();
+        assert!(periods.iter().all(|&p| p == 1_000_000 || p == 1_010_000));
+        let mean = periods.iter().sum::<u64>() as f64 / 300.0;
+        assert!((mean - 1_003_333.3).abs() < 100.0, "{mean}");
+    }
+
+    #[test]
+    fn chen_rescales_by_the_reference_speed() {
+        // The reference runs 100 ppm fast: each master millisecond is 1 000 100 ns of it.
+        let mut c = Chen2016::new(1_000_000, 10, 1);
+        let mut last = None;
+        for k in 0..=10 {
+            last = c.update(Some(&sample(k, k * 1_000_100, 0))).next_period_ns;
+        }
+        let p = last.unwrap() as f64;
+        assert!((p - 1_000_000.0 * 1_000_000.0 / 1_000_100.0).abs() < 2.0, "{p}");
+    }
+
+    #[test]
+    fn soem_pi_shortens_the_period_when_the_reference_is_late_in_its_cycle() {
+        let mut pi = SoemPi::new(1_000_000, 0);
+        let p = pi.update(Some(&sample(1, 5_000_000 + 20_000, 0))).next_period_ns.unwrap();
+        assert_eq!(p, 1_000_000 - 200);
+        let p = pi.update(Some(&sample(2, 5_000_000 - 20_000, 0))).next_period_ns.unwrap();
+        assert_eq!(p, 1_000_000 + 200);
+    }
+
+    #[test]
+    fn ferrocat_lead_is_half_the_round_trip_without_loop_and_frame() {
+        let s = sample(1, 0, 0);
+        assert_eq!(s.lead_ns(), (20_000 - 4_000 - 6_000) / 2);
+        let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
+        assert_eq!(f.reference_time(100), 100, "no lead before the first sample");
+        f.update(Some(&s));
+        assert_eq!(f.reference_time(100), 100 + 5_000);
+        // One wild sample out of many does not move it.
+        for k in 2..60 {
+            f.update(Some(&sample(k, 0, 0)));
+        }
+        let mut wild = sample(61, 0, 0);
+        wild.rx_ns += 500_000;
+        f.update(Some(&wild));
+        assert_eq!(f.lead_ns(), Some(5_000));
+    }
+}
