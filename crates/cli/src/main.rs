@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod esi;
+mod lab;
 mod master_cmd;
 mod pcap;
 mod sii;
@@ -108,6 +109,11 @@ enum Command {
         #[arg(long, default_value_t = 15_000, requires = "dc")]
         dc_static_frames: u32,
     },
+    /// The papers' clock-synchronisation experiments, in virtual time.
+    Lab {
+        #[command(subcommand)]
+        experiment: LabCmd,
+    },
     /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
     Rtt {
         #[arg(long)]
@@ -118,6 +124,31 @@ enum Command {
         /// Slaves the frame is built for (one process-data nibble each, after the coupler).
         #[arg(long, default_value_t = 6)]
         slaves: u16,
+    },
+}
+
+#[derive(Subcommand)]
+enum LabCmd {
+    /// Park et al. 2020 Table 1: master–reference and master–last-slave errors per method.
+    Park2020 {
+        /// 5 s settling, 5 000 samples, 3 rounds (instead of 5 min, 100 000, 10).
+        #[arg(long)]
+        quick: bool,
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt.
+        #[arg(long, default_value = "beaglebone-rt")]
+        host: String,
+        /// Segment sizes (repeatable; default 2 and 6).
+        #[arg(long)]
+        slaves: Vec<usize>,
+        #[arg(long)]
+        rounds: Option<u32>,
+        #[arg(long)]
+        json: bool,
+        /// Folder for the CSV.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -191,6 +222,9 @@ fn main() -> ExitCode {
         Command::Sim { bench: true, json, .. } => sim::bench(json),
         Command::Sim { config, device, iface, udp, report, seed, .. } => {
             sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
+        }
+        Command::Lab { experiment: LabCmd::Park2020 { quick, seed, host, slaves, rounds, json, out } } => {
+            lab::park2020(lab::ParkArgs { quick, seed, host, slaves, rounds, json, out })
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
         Command::Scan { target, json } => master_cmd::scan(&target, json),

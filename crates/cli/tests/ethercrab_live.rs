@@ -61,7 +61,14 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
     std::thread::sleep(Duration::from_millis(200));
     let md = Arc::new(MainDevice::new(
         pdu_loop,
-        Timeouts { pdu: Duration::from_millis(200), state_transition: Duration::from_secs(10), ..Timeouts::default() },
+        // A loaded run once took longer than ethercrab's default EEPROM wait (the simulator's
+        // p99 per frame was 180 µs then): generous timeouts, as for a slow network.
+        Timeouts {
+            pdu: Duration::from_millis(200),
+            eeprom: Duration::from_millis(200),
+            state_transition: Duration::from_secs(10),
+            ..Timeouts::default()
+        },
         // Under a loaded test run the kernel's veth path has dropped a frame now and then (the
         // simulator answered every frame it received): retry, as on any real network.
         MainDeviceConfig { dc_static_sync_iterations: 10_000, retry_behaviour: RetryBehaviour::Count(3) },

@@ -321,7 +321,11 @@ impl<I: Io> Master<I> {
                 difference_ns: SystemTimeDifference(u32::from_le_bytes(diff)).as_ns(),
                 loop_ns: st.loop_ns,
                 // Ethernet header, EtherCAT header, the three datagrams; FCS and preamble.
-                frame_ns: if tx.is_some() { 0 } else { (16 + 3 * 12 + 8 + 8 + 4 + 4 + 8) * 80 },
+                frame_ns: if self.engine.io.rx_stamps_start_of_frame() {
+                    0
+                } else {
+                    (16 + 3 * 12 + 8 + 8 + 4 + 4 + 8) * 80
+                },
             })
         } else {
             st.lost += 1;

@@ -18,6 +18,10 @@ pub trait Io {
     fn last_tx_ns(&mut self) -> Option<u64> {
         None
     }
+    /// Receive times mark the start of the frame (a NIC stamp) rather than its end.
+    fn rx_stamps_start_of_frame(&self) -> bool {
+        false
+    }
     /// Virtual time (deterministic) rather than a real clock.
     fn is_virtual(&self) -> bool {
         false
@@ -63,14 +67,26 @@ pub struct HostModel {
     pub send: Latency,
     pub recv: Latency,
     pub wake: Latency,
-    /// The NIC stamps when each frame really left and when each reply began to arrive.
-    pub tx_timestamps: bool,
+    /// What the link tells about when frames really left and arrived.
+    pub stamps: Stamps,
+}
+
+/// Timestamps the link gives the master.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Stamps {
+    /// None: the master knows only when it handed a frame over and when it had the reply.
+    None,
+    /// The kernel's (SO_TIMESTAMPING software): transmit taken this long before the frame
+    /// leaves, receive this long after its last byte arrived.
+    Software { tx_early: Latency, rx_late: Latency },
+    /// The NIC's: the start of each frame, both ways, exactly.
+    Hardware,
 }
 
 impl HostModel {
     /// No host at all: frames leave and arrive instantly, timers are exact.
     pub fn ideal() -> Self {
-        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO, tx_timestamps: false }
+        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO, stamps: Stamps::None }
     }
 
     /// A PC with a PREEMPT_RT kernel and a raw socket: a few µs through the stack, timer
@@ -81,13 +97,103 @@ impl HostModel {
             send: Latency { mean_ns: 4_000.0, sd_ns: 1_000.0, min_ns: 2_000.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
             recv: Latency { mean_ns: 5_000.0, sd_ns: 1_500.0, min_ns: 2_500.0, outlier_p: 0.001, outlier_ns: 20_000.0 },
             wake: Latency { mean_ns: 3_000.0, sd_ns: 1_500.0, min_ns: 1_000.0, outlier_p: 0.001, outlier_ns: 30_000.0 },
-            tx_timestamps: false,
+            stamps: Stamps::Software {
+                tx_early: Latency { mean_ns: 1_000.0, sd_ns: 300.0, min_ns: 400.0, ..Latency::ZERO },
+                rx_late: Latency { mean_ns: 1_500.0, sd_ns: 400.0, min_ns: 500.0, ..Latency::ZERO },
+            },
         }
     }
 
-    /// `pc_rt` with a NIC that stamps each frame's departure in hardware.
+    /// `pc_rt` with a NIC that stamps each frame's departure and arrival in hardware.
     pub fn nic_hwts() -> Self {
-        HostModel { name: "nic-hwts", tx_timestamps: true, ..HostModel::pc_rt() }
+        HostModel { name: "nic-hwts", stamps: Stamps::Hardware, ..HostModel::pc_rt() }
+    }
+
+    /// A stock (non-RT) kernel: tens of µs through the stack and timer, rare hundreds.
+    pub fn pc_stock() -> Self {
+        HostModel {
+            name: "pc-stock",
+            send: Latency {
+                mean_ns: 15_000.0,
+                sd_ns: 6_000.0,
+                min_ns: 5_000.0,
+                outlier_p: 0.01,
+                outlier_ns: 200_000.0,
+            },
+            recv: Latency {
+                mean_ns: 20_000.0,
+                sd_ns: 8_000.0,
+                min_ns: 6_000.0,
+                outlier_p: 0.01,
+                outlier_ns: 200_000.0,
+            },
+            wake: Latency {
+                mean_ns: 50_000.0,
+                sd_ns: 25_000.0,
+                min_ns: 5_000.0,
+                outlier_p: 0.01,
+                outlier_ns: 500_000.0,
+            },
+            stamps: Stamps::Software {
+                tx_early: Latency {
+                    mean_ns: 2_000.0,
+                    sd_ns: 1_000.0,
+                    min_ns: 500.0,
+                    outlier_p: 0.01,
+                    outlier_ns: 50_000.0,
+                },
+                rx_late: Latency {
+                    mean_ns: 3_000.0,
+                    sd_ns: 1_500.0,
+                    min_ns: 500.0,
+                    outlier_p: 0.01,
+                    outlier_ns: 50_000.0,
+                },
+            },
+        }
+    }
+
+    /// The BeagleBone Green of Park 2020 (AM335x, RT kernel 4.9). Its send delay is the one
+    /// free parameter, set so that `conventional`'s master–reference bias comes out at the
+    /// paper's 10.6 µs: the bias is the send delay plus the wire to the reference (preamble and
+    /// link, about 1.1 µs in the segment model), so the send delay's mean is 9.5 µs.
+    pub fn beaglebone_rt() -> Self {
+        HostModel {
+            name: "beaglebone-rt",
+            send: Latency { mean_ns: 9_500.0, sd_ns: 2_500.0, min_ns: 5_000.0, outlier_p: 0.002, outlier_ns: 40_000.0 },
+            recv: Latency {
+                mean_ns: 12_000.0,
+                sd_ns: 3_000.0,
+                min_ns: 6_000.0,
+                outlier_p: 0.002,
+                outlier_ns: 40_000.0,
+            },
+            wake: Latency {
+                mean_ns: 10_000.0,
+                sd_ns: 4_000.0,
+                min_ns: 3_000.0,
+                outlier_p: 0.002,
+                outlier_ns: 60_000.0,
+            },
+            stamps: Stamps::Software {
+                tx_early: Latency { mean_ns: 2_000.0, sd_ns: 600.0, min_ns: 800.0, ..Latency::ZERO },
+                rx_late: Latency { mean_ns: 3_000.0, sd_ns: 800.0, min_ns: 1_000.0, ..Latency::ZERO },
+            },
+        }
+    }
+
+    /// The presets by name, for the command line and scenarios.
+    pub const PRESETS: [&'static str; 5] = ["ideal", "pc-rt", "pc-stock", "nic-hwts", "beaglebone-rt"];
+
+    pub fn preset(name: &str) -> Option<Self> {
+        Some(match name {
+            "ideal" => HostModel::ideal(),
+            "pc-rt" => HostModel::pc_rt(),
+            "pc-stock" => HostModel::pc_stock(),
+            "nic-hwts" => HostModel::nic_hwts(),
+            "beaglebone-rt" => HostModel::beaglebone_rt(),
+            _ => return None,
+        })
     }
 }
 
@@ -132,7 +238,12 @@ impl Io for VirtualIo {
 
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let t_wire = self.now + self.host.send.sample(&mut self.rng);
-        self.last_tx = Some(t_wire);
+        // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit.
+        self.last_tx = match self.host.stamps {
+            Stamps::None => None,
+            Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(&mut self.rng))),
+            Stamps::Hardware => Some(t_wire + 8 * 80),
+        };
         let Some(k) = self.slots.iter().position(|s| !s.3) else {
             return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
         };
@@ -141,9 +252,14 @@ impl Io for VirtualIo {
         slot.2[..n].copy_from_slice(&frame[..n]);
         match self.seg.exchange(&mut slot.2[..n], t_wire) {
             Some(back) => {
-                // A NIC stamps the start of the frame: its end minus the frame and FCS at 100 Mbit/s.
-                self.rx_stamps[k] = back.saturating_sub((n as u64 + 4) * 80);
-                slot.0 = back + self.host.recv.sample(&mut self.rng);
+                let deliver = back + self.host.recv.sample(&mut self.rng);
+                self.rx_stamps[k] = match self.host.stamps {
+                    Stamps::None => deliver,
+                    Stamps::Software { rx_late, .. } => (back + rx_late.sample(&mut self.rng)).min(deliver),
+                    // The start of the frame: its end minus the frame and FCS at 100 Mbit/s.
+                    Stamps::Hardware => back.saturating_sub((n as u64 + 4) * 80),
+                };
+                slot.0 = deliver;
                 slot.1 = n;
                 slot.3 = true;
             }
@@ -162,8 +278,7 @@ impl Io for VirtualIo {
                 let n = s.1.min(buf.len());
                 buf[..n].copy_from_slice(&s.2[..n]);
                 s.3 = false;
-                let stamp = if self.host.tx_timestamps { self.rx_stamps[k] } else { self.now };
-                Ok(Some((n, stamp)))
+                Ok(Some((n, self.rx_stamps[k])))
             }
             _ => {
                 self.now = self.now.max(deadline_ns);
@@ -178,12 +293,10 @@ impl Io for VirtualIo {
     }
 
     fn last_tx_ns(&mut self) -> Option<u64> {
-        if self.host.tx_timestamps {
-            // A NIC stamps the end of the start-of-frame delimiter: 8 bytes after the first bit.
-            self.last_tx.map(|t| t + 8 * 80)
-        } else {
-            None
-        }
+        self.last_tx
+    }
+    fn rx_stamps_start_of_frame(&self) -> bool {
+        self.host.stamps == Stamps::Hardware
     }
 }
 

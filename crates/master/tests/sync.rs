@@ -84,7 +84,7 @@ fn reference_follows_master_methods_side_by_side() {
         assert!(ours.ref_mean.abs() <= park.ref_mean.abs() + 1.0 && ours.ref_rms <= park.ref_rms);
         // The other slaves follow the reference.
         assert!((ours.last_mean - ours.ref_mean).abs() < 100.0, "{} {}", ours.last_mean, ours.ref_mean);
-        if host.tx_timestamps {
+        if host.stamps == ferrocat_master::io::Stamps::Hardware {
             // What is left is the reference's own forward/return asymmetry, which no round
             // trip can see.
             assert!(ours.ref_mean.abs() <= 250.0, "with hardware timestamps: {}", ours.ref_mean);
@@ -114,10 +114,22 @@ fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64) -> (f64, f64)
             phases.push(p);
         }
     }
-    let mean = phases.iter().sum::<f64>() / phases.len() as f64;
-    let sd = (phases.iter().map(|p| (p - mean).powi(2)).sum::<f64>() / phases.len() as f64).sqrt();
-    let span = phases.iter().cloned().fold(f64::MIN, f64::max) - phases.iter().cloned().fold(f64::MAX, f64::min);
-    println!("phase mean {mean:9.1} ns, sd {sd:8.1} ns, span {span:9.1} ns");
+    // Phases on a circle: sd around the first one (Chen's method holds whatever phase it
+    // started with), mean as an absolute phase.
+    let c = CYCLE_NS as f64;
+    let wrap = |x: f64| {
+        let y = x.rem_euclid(c);
+        if y > c / 2.0 {
+            y - c
+        } else {
+            y
+        }
+    };
+    let rel: Vec<f64> = phases.iter().map(|p| wrap(p - phases[0])).collect();
+    let rel_mean = rel.iter().sum::<f64>() / rel.len() as f64;
+    let sd = (rel.iter().map(|p| (p - rel_mean).powi(2)).sum::<f64>() / rel.len() as f64).sqrt();
+    let mean = wrap(phases[0] + rel_mean);
+    println!("{}: phase mean {mean:9.1} ns, sd {sd:8.1} ns", sync.name());
     (mean, sd)
 }
 

@@ -1,0 +1,126 @@
+//! `ferrocat lab …`: the papers' experiments in virtual time.
+use std::io::IsTerminal;
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use ferrocat_lab::park2020::{self, Options, Row, PAPER};
+use ferrocat_master::io::HostModel;
+
+use crate::outln;
+
+pub struct ParkArgs {
+    pub quick: bool,
+    pub seed: Option<u64>,
+    pub host: String,
+    pub slaves: Vec<usize>,
+    pub rounds: Option<u32>,
+    pub json: bool,
+    pub out: Option<std::path::PathBuf>,
+}
+
+pub fn host(name: &str) -> anyhow::Result<HostModel> {
+    HostModel::preset(name)
+        .ok_or_else(|| anyhow::anyhow!("unknown host model {name:?} (known: {})", HostModel::PRESETS.join(", ")))
+}
+
+pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
+    let host = host(&a.host)?;
+    let mut o = if a.quick { Options::quick(host) } else { Options::full(host) };
+    if let Some(s) = a.seed {
+        o.seed = s;
+    }
+    if let Some(r) = a.rounds {
+        anyhow::ensure!(r > 0, "--rounds must be at least 1");
+        o.rounds = r;
+    }
+    if !a.slaves.is_empty() {
+        anyhow::ensure!(a.slaves.iter().all(|&n| (1..=64).contains(&n)), "--slaves must be between 1 and 64");
+        o.slaves = a.slaves.clone();
+    }
+    let tty = std::io::stderr().is_terminal();
+    let progress = move |done: usize, total: usize| {
+        if tty {
+            eprint!("\r  {done}/{total} rounds");
+            if done == total {
+                eprintln!();
+            }
+        }
+    };
+    let rows = park2020::run(&o, &progress)?;
+    if let Some(dir) = &a.out {
+        write_csv(dir, &rows)?;
+    }
+    if a.json {
+        let v = serde_json::json!({ "experiment": "park2020", "seed": o.seed, "rounds": o.rounds,
+            "settle_s": o.settle_s, "samples": o.samples, "rows": rows });
+        outln!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "Park 2020 Table 1 — host {}, seed {}, {} rounds, {} samples every {} ms after {} s; error = master − slave, µs",
+        host.name,
+        o.seed,
+        o.rounds,
+        o.samples,
+        o.sample_every * o.cycle_ns / 1_000_000,
+        o.settle_s
+    );
+    outln!(
+        "{:>6}  {:<13} {:>9} {:>9} {:>9} {:>9} {:>10}   paper: {:>7} {:>7} {:>7} {:>7}",
+        "slaves",
+        "method",
+        "ref GMEAN",
+        "ref MRMS",
+        "last GM",
+        "last MRMS",
+        "lock ms",
+        "rGMEAN",
+        "rMRMS",
+        "lGMEAN",
+        "lMRMS"
+    );
+    for r in &rows {
+        let paper = PAPER
+            .iter()
+            .find(|p| p.0 == r.slaves && p.1 == r.method)
+            .map(|p| format!("{:>7.2} {:>7.2} {:>7.2} {:>7.2}", p.2, p.3, p.4, p.5))
+            .unwrap_or_else(|| format!("{:>7} {:>7} {:>7} {:>7}", "—", "—", "—", "—"));
+        let lock = r.lock_ms.map(|l| format!("{l:.0}")).unwrap_or_else(|| "never".into());
+        outln!(
+            "{:>6}  {:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10}   paper: {paper}",
+            r.slaves,
+            r.method,
+            r.ref_gmean_us,
+            r.ref_mrms_us,
+            r.last_gmean_us,
+            r.last_mrms_us,
+            lock
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn write_csv(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join("park2020.csv");
+    let mut s = String::from(
+        "slaves,method,host,ref_gmean_us,ref_mrms_us,last_gmean_us,last_mrms_us,lock_ms,rounds,frames_lost\n",
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{},{},{}\n",
+            r.slaves,
+            r.method,
+            r.host,
+            r.ref_gmean_us,
+            r.ref_mrms_us,
+            r.last_gmean_us,
+            r.last_mrms_us,
+            r.lock_ms.map(|l| format!("{l:.1}")).unwrap_or_default(),
+            r.rounds,
+            r.frames_lost
+        ));
+    }
+    std::fs::write(&path, s).with_context(|| format!("writing {}", path.display()))
+}

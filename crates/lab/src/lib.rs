@@ -1,0 +1,37 @@
+//! The lab: the papers' experiments run on the virtual segment, every method on the same
+//! random realisation (same seed), the error taken from the true clocks the simulator knows.
+pub mod park2020;
+pub mod stats;
+
+use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Park2020};
+use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::SegmentConfig;
+
+/// The reference-follows-master methods the master–slave error tables compare.
+pub const RFM_METHODS: [&str; 3] = ["conventional", "park2020", "ferrocat"];
+
+/// A line of `slaves` DC slaves (EK1100-like, E-Bus hops), crystals spread ±50 ppm by `seed`,
+/// brought up and DC-initialised, in virtual time on `host`.
+pub fn segment(slaves: usize, host: HostModel, seed: u64) -> anyhow::Result<Master<VirtualIo>> {
+    let mut toml = format!("seed = {seed}\ndrift_spread_ppm = 50.0\n");
+    for _ in 0..slaves {
+        toml.push_str("[[device]]\nbuiltin = 'EK1100'\n");
+    }
+    let cfg: SegmentConfig = toml::from_str(&toml)?;
+    let mut m = Master::new(VirtualIo::new(cfg.build()?, host, seed));
+    m.bring_up()?;
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
+    Ok(m)
+}
+
+/// A method by name, prepared on `m` (Park's delay measurement runs here).
+pub fn method(name: &str, m: &mut Master<VirtualIo>, cycle_ns: u64) -> anyhow::Result<Box<dyn ClockSync>> {
+    Ok(match name {
+        "conventional" => Box::new(ferrocat_master::sync::Conventional),
+        // Eq. 3 averaged over 1000 round trips, as published.
+        "park2020" => Box::new(Park2020::new(m.park_delay(1000)?)),
+        "ferrocat" => Box::new(Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns)),
+        other => anyhow::bail!("unknown method {other:?} (known: {})", RFM_METHODS.join(", ")),
+    })
+}

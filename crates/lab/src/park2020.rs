@@ -1,0 +1,174 @@
+//! Park et al. 2020, Table 1: the master–reference and master–last-slave synchronisation
+//! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
+//! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::{Master, SyncState};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::stats::Moments;
+
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub slaves: Vec<usize>,
+    pub methods: Vec<String>,
+    pub rounds: u32,
+    pub settle_s: f64,
+    pub samples: u64,
+    pub cycle_ns: u64,
+    /// A sample every this many cycles (the paper: every 2 ms at 1 ms).
+    pub sample_every: u64,
+    pub seed: u64,
+    pub host: HostModel,
+}
+
+impl Options {
+    /// As published: 100 000 samples after 5 minutes, 10 rounds.
+    pub fn full(host: HostModel) -> Self {
+        Options {
+            slaves: vec![2, 6],
+            methods: crate::RFM_METHODS.iter().map(|s| s.to_string()).collect(),
+            rounds: 10,
+            settle_s: 300.0,
+            samples: 100_000,
+            cycle_ns: 1_000_000,
+            sample_every: 2,
+            seed: 1,
+            host,
+        }
+    }
+
+    /// Under a minute: 5 s of settling, 5 000 samples, 3 rounds.
+    pub fn quick(host: HostModel) -> Self {
+        Options { rounds: 3, settle_s: 5.0, samples: 5_000, ..Options::full(host) }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Row {
+    pub slaves: usize,
+    pub method: String,
+    pub host: String,
+    pub ref_gmean_us: f64,
+    pub ref_mrms_us: f64,
+    pub last_gmean_us: f64,
+    pub last_mrms_us: f64,
+    /// Median over rounds of the time from the start of cyclic operation until every slave
+    /// stays within 100 ns of the reference and the master within 1 µs (None: not locked in
+    /// some round).
+    pub lock_ms: Option<f64>,
+    pub rounds: u32,
+    pub frames_lost: u64,
+}
+
+/// Table 1 as published (µs): slaves, method, ref GMEAN, ref MRMS, last GMEAN, last MRMS.
+pub const PAPER: [(usize, &str, f64, f64, f64, f64); 4] = [
+    (2, "conventional", 10.58, 11.23, 10.57, 11.24),
+    (2, "park2020", 1.06, 4.19, 1.08, 4.24),
+    (6, "conventional", 11.67, 12.29, 11.74, 12.35),
+    (6, "park2020", -1.71, 4.55, -1.59, 4.59),
+];
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Round {
+    reference: Moments,
+    last: Moments,
+    lock_ms: Option<f64>,
+    lost: u64,
+}
+
+/// The master's clock minus slave `k`'s system time now (the paper's sign: positive when the
+/// slave lags), on the low 32 bits so that 32-bit DCs compare too.
+fn error_ns(m: &mut Master<VirtualIo>, k: usize) -> i64 {
+    let t = m.engine.io.now_ns();
+    let master = m.master_system_time() as u32;
+    let slave = m.engine.io.seg.nodes[k].esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
+    master.wrapping_sub(slave) as i32 as i64
+}
+
+fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Result<Round> {
+    let mut m = crate::segment(slaves, opts.host, seed)?;
+    let mut sync = crate::method(method, &mut m, opts.cycle_ns)?;
+    let mut st = SyncState { loop_ns: m.reference_loop_ns()?, ..SyncState::default() };
+    let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
+    let total = settle + opts.samples * opts.sample_every;
+    let mut next = m.engine.io.now_ns();
+    let mut r = Round::default();
+    let mut last_violation: Option<u64> = None;
+    let last = slaves - 1;
+    for k in 0..total {
+        next += opts.cycle_ns;
+        m.engine.io.sleep_until(next);
+        m.sync_step(sync.as_mut(), &mut st)?;
+        if k % opts.sample_every != 0 {
+            continue;
+        }
+        let e_ref = error_ns(&mut m, 0);
+        let e_last = error_ns(&mut m, last);
+        let spread = (1..slaves).map(|s| (error_ns(&mut m, s) - e_ref).abs()).max().unwrap_or(0);
+        if spread > 100 || e_ref.abs() > 1_000 {
+            last_violation = Some(k);
+        }
+        if k >= settle {
+            r.reference.push(e_ref as f64);
+            r.last.push(e_last as f64);
+        }
+    }
+    // Locked if the last violation is in the first 90 % of the run.
+    r.lock_ms = match last_violation {
+        None => Some(0.0),
+        Some(v) if v < total * 9 / 10 => Some((v + opts.sample_every) as f64 * opts.cycle_ns as f64 / 1e6),
+        Some(_) => None,
+    };
+    r.lost = st.lost;
+    Ok(r)
+}
+
+/// Every (slaves, method) row; round `i` of every method uses seed `seed + i`, so the
+/// comparison is paired. `progress(done, total)` is called as rounds finish.
+pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Vec<Row>> {
+    let jobs: Vec<(usize, String, u32)> = opts
+        .slaves
+        .iter()
+        .flat_map(|&n| opts.methods.iter().flat_map(move |m| (0..opts.rounds).map(move |i| (n, m.clone(), i))))
+        .collect();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<anyhow::Result<Round>> = jobs
+        .par_iter()
+        .map(|(n, method, i)| {
+            let r = round(opts, *n, method, opts.seed.wrapping_add(*i as u64));
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, jobs.len());
+            r
+        })
+        .collect();
+    let mut rows = Vec::new();
+    for &n in &opts.slaves {
+        for method in &opts.methods {
+            let mut rs = Vec::new();
+            for (job, r) in jobs.iter().zip(&results) {
+                if job.0 == n && &job.1 == method {
+                    match r {
+                        Ok(r) => rs.push(*r),
+                        Err(e) => anyhow::bail!("{n} slaves, {method}, round {}: {e:#}", job.2),
+                    }
+                }
+            }
+            let k = rs.len() as f64;
+            let avg = |f: &dyn Fn(&Round) -> f64| rs.iter().map(f).sum::<f64>() / k / 1e3;
+            let locks: Option<Vec<f64>> = rs.iter().map(|r| r.lock_ms).collect();
+            rows.push(Row {
+                slaves: n,
+                method: method.clone(),
+                host: opts.host.name.to_string(),
+                ref_gmean_us: avg(&|r| r.reference.mean()),
+                ref_mrms_us: avg(&|r| r.reference.rms()),
+                last_gmean_us: avg(&|r| r.last.mean()),
+                last_mrms_us: avg(&|r| r.last.rms()),
+                lock_ms: locks.map(|l| crate::stats::median(&l)),
+                rounds: rs.len() as u32,
+                frames_lost: rs.iter().map(|r| r.lost).sum(),
+            });
+        }
+    }
+    Ok(rows)
+}
