@@ -287,7 +287,7 @@ impl<I: Io> Master<I> {
         let mut w = sync.reference_time(built_ns).to_le_bytes();
         let mut frmw = [0u8; 8];
         let mut diff = [0u8; 4];
-        let rfm = sync.coupling() == Coupling::ReferenceFollowsMaster;
+        let rfm = sync.coupling() == Coupling::ReferenceFollowsMaster && sync.writes_reference_time(st.cycle);
         let mut nop: [u8; 0] = [];
         let mut pdus = [
             if rfm {
