@@ -49,3 +49,23 @@ fn bad_arguments_are_errors_not_panics() {
         assert!(!ok && !err.contains("panicked") && !err.trim().is_empty(), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn lab_park2020_prints_its_table_as_json() {
+    let (ok, out, err) = ferrocat(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3, "conventional, park2020, ferrocat");
+    for r in rows {
+        for key in
+            ["slaves", "method", "host", "ref_gmean_us", "ref_mrms_us", "last_gmean_us", "last_mrms_us", "lock_ms"]
+        {
+            assert!(r.get(key).is_some(), "{key} missing in {r}");
+        }
+        assert_eq!(r["host"], "beaglebone-rt");
+        assert!(r["ref_mrms_us"].as_f64().unwrap() > 0.0);
+    }
+    let (ok, _, err) = ferrocat(&["lab", "park2020", "--quick", "--host", "vax"]);
+    assert!(!ok && err.contains("vax") && err.contains("beaglebone-rt"), "{err}");
+}
