@@ -528,14 +528,20 @@ impl<I: Io> Master<I> {
             if Some(k) == reference || !self.slaves[k].has_dc {
                 continue;
             }
-            let Some(p) = self.slaves[k].parent.map(|p| p as usize) else { continue };
-            let parent = &self.slaves[p];
+            let Some(mut via) = self.slaves[k].parent.map(|p| p as usize) else { continue };
+            // Behind non-DC slaves (which latch no receive times), measure from the nearest DC
+            // ancestor: the round trip it sees on the port toward them holds their hops both ways
+            // and this slave's own loop.
+            let mut port = self.slaves[k].parent_port;
+            while !self.slaves[via].has_dc {
+                let Some(up) = self.slaves[via].parent else { break };
+                port = self.slaves[via].parent_port;
+                via = up as usize;
+            }
+            let parent = &self.slaves[via];
             if !parent.has_dc {
-                // A non-DC parent: carry its delay through (its hop folds into the wire).
-                self.slaves[k].delay_ns = parent.delay_ns;
                 continue;
             }
-            let port = self.slaves[k].parent_port;
             let before = prev_active(parent, port);
             let rtt =
                 parent.receive_times[port as usize].wrapping_sub(parent.receive_times[before as usize]) as i32 as i64;
