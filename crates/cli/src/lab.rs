@@ -124,3 +124,79 @@ fn write_csv(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     }
     std::fs::write(&path, s).with_context(|| format!("writing {}", path.display()))
 }
+
+pub fn chen2016(
+    quick: bool,
+    seed: Option<u64>,
+    host_name: &str,
+    cycles_us: Vec<u64>,
+    json: bool,
+) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::chen2016::{run, Options, PAPER};
+    let host = host(host_name)?;
+    let mut o = if quick { Options::quick(host) } else { Options::full(host) };
+    if let Some(s) = seed {
+        o.seed = s;
+    }
+    if !cycles_us.is_empty() {
+        anyhow::ensure!(
+            cycles_us.iter().all(|&c| (10..=100_000).contains(&c)),
+            "--cycle-us must be between 10 and 100000"
+        );
+        o.cycles_us = cycles_us;
+    }
+    let tty = std::io::stderr().is_terminal();
+    let rows = run(&o, &move |done, total| {
+        if tty {
+            eprint!("\r  {done}/{total} runs");
+            if done == total {
+                eprintln!();
+            }
+        }
+    })?;
+    if json {
+        let v = serde_json::json!({ "experiment": "chen2016", "seed": o.seed, "seconds": o.seconds,
+            "reference_ppm": o.reference_ppm, "rows": rows });
+        outln!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "Chen 2016 Table 2 — host {}, seed {}, {} s per run, reference crystal {:+} ppm; jitter of the reference's time against the master's grid",
+        host.name, o.seed, o.seconds, o.reference_ppm
+    );
+    outln!(
+        "{:>6}  {:<9} {:>10} {:>10} {:>8} {:>9} {:>6} {:>8}   paper: {:>7} {:>7} {:>6} {:>5}",
+        "cycle",
+        "method",
+        "min µs",
+        "max µs",
+        "width %",
+        "cycles",
+        "lost",
+        "repeated",
+        "min",
+        "max",
+        "width",
+        "loss"
+    );
+    for r in &rows {
+        let paper = PAPER
+            .iter()
+            .find(|p| p.0 == r.cycle_us && r.method == "chen2016")
+            .map(|p| format!("{:>7.2} {:>7.2} {:>6.1} {:>5}", p.1, p.2, p.3, p.4))
+            .unwrap_or_default();
+        outln!(
+            "{:>4}µs  {:<9} {:>10.2} {:>10.2} {:>8.1} {:>9} {:>6} {:>8}   {}{paper}",
+            r.cycle_us,
+            r.method,
+            r.jitter_min_us,
+            r.jitter_max_us,
+            r.jitter_width_pct,
+            r.cycles,
+            r.lost,
+            r.repeated,
+            if paper.is_empty() { "" } else { "paper: " }
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

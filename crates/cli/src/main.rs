@@ -150,6 +150,22 @@ enum LabCmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method.
+    Chen2016 {
+        /// 10 s per run instead of 60.
+        #[arg(long)]
+        quick: bool,
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
+        #[arg(long, default_value = "rtx-10us")]
+        host: String,
+        /// Cycle times in µs (repeatable; default 500, 250, 100, 50).
+        #[arg(long)]
+        cycle_us: Vec<u64>,
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -225,6 +241,9 @@ fn main() -> ExitCode {
         }
         Command::Lab { experiment: LabCmd::Park2020 { quick, seed, host, slaves, rounds, json, out } } => {
             lab::park2020(lab::ParkArgs { quick, seed, host, slaves, rounds, json, out })
+        }
+        Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json } } => {
+            lab::chen2016(quick, seed, &host, cycle_us, json)
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
         Command::Scan { target, json } => master_cmd::scan(&target, json),

@@ -69,3 +69,11 @@ fn lab_park2020_prints_its_table_as_json() {
     let (ok, _, err) = ferrocat(&["lab", "park2020", "--quick", "--host", "vax"]);
     assert!(!ok && err.contains("vax") && err.contains("beaglebone-rt"), "{err}");
 }
+
+#[test]
+fn lab_chen2016_refuses_bad_cycles_and_hosts() {
+    let (ok, _, err) = ferrocat(&["lab", "chen2016", "--quick", "--cycle-us", "5"]);
+    assert!(!ok && err.contains("--cycle-us") && err.lines().count() == 1, "{err}");
+    let (ok, _, err) = ferrocat(&["lab", "chen2016", "--host", "vax"]);
+    assert!(!ok && err.contains("rtx-10us"), "{err}");
+}

@@ -181,6 +181,13 @@ pub struct SyncApp {
 }
 
 impl SyncApp {
+    /// Starts the counts afresh (at the start of a measurement).
+    pub fn reset_counts(&mut self) {
+        self.consumed = 0;
+        self.lost = 0;
+        self.repeated = 0;
+    }
+
     pub fn new(mode: SyncMode, sm_count: u8, drift_ppb: i64) -> Self {
         SyncApp {
             mode,

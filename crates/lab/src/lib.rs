@@ -1,5 +1,6 @@
 //! The lab: the papers' experiments run on the virtual segment, every method on the same
 //! random realisation (same seed), the error taken from the true clocks the simulator knows.
+pub mod chen2016;
 pub mod park2020;
 pub mod stats;
 

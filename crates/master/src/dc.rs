@@ -226,6 +226,8 @@ pub struct SyncState {
     /// Time the frame spends behind the reference (from the latched receive times).
     pub loop_ns: u64,
     pub lost: u64,
+    /// The reference's time from the last answered step's FRMW.
+    pub reference_ns: Option<u64>,
 }
 
 impl<I: Io> Master<I> {
@@ -309,6 +311,9 @@ impl<I: Io> Master<I> {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))
         };
+        if answered {
+            st.reference_ns = Some(u64::from_le_bytes(frmw));
+        }
         let sample = if answered {
             let tx = self.engine.io.last_tx_ns();
             let rx = self.engine.last_rx_ns;

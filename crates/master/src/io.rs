@@ -69,6 +69,8 @@ pub struct HostModel {
     pub wake: Latency,
     /// What the link tells about when frames really left and arrived.
     pub stamps: Stamps,
+    /// The timer wakes only on multiples of this (0: any ns), as RTX's 10 µs timer in Chen 2016.
+    pub timer_resolution_ns: u64,
 }
 
 /// Timestamps the link gives the master.
@@ -86,7 +88,14 @@ pub enum Stamps {
 impl HostModel {
     /// No host at all: frames leave and arrive instantly, timers are exact.
     pub fn ideal() -> Self {
-        HostModel { name: "ideal", send: Latency::ZERO, recv: Latency::ZERO, wake: Latency::ZERO, stamps: Stamps::None }
+        HostModel {
+            name: "ideal",
+            send: Latency::ZERO,
+            recv: Latency::ZERO,
+            wake: Latency::ZERO,
+            stamps: Stamps::None,
+            timer_resolution_ns: 0,
+        }
     }
 
     /// A PC with a PREEMPT_RT kernel and a raw socket: a few µs through the stack, timer
@@ -101,6 +110,7 @@ impl HostModel {
                 tx_early: Latency { mean_ns: 1_000.0, sd_ns: 300.0, min_ns: 400.0, ..Latency::ZERO },
                 rx_late: Latency { mean_ns: 1_500.0, sd_ns: 400.0, min_ns: 500.0, ..Latency::ZERO },
             },
+            timer_resolution_ns: 0,
         }
     }
 
@@ -150,6 +160,7 @@ impl HostModel {
                     outlier_ns: 50_000.0,
                 },
             },
+            timer_resolution_ns: 0,
         }
     }
 
@@ -179,11 +190,18 @@ impl HostModel {
                 tx_early: Latency { mean_ns: 2_000.0, sd_ns: 600.0, min_ns: 800.0, ..Latency::ZERO },
                 rx_late: Latency { mean_ns: 3_000.0, sd_ns: 800.0, min_ns: 1_000.0, ..Latency::ZERO },
             },
+            timer_resolution_ns: 0,
         }
     }
 
+    /// Chen 2016's master: Windows with the RTX real-time extension, its timer set to a 10 µs
+    /// resolution (their §5.2), latencies as a PC with an RT kernel.
+    pub fn rtx_10us() -> Self {
+        HostModel { name: "rtx-10us", timer_resolution_ns: 10_000, stamps: Stamps::None, ..HostModel::pc_rt() }
+    }
+
     /// The presets by name, for the command line and scenarios.
-    pub const PRESETS: [&'static str; 5] = ["ideal", "pc-rt", "pc-stock", "nic-hwts", "beaglebone-rt"];
+    pub const PRESETS: [&'static str; 6] = ["ideal", "pc-rt", "pc-stock", "nic-hwts", "beaglebone-rt", "rtx-10us"];
 
     pub fn preset(name: &str) -> Option<Self> {
         Some(match name {
@@ -192,6 +210,7 @@ impl HostModel {
             "pc-stock" => HostModel::pc_stock(),
             "nic-hwts" => HostModel::nic_hwts(),
             "beaglebone-rt" => HostModel::beaglebone_rt(),
+            "rtx-10us" => HostModel::rtx_10us(),
             _ => return None,
         })
     }
@@ -288,6 +307,8 @@ impl Io for VirtualIo {
     }
 
     fn sleep_until(&mut self, t_ns: u64) {
+        let res = self.host.timer_resolution_ns;
+        let t_ns = if res > 1 { t_ns.div_ceil(res).saturating_mul(res) } else { t_ns };
         let late = self.host.wake.sample(&mut self.rng);
         self.now = self.now.max(t_ns + late);
     }

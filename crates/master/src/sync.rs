@@ -96,6 +96,25 @@ impl ClockSync for Conventional {
     }
 }
 
+/// No following at all: the master keeps its nominal period on its own clock (the baseline of
+/// Chen 2016's Table 2).
+#[derive(Debug)]
+pub struct Nominal {
+    pub cycle_ns: u64,
+}
+
+impl ClockSync for Nominal {
+    fn name(&self) -> &'static str {
+        "none"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::MasterFollowsReference
+    }
+    fn update(&mut self, _: Option<&Sample>) -> Correction {
+        Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns.max(1)) }
+    }
+}
+
 /// Park et al. 2020: compensated time sent (delay from eq. 3, averaged over many round trips
 /// before cyclic operation), then every `period_ns` an EMA of the reference's 0x092C (eq. 4)
 /// subtracted from every slave's offset (eq. 5).

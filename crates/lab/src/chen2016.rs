@@ -1,0 +1,155 @@
+//! Chen et al. 2016, Table 2: with the master following the reference clock (or not), the
+//! jitter of the reference's timestamps against the master's cycle grid (min, max, width as a
+//! share of the cycle) and the process-data cycles that DC-synchronous slaves lost or consumed
+//! twice, for 500, 250, 100 and 50 µs cycles.
+use ferrocat_esc::SyncApp;
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, SoemPi};
+use ferrocat_master::{DcConfig, Master, SyncState};
+use ferrocat_segment::SegmentConfig;
+use rayon::prelude::*;
+use serde::Serialize;
+
+pub const METHODS: [&str; 4] = ["none", "chen2016", "pi", "ferrocat"];
+
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub cycles_us: Vec<u64>,
+    pub methods: Vec<String>,
+    pub seconds: f64,
+    pub seed: u64,
+    pub host: HostModel,
+    /// The reference's crystal error (the master's clock is exact).
+    pub reference_ppm: f64,
+}
+
+impl Options {
+    pub fn full(host: HostModel) -> Self {
+        Options {
+            cycles_us: vec![500, 250, 100, 50],
+            methods: METHODS.iter().map(|s| s.to_string()).collect(),
+            seconds: 60.0,
+            seed: 1,
+            host,
+            reference_ppm: 40.0,
+        }
+    }
+    pub fn quick(host: HostModel) -> Self {
+        Options { seconds: 10.0, ..Options::full(host) }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Row {
+    pub cycle_us: u64,
+    pub method: String,
+    pub host: String,
+    pub jitter_min_us: f64,
+    pub jitter_max_us: f64,
+    /// (max − min) / cycle, in per cent, as the paper gives it.
+    pub jitter_width_pct: f64,
+    pub cycles: u64,
+    /// Over the DC-synchronous slaves: cycles whose data was overwritten before use, and
+    /// cycles whose data was used twice.
+    pub lost: u64,
+    pub repeated: u64,
+    pub loss_rate: f64,
+    pub frames_lost: u64,
+}
+
+/// Table 2 as published: cycle µs, jitter min, max (µs), width (%), loss rate.
+pub const PAPER: [(u64, f64, f64, f64, f64); 3] =
+    [(500, 26.36, -56.0, 16.5, 0.0), (250, 15.12, -66.96, 32.8, 0.0), (100, 14.48, -49.96, 64.4, 0.0)];
+
+fn method(name: &str, cycle_ns: u64, res_ns: u64) -> anyhow::Result<Box<dyn ClockSync>> {
+    Ok(match name {
+        "none" => Box::new(Nominal { cycle_ns }),
+        // N = 100 timestamp differences per speed update; the host's timer resolution.
+        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, res_ns.max(1))),
+        "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
+        "ferrocat" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
+        other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),
+    })
+}
+
+fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
+    let cycle_ns = cycle_us * 1000;
+    let toml = format!(
+        "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = {}\n\
+         [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
+        o.seed, o.reference_ppm
+    );
+    let cfg: SegmentConfig = toml::from_str(&toml)?;
+    let mut m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
+    m.scan()?;
+    m.configure()?;
+    // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
+    m.init_dc(&DcConfig {
+        sync0_cycle_ns: cycle_ns as u32,
+        sync0_shift_ns: (cycle_ns / 2) as i32,
+        sync0_slaves: Some(vec![1, 2]),
+        start_delay_ns: 20_000_000,
+        ..DcConfig::default()
+    })?;
+    m.start()?;
+    let mut sync = method(name, cycle_ns, o.host.timer_resolution_ns)?;
+    let mut st = SyncState { loop_ns: m.reference_loop_ns()?, ..SyncState::default() };
+    // Common start for every method (Chen's offset compensation at t1): the first frame at
+    // the start of a reference cycle.
+    let mut probe = Nominal { cycle_ns };
+    m.sync_step(&mut probe, &mut st)?;
+    let r0 = st.reference_ns.unwrap_or(0);
+    let mut next = m.engine.io.now_ns() + 2 * cycle_ns - r0 % cycle_ns;
+    m.engine.io.sleep_until(next);
+    for a in apps(&mut m) {
+        a.reset_counts();
+    }
+    let total = (o.seconds * 1e9 / cycle_ns as f64) as u64;
+    let (mut jmin, mut jmax) = (i64::MAX, i64::MIN);
+    let mut first: Option<(u64, u64)> = None;
+    for k in 0..total {
+        m.cycle()?;
+        let c = m.sync_step(sync.as_mut(), &mut st)?;
+        if let (Some(t), true) = (st.reference_ns, k >= total / 10) {
+            let (k0, t0) = *first.get_or_insert((k, t));
+            // Chen's jitter: the reference's time against the master's grid T_s + i·T_p.
+            let j = t.wrapping_sub(t0) as i64 - ((k - k0) * cycle_ns) as i64;
+            jmin = jmin.min(j);
+            jmax = jmax.max(j);
+        }
+        next += c.next_period_ns.unwrap_or(cycle_ns);
+        m.engine.io.sleep_until(next);
+    }
+    let (lost, repeated) = apps(&mut m).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
+    let cycles = total;
+    Ok(Row {
+        cycle_us,
+        method: name.to_string(),
+        host: o.host.name.to_string(),
+        jitter_min_us: jmin as f64 / 1e3,
+        jitter_max_us: jmax as f64 / 1e3,
+        jitter_width_pct: (jmax - jmin) as f64 / cycle_ns as f64 * 100.0,
+        cycles,
+        lost,
+        repeated,
+        loss_rate: lost as f64 / (2 * cycles).max(1) as f64,
+        frames_lost: st.lost + m.cycle_stats().lost_frames,
+    })
+}
+
+fn apps(m: &mut Master<VirtualIo>) -> Vec<&mut SyncApp> {
+    m.engine.io.seg.nodes.iter_mut().filter_map(|n| n.esc.app_mut().as_any_mut().downcast_mut::<SyncApp>()).collect()
+}
+
+pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Vec<Row>> {
+    let jobs: Vec<(u64, String)> =
+        o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    jobs.par_iter()
+        .map(|(c, name)| {
+            let r = run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"));
+            progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, jobs.len());
+            r
+        })
+        .collect()
+}

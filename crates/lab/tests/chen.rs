@@ -1,0 +1,27 @@
+//! The Chen 2016 experiment, shortened: a master that does not follow the reference loses and
+//! repeats process data in DC-synchronous slaves; Chen's method, SOEM's PI and ferrocat's do not
+//! at 500 and 250 µs on Chen's 10 µs timer.
+use ferrocat_lab::chen2016::{run, Options};
+use ferrocat_master::io::HostModel;
+
+#[test]
+fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
+    let o = Options { cycles_us: vec![500, 250], seconds: 4.0, ..Options::quick(HostModel::rtx_10us()) };
+    let rows = run(&o, &|_, _| {}).unwrap();
+    for r in &rows {
+        println!(
+            "{:>3} µs {:9}: jitter {:7.2} … {:7.2} µs ({:5.1} %), lost {}, repeated {} of {} cycles",
+            r.cycle_us, r.method, r.jitter_min_us, r.jitter_max_us, r.jitter_width_pct, r.lost, r.repeated, r.cycles
+        );
+        if r.method == "none" {
+            // +40 ppm over 4 s: the reference's grid slides 160 µs past the master's.
+            assert!(r.jitter_max_us - r.jitter_min_us > 100.0, "{r:?}");
+            if r.cycle_us == 250 {
+                assert!(r.lost > 0 && r.repeated > 0, "{r:?}");
+            }
+        } else {
+            assert_eq!((r.lost, r.repeated), (0, 0), "{r:?}");
+            assert!(r.jitter_width_pct < 50.0, "{r:?}");
+        }
+    }
+}
