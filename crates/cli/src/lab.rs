@@ -200,3 +200,53 @@ pub fn chen2016(
     }
     Ok(ExitCode::SUCCESS)
 }
+
+pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::paprocki2022::{run, Options, PAPER};
+    let host = host(host_name)?;
+    let mut o = Options::new(host);
+    if let Some(s) = seed {
+        o.seed = s;
+    }
+    let rows = run(&o)?;
+    if json {
+        let v =
+            serde_json::json!({ "experiment": "paprocki2022", "seed": o.seed, "settle_s": o.settle_s, "rows": rows });
+        outln!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "Paprocki 2022 Table 2 — host {}, seed {}, {} SYNC0 pulses after {} s; second slave's SYNC0 minus the first's, ns",
+        host.name, o.seed, o.samples, o.settle_s
+    );
+    outln!(
+        "{:>6}  {:<13} {:>8} {:>6} {:>6} {:>6}   paper: {:>6} {:>6} {:>6} {:>6}",
+        "cycle",
+        "method",
+        "mean",
+        "max",
+        "min",
+        "sd",
+        "mean",
+        "max",
+        "min",
+        "sd"
+    );
+    for r in &rows {
+        let p = PAPER
+            .iter()
+            .find(|p| p.0 == r.cycle_us)
+            .map(|p| format!("{:>6.1} {:>6.1} {:>6.1} {:>6.3}", p.1, p.2, p.3, p.4))
+            .unwrap_or_default();
+        outln!(
+            "{:>4}µs  {:<13} {:>8.1} {:>6} {:>6} {:>6.1}   paper: {p}",
+            r.cycle_us,
+            r.method,
+            r.mean_ns,
+            r.max_ns,
+            r.min_ns,
+            r.sd_ns
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

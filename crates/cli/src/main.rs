@@ -150,6 +150,16 @@ enum LabCmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Paprocki & Erwiński 2022 Table 2: how simultaneously two DC slaves see SYNC0.
+    Paprocki2022 {
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
+        #[arg(long, default_value = "pc-rt")]
+        host: String,
+        #[arg(long)]
+        json: bool,
+    },
     /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method.
     Chen2016 {
         /// 10 s per run instead of 60.
@@ -242,6 +252,7 @@ fn main() -> ExitCode {
         Command::Lab { experiment: LabCmd::Park2020 { quick, seed, host, slaves, rounds, json, out } } => {
             lab::park2020(lab::ParkArgs { quick, seed, host, slaves, rounds, json, out })
         }
+        Command::Lab { experiment: LabCmd::Paprocki2022 { seed, host, json } } => lab::paprocki2022(seed, &host, json),
         Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json } } => {
             lab::chen2016(quick, seed, &host, cycle_us, json)
         }

@@ -15,6 +15,8 @@ const AS_PER_NS: i128 = 1_000_000_000;
 const TICK_AS: i128 = 10 * AS_PER_NS;
 /// Phase time constant of the loop: an offset is slewed out over about this long.
 pub const TCL_PHASE_TAU_NS: i128 = 50_000_000;
+/// The shortest span between two samples that updates the loop's frequency estimate.
+pub const TCL_MIN_SPAN_NS: i64 = 200_000;
 
 /// Clock deviation of a speed-counter difference, as a fraction `num/den` (esc-spec §3.5).
 fn scd_rate(scs: u16, scd: i16) -> (i128, i128) {
@@ -193,15 +195,24 @@ impl DcUnit {
         // was already correcting, filtered over 2^depth samples.
         let local = self.local_at(t_ns);
         let applied_fpp = self.applied_fpp as f64;
-        if let Some((l0, dt0)) = self.last_sample {
-            let span = local.wrapping_sub(l0) as i64;
-            if span > 0 {
-                let meas = applied_fpp + (dt - dt0) as f64 * 1e15 / span as f64;
-                let n2 = (self.depth_speed & 0x0F).min(6) as i32;
-                self.freq_est_fpp += (meas - self.freq_est_fpp) / (1u32 << n2) as f64;
+        // Samples closer together than TCL_MIN_SPAN_NS do not update the frequency: the change
+        // of the difference over a few µs is all quantisation and jitter, and dividing it by so
+        // short a span would amplify it (two FRMW frames 10 µs apart made followers wander by
+        // ±1 µs before this rule). The anchor stays until a span is long enough.
+        match self.last_sample {
+            Some((l0, dt0)) => {
+                let span = local.wrapping_sub(l0) as i64;
+                if span >= TCL_MIN_SPAN_NS {
+                    let meas = applied_fpp + (dt - dt0) as f64 * 1e15 / span as f64;
+                    let n2 = (self.depth_speed & 0x0F).min(6) as i32;
+                    self.freq_est_fpp += (meas - self.freq_est_fpp) / (1u32 << n2) as f64;
+                    self.last_sample = Some((local, dt));
+                } else if span < 0 {
+                    self.last_sample = Some((local, dt));
+                }
             }
+            None => self.last_sample = Some((local, dt)),
         }
-        self.last_sample = Some((local, dt));
         // Command: cancel the frequency error and slew the mean difference out over TAU.
         let want_fpp = self.freq_est_fpp + self.diff_mean_ns as f64 * 1e15 / TCL_PHASE_TAU_NS as f64;
         let scd = self.scd_for(want_fpp);

@@ -1,6 +1,7 @@
 //! The lab: the papers' experiments run on the virtual segment, every method on the same
 //! random realisation (same seed), the error taken from the true clocks the simulator knows.
 pub mod chen2016;
+pub mod paprocki2022;
 pub mod park2020;
 pub mod stats;
 
