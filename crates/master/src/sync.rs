@@ -303,6 +303,13 @@ pub struct Ferrocat {
     leads: VecDeque<i64>,
     lead_ns: Option<i64>,
     fit: VecDeque<(f64, f64)>,
+    /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
+    /// the next time written takes it back out (error feedback), so that the reference's
+    /// loop, which averages its samples, sees the host's send jitter cancel pairwise.
+    sends: VecDeque<i64>,
+    last_send_error_ns: i64,
+    /// Whether to feed the last send error back (off by default: measured in docs/clock-sync.md).
+    pub error_feedback: bool,
 }
 
 const WINDOW: usize = 64;
@@ -317,6 +324,9 @@ impl Ferrocat {
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
             fit: VecDeque::with_capacity(WINDOW),
+            sends: VecDeque::with_capacity(WINDOW),
+            last_send_error_ns: 0,
+            error_feedback: false,
         }
     }
 
@@ -348,7 +358,8 @@ impl ClockSync for Ferrocat {
         self.coupling
     }
     fn reference_time(&mut self, built_ns: u64) -> u64 {
-        built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0))
+        let feedback = if self.error_feedback { self.last_send_error_ns } else { 0 };
+        built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0).wrapping_sub(feedback))
     }
     fn writes_reference_time(&self, cycle: u64) -> bool {
         cycle % self.write_every.max(1) == 0
@@ -365,6 +376,14 @@ impl ClockSync for Ferrocat {
         }
         self.leads.push_back(s.lead_ns());
         self.lead_ns = Some(Self::trimmed_mean(&self.leads));
+        if let Some(tx) = s.tx_ns {
+            let send = tx.wrapping_sub(s.built_ns) as i64;
+            if self.sends.len() == WINDOW {
+                self.sends.pop_front();
+            }
+            self.sends.push_back(send);
+            self.last_send_error_ns = send.wrapping_sub(Self::trimmed_mean(&self.sends));
+        }
         if self.coupling == Coupling::ReferenceFollowsMaster {
             return Correction::default();
         }
@@ -515,6 +534,28 @@ mod tests {
         assert_eq!(p, 1_000_000 - 200);
         let p = pi.update(Some(&sample(2, 5_000_000 - 20_000, 0))).next_period_ns.unwrap();
         assert_eq!(p, 1_000_000 + 200);
+    }
+
+    #[test]
+    fn error_feedback_takes_the_last_send_error_back_out() {
+        let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
+        f.error_feedback = true;
+        let stamped = |k: u64, send: u64| {
+            let mut s = sample(k, 0, 0);
+            s.tx_ns = Some(s.built_ns + send);
+            s.frame_ns = 0;
+            s
+        };
+        for k in 1..=32 {
+            f.update(Some(&stamped(k, 1_000)));
+        }
+        let base = f.reference_time(0);
+        // A frame that left 2 µs late: the next time written is 2 µs earlier than it would be.
+        f.update(Some(&stamped(33, 3_000)));
+        let lead_change = f.lead_ns().unwrap() - base as i64;
+        assert_eq!(f.reference_time(0) as i64, base as i64 + lead_change - 2_000);
+        f.error_feedback = false;
+        assert_eq!(f.reference_time(0) as i64, base as i64 + lead_change);
     }
 
     #[test]
