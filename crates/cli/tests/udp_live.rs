@@ -7,16 +7,28 @@ use std::time::Duration;
 
 use ferrocat_wire::{Address, Command as Cmd, DatagramHeader, EcatPdu};
 
+/// The simulator process, stopped whatever way the test ends.
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 #[test]
 fn sim_over_udp_on_loopback() {
     let report = std::env::temp_dir().join(format!("ferrocat-udp-report-{}.json", std::process::id()));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-        .args(["sim", "--device", "EK1100", "--device", "EL2004", "--udp", "127.0.0.1:0", "--report"])
-        .arg(&report)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = child.stderr.take().unwrap();
+    let mut child = Child(
+        Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(["sim", "--device", "EK1100", "--device", "EL2004", "--udp", "127.0.0.1:0", "--report"])
+            .arg(&report)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let mut err = child.0.stderr.take().unwrap();
     let mut seen = String::new();
     let mut b = [0u8; 256];
     let addr = loop {
@@ -55,8 +67,8 @@ fn sim_over_udp_on_loopback() {
         slaves.as_array().unwrap().iter().map(|s| s["name"].as_str().unwrap()).collect::<Vec<_>>(),
         ["EK1100", "EL2004"]
     );
-    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
-    assert!(child.wait().unwrap().success());
+    Command::new("kill").args(["-TERM", &child.0.id().to_string()]).status().unwrap();
+    assert!(child.0.wait().unwrap().success());
     let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     std::fs::remove_file(&report).ok();
     assert_eq!(rep["malformed"].as_u64(), Some(1), "{rep}");

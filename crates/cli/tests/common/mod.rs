@@ -86,9 +86,10 @@ impl Sim {
     pub fn start(net: &VethPair, args: &[&str]) -> Self {
         let mut c = VethPair::cmd(&net.segment_ns, env!("CARGO_BIN_EXE_ferrocat"));
         c.arg("sim").args(args).args(["--iface", &net.segment_if]).stdout(Stdio::null()).stderr(Stdio::piped());
-        let mut child = c.spawn().unwrap();
+        // Owned by the guard at once, so that it is stopped even if it never gets ready.
+        let mut sim = Sim { child: c.spawn().unwrap() };
         // Ready once it has bound its socket and said so.
-        let mut err = child.stderr.take().unwrap();
+        let mut err = sim.child.stderr.take().unwrap();
         let t0 = Instant::now();
         let mut seen = Vec::new();
         let mut b = [0u8; 256];
@@ -110,7 +111,7 @@ impl Sim {
                 eprintln!("ferrocat sim said: {}", rest.trim());
             }
         });
-        Sim { child }
+        sim
     }
 
     /// Stops the simulator with SIGTERM and waits for it to exit cleanly.
