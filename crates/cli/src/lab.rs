@@ -19,6 +19,19 @@ pub struct ParkArgs {
     pub out: Option<std::path::PathBuf>,
 }
 
+/// A one-line counter on stderr, when it is a terminal.
+fn progress(unit: &'static str) -> impl Fn(usize, usize) + Sync {
+    let tty = std::io::stderr().is_terminal();
+    move |done, total| {
+        if tty {
+            eprint!("\r  {done}/{total} {unit}");
+            if done == total {
+                eprintln!();
+            }
+        }
+    }
+}
+
 pub fn host(name: &str) -> anyhow::Result<HostModel> {
     HostModel::preset(name)
         .ok_or_else(|| anyhow::anyhow!("unknown host model {name:?} (known: {})", HostModel::PRESETS.join(", ")))
@@ -38,16 +51,7 @@ pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
         anyhow::ensure!(a.slaves.iter().all(|&n| (1..=64).contains(&n)), "--slaves must be between 1 and 64");
         o.slaves = a.slaves.clone();
     }
-    let tty = std::io::stderr().is_terminal();
-    let progress = move |done: usize, total: usize| {
-        if tty {
-            eprint!("\r  {done}/{total} rounds");
-            if done == total {
-                eprintln!();
-            }
-        }
-    };
-    let rows = park2020::run(&o, &progress)?;
+    let rows = park2020::run(&o, &progress("rounds"))?;
     if let Some(dir) = &a.out {
         write_csv(dir, &rows)?;
     }
@@ -145,15 +149,7 @@ pub fn chen2016(
         );
         o.cycles_us = cycles_us;
     }
-    let tty = std::io::stderr().is_terminal();
-    let rows = run(&o, &move |done, total| {
-        if tty {
-            eprint!("\r  {done}/{total} runs");
-            if done == total {
-                eprintln!();
-            }
-        }
-    })?;
+    let rows = run(&o, &progress("runs"))?;
     if json {
         let v = serde_json::json!({ "experiment": "chen2016", "seed": o.seed, "seconds": o.seconds,
             "reference_ppm": o.reference_ppm, "rows": rows });

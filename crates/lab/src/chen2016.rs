@@ -4,8 +4,8 @@
 //! twice, for 500, 250, 100 and 50 µs cycles.
 use ferrocat_esc::SyncApp;
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
-use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, SoemPi};
-use ferrocat_master::{DcConfig, Master, SyncState};
+use ferrocat_master::sync::{Coupling, Nominal};
+use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -61,17 +61,6 @@ pub struct Row {
 pub const PAPER: [(u64, f64, f64, f64, f64); 3] =
     [(500, 26.36, -56.0, 16.5, 0.0), (250, 15.12, -66.96, 32.8, 0.0), (100, 14.48, -49.96, 64.4, 0.0)];
 
-fn method(name: &str, cycle_ns: u64, res_ns: u64) -> anyhow::Result<Box<dyn ClockSync>> {
-    Ok(match name {
-        "none" => Box::new(Nominal { cycle_ns }),
-        // N = 100 timestamp differences per speed update; the host's timer resolution.
-        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, res_ns.max(1))),
-        "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
-        "ferrocat" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
-        other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),
-    })
-}
-
 fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let cycle_ns = cycle_us * 1000;
     let toml = format!(
@@ -92,8 +81,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         ..DcConfig::default()
     })?;
     m.start()?;
-    let mut sync = method(name, cycle_ns, o.host.timer_resolution_ns)?;
-    let mut st = SyncState { loop_ns: m.reference_loop_ns()?, ..SyncState::default() };
+    let mut sync = crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?;
+    let mut st = m.sync_state()?;
     // Common start for every method (Chen's offset compensation at t1): the first frame at
     // the start of a reference cycle.
     let mut probe = Nominal { cycle_ns };

@@ -6,12 +6,15 @@ pub mod park2020;
 pub mod stats;
 
 use ferrocat_master::io::{HostModel, VirtualIo};
-use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Park2020};
+use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 
 /// The reference-follows-master methods the master–slave error tables compare.
 pub const RFM_METHODS: [&str; 3] = ["conventional", "park2020", "ferrocat"];
+
+/// Every method the lab knows.
+pub const METHODS: [&str; 6] = ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat"];
 
 /// A line of `slaves` DC slaves (EK1100-like, E-Bus hops), crystals spread ±50 ppm by `seed`,
 /// brought up and DC-initialised, in virtual time on `host`.
@@ -27,13 +30,23 @@ pub fn segment(slaves: usize, host: HostModel, seed: u64) -> anyhow::Result<Mast
     Ok(m)
 }
 
-/// A method by name, prepared on `m` (Park's delay measurement runs here).
-pub fn method(name: &str, m: &mut Master<VirtualIo>, cycle_ns: u64) -> anyhow::Result<Box<dyn ClockSync>> {
+/// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the
+/// one ferrocat's own method takes.
+pub fn method(
+    name: &str,
+    m: &mut Master<VirtualIo>,
+    cycle_ns: u64,
+    coupling: Coupling,
+) -> anyhow::Result<Box<dyn ClockSync>> {
     Ok(match name {
+        "none" => Box::new(Nominal { cycle_ns }),
         "conventional" => Box::new(ferrocat_master::sync::Conventional),
         // Eq. 3 averaged over 1000 round trips, as published.
         "park2020" => Box::new(Park2020::new(m.park_delay(1000)?)),
-        "ferrocat" => Box::new(Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns)),
-        other => anyhow::bail!("unknown method {other:?} (known: {})", RFM_METHODS.join(", ")),
+        // N = 100 timestamp differences per speed update; the host's timer resolution.
+        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.host.timer_resolution_ns.max(1))),
+        "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
+        "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns)),
+        other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),
     })
 }

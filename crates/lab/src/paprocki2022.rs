@@ -2,8 +2,8 @@
 //! of their SYNC0 instants (true time, which the simulator knows) for the same system time, over
 //! 1000 cycles at 1000 and 500 µs, for each clock-sync method.
 use ferrocat_master::io::{HostModel, Io};
-use ferrocat_master::sync::Nominal;
-use ferrocat_master::{DcConfig, Master, SyncState};
+use ferrocat_master::sync::Coupling;
+use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -68,9 +68,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         start_delay_ns: 10_000_000,
         ..DcConfig::default()
     })?;
-    let mut sync: Box<dyn ferrocat_master::sync::ClockSync> =
-        if name == "none" { Box::new(Nominal { cycle_ns }) } else { crate::method(name, &mut m, cycle_ns)? };
-    let mut st = SyncState { loop_ns: m.reference_loop_ns()?, ..SyncState::default() };
+    let mut sync = crate::method(name, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    let mut st = m.sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
     let mut next = m.engine.io.now_ns();
     let mut diffs: Vec<i64> = Vec::with_capacity(o.samples);

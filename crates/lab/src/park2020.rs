@@ -2,7 +2,8 @@
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
-use ferrocat_master::{Master, SyncState};
+use ferrocat_master::sync::Coupling;
+use ferrocat_master::Master;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -88,8 +89,8 @@ fn error_ns(m: &mut Master<VirtualIo>, k: usize) -> i64 {
 
 fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Result<Round> {
     let mut m = crate::segment(slaves, opts.host, seed)?;
-    let mut sync = crate::method(method, &mut m, opts.cycle_ns)?;
-    let mut st = SyncState { loop_ns: m.reference_loop_ns()?, ..SyncState::default() };
+    let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    let mut st = m.sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
     let total = settle + opts.samples * opts.sample_every;
     let mut next = m.engine.io.now_ns();

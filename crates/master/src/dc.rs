@@ -240,6 +240,11 @@ impl<I: Io> Master<I> {
             .ok_or_else(|| MasterError::Config("reference clock gone".into()))
     }
 
+    /// A fresh state for cyclic synchronisation, with the reference's loop time.
+    pub fn sync_state(&self) -> Result<SyncState> {
+        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ..SyncState::default() })
+    }
+
     /// How long a frame spends behind the reference before it passes it again on its way
     /// back: the latest receive time of its other open ports minus that of its entry port.
     pub fn reference_loop_ns(&self) -> Result<u64> {

@@ -2,7 +2,7 @@
 //! judged by the true clocks the simulator knows.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{Chen2016, ClockSync, Conventional, Coupling, Ferrocat, Park2020, SoemPi};
-use ferrocat_master::{DcConfig, Master, SyncState};
+use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 
 const CYCLE_NS: u64 = 1_000_000;
@@ -41,7 +41,7 @@ struct Figures {
 fn run_rfm(host: HostModel, make: impl FnOnce(&mut Master<VirtualIo>) -> Box<dyn ClockSync>, cycles: u64) -> Figures {
     let mut m = segment(host);
     let mut sync = make(&mut m);
-    let mut st = SyncState { loop_ns: m.reference_loop_ns().unwrap(), ..SyncState::default() };
+    let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
     let (mut r, mut l) = (Vec::new(), Vec::new());
     for k in 0..cycles {
@@ -97,7 +97,7 @@ fn reference_follows_master_methods_side_by_side() {
 fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64) -> (f64, f64) {
     let mut m = segment(HostModel::pc_rt());
     let mut sync = make();
-    let mut st = SyncState { loop_ns: m.reference_loop_ns().unwrap(), ..SyncState::default() };
+    let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
     let mut phases = Vec::new();
     for k in 0..cycles {
