@@ -120,7 +120,7 @@ impl CoeDevice {
         self.mapping(outputs).iter().map(|m| m.bits as u32).sum()
     }
 
-    fn copy_outputs(&mut self, buf: &[u8]) {
+    pub(crate) fn copy_outputs(&mut self, buf: &[u8]) {
         let mut bit = 0usize;
         for m in self.mapping(true) {
             if m.index != 0 {

@@ -1,11 +1,12 @@
 //! The lab: the papers' experiments run on the virtual segment, every method on the same
 //! random realisation (same seed), the error taken from the true clocks the simulator knows.
 pub mod chen2016;
+pub mod demo;
 pub mod paprocki2022;
 pub mod park2020;
 pub mod stats;
 
-use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
@@ -28,6 +29,15 @@ pub fn segment(slaves: usize, host: HostModel, seed: u64) -> anyhow::Result<Mast
     m.bring_up()?;
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
     Ok(m)
+}
+
+/// The master's clock minus slave `k`'s system time now (Park 2020's sign: positive when the
+/// slave lags), on the low 32 bits so that 32-bit DCs compare too.
+pub fn clock_error_ns(m: &mut Master<VirtualIo>, k: usize) -> i64 {
+    let t = m.engine.io.now_ns();
+    let master = m.master_system_time() as u32;
+    let slave = m.engine.io.seg.nodes[k].esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
+    master.wrapping_sub(slave) as i32 as i64
 }
 
 /// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the

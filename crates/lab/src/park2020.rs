@@ -1,9 +1,8 @@
 //! Park et al. 2020, Table 1: the master–reference and master–last-slave synchronisation
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::{HostModel, Io};
 use ferrocat_master::sync::Coupling;
-use ferrocat_master::Master;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -78,15 +77,6 @@ struct Round {
     lost: u64,
 }
 
-/// The master's clock minus slave `k`'s system time now (the paper's sign: positive when the
-/// slave lags), on the low 32 bits so that 32-bit DCs compare too.
-fn error_ns(m: &mut Master<VirtualIo>, k: usize) -> i64 {
-    let t = m.engine.io.now_ns();
-    let master = m.master_system_time() as u32;
-    let slave = m.engine.io.seg.nodes[k].esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
-    master.wrapping_sub(slave) as i32 as i64
-}
-
 fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Result<Round> {
     let mut m = crate::segment(slaves, opts.host, seed)?;
     let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
@@ -104,9 +94,9 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Resu
         if k % opts.sample_every != 0 {
             continue;
         }
-        let e_ref = error_ns(&mut m, 0);
-        let e_last = error_ns(&mut m, last);
-        let spread = (1..slaves).map(|s| (error_ns(&mut m, s) - e_ref).abs()).max().unwrap_or(0);
+        let e_ref = crate::clock_error_ns(&mut m, 0);
+        let e_last = crate::clock_error_ns(&mut m, last);
+        let spread = (1..slaves).map(|s| (crate::clock_error_ns(&mut m, s) - e_ref).abs()).max().unwrap_or(0);
         if spread > 100 || e_ref.abs() > 1_000 {
             last_violation = Some(k);
         }

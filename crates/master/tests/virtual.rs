@@ -116,8 +116,9 @@ fn needs_shared_emergencies_reach_the_application() {
     m.configure().unwrap();
     assert_eq!(m.poll_mailboxes().unwrap(), 0, "nothing waiting");
     let e = ferrocat_wire::coe::Emergency { error_code: 0x8611, error_register: 0x20, data: [1, 2, 3, 4, 5] };
-    let dev = m.engine.io.seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::CoeDevice>().unwrap();
-    dev.emergency(e);
+    // The Nanotec is a CiA402 drive: its CoE device queues the message.
+    let dev = m.engine.io.seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>().unwrap();
+    dev.coe.emergency(e);
     // The ESC delivers it to SM1 with the next frame; the application's poll finds it.
     m.poll_mailboxes().unwrap();
     m.poll_mailboxes().unwrap();

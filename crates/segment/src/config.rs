@@ -13,7 +13,9 @@
 //! ```
 use std::path::{Path, PathBuf};
 
-use ferrocat_esc::{Application, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, SyncApp, SyncMode};
+use ferrocat_esc::{
+    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, SyncApp, SyncMode,
+};
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::sii::dump::parse_dump;
 use ferrocat_wire::sii::SiiInfo;
@@ -97,7 +99,8 @@ pub struct DeviceToml {
     pub link_ns: Option<u32>,
     pub timing: Option<TimingToml>,
     /// Device application: "io" (default for devices without mailbox), "sm", "dc" or
-    /// "free-run" (with `app_period_us`), the last three counting lost and repeated cycles.
+    /// "free-run" (with `app_period_us`), the last three counting lost and repeated cycles;
+    /// "cia402" (default for CoE devices with the drive profile's objects).
     pub app: Option<String>,
     pub app_period_us: Option<f64>,
     /// How long the firmware of a device without device emulation takes to act on a write of
@@ -248,14 +251,21 @@ impl SegmentConfig {
                 None => (rng.gen_range(-spread..=spread) * 1000.0).round() as i64,
             };
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
+            let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;
+            let od = || match &esi_dev {
+                Some(dev) => crate::od_build::from_esi(dev, &info),
+                None => crate::od_build::from_sii(&info),
+            };
             let app: Box<dyn Application> = match d.app.as_deref() {
-                None if info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0 => {
-                    let od = match &esi_dev {
-                        Some(dev) => crate::od_build::from_esi(dev, &info),
-                        None => crate::od_build::from_sii(&info),
-                    };
-                    Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic)))
+                None | Some("cia402") if coe && (d.app.is_some() || is_drive(&info, &od())) => {
+                    // Each drive draws from its own stream: the others' draws stay as they were.
+                    let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+                    Box::new(Cia402Drive::new(od(), config.sm_count, seed))
                 }
+                Some("cia402") => {
+                    return Err(device_err(format!("device {i}"), "app = \"cia402\" needs a CoE mailbox"))
+                }
+                None if coe => Box::new(CoeDevice::new(od(), config.sm_count, Box::new(PassiveLogic))),
                 None if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
                 None | Some("io") => Box::new(DigitalIo::new(config.sm_count)),
                 Some("sm") => sync(SyncMode::SmSynchronous),
@@ -272,7 +282,7 @@ impl SegmentConfig {
                 Some(other) => {
                     return Err(device_err(
                         format!("device {i}"),
-                        format!("unknown app '{other}' (io, sm, dc, free-run)"),
+                        format!("unknown app '{other}' (io, sm, dc, free-run, cia402)"),
                     ))
                 }
             };
@@ -360,6 +370,12 @@ impl SegmentConfig {
     }
 }
 
+/// A CiA402 drive: the SII says so (DS402 channels), or the dictionary has the profile's
+/// controlword and statusword.
+fn is_drive(info: &SiiInfo, od: &ferrocat_esc::od::ObjectDictionary) -> bool {
+    info.general().is_some_and(|g| g.ds402_channels > 0) || (od.get(0x6040).is_some() && od.get(0x6041).is_some())
+}
+
 fn describe(src: &DeviceSource) -> String {
     match src {
         DeviceSource::Eeprom(p) => p.display().to_string(),
@@ -436,7 +452,9 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
                     format!("unknown built-in device (known: {})", crate::builtin::NAMES.join(", ")),
                 )
             })?;
-            let img = dev.to_sii(2).map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
+            // Beckhoff's vendor ID for the terminals; none for our own servo.
+            let vendor = if name == "SERVO" { 0 } else { 2 };
+            let img = dev.to_sii(vendor).map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
             Ok((img, dev.type_name.clone(), Some(dev)))
         }
     }

@@ -14,6 +14,7 @@
 extern crate alloc;
 
 mod bytes;
+pub mod cia402;
 pub mod coe;
 pub mod datagram;
 mod error;

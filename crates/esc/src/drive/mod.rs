@@ -1,0 +1,723 @@
+//! A CiA402 servo drive: a CoE device (its dictionary from an ESI file, an SII or built in)
+//! whose application runs the profile's state machine, the PP/CSP/CSV/CST modes and a motor.
+//!
+//! Timing follows a drive's firmware: in DC mode the SYNC0 interrupt takes the newest output
+//! buffer and latches the feedback; the application then needs a processing time drawn from a
+//! configurable distribution (by default Paprocki & Erwiński 2022, Tables 3–4) before the new
+//! set-point reaches the control loops and the inputs are published. A cycle whose SYNC0 found no
+//! new buffer used a *repeated* set-point; a buffer overwritten before any SYNC0 took it was a
+//! *late* set-point (it arrived after the SYNC0 it was meant for).
+mod motor;
+pub mod objects;
+
+use std::any::Any;
+
+use ferrocat_wire::cia402::{control, error_code, index as ix, status, Command, Mode, State};
+use ferrocat_wire::coe::Emergency;
+use ferrocat_wire::register::{AlState, AlStatusCode};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Gamma};
+
+pub use motor::{Demand, Mechanics, MotorParams};
+
+use crate::app::{Application, Pdi};
+use crate::coe_server::CoeDevice;
+use crate::od::ObjectDictionary;
+use objects::{get, get_unsigned, set};
+
+/// How long the application takes from SYNC0 until the set-point reaches the control loops:
+/// a gamma distribution above `min_ns` with the given mean and deviation, redrawn above
+/// `max_ns`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcessingTime {
+    pub mean_ns: f64,
+    pub sd_ns: f64,
+    pub min_ns: u64,
+    pub max_ns: u64,
+}
+
+impl ProcessingTime {
+    /// Paprocki & Erwiński 2022, Tables 3–4, the two drives averaged: the 1000 µs row for cycles
+    /// of 750 µs and more, the 500 µs row below.
+    pub fn paprocki2022(cycle_ns: u64) -> Self {
+        if cycle_ns >= 750_000 {
+            ProcessingTime { mean_ns: 51_465.0, sd_ns: 31_350.0, min_ns: 2_868, max_ns: 148_800 }
+        } else {
+            ProcessingTime { mean_ns: 76_250.0, sd_ns: 34_900.0, min_ns: 9_245, max_ns: 146_850 }
+        }
+    }
+
+    /// Always the same time.
+    pub fn fixed(ns: u64) -> Self {
+        ProcessingTime { mean_ns: ns as f64, sd_ns: 0.0, min_ns: ns, max_ns: ns }
+    }
+
+    fn draw(&self, rng: &mut ChaCha8Rng) -> u64 {
+        let above = self.mean_ns - self.min_ns as f64;
+        if self.sd_ns <= 0.0 || above <= 0.0 {
+            return self.min_ns.max(self.mean_ns as u64).min(self.max_ns.max(self.min_ns));
+        }
+        let shape = (above / self.sd_ns).powi(2);
+        let Ok(g) = Gamma::new(shape, self.sd_ns * self.sd_ns / above) else { return self.mean_ns as u64 };
+        for _ in 0..64 {
+            let t = self.min_ns + g.sample(rng) as u64;
+            if t <= self.max_ns {
+                return t;
+            }
+        }
+        self.max_ns
+    }
+}
+
+/// What the drive saw, for the lab and the demo (the simulator's truth).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DriveStats {
+    pub sync0_events: u64,
+    /// Set-points overwritten before a SYNC0 took them.
+    pub late_setpoints: u64,
+    /// SYNC0 events that found no new set-point.
+    pub repeated_setpoints: u64,
+    /// The SYNC0 event numbers (counted from the last reset) of the first late and repeated
+    /// set-points.
+    pub late_cycles: Vec<u64>,
+    pub repeated_cycles: Vec<u64>,
+    /// Processing still running when the next SYNC0 came.
+    pub overruns: u64,
+    /// Largest |position demand − actual| (increments) in a position mode, operation enabled.
+    pub max_following_error: f64,
+    pub processing_count: u64,
+    pub processing_sum_ns: f64,
+    pub processing_sum_sq_ns: f64,
+    pub processing_min_ns: u64,
+    pub processing_max_ns: u64,
+}
+
+/// Cycle numbers kept per kind.
+const KEEP_CYCLES: usize = 32;
+
+impl DriveStats {
+    pub fn processing_mean_ns(&self) -> f64 {
+        self.processing_sum_ns / self.processing_count.max(1) as f64
+    }
+    pub fn processing_sd_ns(&self) -> f64 {
+        let n = self.processing_count.max(1) as f64;
+        (self.processing_sum_sq_ns / n - self.processing_mean_ns().powi(2)).max(0.0).sqrt()
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Feedback {
+    pos: i32,
+    vel: i32,
+    torque: i16,
+    following_error: i32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    at_ns: u64,
+    /// When the outputs were taken (SYNC0 or the SM event).
+    taken_ns: u64,
+    feedback: Feedback,
+}
+
+/// One straight piece of the CSP demand: from `from` at `t0_ns` to `to` one period later.
+#[derive(Debug, Clone, Copy, Default)]
+struct Segment {
+    from: f64,
+    to: f64,
+    t0_ns: u64,
+    period_ns: u64,
+    acc: f64,
+}
+
+impl Segment {
+    fn slope(&self) -> f64 {
+        if self.period_ns == 0 {
+            0.0
+        } else {
+            (self.to - self.from) / (self.period_ns as f64 * 1e-9)
+        }
+    }
+    /// Position, velocity, acceleration at `t`; after the end it holds `to`.
+    fn at(&self, t_ns: u64) -> (f64, f64, f64) {
+        if self.period_ns == 0 || t_ns >= self.t0_ns + self.period_ns {
+            return (self.to, 0.0, 0.0);
+        }
+        let f = t_ns.saturating_sub(self.t0_ns) as f64 / self.period_ns as f64;
+        (self.from + (self.to - self.from) * f, self.slope(), self.acc)
+    }
+}
+
+/// The position demand. CSP: the target taken at SYNC0 k is reached along a straight line
+/// from the previous target over [SYNC0 k + T, SYNC0 k + 2T] (T the cycle): one cycle of
+/// delay covers the processing time, and the demand stays continuous. PP: a trapezoidal
+/// profile stepped with the control loop.
+#[derive(Debug, Clone, Copy, Default)]
+struct PositionDemand {
+    now: Segment,
+    next: Option<Segment>,
+    /// Profile position: the target and the profile's velocity, acceleration, deceleration.
+    pp_target: Option<f64>,
+    pp_vel: f64,
+    pp_limits: (f64, f64, f64),
+}
+
+impl PositionDemand {
+    fn hold(at: f64) -> Self {
+        PositionDemand { now: Segment { from: at, to: at, ..Default::default() }, ..Default::default() }
+    }
+    fn segment(&self, t_ns: u64) -> &Segment {
+        match &self.next {
+            Some(n) if t_ns >= n.t0_ns => n,
+            _ => &self.now,
+        }
+    }
+    fn at(&self, t_ns: u64) -> (f64, f64) {
+        let (p, v, _) = self.segment(t_ns).at(t_ns);
+        (p, v)
+    }
+    /// Makes the queued segment current once it has started.
+    fn promote(&mut self, t_ns: u64) {
+        if self.next.is_some_and(|n| t_ns >= n.t0_ns) {
+            self.now = self.next.take().unwrap_or_default();
+        }
+    }
+    /// Queues the line to `to` over [`t0_ns`, `t0_ns` + `period_ns`].
+    fn queue(&mut self, to: f64, t0_ns: u64, period_ns: u64) {
+        if let Some(n) = self.next.take() {
+            self.now = n;
+        }
+        let from = self.now.to;
+        let mut seg = Segment { from, to, t0_ns, period_ns, acc: 0.0 };
+        seg.acc = (seg.slope() - self.now.slope()) / (period_ns.max(1) as f64 * 1e-9);
+        self.next = Some(seg);
+    }
+    /// The last target (where the demand ends up).
+    fn last_target(&self) -> f64 {
+        self.next.map_or(self.now.to, |n| n.to)
+    }
+}
+
+#[derive(Debug)]
+pub struct Cia402Drive {
+    pub coe: CoeDevice,
+    pub motor: MotorParams,
+    /// `None`: Paprocki 2022's figures for the SYNC0 cycle the drive runs at.
+    pub processing: Option<ProcessingTime>,
+    pub stats: DriveStats,
+    rng: ChaCha8Rng,
+    state: State,
+    mode: Option<Mode>,
+    mech: Mechanics,
+    model_ns: Option<u64>,
+    demand: PositionDemand,
+    /// Quick-stop or fault-reaction ramp: velocity demand (increments/s) and deceleration.
+    ramp: Option<(f64, f64)>,
+    op: bool,
+    dc: bool,
+    written: u64,
+    taken: u64,
+    pending: Option<Pending>,
+    last_sync0_ns: Option<u64>,
+    cycle_ns: u64,
+    prev_cw: u16,
+    fault_code: u16,
+    following_since_ns: Option<u64>,
+    active_processing: ProcessingTime,
+    /// Controlword bit 4 as last seen (profile position takes a set-point on its rising edge).
+    pp_bit: bool,
+}
+
+impl Cia402Drive {
+    /// A drive over `od` (the profile objects it lacks are added); `seed` draws its starting
+    /// position and processing times.
+    pub fn new(mut od: ObjectDictionary, sm_count: u8, seed: u64) -> Self {
+        let pt = ProcessingTime::paprocki2022(1_000_000);
+        objects::complete_profile(&mut od, pt.max_ns as u32);
+        let mut motor = MotorParams::default();
+        let (inc, revs) = (get_unsigned(&od, 0x608F, 1), get_unsigned(&od, 0x608F, 2));
+        if inc > 0 && revs > 0 {
+            motor.increments_per_rev = inc as f64 / revs as f64;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC1A4_0200);
+        // Wherever the shaft happens to stand at power-on: a CSP start must not jump to 0.
+        let start_rev = rand::Rng::gen_range(&mut rng, -4.0..4.0);
+        let mut mech = Mechanics::default();
+        mech.pos_rad = start_rev * std::f64::consts::TAU;
+        let mut d = Cia402Drive {
+            coe: CoeDevice::new(od, sm_count, Box::new(crate::PassiveLogic)),
+            motor,
+            processing: None,
+            stats: DriveStats::default(),
+            rng,
+            state: State::SwitchOnDisabled,
+            mode: None,
+            mech,
+            model_ns: None,
+            demand: PositionDemand::default(),
+            ramp: None,
+            op: false,
+            dc: false,
+            written: 0,
+            taken: 0,
+            pending: None,
+            last_sync0_ns: None,
+            cycle_ns: 1_000_000,
+            prev_cw: 0,
+            fault_code: 0,
+            following_since_ns: None,
+            active_processing: pt,
+            pp_bit: false,
+        };
+        d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
+        d.write_feedback(d.feedback());
+        d
+    }
+
+    pub fn state(&self) -> State {
+        self.state
+    }
+    pub fn mode(&self) -> Option<Mode> {
+        self.mode
+    }
+    pub fn position_increments(&self) -> f64 {
+        self.mech.position_increments(&self.motor)
+    }
+    pub fn velocity_increments(&self) -> f64 {
+        self.mech.velocity_increments(&self.motor)
+    }
+    /// Position demand minus actual (increments) in a position mode with operation enabled.
+    pub fn following_error_increments(&self) -> f64 {
+        if !self.position_controlled() {
+            return 0.0;
+        }
+        self.demand.at(self.model_ns.unwrap_or(0)).0 - self.mech.position_increments(&self.motor)
+    }
+    pub fn torque_nm(&self) -> f64 {
+        self.mech.torque_nm
+    }
+    /// Whether the drive takes its set-points on SYNC0 (decided on entering OP).
+    pub fn dc_synchronous(&self) -> bool {
+        self.dc
+    }
+
+    /// Starts the statistics afresh.
+    pub fn reset_stats(&mut self) {
+        self.stats = DriveStats::default();
+    }
+
+    /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
+    /// then FAULT, with an emergency message.
+    pub fn inject_fault(&mut self, code: u16) {
+        self.enter_fault(code);
+    }
+
+    fn enter_fault(&mut self, code: u16) {
+        if matches!(self.state, State::Fault | State::FaultReactionActive) {
+            return;
+        }
+        self.fault_code = code;
+        self.coe.emergency(Emergency { error_code: code, error_register: 0x01, data: [0; 5] });
+        let powered = matches!(self.state, State::OperationEnabled | State::QuickStopActive);
+        if powered {
+            self.state = State::FaultReactionActive;
+            let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
+            self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+        } else {
+            self.state = State::Fault;
+        }
+    }
+
+    fn feedback(&self) -> Feedback {
+        let pos = self.mech.position_increments(&self.motor);
+        let (demand, _) = self.demand.at(self.model_ns.unwrap_or(0));
+        let fe = if self.position_controlled() { demand - pos } else { 0.0 };
+        let torque_pm = self.mech.torque_nm / self.motor.rated_torque_nm * 1000.0;
+        Feedback {
+            pos: pos.round() as i64 as i32,
+            vel: self.mech.velocity_increments(&self.motor).round() as i32,
+            torque: torque_pm.round().clamp(i16::MIN as f64, i16::MAX as f64) as i16,
+            following_error: fe.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32,
+        }
+    }
+
+    fn position_controlled(&self) -> bool {
+        self.state == State::OperationEnabled
+            && matches!(self.mode, Some(Mode::CyclicSyncPosition | Mode::ProfilePosition))
+    }
+
+    fn max_torque_nm(&self) -> f64 {
+        let pm = get_unsigned(&self.coe.od, ix::MAX_TORQUE, 0);
+        let pm = if pm == 0 { 3000 } else { pm };
+        pm as f64 / 1000.0 * self.motor.rated_torque_nm
+    }
+
+    /// Runs the control loops up to `t_ns`.
+    fn advance(&mut self, t_ns: u64) {
+        let Some(mut at) = self.model_ns else {
+            self.model_ns = Some(t_ns);
+            return;
+        };
+        let loop_ns = self.motor.loop_ns.max(1_000);
+        let dt = loop_ns as f64 * 1e-9;
+        let max_torque = self.max_torque_nm();
+        let window = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_WINDOW, 0);
+        let timeout_ns = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_TIMEOUT, 0) * 1_000_000;
+        while at + loop_ns <= t_ns {
+            at += loop_ns;
+            self.demand.promote(at);
+            let demand = self.step_demand(at, dt);
+            self.mech.step(&self.motor, demand, max_torque, dt);
+            if let Some((v, _)) = self.ramp {
+                if v == 0.0 && self.mech.vel_rad_s.abs() < 0.05 {
+                    self.ramp = None;
+                    self.ramp_finished();
+                }
+            }
+            if self.position_controlled() {
+                let (d, _) = self.demand.at(at);
+                let fe = (d - self.mech.position_increments(&self.motor)).abs();
+                self.stats.max_following_error = self.stats.max_following_error.max(fe);
+                // Window 0xFFFFFFFF switches the check off (the profile's convention).
+                if window != 0xFFFF_FFFF && fe > window as f64 {
+                    let since = *self.following_since_ns.get_or_insert(at);
+                    if at - since >= timeout_ns {
+                        self.following_since_ns = None;
+                        self.enter_fault(error_code::FOLLOWING_ERROR);
+                    }
+                } else {
+                    self.following_since_ns = None;
+                }
+            } else {
+                let p = self.mech.position_increments(&self.motor);
+                self.demand = PositionDemand::hold(p);
+                self.following_since_ns = None;
+            }
+        }
+        self.model_ns = Some(at);
+    }
+
+    fn step_demand(&mut self, at: u64, dt: f64) -> Demand {
+        if let Some((v, dec)) = self.ramp.as_mut() {
+            *v = if *v > 0.0 { (*v - *dec * dt).max(0.0) } else { (*v + *dec * dt).min(0.0) };
+            return Demand::Velocity(*v);
+        }
+        if self.state != State::OperationEnabled {
+            return Demand::Off;
+        }
+        let od = &self.coe.od;
+        match self.mode {
+            Some(Mode::CyclicSyncPosition) => {
+                let (pos, vel, acc) = self.demand.segment(at).at(at);
+                Demand::Position { pos, vel, acc }
+            }
+            Some(Mode::ProfilePosition) => {
+                let d = &mut self.demand;
+                if let Some(target) = d.pp_target {
+                    let (vmax, acc, dec) = d.pp_limits;
+                    let rest = target - d.now.to;
+                    // Decelerate when the stopping distance reaches what is left.
+                    let stopping = d.pp_vel * d.pp_vel / (2.0 * dec);
+                    let want = if rest.abs() <= stopping { 0.0 } else { vmax * rest.signum() };
+                    let step = if want.abs() < d.pp_vel.abs() { dec } else { acc } * dt;
+                    d.pp_vel += (want - d.pp_vel).clamp(-step, step);
+                    d.now.to += d.pp_vel * dt;
+                    if (target - d.now.to).abs() <= (d.pp_vel * dt).abs().max(0.5) && d.pp_vel.abs() <= dec * dt * 2.0 {
+                        d.now.to = target;
+                        d.pp_vel = 0.0;
+                        d.pp_target = None;
+                    }
+                    d.now.from = d.now.to;
+                    d.now.period_ns = 0;
+                }
+                Demand::Position { pos: d.now.to, vel: d.pp_vel, acc: 0.0 }
+            }
+            Some(Mode::CyclicSyncVelocity) => Demand::Velocity(get(od, ix::TARGET_VELOCITY, 0) as f64),
+            Some(Mode::CyclicSyncTorque) => {
+                Demand::Torque(get(od, ix::TARGET_TORQUE, 0) as f64 / 1000.0 * self.motor.rated_torque_nm)
+            }
+            _ => Demand::Off,
+        }
+    }
+
+    fn ramp_finished(&mut self) {
+        match self.state {
+            State::FaultReactionActive => self.state = State::Fault,
+            // Option codes 0–4: then switch on disabled; 5–8: stay in quick stop active.
+            State::QuickStopActive if !(5..=8).contains(&get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) => {
+                self.state = State::SwitchOnDisabled;
+            }
+            _ => {}
+        }
+    }
+
+    /// The device-control state machine, on a controlword the application took.
+    fn control(&mut self, cw: u16) {
+        use State::*;
+        let reset_edge = cw & control::FAULT_RESET != 0 && self.prev_cw & control::FAULT_RESET == 0;
+        self.prev_cw = cw;
+        let cmd = Command::from_controlword(cw);
+        let before = self.state;
+        self.state = match (self.state, cmd) {
+            (Fault, _) if reset_edge => {
+                self.fault_code = 0;
+                SwitchOnDisabled
+            }
+            (Fault | FaultReactionActive | NotReadyToSwitchOn, _) => self.state,
+            (_, _) if cw & control::FAULT_RESET != 0 => self.state,
+            (SwitchOnDisabled, Command::Shutdown) => ReadyToSwitchOn,
+            (ReadyToSwitchOn, Command::SwitchOn) => SwitchedOn,
+            // Transitions 3 and 4 in one step, as most drives allow.
+            (ReadyToSwitchOn | SwitchedOn, Command::EnableOperation) => OperationEnabled,
+            (SwitchedOn | OperationEnabled, Command::Shutdown) => ReadyToSwitchOn,
+            (OperationEnabled, Command::SwitchOn) => SwitchedOn,
+            (OperationEnabled, Command::QuickStop) => {
+                let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
+                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+                QuickStopActive
+            }
+            (QuickStopActive, Command::EnableOperation)
+                if (5..=8).contains(&get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) && self.ramp.is_none() =>
+            {
+                OperationEnabled
+            }
+            (QuickStopActive, Command::DisableVoltage) => {
+                self.ramp = None;
+                SwitchOnDisabled
+            }
+            (ReadyToSwitchOn | SwitchedOn | OperationEnabled, Command::DisableVoltage | Command::QuickStop) => {
+                SwitchOnDisabled
+            }
+            (s, _) => s,
+        };
+        if self.state == OperationEnabled && before != OperationEnabled {
+            // Enabling starts from where the shaft stands: no jump.
+            self.mech.reset_loops();
+            self.demand = PositionDemand::hold(self.mech.position_increments(&self.motor));
+        }
+    }
+
+    /// The application's work for one cycle: state machine, mode, new targets, inputs.
+    fn complete(&mut self, pdi: &mut Pdi<'_>, feedback: Feedback, taken_ns: u64) {
+        let now = pdi.now_ns();
+        self.advance(now);
+        let od = &self.coe.od;
+        let cw = get_unsigned(od, ix::CONTROLWORD, 0) as u16;
+        let mode_req = Mode::from_code(get(od, ix::MODES_OF_OPERATION, 0) as i8).filter(|m| objects::MODES.contains(m));
+        self.control(cw);
+        if mode_req.is_some() && mode_req != self.mode {
+            self.mode = mode_req;
+            self.demand = PositionDemand::hold(self.mech.position_increments(&self.motor));
+        }
+        if self.state == State::OperationEnabled {
+            match self.mode {
+                Some(Mode::CyclicSyncPosition) => {
+                    let last = self.demand.last_target();
+                    let target = get(&self.coe.od, ix::TARGET_POSITION, 0) as i32;
+                    // Unwrap the 32-bit target around the last one.
+                    let to = last + target.wrapping_sub(last.round() as i64 as i32) as f64;
+                    let period = self.cycle_ns.max(1);
+                    self.demand.queue(to, taken_ns + period, period);
+                }
+                Some(Mode::ProfilePosition) => {
+                    let edge = cw & control::NEW_SETPOINT != 0 && self.pp_prev_edge(cw);
+                    if edge {
+                        let od = &self.coe.od;
+                        let target = get(od, ix::TARGET_POSITION, 0) as f64;
+                        let base = if cw & control::RELATIVE != 0 { self.demand.now.to } else { 0.0 };
+                        let lim = |i| get_unsigned(od, i, 0).max(1) as f64;
+                        self.demand.pp_target = Some(base + target);
+                        self.demand.pp_limits =
+                            (lim(ix::PROFILE_VELOCITY), lim(ix::PROFILE_ACCELERATION), lim(ix::PROFILE_DECELERATION));
+                    }
+                }
+                _ => {}
+            }
+        }
+        self.write_feedback(feedback);
+        self.coe.publish_inputs(pdi);
+    }
+
+    /// Whether bit 4 was clear in the last cycle.
+    fn pp_prev_edge(&mut self, cw: u16) -> bool {
+        let was = self.pp_bit;
+        self.pp_bit = cw & control::NEW_SETPOINT != 0;
+        !was
+    }
+
+    fn write_feedback(&mut self, f: Feedback) {
+        let mut sw = self.state.statusword_bits() | status::REMOTE;
+        if matches!(
+            self.state,
+            State::ReadyToSwitchOn
+                | State::SwitchedOn
+                | State::OperationEnabled
+                | State::QuickStopActive
+                | State::FaultReactionActive
+        ) {
+            sw |= status::VOLTAGE_ENABLED;
+        }
+        if self.mech.limited && self.state == State::OperationEnabled {
+            sw |= status::INTERNAL_LIMIT;
+        }
+        let window = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_WINDOW, 0);
+        match (self.state, self.mode) {
+            (State::OperationEnabled, Some(Mode::CyclicSyncPosition)) => {
+                sw |= status::OP_SPECIFIC_12;
+                if window != 0xFFFF_FFFF && f.following_error.unsigned_abs() as u64 > window {
+                    sw |= status::OP_SPECIFIC_13;
+                }
+            }
+            (State::OperationEnabled, Some(Mode::CyclicSyncVelocity | Mode::CyclicSyncTorque)) => {
+                sw |= status::OP_SPECIFIC_12;
+            }
+            (State::OperationEnabled, Some(Mode::ProfilePosition)) => {
+                if self.pp_bit {
+                    sw |= status::OP_SPECIFIC_12;
+                }
+                if self.demand.pp_target.is_none() && f.following_error.unsigned_abs() < 100 {
+                    sw |= status::TARGET_REACHED;
+                }
+            }
+            _ => {}
+        }
+        let od = &mut self.coe.od;
+        set(od, ix::STATUSWORD, 0, sw as i64);
+        set(od, ix::MODES_OF_OPERATION_DISPLAY, 0, self.mode.map_or(0, |m| m.code()) as i64);
+        set(od, ix::POSITION_ACTUAL, 0, f.pos as i64);
+        set(od, ix::POSITION_ACTUAL_INTERNAL, 0, f.pos as i64);
+        set(od, ix::VELOCITY_ACTUAL, 0, f.vel as i64);
+        set(od, ix::TORQUE_ACTUAL, 0, f.torque as i64);
+        set(od, ix::FOLLOWING_ERROR_ACTUAL, 0, f.following_error as i64);
+        set(od, ix::ERROR_CODE, 0, self.fault_code as i64);
+        set(od, 0x1C32, 0x0B, self.stats.repeated_setpoints.min(u16::MAX as u64) as i64);
+        set(od, 0x1C32, 0x0C, self.stats.late_setpoints.min(u16::MAX as u64) as i64);
+    }
+
+    /// SYNC0 or an SM event: take the newest outputs, latch the feedback, start processing.
+    fn take(&mut self, pdi: &mut Pdi<'_>) {
+        let now = pdi.now_ns();
+        if let Some(p) = self.pending.take() {
+            self.stats.overruns += 1;
+            self.complete(pdi, p.feedback, p.taken_ns);
+        }
+        self.advance(now);
+        if let Some((_, sm)) = pdi.process_data_sm(true, self.coe.sm_count) {
+            let buf = pdi.read(sm.start, sm.length as usize).to_vec();
+            self.coe.copy_outputs(&buf);
+        }
+        let t = self.active_processing.draw(&mut self.rng);
+        let s = &mut self.stats;
+        s.processing_count += 1;
+        s.processing_sum_ns += t as f64;
+        s.processing_sum_sq_ns += (t as f64).powi(2);
+        s.processing_min_ns = if s.processing_count == 1 { t } else { s.processing_min_ns.min(t) };
+        s.processing_max_ns = s.processing_max_ns.max(t);
+        self.pending = Some(Pending { at_ns: now + t, taken_ns: now, feedback: self.feedback() });
+    }
+}
+
+impl Application for Cia402Drive {
+    fn check_transition(&mut self, pdi: &mut Pdi<'_>, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
+        self.coe.check_transition(pdi, from, to)?;
+        if to == AlState::Op {
+            let sync0 = pdi.read(0x0981, 1).first().is_some_and(|a| a & 0x03 == 0x03);
+            let asked = get_unsigned(&self.coe.od, 0x1C32, 1) as u16;
+            if asked == objects::SYNC_DC_SYNC0 && !sync0 {
+                return Err(AlStatusCode::INVALID_DC_SYNC_CONFIG);
+            }
+            self.dc = sync0;
+            let cycle = u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64;
+            if self.dc && cycle > 0 {
+                self.cycle_ns = cycle;
+            }
+            self.active_processing = self.processing.unwrap_or(ProcessingTime::paprocki2022(self.cycle_ns));
+            let od = &mut self.coe.od;
+            set(od, 0x1C32, 1, if sync0 { objects::SYNC_DC_SYNC0 } else { objects::SYNC_SM } as i64);
+            set(od, 0x1C32, 0x0A, if sync0 { cycle as i64 } else { 0 });
+        }
+        Ok(())
+    }
+    fn process_data_bytes(&self, outputs: bool) -> Option<u16> {
+        self.coe.process_data_bytes(outputs)
+    }
+    fn state_changed(&mut self, pdi: &mut Pdi<'_>, state: AlState) {
+        let was_op = self.op;
+        self.op = state == AlState::Op;
+        if self.op && !was_op {
+            self.model_ns = Some(pdi.now_ns());
+            self.last_sync0_ns = None;
+            self.taken = self.written;
+        }
+        if was_op && !self.op {
+            // Leaving OP takes the power away (the set-points stopped): switch on disabled.
+            self.pending = None;
+            if !matches!(self.state, State::Fault | State::FaultReactionActive) {
+                self.state = State::SwitchOnDisabled;
+            }
+            self.ramp = None;
+        }
+        self.coe.state_changed(pdi, state);
+        let f = self.feedback();
+        self.write_feedback(f);
+        self.coe.publish_inputs(pdi);
+    }
+    fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
+        self.written += 1;
+        if self.op && !self.dc {
+            self.take(pdi);
+        } else if !self.op {
+            let s = pdi.sm(sm);
+            let buf = pdi.read(s.start, s.length as usize).to_vec();
+            self.coe.copy_outputs(&buf);
+        }
+    }
+    fn sync0(&mut self, pdi: &mut Pdi<'_>, _sys_ns: u64) {
+        if !(self.op && self.dc) {
+            return;
+        }
+        let now = pdi.now_ns();
+        let s = &mut self.stats;
+        if let Some(last) = self.last_sync0_ns {
+            self.cycle_ns = now - last;
+            let new = self.written - self.taken;
+            if new == 0 {
+                s.repeated_setpoints += 1;
+                if s.repeated_cycles.len() < KEEP_CYCLES {
+                    s.repeated_cycles.push(s.sync0_events);
+                }
+            } else if new > 1 {
+                s.late_setpoints += new - 1;
+                if s.late_cycles.len() < KEEP_CYCLES {
+                    s.late_cycles.push(s.sync0_events);
+                }
+            }
+        }
+        s.sync0_events += 1;
+        self.taken = self.written;
+        self.last_sync0_ns = Some(now);
+        self.take(pdi);
+    }
+    fn mailbox(&mut self, pdi: &mut Pdi<'_>, request: &[u8]) -> Option<Vec<u8>> {
+        self.coe.mailbox(pdi, request)
+    }
+    fn pending_mailbox(&mut self) -> Option<Vec<u8>> {
+        self.coe.pending_mailbox()
+    }
+    fn next_event_ns(&self) -> Option<u64> {
+        self.pending.map(|p| p.at_ns)
+    }
+    fn tick(&mut self, pdi: &mut Pdi<'_>) {
+        if let Some(p) = self.pending.take() {
+            self.complete(pdi, p.feedback, p.taken_ns);
+        }
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}

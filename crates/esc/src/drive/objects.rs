@@ -1,0 +1,130 @@
+//! The profile objects a CiA402 drive needs, added where the dictionary (from an ESI file or
+//! an SII) does not already describe them, and typed access to their values.
+use ferrocat_wire::cia402::{index as ix, Mode};
+
+use crate::od::{data_type as dt, Access, Entry, Object, ObjectCode, ObjectDictionary};
+
+fn access(write: bool, rx: bool, tx: bool) -> Access {
+    Access { read: true, write, write_preop_only: false, rx_mappable: rx, tx_mappable: tx }
+}
+
+/// Sync types supported (0x1C32:04, ETG.1020): free run, SM-synchronous, DC SYNC0.
+pub const SYNC_TYPES_SUPPORTED: u16 = 0b0000_0111;
+/// 0x1C32:01 values.
+pub const SYNC_FREE_RUN: u16 = 0;
+pub const SYNC_SM: u16 = 1;
+pub const SYNC_DC_SYNC0: u16 = 2;
+
+/// The modes the simulated drive runs.
+pub const MODES: [Mode; 4] =
+    [Mode::ProfilePosition, Mode::CyclicSyncPosition, Mode::CyclicSyncVelocity, Mode::CyclicSyncTorque];
+
+fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32) -> Object {
+    let e = |sub: u8, name: &str, ty: u16, bits: u16, write: bool, v: u32| Entry {
+        subindex: sub,
+        name: name.into(),
+        data_type: ty,
+        bit_len: bits,
+        bit_offset: 0,
+        access: access(write, false, false),
+        value: v.to_le_bytes()[..(bits as usize / 8)].to_vec(),
+    };
+    let mut o = Object::list(
+        index,
+        name,
+        ObjectCode::Record,
+        0x0042,
+        Access::RO,
+        vec![
+            e(0x01, "Synchronization type", dt::UINT, 16, true, SYNC_FREE_RUN as u32),
+            e(0x02, "Cycle time", dt::UDINT, 32, true, 0),
+            e(0x03, "Shift time", dt::UDINT, 32, false, 0),
+            e(0x04, "Synchronization types supported", dt::UINT, 16, false, SYNC_TYPES_SUPPORTED as u32),
+            e(0x05, "Minimum cycle time", dt::UDINT, 32, false, min_cycle_ns),
+            e(0x06, "Calc and copy time", dt::UDINT, 32, false, calc_copy_ns),
+            e(0x09, "Delay time", dt::UDINT, 32, false, 0),
+            e(0x0A, "Sync0 cycle time", dt::UDINT, 32, false, 0),
+            e(0x0B, "SM event missed", dt::UINT, 16, false, 0),
+            e(0x0C, "Cycle time too small", dt::UINT, 16, false, 0),
+            e(0x20, "Sync error", dt::BOOL, 8, false, 0),
+        ],
+    );
+    // Subindex 0 holds the highest subindex, not the count.
+    if let Some(s0) = o.entry_mut(0) {
+        s0.value = vec![0x20];
+    }
+    o
+}
+
+/// Adds the profile's objects that `od` lacks, with the model's defaults.
+pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
+    let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
+    let vars: [(u16, &str, u16, u16, Access, i64); 20] = [
+        (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
+        (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
+        (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
+        (ix::QUICK_STOP_OPTION, "Quick stop option code", dt::INT, 16, access(true, false, false), 2),
+        (ix::MODES_OF_OPERATION, "Modes of operation", dt::SINT, 8, access(true, true, false), 0),
+        (ix::MODES_OF_OPERATION_DISPLAY, "Modes of operation display", dt::SINT, 8, access(false, false, true), 0),
+        (ix::POSITION_ACTUAL, "Position actual value", dt::DINT, 32, access(false, false, true), 0),
+        // 0.1 rev at the default resolution, for 100 ms.
+        (ix::FOLLOWING_ERROR_WINDOW, "Following error window", dt::UDINT, 32, access(true, false, false), 13_107),
+        (ix::FOLLOWING_ERROR_TIMEOUT, "Following error time out", dt::UINT, 16, access(true, false, false), 100),
+        (ix::VELOCITY_ACTUAL, "Velocity actual value", dt::DINT, 32, access(false, false, true), 0),
+        (ix::TARGET_TORQUE, "Target torque", dt::INT, 16, access(true, true, false), 0),
+        (ix::MAX_TORQUE, "Max torque", dt::UINT, 16, access(true, true, false), 3000),
+        (ix::TORQUE_ACTUAL, "Torque actual value", dt::INT, 16, access(false, false, true), 0),
+        (ix::TARGET_POSITION, "Target position", dt::DINT, 32, access(true, true, false), 0),
+        (ix::PROFILE_VELOCITY, "Profile velocity", dt::UDINT, 32, access(true, true, false), 131_072),
+        (ix::PROFILE_ACCELERATION, "Profile acceleration", dt::UDINT, 32, access(true, true, false), 655_360),
+        (ix::PROFILE_DECELERATION, "Profile deceleration", dt::UDINT, 32, access(true, true, false), 655_360),
+        (ix::QUICK_STOP_DECELERATION, "Quick stop deceleration", dt::UDINT, 32, access(true, false, false), 2_621_440),
+        (ix::FOLLOWING_ERROR_ACTUAL, "Following error actual value", dt::DINT, 32, access(false, false, true), 0),
+        (ix::TARGET_VELOCITY, "Target velocity", dt::DINT, 32, access(true, true, false), 0),
+    ];
+    for (index, name, ty, bits, acc, v) in vars {
+        if od.get(index).is_none() {
+            od.insert(Object::var(index, name, ty, bits, acc, v.to_le_bytes()[..bits as usize / 8].to_vec()));
+        }
+    }
+    if od.get(ix::SUPPORTED_DRIVE_MODES).is_none() {
+        od.insert(Object::var(
+            ix::SUPPORTED_DRIVE_MODES,
+            "Supported drive modes",
+            dt::UDINT,
+            32,
+            Access::RO,
+            supported.to_le_bytes().to_vec(),
+        ));
+    }
+    for (index, name) in [(0x1C32, "SM output parameter"), (0x1C33, "SM input parameter")] {
+        if od.get(index).is_none() {
+            od.insert(sync_parameters(index, name, 125_000, max_processing_ns));
+        }
+    }
+}
+
+/// A value of an entry as a little-endian signed integer of its width (0 when absent).
+pub fn get(od: &ObjectDictionary, index: u16, sub: u8) -> i64 {
+    let Ok(v) = od.read(index, sub) else { return 0 };
+    match v.len() {
+        1 => v[0] as i8 as i64,
+        2 => i16::from_le_bytes([v[0], v[1]]) as i64,
+        4 => i32::from_le_bytes([v[0], v[1], v[2], v[3]]) as i64,
+        _ => 0,
+    }
+}
+
+/// The same value read as unsigned.
+pub fn get_unsigned(od: &ObjectDictionary, index: u16, sub: u8) -> u64 {
+    let Ok(v) = od.read(index, sub) else { return 0 };
+    v.iter().take(8).rev().fold(0u64, |a, &b| a << 8 | b as u64)
+}
+
+/// Sets an entry the drive produces (its width decides the bytes; absent entries are skipped).
+pub fn set(od: &mut ObjectDictionary, index: u16, sub: u8, value: i64) {
+    if let Some(e) = od.objects.get_mut(&index).and_then(|o| o.entry_mut(sub)) {
+        let n = e.value.len().min(8);
+        e.value[..n].copy_from_slice(&value.to_le_bytes()[..n]);
+    }
+}

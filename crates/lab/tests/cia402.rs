@@ -1,0 +1,292 @@
+//! The simulated CiA402 drive against the master's driver, in virtual time: every transition of
+//! the state machine, a following-error fault and its reset, CSP, CSV and CST — for the built-in
+//! servo and for the Nanotec drive as its ESI file describes it.
+use ferrocat_esc::Cia402Drive;
+use ferrocat_master::cia402::{drive_to_goal, Axis, Goal};
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::{DcConfig, Master, MasterEvent};
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::cia402::{error_code, index as ix, Mode, State};
+
+const CYCLE_NS: u64 = 1_000_000;
+const DRIVE: u16 = 1;
+
+fn master(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) -> Master<VirtualIo> {
+    let toml = format!("seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\n{drive_toml}\n");
+    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    prepare(&mut m);
+    m.init_dc(&DcConfig {
+        sync0_slaves: Some(vec![DRIVE]),
+        sync0_shift_ns: 500_000,
+        start_delay_ns: 10_000_000,
+        ..DcConfig::default()
+    })
+    .unwrap();
+    m.start().unwrap();
+    // Until SYNC0 runs, a DC-synchronous drive takes no set-points.
+    cycles(&mut m, 20);
+    m
+}
+
+fn cycles(m: &mut Master<VirtualIo>, n: u64) {
+    for _ in 0..n {
+        m.cycle().unwrap();
+        let now = m.engine.io.now_ns();
+        m.engine.io.sleep_until(now + CYCLE_NS);
+    }
+}
+
+fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
+    m.engine.io.seg.nodes[DRIVE as usize].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
+}
+
+/// Writes `cw`, runs a few cycles, returns the state the statusword reports.
+fn command(m: &mut Master<VirtualIo>, a: &Axis, cw: u16) -> Option<State> {
+    a.write_controlword(m, cw);
+    cycles(m, 4);
+    State::from_statusword(a.statusword(m))
+}
+
+fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
+    use State::*;
+    let mut m = master(drive_toml, prepare);
+    assert!(drive(&m).dc_synchronous(), "the drive takes its set-points on SYNC0");
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_mode(&mut m, Mode::CyclicSyncPosition).unwrap();
+    cycles(&mut m, 4);
+    assert_eq!(State::from_statusword(a.statusword(&m)), Some(SwitchOnDisabled));
+    // Keep the target on the actual position while enabling (a CSP start without a jump).
+    let hold = |m: &mut Master<VirtualIo>, a: &Axis| {
+        let p = a.position_actual(m).unwrap();
+        a.set_target_position(m, p);
+    };
+    let up = |m: &mut Master<VirtualIo>, a: &Axis| {
+        hold(m, a);
+        assert_eq!(command(m, a, 0x06), Some(ReadyToSwitchOn), "2");
+        assert_eq!(command(m, a, 0x07), Some(SwitchedOn), "3");
+        assert_eq!(command(m, a, 0x0F), Some(OperationEnabled), "4");
+    };
+    up(&mut m, &a);
+    assert_eq!(command(&mut m, &a, 0x07), Some(SwitchedOn), "5");
+    assert_eq!(command(&mut m, &a, 0x06), Some(ReadyToSwitchOn), "6");
+    assert_eq!(command(&mut m, &a, 0x00), Some(SwitchOnDisabled), "7");
+    up(&mut m, &a);
+    assert_eq!(command(&mut m, &a, 0x06), Some(ReadyToSwitchOn), "8");
+    assert_eq!(command(&mut m, &a, 0x07), Some(SwitchedOn), "3");
+    assert_eq!(command(&mut m, &a, 0x00), Some(SwitchOnDisabled), "10");
+    up(&mut m, &a);
+    assert_eq!(command(&mut m, &a, 0x00), Some(SwitchOnDisabled), "9");
+    // Quick stop with option code 2: decelerate, then switch on disabled (11, 12).
+    m.sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &2i16.to_le_bytes()).unwrap();
+    up(&mut m, &a);
+    a.write_controlword(&mut m, 0x02);
+    m.cycle().unwrap();
+    let mut seen_quick_stop = false;
+    for _ in 0..50 {
+        cycles(&mut m, 1);
+        match State::from_statusword(a.statusword(&m)) {
+            // The statusword answers a cycle or two later.
+            Some(OperationEnabled) if !seen_quick_stop => {}
+            Some(QuickStopActive) => seen_quick_stop = true,
+            Some(SwitchOnDisabled) => break,
+            other => panic!("11/12: {other:?}"),
+        }
+    }
+    assert!(seen_quick_stop, "11: quick stop active first");
+    assert_eq!(State::from_statusword(a.statusword(&m)), Some(SwitchOnDisabled), "12");
+    // Option code 6: stay in quick stop active; enable operation returns (16).
+    m.sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &6i16.to_le_bytes()).unwrap();
+    up(&mut m, &a);
+    assert_eq!(command(&mut m, &a, 0x02), Some(QuickStopActive), "11");
+    cycles(&mut m, 20);
+    assert_eq!(State::from_statusword(a.statusword(&m)), Some(QuickStopActive), "stays with option 6");
+    hold(&mut m, &a);
+    assert_eq!(command(&mut m, &a, 0x0F), Some(OperationEnabled), "16");
+    // 13, 14: a blocked axis (its torque limit below friction) behind a target beyond the
+    // following-error window for longer than the window's timeout.
+    m.events.clear();
+    m.sdo_write(DRIVE, ix::MAX_TORQUE, 0, &1u16.to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes()).unwrap();
+    let p = a.position_actual(&m).unwrap();
+    a.set_target_position(&mut m, p.wrapping_add(30_000));
+    let mut states = Vec::new();
+    for _ in 0..400 {
+        cycles(&mut m, 1);
+        let s = State::from_statusword(a.statusword(&m));
+        if states.last() != Some(&s) {
+            states.push(s);
+        }
+        if s == Some(Fault) {
+            break;
+        }
+    }
+    // At standstill the fault reaction (13) ends at once; `run_modes` sees it while moving.
+    assert_eq!(states.last(), Some(&Some(Fault)), "13, 14: {states:?}");
+    let code = m.sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
+    assert_eq!(u16::from_le_bytes([code[0], code[1]]), error_code::FOLLOWING_ERROR);
+    m.poll_mailboxes().unwrap();
+    assert!(
+        m.events.iter().any(|e| matches!(e, MasterEvent::Emergency { error_code: 0x8611, .. })),
+        "an emergency: {:?}",
+        m.events
+    );
+    m.sdo_write(DRIVE, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes()).unwrap();
+    // Faults ignore everything but a rising edge of bit 7 (15).
+    assert_eq!(command(&mut m, &a, 0x0F), Some(Fault));
+    assert_eq!(command(&mut m, &a, 0x80), Some(SwitchOnDisabled), "15");
+    let code = m.sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
+    assert_eq!(code[..2], [0, 0], "the error code clears with the reset");
+    // The driver brings it back from a fault on its own.
+    drive_mut(&mut m).inject_fault(error_code::OVERCURRENT);
+    cycles(&mut m, 2);
+    assert_eq!(State::from_statusword(a.statusword(&m)), Some(Fault));
+    a.set_goal(Goal::OperationEnabled);
+    let n = drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    assert!(a.faults >= 1 && n > 3, "{n} cycles, {} faults", a.faults);
+}
+
+fn drive_mut(m: &mut Master<VirtualIo>) -> &mut Cia402Drive {
+    m.engine.io.seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
+}
+
+/// CSP follows a ramp with a small following error; CSV reaches its speed; CST accelerates
+/// the inertia as the torque says.
+fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
+    let mut m = master(drive_toml, prepare);
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let per_rev = drive(&m).motor.increments_per_rev;
+    // CSP: enable without a jump, then 2 rev/s for half a second.
+    a.set_mode(&mut m, Mode::CyclicSyncPosition).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    let p0 = a.position_actual(&m).unwrap() as f64;
+    let actual0 = drive(&m).position_increments();
+    assert!((p0 - actual0).abs() < 2.0, "image {p0} vs drive {actual0}");
+    drive_mut(&mut m).reset_stats();
+    let v = 2.0 * per_rev;
+    for k in 0..500 {
+        let t = k as f64 * 1e-3;
+        // Accelerate over 100 ms, then constant speed.
+        let p = if t < 0.1 { 0.5 * v / 0.1 * t * t } else { v * 0.05 + v * (t - 0.1) };
+        a.set_target_position(&mut m, (p0 + p) as i64 as i32);
+        cycles(&mut m, 1);
+        a.update(&mut m);
+    }
+    let fe = drive(&m).stats.max_following_error;
+    assert!(fe < 0.01 * per_rev, "CSP following error {fe} increments");
+    assert_eq!(a.state(), Some(State::OperationEnabled));
+    let moved = (drive(&m).position_increments() - actual0) / per_rev;
+    assert!((moved - 0.9).abs() < 0.05, "moved {moved} rev (0.9 commanded, minus the pipeline)");
+    // CSV: 5 rev/s.
+    a.set_mode(&mut m, Mode::CyclicSyncVelocity).unwrap();
+    for _ in 0..300 {
+        if a.ready(&m) {
+            a.set_target_velocity(&mut m, (5.0 * per_rev) as i32);
+        }
+        cycles(&mut m, 1);
+        a.update(&mut m);
+    }
+    let vel = drive(&m).velocity_increments() / per_rev;
+    assert!((vel - 5.0).abs() < 0.05, "CSV: {vel} rev/s");
+    if a.velocity_actual(&m).is_some() {
+        assert!((a.velocity_actual(&m).unwrap() as f64 / per_rev - 5.0).abs() < 0.05);
+    }
+    // A fault while moving: the reaction decelerates (13), then the fault (14); the driver
+    // resets it and enables again.
+    drive_mut(&mut m).inject_fault(error_code::DC_LINK_UNDERVOLTAGE);
+    let mut states = Vec::new();
+    for _ in 0..1000 {
+        cycles(&mut m, 1);
+        let s = a.update(&mut m);
+        if states.last() != Some(&s) {
+            states.push(s);
+        }
+        if a.ready(&m) && states.len() > 2 {
+            break;
+        }
+    }
+    assert_eq!(
+        states[..3],
+        [Some(State::FaultReactionActive), Some(State::Fault), Some(State::SwitchOnDisabled)],
+        "{states:?}"
+    );
+    assert!(a.ready(&m), "{states:?}");
+    // CST: from the speed reached, 100 ‰ of rated torque for 100 ms.
+    a.set_mode(&mut m, Mode::CyclicSyncTorque).unwrap();
+    let mut v0 = None;
+    for _ in 0..200 {
+        if a.ready(&m) {
+            a.set_target_torque(&mut m, 100);
+            v0.get_or_insert(drive(&m).velocity_increments());
+        }
+        cycles(&mut m, 1);
+        a.update(&mut m);
+        if v0.is_some() && a.ready(&m) && drive(&m).torque_nm() > 0.05 {
+            break;
+        }
+    }
+    let (w0, t0) = (drive(&m).velocity_increments(), m.engine.io.now_ns());
+    cycles(&mut m, 100);
+    let dt = (m.engine.io.now_ns() - t0) as f64 * 1e-9;
+    let d = drive(&m);
+    let p = d.motor;
+    let accel = (d.velocity_increments() - w0) / per_rev * std::f64::consts::TAU / dt;
+    // a = (T − Coulomb − viscous·ω) / J at about 5 rev/s.
+    let w = w0 / per_rev * std::f64::consts::TAU;
+    let expected = (0.1 * p.rated_torque_nm - p.coulomb_nm - p.viscous_nm_per_rad_s * w) / p.inertia_kg_m2;
+    assert!((accel - expected).abs() / expected < 0.1, "CST: {accel} rad/s² vs {expected}");
+    if let Some(t) = a.torque_actual(&m) {
+        assert!((t - 100).abs() <= 2, "torque actual {t} ‰");
+    }
+}
+
+#[test]
+fn the_builtin_servo_walks_every_transition() {
+    walk_every_transition("builtin = 'SERVO'", &|_| {});
+}
+
+#[test]
+fn the_builtin_servo_runs_csp_csv_and_cst() {
+    run_modes("builtin = 'SERVO'", &|_| {});
+}
+
+fn nanotec() -> String {
+    let p = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
+    format!("esi = '{}'\nproduct = '#x4F'", p.display())
+}
+
+#[test]
+fn needs_shared_nanotec_esi_walks_every_transition() {
+    // Its dictionary assigns only the PDOs with the controlword and statusword by default.
+    walk_every_transition(&nanotec(), &|m| {
+        m.remap(DRIVE, true, &[0x1600, 0x1601]).unwrap();
+        m.remap(DRIVE, false, &[0x1A00, 0x1A01]).unwrap();
+    });
+}
+
+#[test]
+fn needs_shared_nanotec_esi_runs_csp_csv_and_cst_after_remapping() {
+    run_modes(&nanotec(), &|m| {
+        // The ESI's default PDOs carry no target velocity or torque: map them into 0x1602 and
+        // their actual values into 0x1A02, as an integrator would.
+        let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.sdo_write(DRIVE, i, s, v).unwrap();
+        w(m, 0x1602, 0, &[0]);
+        w(m, 0x1602, 1, &0x60FF_0020u32.to_le_bytes());
+        w(m, 0x1602, 2, &0x6071_0010u32.to_le_bytes());
+        w(m, 0x1602, 0, &[2]);
+        w(m, 0x1A02, 0, &[0]);
+        w(m, 0x1A02, 1, &0x606C_0020u32.to_le_bytes());
+        w(m, 0x1A02, 2, &0x6077_0010u32.to_le_bytes());
+        w(m, 0x1A02, 0, &[2]);
+        m.remap(DRIVE, true, &[0x1600, 0x1601, 0x1602]).unwrap();
+        m.remap(DRIVE, false, &[0x1A00, 0x1A01, 0x1A02]).unwrap();
+        // The Nanotec's defaults (a 10 % torque limit, a 256-increment window) are tighter than
+        // the test's moves: set them as an integrator would.
+        w(m, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes());
+        w(m, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes());
+        w(m, ix::QUICK_STOP_DECELERATION, 0, &2_621_440u32.to_le_bytes());
+    });
+}

@@ -1,0 +1,249 @@
+//! A CiA402 driver: one [`Axis`] per drive walks the drive's state machine to where the
+//! application wants it (operation enabled, disabled, quick stop) one controlword per cycle,
+//! resets faults, switches modes, and starts cyclic synchronous position without a jump (the
+//! target follows the actual position until operation is enabled).
+use ferrocat_wire::cia402::{control, index as ix, Command, Mode, State};
+
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+use crate::master::Master;
+use crate::process::Handle;
+
+/// Where the application wants the drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Goal {
+    /// Switch on disabled, power off.
+    Disabled,
+    OperationEnabled,
+    QuickStop,
+}
+
+/// The process-data entries of one drive (by object index, so that any vendor's names work).
+#[derive(Debug, Clone, Copy)]
+struct Handles {
+    controlword: Handle,
+    statusword: Handle,
+    mode: Option<Handle>,
+    mode_display: Option<Handle>,
+    target_position: Option<Handle>,
+    target_velocity: Option<Handle>,
+    target_torque: Option<Handle>,
+    position_actual: Option<Handle>,
+    velocity_actual: Option<Handle>,
+    torque_actual: Option<Handle>,
+    following_error: Option<Handle>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Axis {
+    pub position: u16,
+    h: Handles,
+    goal: Goal,
+    mode: Mode,
+    controlword: u16,
+    state: Option<State>,
+    /// Cycles spent in the current state, for timeouts the application may impose.
+    pub cycles_in_state: u64,
+    /// Faults seen (rising edges of the fault state).
+    pub faults: u64,
+}
+
+fn signed(v: u64, bits: u8) -> i64 {
+    let shift = 64 - bits as u32;
+    ((v << shift) as i64) >> shift
+}
+
+impl Axis {
+    /// The drive at `position`, whose process image must hold at least the controlword and the
+    /// statusword.
+    pub fn new<I: Io>(m: &Master<I>, position: u16) -> Result<Self> {
+        let s = m.slave(position)?;
+        let find = |outputs: bool, index: u16| {
+            let list = if outputs { &s.outputs } else { &s.inputs };
+            list.iter().find(|e| e.index == index).map(|e| Handle { bit: e.image_bit, bits: e.bits })
+        };
+        let need = |h: Option<Handle>, what: &str| {
+            h.ok_or_else(|| MasterError::slave(position, &s.name, format!("no {what} in the process image")))
+        };
+        let h = Handles {
+            controlword: need(find(true, ix::CONTROLWORD), "controlword (0x6040)")?,
+            statusword: need(find(false, ix::STATUSWORD), "statusword (0x6041)")?,
+            mode: find(true, ix::MODES_OF_OPERATION),
+            mode_display: find(false, ix::MODES_OF_OPERATION_DISPLAY),
+            target_position: find(true, ix::TARGET_POSITION),
+            target_velocity: find(true, ix::TARGET_VELOCITY),
+            target_torque: find(true, ix::TARGET_TORQUE),
+            position_actual: find(false, ix::POSITION_ACTUAL).or_else(|| find(false, ix::POSITION_ACTUAL_INTERNAL)),
+            velocity_actual: find(false, ix::VELOCITY_ACTUAL),
+            torque_actual: find(false, ix::TORQUE_ACTUAL),
+            following_error: find(false, ix::FOLLOWING_ERROR_ACTUAL),
+        };
+        Ok(Axis {
+            position,
+            h,
+            goal: Goal::Disabled,
+            mode: Mode::CyclicSyncPosition,
+            controlword: 0,
+            state: None,
+            cycles_in_state: 0,
+            faults: 0,
+        })
+    }
+
+    pub fn set_goal(&mut self, goal: Goal) {
+        self.goal = goal;
+    }
+
+    /// The mode to run in; set through the process image when 0x6060 is mapped, else by SDO
+    /// (which needs the mailbox, so call it outside the cycle's hot path).
+    pub fn set_mode<I: Io>(&mut self, m: &mut Master<I>, mode: Mode) -> Result<()> {
+        self.mode = mode;
+        match self.h.mode {
+            Some(h) => m.set(h, mode.code() as u8 as u64),
+            None => m.sdo_write(self.position, ix::MODES_OF_OPERATION, 0, &[mode.code() as u8])?,
+        }
+        Ok(())
+    }
+
+    pub fn state(&self) -> Option<State> {
+        self.state
+    }
+
+    /// The statusword in the image, and a controlword written as it is (for tools and tests
+    /// that walk the state machine by hand; `update` overwrites it).
+    pub fn statusword<I: Io>(&self, m: &Master<I>) -> u16 {
+        m.get(self.h.statusword) as u16
+    }
+    pub fn write_controlword<I: Io>(&self, m: &mut Master<I>, cw: u16) {
+        m.set(self.h.controlword, cw as u64);
+    }
+
+    pub fn mode_display<I: Io>(&self, m: &Master<I>) -> Option<Mode> {
+        self.h.mode_display.and_then(|h| Mode::from_code(m.get(h) as u8 as i8))
+    }
+
+    /// Operation enabled in the wanted mode (as far as the image shows the mode).
+    pub fn ready<I: Io>(&self, m: &Master<I>) -> bool {
+        self.state == Some(State::OperationEnabled) && self.mode_display(m).is_none_or(|d| d == self.mode)
+    }
+
+    pub fn position_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
+        self.h.position_actual.map(|h| signed(m.get(h), h.bits) as i32)
+    }
+    pub fn velocity_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
+        self.h.velocity_actual.map(|h| signed(m.get(h), h.bits) as i32)
+    }
+    pub fn torque_actual<I: Io>(&self, m: &Master<I>) -> Option<i16> {
+        self.h.torque_actual.map(|h| signed(m.get(h), h.bits) as i16)
+    }
+    pub fn following_error<I: Io>(&self, m: &Master<I>) -> Option<i32> {
+        self.h.following_error.map(|h| signed(m.get(h), h.bits) as i32)
+    }
+
+    pub fn set_target_position<I: Io>(&self, m: &mut Master<I>, pos: i32) {
+        if let Some(h) = self.h.target_position {
+            m.set(h, pos as u32 as u64);
+        }
+    }
+    pub fn set_target_velocity<I: Io>(&self, m: &mut Master<I>, vel: i32) {
+        if let Some(h) = self.h.target_velocity {
+            m.set(h, vel as u32 as u64);
+        }
+    }
+    pub fn set_target_torque<I: Io>(&self, m: &mut Master<I>, per_mille: i16) {
+        if let Some(h) = self.h.target_torque {
+            m.set(h, per_mille as u16 as u64);
+        }
+    }
+
+    /// After each cycle: reads the statusword and writes the next controlword (and, until
+    /// operation is enabled in a cyclic mode, targets that hold the drive where it stands).
+    /// Returns the drive's state.
+    pub fn update<I: Io>(&mut self, m: &mut Master<I>) -> Option<State> {
+        let state = State::from_statusword(m.get(self.h.statusword) as u16);
+        if state != self.state {
+            if state == Some(State::Fault) {
+                self.faults += 1;
+            }
+            self.cycles_in_state = 0;
+        } else {
+            self.cycles_in_state += 1;
+        }
+        self.state = state;
+        let holding = !self.ready(m);
+        if holding {
+            // Until the drive runs in the wanted mode, command what it is doing now: no jump.
+            if let Some(p) = self.position_actual(m) {
+                self.set_target_position(m, p);
+            }
+            self.set_target_velocity(m, 0);
+            self.set_target_torque(m, 0);
+        }
+        if let Some(h) = self.h.mode {
+            m.set(h, self.mode.code() as u8 as u64);
+        }
+        let cw = self.next_controlword(state);
+        self.controlword = cw;
+        m.set(self.h.controlword, cw as u64);
+        state
+    }
+
+    fn next_controlword(&self, state: Option<State>) -> u16 {
+        use State::*;
+        let keep_high = self.controlword & !0x008F;
+        let cmd = match (self.goal, state) {
+            // A fault reset is a rising edge of bit 7: alternate 0 and the reset.
+            (_, Some(Fault)) => {
+                return if self.controlword & control::FAULT_RESET != 0 { 0 } else { control::FAULT_RESET };
+            }
+            (_, None | Some(NotReadyToSwitchOn | FaultReactionActive)) => Command::DisableVoltage,
+            (Goal::Disabled, _) => Command::DisableVoltage,
+            (Goal::QuickStop, Some(OperationEnabled | QuickStopActive)) => Command::QuickStop,
+            (Goal::QuickStop, _) => Command::DisableVoltage,
+            (Goal::OperationEnabled, Some(SwitchOnDisabled)) => Command::Shutdown,
+            (Goal::OperationEnabled, Some(ReadyToSwitchOn)) => Command::SwitchOn,
+            (Goal::OperationEnabled, Some(SwitchedOn | OperationEnabled)) => Command::EnableOperation,
+            // Left in quick stop by someone else: back through switch on disabled.
+            (Goal::OperationEnabled, Some(QuickStopActive)) => Command::DisableVoltage,
+        };
+        keep_high | cmd.controlword()
+    }
+}
+
+/// Runs cycles (one every `cycle_ns`) until every axis has reached its goal, at most
+/// `max_cycles`; the error names the first axis that did not and its state.
+pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64, max_cycles: u64) -> Result<u64> {
+    let mut next = m.engine.io.now_ns();
+    for k in 0..max_cycles {
+        m.cycle()?;
+        let mut done = true;
+        for a in axes.iter_mut() {
+            let s = a.update(m);
+            done &= match a.goal {
+                Goal::OperationEnabled => a.ready(m),
+                Goal::Disabled => s == Some(State::SwitchOnDisabled),
+                Goal::QuickStop => matches!(s, Some(State::QuickStopActive | State::SwitchOnDisabled)),
+            };
+        }
+        if done {
+            return Ok(k + 1);
+        }
+        next += cycle_ns;
+        m.engine.io.sleep_until(next);
+    }
+    let a = axes
+        .iter()
+        .find(|a| a.goal != Goal::OperationEnabled || !a.ready(m))
+        .or(axes.first())
+        .ok_or_else(|| MasterError::Config("no axes".into()))?;
+    let s = m.slave(a.position)?;
+    Err(MasterError::slave(
+        a.position,
+        &s.name,
+        format!(
+            "CiA402: still {} after {max_cycles} cycles (wanted {:?})",
+            a.state.map_or("unknown", |s| s.name()),
+            a.goal
+        ),
+    ))
+}
