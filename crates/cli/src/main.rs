@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod demo;
 mod esi;
 mod lab;
 mod master_cmd;
@@ -108,6 +109,34 @@ enum Command {
         /// once converged).
         #[arg(long, default_value_t = 15_000, requires = "dc")]
         dc_static_frames: u32,
+    },
+    /// CiA402 drives with DC on the embedded virtual segment: a synchronised move of every axis
+    /// per clock-sync method and cycle time; the master–slave error, SYNC0 simultaneity,
+    /// following errors and late or repeated set-points.
+    Demo {
+        /// Number of drives.
+        #[arg(long, default_value_t = 2)]
+        drives: usize,
+        /// The drive: SERVO (built in), an ESI file with :PRODUCT, or an EEPROM image.
+        #[arg(long)]
+        drive: Option<String>,
+        /// Cycle times in µs (repeatable; default 1000 and 250).
+        #[arg(long)]
+        cycle_us: Vec<u64>,
+        /// Clock-sync methods (repeatable; default all: none, conventional, park2020, chen2016,
+        /// pi, ferrocat).
+        #[arg(long)]
+        method: Vec<String>,
+        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
+        #[arg(long, default_value = "pc-rt")]
+        host: String,
+        #[arg(long)]
+        seed: Option<u64>,
+        #[arg(long)]
+        json: bool,
+        /// Folder for the CSV and the SVG plots.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
     },
     /// The papers' clock-synchronisation experiments, in virtual time.
     Lab {
@@ -267,6 +296,9 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
+        Command::Demo { drives, drive, cycle_us, method, host, seed, json, out } => {
+            demo::demo(demo::DemoArgs { drives, drive, cycles_us: cycle_us, methods: method, host, seed, json, out })
+        }
         Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames } => {
             master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate)
         }

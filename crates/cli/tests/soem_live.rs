@@ -137,3 +137,32 @@ fn needs_shared_soem_sees_the_real_hardware() {
     assert!(rep["malformed"].as_u64().unwrap() >= 3, "lying lengths counted: {rep}");
     assert!(rep["not_ethercat"].as_u64().unwrap() >= 1, "others counted: {rep}");
 }
+
+/// The simulated drive is not tailored to our master: SOEM, unmodified, configures DC with
+/// SYNC0, reaches OP and walks the drive to OPERATION ENABLED in cyclic synchronous position.
+#[test]
+fn soem_enables_the_simulated_cia402_drive() {
+    let net = VethPair::new("sd");
+    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/soem_cia402.py");
+    let out =
+        VethPair::cmd(&net.master_ns, python().to_str().unwrap()).args([script, &net.master_if, "1"]).output().unwrap();
+    sim.stop();
+    assert!(
+        out.status.success(),
+        "pysoem: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    println!("SOEM: {r}");
+    assert_eq!(r["found"], 2);
+    assert_eq!(r["has_dc"], true);
+    assert_eq!(r["op"], true);
+    let states: Vec<&str> = r["states"].as_array().unwrap().iter().filter_map(|s| s.as_str()).collect();
+    assert_eq!(states, ["switch on disabled", "ready to switch on", "switched on", "operation enabled"], "{r}");
+    assert_eq!(r["final_state"], "operation enabled");
+    assert_eq!(r["mode_display"], 8);
+    // Enabled with the target on the actual position: no jump.
+    assert!(r["moved"].as_i64().unwrap().abs() < 50, "{r}");
+}

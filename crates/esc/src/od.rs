@@ -110,8 +110,9 @@ impl Object {
         }
     }
 
-    /// A record or array: subindex 0 (u8, the number of entries) then the entries, each on a
-    /// 16-bit boundary as ESI files lay them out.
+    /// A record or array: subindex 0 (u8, the number of entries, padded to 16 bits) then the
+    /// entries packed by their sizes, as ESI files lay them out (an array of USINT, 0x1C00,
+    /// takes a byte per element).
     pub fn list(
         index: u16,
         name: &str,
@@ -132,7 +133,7 @@ impl Object {
         let mut off = 16;
         for mut e in items {
             e.bit_offset = off;
-            off += (e.bit_len as u32).max(1).div_ceil(16) * 16;
+            off += (e.bit_len as u32).max(1);
             entries.push(e);
         }
         Object { index, name: name.into(), code, data_type, entries }

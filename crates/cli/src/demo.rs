@@ -1,0 +1,263 @@
+//! `ferrocat demo`: drives brought to OP with distributed clocks and moved together, once per
+//! clock-sync method and cycle time; tables on stdout, CSV and SVG plots in a folder.
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use ferrocat_lab::demo::{run, Options, Row};
+use plotters::prelude::*;
+
+use crate::outln;
+
+pub struct DemoArgs {
+    pub drives: usize,
+    pub drive: Option<String>,
+    pub cycles_us: Vec<u64>,
+    pub methods: Vec<String>,
+    pub host: String,
+    pub seed: Option<u64>,
+    pub json: bool,
+    pub out: PathBuf,
+}
+
+pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
+    let mut o = Options::new(crate::lab::host(&a.host)?);
+    anyhow::ensure!((1..=16).contains(&a.drives), "--drives must be between 1 and 16");
+    o.drives = a.drives;
+    if let Some(d) = a.drive {
+        o.drive = d;
+    }
+    if let Some(s) = a.seed {
+        o.seed = s;
+    }
+    if !a.cycles_us.is_empty() {
+        anyhow::ensure!(
+            a.cycles_us.iter().all(|&c| (100..=10_000).contains(&c)),
+            "--cycle-us must be between 100 and 10000"
+        );
+        o.cycles_us = a.cycles_us;
+    }
+    if !a.methods.is_empty() {
+        for m in &a.methods {
+            anyhow::ensure!(
+                ferrocat_lab::METHODS.contains(&m.as_str()),
+                "unknown method {m:?} (known: {})",
+                ferrocat_lab::METHODS.join(", ")
+            );
+        }
+        o.methods = a.methods;
+    }
+    let rows = run(&o)?;
+    write_outputs(&a.out, &o, &rows)?;
+    if a.json {
+        let v = serde_json::json!({ "demo": { "drives": o.drives, "drive": o.drive, "host": o.host.name,
+            "seed": o.seed, "out": a.out }, "methods": rows });
+        outln!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let r0 = &rows[0];
+    outln!(
+        "ferrocat demo — {} × {} behind EK1100, EL2004, EL1004; host {}, seed {}; every axis moves out and back together ({:.2} s, CSP)",
+        o.drives,
+        o.drive,
+        o.host.name,
+        o.seed,
+        r0.move_s
+    );
+    outln!("Truth from the simulator. Error: master − reference clock (reference follows master) or the reference's time at the master's");
+    outln!("cycle start off the cycle grid (master follows reference). SYNC0 Δ: second drive minus first (Paprocki 2022 Table 2).");
+    outln!(
+        "{:>6}  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>7} {:>14}",
+        "cycle",
+        "method",
+        "err mean",
+        "err rms",
+        "err max",
+        "Δ mean",
+        "Δ sd",
+        "Δ min",
+        "Δ max",
+        "spread",
+        "late",
+        "repeated",
+        "max FE incr",
+        "enabled",
+        "app µs mean/max"
+    );
+    for r in &rows {
+        outln!(
+            "{:>4}µs  {:<12} {:>8.0}ns {:>8.0}ns {:>8.0}ns   {:>7.1} {:>6.1} {:>6} {:>6} {:>5}ns   {:>5} {:>8}   {:>12.0} {:>5}/{} {:>7.1}/{:.1}",
+            r.cycle_us,
+            r.method,
+            r.error_mean_ns,
+            r.error_rms_ns,
+            r.error_max_ns,
+            r.sync0_mean_ns,
+            r.sync0_sd_ns,
+            r.sync0_min_ns,
+            r.sync0_max_ns,
+            r.sync0_spread_max_ns,
+            r.late_setpoints,
+            r.repeated_setpoints,
+            r.max_following_error,
+            r.drives_enabled,
+            r.drives,
+            r.processing_mean_us,
+            r.processing_max_us
+        );
+    }
+    outln!("Following error per axis (increments, largest |demand − actual|):");
+    for r in &rows {
+        let fe: Vec<String> = r.following_error.iter().map(|f| format!("{f:.0}")).collect();
+        outln!("{:>4}µs  {:<12} {}", r.cycle_us, r.method, fe.join("  "));
+    }
+    for r in rows.iter().filter(|r| r.late_setpoints + r.repeated_setpoints > 0) {
+        outln!(
+            "{:>4}µs  {:<12} late at drive:SYNC0 {} — repeated at {}",
+            r.cycle_us,
+            r.method,
+            list(&r.late_cycles),
+            list(&r.repeated_cycles)
+        );
+    }
+    outln!("Plots and CSV in {}", a.out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn list(v: &[String]) -> String {
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(" ")
+    }
+}
+
+fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut csv = String::from(
+        "cycle_us,method,host,error_mean_ns,error_rms_ns,error_max_ns,sync0_mean_ns,sync0_sd_ns,sync0_min_ns,\
+         sync0_max_ns,sync0_spread_max_ns,late_setpoints,repeated_setpoints,max_following_error,drives_enabled,\
+         processing_mean_us,processing_max_us\n",
+    );
+    for r in rows {
+        csv.push_str(&format!(
+            "{},{},{},{:.1},{:.1},{:.1},{:.2},{:.2},{},{},{},{},{},{:.1},{},{:.2},{:.2}\n",
+            r.cycle_us,
+            r.method,
+            r.host,
+            r.error_mean_ns,
+            r.error_rms_ns,
+            r.error_max_ns,
+            r.sync0_mean_ns,
+            r.sync0_sd_ns,
+            r.sync0_min_ns,
+            r.sync0_max_ns,
+            r.sync0_spread_max_ns,
+            r.late_setpoints,
+            r.repeated_setpoints,
+            r.max_following_error,
+            r.drives_enabled,
+            r.processing_mean_us,
+            r.processing_max_us
+        ));
+    }
+    let path = dir.join("demo.csv");
+    std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
+    for &c in &o.cycles_us {
+        let of_cycle: Vec<&Row> = rows.iter().filter(|r| r.cycle_us == c).collect();
+        if let Some(r) = of_cycle.iter().find(|r| r.method == "ferrocat").or(of_cycle.first()) {
+            plot_positions(&dir.join(format!("positions-{c}us.svg")), r)?;
+        }
+        plot_series(
+            &dir.join(format!("following-error-{c}us.svg")),
+            &format!("Following error of axis 1 (increments), {c} µs"),
+            &of_cycle,
+            &|p| p.following_error.first().copied().unwrap_or(0.0),
+        )?;
+        plot_series(
+            &dir.join(format!("clock-error-{c}us.svg")),
+            &format!("Master–reference error (ns), {c} µs"),
+            &of_cycle,
+            &|p| p.error_ns,
+        )?;
+    }
+    Ok(())
+}
+
+const COLOURS: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+
+fn plot_positions(path: &Path, r: &Row) -> anyhow::Result<()> {
+    let t_max = r.trace.last().map_or(1.0, |p| p.t_s).max(1e-3);
+    let (lo, hi) = r
+        .trace
+        .iter()
+        .flat_map(|p| p.setpoint_rev.iter().chain(&p.actual_rev))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let pad = ((hi - lo) * 0.05).max(1e-3);
+    let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("Positions (rev), {} µs, {}: set-point and actual", r.cycle_us, r.method), ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
+        .map_err(plot_err)?;
+    chart.configure_mesh().x_desc("time (s)").y_desc("rev").draw().map_err(plot_err)?;
+    for i in 0..r.drives {
+        let c = COLOURS[i % COLOURS.len()];
+        chart
+            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, p.setpoint_rev[i])), c.stroke_width(1)))
+            .map_err(plot_err)?
+            .label(format!("axis {} set-point", i + 1))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));
+        chart
+            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, p.actual_rev[i])), c.mix(0.5).stroke_width(3)))
+            .map_err(plot_err)?
+            .label(format!("axis {} actual", i + 1))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c.mix(0.5).stroke_width(3)));
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.8)).draw().map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    Ok(())
+}
+
+fn plot_series(
+    path: &Path,
+    title: &str,
+    rows: &[&Row],
+    f: &dyn Fn(&ferrocat_lab::demo::TracePoint) -> f64,
+) -> anyhow::Result<()> {
+    let t_max = rows.iter().filter_map(|r| r.trace.last()).map(|p| p.t_s).fold(1e-3, f64::max);
+    let (lo, hi) = rows
+        .iter()
+        .flat_map(|r| r.trace.iter().map(f))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let pad = ((hi - lo) * 0.05).max(1.0);
+    let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
+        .map_err(plot_err)?;
+    chart.configure_mesh().x_desc("time (s)").draw().map_err(plot_err)?;
+    for (k, r) in rows.iter().enumerate() {
+        let c = COLOURS[k % COLOURS.len()];
+        chart
+            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, f(p))), c))
+            .map_err(plot_err)?
+            .label(r.method.clone())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));
+    }
+    chart.configure_series_labels().background_style(WHITE.mix(0.8)).draw().map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    Ok(())
+}
+
+fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("drawing a plot: {e}")
+}
