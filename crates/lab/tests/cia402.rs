@@ -290,3 +290,45 @@ fn needs_shared_nanotec_esi_runs_csp_csv_and_cst_after_remapping() {
         w(m, ix::QUICK_STOP_DECELERATION, 0, &2_621_440u32.to_le_bytes());
     });
 }
+
+/// Profile position: a new set-point on the rising edge of bit 4, acknowledged in bit 12, the
+/// drive's own trapezoid to the target, target reached in bit 10.
+#[test]
+fn the_builtin_servo_runs_profile_position() {
+    use ferrocat_wire::cia402::{control, status};
+    let mut m = master("builtin = 'SERVO'", &|_| {});
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_mode(&mut m, Mode::ProfilePosition).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    let per_rev = drive(&m).motor.increments_per_rev;
+    // 3 rev/s, 30 rev/s² both ways; 2 revolutions from here.
+    m.sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((3.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    for i in [ix::PROFILE_ACCELERATION, ix::PROFILE_DECELERATION] {
+        m.sdo_write(DRIVE, i, 0, &((30.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    }
+    let start = a.position_actual(&m).unwrap();
+    let target = start.wrapping_add((2.0 * per_rev) as i32);
+    a.set_target_position(&mut m, target);
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+    let mut acknowledged = false;
+    let mut reached_after = None;
+    for k in 0..2000 {
+        cycles(&mut m, 1);
+        let sw = a.statusword(&m);
+        if sw & status::OP_SPECIFIC_12 != 0 {
+            acknowledged = true;
+            a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        }
+        if acknowledged && k > 10 && sw & status::TARGET_REACHED != 0 {
+            reached_after = Some(k);
+            break;
+        }
+    }
+    assert!(acknowledged, "set-point acknowledge");
+    let k = reached_after.expect("target reached") as f64 * 1e-3;
+    // 2 rev at 3 rev/s with 0.1 s ramps each way: 0.767 s, plus the settling of the loops.
+    assert!((0.7..1.0).contains(&k), "reached after {k} s");
+    let end = a.position_actual(&m).unwrap();
+    assert!(end.wrapping_sub(target).abs() < 100, "ends at {end}, target {target}");
+}
