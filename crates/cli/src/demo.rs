@@ -134,32 +134,23 @@ fn list(v: &[String]) -> String {
 
 fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut csv = String::from(
-        "cycle_us,method,host,error_mean_ns,error_rms_ns,error_max_ns,sync0_mean_ns,sync0_sd_ns,sync0_min_ns,\
-         sync0_max_ns,sync0_spread_max_ns,late_setpoints,repeated_setpoints,max_following_error,drives_enabled,\
-         processing_mean_us,processing_max_us\n",
-    );
-    for r in rows {
-        csv.push_str(&format!(
-            "{},{},{},{:.1},{:.1},{:.1},{:.2},{:.2},{},{},{},{},{},{:.1},{},{:.2},{:.2}\n",
-            r.cycle_us,
-            r.method,
-            r.host,
-            r.error_mean_ns,
-            r.error_rms_ns,
-            r.error_max_ns,
-            r.sync0_mean_ns,
-            r.sync0_sd_ns,
-            r.sync0_min_ns,
-            r.sync0_max_ns,
-            r.sync0_spread_max_ns,
-            r.late_setpoints,
-            r.repeated_setpoints,
-            r.max_following_error,
-            r.drives_enabled,
-            r.processing_mean_us,
-            r.processing_max_us
-        ));
+    // Every scalar figure of a row, columns by name (the lists stay in the JSON).
+    let values: Vec<serde_json::Map<String, serde_json::Value>> = rows
+        .iter()
+        .filter_map(|r| serde_json::to_value(r).ok()?.as_object().cloned())
+        .map(|o| o.into_iter().filter(|(_, v)| !v.is_array()).collect())
+        .collect();
+    let keys: Vec<String> = values.first().map(|o| o.keys().cloned().collect()).unwrap_or_default();
+    let mut csv = keys.join(",") + "\n";
+    for o in &values {
+        let cells: Vec<String> = keys
+            .iter()
+            .map(|k| match &o[k] {
+                serde_json::Value::String(s) => s.clone(),
+                v => v.to_string(),
+            })
+            .collect();
+        csv.push_str(&(cells.join(",") + "\n"));
     }
     let path = dir.join("demo.csv");
     std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
