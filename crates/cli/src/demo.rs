@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use ferrocat_lab::demo::{run, Options, Row};
+use ferrocat_lab::demo::{run, run_with, Options, Row};
 use plotters::prelude::*;
 
 use crate::outln;
@@ -18,6 +18,9 @@ pub struct DemoArgs {
     pub seed: Option<u64>,
     pub json: bool,
     pub out: PathBuf,
+    /// A real network (or a served one) instead of the embedded virtual segment.
+    pub iface: Option<String>,
+    pub force: bool,
 }
 
 pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
@@ -47,25 +50,48 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
         }
         o.methods = a.methods;
     }
-    let rows = run(&o)?;
+    let rows = match &a.iface {
+        None => run(&o)?,
+        Some(iface) => {
+            let target = crate::target::Target {
+                iface: Some(iface.clone()),
+                udp: None,
+                force: a.force,
+                config: None,
+                device: Vec::new(),
+                seed: None,
+                esi: Vec::new(),
+                pcap: None,
+            };
+            crate::target::go_real_time();
+            run_with(&o, &mut || target.master())?
+        }
+    };
     write_outputs(&a.out, &o, &rows)?;
     if a.json {
         let v = serde_json::json!({ "demo": { "drives": o.drives, "drive": o.drive, "host": o.host.name,
-            "seed": o.seed, "out": a.out }, "methods": rows });
+            "seed": o.seed, "out": a.out, "iface": a.iface }, "methods": rows });
         outln!("{v}");
         return Ok(ExitCode::SUCCESS);
     }
     let r0 = &rows[0];
-    outln!(
-        "ferrocat demo — {} × {} behind EK1100, EL2004, EL1004; host {}, seed {}; every axis moves out and back together ({:.2} s, CSP)",
-        o.drives,
-        o.drive,
-        o.host.name,
-        o.seed,
-        r0.move_s
-    );
-    outln!("Truth from the simulator. Error: master − reference clock (reference follows master) or the reference's time at the master's");
-    outln!("cycle start off the cycle grid (master follows reference). SYNC0 Δ: second drive minus first (Paprocki 2022 Table 2).");
+    match &a.iface {
+        None => outln!(
+            "ferrocat demo — {} × {} behind EK1100, EL2004, EL1004; host {}, seed {}; every axis moves out and back together ({:.2} s, CSP)",
+            o.drives,
+            o.drive,
+            o.host.name,
+            o.seed,
+            r0.move_s
+        ),
+        Some(i) => outln!(
+            "ferrocat demo on {i} — {} drives; every axis moves out and back together ({:.2} s, CSP); — marks what only a simulator can measure",
+            r0.drives,
+            r0.move_s
+        ),
+    }
+    outln!("Error: master − reference clock (reference follows master) or the reference's time at the master's cycle start off");
+    outln!("the cycle grid (master follows reference). SYNC0 Δ: second drive minus first (Paprocki 2022 Table 2).");
     outln!(
         "{:>6}  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>7} {:>14}",
         "cycle",
@@ -86,32 +112,34 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
     );
     for r in &rows {
         outln!(
-            "{:>4}µs  {:<12} {:>8.0}ns {:>8.0}ns {:>8.0}ns   {:>7.1} {:>6.1} {:>6} {:>6} {:>5}ns   {:>5} {:>8}   {:>12.0} {:>5}/{} {:>7.1}/{:.1}",
+            "{:>4}µs  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>5}/{} {:>15}",
             r.cycle_us,
             r.method,
-            r.error_mean_ns,
-            r.error_rms_ns,
-            r.error_max_ns,
-            r.sync0_mean_ns,
-            r.sync0_sd_ns,
-            r.sync0_min_ns,
-            r.sync0_max_ns,
-            r.sync0_spread_max_ns,
-            r.late_setpoints,
-            r.repeated_setpoints,
-            r.max_following_error,
+            ns(r.error_mean_ns),
+            ns(r.error_rms_ns),
+            ns(r.error_max_ns),
+            opt(r.sync0_mean_ns, 1),
+            opt(r.sync0_sd_ns, 1),
+            opt(r.sync0_min_ns.map(|v| v as f64), 0),
+            opt(r.sync0_max_ns.map(|v| v as f64), 0),
+            r.sync0_spread_max_ns.map_or("—".into(), |v| format!("{v}ns")),
+            opt(r.late_setpoints.map(|v| v as f64), 0),
+            opt(r.repeated_setpoints.map(|v| v as f64), 0),
+            opt(r.max_following_error, 0),
             r.drives_enabled,
             r.drives,
-            r.processing_mean_us,
-            r.processing_max_us
+            match (r.processing_mean_us, r.processing_max_us) {
+                (Some(m), Some(x)) => format!("{m:.1}/{x:.1}"),
+                _ => "—".into(),
+            }
         );
     }
     outln!("Following error per axis (increments, largest |demand − actual|):");
     for r in &rows {
-        let fe: Vec<String> = r.following_error.iter().map(|f| format!("{f:.0}")).collect();
+        let fe: Vec<String> = r.following_error.iter().map(|f| opt(*f, 0)).collect();
         outln!("{:>4}µs  {:<12} {}", r.cycle_us, r.method, fe.join("  "));
     }
-    for r in rows.iter().filter(|r| r.late_setpoints + r.repeated_setpoints > 0) {
+    for r in rows.iter().filter(|r| r.late_setpoints.unwrap_or(0) + r.repeated_setpoints.unwrap_or(0) > 0) {
         outln!(
             "{:>4}µs  {:<12} late at drive:SYNC0 {} — repeated at {}",
             r.cycle_us,
@@ -122,6 +150,15 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
     }
     outln!("Plots and CSV in {}", a.out.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// A figure, or "—" where it was not measured.
+fn opt(v: Option<f64>, precision: usize) -> String {
+    v.map_or("—".into(), |v| format!("{v:.precision$}"))
+}
+
+fn ns(v: Option<f64>) -> String {
+    v.map_or("—".into(), |v| format!("{v:.0}ns"))
 }
 
 fn list(v: &[String]) -> String {
@@ -163,7 +200,7 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
             &dir.join(format!("following-error-{c}us.svg")),
             &format!("Following error of axis 1 (increments), {c} µs"),
             &of_cycle,
-            &|p| p.following_error.first().copied().unwrap_or(0.0),
+            &|p| p.following_error.first().copied().unwrap_or(f64::NAN),
         )?;
         plot_series(
             &dir.join(format!("clock-error-{c}us.svg")),
@@ -223,6 +260,7 @@ fn plot_series(
     let (lo, hi) = rows
         .iter()
         .flat_map(|r| r.trace.iter().map(f))
+        .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
     let pad = ((hi - lo) * 0.05).max(1.0);
@@ -239,7 +277,7 @@ fn plot_series(
     for (k, r) in rows.iter().enumerate() {
         let c = COLOURS[k % COLOURS.len()];
         chart
-            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, f(p))), c))
+            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, f(p))).filter(|(_, v)| v.is_finite()), c))
             .map_err(plot_err)?
             .label(r.method.clone())
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));

@@ -137,6 +137,13 @@ enum Command {
         /// Folder for the CSV and the SVG plots.
         #[arg(long, default_value = "out/demo")]
         out: PathBuf,
+        /// Run on this network interface (real drives, or `ferrocat sim` serving one) instead of
+        /// the embedded virtual segment; needs CAP_NET_RAW.
+        #[arg(long, conflicts_with_all = ["drives", "drive"])]
+        iface: Option<String>,
+        /// With --iface: send even on an interface that has an IPv4 or a global IPv6 address.
+        #[arg(long, requires = "iface")]
+        force: bool,
     },
     /// The papers' clock-synchronisation experiments, in virtual time.
     Lab {
@@ -296,8 +303,19 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
-        Command::Demo { drives, drive, cycle_us, method, host, seed, json, out } => {
-            demo::demo(demo::DemoArgs { drives, drive, cycles_us: cycle_us, methods: method, host, seed, json, out })
+        Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force } => {
+            demo::demo(demo::DemoArgs {
+                drives,
+                drive,
+                cycles_us: cycle_us,
+                methods: method,
+                host,
+                seed,
+                json,
+                out,
+                iface,
+                force,
+            })
         }
         Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames } => {
             master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate)

@@ -218,14 +218,7 @@ pub fn run(
     }
     let mut m = t.master()?;
     if !m.engine.io.is_virtual() {
-        let rt = ferrocat_link::real_time(80, Some(1));
-        eprintln!(
-            "real time: memory locked {}, SCHED_FIFO {:?}, CPU {:?}{}",
-            rt.memory_locked,
-            rt.fifo_priority,
-            rt.cpu,
-            if rt.refused.is_empty() { String::new() } else { format!(" (refused: {})", rt.refused.join("; ")) }
-        );
+        crate::target::go_real_time();
     }
     eprintln!("timestamps: {}", m.engine.io.timestamps());
     let t_start = {

@@ -113,6 +113,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
         (Some(iface), None) => {
             let sock = RawSocket::open(iface).with_context(|| format!("serving interface {iface}"))?;
             eprintln!("ferrocat sim: {} slaves ({}) on {iface}", names.len(), names.join(", "));
+            // Answer like hardware: real-time priority on CPU 0 (a master pins itself to CPU 1),
+            // below a master's 80 so that neither starves the other on a shared core.
+            let rt = ferrocat_link::real_time(70, Some(0));
+            if !rt.refused.is_empty() {
+                eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
+            }
             serve_raw(&mut seg, &sock, &stop)?
         }
         (None, Some(addr)) => {

@@ -117,6 +117,24 @@ impl Io for CliIo {
     fn is_virtual(&self) -> bool {
         matches!(self.world, World::Virtual(_))
     }
+    fn segment(&self) -> Option<&ferrocat_segment::Segment> {
+        match &self.world {
+            World::Virtual(v) => v.segment(),
+            _ => None,
+        }
+    }
+    fn segment_mut(&mut self) -> Option<&mut ferrocat_segment::Segment> {
+        match &mut self.world {
+            World::Virtual(v) => v.segment_mut(),
+            _ => None,
+        }
+    }
+    fn timer_resolution_ns(&self) -> u64 {
+        match &self.world {
+            World::Virtual(v) => v.timer_resolution_ns(),
+            _ => 1,
+        }
+    }
     fn last_tx_ns(&mut self) -> Option<u64> {
         match &mut self.world {
             World::Virtual(v) => v.last_tx_ns(),
@@ -175,4 +193,17 @@ pub fn finish(m: Master<CliIo>) -> anyhow::Result<()> {
         c.into_inner().flush()?;
     }
     Ok(())
+}
+
+/// Real-time set-up for a master on a real network (SCHED_FIFO 80, CPU 1, memory locked),
+/// reported on stderr with whatever the system refused.
+pub fn go_real_time() {
+    let rt = ferrocat_link::real_time(80, Some(1));
+    eprintln!(
+        "real time: memory locked {}, SCHED_FIFO {:?}, CPU {:?}{}",
+        rt.memory_locked,
+        rt.fifo_priority,
+        rt.cpu,
+        if rt.refused.is_empty() { String::new() } else { format!(" (refused: {})", rt.refused.join("; ")) }
+    );
 }

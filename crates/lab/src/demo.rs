@@ -1,16 +1,19 @@
 //! The demo: a coupler, I/O terminals and N CiA402 drives brought to OP with distributed clocks,
 //! every drive enabled in cyclic synchronous position, and a synchronised jerk-limited move of
-//! all axes out and back — once per clock-sync method and cycle time, on the same seed. What the
-//! drives saw is the simulator's truth: their SYNC0 instants, late and repeated set-points,
-//! following errors.
+//! all axes out and back — once per clock-sync method and cycle time, on the same seed.
+//!
+//! In the simulator the figures are its truth: the clocks, the drives' SYNC0 instants, late and
+//! repeated set-points, following errors. On a real network (any `Io`) only what the master can
+//! see is reported: following errors from 0x60F4 when mapped, late and repeated set-points from
+//! the drives' 0x1C32:0C and 0x1C32:0B when they have them; the rest is `None`.
 use ferrocat_esc::Cia402Drive;
-use ferrocat_master::cia402::{Axis, Goal};
+use ferrocat_master::cia402::{map_for_csp, Axis, Goal};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{ClockSync, Coupling};
 use ferrocat_master::trajectory::{Limits, Move};
 use ferrocat_master::{DcConfig, Master, SyncState};
 use ferrocat_segment::SegmentConfig;
-use ferrocat_wire::cia402::{index as ix, Mode};
+use ferrocat_wire::cia402::{index as ix, Mode, State};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -52,35 +55,35 @@ pub struct Row {
     pub method: String,
     pub cycle_us: u64,
     pub host: String,
-    /// Master–reference error (ns) over the move: master clock minus reference clock where the
-    /// reference follows the master; where the master follows, the reference's time at the
-    /// master's cycle start off the cycle grid.
-    pub error_mean_ns: f64,
-    pub error_rms_ns: f64,
-    pub error_max_ns: f64,
+    /// Master–reference error (ns) over the move (simulator only): master clock minus reference
+    /// clock where the reference follows the master; where the master follows, the reference's
+    /// time at the master's cycle start off the cycle grid.
+    pub error_mean_ns: Option<f64>,
+    pub error_rms_ns: Option<f64>,
+    pub error_max_ns: Option<f64>,
     /// Second drive's SYNC0 minus the first's for the same system time (Paprocki 2022, Table
-    /// 2), and the largest spread of all drives' SYNC0 instants.
-    pub sync0_mean_ns: f64,
-    pub sync0_sd_ns: f64,
-    pub sync0_min_ns: i64,
-    pub sync0_max_ns: i64,
-    pub sync0_spread_max_ns: u64,
-    pub late_setpoints: u64,
-    pub repeated_setpoints: u64,
+    /// 2), and the largest spread of all drives' SYNC0 instants (simulator only).
+    pub sync0_mean_ns: Option<f64>,
+    pub sync0_sd_ns: Option<f64>,
+    pub sync0_min_ns: Option<i64>,
+    pub sync0_max_ns: Option<i64>,
+    pub sync0_spread_max_ns: Option<u64>,
+    pub late_setpoints: Option<u64>,
+    pub repeated_setpoints: Option<u64>,
     /// SYNC0 numbers (from the start of the move) of the first late and repeated set-points,
-    /// as "drive:cycle".
+    /// as "drive:cycle" (simulator only).
     pub late_cycles: Vec<String>,
     pub repeated_cycles: Vec<String>,
     /// Largest |position demand − actual| of each axis (increments) and over all.
-    pub following_error: Vec<f64>,
-    pub max_following_error: f64,
-    /// Drives in operation enabled at the end of the move.
+    pub following_error: Vec<Option<f64>>,
+    pub max_following_error: Option<f64>,
+    /// Drives in operation enabled at the end of the move (as their statuswords say).
     pub drives_enabled: usize,
     pub drives: usize,
     /// Application-layer time (SYNC0 to set-point in the loops), all drives: mean and max µs
-    /// (Paprocki 2022, Tables 3–4).
-    pub processing_mean_us: f64,
-    pub processing_max_us: f64,
+    /// (Paprocki 2022, Tables 3–4; simulator only).
+    pub processing_mean_us: Option<f64>,
+    pub processing_max_us: Option<f64>,
     pub move_s: f64,
     pub cycles: u64,
     pub frames_lost: u64,
@@ -94,19 +97,20 @@ pub struct TracePoint {
     pub t_s: f64,
     pub setpoint_rev: Vec<f64>,
     pub actual_rev: Vec<f64>,
+    /// NaN where neither the simulator nor the image gives it.
     pub following_error: Vec<f64>,
     pub error_ns: f64,
 }
 
-struct Rig {
-    m: Master<VirtualIo>,
+struct Rig<I: Io> {
+    m: Master<I>,
     sync: Box<dyn ClockSync>,
     st: SyncState,
     cycle_ns: u64,
     next: u64,
 }
 
-impl Rig {
+impl<I: Io> Rig<I> {
     fn step(&mut self) -> anyhow::Result<()> {
         self.m.cycle()?;
         let c = self.m.sync_step(self.sync.as_mut(), &mut self.st)?;
@@ -115,42 +119,32 @@ impl Rig {
         Ok(())
     }
 
-    fn drive(&self, k: usize) -> &Cia402Drive {
-        self.m.engine.io.seg.nodes[k].esc.app().as_any().downcast_ref::<Cia402Drive>().expect("a drive")
-    }
-    fn drive_mut(&mut self, k: usize) -> &mut Cia402Drive {
-        self.m.engine.io.seg.nodes[k].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().expect("a drive")
+    /// The simulated drive at `k`, when the world is the in-process simulator.
+    fn drive(&self, k: u16) -> Option<&Cia402Drive> {
+        self.m.engine.io.segment()?.nodes.get(k as usize)?.esc.app().as_any().downcast_ref::<Cia402Drive>()
     }
 }
 
-/// The segment of the demo: EK1100, EL2004, EL1004, then the drives (`--device` syntax).
-pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
-    let mut cfg: SegmentConfig = toml::from_str(&format!(
-        "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
-         [[device]]\nbuiltin = 'EL1004'\n",
-        o.seed
-    ))?;
-    let mut drive = SegmentConfig::from_device_args(std::slice::from_ref(&o.drive))?.devices.remove(0);
-    drive.app = Some("cia402".into());
-    cfg.devices.extend(std::iter::repeat_n(drive, o.drives));
-    Ok(cfg)
-}
-
-/// Brings the demo segment up with DC and the drives' SYNC0 at half a cycle after the cycle
-/// grid, prepares `method`, and aligns the master's first cycle with the grid.
-fn rig(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<(Rig, Vec<u16>)> {
+/// Brings the segment up with DC and the drives' SYNC0 half a cycle after the cycle grid,
+/// prepares `method`, and aligns the master's first cycle with the grid. The drives are the
+/// slaves with a controlword and a statusword in their image (after `map_for_csp`).
+fn rig<I: Io>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Result<(Rig<I>, Vec<u16>)> {
     let cycle_ns = cycle_us * 1000;
-    let cfg = segment_config(o)?;
-    let mut m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
     m.scan()?;
     m.configure()?;
-    let drives: Vec<u16> = (3..3 + o.drives as u16).collect();
-    for &d in &drives {
+    let mut drives = Vec::new();
+    for k in 0..m.slaves.len() as u16 {
+        if Axis::new(&m, k).is_err() {
+            continue;
+        }
+        map_for_csp(&mut m, k)?;
         // What an integrator sets up in PREOP: a torque limit and a following-error window the
         // move needs (a vendor's defaults may be far tighter), where the drive has the objects.
-        let _ = m.sdo_write(d, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes());
-        let _ = m.sdo_write(d, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes());
+        let _ = m.sdo_write(k, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes());
+        let _ = m.sdo_write(k, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes());
+        drives.push(k);
     }
+    anyhow::ensure!(!drives.is_empty(), "no CiA402 drive on the segment (no slave maps 0x6040 and 0x6041)");
     let shift = (cycle_ns / 2) as i32;
     let report = m.init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
@@ -173,8 +167,21 @@ fn rig(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<(Rig, Vec<u16
     Ok((Rig { m, sync, st, cycle_ns, next }, drives))
 }
 
-fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
-    let (mut r, drives) = rig(o, cycle_us, method)?;
+/// The segment of the demo: EK1100, EL2004, EL1004, then the drives (`--device` syntax).
+pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
+    let mut cfg: SegmentConfig = toml::from_str(&format!(
+        "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'EL1004'\n",
+        o.seed
+    ))?;
+    let mut drive = SegmentConfig::from_device_args(std::slice::from_ref(&o.drive))?.devices.remove(0);
+    drive.app = Some("cia402".into());
+    cfg.devices.extend(std::iter::repeat_n(drive, o.drives));
+    Ok(cfg)
+}
+
+fn run_one<I: Io>(m: Master<I>, o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
+    let (mut r, drives) = rig(m, cycle_us, method)?;
     let cycle_ns = r.cycle_ns;
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
     for _ in 0..(o.settle_s * 1e9 / cycle_ns as f64) as u64 {
@@ -198,7 +205,13 @@ fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
         }
         anyhow::ensure!(k < 5_000, "drives not enabled: {:?}", axes.iter().map(|a| a.state()).collect::<Vec<_>>());
     }
-    let per_rev: Vec<f64> = drives.iter().map(|&d| r.drive(d as usize).motor.increments_per_rev).collect();
+    let mut per_rev = Vec::new();
+    for &d in &drives {
+        per_rev.push(match r.drive(d) {
+            Some(dr) => dr.motor.increments_per_rev,
+            None => increments_per_rev(&mut r.m, d),
+        });
+    }
     let start: Vec<f64> = axes.iter().map(|a| a.position_actual(&r.m).unwrap_or(0) as f64).collect();
     // Axis i moves (i + 1) · 2 revolutions, alternating direction, then back.
     let out: Vec<f64> = start
@@ -219,15 +232,20 @@ fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
     let dwell_s = 0.1;
     let move_s = there.duration_s() + back.duration_s() + 2.0 * dwell_s;
     let cycles = (move_s * 1e9 / cycle_ns as f64).ceil() as u64;
-    for &d in &drives {
-        r.drive_mut(d as usize).reset_stats();
+    let simulated = r.m.engine.io.segment().is_some();
+    if let Some(seg) = r.m.engine.io.segment_mut() {
+        for &d in &drives {
+            if let Some(dr) = seg.nodes[d as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>() {
+                dr.reset_stats();
+            }
+        }
     }
+    let counters0 = if simulated { None } else { sync_counters(&mut r.m, &drives) };
     let lost0 = r.st.lost;
     let mut err = Moments::default();
     let mut err_max = 0.0f64;
-    let mut diffs = Moments::default();
-    let (mut dmin, mut dmax, mut spread_max) = (i64::MAX, i64::MIN, 0u64);
-    let mut last_sys = None;
+    let mut sync0 = Sync0Stats::default();
+    let mut fe_image: Vec<Option<f64>> = vec![None; axes.len()];
     let mut sp = vec![0.0; axes.len()];
     let mut trace = Vec::new();
     let trace_every = (1_000_000 / cycle_ns).max(1);
@@ -243,45 +261,20 @@ fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
         for (a, p) in axes.iter().zip(&sp) {
             a.set_target_position(&mut r.m, p.round() as i64 as i32);
         }
-        let e = if mfr {
-            // The reference's time at the master's cycle start, off the grid.
-            let c = cycle_ns as i64;
-            let now = r.m.engine.io.now_ns();
-            let rsys = r.m.engine.io.seg.nodes[0].esc.dc.as_ref().map(|d| d.system_at(now)).unwrap_or(0);
-            let ph = (rsys % cycle_ns) as i64;
-            (if ph > c / 2 { ph - c } else { ph }) as f64
-        } else {
-            crate::clock_error_ns(&mut r.m, 0) as f64
-        };
-        err.push(e);
-        err_max = err_max.max(e.abs());
-        r.step()?;
-        for a in &mut axes {
-            a.update(&mut r.m);
+        let e = true_error_ns(&mut r.m, mfr, cycle_ns);
+        if let Some(e) = e {
+            err.push(e);
+            err_max = err_max.max(e.abs());
         }
-        // SYNC0 simultaneity: the drives' pulses for the same system time.
-        let nodes = &r.m.engine.io.seg.nodes;
-        if let Some(&(s1, t1)) = nodes[drives[0] as usize].esc.sync0_log.pulses.back() {
-            if last_sys != Some(s1) {
-                let ts: Vec<u64> = drives
-                    .iter()
-                    .filter_map(|&d| {
-                        nodes[d as usize].esc.sync0_log.pulses.iter().rev().find(|(s, _)| *s as u32 == s1 as u32)
-                    })
-                    .map(|&(_, t)| t)
-                    .collect();
-                if ts.len() == drives.len() {
-                    last_sys = Some(s1);
-                    if let Some(&t2) = ts.get(1) {
-                        let d = t2 as i64 - t1 as i64;
-                        diffs.push(d as f64);
-                        dmin = dmin.min(d);
-                        dmax = dmax.max(d);
-                    }
-                    let (lo, hi) = (ts.iter().min().copied().unwrap_or(0), ts.iter().max().copied().unwrap_or(0));
-                    spread_max = spread_max.max(hi - lo);
-                }
+        r.step()?;
+        for (a, fe) in axes.iter_mut().zip(&mut fe_image) {
+            a.update(&mut r.m);
+            if let Some(f) = a.following_error(&r.m) {
+                *fe = Some(fe.unwrap_or(0.0).max(f.unsigned_abs() as f64));
             }
+        }
+        if let Some(seg) = r.m.engine.io.segment() {
+            sync0.sample(seg, &drives);
         }
         if k % trace_every == 0 {
             let mut p = TracePoint {
@@ -289,54 +282,74 @@ fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
                 setpoint_rev: sp.iter().zip(&per_rev).map(|(s, p)| s / p).collect(),
                 actual_rev: Vec::new(),
                 following_error: Vec::new(),
-                error_ns: e,
+                error_ns: e.unwrap_or(f64::NAN),
             };
-            for (i, &d) in drives.iter().enumerate() {
-                let dr = r.drive(d as usize);
-                p.actual_rev.push(dr.position_increments() / per_rev[i]);
-                p.following_error.push(dr.following_error_increments());
+            for (i, (&d, a)) in drives.iter().zip(&axes).enumerate() {
+                let (pos, fe) = match r.drive(d) {
+                    Some(dr) => (dr.position_increments(), dr.following_error_increments()),
+                    None => (
+                        a.position_actual(&r.m).unwrap_or(0) as f64,
+                        a.following_error(&r.m).map_or(f64::NAN, |f| f as f64),
+                    ),
+                };
+                p.actual_rev.push(pos / per_rev[i]);
+                p.following_error.push(fe);
             }
             trace.push(p);
         }
     }
-    let stats: Vec<_> = drives.iter().map(|&d| r.drive(d as usize).stats.clone()).collect();
+    let stats: Option<Vec<ferrocat_esc::DriveStats>> =
+        drives.iter().map(|&d| r.drive(d).map(|dr| dr.stats.clone())).collect();
     let tagged = |f: &dyn Fn(&ferrocat_esc::DriveStats) -> &Vec<u64>| -> Vec<String> {
         let mut v: Vec<String> = stats
             .iter()
+            .flatten()
             .enumerate()
             .flat_map(|(i, s)| f(s).iter().map(move |c| format!("{}:{c}", i + 1)).collect::<Vec<_>>())
             .collect();
         v.truncate(8);
         v
     };
-    let n_proc: u64 = stats.iter().map(|s| s.processing_count).sum();
-    let following_error: Vec<f64> = stats.iter().map(|s| s.max_following_error).collect();
-    let enabled = drives
-        .iter()
-        .filter(|&&d| r.drive(d as usize).state() == ferrocat_wire::cia402::State::OperationEnabled)
-        .count();
+    let (late, repeated) = match &stats {
+        Some(st) => {
+            (Some(st.iter().map(|s| s.late_setpoints).sum()), Some(st.iter().map(|s| s.repeated_setpoints).sum()))
+        }
+        None => match (counters0, sync_counters(&mut r.m, &drives)) {
+            (Some((l0, r0)), Some((l1, r1))) => (Some(l1.wrapping_sub(l0)), Some(r1.wrapping_sub(r0))),
+            _ => (None, None),
+        },
+    };
+    let following_error: Vec<Option<f64>> = match &stats {
+        Some(st) => st.iter().map(|s| Some(s.max_following_error)).collect(),
+        None => fe_image,
+    };
+    let n_proc: u64 = stats.iter().flatten().map(|s| s.processing_count).sum();
+    let enabled = axes.iter().filter(|a| a.state() == Some(State::OperationEnabled)).count();
+    let (sync0_mean_ns, sync0_sd_ns, sync0_min_ns, sync0_max_ns, sync0_spread_max_ns) = sync0.figures();
     Ok(Row {
         method: method.to_string(),
         cycle_us,
-        host: o.host.name.to_string(),
-        error_mean_ns: err.mean(),
-        error_rms_ns: err.rms(),
-        error_max_ns: err_max,
-        sync0_mean_ns: diffs.mean(),
-        sync0_sd_ns: (diffs.rms().powi(2) - diffs.mean().powi(2)).max(0.0).sqrt(),
-        sync0_min_ns: if diffs.n > 0 { dmin } else { 0 },
-        sync0_max_ns: if diffs.n > 0 { dmax } else { 0 },
-        sync0_spread_max_ns: spread_max,
-        late_setpoints: stats.iter().map(|s| s.late_setpoints).sum(),
-        repeated_setpoints: stats.iter().map(|s| s.repeated_setpoints).sum(),
+        host: if simulated { o.host.name.to_string() } else { "real".to_string() },
+        error_mean_ns: (err.n > 0).then(|| err.mean()),
+        error_rms_ns: (err.n > 0).then(|| err.rms()),
+        error_max_ns: (err.n > 0).then_some(err_max),
+        sync0_mean_ns,
+        sync0_sd_ns,
+        sync0_min_ns,
+        sync0_max_ns,
+        sync0_spread_max_ns,
+        late_setpoints: late,
+        repeated_setpoints: repeated,
         late_cycles: tagged(&|s| &s.late_cycles),
         repeated_cycles: tagged(&|s| &s.repeated_cycles),
-        max_following_error: following_error.iter().copied().fold(0.0, f64::max),
+        max_following_error: following_error.iter().flatten().copied().reduce(f64::max),
         following_error,
         drives_enabled: enabled,
         drives: drives.len(),
-        processing_mean_us: stats.iter().map(|s| s.processing_sum_ns).sum::<f64>() / n_proc.max(1) as f64 / 1e3,
-        processing_max_us: stats.iter().map(|s| s.processing_max_ns).max().unwrap_or(0) as f64 / 1e3,
+        processing_mean_us: (n_proc > 0)
+            .then(|| stats.iter().flatten().map(|s| s.processing_sum_ns).sum::<f64>() / n_proc as f64 / 1e3),
+        processing_max_us: (n_proc > 0)
+            .then(|| stats.iter().flatten().map(|s| s.processing_max_ns).max().unwrap_or(0) as f64 / 1e3),
         move_s,
         cycles,
         frames_lost: r.st.lost - lost0,
@@ -344,12 +357,125 @@ fn run_one(o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
     })
 }
 
-/// Every (cycle, method) run, in parallel; the same seed for all.
+/// The true master–reference error now (simulator only): master − reference clock, or, where
+/// the master follows, the reference's time off the cycle grid.
+fn true_error_ns<I: Io>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Option<f64> {
+    if !mfr {
+        return crate::clock_error_ns(m, 0).map(|e| e as f64);
+    }
+    let now = m.engine.io.now_ns();
+    let rsys = m.engine.io.segment()?.nodes.first()?.esc.dc.as_ref()?.system_at(now);
+    let c = cycle_ns as i64;
+    let ph = (rsys % cycle_ns) as i64;
+    Some((if ph > c / 2 { ph - c } else { ph }) as f64)
+}
+
+/// Increments per revolution from 0x608F (encoder increments / motor revolutions), or the
+/// model's 131 072 when the drive does not say.
+fn increments_per_rev<I: Io>(m: &mut Master<I>, d: u16) -> f64 {
+    let u32_of = |v: Vec<u8>| v.get(..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let inc = m.sdo_read(d, 0x608F, 1).ok().and_then(u32_of).unwrap_or(0);
+    let revs = m.sdo_read(d, 0x608F, 2).ok().and_then(u32_of).unwrap_or(0);
+    if inc > 0 && revs > 0 {
+        inc as f64 / revs as f64
+    } else {
+        131_072.0
+    }
+}
+
+/// Sum over the drives of 0x1C32:0C (cycle time too small: late) and 0x1C32:0B (SM event
+/// missed: repeated), when every drive has both.
+fn sync_counters<I: Io>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u64)> {
+    let mut sum = (0u64, 0u64);
+    for &d in drives {
+        let late = m.sdo_read(d, 0x1C32, 0x0C).ok()?;
+        let missed = m.sdo_read(d, 0x1C32, 0x0B).ok()?;
+        sum.0 += u16::from_le_bytes([*late.first()?, *late.get(1)?]) as u64;
+        sum.1 += u16::from_le_bytes([*missed.first()?, *missed.get(1)?]) as u64;
+    }
+    Some(sum)
+}
+
+/// SYNC0 simultaneity from the drives' pulse logs: the second drive minus the first for the
+/// same system time, and the spread of all.
+#[derive(Debug, Default)]
+struct Sync0Stats {
+    diffs: Moments,
+    min: i64,
+    max: i64,
+    spread_max: u64,
+    last_sys: Option<u64>,
+}
+
+impl Sync0Stats {
+    fn sample(&mut self, seg: &ferrocat_segment::Segment, drives: &[u16]) {
+        let log = |d: u16| &seg.nodes[d as usize].esc.sync0_log.pulses;
+        let Some(&(s1, t1)) = log(drives[0]).back() else { return };
+        if self.last_sys == Some(s1) {
+            return;
+        }
+        // 32-bit DCs compare on 32 bits.
+        let ts: Vec<u64> = drives
+            .iter()
+            .filter_map(|&d| log(d).iter().rev().find(|(s, _)| *s as u32 == s1 as u32).map(|&(_, t)| t))
+            .collect();
+        if ts.len() != drives.len() {
+            return;
+        }
+        self.last_sys = Some(s1);
+        if let Some(&t2) = ts.get(1) {
+            let d = t2 as i64 - t1 as i64;
+            if self.diffs.n == 0 {
+                (self.min, self.max) = (d, d);
+            }
+            self.diffs.push(d as f64);
+            self.min = self.min.min(d);
+            self.max = self.max.max(d);
+        }
+        let (lo, hi) = (ts.iter().min().copied().unwrap_or(0), ts.iter().max().copied().unwrap_or(0));
+        self.spread_max = self.spread_max.max(hi - lo);
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn figures(&self) -> (Option<f64>, Option<f64>, Option<i64>, Option<i64>, Option<u64>) {
+        if self.last_sys.is_none() {
+            return (None, None, None, None, None);
+        }
+        let two = self.diffs.n > 0;
+        let sd = (self.diffs.rms().powi(2) - self.diffs.mean().powi(2)).max(0.0).sqrt();
+        (
+            two.then(|| self.diffs.mean()),
+            two.then_some(sd),
+            two.then_some(self.min),
+            two.then_some(self.max),
+            Some(self.spread_max),
+        )
+    }
+}
+
+/// Every (cycle, method) run on the embedded virtual segment, in parallel; the same seed for all.
 pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
     anyhow::ensure!(o.drives >= 1, "at least one drive");
+    let cfg = segment_config(o)?;
     let jobs: Vec<(u64, String)> =
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
     jobs.par_iter()
-        .map(|(c, name)| run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}")))
+        .map(|(c, name)| {
+            let m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
+            run_one(m, o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))
+        })
         .collect()
+}
+
+/// The same runs one after the other on masters `open` makes (a real network: the drives are
+/// whatever the segment holds).
+pub fn run_with<I: Io>(o: &Options, open: &mut dyn FnMut() -> anyhow::Result<Master<I>>) -> anyhow::Result<Vec<Row>> {
+    let mut rows = Vec::new();
+    for &c in &o.cycles_us {
+        for name in &o.methods {
+            let m = open()?;
+            rows.push(run_one(m, o, c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))?);
+        }
+    }
+    Ok(rows)
 }

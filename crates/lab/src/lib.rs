@@ -32,19 +32,20 @@ pub fn segment(slaves: usize, host: HostModel, seed: u64) -> anyhow::Result<Mast
 }
 
 /// The master's clock minus slave `k`'s system time now (Park 2020's sign: positive when the
-/// slave lags), on the low 32 bits so that 32-bit DCs compare too.
-pub fn clock_error_ns(m: &mut Master<VirtualIo>, k: usize) -> i64 {
+/// slave lags), on the low 32 bits so that 32-bit DCs compare too; `None` outside a simulator.
+pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
     let t = m.engine.io.now_ns();
     let master = m.master_system_time() as u32;
-    let slave = m.engine.io.seg.nodes[k].esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
-    master.wrapping_sub(slave) as i32 as i64
+    let dc = m.engine.io.segment()?.nodes.get(k)?.esc.dc.as_ref();
+    let slave = dc.map(|d| d.system_at(t) as u32).unwrap_or(master);
+    Some(master.wrapping_sub(slave) as i32 as i64)
 }
 
 /// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the
 /// one ferrocat's own method takes.
-pub fn method(
+pub fn method<I: Io>(
     name: &str,
-    m: &mut Master<VirtualIo>,
+    m: &mut Master<I>,
     cycle_ns: u64,
     coupling: Coupling,
 ) -> anyhow::Result<Box<dyn ClockSync>> {
@@ -54,7 +55,7 @@ pub fn method(
         // Eq. 3 averaged over 1000 round trips, as published.
         "park2020" => Box::new(Park2020::new(m.park_delay(1000)?)),
         // N = 100 timestamp differences per speed update; the host's timer resolution.
-        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.host.timer_resolution_ns.max(1))),
+        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.timer_resolution_ns())),
         "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
         "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns)),
         other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),

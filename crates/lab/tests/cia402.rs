@@ -2,7 +2,7 @@
 //! the state machine, a following-error fault and its reset, CSP, CSV and CST — for the built-in
 //! servo and for the Nanotec drive as its ESI file describes it.
 use ferrocat_esc::Cia402Drive;
-use ferrocat_master::cia402::{drive_to_goal, Axis, Goal};
+use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master, MasterEvent};
 use ferrocat_segment::SegmentConfig;
@@ -260,10 +260,12 @@ fn nanotec() -> String {
 
 #[test]
 fn needs_shared_nanotec_esi_walks_every_transition() {
-    // Its dictionary assigns only the PDOs with the controlword and statusword by default.
+    // Its dictionary assigns only the PDOs with the controlword and statusword by default: the
+    // driver adds the ESI's PDOs with the target position and the position actual value.
     walk_every_transition(&nanotec(), &|m| {
-        m.remap(DRIVE, true, &[0x1600, 0x1601]).unwrap();
-        m.remap(DRIVE, false, &[0x1A00, 0x1A01]).unwrap();
+        assert!(Axis::new(m, DRIVE).unwrap().position_actual(m).is_none());
+        map_for_csp(m, DRIVE).unwrap();
+        assert!(Axis::new(m, DRIVE).unwrap().position_actual(m).is_some());
     });
 }
 

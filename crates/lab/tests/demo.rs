@@ -11,7 +11,7 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
     assert_eq!(rows.len(), 4);
     for r in &rows {
         println!(
-            "{} µs {:12}: SYNC0 spread max {} ns, late {}, repeated {}, max FE {:.0}, enabled {}/{}",
+            "{} µs {:12}: SYNC0 spread max {:?} ns, late {:?}, repeated {:?}, max FE {:?}, enabled {}/{}",
             r.cycle_us,
             r.method,
             r.sync0_spread_max_ns,
@@ -23,13 +23,14 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
         );
         assert_eq!(r.drives_enabled, 2, "{r:?}");
         assert!(r.cycles > 0 && r.trace.len() > 100);
-        assert!(r.processing_mean_us > 20.0 && r.processing_max_us < 150.0, "{r:?}");
+        let (mean, max) = (r.processing_mean_us.unwrap(), r.processing_max_us.unwrap());
+        assert!(mean > 20.0 && max < 150.0, "{r:?}");
     }
     for r in rows.iter().filter(|r| r.method == "ferrocat") {
-        assert!(r.sync0_spread_max_ns <= 100, "{r:?}");
-        assert_eq!((r.late_setpoints, r.repeated_setpoints), (0, 0), "{r:?}");
+        assert!(r.sync0_spread_max_ns.unwrap() <= 100, "{r:?}");
+        assert_eq!((r.late_setpoints, r.repeated_setpoints), (Some(0), Some(0)), "{r:?}");
         // A tenth of a revolution would be a poor servo; the model follows within ~0.2 %.
-        assert!(r.max_following_error < 1000.0, "{r:?}");
+        assert!(r.max_following_error.unwrap() < 1000.0, "{r:?}");
     }
     let stock = Options {
         methods: vec!["ferrocat".into()],
@@ -37,7 +38,7 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
         ..Options::new(HostModel::preset("pc-stock").unwrap())
     };
     let r = &run(&stock).unwrap()[0];
-    println!("pc-stock 250 µs ferrocat: late {}, repeated {}", r.late_setpoints, r.repeated_setpoints);
-    assert!(r.late_setpoints > 0 && r.repeated_setpoints > 0, "{r:?}");
+    println!("pc-stock 250 µs ferrocat: late {:?}, repeated {:?}", r.late_setpoints, r.repeated_setpoints);
+    assert!(r.late_setpoints.unwrap() > 0 && r.repeated_setpoints.unwrap() > 0, "{r:?}");
     assert!(!r.late_cycles.is_empty() && !r.repeated_cycles.is_empty());
 }

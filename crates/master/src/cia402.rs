@@ -210,6 +210,35 @@ impl Axis {
     }
 }
 
+/// Makes sure the drive at `position` (in PREOP) carries a target position and a position
+/// actual value in its process image: where the present assignment lacks one, the first PDO
+/// its SII (or ESI) offers with that object is added to 0x1C12/0x1C13. A vendor's default
+/// assignment often holds only the controlword and statusword (the Nanotec C5-E's does).
+pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
+    for (outputs, object, assign) in [(true, ix::TARGET_POSITION, 0x1C12u16), (false, ix::POSITION_ACTUAL, 0x1C13)] {
+        let s = m.slave(position)?;
+        let mapped = if outputs { &s.outputs } else { &s.inputs };
+        if mapped.iter().any(|e| e.index == object) {
+            continue;
+        }
+        let offered = if outputs { s.sii.rx_pdos() } else { s.sii.tx_pdos() };
+        let Some(pdo) = offered.iter().find(|p| p.entries.iter().any(|e| e.index == object)).map(|p| p.index) else {
+            continue;
+        };
+        let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+        let mut pdos = Vec::with_capacity(n as usize + 1);
+        for k in 1..=n {
+            let v = m.sdo_read(position, assign, k)?;
+            pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
+        }
+        if !pdos.contains(&pdo) {
+            pdos.push(pdo);
+            m.remap(position, outputs, &pdos)?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs cycles (one every `cycle_ns`) until every axis has reached its goal, at most
 /// `max_cycles`; the error names the first axis that did not and its state.
 pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64, max_cycles: u64) -> Result<u64> {

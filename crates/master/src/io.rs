@@ -26,6 +26,19 @@ pub trait Io {
     fn is_virtual(&self) -> bool {
         false
     }
+    /// The in-process segment when the world is virtual: what only a simulator can measure
+    /// (true clocks, what each device saw).
+    fn segment(&self) -> Option<&Segment> {
+        None
+    }
+    fn segment_mut(&mut self) -> Option<&mut Segment> {
+        None
+    }
+    /// The granularity of the host's timer: a master that follows a clock rounds its periods
+    /// to it (Chen 2016's Algorithm 1).
+    fn timer_resolution_ns(&self) -> u64 {
+        1
+    }
 }
 
 /// A latency distribution: normal, clipped below, with rare outliers.
@@ -250,6 +263,15 @@ impl VirtualIo {
 impl Io for VirtualIo {
     fn now_ns(&mut self) -> u64 {
         self.now
+    }
+    fn segment(&self) -> Option<&Segment> {
+        Some(&self.seg)
+    }
+    fn segment_mut(&mut self) -> Option<&mut Segment> {
+        Some(&mut self.seg)
+    }
+    fn timer_resolution_ns(&self) -> u64 {
+        self.host.timer_resolution_ns.max(1)
     }
     fn is_virtual(&self) -> bool {
         true

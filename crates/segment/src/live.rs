@@ -67,13 +67,19 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool) -> io::
     let t0 = monotonic_ns();
     let mut buf = vec![0u8; 9216];
     let mut stats = ServeStats::default();
+    // The segment's time only moves forward: a frame is processed at its kernel receive time
+    // (when it reached the "wire"), as hardware would, unless the idle clock already passed it.
+    let mut last = 0u64;
     while !stop.load(Ordering::Relaxed) {
-        let Some(n) = sock.recv(&mut buf)? else {
-            seg.advance_to(monotonic_ns() - t0);
+        let Some((n, stamp)) = sock.recv_stamped(&mut buf)? else {
+            last = last.max(monotonic_ns() - t0);
+            seg.advance_to(last);
             continue;
         };
         let start = monotonic_ns();
-        if handle(seg, &mut buf[..n], start - t0, &mut stats) {
+        let arrived = stamp.map_or(start, |s| s.clamp(t0, start)) - t0;
+        last = last.max(arrived);
+        if handle(seg, &mut buf[..n], last, &mut stats) {
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
             stats.record(monotonic_ns() - start);
