@@ -334,3 +334,16 @@ fn the_builtin_servo_runs_profile_position() {
     let end = a.position_actual(&m).unwrap();
     assert!(end.wrapping_sub(target).abs() < 100, "ends at {end}, target {target}");
 }
+
+/// The AKD as its EEPROM dump describes it: its default PDOs carry an interpolated set-point
+/// (0x60C1, mode 7, not modelled); the driver assigns the SII's PDOs with target and actual
+/// position, and the drive's profile objects come from the model.
+#[test]
+fn needs_shared_akd_eeprom_walks_every_transition() {
+    let p = ferrocat_testdata::shared("captures/eeprom/akd.hex");
+    walk_every_transition(&format!("eeprom = '{}'", p.display()), &|m| {
+        map_for_csp(m, DRIVE).unwrap();
+        let s = m.slave(DRIVE).unwrap();
+        assert!(s.outputs.iter().any(|e| e.index == 0x607A) && s.inputs.iter().any(|e| e.index == 0x6064));
+    });
+}

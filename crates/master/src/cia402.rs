@@ -211,30 +211,41 @@ impl Axis {
 }
 
 /// Makes sure the drive at `position` (in PREOP) carries a target position and a position
-/// actual value in its process image: where the present assignment lacks one, the first PDO
-/// its SII (or ESI) offers with that object is added to 0x1C12/0x1C13. A vendor's default
-/// assignment often holds only the controlword and statusword (the Nanotec C5-E's does).
+/// actual value in its process image. Where the present assignment lacks one, a PDO its SII (or
+/// ESI) offers is assigned: one that also holds the controlword (statusword) replaces the
+/// assignment — fixed PDOs often repeat it, and a second copy would override the first — else
+/// the first with the object is added. A vendor's default assignment often holds only the
+/// controlword and statusword (the Nanotec C5-E's does) or an interpolated set-point (the AKD's).
 pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
-    for (outputs, object, assign) in [(true, ix::TARGET_POSITION, 0x1C12u16), (false, ix::POSITION_ACTUAL, 0x1C13)] {
+    let sides =
+        [(true, ix::TARGET_POSITION, ix::CONTROLWORD, 0x1C12u16), (false, ix::POSITION_ACTUAL, ix::STATUSWORD, 0x1C13)];
+    for (outputs, object, word, assign) in sides {
         let s = m.slave(position)?;
         let mapped = if outputs { &s.outputs } else { &s.inputs };
         if mapped.iter().any(|e| e.index == object) {
             continue;
         }
         let offered = if outputs { s.sii.rx_pdos() } else { s.sii.tx_pdos() };
-        let Some(pdo) = offered.iter().find(|p| p.entries.iter().any(|e| e.index == object)).map(|p| p.index) else {
+        let has = |p: &ferrocat_wire::sii::Pdo, i: u16| p.entries.iter().any(|e| e.index == i);
+        let whole = offered.iter().find(|p| has(p, object) && has(p, word)).map(|p| p.index);
+        let Some(pdo) = whole.or_else(|| offered.iter().find(|p| has(p, object)).map(|p| p.index)) else {
             continue;
         };
-        let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
-        let mut pdos = Vec::with_capacity(n as usize + 1);
-        for k in 1..=n {
-            let v = m.sdo_read(position, assign, k)?;
-            pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
-        }
-        if !pdos.contains(&pdo) {
-            pdos.push(pdo);
-            m.remap(position, outputs, &pdos)?;
-        }
+        let pdos = if whole.is_some() {
+            vec![pdo]
+        } else {
+            let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+            let mut pdos = Vec::with_capacity(n as usize + 1);
+            for k in 1..=n {
+                let v = m.sdo_read(position, assign, k)?;
+                pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
+            }
+            if !pdos.contains(&pdo) {
+                pdos.push(pdo);
+            }
+            pdos
+        };
+        m.remap(position, outputs, &pdos)?;
     }
     Ok(())
 }
