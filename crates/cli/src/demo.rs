@@ -4,8 +4,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use ferrocat_lab::demo::{run, run_with, Options, Row};
-use plotters::prelude::*;
+use ferrocat_lab::demo::{run, run_with, Options, Row, TracePoint};
+
+use crate::plots::{line_chart, Series};
 
 use crate::outln;
 
@@ -194,99 +195,42 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
     for &c in &o.cycles_us {
         let of_cycle: Vec<&Row> = rows.iter().filter(|r| r.cycle_us == c).collect();
         if let Some(r) = of_cycle.iter().find(|r| r.method == "ferrocat").or(of_cycle.first()) {
-            plot_positions(&dir.join(format!("positions-{c}us.svg")), r)?;
+            let mut series = Vec::new();
+            for i in 0..r.drives {
+                let pts = |f: &dyn Fn(&TracePoint) -> f64| r.trace.iter().map(|p| (p.t_s, f(p))).collect();
+                series.push(Series::new(format!("axis {} set-point", i + 1), pts(&|p| p.setpoint_rev[i])));
+                let mut actual = Series::new(format!("axis {} actual", i + 1), pts(&|p| p.actual_rev[i]));
+                actual.wide = true;
+                series.push(actual);
+            }
+            line_chart(
+                &dir.join(format!("positions-{c}us.svg")),
+                &format!("Positions, {c} µs, {}: set-point and actual", r.method),
+                "time (s)",
+                "rev",
+                &series,
+            )?;
         }
-        plot_series(
+        let per_method = |f: &dyn Fn(&TracePoint) -> f64| -> Vec<Series> {
+            of_cycle
+                .iter()
+                .map(|r| Series::new(r.method.clone(), r.trace.iter().map(|p| (p.t_s, f(p))).collect()))
+                .collect()
+        };
+        line_chart(
             &dir.join(format!("following-error-{c}us.svg")),
-            &format!("Following error of axis 1 (increments), {c} µs"),
-            &of_cycle,
-            &|p| p.following_error.first().copied().unwrap_or(f64::NAN),
+            &format!("Following error of axis 1, {c} µs"),
+            "time (s)",
+            "increments",
+            &per_method(&|p| p.following_error.first().copied().unwrap_or(f64::NAN)),
         )?;
-        plot_series(
+        line_chart(
             &dir.join(format!("clock-error-{c}us.svg")),
-            &format!("Master–reference error (ns), {c} µs"),
-            &of_cycle,
-            &|p| p.error_ns,
+            &format!("Master–reference error, {c} µs"),
+            "time (s)",
+            "ns",
+            &per_method(&|p| p.error_ns),
         )?;
     }
     Ok(())
-}
-
-const COLOURS: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
-
-fn plot_positions(path: &Path, r: &Row) -> anyhow::Result<()> {
-    let t_max = r.trace.last().map_or(1.0, |p| p.t_s).max(1e-3);
-    let (lo, hi) = r
-        .trace
-        .iter()
-        .flat_map(|p| p.setpoint_rev.iter().chain(&p.actual_rev))
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    let pad = ((hi - lo) * 0.05).max(1e-3);
-    let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(format!("Positions (rev), {} µs, {}: set-point and actual", r.cycle_us, r.method), ("sans-serif", 18))
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
-        .map_err(plot_err)?;
-    chart.configure_mesh().x_desc("time (s)").y_desc("rev").draw().map_err(plot_err)?;
-    for i in 0..r.drives {
-        let c = COLOURS[i % COLOURS.len()];
-        chart
-            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, p.setpoint_rev[i])), c.stroke_width(1)))
-            .map_err(plot_err)?
-            .label(format!("axis {} set-point", i + 1))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));
-        chart
-            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, p.actual_rev[i])), c.mix(0.5).stroke_width(3)))
-            .map_err(plot_err)?
-            .label(format!("axis {} actual", i + 1))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c.mix(0.5).stroke_width(3)));
-    }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).draw().map_err(plot_err)?;
-    root.present().map_err(plot_err)?;
-    Ok(())
-}
-
-fn plot_series(
-    path: &Path,
-    title: &str,
-    rows: &[&Row],
-    f: &dyn Fn(&ferrocat_lab::demo::TracePoint) -> f64,
-) -> anyhow::Result<()> {
-    let t_max = rows.iter().filter_map(|r| r.trace.last()).map(|p| p.t_s).fold(1e-3, f64::max);
-    let (lo, hi) = rows
-        .iter()
-        .flat_map(|r| r.trace.iter().map(f))
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-    let pad = ((hi - lo) * 0.05).max(1.0);
-    let root = SVGBackend::new(path, (900, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
-        .map_err(plot_err)?;
-    chart.configure_mesh().x_desc("time (s)").draw().map_err(plot_err)?;
-    for (k, r) in rows.iter().enumerate() {
-        let c = COLOURS[k % COLOURS.len()];
-        chart
-            .draw_series(LineSeries::new(r.trace.iter().map(|p| (p.t_s, f(p))).filter(|(_, v)| v.is_finite()), c))
-            .map_err(plot_err)?
-            .label(r.method.clone())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));
-    }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).draw().map_err(plot_err)?;
-    root.present().map_err(plot_err)?;
-    Ok(())
-}
-
-fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow::anyhow!("drawing a plot: {e}")
 }

@@ -54,6 +54,31 @@ pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
     let rows = park2020::run(&o, &progress("rounds"))?;
     if let Some(dir) = &a.out {
         write_csv(dir, &rows)?;
+        park_figures(dir, &rows)?;
+        let mut md = format!(
+            "# Park 2020, Table 1\n\nHost `{}`, seed {}, {} rounds, {} samples every {} ms after {} s of settling; \
+             error = master − slave clock (true times from the simulator), µs.\n\n\
+             | slaves | method | ref GMEAN | ref MRMS | last GMEAN | last MRMS | lock ms | paper ref GMEAN/MRMS |\n|---|---|---|---|---|---|---|---|\n",
+            host.name, o.seed, o.rounds, o.samples, o.sample_every * o.cycle_ns / 1_000_000, o.settle_s
+        );
+        for r in &rows {
+            let paper = PAPER
+                .iter()
+                .find(|p| p.0 == r.slaves && p.1 == r.method)
+                .map(|p| format!("{:.2} / {:.2}", p.2, p.3))
+                .unwrap_or_else(|| "—".into());
+            let lock = r.lock_ms.map(|l| format!("{l:.0}")).unwrap_or_else(|| "never".into());
+            md.push_str(&format!(
+                "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {lock} | {paper} |\n",
+                r.slaves, r.method, r.ref_gmean_us, r.ref_mrms_us, r.last_gmean_us, r.last_mrms_us
+            ));
+        }
+        md.push_str(
+            "\nFigures (first round): `fig8-*` and `fig9-*` histograms of the master–reference and \
+             master–last-slave errors, `fig10-*` and `fig11-*` their mean and RMS up to each sample; CSV in \
+             `park2020.csv`.\n",
+        );
+        write_report(dir, "park2020.md", &md)?;
     }
     if a.json {
         let v = serde_json::json!({ "experiment": "park2020", "seed": o.seed, "rounds": o.rounds,
@@ -105,6 +130,46 @@ pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Park 2020 Figures 8–11 for the first round of every (slaves, method).
+fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    use crate::plots::{histogram, line_chart, running_mean_rms, Series};
+    for r in rows {
+        for (fig, whom, samples) in [(8, "reference", &r.ref_samples_us), (9, "last slave", &r.last_samples_us)] {
+            let v: Vec<f64> = samples.iter().map(|&x| x as f64).collect();
+            if v.is_empty() {
+                continue;
+            }
+            let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+            let tag = format!("{}slaves-{}", r.slaves, r.method);
+            line_chart(
+                &dir.join(format!("fig{fig}-{tag}.svg")),
+                &format!("Master–{whom} error, {} slaves, {} ({} samples)", r.slaves, r.method, v.len()),
+                "error (µs)",
+                "share of samples (%)",
+                &[Series::new(r.method.clone(), histogram(&v, lo, hi, 100))],
+            )?;
+            let (mean, rms) = running_mean_rms(&v, 2000);
+            line_chart(
+                &dir.join(format!("fig{}-{tag}.svg", fig + 2)),
+                &format!(
+                    "Mean and RMS of the master–{whom} error up to each sample, {} slaves, {}",
+                    r.slaves, r.method
+                ),
+                "sample",
+                "µs",
+                &[Series::new("mean", mean), Series::new("RMS", rms)],
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn write_report(dir: &Path, name: &str, md: &str) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(name);
+    std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))
+}
+
 fn write_csv(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let path = dir.join("park2020.csv");
@@ -135,6 +200,7 @@ pub fn chen2016(
     host_name: &str,
     cycles_us: Vec<u64>,
     json: bool,
+    out: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
     use ferrocat_lab::chen2016::{run, Options, PAPER};
     let host = host(host_name)?;
@@ -150,6 +216,9 @@ pub fn chen2016(
         o.cycles_us = cycles_us;
     }
     let rows = run(&o, &progress("runs"))?;
+    if let Some(dir) = out {
+        chen_outputs(dir, &o, &rows)?;
+    }
     if json {
         let v = serde_json::json!({ "experiment": "chen2016", "seed": o.seed, "seconds": o.seconds,
             "reference_ppm": o.reference_ppm, "rows": rows });
@@ -197,7 +266,74 @@ pub fn chen2016(
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Result<ExitCode> {
+/// Chen 2016: CSV, Figure 12 (the reference's jitter and the master's period per cycle, every
+/// method) and a Markdown report.
+fn chen_outputs(
+    dir: &Path,
+    o: &ferrocat_lab::chen2016::Options,
+    rows: &[ferrocat_lab::chen2016::Row],
+) -> anyhow::Result<()> {
+    use crate::plots::{line_chart, Series};
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut csv = String::from("cycle_us,method,host,jitter_min_us,jitter_max_us,jitter_width_pct,cycles,lost,repeated,loss_rate,frames_lost\n");
+    let mut md = format!(
+        "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm.\n\n\
+         | cycle µs | method | jitter min µs | max µs | width % | cycles | lost | repeated | paper (chen2016) |\n|---|---|---|---|---|---|---|---|---|\n",
+        o.host.name, o.seed, o.seconds, o.reference_ppm
+    );
+    for r in rows {
+        csv.push_str(&format!(
+            "{},{},{},{:.3},{:.3},{:.2},{},{},{},{:.6},{}\n",
+            r.cycle_us,
+            r.method,
+            r.host,
+            r.jitter_min_us,
+            r.jitter_max_us,
+            r.jitter_width_pct,
+            r.cycles,
+            r.lost,
+            r.repeated,
+            r.loss_rate,
+            r.frames_lost
+        ));
+        let paper = ferrocat_lab::chen2016::PAPER
+            .iter()
+            .find(|p| p.0 == r.cycle_us && r.method == "chen2016")
+            .map(|p| format!("{:.2} / {:.2} µs, {:.1} %, loss {}", p.1, p.2, p.3, p.4))
+            .unwrap_or_else(|| "—".into());
+        md.push_str(&format!(
+            "| {} | {} | {:.2} | {:.2} | {:.1} | {} | {} | {} | {paper} |\n",
+            r.cycle_us, r.method, r.jitter_min_us, r.jitter_max_us, r.jitter_width_pct, r.cycles, r.lost, r.repeated
+        ));
+    }
+    std::fs::write(dir.join("chen2016.csv"), csv).with_context(|| format!("writing {}", dir.display()))?;
+    for &c in &o.cycles_us {
+        let of: Vec<_> = rows.iter().filter(|r| r.cycle_us == c).collect();
+        let series = |f: &dyn Fn(&(u64, f64, f64)) -> f64| -> Vec<Series> {
+            of.iter()
+                .map(|r| Series::new(r.method.clone(), r.trace.iter().map(|p| (p.0 as f64, f(p))).collect()))
+                .collect()
+        };
+        line_chart(
+            &dir.join(format!("fig12-jitter-{c}us.svg")),
+            &format!("Reference time against the master's grid, {c} µs cycle"),
+            "master cycle",
+            "µs",
+            &series(&|p| p.1),
+        )?;
+        line_chart(
+            &dir.join(format!("fig12-period-{c}us.svg")),
+            &format!("The master's cycle period, {c} µs nominal"),
+            "master cycle",
+            "µs",
+            &series(&|p| p.2),
+        )?;
+    }
+    md.push_str("\nFigure 12: `fig12-jitter-*` (the reference's timestamps against the master's cycle grid) and `fig12-period-*` (the master's period, its speed relative to the reference); CSV in `chen2016.csv`.\n");
+    write_report(dir, "chen2016.md", &md)
+}
+
+pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
     use ferrocat_lab::paprocki2022::{run, Options, PAPER};
     let host = host(host_name)?;
     let mut o = Options::new(host);
@@ -205,6 +341,31 @@ pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::R
         o.seed = s;
     }
     let rows = run(&o)?;
+    if let Some(dir) = out {
+        let mut csv = String::from("cycle_us,method,host,mean_ns,max_ns,min_ns,sd_ns,samples\n");
+        let mut md = format!(
+            "# Paprocki 2022, Table 2\n\nHost `{}`, seed {}, {} SYNC0 pulses after {} s; second slave's SYNC0 minus the \
+             first's (true times), ns.\n\n| cycle µs | method | mean | max | min | sd | paper mean / max / min / sd |\n|---|---|---|---|---|---|---|\n",
+            host.name, o.seed, o.samples, o.settle_s
+        );
+        for r in &rows {
+            csv.push_str(&format!(
+                "{},{},{},{:.2},{},{},{:.3},{}\n",
+                r.cycle_us, r.method, r.host, r.mean_ns, r.max_ns, r.min_ns, r.sd_ns, r.samples
+            ));
+            let p = PAPER
+                .iter()
+                .find(|p| p.0 == r.cycle_us)
+                .map(|p| format!("{} / {} / {} / {}", p.1, p.2, p.3, p.4))
+                .unwrap_or_else(|| "—".into());
+            md.push_str(&format!(
+                "| {} | {} | {:.1} | {} | {} | {:.1} | {p} |\n",
+                r.cycle_us, r.method, r.mean_ns, r.max_ns, r.min_ns, r.sd_ns
+            ));
+        }
+        write_report(dir, "paprocki2022.md", &md)?;
+        std::fs::write(dir.join("paprocki2022.csv"), csv).with_context(|| format!("writing {}", dir.display()))?;
+    }
     if json {
         let v =
             serde_json::json!({ "experiment": "paprocki2022", "seed": o.seed, "settle_s": o.settle_s, "rows": rows });

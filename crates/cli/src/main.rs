@@ -9,6 +9,7 @@ mod esi;
 mod lab;
 mod master_cmd;
 mod pcap;
+mod plots;
 mod sii;
 mod sim;
 mod target;
@@ -182,7 +183,7 @@ enum LabCmd {
         rounds: Option<u32>,
         #[arg(long)]
         json: bool,
-        /// Folder for the CSV.
+        /// Folder for the CSV, Figures 8–11 (SVG) and a Markdown report.
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -195,6 +196,9 @@ enum LabCmd {
         host: String,
         #[arg(long)]
         json: bool,
+        /// Folder for the CSV and a Markdown report.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method.
     Chen2016 {
@@ -211,6 +215,9 @@ enum LabCmd {
         cycle_us: Vec<u64>,
         #[arg(long)]
         json: bool,
+        /// Folder for the CSV, Figure 12 (SVG) and a Markdown report.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -288,9 +295,11 @@ fn main() -> ExitCode {
         Command::Lab { experiment: LabCmd::Park2020 { quick, seed, host, slaves, rounds, json, out } } => {
             lab::park2020(lab::ParkArgs { quick, seed, host, slaves, rounds, json, out })
         }
-        Command::Lab { experiment: LabCmd::Paprocki2022 { seed, host, json } } => lab::paprocki2022(seed, &host, json),
-        Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json } } => {
-            lab::chen2016(quick, seed, &host, cycle_us, json)
+        Command::Lab { experiment: LabCmd::Paprocki2022 { seed, host, json, out } } => {
+            lab::paprocki2022(seed, &host, json, out.as_deref())
+        }
+        Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json, out } } => {
+            lab::chen2016(quick, seed, &host, cycle_us, json, out.as_deref())
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
         Command::Scan { target, json } => master_cmd::scan(&target, json),

@@ -55,6 +55,10 @@ pub struct Row {
     pub repeated: u64,
     pub loss_rate: f64,
     pub frames_lost: u64,
+    /// Up to 2 000 points of (master cycle, reference jitter µs, master period µs) over the
+    /// measured part of the run (Chen 2016, Figure 12).
+    #[serde(skip)]
+    pub trace: Vec<(u64, f64, f64)>,
 }
 
 /// Table 2 as published: cycle µs, jitter min, max (µs), width (%), loss rate.
@@ -96,17 +100,23 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let total = (o.seconds * 1e9 / cycle_ns as f64) as u64;
     let (mut jmin, mut jmax) = (i64::MAX, i64::MIN);
     let mut first: Option<(u64, u64)> = None;
+    let mut trace = Vec::new();
+    let trace_every = (total - total / 10).div_ceil(2000).max(1);
     for k in 0..total {
         m.cycle()?;
         let c = m.sync_step(sync.as_mut(), &mut st)?;
+        let period = c.next_period_ns.unwrap_or(cycle_ns);
         if let (Some(t), true) = (st.reference_ns, k >= total / 10) {
             let (k0, t0) = *first.get_or_insert((k, t));
             // Chen's jitter: the reference's time against the master's grid T_s + i·T_p.
             let j = t.wrapping_sub(t0) as i64 - ((k - k0) * cycle_ns) as i64;
             jmin = jmin.min(j);
             jmax = jmax.max(j);
+            if (k - k0) % trace_every == 0 {
+                trace.push((k - k0, j as f64 / 1e3, period as f64 / 1e3));
+            }
         }
-        next += c.next_period_ns.unwrap_or(cycle_ns);
+        next += period;
         m.engine.io.sleep_until(next);
     }
     let (lost, repeated) = apps(&mut m).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
@@ -123,6 +133,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         repeated,
         loss_rate: lost as f64 / (2 * cycles).max(1) as f64,
         frames_lost: st.lost + m.cycle_stats().lost_frames,
+        trace,
     })
 }
 

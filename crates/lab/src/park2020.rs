@@ -59,6 +59,12 @@ pub struct Row {
     pub lock_ms: Option<f64>,
     pub rounds: u32,
     pub frames_lost: u64,
+    /// The first round's samples (µs), master − reference and master − last slave, for the
+    /// figures (Park 2020, Figures 8–11).
+    #[serde(skip)]
+    pub ref_samples_us: Vec<f32>,
+    #[serde(skip)]
+    pub last_samples_us: Vec<f32>,
 }
 
 /// Table 1 as published (µs): slaves, method, ref GMEAN, ref MRMS, last GMEAN, last MRMS.
@@ -69,15 +75,17 @@ pub const PAPER: [(usize, &str, f64, f64, f64, f64); 4] = [
     (6, "park2020", -1.71, 4.55, -1.59, 4.59),
 ];
 
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct Round {
     reference: Moments,
     last: Moments,
     lock_ms: Option<f64>,
     lost: u64,
+    /// Every sample (µs), kept for the first round only.
+    samples: Option<(Vec<f32>, Vec<f32>)>,
 }
 
-fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Result<Round> {
+fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> anyhow::Result<Round> {
     let mut m = crate::segment(slaves, opts.host, seed)?;
     let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
@@ -85,6 +93,9 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Resu
     let total = settle + opts.samples * opts.sample_every;
     let mut next = m.engine.io.now_ns();
     let mut r = Round::default();
+    if keep {
+        r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
+    }
     let mut last_violation: Option<u64> = None;
     let last = slaves - 1;
     for k in 0..total {
@@ -106,6 +117,10 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64) -> anyhow::Resu
         if k >= settle {
             r.reference.push(e_ref as f64);
             r.last.push(e_last as f64);
+            if let Some((a, b)) = r.samples.as_mut() {
+                a.push(e_ref as f32 / 1e3);
+                b.push(e_last as f32 / 1e3);
+            }
         }
     }
     // Locked if the last violation is in the first 90 % of the run.
@@ -130,7 +145,7 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
     let results: Vec<anyhow::Result<Round>> = jobs
         .par_iter()
         .map(|(n, method, i)| {
-            let r = round(opts, *n, method, opts.seed.wrapping_add(*i as u64));
+            let r = round(opts, *n, method, opts.seed.wrapping_add(*i as u64), *i == 0);
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, jobs.len());
             r
         })
@@ -142,14 +157,15 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
             for (job, r) in jobs.iter().zip(&results) {
                 if job.0 == n && &job.1 == method {
                     match r {
-                        Ok(r) => rs.push(*r),
+                        Ok(r) => rs.push(r),
                         Err(e) => anyhow::bail!("{n} slaves, {method}, round {}: {e:#}", job.2),
                     }
                 }
             }
             let k = rs.len() as f64;
-            let avg = |f: &dyn Fn(&Round) -> f64| rs.iter().map(f).sum::<f64>() / k / 1e3;
+            let avg = |f: &dyn Fn(&Round) -> f64| rs.iter().map(|r| f(r)).sum::<f64>() / k / 1e3;
             let locks: Option<Vec<f64>> = rs.iter().map(|r| r.lock_ms).collect();
+            let (ref_samples_us, last_samples_us) = rs.iter().find_map(|r| r.samples.clone()).unwrap_or_default();
             rows.push(Row {
                 slaves: n,
                 method: method.clone(),
@@ -161,6 +177,8 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
                 lock_ms: locks.map(|l| crate::stats::median(&l)),
                 rounds: rs.len() as u32,
                 frames_lost: rs.iter().map(|r| r.lost).sum(),
+                ref_samples_us,
+                last_samples_us,
             });
         }
     }

@@ -1,0 +1,39 @@
+//! `ferrocat lab … --out DIR`: each experiment writes its CSV, its figures as SVG and a Markdown
+//! report with the table.
+use std::path::Path;
+use std::process::Command;
+
+fn run(args: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+fn has(dir: &Path, file: &str, needle: &str) {
+    let p = dir.join(file);
+    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    assert!(text.contains(needle), "{} lacks {needle:?}", p.display());
+}
+
+#[test]
+fn every_experiment_writes_csv_figures_and_a_report() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-lab-out-{}", std::process::id()));
+    let d = |s: &str| dir.join(s).to_str().unwrap().to_string();
+    run(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--out", &d("park")]);
+    let park = dir.join("park");
+    has(&park, "park2020.md", "| 2 | conventional |");
+    has(&park, "park2020.csv", "slaves,method");
+    for f in ["fig8-2slaves-park2020.svg", "fig9-2slaves-ferrocat.svg", "fig10-2slaves-conventional.svg"] {
+        has(&park, f, "<svg");
+    }
+    has(&park, "fig11-2slaves-ferrocat.svg", "RMS");
+    run(&["lab", "chen2016", "--quick", "--cycle-us", "500", "--out", &d("chen")]);
+    let chen = dir.join("chen");
+    has(&chen, "chen2016.md", "| 500 | chen2016 |");
+    has(&chen, "chen2016.csv", "500,pi,");
+    has(&chen, "fig12-jitter-500us.svg", "<svg");
+    has(&chen, "fig12-period-500us.svg", "chen2016");
+    run(&["lab", "paprocki2022", "--out", &d("pap")]);
+    has(&dir.join("pap"), "paprocki2022.md", "| 1000 | ferrocat |");
+    has(&dir.join("pap"), "paprocki2022.csv", "cycle_us,method");
+    let _ = std::fs::remove_dir_all(&dir);
+}
