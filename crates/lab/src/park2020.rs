@@ -57,6 +57,12 @@ pub struct Row {
     /// stays within 100 ns of the reference and the master within 1 µs (None: not locked in
     /// some round).
     pub lock_ms: Option<f64>,
+    /// The same errors as Park's GPI measurement (§IV-B) would have reported them
+    /// (`crate::gpi`): latencies drawn per sample, their estimated means subtracted.
+    pub gpi_ref_gmean_us: f64,
+    pub gpi_ref_mrms_us: f64,
+    pub gpi_last_gmean_us: f64,
+    pub gpi_last_mrms_us: f64,
     pub rounds: u32,
     pub frames_lost: u64,
     /// The first round's samples (µs), master − reference and master − last slave, for the
@@ -79,6 +85,8 @@ pub const PAPER: [(usize, &str, f64, f64, f64, f64); 4] = [
 struct Round {
     reference: Moments,
     last: Moments,
+    gpi_reference: Moments,
+    gpi_last: Moments,
     lock_ms: Option<f64>,
     lost: u64,
     /// Every sample (µs), kept for the first round only.
@@ -98,6 +106,9 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     }
     let mut last_violation: Option<u64> = None;
     let last = slaves - 1;
+    // One GPI rig per slave measured, as in the paper's set-up.
+    let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
+    let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
     for k in 0..total {
         next += opts.cycle_ns;
         m.engine.io.sleep_until(next);
@@ -117,6 +128,8 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         if k >= settle {
             r.reference.push(e_ref as f64);
             r.last.push(e_last as f64);
+            r.gpi_reference.push(gpi_ref.measure(e_ref as f64));
+            r.gpi_last.push(gpi_last.measure(e_last as f64));
             if let Some((a, b)) = r.samples.as_mut() {
                 a.push(e_ref as f32 / 1e3);
                 b.push(e_last as f32 / 1e3);
@@ -175,6 +188,10 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
                 last_gmean_us: avg(&|r| r.last.mean()),
                 last_mrms_us: avg(&|r| r.last.rms()),
                 lock_ms: locks.map(|l| crate::stats::median(&l)),
+                gpi_ref_gmean_us: avg(&|r| r.gpi_reference.mean()),
+                gpi_ref_mrms_us: avg(&|r| r.gpi_reference.rms()),
+                gpi_last_gmean_us: avg(&|r| r.gpi_last.mean()),
+                gpi_last_mrms_us: avg(&|r| r.gpi_last.rms()),
                 rounds: rs.len() as u32,
                 frames_lost: rs.iter().map(|r| r.lost).sum(),
                 ref_samples_us,

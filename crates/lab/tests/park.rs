@@ -30,6 +30,12 @@ fn beaglebone_reproduces_the_conventional_bias_and_ferrocat_beats_park() {
         assert!(p.ref_gmean_us.abs() < c.ref_gmean_us.abs() && p.ref_mrms_us < c.ref_mrms_us);
         assert!(f.ref_gmean_us.abs() < p.ref_gmean_us.abs() && f.ref_mrms_us < p.ref_mrms_us);
         assert!(f.last_gmean_us.abs() < p.last_gmean_us.abs() && f.last_mrms_us < p.last_mrms_us);
+        // Park's GPI measurement keeps the mean (its latencies' means are subtracted) and adds
+        // the latencies' spread to every method alike.
+        for r in [c, p, f] {
+            assert!((r.gpi_ref_gmean_us - r.ref_gmean_us).abs() < 0.5, "{r:?}");
+            assert!(r.gpi_ref_mrms_us > r.ref_mrms_us && r.gpi_last_mrms_us > r.last_mrms_us, "{r:?}");
+        }
     }
 }
 
