@@ -436,3 +436,54 @@ pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<
     }
     Ok(ExitCode::SUCCESS)
 }
+
+pub fn robustness(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::robustness::{run, Options};
+    let host = host(host_name)?;
+    let mut o = Options::new(host);
+    if let Some(s) = seed {
+        o.seed = s;
+    }
+    let rows = run(&o)?;
+    if json {
+        let v = serde_json::json!({ "experiment": "robustness", "seed": o.seed, "settle_s": o.settle_s,
+            "after_s": o.after_s, "rows": rows });
+        outln!("{v}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "Robustness — host {}, seed {}, {} slaves, 1 ms; one disturbance after {} s, {} s measured; error = master − reference, ns",
+        host.name, o.seed, o.slaves, o.settle_s, o.after_s
+    );
+    outln!(
+        "{:<18} {:<13} {:>9} {:>7} {:>7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>5}",
+        "scenario",
+        "method",
+        "before",
+        "sd",
+        "band",
+        "peak",
+        "recovery ms",
+        "outside %",
+        "after",
+        "after RMS",
+        "lost"
+    );
+    for r in &rows {
+        outln!(
+            "{:<18} {:<13} {:>9.1} {:>7.1} {:>7.1} {:>9.1} {:>11} {:>9.2} {:>9.1} {:>9.1} {:>5}",
+            r.scenario,
+            r.method,
+            r.before_mean_ns,
+            r.before_sd_ns,
+            r.band_ns,
+            r.peak_ns,
+            r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
+            r.outside_pct,
+            r.after_mean_ns,
+            r.after_rms_ns,
+            r.frames_lost
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

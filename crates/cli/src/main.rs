@@ -200,6 +200,17 @@ enum LabCmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Robustness: 1 % frame loss, a 50 ppm crystal step and a 3-cycle overrun, once each after
+    /// settling, for every reference-follows-master method: peak excursion and recovery.
+    Robustness {
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
+        #[arg(long, default_value = "pc-rt")]
+        host: String,
+        #[arg(long)]
+        json: bool,
+    },
     /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method.
     Chen2016 {
         /// 10 s per run instead of 60.
@@ -298,6 +309,7 @@ fn main() -> ExitCode {
         Command::Lab { experiment: LabCmd::Paprocki2022 { seed, host, json, out } } => {
             lab::paprocki2022(seed, &host, json, out.as_deref())
         }
+        Command::Lab { experiment: LabCmd::Robustness { seed, host, json } } => lab::robustness(seed, &host, json),
         Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json, out } } => {
             lab::chen2016(quick, seed, &host, cycle_us, json, out.as_deref())
         }

@@ -5,6 +5,7 @@ pub mod demo;
 pub mod gpi;
 pub mod paprocki2022;
 pub mod park2020;
+pub mod robustness;
 pub mod stats;
 
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
