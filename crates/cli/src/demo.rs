@@ -172,26 +172,7 @@ fn list(v: &[String]) -> String {
 
 fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    // Every scalar figure of a row, columns by name (the lists stay in the JSON).
-    let values: Vec<serde_json::Map<String, serde_json::Value>> = rows
-        .iter()
-        .filter_map(|r| serde_json::to_value(r).ok()?.as_object().cloned())
-        .map(|o| o.into_iter().filter(|(_, v)| !v.is_array()).collect())
-        .collect();
-    let keys: Vec<String> = values.first().map(|o| o.keys().cloned().collect()).unwrap_or_default();
-    let mut csv = keys.join(",") + "\n";
-    for o in &values {
-        let cells: Vec<String> = keys
-            .iter()
-            .map(|k| match &o[k] {
-                serde_json::Value::String(s) => s.clone(),
-                v => v.to_string(),
-            })
-            .collect();
-        csv.push_str(&(cells.join(",") + "\n"));
-    }
-    let path = dir.join("demo.csv");
-    std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
+    crate::report::write(dir, "demo.csv", &crate::report::csv_of(rows))?;
     for &c in &o.cycles_us {
         let of_cycle: Vec<&Row> = rows.iter().filter(|r| r.cycle_us == c).collect();
         if let Some(r) = of_cycle.iter().find(|r| r.method == "ferrocat").or(of_cycle.first()) {

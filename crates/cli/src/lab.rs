@@ -8,6 +8,7 @@ use ferrocat_lab::park2020::{self, Options, Row, PAPER};
 use ferrocat_master::io::HostModel;
 
 use crate::outln;
+use crate::report::write as write_report;
 
 pub struct ParkArgs {
     pub quick: bool,
@@ -53,7 +54,7 @@ pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
     }
     let rows = park2020::run(&o, &progress("rounds"))?;
     if let Some(dir) = &a.out {
-        write_csv(dir, &rows)?;
+        write_report(dir, "park2020.csv", &crate::report::csv_of(&rows))?;
         park_figures(dir, &rows)?;
         let mut md = format!(
             "# Park 2020, Table 1\n\nHost `{}`, seed {}, {} rounds, {} samples every {} ms after {} s of settling; \
@@ -188,41 +189,6 @@ fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write_report(dir: &Path, name: &str, md: &str) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join(name);
-    std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))
-}
-
-fn write_csv(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join("park2020.csv");
-    let mut s = String::from(
-        "slaves,method,host,ref_gmean_us,ref_mrms_us,last_gmean_us,last_mrms_us,lock_ms,rounds,frames_lost,\
-         gpi_ref_gmean_us,gpi_ref_mrms_us,gpi_last_gmean_us,gpi_last_mrms_us\n",
-    );
-    for r in rows {
-        s.push_str(&format!(
-            "{},{},{},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.4},{:.4},{:.4},{:.4}\n",
-            r.slaves,
-            r.method,
-            r.host,
-            r.ref_gmean_us,
-            r.ref_mrms_us,
-            r.last_gmean_us,
-            r.last_mrms_us,
-            r.lock_ms.map(|l| format!("{l:.1}")).unwrap_or_default(),
-            r.rounds,
-            r.frames_lost,
-            r.gpi_ref_gmean_us,
-            r.gpi_ref_mrms_us,
-            r.gpi_last_gmean_us,
-            r.gpi_last_mrms_us
-        ));
-    }
-    std::fs::write(&path, s).with_context(|| format!("writing {}", path.display()))
-}
-
 pub fn chen2016(
     quick: bool,
     seed: Option<u64>,
@@ -304,27 +270,12 @@ fn chen_outputs(
 ) -> anyhow::Result<()> {
     use crate::plots::{line_chart, Series};
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut csv = String::from("cycle_us,method,host,jitter_min_us,jitter_max_us,jitter_width_pct,cycles,lost,repeated,loss_rate,frames_lost\n");
     let mut md = format!(
         "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm.\n\n\
          | cycle µs | method | jitter min µs | max µs | width % | cycles | lost | repeated | paper (chen2016) |\n|---|---|---|---|---|---|---|---|---|\n",
         o.host.name, o.seed, o.seconds, o.reference_ppm
     );
     for r in rows {
-        csv.push_str(&format!(
-            "{},{},{},{:.3},{:.3},{:.2},{},{},{},{:.6},{}\n",
-            r.cycle_us,
-            r.method,
-            r.host,
-            r.jitter_min_us,
-            r.jitter_max_us,
-            r.jitter_width_pct,
-            r.cycles,
-            r.lost,
-            r.repeated,
-            r.loss_rate,
-            r.frames_lost
-        ));
         let paper = ferrocat_lab::chen2016::PAPER
             .iter()
             .find(|p| p.0 == r.cycle_us && r.method == "chen2016")
@@ -335,7 +286,7 @@ fn chen_outputs(
             r.cycle_us, r.method, r.jitter_min_us, r.jitter_max_us, r.jitter_width_pct, r.cycles, r.lost, r.repeated
         ));
     }
-    std::fs::write(dir.join("chen2016.csv"), csv).with_context(|| format!("writing {}", dir.display()))?;
+    write_report(dir, "chen2016.csv", &crate::report::csv_of(rows))?;
     for &c in &o.cycles_us {
         let of: Vec<_> = rows.iter().filter(|r| r.cycle_us == c).collect();
         let series = |f: &dyn Fn(&(u64, f64, f64)) -> f64| -> Vec<Series> {
@@ -371,17 +322,12 @@ pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<
     }
     let rows = run(&o)?;
     if let Some(dir) = out {
-        let mut csv = String::from("cycle_us,method,host,mean_ns,max_ns,min_ns,sd_ns,samples\n");
         let mut md = format!(
             "# Paprocki 2022, Table 2\n\nHost `{}`, seed {}, {} SYNC0 pulses after {} s; second slave's SYNC0 minus the \
              first's (true times), ns.\n\n| cycle µs | method | mean | max | min | sd | paper mean / max / min / sd |\n|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.samples, o.settle_s
         );
         for r in &rows {
-            csv.push_str(&format!(
-                "{},{},{},{:.2},{},{},{:.3},{}\n",
-                r.cycle_us, r.method, r.host, r.mean_ns, r.max_ns, r.min_ns, r.sd_ns, r.samples
-            ));
             let p = PAPER
                 .iter()
                 .find(|p| p.0 == r.cycle_us)
@@ -393,7 +339,7 @@ pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<
             ));
         }
         write_report(dir, "paprocki2022.md", &md)?;
-        std::fs::write(dir.join("paprocki2022.csv"), csv).with_context(|| format!("writing {}", dir.display()))?;
+        write_report(dir, "paprocki2022.csv", &crate::report::csv_of(&rows))?;
     }
     if json {
         let v =

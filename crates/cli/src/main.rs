@@ -10,6 +10,7 @@ mod lab;
 mod master_cmd;
 mod pcap;
 mod plots;
+mod report;
 mod sii;
 mod sim;
 mod target;

@@ -72,45 +72,30 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let mut st = m.sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
     let mut next = m.engine.io.now_ns();
-    let mut diffs: Vec<i64> = Vec::with_capacity(o.samples);
-    let mut last_sys = None;
+    let mut sync0 = crate::stats::Sync0Stats::default();
     let mut k = 0u64;
-    while diffs.len() < o.samples {
+    while (sync0.diffs.n as usize) < o.samples {
         m.cycle()?;
         let c = m.sync_step(sync.as_mut(), &mut st)?;
         next += c.next_period_ns.unwrap_or(cycle_ns);
         m.engine.io.sleep_until(next);
         k += 1;
         anyhow::ensure!(k < settle + 100 * o.samples as u64, "SYNC0 pulses stopped");
-        if k < settle {
-            continue;
-        }
-        let nodes = &m.engine.io.seg.nodes;
-        let (Some(&(s1, t1)), Some(p2)) = (nodes[1].esc.sync0_log.pulses.back(), Some(&nodes[2].esc.sync0_log.pulses))
-        else {
-            continue;
-        };
-        // The second drive's pulse for the same system time (32-bit DCs compared on 32 bits).
-        if last_sys == Some(s1) {
-            continue;
-        }
-        if let Some(&(_, t2)) = p2.iter().rev().find(|(s2, _)| *s2 as u32 == s1 as u32) {
-            diffs.push(t2 as i64 - t1 as i64);
-            last_sys = Some(s1);
+        if k >= settle {
+            // The two drives' pulses for the same system time.
+            sync0.sample(&m.engine.io.seg, &[1, 2]);
         }
     }
-    let n = diffs.len() as f64;
-    let mean = diffs.iter().sum::<i64>() as f64 / n;
-    let sd = (diffs.iter().map(|&d| (d as f64 - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let (mean, sd, min, max, _) = sync0.figures();
     Ok(Row {
         cycle_us,
         method: name.to_string(),
         host: o.host.name.to_string(),
-        mean_ns: mean,
-        max_ns: *diffs.iter().max().unwrap_or(&0),
-        min_ns: *diffs.iter().min().unwrap_or(&0),
-        sd_ns: sd,
-        samples: diffs.len(),
+        mean_ns: mean.unwrap_or(f64::NAN),
+        max_ns: max.unwrap_or(0),
+        min_ns: min.unwrap_or(0),
+        sd_ns: sd.unwrap_or(f64::NAN),
+        samples: sync0.diffs.n as usize,
     })
 }
 

@@ -62,3 +62,60 @@ mod tests {
         assert!(median(&[]).is_nan());
     }
 }
+
+/// SYNC0 simultaneity from the slaves' pulse logs (Paprocki 2022, Table 2): the second slave
+/// minus the first for the same system time, and the spread of all.
+#[derive(Debug, Default)]
+pub struct Sync0Stats {
+    pub diffs: Moments,
+    min: i64,
+    max: i64,
+    spread_max: u64,
+    last_sys: Option<u64>,
+}
+
+impl Sync0Stats {
+    pub fn sample(&mut self, seg: &ferrocat_segment::Segment, drives: &[u16]) {
+        let log = |d: u16| &seg.nodes[d as usize].esc.sync0_log.pulses;
+        let Some(&(s1, t1)) = log(drives[0]).back() else { return };
+        if self.last_sys == Some(s1) {
+            return;
+        }
+        // 32-bit DCs compare on 32 bits.
+        let ts: Vec<u64> = drives
+            .iter()
+            .filter_map(|&d| log(d).iter().rev().find(|(s, _)| *s as u32 == s1 as u32).map(|&(_, t)| t))
+            .collect();
+        if ts.len() != drives.len() {
+            return;
+        }
+        self.last_sys = Some(s1);
+        if let Some(&t2) = ts.get(1) {
+            let d = t2 as i64 - t1 as i64;
+            if self.diffs.n == 0 {
+                (self.min, self.max) = (d, d);
+            }
+            self.diffs.push(d as f64);
+            self.min = self.min.min(d);
+            self.max = self.max.max(d);
+        }
+        let (lo, hi) = (ts.iter().min().copied().unwrap_or(0), ts.iter().max().copied().unwrap_or(0));
+        self.spread_max = self.spread_max.max(hi - lo);
+    }
+
+    #[allow(clippy::type_complexity)]
+    pub fn figures(&self) -> (Option<f64>, Option<f64>, Option<i64>, Option<i64>, Option<u64>) {
+        if self.last_sys.is_none() {
+            return (None, None, None, None, None);
+        }
+        let two = self.diffs.n > 0;
+        let sd = (self.diffs.rms().powi(2) - self.diffs.mean().powi(2)).max(0.0).sqrt();
+        (
+            two.then(|| self.diffs.mean()),
+            two.then_some(sd),
+            two.then_some(self.min),
+            two.then_some(self.max),
+            Some(self.spread_max),
+        )
+    }
+}
