@@ -252,25 +252,27 @@ impl SegmentConfig {
             };
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
             let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;
-            let od = || match &esi_dev {
+            // The dictionary is built once, for CoE devices only.
+            let od = coe.then(|| match &esi_dev {
                 Some(dev) => crate::od_build::from_esi(dev, &info),
                 None => crate::od_build::from_sii(&info),
-            };
-            let app: Box<dyn Application> = match d.app.as_deref() {
-                None | Some("cia402") if coe && (d.app.is_some() || is_drive(&info, &od())) => {
+            });
+            let drive = od.as_ref().is_some_and(|od| d.app.is_some() || is_drive(&info, od));
+            let app: Box<dyn Application> = match (d.app.as_deref(), od) {
+                (None | Some("cia402"), Some(od)) if drive => {
                     // Each drive draws from its own stream: the others' draws stay as they were.
                     let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                    Box::new(Cia402Drive::new(od(), config.sm_count, seed))
+                    Box::new(Cia402Drive::new(od, config.sm_count, seed))
                 }
-                Some("cia402") => {
+                (Some("cia402"), _) => {
                     return Err(device_err(format!("device {i}"), "app = \"cia402\" needs a CoE mailbox"))
                 }
-                None if coe => Box::new(CoeDevice::new(od(), config.sm_count, Box::new(PassiveLogic))),
-                None if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
-                None | Some("io") => Box::new(DigitalIo::new(config.sm_count)),
-                Some("sm") => sync(SyncMode::SmSynchronous),
-                Some("dc") => sync(SyncMode::DcSynchronous),
-                Some("free-run") => {
+                (None, Some(od)) => Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic))),
+                (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
+                (None | Some("io"), _) => Box::new(DigitalIo::new(config.sm_count)),
+                (Some("sm"), _) => sync(SyncMode::SmSynchronous),
+                (Some("dc"), _) => sync(SyncMode::DcSynchronous),
+                (Some("free-run"), _) => {
                     let us = d
                         .app_period_us
                         .ok_or_else(|| device_err(format!("device {i}"), "app = \"free-run\" needs app_period_us"))?;
@@ -279,7 +281,7 @@ impl SegmentConfig {
                     }
                     sync(SyncMode::FreeRun { period_ns: (us * 1000.0).round() as u64 })
                 }
-                Some(other) => {
+                (Some(other), _) => {
                     return Err(device_err(
                         format!("device {i}"),
                         format!("unknown app '{other}' (io, sm, dc, free-run, cia402)"),
