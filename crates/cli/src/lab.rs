@@ -5,20 +5,10 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use ferrocat_lab::park2020::{self, Options, Row, PAPER};
-use ferrocat_master::io::HostModel;
+use ferrocat_lab::scenario::Plan;
 
 use crate::outln;
 use crate::report::write as write_report;
-
-pub struct ParkArgs {
-    pub quick: bool,
-    pub seed: Option<u64>,
-    pub host: String,
-    pub slaves: Vec<usize>,
-    pub rounds: Option<u32>,
-    pub json: bool,
-    pub out: Option<std::path::PathBuf>,
-}
 
 /// A one-line counter on stderr, when it is a terminal.
 fn progress(unit: &'static str) -> impl Fn(usize, usize) + Sync {
@@ -33,27 +23,26 @@ fn progress(unit: &'static str) -> impl Fn(usize, usize) + Sync {
     }
 }
 
-pub fn host(name: &str) -> anyhow::Result<HostModel> {
+pub fn host(name: &str) -> anyhow::Result<ferrocat_master::io::HostModel> {
+    use ferrocat_master::io::HostModel;
     HostModel::preset(name)
         .ok_or_else(|| anyhow::anyhow!("unknown host model {name:?} (known: {})", HostModel::PRESETS.join(", ")))
 }
 
-pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
-    let host = host(&a.host)?;
-    let mut o = if a.quick { Options::quick(host) } else { Options::full(host) };
-    if let Some(s) = a.seed {
-        o.seed = s;
+/// An experiment as planned from its scenario and flags: run, print, and write `out`.
+pub fn run(plan: Plan, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    match plan {
+        Plan::Park2020(o) => park2020(o, json, out),
+        Plan::Chen2016(o) => chen2016(o, json, out),
+        Plan::Paprocki2022(o) => paprocki2022(o, json, out),
+        Plan::Robustness(o) => robustness(o, json, out),
     }
-    if let Some(r) = a.rounds {
-        anyhow::ensure!(r > 0, "--rounds must be at least 1");
-        o.rounds = r;
-    }
-    if !a.slaves.is_empty() {
-        anyhow::ensure!(a.slaves.iter().all(|&n| (1..=64).contains(&n)), "--slaves must be between 1 and 64");
-        o.slaves = a.slaves.clone();
-    }
+}
+
+fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    let host = o.host;
     let rows = park2020::run(&o, &progress("rounds"))?;
-    if let Some(dir) = &a.out {
+    if let Some(dir) = out {
         write_report(dir, "park2020.csv", &crate::report::csv_of(&rows))?;
         park_figures(dir, &rows)?;
         let mut md = format!(
@@ -90,7 +79,7 @@ pub fn park2020(a: ParkArgs) -> anyhow::Result<ExitCode> {
         );
         write_report(dir, "park2020.md", &md)?;
     }
-    if a.json {
+    if json {
         let v = serde_json::json!({ "experiment": "park2020", "seed": o.seed, "rounds": o.rounds,
             "settle_s": o.settle_s, "samples": o.samples, "rows": rows });
         outln!("{v}");
@@ -189,27 +178,9 @@ fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn chen2016(
-    quick: bool,
-    seed: Option<u64>,
-    host_name: &str,
-    cycles_us: Vec<u64>,
-    json: bool,
-    out: Option<&Path>,
-) -> anyhow::Result<ExitCode> {
-    use ferrocat_lab::chen2016::{run, Options, PAPER};
-    let host = host(host_name)?;
-    let mut o = if quick { Options::quick(host) } else { Options::full(host) };
-    if let Some(s) = seed {
-        o.seed = s;
-    }
-    if !cycles_us.is_empty() {
-        anyhow::ensure!(
-            cycles_us.iter().all(|&c| (10..=100_000).contains(&c)),
-            "--cycle-us must be between 10 and 100000"
-        );
-        o.cycles_us = cycles_us;
-    }
+fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::chen2016::{run, PAPER};
+    let host = o.host;
     let rows = run(&o, &progress("runs"))?;
     if let Some(dir) = out {
         chen_outputs(dir, &o, &rows)?;
@@ -313,13 +284,9 @@ fn chen_outputs(
     write_report(dir, "chen2016.md", &md)
 }
 
-pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
-    use ferrocat_lab::paprocki2022::{run, Options, PAPER};
-    let host = host(host_name)?;
-    let mut o = Options::new(host);
-    if let Some(s) = seed {
-        o.seed = s;
-    }
+fn paprocki2022(o: ferrocat_lab::paprocki2022::Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::paprocki2022::{run, PAPER};
+    let host = o.host;
     let rows = run(&o)?;
     if let Some(dir) = out {
         let mut md = format!(
@@ -383,14 +350,24 @@ pub fn paprocki2022(seed: Option<u64>, host_name: &str, json: bool, out: Option<
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn robustness(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Result<ExitCode> {
-    use ferrocat_lab::robustness::{run, Options};
-    let host = host(host_name)?;
-    let mut o = Options::new(host);
-    if let Some(s) = seed {
-        o.seed = s;
-    }
+fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    use ferrocat_lab::robustness::run;
+    let host = o.host;
     let rows = run(&o)?;
+    if let Some(dir) = out {
+        write_report(dir, "robustness.csv", &crate::report::csv_of(&rows))?;
+        let mut md = format!(
+            "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
+             measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns).\n\n\
+             | disturbance | method | mean before | sd | band | peak | recovery ms | outside % | mean after | RMS after | frames lost |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|\n",
+            host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
+        );
+        for r in &rows {
+            md.push_str(&format!("| {} |\n", robustness_cells(r).join(" | ")));
+        }
+        write_report(dir, "robustness.md", &md)?;
+    }
     if json {
         let v = serde_json::json!({ "experiment": "robustness", "seed": o.seed, "settle_s": o.settle_s,
             "after_s": o.after_s, "rows": rows });
@@ -398,11 +375,18 @@ pub fn robustness(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Res
         return Ok(ExitCode::SUCCESS);
     }
     outln!(
-        "Robustness — host {}, seed {}, {} slaves, 1 ms; one disturbance after {} s, {} s measured; error = master − reference, ns",
-        host.name, o.seed, o.slaves, o.settle_s, o.after_s
+        "Robustness — host {}, seed {}, {} slaves, {} µs; one disturbance after {} s, {} s measured; error = master − reference, ns",
+        host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
     );
-    outln!(
-        "{:<18} {:<13} {:>9} {:>7} {:>7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>5}",
+    let widths = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 5];
+    let line = |cells: &[String]| -> String {
+        let pad = |(c, w): (&String, &i32)| match *w {
+            w if w < 0 => format!("{c:<0$}", (-w) as usize),
+            w => format!("{c:>0$}", w as usize),
+        };
+        cells.iter().zip(&widths).map(pad).collect::<Vec<_>>().join(" ")
+    };
+    let head = [
         "scenario",
         "method",
         "before",
@@ -413,23 +397,28 @@ pub fn robustness(seed: Option<u64>, host_name: &str, json: bool) -> anyhow::Res
         "outside %",
         "after",
         "after RMS",
-        "lost"
-    );
+        "lost",
+    ];
+    outln!("{}", line(&head.map(String::from)));
     for r in &rows {
-        outln!(
-            "{:<18} {:<13} {:>9.1} {:>7.1} {:>7.1} {:>9.1} {:>11} {:>9.2} {:>9.1} {:>9.1} {:>5}",
-            r.scenario,
-            r.method,
-            r.before_mean_ns,
-            r.before_sd_ns,
-            r.band_ns,
-            r.peak_ns,
-            r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
-            r.outside_pct,
-            r.after_mean_ns,
-            r.after_rms_ns,
-            r.frames_lost
-        );
+        outln!("{}", line(&robustness_cells(r)));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One robustness row's cells, for the terminal and the report alike.
+fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 11] {
+    [
+        r.scenario.clone(),
+        r.method.clone(),
+        format!("{:.1}", r.before_mean_ns),
+        format!("{:.1}", r.before_sd_ns),
+        format!("{:.1}", r.band_ns),
+        format!("{:.1}", r.peak_ns),
+        r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
+        format!("{:.2}", r.outside_pct),
+        format!("{:.1}", r.after_mean_ns),
+        format!("{:.1}", r.after_rms_ns),
+        r.frames_lost.to_string(),
+    ]
 }

@@ -167,70 +167,94 @@ enum Command {
 
 #[derive(Subcommand)]
 enum LabCmd {
-    /// Park et al. 2020 Table 1: master–reference and master–last-slave errors per method.
-    Park2020 {
-        /// 5 s settling, 5 000 samples, 3 rounds (instead of 5 min, 100 000, 10).
-        #[arg(long)]
-        quick: bool,
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt.
-        #[arg(long, default_value = "beaglebone-rt")]
-        host: String,
-        /// Segment sizes (repeatable; default 2 and 6).
-        #[arg(long)]
-        slaves: Vec<usize>,
-        #[arg(long)]
-        rounds: Option<u32>,
-        #[arg(long)]
-        json: bool,
-        /// Folder for the CSV, Figures 8–11 (SVG) and a Markdown report.
-        #[arg(long)]
-        out: Option<PathBuf>,
-    },
+    /// Park et al. 2020 Table 1: master–reference and master–last-slave errors per method
+    /// (default host beaglebone-rt).
+    Park2020(LabArgs),
+    /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method
+    /// (default host rtx-10us).
+    Chen2016(LabArgs),
     /// Paprocki & Erwiński 2022 Table 2: how simultaneously two DC slaves see SYNC0.
-    Paprocki2022 {
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
-        #[arg(long, default_value = "pc-rt")]
-        host: String,
-        #[arg(long)]
-        json: bool,
-        /// Folder for the CSV and a Markdown report.
-        #[arg(long)]
-        out: Option<PathBuf>,
-    },
+    Paprocki2022(LabArgs),
     /// Robustness: 1 % frame loss, a 50 ppm crystal step and a 3-cycle overrun, once each after
     /// settling, for every reference-follows-master method: peak excursion and recovery.
-    Robustness {
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
-        #[arg(long, default_value = "pc-rt")]
-        host: String,
-        #[arg(long)]
-        json: bool,
+    Robustness(LabArgs),
+    /// Run the experiment a scenario file names (docs/clock-sync.md, scenarios/).
+    Run {
+        scenario: PathBuf,
+        #[command(flatten)]
+        args: LabArgs,
     },
-    /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method.
-    Chen2016 {
-        /// 10 s per run instead of 60.
-        #[arg(long)]
-        quick: bool,
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
-        #[arg(long, default_value = "rtx-10us")]
-        host: String,
-        /// Cycle times in µs (repeatable; default 500, 250, 100, 50).
-        #[arg(long)]
-        cycle_us: Vec<u64>,
-        #[arg(long)]
-        json: bool,
-        /// Folder for the CSV, Figure 12 (SVG) and a Markdown report.
-        #[arg(long)]
-        out: Option<PathBuf>,
-    },
+}
+
+/// What every lab experiment takes; a flag overrides the scenario file's key of the same name.
+#[derive(clap::Args, Default)]
+struct LabArgs {
+    /// A scenario file (TOML); the flags below override its keys.
+    #[arg(long = "scenario", id = "scenario_file", value_name = "FILE")]
+    scenario_file: Option<PathBuf>,
+    /// Each experiment in under a minute: park2020 5 s settling, 5 000 samples, 3 rounds;
+    /// chen2016 10 s per run.
+    #[arg(long)]
+    quick: bool,
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
+    #[arg(long)]
+    host: Option<String>,
+    /// A segment file (as for `sim --config`) instead of the experiment's own segment.
+    #[arg(long)]
+    segment: Option<PathBuf>,
+    /// Methods (repeatable): none, conventional, park2020, chen2016, pi, ferrocat.
+    #[arg(long)]
+    method: Vec<String>,
+    /// Segment sizes (repeatable; park2020 default 2 and 6).
+    #[arg(long)]
+    slaves: Vec<usize>,
+    /// Cycle times in µs (repeatable where the experiment takes several).
+    #[arg(long)]
+    cycle_us: Vec<u64>,
+    /// park2020: rounds per (segment, method).
+    #[arg(long)]
+    rounds: Option<u32>,
+    #[arg(long)]
+    json: bool,
+    /// Folder for the CSV, the figures (SVG) and a Markdown report.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+impl LabArgs {
+    fn run(
+        self,
+        experiment: Option<ferrocat_lab::scenario::Experiment>,
+        file: Option<PathBuf>,
+    ) -> anyhow::Result<ExitCode> {
+        use ferrocat_lab::scenario::{CycleUs, Scenario};
+        anyhow::ensure!(file.is_none() || self.scenario_file.is_none(), "give the scenario file once");
+        let mut base = match file.or(self.scenario_file) {
+            Some(f) => Scenario::from_file(&f)?,
+            None => Scenario::default(),
+        };
+        if self.quick {
+            base = base.quick();
+        }
+        let over = Scenario {
+            host: self.host,
+            seed: self.seed,
+            segment: self.segment.map(|p| std::env::current_dir().unwrap_or_default().join(p)),
+            methods: (!self.method.is_empty()).then_some(self.method),
+            slaves: (!self.slaves.is_empty()).then_some(self.slaves),
+            cycle_us: (!self.cycle_us.is_empty()).then_some(CycleUs::Many(self.cycle_us)),
+            rounds: self.rounds,
+            ..Scenario::default()
+        };
+        // The flags checked on their own first, so that an error names the flag, not the file.
+        if let Some(e) = experiment.or(base.experiment) {
+            Scenario { experiment: Some(e), ..over.clone() }.plan(None, self.quick)?;
+        }
+        let plan = base.overlay(over).plan(experiment, self.quick)?;
+        lab::run(plan, self.json, self.out.as_deref())
+    }
 }
 
 #[derive(Subcommand)]
@@ -304,15 +328,15 @@ fn main() -> ExitCode {
         Command::Sim { config, device, iface, udp, report, seed, .. } => {
             sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
         }
-        Command::Lab { experiment: LabCmd::Park2020 { quick, seed, host, slaves, rounds, json, out } } => {
-            lab::park2020(lab::ParkArgs { quick, seed, host, slaves, rounds, json, out })
-        }
-        Command::Lab { experiment: LabCmd::Paprocki2022 { seed, host, json, out } } => {
-            lab::paprocki2022(seed, &host, json, out.as_deref())
-        }
-        Command::Lab { experiment: LabCmd::Robustness { seed, host, json } } => lab::robustness(seed, &host, json),
-        Command::Lab { experiment: LabCmd::Chen2016 { quick, seed, host, cycle_us, json, out } } => {
-            lab::chen2016(quick, seed, &host, cycle_us, json, out.as_deref())
+        Command::Lab { experiment } => {
+            use ferrocat_lab::scenario::Experiment;
+            match experiment {
+                LabCmd::Park2020(a) => a.run(Some(Experiment::Park2020), None),
+                LabCmd::Chen2016(a) => a.run(Some(Experiment::Chen2016), None),
+                LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
+                LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
+                LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
+            }
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
         Command::Scan { target, json } => master_cmd::scan(&target, json),

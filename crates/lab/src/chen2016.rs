@@ -21,6 +21,9 @@ pub struct Options {
     pub host: HostModel,
     /// The reference's crystal error (the master's clock is exact).
     pub reference_ppm: f64,
+    /// A segment of one's own instead of a coupler and two DC-synchronous outputs (its
+    /// slaves with `app = "dc"` are the ones whose lost and repeated cycles count).
+    pub segment: Option<SegmentConfig>,
 }
 
 impl Options {
@@ -32,6 +35,7 @@ impl Options {
             seed: 1,
             host,
             reference_ppm: 40.0,
+            segment: None,
         }
     }
     pub fn quick(host: HostModel) -> Self {
@@ -72,15 +76,23 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
          [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
         o.seed, o.reference_ppm
     );
-    let cfg: SegmentConfig = toml::from_str(&toml)?;
+    let cfg: SegmentConfig = match &o.segment {
+        Some(c) => SegmentConfig { seed: o.seed, ..c.clone() },
+        None => toml::from_str(&toml)?,
+    };
     let mut m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
     m.scan()?;
     m.configure()?;
+    let synced: Vec<u16> = (0..m.slaves.len())
+        .filter(|&k| crate::node_of(&m, k).is_some_and(|n| m.engine.io.seg.nodes[n].esc.app().as_any().is::<SyncApp>()))
+        .map(|k| k as u16)
+        .collect();
+    anyhow::ensure!(!synced.is_empty(), "the segment has no DC-synchronous slave (app = \"dc\")");
     // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
     m.init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
         sync0_shift_ns: (cycle_ns / 2) as i32,
-        sync0_slaves: Some(vec![1, 2]),
+        sync0_slaves: Some(synced.clone()),
         start_delay_ns: 20_000_000,
         ..DcConfig::default()
     })?;
@@ -131,7 +143,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         cycles,
         lost,
         repeated,
-        loss_rate: lost as f64 / (2 * cycles).max(1) as f64,
+        loss_rate: lost as f64 / (synced.len() as u64 * cycles).max(1) as f64,
         frames_lost: st.lost + m.cycle_stats().lost_frames,
         trace,
     })

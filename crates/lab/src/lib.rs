@@ -6,6 +6,7 @@ pub mod gpi;
 pub mod paprocki2022;
 pub mod park2020;
 pub mod robustness;
+pub mod scenario;
 pub mod stats;
 
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
@@ -19,28 +20,47 @@ pub const RFM_METHODS: [&str; 3] = ["conventional", "park2020", "ferrocat"];
 /// Every method the lab knows.
 pub const METHODS: [&str; 6] = ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat"];
 
-/// A line of `slaves` DC slaves (EK1100-like, E-Bus hops), crystals spread ±50 ppm by `seed`,
+/// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
+pub fn line(slaves: usize) -> SegmentConfig {
+    let mut cfg = SegmentConfig { drift_spread_ppm: Some(50.0), ..SegmentConfig::default() };
+    cfg.devices = (0..slaves)
+        .map(|_| ferrocat_segment::DeviceToml { builtin: Some("EK1100".into()), ..Default::default() })
+        .collect();
+    cfg
+}
+
+/// `cfg` (its own seed replaced by `seed`, so that rounds differ and the scenario's seed rules)
 /// brought up and DC-initialised, in virtual time on `host`.
-pub fn segment(slaves: usize, host: HostModel, seed: u64) -> anyhow::Result<Master<VirtualIo>> {
-    let mut toml = format!("seed = {seed}\ndrift_spread_ppm = 50.0\n");
-    for _ in 0..slaves {
-        toml.push_str("[[device]]\nbuiltin = 'EK1100'\n");
-    }
-    let cfg: SegmentConfig = toml::from_str(&toml)?;
+pub fn segment(cfg: &SegmentConfig, host: HostModel, seed: u64) -> anyhow::Result<Master<VirtualIo>> {
+    let cfg = SegmentConfig { seed, ..cfg.clone() };
     let mut m = Master::new(VirtualIo::new(cfg.build()?, host, seed));
     m.bring_up()?;
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
     Ok(m)
 }
 
-/// The master's clock minus slave `k`'s system time now (Park 2020's sign: positive when the
-/// slave lags), on the low 32 bits so that 32-bit DCs compare too; `None` outside a simulator.
+/// The positions of the slaves with a DC unit, the reference first; an error if there are none.
+pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
+    let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_dc).map(|(k, _)| k).collect();
+    anyhow::ensure!(!dc.is_empty(), "the segment has no slave with distributed clocks");
+    Ok(dc)
+}
+
+/// The master's clock minus the system time of the slave at position `k` now (Park 2020's
+/// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
+/// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
     let t = m.engine.io.now_ns();
     let master = m.master_system_time() as u32;
-    let dc = m.engine.io.segment()?.nodes.get(k)?.esc.dc.as_ref();
-    let slave = dc.map(|d| d.system_at(t) as u32).unwrap_or(master);
+    let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
+    let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)
+}
+
+/// The segment node of the slave at position `k`, by its station address.
+pub fn node_of<I: Io>(m: &Master<I>, k: usize) -> Option<usize> {
+    let station = m.slaves.get(k)?.station;
+    m.engine.io.segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
 }
 
 /// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the

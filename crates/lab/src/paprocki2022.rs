@@ -18,6 +18,9 @@ pub struct Options {
     pub samples: usize,
     pub seed: u64,
     pub host: HostModel,
+    /// A segment of one's own instead of a coupler and two DC slaves: the first two DC slaves
+    /// after the reference stand for the drives.
+    pub segment: Option<SegmentConfig>,
 }
 
 impl Options {
@@ -29,6 +32,7 @@ impl Options {
             samples: 1000,
             seed: 1,
             host,
+            segment: None,
         }
     }
 }
@@ -59,12 +63,19 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
          [[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL2004'\n",
         o.seed
     );
-    let cfg: SegmentConfig = toml::from_str(&toml)?;
+    let cfg: SegmentConfig = match &o.segment {
+        Some(c) => SegmentConfig { seed: o.seed, ..c.clone() },
+        None => toml::from_str(&toml)?,
+    };
     let mut m = Master::new(ferrocat_master::io::VirtualIo::new(cfg.build()?, o.host, o.seed));
     m.bring_up()?;
+    let dc = crate::dc_slaves(&m)?;
+    anyhow::ensure!(dc.len() >= 3, "two drives need a reference and two more DC slaves; the segment has {}", dc.len());
+    let drives = [dc[1], dc[2]];
+    let nodes = drives.map(|k| crate::node_of(&m, k).unwrap_or(k) as u16);
     m.init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
-        sync0_slaves: Some(vec![1, 2]),
+        sync0_slaves: Some(drives.iter().map(|&k| k as u16).collect()),
         start_delay_ns: 10_000_000,
         ..DcConfig::default()
     })?;
@@ -83,7 +94,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         anyhow::ensure!(k < settle + 100 * o.samples as u64, "SYNC0 pulses stopped");
         if k >= settle {
             // The two drives' pulses for the same system time.
-            sync0.sample(&m.engine.io.seg, &[1, 2]);
+            sync0.sample(&m.engine.io.seg, &nodes);
         }
     }
     let (mean, sd, min, max, _) = sync0.figures();

@@ -7,6 +7,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::stats::Moments;
+use ferrocat_segment::SegmentConfig;
+
+/// The methods whose master clock this experiment compares with the slaves' (the
+/// reference-follows-master methods, and none at all).
+pub const METHODS: [&str; 4] = ["none", "conventional", "park2020", "ferrocat"];
 
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -20,6 +25,9 @@ pub struct Options {
     pub sample_every: u64,
     pub seed: u64,
     pub host: HostModel,
+    /// A segment of one's own instead of the line of `slaves` EK1100s (`slaves` then only
+    /// labels the rows).
+    pub segment: Option<SegmentConfig>,
 }
 
 impl Options {
@@ -35,6 +43,7 @@ impl Options {
             sample_every: 2,
             seed: 1,
             host,
+            segment: None,
         }
     }
 
@@ -94,7 +103,9 @@ struct Round {
 }
 
 fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> anyhow::Result<Round> {
-    let mut m = crate::segment(slaves, opts.host, seed)?;
+    let cfg = opts.segment.clone().unwrap_or_else(|| crate::line(slaves));
+    let mut m = crate::segment(&cfg, opts.host, seed)?;
+    let dc = crate::dc_slaves(&m)?;
     let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
@@ -105,7 +116,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
     }
     let mut last_violation: Option<u64> = None;
-    let last = slaves - 1;
+    let (reference, last) = (dc[0], dc[dc.len() - 1]);
     // One GPI rig per slave measured, as in the paper's set-up.
     let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
     let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
@@ -116,10 +127,11 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         if k % opts.sample_every != 0 {
             continue;
         }
-        let e_ref = crate::clock_error_ns(&mut m, 0).unwrap_or_default();
+        let e_ref = crate::clock_error_ns(&mut m, reference).unwrap_or_default();
         let e_last = crate::clock_error_ns(&mut m, last).unwrap_or_default();
-        let spread = (1..slaves)
-            .map(|s| (crate::clock_error_ns(&mut m, s).unwrap_or_default() - e_ref).abs())
+        let spread = dc[1..]
+            .iter()
+            .map(|&s| (crate::clock_error_ns(&mut m, s).unwrap_or_default() - e_ref).abs())
             .max()
             .unwrap_or(0);
         if spread > 100 || e_ref.abs() > 1_000 {

@@ -25,6 +25,8 @@ pub struct Options {
     pub after_s: f64,
     pub seed: u64,
     pub host: HostModel,
+    /// A segment of one's own instead of the line of `slaves` EK1100s.
+    pub segment: Option<ferrocat_segment::SegmentConfig>,
 }
 
 impl Options {
@@ -39,6 +41,7 @@ impl Options {
             after_s: 10.0,
             seed: 1,
             host,
+            segment: None,
         }
     }
 }
@@ -67,7 +70,10 @@ pub struct Row {
 }
 
 fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
-    let mut m = crate::segment(o.slaves, o.host, o.seed)?;
+    let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
+    let mut m = crate::segment(&cfg, o.host, o.seed)?;
+    let reference = crate::dc_slaves(&m)?[0];
+    let reference_node = crate::node_of(&m, reference).unwrap_or(0);
     let mut sync = crate::method(method, &mut m, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let per_s = 1e9 / o.cycle_ns as f64;
@@ -84,7 +90,9 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
             let now = m.engine.io.now_ns();
             match scenario {
                 "loss-1pct" => m.engine.io.seg.loss_probability = 0.01,
-                "drift-step-50ppm" => m.engine.io.seg.schedule(now, Event::DriftStep { node: 0, delta_ppb: 50_000 }),
+                "drift-step-50ppm" => {
+                    m.engine.io.seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
+                }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
                 other => anyhow::bail!("unknown scenario {other:?} (known: {})", SCENARIOS.join(", ")),
@@ -93,7 +101,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         next += o.cycle_ns;
         m.engine.io.sleep_until(next);
         m.sync_step(sync.as_mut(), &mut st)?;
-        let e = crate::clock_error_ns(&mut m, 0).unwrap_or_default() as f64;
+        let e = crate::clock_error_ns(&mut m, reference).unwrap_or_default() as f64;
         if k >= settle {
             errors_after.push(e);
             if k >= settle + after / 2 {

@@ -8,7 +8,7 @@ pub mod od_build;
 mod segment;
 pub mod timing;
 
-pub use config::{load_device, DeviceSource, SegmentConfig, SegmentError};
+pub use config::{load_device, DeviceSource, DeviceToml, SegmentConfig, SegmentError};
 pub use segment::{Event, Node, Peer, Segment, SegmentStats};
 
 use ferrocat_wire::ethernet::{EthernetRepr, ETHERTYPE_ETHERCAT, ETHERTYPE_IPV4};

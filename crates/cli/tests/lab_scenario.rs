@@ -1,0 +1,84 @@
+//! `ferrocat lab run SCENARIO.toml` and `--scenario`: the shipped scenarios, a segment of one's
+//! own, the command line over a file, and bad files.
+use std::process::Command;
+
+fn ferrocat(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        // One core: the live tests running beside this one need the other.
+        .env("RAYON_NUM_THREADS", "1")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn a_scenario_with_a_tree_segment_runs_and_the_flags_override_it() {
+    let out = ferrocat(&[
+        "lab",
+        "run",
+        "scenarios/park2020-tree.toml",
+        "--quick",
+        "--rounds",
+        "1",
+        "--seed",
+        "3",
+        "--method",
+        "conventional",
+        "--method",
+        "ferrocat",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["seed"].as_u64(), v["rounds"].as_u64()), (Some(3), Some(1)), "{v}");
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{v}");
+    // The tree of scenarios/segments/tree.toml: six devices, its host pc-rt.
+    assert!(rows.iter().all(|r| r["slaves"] == 6 && r["host"] == "pc-rt"), "{v}");
+    let gmean = |m: &str| rows.iter().find(|r| r["method"] == m).unwrap()["last_gmean_us"].as_f64().unwrap();
+    // Behind a 100BASE-TX branch and at a 32-bit DC, ferrocat still beats conventional.
+    assert!(gmean("ferrocat").abs() < gmean("conventional").abs() / 4.0, "{v}");
+}
+
+#[test]
+fn robustness_writes_its_report() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-robust-{}", std::process::id()));
+    let out = ferrocat(&[
+        "lab",
+        "robustness",
+        "--scenario",
+        "scenarios/robustness.toml",
+        "--method",
+        "ferrocat",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let md = std::fs::read_to_string(dir.join("robustness.md")).unwrap();
+    assert!(md.contains("| drift-step-50ppm | ferrocat |"), "{md}");
+    assert!(std::fs::read_to_string(dir.join("robustness.csv")).unwrap().starts_with("scenario,method"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_scenarios_are_named_with_their_key() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-scen-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (text, needle) in [
+        ("experiment = 'park2020'\nsamples = 'many'\n", "samples"),
+        ("experiment = 'chen2016'\nslaves = [2]\n", "`slaves`: does not apply to chen2016"),
+        ("experiment = 'park2020'\nsegment = 'missing.toml'\n", "missing.toml"),
+        ("experiment = 'park2020'\n[oops\n", "line 2"),
+    ] {
+        let f = dir.join("s.toml");
+        std::fs::write(&f, text).unwrap();
+        let out = ferrocat(&["lab", "run", f.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{text}: {err}");
+        assert!(err.contains("s.toml") && err.contains(needle), "{text}: {err}");
+    }
+    let out = ferrocat(&["lab", "chen2016", "--rounds", "2"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--rounds: does not apply to chen2016"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
