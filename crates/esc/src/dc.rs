@@ -114,7 +114,8 @@ impl DcUnit {
 
     fn local_ext_at(&self, t_ns: u64) -> u64 {
         let (ticks, _, corr_ns, _) = self.project(t_ns as i128 - self.t_ns as i128);
-        (10 * ticks + corr_ns).max(0) as u64
+        // The counter is 64 bits wide and wraps (a unit powered on near 2^64 does).
+        (10 * ticks as i128 + corr_ns as i128).max(0) as u64
     }
 
     /// The accumulators `dt` ns after the folded time: (ticks, phase remainder, correction ns,
@@ -322,18 +323,26 @@ impl DcUnit {
         }
         let ahead = ahead as u64;
         let reached = |t: u64| (self.system_ext_at(t).wrapping_sub(next) as i64) >= 0;
-        let mut t = from_ns.saturating_add(ahead.saturating_sub(ahead / 1000 + 10));
+        // Bracket the pulse between `lo` (not reached) and `hi` (reached), starting from the
+        // estimate for a clock 0.1 % fast and galloping forward with doubling steps, then
+        // bisect: at most ~130 evaluations however far the start time or fast the clock.
+        let mut lo = from_ns;
+        let mut hi = from_ns.saturating_add(ahead.saturating_sub(ahead / 1000 + 10));
         let mut step = 1u64 << 16;
-        while !reached(t) {
-            t = t.saturating_add(step);
+        while !reached(hi) && hi < u64::MAX {
+            lo = hi;
+            hi = hi.saturating_add(step);
+            step = step.saturating_mul(2);
         }
-        while step > 0 {
-            if t >= from_ns + step && reached(t - step) {
-                t -= step;
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if reached(mid) {
+                hi = mid;
             } else {
-                step >>= 1;
+                lo = mid;
             }
         }
+        let t = hi;
         Some(t)
     }
 }
@@ -341,6 +350,48 @@ impl DcUnit {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Whatever the power-on time, offset, delay, crystal (±1000 ppm), samples written to
+        /// 0x0910 and SYNC0 set-up, on either width: no overflow or panic, and the local
+        /// time advances by the elapsed true time (within the crystal and loop's 0.2 %) across
+        /// every wrap.
+        #[test]
+        fn the_dc_unit_never_overflows(
+            wide in any::<bool>(),
+            local0 in any::<u64>(),
+            offset in any::<u64>(),
+            delay in any::<u32>(),
+            drift_ppb in -1_000_000i64..1_000_000,
+            samples in proptest::collection::vec((0u64..20_000_000, any::<u32>()), 1..40),
+            start in any::<u64>(),
+            cycle in any::<u32>(),
+            activation in any::<u8>(),
+        ) {
+            let width = if wide { DcWidth::Bits64 } else { DcWidth::Bits32 };
+            let mut dc = DcUnit::new(width, 1_000, local0, drift_ppb);
+            (dc.offset, dc.delay) = (offset, delay);
+            dc.sync.start_time = start;
+            dc.sync.cycle0_ns = cycle.max(1_000);
+            dc.sync.activation = activation;
+            dc.sync_activation_written(1_000);
+            let mut t = 1_000u64;
+            let mut pulses = Vec::new();
+            for (dt, received) in samples {
+                let before = dc.local_at(t);
+                t += dt;
+                let elapsed = dc.local_at(t).wrapping_sub(before) & dc.mask(u64::MAX);
+                prop_assert!((elapsed as f64 - dt as f64).abs() <= dt as f64 * 2e-3 + 20.0, "{elapsed} after {dt}");
+                dc.tcl_sample(t, received);
+                let _ = (dc.system_at(t), dc.ecat_system_time(t), dc.difference_register());
+                pulses.clear();
+                dc.take_sync0_until(t, &mut pulses);
+                prop_assert!(pulses.len() <= (dt / 1_000 + 2) as usize);
+                let _ = dc.next_sync0_true(t);
+            }
+        }
+    }
 
     #[test]
     fn ticks_and_drift() {
@@ -376,6 +427,16 @@ mod tests {
         let mut dc = DcUnit::new(DcWidth::Bits32, 0, 0, 0);
         dc.offset = 0xFFFF_FFF0;
         assert_eq!(dc.system_at(100), 84);
+    }
+
+    #[test]
+    fn the_64_bit_local_time_wraps_too() {
+        // Powered on 5 µs before the 64-bit wrap: 10 µs later the counter reads 5 µs, to
+        // within its 10 ns tick.
+        let dc = DcUnit::new(DcWidth::Bits64, 0, u64::MAX - 4_999, 0);
+        assert!((4_990..=5_000).contains(&dc.local_at(10_000)), "{}", dc.local_at(10_000));
+        let dc32 = DcUnit::new(DcWidth::Bits32, 0, 0xFFFF_FFFF - 4_999, 0);
+        assert!((4_990..=5_000).contains(&dc32.local_at(10_000)), "{}", dc32.local_at(10_000));
     }
 
     #[test]

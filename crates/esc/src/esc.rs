@@ -298,6 +298,16 @@ impl Esc {
         self.mem[a] = self.mem[a].saturating_add(1);
     }
 
+    /// The DC local time this ESC starts from at power-on (default 0; a real ESC's counter
+    /// starts at 0 but slaves powered at different moments differ, and a value near 2^32 or
+    /// 2^64 makes latched times wrap soon after the start).
+    pub fn set_power_on_local_time(&mut self, local_ns: u64) {
+        self.dc_init.1 = local_ns;
+        if let Some(dc) = &self.dc {
+            self.dc = Some(DcUnit::new(dc.width, self.now_ns, local_ns, self.dc_init.0));
+        }
+    }
+
     pub fn station_address(&self) -> u16 {
         u16::from_le_bytes([self.mem[0x10], self.mem[0x11]])
     }

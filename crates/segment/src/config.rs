@@ -77,6 +77,21 @@ impl Number {
             Number::Text(s) => ferrocat_esi::parse_number(s).and_then(|v| u32::try_from(v).ok()),
         }
     }
+
+    /// The whole u64 range: TOML integers stop at 2^63 − 1, so larger values come as text
+    /// ("0xFFFF_FFFF_FFFF_0000" or decimal).
+    fn get_u64(&self) -> Option<u64> {
+        match self {
+            Number::Int(v) => u64::try_from(*v).ok(),
+            Number::Text(s) => {
+                let t = s.trim().replace('_', "");
+                match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+                    Some(h) => u64::from_str_radix(h, 16).ok(),
+                    None => t.parse().ok(),
+                }
+            }
+        }
+    }
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -91,6 +106,8 @@ pub struct DeviceToml {
     /// "et1100" (default), "lan9252", "esc20" (32-bit DC) or "nodc".
     pub esc: Option<String>,
     pub drift_ppm: Option<f64>,
+    /// The DC local time at power-on (ns, default 0; text for values beyond 2^63).
+    pub local_time_ns: Option<Number>,
     pub wander_ppb_per_sqrt_s: Option<f64>,
     pub parent: Option<NodeRef>,
     pub parent_port: Option<u8>,
@@ -289,6 +306,12 @@ impl SegmentConfig {
                 }
             };
             let mut esc = Esc::new(config, sii, app, drift_ppb, 0);
+            if let Some(n) = &d.local_time_ns {
+                let t = n.get_u64().ok_or_else(|| {
+                    device_err(format!("device {i}"), format!("local_time_ns {n:?} is not a u64 number of ns"))
+                })?;
+                esc.set_power_on_local_time(t);
+            }
             if let Some(us) = d.al_response_us {
                 if !(0.0..=10e6).contains(&us) {
                     return Err(device_err(format!("device {i}"), format!("al_response_us {us} out of range")));
