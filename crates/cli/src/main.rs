@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod demo;
 mod esi;
 mod lab;
+mod lab_live;
 mod master_cmd;
 mod pcap;
 mod plots;
@@ -71,11 +72,15 @@ enum Command {
         /// Write a JSON report of the devices (state, outputs) here on exit.
         #[arg(long)]
         report: Option<PathBuf>,
+        /// With --iface: write, on exit, a CSV of every frame's CLOCK_MONOTONIC instant and each
+        /// device's true system time then (what `lab live` compares the master's clock with).
+        #[arg(long, requires = "iface")]
+        clock_log: Option<PathBuf>,
         /// Seed for oscillators and faults (overrides the file's).
         #[arg(long)]
         seed: Option<u64>,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
-        #[arg(long, conflicts_with_all = ["config", "device", "iface", "udp", "report"])]
+        #[arg(long, conflicts_with_all = ["config", "device", "iface", "udp", "report", "clock_log"])]
         bench: bool,
         #[arg(long, requires = "bench")]
         json: bool,
@@ -178,6 +183,27 @@ enum LabCmd {
     /// Robustness: 1 % frame loss, a 50 ppm crystal step and a 3-cycle overrun, once each after
     /// settling, for every reference-follows-master method: peak excursion and recovery.
     Robustness(LabArgs),
+    /// The master–slave clock errors on this machine's real kernel: the master in real time on a
+    /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root).
+    Live {
+        /// Methods (repeatable): none, conventional, park2020, ferrocat.
+        #[arg(long, default_values = ["conventional", "park2020", "ferrocat"])]
+        method: Vec<String>,
+        #[arg(long, default_value_t = 2)]
+        slaves: usize,
+        #[arg(long, default_value_t = 1000)]
+        cycle_us: u64,
+        /// Seconds of cyclic operation before measuring.
+        #[arg(long, default_value_t = 2.0)]
+        settle_s: f64,
+        /// Seconds measured per method.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        json: bool,
+    },
     /// Run the experiment a scenario file names (docs/clock-sync.md, scenarios/).
     Run {
         scenario: PathBuf,
@@ -325,8 +351,8 @@ fn main() -> ExitCode {
         },
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
         Command::Sim { bench: true, json, .. } => sim::bench(json),
-        Command::Sim { config, device, iface, udp, report, seed, .. } => {
-            sim::run(sim::SimArgs { config, devices: device, iface, udp, report, seed })
+        Command::Sim { config, device, iface, udp, report, clock_log, seed, .. } => {
+            sim::run(sim::SimArgs { config, devices: device, iface, udp, report, clock_log, seed })
         }
         Command::Lab { experiment } => {
             use ferrocat_lab::scenario::Experiment;
@@ -336,6 +362,17 @@ fn main() -> ExitCode {
                 LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
                 LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
                 LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
+                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, json } => {
+                    lab_live::run(lab_live::LiveArgs {
+                        methods: method,
+                        slaves,
+                        cycle_us,
+                        settle_s,
+                        seconds,
+                        seed,
+                        json,
+                    })
+                }
             }
         }
         Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),

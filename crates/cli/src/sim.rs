@@ -16,6 +16,7 @@ pub struct SimArgs {
     pub iface: Option<String>,
     pub udp: Option<String>,
     pub report: Option<PathBuf>,
+    pub clock_log: Option<PathBuf>,
     pub seed: Option<u64>,
 }
 
@@ -119,7 +120,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             if !rt.refused.is_empty() {
                 eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
             }
-            serve_raw(&mut seg, &sock, &stop)?
+            serve_raw(&mut seg, &sock, &stop, a.clock_log.is_some())?
         }
         (None, Some(addr)) => {
             let sock = std::net::UdpSocket::bind(addr).with_context(|| format!("binding UDP {addr}"))?;
@@ -143,7 +144,35 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     if let Some(p) = a.report {
         std::fs::write(&p, format!("{r:#}\n")).with_context(|| format!("writing {}", p.display()))?;
     }
+    if let (Some(p), Some(log)) = (a.clock_log, &stats.clock_log) {
+        write_clock_log(&p, &seg, log).with_context(|| format!("writing {}", p.display()))?;
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The clock log as CSV: `monotonic_ns` and one `system_ns_K` column per device (empty
+/// without DC).
+fn write_clock_log(p: &Path, seg: &Segment, log: &[u64]) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut w = std::io::BufWriter::new(std::fs::File::create(p)?);
+    let n = seg.nodes.len();
+    write!(w, "monotonic_ns")?;
+    for k in 0..n {
+        write!(w, ",system_ns_{k}")?;
+    }
+    writeln!(w)?;
+    for row in log.chunks_exact(n + 1) {
+        write!(w, "{}", row[0])?;
+        for &v in &row[1..] {
+            if v == u64::MAX {
+                write!(w, ",")?;
+            } else {
+                write!(w, ",{v}")?;
+            }
+        }
+        writeln!(w)?;
+    }
+    w.flush()
 }
 
 /// `ferrocat rtt`: round trips of an LRW + FRMW frame through whatever answers on `iface`.

@@ -259,8 +259,18 @@ impl RawSocket {
 
     /// The kernel's transmit timestamp of the last frame sent, if it has arrived.
     pub fn tx_timestamp(&self) -> Option<u64> {
+        // Every frame sent queues a stamp, whether or not anyone reads it: the newest is the
+        // last frame's; older ones are drained (reading only the first gave a stamp hundreds
+        // of frames stale after a bring-up, found by `lab live`).
         let mut b = [0u8; 64];
-        self.recvmsg(&mut b, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT).ok().flatten().and_then(|(_, t)| t)
+        let mut newest = None;
+        for _ in 0..4096 {
+            match self.recvmsg(&mut b, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT) {
+                Ok(Some((_, t))) => newest = t.or(newest),
+                _ => break,
+            }
+        }
+        newest
     }
 
     /// The next frame, or `None` after the receive timeout.
@@ -317,6 +327,21 @@ pub struct RealTime {
     pub cpu: Option<usize>,
     /// Why something could not be set, one line each.
     pub refused: Vec<String>,
+}
+
+/// Moves the calling thread into the network namespace `name` (as made by `ip netns add`,
+/// under /run/netns); sockets opened afterwards belong to it.
+pub fn enter_netns(name: &str) -> io::Result<()> {
+    if name.is_empty() || name.contains('/') || name.starts_with('.') {
+        return Err(io::Error::new(io::ErrorKind::InvalidInput, format!("bad namespace name {name:?}")));
+    }
+    let f = std::fs::File::open(format!("/run/netns/{name}"))?;
+    use std::os::fd::AsRawFd;
+    // SAFETY: setns takes a namespace file descriptor we hold open for the call.
+    if unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
 }
 
 /// Locks memory, switches the calling thread to SCHED_FIFO at `priority` and pins it to `cpu`,

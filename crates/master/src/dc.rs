@@ -60,6 +60,11 @@ pub struct DcReport {
 }
 
 impl<I: Io> Master<I> {
+    /// The fixed offset from the world's clock to the master's DC time, once taken.
+    pub fn epoch_offset_ns(&self) -> Option<u64> {
+        self.epoch_offset_ns
+    }
+
     /// The master's clock as DC system time (ns since 2000): the world's clock plus a fixed
     /// offset taken once (for real time from CLOCK_REALTIME).
     pub fn master_system_time(&mut self) -> u64 {

@@ -22,6 +22,10 @@ pub struct ServeStats {
     pub busy_ns: u64,
     /// The first 100 000 per-frame times (receive to send), for percentiles.
     pub busy_samples_ns: Vec<u32>,
+    /// With clock logging: per frame, the CLOCK_MONOTONIC instant it was processed at and
+    /// every node's true system time then (`u64::MAX` without DC), `1 + nodes` values a row —
+    /// what `ferrocat lab live` compares the master's clock with.
+    pub clock_log: Option<Vec<u64>>,
 }
 
 impl ServeStats {
@@ -62,14 +66,18 @@ fn handle(seg: &mut Segment, frame: &mut [u8], t_ns: u64, stats: &mut ServeStats
     }
 }
 
-/// Serves `seg` on a raw socket until `stop` is set.
-pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool) -> io::Result<ServeStats> {
+/// Serves `seg` on a raw socket until `stop` is set; `log_clocks` fills `clock_log`.
+pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool, log_clocks: bool) -> io::Result<ServeStats> {
     let t0 = monotonic_ns();
     let mut buf = vec![0u8; 9216];
-    let mut stats = ServeStats::default();
+    let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
     // The segment's time only moves forward: a frame is processed at its kernel receive time
-    // (when it reached the "wire"), as hardware would, unless the idle clock already passed it.
+    // (when it reached the "wire") plus half of what answering costs the simulator (receive
+    // stamp to send, a running mean). Hardware answers within ns; a program answers tens of µs
+    // late, and processing at arrival would put all of that on the way back — an asymmetry no
+    // round-trip measurement can see. Half each way makes it a long, symmetric cable instead.
     let mut last = 0u64;
+    let mut answer_ns = 0u64;
     while !stop.load(Ordering::Relaxed) {
         let Some((n, stamp)) = sock.recv_stamped(&mut buf)? else {
             last = last.max(monotonic_ns() - t0);
@@ -78,11 +86,19 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool) -> io::
         };
         let start = monotonic_ns();
         let arrived = stamp.map_or(start, |s| s.clamp(t0, start)) - t0;
-        last = last.max(arrived);
+        last = last.max(arrived + answer_ns / 2);
         if handle(seg, &mut buf[..n], last, &mut stats) {
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
-            stats.record(monotonic_ns() - start);
+            let sent = monotonic_ns();
+            stats.record(sent - start);
+            // A running mean over ~16 frames, outliers (a preempted answer) capped at 1 ms.
+            let took = (sent - t0).saturating_sub(arrived).min(1_000_000);
+            answer_ns = (answer_ns * 15 + took) / 16;
+        }
+        if let Some(log) = stats.clock_log.as_mut() {
+            log.push(t0 + last);
+            log.extend(seg.nodes.iter().map(|n| n.esc.dc.as_ref().map_or(u64::MAX, |d| d.system_at(last))));
         }
     }
     Ok(stats)

@@ -1,0 +1,288 @@
+//! `ferrocat lab live`: the master–slave clock measurement on this machine's real kernel. The
+//! master runs in real time on one end of a veth pair in a network namespace of its own,
+//! `ferrocat sim` serves the other end in another, and the simulator logs every slave's true
+//! system time at each frame's CLOCK_MONOTONIC instant; the master's clock is CLOCK_MONOTONIC
+//! plus its epoch offset, so both are compared on the same time base.
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitCode, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, ensure, Context};
+use ferrocat_lab::stats::Moments;
+use ferrocat_master::io::Io;
+use ferrocat_master::sync::Coupling;
+use ferrocat_master::DcConfig;
+use serde::Serialize;
+
+use crate::outln;
+
+pub struct LiveArgs {
+    pub methods: Vec<String>,
+    pub slaves: usize,
+    pub cycle_us: u64,
+    pub settle_s: f64,
+    pub seconds: f64,
+    pub seed: u64,
+    pub json: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Row {
+    pub method: String,
+    pub slaves: usize,
+    pub cycle_us: u64,
+    /// Master − reference and master − last slave over the measured part (µs).
+    pub ref_mean_us: f64,
+    pub ref_rms_us: f64,
+    pub last_mean_us: f64,
+    pub last_rms_us: f64,
+    /// Largest |master − slave| over all slaves and samples (µs).
+    pub max_abs_us: f64,
+    pub samples: u64,
+    pub cycles: u64,
+    pub frames_lost: u64,
+}
+
+/// Two network namespaces joined by a veth pair, removed on drop.
+struct Veth {
+    master_ns: String,
+    sim_ns: String,
+    master_if: String,
+    sim_if: String,
+}
+
+fn ip(args: &[&str]) -> anyhow::Result<()> {
+    let out = Command::new("ip").args(args).output().context("running ip (iproute2)")?;
+    ensure!(out.status.success(), "ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim());
+    Ok(())
+}
+
+impl Veth {
+    fn new() -> anyhow::Result<Veth> {
+        let id = std::process::id() % 100_000;
+        let v = Veth {
+            master_ns: format!("fcl{id}m"),
+            sim_ns: format!("fcl{id}s"),
+            master_if: format!("fcl{id}a"),
+            sim_if: format!("fcl{id}b"),
+        };
+        ip(&["netns", "add", &v.master_ns])?;
+        ip(&["netns", "add", &v.sim_ns])?;
+        ip(&[
+            "link",
+            "add",
+            &v.master_if,
+            "netns",
+            &v.master_ns,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            &v.sim_if,
+            "netns",
+            &v.sim_ns,
+        ])?;
+        for (ns, ifc) in [(&v.master_ns, &v.master_if), (&v.sim_ns, &v.sim_if)] {
+            ip(&["-n", ns, "link", "set", ifc, "up"])?;
+        }
+        Ok(v)
+    }
+}
+
+impl Drop for Veth {
+    fn drop(&mut self) {
+        for ns in [&self.master_ns, &self.sim_ns] {
+            let _ = Command::new("ip").args(["netns", "del", ns]).output();
+        }
+    }
+}
+
+/// `ferrocat sim` in the simulator's namespace; SIGTERM and wait on drop.
+struct Sim(Child);
+
+impl Sim {
+    fn start(v: &Veth, slaves: usize, seed: u64, log: &Path) -> anyhow::Result<Sim> {
+        let exe = std::env::current_exe().context("finding this executable")?;
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &v.sim_ns]).arg(exe).arg("sim");
+        for _ in 0..slaves {
+            c.args(["--device", "EK1100"]);
+        }
+        c.args(["--seed", &seed.to_string(), "--iface", &v.sim_if, "--clock-log"]).arg(log);
+        let mut sim = Sim(c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().context("starting ferrocat sim")?);
+        let mut err = sim.0.stderr.take().context("sim stderr")?;
+        let (t0, mut seen, mut b) = (Instant::now(), Vec::new(), [0u8; 256]);
+        while !String::from_utf8_lossy(&seen).contains(" on ") {
+            let n = err.read(&mut b).unwrap_or(0);
+            ensure!(
+                n > 0 && t0.elapsed() < Duration::from_secs(20),
+                "ferrocat sim: {}",
+                String::from_utf8_lossy(&seen)
+            );
+            seen.extend_from_slice(&b[..n]);
+        }
+        // Drain the rest (its statistics on exit) so that it never blocks on a full pipe.
+        std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+        Ok(sim)
+    }
+
+    fn stop(mut self) -> anyhow::Result<()> {
+        // SAFETY: kill sends a signal to our own child's pid.
+        unsafe { libc::kill(self.0.id() as i32, libc::SIGTERM) };
+        let st = self.0.wait()?;
+        ensure!(st.success(), "ferrocat sim exited with {st}");
+        Ok(())
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        // SAFETY: as in stop.
+        unsafe { libc::kill(self.0.id() as i32, libc::SIGTERM) };
+        let _ = self.0.wait();
+    }
+}
+
+/// What the master's side of one run knows: its clock's offset from CLOCK_MONOTONIC and the
+/// window it measured.
+struct MasterRun {
+    epoch_offset_ns: u64,
+    from_ns: u64,
+    to_ns: u64,
+    cycles: u64,
+    lost: u64,
+}
+
+fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
+    let target = crate::target::Target {
+        iface: Some(iface.into()),
+        udp: None,
+        force: false,
+        config: None,
+        device: Vec::new(),
+        seed: None,
+        esi: Vec::new(),
+        pcap: None,
+    };
+    let mut m = target.master()?;
+    m.bring_up()?;
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
+    let cycle_ns = a.cycle_us * 1000;
+    let mut sync = ferrocat_lab::method(method, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    let mut st = m.sync_state()?;
+    let start = m.engine.io.now_ns();
+    let from_ns = start + (a.settle_s * 1e9) as u64;
+    let to_ns = from_ns + (a.seconds * 1e9) as u64;
+    let (mut next, mut cycles) = (start, 0);
+    while next < to_ns {
+        next += cycle_ns;
+        m.engine.io.sleep_until(next);
+        m.sync_step(sync.as_mut(), &mut st)?;
+        cycles += 1;
+    }
+    let epoch_offset_ns = m.epoch_offset_ns().context("the master's clock was never read")?;
+    Ok(MasterRun { epoch_offset_ns, from_ns, to_ns, cycles, lost: st.lost })
+}
+
+/// Master − slave errors from the simulator's clock log over the master's window.
+fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Result<Row> {
+    let text = std::fs::read_to_string(log).with_context(|| format!("reading {}", log.display()))?;
+    let (mut reference, mut last, mut max_abs) = (Moments::default(), Moments::default(), 0f64);
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let v: Vec<Option<u64>> = line.split(',').map(|x| x.parse().ok()).collect();
+        let Some(Some(mono)) = v.first().copied() else { bail!("{}: line {}: no time", log.display(), i + 1) };
+        if mono < r.from_ns || mono > r.to_ns {
+            continue;
+        }
+        let master = mono.wrapping_add(r.epoch_offset_ns) as u32;
+        let e: Vec<f64> = v[1..].iter().flatten().map(|&s| master.wrapping_sub(s as u32) as i32 as f64).collect();
+        ensure!(e.len() == a.slaves, "{}: line {}: {} slave clocks, not {}", log.display(), i + 1, e.len(), a.slaves);
+        reference.push(e[0]);
+        last.push(e[e.len() - 1]);
+        max_abs = e.iter().fold(max_abs, |m, x| m.max(x.abs()));
+    }
+    ensure!(reference.n > 0, "the simulator logged no frame in the measured window");
+    Ok(Row {
+        method: method.into(),
+        slaves: a.slaves,
+        cycle_us: a.cycle_us,
+        ref_mean_us: reference.mean() / 1e3,
+        ref_rms_us: reference.rms() / 1e3,
+        last_mean_us: last.mean() / 1e3,
+        last_rms_us: last.rms() / 1e3,
+        max_abs_us: max_abs / 1e3,
+        samples: reference.n,
+        cycles: r.cycles,
+        frames_lost: r.lost,
+    })
+}
+
+pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
+    // SAFETY: geteuid has no preconditions.
+    ensure!(unsafe { libc::geteuid() } == 0, "lab live makes network namespaces and a veth pair: run it as root");
+    ensure!((1..=64).contains(&a.slaves), "--slaves must be between 1 and 64");
+    ensure!((100..=100_000).contains(&a.cycle_us), "--cycle-us must be between 100 and 100000");
+    ensure!(
+        a.seconds > 0.0 && a.seconds <= 3600.0 && (0.0..=3600.0).contains(&a.settle_s),
+        "--seconds/--settle-s out of range"
+    );
+    for m in &a.methods {
+        ensure!(
+            ferrocat_lab::park2020::METHODS.contains(&m.as_str()),
+            "--method {m:?}: one of {}",
+            ferrocat_lab::park2020::METHODS.join(", ")
+        );
+    }
+    let veth = Veth::new()?;
+    // This thread (the master) lives in its namespace from here on; the simulator is started
+    // in the other through `ip netns exec`.
+    ferrocat_link::enter_netns(&veth.master_ns).context("entering the master's namespace")?;
+    crate::target::go_real_time();
+    let mut rows = Vec::new();
+    for method in &a.methods {
+        let log: PathBuf = std::env::temp_dir().join(format!("ferrocat-live-{}-{method}.csv", std::process::id()));
+        let sim = Sim::start(&veth, a.slaves, a.seed, &log)?;
+        let run = run_master(&veth.master_if, &a, method).with_context(|| format!("method {method}"));
+        sim.stop()?;
+        let row = errors(&log, &run?, method, &a);
+        let _ = std::fs::remove_file(&log);
+        rows.push(row?);
+    }
+    if a.json {
+        outln!(
+            "{}",
+            serde_json::json!({ "experiment": "live", "seed": a.seed, "settle_s": a.settle_s, "seconds": a.seconds, "rows": rows })
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "Live — this kernel, veth pair, {} slaves, {} µs cycle, {} s after {} s; error = master − slave clock (true, from the simulator), µs",
+        a.slaves, a.cycle_us, a.seconds, a.settle_s
+    );
+    outln!(
+        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>6}",
+        "method",
+        "ref mean",
+        "ref RMS",
+        "last mean",
+        "last RMS",
+        "max |e|",
+        "samples",
+        "lost"
+    );
+    for r in &rows {
+        outln!(
+            "{:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>8} {:>6}",
+            r.method,
+            r.ref_mean_us,
+            r.ref_rms_us,
+            r.last_mean_us,
+            r.last_rms_us,
+            r.max_abs_us,
+            r.samples,
+            r.frames_lost
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
