@@ -136,6 +136,9 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
             .unwrap_or(0);
         if spread > 100 || e_ref.abs() > 1_000 {
             last_violation = Some(k);
+            if std::env::var("DBG").is_ok() {
+                eprintln!("viol k={k} spread={spread} e_ref={e_ref} {method}");
+            }
         }
         if k >= settle {
             r.reference.push(e_ref as f64);

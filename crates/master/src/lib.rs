@@ -14,6 +14,7 @@ mod master;
 mod process;
 mod slave;
 pub mod sync;
+pub mod topology;
 pub mod trajectory;
 
 pub use coe::{EntryInfo, ObjectInfo};

@@ -427,9 +427,25 @@ impl<I: Io> Master<I> {
         Ok(written)
     }
 
-    /// Parents and ports from the active ports, as SOEM infers them for a segment walked in
-    /// processing order.
+    /// Parents and ports: parsed from the processing order, the active ports, entry ports and
+    /// receive times where known (crate::topology); counting ports as SOEM does where no tree
+    /// fits or the segment is too long to parse.
     fn topology(&mut self) {
+        let view = self.port_views();
+        if view.len() <= 1024 {
+            if let Some(links) = crate::topology::infer(&view) {
+                for (s, l) in self.slaves.iter_mut().zip(links) {
+                    s.parent = l.map(|l| l.parent as u16);
+                    s.parent_port = l.map_or(0, |l| l.port);
+                }
+                return;
+            }
+        }
+        self.count_ports_topology();
+    }
+
+    /// SOEM's inference: every entry on port 0, the processing order a pre-order walk.
+    fn count_ports_topology(&mut self) {
         let count = self.slaves.len();
         let topo: Vec<i32> = self.slaves.iter().map(|s| s.active_ports.iter().filter(|&&a| a).count() as i32).collect();
         for i in 1..count {
@@ -497,60 +513,84 @@ impl<I: Io> Master<I> {
             }
         }
         self.topology();
-        // Loop time behind each port: time from the previous active port to this one.
-        let prev_active = |s: &Slave, port: u8| -> u8 {
-            let mut q = port;
-            for _ in 0..4 {
-                q = [2, 3, 1, 0][q as usize];
-                if s.active_ports[q as usize] || q == s.entry_port {
-                    return q;
-                }
-            }
-            s.entry_port
-        };
-        // A slave's own loop: from its entry to the last active port before returning.
-        let own_loop = |s: &Slave| -> i64 {
-            let mut q = s.entry_port;
-            let mut last = s.entry_port;
-            for _ in 0..3 {
-                q = [3, 2, 0, 1][q as usize];
-                if q == s.entry_port {
-                    break;
-                }
-                if s.active_ports[q as usize] {
-                    last = q;
-                }
-            }
-            s.receive_times[last as usize].wrapping_sub(s.receive_times[s.entry_port as usize]) as i32 as i64
-        };
-        let reference = self.slaves.iter().position(|s| s.has_dc);
-        for k in 0..self.slaves.len() {
-            if Some(k) == reference || !self.slaves[k].has_dc {
+        let view = self.port_views();
+        // When the frame reaches each DC slave's entry port, relative to the first DC slave on
+        // its way; parents before children, whatever the processing order.
+        let mut entry_at: Vec<Option<i64>> = vec![None; self.slaves.len()];
+        for k in self.tree_order() {
+            if !self.slaves[k].has_dc {
                 continue;
             }
-            let Some(mut via) = self.slaves[k].parent.map(|p| p as usize) else { continue };
             // Behind non-DC slaves (which latch no receive times), measure from the nearest DC
             // ancestor: the round trip it sees on the port toward them holds their hops both ways
             // and this slave's own loop.
-            let mut port = self.slaves[k].parent_port;
-            while !self.slaves[via].has_dc {
-                let Some(up) = self.slaves[via].parent else { break };
-                port = self.slaves[via].parent_port;
-                via = up as usize;
+            let (mut via, mut port) = (self.slaves[k].parent.map(|p| p as usize), self.slaves[k].parent_port);
+            while let Some(v) = via.filter(|&v| !self.slaves[v].has_dc) {
+                port = self.slaves[v].parent_port;
+                via = self.slaves[v].parent.map(|p| p as usize);
             }
-            let parent = &self.slaves[via];
-            if !parent.has_dc {
-                continue;
+            entry_at[k] = Some(match via.and_then(|v| Some((v, entry_at[v]?))) {
+                Some((v, at)) => {
+                    let before = view[v].before(port);
+                    // A child's hop is half of what the frame spent behind the port, less the
+                    // child's own loop (esc-spec §3.6).
+                    let hop = (view[v].between(before, port).unwrap_or(0) - view[k].span_ns().unwrap_or(0)) / 2;
+                    at + view[v].between(view[v].entry_port, before).unwrap_or(0) + hop
+                }
+                None => 0,
+            });
+        }
+        // The delay is between processing units: a slave entered on a port other than 0
+        // processes the frame after its branches before port 0 (0x0918 latches that instant).
+        let epu_at: Vec<Option<i64>> = self
+            .slaves
+            .iter()
+            .zip(&entry_at)
+            .map(|(s, at)| {
+                let since_entry = (s.receive_time_epu as u32).wrapping_sub(s.receive_times[s.entry_port as usize]);
+                Some((*at)? + since_entry as i32 as i64)
+            })
+            .collect();
+        let reference = self.slaves.iter().position(|s| s.has_dc);
+        let at_reference = reference.and_then(|r| epu_at[r]).unwrap_or(0);
+        for (s, at) in self.slaves.iter_mut().zip(epu_at) {
+            if s.has_dc {
+                s.delay_ns = at.map_or(0, |t| t - at_reference).clamp(0, u32::MAX as i64) as u32;
             }
-            let before = prev_active(parent, port);
-            let rtt =
-                parent.receive_times[port as usize].wrapping_sub(parent.receive_times[before as usize]) as i32 as i64;
-            let hop = (rtt - own_loop(&self.slaves[k])) / 2;
-            let earlier = parent.receive_times[before as usize]
-                .wrapping_sub(parent.receive_times[parent.entry_port as usize]) as i32 as i64;
-            self.slaves[k].delay_ns = (parent.delay_ns as i64 + earlier + hop).max(0) as u32;
         }
         Ok(())
+    }
+
+    fn port_views(&self) -> Vec<crate::topology::PortView> {
+        self.slaves
+            .iter()
+            .map(|s| crate::topology::PortView {
+                entry_port: s.entry_port,
+                active_ports: s.active_ports,
+                receive_times: s.has_dc.then_some(s.receive_times),
+                epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
+            })
+            .collect()
+    }
+
+    /// Positions with every parent before its children (breadth first from the first slave).
+    fn tree_order(&self) -> Vec<usize> {
+        let n = self.slaves.len();
+        let mut order: Vec<usize> = (0..n).filter(|&k| self.slaves[k].parent.is_none()).collect();
+        let mut seen = vec![false; n];
+        let mut i = 0;
+        while i < order.len() {
+            let p = order[i];
+            seen[p] = true;
+            for (c, s) in self.slaves.iter().enumerate() {
+                if !seen[c] && s.parent == Some(p as u16) {
+                    seen[c] = true;
+                    order.push(c);
+                }
+            }
+            i += 1;
+        }
+        order
     }
 
     /// Requests `state` from every slave and waits until all are there.

@@ -10,6 +10,7 @@
 //! drift_ppm = 12.5
 //! parent = 0        # index or name; default: the device before
 //! parent_port = 1   # default: the parent's next free port in processing order
+//! port = 0          # this device's port toward the parent (the master for the first)
 //! ```
 use std::path::{Path, PathBuf};
 
@@ -347,8 +348,20 @@ impl SegmentConfig {
         }
         seg.loss_probability = self.loss_probability.unwrap_or(0.0);
         seg.corruption_probability = self.corruption_probability.unwrap_or(0.0);
-        for (i, d) in self.devices.iter().enumerate().skip(1) {
+        for (i, d) in self.devices.iter().enumerate() {
             let place = format!("device {i} ({})", names[i]);
+            let port = d.port.unwrap_or(0);
+            if port > 3 || seg.nodes[i].port_kinds[port as usize].is_none() {
+                return Err(device_err(place, format!("port {port} does not exist on this device")));
+            }
+            if i == 0 {
+                // The first device's port toward the master.
+                if d.parent.is_some() || d.parent_port.is_some() {
+                    return Err(device_err(place, "the first device hangs on the master: no parent"));
+                }
+                seg.nodes[0].entry_port = port;
+                continue;
+            }
             let parent = match &d.parent {
                 None => i - 1,
                 Some(NodeRef::Index(p)) if *p < i => *p,
@@ -358,10 +371,6 @@ impl SegmentConfig {
                     .position(|x| x == n)
                     .ok_or_else(|| device_err(&place, format!("no earlier device named '{n}'")))?,
             };
-            let port = d.port.unwrap_or(0);
-            if port > 3 || seg.nodes[i].port_kinds[port as usize].is_none() {
-                return Err(device_err(place, format!("port {port} does not exist on this device")));
-            }
             let pport = match d.parent_port {
                 Some(p) => p,
                 None => {

@@ -103,4 +103,20 @@ fn builtin_devices_and_bad_descriptions() {
     assert!(e.contains("line 4") && e.contains("colour"), "{e}");
     let e = SegmentConfig::from_device_args(&["/nonexistent/x.bin".into()]).unwrap().build().unwrap_err().to_string();
     assert!(e.contains("/nonexistent/x.bin"), "{e}");
+    // Wiring: a port the device lacks, a parent for the first device, a port taken twice.
+    for (toml, want) in [
+        ("[[device]]\nbuiltin = 'EK1100'\nport = 3\n", "device 0 (EK1100): port 3 does not exist"),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\nparent_port = 1\n",
+            "device 0 (EK1100): the first device hangs on the master",
+        ),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\nport = 2\n[[device]]\nbuiltin = 'EL2004'\nparent_port = 2\n",
+            "device 1 (EL2004): port 2 of 'EK1100' is already in use",
+        ),
+    ] {
+        let cfg: SegmentConfig = toml::from_str(toml).unwrap();
+        let e = cfg.build().unwrap_err().to_string();
+        assert!(e.contains(want), "{toml}: {e}");
+    }
 }
