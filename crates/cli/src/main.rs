@@ -181,12 +181,12 @@ enum LabCmd {
     /// Paprocki & Erwiński 2022 Table 2: how simultaneously two DC slaves see SYNC0.
     Paprocki2022(LabArgs),
     /// Robustness: 1 % frame loss, a 50 ppm crystal step and a 3-cycle overrun, once each after
-    /// settling, for every reference-follows-master method: peak excursion and recovery.
+    /// settling, for every method of the error tables: peak excursion and recovery.
     Robustness(LabArgs),
     /// The master–slave clock errors on this machine's real kernel: the master in real time on a
     /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root).
     Live {
-        /// Methods (repeatable): none, conventional, park2020, ferrocat.
+        /// Methods (repeatable): none, conventional, park2020, ferrocat (ferrocat-mfr keeps its own clock, not measured live).
         #[arg(long, default_values = ["conventional", "park2020", "ferrocat"])]
         method: Vec<String>,
         #[arg(long, default_value_t = 2)]

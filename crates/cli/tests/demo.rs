@@ -16,7 +16,7 @@ fn the_demo_prints_every_method_as_json_and_writes_its_plots() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let methods = v["methods"].as_array().unwrap();
-    assert_eq!(methods.len(), 12, "6 methods × 2 cycle times");
+    assert_eq!(methods.len(), 14, "7 methods × 2 cycle times");
     for m in methods {
         for key in [
             "method",

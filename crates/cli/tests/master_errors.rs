@@ -56,7 +56,7 @@ fn lab_park2020_prints_its_table_as_json() {
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 3, "conventional, park2020, ferrocat");
+    assert_eq!(rows.len(), 4, "conventional, park2020, ferrocat, ferrocat-mfr");
     for r in rows {
         for key in
             ["slaves", "method", "host", "ref_gmean_us", "ref_mrms_us", "last_gmean_us", "last_mrms_us", "lock_ms"]

@@ -14,11 +14,12 @@ use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Pa
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 
-/// The reference-follows-master methods the master–slave error tables compare.
-pub const RFM_METHODS: [&str; 3] = ["conventional", "park2020", "ferrocat"];
+/// The methods the master–slave error tables compare: those where the reference follows the
+/// master, and ferrocat in both couplings.
+pub const ERROR_METHODS: [&str; 4] = ["conventional", "park2020", "ferrocat", "ferrocat-mfr"];
 
 /// Every method the lab knows.
-pub const METHODS: [&str; 6] = ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat"];
+pub const METHODS: [&str; 7] = ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"];
 
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
 pub fn line(slaves: usize) -> SegmentConfig {
@@ -50,8 +51,15 @@ pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
+    method_error_ns(m, None, k)
+}
+
+/// As [`clock_error_ns`], the master's clock being the method's where it keeps one (master
+/// follows reference: its estimate of the reference's time).
+pub fn method_error_ns<I: Io>(m: &mut Master<I>, sync: Option<&dyn ClockSync>, k: usize) -> Option<i64> {
     let t = m.engine.io.now_ns();
-    let master = m.master_system_time() as u32;
+    let own = m.master_system_time();
+    let master = sync.and_then(|s| s.master_time(own)).unwrap_or(own) as u32;
     let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)
@@ -80,6 +88,8 @@ pub fn method<I: Io>(
         "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.timer_resolution_ns())),
         "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
         "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns)),
+        // ferrocat with the master following the reference whatever the experiment's coupling.
+        "ferrocat-mfr" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
         other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),
     })
 }

@@ -1,4 +1,4 @@
-//! Robustness: each reference-follows-master method on the same realisation, disturbed once
+//! Robustness: each method of the master–slave error tables on the same realisation, disturbed once
 //! after it has settled — 1 % of frames lost from then on, the reference's crystal stepping by
 //! 50 ppm (a temperature step), or the master overrunning three cycles (no frames for 3 ms) —
 //! and how far and for how long the master–reference error leaves its band.
@@ -32,7 +32,7 @@ pub struct Options {
 impl Options {
     pub fn new(host: HostModel) -> Self {
         Options {
-            methods: crate::RFM_METHODS.iter().map(|s| s.to_string()).collect(),
+            methods: crate::ERROR_METHODS.iter().map(|s| s.to_string()).collect(),
             scenarios: SCENARIOS.iter().map(|s| s.to_string()).collect(),
             slaves: 2,
             cycle_ns: 1_000_000,
@@ -100,8 +100,10 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         }
         next += o.cycle_ns;
         m.engine.io.sleep_until(next);
-        m.sync_step(sync.as_mut(), &mut st)?;
-        let e = crate::clock_error_ns(&mut m, reference).unwrap_or_default() as f64;
+        let c = m.sync_step(sync.as_mut(), &mut st)?;
+        // A master that follows the reference times its next cycle by it.
+        next = next.wrapping_add_signed(c.next_period_ns.map_or(0, |p| p as i64 - o.cycle_ns as i64));
+        let e = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default() as f64;
         if k >= settle {
             errors_after.push(e);
             if k >= settle + after / 2 {

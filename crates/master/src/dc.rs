@@ -11,6 +11,8 @@ use crate::master::Master;
 
 /// Nanoseconds from 1970-01-01 to 2000-01-01, the epoch of DC system time.
 const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
+/// The 8-byte preamble and start-of-frame delimiter at 100 Mbit/s.
+const PREAMBLE_NS: u64 = 8 * 80;
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DcConfig {
@@ -310,6 +312,10 @@ impl<I: Io> Master<I> {
             Pdu::new(Command::FRMW, Address::Device { adp: station, ado: 0x0910 }, &mut frmw),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x092C }, &mut diff),
         ];
+        // Ethernet and EtherCAT headers, each datagram's header, data and WKC, padded to
+        // Ethernet's minimum; then FCS and preamble.
+        let payload: usize = 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>();
+        let frame_bytes = payload.max(60) as u64 + 4 + 8;
         let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
         self.engine.timeout_ns = self.cyclic_timeout_ns;
         self.engine.retries = 0;
@@ -325,8 +331,12 @@ impl<I: Io> Master<I> {
             st.reference_ns = Some(u64::from_le_bytes(frmw));
         }
         let sample = if answered {
-            let tx = self.engine.io.last_tx_ns();
-            let rx = self.engine.last_rx_ns;
+            // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
+            // first preamble bit, which is what an ESC latches: take them back to that bit.
+            let hw = self.engine.io.rx_stamps_start_of_frame();
+            let sfd = if hw { PREAMBLE_NS } else { 0 };
+            let tx = self.engine.io.last_tx_ns().map(|t| t.wrapping_sub(sfd));
+            let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
             Some(Sample {
                 cycle: st.cycle,
                 built_ns,
@@ -335,12 +345,8 @@ impl<I: Io> Master<I> {
                 reference_ns: u64::from_le_bytes(frmw),
                 difference_ns: SystemTimeDifference(u32::from_le_bytes(diff)).as_ns(),
                 loop_ns: st.loop_ns,
-                // Ethernet header, EtherCAT header, the three datagrams; FCS and preamble.
-                frame_ns: if self.engine.io.rx_stamps_start_of_frame() {
-                    0
-                } else {
-                    (16 + 3 * 12 + 8 + 8 + 4 + 4 + 8) * 80
-                },
+                // A stamp after the last byte (software, or none) includes the whole frame.
+                frame_ns: if hw { 0 } else { frame_bytes * 80 },
             })
         } else {
             st.lost += 1;

@@ -78,6 +78,11 @@ pub trait ClockSync {
     }
     /// Takes one cycle's sample (`None`: the frame was lost).
     fn update(&mut self, sample: Option<&Sample>) -> Correction;
+    /// Master follows reference: the master's clock is its estimate of the reference's system
+    /// time at `host_ns` (the master's own system time); `None` where the method keeps none.
+    fn master_time(&self, _host_ns: u64) -> Option<u64> {
+        None
+    }
 }
 
 /// IgH's way: the master's present time to the reference, no delay compensation.
@@ -288,8 +293,11 @@ impl ClockSync for SoemPi {
 /// - Reference follows master: the master writes its time plus that lead, so the reference's
 ///   time control loop steers to the master's time at the instant the frame passes.
 /// - Master follows reference: a least-squares line through (master time at passage,
-///   reference time) gives offset and rate; the next period puts the frame at `phase_ns` of the
-///   reference's cycle, removing 1/16 of the phase error per cycle.
+///   reference time) gives offset and rate; the master's clock is that line (its estimate of
+///   the reference's time), and the next period puts the frame at `phase_ns` of the
+///   reference's cycle, removing 1/16 of the phase error per cycle. The passage is the
+///   transmit stamp plus half the round trip where the link stamps sends, so that the send
+///   jitter, known after the fact, stays out of the line.
 #[derive(Debug)]
 pub struct Ferrocat {
     pub coupling: Coupling,
@@ -302,7 +310,11 @@ pub struct Ferrocat {
     pub write_every: u64,
     leads: VecDeque<i64>,
     lead_ns: Option<i64>,
-    fit: VecDeque<(f64, f64)>,
+    fit: VecDeque<(u64, u64)>,
+    /// Half round trips from the transmit stamp (or the build time), for the fit's abscissa.
+    halves: VecDeque<i64>,
+    /// The last line: (x0, y0) the newest point, then mean offsets from it and the rate.
+    line: Option<(u64, u64, f64, f64, f64)>,
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
     /// loop, which averages its samples, sees the host's send jitter cancel pairwise.
@@ -324,6 +336,8 @@ impl Ferrocat {
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
             fit: VecDeque::with_capacity(WINDOW),
+            halves: VecDeque::with_capacity(WINDOW),
+            line: None,
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
             error_feedback: false,
@@ -389,27 +403,36 @@ impl ClockSync for Ferrocat {
         }
         // Master follows reference: fit reference time against master time at passage,
         // relative to the newest point so that f64 keeps ns precision.
-        let x = s.built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0));
+        let sent = s.tx_ns.unwrap_or(s.built_ns);
+        if self.halves.len() == WINDOW {
+            self.halves.pop_front();
+        }
+        self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
+        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves));
         if self.fit.len() == WINDOW {
             self.fit.pop_front();
         }
         let (x0, y0) = (x, s.reference_ns);
-        self.fit.push_back((x as f64, s.reference_ns as f64));
+        self.fit.push_back((x, s.reference_ns));
         let n = self.fit.len() as f64;
-        let (mx, my) = self.fit.iter().fold((0.0, 0.0), |(a, b), &(x, y)| (a + (x - x0 as f64), b + (y - y0 as f64)));
+        // Differences on the wrapping circle first: an f64 holds a u64 time only to 128 ns.
+        let rel = |&(x, y): &(u64, u64)| (x.wrapping_sub(x0) as i64 as f64, y.wrapping_sub(y0) as i64 as f64);
+        let (mx, my) = self.fit.iter().map(rel).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
         let (mx, my) = (mx / n, my / n);
         let (mut sxy, mut sxx) = (0.0, 0.0);
-        for &(x, y) in &self.fit {
-            let (dx, dy) = (x - x0 as f64 - mx, y - y0 as f64 - my);
+        for (x, y) in self.fit.iter().map(rel) {
+            let (dx, dy) = (x - mx, y - my);
             sxy += dx * dy;
             sxx += dx * dx;
         }
         let rate = if sxx > 0.0 { (sxy / sxx).clamp(0.999, 1.001) } else { 1.0 };
+        self.line = Some((x0, y0, mx, my, rate));
         // Reference time now, from the fit; its phase in the cycle against the target.
         let y_now = my + rate * (0.0 - mx);
-        let t_ref = y0 as f64 + y_now;
         let c = self.cycle_ns as f64;
-        let mut phase = (t_ref - self.phase_ns as f64).rem_euclid(c);
+        // y0's place in the cycle in integers; only the fit's small part in f64.
+        let y0_phase = y0.wrapping_sub(self.phase_ns) % self.cycle_ns;
+        let mut phase = (y0_phase as f64 + y_now).rem_euclid(c);
         if phase > c / 2.0 {
             phase -= c;
         }
@@ -418,6 +441,11 @@ impl ClockSync for Ferrocat {
         // that the jitter averages away instead of being fed back.
         let period = (c - phase / 16.0) / rate;
         Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) }
+    }
+    fn master_time(&self, host_ns: u64) -> Option<u64> {
+        let (x0, y0, mx, my, rate) = self.line?;
+        let dx = host_ns.wrapping_sub(x0) as i64 as f64;
+        Some(y0.wrapping_add_signed((my + rate * (dx - mx)) as i64))
     }
 }
 

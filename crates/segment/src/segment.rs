@@ -301,7 +301,9 @@ impl Segment {
         }
         let pdu_at = crate::frame_pdu_offset(frame)?;
         // Timing pass: where the frame head is when.
-        let head_at_first = t_tx_ns + (PREAMBLE_BYTES * NS_PER_BYTE) + self.master_link_ns as u64;
+        // An ESC latches the start of the frame, its first preamble bit (esc-spec 0x0900): the
+        // "head" that walks the segment is that bit.
+        let head_at_first = t_tx_ns + self.master_link_ns as u64;
         self.visits.clear();
         let entry = self.nodes[0].entry_port;
         let back_at_nic = self.walk(0, entry, head_at_first, 0) + self.master_link_ns as u64;
@@ -355,7 +357,7 @@ impl Segment {
             return None;
         }
         self.stats.returned += 1;
-        let wire = (frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
+        let wire = (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
         Some(back_at_nic + wire)
     }
 
