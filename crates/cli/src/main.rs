@@ -338,6 +338,11 @@ enum EepromCmd {
 }
 
 fn main() -> ExitCode {
+    // Output piped into `head` and closed: end quietly as Unix tools do, not with a panic.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Pcap { file, json } => pcap::run(&file, json),

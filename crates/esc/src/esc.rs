@@ -135,6 +135,9 @@ pub struct Esc {
     /// Lowest start and highest end of the enabled SyncManagers' areas.
     sm_span: (u32, u32),
     fmmu_cache: Vec<Fmmu>,
+    /// When the frame being processed passed the processing unit (0x0910's latch instant),
+    /// until a read puts that time into the register.
+    system_time_latch: Option<u64>,
     scratch: Vec<u8>,
     sii_busy_shown: bool,
     sync_pulsed: bool,
@@ -175,6 +178,7 @@ impl Esc {
             sm_cache: Vec::new(),
             sm_span: (0, 0),
             fmmu_cache: Vec::new(),
+            system_time_latch: None,
             scratch: Vec::new(),
             sii_busy_shown: false,
             sync_pulsed: false,
@@ -493,12 +497,9 @@ impl Esc {
         if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
             self.refresh_registers();
         }
-        if let Some(dc) = &self.dc {
-            // ECAT reads of 0x0910 see the time the frame passed, minus the delay.
-            let v = dc.ecat_system_time(timing.epu_ns);
-            let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
-            self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
-        }
+        // ECAT reads of 0x0910 see the time the frame passed, minus the delay: latched now,
+        // put into the register when a datagram reads it (most frames do not).
+        self.system_time_latch = self.dc.as_ref().map(|_| timing.epu_ns);
         self.effects = FrameEffects::default();
         let mut off = 0;
         while off + HEADER_LEN + 2 <= chain.len() {
@@ -587,6 +588,10 @@ impl Esc {
     }
 
     fn sm_at(&self, a: u16) -> Option<(u8, SyncManager)> {
+        // Outside every enabled SyncManager's span (all registers, usually): no search.
+        if (a as u32) < self.sm_span.0 || a as u32 >= self.sm_span.1 {
+            return None;
+        }
         (0..self.config.sm_count)
             .map(|n| (n, self.sm(n)))
             .find(|(_, s)| s.enabled() && s.length > 0 && a >= s.start && (a as u32) < s.start as u32 + s.length as u32)
@@ -607,6 +612,13 @@ impl Esc {
     fn read_byte(&mut self, a: u16) -> Option<u8> {
         if self.absent(a) {
             return None;
+        }
+        if (0x0910..0x0918).contains(&a) {
+            if let (Some(t), Some(dc)) = (self.system_time_latch.take(), &self.dc) {
+                let v = dc.ecat_system_time(t);
+                let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
+                self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
+            }
         }
         if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
             // Reading a latch time clears its single-event flag (ECAT-controlled latch units).
@@ -676,7 +688,6 @@ impl Esc {
                 return false;
             }
             if ecat_writable(a) {
-                self.pending.push((a, v));
                 match a {
                     0x0900..=0x0903 => {
                         self.effects.latch_epu = true;
@@ -684,12 +695,17 @@ impl Esc {
                             self.effects.latch_ports = true;
                         }
                     }
+                    // A write of the system time feeds the time control loop and leaves the
+                    // register as it is (esc-spec 0x0910): nothing to apply at the end.
                     0x0910..=0x0913 => {
                         let t = self.effects.tcl.get_or_insert([None; 4]);
                         t[(a - 0x0910) as usize] = Some(v);
+                        return true;
                     }
+                    0x0914..=0x0917 => return true,
                     _ => {}
                 }
+                self.pending.push((a, v));
             }
             return true;
         }
@@ -785,7 +801,10 @@ impl Esc {
     fn end_of_frame(&mut self, timing: &FrameTiming) {
         let t = timing.epu_ns;
         let mut pending = std::mem::take(&mut self.pending);
-        if pending.is_empty() && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read) {
+        if pending.is_empty()
+            && self.effects.tcl.is_none()
+            && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read)
+        {
             self.pending = pending;
             return;
         }
