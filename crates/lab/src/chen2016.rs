@@ -115,8 +115,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let mut trace = Vec::new();
     let trace_every = (total - total / 10).div_ceil(2000).max(1);
     for k in 0..total {
-        m.cycle()?;
-        let c = m.sync_step(sync.as_mut(), &mut st)?;
+        // One frame per cycle: the process data with the sync datagrams behind it.
+        let (_, c) = m.cycle_sync(sync.as_mut(), &mut st)?;
         let period = c.next_period_ns.unwrap_or(cycle_ns);
         if let (Some(t), true) = (st.reference_ns, k >= total / 10) {
             let (k0, t0) = *first.get_or_insert((k, t));

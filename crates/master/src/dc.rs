@@ -14,6 +14,44 @@ const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
 /// The 8-byte preamble and start-of-frame delimiter at 100 Mbit/s.
 const PREAMBLE_NS: u64 = 8 * 80;
 
+/// A frame's bytes on the wire: Ethernet and EtherCAT headers, each datagram's header, data
+/// and WKC, padded to Ethernet's minimum; then FCS and preamble.
+pub(crate) fn frame_bytes(pdus: &[Pdu<'_>]) -> u64 {
+    let payload: usize = 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>();
+    payload.max(60) as u64 + 4 + 8
+}
+
+/// The clock-synchronisation datagrams of one cycle and their buffers.
+#[derive(Debug)]
+pub(crate) struct SyncPdus {
+    station: u16,
+    built_ns: u64,
+    /// The master's time for the reference's 0x0910 (reference follows master).
+    write: Option<[u8; 8]>,
+    pub(crate) frmw: [u8; 8],
+    diff: [u8; 4],
+}
+
+impl SyncPdus {
+    /// [FPWR 0x0910 or NOP, FRMW 0x0910, FPRD 0x092C] on the reference.
+    pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> [Pdu<'a>; 3] {
+        let station = self.station;
+        [
+            match self.write.as_mut() {
+                Some(w) => Pdu::new(Command::FPWR, Address::Device { adp: station, ado: 0x0910 }, w),
+                None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
+            },
+            Pdu::new(Command::FRMW, Address::Device { adp: station, ado: 0x0910 }, &mut self.frmw),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x092C }, &mut self.diff),
+        ]
+    }
+
+    /// Whether the reference answered the FRMW and the 0x092C read.
+    pub(crate) fn answered(pdus: &[Pdu<'_>]) -> bool {
+        pdus.len() >= 3 && pdus[1].wkc > 0 && pdus[2].wkc == 1
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DcConfig {
     /// Static drift compensation stops when every |0x092C| stays at or below this…
@@ -288,49 +326,58 @@ impl<I: Io> Master<I> {
     /// read of its 0x092C; the sample goes to `sync`, and an offset shift it asks for is
     /// written to every DC slave. Returns the correction (the next period for
     /// master-follows-reference methods). Lost frames are counted, not errors.
+    /// [`Master::cycle_sync`] sends the same datagrams behind the process data, in one frame.
     pub fn sync_step(
         &mut self,
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
     ) -> Result<crate::sync::Correction> {
-        use crate::sync::{Coupling, Sample};
-        let r = self.reference_index()?;
-        let station = self.slaves[r].station;
-        st.cycle += 1;
-        let built_ns = self.master_system_time();
-        let mut w = sync.reference_time(built_ns).to_le_bytes();
-        let mut frmw = [0u8; 8];
-        let mut diff = [0u8; 4];
-        let rfm = sync.coupling() == Coupling::ReferenceFollowsMaster && sync.writes_reference_time(st.cycle);
+        let mut p = self.sync_begin(sync, st)?;
         let mut nop: [u8; 0] = [];
-        let mut pdus = [
-            if rfm {
-                Pdu::new(Command::FPWR, Address::Device { adp: station, ado: 0x0910 }, &mut w)
-            } else {
-                Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut nop)
-            },
-            Pdu::new(Command::FRMW, Address::Device { adp: station, ado: 0x0910 }, &mut frmw),
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x092C }, &mut diff),
-        ];
-        // Ethernet and EtherCAT headers, each datagram's header, data and WKC, padded to
-        // Ethernet's minimum; then FCS and preamble.
-        let payload: usize = 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>();
-        let frame_bytes = payload.max(60) as u64 + 4 + 8;
+        let mut pdus = p.pdus(&mut nop);
+        let frame_bytes = frame_bytes(&pdus);
         let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
         self.engine.timeout_ns = self.cyclic_timeout_ns;
         self.engine.retries = 0;
         let res = self.engine.transact(&mut pdus);
         self.engine.timeout_ns = timeout;
         self.engine.retries = retries;
-        let answered = res.is_ok() && pdus[1].wkc > 0 && pdus[2].wkc == 1;
+        let answered = res.is_ok() && SyncPdus::answered(&pdus);
+        self.sync_end(sync, st, &p, answered, frame_bytes)
+    }
+
+    /// The sync datagrams of this cycle, built now (the master's time goes into them).
+    pub(crate) fn sync_begin(&mut self, sync: &mut dyn crate::sync::ClockSync, st: &mut SyncState) -> Result<SyncPdus> {
+        let r = self.reference_index()?;
+        st.cycle += 1;
+        let built_ns = self.master_system_time();
+        let rfm =
+            sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster && sync.writes_reference_time(st.cycle);
+        Ok(SyncPdus {
+            station: self.slaves[r].station,
+            built_ns,
+            write: rfm.then(|| sync.reference_time(built_ns).to_le_bytes()),
+            frmw: [0; 8],
+            diff: [0; 4],
+        })
+    }
+
+    /// The sample of an answered (or lost) sync frame to the method, and its correction done.
+    pub(crate) fn sync_end(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut SyncState,
+        p: &SyncPdus,
+        answered: bool,
+        frame_bytes: u64,
+    ) -> Result<crate::sync::Correction> {
+        use crate::sync::Sample;
         let to_sys = |m: &mut Self, world: u64| -> u64 {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))
         };
-        if answered {
-            st.reference_ns = Some(u64::from_le_bytes(frmw));
-        }
         let sample = if answered {
+            st.reference_ns = Some(u64::from_le_bytes(p.frmw));
             // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
             // first preamble bit, which is what an ESC latches: take them back to that bit.
             let hw = self.engine.io.rx_stamps_start_of_frame();
@@ -339,11 +386,11 @@ impl<I: Io> Master<I> {
             let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
             Some(Sample {
                 cycle: st.cycle,
-                built_ns,
+                built_ns: p.built_ns,
                 tx_ns: tx.map(|t| to_sys(self, t)),
                 rx_ns: to_sys(self, rx),
-                reference_ns: u64::from_le_bytes(frmw),
-                difference_ns: SystemTimeDifference(u32::from_le_bytes(diff)).as_ns(),
+                reference_ns: u64::from_le_bytes(p.frmw),
+                difference_ns: SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns(),
                 loop_ns: st.loop_ns,
                 // A stamp after the last byte (software, or none) includes the whole frame.
                 frame_ns: if hw { 0 } else { frame_bytes * 80 },

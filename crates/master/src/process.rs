@@ -13,8 +13,8 @@ use crate::master::Master;
 const CHUNK: usize = MAX_PDU_LEN - HEADER_LEN - WKC_LEN;
 /// Up to this many frames per cycle (8 × 1486 bytes of process image).
 const MAX_CHUNKS: usize = 8;
-/// The image's LRWs and, with DC distribution, one FRMW.
-const MAX_PDUS: usize = MAX_CHUNKS + 1;
+/// The image's LRWs and, with DC distribution, one FRMW or the three sync datagrams.
+const MAX_PDUS: usize = MAX_CHUNKS + 3;
 
 /// Where an entry sits in the image: bit offset and width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -112,6 +112,25 @@ impl<I: Io> Master<I> {
     /// one). Returns the working counter; a shortfall is counted, not an error, so that the
     /// control loop keeps running.
     pub fn cycle(&mut self) -> Result<u16> {
+        self.cycle_inner(None).map(|(wkc, _)| wkc)
+    }
+
+    /// [`Master::cycle`] with the clock synchronisation of [`Master::sync_step`] in the same
+    /// frame, behind the process data (as SOEM appends its FRMW): one frame per cycle, and the
+    /// method's timing is the process data's. Returns the working counter and the correction.
+    pub fn cycle_sync(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut crate::SyncState,
+    ) -> Result<(u16, crate::sync::Correction)> {
+        let (wkc, c) = self.cycle_inner(Some((sync, st)))?;
+        Ok((wkc, c.unwrap_or_default()))
+    }
+
+    fn cycle_inner(
+        &mut self,
+        sync: Option<(&mut dyn crate::sync::ClockSync, &mut crate::SyncState)>,
+    ) -> Result<(u16, Option<crate::sync::Correction>)> {
         let start = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         if let Some(prev) = self.cyc.last_start {
@@ -121,8 +140,13 @@ impl<I: Io> Master<I> {
             }
         }
         self.cyc.last_start = Some(start);
+        let mut sync = sync;
+        let mut sp = match sync.as_mut() {
+            Some((m, st)) => Some(self.sync_begin(&mut **m, st)?),
+            None => None,
+        };
         if self.image.is_empty() && self.dc_reference.is_none() {
-            return Ok(0);
+            return Ok((0, None));
         }
         let chunks = self.image.len().div_ceil(CHUNK);
         if chunks > MAX_CHUNKS {
@@ -133,14 +157,21 @@ impl<I: Io> Master<I> {
             )));
         }
         let mut empty: [[u8; 0]; MAX_PDUS] = [[]; MAX_PDUS];
+        let mut nop: [u8; 0] = [];
         let Master { image, frmw, engine, dc_reference, cyclic_timeout_ns, .. } = self;
         let mut parts = image.chunks_mut(CHUNK);
         let mut e = empty.iter_mut();
         let mut frmw = Some(&mut frmw[..]);
         let reference = *dc_reference;
+        let with_sync = sp.is_some();
+        let mut extra = sp.as_mut().map(|p| p.pdus(&mut nop).into_iter());
+        let n = chunks + if extra.is_some() { 3 } else { reference.is_some() as usize };
         let mut pdus: [Pdu<'_>; MAX_PDUS] = std::array::from_fn(|k| {
             if let Some(p) = parts.next() {
                 return Pdu::new(Command::LRW, Address::Logical((k * CHUNK) as u32), p);
+            }
+            if let Some(x) = extra.as_mut().and_then(|x| x.next()) {
+                return x;
             }
             match (reference, frmw.take()) {
                 (Some(st), Some(f)) => Pdu::new(Command::FRMW, Address::Device { adp: st, ado: 0x0910 }, f),
@@ -151,7 +182,8 @@ impl<I: Io> Master<I> {
                 ),
             }
         });
-        let n = chunks + reference.is_some() as usize;
+        drop(extra);
+        let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let (timeout, retries) = (engine.timeout_ns, engine.retries);
         engine.timeout_ns = *cyclic_timeout_ns;
@@ -159,9 +191,10 @@ impl<I: Io> Master<I> {
         let r = engine.transact(&mut pdus[..n]);
         engine.timeout_ns = timeout;
         engine.retries = retries;
+        let answered = r.is_ok() && with_sync && crate::dc::SyncPdus::answered(&pdus[chunks..n]);
         let wkc = match r {
             Ok(()) => {
-                if reference.is_some() {
+                if reference.is_some() && !with_sync {
                     let f = &pdus[chunks];
                     let mut b = [0u8; 8];
                     b.copy_from_slice(&f.data[..8]);
@@ -174,6 +207,15 @@ impl<I: Io> Master<I> {
                 0
             }
             Err(e) => return Err(e),
+        };
+        let correction = match (sync, sp) {
+            (Some((m, st)), Some(p)) => {
+                if answered {
+                    self.dc_time = u64::from_le_bytes(p.frmw);
+                }
+                Some(self.sync_end(m, st, &p, answered, frame_bytes)?)
+            }
+            _ => None,
         };
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
@@ -188,6 +230,6 @@ impl<I: Io> Master<I> {
                 self.supervise()?;
             }
         }
-        Ok(wkc)
+        Ok((wkc, correction))
     }
 }

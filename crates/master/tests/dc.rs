@@ -126,3 +126,31 @@ proptest::proptest! {
         proptest::prop_assert!(spread <= 100, "true spread {spread} ns");
     }
 }
+
+#[test]
+fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
+    use ferrocat_master::sync::{Coupling, Ferrocat};
+    let mut m = segment();
+    m.bring_up().unwrap();
+    m.init_dc(&DcConfig::default()).unwrap();
+    let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, 1_000_000);
+    let mut st = m.sync_state().unwrap();
+    let frames0 = m.engine.io.seg.stats.frames;
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..200 {
+        let (wkc, c) = m.cycle_sync(&mut sync, &mut st).unwrap();
+        assert!(wkc > 0, "the process data answered");
+        next += c.next_period_ns.expect("the master follows: a period every cycle");
+        m.engine.io.sleep_until(next);
+    }
+    assert_eq!(m.engine.io.seg.stats.frames - frames0, 200, "one frame per cycle");
+    assert_eq!((st.cycle, st.lost), (200, 0));
+    // The master's clock, its line through the reference's times, within 1 µs of the reference.
+    let t = m.engine.io.now_ns();
+    let own = m.master_system_time();
+    let mine = ferrocat_master::sync::ClockSync::master_time(&sync, own).expect("a line after 200 samples");
+    let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+    let e = mine.wrapping_sub(reference) as i64;
+    println!("master − reference after 200 one-frame cycles: {e} ns");
+    assert!(e.abs() < 1_000, "{e}");
+}
