@@ -71,6 +71,12 @@ pub fn node_of<I: Io>(m: &Master<I>, k: usize) -> Option<usize> {
     m.engine.io.segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
 }
 
+/// The next wake-up after `next`: one nominal cycle, or the period a master that follows the
+/// reference asked for.
+pub fn next_wake(next: u64, cycle_ns: u64, c: &ferrocat_master::sync::Correction) -> u64 {
+    next.wrapping_add(c.next_period_ns.unwrap_or(cycle_ns))
+}
+
 /// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the
 /// one ferrocat's own method takes.
 pub fn method<I: Io>(

@@ -2,7 +2,7 @@
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
 use ferrocat_master::io::{HostModel, Io};
-use ferrocat_master::sync::Coupling;
+use ferrocat_master::sync::{Correction, Coupling};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -120,12 +120,12 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     // One GPI rig per slave measured, as in the paper's set-up.
     let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
     let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
+    let mut c = Correction::default();
     for k in 0..total {
-        next += opts.cycle_ns;
-        m.engine.io.sleep_until(next);
-        let c = m.sync_step(sync.as_mut(), &mut st)?;
         // A master that follows the reference times its next cycle by it.
-        next = next.wrapping_add_signed(c.next_period_ns.map_or(0, |p| p as i64 - opts.cycle_ns as i64));
+        next = crate::next_wake(next, opts.cycle_ns, &c);
+        m.engine.io.sleep_until(next);
+        c = m.sync_step(sync.as_mut(), &mut st)?;
         if k % opts.sample_every != 0 {
             continue;
         }

@@ -3,7 +3,7 @@
 //! 50 ppm (a temperature step), or the master overrunning three cycles (no frames for 3 ms) —
 //! and how far and for how long the master–reference error leaves its band.
 use ferrocat_master::io::{HostModel, Io};
-use ferrocat_master::sync::Coupling;
+use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -84,6 +84,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let (mut before, mut late) = (Moments::default(), Moments::default());
     let mut errors_after = Vec::with_capacity(after as usize);
     let mut lost0 = 0;
+    let mut c = Correction::default();
     for k in 0..settle + after {
         if k == settle {
             lost0 = st.lost;
@@ -98,11 +99,10 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
                 other => anyhow::bail!("unknown scenario {other:?} (known: {})", SCENARIOS.join(", ")),
             }
         }
-        next += o.cycle_ns;
-        m.engine.io.sleep_until(next);
-        let c = m.sync_step(sync.as_mut(), &mut st)?;
         // A master that follows the reference times its next cycle by it.
-        next = next.wrapping_add_signed(c.next_period_ns.map_or(0, |p| p as i64 - o.cycle_ns as i64));
+        next = crate::next_wake(next, o.cycle_ns, &c);
+        m.engine.io.sleep_until(next);
+        c = m.sync_step(sync.as_mut(), &mut st)?;
         let e = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default() as f64;
         if k >= settle {
             errors_after.push(e);

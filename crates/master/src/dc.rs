@@ -336,12 +336,7 @@ impl<I: Io> Master<I> {
         let mut nop: [u8; 0] = [];
         let mut pdus = p.pdus(&mut nop);
         let frame_bytes = frame_bytes(&pdus);
-        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
-        self.engine.timeout_ns = self.cyclic_timeout_ns;
-        self.engine.retries = 0;
-        let res = self.engine.transact(&mut pdus);
-        self.engine.timeout_ns = timeout;
-        self.engine.retries = retries;
+        let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
         let answered = res.is_ok() && SyncPdus::answered(&pdus);
         self.sync_end(sync, st, &p, answered, frame_bytes)
     }

@@ -111,6 +111,16 @@ impl<I: Io> Engine<I> {
 
     /// Sends all `pdus` (as few frames as fit), waits for every reply and fills in data and
     /// working counters. Fails if a frame stays unanswered after the retries.
+    /// [`Engine::transact`] once, within `timeout_ns`: cyclic frames are not sent twice (a lost
+    /// frame costs its cycle, not the next ones).
+    pub fn transact_once(&mut self, pdus: &mut [Pdu<'_>], timeout_ns: u64) -> Result<()> {
+        let (timeout, retries) = (self.timeout_ns, self.retries);
+        (self.timeout_ns, self.retries) = (timeout_ns, 0);
+        let r = self.transact(pdus);
+        (self.timeout_ns, self.retries) = (timeout, retries);
+        r
+    }
+
     pub fn transact(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
         let mut next = 0;
         loop {

@@ -185,12 +185,7 @@ impl<I: Io> Master<I> {
         drop(extra);
         let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
-        let (timeout, retries) = (engine.timeout_ns, engine.retries);
-        engine.timeout_ns = *cyclic_timeout_ns;
-        engine.retries = 0;
-        let r = engine.transact(&mut pdus[..n]);
-        engine.timeout_ns = timeout;
-        engine.retries = retries;
+        let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
         let answered = r.is_ok() && with_sync && crate::dc::SyncPdus::answered(&pdus[chunks..n]);
         let wkc = match r {
             Ok(()) => {
