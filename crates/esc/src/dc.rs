@@ -18,10 +18,19 @@ pub const TCL_PHASE_TAU_NS: i128 = 50_000_000;
 /// The shortest span between two samples that updates the loop's frequency estimate.
 pub const TCL_MIN_SPAN_NS: i64 = 200_000;
 
-/// Clock deviation of a speed-counter difference, as a fraction `num/den` (esc-spec §3.5).
-fn scd_rate(scs: u16, scd: i16) -> (i128, i128) {
-    let (s, d) = (scs as i128, scd as i128);
+/// Clock deviation of a speed-counter difference, as a fraction `num/den` (esc-spec §3.5);
+/// `den > 0` for every SCD the bound allows.
+fn scd_rate(scs: u16, scd: i16) -> (i64, i64) {
+    let (s, d) = (scs as i64, scd as i64);
     (d, 5 * (s + d + 2) * (s - d + 2))
+}
+
+/// `a·scale/den` truncated, as i128 arithmetic gives it, without the i128 division: with
+/// `a = q·den + r` both `q·scale` and `r·scale/den` have the sign of `a`, so truncating the sum
+/// truncates the second term. Needs `|r|·scale` and `|q|·scale` within i64.
+fn scaled_div(a: i64, scale: i64, den: i64) -> i64 {
+    let (q, r) = (a / den, a % den);
+    q * scale + r * scale / den
 }
 
 #[derive(Debug, Clone)]
@@ -36,7 +45,7 @@ pub struct DcUnit {
     corr_ns: i64,
     corr_rem_as: i64,
     /// Correction rate, attoseconds per ns × 2³², from SCS and SCD.
-    corr_rate_q32: i128,
+    corr_rate_q32: i64,
     pub drift_ppb: i64,
     pub offset: u64,
     pub delay: u32,
@@ -50,7 +59,7 @@ pub struct DcUnit {
     /// in a fixed order, so every machine computes the same value).
     freq_est_fpp: f64,
     /// The rate the current SCD applies, in units of 10⁻¹⁵.
-    applied_fpp: i128,
+    applied_fpp: i64,
     last_sample: Option<(u64, i64)>,
     pub sync: SyncUnit,
 }
@@ -124,7 +133,7 @@ impl DcUnit {
         const TICK: i64 = TICK_AS as i64;
         const NS: i64 = AS_PER_NS as i64;
         let per_ns = AS_PER_NS as i64 + self.drift_ppb;
-        let corr_delta = (dt * self.corr_rate_q32) >> 32;
+        let corr_delta = (dt * self.corr_rate_q32 as i128) >> 32;
         if (0..1 << 32).contains(&dt) {
             let dt = dt as i64;
             let ph = self.phase_rem_as + dt * per_ns;
@@ -145,8 +154,9 @@ impl DcUnit {
     fn set_scd(&mut self, scd: i16) {
         self.scd = scd;
         let (num, den) = scd_rate(self.scs, scd);
-        self.corr_rate_q32 = ((AS_PER_NS * num) << 32) / den;
-        self.applied_fpp = 1_000_000_000_000_000 * num / den;
+        // |num| < 2¹⁴ and den < 1.4·10⁹: every product below stays within i64.
+        self.corr_rate_q32 = scaled_div(AS_PER_NS as i64 * num, 1 << 32, den);
+        self.applied_fpp = scaled_div(AS_PER_NS as i64 * num, 1_000_000, den);
     }
 
     /// Local copy of the system time at true time `t_ns`.
@@ -187,14 +197,15 @@ impl DcUnit {
     /// the time control loop, on the lower 32 bits (esc-spec §3.5).
     pub fn tcl_sample(&mut self, t_ns: u64, received: u32) {
         self.fold_to(t_ns);
-        let local_copy = self.ecat_system_time(t_ns) as u32;
+        let local = self.local_at(t_ns);
+        // What an ECAT read would return (`ecat_system_time`), from the one local time.
+        let local_copy = self.mask(self.mask(local.wrapping_add(self.offset)).wrapping_sub(self.delay as u64)) as u32;
         let dt = local_copy.wrapping_sub(received) as i32 as i64;
         // Mean of the difference over 2^depth samples (0x092C).
         let n1 = (self.depth_diff & 0x0F) as u32;
         self.diff_mean_ns += (dt - self.diff_mean_ns) >> n1;
         // Frequency: the change of the difference since the last sample, plus what the loop
         // was already correcting, filtered over 2^depth samples.
-        let local = self.local_at(t_ns);
         let applied_fpp = self.applied_fpp as f64;
         // Samples closer together than TCL_MIN_SPAN_NS do not update the frequency: the change
         // of the difference over a few µs is all quantisation and jitter, and dividing it by so
@@ -351,6 +362,23 @@ impl DcUnit {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The i64 rate arithmetic equals the i128 formula for every SCS the register takes and
+    /// every SCD the bound allows.
+    #[test]
+    fn rates_match_the_wide_formula() {
+        for scs in (0x0080u16..=0x3FFF).step_by(97).chain([0x0080, 0x1000, 0x3FFF]) {
+            let max = scs as i64 - 0x7F;
+            for scd in (-max..=max).step_by(13).chain([-max, -1, 0, 1, max]) {
+                let (num, den) = (scd as i128, 5 * (scs as i128 + scd as i128 + 2) * (scs as i128 - scd as i128 + 2));
+                let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
+                dc.scs = scs;
+                dc.set_scd(scd as i16);
+                assert_eq!(dc.corr_rate_q32 as i128, ((AS_PER_NS * num) << 32) / den, "scs {scs} scd {scd}");
+                assert_eq!(dc.applied_fpp as i128, 1_000_000_000_000_000 * num / den, "scs {scs} scd {scd}");
+            }
+        }
+    }
 
     proptest! {
         /// Whatever the power-on time, offset, delay, crystal (±1000 ppm), samples written to

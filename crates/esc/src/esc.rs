@@ -19,6 +19,13 @@ pub struct FrameTiming {
     pub epu_ns: u64,
 }
 
+impl FrameTiming {
+    /// The same timing `by_ns` later.
+    pub fn shifted(&self, by_ns: u64) -> FrameTiming {
+        FrameTiming { port_ns: self.port_ns.map(|t| t.map(|t| t + by_ns)), epu_ns: self.epu_ns + by_ns }
+    }
+}
+
 /// Link of one port, as the segment wires it.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LinkState {
@@ -329,6 +336,11 @@ impl Esc {
         }
         // Loop control 0x0101: 00 auto, 01 auto-close, 10 open, 11 closed.
         (self.mem[0x0101] >> (2 * p)) & 3 != 3
+    }
+
+    /// The ports a frame leaves through, one bit each (`port_open` of ports 0–3).
+    pub fn open_ports(&self) -> u8 {
+        (0..4u8).fold(0, |m, p| m | (self.port_open(p) as u8) << p)
     }
 
     /// Reads memory as the PDI sees it (tests, tools).
@@ -714,6 +726,22 @@ impl Esc {
     }
 
     fn write(&mut self, ado: u16, data: &[u8], cmd: Command) -> bool {
+        // The system time as a whole (FRMW/ARMW/BWR of 0x0910, every follower every cycle):
+        // what `write_byte` does byte by byte, at once — a TCL sample, nothing stored.
+        let end = ado as u32 + data.len() as u32;
+        if (0x0910..0x0918).contains(&ado)
+            && end <= 0x0918
+            && self.dc.is_some()
+            && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
+        {
+            let t = self.effects.tcl.get_or_insert([None; 4]);
+            for (i, &v) in data.iter().enumerate() {
+                if let Some(slot) = t.get_mut(ado as usize - 0x0910 + i) {
+                    *slot = Some(v);
+                }
+            }
+            return !data.is_empty();
+        }
         let mut ok = false;
         for (i, &v) in data.iter().enumerate() {
             let Some(a) = ado.checked_add(i as u16) else { break };
@@ -798,14 +826,33 @@ impl Esc {
         self.mem.get(a as usize).copied().unwrap_or(0)
     }
 
+    /// A frame's write of 0x0910 (the bytes it wrote): one TCL sample at `t`.
+    fn feed_tcl(dc: &mut DcUnit, bytes: Option<[Option<u8>; 4]>, t: u64) {
+        // Only a write that includes byte 0x0910 produces a sample (esc-spec §3.2).
+        let Some(bytes @ [Some(_), ..]) = bytes else { return };
+        // Bytes the write left out are what the register holds (a read's value).
+        let v = match bytes {
+            [Some(a), Some(b), Some(c), Some(d)] => [a, b, c, d],
+            _ => {
+                let cur = (dc.ecat_system_time(t) as u32).to_le_bytes();
+                std::array::from_fn(|i| bytes[i].unwrap_or(cur[i]))
+            }
+        };
+        dc.tcl_sample(t, u32::from_le_bytes(v));
+    }
+
     fn end_of_frame(&mut self, timing: &FrameTiming) {
         let t = timing.epu_ns;
         let mut pending = std::mem::take(&mut self.pending);
-        if pending.is_empty()
-            && self.effects.tcl.is_none()
-            && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read)
-        {
+        if pending.is_empty() && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read) {
             self.pending = pending;
+            // Nothing but (perhaps) a system-time write: a TCL sample, which changes only the
+            // difference (0x092C) and the speed counter difference (0x0932).
+            if let (Some(dc), Some(bytes)) = (self.dc.as_mut(), self.effects.tcl.take()) {
+                Self::feed_tcl(dc, Some(bytes), t);
+                self.mem[0x092C..0x0930].copy_from_slice(&dc.difference_register().to_le_bytes());
+                self.mem[0x0932..0x0934].copy_from_slice(&dc.scd.to_le_bytes());
+            }
             return;
         }
         let (mut al_ctl, mut sii_cmd, mut dc_offset, mut dc_delay, mut scs, mut depths) =
@@ -950,18 +997,8 @@ impl Esc {
             if dc_delay {
                 dc.delay = u32::from_le_bytes([self.mem[0x0928], self.mem[0x0929], self.mem[0x092A], self.mem[0x092B]]);
             }
-            if let Some(bytes) = self.effects.tcl {
-                // Only a write that includes byte 0x0910 produces a sample (esc-spec §3.2).
-                if bytes[0].is_some() {
-                    let cur = dc.ecat_system_time(t) as u32;
-                    let mut v = cur.to_le_bytes();
-                    for (i, b) in bytes.iter().enumerate() {
-                        if let Some(b) = b {
-                            v[i] = *b;
-                        }
-                    }
-                    dc.tcl_sample(t, u32::from_le_bytes(v));
-                }
+            if self.effects.tcl.is_some() {
+                Self::feed_tcl(dc, self.effects.tcl.take(), t);
             }
             if depths {
                 dc.depth_diff = self.mem[0x0934] & 0x0F;

@@ -100,6 +100,20 @@ pub struct Segment {
     next_wander_ns: u64,
     pub stats: SegmentStats,
     visits: Vec<(usize, FrameTiming)>,
+    route: Route,
+}
+
+/// The last walk through the segment, relative to the instant the frame reached the first ESC:
+/// a frame's path and timing follow from the wiring, the delays and the port states alone, so
+/// every frame sent while those stay as they were walks the same way, shifted in time.
+#[derive(Debug, Default)]
+struct Route {
+    /// Per node: powered, pulled links and open ports, as when the walk was made.
+    key: Vec<u16>,
+    scratch: Vec<u16>,
+    valid: bool,
+    visits: Vec<(usize, FrameTiming)>,
+    back_ns: u64,
 }
 
 /// Processing order: after port 0 comes 3, after 3 comes 1, after 1 comes 2, after 2 comes 0.
@@ -121,6 +135,7 @@ impl Segment {
             next_wander_ns: 100_000_000,
             stats: SegmentStats::default(),
             visits: Vec::new(),
+            route: Route::default(),
         }
     }
 
@@ -139,6 +154,7 @@ impl Segment {
         self.nodes[a].peers[port_a as usize] = Some(Peer { node: b, port: port_b, delay_ns });
         self.nodes[b].peers[port_b as usize] = Some(Peer { node: a, port: port_a, delay_ns });
         self.nodes[b].entry_port = port_b;
+        self.route.valid = false;
     }
 
     fn link_up(&self, node: usize, port: u8) -> bool {
@@ -289,6 +305,32 @@ impl Segment {
         }
     }
 
+    /// What decides a node's part of the route and may change between frames (timings and
+    /// wiring are fixed when the segment is built; `connect` invalidates the route).
+    fn route_state(&self, i: usize) -> u16 {
+        // A link's state follows from both ends' power and pulled ports, which are all in the
+        // key (the wiring itself is fixed).
+        let n = &self.nodes[i];
+        let cut = n.cut.iter().enumerate().fold(0u16, |k, (p, &c)| k | (c as u16) << p);
+        n.powered as u16 | (n.entry_port as u16) << 1 | cut << 3 | (n.esc.open_ports() as u16) << 7
+    }
+
+    /// Walks the segment again if any node's route state changed since the last walk.
+    fn refresh_route(&mut self) {
+        let mut key = std::mem::take(&mut self.route.scratch);
+        key.clear();
+        key.extend((0..self.nodes.len()).map(|i| self.route_state(i)));
+        if !(self.route.valid && key == self.route.key) {
+            self.visits.clear();
+            let entry = self.nodes[0].entry_port;
+            self.route.back_ns = self.walk(0, entry, 0, 0);
+            self.route.visits.clear();
+            self.route.visits.extend_from_slice(&self.visits);
+            self.route.valid = true;
+        }
+        self.route.scratch = std::mem::replace(&mut self.route.key, key);
+    }
+
     /// Sends an Ethernet frame (without FCS) whose first preamble bit leaves the master at
     /// `t_tx_ns`. Returns the true time at which the master has received the whole frame back,
     /// with `frame` modified in place, or `None` if it does not come back.
@@ -304,9 +346,10 @@ impl Segment {
         // An ESC latches the start of the frame, its first preamble bit (esc-spec 0x0900): the
         // "head" that walks the segment is that bit.
         let head_at_first = t_tx_ns + self.master_link_ns as u64;
+        self.refresh_route();
         self.visits.clear();
-        let entry = self.nodes[0].entry_port;
-        let back_at_nic = self.walk(0, entry, head_at_first, 0) + self.master_link_ns as u64;
+        self.visits.extend(self.route.visits.iter().map(|(node, rel)| (*node, rel.shifted(head_at_first))));
+        let back_at_nic = head_at_first + self.route.back_ns + self.master_link_ns as u64;
         // Faults: a lost or corrupted frame is processed by the ESCs before the fault only.
         let mut reach = self.visits.len();
         let mut lost = false;
