@@ -79,7 +79,7 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
     use ferrocat_segment::bench::CyclicBench;
     const REPEATS: usize = 7;
     let mut rows = Vec::new();
-    for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 20.0f64), (64, 1000, 5.0), (256, 100, 0.5)] {
+    for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 60.0f64), (64, 1000, 10.0), (256, 100, 1.0)] {
         let mut b = CyclicBench::new(slaves, cycle_us * 1000, 1);
         let cycles = (sim_s * 1e6 / cycle_us as f64) as u64;
         let mut walls: Vec<f64> = (0..REPEATS)

@@ -247,10 +247,11 @@ impl DcUnit {
         let guess =
             if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
         let g = (guess.round() as i64).clamp(-max, max);
-        let mut best = g;
+        let (mut best, mut best_err) = (g, (rate(g) - r).abs());
         for d in [g - 1, g + 1] {
-            if d.abs() <= max && (rate(d) - r).abs() < (rate(best) - r).abs() {
-                best = d;
+            let err = (rate(d) - r).abs();
+            if d.abs() <= max && err < best_err {
+                (best, best_err) = (d, err);
             }
         }
         best as i16

@@ -110,6 +110,8 @@ struct FrameEffects {
     latch_ports: bool,
     latch_epu: bool,
     tcl: Option<[Option<u8>; 4]>,
+    /// Some SyncManager's last byte was written or read.
+    sm_buffer_done: bool,
 }
 
 #[derive(Debug)]
@@ -156,6 +158,7 @@ pub struct Esc {
     /// wrote it; until then the register is locked (ESC datasheet, 0x0120).
     pub al_response_ns: u64,
     pending_al: Option<(u16, u64)>,
+    port_generation: u32,
 }
 
 impl Esc {
@@ -193,6 +196,7 @@ impl Esc {
             mbx_queue: Default::default(),
             al_response_ns: 1_000_000,
             pending_al: None,
+            port_generation: 0,
         };
         esc.power_on(t_ns);
         esc
@@ -202,6 +206,7 @@ impl Esc {
     /// EEPROM, a fresh DC unit whose local time starts at zero.
     pub fn power_on(&mut self, t_ns: u64) {
         let c = self.config.clone();
+        self.port_generation = self.port_generation.wrapping_add(1);
         self.mem.fill(0);
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
@@ -325,6 +330,7 @@ impl Esc {
 
     pub fn set_link(&mut self, port: u8, link: bool) {
         self.links[(port & 3) as usize] = link;
+        self.port_generation = self.port_generation.wrapping_add(1);
         self.refresh_registers();
     }
 
@@ -338,9 +344,10 @@ impl Esc {
         (self.mem[0x0101] >> (2 * p)) & 3 != 3
     }
 
-    /// The ports a frame leaves through, one bit each (`port_open` of ports 0–3).
-    pub fn open_ports(&self) -> u8 {
-        (0..4u8).fold(0, |m, p| m | (self.port_open(p) as u8) << p)
+    /// Changes whenever `port_open` may answer differently (link, loop control, power-on):
+    /// the segment re-walks its route only then.
+    pub fn port_generation(&self) -> u32 {
+        self.port_generation
     }
 
     /// Reads memory as the PDI sees it (tests, tools).
@@ -495,6 +502,14 @@ impl Esc {
         }
     }
 
+    /// The registers a TCL sample changes: the difference (0x092C) and SCD (0x0932).
+    fn refresh_tcl_registers(&mut self) {
+        if let Some(dc) = &self.dc {
+            self.mem[0x092C..0x0930].copy_from_slice(&dc.difference_register().to_le_bytes());
+            self.mem[0x0932..0x0934].copy_from_slice(&dc.scd.to_le_bytes());
+        }
+    }
+
     /// Processes the datagram chain of one frame passing the processing unit.
     pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming) {
         self.advance_to(timing.epu_ns);
@@ -620,17 +635,22 @@ impl Esc {
         }
     }
 
+    /// Puts the time the frame passed (minus the delay) into 0x0910, once per frame.
+    fn latch_system_time(&mut self) {
+        if let (Some(t), Some(dc)) = (self.system_time_latch.take(), &self.dc) {
+            let v = dc.ecat_system_time(t);
+            let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
+            self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
+        }
+    }
+
     /// One byte read by the master; `None` if it cannot be read.
     fn read_byte(&mut self, a: u16) -> Option<u8> {
         if self.absent(a) {
             return None;
         }
         if (0x0910..0x0918).contains(&a) {
-            if let (Some(t), Some(dc)) = (self.system_time_latch.take(), &self.dc) {
-                let v = dc.ecat_system_time(t);
-                let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
-                self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
-            }
+            self.latch_system_time();
         }
         if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
             // Reading a latch time clears its single-event flag (ECAT-controlled latch units).
@@ -648,6 +668,7 @@ impl Esc {
                 }
                 if a as u32 == s.start as u32 + s.length as u32 - 1 {
                     st.last_byte_read = true;
+                    self.effects.sm_buffer_done = true;
                 }
             }
         }
@@ -655,6 +676,23 @@ impl Esc {
     }
 
     fn read(&mut self, ado: u16, data: &mut [u8], or: bool) -> bool {
+        // The system time as a whole (the reference's FRMW every cycle): what `read_byte`
+        // does byte by byte, at once.
+        let end = ado as u32 + data.len() as u32;
+        if (0x0910..0x0918).contains(&ado)
+            && end <= 0x0918
+            && !data.is_empty()
+            && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
+        {
+            if self.dc.is_none() {
+                return false;
+            }
+            self.latch_system_time();
+            for (b, v) in data.iter_mut().zip(&self.mem[ado as usize..end as usize]) {
+                *b = if or { *b | v } else { *v };
+            }
+            return true;
+        }
         let mut ok = false;
         for (i, b) in data.iter_mut().enumerate() {
             let Some(a) = ado.checked_add(i as u16) else { break };
@@ -691,6 +729,7 @@ impl Esc {
             }
             if last {
                 st.last_byte_written = true;
+                self.effects.sm_buffer_done = true;
             }
             return true;
         }
@@ -753,17 +792,34 @@ impl Esc {
     /// LRD/LWR/LRW through the FMMUs, bit by bit where they are not byte-aligned. Returns the
     /// WKC increment: +1 if something was read, +2 if something was written (LWR: +1).
     fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
-        let mut original = std::mem::take(&mut self.scratch);
-        original.clear();
-        original.extend_from_slice(data);
-        let (mut read_ok, mut write_ok) = (false, false);
         let dg_start = logical as u64 * 8;
         let dg_end = dg_start + data.len() as u64 * 8;
-        for i in 0..self.fmmu_cache.len() {
-            let f = self.fmmu_cache[i];
+        let overlap = |f: &Fmmu| {
             let f_start = f.logical_start as u64 * 8 + (f.logical_start_bit & 7) as u64;
             let f_end = (f.logical_start as u64 + f.length as u64 - 1) * 8 + (f.logical_stop_bit & 7) as u64 + 1;
-            let (lo, hi) = (f_start.max(dg_start), f_end.min(dg_end));
+            (f_start, f_start.max(dg_start), f_end.min(dg_end))
+        };
+        // The frame bytes some FMMU maps: writes take them as they arrived (a read through
+        // another FMMU may change them first), so they are kept aside; most ESCs map only a
+        // few bytes of a long LRW.
+        let (first, last) = self
+            .fmmu_cache
+            .iter()
+            .map(overlap)
+            .filter(|(_, lo, hi)| lo < hi)
+            .fold((u64::MAX, 0), |(a, b), (_, lo, hi)| {
+                (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)))
+            });
+        if first >= last {
+            return 0;
+        }
+        let mut original = std::mem::take(&mut self.scratch);
+        original.clear();
+        original.extend_from_slice(&data[first as usize..last as usize]);
+        let (mut read_ok, mut write_ok) = (false, false);
+        for i in 0..self.fmmu_cache.len() {
+            let f = self.fmmu_cache[i];
+            let (f_start, lo, hi) = overlap(&f);
             if lo >= hi {
                 continue;
             }
@@ -789,7 +845,7 @@ impl Esc {
                 };
                 if writes {
                     let cur = self.current_byte(pa);
-                    let bits = shift(original[fi] & mask_f, fbit % 8, pbit % 8);
+                    let bits = shift(original[fi - first as usize] & mask_f, fbit % 8, pbit % 8);
                     if self.write_byte(pa, (cur & !mask_p) | bits, cmd) {
                         write_ok = true;
                     }
@@ -844,14 +900,13 @@ impl Esc {
     fn end_of_frame(&mut self, timing: &FrameTiming) {
         let t = timing.epu_ns;
         let mut pending = std::mem::take(&mut self.pending);
-        if pending.is_empty() && !self.sms.iter().any(|s| s.last_byte_written || s.last_byte_read) {
+        if pending.is_empty() && !self.effects.sm_buffer_done {
             self.pending = pending;
             // Nothing but (perhaps) a system-time write: a TCL sample, which changes only the
             // difference (0x092C) and the speed counter difference (0x0932).
             if let (Some(dc), Some(bytes)) = (self.dc.as_mut(), self.effects.tcl.take()) {
                 Self::feed_tcl(dc, Some(bytes), t);
-                self.mem[0x092C..0x0930].copy_from_slice(&dc.difference_register().to_le_bytes());
-                self.mem[0x0932..0x0934].copy_from_slice(&dc.scd.to_le_bytes());
+                self.refresh_tcl_registers();
             }
             return;
         }
@@ -862,6 +917,7 @@ impl Esc {
         for &(a, _) in &pending {
             match a {
                 0x0040 => reset = true,
+                0x0100..=0x0103 => self.port_generation = self.port_generation.wrapping_add(1),
                 0x0120..=0x0121 => al_ctl = true,
                 0x0502..=0x0503 => sii_cmd = true,
                 0x0600..=0x06FF => fmmu_cfg = true,
@@ -902,6 +958,7 @@ impl Esc {
                 return;
             }
         }
+        let mut tcl_fed = false;
         if sm_cfg || fmmu_cfg {
             self.reload_sm_fmmu();
         }
@@ -998,6 +1055,7 @@ impl Esc {
                 dc.delay = u32::from_le_bytes([self.mem[0x0928], self.mem[0x0929], self.mem[0x092A], self.mem[0x092B]]);
             }
             if self.effects.tcl.is_some() {
+                tcl_fed = true;
                 Self::feed_tcl(dc, self.effects.tcl.take(), t);
             }
             if depths {
@@ -1033,7 +1091,11 @@ impl Esc {
         }
         let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset || self.sms.iter().any(|s| s.full));
         if dc_only {
-            self.refresh_dc_registers();
+            if dc_offset || dc_delay || scs || depths || sync_cfg {
+                self.refresh_dc_registers();
+            } else if tcl_fed {
+                self.refresh_tcl_registers();
+            }
         } else {
             self.refresh_registers();
         }

@@ -99,7 +99,6 @@ pub struct Segment {
     wander_step_ns: u64,
     next_wander_ns: u64,
     pub stats: SegmentStats,
-    visits: Vec<(usize, FrameTiming)>,
     route: Route,
 }
 
@@ -109,11 +108,13 @@ pub struct Segment {
 #[derive(Debug, Default)]
 struct Route {
     /// Per node: powered, pulled links and open ports, as when the walk was made.
-    key: Vec<u16>,
-    scratch: Vec<u16>,
+    key: Vec<u64>,
+    scratch: Vec<u64>,
     valid: bool,
     visits: Vec<(usize, FrameTiming)>,
     back_ns: u64,
+    /// When the last frame reached the first ESC: the route's origin for `last_visits`.
+    last_at: u64,
 }
 
 /// Processing order: after port 0 comes 3, after 3 comes 1, after 1 comes 2, after 2 comes 0.
@@ -134,7 +135,6 @@ impl Segment {
             wander_step_ns: 100_000_000,
             next_wander_ns: 100_000_000,
             stats: SegmentStats::default(),
-            visits: Vec::new(),
             route: Route::default(),
         }
     }
@@ -273,8 +273,8 @@ impl Segment {
             let mut t_tx = t;
             if p == 0 {
                 timing.epu_ns = t;
-                slot = Some(self.visits.len());
-                self.visits.push((node, timing));
+                slot = Some(self.route.visits.len());
+                self.route.visits.push((node, timing));
                 t_tx += proc_ns;
             } else if from_wire {
                 t_tx += fwd_ns;
@@ -282,7 +282,7 @@ impl Segment {
             let q = next_port(p);
             if q == entry {
                 if let Some(i) = slot {
-                    self.visits[i].1.port_ns = timing.port_ns;
+                    self.route.visits[i].1.port_ns = timing.port_ns;
                 }
                 return t_tx;
             }
@@ -306,13 +306,12 @@ impl Segment {
     }
 
     /// What decides a node's part of the route and may change between frames (timings and
-    /// wiring are fixed when the segment is built; `connect` invalidates the route).
-    fn route_state(&self, i: usize) -> u16 {
-        // A link's state follows from both ends' power and pulled ports, which are all in the
-        // key (the wiring itself is fixed).
+    /// wiring are fixed when the segment is built; `connect` invalidates the route): power,
+    /// pulled links, and the ESC's port state (its generation counts every change).
+    fn route_state(&self, i: usize) -> u64 {
         let n = &self.nodes[i];
-        let cut = n.cut.iter().enumerate().fold(0u16, |k, (p, &c)| k | (c as u16) << p);
-        n.powered as u16 | (n.entry_port as u16) << 1 | cut << 3 | (n.esc.open_ports() as u16) << 7
+        let cut = u32::from_le_bytes(n.cut.map(u8::from));
+        (n.esc.port_generation() as u64) << 32 | (n.powered as u64) << 31 | cut as u64
     }
 
     /// Walks the segment again if any node's route state changed since the last walk.
@@ -321,11 +320,9 @@ impl Segment {
         key.clear();
         key.extend((0..self.nodes.len()).map(|i| self.route_state(i)));
         if !(self.route.valid && key == self.route.key) {
-            self.visits.clear();
+            self.route.visits.clear();
             let entry = self.nodes[0].entry_port;
             self.route.back_ns = self.walk(0, entry, 0, 0);
-            self.route.visits.clear();
-            self.route.visits.extend_from_slice(&self.visits);
             self.route.valid = true;
         }
         self.route.scratch = std::mem::replace(&mut self.route.key, key);
@@ -347,26 +344,25 @@ impl Segment {
         // "head" that walks the segment is that bit.
         let head_at_first = t_tx_ns + self.master_link_ns as u64;
         self.refresh_route();
-        self.visits.clear();
-        self.visits.extend(self.route.visits.iter().map(|(node, rel)| (*node, rel.shifted(head_at_first))));
+        self.route.last_at = head_at_first;
         let back_at_nic = head_at_first + self.route.back_ns + self.master_link_ns as u64;
         // Faults: a lost or corrupted frame is processed by the ESCs before the fault only.
-        let mut reach = self.visits.len();
+        let mut reach = self.route.visits.len();
         let mut lost = false;
         let mut corrupted = false;
         if self.loss_probability > 0.0 && self.rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
-            reach = self.rng.gen_range(0..=self.visits.len());
+            reach = self.rng.gen_range(0..=self.route.visits.len());
             lost = true;
         } else if self.corruption_probability > 0.0 && self.rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0)) {
-            reach = self.rng.gen_range(0..=self.visits.len());
+            reach = self.rng.gen_range(0..=self.route.visits.len());
             lost = true;
             corrupted = true;
             self.stats.corrupted += 1;
         }
         // Processing pass, in the order the frame passes the processing units.
-        let visits = std::mem::take(&mut self.visits);
+        let visits = std::mem::take(&mut self.route.visits);
         let hdr = ECAT_HEADER_LEN;
-        for (i, (node, timing)) in visits.iter().enumerate() {
+        for (i, (node, rel)) in visits.iter().enumerate() {
             if i >= reach {
                 if corrupted {
                     if let Some(n) = self.nodes.get_mut(*node) {
@@ -387,9 +383,9 @@ impl Segment {
                 }
                 crate::set_circulating(chain);
             }
-            n.esc.process_frame(chain, timing);
+            n.esc.process_frame(chain, &rel.shifted(head_at_first));
         }
-        self.visits = visits;
+        self.route.visits = visits;
         // The ESC marks frames it processed by setting the locally administered bit of the
         // source MAC (DL control bit 0, esc-spec §1.1).
         if frame.len() > 6 {
@@ -405,8 +401,8 @@ impl Segment {
     }
 
     /// The true time at which each ESC saw the last frame at its processing unit.
-    pub fn last_visits(&self) -> &[(usize, FrameTiming)] {
-        &self.visits
+    pub fn last_visits(&self) -> Vec<(usize, FrameTiming)> {
+        self.route.visits.iter().map(|(node, rel)| (*node, rel.shifted(self.route.last_at))).collect()
     }
 }
 
