@@ -62,7 +62,11 @@ pub struct DcUnit {
     applied_fpp: i64,
     last_sample: Option<(u64, i64)>,
     pub sync: SyncUnit,
+    /// (SCS, SCD) → (`corr_rate_q32`, `applied_fpp`), direct-mapped on SCD.
+    rate_memo: [((u16, i16), i64, i64); RATE_MEMO],
 }
+
+const RATE_MEMO: usize = 16;
 
 #[derive(Debug, Clone, Default)]
 pub struct SyncUnit {
@@ -101,6 +105,8 @@ impl DcUnit {
             applied_fpp: 0,
             last_sample: None,
             sync: SyncUnit::default(),
+            // SCS 0 never occurs (it is clamped to 0x80..0x3FFF): every slot starts empty.
+            rate_memo: [((0, 0), 0, 0); RATE_MEMO],
         }
     }
 
@@ -153,10 +159,18 @@ impl DcUnit {
 
     fn set_scd(&mut self, scd: i16) {
         self.scd = scd;
+        // The loop moves SCD among a few neighbouring values: their rates are remembered
+        // (the divisions cost more than the rest of a sample).
+        let slot = &mut self.rate_memo[scd as u16 as usize % RATE_MEMO];
+        if slot.0 == (self.scs, scd) {
+            (self.corr_rate_q32, self.applied_fpp) = (slot.1, slot.2);
+            return;
+        }
         let (num, den) = scd_rate(self.scs, scd);
         // |num| < 2¹⁴ and den < 1.4·10⁹: every product below stays within i64.
         self.corr_rate_q32 = scaled_div(AS_PER_NS as i64 * num, 1 << 32, den);
         self.applied_fpp = scaled_div(AS_PER_NS as i64 * num, 1_000_000, den);
+        *slot = ((self.scs, scd), self.corr_rate_q32, self.applied_fpp);
     }
 
     /// Local copy of the system time at true time `t_ns`.
@@ -217,7 +231,8 @@ impl DcUnit {
                 if span >= TCL_MIN_SPAN_NS {
                     let meas = applied_fpp + (dt - dt0) as f64 * 1e15 / span as f64;
                     let n2 = (self.depth_speed & 0x0F).min(6) as i32;
-                    self.freq_est_fpp += (meas - self.freq_est_fpp) / (1u32 << n2) as f64;
+                    // × 2⁻ⁿ is exactly ÷ 2ⁿ, without a division's latency.
+                    self.freq_est_fpp += (meas - self.freq_est_fpp) * (1.0 / (1u32 << n2) as f64);
                     self.last_sample = Some((local, dt));
                 } else if span < 0 {
                     self.last_sample = Some((local, dt));
