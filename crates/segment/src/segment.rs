@@ -18,6 +18,8 @@ pub struct Peer {
 pub struct Node {
     pub name: String,
     pub esc: Esc,
+    /// Delays and wiring are fixed once frames flow: the segment keeps its route across
+    /// frames and re-walks it only when power, pulled links or an ESC's ports change.
     pub timing: EscTiming,
     pub port_kinds: [Option<PortKind>; 4],
     pub peers: [Option<Peer>; 4],
