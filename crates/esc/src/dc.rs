@@ -180,7 +180,12 @@ impl DcUnit {
 
     /// What an ECAT read of 0x0910 returns for a frame that reached this ESC at `t_ns`.
     pub fn ecat_system_time(&self, t_ns: u64) -> u64 {
-        self.mask(self.system_at(t_ns).wrapping_sub(self.delay as u64))
+        self.ecat_time_of_local(self.local_at(t_ns))
+    }
+
+    /// The ECAT read's value (system time less the delay) for a local time.
+    fn ecat_time_of_local(&self, local: u64) -> u64 {
+        self.mask(self.mask(local.wrapping_add(self.offset)).wrapping_sub(self.delay as u64))
     }
 
     /// Folds the accumulators forward to `t_ns` (never backward).
@@ -212,8 +217,7 @@ impl DcUnit {
     pub fn tcl_sample(&mut self, t_ns: u64, received: u32) {
         self.fold_to(t_ns);
         let local = self.local_at(t_ns);
-        // What an ECAT read would return (`ecat_system_time`), from the one local time.
-        let local_copy = self.mask(self.mask(local.wrapping_add(self.offset)).wrapping_sub(self.delay as u64)) as u32;
+        let local_copy = self.ecat_time_of_local(local) as u32;
         let dt = local_copy.wrapping_sub(received) as i32 as i64;
         // Mean of the difference over 2^depth samples (0x092C).
         let n1 = (self.depth_diff & 0x0F) as u32;

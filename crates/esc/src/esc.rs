@@ -748,12 +748,10 @@ impl Esc {
                     }
                     // A write of the system time feeds the time control loop and leaves the
                     // register as it is (esc-spec 0x0910): nothing to apply at the end.
-                    0x0910..=0x0913 => {
-                        let t = self.effects.tcl.get_or_insert([None; 4]);
-                        t[(a - 0x0910) as usize] = Some(v);
+                    0x0910..=0x0917 => {
+                        self.system_time_byte_written(a, v);
                         return true;
                     }
-                    0x0914..=0x0917 => return true,
                     _ => {}
                 }
                 self.pending.push((a, v));
@@ -773,11 +771,8 @@ impl Esc {
             && self.dc.is_some()
             && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
         {
-            let t = self.effects.tcl.get_or_insert([None; 4]);
-            for (i, &v) in data.iter().enumerate() {
-                if let Some(slot) = t.get_mut(ado as usize - 0x0910 + i) {
-                    *slot = Some(v);
-                }
+            for (a, &v) in (ado..).zip(data) {
+                self.system_time_byte_written(a, v);
             }
             return !data.is_empty();
         }
@@ -880,6 +875,15 @@ impl Esc {
             return v;
         }
         self.mem.get(a as usize).copied().unwrap_or(0)
+    }
+
+    /// A byte of 0x0910–0x0917 written: the low four go to the frame's TCL sample, the
+    /// register itself stays as it is (esc-spec 0x0910).
+    fn system_time_byte_written(&mut self, a: u16, v: u8) {
+        let t = self.effects.tcl.get_or_insert([None; 4]);
+        if let Some(slot) = t.get_mut(a.wrapping_sub(0x0910) as usize) {
+            *slot = Some(v);
+        }
     }
 
     /// A frame's write of 0x0910 (the bytes it wrote): one TCL sample at `t`.
