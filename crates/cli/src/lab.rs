@@ -48,7 +48,7 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
         let mut md = format!(
             "# Park 2020, Table 1\n\nHost `{}`, seed {}, {} rounds, {} samples every {} ms after {} s of settling; \
              error = master − slave clock (true times from the simulator), µs.\n\n\
-             | slaves | method | ref GMEAN | ref MRMS | last GMEAN | last MRMS | lock ms | GPI ref GMEAN/MRMS | GPI last GMEAN/MRMS | paper ref GMEAN/MRMS |\n|---|---|---|---|---|---|---|---|---|---|\n",
+             | slaves | method | ref GMEAN | ref MRMS | last GMEAN | last MRMS | lock ms | GPIO calibration | GPI ref GMEAN/MRMS | GPI last GMEAN/MRMS | paper ref GMEAN/MRMS |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.rounds, o.samples, o.sample_every * o.cycle_ns / 1_000_000, o.settle_s
         );
         for r in &rows {
@@ -58,8 +58,9 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
                 .map(|p| format!("{:.2} / {:.2}", p.2, p.3))
                 .unwrap_or_else(|| "—".into());
             let lock = r.lock_ms.map(|l| format!("{l:.0}")).unwrap_or_else(|| "never".into());
+            let cal = r.calibration_us.map(|c| format!("{c:+.3}")).unwrap_or_else(|| "—".into());
             md.push_str(&format!(
-                "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {lock} | {:.3} / {:.3} | {:.3} / {:.3} | {paper} |\n",
+                "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {lock} | {cal} | {:.3} / {:.3} | {:.3} / {:.3} | {paper} |\n",
                 r.slaves,
                 r.method,
                 r.ref_gmean_us,
@@ -124,6 +125,16 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
             r.last_gmean_us,
             r.last_mrms_us,
             lock
+        );
+    }
+    let calibrated: Vec<String> = rows
+        .iter()
+        .filter_map(|r| r.calibration_us.map(|c| format!("{} slaves {} {c:+.3}", r.slaves, r.method)))
+        .collect();
+    if !calibrated.is_empty() {
+        outln!(
+            "Calibrated through the host's GPIO into the reference's LATCH0 (master − reference error found and taken out, µs): {}",
+            calibrated.join(", ")
         );
     }
     outln!(

@@ -242,6 +242,9 @@ struct LabArgs {
     /// park2020: rounds per (segment, method).
     #[arg(long)]
     rounds: Option<u32>,
+    /// park2020: ferrocat without its GPIO calibration of the stamps' asymmetry.
+    #[arg(long)]
+    no_gpio_calibration: bool,
     #[arg(long)]
     json: bool,
     /// Folder for the CSV, the figures (SVG) and a Markdown report.
@@ -272,6 +275,7 @@ impl LabArgs {
             slaves: (!self.slaves.is_empty()).then_some(self.slaves),
             cycle_us: (!self.cycle_us.is_empty()).then_some(CycleUs::Many(self.cycle_us)),
             rounds: self.rounds,
+            gpio_calibration: self.no_gpio_calibration.then_some(false),
             ..Scenario::default()
         };
         // The flags checked on their own first, so that an error names the flag, not the file.

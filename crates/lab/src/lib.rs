@@ -40,6 +40,41 @@ pub fn segment(cfg: &SegmentConfig, host: HostModel, seed: u64) -> anyhow::Resul
     Ok(m)
 }
 
+/// Methods that take out what a calibration measured (`ClockSync::take_error`).
+pub const CALIBRATED: [&str; 2] = ["ferrocat", "ferrocat-mfr"];
+
+/// Pulses per calibration.
+pub const CALIBRATION_PULSES: usize = 1000;
+
+/// Whether cycle `k` of a run that settles for `settle_cycles` pulses the calibration: the
+/// pulses are spread evenly over the middle half of the settling time, since the master's
+/// error wanders (on a stock kernel its one-second means spread by ≈ 80 ns) and a pulse
+/// every cycle for one second would catch one excursion.
+pub fn calibration_cycle(k: u64, settle_cycles: u64) -> bool {
+    let every = (settle_cycles / 2 / CALIBRATION_PULSES as u64).max(1);
+    k >= settle_cycles / 4 && (k - settle_cycles / 4) % every == 0
+}
+
+/// A GPIO calibration of `method` on `m`, the host's output wired to LATCH0 of the slave at
+/// position `reference`; `None` where the method takes no calibration or the host model has
+/// no GPIO.
+pub fn calibration(
+    m: &mut Master<VirtualIo>,
+    method: &str,
+    reference: usize,
+) -> Option<ferrocat_master::calibrate::GpioCalibration> {
+    let gpio = m.engine.io.host.gpio?;
+    if !CALIBRATED.contains(&method) {
+        return None;
+    }
+    m.engine.io.gpio_wire = Some((node_of(m, reference)?, 0));
+    Some(ferrocat_master::calibrate::GpioCalibration::new(
+        reference as u16,
+        gpio.mean_ns.round() as u64,
+        CALIBRATION_PULSES,
+    ))
+}
+
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.
 pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
     let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_dc).map(|(k, _)| k).collect();

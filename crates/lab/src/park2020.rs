@@ -28,6 +28,9 @@ pub struct Options {
     /// A segment of one's own instead of the line of `slaves` EK1100s (`slaves` then only
     /// labels the rows).
     pub segment: Option<SegmentConfig>,
+    /// ferrocat's methods calibrate their stamps' asymmetry through the host's GPIO into the
+    /// reference's LATCH0 input where the host model has one (`crate::calibration`).
+    pub gpio_calibration: bool,
 }
 
 impl Options {
@@ -44,6 +47,7 @@ impl Options {
             seed: 1,
             host,
             segment: None,
+            gpio_calibration: true,
         }
     }
 
@@ -74,6 +78,9 @@ pub struct Row {
     pub gpi_last_mrms_us: f64,
     pub rounds: u32,
     pub frames_lost: u64,
+    /// The mean over rounds of the master − reference error the GPIO calibration found and
+    /// took out (None: not calibrated).
+    pub calibration_us: Option<f64>,
     /// The first round's samples (µs), master − reference and master − last slave, for the
     /// figures (Park 2020, Figures 8–11).
     #[serde(skip)]
@@ -98,6 +105,7 @@ struct Round {
     gpi_last: Moments,
     lock_ms: Option<f64>,
     lost: u64,
+    calibration_ns: Option<i64>,
     /// Every sample (µs), kept for the first round only.
     samples: Option<(Vec<f32>, Vec<f32>)>,
 }
@@ -121,11 +129,15 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
     let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
     let mut c = Correction::default();
+    let mut calibration = if opts.gpio_calibration { crate::calibration(&mut m, method, reference) } else { None };
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);
         m.engine.io.sleep_until(next);
         c = m.sync_step(sync.as_mut(), &mut st)?;
+        if let Some(cal) = calibration.as_mut().filter(|_| crate::calibration_cycle(k, settle)) {
+            r.calibration_ns = r.calibration_ns.or(cal.pulse(&mut m, sync.as_mut())?);
+        }
         if k % opts.sample_every != 0 {
             continue;
         }
@@ -208,6 +220,11 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
                 gpi_last_mrms_us: avg(&|r| r.gpi_last.rms()),
                 rounds: rs.len() as u32,
                 frames_lost: rs.iter().map(|r| r.lost).sum(),
+                calibration_us: rs
+                    .iter()
+                    .map(|r| r.calibration_ns.map(|e| e as f64 / 1e3))
+                    .sum::<Option<f64>>()
+                    .map(|s| s / k),
                 ref_samples_us,
                 last_samples_us,
             });

@@ -80,6 +80,8 @@ pub struct Scenario {
     pub reference_ppm: Option<f64>,
     /// robustness: which disturbances.
     pub disturbances: Option<Vec<String>>,
+    /// park2020: whether ferrocat calibrates through the host's GPIO (default true).
+    pub gpio_calibration: Option<bool>,
     #[serde(skip)]
     pub path: PathBuf,
 }
@@ -100,7 +102,7 @@ impl Scenario {
             ($($k:ident),*) => { $( if over.$k.is_some() { self.$k = over.$k; } )* };
         }
         take!(experiment, host, seed, segment, methods, cycle_us, slaves, settle_s, duration_s, samples);
-        take!(sample_every, rounds, reference_ppm, disturbances);
+        take!(sample_every, rounds, reference_ppm, disturbances, gpio_calibration);
         self
     }
 
@@ -156,6 +158,7 @@ impl Scenario {
         applies("settle_s", self.settle_s.is_some(), &[Park2020, Paprocki2022, Robustness])?;
         applies("reference_ppm", self.reference_ppm.is_some(), &[Chen2016])?;
         applies("disturbances", self.disturbances.is_some(), &[Robustness])?;
+        applies("gpio_calibration", self.gpio_calibration.is_some(), &[Park2020])?;
         if self.segment.is_some() && (self.slaves.is_some() || self.reference_ppm.is_some()) {
             let key = if self.slaves.is_some() { "slaves" } else { "reference_ppm" };
             return Err(self.err(key, "describes the default segment; with `segment` set it has no meaning"));
@@ -217,6 +220,7 @@ impl Scenario {
                     ensure!((1..=1000).contains(&r), self.err("rounds", "must be between 1 and 1000"));
                     o.rounds = r;
                 }
+                o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
                 o.seed = self.seed.unwrap_or(o.seed);
                 Plan::Park2020(o)
             }
@@ -346,13 +350,14 @@ mod tests {
     fn a_scenario_overrides_the_published_set_up() {
         let Plan::Park2020(o) = scenario(
             "experiment = 'park2020'\nhost = 'beaglebone-rt'\nseed = 7\nslaves = [3]\nmethods = ['ferrocat']\n\
-             settle_s = 1\nsamples = 10\nrounds = 2\ncycle_us = 500\n",
+             settle_s = 1\nsamples = 10\nrounds = 2\ncycle_us = 500\ngpio_calibration = false\n",
         )
         .unwrap() else {
             panic!("not park2020")
         };
         assert_eq!((o.seed, o.slaves.clone(), o.methods.clone(), o.rounds), (7, vec![3], vec!["ferrocat".into()], 2));
         assert_eq!((o.settle_s, o.samples, o.cycle_ns, o.host.name), (1.0, 10, 500_000, "beaglebone-rt"));
+        assert!(!o.gpio_calibration);
         let Plan::Chen2016(o) = scenario("experiment = 'chen2016'\ncycle_us = [100, 50]\nduration_s = 3\n").unwrap()
         else {
             panic!("not chen2016")
@@ -388,6 +393,7 @@ mod tests {
             ("experiment = 'park2020'\nslaves = [0]\n", "`slaves`"),
             ("host = 'pc-rt'\n", "`experiment`"),
             ("experiment = 'robustness'\ndisturbances = ['earthquake']\n", "`disturbances`"),
+            ("experiment = 'chen2016'\ngpio_calibration = false\n", "`gpio_calibration`"),
         ] {
             let e = format!("{:#}", scenario(text).unwrap_err());
             assert!(e.contains("test.toml") && e.contains(key), "{text}: {e}");

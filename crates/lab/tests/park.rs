@@ -30,8 +30,12 @@ fn beaglebone_reproduces_the_conventional_bias_and_ferrocat_beats_park() {
         assert!(p.ref_gmean_us.abs() < c.ref_gmean_us.abs() && p.ref_mrms_us < c.ref_mrms_us);
         assert!(f.ref_gmean_us.abs() < p.ref_gmean_us.abs() && f.ref_mrms_us < p.ref_mrms_us);
         assert!(f.last_gmean_us.abs() < p.last_gmean_us.abs() && f.last_mrms_us < p.last_mrms_us);
+        // Calibrated through the GPIO into the reference's latch: on the reference in the mean,
+        // in both couplings (following the master, the reference's loop wanders more).
         let fm = row(&rows, n, "ferrocat-mfr");
-        assert!(fm.ref_gmean_us.abs() < f.ref_gmean_us.abs() && fm.ref_mrms_us < p.ref_mrms_us / 5.0, "{fm:?}");
+        assert!(fm.ref_gmean_us.abs() <= 0.1 && fm.ref_mrms_us < p.ref_mrms_us / 5.0, "{fm:?}");
+        assert!(f.ref_gmean_us.abs() <= 0.2 && f.ref_mrms_us < p.ref_mrms_us / 5.0, "{f:?}");
+        assert!(fm.calibration_us.is_some() && f.calibration_us.is_some() && c.calibration_us.is_none());
         // Park's GPI measurement keeps the mean (its latencies' means are subtracted) and adds
         // the latencies' spread to every method alike.
         for r in [c, p, f] {
@@ -42,12 +46,29 @@ fn beaglebone_reproduces_the_conventional_bias_and_ferrocat_beats_park() {
 }
 
 #[test]
+fn without_the_calibration_half_the_stamps_asymmetry_stays() {
+    // beaglebone-rt's software stamps: transmit 2.0 µs early, receive 3.0 µs late on average;
+    // no round trip shows the difference, so every passage is put 0.5 µs late.
+    let o = Options {
+        rounds: 2,
+        settle_s: 2.0,
+        samples: 2_000,
+        slaves: vec![2],
+        methods: vec!["ferrocat-mfr".into()],
+        gpio_calibration: false,
+        ..Options::quick(HostModel::beaglebone_rt())
+    };
+    let r = &run(&o, &|_, _| {}).unwrap()[0];
+    assert!((r.ref_gmean_us + 0.5).abs() < 0.1 && r.calibration_us.is_none(), "{r:?}");
+}
+
+#[test]
 fn hardware_timestamps_bring_ferrocat_within_a_tenth_of_a_microsecond_at_once() {
     let rows = table(HostModel::nic_hwts());
     for n in [2, 6] {
         let park = row(&rows, n, "park2020");
         let f = row(&rows, n, "ferrocat");
-        assert!(f.ref_gmean_us.abs() <= 0.25 && f.ref_mrms_us <= 0.3, "{f:?}");
+        assert!(f.ref_gmean_us.abs() <= 0.1 && f.ref_mrms_us <= 0.3, "{f:?}");
         assert!(f.ref_mrms_us < park.ref_mrms_us / 5.0);
         // The master following the reference: no loop at the reference carries host noise
         // into the slaves, and the master's clock is its fitted line through the stamps.
@@ -65,7 +86,9 @@ fn a_stock_kernel_needs_the_master_to_follow() {
     let rows = table(HostModel::pc_stock());
     for n in [2, 6] {
         let (p, fm) = (row(&rows, n, "park2020"), row(&rows, n, "ferrocat-mfr"));
-        assert!(fm.ref_gmean_us.abs() < 1.0 && fm.ref_mrms_us < p.ref_mrms_us / 5.0, "{fm:?}");
+        // The master's error wanders here (its one-second means spread by ≈ 90 ns), and this
+        // short run calibrates over one second: a looser bound than the full run's 0.1 µs.
+        assert!(fm.ref_gmean_us.abs() <= 0.15 && fm.ref_mrms_us < p.ref_mrms_us / 5.0, "{fm:?}");
     }
 }
 

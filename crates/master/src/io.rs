@@ -39,6 +39,12 @@ pub trait Io {
     fn timer_resolution_ns(&self) -> u64 {
         1
     }
+    /// Drives the host's calibration output (a GPIO wired to a slave's LATCH input) to
+    /// `level`; the pin changes one output latency after the call. Unsupported where the host
+    /// has no such output or nothing is wired to it.
+    fn set_gpio(&mut self, _level: bool) -> std::io::Result<()> {
+        Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "this host has no calibration output"))
+    }
 }
 
 /// A latency distribution: normal, clipped below, with rare outliers.
@@ -84,6 +90,9 @@ pub struct HostModel {
     pub stamps: Stamps,
     /// The timer wakes only on multiples of this (0: any ns), as RTX's 10 µs timer in Chen 2016.
     pub timer_resolution_ns: u64,
+    /// A general-purpose output, and how long after the program writes it its pin changes
+    /// (None: the host has none).
+    pub gpio: Option<Latency>,
 }
 
 /// Timestamps the link gives the master.
@@ -108,6 +117,7 @@ impl HostModel {
             wake: Latency::ZERO,
             stamps: Stamps::None,
             timer_resolution_ns: 0,
+            gpio: None,
         }
     }
 
@@ -124,6 +134,7 @@ impl HostModel {
                 rx_late: Latency { mean_ns: 1_500.0, sd_ns: 400.0, min_ns: 500.0, ..Latency::ZERO },
             },
             timer_resolution_ns: 0,
+            gpio: Some(HostModel::PARALLEL_PORT),
         }
     }
 
@@ -174,6 +185,9 @@ impl HostModel {
                 },
             },
             timer_resolution_ns: 0,
+            // The same port, but the process may be preempted between reading its clock and
+            // writing the pin.
+            gpio: Some(Latency { outlier_p: 0.01, outlier_ns: 200_000.0, ..HostModel::PARALLEL_PORT }),
         }
     }
 
@@ -211,6 +225,9 @@ impl HostModel {
                 rx_late: Latency { mean_ns: 3_000.0, sd_ns: 800.0, min_ns: 1_000.0, ..Latency::ZERO },
             },
             timer_resolution_ns: 0,
+            // An AM335x GPIO register written through a mapping from the RT thread: a posted
+            // write over the L4 interconnect, a few hundred ns (assumed; measure it with a scope).
+            gpio: Some(Latency { mean_ns: 300.0, sd_ns: 40.0, min_ns: 200.0, outlier_p: 0.002, outlier_ns: 40_000.0 }),
         }
     }
 
@@ -219,6 +236,12 @@ impl HostModel {
     pub fn rtx_10us() -> Self {
         HostModel { name: "rtx-10us", timer_resolution_ns: 10_000, stamps: Stamps::None, ..HostModel::pc_rt() }
     }
+
+    /// A PC's calibration output: a parallel-port data pin written with `outb`, about 1 µs
+    /// per ISA-style I/O cycle (assumed; measure it with a scope), rarely delayed by an
+    /// interrupt between the clock read and the write.
+    pub const PARALLEL_PORT: Latency =
+        Latency { mean_ns: 1_000.0, sd_ns: 100.0, min_ns: 700.0, outlier_p: 0.001, outlier_ns: 20_000.0 };
 
     /// The presets by name, for the command line and scenarios.
     pub const PRESETS: [&'static str; 6] = ["ideal", "pc-rt", "pc-stock", "nic-hwts", "beaglebone-rt", "rtx-10us"];
@@ -250,6 +273,11 @@ pub struct VirtualIo {
     last_tx: Option<u64>,
     /// The NIC's receive stamp of the frame in each slot.
     rx_stamps: [u64; 32],
+    /// Where the host's calibration output is wired: (segment node, LATCH unit).
+    pub gpio_wire: Option<(usize, u8)>,
+    /// The output's latencies have their own stream, so that pulsing it leaves the frames'
+    /// latencies as they would have been.
+    gpio_rng: ChaCha8Rng,
 }
 
 impl VirtualIo {
@@ -263,6 +291,8 @@ impl VirtualIo {
             lost: 0,
             last_tx: None,
             rx_stamps: [0; 32],
+            gpio_wire: None,
+            gpio_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x6710),
         }
     }
 }
@@ -347,6 +377,18 @@ impl Io for VirtualIo {
     }
     fn rx_stamps_start_of_frame(&self) -> bool {
         self.host.stamps == Stamps::Hardware
+    }
+
+    fn set_gpio(&mut self, level: bool) -> std::io::Result<()> {
+        let unsupported = |what: &str| std::io::Error::new(std::io::ErrorKind::Unsupported, what.to_string());
+        let latency = self.host.gpio.ok_or_else(|| unsupported("this host model has no calibration output"))?;
+        let (node, unit) = self.gpio_wire.ok_or_else(|| unsupported("the calibration output is not wired"))?;
+        let n = self.seg.nodes.len();
+        let esc = &mut self.seg.nodes.get_mut(node).ok_or_else(|| unsupported(&format!("no node {node} of {n}")))?.esc;
+        // The pin changes after the write; no frame passes the ESC in between that this
+        // edge's latched time could depend on, so it is latched now.
+        esc.latch_input(unit, level, self.now + latency.sample(&mut self.gpio_rng));
+        Ok(())
     }
 }
 

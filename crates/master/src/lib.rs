@@ -4,6 +4,7 @@
 //! in-process segment with a model of the host (fast, deterministic), [`io::RawIo`] in real time
 //! on a network interface. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
 //! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
+pub mod calibrate;
 pub mod cia402;
 mod coe;
 mod dc;

@@ -83,6 +83,12 @@ pub trait ClockSync {
     fn master_time(&self, _host_ns: u64) -> Option<u64> {
         None
     }
+    /// A master − reference error measured by an independent path (`crate::calibrate`): a
+    /// method that can takes it out from now on. Returns whether it did (the papers' methods,
+    /// as published, do not).
+    fn take_error(&mut self, _error_ns: i64) -> bool {
+        false
+    }
 }
 
 /// IgH's way: the master's present time to the reference, no delay compensation.
@@ -322,6 +328,11 @@ pub struct Ferrocat {
     last_send_error_ns: i64,
     /// Whether to feed the last send error back (off by default: measured in docs/clock-sync.md).
     pub error_feedback: bool,
+    /// How much later than it was the stamps put the frame's passage of the reference, as a
+    /// calibration found it (half the stamps' receive/transmit asymmetry; with the reference
+    /// following, also the bias its time control loop adds to a jittery master): taken out of
+    /// every passage, as linuxptp's `delayAsymmetry` is.
+    pub calibration_ns: i64,
 }
 
 const WINDOW: usize = 64;
@@ -341,6 +352,7 @@ impl Ferrocat {
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
             error_feedback: false,
+            calibration_ns: 0,
         }
     }
 
@@ -389,7 +401,7 @@ impl ClockSync for Ferrocat {
             self.leads.pop_front();
         }
         self.leads.push_back(s.lead_ns());
-        self.lead_ns = Some(Self::trimmed_mean(&self.leads));
+        self.lead_ns = Some(Self::trimmed_mean(&self.leads).wrapping_sub(self.calibration_ns));
         if let Some(tx) = s.tx_ns {
             let send = tx.wrapping_sub(s.built_ns) as i64;
             if self.sends.len() == WINDOW {
@@ -408,7 +420,7 @@ impl ClockSync for Ferrocat {
             self.halves.pop_front();
         }
         self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
-        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves));
+        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves).wrapping_sub(self.calibration_ns));
         if self.fit.len() == WINDOW {
             self.fit.pop_front();
         }
@@ -446,6 +458,20 @@ impl ClockSync for Ferrocat {
         let (x0, y0, mx, my, rate) = self.line?;
         let dx = host_ns.wrapping_sub(x0) as i64 as f64;
         Some(y0.wrapping_add_signed((my + rate * (dx - mx)) as i64))
+    }
+    fn take_error(&mut self, error_ns: i64) -> bool {
+        // The master (or its estimate of the reference) is ahead by `error_ns`: the passages
+        // were that much earlier than the stamps said. Past passages move at once too.
+        let shift = error_ns.saturating_neg();
+        self.calibration_ns = self.calibration_ns.saturating_add(shift);
+        self.lead_ns = self.lead_ns.map(|l| l.wrapping_sub(shift));
+        for (x, _) in self.fit.iter_mut() {
+            *x = x.wrapping_add_signed(shift.wrapping_neg());
+        }
+        if let Some(line) = self.line.as_mut() {
+            line.0 = line.0.wrapping_add_signed(shift.wrapping_neg());
+        }
+        true
     }
 }
 

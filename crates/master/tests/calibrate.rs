@@ -1,0 +1,99 @@
+//! The GPIO calibration against the simulator's true clocks: it finds what half the software
+//! stamps' asymmetry does to ferrocat's master clock, and taking it out removes it.
+use ferrocat_master::calibrate::GpioCalibration;
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::sync::{ClockSync, Correction, Coupling, Ferrocat};
+use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::SegmentConfig;
+
+const CYCLE_NS: u64 = 1_000_000;
+
+fn segment(host: HostModel) -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 3\n\
+         [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 30.0\n\
+         [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = -40.0\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, 3));
+    m.bring_up().unwrap();
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m
+}
+
+/// The method's clock minus the reference's true system time now, ns.
+fn true_error(m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> i64 {
+    let t = m.engine.io.now_ns();
+    let own = m.master_system_time();
+    let master = sync.master_time(own).unwrap_or(own);
+    let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+    master.wrapping_sub(reference) as i64
+}
+
+/// 4 000 cycles of `sync`, pulsing `cal` (if any) after each of cycles 1 000–1 999; the mean
+/// true error over those cycles and over the last 1 000, and what the calibration found.
+fn run(
+    m: &mut Master<VirtualIo>,
+    sync: &mut Ferrocat,
+    mut cal: Option<&mut GpioCalibration>,
+) -> (f64, f64, Option<i64>) {
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let mut c = Correction::default();
+    let (mut during, mut last, mut found) = (0.0, 0.0, None);
+    for k in 0..4_000 {
+        next += c.next_period_ns.unwrap_or(CYCLE_NS);
+        m.engine.io.sleep_until(next);
+        c = m.sync_step(sync, &mut st).unwrap();
+        if (1_000..2_000).contains(&k) {
+            during += true_error(m, sync) as f64 / 1e3;
+            if let Some(cal) = cal.as_deref_mut() {
+                found = found.or(cal.pulse(m, sync).unwrap());
+            }
+        } else if k >= 3_000 {
+            last += true_error(m, sync) as f64 / 1e3;
+        }
+    }
+    (during, last, found)
+}
+
+#[test]
+fn the_calibration_finds_and_removes_the_stamps_asymmetry() {
+    // beaglebone-rt: transmit stamps 2.0 µs early, receive stamps 3.0 µs late on average, so
+    // every passage is put 0.5 µs late, and the master's copy of the reference's clock with it.
+    let host = HostModel::beaglebone_rt();
+    for coupling in [Coupling::MasterFollowsReference, Coupling::ReferenceFollowsMaster] {
+        let mut m = segment(host);
+        let (_, before, _) = run(&mut m, &mut Ferrocat::new(coupling, CYCLE_NS), None);
+        assert!(before < -300.0, "{coupling:?}: uncalibrated {before:.0} ns");
+
+        let mut m = segment(host);
+        m.engine.io.gpio_wire = Some((0, 0));
+        let mut cal = GpioCalibration::new(0, host.gpio.unwrap().mean_ns as u64, 1_000);
+        let mut sync = Ferrocat::new(coupling, CYCLE_NS);
+        let (during, after, found) = run(&mut m, &mut sync, Some(&mut cal));
+        let found = found.expect("1 000 pulses, one after each of 1 000 cycles");
+        println!("{coupling:?}: uncalibrated {before:.0} ns; while calibrating {during:.0} ns, found {found} ns; calibrated {after:.0} ns");
+        // The pulses measure the true error of their cycles (the output's latency jitter and
+        // the 10 ns latch apart), and taking it out leaves the master on the reference.
+        assert!((found as f64 - during).abs() < 30.0, "{coupling:?}: found {found}, true {during:.0}");
+        assert!(after.abs() < 0.2 * before.abs(), "{coupling:?}: calibrated {after:.0} ns");
+        assert_eq!(sync.calibration_ns, -found);
+    }
+}
+
+#[test]
+fn a_host_without_a_wired_output_says_so() {
+    let mut m = segment(HostModel::ideal());
+    let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS);
+    let mut cal = GpioCalibration::new(0, 0, 10);
+    let e = cal.pulse(&mut m, &mut sync).unwrap_err().to_string();
+    assert!(e.contains("no calibration output"), "{e}");
+    let mut m = segment(HostModel::pc_rt());
+    let e = cal.pulse(&mut m, &mut sync).unwrap_err().to_string();
+    assert!(e.contains("not wired"), "{e}");
+    // A slave position that does not exist.
+    m.engine.io.gpio_wire = Some((0, 0));
+    let e = GpioCalibration::new(7, 0, 10).pulse(&mut m, &mut sync).unwrap_err().to_string();
+    assert!(e.contains('7'), "{e}");
+}
