@@ -4,7 +4,7 @@
 //! twice, for 500, 250, 100 and 50 µs cycles.
 use ferrocat_esc::SyncApp;
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
-use ferrocat_master::sync::{Coupling, Nominal};
+use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Nominal};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use rayon::prelude::*;
@@ -97,7 +97,14 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         ..DcConfig::default()
     })?;
     m.start()?;
-    let mut sync = crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?;
+    let mut sync: Box<dyn ClockSync> = if name == "ferrocat" {
+        // ferrocat knows the SYNC0 its frames serve, and holds a frame back after a late one.
+        let mut f = Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns);
+        f.sync0_phase_ns = Some(cycle_ns / 2);
+        Box::new(f)
+    } else {
+        crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?
+    };
     let mut st = m.sync_state()?;
     // Common start for every method (Chen's offset compensation at t1): the first frame at
     // the start of a reference cycle.
@@ -114,20 +121,23 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let mut first: Option<(u64, u64)> = None;
     let mut trace = Vec::new();
     let trace_every = (total - total / 10).div_ceil(2000).max(1);
+    // Slots of the master's grid so far: a period of two cycles (a frame held back) skips one.
+    let mut slot = 0u64;
     for k in 0..total {
         // One frame per cycle: the process data with the sync datagrams behind it.
         let (_, c) = m.cycle_sync(sync.as_mut(), &mut st)?;
         let period = c.next_period_ns.unwrap_or(cycle_ns);
         if let (Some(t), true) = (st.reference_ns, k >= total / 10) {
-            let (k0, t0) = *first.get_or_insert((k, t));
+            let (k0, t0) = *first.get_or_insert((slot, t));
             // Chen's jitter: the reference's time against the master's grid T_s + i·T_p.
-            let j = t.wrapping_sub(t0) as i64 - ((k - k0) * cycle_ns) as i64;
+            let j = t.wrapping_sub(t0) as i64 - ((slot - k0) * cycle_ns) as i64;
             jmin = jmin.min(j);
             jmax = jmax.max(j);
-            if (k - k0) % trace_every == 0 {
-                trace.push((k - k0, j as f64 / 1e3, period as f64 / 1e3));
+            if (k - total / 10) % trace_every == 0 {
+                trace.push((slot - k0, j as f64 / 1e3, period as f64 / 1e3));
             }
         }
+        slot += ((period + cycle_ns / 2) / cycle_ns).max(1);
         next += period;
         m.engine.io.sleep_until(next);
     }

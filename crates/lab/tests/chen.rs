@@ -25,3 +25,25 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
         }
     }
 }
+
+#[test]
+fn at_50_us_ferrocat_holds_a_frame_back_after_a_late_one_and_loses_none() {
+    // The host's rare late wake-ups and sends (0.1 % each, up to 30 and 20 µs) pass the SYNC0
+    // half a 50 µs cycle after the frame's target: the others lose the next frame's data,
+    // ferrocat holds that frame back one cycle, so the slaves repeat one cycle and lose none.
+    let o = Options {
+        // The quick run's 10 s: the widths are extremes, and chen2016's grows over the run.
+        cycles_us: vec![50],
+        methods: vec!["chen2016".into(), "ferrocat".into()],
+        ..Options::quick(HostModel::rtx_10us())
+    };
+    let rows = run(&o, &|_, _| {}).unwrap();
+    let (chen, f) = (&rows[0], &rows[1]);
+    let show = |r: &ferrocat_lab::chen2016::Row| {
+        format!("{}: width {:.1} %, lost {}, repeated {}", r.method, r.jitter_width_pct, r.lost, r.repeated)
+    };
+    println!("{}\n{}", show(chen), show(f));
+    assert!(chen.lost > 0, "{}", show(chen));
+    assert!(f.lost == 0 && f.repeated > 0, "{}", show(f));
+    assert!(f.jitter_width_pct < chen.jitter_width_pct, "{}", show(f));
+}

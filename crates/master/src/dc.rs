@@ -21,6 +21,15 @@ pub(crate) fn frame_bytes(pdus: &[Pdu<'_>]) -> u64 {
     payload.max(60) as u64 + 4 + 8
 }
 
+/// From a frame's head (its first preamble bit) to the end of its first `pdus` datagrams, in
+/// bytes: preamble, Ethernet and EtherCAT headers, each datagram's header, data and WKC.
+pub(crate) fn bytes_through(pdus: &[Pdu<'_>]) -> u64 {
+    if pdus.is_empty() {
+        return 0;
+    }
+    (8 + 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>()) as u64
+}
+
 /// The clock-synchronisation datagrams of one cycle and their buffers.
 #[derive(Debug)]
 pub(crate) struct SyncPdus {
@@ -338,7 +347,7 @@ impl<I: Io> Master<I> {
         let frame_bytes = frame_bytes(&pdus);
         let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
         let answered = res.is_ok() && SyncPdus::answered(&pdus);
-        self.sync_end(sync, st, &p, answered, frame_bytes)
+        self.sync_end(sync, st, &p, answered, frame_bytes, 0)
     }
 
     /// The sync datagrams of this cycle, built now (the master's time goes into them).
@@ -365,6 +374,7 @@ impl<I: Io> Master<I> {
         p: &SyncPdus,
         answered: bool,
         frame_bytes: u64,
+        data_bytes: u64,
     ) -> Result<crate::sync::Correction> {
         use crate::sync::Sample;
         let to_sys = |m: &mut Self, world: u64| -> u64 {
@@ -389,6 +399,7 @@ impl<I: Io> Master<I> {
                 loop_ns: st.loop_ns,
                 // A stamp after the last byte (software, or none) includes the whole frame.
                 frame_ns: if hw { 0 } else { frame_bytes * 80 },
+                data_ns: data_bytes * 80,
             })
         } else {
             st.lost += 1;

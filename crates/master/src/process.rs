@@ -184,6 +184,7 @@ impl<I: Io> Master<I> {
         });
         drop(extra);
         let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
+        let data_bytes = crate::dc::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
         let answered = r.is_ok() && with_sync && crate::dc::SyncPdus::answered(&pdus[chunks..n]);
@@ -208,7 +209,7 @@ impl<I: Io> Master<I> {
                 if answered {
                     self.dc_time = u64::from_le_bytes(p.frmw);
                 }
-                Some(self.sync_end(m, st, &p, answered, frame_bytes)?)
+                Some(self.sync_end(m, st, &p, answered, frame_bytes, data_bytes)?)
             }
             _ => None,
         };

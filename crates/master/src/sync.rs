@@ -38,6 +38,9 @@ pub struct Sample {
     /// 100 Mbit/s when the receive time is taken after the last byte (software), 0 for a
     /// NIC that stamps the start of frame.
     pub frame_ns: u64,
+    /// From the frame's head to the end of its process data (its LRW datagrams), which the
+    /// slaves take at their next SYNC0; 0 for a frame without.
+    pub data_ns: u64,
 }
 
 impl Sample {
@@ -333,6 +336,15 @@ pub struct Ferrocat {
     /// following, also the bias its time control loop adds to a jittery master): taken out of
     /// every passage, as linuxptp's `delayAsymmetry` is.
     pub calibration_ns: i64,
+    /// Master follows reference: the reference-time phase of the SYNC0 the frames serve. A
+    /// frame whose end passed it (a late wake-up or send) has been consumed a SYNC0 late; the
+    /// next frame is held back one cycle so that it does not overwrite it before then: the
+    /// slaves repeat one cycle instead of repeating one and losing the next.
+    pub sync0_phase_ns: Option<u64>,
+    /// Frames held back so.
+    pub held_back: u64,
+    /// The reference time the next frame is aimed at (its slot on the grid of `phase_ns`).
+    aimed_ns: Option<u64>,
 }
 
 const WINDOW: usize = 64;
@@ -353,12 +365,40 @@ impl Ferrocat {
             last_send_error_ns: 0,
             error_feedback: false,
             calibration_ns: 0,
+            sync0_phase_ns: None,
+            held_back: 0,
+            aimed_ns: None,
         }
     }
 
     /// The lead in use (None before the first sample).
     pub fn lead_ns(&self) -> Option<i64> {
         self.lead_ns
+    }
+
+    /// How many cycles to hold the next frame back: as many SYNC0s as the process data of
+    /// `s` ended after the one it was aimed before. The frame's slot is counted on from the
+    /// last one, not read off its phase, which could not tell a frame late by most of a cycle
+    /// from an early one.
+    fn slots_to_hold(&mut self, s: &Sample) -> u64 {
+        let Some(sync0) = self.sync0_phase_ns else { return 0 };
+        let c = self.cycle_ns;
+        let nearest = || {
+            let off = s.reference_ns.wrapping_sub(self.phase_ns).wrapping_add(c / 2) % c;
+            s.reference_ns.wrapping_sub(off).wrapping_add(c / 2)
+        };
+        let mut aimed = self.aimed_ns.unwrap_or_else(nearest);
+        let mut late = s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
+        // Far off the count (a stall, a jump of the reference): start counting again here.
+        if late < -(c as i64) / 2 || late > 8 * c as i64 {
+            aimed = nearest();
+            late = s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
+        }
+        let room = (sync0.wrapping_sub(self.phase_ns) % c) as i64;
+        // At most the 8 cycles a frame may be late before the count starts again.
+        let hold = if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
+        self.aimed_ns = Some(aimed.wrapping_add((1 + hold) * c));
+        hold
     }
 
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
@@ -392,6 +432,7 @@ impl ClockSync for Ferrocat {
     }
     fn update(&mut self, s: Option<&Sample>) -> Correction {
         let Some(s) = s else {
+            self.aimed_ns = self.aimed_ns.map(|a| a.wrapping_add(self.cycle_ns));
             return Correction {
                 shift_offsets_ns: 0,
                 next_period_ns: (self.coupling == Coupling::MasterFollowsReference).then_some(self.cycle_ns),
@@ -451,7 +492,10 @@ impl ClockSync for Ferrocat {
         // One cycle of reference time is cycle/rate of master time. Each phase carries the
         // host's wake-up jitter, which no period can undo: take out 1/16 of it per cycle so
         // that the jitter averages away instead of being fed back.
-        let period = (c - phase / 16.0) / rate;
+        let mut period = (c - phase / 16.0) / rate;
+        let hold = self.slots_to_hold(s);
+        period += hold as f64 * c / rate;
+        self.held_back += hold;
         Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) }
     }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
@@ -490,10 +534,21 @@ mod tests {
             any::<i64>(),
             any::<u64>(),
             any::<u64>(),
+            any::<u64>(),
         )
-            .prop_map(|(cycle, built_ns, tx_ns, rx_ns, reference_ns, difference_ns, loop_ns, frame_ns)| {
-                Sample { cycle, built_ns, tx_ns, rx_ns, reference_ns, difference_ns, loop_ns, frame_ns }
-            })
+            .prop_map(
+                |(cycle, built_ns, tx_ns, rx_ns, reference_ns, difference_ns, loop_ns, frame_ns, data_ns)| Sample {
+                    cycle,
+                    built_ns,
+                    tx_ns,
+                    rx_ns,
+                    reference_ns,
+                    difference_ns,
+                    loop_ns,
+                    frame_ns,
+                    data_ns,
+                },
+            )
     }
 
     proptest! {
@@ -508,6 +563,7 @@ mod tests {
                 Box::new(SoemPi::new(cycle_ns, samples[0].difference_ns)),
                 Box::new(Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns)),
                 Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
+                Box::new(Ferrocat { sync0_phase_ns: Some(built), ..Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns) }),
             ];
             for m in methods.iter_mut() {
                 for (k, s) in samples.iter().enumerate() {
@@ -526,7 +582,7 @@ mod tests {
                                               loop_ns in 0u64..1_000_000) {
             let s = |b: u64| Sample {
                 cycle: 0, built_ns: b, tx_ns: Some(b.wrapping_add(send)), rx_ns: b.wrapping_add(send).wrapping_add(rtt),
-                reference_ns: 0, difference_ns: 0, loop_ns, frame_ns: 0,
+                reference_ns: 0, difference_ns: 0, loop_ns, frame_ns: 0, data_ns: 0,
             };
             prop_assert_eq!(s(base).lead_ns(), s(0).lead_ns());
         }
@@ -542,6 +598,7 @@ mod tests {
             difference_ns,
             loop_ns: 4_000,
             frame_ns: 6_000,
+            data_ns: 0,
         }
     }
 
@@ -610,6 +667,38 @@ mod tests {
         assert_eq!(f.reference_time(0) as i64, base as i64 + lead_change - 2_000);
         f.error_feedback = false;
         assert_eq!(f.reference_time(0) as i64, base as i64 + lead_change);
+    }
+
+    #[test]
+    fn a_frame_that_ended_past_its_sync0_holds_the_next_back_one_cycle() {
+        let c = 50_000;
+        let mut f = Ferrocat::new(Coupling::MasterFollowsReference, c);
+        f.sync0_phase_ns = Some(c / 2);
+        // Process data ending 5 µs after the frame's head, aimed at phase 0 of the reference's cycle, SYNC0 at 25 µs.
+        let frame = |k: u64, late: i64| Sample {
+            cycle: k,
+            built_ns: k * c,
+            tx_ns: None,
+            rx_ns: (k * c).wrapping_add_signed(late) + 10_000,
+            reference_ns: (k * c).wrapping_add_signed(late),
+            difference_ns: 0,
+            loop_ns: 0,
+            frame_ns: 8_000,
+            data_ns: 5_000,
+        };
+        let period = |f: &mut Ferrocat, k, late| f.update(Some(&frame(k, late))).next_period_ns.unwrap();
+        for k in 1..100 {
+            let p = period(&mut f, k, 1_000);
+            assert!(p.abs_diff(c) < 2_000, "{k}: {p}");
+        }
+        // Ends 1 µs before SYNC0: nothing; 1 µs after: the next frame one cycle later.
+        assert!(period(&mut f, 100, 19_000) < c * 3 / 2 && f.held_back == 0);
+        assert!(period(&mut f, 101, 21_000) > c * 3 / 2 && f.held_back == 1);
+        // Early (its end 2 µs before its target, or its head 7 µs): not taken for late.
+        assert!(period(&mut f, 103, -7_000) < c * 3 / 2 && f.held_back == 1);
+        // Without a SYNC0 to serve, never.
+        f.sync0_phase_ns = None;
+        assert!(period(&mut f, 104, 30_000) < c * 3 / 2 && f.held_back == 1);
     }
 
     #[test]
