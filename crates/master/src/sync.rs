@@ -337,7 +337,7 @@ pub struct Ferrocat {
     /// every passage, as linuxptp's `delayAsymmetry` is.
     pub calibration_ns: i64,
     /// Master follows reference: the reference-time phase of the SYNC0 the frames serve. A
-    /// frame whose end passed it (a late wake-up or send) has been consumed a SYNC0 late; the
+    /// frame whose process data ended after it (a late wake-up or send) is consumed a SYNC0 late; the
     /// next frame is held back one cycle so that it does not overwrite it before then: the
     /// slaves repeat one cycle instead of repeating one and losing the next.
     pub sync0_phase_ns: Option<u64>,
@@ -387,13 +387,13 @@ impl Ferrocat {
             let off = s.reference_ns.wrapping_sub(self.phase_ns).wrapping_add(c / 2) % c;
             s.reference_ns.wrapping_sub(off).wrapping_add(c / 2)
         };
+        let late_of = |aimed: u64| s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
         let mut aimed = self.aimed_ns.unwrap_or_else(nearest);
-        let mut late = s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
         // Far off the count (a stall, a jump of the reference): start counting again here.
-        if late < -(c as i64) / 2 || late > 8 * c as i64 {
+        if !(-(c as i64) / 2..=8 * c as i64).contains(&late_of(aimed)) {
             aimed = nearest();
-            late = s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
         }
+        let late = late_of(aimed);
         let room = (sync0.wrapping_sub(self.phase_ns) % c) as i64;
         // At most the 8 cycles a frame may be late before the count starts again.
         let hold = if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
