@@ -52,10 +52,10 @@ impl GpioCalibration {
             return Ok(None);
         }
         let s = m.slave(self.slave)?;
-        let (station, wide, has_dc, name) = (s.station, s.dc_64bit, s.has_dc, s.name.clone());
-        if !has_dc {
-            return Err(MasterError::slave(self.slave, &name, "has no DC unit to latch the calibration pulse"));
+        if !s.has_dc {
+            return Err(MasterError::slave(self.slave, &s.name, "has no DC unit to latch the calibration pulse"));
         }
+        let (station, wide) = (s.station, s.dc_64bit);
         if !self.armed {
             m.fpwr(station, LATCH0_CONTROL, &[0])?;
             m.engine.io.set_gpio(false)?;

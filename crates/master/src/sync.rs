@@ -506,14 +506,13 @@ impl ClockSync for Ferrocat {
     fn take_error(&mut self, error_ns: i64) -> bool {
         // The master (or its estimate of the reference) is ahead by `error_ns`: the passages
         // were that much earlier than the stamps said. Past passages move at once too.
-        let shift = error_ns.saturating_neg();
-        self.calibration_ns = self.calibration_ns.saturating_add(shift);
-        self.lead_ns = self.lead_ns.map(|l| l.wrapping_sub(shift));
+        self.calibration_ns = self.calibration_ns.saturating_sub(error_ns);
+        self.lead_ns = self.lead_ns.map(|l| l.wrapping_add(error_ns));
         for (x, _) in self.fit.iter_mut() {
-            *x = x.wrapping_add_signed(shift.wrapping_neg());
+            *x = x.wrapping_add_signed(error_ns);
         }
         if let Some(line) = self.line.as_mut() {
-            line.0 = line.0.wrapping_add_signed(shift.wrapping_neg());
+            line.0 = line.0.wrapping_add_signed(error_ns);
         }
         true
     }
