@@ -2,7 +2,8 @@
 //! master runs in real time on one end of a veth pair in a network namespace of its own,
 //! `ferrocat sim` serves the other end in another, and the simulator logs every slave's true
 //! system time at each frame's CLOCK_MONOTONIC instant; the master's clock is CLOCK_MONOTONIC
-//! plus its epoch offset, so both are compared on the same time base.
+//! plus its epoch offset (or, for a master that follows the reference, the method's line on
+//! that), so both are compared on the same time base.
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
@@ -148,10 +149,28 @@ impl Drop for Sim {
 /// window it measured.
 struct MasterRun {
     epoch_offset_ns: u64,
+    /// Where the method keeps a clock of its own (master follows reference), that clock as the
+    /// line in force from each cycle on; `None` where the master's clock is its own.
+    clock: Option<Vec<ClockPiece>>,
     from_ns: u64,
     to_ns: u64,
     cycles: u64,
     lost: u64,
+}
+
+/// The method's clock from `own_ns` (the master's own system time) until the next piece.
+#[derive(Debug, Clone, Copy)]
+struct ClockPiece {
+    own_ns: u64,
+    master_ns: u64,
+    rate: f64,
+}
+
+impl ClockPiece {
+    fn at(&self, own_ns: u64) -> u64 {
+        let dx = own_ns.wrapping_sub(self.own_ns) as i64 as f64;
+        self.master_ns.wrapping_add_signed((dx * self.rate) as i64)
+    }
 }
 
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
@@ -174,15 +193,28 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let start = m.engine.io.now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
-    let (mut next, mut cycles) = (start, 0);
+    let mut clock = Vec::new();
+    let (mut next, mut period, mut cycles) = (start, cycle_ns, 0);
     while next < to_ns {
-        next += cycle_ns;
+        next += period;
         m.engine.io.sleep_until(next);
-        m.sync_step(sync.as_mut(), &mut st)?;
+        let c = m.sync_step(sync.as_mut(), &mut st)?;
+        // A master that follows the reference wakes when it says.
+        period = c.next_period_ns.unwrap_or(cycle_ns);
         cycles += 1;
+        if m.engine.io.now_ns() + 2 * cycle_ns >= from_ns {
+            let own = m.master_system_time();
+            let ahead = own.wrapping_add(cycle_ns);
+            if let (Some(a), Some(b)) = (sync.master_time(own), sync.master_time(ahead)) {
+                let rate = b.wrapping_sub(a) as i64 as f64 / cycle_ns as f64;
+                clock.push(ClockPiece { own_ns: own, master_ns: a, rate });
+            }
+        }
     }
     let epoch_offset_ns = m.epoch_offset_ns().context("the master's clock was never read")?;
-    Ok(MasterRun { epoch_offset_ns, from_ns, to_ns, cycles, lost: st.lost })
+    // A method that keeps no clock of its own leaves the master's.
+    let clock = (!clock.is_empty()).then_some(clock);
+    Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost })
 }
 
 /// Master − slave errors from the simulator's clock log over the master's window.
@@ -195,7 +227,16 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         if mono < r.from_ns || mono > r.to_ns {
             continue;
         }
-        let master = mono.wrapping_add(r.epoch_offset_ns) as u32;
+        let own = mono.wrapping_add(r.epoch_offset_ns);
+        let master = match &r.clock {
+            None => own,
+            Some(pieces) => {
+                // The line in force then; none yet (not fitted) leaves the frame out.
+                let i = pieces.partition_point(|p| p.own_ns.wrapping_sub(own) as i64 <= 0);
+                let Some(p) = i.checked_sub(1).map(|i| pieces[i]) else { continue };
+                p.at(own)
+            }
+        } as u32;
         let e: Vec<f64> = v[1..].iter().flatten().map(|&s| master.wrapping_sub(s as u32) as i32 as f64).collect();
         ensure!(e.len() == a.slaves, "{}: line {}: {} slave clocks, not {}", log.display(), i + 1, e.len(), a.slaves);
         reference.push(e[0]);
@@ -227,9 +268,9 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         a.seconds > 0.0 && a.seconds <= 3600.0 && (0.0..=3600.0).contains(&a.settle_s),
         "--seconds/--settle-s out of range"
     );
-    // The simulator compares slave clocks with CLOCK_MONOTONIC + the master's epoch offset, so
-    // only methods whose master clock is that (not ferrocat-mfr's fitted line) are measured.
-    const LIVE: [&str; 4] = ["none", "conventional", "park2020", "ferrocat"];
+    // The methods that keep a master clock: the master's own, or (ferrocat-mfr) its estimate of
+    // the reference's. chen2016 and SOEM's PI follow the reference's phase and keep no clock.
+    const LIVE: [&str; 5] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr"];
     for m in &a.methods {
         ensure!(LIVE.contains(&m.as_str()), "--method {m:?}: one of {}", LIVE.join(", "));
     }
@@ -284,4 +325,40 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_master_that_follows_the_reference_is_measured_on_its_own_line() {
+        let a =
+            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let log = std::env::temp_dir().join(format!("ferrocat-live-unit-{}.csv", std::process::id()));
+        // Monotonic 1 000 000 ns is own 5 001 000 000; the slave reads 7 000 000 000 + 500 then.
+        std::fs::write(&log, "t,s0\n900000,1\n1000000,7000000500\n2000000,7001000600\n").unwrap();
+        let epoch = 5_000_000_000;
+        // From own 5 000 950 000 on, the method's clock is 7 000 000 000 − 50 000 + 1.0001 × Δ.
+        let piece = ClockPiece { own_ns: 5_000_950_000, master_ns: 6_999_950_000, rate: 1.0001 };
+        let mut run = MasterRun {
+            epoch_offset_ns: epoch,
+            clock: Some(vec![piece]),
+            from_ns: 0,
+            to_ns: u64::MAX,
+            cycles: 3,
+            lost: 0,
+        };
+        let row = errors(&log, &run, "ferrocat-mfr", &a).unwrap();
+        // The frame before the first piece is left out; the others: line − slave.
+        assert_eq!(row.samples, 2);
+        let e1 = 6_999_950_000.0 + 1.0001 * 50_000.0 - 7_000_000_500.0;
+        let e2 = 6_999_950_000.0 + 1.0001 * 1_050_000.0 - 7_001_000_600.0;
+        assert!((row.ref_mean_us * 1e3 - (e1 + e2) / 2.0).abs() < 1.0, "{row:?}");
+        // Without a clock of the method's own, the master's is CLOCK_MONOTONIC + epoch.
+        run.clock = None;
+        let row = errors(&log, &run, "ferrocat", &a).unwrap();
+        assert_eq!(row.samples, 3);
+        std::fs::remove_file(&log).ok();
+    }
 }

@@ -186,8 +186,8 @@ enum LabCmd {
     /// The master–slave clock errors on this machine's real kernel: the master in real time on a
     /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root).
     Live {
-        /// Methods (repeatable): none, conventional, park2020, ferrocat (ferrocat-mfr keeps its own clock, not measured live).
-        #[arg(long, default_values = ["conventional", "park2020", "ferrocat"])]
+        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr (whose master clock is its estimate of the reference's).
+        #[arg(long, default_values = ["conventional", "park2020", "ferrocat", "ferrocat-mfr"])]
         method: Vec<String>,
         #[arg(long, default_value_t = 2)]
         slaves: usize,

@@ -6,14 +6,14 @@ use std::process::Command;
 fn lab_live_measures_the_true_clock_errors_on_this_kernel() {
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
         .args(["lab", "live", "--seconds", "1", "--settle-s", "0.5", "--slaves", "3", "--json"])
-        .args(["--method", "conventional", "--method", "ferrocat"])
+        .args(["--method", "conventional", "--method", "ferrocat", "--method", "ferrocat-mfr"])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     println!("{v:#}");
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 2);
+    assert_eq!(rows.len(), 3);
     for r in rows {
         let f = |k: &str| r[k].as_f64().unwrap();
         // About one logged frame per cycle of the measured second.
