@@ -194,13 +194,12 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
     let mut clock = Vec::new();
-    let (mut next, mut period, mut cycles) = (start, cycle_ns, 0);
+    let (mut next, mut c, mut cycles) = (start, Default::default(), 0);
     while next < to_ns {
-        next += period;
-        m.engine.io.sleep_until(next);
-        let c = m.sync_step(sync.as_mut(), &mut st)?;
         // A master that follows the reference wakes when it says.
-        period = c.next_period_ns.unwrap_or(cycle_ns);
+        next = ferrocat_lab::next_wake(next, cycle_ns, &c);
+        m.engine.io.sleep_until(next);
+        c = m.sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
         if m.engine.io.now_ns() + 2 * cycle_ns >= from_ns {
             let own = m.master_system_time();
