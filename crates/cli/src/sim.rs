@@ -50,7 +50,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "frames": n.esc.frames,
                 "outputs": io.map(|d| d.outputs.clone()),
                 "output_updates": io.map(|d| d.output_updates),
-                "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns),
+                "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns()),
             })
         })
         .collect();

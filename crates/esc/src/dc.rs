@@ -53,8 +53,9 @@ pub struct DcUnit {
     pub scd: i16,
     pub depth_diff: u8,
     pub depth_speed: u8,
-    /// Filtered `local − received` (0x092C), in ns.
-    pub diff_mean_ns: i64,
+    /// Filtered `local − received` (0x092C), in 1/256 ns: the filter's shift floors, and on
+    /// whole nanoseconds that floor alone held every follower ≈ 7.5 ns ahead of the reference.
+    diff_mean_q8: i64,
     /// Estimated free-running frequency error, in units of 10⁻¹⁵ (f64: exact IEEE operations
     /// in a fixed order, so every machine computes the same value).
     freq_est_fpp: f64,
@@ -100,7 +101,7 @@ impl DcUnit {
             scd: 0,
             depth_diff: 4,
             depth_speed: 12,
-            diff_mean_ns: 0,
+            diff_mean_q8: 0,
             freq_est_fpp: 0.0,
             applied_fpp: 0,
             last_sample: None,
@@ -206,7 +207,7 @@ impl DcUnit {
     /// The TCL filters are reset by any write of 0x0930 (esc-spec §3.2).
     pub fn reset_filters(&mut self, t_ns: u64) {
         self.fold_to(t_ns);
-        self.diff_mean_ns = 0;
+        self.diff_mean_q8 = 0;
         self.set_scd(0);
         self.freq_est_fpp = 0.0;
         self.last_sample = None;
@@ -221,7 +222,7 @@ impl DcUnit {
         let dt = local_copy.wrapping_sub(received) as i32 as i64;
         // Mean of the difference over 2^depth samples (0x092C).
         let n1 = (self.depth_diff & 0x0F) as u32;
-        self.diff_mean_ns += (dt - self.diff_mean_ns) >> n1;
+        self.diff_mean_q8 += ((dt << 8) - self.diff_mean_q8) >> n1;
         // Frequency: the change of the difference since the last sample, plus what the loop
         // was already correcting, filtered over 2^depth samples.
         let applied_fpp = self.applied_fpp as f64;
@@ -245,7 +246,7 @@ impl DcUnit {
             None => self.last_sample = Some((local, dt)),
         }
         // Command: cancel the frequency error and slew the mean difference out over TAU.
-        let want_fpp = self.freq_est_fpp + self.diff_mean_ns as f64 * 1e15 / TCL_PHASE_TAU_NS as f64;
+        let want_fpp = self.freq_est_fpp + self.diff_mean_q8 as f64 * (1e15 / 256.0) / TCL_PHASE_TAU_NS as f64;
         let scd = self.scd_for(want_fpp);
         if scd != self.scd {
             self.set_scd(scd);
@@ -276,9 +277,14 @@ impl DcUnit {
         best as i16
     }
 
+    /// Filtered `local − received` (0x092C's value), in ns, rounded to nearest.
+    pub fn diff_mean_ns(&self) -> i64 {
+        (self.diff_mean_q8 + 128) >> 8
+    }
+
     /// 0x092C as sign–magnitude.
     pub fn difference_register(&self) -> u32 {
-        ferrocat_wire::register::SystemTimeDifference::from_ns(self.diff_mean_ns).0
+        ferrocat_wire::register::SystemTimeDifference::from_ns(self.diff_mean_ns()).0
     }
 
     /// Arms or disarms SYNC generation after a write of 0x0981 or 0x0990 at `t_ns`.
@@ -501,6 +507,24 @@ mod tests {
         }
         assert!(worst_late <= 20, "error after lock {worst_late} ns, scd {}", dc.scd);
         assert!(dc.scd > 2000, "50 ppm needs a large SCD, got {}", dc.scd);
+    }
+
+    #[test]
+    fn a_locked_loop_is_centred_on_the_reference() {
+        // The mean error after lock, not only its bound: the 0x092C filter must not round its
+        // way to a bias (on whole ns its shift's floor held the slave 7.5 ns ahead).
+        let mut dc = DcUnit::new(DcWidth::Bits64, 0, 3_000, 37_000);
+        let (mut sum, mut n) = (0i64, 0i64);
+        for k in 1..=30_000u64 {
+            let t = k * 1_000_000 + k % 7;
+            dc.tcl_sample(t, t as u32);
+            if k > 10_000 {
+                sum += dc.system_at(t) as i64 - t as i64;
+                n += 1;
+            }
+        }
+        let mean = sum as f64 / n as f64;
+        assert!(mean.abs() < 1.5, "mean error after lock {mean:.2} ns");
     }
 
     #[test]
