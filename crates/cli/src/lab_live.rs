@@ -269,7 +269,7 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
     );
     // The methods that keep a master clock: the master's own, or (ferrocat-mfr) its estimate of
     // the reference's. chen2016 and SOEM's PI follow the reference's phase and keep no clock.
-    const LIVE: [&str; 5] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr"];
+    const LIVE: [&str; 6] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
     for m in &a.methods {
         ensure!(LIVE.contains(&m.as_str()), "--method {m:?}: one of {}", LIVE.join(", "));
     }

@@ -10,7 +10,7 @@ pub mod scenario;
 pub mod stats;
 
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
-use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi};
+use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi, Steering};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 
@@ -20,6 +20,10 @@ pub const ERROR_METHODS: [&str; 4] = ["conventional", "park2020", "ferrocat", "f
 
 /// Every method the lab knows.
 pub const METHODS: [&str; 7] = ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"];
+
+/// A variant [`method`] also knows, for comparison where the reference follows the master:
+/// ferrocat steering the reference's time control loop instead of its offset.
+pub const FERROCAT_TCL: &str = "ferrocat-tcl";
 
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
 pub fn line(slaves: usize) -> SegmentConfig {
@@ -41,7 +45,7 @@ pub fn segment(cfg: &SegmentConfig, host: HostModel, seed: u64) -> anyhow::Resul
 }
 
 /// Methods that take out what a calibration measured (`ClockSync::take_error`).
-pub const CALIBRATED: [&str; 2] = ["ferrocat", "ferrocat-mfr"];
+pub const CALIBRATED: [&str; 3] = ["ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
 
 /// Pulses per calibration.
 pub const CALIBRATION_PULSES: usize = 1000;
@@ -131,6 +135,13 @@ pub fn method<I: Io>(
         "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns)),
         // ferrocat with the master following the reference whatever the experiment's coupling.
         "ferrocat-mfr" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
-        other => anyhow::bail!("unknown method {other:?} (known: {})", METHODS.join(", ")),
+        // ferrocat's earlier reference-follows-master design: its time into the reference's
+        // time control loop (0x0910) rather than the reference's offset.
+        FERROCAT_TCL => {
+            let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns);
+            f.steering = Steering::TimeControlLoop;
+            Box::new(f)
+        }
+        other => anyhow::bail!("unknown method {other:?} (known: {}, {FERROCAT_TCL})", METHODS.join(", ")),
     })
 }

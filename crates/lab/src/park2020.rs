@@ -11,7 +11,7 @@ use ferrocat_segment::SegmentConfig;
 
 /// The methods whose master clock this experiment compares with the slaves' (the
 /// reference-follows-master methods, and none at all).
-pub const METHODS: [&str; 5] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr"];
+pub const METHODS: [&str; 6] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
 
 #[derive(Debug, Clone)]
 pub struct Options {

@@ -35,29 +35,71 @@ pub(crate) fn bytes_through(pdus: &[Pdu<'_>]) -> u64 {
 pub(crate) struct SyncPdus {
     station: u16,
     built_ns: u64,
-    /// The master's time for the reference's 0x0910 (reference follows master).
-    write: Option<[u8; 8]>,
+    first: FirstPdu,
     pub(crate) frmw: [u8; 8],
     diff: [u8; 4],
 }
 
+/// What the sync frame does to the reference before its FRMW.
+#[derive(Debug)]
+enum FirstPdu {
+    Nop,
+    /// The master's time for the reference's 0x0910 (its time control loop steers to it).
+    Time([u8; 8]),
+    /// The reference's System_Time_Offset (0x0920, `len` bytes): read (FPRD) or replaced
+    /// (FPRW, which answers the value it replaced). Writes apply at the frame's end, so the
+    /// value read is the one in force when the FRMW read the reference's time.
+    Offset {
+        data: [u8; 8],
+        len: usize,
+        write: bool,
+    },
+}
+
+/// Which of the sync frame's datagrams were answered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct SyncAnswers {
+    /// The FRMW and the 0x092C read.
+    pub(crate) sync: bool,
+    /// The reference's 0x0920 (read or replaced).
+    pub(crate) offset: bool,
+}
+
 impl SyncPdus {
-    /// [FPWR 0x0910 or NOP, FRMW 0x0910, FPRD 0x092C] on the reference.
+    /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference.
     pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> [Pdu<'a>; 3] {
         let station = self.station;
+        let at = |ado| Address::Device { adp: station, ado };
         [
-            match self.write.as_mut() {
-                Some(w) => Pdu::new(Command::FPWR, Address::Device { adp: station, ado: 0x0910 }, w),
-                None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
+            match &mut self.first {
+                FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(0x0910), w),
+                FirstPdu::Offset { data, len, write } => {
+                    Pdu::new(if *write { Command::FPRW } else { Command::FPRD }, at(0x0920), &mut data[..*len])
+                }
+                FirstPdu::Nop => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
             },
-            Pdu::new(Command::FRMW, Address::Device { adp: station, ado: 0x0910 }, &mut self.frmw),
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x092C }, &mut self.diff),
+            Pdu::new(Command::FRMW, at(0x0910), &mut self.frmw),
+            Pdu::new(Command::FPRD, at(0x092C), &mut self.diff),
         ]
     }
 
-    /// Whether the reference answered the FRMW and the 0x092C read.
-    pub(crate) fn answered(pdus: &[Pdu<'_>]) -> bool {
-        pdus.len() >= 3 && pdus[1].wkc > 0 && pdus[2].wkc == 1
+    /// Which datagrams the reference answered (an FPRW counts 3: read and write).
+    pub(crate) fn answered(pdus: &[Pdu<'_>]) -> SyncAnswers {
+        let sync = pdus.len() >= 3 && pdus[1].wkc > 0 && pdus[2].wkc == 1;
+        let offset = pdus.first().is_some_and(|p| match p.cmd {
+            Command::FPRD => p.wkc == 1,
+            Command::FPRW => p.wkc == 3,
+            _ => false,
+        });
+        SyncAnswers { sync, offset }
+    }
+
+    /// The reference's offset the frame read, if it carried a read.
+    fn offset_read(&self) -> Option<u64> {
+        match &self.first {
+            FirstPdu::Offset { data, .. } => Some(u64::from_le_bytes(*data)),
+            _ => None,
+        }
     }
 }
 
@@ -280,8 +322,19 @@ pub struct SyncState {
     /// Time the frame spends behind the reference (from the latched receive times).
     pub loop_ns: u64,
     pub lost: u64,
-    /// The reference's time from the last answered step's FRMW.
+    /// The reference's time from the last answered step's FRMW (a 32-bit reference's unwrapped
+    /// onto 64 bits, counting its wraps from the first).
     pub reference_ns: Option<u64>,
+    /// The reference's System_Time_Offset as last read (unwrapped likewise).
+    pub reference_offset_ns: Option<u64>,
+}
+
+/// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
+fn unwrap32(prev: Option<u64>, low: u64) -> u64 {
+    match prev {
+        Some(p) => p.wrapping_add_signed((low as u32).wrapping_sub(p as u32) as i32 as i64),
+        None => low & 0xFFFF_FFFF,
+    }
 }
 
 impl<I: Io> Master<I> {
@@ -346,7 +399,10 @@ impl<I: Io> Master<I> {
         let mut pdus = p.pdus(&mut nop);
         let frame_bytes = frame_bytes(&pdus);
         let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
-        let answered = res.is_ok() && SyncPdus::answered(&pdus);
+        let answered = match res {
+            Ok(()) => SyncPdus::answered(&pdus),
+            Err(_) => SyncAnswers { sync: false, offset: false },
+        };
         self.sync_end(sync, st, &p, answered, frame_bytes, 0)
     }
 
@@ -355,15 +411,19 @@ impl<I: Io> Master<I> {
         let r = self.reference_index()?;
         st.cycle += 1;
         let built_ns = self.master_system_time();
-        let rfm =
-            sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster && sync.writes_reference_time(st.cycle);
-        Ok(SyncPdus {
-            station: self.slaves[r].station,
-            built_ns,
-            write: rfm.then(|| sync.reference_time(built_ns).to_le_bytes()),
-            frmw: [0; 8],
-            diff: [0; 4],
-        })
+        let rfm = sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster;
+        let first = if rfm && sync.steers_reference_offset() {
+            let len = if self.slaves[r].dc_64bit { 8 } else { 4 };
+            match sync.reference_offset(built_ns) {
+                Some(v) => FirstPdu::Offset { data: v.to_le_bytes(), len, write: true },
+                None => FirstPdu::Offset { data: [0; 8], len, write: false },
+            }
+        } else if rfm && sync.writes_reference_time(st.cycle) {
+            FirstPdu::Time(sync.reference_time(built_ns).to_le_bytes())
+        } else {
+            FirstPdu::Nop
+        };
+        Ok(SyncPdus { station: self.slaves[r].station, built_ns, first, frmw: [0; 8], diff: [0; 4] })
     }
 
     /// The sample of an answered (or lost) sync frame to the method, and its correction done.
@@ -372,7 +432,7 @@ impl<I: Io> Master<I> {
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
         p: &SyncPdus,
-        answered: bool,
+        answered: SyncAnswers,
         frame_bytes: u64,
         data_bytes: u64,
     ) -> Result<crate::sync::Correction> {
@@ -381,8 +441,14 @@ impl<I: Io> Master<I> {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))
         };
-        let sample = if answered {
-            st.reference_ns = Some(u64::from_le_bytes(p.frmw));
+        let wide = self.slaves[self.reference_index()?].dc_64bit;
+        let offset = p.offset_read().filter(|_| answered.offset);
+        if let Some(o) = offset {
+            st.reference_offset_ns = Some(if wide { o } else { unwrap32(st.reference_offset_ns, o) });
+        }
+        let sample = if answered.sync {
+            let frmw = u64::from_le_bytes(p.frmw);
+            st.reference_ns = Some(if wide { frmw } else { unwrap32(st.reference_ns, frmw) });
             // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
             // first preamble bit, which is what an ESC latches: take them back to that bit.
             let hw = self.engine.io.rx_stamps_start_of_frame();
@@ -394,7 +460,8 @@ impl<I: Io> Master<I> {
                 built_ns: p.built_ns,
                 tx_ns: tx.map(|t| to_sys(self, t)),
                 rx_ns: to_sys(self, rx),
-                reference_ns: u64::from_le_bytes(p.frmw),
+                reference_ns: st.reference_ns.unwrap_or(frmw),
+                reference_offset_ns: offset.and(st.reference_offset_ns),
                 difference_ns: SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns(),
                 loop_ns: st.loop_ns,
                 // A stamp after the last byte (software, or none) includes the whole frame.
@@ -426,5 +493,19 @@ impl<I: Io> Master<I> {
             self.fpwr(st, 0x0920, &v.to_le_bytes()[..n])?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::unwrap32;
+
+    #[test]
+    fn a_32_bit_register_is_unwrapped_across_its_wrap_both_ways() {
+        assert_eq!(unwrap32(None, 0x1_2345_6789), 0x2345_6789, "the first value is its low word");
+        let before = (7u64 << 32) | 0xFFFF_FF00;
+        assert_eq!(unwrap32(Some(before), 0x0000_0100), (8u64 << 32) | 0x100, "forward over the wrap");
+        assert_eq!(unwrap32(Some((8u64 << 32) | 0x10), 0xFFFF_FFF0), (7u64 << 32) | 0xFFFF_FFF0, "back over it");
+        assert_eq!(unwrap32(Some(5), 3), 3);
     }
 }

@@ -187,7 +187,10 @@ impl<I: Io> Master<I> {
         let data_bytes = crate::dc::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
-        let answered = r.is_ok() && with_sync && crate::dc::SyncPdus::answered(&pdus[chunks..n]);
+        let answered = match (r.is_ok(), with_sync) {
+            (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
+            _ => crate::dc::SyncAnswers { sync: false, offset: false },
+        };
         let wkc = match r {
             Ok(()) => {
                 if reference.is_some() && !with_sync {
@@ -206,7 +209,7 @@ impl<I: Io> Master<I> {
         };
         let correction = match (sync, sp) {
             (Some((m, st)), Some(p)) => {
-                if answered {
+                if answered.sync {
                     self.dc_time = u64::from_le_bytes(p.frmw);
                 }
                 Some(self.sync_end(m, st, &p, answered, frame_bytes, data_bytes)?)

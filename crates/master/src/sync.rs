@@ -27,8 +27,12 @@ pub struct Sample {
     /// otherwise `tx_ns` is `None` and `rx_ns` is when the master had the reply.
     pub tx_ns: Option<u64>,
     pub rx_ns: u64,
-    /// The reference's system time as the frame passed it (the FRMW reply).
+    /// The reference's system time as the frame passed it (the FRMW reply; a 32-bit
+    /// reference's unwrapped onto 64 bits).
     pub reference_ns: u64,
+    /// The reference's System_Time_Offset (0x0920) in force as the frame passed it, where the
+    /// frame read it (methods that steer the offset); unwrapped likewise.
+    pub reference_offset_ns: Option<u64>,
     /// The reference's 0x092C (local − received, filtered), signed.
     pub difference_ns: i64,
     /// How long the frame spent behind the reference before it came back through it
@@ -78,6 +82,16 @@ pub trait ClockSync {
     /// Reference-follows-master: whether cycle `cycle`'s frame carries the master's time.
     fn writes_reference_time(&self, _cycle: u64) -> bool {
         true
+    }
+    /// Reference-follows-master: whether the method steers the reference through its
+    /// System_Time_Offset (0x0920) instead of its time control loop; its frames then read
+    /// the offset, or replace it with what [`ClockSync::reference_offset`] returns.
+    fn steers_reference_offset(&self) -> bool {
+        false
+    }
+    /// The offset to give the reference in the frame built at `built_ns`; `None`: read it only.
+    fn reference_offset(&mut self, _built_ns: u64) -> Option<u64> {
+        None
     }
     /// Takes one cycle's sample (`None`: the frame was lost).
     fn update(&mut self, sample: Option<&Sample>) -> Correction;
@@ -299,17 +313,27 @@ impl ClockSync for SoemPi {
 /// takes from being built to passing the reference (transmit and receive stamps where the
 /// link has them); a trimmed mean over a short window rejects the outliers of a busy host
 /// without the settling time of a long average.
-/// - Reference follows master: the master writes its time plus that lead, so the reference's
-///   time control loop steers to the master's time at the instant the frame passes.
 /// - Master follows reference: a least-squares line through (master time at passage,
 ///   reference time) gives offset and rate; the master's clock is that line (its estimate of
 ///   the reference's time), and the next period puts the frame at `phase_ns` of the
 ///   reference's cycle, removing 1/16 of the phase error per cycle. The passage is the
 ///   transmit stamp plus half the round trip where the link stamps sends, so that the send
 ///   jitter, known after the fact, stays out of the line.
+/// - Reference follows master ([`Steering::Offset`], the default): the same line, through
+///   the reference's local time (its time read less the offset the same frame read), and
+///   each frame gives the reference the offset that puts its system time on the master's
+///   half a cycle after the frame's expected passage. A late send moves that passage, but
+///   the offset wanted changes only at the crystals' rate difference (50 ppm: 10 ns for
+///   200 µs late). The price: between frames the reference runs at its crystal's rate, a
+///   sawtooth of |rate − 1|·cycle (50 ns at 50 ppm and 1 ms) that the followers smooth.
+/// - Reference follows master ([`Steering::TimeControlLoop`]): the master writes its time plus
+///   that lead into 0x0910, so the reference's time control loop steers to the master's time
+///   at the instant the frame passes; a late send is a sample off by its lateness.
 #[derive(Debug)]
 pub struct Ferrocat {
     pub coupling: Coupling,
+    /// How the reference is made to follow (reference-follows-master only).
+    pub steering: Steering,
     pub cycle_ns: u64,
     pub phase_ns: u64,
     /// Reference follows master: the master's time goes to the reference every this many
@@ -347,12 +371,22 @@ pub struct Ferrocat {
     aimed_ns: Option<u64>,
 }
 
+/// How a method makes the reference follow the master.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Steering {
+    /// Replace the reference's System_Time_Offset (0x0920) each cycle.
+    Offset,
+    /// Write the master's time into the reference's 0x0910, a sample of its time control loop.
+    TimeControlLoop,
+}
+
 const WINDOW: usize = 64;
 
 impl Ferrocat {
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
         Ferrocat {
             coupling,
+            steering: Steering::Offset,
             cycle_ns: cycle_ns.clamp(1, MAX_CYCLE_NS),
             phase_ns: 0,
             write_every: 1,
@@ -399,6 +433,46 @@ impl Ferrocat {
         let hold = if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
         self.aimed_ns = Some(aimed.wrapping_add((1 + hold) * c));
         hold
+    }
+
+    /// Adds (passage of `s` on the master's clock, `y`) to the fit and refits the line. The
+    /// passage is the transmit stamp (or the build time) plus the trimmed mean of the half
+    /// round trips.
+    fn fit_passage(&mut self, s: &Sample, y: u64) -> (u64, u64, f64, f64, f64) {
+        // Fit y against master time at passage, relative to the newest point so that f64
+        // keeps ns precision.
+        let sent = s.tx_ns.unwrap_or(s.built_ns);
+        if self.halves.len() == WINDOW {
+            self.halves.pop_front();
+        }
+        self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
+        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves).wrapping_sub(self.calibration_ns));
+        if self.fit.len() == WINDOW {
+            self.fit.pop_front();
+        }
+        let (x0, y0) = (x, y);
+        self.fit.push_back((x, y));
+        let n = self.fit.len() as f64;
+        // Differences on the wrapping circle first: an f64 holds a u64 time only to 128 ns.
+        let rel = |&(x, y): &(u64, u64)| (x.wrapping_sub(x0) as i64 as f64, y.wrapping_sub(y0) as i64 as f64);
+        let (mx, my) = self.fit.iter().map(rel).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+        let (mx, my) = (mx / n, my / n);
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for (x, y) in self.fit.iter().map(rel) {
+            let (dx, dy) = (x - mx, y - my);
+            sxy += dx * dy;
+            sxx += dx * dx;
+        }
+        let rate = if sxx > 0.0 { (sxy / sxx).clamp(0.999, 1.001) } else { 1.0 };
+        self.line = Some((x0, y0, mx, my, rate));
+        (x0, y0, mx, my, rate)
+    }
+
+    /// The fitted line at master time `x`.
+    fn line_at(&self, x: u64) -> Option<u64> {
+        let (x0, y0, mx, my, rate) = self.line?;
+        let dx = x.wrapping_sub(x0) as i64 as f64;
+        Some(y0.wrapping_add_signed((my + rate * (dx - mx)) as i64))
     }
 
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
@@ -452,34 +526,14 @@ impl ClockSync for Ferrocat {
             self.last_send_error_ns = send.wrapping_sub(Self::trimmed_mean(&self.sends));
         }
         if self.coupling == Coupling::ReferenceFollowsMaster {
+            // The line through the reference's local time: what it would read with the
+            // offset it had at the start.
+            if let (Steering::Offset, Some(o)) = (self.steering, s.reference_offset_ns) {
+                self.fit_passage(s, s.reference_ns.wrapping_sub(o));
+            }
             return Correction::default();
         }
-        // Master follows reference: fit reference time against master time at passage,
-        // relative to the newest point so that f64 keeps ns precision.
-        let sent = s.tx_ns.unwrap_or(s.built_ns);
-        if self.halves.len() == WINDOW {
-            self.halves.pop_front();
-        }
-        self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
-        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves).wrapping_sub(self.calibration_ns));
-        if self.fit.len() == WINDOW {
-            self.fit.pop_front();
-        }
-        let (x0, y0) = (x, s.reference_ns);
-        self.fit.push_back((x, s.reference_ns));
-        let n = self.fit.len() as f64;
-        // Differences on the wrapping circle first: an f64 holds a u64 time only to 128 ns.
-        let rel = |&(x, y): &(u64, u64)| (x.wrapping_sub(x0) as i64 as f64, y.wrapping_sub(y0) as i64 as f64);
-        let (mx, my) = self.fit.iter().map(rel).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
-        let (mx, my) = (mx / n, my / n);
-        let (mut sxy, mut sxx) = (0.0, 0.0);
-        for (x, y) in self.fit.iter().map(rel) {
-            let (dx, dy) = (x - mx, y - my);
-            sxy += dx * dy;
-            sxx += dx * dx;
-        }
-        let rate = if sxx > 0.0 { (sxy / sxx).clamp(0.999, 1.001) } else { 1.0 };
-        self.line = Some((x0, y0, mx, my, rate));
+        let (_, y0, mx, my, rate) = self.fit_passage(s, s.reference_ns);
         // Reference time now, from the fit; its phase in the cycle against the target.
         let y_now = my + rate * (0.0 - mx);
         let c = self.cycle_ns as f64;
@@ -498,10 +552,22 @@ impl ClockSync for Ferrocat {
         self.held_back += hold;
         Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) }
     }
+    fn steers_reference_offset(&self) -> bool {
+        self.coupling == Coupling::ReferenceFollowsMaster && self.steering == Steering::Offset
+    }
+    fn reference_offset(&mut self, built_ns: u64) -> Option<u64> {
+        // Between two frames the reference runs at its own crystal's rate; aiming its time at
+        // the master's half a cycle after the frame's expected passage centres that sawtooth
+        // (±|rate − 1|·cycle/2) on the master's time.
+        let passage = built_ns.wrapping_add_signed(self.lead_ns?);
+        let aim = passage.wrapping_add(self.cycle_ns / 2);
+        Some(aim.wrapping_sub(self.line_at(aim)?))
+    }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
-        let (x0, y0, mx, my, rate) = self.line?;
-        let dx = host_ns.wrapping_sub(x0) as i64 as f64;
-        Some(y0.wrapping_add_signed((my + rate * (dx - mx)) as i64))
+        match self.coupling {
+            Coupling::MasterFollowsReference => self.line_at(host_ns),
+            Coupling::ReferenceFollowsMaster => None,
+        }
     }
     fn take_error(&mut self, error_ns: i64) -> bool {
         // The master (or its estimate of the reference) is ahead by `error_ns`: the passages
@@ -534,18 +600,22 @@ mod tests {
             any::<u64>(),
             any::<u64>(),
             any::<u64>(),
+            any::<Option<u64>>(),
         )
             .prop_map(
-                |(cycle, built_ns, tx_ns, rx_ns, reference_ns, difference_ns, loop_ns, frame_ns, data_ns)| Sample {
-                    cycle,
-                    built_ns,
-                    tx_ns,
-                    rx_ns,
-                    reference_ns,
-                    difference_ns,
-                    loop_ns,
-                    frame_ns,
-                    data_ns,
+                |(cycle, built_ns, tx_ns, rx_ns, reference_ns, difference_ns, loop_ns, frame_ns, data_ns, offset)| {
+                    Sample {
+                        cycle,
+                        built_ns,
+                        tx_ns,
+                        rx_ns,
+                        reference_ns,
+                        reference_offset_ns: offset,
+                        difference_ns,
+                        loop_ns,
+                        frame_ns,
+                        data_ns,
+                    }
                 },
             )
     }
@@ -561,6 +631,7 @@ mod tests {
                 Box::new(Chen2016::new(cycle_ns, 3, res)),
                 Box::new(SoemPi::new(cycle_ns, samples[0].difference_ns)),
                 Box::new(Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns)),
+                Box::new(Ferrocat { steering: Steering::TimeControlLoop, ..Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns) }),
                 Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
                 Box::new(Ferrocat { sync0_phase_ns: Some(built), ..Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns) }),
             ];
@@ -568,6 +639,7 @@ mod tests {
                 for (k, s) in samples.iter().enumerate() {
                     let _ = m.reference_time(built);
                     let _ = m.writes_reference_time(k as u64);
+                    let _ = m.reference_offset(built);
                     let c = m.update(if k % 7 == 3 { None } else { Some(s) });
                     if let Some(p) = c.next_period_ns {
                         prop_assert!(p >= 1);
@@ -581,7 +653,7 @@ mod tests {
                                               loop_ns in 0u64..1_000_000) {
             let s = |b: u64| Sample {
                 cycle: 0, built_ns: b, tx_ns: Some(b.wrapping_add(send)), rx_ns: b.wrapping_add(send).wrapping_add(rtt),
-                reference_ns: 0, difference_ns: 0, loop_ns, frame_ns: 0, data_ns: 0,
+                reference_ns: 0, reference_offset_ns: None, difference_ns: 0, loop_ns, frame_ns: 0, data_ns: 0,
             };
             prop_assert_eq!(s(base).lead_ns(), s(0).lead_ns());
         }
@@ -594,6 +666,7 @@ mod tests {
             tx_ns: None,
             rx_ns: cycle * 1_000_000 + 20_000,
             reference_ns,
+            reference_offset_ns: None,
             difference_ns,
             loop_ns: 4_000,
             frame_ns: 6_000,
@@ -680,6 +753,7 @@ mod tests {
             tx_ns: None,
             rx_ns: (k * c).wrapping_add_signed(late) + 10_000,
             reference_ns: (k * c).wrapping_add_signed(late),
+            reference_offset_ns: None,
             difference_ns: 0,
             loop_ns: 0,
             frame_ns: 8_000,
@@ -716,5 +790,35 @@ mod tests {
         wild.rx_ns += 500_000;
         f.update(Some(&wild));
         assert_eq!(f.lead_ns(), Some(5_000));
+    }
+
+    #[test]
+    fn offset_steering_puts_the_reference_on_the_master_half_a_cycle_after_passage() {
+        // The reference's local time runs 50 ppm fast from 7 ms; the offsets it read differ
+        // from frame to frame (as the master's writes change them): the line goes through
+        // the local time all the same.
+        let c = 1_000_000u64;
+        let local = |x: u64| 7_000_000 + x + x / 20_000;
+        let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, c);
+        assert!(f.steers_reference_offset());
+        assert_eq!(f.reference_offset(0), None, "nothing to aim with before a sample");
+        for k in 1..=40u64 {
+            let mut s = sample(k, 0, 0);
+            // Passage: build + lead = k ms + 5 µs (no transmit stamp: half the round trip).
+            let passage = s.built_ns + 5_000;
+            let offset = 123_456_789 + k * 977;
+            s.reference_ns = local(passage) + offset;
+            s.reference_offset_ns = Some(offset);
+            f.update(Some(&s));
+        }
+        let built = 41 * c;
+        let aim = built + 5_000 + c / 2;
+        let got = f.reference_offset(built).unwrap();
+        let want = aim.wrapping_sub(local(aim));
+        assert!((got.wrapping_sub(want) as i64).abs() <= 2, "offset {got}, want {want}");
+        assert_eq!(f.master_time(built), None, "the master keeps its own clock");
+        let mut tcl = Ferrocat::new(Coupling::ReferenceFollowsMaster, c);
+        tcl.steering = Steering::TimeControlLoop;
+        assert!(!tcl.steers_reference_offset());
     }
 }
