@@ -65,6 +65,11 @@ pub(crate) struct SyncAnswers {
     pub(crate) offset: bool,
 }
 
+impl SyncAnswers {
+    /// A frame that did not come back.
+    pub(crate) const NONE: SyncAnswers = SyncAnswers { sync: false, offset: false };
+}
+
 impl SyncPdus {
     /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference.
     pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> [Pdu<'a>; 3] {
@@ -401,7 +406,7 @@ impl<I: Io> Master<I> {
         let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
         let answered = match res {
             Ok(()) => SyncPdus::answered(&pdus),
-            Err(_) => SyncAnswers { sync: false, offset: false },
+            Err(_) => SyncAnswers::NONE,
         };
         self.sync_end(sync, st, &p, answered, frame_bytes, 0)
     }

@@ -189,7 +189,7 @@ impl<I: Io> Master<I> {
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
         let answered = match (r.is_ok(), with_sync) {
             (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
-            _ => crate::dc::SyncAnswers { sync: false, offset: false },
+            _ => crate::dc::SyncAnswers::NONE,
         };
         let wkc = match r {
             Ok(()) => {
