@@ -34,6 +34,8 @@ pub(crate) fn bytes_through(pdus: &[Pdu<'_>]) -> u64 {
 #[derive(Debug)]
 pub(crate) struct SyncPdus {
     station: u16,
+    /// Whether the reference's DC is 64 bits wide (else its registers are unwrapped).
+    wide: bool,
     built_ns: u64,
     first: FirstPdu,
     pub(crate) frmw: [u8; 8],
@@ -417,8 +419,9 @@ impl<I: Io> Master<I> {
         st.cycle += 1;
         let built_ns = self.master_system_time();
         let rfm = sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster;
+        let wide = self.slaves[r].dc_64bit;
         let first = if rfm && sync.steers_reference_offset() {
-            let len = if self.slaves[r].dc_64bit { 8 } else { 4 };
+            let len = if wide { 8 } else { 4 };
             match sync.reference_offset(built_ns) {
                 Some(v) => FirstPdu::Offset { data: v.to_le_bytes(), len, write: true },
                 None => FirstPdu::Offset { data: [0; 8], len, write: false },
@@ -428,7 +431,7 @@ impl<I: Io> Master<I> {
         } else {
             FirstPdu::Nop
         };
-        Ok(SyncPdus { station: self.slaves[r].station, built_ns, first, frmw: [0; 8], diff: [0; 4] })
+        Ok(SyncPdus { station: self.slaves[r].station, wide, built_ns, first, frmw: [0; 8], diff: [0; 4] })
     }
 
     /// The sample of an answered (or lost) sync frame to the method, and its correction done.
@@ -446,7 +449,7 @@ impl<I: Io> Master<I> {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))
         };
-        let wide = self.slaves[self.reference_index()?].dc_64bit;
+        let wide = p.wide;
         let offset = p.offset_read().filter(|_| answered.offset);
         if let Some(o) = offset {
             st.reference_offset_ns = Some(if wide { o } else { unwrap32(st.reference_offset_ns, o) });
