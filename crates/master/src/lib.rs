@@ -11,6 +11,7 @@ mod dc;
 mod engine;
 mod error;
 pub mod io;
+pub mod line_fit;
 mod master;
 mod process;
 mod slave;

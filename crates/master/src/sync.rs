@@ -1,6 +1,7 @@
 //! Cyclic clock synchronisation between the master and the reference clock. Every method sits
 //! behind one small interface, as linuxptp's servos do: each cycle the master hands a
 //! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
+use crate::line_fit::LineFit;
 use std::collections::VecDeque;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
@@ -314,7 +315,9 @@ impl ClockSync for SoemPi {
 /// link has them); a trimmed mean over a short window rejects the outliers of a busy host
 /// without the settling time of a long average.
 /// - Master follows reference: a least-squares line through (master time at passage,
-///   reference time) gives offset and rate; the master's clock is that line (its estimate of
+///   reference time) gives offset and rate ([`LineFit`]: its window grows to 4096 cycles
+///   while the points agree with it, leaves single outliers out, and restarts when a CUSUM
+///   of its innovations sees the rate or phase change); the master's clock is that line (its estimate of
 ///   the reference's time), and the next period puts the frame at `phase_ns` of the
 ///   reference's cycle, removing 1/16 of the phase error per cycle. The passage is the
 ///   transmit stamp plus half the round trip where the link stamps sends, so that the send
@@ -343,11 +346,11 @@ pub struct Ferrocat {
     pub write_every: u64,
     leads: VecDeque<i64>,
     lead_ns: Option<i64>,
-    fit: VecDeque<(u64, u64)>,
+    /// (master time at passage, reference time): the line through them is the method's
+    /// estimate of the reference's clock.
+    pub fit: LineFit,
     /// Half round trips from the transmit stamp (or the build time), for the fit's abscissa.
     halves: VecDeque<i64>,
-    /// The last line: (x0, y0) the newest point, then mean offsets from it and the rate.
-    line: Option<(u64, u64, f64, f64, f64)>,
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
     /// loop, which averages its samples, sees the host's send jitter cancel pairwise.
@@ -369,6 +372,10 @@ pub struct Ferrocat {
     pub held_back: u64,
     /// The reference time the next frame is aimed at (its slot on the grid of `phase_ns`).
     aimed_ns: Option<u64>,
+    /// Reference following by offset: a calibration moves the reference at once by what it
+    /// found; every other slave's offset moves with it (the next correction), so that the
+    /// followers' loops need not chase a step.
+    pending_shift_ns: i64,
 }
 
 /// How a method makes the reference follow the master.
@@ -381,6 +388,8 @@ pub enum Steering {
 }
 
 const WINDOW: usize = 64;
+/// The longest the line's window grows (4 s at 1 ms) while its points agree with it.
+pub const FIT_WINDOW: usize = 4096;
 
 impl Ferrocat {
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
@@ -392,9 +401,8 @@ impl Ferrocat {
             write_every: 1,
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
-            fit: VecDeque::with_capacity(WINDOW),
+            fit: LineFit::new(FIT_WINDOW),
             halves: VecDeque::with_capacity(WINDOW),
-            line: None,
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
             error_feedback: false,
@@ -402,6 +410,7 @@ impl Ferrocat {
             sync0_phase_ns: None,
             held_back: 0,
             aimed_ns: None,
+            pending_shift_ns: 0,
         }
     }
 
@@ -435,44 +444,17 @@ impl Ferrocat {
         hold
     }
 
-    /// Adds (passage of `s` on the master's clock, `y`) to the fit and refits the line. The
-    /// passage is the transmit stamp (or the build time) plus the trimmed mean of the half
-    /// round trips.
-    fn fit_passage(&mut self, s: &Sample, y: u64) -> (u64, u64, f64, f64, f64) {
-        // Fit y against master time at passage, relative to the newest point so that f64
-        // keeps ns precision.
+    /// Offers (passage of `s` on the master's clock, `y`) to the fit. The passage is the
+    /// transmit stamp (or the build time) plus the trimmed mean of the half round trips.
+    fn fit_passage(&mut self, s: &Sample, y: u64) -> u64 {
         let sent = s.tx_ns.unwrap_or(s.built_ns);
         if self.halves.len() == WINDOW {
             self.halves.pop_front();
         }
         self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
         let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves).wrapping_sub(self.calibration_ns));
-        if self.fit.len() == WINDOW {
-            self.fit.pop_front();
-        }
-        let (x0, y0) = (x, y);
-        self.fit.push_back((x, y));
-        let n = self.fit.len() as f64;
-        // Differences on the wrapping circle first: an f64 holds a u64 time only to 128 ns.
-        let rel = |&(x, y): &(u64, u64)| (x.wrapping_sub(x0) as i64 as f64, y.wrapping_sub(y0) as i64 as f64);
-        let (mx, my) = self.fit.iter().map(rel).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
-        let (mx, my) = (mx / n, my / n);
-        let (mut sxy, mut sxx) = (0.0, 0.0);
-        for (x, y) in self.fit.iter().map(rel) {
-            let (dx, dy) = (x - mx, y - my);
-            sxy += dx * dy;
-            sxx += dx * dx;
-        }
-        let rate = if sxx > 0.0 { (sxy / sxx).clamp(0.999, 1.001) } else { 1.0 };
-        self.line = Some((x0, y0, mx, my, rate));
-        (x0, y0, mx, my, rate)
-    }
-
-    /// The fitted line at master time `x`.
-    fn line_at(&self, x: u64) -> Option<u64> {
-        let (x0, y0, mx, my, rate) = self.line?;
-        let dx = x.wrapping_sub(x0) as i64 as f64;
-        Some(y0.wrapping_add_signed((my + rate * (dx - mx)) as i64))
+        self.fit.push(x, y);
+        x
     }
 
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
@@ -531,15 +513,16 @@ impl ClockSync for Ferrocat {
             if let (Steering::Offset, Some(o)) = (self.steering, s.reference_offset_ns) {
                 self.fit_passage(s, s.reference_ns.wrapping_sub(o));
             }
-            return Correction::default();
+            return Correction { shift_offsets_ns: std::mem::take(&mut self.pending_shift_ns), next_period_ns: None };
         }
-        let (_, y0, mx, my, rate) = self.fit_passage(s, s.reference_ns);
-        // Reference time now, from the fit; its phase in the cycle against the target.
-        let y_now = my + rate * (0.0 - mx);
+        let x = self.fit_passage(s, s.reference_ns);
+        let (Some(y), Some(rate)) = (self.fit.at(x), self.fit.rate()) else {
+            return Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) };
+        };
+        // The reference's time at this passage, from the fit; its phase in the cycle against
+        // the target, in integers.
         let c = self.cycle_ns as f64;
-        // y0's place in the cycle in integers; only the fit's small part in f64.
-        let y0_phase = y0.wrapping_sub(self.phase_ns) % self.cycle_ns;
-        let mut phase = (y0_phase as f64 + y_now).rem_euclid(c);
+        let mut phase = (y.wrapping_sub(self.phase_ns) % self.cycle_ns) as f64;
         if phase > c / 2.0 {
             phase -= c;
         }
@@ -561,11 +544,11 @@ impl ClockSync for Ferrocat {
         // (±|rate − 1|·cycle/2) on the master's time.
         let passage = built_ns.wrapping_add_signed(self.lead_ns?);
         let aim = passage.wrapping_add(self.cycle_ns / 2);
-        Some(aim.wrapping_sub(self.line_at(aim)?))
+        Some(aim.wrapping_sub(self.fit.at(aim)?))
     }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
         match self.coupling {
-            Coupling::MasterFollowsReference => self.line_at(host_ns),
+            Coupling::MasterFollowsReference => self.fit.at(host_ns),
             Coupling::ReferenceFollowsMaster => None,
         }
     }
@@ -574,11 +557,9 @@ impl ClockSync for Ferrocat {
         // were that much earlier than the stamps said. Past passages move at once too.
         self.calibration_ns = self.calibration_ns.saturating_sub(error_ns);
         self.lead_ns = self.lead_ns.map(|l| l.wrapping_add(error_ns));
-        for (x, _) in self.fit.iter_mut() {
-            *x = x.wrapping_add_signed(error_ns);
-        }
-        if let Some(line) = self.line.as_mut() {
-            line.0 = line.0.wrapping_add_signed(error_ns);
+        self.fit.shift_x(error_ns);
+        if self.steers_reference_offset() {
+            self.pending_shift_ns = self.pending_shift_ns.saturating_add(error_ns);
         }
         true
     }

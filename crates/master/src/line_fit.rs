@@ -1,0 +1,460 @@
+//! A least-squares line through (master time, reference time) pairs whose window grows while
+//! the points agree with it and restarts when they stop agreeing.
+//!
+//! Why adaptive: the host's timestamps scatter by hundreds of ns (a stock kernel: µs), while
+//! two crystals' rates drift by far less than that over seconds, so the longer the window the
+//! better the line (its phase error falls as 1/√n) — until a crystal changes its rate (a
+//! temperature step), when a long window keeps the old slope for seconds. A CUSUM of the
+//! standardised innovations (each point's distance from the line before it joins) tells the
+//! two apart: noise keeps it near zero, a change of rate or phase drives it up within a few
+//! dozen points, and the window then restarts at the estimated change point. Single points
+//! far off the line (a preempted send, a stamp taken late) are left out and do not count.
+//!
+//! The sums are kept exactly in i128 about an origin, so adding and dropping a point costs
+//! O(1) however long the window and the line never drifts from rounding.
+use std::collections::VecDeque;
+
+/// Points the noise scale is learned on before any is rejected or counted as a change.
+const WARM_UP: usize = 16;
+/// An innovation beyond this many noise scales is an outlier.
+const OUTLIER_SCALES: f64 = 6.0;
+/// CUSUM allowance and threshold, in noise scales (Page's test, k = 0.5, h = 16: Gaussian
+/// noise trips one side about once in 3·10⁷ points (Siegmund's approximation), a ramp of
+/// 50 ns per point in 1 µs of noise within ≈ 40).
+const CUSUM_K: f64 = 0.5;
+const CUSUM_H: f64 = 16.0;
+/// This many outliers in a row on one side are a jump of the line, not outliers.
+const JUMP_RUN: usize = 8;
+/// Points kept at least when the window restarts.
+const MIN_RESTART: usize = 4;
+/// The smallest noise scale (ns): the ESC's clock ticks in 10 ns.
+const MIN_SCALE_NS: f64 = 2.0;
+/// The noise scale is an exponential mean of |innovation| over about this many points.
+const SCALE_MEMORY: f64 = 64.0;
+/// Rates further than this from 1 are clamped (1000 ppm: far beyond any crystal).
+const MAX_RATE_ERROR: f64 = 1e-3;
+/// Points further apart than this (ns, 18 minutes) do not share a line: the window restarts.
+/// With at most `MAX_POINTS` points of |dx|, |dz| ≤ 2·SPAN the i128 sums cannot overflow.
+const SPAN: u64 = 1 << 40;
+const MAX_POINTS: usize = 1 << 16;
+
+/// What became of a point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fate {
+    /// Joined the window.
+    Added,
+    /// Too far off the line: left out.
+    Outlier,
+    /// The points had stopped agreeing with the line: the window restarted (this point in it).
+    Restarted,
+}
+
+/// Exact sums of the window's points about `origin`: `dx = x − x₀`, `dz = (y − y₀) − dx`
+/// (the reference's deviation from rate 1, which stays small).
+#[derive(Debug, Clone, Copy, Default)]
+struct Sums {
+    n: i128,
+    x: i128,
+    xx: i128,
+    z: i128,
+    xz: i128,
+}
+
+#[derive(Debug, Clone)]
+pub struct LineFit {
+    max_len: usize,
+    points: VecDeque<(u64, u64)>,
+    origin: (u64, u64),
+    sums: Sums,
+    /// The line as (slope of dz on dx, mean dx, mean dz), refreshed on every change.
+    line: Option<(f64, f64, f64)>,
+    scale_ns: f64,
+    innovations: u64,
+    /// Points added so far (the window's and those since dropped).
+    added: u64,
+    /// Page's CUSUM upwards and downwards, and `added` when each last stood at zero.
+    up: (f64, u64),
+    down: (f64, u64),
+    /// The outliers in a row so far, and on which side of the line.
+    far_run: Vec<(u64, u64, bool)>,
+    pub outliers: u64,
+    pub restarts: u64,
+}
+
+impl LineFit {
+    /// A fit over at most `max_len` points (at least 2).
+    pub fn new(max_len: usize) -> Self {
+        let max_len = max_len.clamp(2, MAX_POINTS);
+        LineFit {
+            max_len,
+            points: VecDeque::with_capacity(max_len),
+            origin: (0, 0),
+            sums: Sums::default(),
+            line: None,
+            scale_ns: 0.0,
+            innovations: 0,
+            added: 0,
+            up: (0.0, 0),
+            down: (0.0, 0),
+            far_run: Vec::with_capacity(JUMP_RUN),
+            outliers: 0,
+            restarts: 0,
+        }
+    }
+
+    /// Points in the window.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The noise scale learned (ns; 0 before the second point).
+    pub fn scale_ns(&self) -> f64 {
+        self.scale_ns
+    }
+
+    /// Offers the point (x, y).
+    pub fn push(&mut self, x: u64, y: u64) -> Fate {
+        let Some(predicted) = self.at(x) else {
+            self.add(x, y);
+            self.added += 1;
+            return Fate::Added;
+        };
+        let innovation = y.wrapping_sub(predicted) as i64 as f64;
+        self.innovations += 1;
+        let z = innovation / self.scale_ns.max(MIN_SCALE_NS);
+        // Neither outliers nor changes before the scale is learned, nor while a restarted
+        // window is too short for its line to predict well.
+        if self.innovations > WARM_UP as u64 && self.points.len() >= WARM_UP {
+            if z.abs() > OUTLIER_SCALES {
+                // One far point is an outlier; a run of them on one side is a jump.
+                if self.far_run.last().is_some_and(|&(_, _, side)| side != (z > 0.0)) {
+                    self.far_run.clear();
+                }
+                self.far_run.push((x, y, z > 0.0));
+                if self.far_run.len() < JUMP_RUN {
+                    self.outliers += 1;
+                    return Fate::Outlier;
+                }
+                let run: Vec<(u64, u64)> = self.far_run.drain(..).map(|(x, y, _)| (x, y)).collect();
+                self.restart(0);
+                for (x, y) in run {
+                    self.add(x, y);
+                    self.added += 1;
+                }
+                return Fate::Restarted;
+            }
+            self.far_run.clear();
+            // Page's CUSUM both ways; the count of points added when each last stood at zero
+            // marks where a change began.
+            self.up.0 = (self.up.0 + z - CUSUM_K).max(0.0);
+            self.down.0 = (self.down.0 - z - CUSUM_K).max(0.0);
+            if self.up.0 == 0.0 {
+                self.up.1 = self.added;
+            }
+            if self.down.0 == 0.0 {
+                self.down.1 = self.added;
+            }
+            if self.up.0 > CUSUM_H || self.down.0 > CUSUM_H {
+                let since = if self.up.0 > CUSUM_H { self.up.1 } else { self.down.1 };
+                self.restart(((self.added - since) as usize).max(MIN_RESTART));
+                self.add(x, y);
+                self.added += 1;
+                return Fate::Restarted;
+            }
+        }
+        // The scale follows the accepted innovations (mean |·| of a normal is 0.8 σ).
+        let a = innovation.abs().min(SPAN as f64) * 1.2533;
+        self.scale_ns = if self.innovations == 1 { a } else { self.scale_ns + (a - self.scale_ns) / SCALE_MEMORY };
+        self.added += 1;
+        if self.add(x, y) {
+            self.restarts += 1;
+            return Fate::Restarted;
+        }
+        Fate::Added
+    }
+
+    /// Drops all but the newest `keep` points.
+    fn restart(&mut self, keep: usize) {
+        let n = self.points.len();
+        let keep = keep.min(n);
+        self.points.drain(..n - keep);
+        self.rebuild();
+        self.up = (0.0, self.added);
+        self.down = (0.0, self.added);
+        self.far_run.clear();
+        self.restarts += 1;
+    }
+
+    /// The line at `x` (None before the first point).
+    pub fn at(&self, x: u64) -> Option<u64> {
+        let (slope, mx, mz) = self.line?;
+        let dx = x.wrapping_sub(self.origin.0) as i64;
+        let dz = mz + slope * (dx as f64 - mx);
+        Some(self.origin.1.wrapping_add_signed(dx).wrapping_add_signed(dz.round() as i64))
+    }
+
+    /// The reference's rate against the master's (1 before there are two distinct x).
+    pub fn rate(&self) -> Option<f64> {
+        self.line.map(|(slope, _, _)| 1.0 + slope)
+    }
+
+    /// Moves every point's x by `dx_ns` (a calibration found the abscissa off by that much).
+    pub fn shift_x(&mut self, dx_ns: i64) {
+        for (x, _) in self.points.iter_mut() {
+            *x = x.wrapping_add_signed(dx_ns);
+        }
+        self.rebuild();
+    }
+
+    /// Adds the point; true if it was too far from the window's to share their line, which
+    /// then starts again from it alone.
+    fn add(&mut self, x: u64, y: u64) -> bool {
+        let far = |a: i64| a.unsigned_abs() > SPAN;
+        if let Some(&oldest) = self.points.front() {
+            let (dx_oldest, _) = self.rel_to(oldest, (x, y));
+            let (_, dz) = self.rel((x, y));
+            if far(dx_oldest) || far(dz) {
+                self.points.clear();
+                self.points.push_back((x, y));
+                self.rebuild();
+                return true;
+            }
+        }
+        if self.points.is_empty() {
+            self.origin = (x, y);
+        }
+        if self.points.len() >= self.max_len {
+            if let Some(old) = self.points.pop_front() {
+                let (dx, dz) = self.rel(old);
+                self.account(dx, dz, -1);
+            }
+        }
+        self.points.push_back((x, y));
+        let (dx, dz) = self.rel((x, y));
+        // Far from the origin: start the sums again about this point (exactness needs dx
+        // well inside i64; 2⁴⁰ ns is 18 minutes).
+        if far(dx) || far(dz) {
+            self.rebuild();
+        } else {
+            self.account(dx, dz, 1);
+            self.refresh();
+        }
+        false
+    }
+
+    fn rel(&self, p: (u64, u64)) -> (i64, i64) {
+        self.rel_to(self.origin, p)
+    }
+
+    /// (dx, dz) of `p` about `o`.
+    fn rel_to(&self, o: (u64, u64), (x, y): (u64, u64)) -> (i64, i64) {
+        let dx = x.wrapping_sub(o.0) as i64;
+        let dy = y.wrapping_sub(o.1) as i64;
+        (dx, dy.wrapping_sub(dx))
+    }
+
+    fn account(&mut self, dx: i64, dz: i64, sign: i128) {
+        let (dx, dz) = (dx as i128, dz as i128);
+        let s = &mut self.sums;
+        s.n += sign;
+        s.x += sign * dx;
+        s.xx += sign * dx * dx;
+        s.z += sign * dz;
+        s.xz += sign * dx * dz;
+    }
+
+    /// The sums again from the points, about the newest point.
+    fn rebuild(&mut self) {
+        self.sums = Sums::default();
+        if let Some(&newest) = self.points.back() {
+            self.origin = newest;
+        }
+        // Every point is within SPAN of the oldest when it joins; this keeps the bound the
+        // sums rely on whatever the history.
+        while let Some(&p) = self.points.front() {
+            let (dx, dz) = self.rel(p);
+            if dx.unsigned_abs() <= 2 * SPAN && dz.unsigned_abs() <= 2 * SPAN {
+                break;
+            }
+            self.points.pop_front();
+        }
+        for k in 0..self.points.len() {
+            let (dx, dz) = self.rel(self.points[k]);
+            self.account(dx, dz, 1);
+        }
+        self.refresh();
+    }
+
+    fn refresh(&mut self) {
+        let s = self.sums;
+        if s.n == 0 {
+            self.line = None;
+            return;
+        }
+        // Centred sums, exact in integers: n²·var(x) and n²·cov(x, z).
+        let sxx = s.n * s.xx - s.x * s.x;
+        let sxz = s.n * s.xz - s.x * s.z;
+        let slope = if sxx > 0 { (sxz as f64 / sxx as f64).clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR) } else { 0.0 };
+        let n = s.n as f64;
+        self.line = Some((slope, s.x as f64 / n, s.z as f64 / n));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// Points of a reference running `ppm` fast from `y0`, the master's stamps scattered by
+    /// `sd_ns`, one per `cycle_ns`.
+    fn points(n: usize, ppm: f64, sd_ns: f64, seed: u64) -> Vec<(u64, u64)> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sd_ns).unwrap();
+        (0..n as u64)
+            .map(|k| {
+                let t = 5_000_000_000 + k * 1_000_000;
+                let y = 700_000_000_000 + t + (t as f64 * ppm * 1e-6) as u64;
+                (t.wrapping_add_signed(noise.sample(&mut rng) as i64), y)
+            })
+            .collect()
+    }
+
+    fn phase_error(f: &LineFit, ppm: f64, x: u64) -> i64 {
+        let truth = 700_000_000_000 + x + (x as f64 * ppm * 1e-6) as u64;
+        f.at(x).unwrap().wrapping_sub(truth) as i64
+    }
+
+    #[test]
+    fn a_longer_window_halves_the_error_per_fourfold_points() {
+        // RMS phase error at the newest point, over many independent fits.
+        let rms = |len: usize| {
+            let mut s = 0.0;
+            for seed in 0..40 {
+                let mut f = LineFit::new(len);
+                let pts = points(len, 30.0, 1000.0, seed);
+                for &(x, y) in &pts {
+                    f.push(x, y);
+                }
+                let x = 5_000_000_000 + (len as u64 - 1) * 1_000_000;
+                s += (phase_error(&f, 30.0, x) as f64).powi(2);
+            }
+            (s / 40.0).sqrt()
+        };
+        let (short, long) = (rms(64), rms(1024));
+        // Theory: 2σ/√n at the end of the window — 250 ns and 62 ns.
+        assert!(long < short / 2.5, "64 points: {short:.0} ns, 1024 points: {long:.0} ns");
+        assert!(long < 100.0, "1024 points: {long:.0} ns");
+    }
+
+    #[test]
+    fn a_rate_step_restarts_the_window_within_tens_of_points() {
+        let mut f = LineFit::new(4096);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let noise = Normal::new(0.0, 1000.0).unwrap();
+        let mut y: u64 = 1 << 50;
+        let mut restarted_at = None;
+        for k in 0..3000u64 {
+            // 20 ppm fast, then 70 ppm fast from point 2000: a 50 ns per cycle ramp.
+            // (1 ms at 1 + ppm·10⁻⁶ is 10⁶ + ppm ns.)
+            let ppm: u64 = if k < 2000 { 20 } else { 70 };
+            y += 1_000_000 + ppm;
+            let x = (k * 1_000_000).wrapping_add_signed(noise.sample(&mut rng) as i64);
+            let fate = f.push(x, y);
+            if fate == Fate::Restarted && k >= 2000 && restarted_at.is_none() {
+                restarted_at = Some(k - 2000);
+            }
+        }
+        let after = restarted_at.expect("the step was never detected");
+        assert!(after < 80, "detected {after} points after the step");
+        assert_eq!(f.restarts, 1, "no restart but the step's");
+        let rate = f.rate().unwrap();
+        assert!((rate - 1.000070).abs() < 2e-6, "rate after the step {rate}");
+    }
+
+    #[test]
+    fn single_outliers_are_left_out_and_do_not_restart() {
+        let mut f = LineFit::new(4096);
+        let pts = points(3000, -40.0, 300.0, 3);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        for (k, &(x, y)) in pts.iter().enumerate() {
+            // 1 % of the stamps 20–200 µs late (a preempted sender).
+            let late = if k > 100 && rng.gen_bool(0.01) { rng.gen_range(20_000..200_000) } else { 0 };
+            f.push(x + late, y);
+        }
+        assert_eq!(f.restarts, 0);
+        assert!(f.outliers >= 15, "outliers {}", f.outliers);
+        let x = 5_000_000_000 + 2999 * 1_000_000;
+        assert!(phase_error(&f, -40.0, x).abs() < 60, "phase error {}", phase_error(&f, -40.0, x));
+    }
+
+    #[test]
+    fn a_jump_restarts_after_a_run_of_outliers_and_the_line_follows_it() {
+        let mut f = LineFit::new(4096);
+        let pts = points(1200, 25.0, 200.0, 5);
+        let mut fates = Vec::new();
+        for (k, &(x, y)) in pts.iter().enumerate() {
+            // The reference's time jumps 30 µs ahead at point 1000 (someone wrote its offset).
+            let y = if k >= 1000 { y + 30_000 } else { y };
+            fates.push(f.push(x, y));
+        }
+        assert!(fates[1000..1000 + JUMP_RUN - 1].iter().all(|&f| f == Fate::Outlier), "{:?}", &fates[1000..1010]);
+        assert_eq!(fates[1000 + JUMP_RUN - 1], Fate::Restarted);
+        assert_eq!(f.restarts, 1);
+        let x = 5_000_000_000 + 1199 * 1_000_000;
+        let e = phase_error(&f, 25.0, x) - 30_000;
+        assert!(e.abs() < 100, "phase error after the jump {e} ns");
+    }
+
+    #[test]
+    fn noise_alone_never_restarts_the_window() {
+        // Four 20 s runs of 1 µs noise: a false change would cost seconds of accuracy.
+        for seed in 0..4 {
+            let mut f = LineFit::new(4096);
+            for &(x, y) in &points(20_000, -35.0, 1000.0, 100 + seed) {
+                f.push(x, y);
+            }
+            assert_eq!(f.restarts, 0, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn shifting_x_moves_the_line_by_the_shift() {
+        let mut f = LineFit::new(256);
+        for &(x, y) in &points(200, 10.0, 0.0, 1) {
+            f.push(x, y);
+        }
+        let x = 5_150_000_000;
+        let before = f.at(x).unwrap();
+        f.shift_x(-1000);
+        // The points' x are 1 µs earlier: at the same x the line now reads 1 µs later.
+        let after = f.at(x).unwrap();
+        assert!((after.wrapping_sub(before) as i64 - 1000).abs() <= 1, "{before} → {after}");
+    }
+
+    proptest! {
+        #[test]
+        fn never_panics_and_stays_exact_across_wraps(
+            base_x in any::<u64>(), base_y in any::<u64>(),
+            steps in proptest::collection::vec((0u64..10_000_000_000, -1_000_000i64..1_000_000), 1..300),
+            len in 2usize..64,
+        ) {
+            let mut f = LineFit::new(len);
+            let (mut x, mut y) = (base_x, base_y);
+            for (dt, jitter) in steps {
+                x = x.wrapping_add(dt);
+                y = y.wrapping_add(dt);
+                f.push(x.wrapping_add_signed(jitter), y);
+                let _ = f.at(x);
+                prop_assert!(f.len() <= len);
+            }
+            let r = f.rate().unwrap();
+            prop_assert!((r - 1.0).abs() <= MAX_RATE_ERROR + 1e-12);
+        }
+    }
+}
