@@ -106,12 +106,19 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?
     };
     let mut st = m.sync_state()?;
-    // Common start for every method (Chen's offset compensation at t1): the first frame at
-    // the start of a reference cycle.
+    // Common start for every method, Chen's compensation of the initial offset and the
+    // propagation delay at t1 (§3, §5.3: T_m(i) = T_s + T_p·i "after compensation for the
+    // propagation delay and initial offset"): a probe frame measures where the reference's
+    // cycle grid lies against the master's send, and the first frame is sent so that it
+    // passes the reference at the start of a reference cycle. (Timing the wake-up rather
+    // than the passage put every frame a lead — 27 µs on rtx-10us — into the cycle, and
+    // chen2016 lost data at 100 µs where the paper lost none.)
     let mut probe = Nominal { cycle_ns };
+    let sent = m.engine.io.now_ns();
     m.sync_step(&mut probe, &mut st)?;
     let r0 = st.reference_ns.unwrap_or(0);
-    let mut next = m.engine.io.now_ns() + 2 * cycle_ns - r0 % cycle_ns;
+    // The reference read r0 one lead after `sent`; a send at sent + d passes at r0 + d.
+    let mut next = sent + 2 * cycle_ns - r0 % cycle_ns;
     m.engine.io.sleep_until(next);
     for a in apps(&mut m) {
         a.reset_counts();

@@ -1,12 +1,12 @@
 //! The Chen 2016 experiment, shortened: a master that does not follow the reference loses and
 //! repeats process data in DC-synchronous slaves; Chen's method, SOEM's PI and ferrocat's do not
-//! at 500 and 250 µs on Chen's 10 µs timer.
+//! at 500, 250 and 100 µs on Chen's 10 µs timer.
 use ferrocat_lab::chen2016::{run, Options};
 use ferrocat_master::io::HostModel;
 
 #[test]
 fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
-    let o = Options { cycles_us: vec![500, 250], seconds: 4.0, ..Options::quick(HostModel::rtx_10us()) };
+    let o = Options { cycles_us: vec![500, 250, 100], seconds: 4.0, ..Options::quick(HostModel::rtx_10us()) };
     let rows = run(&o, &|_, _| {}).unwrap();
     for r in &rows {
         println!(
@@ -21,7 +21,9 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
             }
         } else {
             assert_eq!((r.lost, r.repeated), (0, 0), "{r:?}");
-            assert!(r.jitter_width_pct < 50.0, "{r:?}");
+            // At 100 µs the 10 µs timer's steps and the host's wake-ups are half the cycle (the
+            // paper's width there: 64 %).
+            assert!(r.jitter_width_pct < if r.cycle_us == 100 { 70.0 } else { 50.0 }, "{r:?}");
         }
     }
 }
