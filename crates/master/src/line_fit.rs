@@ -120,7 +120,6 @@ impl LineFit {
     pub fn push(&mut self, x: u64, y: u64) -> Fate {
         let Some(predicted) = self.at(x) else {
             self.add(x, y);
-            self.added += 1;
             return Fate::Added;
         };
         let innovation = y.wrapping_sub(predicted) as i64 as f64;
@@ -139,12 +138,15 @@ impl LineFit {
                     self.outliers += 1;
                     return Fate::Outlier;
                 }
-                let run: Vec<(u64, u64)> = self.far_run.drain(..).map(|(x, y, _)| (x, y)).collect();
+                // The run becomes the new window (its buffer kept: the cyclic path does not
+                // allocate).
+                let mut run = std::mem::take(&mut self.far_run);
                 self.restart(0);
-                for (x, y) in run {
+                for &(x, y, _) in &run {
                     self.add(x, y);
-                    self.added += 1;
                 }
+                run.clear();
+                self.far_run = run;
                 return Fate::Restarted;
             }
             self.far_run.clear();
@@ -162,14 +164,12 @@ impl LineFit {
                 let since = if self.up.0 > CUSUM_H { self.up.1 } else { self.down.1 };
                 self.restart(((self.added - since) as usize).max(MIN_RESTART));
                 self.add(x, y);
-                self.added += 1;
                 return Fate::Restarted;
             }
         }
         // The scale follows the accepted innovations (mean |·| of a normal is 0.8 σ).
         let a = innovation.abs().min(SPAN as f64) * 1.2533;
         self.scale_ns = if self.innovations == 1 { a } else { self.scale_ns + (a - self.scale_ns) / SCALE_MEMORY };
-        self.added += 1;
         if self.add(x, y) {
             self.restarts += 1;
             return Fate::Restarted;
@@ -213,6 +213,7 @@ impl LineFit {
     /// Adds the point; true if it was too far from the window's to share their line, which
     /// then starts again from it alone.
     fn add(&mut self, x: u64, y: u64) -> bool {
+        self.added += 1;
         let far = |a: i64| a.unsigned_abs() > SPAN;
         if let Some(&oldest) = self.points.front() {
             let (dx_oldest, _) = self.rel_to(oldest, (x, y));
