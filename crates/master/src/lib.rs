@@ -14,6 +14,7 @@ pub mod io;
 pub mod line_fit;
 mod master;
 mod process;
+pub mod rtt_weight;
 mod slave;
 pub mod sync;
 pub mod topology;

@@ -1,7 +1,8 @@
 //! Cyclic clock synchronisation between the master and the reference clock. Every method sits
 //! behind one small interface, as linuxptp's servos do: each cycle the master hands a
 //! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
-use crate::line_fit::LineFit;
+use crate::line_fit::{Fate, LineFit};
+use crate::rtt_weight::RttWeight;
 use std::collections::VecDeque;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
@@ -349,8 +350,7 @@ pub struct Ferrocat {
     /// (master time at passage, reference time): the line through them is the method's
     /// estimate of the reference's clock.
     pub fit: LineFit,
-    /// Half round trips from the transmit stamp (or the build time), for the fit's abscissa.
-    halves: VecDeque<i64>,
+    rtt: RttWeight,
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
     /// loop, which averages its samples, sees the host's send jitter cancel pairwise.
@@ -402,7 +402,7 @@ impl Ferrocat {
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
             fit: LineFit::new(FIT_WINDOW),
-            halves: VecDeque::with_capacity(WINDOW),
+            rtt: RttWeight::new(),
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
             error_feedback: false,
@@ -445,16 +445,23 @@ impl Ferrocat {
     }
 
     /// Offers (passage of `s` on the master's clock, `y`) to the fit. The passage is the
-    /// transmit stamp (or the build time) plus the trimmed mean of the half round trips.
+    /// transmit stamp (or the build time) plus the mean half round trip, moved by the part of
+    /// this frame's own deviation learned to be the way out (rtt_weight.rs).
     fn fit_passage(&mut self, s: &Sample, y: u64) -> u64 {
         let sent = s.tx_ns.unwrap_or(s.built_ns);
-        if self.halves.len() == WINDOW {
-            self.halves.pop_front();
-        }
-        self.halves.push_back(s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64));
-        let x = sent.wrapping_add_signed(Self::trimmed_mean(&self.halves).wrapping_sub(self.calibration_ns));
-        self.fit.push(x, y);
+        let half = s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64);
+        let stamp = sent.wrapping_add_signed(self.rtt.mean_ns(half).wrapping_sub(self.calibration_ns));
+        let x = stamp.wrapping_add_signed(self.rtt.shift_ns(half));
+        // The weight is learned from the reference's time against the line at the stamp alone.
+        let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
+        let fate = self.fit.push(x, y);
+        self.rtt.learn(half, residual.filter(|_| fate == Fate::Added));
         x
+    }
+
+    /// The learned share of a round trip's deviation that is the way out (rtt_weight.rs).
+    pub fn rtt_weight(&self) -> f64 {
+        self.rtt.weight()
     }
 
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
