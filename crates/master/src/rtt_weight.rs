@@ -11,6 +11,12 @@
 //! reference's time against the line at the stamp alone is off by `e_out` (times the rate),
 //! so `w` is the regression of those residuals on `d`. Each host learns its own weight.
 //!
+//! The deviation is taken from a short robust centre (the caller's trimmed mean of the last 64
+//! half round trips), not a long mean: slower than that window the centre follows the round
+//! trips, so there the passage takes half of each (the symmetric split), and a host whose
+//! latencies drift as it warms up or changes its clock is followed within 64 cycles. The
+//! weight acts on the faster scatter, which is what a short window (a restart) sees.
+//!
 //! Deviations beyond a few scales (a preempted send) are neither learned from nor applied in
 //! full: their distribution is not the Gaussian the weight is optimal for.
 
@@ -18,9 +24,6 @@
 const WARM_UP: u64 = 128;
 /// Exponential memory of the moments, in points.
 const MEMORY: f64 = 1024.0;
-/// Memory of the mean the deviations are taken from: its own scatter (σ/√(2·memory)) moves
-/// every passage by the weight times as much, so it is longer.
-const MEAN_MEMORY: f64 = 8192.0;
 /// Deviations beyond this many scales are not learned from, and applied only up to it.
 const CLIP_SCALES: f64 = 4.0;
 /// The scale is a running mean |deviation| (×1.2533: σ of a normal); its inputs are capped at
@@ -31,7 +34,6 @@ const SCALE_WARM_UP: u64 = 16;
 #[derive(Debug, Clone, Default)]
 pub struct RttWeight {
     n: u64,
-    mean_ns: f64,
     scale_ns: f64,
     /// Exponentially weighted means and (co)variance of the inlier deviations and residuals.
     mean_d: f64,
@@ -54,56 +56,28 @@ impl RttWeight {
         (self.cov_rd / self.var_d).clamp(0.0, 2.0)
     }
 
-    /// The mean half round trip (ns), or `half_ns` itself before the first.
-    pub fn mean_ns(&self, half_ns: i64) -> i64 {
-        if self.n == 0 {
-            half_ns
-        } else {
-            self.mean_ns.round() as i64
-        }
-    }
-
-    /// The deviation of a half round trip `half_ns` from the running mean, clipped.
-    fn deviation(&self, half_ns: i64) -> Option<f64> {
-        if self.n == 0 {
-            return None;
-        }
-        let d = half_ns as f64 - self.mean_ns;
+    /// How far to move a frame's passage, whose half round trip deviated by `dev_ns` from the
+    /// centre the caller took its stamp's passage from (ns).
+    pub fn shift_ns(&self, dev_ns: i64) -> i64 {
         let lim = CLIP_SCALES * self.scale_ns;
-        Some(d.clamp(-lim, lim))
+        (self.weight() * (dev_ns as f64).clamp(-lim, lim)).round() as i64
     }
 
-    /// How far to move the passage that the stamp alone puts at its mean, for a frame whose
-    /// half round trip was `half_ns` (ns).
-    pub fn shift_ns(&self, half_ns: i64) -> i64 {
-        self.deviation(half_ns).map_or(0, |d| (self.weight() * d).round() as i64)
-    }
-
-    /// Learns from a frame whose half round trip was `half_ns` and whose reference time was
-    /// `residual_ns` past the line at the stamp alone (None: no line yet, or the point was
-    /// not accepted by it). Every frame's half round trip updates the mean it deviates from.
-    pub fn learn(&mut self, half_ns: i64, residual_ns: Option<i64>) {
-        let h = half_ns as f64;
-        if self.n == 0 {
-            self.mean_ns = h;
-        }
-        let raw = h - self.mean_ns;
-        let inlier = self.n < WARM_UP || raw.abs() <= CLIP_SCALES * self.scale_ns;
+    /// Learns from a frame whose half round trip deviated by `dev_ns` and whose reference time
+    /// was `residual_ns` past the line at the stamp alone (None: no line yet, or the point was
+    /// not accepted by it).
+    pub fn learn(&mut self, dev_ns: i64, residual_ns: Option<i64>) {
+        let d = dev_ns as f64;
+        let inlier = self.n < WARM_UP || d.abs() <= CLIP_SCALES * self.scale_ns;
         self.n += 1;
-        let w = 1.0 / (self.n as f64).min(MEMORY);
         // Uncapped while the scale is learned.
         let cap = if self.n <= SCALE_WARM_UP { f64::INFINITY } else { SCALE_CAP * self.scale_ns };
-        let a = raw.abs().min(cap) * 1.2533;
-        self.scale_ns += (a - self.scale_ns) * w;
-        if !inlier {
-            return;
-        }
-        self.mean_ns += raw / (self.n as f64).min(MEAN_MEMORY);
-        let Some(r) = residual_ns else { return };
+        self.scale_ns += (d.abs().min(cap) * 1.2533 - self.scale_ns) / (self.n as f64).min(MEMORY);
+        let (true, Some(r)) = (inlier, residual_ns) else { return };
         // West's exponentially weighted (co)variance update.
         self.learned += 1;
         let w = 1.0 / (self.learned as f64).min(MEMORY);
-        let (dd, dr) = (raw - self.mean_d, r as f64 - self.mean_r);
+        let (dd, dr) = (d - self.mean_d, r as f64 - self.mean_r);
         self.mean_d += w * dd;
         self.mean_r += w * dr;
         self.var_d = (1.0 - w) * (self.var_d + w * dd * dd);
@@ -126,13 +100,13 @@ mod tests {
         let (mut with, mut without) = (0.0, 0.0);
         for k in 0..n {
             let (e_out, e_back) = (out.sample(&mut rng), back.sample(&mut rng));
-            let half = 10_000 + ((e_out + e_back) / 2.0) as i64;
-            let err = e_out - rw.shift_ns(half) as f64;
+            let dev = ((e_out + e_back) / 2.0) as i64;
+            let err = e_out - rw.shift_ns(dev) as f64;
             if k >= n / 2 {
                 with += err * err;
                 without += e_out * e_out;
             }
-            rw.learn(half, Some(e_out as i64 + 500));
+            rw.learn(dev, Some(e_out as i64 + 500));
         }
         let m = (n - n / 2) as f64;
         (rw.weight(), (with / m).sqrt(), (without / m).sqrt())
@@ -145,8 +119,7 @@ mod tests {
             let ideal = 2.0 * out * out / (out * out + back * back);
             assert!((w - ideal).abs() < 0.1, "σ {out}/{back}: weight {w:.3}, least squares {ideal:.3}");
             let best = out * back / (out * out + back * back).sqrt();
-            // The mean the deviations are taken from scatters by σ_d/√(2·8192) (< 6 ns here).
-            assert!(with < best * 1.1 + 6.0 && with <= without * 1.01, "σ {out}/{back}: {with:.0} ns, best {best:.0}");
+            assert!(with < best * 1.1 + 1.0 && with <= without * 1.01, "σ {out}/{back}: {with:.0} ns, best {best:.0}");
         }
     }
 
@@ -154,13 +127,13 @@ mod tests {
     fn no_weight_before_warm_up_nor_without_residuals() {
         let mut rw = RttWeight::new();
         for k in 0..WARM_UP as i64 - 1 {
-            rw.learn(10_000 + k % 7 * 100, Some(k % 7 * 100));
+            rw.learn(k % 7 * 100 - 300, Some(k % 7 * 100));
         }
         assert_eq!(rw.weight(), 0.0);
-        assert_eq!(rw.shift_ns(20_000), 0);
+        assert_eq!(rw.shift_ns(10_000), 0);
         let mut rw = RttWeight::new();
         for k in 0..10_000 {
-            rw.learn(10_000 + k % 7 * 100, None);
+            rw.learn(k % 7 * 100 - 300, None);
         }
         assert_eq!(rw.weight(), 0.0);
     }
@@ -170,13 +143,13 @@ mod tests {
         let mut rw = RttWeight::new();
         for k in 0..5_000i64 {
             let e = (k * 7919 % 601) - 300; // deterministic scatter ±300 ns, all on the way out
-            rw.learn(10_000 + e / 2, Some(e));
+            rw.learn(e / 2, Some(e));
         }
         let w = rw.weight();
         assert!((w - 2.0).abs() < 0.05, "weight {w}");
         // A 200 µs outlier moves the passage by at most the clip, and leaves the weight.
-        assert!(rw.shift_ns(110_000).abs() as f64 <= w * CLIP_SCALES * rw.scale_ns + 1.0);
-        rw.learn(110_000, Some(-1_000_000));
+        assert!(rw.shift_ns(100_000).abs() as f64 <= w * CLIP_SCALES * rw.scale_ns + 1.0);
+        rw.learn(100_000, Some(-1_000_000));
         assert_eq!(rw.weight(), w);
     }
 }

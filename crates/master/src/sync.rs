@@ -350,6 +350,8 @@ pub struct Ferrocat {
     /// (master time at passage, reference time): the line through them is the method's
     /// estimate of the reference's clock.
     pub fit: LineFit,
+    /// Half round trips from the transmit stamp (or the build time), for the fit's abscissa.
+    halves: VecDeque<i64>,
     rtt: RttWeight,
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
@@ -402,6 +404,7 @@ impl Ferrocat {
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
             fit: LineFit::new(FIT_WINDOW),
+            halves: VecDeque::with_capacity(WINDOW),
             rtt: RttWeight::new(),
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
@@ -445,17 +448,24 @@ impl Ferrocat {
     }
 
     /// Offers (passage of `s` on the master's clock, `y`) to the fit. The passage is the
-    /// transmit stamp (or the build time) plus the mean half round trip, moved by the part of
-    /// this frame's own deviation learned to be the way out (rtt_weight.rs).
+    /// transmit stamp (or the build time) plus the trimmed mean of the half round trips, moved
+    /// by the part of this frame's own deviation from it learned to be the way out
+    /// (rtt_weight.rs).
     fn fit_passage(&mut self, s: &Sample, y: u64) -> u64 {
         let sent = s.tx_ns.unwrap_or(s.built_ns);
+        if self.halves.len() == WINDOW {
+            self.halves.pop_front();
+        }
         let half = s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64);
-        let stamp = sent.wrapping_add_signed(self.rtt.mean_ns(half).wrapping_sub(self.calibration_ns));
-        let x = stamp.wrapping_add_signed(self.rtt.shift_ns(half));
+        self.halves.push_back(half);
+        let centre = Self::trimmed_mean(&self.halves);
+        let stamp = sent.wrapping_add_signed(centre.wrapping_sub(self.calibration_ns));
+        let dev = half.wrapping_sub(centre);
+        let x = stamp.wrapping_add_signed(self.rtt.shift_ns(dev));
         // The weight is learned from the reference's time against the line at the stamp alone.
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
         let fate = self.fit.push(x, y);
-        self.rtt.learn(half, residual.filter(|_| fate == Fate::Added));
+        self.rtt.learn(dev, residual.filter(|_| fate == Fate::Added));
         x
     }
 
