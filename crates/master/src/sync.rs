@@ -469,11 +469,6 @@ impl Ferrocat {
         x
     }
 
-    /// The learned share of a round trip's deviation that is the way out (rtt_weight.rs).
-    pub fn rtt_weight(&self) -> f64 {
-        self.rtt.weight()
-    }
-
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
         // On the stack: the cyclic path does not allocate.
         let mut buf = [0i64; WINDOW];
