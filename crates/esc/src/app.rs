@@ -113,6 +113,9 @@ impl DigitalIo {
     }
 
     fn publish_inputs(&self, pdi: &mut Pdi<'_>) {
+        if self.inputs.is_empty() {
+            return; // an output terminal: nothing to publish, no SyncManager to look up
+        }
         if let Some((_, sm)) = pdi.process_data_sm(false, self.sm_count) {
             let n = (sm.length as usize).min(self.inputs.len());
             pdi.write(sm.start, &self.inputs[..n]);

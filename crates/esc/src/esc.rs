@@ -771,10 +771,14 @@ impl Esc {
             && self.dc.is_some()
             && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
         {
-            for (a, &v) in (ado..).zip(data) {
-                self.system_time_byte_written(a, v);
+            if data.is_empty() {
+                return false;
             }
-            return !data.is_empty();
+            let t = self.effects.tcl.get_or_insert([None; 4]);
+            for (slot, &v) in t.iter_mut().skip((ado - 0x0910) as usize).zip(data) {
+                *slot = Some(v);
+            }
+            return true;
         }
         let mut ok = false;
         for (i, &v) in data.iter().enumerate() {
