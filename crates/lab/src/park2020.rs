@@ -112,7 +112,7 @@ struct Round {
 
 fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> anyhow::Result<Round> {
     let cfg = opts.segment.clone().unwrap_or_else(|| crate::line(slaves));
-    let mut m = crate::segment(&cfg, opts.host, seed)?;
+    let mut m = crate::segment(&cfg, opts.host, seed, method)?;
     let dc = crate::dc_slaves(&m)?;
     let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;

@@ -71,7 +71,7 @@ pub struct Row {
 
 fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
-    let mut m = crate::segment(&cfg, o.host, o.seed)?;
+    let mut m = crate::segment(&cfg, o.host, o.seed, method)?;
     let reference = crate::dc_slaves(&m)?[0];
     let reference_node = crate::node_of(&m, reference).unwrap_or(0);
     let mut sync = crate::method(method, &mut m, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;

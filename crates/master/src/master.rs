@@ -77,6 +77,9 @@ pub struct Master<I: Io> {
     pub(crate) frmw: [u8; 8],
     /// Master clock → DC system time (ns since 2000), fixed at first use.
     pub(crate) epoch_offset_ns: Option<u64>,
+    /// What a closed port's loop-back adds to a frame's way, for the delay computation (0:
+    /// assume nothing, as SOEM, IgH and ethercrab do). See `measure_delays`.
+    pub closed_port_loop_ns: u32,
 }
 
 impl<I: Io> Master<I> {
@@ -99,6 +102,7 @@ impl<I: Io> Master<I> {
             dc_time: 0,
             frmw: [0; 8],
             epoch_offset_ns: None,
+            closed_port_loop_ns: 0,
         }
     }
 
@@ -192,6 +196,7 @@ impl<I: Io> Master<I> {
             features,
             dl_status,
             active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
+            port_descriptor: id[7],
             entry_port: 0,
             parent: None,
             parent_port: 0,
@@ -525,16 +530,26 @@ impl<I: Io> Master<I> {
             // ancestor: the round trip it sees on the port toward them holds their hops both ways
             // and this slave's own loop.
             let (mut via, mut port) = (self.slaves[k].parent.map(|p| p as usize), self.slaves[k].parent_port);
+            // Closed ports the frame loops through on its way out, less those on its way back,
+            // that no latch separates: the child's after its last event, each non-DC slave's on
+            // the way (one loop-back each, `closed_port_loop_ns`).
+            let mut loops = -view[k].loops_after_last_event();
             while let Some(v) = via.filter(|&v| !self.slaves[v].has_dc) {
+                loops += view[v].loops_between(view[v].before(port), port)
+                    - view[v].loops_between(port, view[v].after(port));
                 port = self.slaves[v].parent_port;
                 via = self.slaves[v].parent.map(|p| p as usize);
             }
             entry_at[k] = Some(match via.and_then(|v| Some((v, entry_at[v]?))) {
                 Some((v, at)) => {
                     let before = view[v].before(port);
+                    loops += view[v].loops_between(before, port);
                     // A child's hop is half of what the frame spent behind the port, less the
-                    // child's own loop (esc-spec §3.6).
-                    let hop = (view[v].between(before, port).unwrap_or(0) - view[k].span_ns().unwrap_or(0)) / 2;
+                    // child's own loop (esc-spec §3.6), corrected for loop-backs that lengthen
+                    // one way only (the return through a closed port behind a child's last
+                    // latch: half of it would otherwise count as delay).
+                    let behind = view[v].between(before, port).unwrap_or(0) - view[k].span_ns().unwrap_or(0);
+                    let hop = (behind + loops * self.closed_port_loop_ns as i64) / 2;
                     at + view[v].between(view[v].entry_port, before).unwrap_or(0) + hop
                 }
                 None => 0,
@@ -567,6 +582,7 @@ impl<I: Io> Master<I> {
             .map(|s| crate::topology::PortView {
                 entry_port: s.entry_port,
                 active_ports: s.active_ports,
+                present_ports: [0, 1, 2, 3].map(|p| (s.port_descriptor >> (2 * p)) & 3 != 0),
                 receive_times: s.has_dc.then_some(s.receive_times),
                 epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
             })

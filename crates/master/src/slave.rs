@@ -42,6 +42,8 @@ pub struct Slave {
     pub sii: SiiInfo,
     pub dl_status: DlStatus,
     pub active_ports: [bool; 4],
+    /// Ports the ESC has (0x0007: two bits per port, 00 for none).
+    pub port_descriptor: u8,
     pub entry_port: u8,
     pub parent: Option<u16>,
     /// Port of the parent this slave hangs on.

@@ -19,6 +19,8 @@ use std::collections::HashMap;
 pub struct PortView {
     pub entry_port: u8,
     pub active_ports: [bool; 4],
+    /// Ports the ESC has (0x0007); an inactive one the frame passes loops it back.
+    pub present_ports: [bool; 4],
     /// The receive-time latches of ports 0–3 (local ns, low 32 bits), for a DC slave.
     pub receive_times: Option<[u32; 4]>,
     /// The processing unit's receive time (0x0918, low 32 bits) from the same frame.
@@ -82,6 +84,49 @@ impl PortView {
         let mut q = port & 3;
         for _ in 0..4 {
             q = [2, 3, 1, 0][q as usize];
+            if self.active_ports[q as usize] || q == e {
+                break;
+            }
+        }
+        q
+    }
+
+    /// Closed ports (present, inactive) the frame loops through after `from` until it reaches
+    /// `to`, in ring order; `from == to` is the whole ring.
+    pub fn loops_between(&self, from: u8, to: u8) -> i64 {
+        let next = |p: u8| [3, 2, 0, 1][(p & 3) as usize];
+        let (mut q, mut n) = (next(from), 0);
+        while q != to & 3 {
+            n += (self.present_ports[q as usize] && !self.active_ports[q as usize]) as i64;
+            q = next(q);
+        }
+        n
+    }
+
+    /// Closed ports the frame loops through after this slave's last event (its last returning
+    /// branch, or the processing unit if that comes later) until it leaves by the entry port:
+    /// time a child spends on the way back that its latches do not show.
+    pub fn loops_after_last_event(&self) -> i64 {
+        let e = self.entry_port & 3;
+        let next = |p: u8| [3, 2, 0, 1][(p & 3) as usize];
+        let (mut q, mut last) = (next(e), e);
+        while q != e {
+            if self.active_ports[q as usize] || q == 0 {
+                last = q;
+            }
+            q = next(q);
+        }
+        // The processing unit sits at port 0; with the entry on port 0 it is the entry itself.
+        self.loops_between(last, e)
+    }
+
+    /// The port the frame goes to after returning through `port`: in ring order the next
+    /// active one, or the entry.
+    pub fn after(&self, port: u8) -> u8 {
+        let e = self.entry_port & 3;
+        let mut q = port & 3;
+        for _ in 0..4 {
+            q = [3, 2, 0, 1][q as usize];
             if self.active_ports[q as usize] || q == e {
                 break;
             }
@@ -216,7 +261,21 @@ mod tests {
         for &p in ports {
             active_ports[p as usize] = true;
         }
-        PortView { entry_port, active_ports, receive_times: None, epu_time: None }
+        PortView { entry_port, active_ports, present_ports: [true; 4], receive_times: None, epu_time: None }
+    }
+
+    #[test]
+    fn closed_ports_on_the_way_out_and_back() {
+        // An EK1100 (ports 0, 1, 2; no 3) entered on 0: ring 0 → EPU → 3 → 1 → 2 → 0.
+        let ek = |ports: &[u8]| PortView { present_ports: [true, true, true, false], ..v(0, ports) };
+        assert_eq!(ek(&[0, 1]).loops_between(0, 1), 0, "port 3 is absent");
+        assert_eq!(ek(&[0, 2]).loops_between(0, 2), 1, "closed port 1 before port 2");
+        assert_eq!(ek(&[0, 1]).loops_after_last_event(), 1, "closed port 2 after the child on 1");
+        assert_eq!(ek(&[0]).loops_after_last_event(), 2, "a leaf loops at 1 and 2");
+        assert_eq!(ek(&[0, 1]).after(1), 0);
+        // Entered on port 1 with nothing else: 1 → 2 → 0 (EPU) → 3 → 1; 3 comes after the EPU.
+        assert_eq!(v(1, &[1]).loops_after_last_event(), 1);
+        assert_eq!(v(1, &[1, 3]).loops_after_last_event(), 0);
     }
 
     /// With receive times: (port, ns after entry) for every active port but the entry.
