@@ -68,6 +68,9 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         None => toml::from_str(&toml)?,
     };
     let mut m = Master::new(ferrocat_master::io::VirtualIo::new(cfg.build()?, o.host, o.seed));
+    if crate::CALIBRATED.contains(&name) {
+        m.closed_port_loop_ns = crate::loop_back_ns(); // as crate::segment
+    }
     m.bring_up()?;
     let dc = crate::dc_slaves(&m)?;
     anyhow::ensure!(dc.len() >= 3, "two drives need a reference and two more DC slaves; the segment has {}", dc.len());
