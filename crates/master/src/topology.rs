@@ -34,6 +34,11 @@ pub struct Link {
     pub port: u8,
 }
 
+/// The port after `p` in the processing order 0 → (EPU) → 3 → 1 → 2 → 0.
+fn next(p: u8) -> u8 {
+    [3, 2, 0, 1][(p & 3) as usize]
+}
+
 /// The ring of an ESC; `None` is the processing unit.
 const RING: [Option<u8>; 5] = [Some(0), None, Some(3), Some(1), Some(2)];
 
@@ -94,7 +99,6 @@ impl PortView {
     /// Closed ports (present, inactive) the frame loops through after `from` until it reaches
     /// `to`, in ring order; `from == to` is the whole ring.
     pub fn loops_between(&self, from: u8, to: u8) -> i64 {
-        let next = |p: u8| [3, 2, 0, 1][(p & 3) as usize];
         let (mut q, mut n) = (next(from), 0);
         while q != to & 3 {
             n += (self.present_ports[q as usize] && !self.active_ports[q as usize]) as i64;
@@ -108,7 +112,6 @@ impl PortView {
     /// time a child spends on the way back that its latches do not show.
     pub fn loops_after_last_event(&self) -> i64 {
         let e = self.entry_port & 3;
-        let next = |p: u8| [3, 2, 0, 1][(p & 3) as usize];
         let (mut q, mut last) = (next(e), e);
         while q != e {
             if self.active_ports[q as usize] || q == 0 {
@@ -126,7 +129,7 @@ impl PortView {
         let e = self.entry_port & 3;
         let mut q = port & 3;
         for _ in 0..4 {
-            q = [3, 2, 0, 1][q as usize];
+            q = next(q);
             if self.active_ports[q as usize] || q == e {
                 break;
             }
