@@ -35,17 +35,22 @@ pub fn line(slaves: usize) -> SegmentConfig {
 }
 
 /// `cfg` (its own seed replaced by `seed`, so that rounds differ and the scenario's seed rules)
-/// brought up and DC-initialised, in virtual time on `host`, for `method`: ferrocat's own
-/// methods compute the delays knowing the ESCs' closed-port loop-back (`loop_back_ns`), the
-/// papers' and the baselines' as SOEM and IgH do.
+/// brought up and DC-initialised, in virtual time on `host`, for `method` (see `master`).
 pub fn segment(cfg: &SegmentConfig, host: HostModel, seed: u64, method: &str) -> anyhow::Result<Master<VirtualIo>> {
-    let cfg = SegmentConfig { seed, ..cfg.clone() };
+    let mut m = master(SegmentConfig { seed, ..cfg.clone() }, host, seed, method)?;
+    m.bring_up()?;
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
+    Ok(m)
+}
+
+/// A master on `cfg` in virtual time on `host`, for `method`: ferrocat's own methods compute
+/// the delays knowing the ESCs' closed-port loop-back (`loop_back_ns`), the papers' and the
+/// baselines' as SOEM and IgH do.
+pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> anyhow::Result<Master<VirtualIo>> {
     let mut m = Master::new(VirtualIo::new(cfg.build()?, host, seed));
     if CALIBRATED.contains(&method) {
         m.closed_port_loop_ns = loop_back_ns();
     }
-    m.bring_up()?;
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
     Ok(m)
 }
 

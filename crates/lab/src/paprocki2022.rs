@@ -3,7 +3,7 @@
 //! 1000 cycles at 1000 and 500 µs, for each clock-sync method.
 use ferrocat_master::io::{HostModel, Io};
 use ferrocat_master::sync::Coupling;
-use ferrocat_master::{DcConfig, Master};
+use ferrocat_master::DcConfig;
 use ferrocat_segment::SegmentConfig;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -67,10 +67,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         Some(c) => SegmentConfig { seed: o.seed, ..c.clone() },
         None => toml::from_str(&toml)?,
     };
-    let mut m = Master::new(ferrocat_master::io::VirtualIo::new(cfg.build()?, o.host, o.seed));
-    if crate::CALIBRATED.contains(&name) {
-        m.closed_port_loop_ns = crate::loop_back_ns(); // as crate::segment
-    }
+    let mut m = crate::master(cfg, o.host, o.seed, name)?;
     m.bring_up()?;
     let dc = crate::dc_slaves(&m)?;
     anyhow::ensure!(dc.len() >= 3, "two drives need a reference and two more DC slaves; the segment has {}", dc.len());
