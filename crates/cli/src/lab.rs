@@ -48,7 +48,7 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
         let mut md = format!(
             "# Park 2020, Table 1\n\nHost `{}`, seed {}, {} rounds, {} samples every {} ms after {} s of settling; \
              error = master − slave clock (true times from the simulator), µs.\n\n\
-             | slaves | method | ref GMEAN | ref MRMS | last GMEAN | last MRMS | lock ms | GPIO calibration | GPI ref GMEAN/MRMS | GPI last GMEAN/MRMS | paper ref GMEAN/MRMS |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+             | slaves | method | ref GMEAN | ref MRMS | last GMEAN | last MRMS | lock ms | init ms | GPIO calibration | GPI ref GMEAN/MRMS | GPI last GMEAN/MRMS | paper ref GMEAN/MRMS |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.rounds, o.samples, o.sample_every * o.cycle_ns / 1_000_000, o.settle_s
         );
         for r in &rows {
@@ -60,13 +60,14 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
             let lock = r.lock_ms.map(|l| format!("{l:.0}")).unwrap_or_else(|| "never".into());
             let cal = r.calibration_us.map(|c| format!("{c:+.3}")).unwrap_or_else(|| "—".into());
             md.push_str(&format!(
-                "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {lock} | {cal} | {:.3} / {:.3} | {:.3} / {:.3} | {paper} |\n",
+                "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {lock} | {:.0} | {cal} | {:.3} / {:.3} | {:.3} / {:.3} | {paper} |\n",
                 r.slaves,
                 r.method,
                 r.ref_gmean_us,
                 r.ref_mrms_us,
                 r.last_gmean_us,
                 r.last_mrms_us,
+                r.init_ms,
                 r.gpi_ref_gmean_us,
                 r.gpi_ref_mrms_us,
                 r.gpi_last_gmean_us,
@@ -96,7 +97,7 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
         o.settle_s
     );
     outln!(
-        "{:>6}  {:<13} {:>9} {:>9} {:>9} {:>9} {:>10}   paper: {:>7} {:>7} {:>7} {:>7}",
+        "{:>6}  {:<13} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8}   paper: {:>7} {:>7} {:>7} {:>7}",
         "slaves",
         "method",
         "ref GMEAN",
@@ -104,6 +105,7 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
         "last GM",
         "last MRMS",
         "lock ms",
+        "init ms",
         "rGMEAN",
         "rMRMS",
         "lGMEAN",
@@ -117,14 +119,15 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
             .unwrap_or_else(|| format!("{:>7} {:>7} {:>7} {:>7}", "—", "—", "—", "—"));
         let lock = r.lock_ms.map(|l| format!("{l:.0}")).unwrap_or_else(|| "never".into());
         outln!(
-            "{:>6}  {:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10}   paper: {paper}",
+            "{:>6}  {:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>8.0}   paper: {paper}",
             r.slaves,
             r.method,
             r.ref_gmean_us,
             r.ref_mrms_us,
             r.last_gmean_us,
             r.last_mrms_us,
-            lock
+            lock,
+            r.init_ms
         );
     }
     let calibrated: Vec<String> = rows
@@ -371,7 +374,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
             "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
              measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns).\n\n\
              | disturbance | method | mean before | sd | band | peak | recovery ms | outside % | mean after | RMS after | frames lost |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|\n",
+             |---|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
         );
         for r in &rows {

@@ -186,9 +186,10 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     };
     let mut m = target.master()?;
     m.bring_up()?;
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
     let cycle_ns = a.cycle_us * 1000;
-    let mut sync = ferrocat_lab::method(method, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
+    let (mut sync, _) =
+        ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let start = m.engine.io.now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;

@@ -11,7 +11,7 @@ pub mod stats;
 
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi, Steering};
-use ferrocat_master::{DcConfig, Master};
+use ferrocat_master::{DcConfig, DcReport, Master};
 use ferrocat_segment::SegmentConfig;
 
 /// The methods the master–slave error tables compare: those where the reference follows the
@@ -35,12 +35,42 @@ pub fn line(slaves: usize) -> SegmentConfig {
 }
 
 /// `cfg` (its own seed replaced by `seed`, so that rounds differ and the scenario's seed rules)
-/// brought up and DC-initialised, in virtual time on `host`, for `method` (see `master`).
-pub fn segment(cfg: &SegmentConfig, host: HostModel, seed: u64, method: &str) -> anyhow::Result<Master<VirtualIo>> {
+/// brought up and DC-initialised, in virtual time on `host`, and `method` prepared on it for
+/// `cycle_ns`, with the DC initialisation's report (see [`master`], [`method`]). ferrocat's methods are made before the DC
+/// initialisation, so that one that steers the reference's offset does so from the static
+/// drift compensation on (`Master::init_dc_with`); the others after it, as published.
+pub fn segment(
+    cfg: &SegmentConfig,
+    host: HostModel,
+    seed: u64,
+    method: &str,
+    cycle_ns: u64,
+    coupling: Coupling,
+) -> anyhow::Result<(Master<VirtualIo>, Box<dyn ClockSync>, DcReport)> {
     let mut m = master(SegmentConfig { seed, ..cfg.clone() }, host, seed, method)?;
     m.bring_up()?;
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() })?;
-    Ok(m)
+    let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
+    let (sync, report) = init_with_method(&mut m, &dc, method, cycle_ns, coupling)?;
+    Ok((m, sync, report))
+}
+
+/// `init_dc` on `m` and `method` made for it, in the order [`segment`] describes; with the
+/// DC initialisation's report.
+pub fn init_with_method<I: Io>(
+    m: &mut Master<I>,
+    dc: &DcConfig,
+    method: &str,
+    cycle_ns: u64,
+    coupling: Coupling,
+) -> anyhow::Result<(Box<dyn ClockSync>, DcReport)> {
+    if method.starts_with("ferrocat") {
+        let mut sync = self::method(method, m, cycle_ns, coupling)?;
+        let report = m.init_dc_with(dc, Some(sync.as_mut()))?;
+        Ok((sync, report))
+    } else {
+        let report = m.init_dc(dc)?;
+        Ok((self::method(method, m, cycle_ns, coupling)?, report))
+    }
 }
 
 /// A master on `cfg` in virtual time on `host`, for `method`: ferrocat's own methods compute

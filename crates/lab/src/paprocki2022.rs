@@ -73,13 +73,13 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     anyhow::ensure!(dc.len() >= 3, "two drives need a reference and two more DC slaves; the segment has {}", dc.len());
     let drives = [dc[1], dc[2]];
     let nodes = drives.map(|k| crate::node_of(&m, k).unwrap_or(k) as u16);
-    m.init_dc(&DcConfig {
+    let dc_cfg = DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
         sync0_slaves: Some(drives.iter().map(|&k| k as u16).collect()),
         start_delay_ns: 10_000_000,
         ..DcConfig::default()
-    })?;
-    let mut sync = crate::method(name, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    };
+    let (mut sync, _) = crate::init_with_method(&mut m, &dc_cfg, name, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
     let mut next = m.engine.io.now_ns();

@@ -70,6 +70,9 @@ pub struct Row {
     /// stays within 100 ns of the reference and the master within 1 µs (None: not locked in
     /// some round).
     pub lock_ms: Option<f64>,
+    /// Median over rounds of how long the DC initialisation's static drift compensation took
+    /// before cyclic operation (it stops once every |0x092C| has converged).
+    pub init_ms: f64,
     /// The same errors as Park's GPI measurement (§IV-B) would have reported them
     /// (`crate::gpi`): latencies drawn per sample, their estimated means subtracted.
     pub gpi_ref_gmean_us: f64,
@@ -104,6 +107,7 @@ struct Round {
     gpi_reference: Moments,
     gpi_last: Moments,
     lock_ms: Option<f64>,
+    init_ms: f64,
     lost: u64,
     calibration_ns: Option<i64>,
     /// Every sample (µs), kept for the first round only.
@@ -112,9 +116,9 @@ struct Round {
 
 fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> anyhow::Result<Round> {
     let cfg = opts.segment.clone().unwrap_or_else(|| crate::line(slaves));
-    let mut m = crate::segment(&cfg, opts.host, seed, method)?;
+    let (mut m, mut sync, dc_report) =
+        crate::segment(&cfg, opts.host, seed, method, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let dc = crate::dc_slaves(&m)?;
-    let mut sync = crate::method(method, &mut m, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
     let total = settle + opts.samples * opts.sample_every;
@@ -169,6 +173,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         Some(_) => None,
     };
     r.lost = st.lost;
+    r.init_ms = dc_report.static_ns as f64 / 1e6;
     Ok(r)
 }
 
@@ -214,6 +219,7 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
                 last_gmean_us: avg(&|r| r.last.mean()),
                 last_mrms_us: avg(&|r| r.last.rms()),
                 lock_ms: locks.map(|l| crate::stats::median(&l)),
+                init_ms: crate::stats::median(&rs.iter().map(|r| r.init_ms).collect::<Vec<_>>()),
                 gpi_ref_gmean_us: avg(&|r| r.gpi_reference.mean()),
                 gpi_ref_mrms_us: avg(&|r| r.gpi_reference.rms()),
                 gpi_last_gmean_us: avg(&|r| r.gpi_last.mean()),

@@ -71,10 +71,10 @@ pub struct Row {
 
 fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
-    let mut m = crate::segment(&cfg, o.host, o.seed, method)?;
+    let (mut m, mut sync, _) =
+        crate::segment(&cfg, o.host, o.seed, method, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let reference = crate::dc_slaves(&m)?[0];
     let reference_node = crate::node_of(&m, reference).unwrap_or(0);
-    let mut sync = crate::method(method, &mut m, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let per_s = 1e9 / o.cycle_ns as f64;
     let settle = (o.settle_s * per_s) as u64;

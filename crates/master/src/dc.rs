@@ -149,6 +149,10 @@ impl Default for DcConfig {
 pub struct DcReport {
     pub reference: u16,
     pub static_frames: u32,
+    /// How long the static drift compensation took.
+    pub static_ns: u64,
+    /// Whether the reference followed the master through it (`init_dc_with`).
+    pub reference_steered: bool,
     pub converged: bool,
     /// Largest |0x092C| at the end of the static drift compensation.
     pub max_difference_ns: u32,
@@ -184,6 +188,15 @@ impl<I: Io> Master<I> {
 
     /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
     pub fn init_dc(&mut self, cfg: &DcConfig) -> Result<DcReport> {
+        self.init_dc_with(cfg, None)
+    }
+
+    /// As [`Master::init_dc`]; where `sync` makes the reference follow the master through its
+    /// System_Time_Offset, its frames are the static drift compensation's, so that the
+    /// reference already runs at the master's rate while the other slaves learn its rate:
+    /// cyclic operation then starts without the rate change every follower would have to
+    /// relearn (docs/clock-sync.md, lock time).
+    pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
         let reference = self
             .slaves
             .iter()
@@ -221,11 +234,28 @@ impl<I: Io> Master<I> {
         )?;
         // 6. Static drift compensation, until converged (checked, not a fixed count).
         let ref_station = self.slaves[reference].station;
+        let mut steer = sync
+            .filter(|s| s.coupling() == crate::sync::Coupling::ReferenceFollowsMaster && s.steers_reference_offset());
+        let mut steer_state = match steer {
+            Some(_) => {
+                self.dc_reference = Some(ref_station);
+                Some(self.sync_state()?)
+            }
+            None => None,
+        };
         let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
         let mut converged = false;
+        let static_from_ns = self.engine.io.now_ns();
         while frames < cfg.max_frames {
-            let mut t = [0u8; 8];
-            self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
+            match (steer.as_deref_mut(), steer_state.as_mut()) {
+                (Some(sync), Some(st)) => {
+                    self.sync_step(sync, st)?;
+                }
+                _ => {
+                    let mut t = [0u8; 8];
+                    self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
+                }
+            }
             frames += 1;
             if frames % cfg.check_every.max(1) == 0 {
                 max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
@@ -236,6 +266,7 @@ impl<I: Io> Master<I> {
                 }
             }
         }
+        let static_ns = self.engine.io.now_ns().wrapping_sub(static_from_ns);
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
         }
@@ -255,6 +286,8 @@ impl<I: Io> Master<I> {
         Ok(DcReport {
             reference: reference as u16,
             static_frames: frames,
+            static_ns,
+            reference_steered: steer_state.is_some(),
             converged,
             max_difference_ns: max_diff,
             sync0_start,
@@ -482,16 +515,23 @@ impl<I: Io> Master<I> {
         };
         let c = sync.update(sample.as_ref());
         if c.shift_offsets_ns != 0 {
-            self.shift_offsets(c.shift_offsets_ns)?;
+            // A method that gives the reference its offset moves the reference itself.
+            let skip = if sync.steers_reference_offset() { Some(p.station) } else { None };
+            self.shift_offsets_but(c.shift_offsets_ns, skip)?;
         }
         Ok(c)
     }
 
     /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
     pub fn shift_offsets(&mut self, shift_ns: i64) -> Result<()> {
+        self.shift_offsets_but(shift_ns, None)
+    }
+
+    /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.
+    fn shift_offsets_but(&mut self, shift_ns: i64, skip: Option<u16>) -> Result<()> {
         for k in 0..self.slaves.len() {
             let (has, st, wide) = (self.slaves[k].has_dc, self.slaves[k].station, self.slaves[k].dc_64bit);
-            if !has {
+            if !has || skip == Some(st) {
                 continue;
             }
             let n = if wide { 8 } else { 4 };

@@ -67,7 +67,8 @@ impl Sample {
 /// What the master does after a sample.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Correction {
-    /// Add this to every DC slave's System_Time_Offset (0x0920).
+    /// Add this to every DC slave's System_Time_Offset (0x0920); where the method steers the
+    /// reference's offset, to every other one (the method moves the reference itself).
     pub shift_offsets_ns: i64,
     /// The master's next cycle period (master-follows-reference methods).
     pub next_period_ns: Option<u64>,
@@ -375,9 +376,13 @@ pub struct Ferrocat {
     /// The reference time the next frame is aimed at (its slot on the grid of `phase_ns`).
     aimed_ns: Option<u64>,
     /// Reference following by offset: a calibration moves the reference at once by what it
-    /// found; every other slave's offset moves with it (the next correction), so that the
+    /// found, and so does the first offset it is given (from wherever the DC initialisation
+    /// left it); every other slave's offset moves with it (the next correction), so that the
     /// followers' loops need not chase a step.
     pending_shift_ns: i64,
+    /// The reference's offset the last frame read, and whether the method has replaced it yet.
+    reference_offset_read: Option<u64>,
+    offset_given: bool,
 }
 
 /// How a method makes the reference follow the master.
@@ -414,6 +419,8 @@ impl Ferrocat {
             held_back: 0,
             aimed_ns: None,
             pending_shift_ns: 0,
+            reference_offset_read: None,
+            offset_given: false,
         }
     }
 
@@ -523,6 +530,7 @@ impl ClockSync for Ferrocat {
             // The line through the reference's local time: what it would read with the
             // offset it had at the start.
             if let (Steering::Offset, Some(o)) = (self.steering, s.reference_offset_ns) {
+                self.reference_offset_read = Some(o);
                 self.fit_passage(s, s.reference_ns.wrapping_sub(o));
             }
             return Correction { shift_offsets_ns: std::mem::take(&mut self.pending_shift_ns), next_period_ns: None };
@@ -556,7 +564,13 @@ impl ClockSync for Ferrocat {
         // (±|rate − 1|·cycle/2) on the master's time.
         let passage = built_ns.wrapping_add_signed(self.lead_ns?);
         let aim = passage.wrapping_add(self.cycle_ns / 2);
-        Some(aim.wrapping_sub(self.fit.at(aim)?))
+        let offset = aim.wrapping_sub(self.fit.at(aim)?);
+        if !self.offset_given {
+            let step = offset.wrapping_sub(self.reference_offset_read?) as i64;
+            self.pending_shift_ns = self.pending_shift_ns.saturating_add(step);
+            self.offset_given = true;
+        }
+        Some(offset)
     }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
         match self.coupling {
@@ -813,5 +827,28 @@ mod tests {
         let mut tcl = Ferrocat::new(Coupling::ReferenceFollowsMaster, c);
         tcl.steering = Steering::TimeControlLoop;
         assert!(!tcl.steers_reference_offset());
+    }
+
+    #[test]
+    fn the_first_offset_given_to_the_reference_moves_every_other_slave_with_it() {
+        let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
+        // The reference's local time runs 1:1 with the master's but 5 µs behind, and its
+        // offset (read by each frame) is 2 000 ns: the offset that puts it on the master's
+        // time is 5 000 ns, a step of 3 000 ns from what the DC initialisation left.
+        let read = |k: u64| {
+            let mut s = sample(k, 0, 0);
+            let passage = s.built_ns.wrapping_add_signed(s.lead_ns());
+            s.reference_offset_ns = Some(2_000);
+            s.reference_ns = passage - 5_000 + 2_000;
+            s
+        };
+        for k in 1..=8 {
+            assert_eq!(f.update(Some(&read(k))).shift_offsets_ns, 0, "no shift before an offset is given");
+        }
+        let offset = f.reference_offset(9 * 1_000_000).unwrap();
+        assert!((offset as i64 - 5_000).abs() <= 1, "{offset}");
+        assert_eq!(f.update(Some(&read(9))).shift_offsets_ns, offset as i64 - 2_000, "the step, once");
+        f.reference_offset(10 * 1_000_000).unwrap();
+        assert_eq!(f.update(Some(&read(10))).shift_offsets_ns, 0, "later offsets move the reference alone");
     }
 }
