@@ -36,9 +36,10 @@ pub fn line(slaves: usize) -> SegmentConfig {
 
 /// `cfg` (its own seed replaced by `seed`, so that rounds differ and the scenario's seed rules)
 /// brought up and DC-initialised, in virtual time on `host`, and `method` prepared on it for
-/// `cycle_ns`, with the DC initialisation's report (see [`master`], [`method`]). ferrocat's methods are made before the DC
-/// initialisation, so that one that steers the reference's offset does so from the static
-/// drift compensation on (`Master::init_dc_with`); the others after it, as published.
+/// `cycle_ns`, with the DC initialisation's report (see [`master`], [`method`]). ferrocat's
+/// methods are made before the DC initialisation, so that one that steers the reference's
+/// offset does so from the static drift compensation on (`Master::init_dc_with`); the others
+/// after it, as published.
 pub fn segment(
     cfg: &SegmentConfig,
     host: HostModel,
