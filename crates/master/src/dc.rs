@@ -234,12 +234,11 @@ impl<I: Io> Master<I> {
         )?;
         // 6. Static drift compensation, until converged (checked, not a fixed count).
         let ref_station = self.slaves[reference].station;
-        let mut steer = sync
-            .filter(|s| s.coupling() == crate::sync::Coupling::ReferenceFollowsMaster && s.steers_reference_offset());
-        let mut steer_state = match steer {
-            Some(_) => {
+        // (`steers_reference_offset` implies the reference follows the master.)
+        let mut steer = match sync.filter(|s| s.steers_reference_offset()) {
+            Some(sync) => {
                 self.dc_reference = Some(ref_station);
-                Some(self.sync_state()?)
+                Some((sync, self.sync_state()?))
             }
             None => None,
         };
@@ -247,11 +246,11 @@ impl<I: Io> Master<I> {
         let mut converged = false;
         let static_from_ns = self.engine.io.now_ns();
         while frames < cfg.max_frames {
-            match (steer.as_deref_mut(), steer_state.as_mut()) {
-                (Some(sync), Some(st)) => {
-                    self.sync_step(sync, st)?;
+            match steer.as_mut() {
+                Some((sync, st)) => {
+                    self.sync_step(&mut **sync, st)?;
                 }
-                _ => {
+                None => {
                     let mut t = [0u8; 8];
                     self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
                 }
@@ -287,7 +286,7 @@ impl<I: Io> Master<I> {
             reference: reference as u16,
             static_frames: frames,
             static_ns,
-            reference_steered: steer_state.is_some(),
+            reference_steered: steer.is_some(),
             converged,
             max_difference_ns: max_diff,
             sync0_start,
