@@ -372,9 +372,13 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         write_report(dir, "robustness.csv", &crate::report::csv_of(&rows))?;
         let mut md = format!(
             "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
-             measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns).\n\n\
-             | disturbance | method | mean before | sd | band | peak | recovery ms | outside % | mean after | RMS after | frames lost |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+             measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns). \
+             Relock: until every slave stays within 100 ns of the reference and the master within 1 µs \
+             (unlocked: not locked before the disturbance). Probes: \
+             ferrocat's extra reads of the reference after the disturbance.\n\n\
+             | disturbance | method | mean before | sd | band | peak | recovery ms | relock ms | outside % | mean after | \
+             RMS after | frames lost | probes |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
         );
         for r in &rows {
@@ -392,7 +396,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "Robustness — host {}, seed {}, {} slaves, {} µs; one disturbance after {} s, {} s measured; error = master − reference, ns",
         host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
     );
-    let widths = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 5];
+    let widths = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 9, 5, 7];
     let line = |cells: &[String]| -> String {
         let pad = |(c, w): (&String, &i32)| match *w {
             w if w < 0 => format!("{c:<0$}", (-w) as usize),
@@ -408,10 +412,12 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "band",
         "peak",
         "recovery ms",
+        "relock ms",
         "outside %",
         "after",
         "after RMS",
         "lost",
+        "probes",
     ];
     outln!("{}", line(&head.map(String::from)));
     for r in &rows {
@@ -421,7 +427,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
 }
 
 /// One robustness row's cells, for the terminal and the report alike.
-fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 11] {
+fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 13] {
     [
         r.scenario.clone(),
         r.method.clone(),
@@ -430,9 +436,15 @@ fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 11] {
         format!("{:.1}", r.band_ns),
         format!("{:.1}", r.peak_ns),
         r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
+        match (r.locked_before, r.relock_ms) {
+            (false, _) => "unlocked".into(),
+            (true, Some(v)) => format!("{v:.0}"),
+            (true, None) => "never".into(),
+        },
         format!("{:.2}", r.outside_pct),
         format!("{:.1}", r.after_mean_ns),
         format!("{:.1}", r.after_rms_ns),
         r.frames_lost.to_string(),
+        r.probes_after.to_string(),
     ]
 }

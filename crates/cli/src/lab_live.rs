@@ -40,9 +40,12 @@ pub struct Row {
     pub last_rms_us: f64,
     /// Largest |master − slave| over all slaves and samples (µs).
     pub max_abs_us: f64,
+    /// Frames the simulator logged in the measured window: about one per cycle, and the
+    /// probe frames (`probes`) ferrocat sent there.
     pub samples: u64,
     pub cycles: u64,
     pub frames_lost: u64,
+    pub probes: u64,
 }
 
 /// Two network namespaces joined by a veth pair, removed on drop.
@@ -156,6 +159,8 @@ struct MasterRun {
     to_ns: u64,
     cycles: u64,
     lost: u64,
+    /// Probe frames sent within the measured window (the simulator logs them too).
+    probes: u64,
 }
 
 /// The method's clock from `own_ns` (the master's own system time) until the next piece.
@@ -196,10 +201,14 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
     let mut clock = Vec::new();
     let (mut next, mut c, mut cycles) = (start, Default::default(), 0);
+    let mut probes_from = None;
     while next < to_ns {
         // A master that follows the reference wakes when it says.
         next = ferrocat_lab::next_wake(next, cycle_ns, &c);
         m.engine.io.sleep_until(next);
+        if m.engine.io.now_ns() >= from_ns && probes_from.is_none() {
+            probes_from = Some(st.probes);
+        }
         c = m.sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
         if m.engine.io.now_ns() + 2 * cycle_ns >= from_ns {
@@ -214,7 +223,8 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let epoch_offset_ns = m.epoch_offset_ns().context("the master's clock was never read")?;
     // A method that keeps no clock of its own leaves the master's.
     let clock = (!clock.is_empty()).then_some(clock);
-    Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost })
+    let probes = st.probes - probes_from.unwrap_or(st.probes);
+    Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost, probes })
 }
 
 /// Master − slave errors from the simulator's clock log over the master's window.
@@ -256,6 +266,7 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         samples: reference.n,
         cycles: r.cycles,
         frames_lost: r.lost,
+        probes: r.probes,
     })
 }
 
@@ -301,7 +312,7 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         a.slaves, a.cycle_us, a.seconds, a.settle_s
     );
     outln!(
-        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>6}",
+        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>6} {:>7}",
         "method",
         "ref mean",
         "ref RMS",
@@ -309,11 +320,12 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         "last RMS",
         "max |e|",
         "samples",
-        "lost"
+        "lost",
+        "probes"
     );
     for r in &rows {
         outln!(
-            "{:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>8} {:>6}",
+            "{:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>8} {:>6} {:>7}",
             r.method,
             r.ref_mean_us,
             r.ref_rms_us,
@@ -321,7 +333,8 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
             r.last_rms_us,
             r.max_abs_us,
             r.samples,
-            r.frames_lost
+            r.frames_lost,
+            r.probes
         );
     }
     Ok(ExitCode::SUCCESS)
@@ -348,6 +361,7 @@ mod tests {
             to_ns: u64::MAX,
             cycles: 3,
             lost: 0,
+            probes: 0,
         };
         let row = errors(&log, &run, "ferrocat-mfr", &a).unwrap();
         // The frame before the first piece is left out; the others: line − slave.

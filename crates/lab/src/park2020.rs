@@ -147,12 +147,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         }
         let e_ref = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default();
         let e_last = crate::method_error_ns(&mut m, Some(sync.as_ref()), last).unwrap_or_default();
-        let spread = dc[1..]
-            .iter()
-            .map(|&s| (crate::method_error_ns(&mut m, Some(sync.as_ref()), s).unwrap_or_default() - e_ref).abs())
-            .max()
-            .unwrap_or(0);
-        if spread > 100 || e_ref.abs() > 1_000 {
+        if !crate::locked(&mut m, sync.as_ref(), &dc, e_ref) {
             last_violation = Some(k);
         }
         if k >= settle {

@@ -62,18 +62,30 @@ pub struct Row {
     /// return within the run). Under lasting loss the band is left now and then at random:
     /// `outside_pct` says how often.
     pub recovery_ms: Option<f64>,
+    /// From the disturbance until the segment was locked for good as the lock time counts it:
+    /// every DC slave within 100 ns of the reference, the master within 1 µs (None: not
+    /// within the run).
+    pub relock_ms: Option<f64>,
+    /// Whether the segment was locked throughout the band window (if not, there is no lock
+    /// to regain and `relock_ms` is None).
+    pub locked_before: bool,
     pub outside_pct: f64,
     /// The error over the last half of the time after.
     pub after_mean_ns: f64,
     pub after_rms_ns: f64,
     pub frames_lost: u64,
+    /// Probe frames (ferrocat's extra reads of the reference while its estimate is uncertain):
+    /// per second over the band window, and in all after the disturbance.
+    pub probes_per_s_before: f64,
+    pub probes_after: u64,
 }
 
 fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
     let (mut m, mut sync, _) =
         crate::segment(&cfg, o.host, o.seed, method, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
-    let reference = crate::dc_slaves(&m)?[0];
+    let dc = crate::dc_slaves(&m)?;
+    let reference = dc[0];
     let reference_node = crate::node_of(&m, reference).unwrap_or(0);
     let mut st = m.sync_state()?;
     let per_s = 1e9 / o.cycle_ns as f64;
@@ -85,8 +97,15 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let mut errors_after = Vec::with_capacity(after as usize);
     let mut lost0 = 0;
     let mut c = Correction::default();
+    let (mut probes_window, mut probes0) = (0, 0);
+    let mut last_unlocked: Option<u64> = None;
+    let mut locked_before = true;
     for k in 0..settle + after {
+        if k + window == settle {
+            probes_window = st.probes;
+        }
         if k == settle {
+            probes0 = st.probes;
             lost0 = st.lost;
             let now = m.engine.io.now_ns();
             match scenario {
@@ -103,7 +122,16 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         next = crate::next_wake(next, o.cycle_ns, &c);
         m.engine.io.sleep_until(next);
         c = m.sync_step(sync.as_mut(), &mut st)?;
-        let e = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default() as f64;
+        let e_ref = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default();
+        let e = e_ref as f64;
+        if k + window >= settle {
+            let locked = crate::locked(&mut m, sync.as_ref(), &dc, e_ref);
+            match k.checked_sub(settle) {
+                Some(after) if !locked => last_unlocked = Some(after),
+                None => locked_before &= locked,
+                _ => {}
+            }
+        }
         if k >= settle {
             errors_after.push(e);
             if k >= settle + after / 2 {
@@ -119,12 +147,14 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let peak = errors_after.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
     let last_out = errors_after.iter().rposition(|e| (e - mean).abs() > band);
     let ms = |cycles: usize| cycles as f64 * o.cycle_ns as f64 / 1e6;
-    let recovery_ms = match last_out {
+    // Back for good only if the last 10 % of the run stayed so.
+    let for_good = |last: Option<usize>| match last {
         None => Some(0.0),
-        // Back for good only if the last 10 % of the run stayed inside.
         Some(i) if i < errors_after.len() * 9 / 10 => Some(ms(i + 1)),
         Some(_) => None,
     };
+    let recovery_ms = for_good(last_out);
+    let relock_ms = if locked_before { for_good(last_unlocked.map(|k| k as usize)) } else { None };
     Ok(Row {
         scenario: scenario.to_string(),
         method: method.to_string(),
@@ -134,12 +164,16 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         band_ns: band,
         peak_ns: peak,
         recovery_ms,
+        relock_ms,
+        locked_before,
         outside_pct: errors_after.iter().filter(|e| (*e - mean).abs() > band).count() as f64
             / errors_after.len().max(1) as f64
             * 100.0,
         after_mean_ns: late.mean(),
         after_rms_ns: late.rms(),
         frames_lost: st.lost - lost0,
+        probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
+        probes_after: st.probes - probes0,
     })
 }
 

@@ -10,9 +10,10 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
     assert_eq!(rows.len(), SCENARIOS.len() * 4);
     for r in &rows {
         println!(
-            "{:18} {:12} before {:8.1} ± {:6.1} ns, peak {:9.1} ns, recovery {:?} ms, outside {:.2} %, after {:8.1}/{:8.1} ns, lost {}",
-            r.scenario, r.method, r.before_mean_ns, r.before_sd_ns, r.peak_ns, r.recovery_ms, r.outside_pct, r.after_mean_ns,
-            r.after_rms_ns, r.frames_lost
+            "{:18} {:12} before {:8.1} ± {:6.1} ns, peak {:9.1} ns, recovery {:?} ms, relock {:?} ms (locked before: {}), \
+             outside {:.2} %, after {:8.1}/{:8.1} ns, lost {}, probes {}",
+            r.scenario, r.method, r.before_mean_ns, r.before_sd_ns, r.peak_ns, r.recovery_ms, r.relock_ms, r.locked_before,
+            r.outside_pct, r.after_mean_ns, r.after_rms_ns, r.frames_lost, r.probes_after
         );
         assert!(r.after_rms_ns.is_finite() && r.peak_ns.is_finite(), "{r:?}");
         if r.scenario == "loss-1pct" {
@@ -29,6 +30,13 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         } else {
             let rec = r.recovery_ms.unwrap_or_else(|| panic!("ferrocat did not recover: {r:?}"));
             assert!(rec < 1_000.0 && r.after_rms_ns < 1.5 * before_rms, "{r:?}");
+        }
+        // Locked before, locked again: no disturbance costs ferrocat its lock for good.
+        assert!(r.locked_before && r.relock_ms.is_some(), "{r:?}");
+        if r.scenario == "drift-step-50ppm" {
+            // The crystal step: back within 100 ms (probing the reference while the line is
+            // uncertain; docs/clock-sync.md, Robustness), having probed it.
+            assert!(r.recovery_ms.is_some_and(|ms| ms < 100.0) && r.probes_after > 0, "{r:?}");
         }
     }
     // The crystal step is the reference's time control loop's to absorb: every method returns.

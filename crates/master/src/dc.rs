@@ -238,7 +238,7 @@ impl<I: Io> Master<I> {
         let mut steer = match sync.filter(|s| s.steers_reference_offset()) {
             Some(sync) => {
                 self.dc_reference = Some(ref_station);
-                Some((sync, self.sync_state()?))
+                Some((sync, SyncState { no_probes: true, ..self.sync_state()? }))
             }
             None => None,
         };
@@ -366,6 +366,11 @@ pub struct SyncState {
     pub reference_ns: Option<u64>,
     /// The reference's System_Time_Offset as last read (unwrapped likewise).
     pub reference_offset_ns: Option<u64>,
+    /// No probe frames (the static drift compensation, whose frames are back to back anyway).
+    pub no_probes: bool,
+    /// Probe frames sent, and those lost.
+    pub probes: u64,
+    pub probes_lost: u64,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -476,11 +481,6 @@ impl<I: Io> Master<I> {
         frame_bytes: u64,
         data_bytes: u64,
     ) -> Result<crate::sync::Correction> {
-        use crate::sync::Sample;
-        let to_sys = |m: &mut Self, world: u64| -> u64 {
-            let now = m.engine.io.now_ns();
-            m.master_system_time().wrapping_sub(now.wrapping_sub(world))
-        };
         let wide = p.wide;
         let offset = p.offset_read().filter(|_| answered.offset);
         if let Some(o) = offset {
@@ -489,25 +489,11 @@ impl<I: Io> Master<I> {
         let sample = if answered.sync {
             let frmw = u64::from_le_bytes(p.frmw);
             st.reference_ns = Some(if wide { frmw } else { unwrap32(st.reference_ns, frmw) });
-            // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
-            // first preamble bit, which is what an ESC latches: take them back to that bit.
-            let hw = self.engine.io.rx_stamps_start_of_frame();
-            let sfd = if hw { PREAMBLE_NS } else { 0 };
-            let tx = self.engine.io.last_tx_ns().map(|t| t.wrapping_sub(sfd));
-            let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
-            Some(Sample {
-                cycle: st.cycle,
-                built_ns: p.built_ns,
-                tx_ns: tx.map(|t| to_sys(self, t)),
-                rx_ns: to_sys(self, rx),
-                reference_ns: st.reference_ns.unwrap_or(frmw),
-                reference_offset_ns: offset.and(st.reference_offset_ns),
-                difference_ns: SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns(),
-                loop_ns: st.loop_ns,
-                // A stamp after the last byte (software, or none) includes the whole frame.
-                frame_ns: if hw { 0 } else { frame_bytes * 80 },
-                data_ns: data_bytes * 80,
-            })
+            let mut s = self.stamped_sample(st, p.built_ns, frame_bytes);
+            s.reference_offset_ns = offset.and(st.reference_offset_ns);
+            s.difference_ns = SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns();
+            s.data_ns = data_bytes * 80;
+            Some(s)
         } else {
             st.lost += 1;
             None
@@ -518,7 +504,75 @@ impl<I: Io> Master<I> {
             let skip = if sync.steers_reference_offset() { Some(p.station) } else { None };
             self.shift_offsets_but(c.shift_offsets_ns, skip)?;
         }
+        for _ in 0..if st.no_probes { 0 } else { sync.probes_wanted() } {
+            self.probe(sync, st, p.station, wide)?;
+        }
         Ok(c)
+    }
+
+    /// One probe frame: the reference's time (and offset, where the method steers it) read,
+    /// nothing written; its sample to the method. A lost probe is only counted.
+    fn probe(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut SyncState,
+        station: u16,
+        wide: bool,
+    ) -> Result<()> {
+        st.probes += 1;
+        let n = if wide { 8 } else { 4 };
+        let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
+        let at = |ado| Address::Device { adp: station, ado };
+        let steer = sync.steers_reference_offset();
+        let built_ns = self.master_system_time();
+        let mut pdus = [
+            Pdu::new(Command::FPRD, at(0x0920), &mut offset[..n]),
+            Pdu::new(Command::FPRD, at(0x0910), &mut time[..n]),
+        ];
+        let pdus = if steer { &mut pdus[..] } else { &mut pdus[1..] };
+        let frame_bytes = frame_bytes(pdus);
+        let answered =
+            self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok() && pdus.iter().all(|p| p.wkc == 1);
+        if !answered {
+            st.probes_lost += 1;
+            return Ok(());
+        }
+        let (time, offset) = (u64::from_le_bytes(time), u64::from_le_bytes(offset));
+        let mut s = self.stamped_sample(st, built_ns, frame_bytes);
+        s.reference_ns = if wide { time } else { unwrap32(st.reference_ns, time) };
+        if steer {
+            s.reference_offset_ns = Some(if wide { offset } else { unwrap32(st.reference_offset_ns, offset) });
+        }
+        sync.probe(&s);
+        Ok(())
+    }
+
+    /// A sample of the frame just answered, with its stamps; the reference's readings are
+    /// the caller's to fill in.
+    fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
+        let to_sys = |m: &mut Self, world: u64| -> u64 {
+            let now = m.engine.io.now_ns();
+            m.master_system_time().wrapping_sub(now.wrapping_sub(world))
+        };
+        // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
+        // first preamble bit, which is what an ESC latches: take them back to that bit.
+        let hw = self.engine.io.rx_stamps_start_of_frame();
+        let sfd = if hw { PREAMBLE_NS } else { 0 };
+        let tx = self.engine.io.last_tx_ns().map(|t| t.wrapping_sub(sfd));
+        let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
+        crate::sync::Sample {
+            cycle: st.cycle,
+            built_ns,
+            tx_ns: tx.map(|t| to_sys(self, t)),
+            rx_ns: to_sys(self, rx),
+            reference_ns: st.reference_ns.unwrap_or(0),
+            reference_offset_ns: None,
+            difference_ns: 0,
+            loop_ns: st.loop_ns,
+            // A stamp after the last byte (software, or none) includes the whole frame.
+            frame_ns: if hw { 0 } else { frame_bytes * 80 },
+            data_ns: 0,
+        }
     }
 
     /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).

@@ -197,6 +197,29 @@ impl LineFit {
         Some(self.origin.1.wrapping_add_signed(dx).wrapping_add_signed(dz.round() as i64))
     }
 
+    /// The standard deviation (ns) of the line's value `ahead_ns` past its newest point, from
+    /// the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/Σ(xᵢ − x̄)²). `None` before
+    /// two distinct x.
+    pub fn sd_ahead_ns(&self, ahead_ns: u64) -> Option<f64> {
+        let s = self.sums;
+        // n²·var(x), exact.
+        let sxx = s.n * s.xx - s.x * s.x;
+        let &(newest, _) = self.points.back()?;
+        if s.n < 2 || sxx <= 0 {
+            return None;
+        }
+        let n = s.n as f64;
+        let d = newest.wrapping_sub(self.origin.0) as i64 as f64 + ahead_ns as f64 - s.x as f64 / n;
+        let v = 1.0 / n + d * d * n / sxx as f64;
+        Some(self.scale_ns.max(MIN_SCALE_NS) * v.sqrt())
+    }
+
+    /// How far the change test is towards restarting the window: its larger CUSUM over the
+    /// threshold (0 while the points agree with the line, 1 restarts).
+    pub fn suspicion(&self) -> f64 {
+        self.up.0.max(self.down.0) / CUSUM_H
+    }
+
     /// The reference's rate against the master's (1 before there are two distinct x).
     pub fn rate(&self) -> Option<f64> {
         self.line.map(|(slope, _, _)| 1.0 + slope)
@@ -422,6 +445,64 @@ mod tests {
             }
             assert_eq!(f.restarts, 0, "seed {seed}");
         }
+    }
+
+    #[test]
+    fn the_predicted_spread_matches_the_scatter_of_independent_fits() {
+        // 256 points of 300 ns noise; the line one cycle past the newest point, over many
+        // independent fits: its RMS error against the truth and the fit's own estimate of it.
+        let (n, sd) = (256, 300.0);
+        let x_next = 5_000_000_000 + n as u64 * 1_000_000;
+        let (mut sq, mut predicted) = (0.0, 0.0);
+        for seed in 0..200 {
+            let mut f = LineFit::new(4096);
+            for &(x, y) in &points(n, 20.0, sd, 1000 + seed) {
+                f.push(x, y);
+            }
+            sq += (phase_error(&f, 20.0, x_next) as f64).powi(2);
+            predicted += f.sd_ahead_ns(1_000_000).unwrap();
+        }
+        let (actual, predicted) = ((sq / 200.0).sqrt(), predicted / 200.0);
+        // Theory: σ·√(1/n + 3(n+1)²/(n(n²−1))) ≈ 2σ/√n = 37.5 ns; the scale learned from
+        // innovations is σ's estimate.
+        assert!((actual / predicted - 1.0).abs() < 0.2, "actual {actual:.1} ns, predicted {predicted:.1} ns");
+        assert!((predicted - 2.0 * sd / (n as f64).sqrt()).abs() < 8.0, "predicted {predicted:.1} ns");
+    }
+
+    #[test]
+    fn the_spread_falls_with_more_points_and_grows_with_the_distance_ahead() {
+        let mut f = LineFit::new(4096);
+        assert_eq!(f.sd_ahead_ns(0), None);
+        let pts = points(1024, -10.0, 500.0, 2);
+        for &(x, y) in &pts[..64] {
+            f.push(x, y);
+        }
+        let short = f.sd_ahead_ns(1_000_000).unwrap();
+        assert!(f.sd_ahead_ns(100_000_000).unwrap() > 2.0 * short, "a longer lever, a larger spread");
+        for &(x, y) in &pts[64..] {
+            f.push(x, y);
+        }
+        let long = f.sd_ahead_ns(1_000_000).unwrap();
+        assert!(long < short / 3.0, "64 points {short:.1} ns, 1024 points {long:.1} ns");
+    }
+
+    #[test]
+    fn suspicion_rises_on_a_ramp_before_the_restart() {
+        let mut f = LineFit::new(4096);
+        let mut fates = Vec::new();
+        let mut suspicion = Vec::new();
+        for (k, &(x, y)) in points(1200, 0.0, 300.0, 4).iter().enumerate() {
+            // 50 ns more per point from point 1000 (a 50 ppm step at 1 ms).
+            let ramp = k.saturating_sub(1000) as u64 * 50;
+            fates.push(f.push(x, y + ramp));
+            suspicion.push(f.suspicion());
+        }
+        let restart = fates[1000..].iter().position(|&f| f == Fate::Restarted).expect("the ramp restarts") + 1000;
+        let first_suspect = suspicion[1000..].iter().position(|&s| s >= 0.25).expect("suspected") + 1000;
+        assert!(first_suspect < restart, "suspected at {first_suspect}, restarted at {restart}");
+        // Before the ramp the test sits well below a quarter of its threshold most of the time.
+        let quiet = suspicion[100..1000].iter().filter(|&&s| s < 0.25).count();
+        assert!(quiet > 800, "{quiet} of 900 points below a quarter");
     }
 
     #[test]

@@ -109,6 +109,13 @@ pub trait ClockSync {
     fn take_error(&mut self, _error_ns: i64) -> bool {
         false
     }
+    /// How many probe frames the method wants after this cycle's: each only reads the
+    /// reference's time (and offset), and its sample goes to [`ClockSync::probe`].
+    fn probes_wanted(&self) -> u32 {
+        0
+    }
+    /// Takes a probe frame's sample.
+    fn probe(&mut self, _sample: &Sample) {}
 }
 
 /// IgH's way: the master's present time to the reference, no delay compensation.
@@ -383,6 +390,8 @@ pub struct Ferrocat {
     /// The reference's offset the last frame read, and whether the method has replaced it yet.
     reference_offset_read: Option<u64>,
     offset_given: bool,
+    /// Whether to probe the reference with extra frames while the line is uncertain.
+    pub probing: bool,
 }
 
 /// How a method makes the reference follow the master.
@@ -395,6 +404,14 @@ pub enum Steering {
 }
 
 const WINDOW: usize = 64;
+/// Probing: extra frames while the line's value one cycle ahead is less certain than this
+/// many noise scales — what a settled window of 1024 points gives at its end (2/√1024)…
+const PROBE_TARGET_SCALES: f64 = 1.0 / 16.0;
+/// …or while the line's change test is this far towards restarting it (a change shows sooner
+/// in more points)…
+const PROBE_SUSPICION: f64 = 0.25;
+/// …at most this many per cycle, in at most a quarter of the cycle.
+const MAX_PROBES: u64 = 16;
 /// The longest the line's window grows (4 s at 1 ms) while its points agree with it.
 pub const FIT_WINDOW: usize = 4096;
 
@@ -421,6 +438,7 @@ impl Ferrocat {
             pending_shift_ns: 0,
             reference_offset_read: None,
             offset_given: false,
+            probing: true,
         }
     }
 
@@ -576,6 +594,29 @@ impl ClockSync for Ferrocat {
         match self.coupling {
             Coupling::MasterFollowsReference => self.fit.at(host_ns),
             Coupling::ReferenceFollowsMaster => None,
+        }
+    }
+    fn probes_wanted(&self) -> u32 {
+        let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
+        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
+        // (Steering the reference's time control loop, the fit is not kept.)
+        let fitting = self.coupling == Coupling::MasterFollowsReference || self.steers_reference_offset();
+        if !self.probing || !fitting || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
+            return 0;
+        }
+        // A probe costs about a round trip and the send before it: twice the lead.
+        let cost_ns = lead.saturating_mul(2).max(1) as u64;
+        (self.cycle_ns / 4 / cost_ns).min(MAX_PROBES) as u32
+    }
+    fn probe(&mut self, s: &Sample) {
+        match (self.coupling, self.steering, s.reference_offset_ns) {
+            (Coupling::MasterFollowsReference, ..) => {
+                self.fit_passage(s, s.reference_ns);
+            }
+            (Coupling::ReferenceFollowsMaster, Steering::Offset, Some(o)) => {
+                self.fit_passage(s, s.reference_ns.wrapping_sub(o));
+            }
+            _ => {}
         }
     }
     fn take_error(&mut self, error_ns: i64) -> bool {

@@ -143,7 +143,9 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
         next += c.next_period_ns.expect("the master follows: a period every cycle");
         m.engine.io.sleep_until(next);
     }
-    assert_eq!(m.engine.io.seg.stats.frames - frames0, 200, "one frame per cycle");
+    // One frame per cycle, and the probes of the line while it was young.
+    assert_eq!(m.engine.io.seg.stats.frames - frames0 - st.probes, 200, "one frame per cycle");
+    assert!(st.probes > 0 && st.probes_lost == 0, "{st:?}");
     assert_eq!((st.cycle, st.lost), (200, 0));
     // The master's clock, its line through the reference's times, within 1 µs of the reference.
     let t = m.engine.io.now_ns();

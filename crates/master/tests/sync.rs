@@ -211,3 +211,60 @@ fn steering_the_reference_from_the_static_drift_compensation_starts_cyclic_opera
     println!("free-running reference in init: followers within {spread} ns, master within {master} ns; {report:?}");
     assert!(!report.reference_steered && spread > 100, "{spread}");
 }
+
+/// Master follows reference through a +50 ppm step of the reference's crystal after 3 s:
+/// (ms from the step until the master's estimate of the reference stayed within 100 ns of
+/// its mean before, peak excursion ns, probe frames in the settled second before the step,
+/// after it).
+fn mfr_crystal_step(probing: bool) -> (f64, f64, u64, u64) {
+    let mut m = segment(HostModel::pc_rt());
+    let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS);
+    sync.probing = probing;
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let (step_at, cycles) = (3000, 4000);
+    let (mut before, mut after, mut probes_before) = (Vec::new(), Vec::new(), 0);
+    let mut settled_from = 0;
+    for k in 0..cycles {
+        if k == step_at - 1000 {
+            settled_from = st.probes;
+        }
+        if k == step_at {
+            let now = m.engine.io.now_ns();
+            m.engine.io.seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
+            probes_before = st.probes;
+        }
+        let c = m.sync_step(&mut sync, &mut st).unwrap();
+        next += c.next_period_ns.unwrap();
+        m.engine.io.sleep_until(next);
+        let t = m.engine.io.now_ns();
+        let own = m.master_system_time();
+        let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+        let e = sync.master_time(own).unwrap().wrapping_sub(reference) as i64 as f64;
+        if k >= step_at {
+            after.push(e);
+        } else if k >= step_at - 1000 {
+            before.push(e);
+        }
+    }
+    let mean = before.iter().sum::<f64>() / before.len() as f64;
+    let last_out = after.iter().rposition(|e| (e - mean).abs() > 100.0).map_or(0, |i| i + 1);
+    let peak = after.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
+    (last_out as f64 * CYCLE_NS as f64 / 1e6, peak, probes_before - settled_from, st.probes - probes_before)
+}
+
+#[test]
+fn probing_while_the_estimate_is_uncertain_recovers_from_a_crystal_step_sooner() {
+    let (with, peak_with, quiet, burst) = mfr_crystal_step(true);
+    let (without, peak_without, none_before, none_after) = mfr_crystal_step(false);
+    println!(
+        "50 ppm step, pc-rt: probing back within 100 ns after {with} ms (peak {peak_with:.0} ns; probes {quiet} \
+         in the settled second before, {burst} after); without {without} ms (peak {peak_without:.0} ns)"
+    );
+    assert_eq!((none_before, none_after), (0, 0), "probing off sends none");
+    assert!(burst > 100, "the step is probed: {burst}");
+    // Settled, the line needs few probes (the change test now and then): under one per 10 cycles.
+    assert!(quiet < 100, "{quiet} probes in 1 000 settled cycles");
+    assert!(with < without && with < 100.0, "{with} ms vs {without} ms");
+    assert!(peak_with < peak_without, "{peak_with} vs {peak_without}");
+}
