@@ -504,7 +504,8 @@ impl<I: Io> Master<I> {
             let skip = if sync.steers_reference_offset() { Some(p.station) } else { None };
             self.shift_offsets_but(c.shift_offsets_ns, skip)?;
         }
-        for _ in 0..if st.no_probes { 0 } else { sync.probes_wanted() } {
+        let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
+        for _ in 0..probes {
             self.probe(sync, st, p.station, wide)?;
         }
         Ok(c)

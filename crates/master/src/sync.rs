@@ -604,9 +604,10 @@ impl ClockSync for Ferrocat {
         if !self.probing || !fitting || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }
-        // A probe costs about a round trip and the send before it: twice the lead.
+        // A probe costs about a round trip and the send before it: twice the lead. One probe's
+        // worth of the quarter cycle is kept as slack for a late reply.
         let cost_ns = lead.saturating_mul(2).max(1) as u64;
-        (self.cycle_ns / 4 / cost_ns).min(MAX_PROBES) as u32
+        (self.cycle_ns / 4 / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
     }
     fn probe(&mut self, s: &Sample) {
         match (self.coupling, self.steering, s.reference_offset_ns) {
