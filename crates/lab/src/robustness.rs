@@ -1,7 +1,8 @@
 //! Robustness: each method of the master–slave error tables on the same realisation, disturbed once
 //! after it has settled — 1 % of frames lost from then on, the reference's crystal stepping by
 //! 50 ppm (a temperature step), or the master overrunning three cycles (no frames for 3 ms) —
-//! and how far and for how long the master–reference error leaves its band.
+//! and how far and for how long the master–reference error leaves its band, and how long until
+//! the segment is locked again (as the lock time counts it).
 use ferrocat_master::io::{HostModel, Io};
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
