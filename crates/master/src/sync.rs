@@ -494,6 +494,24 @@ impl Ferrocat {
         x
     }
 
+    /// Whether the method keeps its line (not when it steers the reference's time control loop).
+    fn keeps_line(&self) -> bool {
+        self.coupling == Coupling::MasterFollowsReference || self.steering == Steering::Offset
+    }
+
+    /// The reference's time the line takes from `s`: its system time where the master follows
+    /// it; steering its offset, its local time (what it would read with the offset it had at
+    /// the start), where the frame read the offset.
+    fn line_point(&self, s: &Sample) -> Option<u64> {
+        match (self.coupling, self.steering) {
+            (Coupling::MasterFollowsReference, _) => Some(s.reference_ns),
+            (Coupling::ReferenceFollowsMaster, Steering::Offset) => {
+                s.reference_offset_ns.map(|o| s.reference_ns.wrapping_sub(o))
+            }
+            (Coupling::ReferenceFollowsMaster, Steering::TimeControlLoop) => None,
+        }
+    }
+
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
         // On the stack: the cyclic path does not allocate.
         let mut buf = [0i64; WINDOW];
@@ -545,11 +563,9 @@ impl ClockSync for Ferrocat {
             self.last_send_error_ns = send.wrapping_sub(Self::trimmed_mean(&self.sends));
         }
         if self.coupling == Coupling::ReferenceFollowsMaster {
-            // The line through the reference's local time: what it would read with the
-            // offset it had at the start.
-            if let (Steering::Offset, Some(o)) = (self.steering, s.reference_offset_ns) {
-                self.reference_offset_read = Some(o);
-                self.fit_passage(s, s.reference_ns.wrapping_sub(o));
+            if let Some(y) = self.line_point(s) {
+                self.reference_offset_read = s.reference_offset_ns;
+                self.fit_passage(s, y);
             }
             return Correction { shift_offsets_ns: std::mem::take(&mut self.pending_shift_ns), next_period_ns: None };
         }
@@ -599,9 +615,7 @@ impl ClockSync for Ferrocat {
     fn probes_wanted(&self) -> u32 {
         let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
         let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
-        // (Steering the reference's time control loop, the fit is not kept.)
-        let fitting = self.coupling == Coupling::MasterFollowsReference || self.steers_reference_offset();
-        if !self.probing || !fitting || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
+        if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }
         // A probe costs about a round trip and the send before it: twice the lead. One probe's
@@ -610,14 +624,8 @@ impl ClockSync for Ferrocat {
         (self.cycle_ns / 4 / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
     }
     fn probe(&mut self, s: &Sample) {
-        match (self.coupling, self.steering, s.reference_offset_ns) {
-            (Coupling::MasterFollowsReference, ..) => {
-                self.fit_passage(s, s.reference_ns);
-            }
-            (Coupling::ReferenceFollowsMaster, Steering::Offset, Some(o)) => {
-                self.fit_passage(s, s.reference_ns.wrapping_sub(o));
-            }
-            _ => {}
+        if let Some(y) = self.line_point(s) {
+            self.fit_passage(s, y);
         }
     }
     fn take_error(&mut self, error_ns: i64) -> bool {
