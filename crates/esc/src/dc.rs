@@ -33,6 +33,20 @@ fn scaled_div(a: i64, scale: i64, den: i64) -> i64 {
     q * scale + r * scale / den
 }
 
+/// `x.round() as i64` without the library call `round` is on baseline x86-64 (no SSE4.1): the
+/// cast truncates, and `x − trunc(x)` is exact.
+fn round_half_away(x: f64) -> i64 {
+    let t = x as i64;
+    let frac = x - t as f64;
+    if frac >= 0.5 {
+        t.saturating_add(1)
+    } else if frac <= -0.5 {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct DcUnit {
     pub width: DcWidth,
@@ -119,6 +133,7 @@ impl DcUnit {
     }
 
     /// Local time (ns) at true time `t_ns` (which may lie slightly before the folded time).
+    #[inline]
     pub fn local_at(&self, t_ns: u64) -> u64 {
         self.mask(self.local_ext_at(t_ns))
     }
@@ -128,8 +143,15 @@ impl DcUnit {
         self.local_ext_at(t_ns).wrapping_add(self.offset)
     }
 
+    #[inline]
     fn local_ext_at(&self, t_ns: u64) -> u64 {
-        let (ticks, _, corr_ns, _) = self.project(t_ns as i128 - self.t_ns as i128);
+        // At the folded time (every frame folds first) the accumulators are the answer.
+        let (ticks, corr_ns) = if t_ns == self.t_ns {
+            (self.ticks, self.corr_ns)
+        } else {
+            let (ticks, _, corr_ns, _) = self.project(t_ns as i128 - self.t_ns as i128);
+            (ticks, corr_ns)
+        };
         // The counter is 64 bits wide and wraps (a unit powered on near 2^64 does).
         (10 * ticks as i128 + corr_ns as i128).max(0) as u64
     }
@@ -266,7 +288,7 @@ impl DcUnit {
         let r = fpp * 1e-15;
         let guess =
             if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
-        let g = (guess.round() as i64).clamp(-max, max);
+        let g = round_half_away(guess).clamp(-max, max);
         let (mut best, mut best_err) = (g, (rate(g) - r).abs());
         for d in [g - 1, g + 1] {
             let err = (rate(d) - r).abs();
@@ -351,8 +373,13 @@ impl DcUnit {
     }
 
     /// True time of the next SYNC0 pulse, searching from `from_ns`.
+    #[inline]
     pub fn next_sync0_true(&self, from_ns: u64) -> Option<u64> {
         let next = self.sync.next_sync0?;
+        self.search_sync0(from_ns, next)
+    }
+
+    fn search_sync0(&self, from_ns: u64, next: u64) -> Option<u64> {
         let now = self.system_ext_at(from_ns);
         let ahead = next.wrapping_sub(now) as i64;
         if ahead <= 0 {
@@ -444,6 +471,16 @@ mod tests {
                 prop_assert!(pulses.len() <= (dt / 1_000 + 2) as usize);
                 let _ = dc.next_sync0_true(t);
             }
+        }
+    }
+
+    #[test]
+    fn rounding_matches_the_library() {
+        let mut xs = vec![0.0, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, 0.49999999999999994, -0.49999999999999994];
+        xs.extend([4503599627370495.5, -4503599627370495.5, 1e300, -1e300, f64::INFINITY, f64::NEG_INFINITY, f64::NAN]);
+        xs.extend((-20_000..20_000).map(|k| k as f64 * 0.25 + 1e-9 * k as f64));
+        for x in xs {
+            assert_eq!(round_half_away(x), x.round() as i64, "{x}");
         }
     }
 

@@ -370,7 +370,12 @@ impl Esc {
         loop {
             let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
             let own = self.app.next_event_ns();
-            let Some(tp) = [sync, own].into_iter().flatten().min() else { break };
+            let tp = match (sync, own) {
+                (None, None) => break,
+                (Some(s), None) => s,
+                (None, Some(o)) => o,
+                (Some(s), Some(o)) => s.min(o),
+            };
             if tp > t_ns {
                 break;
             }
@@ -510,9 +515,11 @@ impl Esc {
         }
     }
 
-    /// Processes the datagram chain of one frame passing the processing unit.
-    pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming) {
-        self.advance_to(timing.epu_ns);
+    /// Processes the datagram chain of one frame passing the processing unit; `timing` is
+    /// relative to `origin_ns` (the segment keeps one route and shifts it per frame).
+    pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming, origin_ns: u64) {
+        let epu_ns = timing.epu_ns + origin_ns;
+        self.advance_to(epu_ns);
         self.frames += 1;
         if self.expected.mailbox.is_some() {
             self.deliver_mailbox();
@@ -526,7 +533,7 @@ impl Esc {
         }
         // ECAT reads of 0x0910 see the time the frame passed, minus the delay: latched now,
         // put into the register when a datagram reads it (most frames do not).
-        self.system_time_latch = self.dc.as_ref().map(|_| timing.epu_ns);
+        self.system_time_latch = self.dc.as_ref().map(|_| epu_ns);
         self.effects = FrameEffects::default();
         let mut off = 0;
         while off + HEADER_LEN + 2 <= chain.len() {
@@ -542,7 +549,7 @@ impl Esc {
                 break;
             }
         }
-        self.end_of_frame(timing);
+        self.end_of_frame(timing, origin_ns);
     }
 
     fn addressed_fp(&self, adp: u16) -> bool {
@@ -801,20 +808,24 @@ impl Esc {
         // The frame bytes some FMMU maps: writes take them as they arrived (a read through
         // another FMMU may change them first), so they are kept aside; most ESCs map only a
         // few bytes of a long LRW.
-        let (first, last) = self
+        let (first, last, hits) = self
             .fmmu_cache
             .iter()
             .map(overlap)
             .filter(|(_, lo, hi)| lo < hi)
-            .fold((u64::MAX, 0), |(a, b), (_, lo, hi)| {
-                (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)))
+            .fold((u64::MAX, 0, 0), |(a, b, n), (_, lo, hi)| {
+                (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)), n + 1)
             });
         if first >= last {
             return 0;
         }
+        // One FMMU's runs cover disjoint frame bits, each written before it is read: only a
+        // second FMMU can read into bits another writes, so only then is a copy needed.
         let mut original = std::mem::take(&mut self.scratch);
         original.clear();
-        original.extend_from_slice(&data[first as usize..last as usize]);
+        if hits > 1 {
+            original.extend_from_slice(&data[first as usize..last as usize]);
+        }
         let (mut read_ok, mut write_ok) = (false, false);
         for i in 0..self.fmmu_cache.len() {
             let f = self.fmmu_cache[i];
@@ -844,7 +855,8 @@ impl Esc {
                 };
                 if writes {
                     let cur = self.current_byte(pa);
-                    let bits = shift(original[fi - first as usize] & mask_f, fbit % 8, pbit % 8);
+                    let arrived = if hits > 1 { original[fi - first as usize] } else { data[fi] };
+                    let bits = shift(arrived & mask_f, fbit % 8, pbit % 8);
                     if self.write_byte(pa, (cur & !mask_p) | bits, cmd) {
                         write_ok = true;
                     }
@@ -905,8 +917,8 @@ impl Esc {
         dc.tcl_sample(t, u32::from_le_bytes(v));
     }
 
-    fn end_of_frame(&mut self, timing: &FrameTiming) {
-        let t = timing.epu_ns;
+    fn end_of_frame(&mut self, timing: &FrameTiming, origin_ns: u64) {
+        let t = timing.epu_ns + origin_ns;
         let mut pending = std::mem::take(&mut self.pending);
         if pending.is_empty() && !self.effects.sm_buffer_done {
             self.pending = pending;
@@ -1039,7 +1051,7 @@ impl Esc {
                 for (p, at) in timing.port_ns.iter().enumerate() {
                     // Ports the frame did not reach keep their old value (esc-spec §3.3).
                     if let Some(at) = at {
-                        let v = dc.local_at(*at) as u32;
+                        let v = dc.local_at(at + origin_ns) as u32;
                         self.mem[0x0900 + 4 * p..0x0904 + 4 * p].copy_from_slice(&v.to_le_bytes());
                     }
                 }

@@ -364,6 +364,8 @@ impl Segment {
         // Processing pass, in the order the frame passes the processing units.
         let visits = std::mem::take(&mut self.route.visits);
         let hdr = ECAT_HEADER_LEN;
+        // ESCs change neither the header nor the length: the chain's bounds hold for the walk.
+        let len = crate::pdu_len(&frame[pdu_at..]).map(|(len, _)| len);
         for (i, (node, rel)) in visits.iter().enumerate() {
             if i >= reach {
                 if corrupted {
@@ -374,7 +376,7 @@ impl Segment {
                 break;
             }
             let n = &mut self.nodes[*node];
-            let Some((len, _)) = crate::pdu_len(&frame[pdu_at..]) else { break };
+            let Some(len) = len else { break };
             let chain = &mut frame[pdu_at + hdr..pdu_at + hdr + len];
             if !n.esc.port_open(0) && n.entry_port != 0 {
                 // Circulating-frame prevention at an auto-closed port 0 (esc-spec §1.6).
@@ -385,7 +387,7 @@ impl Segment {
                 }
                 crate::set_circulating(chain);
             }
-            n.esc.process_frame(chain, &rel.shifted(head_at_first));
+            n.esc.process_frame(chain, rel, head_at_first);
         }
         self.route.visits = visits;
         // The ESC marks frames it processed by setting the locally administered bit of the
