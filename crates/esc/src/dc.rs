@@ -9,7 +9,10 @@
 //!
 //! The loop that turns samples (writes of 0x0910) into SCD is not documented; ours is described
 //! in docs/esc-model.md.
+use std::sync::Arc;
+
 use crate::config::DcWidth;
+use crate::rate_table::{exact_rates, float_rate, RateTable};
 
 const AS_PER_NS: i128 = 1_000_000_000;
 const TICK_AS: i128 = 10 * AS_PER_NS;
@@ -17,21 +20,6 @@ const TICK_AS: i128 = 10 * AS_PER_NS;
 pub const TCL_PHASE_TAU_NS: i128 = 50_000_000;
 /// The shortest span between two samples that updates the loop's frequency estimate.
 pub const TCL_MIN_SPAN_NS: i64 = 200_000;
-
-/// Clock deviation of a speed-counter difference, as a fraction `num/den` (esc-spec §3.5);
-/// `den > 0` for every SCD the bound allows.
-fn scd_rate(scs: u16, scd: i16) -> (i64, i64) {
-    let (s, d) = (scs as i64, scd as i64);
-    (d, 5 * (s + d + 2) * (s - d + 2))
-}
-
-/// `a·scale/den` truncated, as i128 arithmetic gives it, without the i128 division: with
-/// `a = q·den + r` both `q·scale` and `r·scale/den` have the sign of `a`, so truncating the sum
-/// truncates the second term. Needs `|r|·scale` and `|q|·scale` within i64.
-fn scaled_div(a: i64, scale: i64, den: i64) -> i64 {
-    let (q, r) = (a / den, a % den);
-    q * scale + r * scale / den
-}
 
 /// `x.round() as i64` without the library call `round` is on baseline x86-64 (no SSE4.1): the
 /// cast truncates, and `x − trunc(x)` is exact.
@@ -77,11 +65,9 @@ pub struct DcUnit {
     applied_fpp: i64,
     last_sample: Option<(u64, i64)>,
     pub sync: SyncUnit,
-    /// (SCS, SCD) → (`corr_rate_q32`, `applied_fpp`), direct-mapped on SCD.
-    rate_memo: [((u16, i16), i64, i64); RATE_MEMO],
+    /// The rates of every SCD the current SCS allows (looked up again when SCS changes).
+    rates: Arc<RateTable>,
 }
-
-const RATE_MEMO: usize = 16;
 
 #[derive(Debug, Clone, Default)]
 pub struct SyncUnit {
@@ -120,8 +106,7 @@ impl DcUnit {
             applied_fpp: 0,
             last_sample: None,
             sync: SyncUnit::default(),
-            // SCS 0 never occurs (it is clamped to 0x80..0x3FFF): every slot starts empty.
-            rate_memo: [((0, 0), 0, 0); RATE_MEMO],
+            rates: RateTable::for_scs(0x1000),
         }
     }
 
@@ -180,20 +165,21 @@ impl DcUnit {
         }
     }
 
+    /// The rate table of the current SCS (`scs` is public: tests and 0x0930 writes set it).
+    fn rates(&mut self) -> &RateTable {
+        if self.rates.scs != self.scs {
+            self.rates = RateTable::for_scs(self.scs);
+        }
+        &self.rates
+    }
+
     fn set_scd(&mut self, scd: i16) {
         self.scd = scd;
-        // The loop moves SCD among a few neighbouring values: their rates are remembered
-        // (the divisions cost more than the rest of a sample).
-        let slot = &mut self.rate_memo[scd as u16 as usize % RATE_MEMO];
-        if slot.0 == (self.scs, scd) {
-            (self.corr_rate_q32, self.applied_fpp) = (slot.1, slot.2);
-            return;
-        }
-        let (num, den) = scd_rate(self.scs, scd);
-        // |num| < 2¹⁴ and den < 1.4·10⁹: every product below stays within i64.
-        self.corr_rate_q32 = scaled_div(AS_PER_NS as i64 * num, 1 << 32, den);
-        self.applied_fpp = scaled_div(AS_PER_NS as i64 * num, 1_000_000, den);
-        *slot = ((self.scs, scd), self.corr_rate_q32, self.applied_fpp);
+        let scs = self.scs;
+        (self.corr_rate_q32, self.applied_fpp) = match self.rates().get(scd as i64) {
+            Some(&(_, q32, fpp)) => (q32, fpp),
+            None => exact_rates(scs, scd as i64),
+        };
     }
 
     /// Local copy of the system time at true time `t_ns`.
@@ -277,23 +263,25 @@ impl DcUnit {
 
     /// The speed-counter difference whose rate is closest to `fpp` (10⁻¹⁵), within the bound.
     /// Closed form: `d = 5r((S+2)² − d²)` is a quadratic in d; its root is refined exactly.
-    fn scd_for(&self, fpp: f64) -> i16 {
-        let max = (self.scs as i64 - 0x7F).max(0);
-        let s = self.scs as f64;
-        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754).
-        let rate = |d: i64| -> f64 {
-            let d = d as f64;
-            d / (5.0 * (s + d + 2.0) * (s - d + 2.0))
-        };
+    fn scd_for(&mut self, fpp: f64) -> i16 {
+        let scs = self.scs;
+        let table = self.rates();
+        let max = table.max;
+        let s = scs as f64;
+        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754);
+        // the table holds the very values `float_rate` computes.
+        let rate = |d: i64| table.get(d).map_or_else(|| float_rate(scs, d), |e| e.0);
         let r = fpp * 1e-15;
         let guess =
             if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
         let g = round_half_away(guess).clamp(-max, max);
         let (mut best, mut best_err) = (g, (rate(g) - r).abs());
         for d in [g - 1, g + 1] {
-            let err = (rate(d) - r).abs();
-            if d.abs() <= max && err < best_err {
-                (best, best_err) = (d, err);
+            if d.abs() <= max {
+                let err = (rate(d) - r).abs();
+                if err < best_err {
+                    (best, best_err) = (d, err);
+                }
             }
         }
         best as i16
@@ -422,10 +410,10 @@ mod tests {
     fn rates_match_the_wide_formula() {
         for scs in (0x0080u16..=0x3FFF).step_by(97).chain([0x0080, 0x1000, 0x3FFF]) {
             let max = scs as i64 - 0x7F;
+            let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
+            dc.scs = scs;
             for scd in (-max..=max).step_by(13).chain([-max, -1, 0, 1, max]) {
                 let (num, den) = (scd as i128, 5 * (scs as i128 + scd as i128 + 2) * (scs as i128 - scd as i128 + 2));
-                let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
-                dc.scs = scs;
                 dc.set_scd(scd as i16);
                 assert_eq!(dc.corr_rate_q32 as i128, ((AS_PER_NS * num) << 32) / den, "scs {scs} scd {scd}");
                 assert_eq!(dc.applied_fpp as i128, 1_000_000_000_000_000 * num / den, "scs {scs} scd {scd}");

@@ -13,6 +13,7 @@ pub mod drive;
 mod eeprom;
 mod esc;
 pub mod od;
+mod rate_table;
 mod regs;
 
 pub use al::AlMachine;
