@@ -371,6 +371,8 @@ pub struct SyncState {
     /// Probe frames sent, and those lost.
     pub probes: u64,
     pub probes_lost: u64,
+    /// The bias the followers' delay registers carry over their measured delays.
+    pub delay_bias_ns: i64,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -504,6 +506,10 @@ impl<I: Io> Master<I> {
             let skip = if sync.steers_reference_offset() { Some(p.station) } else { None };
             self.shift_offsets_but(c.shift_offsets_ns, skip)?;
         }
+        if let Some(bias) = sync.follower_delay_bias_ns() {
+            self.bias_follower_delays(bias, p.station)?;
+            st.delay_bias_ns = bias;
+        }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         for _ in 0..probes {
             self.probe(sync, st, p.station, wide)?;
@@ -579,6 +585,20 @@ impl<I: Io> Master<I> {
     /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
     pub fn shift_offsets(&mut self, shift_ns: i64) -> Result<()> {
         self.shift_offsets_but(shift_ns, None)
+    }
+
+    /// Writes every DC slave's System_Time_Delay (0x0928) as its measured delay plus
+    /// `bias_ns` (at least 0), the reference at station `reference` left out.
+    fn bias_follower_delays(&mut self, bias_ns: i64, reference: u16) -> Result<()> {
+        for k in 0..self.slaves.len() {
+            let s = &self.slaves[k];
+            if !s.has_dc || s.station == reference {
+                continue;
+            }
+            let (st, delay) = (s.station, (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32);
+            self.fpwr(st, 0x0928, &delay.to_le_bytes())?;
+        }
+        Ok(())
     }
 
     /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.

@@ -116,6 +116,11 @@ pub trait ClockSync {
     }
     /// Takes a probe frame's sample.
     fn probe(&mut self, _sample: &Sample) {}
+    /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
+    /// from now on; `None`: leave the delays as they are.
+    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
+        None
+    }
 }
 
 /// IgH's way: the master's present time to the reference, no delay compensation.
@@ -337,7 +342,10 @@ impl ClockSync for SoemPi {
 ///   half a cycle after the frame's expected passage. A late send moves that passage, but
 ///   the offset wanted changes only at the crystals' rate difference (50 ppm: 10 ns for
 ///   200 µs late). The price: between frames the reference runs at its crystal's rate, a
-///   sawtooth of |rate − 1|·cycle (50 ns at 50 ppm and 1 ms) that the followers smooth.
+///   sawtooth of |rate − 1|·cycle (50 ns at 50 ppm and 1 ms). The followers' loops lock to
+///   the reference's time as the frame reads it, the sawtooth's top; every follower's delay
+///   register gets −(rate − 1)·cycle/2 on top of its measured delay, which moves it to the
+///   middle (see [`ClockSync::follower_delay_bias_ns`]).
 /// - Reference follows master ([`Steering::TimeControlLoop`]): the master writes its time plus
 ///   that lead into 0x0910, so the reference's time control loop steers to the master's time
 ///   at the instant the frame passes; a late send is a sample off by its lateness.
@@ -392,6 +400,11 @@ pub struct Ferrocat {
     offset_given: bool,
     /// Whether to probe the reference with extra frames while the line is uncertain.
     pub probing: bool,
+    /// Offset steering: whether to bias the followers' delay registers so that they sit in the
+    /// middle of the reference's sawtooth instead of on its top.
+    pub centre_followers: bool,
+    /// The bias last given to the followers' delay registers.
+    delay_bias_ns: i64,
 }
 
 /// How a method makes the reference follow the master.
@@ -412,6 +425,10 @@ const PROBE_TARGET_SCALES: f64 = 1.0 / 16.0;
 const PROBE_SUSPICION: f64 = 0.25;
 /// …at most this many per cycle, in at most a quarter of the cycle.
 const MAX_PROBES: u64 = 16;
+/// The smallest change of the followers' delay bias worth a write (ns), and the shortest
+/// line (in cycles of master time) whose rate it is taken from.
+const DELAY_BIAS_STEP_NS: f64 = 4.0;
+const DELAY_BIAS_MIN_SPAN_CYCLES: u64 = 32;
 /// The longest the line's window grows (4 s at 1 ms) while its points agree with it.
 pub const FIT_WINDOW: usize = 4096;
 
@@ -439,6 +456,8 @@ impl Ferrocat {
             reference_offset_read: None,
             offset_given: false,
             probing: true,
+            centre_followers: true,
+            delay_bias_ns: 0,
         }
     }
 
@@ -492,6 +511,13 @@ impl Ferrocat {
         let fate = self.fit.push(x, y);
         self.rtt.learn(dev, residual.filter(|_| fate == Fate::Added));
         x
+    }
+
+    /// Whether the line is certain one cycle ahead (to 1/16 of its noise scale) and its change
+    /// test far from restarting it (`None`: no line to judge).
+    fn line_settled(&self) -> Option<bool> {
+        let sd = self.fit.sd_ahead_ns(self.cycle_ns)?;
+        Some(sd <= self.fit.scale_ns() * PROBE_TARGET_SCALES && self.fit.suspicion() < PROBE_SUSPICION)
     }
 
     /// Whether the method keeps its line (not when it steers the reference's time control loop).
@@ -613,9 +639,8 @@ impl ClockSync for Ferrocat {
         }
     }
     fn probes_wanted(&self) -> u32 {
-        let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
-        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
-        if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
+        let Some(lead) = self.lead_ns else { return 0 };
+        if !self.probing || !self.keeps_line() || self.line_settled() != Some(false) {
             return 0;
         }
         // A probe costs about a round trip and the send before it: twice the lead. One probe's
@@ -627,6 +652,33 @@ impl ClockSync for Ferrocat {
         if let Some(y) = self.line_point(s) {
             self.fit_passage(s, y);
         }
+    }
+    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
+        if !self.steers_reference_offset() || !self.centre_followers {
+            return None;
+        }
+        // The followers' loops lock to the reference as the frame reads it, a cycle after its
+        // last offset: (rate − 1)·cycle/2 above the master, the top of its sawtooth. A delay
+        // register larger by b puts a follower b later (its loop compares the time received
+        // with its own less the delay), so −(rate − 1)·cycle/2 centres them on the reference.
+        let half_cycle = self.cycle_ns as f64 / 2.0;
+        let bias = -(self.fit.rate()? - 1.0) * half_cycle;
+        // No crystal is 200 ppm off: a wilder rate is a young line's.
+        let limit = half_cycle * 2e-4;
+        let bias = bias.clamp(-limit, limit).round() as i64;
+        // Each change is a step the followers' loops slew out: only one that stands out from
+        // the rate's own uncertainty (3 σ) and the loops' 10 ns tick is worth it.
+        // A line over a few cycles, dense with probes, can look certain of a rate it does not
+        // know (on a live kernel such lines swung it by ±100 ppm): act on longer ones only.
+        if self.fit.span_ns() < DELAY_BIAS_MIN_SPAN_CYCLES * self.cycle_ns {
+            return None;
+        }
+        let sd = self.fit.rate_sd()? * half_cycle;
+        if ((bias - self.delay_bias_ns).abs() as f64) < (3.0 * sd).max(DELAY_BIAS_STEP_NS) {
+            return None;
+        }
+        self.delay_bias_ns = bias;
+        Some(bias)
     }
     fn take_error(&mut self, error_ns: i64) -> bool {
         // The master (or its estimate of the reference) is ahead by `error_ns`: the passages
@@ -874,6 +926,12 @@ mod tests {
         let want = aim.wrapping_sub(local(aim));
         assert!((got.wrapping_sub(want) as i64).abs() <= 2, "offset {got}, want {want}");
         assert_eq!(f.master_time(built), None, "the master keeps its own clock");
+        // 50 ppm fast, 1 ms: the followers would sit 25 ns above the reference's mean.
+        assert_eq!(f.follower_delay_bias_ns(), Some(-25));
+        assert_eq!(f.follower_delay_bias_ns(), None, "given once: nothing new to write");
+        f.centre_followers = false;
+        f.delay_bias_ns = 0;
+        assert_eq!(f.follower_delay_bias_ns(), None);
         let mut tcl = Ferrocat::new(Coupling::ReferenceFollowsMaster, c);
         tcl.steering = Steering::TimeControlLoop;
         assert!(!tcl.steers_reference_offset());
