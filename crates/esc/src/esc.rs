@@ -1067,16 +1067,18 @@ impl Esc {
                     v & 0xFFFF_FFFF
                 }
             };
+            // The time written is compared with the copy latched at SOF (esc-spec 0x0910): with
+            // the offset and delay in force before this frame's writes apply.
+            if self.effects.tcl.is_some() {
+                tcl_fed = true;
+                Self::feed_tcl(dc, self.effects.tcl.take(), t);
+            }
             if dc_offset {
                 dc.fold_to(t);
                 dc.offset = rd64(&self.mem, 0x0920);
             }
             if dc_delay {
                 dc.delay = u32::from_le_bytes([self.mem[0x0928], self.mem[0x0929], self.mem[0x092A], self.mem[0x092B]]);
-            }
-            if self.effects.tcl.is_some() {
-                tcl_fed = true;
-                Self::feed_tcl(dc, self.effects.tcl.take(), t);
             }
             if depths {
                 dc.depth_diff = self.mem[0x0934] & 0x0F;

@@ -51,6 +51,32 @@ fn ecat_read_of_0910_subtracts_the_delay_and_a_write_does_not_overwrite() {
 }
 
 #[test]
+fn a_system_time_write_is_compared_with_the_time_latched_at_start_of_frame() {
+    // esc-spec 0x0910: the value written is compared, at the end of the frame, with the local
+    // copy latched at SOF — with the offset and delay in force then, not with the ones the
+    // same frame writes (those apply at its end).
+    let diff_after = |also_offset: bool| {
+        let mut bus = line(&["EK1100", "EL2004"], "et1100");
+        let now = bus.fprd_u64(0x1002, 0x0910);
+        // A time 1 µs behind what the slave will read: its difference becomes positive.
+        let sample = (now + 30_000 - 1_000).to_le_bytes();
+        let (offset, delay) = (5_000_000u64.to_le_bytes(), 7_000u32.to_le_bytes());
+        let at = |ado| Address::Device { adp: 0x1002, ado };
+        let mut frame: Vec<(Command, Address, &[u8])> = vec![(Command::FPWR, at(0x0910), &sample)];
+        if also_offset {
+            frame.push((Command::FPWR, at(0x0920), &offset));
+            frame.push((Command::FPWR, at(0x0928), &delay));
+        }
+        bus.t += 20_000;
+        assert!(bus.tx_all(&frame).iter().all(|&w| w == 1));
+        bus.fprd_u32(0x1002, 0x092C)
+    };
+    let alone = diff_after(false);
+    assert!(alone != 0, "the sample shows in 0x092C");
+    assert_eq!(diff_after(true), alone);
+}
+
+#[test]
 fn writing_0930_resets_the_filters() {
     let mut bus = line(&["EK1100", "EL2004"], "et1100");
     // FRMW of the reference's time into the second slave, a few hundred times.
