@@ -371,8 +371,6 @@ pub struct SyncState {
     /// Probe frames sent, and those lost.
     pub probes: u64,
     pub probes_lost: u64,
-    /// The bias the followers' delay registers carry over their measured delays.
-    pub delay_bias_ns: i64,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -508,7 +506,6 @@ impl<I: Io> Master<I> {
         }
         if let Some(bias) = sync.follower_delay_bias_ns() {
             self.bias_follower_delays(bias, p.station)?;
-            st.delay_bias_ns = bias;
         }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         for _ in 0..probes {

@@ -513,13 +513,6 @@ impl Ferrocat {
         x
     }
 
-    /// Whether the line is certain one cycle ahead (to 1/16 of its noise scale) and its change
-    /// test far from restarting it (`None`: no line to judge).
-    fn line_settled(&self) -> Option<bool> {
-        let sd = self.fit.sd_ahead_ns(self.cycle_ns)?;
-        Some(sd <= self.fit.scale_ns() * PROBE_TARGET_SCALES && self.fit.suspicion() < PROBE_SUSPICION)
-    }
-
     /// Whether the method keeps its line (not when it steers the reference's time control loop).
     fn keeps_line(&self) -> bool {
         self.coupling == Coupling::MasterFollowsReference || self.steering == Steering::Offset
@@ -639,8 +632,9 @@ impl ClockSync for Ferrocat {
         }
     }
     fn probes_wanted(&self) -> u32 {
-        let Some(lead) = self.lead_ns else { return 0 };
-        if !self.probing || !self.keeps_line() || self.line_settled() != Some(false) {
+        let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
+        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
+        if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }
         // A probe costs about a round trip and the send before it: twice the lead. One probe's
