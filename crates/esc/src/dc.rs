@@ -12,7 +12,7 @@
 use std::sync::Arc;
 
 use crate::config::DcWidth;
-use crate::rate_table::{exact_rates, float_rate, RateTable};
+use crate::rate_table::{exact_rates, RateTable};
 
 const AS_PER_NS: i128 = 1_000_000_000;
 const TICK_AS: i128 = 10 * AS_PER_NS;
@@ -268,9 +268,9 @@ impl DcUnit {
         let table = self.rates();
         let max = table.max;
         let s = scs as f64;
-        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754);
-        // the table holds the very values `float_rate` computes.
-        let rate = |d: i64| table.get(d).map_or_else(|| float_rate(scs, d), |e| e.0);
+        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754).
+        // Every candidate ranked lies within the bound, so in the table.
+        let rate = |d: i64| table.get(d).map_or(f64::INFINITY, |e| e.0);
         let r = fpp * 1e-15;
         let guess =
             if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };

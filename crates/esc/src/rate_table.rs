@@ -28,7 +28,7 @@ pub(crate) fn exact_rates(scs: u16, scd: i64) -> (i64, i64) {
 }
 
 /// The rate of SCD `d` as a float, in the order of operations the loop ranks candidates by.
-pub(crate) fn float_rate(scs: u16, d: i64) -> f64 {
+fn float_rate(scs: u16, d: i64) -> f64 {
     let (s, d) = (scs as f64, d as f64);
     d / (5.0 * (s + d + 2.0) * (s - d + 2.0))
 }

@@ -202,12 +202,8 @@ impl LineFit {
     /// two distinct x.
     pub fn sd_ahead_ns(&self, ahead_ns: u64) -> Option<f64> {
         let s = self.sums;
-        // n²·var(x), exact.
-        let sxx = s.n * s.xx - s.x * s.x;
+        let sxx = self.x_spread()?;
         let &(newest, _) = self.points.back()?;
-        if s.n < 2 || sxx <= 0 {
-            return None;
-        }
         let n = s.n as f64;
         let d = newest.wrapping_sub(self.origin.0) as i64 as f64 + ahead_ns as f64 - s.x as f64 / n;
         let v = 1.0 / n + d * d * n / sxx as f64;
@@ -236,13 +232,15 @@ impl LineFit {
     /// The standard deviation of [`LineFit::rate`], from the noise scale and the window's
     /// spread: σ/√Σ(xᵢ − x̄)². `None` before two distinct x.
     pub fn rate_sd(&self) -> Option<f64> {
+        let sxx = self.x_spread()?;
+        Some(self.scale_ns.max(MIN_SCALE_NS) / (sxx as f64 / self.sums.n as f64).sqrt())
+    }
+
+    /// n·Σ(xᵢ − x̄)², exact; `None` before two distinct x.
+    fn x_spread(&self) -> Option<i128> {
         let s = self.sums;
-        // n·Σ(xᵢ − x̄)², exact.
         let sxx = s.n * s.xx - s.x * s.x;
-        if s.n < 2 || sxx <= 0 {
-            return None;
-        }
-        Some(self.scale_ns.max(MIN_SCALE_NS) / (sxx as f64 / s.n as f64).sqrt())
+        (s.n >= 2 && sxx > 0).then_some(sxx)
     }
 
     /// Moves every point's x by `dx_ns` (a calibration found the abscissa off by that much).

@@ -68,7 +68,7 @@ fn a_system_time_write_is_compared_with_the_time_latched_at_start_of_frame() {
             frame.push((Command::FPWR, at(0x0928), &delay));
         }
         bus.t += 20_000;
-        assert!(bus.tx_all(&frame).iter().all(|&w| w == 1));
+        assert!(bus.tx_all(&frame).iter().all(|(_, w, _)| *w == 1));
         bus.fprd_u32(0x1002, 0x092C)
     };
     let alone = diff_after(false);

@@ -14,35 +14,28 @@ impl Bus {
         Bus { seg, t: 1_000_000 }
     }
 
-    /// Several datagrams in one frame, sent at `self.t`; returns each one's working counter.
-    pub fn tx_all(&mut self, datagrams: &[(Command, Address, &[u8])]) -> Vec<u16> {
+    /// Several datagrams in one frame, sent at `self.t`; returns each one's (data, wkc,
+    /// address as returned).
+    pub fn tx_all(&mut self, datagrams: &[(Command, Address, &[u8])]) -> Vec<(Vec<u8>, u16, Address)> {
         let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
         let mut buf = [0u8; 1514];
         let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
         for (i, (cmd, address, data)) in datagrams.iter().enumerate() {
-            w.push_chained(&DatagramHeader::new(*cmd, i as u8, *address, data.len() as u16), data, 0).unwrap();
+            let header = DatagramHeader::new(*cmd, i as u8 + 1, *address, data.len() as u16);
+            w.push_chained(&header, data, 0).unwrap();
         }
-        let n = w.finish().unwrap();
-        let back = self.seg.exchange(&mut buf[..n], self.t).expect("frame returns");
-        self.t = back + 10_000;
-        let f = Frame::parse(&buf[..n]).unwrap().unwrap();
-        let wkcs = f.pdu.datagrams().map(|d| d.wkc()).collect();
-        wkcs
-    }
-
-    /// One datagram in one frame, sent at `self.t`; returns (data, wkc, address as returned).
-    pub fn tx(&mut self, cmd: Command, address: Address, data: &[u8]) -> (Vec<u8>, u16, Address) {
-        let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
-        let mut buf = [0u8; 1514];
-        let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
-        w.push(&DatagramHeader::new(cmd, 1, address, data.len() as u16), data, 0).unwrap();
         let n = w.finish().unwrap();
         let back = self.seg.exchange(&mut buf[..n], self.t).expect("frame returns");
         assert!(back > self.t);
         self.t = back + 10_000;
         let f = Frame::parse(&buf[..n]).unwrap().unwrap();
-        let d = f.pdu.datagrams().next().unwrap();
-        (d.data().to_vec(), d.wkc(), d.header().address)
+        let answers = f.pdu.datagrams().map(|d| (d.data().to_vec(), d.wkc(), d.header().address)).collect();
+        answers
+    }
+
+    /// One datagram in one frame, sent at `self.t`; returns (data, wkc, address as returned).
+    pub fn tx(&mut self, cmd: Command, address: Address, data: &[u8]) -> (Vec<u8>, u16, Address) {
+        self.tx_all(&[(cmd, address, data)]).remove(0)
     }
 
     pub fn fp(&mut self, cmd: Command, station: u16, ado: u16, data: &[u8]) -> (Vec<u8>, u16) {
