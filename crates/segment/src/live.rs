@@ -1,5 +1,6 @@
 //! Serving a segment on a real interface: an AF_PACKET raw socket (Linux) or EtherCAT over UDP,
 //! in real time, with CLOCK_MONOTONIC mapped onto the segment's true time.
+use std::collections::HashMap;
 use std::io;
 use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -48,21 +49,65 @@ impl ServeStats {
 }
 
 /// One received frame through the segment: counted, dropped as an ESC drops it (not EtherCAT,
-/// or malformed), or processed. Returns whether there is an answer to send.
-fn handle(seg: &mut Segment, frame: &mut [u8], t_ns: u64, stats: &mut ServeStats) -> bool {
+/// or malformed), or processed. Returns when the answer would be back at the master, if there is
+/// one.
+fn handle(seg: &mut Segment, frame: &mut [u8], t_ns: u64, stats: &mut ServeStats) -> Option<u64> {
     stats.frames_in += 1;
     match ferrocat_wire::Frame::parse(frame) {
-        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => {
-            seg.exchange(frame, t_ns).is_some()
-        }
+        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => seg.exchange(frame, t_ns),
         Ok(_) => {
             stats.not_ethercat += 1;
-            false
+            None
         }
         Err(_) => {
             stats.malformed += 1;
-            false
+            None
         }
+    }
+}
+
+/// Where each frame's trip through the virtual segment goes in real time. Hardware answers
+/// within ns; a program answers tens of µs late, and processing a frame at its arrival would put
+/// all of that on the way back, an asymmetry no round-trip measurement can see. Instead the trip
+/// sits in the middle of the time the simulator takes to answer, from the frame's kernel receive
+/// stamp (when it reached the "wire") to the answer's transmit stamp: a long symmetric cable
+/// whose length changes frame by frame. The wait for this thread to wake, which varies most, is
+/// known before the frame is processed; the processing and the send after it are taken as their
+/// running mean, and the trip's own length (which depends on the frame's length only) as it was
+/// last time.
+#[derive(Debug, Default)]
+struct Placement {
+    /// Segment time at the last frame's entry: it only moves forward.
+    last_ns: u64,
+    /// Running mean of the processing and send, to the answer's transmit stamp.
+    finish_ns: Option<u64>,
+    /// The segment's round trip by frame length.
+    trip_ns: HashMap<usize, u64>,
+}
+
+impl Placement {
+    /// The segment time at which a frame of `len` bytes that arrived at `arrived_ns` and is
+    /// handled from `start_ns` on enters the segment.
+    fn entry_ns(&mut self, len: usize, arrived_ns: u64, start_ns: u64) -> u64 {
+        let answer = start_ns.saturating_sub(arrived_ns) + self.finish_ns.unwrap_or(0);
+        let trip = self.trip_ns.get(&len).copied().unwrap_or(0);
+        self.last_ns = self.last_ns.max(arrived_ns + answer.saturating_sub(trip) / 2);
+        self.last_ns
+    }
+
+    /// The answer to the frame of `len` bytes left `finish_ns` after it was handled; its trip
+    /// through the segment took `trip_ns`.
+    fn answered(&mut self, len: usize, trip_ns: u64, finish_ns: u64) {
+        self.trip_ns.insert(len, trip_ns);
+        // Over ~16 frames; a preempted send counts as 1 ms at most.
+        let f = finish_ns.min(1_000_000);
+        self.finish_ns = Some(self.finish_ns.map_or(f, |m| (m * 15 + f) / 16));
+    }
+
+    /// No frame until `now_ns`: the segment's time moves on.
+    fn idle(&mut self, now_ns: u64) -> u64 {
+        self.last_ns = self.last_ns.max(now_ns);
+        self.last_ns
     }
 }
 
@@ -71,34 +116,28 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool, log_clo
     let t0 = monotonic_ns();
     let mut buf = vec![0u8; 9216];
     let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
-    // The segment's time only moves forward: a frame is processed at its kernel receive time
-    // (when it reached the "wire") plus half of what answering costs the simulator (receive
-    // stamp to send, a running mean). Hardware answers within ns; a program answers tens of µs
-    // late, and processing at arrival would put all of that on the way back — an asymmetry no
-    // round-trip measurement can see. Half each way makes it a long, symmetric cable instead.
-    let mut last = 0u64;
-    let mut answer_ns = 0u64;
+    let mut place = Placement::default();
     while !stop.load(Ordering::Relaxed) {
         let Some((n, stamp)) = sock.recv_stamped(&mut buf)? else {
-            last = last.max(monotonic_ns() - t0);
-            seg.advance_to(last);
+            seg.advance_to(place.idle(monotonic_ns() - t0));
             continue;
         };
         let start = monotonic_ns();
-        let arrived = stamp.map_or(start, |s| s.clamp(t0, start)) - t0;
-        last = last.max(arrived + answer_ns / 2);
-        if handle(seg, &mut buf[..n], last, &mut stats) {
+        let arrived = stamp.map_or(start, |s| s.clamp(t0, start));
+        let entry = place.entry_ns(n, arrived - t0, start - t0);
+        if let Some(back) = handle(seg, &mut buf[..n], entry, &mut stats) {
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
             let sent = monotonic_ns();
             stats.record(sent - start);
-            // A running mean over ~16 frames, outliers (a preempted answer) capped at 1 ms.
-            let took = (sent - t0).saturating_sub(arrived).min(1_000_000);
-            answer_ns = (answer_ns * 15 + took) / 16;
+            // The answer reaches the other end partway through the send call: its kernel
+            // transmit stamp says when (the call's return, without one).
+            let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(start, sent));
+            place.answered(n, back.saturating_sub(entry), left - start);
         }
         if let Some(log) = stats.clock_log.as_mut() {
-            log.push(t0 + last);
-            log.extend(seg.nodes.iter().map(|n| n.esc.dc.as_ref().map_or(u64::MAX, |d| d.system_at(last))));
+            log.push(t0 + place.last_ns);
+            log.extend(seg.nodes.iter().map(|n| n.esc.dc.as_ref().map_or(u64::MAX, |d| d.system_at(place.last_ns))));
         }
     }
     Ok(stats)
@@ -130,11 +169,36 @@ pub fn serve_udp(seg: &mut Segment, sock: &UdpSocket, stop: &AtomicBool) -> io::
         // Wrap the PDU in an Ethernet header so that the segment sees a frame.
         buf[..12].fill(0xFF);
         buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
-        if handle(seg, &mut buf[..HDR + n], start - t0, &mut stats) {
+        if handle(seg, &mut buf[..HDR + n], start - t0, &mut stats).is_some() {
             sock.send_to(&buf[HDR..HDR + n], from)?;
             stats.frames_out += 1;
             stats.record(monotonic_ns() - start);
         }
     }
     Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Placement;
+
+    #[test]
+    fn a_frames_trip_sits_in_the_middle_of_the_simulators_answer() {
+        let mut p = Placement::default();
+        let (trip, finish) = (6_000, 8_000);
+        // The first frame of a length teaches its trip and the finishing time.
+        p.entry_ns(64, 10_000, 12_000);
+        p.answered(64, trip, finish);
+        for (arrived, wait) in [(1_000_000, 3_000), (2_000_000, 40_000), (3_000_000, 0)] {
+            let entry = p.entry_ns(64, arrived, arrived + wait);
+            let there = entry - arrived;
+            let back = (arrived + wait + finish) - (entry + trip);
+            assert_eq!(there, back, "wait {wait} ns");
+            p.answered(64, trip, finish);
+        }
+        // Another length has its own trip; time never runs backwards.
+        let before = p.last_ns;
+        assert_eq!(p.entry_ns(1_500, 3_000_100, 3_000_100), before.max(3_000_100 + finish / 2));
+        assert!(p.entry_ns(64, 10, 20) >= before);
+    }
 }
