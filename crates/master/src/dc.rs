@@ -202,9 +202,14 @@ impl<I: Io> Master<I> {
             .iter()
             .position(|s| s.has_dc)
             .ok_or_else(|| MasterError::Config("no slave has a distributed clock".into()))?;
-        // 1–3. Latch receive times, take the master's time at the latch, compute delays.
-        let t_master = self.master_system_time();
-        self.measure_delays()?;
+        // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
+        //    when the latching frame passed the reference, from its stamps (half its round
+        //    trip, less the segment's own loop and the frame's length), not when the master
+        //    read its clock before sending it (KickCAT) or after it came back (SOEM).
+        let t_master = match self.latch_and_measure_delays()? {
+            Some(latch) => latch.built_ns.wrapping_add_signed(latch.lead_ns()),
+            None => self.master_system_time(),
+        };
         // 4. Offsets, including each slave's delay: all local copies equal the reference's,
         //    and the reference's equals the master's time at the latch.
         let r_ref = self.slaves[reference].receive_time_epu;
@@ -399,14 +404,19 @@ impl<I: Io> Master<I> {
     /// How long a frame spends behind the reference before it passes it again on its way
     /// back: the latest receive time of its other open ports minus that of its entry port.
     pub fn reference_loop_ns(&self) -> Result<u64> {
-        let s = &self.slaves[self.reference_index()?];
+        Ok(self.loop_ns_of(self.reference_index()?))
+    }
+
+    /// How long a frame spends behind slave `k` before it passes it again on its way back.
+    pub(crate) fn loop_ns_of(&self, k: usize) -> u64 {
+        let s = &self.slaves[k];
         let e = s.entry_port as usize;
-        Ok((0..4)
+        (0..4)
             .filter(|&p| p != e && s.active_ports[p])
             .map(|p| s.receive_times[p].wrapping_sub(s.receive_times[e]) as i32 as i64)
             .max()
             .unwrap_or(0)
-            .max(0) as u64)
+            .max(0) as u64
     }
 
     /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master,
@@ -553,7 +563,7 @@ impl<I: Io> Master<I> {
 
     /// A sample of the frame just answered, with its stamps; the reference's readings are
     /// the caller's to fill in.
-    fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
+    pub(crate) fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
         let to_sys = |m: &mut Self, world: u64| -> u64 {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))

@@ -491,11 +491,30 @@ impl<I: Io> Master<I> {
     /// parent's round trip through that port minus the child's own loop; slaves behind a later
     /// port also wait for the earlier branches (esc-spec §3.6).
     pub fn measure_delays(&mut self) -> Result<()> {
+        self.latch_and_measure_delays().map(|_| ())
+    }
+
+    /// As [`Master::measure_delays`]; returns the stamps of the latching frame (without the
+    /// reference's readings) when there are DC slaves.
+    pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
         let dc = self.slaves.iter().filter(|s| s.has_dc).count() as u16;
         if dc == 0 {
-            return Ok(());
+            return Ok(None);
         }
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+        // Sent once per try, so that the stamps are of the frame that latched.
+        let mut tries = self.engine.retries.saturating_add(1);
+        let mut stamps = loop {
+            let built_ns = self.master_system_time();
+            let mut latch = [0u8; 4];
+            let mut pdus = [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch)];
+            let bytes = crate::dc::frame_bytes(&pdus);
+            tries -= 1;
+            match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
+                Ok(()) => break self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes),
+                Err(MasterError::Timeout { .. }) if tries > 0 => continue,
+                Err(e) => return Err(e),
+            }
+        };
         for k in 0..self.slaves.len() {
             if !self.slaves[k].has_dc {
                 continue;
@@ -573,7 +592,11 @@ impl<I: Io> Master<I> {
                 s.delay_ns = at.map_or(0, |t| t - at_reference).clamp(0, u32::MAX as i64) as u32;
             }
         }
-        Ok(())
+        // The first DC slave is the reference (DC initialisation makes it so).
+        if let Some(r) = reference {
+            stamps.loop_ns = self.loop_ns_of(r);
+        }
+        Ok(Some(stamps))
     }
 
     fn port_views(&self) -> Vec<crate::topology::PortView> {

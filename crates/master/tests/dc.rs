@@ -1,9 +1,13 @@
 //! DC initialisation in virtual time, judged by the true clocks the simulator knows.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::{HostModel, Io, Stamps, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 
 fn segment() -> Master<VirtualIo> {
+    segment_on(HostModel::pc_rt())
+}
+
+fn segment_on(host: HostModel) -> Master<VirtualIo> {
     // Six DC slaves with crystals between −45 and +50 ppm, 64-bit and 32-bit DCs mixed.
     let cfg: SegmentConfig = toml::from_str(
         "seed = 9\n\
@@ -15,7 +19,7 @@ fn segment() -> Master<VirtualIo> {
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 33.0\nesc = 'et1100'\n",
     )
     .unwrap();
-    Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 9))
+    Master::new(VirtualIo::new(cfg.build().unwrap(), host, 9))
 }
 
 /// The spread of the slaves' true system times at one true instant (32-bit ones compared on
@@ -65,6 +69,39 @@ fn init_dc_converges_and_starts_sync0_together() {
     let spread = same.iter().max().unwrap() - same.iter().min().unwrap();
     println!("SYNC0 of six slaves within {spread} ns");
     assert!(spread <= 100, "{spread}");
+}
+
+/// The reference's time equals the master's from the latch on: the master's time at the latch
+/// is when the latching frame passed the reference (half its round trip), not when the master
+/// read its clock before sending it (2.5–12 µs earlier on these host models).
+#[test]
+fn the_references_offset_gives_it_the_masters_time_at_the_latch() {
+    for host in [HostModel::pc_rt(), HostModel::beaglebone_rt(), HostModel::pc_stock(), HostModel::nic_hwts()] {
+        let mut m = segment_on(host);
+        m.bring_up().unwrap();
+        // No static drift compensation to speak of: the reference free-runs from the latch.
+        let cfg = DcConfig { max_frames: 1, sync0_slaves: Some(vec![]), ..DcConfig::default() };
+        m.init_dc(&cfg).unwrap();
+        let t = m.engine.io.now_ns();
+        let master = m.master_system_time();
+        let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+        let error = master.wrapping_sub(reference) as i64;
+        println!("{}: master − reference just after DC initialisation {error} ns", host.name);
+        // What one frame's stamps leave: software stamps are taken early on the way out and
+        // late on the way in (half the difference of the means, plus 3 σ of half their
+        // noise); hardware stamps are exact. The reference (12 ppm) drifts ≈ 50 ns over the
+        // ≈ 4 ms of initialisation after the latch.
+        let stamps_ns = match host.stamps {
+            Stamps::Software { tx_early, rx_late } => {
+                (rx_late.mean_ns - tx_early.mean_ns).abs() / 2.0
+                    + 1.5 * (tx_early.sd_ns.powi(2) + rx_late.sd_ns.powi(2)).sqrt()
+            }
+            Stamps::Hardware => 0.0,
+            Stamps::None => unreachable!("every preset here has stamps"),
+        };
+        let bound = stamps_ns + 100.0;
+        assert!((error.abs() as f64) <= bound, "{}: {error} ns, bound {bound:.0} ns", host.name);
+    }
 }
 
 /// A six-slave tree (64- and 32-bit DCs) whose ESCs were powered on at `local0[k]`.
