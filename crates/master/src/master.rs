@@ -497,8 +497,7 @@ impl<I: Io> Master<I> {
     /// As [`Master::measure_delays`]; returns the stamps of the latching frame (without the
     /// reference's readings) when there are DC slaves.
     pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
-        let dc = self.slaves.iter().filter(|s| s.has_dc).count() as u16;
-        if dc == 0 {
+        if !self.slaves.iter().any(|s| s.has_dc) {
             return Ok(None);
         }
         // Sent once per try, so that the stamps are of the frame that latched.
