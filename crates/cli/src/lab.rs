@@ -374,11 +374,11 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
             "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
              measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns). \
              Relock: until every slave stays within 100 ns of the reference and the master within 1 µs \
-             (unlocked: not locked before the disturbance). Probes: \
+             (unlocked: not locked before the disturbance). Made up: lost frames ferrocat replaced at once. Probes: \
              ferrocat's extra reads of the reference after the disturbance.\n\n\
              | disturbance | method | mean before | sd | band | peak | recovery ms | relock ms | outside % | mean after | \
-             RMS after | frames lost | probes |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+             RMS after | frames lost | made up | probes |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
         );
         for r in &rows {
@@ -396,7 +396,8 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "Robustness — host {}, seed {}, {} slaves, {} µs; one disturbance after {} s, {} s measured; error = master − reference, ns",
         host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
     );
-    let widths = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 9, 5, 7];
+    // One width per cell: a cell without one would be dropped silently.
+    let widths: [i32; 14] = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 9, 5, 7, 7];
     let line = |cells: &[String]| -> String {
         let pad = |(c, w): (&String, &i32)| match *w {
             w if w < 0 => format!("{c:<0$}", (-w) as usize),
@@ -417,6 +418,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "after",
         "after RMS",
         "lost",
+        "made up",
         "probes",
     ];
     outln!("{}", line(&head.map(String::from)));
@@ -427,7 +429,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
 }
 
 /// One robustness row's cells, for the terminal and the report alike.
-fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 13] {
+fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 14] {
     [
         r.scenario.clone(),
         r.method.clone(),
@@ -445,6 +447,7 @@ fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 13] {
         format!("{:.1}", r.after_mean_ns),
         format!("{:.1}", r.after_rms_ns),
         r.frames_lost.to_string(),
+        r.make_ups.to_string(),
         r.probes_after.to_string(),
     ]
 }

@@ -6,6 +6,7 @@ pub mod gpi;
 pub mod paprocki2022;
 pub mod park2020;
 pub mod robustness;
+pub mod sampler;
 pub mod scenario;
 pub mod stats;
 
@@ -149,18 +150,6 @@ pub fn method_error_ns<I: Io>(m: &mut Master<I>, sync: Option<&dyn ClockSync>, k
     let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)
-}
-
-/// Whether the segment is locked as the lock time counts it: every DC slave of `dc` (the
-/// reference first) within 100 ns of the reference and the master within 1 µs of it
-/// (`e_ref`, the method's master − reference error).
-pub fn locked<I: Io>(m: &mut Master<I>, sync: &dyn ClockSync, dc: &[usize], e_ref: i64) -> bool {
-    let spread = dc[1..]
-        .iter()
-        .map(|&s| (method_error_ns(m, Some(sync), s).unwrap_or_default() - e_ref).abs())
-        .max()
-        .unwrap_or(0);
-    spread <= 100 && e_ref.abs() <= 1_000
 }
 
 /// The segment node of the slave at position `k`, by its station address.

@@ -128,39 +128,46 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
     }
     let mut last_violation: Option<u64> = None;
-    let (reference, last) = (dc[0], dc[dc.len() - 1]);
+    let reference = dc[0];
     // One GPI rig per slave measured, as in the paper's set-up.
     let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
     let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
     let mut c = Correction::default();
     let mut calibration = if opts.gpio_calibration { crate::calibration(&mut m, method, reference) } else { None };
+    // The reference, every follower, the last slave last: the lock needs them all.
+    let mut sampler = crate::sampler::Sampler::new(&m, &dc, seed);
+    let mut take = |samples: Vec<crate::sampler::Sample>, r: &mut Round| {
+        for s in samples {
+            let (e_ref, e_last) = (s.errors_ns[0], s.errors_ns[s.errors_ns.len() - 1]);
+            if !crate::sampler::locked(&s.errors_ns) {
+                last_violation = Some(s.tag);
+            }
+            if s.tag >= settle {
+                r.reference.push(e_ref as f64);
+                r.last.push(e_last as f64);
+                r.gpi_reference.push(gpi_ref.measure(e_ref as f64));
+                r.gpi_last.push(gpi_last.measure(e_last as f64));
+                if let Some((a, b)) = r.samples.as_mut() {
+                    a.push(e_ref as f32 / 1e3);
+                    b.push(e_last as f32 / 1e3);
+                }
+            }
+        }
+    };
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);
         m.engine.io.sleep_until(next);
+        if k % opts.sample_every == 0 {
+            sampler.arm(&mut m, next, opts.cycle_ns, k);
+        }
         c = m.sync_step(sync.as_mut(), &mut st)?;
         if let Some(cal) = calibration.as_mut().filter(|_| crate::calibration_cycle(k, settle)) {
             r.calibration_ns = r.calibration_ns.or(cal.pulse(&mut m, sync.as_mut())?);
         }
-        if k % opts.sample_every != 0 {
-            continue;
-        }
-        let e_ref = crate::method_error_ns(&mut m, Some(sync.as_ref()), reference).unwrap_or_default();
-        let e_last = crate::method_error_ns(&mut m, Some(sync.as_ref()), last).unwrap_or_default();
-        if !crate::locked(&mut m, sync.as_ref(), &dc, e_ref) {
-            last_violation = Some(k);
-        }
-        if k >= settle {
-            r.reference.push(e_ref as f64);
-            r.last.push(e_last as f64);
-            r.gpi_reference.push(gpi_ref.measure(e_ref as f64));
-            r.gpi_last.push(gpi_last.measure(e_last as f64));
-            if let Some((a, b)) = r.samples.as_mut() {
-                a.push(e_ref as f32 / 1e3);
-                b.push(e_last as f32 / 1e3);
-            }
-        }
+        take(sampler.after_cycle(&mut m, sync.as_ref()), &mut r);
     }
+    take(sampler.rest(&mut m, sync.as_ref()), &mut r);
     // Locked if the last violation is in the first 90 % of the run.
     r.lock_ms = match last_violation {
         None => Some(0.0),

@@ -171,6 +171,12 @@ impl<I: Io> Master<I> {
     /// offset taken once (for real time from CLOCK_REALTIME).
     pub fn master_system_time(&mut self) -> u64 {
         let now = self.engine.io.now_ns();
+        self.master_system_time_at(now)
+    }
+
+    /// The master's clock as DC system time when the world's clock reads `t_ns`.
+    pub fn master_system_time_at(&mut self, t_ns: u64) -> u64 {
+        let now = self.engine.io.now_ns();
         if self.epoch_offset_ns.is_none() {
             self.epoch_offset_ns = Some(if self.engine.io.is_virtual() {
                 // Virtual time starts at 2026-01-01 00:00 UTC.
@@ -183,7 +189,7 @@ impl<I: Io> Master<I> {
                 real.saturating_sub(EPOCH_2000_NS).saturating_sub(now)
             });
         }
-        now.wrapping_add(self.epoch_offset_ns.unwrap_or(0))
+        t_ns.wrapping_add(self.epoch_offset_ns.unwrap_or(0))
     }
 
     /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
@@ -376,6 +382,8 @@ pub struct SyncState {
     /// Probe frames sent, and those lost.
     pub probes: u64,
     pub probes_lost: u64,
+    /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`]).
+    pub make_ups: u64,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -517,36 +525,49 @@ impl<I: Io> Master<I> {
         if let Some(bias) = sync.follower_delay_bias_ns() {
             self.bias_follower_delays(bias, p.station)?;
         }
+        if !answered.sync && sync.makes_up_lost_frames() && !st.no_probes {
+            st.make_ups += 1;
+            self.probe(sync, st, p.station, wide, true)?;
+        }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         for _ in 0..probes {
-            self.probe(sync, st, p.station, wide)?;
+            st.probes += 1;
+            self.probe(sync, st, p.station, wide, false)?;
         }
         Ok(c)
     }
 
     /// One probe frame: the reference's time (and offset, where the method steers it) read,
-    /// nothing written; its sample to the method. A lost probe is only counted.
+    /// and with `give_offset` the reference given the offset the method wants (the write
+    /// answers the offset it replaced); its sample to the method. A lost probe is only counted.
     fn probe(
         &mut self,
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
         station: u16,
         wide: bool,
+        give_offset: bool,
     ) -> Result<()> {
-        st.probes += 1;
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
         let steer = sync.steers_reference_offset();
         let built_ns = self.master_system_time();
-        let mut pdus = [
-            Pdu::new(Command::FPRD, at(0x0920), &mut offset[..n]),
-            Pdu::new(Command::FPRD, at(0x0910), &mut time[..n]),
-        ];
+        let given = if give_offset && steer { sync.reference_offset(built_ns) } else { None };
+        let offset_cmd = match given {
+            Some(v) => {
+                offset = v.to_le_bytes();
+                Command::FPRW
+            }
+            None => Command::FPRD,
+        };
+        let mut pdus =
+            [Pdu::new(offset_cmd, at(0x0920), &mut offset[..n]), Pdu::new(Command::FPRD, at(0x0910), &mut time[..n])];
         let pdus = if steer { &mut pdus[..] } else { &mut pdus[1..] };
         let frame_bytes = frame_bytes(pdus);
-        let answered =
-            self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok() && pdus.iter().all(|p| p.wkc == 1);
+        let sent = self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok();
+        // An FPRW counts 3 (read and write).
+        let answered = sent && pdus.iter().all(|p| p.wkc == if p.cmd == Command::FPRW { 3 } else { 1 });
         if !answered {
             st.probes_lost += 1;
             return Ok(());

@@ -116,6 +116,11 @@ pub trait ClockSync {
     }
     /// Takes a probe frame's sample.
     fn probe(&mut self, _sample: &Sample) {}
+    /// Whether a lost cycle's frame is made up at once by a frame that gives the reference
+    /// its offset ([`ClockSync::reference_offset`]) and reads its time (a probe's sample).
+    fn makes_up_lost_frames(&self) -> bool {
+        false
+    }
     /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
     /// from now on; `None`: leave the delays as they are.
     fn follower_delay_bias_ns(&mut self) -> Option<i64> {
@@ -403,6 +408,8 @@ pub struct Ferrocat {
     /// Offset steering: whether to bias the followers' delay registers so that they sit in the
     /// middle of the reference's sawtooth instead of on its top.
     pub centre_followers: bool,
+    /// Offset steering: whether a lost frame is made up at once (its offset given by another).
+    pub make_up: bool,
     /// The bias last given to the followers' delay registers.
     delay_bias_ns: i64,
 }
@@ -457,6 +464,7 @@ impl Ferrocat {
             offset_given: false,
             probing: true,
             centre_followers: true,
+            make_up: true,
             delay_bias_ns: 0,
         }
     }
@@ -646,6 +654,11 @@ impl ClockSync for Ferrocat {
         if let Some(y) = self.line_point(s) {
             self.fit_passage(s, y);
         }
+    }
+    fn makes_up_lost_frames(&self) -> bool {
+        // Steering by offset, a lost frame leaves the reference on its crystal's rate for two
+        // cycles instead of one: twice the sawtooth.
+        self.make_up && self.steers_reference_offset()
     }
     fn follower_delay_bias_ns(&mut self) -> Option<i64> {
         if !self.steers_reference_offset() || !self.centre_followers {

@@ -268,3 +268,49 @@ fn probing_while_the_estimate_is_uncertain_recovers_from_a_crystal_step_sooner()
     assert!(with < without && with < 100.0, "{with} ms vs {without} ms");
     assert!(peak_with < peak_without, "{peak_with} vs {peak_without}");
 }
+
+/// Reference follows master by its offset, the master waiting a quarter cycle for each frame;
+/// every 50th cycle the master's link is down while that cycle's frame would pass: (mean
+/// |change| of master − reference, taken just before each frame, across the lost frames;
+/// frames lost, frames made up).
+fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
+    let mut m = segment(HostModel::pc_rt());
+    let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
+    sync.make_up = make_up;
+    m.cyclic_timeout_ns = CYCLE_NS / 4;
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let (mut prev, mut lost_before, mut jumps): (Option<i64>, u64, Vec<f64>) = (None, 0, Vec::new());
+    for k in 0..3_000 {
+        next += CYCLE_NS;
+        if k % 50 == 25 {
+            let down = ferrocat_segment::Event::LinkDown { node: 0, port: 0 };
+            m.engine.io.seg.schedule(next, down);
+            m.engine.io.seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
+        }
+        m.engine.io.sleep_until(next);
+        // Just before the frame the reference has run on its crystal longest since its offset.
+        let e = true_error(&mut m, 0);
+        if let Some(p) = prev.filter(|_| st.lost > lost_before) {
+            jumps.push((e - p).abs() as f64);
+        }
+        (prev, lost_before) = (Some(e), st.lost);
+        m.sync_step(&mut sync, &mut st).unwrap();
+    }
+    (jumps.iter().sum::<f64>() / jumps.len().max(1) as f64, st.lost, st.make_ups)
+}
+
+#[test]
+fn a_lost_frame_is_made_up_at_once_when_the_reference_follows_by_its_offset() {
+    let (with, lost, made_up) = offset_steering_across_lost_frames(true);
+    let (without, lost_without, none) = offset_steering_across_lost_frames(false);
+    println!(
+        "master − reference across a lost frame: {with:.1} ns with make-up ({lost} lost, {made_up} made up), \
+         {without:.1} ns without ({lost_without} lost)"
+    );
+    assert!(lost == 60 && made_up == lost && none == 0, "{lost} {made_up} {none}");
+    // The reference's crystal runs 40 ppm fast and the offset centres its sawtooth: a lost
+    // frame leaves it a whole cycle longer on its crystal (40 ns); made up a quarter cycle
+    // later, aimed half a cycle on, it is a quarter cycle off by the next frame (10 ns).
+    assert!(without > 30.0 && with < without / 2.0, "{with} vs {without}");
+}

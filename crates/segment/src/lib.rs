@@ -7,9 +7,11 @@ pub mod live;
 pub mod od_build;
 mod segment;
 pub mod timing;
+mod watch;
 
 pub use config::{load_device, DeviceSource, DeviceToml, SegmentConfig, SegmentError};
 pub use segment::{Event, Node, Peer, Segment, SegmentStats};
+pub use watch::Watch;
 
 use ferrocat_wire::ethernet::{EthernetRepr, ETHERTYPE_ETHERCAT, ETHERTYPE_IPV4};
 use ferrocat_wire::frame::{EcatHeader, TYPE_DLPDU};

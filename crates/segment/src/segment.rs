@@ -2,6 +2,9 @@
 use ferrocat_esc::{Esc, FrameTiming};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::collections::VecDeque;
+
+use crate::watch::Watch;
 
 use crate::timing::{EscTiming, PortKind, FCS_BYTES, NS_PER_BYTE, PREAMBLE_BYTES};
 
@@ -102,6 +105,8 @@ pub struct Segment {
     next_wander_ns: u64,
     pub stats: SegmentStats,
     route: Route,
+    /// Instants whose system times are still being filled in, oldest first.
+    watches: VecDeque<Watch>,
 }
 
 /// The last walk through the segment, relative to the instant the frame reached the first ESC:
@@ -138,6 +143,49 @@ impl Segment {
             next_wander_ns: 100_000_000,
             stats: SegmentStats::default(),
             route: Route::default(),
+            watches: VecDeque::new(),
+        }
+    }
+
+    /// Asks for every DC unit's system time at true time `at_ns` ([`Watch`]), to be taken
+    /// with [`Segment::watched`]. An instant the segment has already passed is read from the
+    /// clocks as they stand.
+    pub fn watch(&mut self, at_ns: u64) {
+        let mut w = Watch::new(at_ns, self.nodes.len());
+        if at_ns <= self.now_ns {
+            for (k, n) in self.nodes.iter().enumerate() {
+                w.fill(k, &n.esc);
+            }
+        }
+        self.watches.push_back(w);
+    }
+
+    /// The oldest watch, once every node's time in it is known.
+    pub fn watched(&mut self) -> Option<Watch> {
+        if self.watches.front()?.is_complete() {
+            self.watches.pop_front()
+        } else {
+            None
+        }
+    }
+
+    /// The oldest watch, whatever is still missing read from the clocks as they stand: exact
+    /// unless a scheduled event or an oscillator step falls between the last frame and its
+    /// instant (for the end of a run, when no further frame will fill it in).
+    pub fn watched_now(&mut self) -> Option<Watch> {
+        let mut w = self.watches.pop_front()?;
+        for (k, n) in self.nodes.iter().enumerate() {
+            w.fill(k, &n.esc);
+        }
+        Some(w)
+    }
+
+    /// Fills in every watch of an instant up to `t_ns` before the segment moves on to it.
+    fn close_watches_until(&mut self, t_ns: u64) {
+        for w in self.watches.iter_mut().filter(|w| w.at_ns <= t_ns && !w.is_complete()) {
+            for (k, n) in self.nodes.iter().enumerate() {
+                w.fill(k, &n.esc);
+            }
         }
     }
 
@@ -207,6 +255,7 @@ impl Segment {
 
     /// Advances every ESC, scheduled event and oscillator to true time `t_ns`.
     pub fn advance_to(&mut self, t_ns: u64) {
+        self.close_watches_until(t_ns);
         self.advance_shared(t_ns);
         self.advance_escs(t_ns);
     }
@@ -334,9 +383,11 @@ impl Segment {
     /// `t_tx_ns`. Returns the true time at which the master has received the whole frame back,
     /// with `frame` modified in place, or `None` if it does not come back.
     pub fn exchange(&mut self, frame: &mut [u8], t_tx_ns: u64) -> Option<u64> {
+        self.close_watches_until(t_tx_ns);
         self.advance_shared(t_tx_ns);
         self.stats.frames += 1;
-        if self.nodes.is_empty() || !self.nodes[0].powered {
+        // No first slave powered, or the cable from the master pulled: nothing gets through.
+        if self.nodes.is_empty() || !self.nodes[0].powered || self.nodes[0].cut[self.nodes[0].entry_port as usize & 3] {
             self.stats.lost += 1;
             return None;
         }
@@ -386,6 +437,12 @@ impl Segment {
                     break;
                 }
                 crate::set_circulating(chain);
+            }
+            if !self.watches.is_empty() {
+                let epu_ns = head_at_first + rel.epu_ns;
+                for w in self.watches.iter_mut().filter(|w| w.at_ns <= epu_ns) {
+                    w.fill(*node, &n.esc);
+                }
             }
             n.esc.process_frame(chain, rel, head_at_first);
         }

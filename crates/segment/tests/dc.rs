@@ -158,3 +158,38 @@ fn latch_inputs_single_event_and_continuous() {
     let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x09AE, &[0]);
     assert_eq!(st[0] & 0x01, 0, "reading the time cleared the event");
 }
+
+#[test]
+fn a_watch_sees_each_clock_at_its_instant_whatever_frames_passed_since() {
+    // Two identical segments; one frame moves the second slave's offset by 1 ms, its twin
+    // only reads. A watch placed between the send and the frame's passage holds the clock
+    // from before the write, one after it the clock with the write, in both segments alike.
+    let mut a = line(&["EK1100", "EK1100"], "et1100");
+    let mut b = line(&["EK1100", "EK1100"], "et1100");
+    let offset = a.fprd_u64(0x1002, 0x0920);
+    assert_eq!(offset, b.fprd_u64(0x1002, 0x0920));
+    let t = a.t;
+    assert_eq!(t, b.t);
+    let (before, after) = (t + 100, t + 50_000_000);
+    for bus in [&mut a, &mut b] {
+        bus.seg.watch(before);
+        bus.seg.watch(after);
+    }
+    let moved = offset + 1_000_000;
+    a.fp(Command::FPWR, 0x1002, 0x0920, &moved.to_le_bytes());
+    b.fp(Command::FPRD, 0x1002, 0x0920, &[0; 8]);
+    let (wa, wb) = (a.seg.watched().expect("every clock passed"), b.seg.watched().expect("every clock passed"));
+    assert_eq!(wa.at_ns, before);
+    assert_eq!(wa, wb, "the write came after the instant");
+    let dc = b.seg.nodes[1].esc.dc.as_ref().unwrap();
+    assert_eq!(wb.system_ns[1], Some(dc.system_at(before)));
+    // Nothing has reached the second instant yet; the next frame fills it in, or the end of a run.
+    assert!(a.seg.watched().is_none());
+    a.t = after + 1;
+    a.fp(Command::FPRD, 0x1002, 0x0920, &[0; 8]);
+    let wa = a.seg.watched().expect("the next frame passed every clock");
+    let wb = b.seg.watched_now().expect("read as the clocks stand");
+    assert_eq!(wa.at_ns, after);
+    assert_eq!(wa.system_ns[0], wb.system_ns[0], "the first slave was not written");
+    assert_eq!(wa.system_ns[1].unwrap() - wb.system_ns[1].unwrap(), 1_000_000);
+}

@@ -82,6 +82,13 @@ fn link_pulled_and_restored_and_slave_power_cycled() {
     assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0010, &[0; 2]).1, 0, "address forgotten");
     let (d, _, _) = bus.tx(Command::APRD, Address::position(1, 0x0130), &[0; 2]);
     assert_eq!(d[0], 1, "INIT after power-on");
+    // The cable from the master pulled: no frame gets through until it is back.
+    let t = bus.t;
+    bus.seg.schedule(t + 1_000_000, Event::LinkDown { node: 0, port: 0 });
+    bus.seg.schedule(t + 3_000_000, Event::LinkUp { node: 0, port: 0 });
+    assert!(bus.seg.exchange(&mut brd_frame(), t + 2_000_000).is_none(), "master cable pulled");
+    bus.t = t + 4_000_000;
+    assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3, "plugged in again");
 }
 
 #[test]
