@@ -19,6 +19,9 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         if r.scenario == "loss-1pct" {
             // 1 % of 6 000 cycles' frames, both ways of a round trip: tens of losses.
             assert!(r.frames_lost > 20, "{r:?}");
+            // Only ferrocat steering the reference's offset makes a lost frame up, every one.
+            let makes_up = r.method == "ferrocat";
+            assert_eq!(r.make_ups, if makes_up { r.frames_lost } else { 0 }, "{r:?}");
         }
     }
     for r in rows.iter().filter(|r| r.method.starts_with("ferrocat")) {
