@@ -55,12 +55,11 @@ impl Sampler {
         // cycle: where the master follows the reference, the estimate it keeps of the
         // reference's time (a line that later points would move only in hindsight).
         for (_, at, master) in self.armed.iter_mut().filter(|a| a.2.is_none()) {
-            let own = m.master_system_time_at(*at);
-            *master = Some(sync.master_time(own).unwrap_or(own) as u32);
+            *master = Some(master_at(m, sync, *at));
         }
         let mut out = Vec::new();
         while let Some(w) = m.engine.io.seg.watched() {
-            out.extend(self.sample(w));
+            out.extend(self.sample(m, sync, w));
         }
         out
     }
@@ -69,15 +68,21 @@ impl Sampler {
     pub fn rest(&mut self, m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> Vec<Sample> {
         let mut out = self.after_cycle(m, sync);
         while let Some(w) = m.engine.io.seg.watched_now() {
-            out.extend(self.sample(w));
+            out.extend(self.sample(m, sync, w));
         }
         out
     }
 
-    fn sample(&mut self, w: ferrocat_segment::Watch) -> Option<Sample> {
+    /// The sample of watch `w`, the oldest armed (None: a watch the sampler did not arm).
+    fn sample(
+        &mut self,
+        m: &mut Master<VirtualIo>,
+        sync: &dyn ClockSync,
+        w: ferrocat_segment::Watch,
+    ) -> Option<Sample> {
         let (tag, at, master) = self.armed.pop_front()?;
         debug_assert_eq!(at, w.at_ns);
-        let master = master?;
+        let master = master.unwrap_or_else(|| master_at(m, sync, at));
         let errors_ns = self
             .nodes
             .iter()
@@ -89,6 +94,13 @@ impl Sampler {
             .collect();
         Some(Sample { tag, at_ns: w.at_ns, errors_ns })
     }
+}
+
+/// The master's clock at true time `at_ns` (low 32 bits): its own, or where it follows the
+/// reference, the method's estimate of the reference's time.
+fn master_at(m: &mut Master<VirtualIo>, sync: &dyn ClockSync, at_ns: u64) -> u32 {
+    let own = m.master_system_time_at(at_ns);
+    sync.master_time(own).unwrap_or(own) as u32
 }
 
 /// Whether the segment is locked as the lock time counts it: every DC slave within 100 ns of
