@@ -138,15 +138,8 @@ pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
-    method_error_ns(m, None, k)
-}
-
-/// As [`clock_error_ns`], the master's clock being the method's where it keeps one (master
-/// follows reference: its estimate of the reference's time).
-pub fn method_error_ns<I: Io>(m: &mut Master<I>, sync: Option<&dyn ClockSync>, k: usize) -> Option<i64> {
     let t = m.engine.io.now_ns();
-    let own = m.master_system_time();
-    let master = sync.and_then(|s| s.master_time(own)).unwrap_or(own) as u32;
+    let master = m.master_system_time() as u32;
     let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)

@@ -153,9 +153,7 @@ impl Segment {
     pub fn watch(&mut self, at_ns: u64) {
         let mut w = Watch::new(at_ns, self.nodes.len());
         if at_ns <= self.now_ns {
-            for (k, n) in self.nodes.iter().enumerate() {
-                w.fill(k, &n.esc);
-            }
+            w.fill_all(&self.nodes);
         }
         self.watches.push_back(w);
     }
@@ -174,18 +172,14 @@ impl Segment {
     /// instant (for the end of a run, when no further frame will fill it in).
     pub fn watched_now(&mut self) -> Option<Watch> {
         let mut w = self.watches.pop_front()?;
-        for (k, n) in self.nodes.iter().enumerate() {
-            w.fill(k, &n.esc);
-        }
+        w.fill_all(&self.nodes);
         Some(w)
     }
 
     /// Fills in every watch of an instant up to `t_ns` before the segment moves on to it.
     fn close_watches_until(&mut self, t_ns: u64) {
         for w in self.watches.iter_mut().filter(|w| w.at_ns <= t_ns && !w.is_complete()) {
-            for (k, n) in self.nodes.iter().enumerate() {
-                w.fill(k, &n.esc);
-            }
+            w.fill_all(&self.nodes);
         }
     }
 

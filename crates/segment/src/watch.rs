@@ -24,6 +24,13 @@ impl Watch {
         self.missing == 0
     }
 
+    /// Takes every node's time not yet known from its clock as it stands.
+    pub(crate) fn fill_all(&mut self, nodes: &[crate::Node]) {
+        for (k, n) in nodes.iter().enumerate() {
+            self.fill(k, &n.esc);
+        }
+    }
+
     /// Takes node `k`'s time from its clock as it stands, unless already known.
     pub(crate) fn fill(&mut self, k: usize, esc: &ferrocat_esc::Esc) {
         if let Some(known) = self.known.get_mut(k).filter(|known| !**known) {
