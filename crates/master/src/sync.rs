@@ -334,7 +334,7 @@ impl ClockSync for SoemPi {
 /// link has them); a trimmed mean over a short window rejects the outliers of a busy host
 /// without the settling time of a long average.
 /// - Master follows reference: a least-squares line through (master time at passage,
-///   reference time) gives offset and rate ([`LineFit`]: its window grows to 4096 cycles
+///   reference time) gives offset and rate ([`LineFit`]: its window grows to 16 384 points
 ///   while the points agree with it, leaves single outliers out, and restarts when a CUSUM
 ///   of its innovations sees the rate or phase change); the master's clock is that line
 ///   (its estimate of the reference's time), and the next period puts the frame at
@@ -425,8 +425,11 @@ pub enum Steering {
 
 const WINDOW: usize = 64;
 /// Probing: extra frames while the line's value one cycle ahead is less certain than this
-/// many noise scales — what a settled window of 1024 points gives at its end (2/√1024)…
-const PROBE_TARGET_SCALES: f64 = 1.0 / 16.0;
+/// many noise scales — what a settled window of 4096 points gives at its end (2/√4096); the
+/// full window is at 1/64 and does not probe. Steering the reference's offset leaves it a
+/// sawtooth of up to half the 100 ns band after a crystal step, so the line must get back to
+/// a few ns, not a few dozen (1/16 left beaglebone-rt outside its band for 340–490 ms)…
+const PROBE_TARGET_SCALES: f64 = 1.0 / 32.0;
 /// …or while the line's change test is this far towards restarting it (a change shows sooner
 /// in more points)…
 const PROBE_SUSPICION: f64 = 0.25;
@@ -436,8 +439,9 @@ const MAX_PROBES: u64 = 16;
 /// line (in cycles of master time) whose rate it is taken from.
 const DELAY_BIAS_STEP_NS: f64 = 4.0;
 const DELAY_BIAS_MIN_SPAN_CYCLES: u64 = 32;
-/// The longest the line's window grows (4 s at 1 ms) while its points agree with it.
-pub const FIT_WINDOW: usize = 4096;
+/// The longest the line's window grows (16 s at 1 ms without probes) while its points agree
+/// with it; probing stops at a quarter of it, so that a settled line does not probe.
+pub const FIT_WINDOW: usize = 16_384;
 
 impl Ferrocat {
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {

@@ -222,7 +222,7 @@ fn mfr_crystal_step(probing: bool) -> (f64, f64, u64, u64) {
     sync.probing = probing;
     let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
-    let (step_at, cycles) = (3000, 4000);
+    let (step_at, cycles) = (12000, 13000);
     let (mut before, mut after, mut probes_before) = (Vec::new(), Vec::new(), 0);
     let mut settled_from = 0;
     for k in 0..cycles {
