@@ -1,5 +1,5 @@
 //! `ferrocat demo`: drives brought to OP with distributed clocks and moved together, once per
-//! clock-sync method and cycle time; tables on stdout, CSV and SVG plots in a folder.
+//! clock-sync method and cycle time; tables on stdout, CSV and plots (SVG, PNG) in a folder.
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -185,7 +185,7 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
                 series.push(actual);
             }
             line_chart(
-                &dir.join(format!("positions-{c}us.svg")),
+                &dir.join(format!("positions-{c}us")),
                 &format!("Positions, {c} µs, {}: set-point and actual", r.method),
                 "time (s)",
                 "rev",
@@ -199,14 +199,14 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
                 .collect()
         };
         line_chart(
-            &dir.join(format!("following-error-{c}us.svg")),
+            &dir.join(format!("following-error-{c}us")),
             &format!("Following error of axis 1, {c} µs"),
             "time (s)",
             "increments",
             &per_method(&|p| p.following_error.first().copied().unwrap_or(f64::NAN)),
         )?;
         line_chart(
-            &dir.join(format!("clock-error-{c}us.svg")),
+            &dir.join(format!("clock-error-{c}us")),
             &format!("Master–reference error, {c} µs"),
             "time (s)",
             "ns",

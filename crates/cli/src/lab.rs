@@ -163,22 +163,23 @@ fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
     use crate::plots::{histogram, line_chart, running_mean_rms, Series};
     for r in rows {
         for (fig, whom, samples) in [(8, "reference", &r.ref_samples_us), (9, "last slave", &r.last_samples_us)] {
-            let v: Vec<f64> = samples.iter().map(|&x| x as f64).collect();
+            // Whole ns, as measured (the f32 µs carry a little rounding).
+            let v: Vec<f64> = samples.iter().map(|&x| (x as f64 * 1e3).round() / 1e3).collect();
             if v.is_empty() {
                 continue;
             }
             let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
             let tag = format!("{}slaves-{}", r.slaves, r.method);
             line_chart(
-                &dir.join(format!("fig{fig}-{tag}.svg")),
+                &dir.join(format!("fig{fig}-{tag}")),
                 &format!("Master–{whom} error, {} slaves, {} ({} samples)", r.slaves, r.method, v.len()),
                 "error (µs)",
                 "share of samples (%)",
-                &[Series::new(r.method.clone(), histogram(&v, lo, hi, 100))],
+                &[Series::new(r.method.clone(), histogram(&v, lo, hi, 100, 1e-3))],
             )?;
             let (mean, rms) = running_mean_rms(&v, 2000);
             line_chart(
-                &dir.join(format!("fig{}-{tag}.svg", fig + 2)),
+                &dir.join(format!("fig{}-{tag}", fig + 2)),
                 &format!(
                     "Mean and RMS of the master–{whom} error up to each sample, {} slaves, {}",
                     r.slaves, r.method
@@ -280,14 +281,14 @@ fn chen_outputs(
                 .collect()
         };
         line_chart(
-            &dir.join(format!("fig12-jitter-{c}us.svg")),
+            &dir.join(format!("fig12-jitter-{c}us")),
             &format!("Reference time against the master's grid, {c} µs cycle"),
             "master cycle",
             "µs",
             &series(&|p| p.1),
         )?;
         line_chart(
-            &dir.join(format!("fig12-period-{c}us.svg")),
+            &dir.join(format!("fig12-period-{c}us")),
             &format!("The master's cycle period, {c} µs nominal"),
             "master cycle",
             "µs",

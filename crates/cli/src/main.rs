@@ -141,7 +141,7 @@ enum Command {
         seed: Option<u64>,
         #[arg(long)]
         json: bool,
-        /// Folder for the CSV and the SVG plots.
+        /// Folder for the CSV and the plots (SVG and PNG).
         #[arg(long, default_value = "out/demo")]
         out: PathBuf,
         /// Run on this network interface (real drives, or `ferrocat sim` serving one) instead of
@@ -247,7 +247,7 @@ struct LabArgs {
     no_gpio_calibration: bool,
     #[arg(long)]
     json: bool,
-    /// Folder for the CSV, the figures (SVG) and a Markdown report.
+    /// Folder for the CSV, the figures (SVG and PNG) and a Markdown report.
     #[arg(long)]
     out: Option<PathBuf>,
 }

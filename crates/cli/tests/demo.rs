@@ -1,6 +1,7 @@
 //! `ferrocat demo --json`, as the README runs it: every method at 1 ms and 250 µs, the figures
 //! the issue names, and the plots written.
 mod common;
+mod figures;
 
 use std::process::Command;
 
@@ -36,6 +37,7 @@ fn the_demo_prints_every_method_as_json_and_writes_its_plots() {
         let len = std::fs::metadata(&p).map(|m| m.len()).unwrap_or(0);
         assert!(len > 500, "{} is {len} bytes", p.display());
     }
+    figures::assert_chart_png(&out_dir.join("clock-error-1000us.png"));
     let _ = std::fs::remove_dir_all(&out_dir);
     // Bad input is one clear line, not a panic.
     let bad = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["demo", "--method", "magic"]).output().unwrap();

@@ -1,7 +1,9 @@
-//! `ferrocat lab … --out DIR`: each experiment writes its CSV, its figures as SVG and a Markdown
-//! report with the table.
+//! `ferrocat lab … --out DIR`: each experiment writes its CSV, its figures as SVG and PNG and a
+//! Markdown report with the table.
 use std::path::Path;
 use std::process::Command;
+
+mod figures;
 
 fn run(args: &[&str]) {
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
@@ -26,12 +28,16 @@ fn every_experiment_writes_csv_figures_and_a_report() {
         has(&park, f, "<svg");
     }
     has(&park, "fig11-2slaves-ferrocat.svg", "RMS");
+    for f in ["fig8-2slaves-ferrocat.png", "fig11-2slaves-park2020.png"] {
+        figures::assert_chart_png(&park.join(f));
+    }
     run(&["lab", "chen2016", "--quick", "--cycle-us", "500", "--out", &d("chen")]);
     let chen = dir.join("chen");
     has(&chen, "chen2016.md", "| 500 | chen2016 |");
     has(&chen, "chen2016.csv", "500,pi,");
     has(&chen, "fig12-jitter-500us.svg", "<svg");
     has(&chen, "fig12-period-500us.svg", "chen2016");
+    figures::assert_chart_png(&chen.join("fig12-jitter-500us.png"));
     run(&["lab", "paprocki2022", "--out", &d("pap")]);
     has(&dir.join("pap"), "paprocki2022.md", "| 1000 | ferrocat |");
     has(&dir.join("pap"), "paprocki2022.csv", "cycle_us,method");
