@@ -3,6 +3,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use anyhow::Context;
+
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -30,7 +32,7 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
 }
 
 /// The chart's size in pixels (the PNG's; the SVG's user units).
-pub const SIZE: (u32, u32) = (900, 500);
+const SIZE: (u32, u32) = (900, 500);
 
 /// Registers the embedded font with plotters once; PNG text is drawn with it.
 fn font_registered() -> anyhow::Result<()> {
@@ -52,9 +54,11 @@ pub fn line_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: 
         PathBuf::from(name)
     };
     let svg = with(".svg");
-    draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x_desc, y_desc, series)?;
+    draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+        .with_context(|| format!("writing {}", svg.display()))?;
     let png = with(".png");
     draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+        .with_context(|| format!("writing {}", png.display()))
 }
 
 fn draw<DB: DrawingBackend>(
