@@ -154,6 +154,8 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
             }
         }
     };
+    // Every method's cyclic phase meets the same host, whatever its bring-up did.
+    m.engine.io.start_cycles(opts.cycle_ns);
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);

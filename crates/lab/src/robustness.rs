@@ -131,6 +131,8 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
             }
         }
     };
+    // Every method's cyclic phase meets the same host, whatever its bring-up did.
+    m.engine.io.start_cycles(o.cycle_ns);
     for k in 0..settle + after {
         if k + window == settle {
             probes_window = st.probes;

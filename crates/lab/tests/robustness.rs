@@ -47,9 +47,14 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
             }
         }
     }
-    // The crystal step is the reference's time control loop's to absorb: every method returns.
-    for r in rows.iter().filter(|r| r.scenario == "drift-step-50ppm") {
-        assert!(r.recovery_ms.is_some_and(|ms| ms < 1_000.0), "{r:?}");
+    // No method loses its hold for good: over the last half of the run every error is back
+    // about where it was before. (Not "back in the band within a second": conventional and
+    // park2020 leave their band on 1–2 % of samples with or without a disturbance, the host's
+    // late sends in the reference's time control loop, so their last exit is wherever the
+    // host's last outlier fell — on seed 1 at 7.2 s in every scenario; docs/clock-sync.md.)
+    for r in &rows {
+        let before_rms = (r.before_mean_ns.powi(2) + r.before_sd_ns.powi(2)).sqrt();
+        assert!(r.after_rms_ns < 1.1 * before_rms + 50.0, "{r:?}");
     }
 }
 

@@ -265,7 +265,16 @@ pub struct VirtualIo {
     pub seg: Segment,
     pub host: HostModel,
     now: u64,
+    seed: u64,
+    /// The host's randomness. Before [`VirtualIo::start_cycles`] one stream; after it, each
+    /// cycle slot of the master's schedule has its own for its wake-up and its first frame
+    /// (send, stamps, delivery), and every other frame (a method's probes) draws from the
+    /// common one: methods that send more frames, or sleep through a cycle, still meet the
+    /// same host in every slot — a paired comparison.
     rng: ChaCha8Rng,
+    slot_rng: ChaCha8Rng,
+    cycles: Option<CycleSlots>,
+    woke: bool,
     /// Frames on their way back: (time the master has them, length, bytes). Preallocated.
     slots: Vec<(u64, usize, Box<[u8; 1536]>, bool)>,
     /// Frames the segment did not return.
@@ -286,7 +295,11 @@ impl VirtualIo {
             seg,
             host,
             now: 0,
+            seed,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x4057),
+            slot_rng: ChaCha8Rng::seed_from_u64(seed),
+            cycles: None,
+            woke: false,
             slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),
             lost: 0,
             last_tx: None,
@@ -294,6 +307,28 @@ impl VirtualIo {
             gpio_wire: None,
             gpio_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x6710),
         }
+    }
+}
+
+/// The master's cycle slots, counted from [`VirtualIo::start_cycles`].
+#[derive(Debug, Clone, Copy)]
+struct CycleSlots {
+    cycle_ns: u64,
+    slot: u64,
+    last_target_ns: Option<u64>,
+}
+
+impl VirtualIo {
+    /// Cyclic operation of `cycle_ns` begins: from here each wake-up is counted into the slots
+    /// of that cycle (a wake-up two cycles after the last is two slots on), and a slot's
+    /// wake-up and first frame draw from that slot's own stream. The labs call it where their
+    /// cyclic phase begins, so that every method meets the same host there, whatever its
+    /// bring-up did (Park's 1 000 round trips, a calibration) and however many extra frames
+    /// it sends.
+    pub fn start_cycles(&mut self, cycle_ns: u64) {
+        self.cycles = Some(CycleSlots { cycle_ns: cycle_ns.max(1), slot: 0, last_target_ns: None });
+        self.rng = ChaCha8Rng::seed_from_u64(self.seed.rotate_left(17) ^ 0x4057);
+        self.woke = false;
     }
 }
 
@@ -315,11 +350,12 @@ impl Io for VirtualIo {
     }
 
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        let t_wire = self.now + self.host.send.sample(&mut self.rng);
+        let rng = if std::mem::take(&mut self.woke) { &mut self.slot_rng } else { &mut self.rng };
+        let t_wire = self.now + self.host.send.sample(rng);
         // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit.
         self.last_tx = match self.host.stamps {
             Stamps::None => None,
-            Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(&mut self.rng))),
+            Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(rng))),
             Stamps::Hardware => Some(t_wire + 8 * 80),
         };
         let Some(k) = self.slots.iter().position(|s| !s.3) else {
@@ -330,10 +366,10 @@ impl Io for VirtualIo {
         slot.2[..n].copy_from_slice(&frame[..n]);
         match self.seg.exchange(&mut slot.2[..n], t_wire) {
             Some(back) => {
-                let deliver = back + self.host.recv.sample(&mut self.rng);
+                let deliver = back + self.host.recv.sample(rng);
                 self.rx_stamps[k] = match self.host.stamps {
                     Stamps::None => deliver,
-                    Stamps::Software { rx_late, .. } => (back + rx_late.sample(&mut self.rng)).min(deliver),
+                    Stamps::Software { rx_late, .. } => (back + rx_late.sample(rng)).min(deliver),
                     // The start of the frame: its end minus the frame and FCS at 100 Mbit/s.
                     Stamps::Hardware => back.saturating_sub((n as u64 + 4) * 80),
                 };
@@ -366,9 +402,27 @@ impl Io for VirtualIo {
     }
 
     fn sleep_until(&mut self, t_ns: u64) {
+        let target = t_ns;
         let res = self.host.timer_resolution_ns;
         let t_ns = if res > 1 { t_ns.div_ceil(res).saturating_mul(res) } else { t_ns };
-        let late = self.host.wake.sample(&mut self.rng);
+        let late = match self.cycles.as_mut() {
+            Some(c) => {
+                // Slots on since the last wake-up's target, to the nearest: 0 for a second
+                // sleep within a cycle, which goes on drawing from its slot's stream.
+                let on = c
+                    .last_target_ns
+                    .map_or(1, |p| target.saturating_sub(p).saturating_add(c.cycle_ns / 2) / c.cycle_ns);
+                c.last_target_ns = Some(target);
+                if on > 0 {
+                    c.slot = c.slot.saturating_add(on);
+                    let key = c.slot.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ self.seed.rotate_left(29) ^ 0x5C1C;
+                    self.slot_rng = ChaCha8Rng::seed_from_u64(key);
+                    self.woke = true;
+                }
+                self.host.wake.sample(&mut self.slot_rng)
+            }
+            None => self.host.wake.sample(&mut self.rng),
+        };
         self.now = self.now.max(t_ns + late);
     }
 

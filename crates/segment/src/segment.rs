@@ -92,7 +92,11 @@ pub struct Segment {
     pub nodes: Vec<Node>,
     /// One-way delay between the master's NIC and the first slave's entry port.
     pub master_link_ns: u32,
+    /// The oscillators' wander, drawn at fixed instants: the same for every master.
     rng: ChaCha8Rng,
+    /// Frame faults, one draw per frame: a master that sends more frames does not change the
+    /// oscillators' realisation.
+    fault_rng: ChaCha8Rng,
     /// Probability that a frame vanishes on its way (a link glitch): it reaches no further ESC
     /// and never returns.
     pub loss_probability: f64,
@@ -135,6 +139,7 @@ impl Segment {
             nodes,
             master_link_ns: 500,
             rng: ChaCha8Rng::seed_from_u64(seed),
+            fault_rng: ChaCha8Rng::seed_from_u64(seed ^ 0xFA17),
             loss_probability: 0.0,
             corruption_probability: 0.0,
             events: Vec::new(),
@@ -397,11 +402,13 @@ impl Segment {
         let mut reach = self.route.visits.len();
         let mut lost = false;
         let mut corrupted = false;
-        if self.loss_probability > 0.0 && self.rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
-            reach = self.rng.gen_range(0..=self.route.visits.len());
+        if self.loss_probability > 0.0 && self.fault_rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
+            reach = self.fault_rng.gen_range(0..=self.route.visits.len());
             lost = true;
-        } else if self.corruption_probability > 0.0 && self.rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0)) {
-            reach = self.rng.gen_range(0..=self.route.visits.len());
+        } else if self.corruption_probability > 0.0
+            && self.fault_rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0))
+        {
+            reach = self.fault_rng.gen_range(0..=self.route.visits.len());
             lost = true;
             corrupted = true;
             self.stats.corrupted += 1;
