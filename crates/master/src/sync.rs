@@ -395,6 +395,14 @@ pub struct Ferrocat {
     pub held_back: u64,
     /// The reference time the next frame is aimed at (its slot on the grid of `phase_ns`).
     aimed_ns: Option<u64>,
+    /// Master follows reference: when this cycle was planned to start on the master's clock
+    /// (the last one plus the period returned), and how late cycles start on average against
+    /// it. A wake-up's lateness is known after the fact and says nothing of the next one's,
+    /// so the period is chosen for the planned start plus the mean lateness, not for the
+    /// actual start: feeding a part of each cycle's lateness back (as until 2026-11-23) made
+    /// the loop chase the host's jitter and a coarse timer's rounding, and widened both.
+    plan_ns: Option<u64>,
+    lateness: RunningMean,
     /// Reference following by offset: a calibration moves the reference at once by what it
     /// found, and so does the first offset it is given (from wherever the DC initialisation
     /// left it); every other slave's offset moves with it (the next correction), so that the
@@ -424,6 +432,32 @@ pub enum Steering {
 }
 
 const WINDOW: usize = 64;
+
+/// The mean of every value so far, and once there are `2^LONG_SHIFT` of them an exponential
+/// average over as many: a coarse timer's rounding is a sawtooth that sweeps its step only as
+/// the reference slides past the timer's grid (thousands of cycles), and a mean that followed
+/// it would have the loop chase it.
+#[derive(Debug, Default, Clone, Copy)]
+struct RunningMean {
+    sum: i128,
+    n: u64,
+}
+
+const LONG_SHIFT: u32 = 16;
+
+impl RunningMean {
+    fn push(&mut self, v: i64) {
+        if self.n < 1 << LONG_SHIFT {
+            self.n += 1;
+        } else {
+            self.sum -= self.sum >> LONG_SHIFT;
+        }
+        self.sum += v as i128;
+    }
+    fn mean(&self) -> i64 {
+        (self.sum / self.n.max(1) as i128) as i64
+    }
+}
 /// Probing: extra frames while the line's value one cycle ahead is less certain than this
 /// many noise scales — what a settled window of 4096 points gives at its end (2/√4096); the
 /// full window is at 1/64 and does not probe. Steering the reference's offset leaves it a
@@ -463,6 +497,8 @@ impl Ferrocat {
             sync0_phase_ns: None,
             held_back: 0,
             aimed_ns: None,
+            plan_ns: None,
+            lateness: RunningMean::default(),
             pending_shift_ns: 0,
             reference_offset_read: None,
             offset_given: false,
@@ -543,6 +579,34 @@ impl Ferrocat {
         }
     }
 
+    /// This cycle's lateness against its plan less the mean lateness. A cycle more than half
+    /// a cycle off is where the schedule itself moved (a master that skipped cycles without
+    /// a word, an outlier as long): the plan starts again from it, deviation 0.
+    fn lateness_deviation(&mut self, built_ns: u64) -> i64 {
+        let Some(plan) = self.plan_ns else {
+            self.plan_ns = Some(built_ns);
+            self.lateness.push(0);
+            return 0;
+        };
+        let late = built_ns.wrapping_sub(plan) as i64;
+        let mean = self.lateness.mean();
+        let dev = late.wrapping_sub(mean);
+        if dev.unsigned_abs() > self.cycle_ns / 2 {
+            self.plan_ns = Some(built_ns.wrapping_add_signed(mean.wrapping_neg()));
+            return 0;
+        }
+        self.lateness.push(late);
+        dev
+    }
+
+    /// The plan moved on by the period returned (master follows reference only).
+    fn planned(&mut self, c: Correction) -> Correction {
+        if let (Some(plan), Some(period)) = (self.plan_ns, c.next_period_ns) {
+            self.plan_ns = Some(plan.wrapping_add(period));
+        }
+        c
+    }
+
     fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
         // On the stack: the cyclic path does not allocate.
         let mut buf = [0i64; WINDOW];
@@ -575,10 +639,8 @@ impl ClockSync for Ferrocat {
     fn update(&mut self, s: Option<&Sample>) -> Correction {
         let Some(s) = s else {
             self.aimed_ns = self.aimed_ns.map(|a| a.wrapping_add(self.cycle_ns));
-            return Correction {
-                shift_offsets_ns: 0,
-                next_period_ns: (self.coupling == Coupling::MasterFollowsReference).then_some(self.cycle_ns),
-            };
+            let next_period_ns = (self.coupling == Coupling::MasterFollowsReference).then_some(self.cycle_ns);
+            return self.planned(Correction { shift_offsets_ns: 0, next_period_ns });
         };
         if self.leads.len() == WINDOW {
             self.leads.pop_front();
@@ -600,25 +662,26 @@ impl ClockSync for Ferrocat {
             }
             return Correction { shift_offsets_ns: std::mem::take(&mut self.pending_shift_ns), next_period_ns: None };
         }
+        let dev = self.lateness_deviation(s.built_ns);
         let x = self.fit_passage(s, s.reference_ns);
-        let (Some(y), Some(rate)) = (self.fit.at(x), self.fit.rate()) else {
-            return Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) };
+        // The reference's time, from the fit, where this frame would have passed had its
+        // cycle started as late as cycles do on average; its phase in the cycle against the
+        // target, in integers.
+        let (Some(y), Some(rate)) = (self.fit.at(x.wrapping_add_signed(dev.wrapping_neg())), self.fit.rate()) else {
+            return self.planned(Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) });
         };
-        // The reference's time at this passage, from the fit; its phase in the cycle against
-        // the target, in integers.
         let c = self.cycle_ns as f64;
         let mut phase = (y.wrapping_sub(self.phase_ns) % self.cycle_ns) as f64;
         if phase > c / 2.0 {
             phase -= c;
         }
-        // One cycle of reference time is cycle/rate of master time. Each phase carries the
-        // host's wake-up jitter, which no period can undo: take out 1/16 of it per cycle so
-        // that the jitter averages away instead of being fed back.
+        // One cycle of reference time is cycle/rate of master time; 1/16 of the phase error is
+        // taken out per cycle, so that the line's and the mean's own noise averages away.
         let mut period = (c - phase / 16.0) / rate;
         let hold = self.slots_to_hold(s);
         period += hold as f64 * c / rate;
         self.held_back += hold;
-        Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) }
+        self.planned(Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) })
     }
     fn steers_reference_offset(&self) -> bool {
         self.coupling == Coupling::ReferenceFollowsMaster && self.steering == Steering::Offset
@@ -892,6 +955,56 @@ mod tests {
         // Without a SYNC0 to serve, never.
         f.sync0_phase_ns = None;
         assert!(period(&mut f, 104, 30_000) < c * 3 / 2 && f.held_back == 1);
+    }
+
+    #[test]
+    fn a_late_wake_up_is_not_fed_back_into_the_period() {
+        // The reference on the master's clock exactly; each cycle starts 0–40 µs late (known
+        // only after the fact) and its frame passes the reference 5 µs after it is built.
+        let c = 1_000_000u64;
+        let mut f = Ferrocat::new(Coupling::MasterFollowsReference, c);
+        f.probing = false;
+        let (mut plan, mut lcg) = (7 * c + 123_456, 1u64);
+        let mut periods = Vec::new();
+        let mut phases = Vec::new();
+        for k in 1..4_000u64 {
+            lcg = lcg.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            let built = plan + (lcg >> 33) % 40_000;
+            let s = Sample {
+                cycle: k,
+                built_ns: built,
+                tx_ns: None,
+                rx_ns: built + 10_000,
+                reference_ns: built + 5_000,
+                reference_offset_ns: None,
+                difference_ns: 0,
+                loop_ns: 0,
+                frame_ns: 0,
+                data_ns: 0,
+            };
+            let p = f.update(Some(&s)).next_period_ns.unwrap();
+            if k == 3_000 {
+                // A master that skipped three cycles without a word: the plan starts again.
+                plan += 3 * c;
+            }
+            if (2_000..3_000).contains(&k) {
+                periods.push(p as i64);
+                let ph = ((built + 5_000) % c) as i64;
+                phases.push(if ph > c as i64 / 2 { ph - c as i64 } else { ph });
+            }
+            if k > 3_100 {
+                // Back on the cycle (the restart takes that one cycle's lateness, 1/16 of it
+                // per cycle out again), not chasing a 3 ms lateness.
+                assert!(p.abs_diff(c) < 300, "{k}: {p}");
+            }
+            plan += p;
+        }
+        // Feeding back 1/16 of each cycle's lateness, the period spread over 2.5 µs.
+        let spread = periods.iter().max().unwrap() - periods.iter().min().unwrap();
+        assert!(spread < 300, "period spread {spread} ns");
+        // The passages centred on the target phase: the mean lateness is aimed for.
+        let mean = phases.iter().sum::<i64>() / phases.len() as i64;
+        assert!(mean.abs() < 1_000, "mean phase {mean} ns");
     }
 
     #[test]
