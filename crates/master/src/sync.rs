@@ -338,8 +338,9 @@ impl ClockSync for SoemPi {
 ///   while the points agree with it, leaves single outliers out, and restarts when a CUSUM
 ///   of its innovations sees the rate or phase change); the master's clock is that line
 ///   (its estimate of the reference's time), and the next period puts the frame at
-///   `phase_ns` of the reference's cycle, removing 1/16 of the phase error per cycle. The
-///   passage is the transmit stamp plus half the round trip where the link stamps sends, so
+///   `phase_ns` of the reference's cycle, removing 1/16 of the phase error per cycle (the
+///   phase of the cycle's planned start plus the mean lateness: the host's jitter is not
+///   chased). The passage is the transmit stamp plus half the round trip where the link stamps sends, so
 ///   that the send jitter, known after the fact, stays out of the line.
 /// - Reference follows master ([`Steering::Offset`], the default): the same line, through
 ///   the reference's local time (its time read less the offset the same frame read), and
