@@ -297,7 +297,8 @@ impl VirtualIo {
             now: 0,
             seed,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x4057),
-            slot_rng: ChaCha8Rng::seed_from_u64(seed),
+            // Replaced at every slot; never drawn from before the first.
+            slot_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5C1C),
             cycles: None,
             woke: false,
             slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),

@@ -340,8 +340,8 @@ impl ClockSync for SoemPi {
 ///   (its estimate of the reference's time), and the next period puts the frame at
 ///   `phase_ns` of the reference's cycle, removing 1/16 of the phase error per cycle (the
 ///   phase of the cycle's planned start plus the mean lateness: the host's jitter is not
-///   chased). The passage is the transmit stamp plus half the round trip where the link stamps sends, so
-///   that the send jitter, known after the fact, stays out of the line.
+///   chased). The passage is the transmit stamp plus half the round trip where the link
+///   stamps sends, so that the send jitter, known after the fact, stays out of the line.
 /// - Reference follows master ([`Steering::Offset`], the default): the same line, through
 ///   the reference's local time (its time read less the offset the same frame read), and
 ///   each frame gives the reference the offset that puts its system time on the master's
@@ -459,6 +459,7 @@ impl RunningMean {
         (self.sum / self.n.max(1) as i128) as i64
     }
 }
+
 /// Probing: extra frames while the line's value one cycle ahead is less certain than this
 /// many noise scales — what a settled window of 4096 points gives at its end (2/√4096); the
 /// full window is at 1/64 and does not probe. Steering the reference's offset leaves it a
