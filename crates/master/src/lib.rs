@@ -19,6 +19,7 @@ mod slave;
 pub mod sync;
 pub mod topology;
 pub mod trajectory;
+mod trimmed;
 
 pub use coe::{EntryInfo, ObjectInfo};
 pub use dc::{DcConfig, DcReport, SyncState};

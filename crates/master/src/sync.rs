@@ -3,6 +3,7 @@
 //! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
 use crate::line_fit::{Fate, LineFit};
 use crate::rtt_weight::RttWeight;
+use crate::trimmed::TrimmedWindow;
 use std::collections::VecDeque;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
@@ -373,7 +374,7 @@ pub struct Ferrocat {
     /// estimate of the reference's clock.
     pub fit: LineFit,
     /// Half round trips from the transmit stamp (or the build time), for the fit's abscissa.
-    halves: VecDeque<i64>,
+    halves: TrimmedWindow,
     rtt: RttWeight,
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
@@ -433,6 +434,11 @@ pub enum Steering {
 }
 
 const WINDOW: usize = 64;
+/// The half round trips' centre is a trimmed mean over this many. A cycle's probes come in a
+/// burst and share the centre; over 64 (two cycles of bursts) its error was a burst's own and
+/// counted in the change test once per point, which took it for a change of the line (a false
+/// restart 4.2 s after a crystal step, pc-rt seed 2; docs/clock-sync.md).
+const CENTRE_WINDOW: usize = 1024;
 
 /// The mean of every value so far, and once there are `2^LONG_SHIFT` of them an exponential
 /// average over as many: a coarse timer's rounding is a sawtooth that sweeps its step only as
@@ -469,8 +475,13 @@ const PROBE_TARGET_SCALES: f64 = 1.0 / 32.0;
 /// …or while the line's change test is this far towards restarting it (a change shows sooner
 /// in more points)…
 const PROBE_SUSPICION: f64 = 0.25;
-/// …at most this many per cycle, in at most a quarter of the cycle.
-const MAX_PROBES: u64 = 16;
+/// …at most this many per cycle, in at most half of it while the line is uncertain (a quarter
+/// while it is only suspicious: a few points confirm a change or dismiss it). A line restarted
+/// at a crystal step knows the phase to about 2σ/√n after n points, so the points per cycle
+/// set how soon it is back: with a quarter cycle (5 probes on beaglebone-rt, σ ≈ 500 ns) it
+/// was still ≈ 30 ns off 100 ms after a 50 ppm step, which on top of the reference's ±42 ns
+/// sawtooth then left the 100 ns band in 3 of 10 realisations (docs/clock-sync.md).
+const MAX_PROBES: u64 = 32;
 /// The smallest change of the followers' delay bias worth a write (ns), and the shortest
 /// line (in cycles of master time) whose rate it is taken from.
 const DELAY_BIAS_STEP_NS: f64 = 4.0;
@@ -490,7 +501,7 @@ impl Ferrocat {
             leads: VecDeque::with_capacity(WINDOW),
             lead_ns: None,
             fit: LineFit::new(FIT_WINDOW),
-            halves: VecDeque::with_capacity(WINDOW),
+            halves: TrimmedWindow::new(CENTRE_WINDOW),
             rtt: RttWeight::new(),
             sends: VecDeque::with_capacity(WINDOW),
             last_send_error_ns: 0,
@@ -547,12 +558,9 @@ impl Ferrocat {
     /// (rtt_weight.rs).
     fn fit_passage(&mut self, s: &Sample, y: u64) -> u64 {
         let sent = s.tx_ns.unwrap_or(s.built_ns);
-        if self.halves.len() == WINDOW {
-            self.halves.pop_front();
-        }
         let half = s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64);
-        self.halves.push_back(half);
-        let centre = Self::trimmed_mean(&self.halves);
+        self.halves.push(half);
+        let centre = self.halves.trimmed_mean();
         let stamp = sent.wrapping_add_signed(centre.wrapping_sub(self.calibration_ns));
         let dev = half.wrapping_sub(centre);
         let x = stamp.wrapping_add_signed(self.rtt.shift_ns(dev));
@@ -715,9 +723,10 @@ impl ClockSync for Ferrocat {
             return 0;
         }
         // A probe costs about a round trip and the send before it: twice the lead. One probe's
-        // worth of the quarter cycle is kept as slack for a late reply.
+        // worth of the budget is kept as slack for a late reply.
         let cost_ns = lead.saturating_mul(2).max(1) as u64;
-        (self.cycle_ns / 4 / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
+        let budget_ns = if uncertain { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
+        (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
     }
     fn probe(&mut self, s: &Sample) {
         if let Some(y) = self.line_point(s) {

@@ -263,8 +263,9 @@ fn probing_while_the_estimate_is_uncertain_recovers_from_a_crystal_step_sooner()
     );
     assert_eq!((none_before, none_after), (0, 0), "probing off sends none");
     assert!(burst > 100, "the step is probed: {burst}");
-    // Settled, the line needs few probes (the change test now and then): under one per 10 cycles.
-    assert!(quiet < 100, "{quiet} probes in 1 000 settled cycles");
+    // Settled, the line needs few probes (the change test now and then, the uncertainty rule
+    // at times, which sends up to 32 at once): under one per 5 cycles.
+    assert!(quiet < 200, "{quiet} probes in 1 000 settled cycles");
     assert!(with < without && with < 100.0, "{with} ms vs {without} ms");
     assert!(peak_with < peak_without, "{peak_with} vs {peak_without}");
 }
