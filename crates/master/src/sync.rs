@@ -4,7 +4,6 @@
 use crate::line_fit::{Fate, LineFit};
 use crate::rtt_weight::RttWeight;
 use crate::trimmed::TrimmedWindow;
-use std::collections::VecDeque;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
 pub const MAX_CYCLE_NS: u64 = u32::MAX as u64;
@@ -368,7 +367,7 @@ pub struct Ferrocat {
     /// jitter into the loop's frequency estimate, but in the modelled loop every 8th cycle
     /// measured worse (docs/clock-sync.md).
     pub write_every: u64,
-    leads: VecDeque<i64>,
+    leads: TrimmedWindow,
     lead_ns: Option<i64>,
     /// (master time at passage, reference time): the line through them is the method's
     /// estimate of the reference's clock.
@@ -379,7 +378,7 @@ pub struct Ferrocat {
     /// Send delays seen by transmit stamps, and how far the last frame's was from their mean:
     /// the next time written takes it back out (error feedback), so that the reference's
     /// loop, which averages its samples, sees the host's send jitter cancel pairwise.
-    sends: VecDeque<i64>,
+    sends: TrimmedWindow,
     last_send_error_ns: i64,
     /// Whether to feed the last send error back (off by default: measured in docs/clock-sync.md).
     pub error_feedback: bool,
@@ -498,12 +497,12 @@ impl Ferrocat {
             cycle_ns: cycle_ns.clamp(1, MAX_CYCLE_NS),
             phase_ns: 0,
             write_every: 1,
-            leads: VecDeque::with_capacity(WINDOW),
+            leads: TrimmedWindow::new(WINDOW),
             lead_ns: None,
             fit: LineFit::new(FIT_WINDOW),
             halves: TrimmedWindow::new(CENTRE_WINDOW),
             rtt: RttWeight::new(),
-            sends: VecDeque::with_capacity(WINDOW),
+            sends: TrimmedWindow::new(WINDOW),
             last_send_error_ns: 0,
             error_feedback: false,
             calibration_ns: 0,
@@ -616,20 +615,6 @@ impl Ferrocat {
         }
         c
     }
-
-    fn trimmed_mean(v: &VecDeque<i64>) -> i64 {
-        // On the stack: the cyclic path does not allocate.
-        let mut buf = [0i64; WINDOW];
-        let n = v.len().min(WINDOW);
-        for (d, x) in buf.iter_mut().zip(v) {
-            *d = *x;
-        }
-        let s = &mut buf[..n];
-        s.sort_unstable();
-        let cut = n / 8;
-        let kept = &s[cut..n - cut];
-        (kept.iter().map(|&x| x as i128).sum::<i128>() / kept.len().max(1) as i128) as i64
-    }
 }
 
 impl ClockSync for Ferrocat {
@@ -652,18 +637,12 @@ impl ClockSync for Ferrocat {
             let next_period_ns = (self.coupling == Coupling::MasterFollowsReference).then_some(self.cycle_ns);
             return self.planned(Correction { shift_offsets_ns: 0, next_period_ns });
         };
-        if self.leads.len() == WINDOW {
-            self.leads.pop_front();
-        }
-        self.leads.push_back(s.lead_ns());
-        self.lead_ns = Some(Self::trimmed_mean(&self.leads).wrapping_sub(self.calibration_ns));
+        self.leads.push(s.lead_ns());
+        self.lead_ns = Some(self.leads.trimmed_mean().wrapping_sub(self.calibration_ns));
         if let Some(tx) = s.tx_ns {
             let send = tx.wrapping_sub(s.built_ns) as i64;
-            if self.sends.len() == WINDOW {
-                self.sends.pop_front();
-            }
-            self.sends.push_back(send);
-            self.last_send_error_ns = send.wrapping_sub(Self::trimmed_mean(&self.sends));
+            self.sends.push(send);
+            self.last_send_error_ns = send.wrapping_sub(self.sends.trimmed_mean());
         }
         if self.coupling == Coupling::ReferenceFollowsMaster {
             if let Some(y) = self.line_point(s) {
