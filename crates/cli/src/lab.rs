@@ -211,12 +211,13 @@ fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) 
         host.name, o.seed, o.seconds, o.reference_ppm
     );
     outln!(
-        "{:>6}  {:<9} {:>10} {:>10} {:>8} {:>9} {:>6} {:>8}   paper: {:>7} {:>7} {:>6} {:>5}",
+        "{:>6}  {:<9} {:>10} {:>10} {:>8} {:>7} {:>9} {:>6} {:>8}   paper: {:>7} {:>7} {:>6} {:>5}",
         "cycle",
         "method",
         "min µs",
         "max µs",
         "width %",
+        "sd µs",
         "cycles",
         "lost",
         "repeated",
@@ -232,12 +233,13 @@ fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) 
             .map(|p| format!("{:>7.2} {:>7.2} {:>6.1} {:>5}", p.1, p.2, p.3, p.4))
             .unwrap_or_default();
         outln!(
-            "{:>4}µs  {:<9} {:>10.2} {:>10.2} {:>8.1} {:>9} {:>6} {:>8}   {}{paper}",
+            "{:>4}µs  {:<9} {:>10.2} {:>10.2} {:>8.1} {:>7.2} {:>9} {:>6} {:>8}   {}{paper}",
             r.cycle_us,
             r.method,
             r.jitter_min_us,
             r.jitter_max_us,
             r.jitter_width_pct,
+            r.jitter_sd_us,
             r.cycles,
             r.lost,
             r.repeated,
@@ -258,7 +260,7 @@ fn chen_outputs(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut md = format!(
         "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm.\n\n\
-         | cycle µs | method | jitter min µs | max µs | width % | cycles | lost | repeated | paper (chen2016) |\n|---|---|---|---|---|---|---|---|---|\n",
+         | cycle µs | method | jitter min µs | max µs | width % | sd µs | cycles | lost | repeated | paper (chen2016) |\n|---|---|---|---|---|---|---|---|---|---|\n",
         o.host.name, o.seed, o.seconds, o.reference_ppm
     );
     for r in rows {
@@ -268,8 +270,16 @@ fn chen_outputs(
             .map(|p| format!("{:.2} / {:.2} µs, {:.1} %, loss {}", p.1, p.2, p.3, p.4))
             .unwrap_or_else(|| "—".into());
         md.push_str(&format!(
-            "| {} | {} | {:.2} | {:.2} | {:.1} | {} | {} | {} | {paper} |\n",
-            r.cycle_us, r.method, r.jitter_min_us, r.jitter_max_us, r.jitter_width_pct, r.cycles, r.lost, r.repeated
+            "| {} | {} | {:.2} | {:.2} | {:.1} | {:.2} | {} | {} | {} | {paper} |\n",
+            r.cycle_us,
+            r.method,
+            r.jitter_min_us,
+            r.jitter_max_us,
+            r.jitter_width_pct,
+            r.jitter_sd_us,
+            r.cycles,
+            r.lost,
+            r.repeated
         ));
     }
     write_report(dir, "chen2016.csv", &crate::report::csv_of(rows))?;

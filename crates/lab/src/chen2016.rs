@@ -52,6 +52,9 @@ pub struct Row {
     pub jitter_max_us: f64,
     /// (max − min) / cycle, in per cent, as the paper gives it.
     pub jitter_width_pct: f64,
+    /// Standard deviation of the jitter (µs): the width is two extremes, single host outliers
+    /// that land on one method's frame and not another's; the spread of all cycles is not.
+    pub jitter_sd_us: f64,
     pub cycles: u64,
     /// Over the DC-synchronous slaves: cycles whose data was overwritten before use, and
     /// cycles whose data was used twice.
@@ -127,6 +130,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     }
     let total = (o.seconds * 1e9 / cycle_ns as f64) as u64;
     let (mut jmin, mut jmax) = (i64::MAX, i64::MIN);
+    // Exact sums for the spread (|j| < 2⁶³ ns, at most 2⁶⁴ cycles: no overflow in i128·n).
+    let (mut jn, mut jsum, mut jsq) = (0i128, 0i128, 0i128);
     let mut first: Option<(u64, u64)> = None;
     let mut trace = Vec::new();
     let trace_every = (total - total / 10).div_ceil(2000).max(1);
@@ -142,6 +147,9 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
             let j = t.wrapping_sub(t0) as i64 - ((slot - k0) * cycle_ns) as i64;
             jmin = jmin.min(j);
             jmax = jmax.max(j);
+            jn += 1;
+            jsum += j as i128;
+            jsq += (j as i128) * (j as i128);
             if (k - total / 10) % trace_every == 0 {
                 trace.push((slot - k0, j as f64 / 1e3, period as f64 / 1e3));
             }
@@ -159,6 +167,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         jitter_min_us: jmin as f64 / 1e3,
         jitter_max_us: jmax as f64 / 1e3,
         jitter_width_pct: (jmax - jmin) as f64 / cycle_ns as f64 * 100.0,
+        jitter_sd_us: spread_ns(jn, jsum, jsq) / 1e3,
         cycles,
         lost,
         repeated,
@@ -166,6 +175,16 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         frames_lost: st.lost + m.cycle_stats().lost_frames,
         trace,
     })
+}
+
+/// Population standard deviation (ns) from exact sums: n·Σj² − (Σj)² is the exact n²·variance.
+fn spread_ns(n: i128, sum: i128, sq: i128) -> f64 {
+    if n == 0 {
+        return 0.0;
+    }
+    // n·Σj² can pass i128 only beyond 10¹³ cycles of ±10⁹ ns: saturate rather than wrap.
+    let var_n2 = n.saturating_mul(sq).saturating_sub(sum.saturating_mul(sum)).max(0);
+    (var_n2 as f64).sqrt() / n as f64
 }
 
 fn apps(m: &mut Master<VirtualIo>) -> Vec<&mut SyncApp> {

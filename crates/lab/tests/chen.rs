@@ -10,8 +10,16 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
     let rows = run(&o, &|_, _| {}).unwrap();
     for r in &rows {
         println!(
-            "{:>3} µs {:9}: jitter {:7.2} … {:7.2} µs ({:5.1} %), lost {}, repeated {} of {} cycles",
-            r.cycle_us, r.method, r.jitter_min_us, r.jitter_max_us, r.jitter_width_pct, r.lost, r.repeated, r.cycles
+            "{:>3} µs {:9}: jitter {:7.2} … {:7.2} µs ({:5.1} %, sd {:.2} µs), lost {}, repeated {} of {} cycles",
+            r.cycle_us,
+            r.method,
+            r.jitter_min_us,
+            r.jitter_max_us,
+            r.jitter_width_pct,
+            r.jitter_sd_us,
+            r.lost,
+            r.repeated,
+            r.cycles
         );
         if r.method == "none" {
             // +40 ppm over 4 s: the reference's grid slides 160 µs past the master's.
@@ -25,6 +33,13 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
             // paper's width there: 64 %).
             assert!(r.jitter_width_pct < if r.cycle_us == 100 { 70.0 } else { 50.0 }, "{r:?}");
         }
+    }
+    // The width is two extremes; the spread of every cycle is where the methods differ: on the
+    // same host draws, ferrocat's is the smallest at every cycle time.
+    for c in &o.cycles_us {
+        let sd = |m: &str| rows.iter().find(|r| r.cycle_us == *c && r.method == m).unwrap().jitter_sd_us;
+        assert!(sd("ferrocat") < sd("pi") && sd("ferrocat") < sd("chen2016"), "{c} µs: {rows:?}");
+        assert!(sd("ferrocat") > 1.0, "{c} µs: a 10 µs timer cannot do better than its steps");
     }
 }
 
@@ -42,10 +57,14 @@ fn at_50_us_ferrocat_holds_a_frame_back_after_a_late_one_and_loses_none() {
     let rows = run(&o, &|_, _| {}).unwrap();
     let (chen, f) = (&rows[0], &rows[1]);
     let show = |r: &ferrocat_lab::chen2016::Row| {
-        format!("{}: width {:.1} %, lost {}, repeated {}", r.method, r.jitter_width_pct, r.lost, r.repeated)
+        format!(
+            "{}: width {:.1} %, sd {:.2} µs, lost {}, repeated {}",
+            r.method, r.jitter_width_pct, r.jitter_sd_us, r.lost, r.repeated
+        )
     };
     println!("{}\n{}", show(chen), show(f));
     assert!(chen.lost > 0, "{}", show(chen));
     assert!(f.lost == 0 && f.repeated > 0, "{}", show(f));
     assert!(f.jitter_width_pct < chen.jitter_width_pct, "{}", show(f));
+    assert!(f.jitter_sd_us < chen.jitter_sd_us, "{}", show(f));
 }
