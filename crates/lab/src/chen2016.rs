@@ -130,7 +130,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     }
     let total = (o.seconds * 1e9 / cycle_ns as f64) as u64;
     let (mut jmin, mut jmax) = (i64::MAX, i64::MIN);
-    // Exact sums for the spread (|j| < 2⁶³ ns, at most 2⁶⁴ cycles: no overflow in i128·n).
+    // Exact sums for the spread: Σj cannot overflow i128 (fewer than 2⁶⁴ terms of |j| ≤ 2⁶³);
+    // Σj² saturates (j² alone is below 2¹²⁶, but a segment of one's own may give wild j).
     let (mut jn, mut jsum, mut jsq) = (0i128, 0i128, 0i128);
     let mut first: Option<(u64, u64)> = None;
     let mut trace = Vec::new();
@@ -149,7 +150,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
             jmax = jmax.max(j);
             jn += 1;
             jsum += j as i128;
-            jsq += (j as i128) * (j as i128);
+            jsq = jsq.saturating_add((j as i128) * (j as i128));
             if (k - total / 10) % trace_every == 0 {
                 trace.push((slot - k0, j as f64 / 1e3, period as f64 / 1e3));
             }
@@ -182,7 +183,7 @@ fn spread_ns(n: i128, sum: i128, sq: i128) -> f64 {
     if n == 0 {
         return 0.0;
     }
-    // n·Σj² can pass i128 only beyond 10¹³ cycles of ±10⁹ ns: saturate rather than wrap.
+    // n·Σj² passes i128 only for runs far beyond any lab's (10¹³ cycles of ±10⁹ ns): saturate.
     let var_n2 = n.saturating_mul(sq).saturating_sub(sum.saturating_mul(sum)).max(0);
     (var_n2 as f64).sqrt() / n as f64
 }
@@ -202,4 +203,19 @@ pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Res
             r
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spread_ns;
+
+    #[test]
+    fn spread_is_the_population_sd_and_never_overflows() {
+        let js = [1i128, 2, 3, 4];
+        let (sum, sq) = (js.iter().sum::<i128>(), js.iter().map(|j| j * j).sum::<i128>());
+        assert!((spread_ns(4, sum, sq) - 1.25f64.sqrt()).abs() < 1e-12);
+        assert_eq!(spread_ns(0, 0, 0), 0.0);
+        // Saturated sums give a finite figure, not a panic or a wrapped one.
+        assert!(spread_ns(i128::MAX, i128::MAX, i128::MAX).is_finite());
+    }
 }
