@@ -68,6 +68,22 @@ pub struct Row {
     pub trace: Vec<(u64, f64, f64)>,
 }
 
+impl Row {
+    /// The row's figures as every table prints them: jitter min, max (µs), width (%), sd (µs),
+    /// cycles, lost, repeated.
+    pub fn figures(&self) -> [String; 7] {
+        [
+            format!("{:.2}", self.jitter_min_us),
+            format!("{:.2}", self.jitter_max_us),
+            format!("{:.1}", self.jitter_width_pct),
+            format!("{:.2}", self.jitter_sd_us),
+            self.cycles.to_string(),
+            self.lost.to_string(),
+            self.repeated.to_string(),
+        ]
+    }
+}
+
 /// Table 2 as published: cycle µs, jitter min, max (µs), width (%), loss rate.
 pub const PAPER: [(u64, f64, f64, f64, f64); 3] =
     [(500, 26.36, -56.0, 16.5, 0.0), (250, 15.12, -66.96, 32.8, 0.0), (100, 14.48, -49.96, 64.4, 0.0)];

@@ -9,18 +9,8 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
     let o = Options { cycles_us: vec![500, 250, 100], seconds: 4.0, ..Options::quick(HostModel::rtx_10us()) };
     let rows = run(&o, &|_, _| {}).unwrap();
     for r in &rows {
-        println!(
-            "{:>3} µs {:9}: jitter {:7.2} … {:7.2} µs ({:5.1} %, sd {:.2} µs), lost {}, repeated {} of {} cycles",
-            r.cycle_us,
-            r.method,
-            r.jitter_min_us,
-            r.jitter_max_us,
-            r.jitter_width_pct,
-            r.jitter_sd_us,
-            r.lost,
-            r.repeated,
-            r.cycles
-        );
+        // Jitter min, max (µs), width (%), sd (µs), cycles, lost, repeated.
+        println!("{:>3} µs {:9}: {}", r.cycle_us, r.method, r.figures().join("  "));
         if r.method == "none" {
             // +40 ppm over 4 s: the reference's grid slides 160 µs past the master's.
             assert!(r.jitter_max_us - r.jitter_min_us > 100.0, "{r:?}");
