@@ -64,6 +64,9 @@ pub struct DcUnit {
     /// The rate the current SCD applies, in units of 10⁻¹⁵.
     applied_fpp: i64,
     last_sample: Option<(u64, i64)>,
+    /// The mean span between the samples that update the frequency (ns of local time, 0: none
+    /// yet), over as many as the frequency filter.
+    mean_span_ns: f64,
     pub sync: SyncUnit,
     /// The rates of every SCD the current SCS allows (looked up again when SCS changes).
     rates: Arc<RateTable>,
@@ -105,6 +108,7 @@ impl DcUnit {
             freq_est_fpp: 0.0,
             applied_fpp: 0,
             last_sample: None,
+            mean_span_ns: 0.0,
             sync: SyncUnit::default(),
             rates: RateTable::for_scs(0x1000),
         }
@@ -219,6 +223,7 @@ impl DcUnit {
         self.set_scd(0);
         self.freq_est_fpp = 0.0;
         self.last_sample = None;
+        self.mean_span_ns = 0.0;
     }
 
     /// A write of `received` to 0x0910 by a frame that reached this ESC at `t_ns`: one sample of
@@ -245,7 +250,19 @@ impl DcUnit {
                     let meas = applied_fpp + (dt - dt0) as f64 * 1e15 / span as f64;
                     let n2 = (self.depth_speed & 0x0F).min(6) as i32;
                     // × 2⁻ⁿ is exactly ÷ 2ⁿ, without a division's latency.
-                    self.freq_est_fpp += (meas - self.freq_est_fpp) * (1.0 / (1u32 << n2) as f64);
+                    let gain = 1.0 / (1u32 << n2) as f64;
+                    let span = span as f64;
+                    self.mean_span_ns = if self.mean_span_ns > 0.0 {
+                        self.mean_span_ns + (span - self.mean_span_ns) * gain
+                    } else {
+                        span
+                    };
+                    // Each measurement weighs as long as its span: a frame late by L gives one
+                    // short and one long span whose changes of Δt cancel, and weighed per sample
+                    // the short one's won — a stock kernel's late wake-ups biased the frequency
+                    // and so held a follower tens of ns off (docs/esc-model.md).
+                    let weight = (gain * span / self.mean_span_ns).min(1.0);
+                    self.freq_est_fpp += (meas - self.freq_est_fpp) * weight;
                     self.last_sample = Some((local, dt));
                 } else if span < 0 {
                     self.last_sample = Some((local, dt));
@@ -534,22 +551,51 @@ mod tests {
         assert!(dc.scd > 2000, "50 ppm needs a large SCD, got {}", dc.scd);
     }
 
-    #[test]
-    fn a_locked_loop_is_centred_on_the_reference() {
-        // The mean error after lock, not only its bound: the 0x092C filter must not round its
-        // way to a bias (on whole ns its shift's floor held the slave 7.5 ns ahead).
+    /// A slave 37 ppm fast, 3 µs ahead, fed 30 000 samples: sample k is taken at true time
+    /// `at(k).0` and carries the reference's time `at(k).1`. Its mean error against true time
+    /// at the samples after the first 10 000.
+    fn mean_error_after_lock(at: impl Fn(u64) -> (u64, u64)) -> f64 {
         let mut dc = DcUnit::new(DcWidth::Bits64, 0, 3_000, 37_000);
         let (mut sum, mut n) = (0i64, 0i64);
         for k in 1..=30_000u64 {
-            let t = k * 1_000_000 + k % 7;
-            dc.tcl_sample(t, t as u32);
+            let (t, read) = at(k);
+            dc.tcl_sample(t, read as u32);
             if k > 10_000 {
                 sum += dc.system_at(t) as i64 - t as i64;
                 n += 1;
             }
         }
-        let mean = sum as f64 / n as f64;
+        sum as f64 / n as f64
+    }
+
+    #[test]
+    fn a_locked_loop_is_centred_on_the_reference() {
+        // The mean error after lock, not only its bound: the 0x092C filter must not round its
+        // way to a bias (on whole ns its shift's floor held the slave 7.5 ns ahead).
+        let mean = mean_error_after_lock(|k| {
+            let t = k * 1_000_000 + k % 7;
+            (t, t)
+        });
         assert!(mean.abs() < 1.5, "mean error after lock {mean:.2} ns");
+    }
+
+    #[test]
+    fn late_frames_do_not_bias_the_loop() {
+        // Every 50th sample 400 µs late, carrying what an offset-steered reference 90 ppm off
+        // reads then: 36 ns more, and the next sample, on time, 36 ns less. The changes cancel
+        // over the two spans; weighed per sample instead of per span, the short span's won and
+        // held the clock 57 ns off (docs/esc-model.md).
+        let mean = mean_error_after_lock(|k| {
+            let late = k % 50 == 0;
+            let t = k * 1_000_000 + if late { 400_000 } else { 0 };
+            let read = match k % 50 {
+                0 => t + 36,
+                1 => t - 36,
+                _ => t,
+            };
+            (t, read)
+        });
+        assert!(mean.abs() < 3.0, "mean error after lock {mean:.2} ns");
     }
 
     #[test]
