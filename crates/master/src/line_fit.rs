@@ -10,6 +10,14 @@
 //! dozen points, and the window then restarts at the estimated change point. Single points
 //! far off the line (a preempted send, a stamp taken late) are left out and do not count.
 //!
+//! A restarted window knows its new rate only from the few points since the change, which
+//! probing packs into bursts a fraction of a cycle wide: their slope alone can be hundreds of
+//! ppm off and, extrapolated a cycle, put the line µs away (4.4 µs once on pc-stock). So the
+//! slope carries a prior from the line before the restart (a Gaussian of `RATE_CHANGE_SD`
+//! about the old rate — a crystal's rate steps by tens of ppm, not hundreds): the maximum a
+//! posteriori slope, (Σ(x − x̄)(z − z̄) + λ·s₀) / (Σ(x − x̄)² + λ) with λ = σ²/τ², is the old
+//! rate while the window is a burst and the data's own within milliseconds.
+//!
 //! The sums are kept exactly in i128 about an origin, so adding and dropping a point costs
 //! O(1) however long the window and the line never drifts from rounding.
 use std::collections::VecDeque;
@@ -31,6 +39,10 @@ const MIN_RESTART: usize = 4;
 const MIN_SCALE_NS: f64 = 2.0;
 /// The noise scale is an exponential mean of |innovation| over about this many points.
 const SCALE_MEMORY: f64 = 64.0;
+/// The prior's standard deviation of a change of rate across a restart (τ above). Crystals
+/// are specified within ±50–100 ppm over their whole temperature range, so no step exceeds
+/// that.
+const RATE_CHANGE_SD: f64 = 100e-6;
 /// Rates further than this from 1 are clamped (1000 ppm: far beyond any crystal).
 const MAX_RATE_ERROR: f64 = 1e-3;
 /// Points further apart than this (ns, 18 minutes) do not share a line: the window restarts.
@@ -68,6 +80,10 @@ pub struct LineFit {
     sums: Sums,
     /// The line as (slope of dz on dx, mean dx, mean dz), refreshed on every change.
     line: Option<(f64, f64, f64)>,
+    /// The slope of the line before the last restart: the prior of the new window's, with
+    /// its standard deviation.
+    prior_slope: Option<f64>,
+    rate_change_sd: f64,
     scale_ns: f64,
     innovations: u64,
     /// Points added so far (the window's and those since dropped).
@@ -91,6 +107,8 @@ impl LineFit {
             origin: (0, 0),
             sums: Sums::default(),
             line: None,
+            prior_slope: None,
+            rate_change_sd: RATE_CHANGE_SD,
             scale_ns: 0.0,
             innovations: 0,
             added: 0,
@@ -124,10 +142,16 @@ impl LineFit {
         };
         let innovation = y.wrapping_sub(predicted) as i64 as f64;
         self.innovations += 1;
-        let z = innovation / self.scale_ns.max(MIN_SCALE_NS);
-        // Neither outliers nor changes before the scale is learned, nor while a restarted
-        // window is too short for its line to predict well.
-        if self.innovations > WARM_UP as u64 && self.points.len() >= WARM_UP {
+        // A restarted window too short for the change test still knows where its line is to
+        // within its own spread (the prior holds its slope): its points are measured against
+        // the spread of the innovation, σ·√(1 + 1/n + d²/P), so that a stamp µs off does not
+        // join the few points the new line stands on.
+        let young = self.points.len() < WARM_UP;
+        let spread = if young { self.line_var_at(x).map(|v| (1.0 + v).sqrt()) } else { Some(1.0) };
+        // Neither outliers nor changes before the scale is learned, nor outliers where a young
+        // window knows nothing of its slope, nor changes while it is young.
+        if let Some(spread) = spread.filter(|_| self.innovations > WARM_UP as u64) {
+            let z = innovation / (self.scale() * spread);
             if z.abs() > OUTLIER_SCALES {
                 // One far point is an outlier; a run of them on one side is a jump.
                 if self.far_run.last().is_some_and(|&(_, _, side)| side != (z > 0.0)) {
@@ -150,6 +174,9 @@ impl LineFit {
                 return Fate::Restarted;
             }
             self.far_run.clear();
+        }
+        if self.innovations > WARM_UP as u64 && !young {
+            let z = innovation / self.scale();
             // Page's CUSUM both ways; the count of points added when each last stood at zero
             // marks where a change began.
             self.up.0 = (self.up.0 + z - CUSUM_K).max(0.0);
@@ -179,6 +206,7 @@ impl LineFit {
 
     /// Drops all but the newest `keep` points.
     fn restart(&mut self, keep: usize) {
+        self.keep_prior();
         let n = self.points.len();
         let keep = keep.min(n);
         self.points.drain(..n - keep);
@@ -201,13 +229,17 @@ impl LineFit {
     /// the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/Σ(xᵢ − x̄)²). `None` before
     /// two distinct x.
     pub fn sd_ahead_ns(&self, ahead_ns: u64) -> Option<f64> {
-        let s = self.sums;
-        let sxx = self.x_spread()?;
         let &(newest, _) = self.points.back()?;
+        Some(self.scale() * self.line_var_at(newest.wrapping_add(ahead_ns))?.sqrt())
+    }
+
+    /// The variance of the line's value at `x` in units of σ²: 1/n + (x − x̄)²/P.
+    fn line_var_at(&self, x: u64) -> Option<f64> {
+        let s = self.sums;
+        let precision = self.slope_precision()?;
         let n = s.n as f64;
-        let d = newest.wrapping_sub(self.origin.0) as i64 as f64 + ahead_ns as f64 - s.x as f64 / n;
-        let v = 1.0 / n + d * d * n / sxx as f64;
-        Some(self.scale_ns.max(MIN_SCALE_NS) * v.sqrt())
+        let d = x.wrapping_sub(self.origin.0) as i64 as f64 - s.x as f64 / n;
+        Some(1.0 / n + d * d / precision)
     }
 
     /// How far the change test is towards restarting the window: its larger CUSUM over the
@@ -232,15 +264,36 @@ impl LineFit {
     /// The standard deviation of [`LineFit::rate`], from the noise scale and the window's
     /// spread: σ/√Σ(xᵢ − x̄)². `None` before two distinct x.
     pub fn rate_sd(&self) -> Option<f64> {
-        let sxx = self.x_spread()?;
-        Some(self.scale_ns.max(MIN_SCALE_NS) / (sxx as f64 / self.sums.n as f64).sqrt())
+        Some(self.scale() / self.slope_precision()?.sqrt())
     }
 
-    /// n·Σ(xᵢ − x̄)², exact; `None` before two distinct x.
-    fn x_spread(&self) -> Option<i128> {
+    /// Σ(xᵢ − x̄)² plus the prior's λ (ns²): the slope's precision times σ². `None` while
+    /// the window says nothing of its slope and there is no prior.
+    fn slope_precision(&self) -> Option<f64> {
         let s = self.sums;
         let sxx = s.n * s.xx - s.x * s.x;
-        (s.n >= 2 && sxx > 0).then_some(sxx)
+        let spread = if s.n >= 2 && sxx > 0 { sxx as f64 / s.n as f64 } else { 0.0 };
+        let precision = spread + self.prior_weight();
+        (s.n >= 1 && precision > 0.0).then_some(precision)
+    }
+
+    /// λ = σ²/τ² of the prior on the slope (0 without one).
+    fn prior_weight(&self) -> f64 {
+        match self.prior_slope {
+            Some(_) => (self.scale() / self.rate_change_sd).powi(2),
+            None => 0.0,
+        }
+    }
+
+    fn scale(&self) -> f64 {
+        self.scale_ns.max(MIN_SCALE_NS)
+    }
+
+    /// The line's slope becomes the prior of the window about to restart.
+    fn keep_prior(&mut self) {
+        if let Some((slope, _, _)) = self.line {
+            self.prior_slope = Some(slope);
+        }
     }
 
     /// Moves every point's x by `dx_ns` (a calibration found the abscissa off by that much).
@@ -260,6 +313,7 @@ impl LineFit {
             let (dx_oldest, _) = self.rel_to(oldest, (x, y));
             let (_, dz) = self.rel((x, y));
             if far(dx_oldest) || far(dz) {
+                self.keep_prior();
                 self.points.clear();
                 self.points.push_back((x, y));
                 self.rebuild();
@@ -337,11 +391,22 @@ impl LineFit {
             self.line = None;
             return;
         }
-        // Centred sums, exact in integers: n²·var(x) and n²·cov(x, z).
+        // Centred sums, exact in integers: n²·var(x) and n²·cov(x, z); with the prior, the
+        // maximum a posteriori slope (module comment).
         let sxx = s.n * s.xx - s.x * s.x;
         let sxz = s.n * s.xz - s.x * s.z;
-        let slope = if sxx > 0 { (sxz as f64 / sxx as f64).clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR) } else { 0.0 };
         let n = s.n as f64;
+        let slope = match self.prior_slope {
+            Some(prior) => {
+                let lambda = self.prior_weight();
+                let spread = if s.n >= 2 && sxx > 0 { sxx as f64 / n } else { 0.0 };
+                let covariance = if s.n >= 2 && sxx > 0 { sxz as f64 / n } else { 0.0 };
+                (covariance + lambda * prior) / (spread + lambda)
+            }
+            None if sxx > 0 => sxz as f64 / sxx as f64,
+            None => 0.0,
+        }
+        .clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR);
         self.line = Some((slope, s.x as f64 / n, s.z as f64 / n));
     }
 }
@@ -441,6 +506,51 @@ mod tests {
         assert!((rate - 1.000070).abs() < 2e-6, "rate after the step {rate}");
     }
 
+    /// The squared errors (ns²) of the line one cycle ahead over the `cycles` cycles after the
+    /// first restart: points in bursts of 16 within 0.3 ms (a cycle's probes) with `sd_ns`
+    /// of noise, the reference 20 ppm fast, its time jumping 30 µs after 3 s.
+    fn errors_after_jump(seed: u64, sd_ns: f64, cycles: u64, rate_change_sd: f64) -> Vec<f64> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sd_ns).unwrap();
+        let truth = |x: u64| x as i64 + (x as f64 * 20e-6) as i64 + if x < 3_000_000_000 { 0 } else { 30_000 };
+        let mut f = LineFit { rate_change_sd, ..LineFit::new(16_384) };
+        let (mut restarted, mut errors) = (None, Vec::new());
+        for k in 1..4_000u64 {
+            for j in 0..16 {
+                let x = k * 1_000_000 + j * 20_000;
+                f.push(x, (truth(x) + noise.sample(&mut rng) as i64) as u64);
+            }
+            if restarted.is_none() && f.restarts > 0 {
+                restarted = Some(k);
+            }
+            if restarted.is_some_and(|r| k < r + cycles) {
+                let ahead = (k + 1) * 1_000_000;
+                errors.push(((f.at(ahead).unwrap() as i64 - truth(ahead)) as f64).powi(2));
+            }
+        }
+        assert_eq!(restarted, Some(3_000), "seed {seed}: the jump restarts the window in its cycle");
+        errors
+    }
+
+    #[test]
+    fn a_restarted_window_keeps_the_old_rate_until_its_points_say_otherwise() {
+        // The jump restarts the window from the 8 points of one burst a sixth of a cycle
+        // wide: alone, their slope is known to σ/(50 µs·√8), thousands of ppm in 1 µs of
+        // noise (the clamp's 1 000 ppm is 1 µs a cycle ahead). With the old rate as its prior
+        // the line is off by its intercept's noise, σ/√n. Measured: 194 ns against 550.
+        let rms = |cycles, rate_change_sd| {
+            let e: Vec<f64> =
+                (0..20).flat_map(|seed| errors_after_jump(seed, 1_000.0, cycles, rate_change_sd)).collect();
+            (e.iter().sum::<f64>() / e.len() as f64).sqrt()
+        };
+        // The first three cycles after the restart, 20 realisations; no prior (a negligible
+        // one: λ = σ²) against the prior.
+        let (with, without) = (rms(3, RATE_CHANGE_SD), rms(3, 1.0));
+        assert!(with < without / 2.0, "RMS one cycle ahead: {with:.0} ns with the prior, {without:.0} ns without");
+        // No worse than the mean of the burst that restarted it: σ/√8.
+        assert!(with < 1_000.0 / 8f64.sqrt(), "RMS one cycle ahead with the prior: {with:.0} ns");
+    }
+
     #[test]
     fn single_outliers_are_left_out_and_do_not_restart() {
         let mut f = LineFit::new(4096);
@@ -473,6 +583,24 @@ mod tests {
         let x = 5_000_000_000 + 1199 * 1_000_000;
         let e = phase_error(&f, 25.0, x) - 30_000;
         assert!(e.abs() < 100, "phase error after the jump {e} ns");
+    }
+
+    #[test]
+    fn a_young_window_leaves_out_a_stamp_far_off_its_line() {
+        // A jump restarts the window from its run of 8 points; a stamp 10 µs off (a software
+        // stamp's rare outlier) right after would otherwise be a ninth of the new line.
+        let mut f = LineFit::new(4096);
+        let pts = points(1200, 25.0, 200.0, 5);
+        let mut fates = Vec::new();
+        for (k, &(x, y)) in pts.iter().enumerate() {
+            let y = if k >= 1000 { y + 30_000 } else { y };
+            let y = if k == 1000 + JUMP_RUN { y + 10_000 } else { y };
+            fates.push(f.push(x, y));
+        }
+        assert_eq!(fates[1000 + JUMP_RUN - 1], Fate::Restarted);
+        assert_eq!(fates[1000 + JUMP_RUN], Fate::Outlier);
+        assert!(fates[1000 + JUMP_RUN + 1..].iter().all(|&f| f == Fate::Added));
+        assert_eq!(f.restarts, 1);
     }
 
     #[test]
