@@ -242,7 +242,7 @@ struct LabArgs {
     /// park2020: rounds per (segment, method).
     #[arg(long)]
     rounds: Option<u32>,
-    /// park2020: ferrocat without its GPIO calibration of the stamps' asymmetry.
+    /// park2020, robustness: ferrocat without its GPIO calibration of the stamps' asymmetry.
     #[arg(long)]
     no_gpio_calibration: bool,
     #[arg(long)]

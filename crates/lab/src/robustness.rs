@@ -28,6 +28,9 @@ pub struct Options {
     pub host: HostModel,
     /// A segment of one's own instead of the line of `slaves` EK1100s.
     pub segment: Option<ferrocat_segment::SegmentConfig>,
+    /// ferrocat's methods calibrate their stamps' asymmetry through the host's GPIO, as in
+    /// park2020, before the band window (`crate::calibration`).
+    pub gpio_calibration: bool,
 }
 
 impl Options {
@@ -43,6 +46,7 @@ impl Options {
             seed: 1,
             host,
             segment: None,
+            gpio_calibration: true,
         }
     }
 }
@@ -81,6 +85,8 @@ pub struct Row {
     /// per second over the band window, and in all after the disturbance.
     pub probes_per_s_before: f64,
     pub probes_after: u64,
+    /// The master − reference error the GPIO calibration found and took out (None: none).
+    pub calibration_ns: Option<i64>,
 }
 
 fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
@@ -108,6 +114,11 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let mut last_unlocked: Option<u64> = None;
     let mut locked_before = true;
     let mut sampler = crate::sampler::Sampler::new(&m, &dc, o.seed);
+    // The calibration's pulses are over before the band window, so that the step it takes out
+    // is not part of the level the band is drawn around.
+    let mut calibration = if o.gpio_calibration { crate::calibration(&mut m, method, reference) } else { None };
+    let calibrated_by = settle.saturating_sub(window);
+    let mut calibration_ns = None;
     // Each cycle's sample, once every clock has passed its instant.
     let mut take = |samples: Vec<crate::sampler::Sample>| {
         for s in samples {
@@ -157,6 +168,11 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         m.engine.io.sleep_until(next);
         sampler.arm(&mut m, next, o.cycle_ns, k);
         c = m.sync_step(sync.as_mut(), &mut st)?;
+        if let Some(cal) =
+            calibration.as_mut().filter(|_| k < calibrated_by && crate::calibration_cycle(k, calibrated_by))
+        {
+            calibration_ns = calibration_ns.or(cal.pulse(&mut m, sync.as_mut())?);
+        }
         take(sampler.after_cycle(&mut m, sync.as_ref()));
     }
     take(sampler.rest(&mut m, sync.as_ref()));
@@ -194,6 +210,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         make_ups: st.make_ups - make_ups0,
         probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
         probes_after: st.probes - probes0,
+        calibration_ns,
     })
 }
 

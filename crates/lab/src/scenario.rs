@@ -158,7 +158,7 @@ impl Scenario {
         applies("settle_s", self.settle_s.is_some(), &[Park2020, Paprocki2022, Robustness])?;
         applies("reference_ppm", self.reference_ppm.is_some(), &[Chen2016])?;
         applies("disturbances", self.disturbances.is_some(), &[Robustness])?;
-        applies("gpio_calibration", self.gpio_calibration.is_some(), &[Park2020])?;
+        applies("gpio_calibration", self.gpio_calibration.is_some(), &[Park2020, Robustness])?;
         if self.segment.is_some() && (self.slaves.is_some() || self.reference_ppm.is_some()) {
             let key = if self.slaves.is_some() { "slaves" } else { "reference_ppm" };
             return Err(self.err(key, "describes the default segment; with `segment` set it has no meaning"));
@@ -289,6 +289,7 @@ impl Scenario {
                     ensure!(d > 0.0, self.err("duration_s", "must be positive"));
                     o.after_s = d;
                 }
+                o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
                 if let Some(ds) = &self.disturbances {
                     if let Some(d) = ds.iter().find(|d| !crate::robustness::SCENARIOS.contains(&d.as_str())) {
                         return Err(self.err(
@@ -357,6 +358,10 @@ mod tests {
         };
         assert_eq!((o.seed, o.slaves.clone(), o.methods.clone(), o.rounds), (7, vec![3], vec!["ferrocat".into()], 2));
         assert_eq!((o.settle_s, o.samples, o.cycle_ns, o.host.name), (1.0, 10, 500_000, "beaglebone-rt"));
+        assert!(!o.gpio_calibration);
+        let Plan::Robustness(o) = scenario("experiment = 'robustness'\ngpio_calibration = false\n").unwrap() else {
+            panic!("not robustness")
+        };
         assert!(!o.gpio_calibration);
         let Plan::Chen2016(o) = scenario("experiment = 'chen2016'\ncycle_us = [100, 50]\nduration_s = 3\n").unwrap()
         else {

@@ -25,14 +25,17 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         }
     }
     for r in rows.iter().filter(|r| r.method.starts_with("ferrocat")) {
+        // Calibrated through the GPIO before the band window: the stamps' asymmetry (half of it
+        // ≈ −290 ns on pc-rt uncalibrated) is out of the level before.
+        assert!(r.calibration_ns.is_some_and(|e| e < -150) && r.before_mean_ns.abs() < 50.0, "{r:?}");
         let before_rms = (r.before_mean_ns.powi(2) + r.before_sd_ns.powi(2)).sqrt();
-        if r.scenario == "loss-1pct" {
-            // Lasting loss: the error stays about where it was (it leaves the band now and then:
-            // `outside_pct` is reported, docs/clock-sync.md).
-            assert!(r.after_rms_ns < 1.5 * before_rms, "{r:?}");
-        } else {
+        // The error over the last half is back about where it was: its RMS exceeds the RMS
+        // before by less than half the band (under lasting loss it leaves the band now and
+        // then: `outside_pct` is reported, docs/clock-sync.md).
+        assert!(r.after_rms_ns < before_rms + r.band_ns / 2.0, "{r:?}");
+        if r.scenario != "loss-1pct" {
             let rec = r.recovery_ms.unwrap_or_else(|| panic!("ferrocat did not recover: {r:?}"));
-            assert!(rec < 1_000.0 && r.after_rms_ns < 1.5 * before_rms, "{r:?}");
+            assert!(rec < 1_000.0, "{r:?}");
         }
         // Locked before, locked again: no disturbance costs ferrocat its lock for good.
         assert!(r.locked_before && r.relock_ms.is_some(), "{r:?}");
