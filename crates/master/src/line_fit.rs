@@ -80,9 +80,9 @@ pub struct LineFit {
     sums: Sums,
     /// The line as (slope of dz on dx, mean dx, mean dz), refreshed on every change.
     line: Option<(f64, f64, f64)>,
-    /// The slope of the line before the last restart: the prior of the new window's, with
-    /// its standard deviation.
+    /// The slope of the line before the last restart: the prior of the new window's.
     prior_slope: Option<f64>,
+    /// The prior's standard deviation (`RATE_CHANGE_SD`; tests compare others).
     rate_change_sd: f64,
     scale_ns: f64,
     innovations: u64,
@@ -226,8 +226,8 @@ impl LineFit {
     }
 
     /// The standard deviation (ns) of the line's value `ahead_ns` past its newest point, from
-    /// the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/Σ(xᵢ − x̄)²). `None` before
-    /// two distinct x.
+    /// the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/(Σ(xᵢ − x̄)² + λ)), λ the
+    /// prior's weight (0 without one). `None` before two distinct x where there is no prior.
     pub fn sd_ahead_ns(&self, ahead_ns: u64) -> Option<f64> {
         let &(newest, _) = self.points.back()?;
         Some(self.scale() * self.line_var_at(newest.wrapping_add(ahead_ns))?.sqrt())
@@ -262,7 +262,7 @@ impl LineFit {
     }
 
     /// The standard deviation of [`LineFit::rate`], from the noise scale and the window's
-    /// spread: σ/√Σ(xᵢ − x̄)². `None` before two distinct x.
+    /// spread: σ/√(Σ(xᵢ − x̄)² + λ). `None` before two distinct x where there is no prior.
     pub fn rate_sd(&self) -> Option<f64> {
         Some(self.scale() / self.slope_precision()?.sqrt())
     }
