@@ -370,12 +370,14 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         let mut md = format!(
             "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
              measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns). \
-             Relock: until every slave stays within 100 ns of the reference and the master within 1 µs \
+             vs control: paired with the same method undisturbed (scenario none, the same realisation until the \
+             disturbance), until the error stayed within the band's half-width of the control's for good, and the \
+             largest distance from it. Relock: until every slave stays within 100 ns of the reference and the master within 1 µs \
              (unlocked: not locked before the disturbance). Made up: lost frames ferrocat replaced at once. Probes: \
              ferrocat's extra reads of the reference after the disturbance.\n\n\
-             | disturbance | method | mean before | sd | band | peak | recovery ms | relock ms | outside % | mean after | \
-             RMS after | frames lost | made up | probes |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+             | disturbance | method | mean before | sd | band | peak | recovery ms | vs control ms | peak vs control | \
+             relock ms | outside % | mean after | RMS after | frames lost | made up | probes |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
         );
         for r in &rows {
@@ -394,7 +396,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
     );
     // One width per cell: a cell without one would be dropped silently.
-    let widths: [i32; 14] = [-18, -13, 9, 7, 7, 9, 11, 9, 9, 9, 9, 5, 7, 7];
+    let widths: [i32; 16] = [-18, -13, 9, 7, 7, 9, 11, 8, 9, 9, 9, 9, 9, 5, 7, 7];
     let line = |cells: &[String]| -> String {
         let pad = |(c, w): (&String, &i32)| match *w {
             w if w < 0 => format!("{c:<0$}", (-w) as usize),
@@ -410,6 +412,8 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "band",
         "peak",
         "recovery ms",
+        "vs ctrl",
+        "peak ctrl",
         "relock ms",
         "outside %",
         "after",
@@ -426,7 +430,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
 }
 
 /// One robustness row's cells, for the terminal and the report alike.
-fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 14] {
+fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 16] {
     [
         r.scenario.clone(),
         r.method.clone(),
@@ -435,6 +439,12 @@ fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 14] {
         format!("{:.1}", r.band_ns),
         format!("{:.1}", r.peak_ns),
         r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
+        match (r.peak_vs_control_ns, r.recovery_vs_control_ms) {
+            (None, _) => "—".into(),
+            (Some(_), Some(v)) => format!("{v:.0}"),
+            (Some(_), None) => "never".into(),
+        },
+        r.peak_vs_control_ns.map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into()),
         match (r.locked_before, r.relock_ms) {
             (false, _) => "unlocked".into(),
             (true, Some(v)) => format!("{v:.0}"),

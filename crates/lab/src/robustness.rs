@@ -3,6 +3,12 @@
 //! 50 ppm (a temperature step), or the master overrunning three cycles (no frames for 3 ms) —
 //! and how far and for how long the master–reference error leaves its band, and how long until
 //! the segment is locked again (as the lock time counts it).
+//!
+//! Each method also runs undisturbed on the same seed (the control, scenario `none`): the two
+//! runs are the same realisation up to the disturbance (checked), so the disturbed error minus
+//! the control's is the disturbance's own effect, free of the level's slow wander that a band
+//! drawn over the window before cannot foresee (a stock kernel's software stamps leave the line
+//! tens of ns of phase error that moves over seconds).
 use ferrocat_master::io::{HostModel, Io};
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
@@ -12,6 +18,8 @@ use serde::Serialize;
 use crate::stats::Moments;
 
 pub const SCENARIOS: [&str; 3] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles"];
+/// The undisturbed run every disturbed one is paired with.
+pub const CONTROL: &str = "none";
 
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -31,6 +39,8 @@ pub struct Options {
     /// ferrocat's methods calibrate their stamps' asymmetry through the host's GPIO, as in
     /// park2020, before the band window (`crate::calibration`).
     pub gpio_calibration: bool,
+    /// Run each method undisturbed too and compare every disturbed run with it.
+    pub control: bool,
 }
 
 impl Options {
@@ -47,6 +57,7 @@ impl Options {
             host,
             segment: None,
             gpio_calibration: true,
+            control: true,
         }
     }
 }
@@ -87,9 +98,37 @@ pub struct Row {
     pub probes_after: u64,
     /// The master − reference error the GPIO calibration found and took out (None: none).
     pub calibration_ns: Option<i64>,
+    /// Paired with the control: from the disturbance until the error stayed within the band's
+    /// half-width of the control's error at the same sample for good (None: not within the
+    /// run, or no control), and the largest distance from it.
+    pub recovery_vs_control_ms: Option<f64>,
+    pub peak_vs_control_ns: Option<f64>,
 }
 
-fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
+/// A run's row and its errors from the start of the band window on.
+struct Run {
+    row: Row,
+    errors: Vec<f64>,
+    window: usize,
+    cycle_ns: u64,
+}
+
+/// Cycles of `cycle_ns` as milliseconds.
+fn ms(cycles: usize, cycle_ns: u64) -> f64 {
+    cycles as f64 * cycle_ns as f64 / 1e6
+}
+
+/// From the disturbance (sample 0 of `errors`) until no sample was out any more, if that was
+/// before the last 10 % of the run: back for good only if the last 10 % stayed so.
+fn back_for_good(last_out: Option<usize>, len: usize, cycle_ns: u64) -> Option<f64> {
+    match last_out {
+        None => Some(0.0),
+        Some(i) if i < len * 9 / 10 => Some(ms(i + 1, cycle_ns)),
+        Some(_) => None,
+    }
+}
+
+fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
     let (mut m, mut sync, _) =
         crate::segment(&cfg, o.host, o.seed, method, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
@@ -107,7 +146,8 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let after = (o.after_s * per_s) as u64;
     let mut next = m.engine.io.now_ns();
     let (mut before, mut late) = (Moments::default(), Moments::default());
-    let mut errors_after = Vec::with_capacity(after as usize);
+    // From the band window on: the control's pairing checks the window is the same.
+    let mut errors = Vec::with_capacity((window + after) as usize);
     let (mut lost0, mut make_ups0) = (0, 0);
     let mut c = Correction::default();
     let (mut probes_window, mut probes0) = (0, 0);
@@ -132,8 +172,10 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
                     _ => {}
                 }
             }
+            if k + window >= settle {
+                errors.push(e);
+            }
             if k >= settle {
-                errors_after.push(e);
                 if k >= settle + after / 2 {
                     late.push(e);
                 }
@@ -160,6 +202,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
                 }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
+                CONTROL => {}
                 other => anyhow::bail!("unknown scenario {other:?} (known: {})", SCENARIOS.join(", ")),
             }
         }
@@ -179,18 +222,13 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
     let mean = before.mean();
     let sd = (before.rms().powi(2) - mean * mean).max(0.0).sqrt();
     let band = (4.0 * sd).max(100.0);
+    let errors_after = &errors[(window as usize).min(errors.len())..];
     let peak = errors_after.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
     let last_out = errors_after.iter().rposition(|e| (e - mean).abs() > band);
-    let ms = |cycles: usize| cycles as f64 * o.cycle_ns as f64 / 1e6;
-    // Back for good only if the last 10 % of the run stayed so.
-    let for_good = |last: Option<usize>| match last {
-        None => Some(0.0),
-        Some(i) if i < errors_after.len() * 9 / 10 => Some(ms(i + 1)),
-        Some(_) => None,
-    };
+    let for_good = |last: Option<usize>| back_for_good(last, errors_after.len(), o.cycle_ns);
     let recovery_ms = for_good(last_out);
     let relock_ms = if locked_before { for_good(last_unlocked.map(|k| k as usize)) } else { None };
-    Ok(Row {
+    let row = Row {
         scenario: scenario.to_string(),
         method: method.to_string(),
         host: o.host.name.to_string(),
@@ -211,12 +249,106 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Row> {
         probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
         probes_after: st.probes - probes0,
         calibration_ns,
-    })
+        recovery_vs_control_ms: None,
+        peak_vs_control_ns: None,
+    };
+    Ok(Run { row, errors, window: window as usize, cycle_ns: o.cycle_ns })
 }
 
-/// Every (scenario, method), on the same seed.
+/// Compares a disturbed run with its method's control, sample by sample.
+fn pair(run: &mut Run, control: &Run) -> anyhow::Result<()> {
+    let w = run.window;
+    let (mine_before, mine) = run.errors.split_at(w.min(run.errors.len()));
+    let (theirs_before, theirs) = control.errors.split_at(w.min(control.errors.len()));
+    // The same seed, method and host: identical until the disturbance, or the pairing is void.
+    if mine_before != theirs_before {
+        anyhow::bail!(
+            "the undisturbed control of {} differs from its disturbed run before the disturbance",
+            run.row.method
+        );
+    }
+    let d: Vec<f64> = mine.iter().zip(theirs).map(|(a, b)| a - b).collect();
+    let last_out = d.iter().rposition(|x| x.abs() > run.row.band_ns);
+    run.row.recovery_vs_control_ms = back_for_good(last_out, d.len(), run.cycle_ns);
+    run.row.peak_vs_control_ns = Some(d.iter().map(|x| x.abs()).fold(0.0, f64::max));
+    Ok(())
+}
+
+/// Every (scenario, method), on the same seed; the controls' rows (scenario `none`) first.
 pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
-    let jobs: Vec<(String, String)> =
-        o.scenarios.iter().flat_map(|s| o.methods.iter().map(move |m| (s.clone(), m.clone()))).collect();
-    jobs.par_iter().map(|(s, name)| run_one(o, s, name).map_err(|e| anyhow::anyhow!("{s}, {name}: {e:#}"))).collect()
+    let control = o.control || o.scenarios.iter().any(|s| s == CONTROL);
+    let scenarios: Vec<&str> = control
+        .then_some(CONTROL)
+        .into_iter()
+        .chain(o.scenarios.iter().map(String::as_str).filter(|s| *s != CONTROL))
+        .collect();
+    let jobs: Vec<(&str, &str)> =
+        scenarios.iter().flat_map(|s| o.methods.iter().map(move |m| (*s, m.as_str()))).collect();
+    let mut runs = jobs
+        .par_iter()
+        .map(|(s, name)| run_one(o, s, name).map_err(|e| anyhow::anyhow!("{s}, {name}: {e:#}")))
+        .collect::<anyhow::Result<Vec<Run>>>()?;
+    if control {
+        let (controls, disturbed) = runs.split_at_mut(o.methods.len());
+        for run in disturbed {
+            let c = controls.iter().find(|c| c.row.method == run.row.method).expect("one control per method");
+            pair(run, c)?;
+        }
+    }
+    Ok(runs.into_iter().map(|r| r.row).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_of(errors: Vec<f64>, window: usize) -> Run {
+        let row = Row {
+            scenario: "drift-step-50ppm".into(),
+            method: "ferrocat".into(),
+            host: "pc-rt".into(),
+            before_mean_ns: 0.0,
+            before_sd_ns: 0.0,
+            band_ns: 100.0,
+            peak_ns: 0.0,
+            recovery_ms: None,
+            relock_ms: None,
+            locked_before: true,
+            outside_pct: 0.0,
+            after_mean_ns: 0.0,
+            after_rms_ns: 0.0,
+            frames_lost: 0,
+            make_ups: 0,
+            probes_per_s_before: 0.0,
+            probes_after: 0,
+            calibration_ns: None,
+            recovery_vs_control_ms: None,
+            peak_vs_control_ns: None,
+        };
+        Run { row, errors, window, cycle_ns: 1_000_000 }
+    }
+
+    #[test]
+    fn a_run_is_measured_against_its_control_sample_by_sample() {
+        // The control wanders 90 ns away from the level before; the disturbed run follows it
+        // after 3 cycles 400 ns off: out of the control's band for 3 ms, not for the wander.
+        let control: Vec<f64> = (0..40).map(|k| if k < 10 { 0.0 } else { 90.0 }).collect();
+        let mut disturbed = control.clone();
+        for e in &mut disturbed[10..13] {
+            *e += 400.0;
+        }
+        let mut run = run_of(disturbed, 10);
+        pair(&mut run, &run_of(control, 10)).unwrap();
+        assert_eq!(run.row.recovery_vs_control_ms, Some(3.0));
+        assert_eq!(run.row.peak_vs_control_ns, Some(400.0));
+    }
+
+    #[test]
+    fn a_control_that_differs_before_the_disturbance_is_refused() {
+        let control = vec![0.0; 40];
+        let mut disturbed = control.clone();
+        disturbed[9] = 1.0;
+        let err = pair(&mut run_of(disturbed, 10), &run_of(control, 10)).unwrap_err();
+        assert!(err.to_string().contains("differs"), "{err}");
+    }
 }

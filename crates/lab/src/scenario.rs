@@ -82,6 +82,9 @@ pub struct Scenario {
     pub disturbances: Option<Vec<String>>,
     /// park2020: whether ferrocat calibrates through the host's GPIO (default true).
     pub gpio_calibration: Option<bool>,
+    /// robustness: whether each method also runs undisturbed, the control every disturbed run
+    /// is compared with (default true).
+    pub control: Option<bool>,
     #[serde(skip)]
     pub path: PathBuf,
 }
@@ -102,7 +105,7 @@ impl Scenario {
             ($($k:ident),*) => { $( if over.$k.is_some() { self.$k = over.$k; } )* };
         }
         take!(experiment, host, seed, segment, methods, cycle_us, slaves, settle_s, duration_s, samples);
-        take!(sample_every, rounds, reference_ppm, disturbances, gpio_calibration);
+        take!(sample_every, rounds, reference_ppm, disturbances, gpio_calibration, control);
         self
     }
 
@@ -159,6 +162,7 @@ impl Scenario {
         applies("reference_ppm", self.reference_ppm.is_some(), &[Chen2016])?;
         applies("disturbances", self.disturbances.is_some(), &[Robustness])?;
         applies("gpio_calibration", self.gpio_calibration.is_some(), &[Park2020, Robustness])?;
+        applies("control", self.control.is_some(), &[Robustness])?;
         if self.segment.is_some() && (self.slaves.is_some() || self.reference_ppm.is_some()) {
             let key = if self.slaves.is_some() { "slaves" } else { "reference_ppm" };
             return Err(self.err(key, "describes the default segment; with `segment` set it has no meaning"));
@@ -299,6 +303,7 @@ impl Scenario {
                     }
                     o.scenarios = ds.clone();
                 }
+                o.control = self.control.unwrap_or(o.control);
                 o.seed = self.seed.unwrap_or(o.seed);
                 Plan::Robustness(o)
             }
@@ -359,10 +364,12 @@ mod tests {
         assert_eq!((o.seed, o.slaves.clone(), o.methods.clone(), o.rounds), (7, vec![3], vec!["ferrocat".into()], 2));
         assert_eq!((o.settle_s, o.samples, o.cycle_ns, o.host.name), (1.0, 10, 500_000, "beaglebone-rt"));
         assert!(!o.gpio_calibration);
-        let Plan::Robustness(o) = scenario("experiment = 'robustness'\ngpio_calibration = false\n").unwrap() else {
+        let Plan::Robustness(o) =
+            scenario("experiment = 'robustness'\ngpio_calibration = false\ncontrol = false\n").unwrap()
+        else {
             panic!("not robustness")
         };
-        assert!(!o.gpio_calibration);
+        assert!(!o.gpio_calibration && !o.control);
         let Plan::Chen2016(o) = scenario("experiment = 'chen2016'\ncycle_us = [100, 50]\nduration_s = 3\n").unwrap()
         else {
             panic!("not chen2016")
@@ -399,6 +406,7 @@ mod tests {
             ("host = 'pc-rt'\n", "`experiment`"),
             ("experiment = 'robustness'\ndisturbances = ['earthquake']\n", "`disturbances`"),
             ("experiment = 'chen2016'\ngpio_calibration = false\n", "`gpio_calibration`"),
+            ("experiment = 'park2020'\ncontrol = false\n", "`control`"),
         ] {
             let e = format!("{:#}", scenario(text).unwrap_err());
             assert!(e.contains("test.toml") && e.contains(key), "{text}: {e}");

@@ -1,13 +1,15 @@
 //! Robustness runs: every method of the error tables under 1 % frame loss, a 50 ppm step of
 //! the reference's crystal and a 3-cycle overrun of the master, on one seed.
-use ferrocat_lab::robustness::{run, Options, SCENARIOS};
+use ferrocat_lab::robustness::{run, Options, CONTROL, SCENARIOS};
 use ferrocat_master::io::HostModel;
 
 #[test]
 fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
     let o = Options::new(HostModel::pc_rt());
     let rows = run(&o).unwrap();
-    assert_eq!(rows.len(), SCENARIOS.len() * 4);
+    // Each method also undisturbed: the control, first.
+    assert_eq!(rows.len(), (SCENARIOS.len() + 1) * 4);
+    assert!(rows[..4].iter().all(|r| r.scenario == CONTROL) && rows[4..].iter().all(|r| r.scenario != CONTROL));
     for r in &rows {
         println!(
             "{:18} {:12} before {:8.1} ± {:6.1} ns, peak {:9.1} ns, recovery {:?} ms, relock {:?} ms (locked before: {}), \
@@ -16,6 +18,12 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
             r.outside_pct, r.after_mean_ns, r.after_rms_ns, r.frames_lost, r.probes_after
         );
         assert!(r.after_rms_ns.is_finite() && r.peak_ns.is_finite(), "{r:?}");
+        // Paired with its control (the same realisation until the disturbance, which `run`
+        // checks), except the control itself.
+        assert_eq!(r.peak_vs_control_ns.is_some(), r.scenario != CONTROL, "{r:?}");
+        if r.scenario == CONTROL {
+            assert_eq!((r.frames_lost, r.recovery_vs_control_ms), (0, None), "{r:?}");
+        }
         if r.scenario == "loss-1pct" {
             // 1 % of 6 000 cycles' frames, both ways of a round trip: tens of losses.
             assert!(r.frames_lost > 20, "{r:?}");
@@ -43,6 +51,10 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
             // The crystal step: back within 100 ms (probing the reference while the line is
             // uncertain; docs/clock-sync.md, Robustness), having probed it.
             assert!(r.recovery_ms.is_some_and(|ms| ms < 100.0) && r.probes_after > 0, "{r:?}");
+            // And no longer than that from where it would have been undisturbed; the step
+            // moved it hundreds of ns from there first.
+            assert!(r.recovery_vs_control_ms.is_some_and(|ms| ms < 100.0), "{r:?}");
+            assert!(r.peak_vs_control_ns.is_some_and(|ns| ns > 200.0), "{r:?}");
             if r.method == "ferrocat" {
                 // Followers kept on the middle of the reference's sawtooth: every slave back
                 // within 100 ns of it within 100 ms too (docs/clock-sync.md, Robustness).
@@ -71,6 +83,7 @@ fn ferrocat_relocks_every_slave_within_100_ms_of_a_crystal_step() {
             methods: vec!["ferrocat".into()],
             scenarios: vec!["drift-step-50ppm".into()],
             seed,
+            control: false,
             ..Options::new(HostModel::pc_rt())
         };
         let r = &run(&o).unwrap()[0];
@@ -89,6 +102,7 @@ fn ferrocat_recovers_within_100_ms_of_a_crystal_step_on_beaglebone_rt() {
             methods: vec!["ferrocat".into(), "ferrocat-mfr".into()],
             scenarios: vec!["drift-step-50ppm".into()],
             seed,
+            control: false,
             ..Options::new(HostModel::beaglebone_rt())
         };
         for r in &run(&o).unwrap() {
