@@ -370,7 +370,7 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         let mut md = format!(
             "# Robustness\n\nHost `{}`, seed {}, {} slaves, {} µs cycle; one disturbance after {} s of settling, {} s \
              measured after it; error = master − reference (true times), ns. Band: the mean before ± max(4 sd, 100 ns). \
-             vs control: paired with the same method undisturbed (scenario none, the same realisation until the \
+             vs control: paired with the same method undisturbed (scenario control, the same realisation until the \
              disturbance), until the error stayed within the band's half-width of the control's for good, and the \
              largest distance from it. Relock: until every slave stays within 100 ns of the reference and the master within 1 µs \
              (unlocked: not locked before the disturbance). Made up: lost frames ferrocat replaced at once. Probes: \

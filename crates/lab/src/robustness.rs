@@ -4,7 +4,7 @@
 //! and how far and for how long the master–reference error leaves its band, and how long until
 //! the segment is locked again (as the lock time counts it).
 //!
-//! Each method also runs undisturbed on the same seed (the control, scenario `none`): the two
+//! Each method also runs undisturbed on the same seed (the control, scenario `control`): the two
 //! runs are the same realisation up to the disturbance (checked), so the disturbed error minus
 //! the control's is the disturbance's own effect, free of the level's slow wander that a band
 //! drawn over the window before cannot foresee (a stock kernel's software stamps leave the line
@@ -19,7 +19,7 @@ use crate::stats::Moments;
 
 pub const SCENARIOS: [&str; 3] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles"];
 /// The undisturbed run every disturbed one is paired with.
-pub const CONTROL: &str = "none";
+pub const CONTROL: &str = "control";
 
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -274,7 +274,7 @@ fn pair(run: &mut Run, control: &Run) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Every (scenario, method), on the same seed; the controls' rows (scenario `none`) first.
+/// Every (scenario, method), on the same seed; the controls' rows (scenario `control`) first.
 pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
     let control = o.control || o.scenarios.iter().any(|s| s == CONTROL);
     let scenarios: Vec<&str> = control
