@@ -249,3 +249,45 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     assert_eq!(m.slaves[1].name, "EL2004");
     assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
+
+/// A burst of frames (`transact_frames_once`): one frame per group of datagrams, all sent
+/// before any reply is awaited, each with its own stamps; on the wire one after the other.
+#[test]
+fn a_burst_of_frames_leaves_back_to_back_and_each_frame_keeps_its_stamps() {
+    use ferrocat_master::Pdu;
+    use ferrocat_wire::{Address, Command};
+    let toml = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n";
+    let mut m = master(toml, HostModel::nic_hwts());
+    m.bring_up().unwrap();
+    let station = m.slaves[0].station;
+    let mut bufs = [[0u8; 4]; 5];
+    let mut pdus: Vec<Pdu> = bufs
+        .iter_mut()
+        .map(|b| Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0910 }, &mut b[..]))
+        .collect();
+    let sent_before = m.engine.stats.frames_sent;
+    let stamps = m.engine.transact_frames_once(&mut pdus, 1, 1_000_000);
+    assert!(pdus.iter().all(|p| p.wkc == 1));
+    drop(pdus);
+    assert_eq!(m.engine.stats.frames_sent - sent_before, 5, "one frame per datagram");
+    let stamps: Vec<_> = stamps.into_iter().map(|s| s.expect("every frame answered")).collect();
+    // No frame waited for a reply: each was handed over as the last one left (a wait would
+    // put it a round trip and the host's receive time later).
+    for w in stamps.windows(2) {
+        assert!(w[1].handed_ns <= w[0].tx_ns.unwrap(), "{:?} {:?}", w[0], w[1]);
+    }
+    // A 60-byte frame with preamble, FCS and gap holds the port 84 bytes = 6 720 ns: the
+    // NIC's transmit stamps are at least that far apart, and so are the replies.
+    for w in stamps.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        assert!(b.tx_ns.unwrap() - a.tx_ns.unwrap() >= 6_720, "{a:?} {b:?}");
+        assert!(b.rx_ns - a.rx_ns >= 6_720, "{a:?} {b:?}");
+    }
+    // The reference's time read by each frame advances with the frame's own departure.
+    let times: Vec<u32> = bufs.iter().map(|b| u32::from_le_bytes(*b)).collect();
+    for (k, w) in times.windows(2).enumerate() {
+        let dt = w[1].wrapping_sub(w[0]) as i64;
+        let dtx = (stamps[k + 1].tx_ns.unwrap() - stamps[k].tx_ns.unwrap()) as i64;
+        assert!((dt - dtx).abs() <= 20, "frame {k}: time read {dt} ns on, sent {dtx} ns on");
+    }
+}
