@@ -153,8 +153,8 @@ impl<I: Io> Engine<I> {
         let mut log = vec![None; pdus.len().div_ceil(per_frame)];
         let (timeout, retries) = (self.timeout_ns, self.retries);
         (self.timeout_ns, self.retries) = (timeout_ns, 0);
-        // A frame that timed out is the log's None; the others' replies came before its
-        // deadline (sent after it, they return first), so they are logged already.
+        // A frame that timed out is the log's None; the frames sent after it came back before
+        // its deadline, so they are logged already (any not yet sent are None too).
         let _ = self.transact_split(pdus, per_frame, Some((&mut log, per_frame)));
         (self.timeout_ns, self.retries) = (timeout, retries);
         log

@@ -711,7 +711,8 @@ impl ClockSync for Ferrocat {
         // for a late reply either way (bursts that filled the budget at 50 µs cycles delayed
         // the next cycle's frame past SYNC0: chen2016's process data repeated).
         let lead = lead.max(1) as u64;
-        let (per_probe_ns, fixed_ns) = if pipelined { (lead, 4 * lead) } else { (2 * lead, 2 * lead) };
+        let (per_probe_ns, fixed_ns) =
+            if pipelined { (lead, lead.saturating_mul(4)) } else { (lead.saturating_mul(2), lead.saturating_mul(2)) };
         let budget_ns = if uncertain { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
         (budget_ns.saturating_sub(fixed_ns) / per_probe_ns).min(MAX_PROBES) as u32
     }
