@@ -527,104 +527,64 @@ impl<I: Io> Master<I> {
         }
         if !answered.sync && sync.makes_up_lost_frames() && !st.no_probes {
             st.make_ups += 1;
-            self.probe(sync, st, p.station, wide, 1, true)?;
+            self.probe(sync, st, p.station, wide, true)?;
         }
-        // Probes go out back to back, each with its own stamps — but not where the NIC stamps
-        // them: its stamps carry no noise to average, only the reference's 10 ns tick, and
-        // frames back to back at line rate meet that tick at one phase (6 720 ns apart, a
-        // whole number of ticks), so a burst's points shared one rounding and made the line
-        // sure of what it did not know (it then probed on for good).
-        let pipelined = !self.engine.io.rx_stamps_start_of_frame();
-        let probes = if st.no_probes { 0 } else { sync.probes_wanted(pipelined) };
-        st.probes += probes as u64;
-        if pipelined {
-            self.probe(sync, st, p.station, wide, probes as usize, false)?;
-        } else {
-            for _ in 0..probes {
-                self.probe(sync, st, p.station, wide, 1, false)?;
-            }
+        let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
+        for _ in 0..probes {
+            st.probes += 1;
+            self.probe(sync, st, p.station, wide, false)?;
         }
         Ok(c)
     }
 
-    /// `count` probe frames, sent one after the other without waiting (each stamped on its
-    /// own): the reference's time (and offset, where the method steers it) read, and with
-    /// `give_offset` the first one gives the reference the offset the method wants (the write
-    /// answers the offset it replaced); their samples to the method. A lost probe is only
-    /// counted.
+    /// One probe frame: the reference's time (and offset, where the method steers it) read,
+    /// and with `give_offset` the reference given the offset the method wants (the write
+    /// answers the offset it replaced); its sample to the method. A lost probe is only counted.
     fn probe(
         &mut self,
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
         station: u16,
         wide: bool,
-        count: usize,
         give_offset: bool,
     ) -> Result<()> {
-        if count == 0 {
-            return Ok(());
-        }
         let n = if wide { 8 } else { 4 };
+        let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
         let steer = sync.steers_reference_offset();
-        let given = if give_offset && steer { sync.reference_offset(self.master_system_time()) } else { None };
-        let (mut times, mut offsets) = (vec![[0u8; 8]; count], vec![[0u8; 8]; count]);
-        let mut pdus = Vec::with_capacity(2 * count);
-        for (k, (time, offset)) in times.iter_mut().zip(offsets.iter_mut()).enumerate() {
-            if steer {
-                let cmd = match given {
-                    Some(v) if k == 0 => {
-                        *offset = v.to_le_bytes();
-                        Command::FPRW
-                    }
-                    _ => Command::FPRD,
-                };
-                pdus.push(Pdu::new(cmd, at(0x0920), &mut offset[..n]));
+        let built_ns = self.master_system_time();
+        let given = if give_offset && steer { sync.reference_offset(built_ns) } else { None };
+        let offset_cmd = match given {
+            Some(v) => {
+                offset = v.to_le_bytes();
+                Command::FPRW
             }
-            pdus.push(Pdu::new(Command::FPRD, at(0x0910), &mut time[..n]));
-        }
-        let per_frame = if steer { 2 } else { 1 };
-        let frame_bytes = frame_bytes(&pdus[..per_frame.min(pdus.len())]);
-        let stamps = self.engine.transact_frames_once(&mut pdus, per_frame, self.cyclic_timeout_ns);
+            None => Command::FPRD,
+        };
+        let mut pdus =
+            [Pdu::new(offset_cmd, at(0x0920), &mut offset[..n]), Pdu::new(Command::FPRD, at(0x0910), &mut time[..n])];
+        let pdus = if steer { &mut pdus[..] } else { &mut pdus[1..] };
+        let frame_bytes = frame_bytes(pdus);
+        let sent = self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok();
         // An FPRW counts 3 (read and write).
-        let answered: Vec<bool> = pdus
-            .chunks(per_frame)
-            .map(|f| f.iter().all(|p| p.wkc == if p.cmd == Command::FPRW { 3 } else { 1 }))
-            .collect();
-        drop(pdus);
-        for k in 0..count {
-            let Some(fs) = stamps.get(k).copied().flatten().filter(|_| answered[k]) else {
-                st.probes_lost += 1;
-                continue;
-            };
-            let (time, offset) = (u64::from_le_bytes(times[k]), u64::from_le_bytes(offsets[k]));
-            let built_ns = self.master_system_time_at(fs.handed_ns);
-            let mut s = self.sample_of(st, built_ns, frame_bytes, fs.tx_ns, fs.rx_ns);
-            s.reference_ns = if wide { time } else { unwrap32(st.reference_ns, time) };
-            if steer {
-                s.reference_offset_ns = Some(if wide { offset } else { unwrap32(st.reference_offset_ns, offset) });
-            }
-            sync.probe(&s);
+        let answered = sent && pdus.iter().all(|p| p.wkc == if p.cmd == Command::FPRW { 3 } else { 1 });
+        if !answered {
+            st.probes_lost += 1;
+            return Ok(());
         }
+        let (time, offset) = (u64::from_le_bytes(time), u64::from_le_bytes(offset));
+        let mut s = self.stamped_sample(st, built_ns, frame_bytes);
+        s.reference_ns = if wide { time } else { unwrap32(st.reference_ns, time) };
+        if steer {
+            s.reference_offset_ns = Some(if wide { offset } else { unwrap32(st.reference_offset_ns, offset) });
+        }
+        sync.probe(&s);
         Ok(())
     }
 
     /// A sample of the frame just answered, with its stamps; the reference's readings are
     /// the caller's to fill in.
     pub(crate) fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
-        let (tx, rx) = (self.engine.io.last_tx_ns(), self.engine.last_rx_ns);
-        self.sample_of(st, built_ns, frame_bytes, tx, rx)
-    }
-
-    /// A sample of a frame the link stamped `tx` and `rx` (world clock).
-    fn sample_of(
-        &mut self,
-        st: &SyncState,
-        built_ns: u64,
-        frame_bytes: u64,
-        tx: Option<u64>,
-        rx: u64,
-    ) -> crate::sync::Sample {
         let to_sys = |m: &mut Self, world: u64| -> u64 {
             let now = m.engine.io.now_ns();
             m.master_system_time().wrapping_sub(now.wrapping_sub(world))
@@ -633,8 +593,8 @@ impl<I: Io> Master<I> {
         // first preamble bit, which is what an ESC latches: take them back to that bit.
         let hw = self.engine.io.rx_stamps_start_of_frame();
         let sfd = if hw { PREAMBLE_NS } else { 0 };
-        let tx = tx.map(|t| t.wrapping_sub(sfd));
-        let rx = rx.wrapping_sub(sfd);
+        let tx = self.engine.io.last_tx_ns().map(|t| t.wrapping_sub(sfd));
+        let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
         crate::sync::Sample {
             cycle: st.cycle,
             built_ns,

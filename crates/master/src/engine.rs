@@ -48,19 +48,7 @@ struct Slot {
     len: usize,
     tries: u32,
     deadline: u64,
-    /// When the frame was handed to the link (world clock), and the link's stamps of it.
-    handed_ns: u64,
-    tx_ns: Option<u64>,
     buf: Box<[u8; FRAME]>,
-}
-
-/// One frame of [`Engine::transact_frames_once`]: when it was handed to the link and what the
-/// link stamped (world clock); `None` where it was not answered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FrameStamps {
-    pub handed_ns: u64,
-    pub tx_ns: Option<u64>,
-    pub rx_ns: u64,
 }
 
 #[derive(Debug)]
@@ -107,8 +95,6 @@ impl<I: Io> Engine<I> {
                     len: 0,
                     tries: 0,
                     deadline: 0,
-                    handed_ns: 0,
-                    tx_ns: None,
                     buf: Box::new([0; FRAME]),
                 })
                 .collect(),
@@ -136,52 +122,22 @@ impl<I: Io> Engine<I> {
     }
 
     pub fn transact(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
-        self.transact_split(pdus, usize::MAX, None)
-    }
-
-    /// Each `per_frame` PDUs in a frame of their own, all sent before the replies are awaited
-    /// (as many as there are slots), once, within `timeout_ns`; per frame, in order, when it
-    /// left and came back, or `None` where no reply came. The frames of a burst each carry
-    /// their own stamps, which one frame of many datagrams would share.
-    pub fn transact_frames_once(
-        &mut self,
-        pdus: &mut [Pdu<'_>],
-        per_frame: usize,
-        timeout_ns: u64,
-    ) -> Vec<Option<FrameStamps>> {
-        let per_frame = per_frame.max(1);
-        let mut log = vec![None; pdus.len().div_ceil(per_frame)];
-        let (timeout, retries) = (self.timeout_ns, self.retries);
-        (self.timeout_ns, self.retries) = (timeout_ns, 0);
-        // A frame that timed out is the log's None; the frames sent after it came back before
-        // its deadline, so they are logged already (any not yet sent are None too).
-        let _ = self.transact_split(pdus, per_frame, Some((&mut log, per_frame)));
-        (self.timeout_ns, self.retries) = (timeout, retries);
-        log
-    }
-
-    fn transact_split(
-        &mut self,
-        pdus: &mut [Pdu<'_>],
-        per_frame: usize,
-        mut log: Option<(&mut Vec<Option<FrameStamps>>, usize)>,
-    ) -> Result<()> {
         let mut next = 0;
         loop {
             // Fill free slots with the next frames.
             while next < pdus.len() {
                 let Some(s) = self.slots.iter().position(|s| !s.busy) else { break };
-                next = self.build(s, pdus, next, per_frame)?;
-                self.send(s, log.is_some())?;
+                next = self.build(s, pdus, next)?;
+                self.send(s)?;
             }
             if self.slots.iter().all(|s| !s.busy) {
                 return Ok(());
             }
-            self.receive(pdus, log.as_mut().map(|(l, n)| (&mut **l, *n)))?;
+            self.receive(pdus)?;
         }
     }
 
-    fn build(&mut self, s: usize, pdus: &[Pdu<'_>], first: usize, per_frame: usize) -> Result<usize> {
+    fn build(&mut self, s: usize, pdus: &[Pdu<'_>], first: usize) -> Result<usize> {
         self.next_idx = self.next_idx.wrapping_add(1);
         let idx = self.next_idx;
         let slot = &mut self.slots[s];
@@ -190,7 +146,7 @@ impl<I: Io> Engine<I> {
         let mut k = first;
         while k < pdus.len() {
             let need = HEADER_LEN + pdus[k].data.len() + WKC_LEN;
-            if k > first && (used + need > MAX_PDU_LEN || k - first >= per_frame) {
+            if k > first && used + need > MAX_PDU_LEN {
                 break;
             }
             if need > MAX_PDU_LEN {
@@ -214,22 +170,17 @@ impl<I: Io> Engine<I> {
         Ok(k)
     }
 
-    fn send(&mut self, s: usize, stamp: bool) -> Result<()> {
+    fn send(&mut self, s: usize) -> Result<()> {
         let now = self.io.now_ns();
         let slot = &mut self.slots[s];
         slot.tries += 1;
         slot.deadline = now + self.timeout_ns;
-        slot.handed_ns = now;
         self.io.send(&slot.buf[..slot.len])?;
-        // On a real link a stamp from before the hand-over is an earlier frame's (its own not
-        // in yet); the virtual link's is always its own (its model may stamp early).
-        let real = !self.io.is_virtual();
-        slot.tx_ns = if stamp { self.io.last_tx_ns().filter(|&t| !real || t >= now) } else { None };
         self.stats.frames_sent += 1;
         Ok(())
     }
 
-    fn receive(&mut self, pdus: &mut [Pdu<'_>], log: Option<(&mut Vec<Option<FrameStamps>>, usize)>) -> Result<()> {
+    fn receive(&mut self, pdus: &mut [Pdu<'_>]) -> Result<()> {
         let deadline = self.slots.iter().filter(|s| s.busy).map(|s| s.deadline).min().unwrap_or(0);
         match self.io.recv(&mut self.rx[..], deadline)? {
             Some((n, t)) => {
@@ -251,9 +202,6 @@ impl<I: Io> Engine<I> {
                     p.data[..n].copy_from_slice(&d.data()[..n]);
                     p.wkc = d.wkc();
                 }
-                if let Some(entry) = log.and_then(|(l, n)| l.get_mut(slot.first / n)) {
-                    *entry = Some(FrameStamps { handed_ns: slot.handed_ns, tx_ns: slot.tx_ns, rx_ns: t });
-                }
                 slot.busy = false;
                 self.stats.frames_received += 1;
                 Ok(())
@@ -274,7 +222,7 @@ impl<I: Io> Engine<I> {
                         });
                     }
                     self.stats.retries += 1;
-                    self.send(s, false)?;
+                    self.send(s)?;
                 }
                 Ok(())
             }

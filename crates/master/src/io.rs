@@ -280,9 +280,6 @@ pub struct VirtualIo {
     /// Frames the segment did not return.
     pub lost: u64,
     last_tx: Option<u64>,
-    /// When the master's port is free again: a frame handed over while the last is still
-    /// going out waits for it (preamble, frame, FCS and the inter-frame gap at 100 Mbit/s).
-    wire_free_ns: u64,
     /// The NIC's receive stamp of the frame in each slot.
     rx_stamps: [u64; 32],
     /// Where the host's calibration output is wired: (segment node, LATCH unit).
@@ -307,7 +304,6 @@ impl VirtualIo {
             slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),
             lost: 0,
             last_tx: None,
-            wire_free_ns: 0,
             rx_stamps: [0; 32],
             gpio_wire: None,
             gpio_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x6710),
@@ -356,8 +352,7 @@ impl Io for VirtualIo {
 
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let rng = if std::mem::take(&mut self.woke) { &mut self.slot_rng } else { &mut self.rng };
-        let t_wire = (self.now + self.host.send.sample(rng)).max(self.wire_free_ns);
-        self.wire_free_ns = t_wire + (8 + frame.len().max(60) as u64 + 4 + 12) * 80;
+        let t_wire = self.now + self.host.send.sample(rng);
         // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit.
         self.last_tx = match self.host.stamps {
             Stamps::None => None,

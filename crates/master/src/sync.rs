@@ -111,8 +111,7 @@ pub trait ClockSync {
     }
     /// How many probe frames the method wants after this cycle's: each only reads the
     /// reference's time (and offset), and its sample goes to [`ClockSync::probe`].
-    /// `pipelined`: the master sends them one after the other without awaiting replies.
-    fn probes_wanted(&self, _pipelined: bool) -> u32 {
+    fn probes_wanted(&self) -> u32 {
         0
     }
     /// Takes a probe frame's sample.
@@ -467,14 +466,11 @@ impl RunningMean {
 }
 
 /// Probing: extra frames while the line's value one cycle ahead is less certain than this
-/// many noise scales — what a settled window of 9216 points gives at its end (2/√9216); the
-/// full window is at 1/64 and does not probe (at 1/64 itself a settled line probed on for
-/// good). Steering the reference's offset leaves it a sawtooth of up to half the 100 ns band
-/// after a crystal step, so the line must get back to a few ns, not a few dozen (1/16 left
-/// beaglebone-rt outside its band for up to 0.5 s). At 1/32 a restarted line stopped probing
-/// ≈ 25 ns off on a stock kernel's stamps (σ ≈ 1 µs) and sat there, beside a line of 16 s that
-/// had not restarted, for seconds (docs/clock-sync.md, session 25)…
-const PROBE_TARGET_SCALES: f64 = 1.0 / 48.0;
+/// many noise scales — what a settled window of 4096 points gives at its end (2/√4096); the
+/// full window is at 1/64 and does not probe. Steering the reference's offset leaves it a
+/// sawtooth of up to half the 100 ns band after a crystal step, so the line must get back to
+/// a few ns, not a few dozen (1/16 left beaglebone-rt outside its band for up to 0.5 s)…
+const PROBE_TARGET_SCALES: f64 = 1.0 / 32.0;
 /// …or while the line's change test is this far towards restarting it (a change shows sooner
 /// in more points)…
 const PROBE_SUSPICION: f64 = 0.25;
@@ -699,22 +695,17 @@ impl ClockSync for Ferrocat {
             Coupling::ReferenceFollowsMaster => None,
         }
     }
-    fn probes_wanted(&self, pipelined: bool) -> u32 {
+    fn probes_wanted(&self) -> u32 {
         let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
         let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
         if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }
-        // A probe that waits for the last one's reply costs a round trip and the send before
-        // it: twice the lead. Sent without waiting, its send is its cost, which the lead
-        // bounds, and the last one's round trip comes on top. Twice the lead is kept as slack
-        // for a late reply either way (bursts that filled the budget at 50 µs cycles delayed
-        // the next cycle's frame past SYNC0: chen2016's process data repeated).
-        let lead = lead.max(1) as u64;
-        let (per_probe_ns, fixed_ns) =
-            if pipelined { (lead, lead.saturating_mul(4)) } else { (lead.saturating_mul(2), lead.saturating_mul(2)) };
+        // A probe costs about a round trip and the send before it: twice the lead. One probe's
+        // worth of the budget is kept as slack for a late reply.
+        let cost_ns = lead.saturating_mul(2).max(1) as u64;
         let budget_ns = if uncertain { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
-        (budget_ns.saturating_sub(fixed_ns) / per_probe_ns).min(MAX_PROBES) as u32
+        (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
     }
     fn probe(&mut self, s: &Sample) {
         if let Some(y) = self.line_point(s) {
