@@ -163,24 +163,22 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let mut take = |samples: Vec<crate::sampler::Sample>| {
         for s in samples {
             let k = s.tag;
+            // Only the band window and what follows it count.
+            if k + window < settle {
+                continue;
+            }
             let e = s.errors_ns[0] as f64;
-            if k + window >= settle {
-                let locked = crate::sampler::locked(&s.errors_ns);
-                match k.checked_sub(settle) {
-                    Some(after) if !locked => last_unlocked = Some(after),
-                    None => locked_before &= locked,
-                    _ => {}
-                }
+            let locked = crate::sampler::locked(&s.errors_ns);
+            match k.checked_sub(settle) {
+                Some(after) if !locked => last_unlocked = Some(after),
+                None => locked_before &= locked,
+                _ => {}
             }
-            if k + window >= settle {
-                errors.push(e);
-            }
-            if k >= settle {
-                if k >= settle + after / 2 {
-                    late.push(e);
-                }
-            } else if k + window >= settle {
+            errors.push(e);
+            if k < settle {
                 before.push(e);
+            } else if k >= settle + after / 2 {
+                late.push(e);
             }
         }
     };

@@ -401,9 +401,9 @@ impl LineFit {
         let n = s.n as f64;
         let slope = match self.prior_slope {
             Some(prior) => {
-                let (spread, covariance) = if sxx > 0 { (sxx as f64 / n, sxz as f64 / n) } else { (0.0, 0.0) };
-                let lambda = self.prior_weight();
-                (covariance + lambda * prior) / (spread + lambda)
+                let covariance = if sxx > 0 { sxz as f64 / n } else { 0.0 };
+                // Σ(x − x̄)² + λ: never 0 with a prior.
+                self.slope_precision().map_or(prior, |p| (covariance + self.prior_weight() * prior) / p)
             }
             None if sxx > 0 => sxz as f64 / sxx as f64,
             None => 0.0,
