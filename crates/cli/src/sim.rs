@@ -76,7 +76,7 @@ fn peak_rss_kib() -> Option<u64> {
 /// runs `REPEATS` times on, and the median run is reported (one short run swings by ±25 % on a
 /// shared VM).
 pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
-    use ferrocat_segment::bench::CyclicBench;
+    use ferrocat_segment::bench::{CyclicBench, TclBench};
     const REPEATS: usize = 7;
     let mut rows = Vec::new();
     for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 60.0f64), (64, 1000, 10.0), (256, 100, 1.0)] {
@@ -96,17 +96,45 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
         if !json {
             println!(
                 "{slaves:4} slaves, {cycle_us:5} us cycle: {sim_s:5.1} s simulated in {wall:6.3} s wall = {speed:8.1}x real time \
-                 (median of {REPEATS}, {slow:.1}–{fast:.1}x; {:.0} ns per cycle, {} lost)",
+                 (median of {REPEATS}, {slow:.1}–{fast:.1}x; {:.0} ns per cycle, {:.0} per ESC visit, {} lost)",
                 wall * 1e9 / cycles as f64,
+                wall * 1e9 / (cycles * slaves as u64) as f64,
                 b.lost
             );
         }
         rows.push(json!({"slaves": slaves, "cycle_us": cycle_us, "simulated_s": sim_s, "wall_s": wall,
                          "speedup": speed, "repeats": REPEATS, "speedup_min": slow, "speedup_max": fast}));
     }
+    // A floor under the ESC visit: the time control loop's sample alone, which every follower
+    // takes from the FRMW each cycle.
+    let mut tcl = TclBench::new(256, 100_000);
+    let tcl_cycles = 4_000u64;
+    let mut tcl_ns: Vec<f64> = (0..REPEATS)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            tcl.run(tcl_cycles);
+            t0.elapsed().as_secs_f64() * 1e9 / (tcl_cycles * tcl.units() as u64) as f64
+        })
+        .collect();
+    tcl_ns.sort_by(f64::total_cmp);
+    let tcl_sample_ns = tcl_ns[REPEATS / 2];
+    // 20x real time for 256 slaves at 100 us: 100 us / 20 / 256 per ESC visit.
+    let budget_ns = 100_000.0 / 20.0 / 256.0;
+    if !json {
+        println!(
+            "time control loop sample alone: {tcl_sample_ns:.1} ns (median of {REPEATS}, {:.1}–{:.1}; SCD sum {}); \
+             an ESC visit at 20x real time for 256 slaves at 100 us may take {budget_ns:.1} ns",
+            tcl_ns[0],
+            tcl_ns[REPEATS - 1],
+            tcl.scd_sum()
+        );
+    }
     let peak = peak_rss_kib();
     if json {
-        println!("{}", json!({"rows": rows, "peak_rss_kib": peak}));
+        println!(
+            "{}",
+            json!({"rows": rows, "peak_rss_kib": peak, "tcl_sample_ns": tcl_sample_ns, "visit_budget_20x_256_ns": budget_ns})
+        );
     } else if let Some(k) = peak {
         println!("peak resident memory (all three runs, 256 slaves the largest): {:.1} MiB", k as f64 / 1024.0);
     }

@@ -1,6 +1,6 @@
 //! Virtual-time speed of the segment: one LRW + FRMW frame per cycle.
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use ferrocat_segment::bench::CyclicBench;
+use ferrocat_segment::bench::{CyclicBench, TclBench};
 
 fn cyclic(c: &mut Criterion) {
     let mut g = c.benchmark_group("virtual_time");
@@ -11,6 +11,11 @@ fn cyclic(c: &mut Criterion) {
             bench.iter(|| b.run(1000))
         });
     }
+    g.finish();
+    let mut g = c.benchmark_group("tcl_sample");
+    let mut b = TclBench::new(256, 100_000);
+    g.throughput(Throughput::Elements(256 * 100));
+    g.bench_function("256 units, 100 cycles", |bench| bench.iter(|| b.run(100)));
     g.finish();
 }
 

@@ -6,6 +6,8 @@ use ferrocat_wire::register::{Fmmu, SyncManager};
 use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
 
 use crate::{Segment, SegmentConfig};
+use ferrocat_esc::dc::DcUnit;
+use ferrocat_esc::DcWidth;
 
 /// A segment of `slaves` devices, configured and in OP, with the cyclic frame ready.
 #[derive(Debug)]
@@ -99,6 +101,66 @@ impl CyclicBench {
                 self.lost += 1;
             }
             self.t_ns += self.cycle_ns;
+        }
+    }
+}
+
+/// The time control loop alone: `units` DC units with crystals spread over ±50 ppm, each taking
+/// one sample per cycle of `cycle_ns` as the followers of [`CyclicBench`] do, nothing else in
+/// the loop. Its cost per sample is a floor under the cost of an ESC visit in that workload.
+#[derive(Debug)]
+pub struct TclBench {
+    units: Vec<DcUnit>,
+    t_ns: u64,
+    cycle_ns: u64,
+}
+
+impl TclBench {
+    /// `units` units, run for 5 000 cycles so that every loop has settled (its SCD moving
+    /// sample by sample, as in the cyclic workload).
+    pub fn new(units: usize, cycle_ns: u64) -> Self {
+        let units = (0..units as i64)
+            .map(|k| DcUnit::new(DcWidth::Bits64, 0, 1_000_000 + k as u64 * 37, (k * 7_919) % 100_001 - 50_000))
+            .collect();
+        let mut b = TclBench { units, t_ns: 1_000_000, cycle_ns };
+        b.run(5_000);
+        b
+    }
+
+    /// `cycles` cycles: one sample per unit each, the units 600 ns apart as on a line, each
+    /// written the reference time at its own arrival (a follower's FRMW, its delay taken out).
+    pub fn run(&mut self, cycles: u64) {
+        for _ in 0..cycles {
+            for (k, u) in self.units.iter_mut().enumerate() {
+                let at_ns = self.t_ns + k as u64 * 600;
+                u.tcl_sample(at_ns, (at_ns + 1_000_000) as u32);
+            }
+            self.t_ns += self.cycle_ns;
+        }
+    }
+
+    pub fn units(&self) -> usize {
+        self.units.len()
+    }
+
+    /// The units' speed counter differences (to show the loops are moving).
+    pub fn scd_sum(&self) -> i64 {
+        self.units.iter().map(|u| u.scd as i64).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The loop workload is the settled one the cyclic bench has: every unit's difference is
+    /// pulled in and its SCD counters its own crystal (positive SCD slows a fast clock).
+    #[test]
+    fn tcl_bench_units_settle_against_their_crystals() {
+        let b = TclBench::new(8, 100_000);
+        for u in &b.units {
+            assert!(u.diff_mean_ns().abs() <= 20, "difference {} ns", u.diff_mean_ns());
+            assert_eq!(u.scd.signum() as i64, u.drift_ppb.signum(), "drift {} ppb, SCD {}", u.drift_ppb, u.scd);
         }
     }
 }
