@@ -353,11 +353,11 @@ impl Io for VirtualIo {
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let rng = if std::mem::take(&mut self.woke) { &mut self.slot_rng } else { &mut self.rng };
         let t_wire = self.now + self.host.send.sample(rng);
-        // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit.
+        // The kernel stamps the hand-over to the NIC, which cannot see the NIC's queue.
         self.last_tx = match self.host.stamps {
             Stamps::None => None,
             Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(rng))),
-            Stamps::Hardware => Some(t_wire + 8 * 80),
+            Stamps::Hardware => None,
         };
         let Some(k) = self.slots.iter().position(|s| !s.3) else {
             return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
@@ -365,7 +365,13 @@ impl Io for VirtualIo {
         let slot = &mut self.slots[k];
         let n = frame.len().min(slot.2.len());
         slot.2[..n].copy_from_slice(&frame[..n]);
-        match self.seg.exchange(&mut slot.2[..n], t_wire) {
+        let back = self.seg.exchange(&mut slot.2[..n], t_wire);
+        // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit
+        // leaves, which is later than handed over if the frame before was still on the wire.
+        if self.host.stamps == Stamps::Hardware {
+            self.last_tx = Some(self.seg.last_departure_ns() + 8 * 80);
+        }
+        match back {
             Some(back) => {
                 let deliver = back + self.host.recv.sample(rng);
                 self.rx_stamps[k] = match self.host.stamps {

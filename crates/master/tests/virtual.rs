@@ -249,3 +249,47 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     assert_eq!(m.slaves[1].name, "EL2004");
     assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
+
+/// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the
+/// second leaves after the first. A NIC's transmit stamp shows the wait; the kernel's software
+/// stamp, taken at the hand-over, does not — as on real hardware.
+#[test]
+fn back_to_back_frames_queue_at_the_nic_and_only_its_stamps_see_it() {
+    use ferrocat_master::io::{Io, Latency, Stamps};
+    use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+    use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
+    let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
+    let mut frame = vec![0u8; 1514];
+    let mut w = FrameWriter::new(&mut frame, &eth).unwrap();
+    w.push(&DatagramHeader::new(Command::BRD, 1, Address::Device { adp: 0, ado: 0 }, 100), &[0; 100], 0).unwrap();
+    let n = w.finish().unwrap();
+    frame.truncate(n);
+    let wire_ns = (8 + n as u64 + 4 + 12) * 80;
+    for stamps in
+        [Stamps::Hardware, Stamps::Software { tx_early: Latency::fixed(500.0), rx_late: Latency::fixed(500.0) }]
+    {
+        let host = HostModel {
+            name: "test",
+            send: Latency::fixed(1_000.0),
+            recv: Latency::fixed(1_000.0),
+            wake: Latency::ZERO,
+            stamps,
+            timer_resolution_ns: 0,
+            gpio: None,
+        };
+        let cfg = SegmentConfig::from_device_args(&["EK1100".into(), "EL2004".into()]).unwrap();
+        let mut io = VirtualIo::new(cfg.build().unwrap(), host, 1);
+        io.send(&frame).unwrap();
+        let tx1 = io.last_tx_ns().unwrap();
+        io.send(&frame).unwrap();
+        let tx2 = io.last_tx_ns().unwrap();
+        let mut buf = [0u8; 1536];
+        let (_, rx1) = io.recv(&mut buf, u64::MAX).unwrap().unwrap();
+        let (_, rx2) = io.recv(&mut buf, u64::MAX).unwrap().unwrap();
+        assert_eq!(rx2 - rx1, wire_ns, "{stamps:?}: the replies come back a frame apart");
+        match stamps {
+            Stamps::Hardware => assert_eq!(tx2 - tx1, wire_ns, "the NIC stamps the real departure"),
+            _ => assert_eq!(tx2 - tx1, 1_000, "the kernel stamps the hand-over"),
+        }
+    }
+}

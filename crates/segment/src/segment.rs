@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 
 use crate::watch::Watch;
 
-use crate::timing::{EscTiming, PortKind, FCS_BYTES, NS_PER_BYTE, PREAMBLE_BYTES};
+use crate::timing::{EscTiming, PortKind, FCS_BYTES, IFG_BYTES, NS_PER_BYTE, PREAMBLE_BYTES};
 
 /// The far end of a link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -111,6 +111,10 @@ pub struct Segment {
     route: Route,
     /// Instants whose system times are still being filled in, oldest first.
     watches: VecDeque<Watch>,
+    /// When the master's link can take the next frame's first bit, and when the last frame's
+    /// first bit left: one frame at a time on a wire.
+    link_free_ns: u64,
+    last_departure_ns: u64,
 }
 
 /// The last walk through the segment, relative to the instant the frame reached the first ESC:
@@ -149,6 +153,8 @@ impl Segment {
             stats: SegmentStats::default(),
             route: Route::default(),
             watches: VecDeque::new(),
+            link_free_ns: 0,
+            last_departure_ns: 0,
         }
     }
 
@@ -190,6 +196,12 @@ impl Segment {
 
     pub fn now_ns(&self) -> u64 {
         self.now_ns
+    }
+
+    /// When the last frame given to [`Segment::exchange`] really left: later than asked if the
+    /// link was still busy with the one before.
+    pub fn last_departure_ns(&self) -> u64 {
+        self.last_departure_ns
     }
 
     /// Schedules `event` at true time `t_ns`.
@@ -379,9 +391,16 @@ impl Segment {
     }
 
     /// Sends an Ethernet frame (without FCS) whose first preamble bit leaves the master at
-    /// `t_tx_ns`. Returns the true time at which the master has received the whole frame back,
+    /// `t_tx_ns`, or once the link is free of the frame before ([`Segment::last_departure_ns`]).
+    /// Returns the true time at which the master has received the whole frame back,
     /// with `frame` modified in place, or `None` if it does not come back.
     pub fn exchange(&mut self, frame: &mut [u8], t_tx_ns: u64) -> Option<u64> {
+        // A frame handed over while the last one is still on the master's link leaves after it
+        // and the inter-frame gap, as from a NIC's transmit queue.
+        let t_tx_ns = t_tx_ns.max(self.link_free_ns);
+        self.last_departure_ns = t_tx_ns;
+        self.link_free_ns =
+            t_tx_ns + (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES + IFG_BYTES) * NS_PER_BYTE;
         self.close_watches_until(t_tx_ns);
         self.advance_shared(t_tx_ns);
         self.stats.frames += 1;

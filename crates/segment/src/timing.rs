@@ -43,3 +43,5 @@ pub const NS_PER_BYTE: u64 = 80;
 /// Preamble and start-of-frame delimiter ahead of the frame; FCS after it.
 pub const PREAMBLE_BYTES: u64 = 8;
 pub const FCS_BYTES: u64 = 4;
+/// The inter-frame gap: the least idle time between two frames on a link.
+pub const IFG_BYTES: u64 = 12;

@@ -120,3 +120,46 @@ fn builtin_devices_and_bad_descriptions() {
         assert!(e.contains(want), "{toml}: {e}");
     }
 }
+
+/// One frame at a time on the master's link: a frame handed over while the one before is
+/// still on the wire leaves after it and the 12-byte gap, and comes back that much later.
+#[test]
+fn frames_handed_over_together_leave_one_after_another() {
+    let cfg = SegmentConfig::from_device_args(&["EK1100".into(), "EL2004".into()]).unwrap();
+    let mut seg = cfg.build().unwrap();
+    let eth = ferrocat_wire::ethernet::EthernetRepr {
+        dst: ferrocat_wire::ethernet::BROADCAST,
+        src: [0x10; 6],
+        vlan_tci: None,
+        ethertype: 0,
+    };
+    let frame = |len: u16| {
+        let mut buf = vec![0u8; 1514];
+        let mut w = ferrocat_wire::FrameWriter::new(&mut buf, &eth).unwrap();
+        let h = ferrocat_wire::DatagramHeader::new(Command::BRD, 1, Address::Device { adp: 0, ado: 0 }, len);
+        w.push(&h, &vec![0; len as usize], 0).unwrap();
+        let n = w.finish().unwrap();
+        buf.truncate(n);
+        buf
+    };
+    let t0 = 5_000_000;
+    // Alone: leaves when handed over.
+    let mut a = frame(200);
+    let alone = seg.exchange(&mut a, t0).unwrap() - t0;
+    assert_eq!(seg.last_departure_ns(), t0);
+    // Two handed over 1 µs apart: the second waits for the first's 8 + len + 4 bytes and the gap.
+    let t1 = t0 + 1_000_000;
+    let mut first = frame(200);
+    let wire_ns = (8 + first.len() as u64 + 4 + 12) * 80;
+    let back_first = seg.exchange(&mut first, t1).unwrap();
+    assert_eq!(back_first - t1, alone);
+    let mut second = frame(200);
+    let back_second = seg.exchange(&mut second, t1 + 1_000).unwrap();
+    assert_eq!(seg.last_departure_ns(), t1 + wire_ns);
+    assert_eq!(back_second - back_first, wire_ns);
+    // Handed over after the link is free again: no wait.
+    let t2 = t1 + 2 * wire_ns + 50_000;
+    let mut third = frame(200);
+    seg.exchange(&mut third, t2).unwrap();
+    assert_eq!(seg.last_departure_ns(), t2);
+}
