@@ -133,7 +133,8 @@ pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool, log_clo
             // The answer reaches the other end partway through the send call: its kernel
             // transmit stamp says when (the call's return, without one).
             let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(start, sent));
-            place.answered(n, back.saturating_sub(entry), left - start);
+            // The trip from the frame's departure: a wait for the link is not part of it.
+            place.answered(n, back.saturating_sub(seg.last_departure_ns()), left - start);
         }
         if let Some(log) = stats.clock_log.as_mut() {
             log.push(t0 + place.last_ns);
