@@ -384,6 +384,10 @@ pub struct SyncState {
     pub probes_lost: u64,
     /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`]).
     pub make_ups: u64,
+    /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
+    /// probes stopped early so as not to make the next cycle late.
+    pub probe_mean_ns: u64,
+    pub probes_cut: u64,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -530,9 +534,26 @@ impl<I: Io> Master<I> {
             self.probe(sync, st, p.station, wide, true)?;
         }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
+        let window_ns = sync.probe_window_ns();
+        // Before the first probe, the cycle so far (at least the frame's exchange) stands for
+        // one.
+        let first_guess_ns = self.master_system_time().wrapping_sub(p.built_ns);
         for _ in 0..probes {
+            // Probing must not make the next cycle late: a probe twice as long as they have
+            // taken on average still ends within the window.
+            let elapsed_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let expected_ns = if st.probe_mean_ns > 0 { st.probe_mean_ns } else { first_guess_ns };
+            if elapsed_ns.saturating_add(expected_ns.saturating_mul(2)) > window_ns {
+                st.probes_cut += 1;
+                break;
+            }
+            let start_ns = self.engine.io.now_ns();
             st.probes += 1;
             self.probe(sync, st, p.station, wide, false)?;
+            // Mean over about 16 probes.
+            let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
+            st.probe_mean_ns =
+                if st.probe_mean_ns == 0 { took_ns } else { st.probe_mean_ns - st.probe_mean_ns / 16 + took_ns / 16 };
         }
         Ok(c)
     }

@@ -114,6 +114,12 @@ pub trait ClockSync {
     fn probes_wanted(&self) -> u32 {
         0
     }
+    /// How long after the cycle's frame was built its probes must have ended (ns): the next
+    /// cycle's frame is due then. None starts that, at twice the probes' mean duration so far,
+    /// would not end in time.
+    fn probe_window_ns(&self) -> u64 {
+        0
+    }
     /// Takes a probe frame's sample.
     fn probe(&mut self, _sample: &Sample) {}
     /// Whether a lost cycle's frame is made up at once by a frame that gives the reference
@@ -706,6 +712,9 @@ impl ClockSync for Ferrocat {
         let cost_ns = lead.saturating_mul(2).max(1) as u64;
         let budget_ns = if uncertain { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
         (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
+    }
+    fn probe_window_ns(&self) -> u64 {
+        self.cycle_ns
     }
     fn probe(&mut self, s: &Sample) {
         if let Some(y) = self.line_point(s) {

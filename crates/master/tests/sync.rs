@@ -321,3 +321,47 @@ fn a_lost_frame_is_made_up_at_once_when_the_reference_follows_by_its_offset() {
     // later, aimed half a cycle on, it is a quarter cycle off by the next frame (10 ns).
     assert!(without > 30.0 && with < without / 2.0, "{with} vs {without}");
 }
+
+/// Probing never makes the next cycle late: on a host whose stamps are quick but whose replies
+/// reach the program 200 µs late, a probe costs ten times what the lead suggests, and the
+/// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
+#[test]
+fn probes_end_within_the_cycle_on_a_slow_receive_path() {
+    use ferrocat_master::io::{Latency, Stamps};
+    let host = HostModel {
+        name: "slow-receive",
+        send: Latency::fixed(10_000.0),
+        recv: Latency::fixed(200_000.0),
+        wake: Latency::fixed(5_000.0),
+        stamps: Stamps::Software { tx_early: Latency::fixed(1_000.0), rx_late: Latency::fixed(1_000.0) },
+        timer_resolution_ns: 0,
+        gpio: None,
+    };
+    let mut m = segment(host);
+    let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
+    // Only the cycle's frame and its probes: no writes of the followers' delays between them.
+    sync.centre_followers = false;
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let mut longest_ns = 0;
+    for _ in 0..200 {
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+        // When the cycle really began: late if the one before overran.
+        let began = m.engine.io.now_ns();
+        let probes_before = st.probes;
+        m.sync_step(&mut sync, &mut st).unwrap();
+        // A cycle whose own writes (an offset shift to every slave) took it past its end has
+        // no room for probes; those that probed must have ended within a period.
+        if st.probes > probes_before {
+            longest_ns = longest_ns.max(m.engine.io.now_ns() - began);
+        }
+    }
+    assert!(st.probes > 0, "the young line probes");
+    assert!(longest_ns <= CYCLE_NS, "a cycle that probed ended {longest_ns} ns after it began");
+    assert!(st.probes_cut > 0, "the window cut probing short");
+    println!(
+        "probes {}, cut in {} cycles, mean {} ns, longest cycle {longest_ns} ns",
+        st.probes, st.probes_cut, st.probe_mean_ns
+    );
+}
