@@ -72,6 +72,19 @@ fn peak_rss_kib() -> Option<u64> {
     s.lines().find_map(|l| l.strip_prefix("VmHWM:")).and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
 }
 
+/// The wall time (s) of `repeats` runs of `run`, shortest first.
+fn sorted_walls_s(repeats: usize, mut run: impl FnMut()) -> Vec<f64> {
+    let mut walls: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let t0 = std::time::Instant::now();
+            run();
+            t0.elapsed().as_secs_f64()
+        })
+        .collect();
+    walls.sort_by(f64::total_cmp);
+    walls
+}
+
 /// `ferrocat sim --bench`: virtual-time speed with one LRW + FRMW frame per cycle; each size
 /// runs `REPEATS` times on, and the median run is reported (one short run swings by ±25 % on a
 /// shared VM).
@@ -82,14 +95,7 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
     for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 60.0f64), (64, 1000, 10.0), (256, 100, 1.0)] {
         let mut b = CyclicBench::new(slaves, cycle_us * 1000, 1);
         let cycles = (sim_s * 1e6 / cycle_us as f64) as u64;
-        let mut walls: Vec<f64> = (0..REPEATS)
-            .map(|_| {
-                let t0 = std::time::Instant::now();
-                b.run(cycles);
-                t0.elapsed().as_secs_f64()
-            })
-            .collect();
-        walls.sort_by(f64::total_cmp);
+        let walls = sorted_walls_s(REPEATS, || b.run(cycles));
         let wall = walls[REPEATS / 2];
         let speed = sim_s / wall;
         let (fast, slow) = (sim_s / walls[0], sim_s / walls[REPEATS - 1]);
@@ -109,14 +115,9 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
     // takes from the FRMW each cycle.
     let mut tcl = TclBench::new(256, 100_000);
     let tcl_cycles = 4_000u64;
-    let mut tcl_ns: Vec<f64> = (0..REPEATS)
-        .map(|_| {
-            let t0 = std::time::Instant::now();
-            tcl.run(tcl_cycles);
-            t0.elapsed().as_secs_f64() * 1e9 / (tcl_cycles * tcl.units() as u64) as f64
-        })
-        .collect();
-    tcl_ns.sort_by(f64::total_cmp);
+    let samples = (tcl_cycles * tcl.units() as u64) as f64;
+    let tcl_ns: Vec<f64> =
+        sorted_walls_s(REPEATS, || tcl.run(tcl_cycles)).into_iter().map(|s| s * 1e9 / samples).collect();
     let tcl_sample_ns = tcl_ns[REPEATS / 2];
     // 20x real time for 256 slaves at 100 us: 100 us / 20 / 256 per ESC visit.
     let budget_ns = 100_000.0 / 20.0 / 256.0;

@@ -537,12 +537,13 @@ impl<I: Io> Master<I> {
         let window_ns = sync.probe_window_ns();
         // Before the first probe, the cycle so far (at least the frame's exchange) stands for
         // one.
-        let first_guess_ns = self.master_system_time().wrapping_sub(p.built_ns);
+        let mut first_guess_ns = None;
         for _ in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
             let elapsed_ns = self.master_system_time().wrapping_sub(p.built_ns);
-            let expected_ns = if st.probe_mean_ns > 0 { st.probe_mean_ns } else { first_guess_ns };
+            let expected_ns =
+                if st.probe_mean_ns > 0 { st.probe_mean_ns } else { *first_guess_ns.get_or_insert(elapsed_ns) };
             if elapsed_ns.saturating_add(expected_ns.saturating_mul(2)) > window_ns {
                 st.probes_cut += 1;
                 break;

@@ -399,8 +399,8 @@ impl Segment {
         // and the inter-frame gap, as from a NIC's transmit queue.
         let t_tx_ns = t_tx_ns.max(self.link_free_ns);
         self.last_departure_ns = t_tx_ns;
-        self.link_free_ns =
-            t_tx_ns + (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES + IFG_BYTES) * NS_PER_BYTE;
+        let wire_ns = (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
+        self.link_free_ns = t_tx_ns + wire_ns + IFG_BYTES * NS_PER_BYTE;
         self.close_watches_until(t_tx_ns);
         self.advance_shared(t_tx_ns);
         self.stats.frames += 1;
@@ -477,8 +477,7 @@ impl Segment {
             return None;
         }
         self.stats.returned += 1;
-        let wire = (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
-        Some(back_at_nic + wire)
+        Some(back_at_nic + wire_ns)
     }
 
     /// The true time at which each ESC saw the last frame at its processing unit.
