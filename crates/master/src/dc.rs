@@ -481,7 +481,7 @@ impl<I: Io> Master<I> {
         let wide = self.slaves[r].dc_64bit;
         let first = if rfm && sync.steers_reference_offset() {
             let len = if wide { 8 } else { 4 };
-            match sync.reference_offset(built_ns) {
+            match sync.reference_offset(built_ns, None) {
                 Some(v) => FirstPdu::Offset { data: v.to_le_bytes(), len, write: true },
                 None => FirstPdu::Offset { data: [0; 8], len, write: false },
             }
@@ -531,26 +531,32 @@ impl<I: Io> Master<I> {
         }
         if !answered.sync && sync.makes_up_lost_frames() && !st.no_probes {
             st.make_ups += 1;
-            self.probe(sync, st, p.station, wide, true)?;
+            self.probe(sync, st, p.station, wide, Some(None))?;
         }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         let window_ns = sync.probe_window_ns();
         // Before the first probe, the cycle so far (at least the frame's exchange) stands for
         // one.
         let mut first_guess_ns = None;
-        for _ in 0..probes {
+        let give = sync.probes_give_offset();
+        for k in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
             let elapsed_ns = self.master_system_time().wrapping_sub(p.built_ns);
             let expected_ns =
                 if st.probe_mean_ns > 0 { st.probe_mean_ns } else { *first_guess_ns.get_or_insert(elapsed_ns) };
-            if elapsed_ns.saturating_add(expected_ns.saturating_mul(2)) > window_ns {
+            let fits = |done_ns: u64| done_ns.saturating_add(expected_ns.saturating_mul(2)) <= window_ns;
+            if !fits(elapsed_ns) {
                 st.probes_cut += 1;
                 break;
             }
+            // An offset given stands until the next probe's passage, about one probe later,
+            // or, after the last, until the next cycle's frame.
+            let next_follows = k + 1 < probes && fits(elapsed_ns.saturating_add(expected_ns));
+            let holds_ns = if next_follows { expected_ns } else { window_ns.saturating_sub(elapsed_ns) };
             let start_ns = self.engine.io.now_ns();
             st.probes += 1;
-            self.probe(sync, st, p.station, wide, false)?;
+            self.probe(sync, st, p.station, wide, give.then_some(Some(holds_ns)))?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
             st.probe_mean_ns =
@@ -560,22 +566,26 @@ impl<I: Io> Master<I> {
     }
 
     /// One probe frame: the reference's time (and offset, where the method steers it) read,
-    /// and with `give_offset` the reference given the offset the method wants (the write
-    /// answers the offset it replaced); its sample to the method. A lost probe is only counted.
+    /// and with `give_offset` the reference given the offset the method wants for that span
+    /// ([`crate::sync::ClockSync::reference_offset`]; the write answers the offset it
+    /// replaced); its sample to the method. A lost probe is only counted.
     fn probe(
         &mut self,
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
         station: u16,
         wide: bool,
-        give_offset: bool,
+        give_offset: Option<Option<u64>>,
     ) -> Result<()> {
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
         let steer = sync.steers_reference_offset();
         let built_ns = self.master_system_time();
-        let given = if give_offset && steer { sync.reference_offset(built_ns) } else { None };
+        let given = match give_offset {
+            Some(holds_ns) if steer => sync.reference_offset(built_ns, holds_ns),
+            _ => None,
+        };
         let offset_cmd = match given {
             Some(v) => {
                 offset = v.to_le_bytes();

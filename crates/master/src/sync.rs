@@ -92,9 +92,16 @@ pub trait ClockSync {
     fn steers_reference_offset(&self) -> bool {
         false
     }
-    /// The offset to give the reference in the frame built at `built_ns`; `None`: read it only.
-    fn reference_offset(&mut self, _built_ns: u64) -> Option<u64> {
+    /// The offset to give the reference in the frame built at `built_ns`, which stands for
+    /// `holds_ns` after the frame's passage, until the next frame gives another (`None`: until
+    /// the next cycle's frame); `None`: read it only.
+    fn reference_offset(&mut self, _built_ns: u64, _holds_ns: Option<u64>) -> Option<u64> {
         None
+    }
+    /// Offset steering: whether probe frames give the reference its offset too
+    /// ([`ClockSync::reference_offset`]), not only read it.
+    fn probes_give_offset(&self) -> bool {
+        false
     }
     /// Takes one cycle's sample (`None`: the frame was lost).
     fn update(&mut self, sample: Option<&Sample>) -> Correction;
@@ -425,6 +432,9 @@ pub struct Ferrocat {
     pub centre_followers: bool,
     /// Offset steering: whether a lost frame is made up at once (its offset given by another).
     pub make_up: bool,
+    /// Offset steering: whether probes give the reference its offset from the line they
+    /// update, so that a change the line sees is in force at once, not a cycle later.
+    pub probes_steer: bool,
     /// The bias last given to the followers' delay registers.
     delay_bias_ns: i64,
 }
@@ -523,6 +533,7 @@ impl Ferrocat {
             probing: true,
             centre_followers: true,
             make_up: true,
+            probes_steer: true,
             delay_bias_ns: 0,
         }
     }
@@ -681,12 +692,12 @@ impl ClockSync for Ferrocat {
     fn steers_reference_offset(&self) -> bool {
         self.coupling == Coupling::ReferenceFollowsMaster && self.steering == Steering::Offset
     }
-    fn reference_offset(&mut self, built_ns: u64) -> Option<u64> {
-        // Between two frames the reference runs at its own crystal's rate; aiming its time at
-        // the master's half a cycle after the frame's expected passage centres that sawtooth
-        // (±|rate − 1|·cycle/2) on the master's time.
+    fn reference_offset(&mut self, built_ns: u64, holds_ns: Option<u64>) -> Option<u64> {
+        // Until the next frame gives it another offset the reference runs at its own crystal's
+        // rate; aiming its time at the master's halfway through that span centres the
+        // sawtooth (±|rate − 1|·span/2) on the master's time.
         let passage = built_ns.wrapping_add_signed(self.lead_ns?);
-        let aim = passage.wrapping_add(self.cycle_ns / 2);
+        let aim = passage.wrapping_add(holds_ns.unwrap_or(self.cycle_ns) / 2);
         let offset = aim.wrapping_sub(self.fit.at(aim)?);
         if !self.offset_given {
             let step = offset.wrapping_sub(self.reference_offset_read?) as i64;
@@ -720,6 +731,9 @@ impl ClockSync for Ferrocat {
         if let Some(y) = self.line_point(s) {
             self.fit_passage(s, y);
         }
+    }
+    fn probes_give_offset(&self) -> bool {
+        self.probes_steer && self.steers_reference_offset()
     }
     fn makes_up_lost_frames(&self) -> bool {
         // Steering by offset, a lost frame leaves the reference on its crystal's rate for two
@@ -821,7 +835,7 @@ mod tests {
                 for (k, s) in samples.iter().enumerate() {
                     let _ = m.reference_time(built);
                     let _ = m.writes_reference_time(k as u64);
-                    let _ = m.reference_offset(built);
+                    let _ = m.reference_offset(built, None);
                     let c = m.update(if k % 7 == 3 { None } else { Some(s) });
                     if let Some(p) = c.next_period_ns {
                         prop_assert!(p >= 1);
@@ -1033,7 +1047,7 @@ mod tests {
         let local = |x: u64| 7_000_000 + x + x / 20_000;
         let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, c);
         assert!(f.steers_reference_offset());
-        assert_eq!(f.reference_offset(0), None, "nothing to aim with before a sample");
+        assert_eq!(f.reference_offset(0, None), None, "nothing to aim with before a sample");
         for k in 1..=40u64 {
             let mut s = sample(k, 0, 0);
             // Passage: build + lead = k ms + 5 µs (no transmit stamp: half the round trip).
@@ -1045,9 +1059,14 @@ mod tests {
         }
         let built = 41 * c;
         let aim = built + 5_000 + c / 2;
-        let got = f.reference_offset(built).unwrap();
+        let got = f.reference_offset(built, None).unwrap();
         let want = aim.wrapping_sub(local(aim));
         assert!((got.wrapping_sub(want) as i64).abs() <= 2, "offset {got}, want {want}");
+        // A probe's offset, standing 200 µs until the next probe, is aimed 100 µs on.
+        let aim = built + 5_000 + 100_000;
+        let got = f.reference_offset(built, Some(200_000)).unwrap();
+        let want = aim.wrapping_sub(local(aim));
+        assert!((got.wrapping_sub(want) as i64).abs() <= 2, "probe's offset {got}, want {want}");
         assert_eq!(f.master_time(built), None, "the master keeps its own clock");
         // 50 ppm fast, 1 ms: the followers would sit 25 ns above the reference's mean.
         assert_eq!(f.follower_delay_bias_ns(), Some(-25));
@@ -1076,10 +1095,10 @@ mod tests {
         for k in 1..=8 {
             assert_eq!(f.update(Some(&read(k))).shift_offsets_ns, 0, "no shift before an offset is given");
         }
-        let offset = f.reference_offset(9 * 1_000_000).unwrap();
+        let offset = f.reference_offset(9 * 1_000_000, None).unwrap();
         assert!((offset as i64 - 5_000).abs() <= 1, "{offset}");
         assert_eq!(f.update(Some(&read(9))).shift_offsets_ns, offset as i64 - 2_000, "the step, once");
-        f.reference_offset(10 * 1_000_000).unwrap();
+        f.reference_offset(10 * 1_000_000, None).unwrap();
         assert_eq!(f.update(Some(&read(10))).shift_offsets_ns, 0, "later offsets move the reference alone");
     }
 }

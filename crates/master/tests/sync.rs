@@ -322,6 +322,61 @@ fn a_lost_frame_is_made_up_at_once_when_the_reference_follows_by_its_offset() {
     assert!(without > 30.0 && with < without / 2.0, "{with} vs {without}");
 }
 
+/// Reference follows master by its offset on an RT kernel, 30 s: after each cycle, the
+/// reference's true error just before the next frame (where it has run on its +40 ppm crystal
+/// longest since its last offset), apart for cycles with and without probes: (mean with
+/// probes − mean without, its standard error, ns; probed cycles).
+fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
+    let mut m = segment(HostModel::pc_rt());
+    let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
+    sync.probes_steer = probes_steer;
+    sync.centre_followers = false;
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let (mut probed, mut quiet) = (Vec::new(), Vec::new());
+    for k in 0..30_000 {
+        let probes_before = st.probes;
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+        m.sync_step(&mut sync, &mut st).unwrap();
+        // Just before the next cycle's frame is built.
+        m.engine.io.sleep_until(next + CYCLE_NS - 1_000);
+        let e = true_error(&mut m, 0) as f64;
+        if k >= 2_000 {
+            if st.probes > probes_before {
+                probed.push(e)
+            } else {
+                quiet.push(e)
+            }
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let var_of_mean = |v: &[f64]| {
+        let m = mean(v);
+        v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len().max(2) - 1) as f64 / v.len().max(1) as f64
+    };
+    let se = (var_of_mean(&probed) + var_of_mean(&quiet)).sqrt();
+    (mean(&probed) - mean(&quiet), se, probed.len())
+}
+
+#[test]
+fn probes_give_the_reference_an_offset_that_holds_until_the_next_frame() {
+    let (steering, se, probed) = sawtooth_top_after_probes(true);
+    let (reading, se_reading, probed_reading) = sawtooth_top_after_probes(false);
+    println!(
+        "reference 40 ppm fast, error before the next frame, probed − unprobed cycles: {steering:.1} ± {se:.1} ns \
+         with probes giving offsets ({probed} probed cycles), {reading:.1} ± {se_reading:.1} ns with probes \
+         reading them ({probed_reading})"
+    );
+    assert!(probed > 100 && probed_reading > 100, "{probed} {probed_reading}");
+    // A probe's offset is aimed halfway to the next frame, not half a cycle past its own
+    // passage: the reference ends the cycle nearer the master by 40 ppm · (how much less
+    // than a cycle the last probe's offset stood)/2, several ns. Probes that only read leave
+    // the cycle frame's offset: probed cycles end where the others do.
+    assert!(steering < -3.0 && steering < -4.0 * se, "{steering} ± {se}");
+    assert!(reading.abs() < 3.0 * se_reading.max(0.5), "{reading} ± {se_reading}");
+}
+
 /// Probing never makes the next cycle late: on a host whose stamps are quick but whose replies
 /// reach the program 200 µs late, a probe costs ten times what the lead suggests, and the
 /// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
