@@ -7,7 +7,9 @@
 //! temperature step), when a long window keeps the old slope for seconds. A CUSUM of the
 //! standardised innovations (each point's distance from the line before it joins) tells the
 //! two apart: noise keeps it near zero, a change of rate or phase drives it up within a few
-//! dozen points, and the window then restarts at the estimated change point. Single points
+//! dozen points, and the window then restarts at the estimated change point — a long window
+//! only once the points after the signal confirm it, since the test's rare false alarm would
+//! otherwise trade a line of thousands of points for a young one. Single points
 //! far off the line (a preempted send, a stamp taken late) are left out and do not count.
 //!
 //! A restarted window knows its new rate only from the few points since the change, which
@@ -33,6 +35,15 @@ const CUSUM_K: f64 = 0.5;
 const CUSUM_H: f64 = 16.0;
 /// This many outliers in a row on one side are a jump of the line, not outliers.
 const JUMP_RUN: usize = 8;
+/// A change the CUSUM signals is confirmed by the points after it: as soon as their mean
+/// innovation lies on the change's side by `CONFIRM_SCALES` standard errors. It was the test's
+/// false alarm, and the line stays, if after `DISMISS_AFTER` points their mean is on the other
+/// side, or none confirmed it within `CONFIRM_POINTS`.
+const CONFIRM_POINTS: u32 = 32;
+const DISMISS_AFTER: u32 = 4;
+const CONFIRM_SCALES: f64 = 3.0;
+/// Only a window this long is worth a confirmation's delay (a young one restarts at once).
+const CONFIRM_MIN_WINDOW: usize = 4096;
 /// Points kept at least when the window restarts.
 const MIN_RESTART: usize = 4;
 /// The smallest noise scale (ns): the ESC's clock ticks in 10 ns.
@@ -93,8 +104,21 @@ pub struct LineFit {
     down: (f64, u64),
     /// The outliers in a row so far, and on which side of the line.
     far_run: Vec<(u64, u64, bool)>,
+    /// A change signalled and not yet confirmed.
+    pending: Option<Signal>,
     pub outliers: u64,
     pub restarts: u64,
+    pub false_alarms: u64,
+}
+
+/// A change the CUSUM signalled: its side, where it began (`added` then), and the points since
+/// with the sum of their standardised innovations (signed so that the change's side counts up).
+#[derive(Debug, Clone, Copy)]
+struct Signal {
+    up: bool,
+    since: u64,
+    points: u32,
+    sum_z: f64,
 }
 
 impl LineFit {
@@ -115,8 +139,10 @@ impl LineFit {
             up: (0.0, 0),
             down: (0.0, 0),
             far_run: Vec::with_capacity(JUMP_RUN),
+            pending: None,
             outliers: 0,
             restarts: 0,
+            false_alarms: 0,
         }
     }
 
@@ -175,7 +201,23 @@ impl LineFit {
             }
             self.far_run.clear();
         }
-        if self.innovations > WARM_UP as u64 && !young {
+        if let (Some(mut signal), false) = (self.pending, young) {
+            let z = innovation / self.scale();
+            signal.points += 1;
+            signal.sum_z += if signal.up { z } else { -z };
+            if signal.sum_z / (signal.points as f64).sqrt() > CONFIRM_SCALES {
+                self.restart(((self.added - signal.since) as usize).max(MIN_RESTART));
+                self.add(x, y);
+                return Fate::Restarted;
+            } else if signal.points < CONFIRM_POINTS && (signal.points < DISMISS_AFTER || signal.sum_z > 0.0) {
+                self.pending = Some(signal);
+            } else {
+                self.pending = None;
+                self.false_alarms += 1;
+                self.up = (0.0, self.added);
+                self.down = (0.0, self.added);
+            }
+        } else if self.innovations > WARM_UP as u64 && !young {
             let z = innovation / self.scale();
             // Page's CUSUM both ways; the count of points added when each last stood at zero
             // marks where a change began.
@@ -188,10 +230,15 @@ impl LineFit {
                 self.down.1 = self.added;
             }
             if self.up.0 > CUSUM_H || self.down.0 > CUSUM_H {
-                let since = if self.up.0 > CUSUM_H { self.up.1 } else { self.down.1 };
-                self.restart(((self.added - since) as usize).max(MIN_RESTART));
-                self.add(x, y);
-                return Fate::Restarted;
+                let up = self.up.0 > CUSUM_H;
+                let since = if up { self.up.1 } else { self.down.1 };
+                if self.points.len() >= CONFIRM_MIN_WINDOW {
+                    self.pending = Some(Signal { up, since, points: 0, sum_z: 0.0 });
+                } else {
+                    self.restart(((self.added - since) as usize).max(MIN_RESTART));
+                    self.add(x, y);
+                    return Fate::Restarted;
+                }
             }
         }
         // The scale follows the accepted innovations (mean |·| of a normal is 0.8 σ).
@@ -214,6 +261,7 @@ impl LineFit {
         self.up = (0.0, self.added);
         self.down = (0.0, self.added);
         self.far_run.clear();
+        self.pending = None;
         self.restarts += 1;
     }
 
@@ -319,6 +367,7 @@ impl LineFit {
             let (_, dz) = self.rel((x, y));
             if far(dx_oldest) || far(dz) {
                 self.keep_prior();
+                self.pending = None;
                 self.points.clear();
                 self.points.push_back((x, y));
                 self.rebuild();
@@ -506,6 +555,54 @@ mod tests {
         assert_eq!(f.restarts, 1, "no restart but the step's");
         let rate = f.rate().unwrap();
         assert!((rate - 1.000070).abs() < 2e-6, "rate after the step {rate}");
+    }
+
+    /// A window of `mature` points of a 20 ppm fast reference in 1 µs of noise, then `extra`
+    /// points from `make`(k, truth) (k counted from the end of the mature part): the fit, and
+    /// the first point that restarted the window (counted like k).
+    fn mature_then(mature: u64, extra: u64, make: impl Fn(u64, u64) -> u64) -> (LineFit, Option<u64>) {
+        let mut f = LineFit::new(8192);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, 1000.0).unwrap();
+        let mut restarted_at = None;
+        for k in 0..mature + extra {
+            let x = k * 1_000_000;
+            let truth = (1u64 << 50) + x + x / 50_000;
+            let y = if k < mature { truth } else { make(k - mature, truth) };
+            let y = y.wrapping_add_signed(noise.sample(&mut rng) as i64);
+            if f.push(x, y) == Fate::Restarted && k >= mature && restarted_at.is_none() {
+                restarted_at = Some(k - mature);
+            }
+        }
+        (f, restarted_at)
+    }
+
+    #[test]
+    fn a_change_signal_the_next_points_do_not_confirm_leaves_a_long_line_alone() {
+        // 10 points 2.5 σ high (a host's brief disturbance) trip the CUSUM of a 6 000-point
+        // line; the points after them are on the line again.
+        let (f, restarted) = mature_then(6_000, 500, |k, truth| if k < 10 { truth + 2_500 } else { truth });
+        assert_eq!((f.restarts, restarted), (0, None), "the line was restarted (false alarms {})", f.false_alarms);
+        assert_eq!(f.false_alarms, 1, "the CUSUM should have signalled once");
+        // The line still has its 6 000 points' phase: within a few σ/√n of the truth.
+        let x = 6_500 * 1_000_000;
+        let truth = (1u64 << 50) + x + x / 50_000;
+        let err = f.at(x).unwrap().wrapping_sub(truth) as i64;
+        assert!(err.abs() < 100, "phase error {err} ns");
+        // Without the confirmation (a young window restarts at once) the same signal restarts it.
+        let (young, restarted) = mature_then(3_000, 500, |k, truth| if k < 10 { truth + 2_500 } else { truth });
+        assert!(restarted.is_some() && young.false_alarms == 0, "{restarted:?}");
+    }
+
+    #[test]
+    fn a_rate_step_of_a_long_line_is_confirmed_within_a_few_points_of_its_signal() {
+        // +50 ppm from point 6 000: a 50 ns per point ramp in 1 µs of noise.
+        let (f, restarted) = mature_then(6_000, 1_000, |k, truth| truth + 50 * k);
+        let after = restarted.expect("the step was never detected");
+        assert!(after < 80, "detected {after} points after the step");
+        assert_eq!((f.restarts, f.false_alarms), (1, 0));
+        let rate = f.rate().unwrap();
+        assert!((rate - 1.000070).abs() < 3e-6, "rate after the step {rate}");
     }
 
     /// The squared errors (ns²) of the line one cycle ahead over the `cycles` cycles after the
