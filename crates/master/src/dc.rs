@@ -398,6 +398,17 @@ fn unwrap32(prev: Option<u64>, low: u64) -> u64 {
     }
 }
 
+/// What a probe frame does with the reference's offset (offset steering).
+#[derive(Debug, Clone, Copy)]
+enum ProbeOffset {
+    /// Reads it only.
+    Read,
+    /// Gives it the method's offset for the rest of the cycle (a lost frame made up).
+    GiveUntilNextCycle,
+    /// Gives it the method's offset for `holds_ns` after the probe's passage.
+    GiveFor { holds_ns: u64 },
+}
+
 impl<I: Io> Master<I> {
     fn reference_index(&self) -> Result<usize> {
         let st =
@@ -531,14 +542,14 @@ impl<I: Io> Master<I> {
         }
         if !answered.sync && sync.makes_up_lost_frames() && !st.no_probes {
             st.make_ups += 1;
-            self.probe(sync, st, p.station, wide, Some(None))?;
+            self.probe(sync, st, p.station, wide, ProbeOffset::GiveUntilNextCycle)?;
         }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         let window_ns = sync.probe_window_ns();
         // Before the first probe, the cycle so far (at least the frame's exchange) stands for
         // one.
         let mut first_guess_ns = None;
-        let give = sync.probes_give_offset();
+        let steer = sync.probes_give_offset();
         for k in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
@@ -556,7 +567,8 @@ impl<I: Io> Master<I> {
             let holds_ns = if next_follows { expected_ns } else { window_ns.saturating_sub(elapsed_ns) };
             let start_ns = self.engine.io.now_ns();
             st.probes += 1;
-            self.probe(sync, st, p.station, wide, give.then_some(Some(holds_ns)))?;
+            let offset = if steer { ProbeOffset::GiveFor { holds_ns } } else { ProbeOffset::Read };
+            self.probe(sync, st, p.station, wide, offset)?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
             st.probe_mean_ns =
@@ -566,7 +578,7 @@ impl<I: Io> Master<I> {
     }
 
     /// One probe frame: the reference's time (and offset, where the method steers it) read,
-    /// and with `give_offset` the reference given the offset the method wants for that span
+    /// and as `give` says the reference given the offset the method wants
     /// ([`crate::sync::ClockSync::reference_offset`]; the write answers the offset it
     /// replaced); its sample to the method. A lost probe is only counted.
     fn probe(
@@ -575,16 +587,18 @@ impl<I: Io> Master<I> {
         st: &mut SyncState,
         station: u16,
         wide: bool,
-        give_offset: Option<Option<u64>>,
+        give: ProbeOffset,
     ) -> Result<()> {
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
         let steer = sync.steers_reference_offset();
         let built_ns = self.master_system_time();
-        let given = match give_offset {
-            Some(holds_ns) if steer => sync.reference_offset(built_ns, holds_ns),
-            _ => None,
+        let given = match give {
+            _ if !steer => None,
+            ProbeOffset::Read => None,
+            ProbeOffset::GiveUntilNextCycle => sync.reference_offset(built_ns, None),
+            ProbeOffset::GiveFor { holds_ns } => sync.reference_offset(built_ns, Some(holds_ns)),
         };
         let offset_cmd = match given {
             Some(v) => {
