@@ -114,6 +114,13 @@ impl Io for CliIo {
             World::Udp(u) => u.sleep_until(t_ns),
         }
     }
+    fn wake_target_ns(&self) -> Option<u64> {
+        match &self.world {
+            World::Virtual(v) => v.wake_target_ns(),
+            World::Raw(r) => r.wake_target_ns(),
+            World::Udp(u) => u.wake_target_ns(),
+        }
+    }
     fn is_virtual(&self) -> bool {
         matches!(self.world, World::Virtual(_))
     }

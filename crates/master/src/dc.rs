@@ -546,16 +546,28 @@ impl<I: Io> Master<I> {
         }
         let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
         let window_ns = sync.probe_window_ns();
-        // Before the first probe, the cycle so far (at least the frame's exchange) stands for
-        // one.
+        // The window counts from the cycle's planned start where the caller slept to one (a
+        // target less than a window before the frame's build): a cycle that woke late has
+        // that much less of it.
+        let woke_late_ns = if probes == 0 {
+            0
+        } else {
+            let since_build_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let built_io_ns = self.engine.io.now_ns().saturating_sub(since_build_ns);
+            let target = self.engine.io.wake_target_ns();
+            target.and_then(|t| built_io_ns.checked_sub(t)).filter(|&late| late < window_ns).unwrap_or(0)
+        };
+        // Before the first probe, the cycle so far from the frame's build (at least its
+        // exchange) stands for one.
         let mut first_guess_ns = None;
         let steer = sync.probes_give_offset();
         for k in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
-            let elapsed_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let since_build_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let elapsed_ns = since_build_ns.saturating_add(woke_late_ns);
             let expected_ns =
-                if st.probe_mean_ns > 0 { st.probe_mean_ns } else { *first_guess_ns.get_or_insert(elapsed_ns) };
+                if st.probe_mean_ns > 0 { st.probe_mean_ns } else { *first_guess_ns.get_or_insert(since_build_ns) };
             let fits = |done_ns: u64| done_ns.saturating_add(expected_ns.saturating_mul(2)) <= window_ns;
             if !fits(elapsed_ns) {
                 st.probes_cut += 1;

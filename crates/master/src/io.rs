@@ -14,6 +14,11 @@ pub trait Io {
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>>;
     /// Sleeps until `t_ns` (absolute); the world may wake late.
     fn sleep_until(&mut self, t_ns: u64);
+    /// The instant the last [`Io::sleep_until`] aimed at: where a caller sleeps to its
+    /// schedule, the planned start of the cycle that woke (however late it woke).
+    fn wake_target_ns(&self) -> Option<u64> {
+        None
+    }
     /// When the last frame sent actually left, if the world knows (a kernel or NIC timestamp).
     fn last_tx_ns(&mut self) -> Option<u64> {
         None
@@ -287,6 +292,7 @@ pub struct VirtualIo {
     /// The output's latencies have their own stream, so that pulsing it leaves the frames'
     /// latencies as they would have been.
     gpio_rng: ChaCha8Rng,
+    wake_target_ns: Option<u64>,
 }
 
 impl VirtualIo {
@@ -307,6 +313,7 @@ impl VirtualIo {
             rx_stamps: [0; 32],
             gpio_wire: None,
             gpio_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x6710),
+            wake_target_ns: None,
         }
     }
 }
@@ -336,6 +343,9 @@ impl VirtualIo {
 impl Io for VirtualIo {
     fn now_ns(&mut self) -> u64 {
         self.now
+    }
+    fn wake_target_ns(&self) -> Option<u64> {
+        self.wake_target_ns
     }
     fn segment(&self) -> Option<&Segment> {
         Some(&self.seg)
@@ -410,6 +420,7 @@ impl Io for VirtualIo {
 
     fn sleep_until(&mut self, t_ns: u64) {
         let target = t_ns;
+        self.wake_target_ns = Some(target);
         let res = self.host.timer_resolution_ns;
         let t_ns = if res > 1 { t_ns.div_ceil(res).saturating_mul(res) } else { t_ns };
         let late = match self.cycles.as_mut() {
@@ -458,11 +469,12 @@ impl Io for VirtualIo {
 #[derive(Debug)]
 pub struct RawIo {
     sock: ferrocat_link::RawSocket,
+    wake_target_ns: Option<u64>,
 }
 
 impl RawIo {
     pub fn open(iface: &str) -> std::io::Result<Self> {
-        Ok(RawIo { sock: ferrocat_link::RawSocket::open(iface)? })
+        Ok(RawIo { sock: ferrocat_link::RawSocket::open(iface)?, wake_target_ns: None })
     }
 
     /// Which timestamps are in use, in words.
@@ -491,7 +503,11 @@ impl Io for RawIo {
         }
     }
     fn sleep_until(&mut self, t_ns: u64) {
+        self.wake_target_ns = Some(t_ns);
         ferrocat_link::sleep_until_ns(t_ns);
+    }
+    fn wake_target_ns(&self) -> Option<u64> {
+        self.wake_target_ns
     }
     fn last_tx_ns(&mut self) -> Option<u64> {
         self.sock.tx_timestamp()
@@ -502,6 +518,7 @@ impl Io for RawIo {
 #[derive(Debug)]
 pub struct UdpIo {
     sock: std::net::UdpSocket,
+    wake_target_ns: Option<u64>,
 }
 
 impl UdpIo {
@@ -509,7 +526,7 @@ impl UdpIo {
     pub fn open(target: &str) -> std::io::Result<Self> {
         let sock = std::net::UdpSocket::bind("0.0.0.0:0")?;
         sock.connect(target)?;
-        Ok(UdpIo { sock })
+        Ok(UdpIo { sock, wake_target_ns: None })
     }
 }
 
@@ -540,6 +557,10 @@ impl Io for UdpIo {
         }
     }
     fn sleep_until(&mut self, t_ns: u64) {
+        self.wake_target_ns = Some(t_ns);
         ferrocat_link::sleep_until_ns(t_ns);
+    }
+    fn wake_target_ns(&self) -> Option<u64> {
+        self.wake_target_ns
     }
 }

@@ -380,6 +380,35 @@ fn probes_give_the_reference_an_offset_that_holds_until_the_next_frame() {
 /// Probing never makes the next cycle late: on a host whose stamps are quick but whose replies
 /// reach the program 200 µs late, a probe costs ten times what the lead suggests, and the
 /// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
+/// Probing counts its window from the cycle's planned start: on a host that wakes every cycle
+/// 600 µs late, the probes still end before the next cycle is due (counted from the late
+/// wake-up, the half cycle they may fill would run into it).
+#[test]
+fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
+    use ferrocat_master::io::Latency;
+    let host = HostModel { name: "late-wake", wake: Latency::fixed(600_000.0), ..HostModel::pc_rt() };
+    let mut m = segment(host);
+    let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
+    sync.centre_followers = false;
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.engine.io.now_ns();
+    let (mut latest_ns, mut probed) = (i64::MIN, 0);
+    for _ in 0..300 {
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+        let probes_before = st.probes;
+        m.sync_step(&mut sync, &mut st).unwrap();
+        if st.probes > probes_before {
+            probed += 1;
+            // How far past the next cycle's due time this one ended (negative: before it).
+            latest_ns = latest_ns.max(m.engine.io.now_ns() as i64 - (next + CYCLE_NS) as i64);
+        }
+    }
+    println!("{probed} cycles probed ({} probes), the latest ended {latest_ns} ns after the next was due", st.probes);
+    assert!(probed > 10, "the young line probes: {probed}");
+    assert!(latest_ns <= 0, "a cycle that probed ended {latest_ns} ns after the next was due");
+}
+
 #[test]
 fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     use ferrocat_master::io::{Latency, Stamps};
