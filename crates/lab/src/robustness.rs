@@ -96,6 +96,10 @@ pub struct Row {
     /// per second over the band window, and in all after the disturbance.
     pub probes_per_s_before: f64,
     pub probes_after: u64,
+    /// After the disturbance: how often ferrocat's line restarted, and how often its change
+    /// test signalled a change the next points did not confirm (None: the method keeps no line).
+    pub line_restarts_after: Option<u64>,
+    pub false_alarms_after: Option<u64>,
     /// The master − reference error the GPIO calibration found and took out (None: none).
     pub calibration_ns: Option<i64>,
     /// Paired with the control: from the disturbance until the error stayed within the band's
@@ -151,6 +155,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let (mut lost0, mut make_ups0) = (0, 0);
     let mut c = Correction::default();
     let (mut probes_window, mut probes0) = (0, 0);
+    let mut events0 = None;
     let mut last_unlocked: Option<u64> = None;
     let mut locked_before = true;
     let mut sampler = crate::sampler::Sampler::new(&m, &dc, o.seed);
@@ -190,6 +195,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         }
         if k == settle {
             probes0 = st.probes;
+            events0 = sync.line_events();
             lost0 = st.lost;
             make_ups0 = st.make_ups;
             let now = m.engine.io.now_ns();
@@ -246,6 +252,8 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         make_ups: st.make_ups - make_ups0,
         probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
         probes_after: st.probes - probes0,
+        line_restarts_after: sync.line_events().zip(events0).map(|(now, then)| now.0.saturating_sub(then.0)),
+        false_alarms_after: sync.line_events().zip(events0).map(|(now, then)| now.1.saturating_sub(then.1)),
         calibration_ns,
         recovery_vs_control_ms: None,
         peak_vs_control_ns: None,
@@ -319,6 +327,8 @@ mod tests {
             make_ups: 0,
             probes_per_s_before: 0.0,
             probes_after: 0,
+            line_restarts_after: None,
+            false_alarms_after: None,
             calibration_ns: None,
             recovery_vs_control_ms: None,
             peak_vs_control_ns: None,

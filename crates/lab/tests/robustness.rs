@@ -18,6 +18,8 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
             r.outside_pct, r.after_mean_ns, r.after_rms_ns, r.frames_lost, r.probes_after
         );
         assert!(r.after_rms_ns.is_finite() && r.peak_ns.is_finite(), "{r:?}");
+        // Only ferrocat keeps a line.
+        assert_eq!(r.line_restarts_after.is_some(), r.method.starts_with("ferrocat"), "{r:?}");
         // Paired with its control (the same realisation until the disturbance, which `run`
         // checks), except the control itself.
         assert_eq!(r.peak_vs_control_ns.is_some(), r.scenario != CONTROL, "{r:?}");
@@ -47,6 +49,10 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         }
         // Locked before, locked again: no disturbance costs ferrocat its lock for good.
         assert!(r.locked_before && r.relock_ms.is_some(), "{r:?}");
+        // Its line restarts for the crystal step, once, and for nothing else: lost frames and
+        // missed cycles leave it standing.
+        let restarts = if r.scenario == "drift-step-50ppm" { 1 } else { 0 };
+        assert_eq!(r.line_restarts_after, Some(restarts), "{r:?}");
         if r.scenario == "drift-step-50ppm" {
             // The crystal step: back within 100 ms (probing the reference while the line is
             // uncertain; docs/clock-sync.md, Robustness), having probed it.

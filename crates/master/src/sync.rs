@@ -134,6 +134,12 @@ pub trait ClockSync {
     fn makes_up_lost_frames(&self) -> bool {
         false
     }
+    /// How often the method's line restarted (a change of rate or phase) and how often its
+    /// change test signalled a change the points after it did not confirm, so far; `None`: it
+    /// keeps no line.
+    fn line_events(&self) -> Option<(u64, u64)> {
+        None
+    }
     /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
     /// from now on; `None`: leave the delays as they are.
     fn follower_delay_bias_ns(&mut self) -> Option<i64> {
@@ -734,6 +740,9 @@ impl ClockSync for Ferrocat {
     }
     fn probes_give_offset(&self) -> bool {
         self.probes_steer && self.steers_reference_offset()
+    }
+    fn line_events(&self) -> Option<(u64, u64)> {
+        self.keeps_line().then_some((self.fit.restarts, self.fit.false_alarms))
     }
     fn makes_up_lost_frames(&self) -> bool {
         // Steering by offset, a lost frame leaves the reference on its crystal's rate for two
