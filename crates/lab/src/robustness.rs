@@ -232,6 +232,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let for_good = |last: Option<usize>| back_for_good(last, errors_after.len(), o.cycle_ns);
     let recovery_ms = for_good(last_out);
     let relock_ms = if locked_before { for_good(last_unlocked.map(|k| k as usize)) } else { None };
+    let events_after = sync.line_events().zip(events0).map(|(now, then)| now.since(then));
     let row = Row {
         scenario: scenario.to_string(),
         method: method.to_string(),
@@ -252,8 +253,8 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         make_ups: st.make_ups - make_ups0,
         probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
         probes_after: st.probes - probes0,
-        line_restarts_after: sync.line_events().zip(events0).map(|(now, then)| now.0.saturating_sub(then.0)),
-        false_alarms_after: sync.line_events().zip(events0).map(|(now, then)| now.1.saturating_sub(then.1)),
+        line_restarts_after: events_after.map(|e| e.restarts),
+        false_alarms_after: events_after.map(|e| e.false_alarms),
         calibration_ns,
         recovery_vs_control_ms: None,
         peak_vs_control_ns: None,

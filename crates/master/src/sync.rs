@@ -74,6 +74,25 @@ pub struct Correction {
     pub next_period_ns: Option<u64>,
 }
 
+/// Counts of what a method's line has been through.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineEvents {
+    /// Restarts: a change of rate or phase (or a gap too long to share a line).
+    pub restarts: u64,
+    /// Changes the change test signalled and the points after it did not confirm.
+    pub false_alarms: u64,
+}
+
+impl LineEvents {
+    /// What happened since `earlier`.
+    pub fn since(self, earlier: LineEvents) -> LineEvents {
+        LineEvents {
+            restarts: self.restarts.saturating_sub(earlier.restarts),
+            false_alarms: self.false_alarms.saturating_sub(earlier.false_alarms),
+        }
+    }
+}
+
 pub trait ClockSync {
     fn name(&self) -> &'static str;
     fn coupling(&self) -> Coupling;
@@ -134,10 +153,8 @@ pub trait ClockSync {
     fn makes_up_lost_frames(&self) -> bool {
         false
     }
-    /// How often the method's line restarted (a change of rate or phase) and how often its
-    /// change test signalled a change the points after it did not confirm, so far; `None`: it
-    /// keeps no line.
-    fn line_events(&self) -> Option<(u64, u64)> {
+    /// What the method's line has been through so far; `None`: it keeps no line.
+    fn line_events(&self) -> Option<LineEvents> {
         None
     }
     /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
@@ -741,8 +758,8 @@ impl ClockSync for Ferrocat {
     fn probes_give_offset(&self) -> bool {
         self.probes_steer && self.steers_reference_offset()
     }
-    fn line_events(&self) -> Option<(u64, u64)> {
-        self.keeps_line().then_some((self.fit.restarts, self.fit.false_alarms))
+    fn line_events(&self) -> Option<LineEvents> {
+        self.keeps_line().then_some(LineEvents { restarts: self.fit.restarts, false_alarms: self.fit.false_alarms })
     }
     fn makes_up_lost_frames(&self) -> bool {
         // Steering by offset, a lost frame leaves the reference on its crystal's rate for two
