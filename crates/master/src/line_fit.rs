@@ -206,9 +206,7 @@ impl LineFit {
             signal.points += 1;
             signal.sum_z += if signal.up { z } else { -z };
             if signal.sum_z / (signal.points as f64).sqrt() > CONFIRM_SCALES {
-                self.restart(((self.added - signal.since) as usize).max(MIN_RESTART));
-                self.add(x, y);
-                return Fate::Restarted;
+                return self.restart_at_change(signal.since, x, y);
             } else if signal.points < CONFIRM_POINTS && (signal.points < DISMISS_AFTER || signal.sum_z > 0.0) {
                 self.pending = Some(signal);
             } else {
@@ -232,13 +230,10 @@ impl LineFit {
             if self.up.0 > CUSUM_H || self.down.0 > CUSUM_H {
                 let up = self.up.0 > CUSUM_H;
                 let since = if up { self.up.1 } else { self.down.1 };
-                if self.points.len() >= CONFIRM_MIN_WINDOW {
-                    self.pending = Some(Signal { up, since, points: 0, sum_z: 0.0 });
-                } else {
-                    self.restart(((self.added - since) as usize).max(MIN_RESTART));
-                    self.add(x, y);
-                    return Fate::Restarted;
+                if self.points.len() < CONFIRM_MIN_WINDOW {
+                    return self.restart_at_change(since, x, y);
                 }
+                self.pending = Some(Signal { up, since, points: 0, sum_z: 0.0 });
             }
         }
         // The scale follows the accepted innovations (mean |·| of a normal is 0.8 σ).
@@ -249,6 +244,14 @@ impl LineFit {
             return Fate::Restarted;
         }
         Fate::Added
+    }
+
+    /// A change began when `since` points had been added: the window keeps the points from
+    /// there on (at least `MIN_RESTART`) and takes (x, y).
+    fn restart_at_change(&mut self, since: u64, x: u64, y: u64) -> Fate {
+        self.restart(((self.added - since) as usize).max(MIN_RESTART));
+        self.add(x, y);
+        Fate::Restarted
     }
 
     /// Drops all but the newest `keep` points.

@@ -377,9 +377,6 @@ fn probes_give_the_reference_an_offset_that_holds_until_the_next_frame() {
     assert!(reading.abs() < 3.0 * se_reading.max(0.5), "{reading} ± {se_reading}");
 }
 
-/// Probing never makes the next cycle late: on a host whose stamps are quick but whose replies
-/// reach the program 200 µs late, a probe costs ten times what the lead suggests, and the
-/// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
 /// Probing counts its window from the cycle's planned start: on a host that wakes every cycle
 /// 600 µs late, the probes still end before the next cycle is due (counted from the late
 /// wake-up, the half cycle they may fill would run into it).
@@ -409,6 +406,9 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     assert!(latest_ns <= 0, "a cycle that probed ended {latest_ns} ns after the next was due");
 }
 
+/// Probing never makes the next cycle late: on a host whose stamps are quick but whose replies
+/// reach the program 200 µs late, a probe costs ten times what the lead suggests, and the
+/// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
 #[test]
 fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     use ferrocat_master::io::{Latency, Stamps};
