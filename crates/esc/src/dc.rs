@@ -21,17 +21,16 @@ pub const TCL_PHASE_TAU_NS: i128 = 50_000_000;
 /// The shortest span between two samples that updates the loop's frequency estimate.
 pub const TCL_MIN_SPAN_NS: i64 = 200_000;
 
-/// `x.round() as i64` without the library call `round` is on baseline x86-64 (no SSE4.1): the
-/// cast truncates, and `x − trunc(x)` is exact.
-fn round_half_away(x: f64) -> i64 {
-    let t = x as i64;
-    let frac = x - t as f64;
-    if frac >= 0.5 {
-        t.saturating_add(1)
-    } else if frac <= -0.5 {
-        t.saturating_sub(1)
+/// The rate (10⁻¹⁵) that slews a mean difference of `diff_q8` (1/256 ns) out over TAU:
+/// `diff·(10¹⁵/256)/TAU`. Below 2⁵³/5¹⁵ both of its roundings are exact and it is `diff·78 125`
+/// exactly, one multiplication instead of a division.
+fn phase_fpp(diff_q8: i64) -> f64 {
+    const EXACT_BELOW: u64 = (1u64 << 53) / 30_517_578_125;
+    const _: () = assert!(1e15 / 256.0 / TCL_PHASE_TAU_NS as f64 == 78_125.0);
+    if diff_q8.unsigned_abs() < EXACT_BELOW {
+        diff_q8 as f64 * 78_125.0
     } else {
-        t
+        diff_q8 as f64 * (1e15 / 256.0) / TCL_PHASE_TAU_NS as f64
     }
 }
 
@@ -180,8 +179,8 @@ impl DcUnit {
     fn set_scd(&mut self, scd: i16) {
         self.scd = scd;
         let scs = self.scs;
-        (self.corr_rate_q32, self.applied_fpp) = match self.rates().get(scd as i64) {
-            Some(&(_, q32, fpp)) => (q32, fpp),
+        (self.corr_rate_q32, self.applied_fpp) = match self.rates().applied(scd as i64) {
+            Some(e) => (e.q32, e.fpp),
             None => exact_rates(scs, scd as i64),
         };
     }
@@ -271,7 +270,7 @@ impl DcUnit {
             None => self.last_sample = Some((local, dt)),
         }
         // Command: cancel the frequency error and slew the mean difference out over TAU.
-        let want_fpp = self.freq_est_fpp + self.diff_mean_q8 as f64 * (1e15 / 256.0) / TCL_PHASE_TAU_NS as f64;
+        let want_fpp = self.freq_est_fpp + phase_fpp(self.diff_mean_q8);
         let scd = self.scd_for(want_fpp);
         if scd != self.scd {
             self.set_scd(scd);
@@ -279,29 +278,9 @@ impl DcUnit {
     }
 
     /// The speed-counter difference whose rate is closest to `fpp` (10⁻¹⁵), within the bound.
-    /// Closed form: `d = 5r((S+2)² − d²)` is a quadratic in d; its root is refined exactly.
     fn scd_for(&mut self, fpp: f64) -> i16 {
-        let scs = self.scs;
-        let table = self.rates();
-        let max = table.max;
-        let s = scs as f64;
-        // f64 is exact enough to rank neighbouring candidates and deterministic (IEEE 754).
-        // Every candidate ranked lies within the bound, so in the table.
-        let rate = |d: i64| table.get(d).map_or(f64::INFINITY, |e| e.0);
-        let r = fpp * 1e-15;
-        let guess =
-            if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
-        let g = round_half_away(guess).clamp(-max, max);
-        let (mut best, mut best_err) = (g, (rate(g) - r).abs());
-        for d in [g - 1, g + 1] {
-            if d.abs() <= max {
-                let err = (rate(d) - r).abs();
-                if err < best_err {
-                    (best, best_err) = (d, err);
-                }
-            }
-        }
-        best as i16
+        let from = self.scd as i64;
+        self.rates().nearest(fpp * 1e-15, from) as i16
     }
 
     /// Filtered `local − received` (0x092C's value), in ns, rounded to nearest.
@@ -476,6 +455,68 @@ mod tests {
                 prop_assert!(pulses.len() <= (dt / 1_000 + 2) as usize);
                 let _ = dc.next_sync0_true(t);
             }
+        }
+    }
+
+    /// `x.round() as i64` without the library call `round` is on baseline x86-64 (no SSE4.1): the
+    /// cast truncates, and `x − trunc(x)` is exact.
+    fn round_half_away(x: f64) -> i64 {
+        let t = x as i64;
+        let frac = x - t as f64;
+        if frac >= 0.5 {
+            t.saturating_add(1)
+        } else if frac <= -0.5 {
+            t.saturating_sub(1)
+        } else {
+            t
+        }
+    }
+
+    /// The SCD nearest a rate by the closed form the table's search replaced: `d = 5r((S+2)² −
+    /// d²)` is a quadratic in d; its root, rounded, and the two neighbours ranked.
+    fn closed_form_scd(table: &RateTable, scs: u16, fpp: f64) -> i64 {
+        let max = table.max;
+        let s = scs as f64;
+        let rate = |d: i64| table.rank(d).map_or(f64::INFINITY, |e| e.rate);
+        let r = fpp * 1e-15;
+        let guess =
+            if r == 0.0 { 0.0 } else { (-1.0 + (1.0 + 100.0 * r * r * (s + 2.0) * (s + 2.0)).sqrt()) / (10.0 * r) };
+        let g = round_half_away(guess).clamp(-max, max);
+        let (mut best, mut best_err) = (g, (rate(g) - r).abs());
+        for d in [g - 1, g + 1] {
+            if d.abs() <= max {
+                let err = (rate(d) - r).abs();
+                if err < best_err {
+                    (best, best_err) = (d, err);
+                }
+            }
+        }
+        best
+    }
+
+    proptest! {
+        /// The table's search from any SCD in use finds the SCD the closed form finds, for any
+        /// SCS and any commanded rate up to beyond the bound's (outside exact ties, where the
+        /// search takes the lower and the closed form its rounded root).
+        #[test]
+        fn the_searched_scd_is_the_closed_forms(
+            scs in 0x0080u16..=0x3FFF,
+            from in any::<i16>(),
+            fpp in prop_oneof![-1e13f64..1e13, -1e11f64..1e11, -1e9f64..1e9, Just(0.0)],
+        ) {
+            let table = RateTable::for_scs(scs);
+            let searched = table.nearest(fpp * 1e-15, from as i64);
+            let closed = closed_form_scd(&table, scs, fpp);
+            let (r, rate) = (fpp * 1e-15, |d: i64| table.rank(d).unwrap().rate);
+            let tie = (rate(searched) - r).abs() == (rate(closed) - r).abs();
+            prop_assert!(searched == closed || tie, "scs {scs} from {from} fpp {fpp}: {searched} vs {closed}");
+        }
+
+        /// The phase term's multiplication is the division it replaced, to the bit.
+        #[test]
+        fn the_phase_rate_is_the_divisions(diff_q8 in prop_oneof![-400_000i64..400_000, -(1i64 << 50)..(1i64 << 50), any::<i64>()]) {
+            let divided = diff_q8 as f64 * (1e15 / 256.0) / TCL_PHASE_TAU_NS as f64;
+            prop_assert_eq!(phase_fpp(diff_q8).to_bits(), divided.to_bits());
         }
     }
 

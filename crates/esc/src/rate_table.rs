@@ -33,12 +33,29 @@ fn float_rate(scs: u16, d: i64) -> f64 {
     d / (5.0 * (s + d + 2.0) * (s - d + 2.0))
 }
 
+/// One SCD's rate as the loop ranks it, and how far its neighbour's lies.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Rank {
+    /// The rate as a float, in the order of operations the loop ranks candidates by.
+    pub rate: f64,
+    /// 1 / (rate of SCD + 1 − this rate): how many SCD steps a difference of rate is, near here.
+    inv_step: f64,
+}
+
+/// What one SCD applies: the correction rate in attoseconds per ns × 2³², and in 10⁻¹⁵.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Applied {
+    pub q32: i64,
+    pub fpp: i64,
+}
+
 pub(crate) struct RateTable {
     pub scs: u16,
     /// The bound on |SCD|: SCS − 0x7F (esc-spec §3.5).
     pub max: i64,
-    /// Indexed by `SCD + max`: (float rate, correction rate × 2³², rate in 10⁻¹⁵).
-    entries: Box<[(f64, i64, i64)]>,
+    /// Both indexed by `SCD + max`; apart, so that the search's half stays in cache.
+    ranks: Box<[Rank]>,
+    applied: Box<[Applied]>,
 }
 
 impl std::fmt::Debug for RateTable {
@@ -59,13 +76,25 @@ impl RateTable {
             return t.clone();
         }
         let max = (scs as i64 - 0x7F).max(0);
-        let entries = (-max..=max)
+        let ranks = (-max..=max)
             .map(|d| {
-                let (q32, fpp) = exact_rates(scs, d);
-                (float_rate(scs, d), q32, fpp)
+                // The last entry takes the step below it (none: a table of SCD 0 alone).
+                let step = if d < max {
+                    float_rate(scs, d + 1) - float_rate(scs, d)
+                } else {
+                    float_rate(scs, d) - float_rate(scs, d - 1)
+                };
+                let inv_step = if max == 0 { 0.0 } else { 1.0 / step };
+                Rank { rate: float_rate(scs, d), inv_step }
             })
             .collect();
-        let table = Arc::new(RateTable { scs, max, entries });
+        let applied = (-max..=max)
+            .map(|d| {
+                let (q32, fpp) = exact_rates(scs, d);
+                Applied { q32, fpp }
+            })
+            .collect();
+        let table = Arc::new(RateTable { scs, max, ranks, applied });
         if cache.len() == CACHED {
             cache.remove(0);
         }
@@ -73,12 +102,58 @@ impl RateTable {
         table
     }
 
-    /// The entry of SCD `d`, if the bound allows it.
+    /// What SCD `d` applies, if the bound allows it.
     #[inline]
-    pub fn get(&self, d: i64) -> Option<&(f64, i64, i64)> {
+    pub fn applied(&self, d: i64) -> Option<&Applied> {
         if d.abs() > self.max {
             return None;
         }
-        self.entries.get((d + self.max) as usize)
+        self.applied.get((d + self.max) as usize)
+    }
+
+    /// How SCD `d` ranks, if the bound allows it.
+    #[cfg(test)]
+    pub fn rank(&self, d: i64) -> Option<&Rank> {
+        if d.abs() > self.max {
+            return None;
+        }
+        self.ranks.get((d + self.max) as usize)
+    }
+
+    /// How `d`, which lies within the bound, ranks.
+    #[inline]
+    fn at(&self, d: i64) -> &Rank {
+        &self.ranks[(d + self.max) as usize]
+    }
+
+    /// The SCD whose rate is nearest `r`, searched from `from` (the SCD in use: the loop's
+    /// command moves a few steps per sample), on an exact tie the lower. Newton steps on the
+    /// table's local slopes, then a walk that brackets `r`: no division or square root (the
+    /// closed form's were most of a sample's latency). `r` NaN gives `from`, clamped.
+    pub fn nearest(&self, r: f64, from: i64) -> i64 {
+        let max = self.max;
+        let span = (2 * max + 1) as f64;
+        let mut d = from.clamp(-max, max);
+        // Rates rise with SCD and bend away from the line: a few steps land within one of r.
+        for _ in 0..16 {
+            let e = self.at(d);
+            let steps = ((r - e.rate) * e.inv_step).clamp(-span, span);
+            if steps.abs() < 1.0 || steps.is_nan() {
+                break;
+            }
+            d = (d + steps as i64).clamp(-max, max);
+        }
+        while d > -max && self.at(d).rate > r {
+            d -= 1;
+        }
+        while d < max && self.at(d + 1).rate <= r {
+            d += 1;
+        }
+        // rate(d) ≤ r < rate(d + 1), or d at a bound.
+        if d < max && (self.at(d + 1).rate - r).abs() < (self.at(d).rate - r).abs() {
+            d + 1
+        } else {
+            d
+        }
     }
 }
