@@ -280,8 +280,9 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         "--seconds/--settle-s out of range"
     );
     // The methods that keep a master clock: the master's own, or (ferrocat-mfr) its estimate of
-    // the reference's. chen2016 and SOEM's PI follow the reference's phase and keep no clock.
-    const LIVE: [&str; 6] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
+    // the reference's — those of the master–slave error tables. chen2016 and SOEM's PI follow
+    // the reference's phase and keep no clock.
+    const LIVE: [&str; 8] = ferrocat_lab::park2020::METHODS;
     for m in &a.methods {
         ensure!(LIVE.contains(&m.as_str()), "--method {m:?}: one of {}", LIVE.join(", "));
     }

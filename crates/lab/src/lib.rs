@@ -26,6 +26,10 @@ pub const METHODS: [&str; 7] = ["none", "conventional", "park2020", "chen2016", 
 /// ferrocat steering the reference's time control loop instead of its offset.
 pub const FERROCAT_TCL: &str = "ferrocat-tcl";
 
+/// Variants of ferrocat in either coupling that probe the reference in half of every cycle,
+/// not only while the line is uncertain (`Ferrocat::probe_every_cycle`).
+pub const FERROCAT_DENSE: [&str; 2] = ["ferrocat-dense", "ferrocat-mfr-dense"];
+
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
 pub fn line(slaves: usize) -> SegmentConfig {
     let mut cfg = SegmentConfig { drift_spread_ppm: Some(50.0), ..SegmentConfig::default() };
@@ -93,7 +97,7 @@ pub fn loop_back_ns() -> u32 {
 }
 
 /// Methods that take out what a calibration measured (`ClockSync::take_error`).
-pub const CALIBRATED: [&str; 3] = ["ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
+pub const CALIBRATED: [&str; 5] = ["ferrocat", "ferrocat-mfr", "ferrocat-tcl", "ferrocat-dense", "ferrocat-mfr-dense"];
 
 /// Pulses per calibration.
 pub const CALIBRATION_PULSES: usize = 1000;
@@ -183,6 +187,16 @@ pub fn method<I: Io>(
             f.steering = Steering::TimeControlLoop;
             Box::new(f)
         }
-        other => anyhow::bail!("unknown method {other:?} (known: {}, {FERROCAT_TCL})", METHODS.join(", ")),
+        "ferrocat-dense" | "ferrocat-mfr-dense" => {
+            let coupling = if name == "ferrocat-dense" { coupling } else { Coupling::MasterFollowsReference };
+            let mut f = Ferrocat::new(coupling, cycle_ns);
+            f.probe_every_cycle = true;
+            Box::new(f)
+        }
+        other => anyhow::bail!(
+            "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {})",
+            METHODS.join(", "),
+            FERROCAT_DENSE.join(", ")
+        ),
     })
 }

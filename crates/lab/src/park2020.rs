@@ -11,7 +11,16 @@ use ferrocat_segment::SegmentConfig;
 
 /// The methods whose master clock this experiment compares with the slaves' (the
 /// reference-follows-master methods, and none at all).
-pub const METHODS: [&str; 6] = ["none", "conventional", "park2020", "ferrocat", "ferrocat-mfr", "ferrocat-tcl"];
+pub const METHODS: [&str; 8] = [
+    "none",
+    "conventional",
+    "park2020",
+    "ferrocat",
+    "ferrocat-mfr",
+    "ferrocat-tcl",
+    "ferrocat-dense",
+    "ferrocat-mfr-dense",
+];
 
 #[derive(Debug, Clone)]
 pub struct Options {

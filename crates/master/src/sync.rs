@@ -450,6 +450,10 @@ pub struct Ferrocat {
     offset_given: bool,
     /// Whether to probe the reference with extra frames while the line is uncertain.
     pub probing: bool,
+    /// Whether to probe every cycle, in half of it, however certain the line: many times the
+    /// frames, for a line of many more points that shows a change sooner and holds the
+    /// reference closer (`ferrocat-dense` in the lab; docs/clock-sync.md, "Dense probing").
+    pub probe_every_cycle: bool,
     /// Offset steering: whether to bias the followers' delay registers so that they sit in the
     /// middle of the reference's sawtooth instead of on its top.
     pub centre_followers: bool,
@@ -554,6 +558,7 @@ impl Ferrocat {
             reference_offset_read: None,
             offset_given: false,
             probing: true,
+            probe_every_cycle: false,
             centre_followers: true,
             make_up: true,
             probes_steer: true,
@@ -737,7 +742,7 @@ impl ClockSync for Ferrocat {
     }
     fn probes_wanted(&self) -> u32 {
         let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
-        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
+        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES || self.probe_every_cycle;
         if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }

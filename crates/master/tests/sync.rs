@@ -218,14 +218,19 @@ fn steering_the_reference_from_the_static_drift_compensation_starts_cyclic_opera
     assert!(!report.reference_steered && spread > 100, "{spread}");
 }
 
-/// Master follows reference through a +50 ppm step of the reference's crystal after 3 s:
+/// Master follows reference through a +50 ppm step of the reference's crystal after 12 s:
 /// (ms from the step until the master's estimate of the reference stayed within 100 ns of
 /// its mean before, peak excursion ns, probe frames in the settled second before the step,
 /// after it).
 fn mfr_crystal_step(probing: bool) -> (f64, f64, u64, u64) {
-    let mut m = segment(HostModel::pc_rt());
+    mfr_crystal_step_on(HostModel::pc_rt(), probing, false)
+}
+
+fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f64, f64, u64, u64) {
+    let mut m = segment(host);
     let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS);
     sync.probing = probing;
+    sync.probe_every_cycle = every_cycle;
     let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
     let (step_at, cycles) = (12000, 13000);
@@ -257,6 +262,22 @@ fn mfr_crystal_step(probing: bool) -> (f64, f64, u64, u64) {
     let last_out = after.iter().rposition(|e| (e - mean).abs() > 100.0).map_or(0, |i| i + 1);
     let peak = after.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
     (last_out as f64 * CYCLE_NS as f64 / 1e6, peak, probes_before - settled_from, st.probes - probes_before)
+}
+
+#[test]
+fn dense_probing_probes_every_settled_cycle_and_recovers_from_a_step_on_a_stock_kernel() {
+    let (dense, peak_dense, settled, after) = mfr_crystal_step_on(HostModel::pc_stock(), true, true);
+    let (sparse, peak_sparse, settled_sparse, _) = mfr_crystal_step_on(HostModel::pc_stock(), true, false);
+    println!(
+        "50 ppm step, pc-stock: dense probing back within 100 ns after {dense} ms (peak {peak_dense:.0} ns; \
+         probes {settled} in the settled second before, {after} after); probing while uncertain {sparse} ms \
+         (peak {peak_sparse:.0} ns; {settled_sparse} settled probes)"
+    );
+    // Half of every 1 ms cycle at twice a stock kernel's lead fits ≈ 14 probes; the sparse
+    // rule sends none once settled but for the change test's and the uncertainty's bursts.
+    assert!(settled >= 10 * 1_000, "{settled} probes in 1 000 settled cycles");
+    assert!(settled > 10 * settled_sparse, "{settled} vs {settled_sparse}");
+    assert!(dense < 100.0, "{dense} ms");
 }
 
 #[test]
