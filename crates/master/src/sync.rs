@@ -742,14 +742,15 @@ impl ClockSync for Ferrocat {
     }
     fn probes_wanted(&self) -> u32 {
         let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
-        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES || self.probe_every_cycle;
-        if !self.probing || !self.keeps_line() || !(uncertain || self.fit.suspicion() >= PROBE_SUSPICION) {
+        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
+        let half_cycle = uncertain || self.probe_every_cycle;
+        if !self.probing || !self.keeps_line() || !(half_cycle || self.fit.suspicion() >= PROBE_SUSPICION) {
             return 0;
         }
         // A probe costs about a round trip and the send before it: twice the lead. One probe's
         // worth of the budget is kept as slack for a late reply.
         let cost_ns = lead.saturating_mul(2).max(1) as u64;
-        let budget_ns = if uncertain { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
+        let budget_ns = if half_cycle { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
         (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
     }
     fn probe_window_ns(&self) -> u64 {
