@@ -27,7 +27,7 @@ pub const METHODS: [&str; 7] = ["none", "conventional", "park2020", "chen2016", 
 pub const FERROCAT_TCL: &str = "ferrocat-tcl";
 
 /// Variants of ferrocat in either coupling that probe the reference in half of every cycle,
-/// not only while the line is uncertain (`Ferrocat::probe_every_cycle`).
+/// not only while the line is uncertain (`Ferrocat::dense`).
 pub const FERROCAT_DENSE: [&str; 2] = ["ferrocat-dense", "ferrocat-mfr-dense"];
 
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
@@ -189,9 +189,7 @@ pub fn method<I: Io>(
         }
         "ferrocat-dense" | "ferrocat-mfr-dense" => {
             let coupling = if name == "ferrocat-dense" { coupling } else { Coupling::MasterFollowsReference };
-            let mut f = Ferrocat::new(coupling, cycle_ns);
-            f.probe_every_cycle = true;
-            Box::new(f)
+            Box::new(Ferrocat::dense(coupling, cycle_ns))
         }
         other => anyhow::bail!(
             "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {})",

@@ -452,7 +452,8 @@ pub struct Ferrocat {
     pub probing: bool,
     /// Whether to probe every cycle, in half of it, however certain the line: many times the
     /// frames, for a line of many more points that shows a change sooner and holds the
-    /// reference closer (`ferrocat-dense` in the lab; docs/clock-sync.md, "Dense probing").
+    /// reference closer (`Ferrocat::dense`; `ferrocat-dense` in the lab; docs/clock-sync.md,
+    /// "Dense probing").
     pub probe_every_cycle: bool,
     /// Offset steering: whether to bias the followers' delay registers so that they sit in the
     /// middle of the reference's sawtooth instead of on its top.
@@ -531,6 +532,10 @@ const DELAY_BIAS_MIN_SPAN_CYCLES: u64 = 32;
 /// The longest the line's window grows (16 s at 1 ms without probes) while its points agree
 /// with it; probing stops at a quarter of it, so that a settled line does not probe.
 pub const FIT_WINDOW: usize = 16_384;
+/// The window of a line probed every cycle (the fit's largest): at 14–32 points per 1 ms cycle
+/// it spans 2–5 s, where 16 384 points spanned one and let a stock kernel's stamps move the
+/// level by tens of ns over seconds (docs/clock-sync.md, "Dense probing").
+pub const DENSE_FIT_WINDOW: usize = 65_536;
 
 impl Ferrocat {
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
@@ -564,6 +569,11 @@ impl Ferrocat {
             probes_steer: true,
             delay_bias_ns: 0,
         }
+    }
+
+    /// ferrocat probing in half of every cycle, with a window long enough for that many points.
+    pub fn dense(coupling: Coupling, cycle_ns: u64) -> Self {
+        Ferrocat { probe_every_cycle: true, fit: LineFit::new(DENSE_FIT_WINDOW), ..Ferrocat::new(coupling, cycle_ns) }
     }
 
     /// The lead in use (None before the first sample).

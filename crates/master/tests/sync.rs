@@ -228,9 +228,12 @@ fn mfr_crystal_step(probing: bool) -> (f64, f64, u64, u64) {
 
 fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f64, f64, u64, u64) {
     let mut m = segment(host);
-    let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS);
+    let mut sync = if every_cycle {
+        Ferrocat::dense(Coupling::MasterFollowsReference, CYCLE_NS)
+    } else {
+        Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS)
+    };
     sync.probing = probing;
-    sync.probe_every_cycle = every_cycle;
     let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
     let (step_at, cycles) = (12000, 13000);
