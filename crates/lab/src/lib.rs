@@ -187,8 +187,8 @@ pub fn method<I: Io>(
             f.steering = Steering::TimeControlLoop;
             Box::new(f)
         }
-        "ferrocat-dense" | "ferrocat-mfr-dense" => {
-            let coupling = if name == "ferrocat-dense" { coupling } else { Coupling::MasterFollowsReference };
+        dense if FERROCAT_DENSE.contains(&dense) => {
+            let coupling = if dense == FERROCAT_DENSE[0] { coupling } else { Coupling::MasterFollowsReference };
             Box::new(Ferrocat::dense(coupling, cycle_ns))
         }
         other => anyhow::bail!(

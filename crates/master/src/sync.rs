@@ -452,8 +452,8 @@ pub struct Ferrocat {
     pub probing: bool,
     /// Whether to probe every cycle, in half of it, however certain the line: many times the
     /// frames, for a line of many more points that shows a change sooner and holds the
-    /// reference closer (`Ferrocat::dense`; `ferrocat-dense` in the lab; docs/clock-sync.md,
-    /// "Dense probing").
+    /// reference closer (`Ferrocat::dense`, which also widens the window for those points;
+    /// `ferrocat-dense` in the lab; docs/clock-sync.md, "Dense probing").
     pub probe_every_cycle: bool,
     /// Offset steering: whether to bias the followers' delay registers so that they sit in the
     /// middle of the reference's sawtooth instead of on its top.
