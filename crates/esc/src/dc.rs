@@ -25,7 +25,7 @@ pub const TCL_MIN_SPAN_NS: i64 = 200_000;
 /// `diff·(10¹⁵/256)/TAU`. Below 2⁵³/5¹⁵ both of its roundings are exact and it is `diff·78 125`
 /// exactly, one multiplication instead of a division.
 fn phase_fpp(diff_q8: i64) -> f64 {
-    const EXACT_BELOW: u64 = (1u64 << 53) / 30_517_578_125;
+    const EXACT_BELOW: u64 = (1u64 << 53) / 5u64.pow(15);
     const _: () = assert!(1e15 / 256.0 / TCL_PHASE_TAU_NS as f64 == 78_125.0);
     if diff_q8.unsigned_abs() < EXACT_BELOW {
         diff_q8 as f64 * 78_125.0
