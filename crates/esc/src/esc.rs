@@ -725,9 +725,10 @@ impl Esc {
                 }
                 self.mem[a as usize] = v;
             } else if s.ecat_writes() {
-                if !st.staged || st.staging.len() != s.length as usize {
+                let area = sm_area(&s, self.mem.len());
+                if !st.staged || st.staging.len() != area.len() {
                     st.staging.clear();
-                    st.staging.extend_from_slice(&self.mem[s.start as usize..s.start as usize + s.length as usize]);
+                    st.staging.extend_from_slice(&self.mem[area]);
                     st.staged = true;
                 }
                 st.staging[(a - s.start) as usize] = v;
@@ -883,7 +884,8 @@ impl Esc {
     fn current_byte(&self, a: u16) -> u8 {
         if let Some((n, s)) = self.sm_at(a) {
             let st = &self.sms[n as usize];
-            if !s.is_mailbox() && s.ecat_writes() && st.staged && st.staging.len() == s.length as usize {
+            if !s.is_mailbox() && s.ecat_writes() && st.staged && st.staging.len() == sm_area(&s, self.mem.len()).len()
+            {
                 return st.staging[(a - s.start) as usize];
             }
         }
@@ -1013,9 +1015,9 @@ impl Esc {
                     deliver = true;
                 }
             } else if s.ecat_writes() && written {
-                if st.staged && st.staging.len() == s.length as usize {
-                    let a = s.start as usize;
-                    self.mem[a..a + st.staging.len()].copy_from_slice(&st.staging);
+                let area = sm_area(&s, self.mem.len());
+                if st.staged && st.staging.len() == area.len() {
+                    self.mem[area].copy_from_slice(&st.staging);
                 }
                 st.staged = false;
                 if s.control & SyncManager::WATCHDOG != 0 {
@@ -1196,7 +1198,7 @@ impl Esc {
     /// A complete request arrived in the mailbox SM: the application answers into SM1.
     fn mailbox_request(&mut self, sm: u8) {
         let s = self.sm(sm);
-        let req = self.mem[s.start as usize..s.start as usize + s.length as usize].to_vec();
+        let req = self.mem[sm_area(&s, self.mem.len())].to_vec();
         // SM0 is consumed by the PDI at once.
         self.sms[sm as usize].full = false;
         let reply = {
@@ -1226,12 +1228,21 @@ impl Esc {
                 None => return,
             },
         };
-        let a = out.start as usize;
-        let len = (out.length as usize).min(msg.len());
-        self.mem[a..a + out.length as usize].fill(0);
-        self.mem[a..a + len].copy_from_slice(&msg[..len]);
+        let area = sm_area(&out, self.mem.len());
+        let area = &mut self.mem[area];
+        let len = area.len().min(msg.len());
+        area.fill(0);
+        area[..len].copy_from_slice(&msg[..len]);
         self.sms[n as usize].full = true;
     }
+}
+
+/// The memory a SyncManager's buffer occupies: its area, less what lies beyond the ESC's
+/// memory (a master may configure that; those bytes do not exist, so its last byte can be
+/// neither written nor read and the buffer never completes).
+fn sm_area(s: &SyncManager, mem_len: usize) -> std::ops::Range<usize> {
+    let start = (s.start as usize).min(mem_len);
+    start..(s.start as usize + s.length as usize).min(mem_len)
 }
 
 /// A mailbox error reply "protocol not supported" for a request no application handles.

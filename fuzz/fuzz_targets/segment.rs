@@ -1,0 +1,97 @@
+#![no_main]
+//! Any sequence of frames a master could send, as `ferrocat sim` takes them off an interface,
+//! through a segment of every kind of ESC the simulator models: the coupler, I/O terminals on an
+//! ET1100, a LAN9252 with an SM-synchronous application, a 32-bit DC whose local time starts
+//! just before its wrap, an ESC without DC, and the CiA402 drive behind a firmware that checks
+//! AL transitions (CoE mailbox, SDO server, PDO mapping). The simulator must not panic, and a
+//! frame it answers must still parse as the same chain of datagrams.
+//!
+//! Input: records, each one datagram `[gap][cmd][adp lo][adp hi][ado lo][ado hi][len][flags]`
+//! and `len + 256·(flags >> 5)` data bytes (fewer if the input ends). Flag bit 0 chains the
+//! next record's datagram into the same frame; otherwise the frame goes out after `gap²` µs
+//! (up to ≈ 65 ms, so that watchdogs, SYNC pulses, EEPROM busy and AL responses come due).
+//! Flag bit 1 makes the record raw bytes after the Ethernet header instead (EtherCAT header
+//! and all, which may lie about the length). Built this way the fuzzer spends its time in the
+//! ESCs, not in guessing the frame format, which the `frame` target covers.
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::Frame;
+use libfuzzer_sys::fuzz_target;
+
+const SEGMENT: &str = r#"
+seed = 7
+[[device]]
+builtin = "EK1100"
+[[device]]
+builtin = "EL2004"
+[[device]]
+builtin = "EL2004"
+esc = "lan9252"
+app = "sm"
+[[device]]
+builtin = "EL1004"
+esc = "esc20"
+app = "dc"
+local_time_ns = 4294000000
+[[device]]
+builtin = "EL1004"
+esc = "nodc"
+[[device]]
+builtin = "SERVO"
+device_emulation = false
+local_time_ns = "18446744073000000000"
+"#;
+
+fuzz_target!(|data: &[u8]| {
+    let cfg: SegmentConfig = toml::from_str(SEGMENT).expect("the fuzz segment parses");
+    let mut seg = cfg.build().expect("the fuzz segment builds");
+    let mut t_ns = 1_000_000u64;
+    let mut rest = data;
+    let mut body: Vec<u8> = Vec::new();
+    while let [gap, cmd, adp0, adp1, ado0, ado1, len, flags, tail @ ..] = rest {
+        let len = (*len as usize + 256 * (*flags >> 5) as usize).min(tail.len());
+        let (bytes, next) = tail.split_at(len);
+        rest = next;
+        let raw = flags & 2 != 0;
+        if raw {
+            body.clear();
+            body.extend_from_slice(bytes);
+        } else {
+            let more = flags & 1 != 0 && !rest.is_empty();
+            body.extend_from_slice(&[*cmd, 0, *adp0, *adp1, *ado0, *ado1]);
+            body.extend_from_slice(&((len as u16 & 0x07FF) | if more { 0x8000 } else { 0 }).to_le_bytes());
+            body.extend_from_slice(&[0, 0]);
+            body.extend_from_slice(bytes);
+            body.extend_from_slice(&[0, 0]);
+            if more {
+                continue;
+            }
+        }
+        t_ns += (*gap as u64).pow(2) * 1_000;
+        let mut frame = Vec::with_capacity(body.len() + 16);
+        frame.extend_from_slice(&[0xFF; 6]);
+        frame.extend_from_slice(&[2, 0, 0, 0, 0, 1]);
+        frame.extend_from_slice(&[0x88, 0xA4]);
+        if !raw {
+            // The EtherCAT header: the chain's length (11 bits), type 1 (DLPDU).
+            frame.extend_from_slice(&((body.len() as u16 & 0x07FF) | 0x1000).to_le_bytes());
+        }
+        frame.extend_from_slice(&body);
+        body.clear();
+        send(&mut seg, &mut frame, &mut t_ns);
+    }
+});
+
+/// What the live server does with a frame off the wire (segment/src/live.rs), and what must
+/// hold of the answer.
+fn send(seg: &mut ferrocat_segment::Segment, frame: &mut [u8], t_ns: &mut u64) {
+    let before = match Frame::parse(frame) {
+        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => f.pdu.datagram_count(),
+        _ => return,
+    };
+    if let Some(back_ns) = seg.exchange(frame, *t_ns) {
+        assert!(back_ns > *t_ns, "a frame came back at {back_ns} ns, sent at {t_ns} ns");
+        let after = Frame::parse(frame).expect("an answered frame parses").expect("and is EtherCAT");
+        assert_eq!(after.pdu.datagram_count(), before, "the ESCs changed the datagram chain");
+        *t_ns = back_ns;
+    }
+}
