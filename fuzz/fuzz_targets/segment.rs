@@ -6,14 +6,20 @@
 //! AL transitions (CoE mailbox, SDO server, PDO mapping). The simulator must not panic, and a
 //! frame it answers must still parse as the same chain of datagrams.
 //!
-//! Input: records, each one datagram `[gap][cmd][adp lo][adp hi][ado lo][ado hi][len][flags]`
-//! and `len + 256·(flags >> 5)` data bytes (fewer if the input ends). Flag bit 0 chains the
-//! next record's datagram into the same frame; otherwise the frame goes out after `gap²` µs
-//! (up to ≈ 65 ms, so that watchdogs, SYNC pulses, EEPROM busy and AL responses come due).
-//! Flag bit 1 makes the record raw bytes after the Ethernet header instead (EtherCAT header
-//! and all, which may lie about the length). Built this way the fuzzer spends its time in the
-//! ESCs, not in guessing the frame format, which the `frame` target covers.
-use ferrocat_segment::SegmentConfig;
+//! Input: a first byte choosing where the fuzzed frames start (mod 5: a segment just powered
+//! on; after our master's scan; configured, in PREOP with mailboxes and the process-data
+//! layout; with distributed clocks initialised and SYNC0 running; in OP), so that the fuzzer
+//! reaches the mailboxes, the SDO server and the drive without having to find a bring-up
+//! itself. Then records, each one datagram `[gap][cmd][adp lo][adp hi][ado lo][ado hi][len]
+//! [flags]` and `len + 256·(flags >> 5)` data bytes (fewer if the input ends). Flag bit 0
+//! chains the next record's datagram into the same frame; otherwise the frame goes out after
+//! `gap²` µs (up to ≈ 65 ms, so that watchdogs, SYNC pulses, EEPROM busy and AL responses come
+//! due). Flag bit 1 makes the record raw bytes after the Ethernet header instead (EtherCAT
+//! header and all, which may lie about the length). Built this way the fuzzer spends its time
+//! in the ESCs, not in guessing the frame format, which the `frame` target covers.
+use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::{Segment, SegmentConfig};
 use ferrocat_wire::Frame;
 use libfuzzer_sys::fuzz_target;
 
@@ -42,10 +48,8 @@ local_time_ns = "18446744073000000000"
 "#;
 
 fuzz_target!(|data: &[u8]| {
-    let cfg: SegmentConfig = toml::from_str(SEGMENT).expect("the fuzz segment parses");
-    let mut seg = cfg.build().expect("the fuzz segment builds");
-    let mut t_ns = 1_000_000u64;
-    let mut rest = data;
+    let Some((&stage, mut rest)) = data.split_first() else { return };
+    let (mut seg, mut t_ns) = prepared(stage % 5);
     let mut body: Vec<u8> = Vec::new();
     while let [gap, cmd, adp0, adp1, ado0, ado1, len, flags, tail @ ..] = rest {
         let len = (*len as usize + 256 * (*flags >> 5) as usize).min(tail.len());
@@ -81,9 +85,37 @@ fuzz_target!(|data: &[u8]| {
     }
 });
 
+/// The fuzz segment, brought by our master (in virtual time, deterministic) as far as `stage`
+/// says; and the time then.
+fn prepared(stage: u8) -> (Segment, u64) {
+    let cfg: SegmentConfig = toml::from_str(SEGMENT).expect("the fuzz segment parses");
+    let seg = cfg.build().expect("the fuzz segment builds");
+    if stage == 0 {
+        return (seg, 1_000_000);
+    }
+    let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
+    m.scan().expect("scan");
+    if stage >= 2 {
+        m.configure().expect("configure");
+    }
+    if stage >= 3 {
+        // Every DC slave with SYNC0 (the 32-bit one too), a short drift compensation.
+        let positions = m.slaves.iter().filter(|s| s.has_dc).map(|s| s.position).collect();
+        let dc =
+            DcConfig { max_frames: 300, sync0_cycle_ns: 250_000, sync0_slaves: Some(positions), ..DcConfig::default() };
+        m.init_dc(&dc).expect("DC initialisation");
+    }
+    if stage >= 4 {
+        m.start().expect("OP");
+    }
+    let mut io = m.engine.io;
+    let t_ns = ferrocat_master::io::Io::now_ns(&mut io);
+    (io.seg, t_ns)
+}
+
 /// What the live server does with a frame off the wire (segment/src/live.rs), and what must
 /// hold of the answer.
-fn send(seg: &mut ferrocat_segment::Segment, frame: &mut [u8], t_ns: &mut u64) {
+fn send(seg: &mut Segment, frame: &mut [u8], t_ns: &mut u64) {
     let before = match Frame::parse(frame) {
         Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => f.pdu.datagram_count(),
         _ => return,
