@@ -41,6 +41,18 @@ fn device_err(place: impl Into<String>, message: impl Into<String>) -> SegmentEr
     SegmentError::Device { place: place.into(), message: message.into() }
 }
 
+/// A number of the file, checked against the range it may take (NaN and infinities never do).
+fn in_range(place: &str, key: &str, v: f64, range: std::ops::RangeInclusive<f64>) -> Result<f64, SegmentError> {
+    if range.contains(&v) {
+        Ok(v)
+    } else {
+        Err(device_err(place, format!("{key} {v:?} out of range ({:?} to {:?})", range.start(), range.end())))
+    }
+}
+
+/// No crystal is off by more than 0.1 %: a larger frequency error is a mistake in the file.
+const MAX_DRIFT_PPM: f64 = 1000.0;
+
 /// Where a device's SII comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DeviceSource {
@@ -218,7 +230,8 @@ impl SegmentConfig {
     /// Builds the segment: loads every device, wires the topology, draws oscillators.
     pub fn build(&self) -> Result<Segment, SegmentError> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5EED_05C1);
-        let spread = self.drift_spread_ppm.unwrap_or(25.0);
+        let spread =
+            in_range("segment", "drift_spread_ppm", self.drift_spread_ppm.unwrap_or(25.0), 0.0..=MAX_DRIFT_PPM)?;
         let mut nodes = Vec::new();
         let mut names = Vec::new();
         for (i, d) in self.devices.iter().enumerate() {
@@ -264,8 +277,11 @@ impl SegmentConfig {
                     None => 0,
                 } << (2 * p)
             });
+            let place = format!("device {i}");
             let drift_ppb = match d.drift_ppm {
-                Some(ppm) => (ppm * 1000.0).round() as i64,
+                Some(ppm) => {
+                    (in_range(&place, "drift_ppm", ppm, -MAX_DRIFT_PPM..=MAX_DRIFT_PPM)? * 1000.0).round() as i64
+                }
                 None => (rng.gen_range(-spread..=spread) * 1000.0).round() as i64,
             };
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
@@ -294,9 +310,8 @@ impl SegmentConfig {
                     let us = d
                         .app_period_us
                         .ok_or_else(|| device_err(format!("device {i}"), "app = \"free-run\" needs app_period_us"))?;
-                    if !(us > 0.0 && us < 1e9) {
-                        return Err(device_err(format!("device {i}"), format!("app_period_us {us} out of range")));
-                    }
+                    // At least 1 µs: the application runs once per period, each run an event.
+                    let us = in_range(&place, "app_period_us", us, 1.0..=1e9)?;
                     sync(SyncMode::FreeRun { period_ns: (us * 1000.0).round() as u64 })
                 }
                 (Some(other), _) => {
@@ -314,14 +329,12 @@ impl SegmentConfig {
                 esc.set_power_on_local_time(t);
             }
             if let Some(us) = d.al_response_us {
-                if !(0.0..=10e6).contains(&us) {
-                    return Err(device_err(format!("device {i}"), format!("al_response_us {us} out of range")));
-                }
-                esc.al_response_ns = (us * 1000.0) as u64;
+                esc.al_response_ns = (in_range(&place, "al_response_us", us, 0.0..=10e6)? * 1000.0) as u64;
             }
             let name = d.name.clone().unwrap_or(default_name);
             let mut node = Node::new(name.clone(), esc, kinds, drift_ppb);
-            node.wander_ppb_per_sqrt_s = d.wander_ppb_per_sqrt_s.unwrap_or(0.0);
+            node.wander_ppb_per_sqrt_s =
+                in_range(&place, "wander_ppb_per_sqrt_s", d.wander_ppb_per_sqrt_s.unwrap_or(0.0), 0.0..=1e6)?;
             if let Some(t) = d.timing {
                 let def = EscTiming::default();
                 node.timing = EscTiming {
@@ -341,9 +354,7 @@ impl SegmentConfig {
             [("loss_probability", self.loss_probability), ("corruption_probability", self.corruption_probability)]
         {
             if let Some(p) = p {
-                if !(0.0..=1.0).contains(&p) {
-                    return Err(device_err("segment", format!("{what} {p} is not a probability")));
-                }
+                in_range("segment", what, p, 0.0..=1.0)?;
             }
         }
         seg.loss_probability = self.loss_probability.unwrap_or(0.0);
@@ -358,6 +369,12 @@ impl SegmentConfig {
                 // The first device's port toward the master.
                 if d.parent.is_some() || d.parent_port.is_some() {
                     return Err(device_err(place, "the first device hangs on the master: no parent"));
+                }
+                if d.cable_m.is_some() || d.link_ns.is_some() {
+                    return Err(device_err(
+                        place,
+                        "the first device's link is the master's: set master_link_ns, not cable_m or link_ns",
+                    ));
                 }
                 seg.nodes[0].entry_port = port;
                 continue;
@@ -396,7 +413,8 @@ impl SegmentConfig {
                 return Err(device_err(place, format!("port {pport} of '{}' is already in use", names[parent])));
             }
             let kind = seg.nodes[i].port_kinds[port as usize].unwrap_or(PortKind::Ebus);
-            let delay = d.link_ns.unwrap_or_else(|| link_delay_ns(pkind, kind, d.cable_m.unwrap_or(2.0)));
+            let cable_m = in_range(&place, "cable_m", d.cable_m.unwrap_or(2.0), 0.0..=1000.0)?;
+            let delay = d.link_ns.unwrap_or_else(|| link_delay_ns(pkind, kind, cable_m));
             seg.connect(parent, pport, i, port, delay);
         }
         seg.refresh_links();

@@ -114,6 +114,29 @@ fn builtin_devices_and_bad_descriptions() {
             "[[device]]\nbuiltin = 'EK1100'\nport = 2\n[[device]]\nbuiltin = 'EL2004'\nparent_port = 2\n",
             "device 1 (EL2004): port 2 of 'EK1100' is already in use",
         ),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\ncable_m = 5.0\n",
+            "device 0 (EK1100): the first device's link is the master's",
+        ),
+        // Numbers out of their range, NaN and infinity among them: an error naming the key,
+        // never a panic (NaN spread), a hang (a free-running period that rounds to 0 ns) or a
+        // frequency error taken as given (1e300 ppm).
+        ("drift_spread_ppm = nan\n[[device]]\nbuiltin = 'EK1100'\n", "segment: drift_spread_ppm NaN out of range"),
+        ("[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 1e300\n", "device 0: drift_ppm 1e300 out of range"),
+        (
+            "[[device]]\nbuiltin = 'EL1004'\napp = 'free-run'\napp_period_us = 1e-9\n",
+            "device 0: app_period_us 1e-9 out of range",
+        ),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\nwander_ppb_per_sqrt_s = inf\n",
+            "device 0: wander_ppb_per_sqrt_s inf out of range",
+        ),
+        ("[[device]]\nbuiltin = 'EK1100'\nal_response_us = -1\n", "device 0: al_response_us -1.0 out of range"),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = -5\n",
+            "device 1 (EL2004): cable_m -5.0 out of range",
+        ),
+        ("loss_probability = 1.5\n[[device]]\nbuiltin = 'EK1100'\n", "segment: loss_probability 1.5 out of range"),
     ] {
         let cfg: SegmentConfig = toml::from_str(toml).unwrap();
         let e = cfg.build().unwrap_err().to_string();
