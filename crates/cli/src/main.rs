@@ -265,6 +265,11 @@ impl LabArgs {
             None => Scenario::default(),
         };
         if self.quick {
+            // The keys `--quick` replaces are still checked: a bad value in the file is an
+            // error with or without the flag.
+            if base.experiment.is_some() || experiment.is_some() {
+                base.plan(experiment, false)?;
+            }
             base = base.quick();
         }
         let over = Scenario {

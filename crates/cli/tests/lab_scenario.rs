@@ -78,6 +78,13 @@ fn bad_scenarios_are_named_with_their_key() {
         assert_eq!(out.status.code(), Some(1), "{text}: {err}");
         assert!(err.contains("s.toml") && err.contains(needle), "{text}: {err}");
     }
+    // `--quick` replaces the durations, but a bad one in the file is still an error.
+    let f = dir.join("s.toml");
+    std::fs::write(&f, "experiment = 'park2020'\nsettle_s = nan\n").unwrap();
+    let out = ferrocat(&["lab", "run", f.to_str().unwrap(), "--quick"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("`settle_s`: NaN is not between 0 and 86400 s"), "{err}");
     let out = ferrocat(&["lab", "chen2016", "--rounds", "2"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("--rounds: does not apply to chen2016"));
     let _ = std::fs::remove_dir_all(&dir);

@@ -179,7 +179,7 @@ impl Scenario {
         let positive = |key: &str, v: Option<f64>| -> anyhow::Result<Option<f64>> {
             match v {
                 Some(x) if !(0.0..=86_400.0).contains(&x) => {
-                    Err(self.err(key, format!("{x} is not between 0 and 86400 s")))
+                    Err(self.err(key, format!("{x:?} is not between 0 and 86400 s")))
                 }
                 v => Ok(v),
             }
