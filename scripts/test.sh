@@ -69,7 +69,11 @@ if [ "$FUZZ_SECONDS" != 0 ]; then
   (cd fuzz && "${fuzz[@]}" build -O)
   for t in $(cd fuzz && "${fuzz[@]}" list); do
     out="$(mktemp)"
-    if ! (cd fuzz && "${fuzz[@]}" run -O "$t" -- -max_total_time="$FUZZ_SECONDS" -max_len=4096) >"$out" 2>&1; then
+    # A target with seeds in fuzz/seeds/ starts from them (the device target: a whole ESI file,
+    # more than any 20 s of mutation finds from nothing).
+    corpus=()
+    if [ -d "fuzz/seeds/$t" ]; then mkdir -p "fuzz/corpus/$t"; corpus=("corpus/$t" "seeds/$t"); fi
+    if ! (cd fuzz && "${fuzz[@]}" run -O "$t" "${corpus[@]}" -- -max_total_time="$FUZZ_SECONDS" -max_len=8192) >"$out" 2>&1; then
       tail -n 60 "$out"
       echo "fuzz target $t FAILED (crash input saved under fuzz/artifacts/$t)"
       exit 1
