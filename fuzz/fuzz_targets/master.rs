@@ -1,0 +1,100 @@
+#![no_main]
+//! Our master against a segment whose answers lie: every frame goes through a real simulated
+//! segment (the coupler, I/O terminals and the CiA402 drive), and the input then tampers with
+//! what comes back, one instruction per frame received — pass it, set one byte, cut it short
+//! or drop it — as a faulty or hostile device, or a corrupting link whose NIC kept the frame,
+//! would. The master brings the segment up (scan, CoE mapping, DC, OP), runs cycles and reads
+//! the drive's dictionary. It may fail with an error at any point; it must not panic or hang.
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::{Segment, SegmentConfig};
+use libfuzzer_sys::fuzz_target;
+
+const SEGMENT: &str = r#"
+seed = 3
+[[device]]
+builtin = "EK1100"
+[[device]]
+builtin = "EL2004"
+[[device]]
+builtin = "EL1004"
+[[device]]
+builtin = "SERVO"
+"#;
+
+/// The in-process world with the input's tampering applied to every frame received.
+struct Lying<'a> {
+    inner: VirtualIo,
+    script: &'a [u8],
+}
+
+impl Io for Lying<'_> {
+    fn now_ns(&mut self) -> u64 {
+        self.inner.now_ns()
+    }
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.inner.send(frame)
+    }
+    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        loop {
+            let Some((n, t)) = self.inner.recv(buf, deadline_ns)? else { return Ok(None) };
+            let [op, lo, hi, value, rest @ ..] = self.script else { return Ok(Some((n, t))) };
+            self.script = rest;
+            let at = u16::from_le_bytes([*lo, *hi]) as usize % n.max(1);
+            match op % 4 {
+                0 => return Ok(Some((n, t))),
+                1 => {
+                    buf[at] = *value;
+                    return Ok(Some((n, t)));
+                }
+                2 => return Ok(Some((at, t))),
+                _ => continue, // dropped: wait for the next frame, or the deadline
+            }
+        }
+    }
+    fn sleep_until(&mut self, t_ns: u64) {
+        self.inner.sleep_until(t_ns)
+    }
+    fn wake_target_ns(&self) -> Option<u64> {
+        self.inner.wake_target_ns()
+    }
+    fn last_tx_ns(&mut self) -> Option<u64> {
+        self.inner.last_tx_ns()
+    }
+    fn is_virtual(&self) -> bool {
+        true
+    }
+    fn segment(&self) -> Option<&Segment> {
+        self.inner.segment()
+    }
+    fn segment_mut(&mut self) -> Option<&mut Segment> {
+        self.inner.segment_mut()
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let cfg: SegmentConfig = toml::from_str(SEGMENT).expect("the fuzz segment parses");
+    let seg = cfg.build().expect("the fuzz segment builds");
+    let io = Lying { inner: VirtualIo::new(seg, HostModel::ideal(), 1), script: data };
+    let mut m = Master::new(io);
+    if m.scan().is_err() || m.configure().is_err() {
+        return;
+    }
+    let dc = DcConfig { max_frames: 300, sync0_cycle_ns: 500_000, ..DcConfig::default() };
+    let _ = m.init_dc(&dc);
+    if m.start().is_err() {
+        return;
+    }
+    for _ in 0..20 {
+        let _ = m.cycle();
+        let _ = m.dc_monitor();
+    }
+    let _ = m.supervise();
+    if let Ok(list) = m.od_list(3) {
+        for index in list.into_iter().take(16) {
+            let _ = m.object_info(3, index);
+            let _ = m.sdo_read(3, index, 0);
+        }
+    }
+    let _ = m.sdo_write(3, 0x6060, 0, &[8]);
+});
