@@ -41,7 +41,7 @@ fn device_err(place: impl Into<String>, message: impl Into<String>) -> SegmentEr
     SegmentError::Device { place: place.into(), message: message.into() }
 }
 
-/// A number of the file, checked against the range it may take (NaN and infinities never do).
+/// A number from the file, checked against the range it may take (NaN and infinities never do).
 fn in_range(place: &str, key: &str, v: f64, range: std::ops::RangeInclusive<f64>) -> Result<f64, SegmentError> {
     if range.contains(&v) {
         Ok(v)
@@ -298,34 +298,28 @@ impl SegmentConfig {
                     let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
                     Box::new(Cia402Drive::new(od, config.sm_count, seed))
                 }
-                (Some("cia402"), _) => {
-                    return Err(device_err(format!("device {i}"), "app = \"cia402\" needs a CoE mailbox"))
-                }
+                (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
                 (None, Some(od)) => Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic))),
                 (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
                 (None | Some("io"), _) => Box::new(DigitalIo::new(config.sm_count)),
                 (Some("sm"), _) => sync(SyncMode::SmSynchronous),
                 (Some("dc"), _) => sync(SyncMode::DcSynchronous),
                 (Some("free-run"), _) => {
-                    let us = d
-                        .app_period_us
-                        .ok_or_else(|| device_err(format!("device {i}"), "app = \"free-run\" needs app_period_us"))?;
+                    let us =
+                        d.app_period_us.ok_or_else(|| device_err(&place, "app = \"free-run\" needs app_period_us"))?;
                     // At least 1 µs: the application runs once per period, each run an event.
                     let us = in_range(&place, "app_period_us", us, 1.0..=1e9)?;
                     sync(SyncMode::FreeRun { period_ns: (us * 1000.0).round() as u64 })
                 }
                 (Some(other), _) => {
-                    return Err(device_err(
-                        format!("device {i}"),
-                        format!("unknown app '{other}' (io, sm, dc, free-run, cia402)"),
-                    ))
+                    return Err(device_err(&place, format!("unknown app '{other}' (io, sm, dc, free-run, cia402)")))
                 }
             };
             let mut esc = Esc::new(config, sii, app, drift_ppb, 0);
             if let Some(n) = &d.local_time_ns {
-                let t = n.get_u64().ok_or_else(|| {
-                    device_err(format!("device {i}"), format!("local_time_ns {n:?} is not a u64 number of ns"))
-                })?;
+                let t = n
+                    .get_u64()
+                    .ok_or_else(|| device_err(&place, format!("local_time_ns {n:?} is not a u64 number of ns")))?;
                 esc.set_power_on_local_time(t);
             }
             if let Some(us) = d.al_response_us {
@@ -413,6 +407,9 @@ impl SegmentConfig {
                 return Err(device_err(place, format!("port {pport} of '{}' is already in use", names[parent])));
             }
             let kind = seg.nodes[i].port_kinds[port as usize].unwrap_or(PortKind::Ebus);
+            if d.cable_m.is_some() && d.link_ns.is_some() {
+                return Err(device_err(place, "give cable_m or link_ns, not both (link_ns is the whole hop)"));
+            }
             let cable_m = in_range(&place, "cable_m", d.cable_m.unwrap_or(2.0), 0.0..=1000.0)?;
             let delay = d.link_ns.unwrap_or_else(|| link_delay_ns(pkind, kind, cable_m));
             seg.connect(parent, pport, i, port, delay);

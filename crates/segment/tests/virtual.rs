@@ -137,6 +137,10 @@ fn builtin_devices_and_bad_descriptions() {
             "device 1 (EL2004): cable_m -5.0 out of range",
         ),
         ("loss_probability = 1.5\n[[device]]\nbuiltin = 'EK1100'\n", "segment: loss_probability 1.5 out of range"),
+        (
+            "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = 5\nlink_ns = 500\n",
+            "device 1 (EL2004): give cable_m or link_ns, not both",
+        ),
     ] {
         let cfg: SegmentConfig = toml::from_str(toml).unwrap();
         let e = cfg.build().unwrap_err().to_string();
