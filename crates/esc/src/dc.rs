@@ -71,6 +71,23 @@ pub struct DcUnit {
     rates: Arc<RateTable>,
 }
 
+/// SYNC0 pulses that fell due together (see [`DcUnit::take_sync0_until`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sync0Due {
+    /// How many pulses (at least one).
+    pub pulses: u64,
+    /// System time of the last of them, as the registers show it (32-bit DC: masked).
+    pub last_sys_ns: u64,
+}
+
+impl SyncUnit {
+    /// A pulse length of at least the cycle time keeps the output active (esc-spec §SYNC):
+    /// after its first edge the PDI sees no further ones.
+    pub fn output_held(&self) -> bool {
+        self.cycle0_ns > 0 && self.pulse_len_10ns > 0 && self.pulse_len_10ns as u64 * 10 >= self.cycle0_ns as u64
+    }
+}
+
 #[derive(Debug, Clone, Default)]
 pub struct SyncUnit {
     pub activation: u8,
@@ -330,25 +347,36 @@ impl DcUnit {
         };
     }
 
-    /// System times of the SYNC0 pulses up to true time `t_ns`, advancing the schedule.
-    pub fn take_sync0_until(&mut self, t_ns: u64, out: &mut Vec<u64>) {
+    /// The SYNC0 pulses due by true time `t_ns`, taken together and the schedule advanced past
+    /// them: constant time however short the cycle or long the gap, so a master that programs
+    /// a cycle of a few ns cannot make the simulator count pulses one by one.
+    pub fn take_sync0_until(&mut self, t_ns: u64) -> Option<Sync0Due> {
         let now = self.system_ext_at(t_ns);
+        let next = self.sync.next_sync0?;
         // Wrapping, half-range comparisons: the schedule never overflows, whatever the offset.
-        while let Some(next) = self.sync.next_sync0 {
-            if (now.wrapping_sub(next) as i64) < 0 {
-                break;
-            }
-            out.push(self.mask(next));
-            self.sync.sync0_count += 1;
-            self.sync.activation_status &= !0b01;
-            if self.sync.cycle1_ns == 0 || self.sync.cycle1_ns < self.sync.cycle0_ns {
-                self.sync.sync1_count += 1;
-            }
-            self.sync.next_sync0 = match self.sync.cycle0_ns {
-                0 => None, // single shot
-                c => Some(next.wrapping_add(c as u64)),
-            };
+        let late = now.wrapping_sub(next);
+        if (late as i64) < 0 {
+            return None;
         }
+        let (pulses, last) = match self.sync.cycle0_ns {
+            0 => {
+                self.sync.next_sync0 = None; // single shot
+                (1, next)
+            }
+            c => {
+                let c = c as u64;
+                let k = late / c + 1;
+                let last = next.wrapping_add((k - 1) * c);
+                self.sync.next_sync0 = Some(last.wrapping_add(c));
+                (k, last)
+            }
+        };
+        self.sync.sync0_count += pulses;
+        self.sync.activation_status &= !0b01;
+        if self.sync.cycle1_ns == 0 || self.sync.cycle1_ns < self.sync.cycle0_ns {
+            self.sync.sync1_count += pulses;
+        }
+        Some(Sync0Due { pulses, last_sys_ns: self.mask(last) })
     }
 
     /// The next SYNC0 as the register 0x0990 shows it.
@@ -361,6 +389,22 @@ impl DcUnit {
     pub fn next_sync0_true(&self, from_ns: u64) -> Option<u64> {
         let next = self.sync.next_sync0?;
         self.search_sync0(from_ns, next)
+    }
+
+    /// True time of the first SYNC0 pulse later than true time `after_ns`: the pulses due by
+    /// then are skipped (they fall while the PDI still services an earlier one).
+    pub fn next_sync0_true_after(&self, after_ns: u64) -> Option<u64> {
+        let next = self.sync.next_sync0?;
+        let late = self.system_ext_at(after_ns).wrapping_sub(next);
+        let first = if (late as i64) < 0 {
+            next
+        } else {
+            match self.sync.cycle0_ns as u64 {
+                0 => return None,
+                c => next.wrapping_add((late / c + 1) * c),
+            }
+        };
+        self.search_sync0(after_ns.saturating_add(1), first)
     }
 
     fn search_sync0(&self, from_ns: u64, next: u64) -> Option<u64> {
@@ -442,7 +486,6 @@ mod tests {
             dc.sync.activation = activation;
             dc.sync_activation_written(1_000);
             let mut t = 1_000u64;
-            let mut pulses = Vec::new();
             for (dt, received) in samples {
                 let before = dc.local_at(t);
                 t += dt;
@@ -450,9 +493,9 @@ mod tests {
                 prop_assert!((elapsed as f64 - dt as f64).abs() <= dt as f64 * 2e-3 + 20.0, "{elapsed} after {dt}");
                 dc.tcl_sample(t, received);
                 let _ = (dc.system_at(t), dc.ecat_system_time(t), dc.difference_register());
-                pulses.clear();
-                dc.take_sync0_until(t, &mut pulses);
-                prop_assert!(pulses.len() <= (dt / 1_000 + 2) as usize);
+                if let Some(due) = dc.take_sync0_until(t) {
+                    prop_assert!(due.pulses >= 1 && due.pulses <= dt / 1_000 + 2, "{due:?} after {dt}");
+                }
                 let _ = dc.next_sync0_true(t);
             }
         }
@@ -639,26 +682,42 @@ mod tests {
         assert!(mean.abs() < 3.0, "mean error after lock {mean:.2} ns");
     }
 
-    #[test]
-    fn sync0_single_shot_and_past_start() {
+    /// A 64-bit unit with a perfect crystal, SYNC0 activated at 0 to start at 1 µs.
+    fn sync0_from_1us(cycle0_ns: u32) -> DcUnit {
         use ferrocat_wire::register::dc_activation as act;
         let mut dc = DcUnit::new(DcWidth::Bits64, 0, 0, 0);
         dc.sync.start_time = 1_000;
-        dc.sync.cycle0_ns = 0;
+        dc.sync.cycle0_ns = cycle0_ns;
         dc.sync.activation = act::CYCLIC_OPERATION | act::SYNC0;
         dc.sync_activation_written(0);
-        let mut v = Vec::new();
-        dc.take_sync0_until(5_000, &mut v);
-        dc.take_sync0_until(50_000, &mut v);
-        assert_eq!(v, [1_000]);
+        dc
+    }
+
+    #[test]
+    fn sync0_single_shot_and_past_start() {
+        use ferrocat_wire::register::dc_activation as act;
+        let mut dc = sync0_from_1us(0);
+        assert_eq!(dc.take_sync0_until(5_000), Some(Sync0Due { pulses: 1, last_sys_ns: 1_000 }));
+        assert_eq!(dc.take_sync0_until(50_000), None);
         // A start time in the past never fires on 64 bit without the check, at once with it.
         dc.sync.start_time = 10;
         dc.sync_activation_written(60_000);
-        dc.take_sync0_until(70_000, &mut v);
-        assert_eq!(v.len(), 1);
+        assert_eq!(dc.take_sync0_until(70_000), None);
         dc.sync.activation |= act::START_TIME_CHECK;
         dc.sync_activation_written(80_000);
-        dc.take_sync0_until(80_000, &mut v);
-        assert_eq!(v.len(), 2);
+        assert_eq!(dc.take_sync0_until(80_000), Some(Sync0Due { pulses: 1, last_sys_ns: 80_000 }));
+        assert_eq!(dc.sync.sync0_count, 2);
+    }
+
+    #[test]
+    fn sync0_pulses_due_together_are_counted_not_listed() {
+        let mut dc = sync0_from_1us(10);
+        // An hour of 10 ns pulses in one step: 1_000, 1_010, … up to 3.6e12.
+        let t = 3_600_000_000_000;
+        let due = dc.take_sync0_until(t).expect("due");
+        assert_eq!(due, Sync0Due { pulses: (t - 1_000) / 10 + 1, last_sys_ns: t });
+        assert_eq!(dc.next_sync0_register(), t + 10);
+        assert_eq!(dc.take_sync0_until(t + 9), None);
+        assert_eq!(dc.take_sync0_until(t + 10).map(|d| d.pulses), Some(1));
     }
 }

@@ -87,22 +87,34 @@ impl Expected {
     }
 }
 
-/// A bounded record of recent SYNC0 pulses (system time, true time).
+/// A bounded record of recent SYNC0 events.
 #[derive(Debug, Clone, Default)]
 pub struct SyncLog {
+    /// The last SYNC0 events the application saw: (system time, true time), newest last, at
+    /// most 64.
     pub pulses: std::collections::VecDeque<(u64, u64)>,
+    /// Every pulse the unit gave, including those that fell while the PDI still serviced an
+    /// earlier one or while the output was held active.
     pub count: u64,
+    /// Pulses the application did not see for those reasons.
+    pub merged: u64,
 }
 
 impl SyncLog {
-    fn push(&mut self, p: (u64, u64)) {
+    fn push(&mut self, p: (u64, u64), pulses: u64) {
         if self.pulses.len() == 64 {
             self.pulses.pop_front();
         }
         self.pulses.push_back(p);
-        self.count += 1;
+        self.count += pulses;
+        self.merged += pulses - 1;
     }
 }
+
+/// How long after a SYNC0 edge the PDI side is busy with it: an interrupt entry and the read of
+/// 0x098E that acknowledges it. Pulses in that time raise no new edge (model choice; the
+/// datasheet gives no figure, and every cycle a device accepts is far longer).
+pub const SYNC0_SERVICE_NS: u64 = 1_000;
 
 /// Per-frame bookkeeping of writes with side effects.
 #[derive(Debug, Default)]
@@ -130,8 +142,8 @@ pub struct Esc {
     effects: FrameEffects,
     wd_last_trigger_ns: u64,
     reset_seq: u8,
-    sync_scratch: Vec<u64>,
-    /// The last SYNC0 pulses: (system time, true time), newest last, at most 64.
+    /// True time of the last SYNC0 edge the application saw since the unit was activated.
+    sync0_edge_ns: Option<u64>,
     pub sync0_log: SyncLog,
     /// Frames this ESC processed.
     pub frames: u64,
@@ -180,7 +192,7 @@ impl Esc {
             effects: FrameEffects::default(),
             wd_last_trigger_ns: t_ns,
             reset_seq: 0,
-            sync_scratch: Vec::new(),
+            sync0_edge_ns: None,
             sync0_log: SyncLog::default(),
             frames: 0,
             al_changes: 0,
@@ -366,9 +378,9 @@ impl Esc {
         if t_ns < self.now_ns {
             return;
         }
-        // SYNC0 pulses and the application's own events up to t, each at its exact true instant.
+        // SYNC0 edges and the application's own events up to t, each at its exact true instant.
         loop {
-            let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
+            let sync = self.next_sync0_edge_ns();
             let own = self.app.next_event_ns();
             let tp = match (sync, own) {
                 (None, None) => break,
@@ -381,20 +393,26 @@ impl Esc {
             }
             self.now_ns = self.now_ns.max(tp);
             if sync == Some(tp) {
-                let mut pulses = std::mem::take(&mut self.sync_scratch);
-                if let Some(dc) = self.dc.as_mut() {
-                    dc.take_sync0_until(tp, &mut pulses);
-                }
-                self.sync_pulsed = true;
-                for sys in pulses.drain(..) {
-                    self.sync0_log.push((sys, tp));
+                let due = self.dc.as_mut().and_then(|dc| dc.take_sync0_until(tp));
+                if let Some(due) = due {
+                    self.sync_pulsed = true;
+                    self.sync0_edge_ns = Some(tp);
+                    self.sync0_log.push((due.last_sys_ns, tp), due.pulses);
                     let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
-                    self.app.sync0(&mut pdi, sys);
+                    self.app.sync0(&mut pdi, due.last_sys_ns);
                 }
-                self.sync_scratch = pulses;
             } else {
                 let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
                 self.app.tick(&mut pdi);
+            }
+        }
+        // Pulses that raised no edge (output held, or the PDI still busy) still move the
+        // schedule that 0x0990 shows.
+        if self.sync0_edge_ns.is_some() {
+            if let Some(due) = self.dc.as_mut().and_then(|dc| dc.take_sync0_until(t_ns)) {
+                self.sync_pulsed = true;
+                self.sync0_log.count += due.pulses;
+                self.sync0_log.merged += due.pulses;
             }
         }
         if let Some(dc) = self.dc.as_mut() {
@@ -418,9 +436,21 @@ impl Esc {
         }
     }
 
-    /// True time of the next internal event (a SYNC0 pulse), for a virtual-time scheduler.
+    /// True time of the next SYNC0 edge the application will see.
+    fn next_sync0_edge_ns(&self) -> Option<u64> {
+        let dc = self.dc.as_ref()?;
+        match self.sync0_edge_ns {
+            Some(_) if dc.sync.output_held() => None,
+            Some(edge) if edge.saturating_add(SYNC0_SERVICE_NS) >= self.now_ns => {
+                dc.next_sync0_true_after(edge.saturating_add(SYNC0_SERVICE_NS))
+            }
+            _ => dc.next_sync0_true(self.now_ns),
+        }
+    }
+
+    /// True time of the next internal event (a SYNC0 edge), for a virtual-time scheduler.
     pub fn next_event_ns(&self) -> Option<u64> {
-        let sync = self.dc.as_ref().and_then(|d| d.next_sync0_true(self.now_ns));
+        let sync = self.next_sync0_edge_ns();
         [sync, self.app.next_event_ns(), self.pending_al.map(|p| p.1)].into_iter().flatten().min()
     }
 
@@ -1102,6 +1132,7 @@ impl Esc {
                 let auto = dc.sync.activation & ferrocat_wire::register::dc_activation::AUTO_ACTIVATE != 0;
                 if activation || (start_time && auto) {
                     dc.sync_activation_written(t);
+                    self.sync0_edge_ns = None;
                 }
             }
         }

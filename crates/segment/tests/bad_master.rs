@@ -57,3 +57,67 @@ fn a_send_mailbox_past_the_end_of_memory_holds_what_fits() {
     }
     assert_eq!(bus.fprd_u32(STATION, 0x0010) & 0xFFFF, STATION as u32, "the ESC still answers");
 }
+
+/// Programs SYNC0 on the ET1100 terminal: `cycle_ns`, a pulse length of `pulse_10ns` × 10 ns,
+/// the first pulse 1 ms ahead; returns that start time.
+fn start_sync0(bus: &mut Bus, cycle_ns: u32, pulse_10ns: u16) -> u64 {
+    use ferrocat_wire::register::dc_activation as act;
+    let start = bus.fprd_u64(STATION, 0x0910) + 1_000_000;
+    bus.fp(Command::FPWR, STATION, 0x0981, &[0]);
+    bus.fp(Command::FPWR, STATION, 0x0982, &pulse_10ns.to_le_bytes());
+    bus.fp(Command::FPWR, STATION, 0x09A0, &cycle_ns.to_le_bytes());
+    bus.fp(Command::FPWR, STATION, 0x0990, &start.to_le_bytes());
+    bus.fp(Command::FPWR, STATION, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0]);
+    start
+}
+
+/// A SYNC0 cycle of 10 ns in acknowledge mode, then 65 ms without a frame: 6.5 million pulses.
+/// The application sees one edge per PDI service time (1 µs); the others fall while the signal
+/// is still asserted, are counted, and 0x0990 still shows the next pulse on the grid. Until
+/// 2026-11-24 the ESC listed every pulse before handing them over: 2 GiB for this gap, found by
+/// the `segment` target as an out-of-memory.
+#[test]
+fn a_sync0_cycle_of_a_few_ns_neither_stalls_nor_exhausts_memory() {
+    let mut bus = et1100_bus();
+    let start = start_sync0(&mut bus, 10, 0);
+    let t0 = bus.t;
+    bus.seg.advance_to(t0 + 65_000_000);
+    let esc = &bus.seg.nodes[0].esc;
+    let log = esc.sync0_log.clone();
+    let sys_now = esc.dc.as_ref().unwrap().system_at(t0 + 65_000_000);
+    assert_eq!(log.count, (sys_now - start) / 10 + 1, "every pulse on the grid up to now counted");
+    let seen = log.count - log.merged;
+    assert!((50_000..=65_001).contains(&seen), "{seen} edges seen in 65 ms");
+    for w in log.pulses.iter().collect::<Vec<_>>().windows(2) {
+        assert!(w[1].1 - w[0].1 > 1_000, "edges {w:?} closer than the service time");
+    }
+    bus.t = bus.t.max(t0 + 65_000_000);
+    let next = bus.fprd_u64(STATION, 0x0990);
+    assert_eq!((next - start) % 10, 0, "0x0990 {next} on the grid");
+    assert!(next > sys_now, "0x0990 {next} shows a pulse to come (now {sys_now})");
+}
+
+/// A pulse length at least the cycle time keeps the output active (esc-spec: SYNC signal): one
+/// edge for the application, however many pulses follow; a new activation gives a new edge.
+#[test]
+fn a_pulse_length_of_a_whole_cycle_holds_the_output() {
+    let mut bus = et1100_bus();
+    let start = start_sync0(&mut bus, 5_000, 500);
+    let t0 = bus.t;
+    bus.seg.advance_to(t0 + 10_000_000);
+    let esc = &bus.seg.nodes[0].esc;
+    let sys_now = esc.dc.as_ref().unwrap().system_at(t0 + 10_000_000);
+    let log = &esc.sync0_log;
+    assert_eq!(log.count, (sys_now - start) / 5_000 + 1, "every pulse counted");
+    assert_eq!(log.count - log.merged, 1, "one edge while held");
+    bus.t = bus.t.max(t0 + 10_000_000);
+    let start = start_sync0(&mut bus, 50_000, 500);
+    let merged = bus.seg.nodes[0].esc.sync0_log.merged;
+    let t1 = bus.t;
+    bus.seg.advance_to(t1 + 2_000_000);
+    let esc = &bus.seg.nodes[0].esc;
+    let sys_now = esc.dc.as_ref().unwrap().system_at(t1 + 2_000_000);
+    let log = &esc.sync0_log;
+    assert_eq!(log.merged, merged, "50 µs cycle with 5 µs pulses: every pulse an edge");
+    assert_eq!(log.pulses.back().unwrap().0, start + (sys_now - start) / 50_000 * 50_000, "the last edge");
+}
