@@ -81,10 +81,10 @@ pub struct Sync0Due {
 }
 
 impl SyncUnit {
-    /// A pulse length of at least the cycle time keeps the output active (esc-spec §SYNC):
-    /// after its first edge the PDI sees no further ones.
+    /// A pulse length greater than the cycle time keeps the output active (ESC datasheet
+    /// section I, 9.2.3.1): after its first edge the PDI sees no further ones.
     pub fn output_held(&self) -> bool {
-        self.cycle0_ns > 0 && self.pulse_len_10ns > 0 && self.pulse_len_10ns as u64 * 10 >= self.cycle0_ns as u64
+        self.cycle0_ns > 0 && self.pulse_len_10ns as u64 * 10 > self.cycle0_ns as u64
     }
 }
 

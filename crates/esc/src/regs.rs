@@ -39,7 +39,7 @@ const fn writable_rule(a: u16) -> bool {
         | 0x0910..=0x0917          // system time (write feeds the time control loop)
         | 0x0920..=0x092B          // offset, delay
         | 0x0930..=0x0931 | 0x0934..=0x0936
-        | 0x0980..=0x0983          // cyclic unit control, activation, pulse length
+        | 0x0980..=0x0981          // cyclic unit control, activation (pulse length: SII only)
         | 0x0990..=0x0997 | 0x09A0..=0x09A7 // start time, cycle times
         | 0x09A8..=0x09A9          // latch control
         | 0x0F80..=0x0FFF          // user RAM

@@ -58,13 +58,12 @@ fn a_send_mailbox_past_the_end_of_memory_holds_what_fits() {
     assert_eq!(bus.fprd_u32(STATION, 0x0010) & 0xFFFF, STATION as u32, "the ESC still answers");
 }
 
-/// Programs SYNC0 on the ET1100 terminal: `cycle_ns`, a pulse length of `pulse_10ns` × 10 ns,
-/// the first pulse 1 ms ahead; returns that start time.
-fn start_sync0(bus: &mut Bus, cycle_ns: u32, pulse_10ns: u16) -> u64 {
+/// Programs SYNC0 on the ET1100 terminal: `cycle_ns`, the first pulse 1 ms ahead; returns that
+/// start time.
+fn start_sync0(bus: &mut Bus, cycle_ns: u32) -> u64 {
     use ferrocat_wire::register::dc_activation as act;
     let start = bus.fprd_u64(STATION, 0x0910) + 1_000_000;
     bus.fp(Command::FPWR, STATION, 0x0981, &[0]);
-    bus.fp(Command::FPWR, STATION, 0x0982, &pulse_10ns.to_le_bytes());
     bus.fp(Command::FPWR, STATION, 0x09A0, &cycle_ns.to_le_bytes());
     bus.fp(Command::FPWR, STATION, 0x0990, &start.to_le_bytes());
     bus.fp(Command::FPWR, STATION, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0]);
@@ -79,7 +78,7 @@ fn start_sync0(bus: &mut Bus, cycle_ns: u32, pulse_10ns: u16) -> u64 {
 #[test]
 fn a_sync0_cycle_of_a_few_ns_neither_stalls_nor_exhausts_memory() {
     let mut bus = et1100_bus();
-    let start = start_sync0(&mut bus, 10, 0);
+    let start = start_sync0(&mut bus, 10);
     let t0 = bus.t;
     bus.seg.advance_to(t0 + 65_000_000);
     let esc = &bus.seg.nodes[0].esc;
@@ -97,12 +96,31 @@ fn a_sync0_cycle_of_a_few_ns_neither_stalls_nor_exhausts_memory() {
     assert!(next > sys_now, "0x0990 {next} shows a pulse to come (now {sys_now})");
 }
 
-/// A pulse length at least the cycle time keeps the output active (esc-spec: SYNC signal): one
-/// edge for the application, however many pulses follow; a new activation gives a new edge.
+/// A pulse length (SII word 2, 10 µs here) greater than the cycle time keeps the output active
+/// (ESC datasheet section I, 9.2.3.1): one edge for the application however many pulses follow;
+/// with a cycle longer than the pulse every pulse is an edge again. The pulse length is the
+/// EEPROM's: a master cannot write 0x0982.
 #[test]
-fn a_pulse_length_of_a_whole_cycle_holds_the_output() {
+fn a_pulse_length_longer_than_the_cycle_holds_the_output() {
+    // The terminal's EEPROM as a master would dump it, with word 2 set to 1000 × 10 ns.
     let mut bus = et1100_bus();
-    let start = start_sync0(&mut bus, 5_000, 500);
+    let mut image: Vec<u8> = (0..512).flat_map(|w| bus.sii_read(STATION, 2 * w)[..4].to_vec()).collect();
+    let mut header = ferrocat_wire::sii::SiiHeader::parse(&image).unwrap();
+    header.sync_impulse_len = 1_000;
+    image[..ferrocat_wire::sii::HEADER_LEN].copy_from_slice(&header.with_checksum().to_bytes());
+    let path = std::env::temp_dir().join(format!("ferrocat-held-output-{}.bin", std::process::id()));
+    std::fs::write(&path, &image).unwrap();
+    let cfg: SegmentConfig =
+        toml::from_str(&format!("[[device]]\neeprom = '{}'\nesc = 'et1100'\n", path.display())).unwrap();
+    let seg = cfg.build();
+    std::fs::remove_file(&path).unwrap();
+    let mut bus = Bus::new(seg.unwrap());
+    bus.address_all();
+    assert_eq!(bus.fp(Command::FPRD, STATION, 0x0982, &[0; 2]).0, 1_000u16.to_le_bytes(), "from the EEPROM");
+    bus.fp(Command::FPWR, STATION, 0x0982, &0u16.to_le_bytes());
+    assert_eq!(bus.fp(Command::FPRD, STATION, 0x0982, &[0; 2]).0, 1_000u16.to_le_bytes(), "ECAT read-only");
+
+    let start = start_sync0(&mut bus, 5_000);
     let t0 = bus.t;
     bus.seg.advance_to(t0 + 10_000_000);
     let esc = &bus.seg.nodes[0].esc;
@@ -111,13 +129,13 @@ fn a_pulse_length_of_a_whole_cycle_holds_the_output() {
     assert_eq!(log.count, (sys_now - start) / 5_000 + 1, "every pulse counted");
     assert_eq!(log.count - log.merged, 1, "one edge while held");
     bus.t = bus.t.max(t0 + 10_000_000);
-    let start = start_sync0(&mut bus, 50_000, 500);
+    let start = start_sync0(&mut bus, 50_000);
     let merged = bus.seg.nodes[0].esc.sync0_log.merged;
     let t1 = bus.t;
     bus.seg.advance_to(t1 + 2_000_000);
     let esc = &bus.seg.nodes[0].esc;
     let sys_now = esc.dc.as_ref().unwrap().system_at(t1 + 2_000_000);
     let log = &esc.sync0_log;
-    assert_eq!(log.merged, merged, "50 µs cycle with 5 µs pulses: every pulse an edge");
+    assert_eq!(log.merged, merged, "50 µs cycle with 10 µs pulses: every pulse an edge");
     assert_eq!(log.pulses.back().unwrap().0, start + (sys_now - start) / 50_000 * 50_000, "the last edge");
 }
