@@ -407,9 +407,10 @@ impl Esc {
             }
         }
         // Pulses that raised no edge (output held, or the PDI still busy) still move the
-        // schedule that 0x0990 shows.
-        if self.sync0_edge_ns.is_some() {
-            if let Some(due) = self.dc.as_mut().and_then(|dc| dc.take_sync0_until(t_ns)) {
+        // schedule that 0x0990 shows. Past the service time every due pulse was an edge.
+        if let (Some(edge), Some(dc)) = (self.sync0_edge_ns, self.dc.as_mut()) {
+            let busy = dc.sync.output_held() || edge.saturating_add(SYNC0_SERVICE_NS) >= t_ns;
+            if let Some(due) = if busy { dc.take_sync0_until(t_ns) } else { None } {
                 self.sync_pulsed = true;
                 self.sync0_log.count += due.pulses;
                 self.sync0_log.merged += due.pulses;
