@@ -185,7 +185,12 @@ impl Target {
         };
         let mut m = Master::new(CliIo { world, capture });
         for f in &self.esi {
-            let xml = std::fs::read_to_string(f).with_context(|| format!("reading {}", f.display()))?;
+            let xml = ferrocat_segment::files::read_bounded_text(
+                f,
+                ferrocat_segment::files::MAX_ESI_FILE_BYTES,
+                "an ESI file",
+            )
+            .with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
             m.esi.extend(file.devices.into_iter().map(|d| (file.vendor_id, d)));
         }

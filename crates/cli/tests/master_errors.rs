@@ -50,6 +50,27 @@ fn bad_arguments_are_errors_not_panics() {
     }
 }
 
+/// An endless file (/dev/zero) where a command takes a file: an error naming the file and the
+/// bound, at once. Until 2026-11-24 each of these read until memory ran out.
+#[test]
+fn an_endless_file_is_refused_by_every_command_that_reads_one() {
+    let toml = std::env::temp_dir().join(format!("ferrocat-endless-{}.toml", std::process::id()));
+    std::fs::write(&toml, "[[device]]\neeprom = '/dev/zero'\n").unwrap();
+    let segment = format!("--config={}", toml.display());
+    for args in [
+        &["sii", "/dev/zero"][..],
+        &["pcap", "/dev/zero"],
+        &["esi", "/dev/zero"],
+        &["scan", "--device", "/dev/zero"],
+        &["scan", &segment],
+        &["lab", "run", "/dev/zero"],
+    ] {
+        let (ok, _, err) = ferrocat(args);
+        assert!(!ok && err.contains("/dev/zero") && err.contains("larger than"), "{args:?}: {err}");
+    }
+    std::fs::remove_file(&toml).ok();
+}
+
 #[test]
 fn lab_park2020_prints_its_table_as_json() {
     let (ok, out, err) = ferrocat(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--json"]);

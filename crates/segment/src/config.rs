@@ -24,13 +24,16 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
+use crate::files::{read_bounded, read_bounded_text, MAX_EEPROM_FILE_BYTES, MAX_ESI_FILE_BYTES, MAX_TOML_FILE_BYTES};
 use crate::segment::{Node, Segment};
 use crate::timing::{link_delay_ns, EscTiming, PortKind};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SegmentError {
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    /// The reason is in the message and not a `source`: shown with its chain (`{:#}`), it
+    /// would appear twice.
+    #[error("{path}: {reason}")]
+    Io { path: PathBuf, reason: std::io::Error },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
     #[error("{place}: {message}")]
@@ -162,7 +165,8 @@ pub struct SegmentConfig {
 
 impl SegmentConfig {
     pub fn from_file(path: &Path) -> Result<Self, SegmentError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SegmentError::Io { path: path.into(), source })?;
+        let text = read_bounded_text(path, MAX_TOML_FILE_BYTES, "a segment description")
+            .map_err(|reason| SegmentError::Io { path: path.into(), reason })?;
         let mut cfg: SegmentConfig =
             toml::from_str(&text).map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })?;
         cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -455,7 +459,8 @@ fn port_kinds(info: &SiiInfo) -> [Option<PortKind>; 4] {
 pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferrocat_esi::Device>), SegmentError> {
     match src {
         DeviceSource::Eeprom(path) => {
-            let raw = std::fs::read(path).map_err(|source| SegmentError::Io { path: path.clone(), source })?;
+            let raw = read_bounded(path, MAX_EEPROM_FILE_BYTES, "an EEPROM dump (an SII EEPROM holds at most 512 KiB)")
+                .map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
             let (img, _) =
                 parse_dump(&raw).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
             let info = SiiInfo::from_image(&img)
@@ -464,8 +469,8 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
             Ok((img, name, None))
         }
         DeviceSource::Esi { path, product, revision } => {
-            let xml =
-                std::fs::read_to_string(path).map_err(|source| SegmentError::Io { path: path.clone(), source })?;
+            let xml = read_bounded_text(path, MAX_ESI_FILE_BYTES, "an ESI file")
+                .map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
             let f =
                 EsiFile::parse(&xml).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
             let dev = match product {

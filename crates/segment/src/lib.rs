@@ -3,6 +3,7 @@
 pub mod bench;
 mod builtin;
 mod config;
+pub mod files;
 pub mod live;
 pub mod od_build;
 mod segment;

@@ -1,0 +1,62 @@
+//! Reading the files a user names (segment and scenario descriptions, EEPROM dumps, ESI files,
+//! captures) with an upper bound: a file larger than any of its kind, or an endless one such as
+//! `/dev/zero`, is an error naming it, not an allocation that takes the machine's memory.
+use std::io::{self, Read};
+use std::path::Path;
+
+/// An SII EEPROM holds at most 4 Mbit (512 KiB, ESC datasheet 0x0502 bit 7); a text dump of it
+/// takes about three characters per byte.
+pub const MAX_EEPROM_FILE_BYTES: u64 = 4 << 20;
+/// Vendors' ESI files run to tens of MB (one file for a whole product family).
+pub const MAX_ESI_FILE_BYTES: u64 = 256 << 20;
+/// Segment and scenario descriptions.
+pub const MAX_TOML_FILE_BYTES: u64 = 16 << 20;
+/// A capture is read whole; larger ones can be split (`editcap -c`).
+pub const MAX_CAPTURE_FILE_BYTES: u64 = 1 << 30;
+
+/// The whole file, if it has at most `max_bytes` (whole MiB); `what` names the kind and its
+/// limit's reason in the error.
+pub fn read_bounded(path: &Path, max_bytes: u64, what: &str) -> io::Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("larger than {} MiB, the limit for {what}", max_bytes >> 20),
+        ));
+    }
+    Ok(bytes)
+}
+
+/// As [`read_bounded`], for a text file: invalid UTF-8 is an error giving its byte offset.
+pub fn read_bounded_text(path: &Path, max_bytes: u64, what: &str) -> io::Result<String> {
+    String::from_utf8(read_bounded(path, max_bytes, what)?).map_err(|e| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("not UTF-8 text: invalid byte at offset {}", e.utf8_error().valid_up_to()),
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_endless_file_is_an_error_not_an_allocation() {
+        let e = read_bounded(Path::new("/dev/zero"), 1 << 20, "a test file").unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData);
+        assert_eq!(e.to_string(), "larger than 1 MiB, the limit for a test file");
+    }
+
+    #[test]
+    fn a_file_of_the_bound_is_read_whole_and_text_is_checked() {
+        let path = std::env::temp_dir().join(format!("ferrocat-files-{}.txt", std::process::id()));
+        std::fs::write(&path, b"ab\xffcd").unwrap();
+        assert_eq!(read_bounded(&path, 5, "a test file").unwrap(), b"ab\xffcd");
+        assert!(read_bounded(&path, 4, "a test file").is_err());
+        let e = read_bounded_text(&path, 5, "a test file").unwrap_err();
+        assert!(e.to_string().contains("offset 2"), "{e}");
+        std::fs::remove_file(&path).unwrap();
+    }
+}
