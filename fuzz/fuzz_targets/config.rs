@@ -1,9 +1,10 @@
 #![no_main]
 //! Any text as a segment description (`ferrocat sim --config`) and as a lab scenario
 //! (`ferrocat lab run`). A segment that builds — any topology of built-in devices, ports,
-//! cables, timings, oscillators, faults — runs for 50 ms and our master scans it and
-//! initialises its clocks; a scenario is planned for every experiment. Errors are expected;
-//! a panic or a hang is the fault. Files the text names (EEPROM dumps, ESI files, a scenario's
+//! cables, timings, oscillators, faults — is scanned by our master, which initialises its
+//! clocks; with the ESCs' default timing every DC slave's computed delay must be the true one
+//! within ±10 ns (tests/delays.rs's oracle, on any topology). A scenario is planned for every
+//! experiment. Errors are expected; a panic, a hang or a wrong delay is the fault. Files the text names (EEPROM dumps, ESI files, a scenario's
 //! segment) are left out: the `sii`, `esi` and `device` targets take their bytes.
 use ferrocat_lab::scenario::{Experiment, Scenario};
 use ferrocat_master::io::{HostModel, VirtualIo};
@@ -16,9 +17,18 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(cfg) = toml::from_str::<SegmentConfig>(text) {
         let names_files = cfg.devices.iter().any(|d| d.eeprom.is_some() || d.esi.is_some());
         if !names_files && cfg.devices.len() <= 64 {
+            // Delays are checked where the master can know them: the ESCs' default timing
+            // (processing and forwarding alike, a 20 ns loop-back), every frame delivered.
+            let knowable = cfg.devices.iter().all(|d| d.timing.is_none())
+                && cfg.loss_probability.unwrap_or(0.0) == 0.0
+                && cfg.corruption_probability.unwrap_or(0.0) == 0.0;
             if let Ok(seg) = cfg.build() {
                 let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
+                m.closed_port_loop_ns = 20;
                 if m.scan().is_ok() {
+                    if knowable {
+                        check_delays(&m, text);
+                    }
                     let _ = m.init_dc(&DcConfig { max_frames: 300, ..DcConfig::default() });
                 }
             }
@@ -34,3 +44,21 @@ fuzz_target!(|data: &[u8]| {
         }
     }
 });
+
+/// Each DC slave's delay from the reference against the simulator's truth: when the last frame
+/// of the scan reached its processing unit, less when it reached the reference's.
+fn check_delays(m: &Master<VirtualIo>, text: &str) {
+    let visits = m.engine.io.seg.last_visits();
+    if visits.len() != m.slaves.len() {
+        return;
+    }
+    let Some(reference) = m.slaves.iter().position(|s| s.has_dc) else { return };
+    for (k, s) in m.slaves.iter().enumerate().filter(|(_, s)| s.has_dc) {
+        let truth = visits[k].1.epu_ns as i64 - visits[reference].1.epu_ns as i64;
+        assert!(
+            (s.delay_ns as i64 - truth).abs() <= 10,
+            "slave {k}: computed {} ns, true {truth} ns, on\n{text}",
+            s.delay_ns
+        );
+    }
+}
