@@ -113,7 +113,7 @@ impl SyncLog {
 
 /// How long after a SYNC0 edge the PDI side is busy with it: an interrupt entry and the read of
 /// 0x098E that acknowledges it. Pulses in that time raise no new edge (model choice; the
-/// datasheet gives no figure, and every cycle a device accepts is far longer).
+/// datasheet gives no figure, and the lab's and tests' cycles, ≥ 50 µs, are far longer).
 pub const SYNC0_SERVICE_NS: u64 = 1_000;
 
 /// Per-frame bookkeeping of writes with side effects.
