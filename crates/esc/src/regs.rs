@@ -35,7 +35,7 @@ const fn writable_rule(a: u16) -> bool {
         | 0x0500 | 0x0502..=0x050F // SII interface (0x0501 is PDI's)
         | 0x0510..=0x0515 | 0x0516 // MII management
         | 0x0600..=0x06FF          // FMMUs
-        | 0x0900..=0x090F          // receive time latch (write arms it)
+        | 0x0900..=0x0903          // receive time port 0: a write latches (ports 1–3 r/-)
         | 0x0910..=0x0917          // system time (write feeds the time control loop)
         | 0x0920..=0x092B          // offset, delay
         | 0x0930..=0x0931 | 0x0934..=0x0936
