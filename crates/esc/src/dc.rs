@@ -97,9 +97,12 @@ pub struct SyncUnit {
     pub cycle1_ns: u32,
     /// System time of the next SYNC0 pulse, when armed.
     pub next_sync0: Option<u64>,
+    /// Bits 0 and 2 of 0x0984 (bit 1, SYNC1 pending, follows from the time: see
+    /// [`DcUnit::activation_status_at`]).
     pub activation_status: u8,
     pub sync0_count: u64,
-    pub sync1_count: u64,
+    /// System time of the first SYNC0 pulse since activation: SYNC1's grid starts there.
+    pub first_sync0: Option<u64>,
 }
 
 impl DcUnit {
@@ -316,6 +319,7 @@ impl DcUnit {
         let a = self.sync.activation;
         if a & act::CYCLIC_OPERATION == 0 || a & (act::SYNC0 | act::SYNC1) == 0 {
             self.sync.next_sync0 = None;
+            self.sync.first_sync0 = None;
             self.sync.activation_status = 0;
             return;
         }
@@ -345,6 +349,56 @@ impl DcUnit {
         } else {
             None
         };
+        s.first_sync0 = s.next_sync0;
+    }
+
+    /// SYNC1's pulses as (system time of the first, period; 0: one pulse), when SYNC1 is
+    /// enabled. ESC datasheet section I 9.2.3.5: a SYNC1 pulse follows the SYNC0 pulse that arms
+    /// it by the SYNC1 cycle time (0x09A4; 0: SYNC1 reflects SYNC0), and the next SYNC0 pulse
+    /// after it arms the next — so the period is the SYNC0 cycle when the SYNC1 time is shorter,
+    /// else the smallest multiple of it that is not shorter (model choice for an exact
+    /// multiple, which the datasheet's figure draws at that multiple: a SYNC0 pulse coinciding
+    /// with a SYNC1 pulse arms the next).
+    fn sync1_grid(&self) -> Option<(u64, u64)> {
+        use ferrocat_wire::register::dc_activation as act;
+        if self.sync.activation & act::SYNC1 == 0 {
+            return None;
+        }
+        let first0 = self.sync.first_sync0?;
+        let (c0, c1) = (self.sync.cycle0_ns as u64, self.sync.cycle1_ns as u64);
+        let period = if c0 == 0 { 0 } else { c1.div_ceil(c0).max(1) * c0 };
+        Some((first0.wrapping_add(c1), period))
+    }
+
+    /// SYNC1 pulses by true time `t_ns` since activation, and the system time of the next one
+    /// (of the last when a single shot has passed).
+    fn sync1_at(&self, t_ns: u64) -> Option<(u64, u64)> {
+        let (first, period) = self.sync1_grid()?;
+        let late = self.system_ext_at(t_ns).wrapping_sub(first);
+        Some(if (late as i64) < 0 {
+            (0, first)
+        } else {
+            match late.checked_div(period) {
+                None => (1, first), // a single shot, passed
+                Some(q) => (q + 1, first.wrapping_add((q + 1) * period)),
+            }
+        })
+    }
+
+    /// SYNC1 pulses by true time `t_ns` since the unit was activated.
+    pub fn sync1_pulses_until(&self, t_ns: u64) -> u64 {
+        self.sync1_at(t_ns).map_or(0, |(k, _)| k)
+    }
+
+    /// 0x0998, the next SYNC1 pulse's system time, at true time `t_ns` (0 without SYNC1).
+    pub fn next_sync1_register(&self, t_ns: u64) -> u64 {
+        self.sync1_at(t_ns).map_or(0, |(_, next)| self.mask(next))
+    }
+
+    /// 0x0984 at true time `t_ns`: bit 1 while the first SYNC1 pulse is pending.
+    pub fn activation_status_at(&self, t_ns: u64) -> u8 {
+        let pending1 = self.sync1_at(t_ns).is_some_and(|(k, _)| k == 0);
+        (self.sync.activation_status & !0b10) | if pending1 { 0b10 } else { 0 }
     }
 
     /// The SYNC0 pulses due by true time `t_ns`, taken together and the schedule advanced past
@@ -373,9 +427,6 @@ impl DcUnit {
         };
         self.sync.sync0_count += pulses;
         self.sync.activation_status &= !0b01;
-        if self.sync.cycle1_ns == 0 || self.sync.cycle1_ns < self.sync.cycle0_ns {
-            self.sync.sync1_count += pulses;
-        }
         Some(Sync0Due { pulses, last_sys_ns: self.mask(last) })
     }
 
@@ -476,6 +527,7 @@ mod tests {
             samples in proptest::collection::vec((0u64..20_000_000, any::<u32>()), 1..40),
             start in any::<u64>(),
             cycle in any::<u32>(),
+            cycle1 in any::<u32>(),
             activation in any::<u8>(),
         ) {
             let width = if wide { DcWidth::Bits64 } else { DcWidth::Bits32 };
@@ -483,6 +535,7 @@ mod tests {
             (dc.offset, dc.delay) = (offset, delay);
             dc.sync.start_time = start;
             dc.sync.cycle0_ns = cycle.max(1_000);
+            dc.sync.cycle1_ns = cycle1;
             dc.sync.activation = activation;
             dc.sync_activation_written(1_000);
             let mut t = 1_000u64;
@@ -497,6 +550,7 @@ mod tests {
                     prop_assert!(due.pulses >= 1 && due.pulses <= dt / 1_000 + 2, "{due:?} after {dt}");
                 }
                 let _ = dc.next_sync0_true(t);
+                let _ = (dc.next_sync1_register(t), dc.sync1_pulses_until(t), dc.activation_status_at(t));
             }
         }
     }

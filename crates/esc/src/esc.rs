@@ -533,8 +533,18 @@ impl Esc {
             self.mem[0x0932..0x0934].copy_from_slice(&dc.scd.to_le_bytes());
             self.mem[0x0934] = dc.depth_diff;
             self.mem[0x0935] = dc.depth_speed;
-            self.mem[0x0984] = dc.sync.activation_status;
+            self.mem[0x0984] = dc.activation_status_at(self.now_ns);
             put(&mut self.mem, 0x0990, dc.next_sync0_register());
+            put(&mut self.mem, 0x0998, dc.next_sync1_register(self.now_ns));
+        }
+    }
+
+    fn refresh_sync1_registers(&mut self) {
+        if let Some(dc) = &self.dc {
+            self.mem[0x0984] = dc.activation_status_at(self.now_ns);
+            let v = dc.next_sync1_register(self.now_ns).to_le_bytes();
+            let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
+            self.mem[0x0998..0x0998 + n].copy_from_slice(&v[..n]);
         }
     }
 
@@ -689,6 +699,11 @@ impl Esc {
         }
         if (0x0910..0x0918).contains(&a) {
             self.latch_system_time();
+        }
+        if a == 0x0984 || (0x0998..0x09A0).contains(&a) {
+            // SYNC1 pulses are not events of their own: its registers are brought to the
+            // frame's instant when read.
+            self.refresh_sync1_registers();
         }
         if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
             // Reading a latch time clears its single-event flag (ECAT-controlled latch units).

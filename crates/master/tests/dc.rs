@@ -71,6 +71,27 @@ fn init_dc_converges_and_starts_sync0_together() {
     assert!(spread <= 100, "{spread}");
 }
 
+/// SYNC1 as the master sets it up (0x09A4 = `sync1_ns`, 0x0981 bit 2): every slave's next SYNC1
+/// pulse (0x0998) is its SYNC0 grid shifted by `sync1_ns`, and SYNC1 pulses once per SYNC0.
+#[test]
+fn init_dc_starts_sync1_after_sync0() {
+    let mut m = segment();
+    m.bring_up().unwrap();
+    let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), sync1_ns: 200_000, ..DcConfig::default() };
+    let r = m.init_dc(&cfg).unwrap();
+    let start = r.sync0_start.unwrap();
+    // 50 ms after the first pulse (the start is `start_delay_ns` ahead).
+    let t = m.engine.io.now_ns() + cfg.start_delay_ns + 50_000_000;
+    for (k, n) in m.engine.io.seg.nodes.iter().enumerate() {
+        let dc = n.esc.dc.as_ref().unwrap();
+        // Differences on the low 32 bits: the same for 32- and 64-bit DCs.
+        let after = (dc.next_sync1_register(t) as u32).wrapping_sub(start as u32) as u64;
+        assert_eq!(after % 1_000_000, 200_000, "slave {k}: next SYNC1 {after} ns after the start");
+        let pulses = dc.sync1_pulses_until(t);
+        assert!((49..=52).contains(&pulses), "slave {k}: {pulses} SYNC1 pulses in about 50 ms");
+    }
+}
+
 /// The reference's time equals the master's from the latch on: the master's time at the latch
 /// is when the latching frame passed the reference (half its round trip), not when the master
 /// read its clock before sending it (2.5–12 µs earlier on these host models).

@@ -124,6 +124,45 @@ fn sync0_fires_on_the_system_time_grid() {
     assert!(next > sys_now);
 }
 
+/// SYNC1 on SYNC0's grid (ESC datasheet section I 9.2.3.5): 0x0998 reads the next SYNC1 pulse,
+/// 0x0984 bit 1 is set until the first. A SYNC1 time shorter than the SYNC0 cycle is a shift
+/// after every SYNC0 pulse; a longer one repeats at the smallest multiple of the SYNC0 cycle
+/// that is not shorter.
+#[test]
+fn sync1_follows_sync0_by_its_cycle_time() {
+    let cycle0 = 250_000u64;
+    for (cycle1, period) in
+        [(50_000u64, 250_000u64), (0, 250_000), (250_000, 250_000), (500_000, 500_000), (600_000, 750_000)]
+    {
+        let mut bus = line(&["EK1100", "EL2004"], "et1100");
+        let now = bus.fprd_u64(0x1002, 0x0910);
+        let start = (now / cycle0 + 4) * cycle0;
+        bus.fp(Command::FPWR, 0x1002, 0x0981, &[0]);
+        bus.fp(Command::FPWR, 0x1002, 0x09A0, &(cycle0 as u32).to_le_bytes());
+        bus.fp(Command::FPWR, 0x1002, 0x09A4, &(cycle1 as u32).to_le_bytes());
+        bus.fp(Command::FPWR, 0x1002, 0x0990, &start.to_le_bytes());
+        bus.fp(Command::FPWR, 0x1002, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0 | act::SYNC1]);
+        assert_eq!(bus.fprd_u64(0x1002, 0x0998), start + cycle1, "cycle1 {cycle1}: the first SYNC1");
+        assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0984, &[0]).0[0] & 0b11, 0b11, "both first pulses pending");
+        for k in 1..=12 {
+            bus.t += 173_000 * k;
+            let sys = bus.fprd_u64(0x1002, 0x0910);
+            let next1 = bus.fprd_u64(0x1002, 0x0998);
+            let status = bus.fp(Command::FPRD, 0x1002, 0x0984, &[0]).0[0];
+            assert_eq!((next1 - start - cycle1) % period, 0, "cycle1 {cycle1}: {next1} off the SYNC1 grid");
+            // The read of 0x0998 is a few µs after that of 0x0910: allow one frame between.
+            let first = start + cycle1;
+            assert!(
+                next1 + 10_000 > sys && next1 <= sys.max(first) + period + 10_000,
+                "cycle1 {cycle1}: next {next1} at {sys}"
+            );
+            if sys.abs_diff(first) > 10_000 {
+                assert_eq!(status & 0b10 != 0, sys < first, "cycle1 {cycle1}: pending bit at {sys}");
+            }
+        }
+    }
+}
+
 #[test]
 fn a_32_bit_dc_wraps() {
     let mut bus = line(&["EK1100", "EL2004"], "esc20");
