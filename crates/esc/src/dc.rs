@@ -81,6 +81,12 @@ pub struct Sync0Due {
 }
 
 impl SyncUnit {
+    /// SYNC0 generation on (0x0981 bit 1); with only SYNC1 on, SYNC0's pulses still time SYNC1
+    /// but raise no SYNC0 signal.
+    pub fn output_enabled(&self) -> bool {
+        self.activation & ferrocat_wire::register::dc_activation::SYNC0 != 0
+    }
+
     /// A pulse length greater than the cycle time keeps the output active (ESC datasheet
     /// section I, 9.2.3.1): after its first edge the PDI sees no further ones.
     pub fn output_held(&self) -> bool {
@@ -405,10 +411,9 @@ impl DcUnit {
     /// them: constant time however short the cycle or long the gap, so a master that programs
     /// a cycle of a few ns cannot make the simulator count pulses one by one.
     pub fn take_sync0_until(&mut self, t_ns: u64) -> Option<Sync0Due> {
-        let now = self.system_ext_at(t_ns);
         let next = self.sync.next_sync0?;
         // Wrapping, half-range comparisons: the schedule never overflows, whatever the offset.
-        let late = now.wrapping_sub(next);
+        let late = self.system_ext_at(t_ns).wrapping_sub(next);
         if (late as i64) < 0 {
             return None;
         }

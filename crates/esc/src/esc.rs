@@ -94,7 +94,7 @@ pub struct SyncLog {
     /// most 64.
     pub pulses: std::collections::VecDeque<(u64, u64)>,
     /// Every pulse the unit gave, including those that fell while the PDI still serviced an
-    /// earlier one or while the output was held active.
+    /// earlier one, while the output was held active, or with only SYNC1's output on.
     pub count: u64,
     /// Pulses the application did not see for those reasons.
     pub merged: u64,
@@ -406,11 +406,14 @@ impl Esc {
                 self.app.tick(&mut pdi);
             }
         }
-        // Pulses that raised no edge (output held, or the PDI still busy) still move the
-        // schedule that 0x0990 shows. Past the service time every due pulse was an edge.
-        if let (Some(edge), Some(dc)) = (self.sync0_edge_ns, self.dc.as_mut()) {
-            let busy = dc.sync.output_held() || edge.saturating_add(SYNC0_SERVICE_NS) >= t_ns;
-            if let Some(due) = if busy { dc.take_sync0_until(t_ns) } else { None } {
+        // Pulses that raised no edge (SYNC0 output off, output held, or the PDI still busy)
+        // still move the schedule that 0x0990 shows. Past the service time every due pulse of
+        // an active output was an edge.
+        if let Some(dc) = self.dc.as_mut() {
+            let edge = self.sync0_edge_ns;
+            let silent = !dc.sync.output_enabled() || (edge.is_some() && dc.sync.output_held());
+            let busy = edge.is_some_and(|e| e.saturating_add(SYNC0_SERVICE_NS) >= t_ns);
+            if let Some(due) = if silent || busy { dc.take_sync0_until(t_ns) } else { None } {
                 self.sync_pulsed = true;
                 self.sync0_log.count += due.pulses;
                 self.sync0_log.merged += due.pulses;
@@ -439,7 +442,7 @@ impl Esc {
 
     /// True time of the next SYNC0 edge the application will see.
     fn next_sync0_edge_ns(&self) -> Option<u64> {
-        let dc = self.dc.as_ref()?;
+        let dc = self.dc.as_ref().filter(|dc| dc.sync.output_enabled())?;
         match self.sync0_edge_ns {
             Some(_) if dc.sync.output_held() => None,
             Some(edge) if edge.saturating_add(SYNC0_SERVICE_NS) >= self.now_ns => {

@@ -143,6 +143,10 @@ fn sync1_follows_sync0_by_its_cycle_time() {
         bus.fp(Command::FPWR, 0x1002, 0x0990, &start.to_le_bytes());
         bus.fp(Command::FPWR, 0x1002, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0 | act::SYNC1]);
         assert_eq!(bus.fprd_u64(0x1002, 0x0998), start + cycle1, "cycle1 {cycle1}: the first SYNC1");
+        if cycle1 == 600_000 {
+            // SYNC1 alone: SYNC0's pulses still time it but raise no SYNC0 signal.
+            bus.fp(Command::FPWR, 0x1002, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC1]);
+        }
         assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0984, &[0]).0[0] & 0b11, 0b11, "both first pulses pending");
         for k in 1..=12 {
             bus.t += 173_000 * k;
@@ -160,6 +164,10 @@ fn sync1_follows_sync0_by_its_cycle_time() {
                 assert_eq!(status & 0b10 != 0, sys < first, "cycle1 {cycle1}: pending bit at {sys}");
             }
         }
+        let log = &bus.seg.nodes[1].esc.sync0_log;
+        let seen = log.count - log.merged;
+        assert!(log.count > 40, "cycle1 {cycle1}: {} SYNC0 pulses", log.count);
+        assert_eq!(seen == 0, cycle1 == 600_000, "cycle1 {cycle1}: {seen} SYNC0 edges");
     }
 }
 
