@@ -99,16 +99,7 @@ fn encode(value: &str, ty: &str) -> anyhow::Result<Vec<u8>> {
         "i32" => i32::try_from(int()?)?.to_le_bytes().to_vec(),
         "u64" => u64::try_from(int()?)?.to_le_bytes().to_vec(),
         "string" => value.as_bytes().to_vec(),
-        "hex" => {
-            let v: String = value.chars().filter(|c| !c.is_whitespace()).collect();
-            if v.len() % 2 != 0 {
-                bail!("hex value of odd length");
-            }
-            (0..v.len())
-                .step_by(2)
-                .map(|i| u8::from_str_radix(&v[i..i + 2], 16).with_context(|| format!("'{}' is not hex", &v[i..i + 2])))
-                .collect::<anyhow::Result<_>>()?
-        }
+        "hex" => ferrocat_wire::hex::decode(value).map_err(|e| anyhow::anyhow!("hex value: {e}"))?,
         other => bail!("unknown type '{other}' (u8 i8 u16 i16 u32 i32 u64 string hex)"),
     })
 }

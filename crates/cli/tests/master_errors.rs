@@ -44,6 +44,8 @@ fn bad_arguments_are_errors_not_panics() {
         &["sdo", "read", "0", "zz:1", "--device", "EK1100"],
         &["run", "--seconds", "-1", "--device", "EK1100"],
         &["sii", "write", "0", "/nonexistent.bin", "--device", "EK1100"],
+        // A multi-byte character in a hex value: was sliced by bytes, a panic.
+        &["sdo", "write", "0", "0x6000:1", "0\u{113}0", "--type", "hex", "--device", "EK1100"],
     ] {
         let (ok, _, err) = ferrocat(args);
         assert!(!ok && !err.contains("panicked") && !err.trim().is_empty(), "{args:?}: {err}");

@@ -75,17 +75,7 @@ pub(crate) fn flag(node: Node<'_, '_>, attr: &str) -> bool {
 
 /// Hex text (e.g. `<ConfigData>05060B0E</ConfigData>`) as bytes.
 pub(crate) fn hex_bytes(node: Node<'_, '_>, s: &str) -> R<Vec<u8>> {
-    let s: String = s.chars().filter(|c| !c.is_whitespace()).collect();
-    if s.len() % 2 != 0 {
-        return Err(err(node, format!("hex data of odd length {}", s.len())));
-    }
-    (0..s.len())
-        .step_by(2)
-        .map(|i| {
-            u8::from_str_radix(&s[i..i + 2], 16)
-                .map_err(|_| err(node, format!("'{}' at character {i} is not hex", &s[i..i + 2])))
-        })
-        .collect()
+    ferrocat_wire::hex::decode(s).map_err(|e| err(node, e.to_string()))
 }
 
 /// The English `<Name>` (LcId 1033), else the first one.

@@ -119,6 +119,12 @@ fn malformed_xml_names_line_and_column() {
     assert_eq!(e.line, 2);
     assert!(e.message.contains("out of range"), "{e}");
 
+    // A multi-byte character in hex data (the `device` fuzz target's find, 2026-11-24: the
+    // parser sliced the text by bytes and panicked inside the character).
+    let xml = "<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices><Device><Type ProductCode=\"#x1\">X</Type>\n<Eeprom><ConfigData>080\u{113}ments0</ConfigData></Eeprom></Device></Devices></Descriptions></EtherCATInfo>";
+    let e = EsiFile::parse(xml).unwrap_err();
+    assert_eq!((e.line, e.message.as_str()), (2, "'\u{113}' at character 3 is not a hex digit"), "{e}");
+
     assert!(EsiFile::parse("").is_err());
     assert!(EsiFile::parse("<Other/>").unwrap_err().message.contains("expected <EtherCATInfo>"));
 }

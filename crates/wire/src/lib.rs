@@ -20,6 +20,8 @@ pub mod datagram;
 mod error;
 pub mod ethernet;
 pub mod frame;
+#[cfg(feature = "alloc")]
+pub mod hex;
 pub mod mailbox;
 pub mod register;
 pub mod sii;
