@@ -1014,6 +1014,9 @@ impl Esc {
             if (0x0300..=0x0313).contains(&a) {
                 self.mem[a as usize] = 0; // a write clears an error counter
             }
+            if (0x0442..=0x0443).contains(&a) {
+                self.mem[0x0442..=0x0443].fill(0); // either watchdog counter's write clears both
+            }
         }
         if reset {
             // ESC reset: 'R' 'E' 'S' in three consecutive frames.

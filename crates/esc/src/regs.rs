@@ -32,6 +32,7 @@ const fn writable_rule(a: u16) -> bool {
         | 0x0200..=0x0201          // ECAT event mask
         | 0x0300..=0x0313          // error counters (a write clears)
         | 0x0400..=0x0401 | 0x0410..=0x0411 | 0x0420..=0x0421 // watchdogs
+        | 0x0442..=0x0443          // watchdog counters (a write clears both)
         | 0x0500 | 0x0502..=0x050F // SII interface (0x0501 is PDI's)
         | 0x0510..=0x0515 | 0x0516 // MII management
         | 0x0600..=0x06FF          // FMMUs

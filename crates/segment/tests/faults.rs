@@ -125,6 +125,10 @@ fn expired_process_data_watchdog_takes_op_to_safeop() {
     let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x0130, &[0; 6]);
     assert_eq!((st[0], u16::from_le_bytes([st[4], st[5]])), (0x14, AlStatusCode::SM_WATCHDOG.0));
     assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0440, &[0; 2]).0[0] & 1, 0, "0x0440: expired");
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0442, &[0]).0, [1], "0x0442 counts the expiry");
+    // A write of either watchdog counter clears both (datasheet II, 0x0442–0x0443).
+    bus.fp(Command::FPWR, 0x1002, 0x0443, &[0x55]);
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0442, &[0; 2]).0, [0, 0], "cleared");
 }
 
 #[test]
