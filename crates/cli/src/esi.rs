@@ -43,9 +43,7 @@ fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
 }
 
 pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool) -> anyhow::Result<ExitCode> {
-    let xml =
-        ferrocat_segment::files::read_bounded_text(path, ferrocat_segment::files::MAX_ESI_FILE_BYTES, "an ESI file")
-            .with_context(|| format!("reading {}", path.display()))?;
+    let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
     let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
     let chosen = match (device, sii_out) {
         (Some(sel), _) => Some(select(&file, sel)?),

@@ -10,12 +10,7 @@ use serde_json::json;
 use crate::outln;
 
 pub fn run(path: &Path, json: bool) -> anyhow::Result<ExitCode> {
-    let bytes = ferrocat_segment::files::read_bounded(
-        path,
-        ferrocat_segment::files::MAX_CAPTURE_FILE_BYTES,
-        "a capture (split larger ones with `editcap -c`)",
-    )
-    .with_context(|| format!("reading {}", path.display()))?;
+    let bytes = ferrocat_segment::files::read_capture(path).with_context(|| format!("reading {}", path.display()))?;
     let mut bad = 0usize;
     for_each_packet(&bytes, |p| {
         // Frames of other link types, runts without an Ethernet header and non-EtherCAT

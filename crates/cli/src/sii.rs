@@ -12,12 +12,7 @@ use crate::pcap::hex;
 
 /// Reads an EEPROM image file in any supported dump format.
 pub fn load(path: &Path) -> anyhow::Result<Vec<u8>> {
-    let raw = ferrocat_segment::files::read_bounded(
-        path,
-        ferrocat_segment::files::MAX_EEPROM_FILE_BYTES,
-        "an EEPROM dump (an SII EEPROM holds at most 512 KiB)",
-    )
-    .with_context(|| format!("reading {}", path.display()))?;
+    let raw = ferrocat_segment::files::read_eeprom_dump(path).with_context(|| format!("reading {}", path.display()))?;
     let (bytes, _) = parse_dump(&raw).with_context(|| format!("{}: not a readable EEPROM dump", path.display()))?;
     Ok(bytes)
 }

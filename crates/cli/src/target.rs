@@ -185,12 +185,7 @@ impl Target {
         };
         let mut m = Master::new(CliIo { world, capture });
         for f in &self.esi {
-            let xml = ferrocat_segment::files::read_bounded_text(
-                f,
-                ferrocat_segment::files::MAX_ESI_FILE_BYTES,
-                "an ESI file",
-            )
-            .with_context(|| format!("reading {}", f.display()))?;
+            let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
             m.esi.extend(file.devices.into_iter().map(|d| (file.vendor_id, d)));
         }

@@ -110,12 +110,8 @@ impl Scenario {
     }
 
     pub fn from_file(path: &Path) -> anyhow::Result<Scenario> {
-        let text = ferrocat_segment::files::read_bounded_text(
-            path,
-            ferrocat_segment::files::MAX_TOML_FILE_BYTES,
-            "a scenario",
-        )
-        .with_context(|| format!("reading scenario {}", path.display()))?;
+        let text = ferrocat_segment::files::read_toml(path, "a scenario")
+            .with_context(|| format!("reading scenario {}", path.display()))?;
         let mut s: Scenario = toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?;
         s.path = path.to_path_buf();
         Ok(s)

@@ -24,7 +24,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
-use crate::files::{read_bounded, read_bounded_text, MAX_EEPROM_FILE_BYTES, MAX_ESI_FILE_BYTES, MAX_TOML_FILE_BYTES};
+use crate::files::{read_eeprom_dump, read_esi, read_toml};
 use crate::segment::{Node, Segment};
 use crate::timing::{link_delay_ns, EscTiming, PortKind};
 
@@ -165,7 +165,7 @@ pub struct SegmentConfig {
 
 impl SegmentConfig {
     pub fn from_file(path: &Path) -> Result<Self, SegmentError> {
-        let text = read_bounded_text(path, MAX_TOML_FILE_BYTES, "a segment description")
+        let text = read_toml(path, "a segment description")
             .map_err(|reason| SegmentError::Io { path: path.into(), reason })?;
         let mut cfg: SegmentConfig =
             toml::from_str(&text).map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })?;
@@ -459,8 +459,7 @@ fn port_kinds(info: &SiiInfo) -> [Option<PortKind>; 4] {
 pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferrocat_esi::Device>), SegmentError> {
     match src {
         DeviceSource::Eeprom(path) => {
-            let raw = read_bounded(path, MAX_EEPROM_FILE_BYTES, "an EEPROM dump (an SII EEPROM holds at most 512 KiB)")
-                .map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
+            let raw = read_eeprom_dump(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
             let (img, _) =
                 parse_dump(&raw).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
             let info = SiiInfo::from_image(&img)
@@ -469,8 +468,7 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
             Ok((img, name, None))
         }
         DeviceSource::Esi { path, product, revision } => {
-            let xml = read_bounded_text(path, MAX_ESI_FILE_BYTES, "an ESI file")
-                .map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
+            let xml = read_esi(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
             let f =
                 EsiFile::parse(&xml).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
             let dev = match product {

@@ -38,6 +38,27 @@ pub fn read_bounded_text(path: &Path, max_bytes: u64, what: &str) -> io::Result<
     })
 }
 
+/// An EEPROM dump (binary or text), bounded by [`MAX_EEPROM_FILE_BYTES`].
+pub fn read_eeprom_dump(path: &Path) -> io::Result<Vec<u8>> {
+    read_bounded(path, MAX_EEPROM_FILE_BYTES, "an EEPROM dump (an SII EEPROM holds at most 512 KiB)")
+}
+
+/// An ESI file's text, bounded by [`MAX_ESI_FILE_BYTES`].
+pub fn read_esi(path: &Path) -> io::Result<String> {
+    read_bounded_text(path, MAX_ESI_FILE_BYTES, "an ESI file")
+}
+
+/// A TOML description's text (`what`: "a segment description", "a scenario"), bounded by
+/// [`MAX_TOML_FILE_BYTES`].
+pub fn read_toml(path: &Path, what: &str) -> io::Result<String> {
+    read_bounded_text(path, MAX_TOML_FILE_BYTES, what)
+}
+
+/// A capture, bounded by [`MAX_CAPTURE_FILE_BYTES`].
+pub fn read_capture(path: &Path) -> io::Result<Vec<u8>> {
+    read_bounded(path, MAX_CAPTURE_FILE_BYTES, "a capture (split larger ones with `editcap -c`)")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
