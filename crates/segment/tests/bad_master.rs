@@ -70,7 +70,7 @@ fn start_sync0(bus: &mut Bus, cycle_ns: u32) -> u64 {
     start
 }
 
-/// A SYNC0 cycle of 10 ns in acknowledge mode, then 65 ms without a frame: 6.5 million pulses.
+/// A SYNC0 cycle of 10 ns in acknowledge mode, then 65 ms without a frame: 6.4 million pulses.
 /// The application sees one edge per PDI service time (1 µs); the others fall while the signal
 /// is still asserted, are counted, and 0x0990 still shows the next pulse on the grid. Until
 /// 2026-11-24 the ESC listed every pulse before handing them over: 2 GiB for this gap, found by
