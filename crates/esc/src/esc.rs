@@ -42,6 +42,10 @@ struct SmState {
     staged: bool,
     last_byte_written: bool,
     last_byte_read: bool,
+    /// Status bits 0 and 1 (mailbox mode): a buffer was completely written / read; each is
+    /// cleared when the other side opens the buffer (accesses its first byte).
+    int_write: bool,
+    int_read: bool,
 }
 
 /// What the SII says the device needs, for the AL checks.
@@ -171,6 +175,11 @@ pub struct Esc {
     pub al_response_ns: u64,
     pending_al: Option<(u16, u64)>,
     port_generation: u32,
+    /// ECAT event request bits 2 and 3: DL and AL status changed since the master last read them.
+    dl_changed: bool,
+    al_changed: bool,
+    /// ECAT event request AND mask: what this ESC ORs into every datagram's IRQ field.
+    irq: u16,
 }
 
 impl Esc {
@@ -209,6 +218,9 @@ impl Esc {
             al_response_ns: 1_000_000,
             pending_al: None,
             port_generation: 0,
+            dl_changed: false,
+            al_changed: false,
+            irq: 0,
         };
         esc.power_on(t_ns);
         esc
@@ -260,7 +272,10 @@ impl Esc {
             }
         };
         self.reload_sm_fmmu();
+        // The DL status comes up from reset (an event); AL status Init is its reset value.
         self.refresh_registers();
+        self.al_changed = false;
+        self.update_irq();
     }
 
     /// Decodes the SyncManager and FMMU registers after they were written.
@@ -316,6 +331,7 @@ impl Esc {
         self.mem[at..at + 8].copy_from_slice(&time.to_le_bytes());
         if single {
             self.mem[status_at] |= 1 << edge;
+            self.update_irq();
         }
     }
 
@@ -502,23 +518,73 @@ impl Esc {
                 dl |= 1 << (8 + 2 * p);
             }
         }
+        let al = self.al.status().0.to_le_bytes();
+        self.dl_changed |= self.mem[0x0110..0x0112] != dl.to_le_bytes();
+        self.al_changed |= self.mem[0x0130..0x0132] != al;
         self.mem[0x0110..0x0112].copy_from_slice(&dl.to_le_bytes());
-        self.mem[0x0130..0x0132].copy_from_slice(&self.al.status().0.to_le_bytes());
+        self.mem[0x0130..0x0132].copy_from_slice(&al);
         self.mem[0x0134..0x0136].copy_from_slice(&self.al.code.0.to_le_bytes());
         for n in 0..self.config.sm_count {
-            let a = addr::sm(n) as usize;
-            let s = &self.sms[n as usize];
-            let mut status = self.mem[a + 5] & !0x08;
-            if s.full {
-                status |= SyncManager::STATUS_MAILBOX_FULL;
-            }
-            self.mem[a + 5] = status;
+            self.write_sm_status(n);
         }
         self.sii_busy_shown = self.eeprom.busy(self.now_ns);
         let busy = if self.sii_busy_shown { SiiControl::BUSY } else { 0 };
         let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800);
         self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | self.eeprom.errors).to_le_bytes());
         self.refresh_dc_registers();
+        self.update_irq();
+    }
+
+    /// SyncManager `n`'s status bits 0, 1 and 3 from its state.
+    fn write_sm_status(&mut self, n: u8) {
+        let a = addr::sm(n) as usize + 5;
+        let s = &self.sms[n as usize];
+        let flags = SyncManager::STATUS_INT_WRITE | SyncManager::STATUS_INT_READ | SyncManager::STATUS_MAILBOX_FULL;
+        let mut status = self.mem[a] & !flags;
+        if s.full {
+            status |= SyncManager::STATUS_MAILBOX_FULL;
+        }
+        if s.int_write {
+            status |= SyncManager::STATUS_INT_WRITE;
+        }
+        if s.int_read {
+            status |= SyncManager::STATUS_INT_READ;
+        }
+        self.mem[a] = status;
+    }
+
+    /// SyncManager `n`'s state changed: its status register and the events that follow.
+    fn put_sm_status(&mut self, n: u8) {
+        self.write_sm_status(n);
+        self.update_irq();
+    }
+
+    /// ECAT event request (0x0210) from the state, and what this ESC puts into IRQ fields.
+    fn update_irq(&mut self) {
+        use ferrocat_wire::register::ecat_event;
+        let mut req = 0u16;
+        // Latch events wait in 0x09AE/0x09AF bits 0–1 of units the ECAT side controls.
+        let latched = (0..2).any(|u| self.mem[0x0980] & (0x10 << u) == 0 && self.mem[0x09AE + u] & 0x03 != 0);
+        if self.dc.is_some() && latched {
+            req |= ecat_event::LATCH;
+        }
+        if self.dl_changed {
+            req |= ecat_event::DL_STATUS;
+        }
+        if self.al_changed {
+            req |= ecat_event::AL_STATUS;
+        }
+        for n in 0..self.config.sm_count.min(8) {
+            let s = self.sm(n);
+            let st = &self.sms[n as usize];
+            // The master's event: the firmware wrote a buffer for it to read, or read one it wrote.
+            let pending = if s.ecat_writes() { st.int_read } else { st.int_write };
+            if s.enabled() && s.control & SyncManager::ECAT_EVENT != 0 && pending {
+                req |= ecat_event::sync_manager(n);
+            }
+        }
+        self.mem[0x0210..0x0212].copy_from_slice(&req.to_le_bytes());
+        self.irq = req & u16::from_le_bytes([self.mem[0x0200], self.mem[0x0201]]);
     }
 
     /// The DC registers that follow from the DC unit's state.
@@ -602,6 +668,12 @@ impl Esc {
     }
 
     fn datagram(&mut self, d: &mut [u8]) {
+        // The IRQ field passes before the data: it carries the events as they were before
+        // this datagram's own reads and writes.
+        if self.irq != 0 {
+            let irq = u16::from_le_bytes([d[8], d[9]]) | self.irq;
+            d[8..10].copy_from_slice(&irq.to_le_bytes());
+        }
         let cmd = Command(d[0]);
         let adp = u16::from_le_bytes([d[2], d[3]]);
         let ado = u16::from_le_bytes([d[4], d[5]]);
@@ -714,9 +786,24 @@ impl Esc {
             let edge = ((a - 0x09B0) / 8 % 2) as u8;
             if self.mem[0x0980] & (0x10 << unit) == 0 {
                 self.mem[0x09AE + unit] &= !(1 << edge);
+                self.update_irq();
             }
         }
+        // An ECAT read of DL or AL status clears its event (ESC datasheet, 0x0210).
+        if (0x0110..=0x0111).contains(&a) && self.dl_changed {
+            self.dl_changed = false;
+            self.update_irq();
+        }
+        if (0x0130..=0x0131).contains(&a) && self.al_changed {
+            self.al_changed = false;
+            self.update_irq();
+        }
         if let Some((n, s)) = self.sm_at(a) {
+            if s.is_mailbox() && a == s.start && !s.ecat_writes() && self.sms[n as usize].full {
+                // The master opens the buffer the firmware wrote.
+                self.sms[n as usize].int_write = false;
+                self.put_sm_status(n);
+            }
             let st = &mut self.sms[n as usize];
             if s.is_mailbox() {
                 if s.ecat_writes() || !st.full {
@@ -766,6 +853,11 @@ impl Esc {
             return false;
         }
         if let Some((n, s)) = self.sm_at(a) {
+            if s.is_mailbox() && a == s.start && s.ecat_writes() && !self.sms[n as usize].full {
+                // The master opens the buffer the firmware read.
+                self.sms[n as usize].int_read = false;
+                self.put_sm_status(n);
+            }
             let st = &mut self.sms[n as usize];
             let last = a as u32 == s.start as u32 + s.length as u32 - 1;
             if s.is_mailbox() {
@@ -985,10 +1077,14 @@ impl Esc {
             (false, false, false, false, false, false);
         let (mut sync_cfg, mut activation, mut start_time, mut sm_cfg, mut fmmu_cfg, mut reset) =
             (false, false, false, false, false, false);
+        let (mut event_mask, mut dl_ctl) = (false, false);
         for &(a, _) in &pending {
             match a {
                 0x0040 => reset = true,
-                0x0100..=0x0103 => self.port_generation = self.port_generation.wrapping_add(1),
+                0x0100..=0x0103 => {
+                    self.port_generation = self.port_generation.wrapping_add(1);
+                    dl_ctl = true; // loop control shows in the DL status
+                }
                 0x0120..=0x0121 => al_ctl = true,
                 0x0502..=0x0503 => sii_cmd = true,
                 0x0600..=0x06FF => fmmu_cfg = true,
@@ -997,6 +1093,7 @@ impl Esc {
                 0x0928..=0x092B => dc_delay = true,
                 0x0930..=0x0931 => scs = true,
                 0x0934..=0x0935 => depths = true,
+                0x0200..=0x0201 => event_mask = true,
                 0x0981 => {
                     sync_cfg = true;
                     activation = true;
@@ -1017,6 +1114,9 @@ impl Esc {
             if (0x0442..=0x0443).contains(&a) {
                 self.mem[0x0442..=0x0443].fill(0); // either watchdog counter's write clears both
             }
+        }
+        if event_mask {
+            self.update_irq();
         }
         if reset {
             // ESC reset: 'R' 'E' 'S' in three consecutive frames.
@@ -1044,6 +1144,8 @@ impl Esc {
                     let st = &mut self.sms[n as usize];
                     if !s.enabled() {
                         st.full = false;
+                        st.int_write = false;
+                        st.int_read = false;
                     }
                     st.staged = false;
                 }
@@ -1051,6 +1153,7 @@ impl Esc {
         }
         // SyncManager buffers completed by this frame.
         let mut deliver = false;
+        let mut mailbox_moved = false;
         for n in 0..self.config.sm_count {
             let s = self.sm(n);
             let st = &mut self.sms[n as usize];
@@ -1061,9 +1164,13 @@ impl Esc {
             if s.is_mailbox() {
                 if s.ecat_writes() && written {
                     st.full = true;
+                    st.int_write = true;
+                    mailbox_moved = true;
                     self.mailbox_request(n);
                 } else if !s.ecat_writes() && read {
                     st.full = false;
+                    st.int_read = true;
+                    mailbox_moved = true;
                     deliver = true;
                 }
             } else if s.ecat_writes() && written {
@@ -1166,7 +1273,8 @@ impl Esc {
                 self.pending_al = Some((control, t + self.al_response_ns));
             }
         }
-        let dc_only = !(al_ctl || sii_cmd || sm_cfg || reset || self.sms.iter().any(|s| s.full));
+        let dc_only =
+            !(al_ctl || sii_cmd || sm_cfg || reset || dl_ctl || mailbox_moved || self.sms.iter().any(|s| s.full));
         if dc_only {
             if dc_offset || dc_delay || scs || depths || sync_cfg {
                 self.refresh_dc_registers();
@@ -1252,8 +1360,11 @@ impl Esc {
     fn mailbox_request(&mut self, sm: u8) {
         let s = self.sm(sm);
         let req = self.mem[sm_area(&s, self.mem.len())].to_vec();
-        // SM0 is consumed by the PDI at once.
-        self.sms[sm as usize].full = false;
+        // SM0 is consumed by the PDI at once: opened (clearing the write event) and read.
+        let st = &mut self.sms[sm as usize];
+        st.full = false;
+        st.int_write = false;
+        st.int_read = true;
         let reply = {
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
             self.app.mailbox(&mut pdi, &req)
@@ -1286,7 +1397,11 @@ impl Esc {
         let len = area.len().min(msg.len());
         area.fill(0);
         area[..len].copy_from_slice(&msg[..len]);
-        self.sms[n as usize].full = true;
+        let st = &mut self.sms[n as usize];
+        st.full = true;
+        st.int_write = true;
+        st.int_read = false;
+        self.put_sm_status(n);
     }
 }
 

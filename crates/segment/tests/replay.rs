@@ -2,9 +2,10 @@
 //! from, as far as the shared EEPROM dumps describe them: the working counters the real
 //! hardware gave, and identical data for reads of identity, SII and configuration registers.
 //! A report lists every mismatch with its reason.
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_wire::register::SyncManager;
 use ferrocat_wire::{Address, Command, Frame};
 
 struct Packet {
@@ -145,23 +146,64 @@ struct Report {
     wkc_same: usize,
     compared_reads: usize,
     data_same: usize,
+    /// Datagrams after the capture wrote the ECAT event mask, and those whose IRQ field
+    /// came back as the real one.
+    irq_compared: usize,
+    irq_same: usize,
+    /// Reads of a mailbox SyncManager's status, and those equal in bits 0, 1 and 3.
+    mbx_status_compared: usize,
+    mbx_status_same: usize,
     reasons: BTreeMap<String, usize>,
     examples: Vec<String>,
 }
 
-fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str) -> String {
+/// Why an IRQ field differs. `dl_unknown`: the capture has not yet read every slave's DL
+/// status, so the real ESCs' DL status events may have been cleared before it began.
+fn irq_reason(ours: u16, real: u16, dl_unknown: bool, standins: &[(u16, &str)]) -> &'static str {
+    let dl = ferrocat_wire::register::ecat_event::DL_STATUS;
+    if ours ^ real == dl && ours & dl != 0 && dl_unknown {
+        "DL status event: the real ESC's was read before the capture began (an earlier session)"
+    } else if ours ^ real == dl && real & dl != 0 {
+        "DL status event: the real ESCs' DL status changed with no master write before it (not replayed)"
+    } else if !standins.is_empty() {
+        "the segment includes stand-ins"
+    } else {
+        "not explained"
+    }
+}
+
+/// Why a mailbox SyncManager's status byte differs (bits 0, 1, 3).
+fn mailbox_status_reason(ours: u8, real: u8, standin: bool) -> &'static str {
+    let full = SyncManager::STATUS_MAILBOX_FULL;
+    if standin {
+        "a stand-in device"
+    } else if ours & full != 0 && real & full == 0 {
+        "the real firmware had not answered yet; ours answers at once"
+    } else if ours & 0x0B == SyncManager::STATUS_INT_READ && real == 0x80 {
+        "the real firmware was writing its reply (write buffer open)"
+    } else {
+        "not explained"
+    }
+}
+
+/// The stand-in a datagram reaches, if any (a broadcast: all of them).
+fn standin_reached(cmd: Command, adp: u16, standins: &[(u16, &str)]) -> Option<String> {
     let broadcast =
         matches!(cmd, Command::BRD | Command::BWR | Command::BRW | Command::LRD | Command::LWR | Command::LRW);
     if broadcast && !standins.is_empty() {
-        return format!(
-            "{what}: the segment includes stand-ins ({})",
+        return Some(format!(
+            "the segment includes stand-ins ({})",
             standins.iter().map(|s| s.1).collect::<Vec<_>>().join("; ")
-        );
+        ));
     }
-    if let Some((_, why)) = standins
+    standins
         .iter()
         .find(|(pos, _)| *pos == adp || 0x1000 + *pos == adp || 0x1001 + *pos == adp || 0u16.wrapping_sub(*pos) == adp)
-    {
+        .map(|(_, why)| why.to_string())
+}
+
+fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str) -> String {
+    if let Some(why) = standin_reached(cmd, adp, standins) {
         return format!("{what}: {why}");
     }
     let r = match ado {
@@ -216,6 +258,12 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
         }
     }
     let mut r = Report::default();
+    // Until the capture writes the ECAT event mask the real one is unknown (it survives from
+    // an earlier session), so IRQ fields are compared only after that write.
+    let mut mask_known = false;
+    // Slaves whose DL status the capture has read (by station, by position, or all at once).
+    let (mut dl_fp, mut dl_ap, mut dl_all) = (BTreeSet::new(), BTreeSet::new(), false);
+    let mut mailbox_sms: Vec<u16> = Vec::new();
     let t0 = p.first().map(|x| x.t_ns).unwrap_or(0);
     let mut last_t = 0;
     for &(req, resp) in &pairs {
@@ -232,6 +280,73 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
                 Address::Device { adp, ado } => (adp, ado),
                 Address::Logical(_) => (0xFFFF, 0),
             };
+            if mask_known && back.is_some() {
+                r.irq_compared += 1;
+                if a.header().irq == b.header().irq {
+                    r.irq_same += 1;
+                } else {
+                    let (ours, real) = (b.header().irq, a.header().irq);
+                    let dl_unknown = !dl_all && dl_fp.len() < count && dl_ap.len() < count;
+                    let why = format!(
+                        "IRQ {ours:#06x} vs real {real:#06x}: {}",
+                        irq_reason(ours, real, dl_unknown, &standins)
+                    );
+                    *r.reasons.entry(why.clone()).or_default() += 1;
+                    if r.examples.len() < 8 && why.contains("not explained") {
+                        r.examples.push(format!(
+                            "frame {}: {} adp {adp:#06x} ado {ado:#06x}: {why}",
+                            req + 1,
+                            h.command
+                        ));
+                    }
+                }
+            }
+            let span = ado as u32..ado as u32 + a.data().len() as u32;
+            if h.command.writes() && !h.command.is_logical() && span.contains(&0x0200) {
+                mask_known |= a.wkc() > 0;
+            }
+            if h.command.reads()
+                && !h.command.is_logical()
+                && a.wkc() > 0
+                && (span.contains(&0x0110) || span.contains(&0x0111))
+            {
+                match h.command {
+                    Command::BRD | Command::BRW => dl_all |= a.wkc() as usize >= count,
+                    Command::FPRD | Command::FPRW => {
+                        dl_fp.insert(adp);
+                    }
+                    _ => {
+                        dl_ap.insert(adp);
+                    }
+                }
+            }
+            // SyncManagers the capture configures in mailbox mode (control byte, mode bits 10).
+            if h.command.writes() && !h.command.is_logical() && a.wkc() > 0 {
+                for (i, v) in a.data().iter().enumerate() {
+                    let x = ado as usize + i;
+                    if (0x0800..0x0840).contains(&x) && (x - 0x0800) % 8 == 4 && v & 0b11 == 0b10 {
+                        mailbox_sms.push(x as u16 + 1);
+                    }
+                }
+            }
+            if h.command.reads() && !h.command.is_logical() && a.wkc() > 0 && a.wkc() == b.wkc() {
+                for i in 0..a.data().len() {
+                    if mailbox_sms.contains(&(ado.wrapping_add(i as u16))) {
+                        r.mbx_status_compared += 1;
+                        let (ours, real) = (b.data()[i], a.data()[i]);
+                        if (ours ^ real) & 0x0B == 0 {
+                            r.mbx_status_same += 1;
+                        } else {
+                            let standin = standin_reached(h.command, adp, &standins).is_some();
+                            let why = format!(
+                                "mailbox SM status {ours:#04x} vs real {real:#04x}: {}",
+                                mailbox_status_reason(ours, real, standin)
+                            );
+                            *r.reasons.entry(why).or_default() += 1;
+                        }
+                    }
+                }
+            }
             if a.wkc() == b.wkc() && back.is_some() {
                 r.wkc_same += 1;
             } else {
@@ -281,8 +396,15 @@ fn needs_shared_replay_every_capture() {
         let wkc = 100.0 * r.wkc_same as f64 / r.datagrams.max(1) as f64;
         let data = 100.0 * r.data_same as f64 / r.compared_reads.max(1) as f64;
         println!(
-            "{name}: {} datagrams, WKC as real {wkc:.2} %, identity/SII/config reads identical {}/{} ({data:.1} %)",
-            r.datagrams, r.data_same, r.compared_reads
+            "{name}: {} datagrams, WKC as real {wkc:.2} %, identity/SII/config reads identical {}/{} ({data:.1} %), \
+             IRQ as real {}/{} after the event mask was written, mailbox SM status as real {}/{}",
+            r.datagrams,
+            r.data_same,
+            r.compared_reads,
+            r.irq_same,
+            r.irq_compared,
+            r.mbx_status_same,
+            r.mbx_status_compared
         );
         for n in &notes {
             println!("    {n}");

@@ -413,6 +413,10 @@ impl SyncManager {
     pub const ECAT_EVENT: u8 = 1 << 4;
     pub const AL_EVENT: u8 = 1 << 5;
     pub const WATCHDOG: u8 = 1 << 6;
+    /// Status bit 0: a buffer was completely written (by the side that writes it).
+    pub const STATUS_INT_WRITE: u8 = 1 << 0;
+    /// Status bit 1: a buffer was completely read (by the side that reads it).
+    pub const STATUS_INT_READ: u8 = 1 << 1;
     pub const STATUS_MAILBOX_FULL: u8 = 1 << 3;
     pub const ACTIVATE_ENABLE: u8 = 1;
     pub const ACTIVATE_REPEAT: u8 = 1 << 1;
@@ -474,6 +478,21 @@ impl SiiControl {
     }
     pub fn errors(self) -> u16 {
         self.0 & (Self::CHECKSUM_ERROR | Self::NOT_LOADED | Self::ACK_ERROR | Self::WRITE_ERROR)
+    }
+}
+
+/// ECAT event request 0x0210 bits; each ESC ORs those its ECAT event mask (0x0200) lets
+/// through into the IRQ field of every datagram that passes it.
+pub mod ecat_event {
+    /// A DC latch input event is waiting in 0x09AE/0x09AF (ECAT-controlled latch units).
+    pub const LATCH: u16 = 1 << 0;
+    /// DL status (0x0110) changed; cleared by an ECAT read of it.
+    pub const DL_STATUS: u16 = 1 << 2;
+    /// AL status (0x0130) changed; cleared by an ECAT read of it.
+    pub const AL_STATUS: u16 = 1 << 3;
+    /// SyncManager `n` (0–7) has an event for the master.
+    pub const fn sync_manager(n: u8) -> u16 {
+        1 << (4 + (n & 7))
     }
 }
 

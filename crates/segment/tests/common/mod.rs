@@ -7,11 +7,13 @@ use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
 pub struct Bus {
     pub seg: Segment,
     pub t: u64,
+    /// The IRQ field of each datagram of the last frame, as it came back.
+    pub irqs: Vec<u16>,
 }
 
 impl Bus {
     pub fn new(seg: Segment) -> Self {
-        Bus { seg, t: 1_000_000 }
+        Bus { seg, t: 1_000_000, irqs: Vec::new() }
     }
 
     /// Several datagrams in one frame, sent at `self.t`; returns each one's (data, wkc,
@@ -29,6 +31,7 @@ impl Bus {
         assert!(back > self.t);
         self.t = back + 10_000;
         let f = Frame::parse(&buf[..n]).unwrap().unwrap();
+        self.irqs = f.pdu.datagrams().map(|d| d.header().irq).collect();
         let answers = f.pdu.datagrams().map(|d| (d.data().to_vec(), d.wkc(), d.header().address)).collect();
         answers
     }
