@@ -401,6 +401,14 @@ impl DcUnit {
         self.sync1_at(t_ns).map_or(0, |(_, next)| self.mask(next))
     }
 
+    /// Whether a SYNC1 pulse fell within the `window_ns` of system time before true time `t_ns`.
+    pub fn sync1_within(&self, t_ns: u64, window_ns: u64) -> bool {
+        let Some((first, period)) = self.sync1_grid() else { return false };
+        let late = self.system_ext_at(t_ns).wrapping_sub(first);
+        // A single shot (period 0) counts from its one pulse.
+        (late as i64) >= 0 && late.checked_rem(period).unwrap_or(late) < window_ns
+    }
+
     /// 0x0984 at true time `t_ns`: bit 1 while the first SYNC1 pulse is pending.
     pub fn activation_status_at(&self, t_ns: u64) -> u8 {
         let pending1 = self.sync1_at(t_ns).is_some_and(|(k, _)| k == 0);

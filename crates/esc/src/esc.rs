@@ -617,6 +617,37 @@ impl Esc {
         }
     }
 
+    /// SYNC0/SYNC1 status (0x098E/0x098F) and the AL event request (0x0220) at this instant,
+    /// as the master reads them. In acknowledge mode (pulse length 0) a SYNC signal stays
+    /// active until the PDI reads its status register, which our firmware does
+    /// `SYNC0_SERVICE_NS` after the pulse; the status reads 0 in pulse mode (the datasheet
+    /// defines it for acknowledge mode only). Of 0x0220 we keep bit 0 (AL control written, not
+    /// yet read by the firmware) and bits 2/3 (the SYNC signals, where 0x0151 bits 3/7 map them
+    /// there); the firmware services every other event at once, so those read 0.
+    fn refresh_pdi_events(&mut self) {
+        let ack_mode = self.mem[0x0982] == 0 && self.mem[0x0983] == 0;
+        let (mut s0, mut s1) = (false, false);
+        if let (Some(dc), true) = (&self.dc, ack_mode) {
+            let now = self.now_ns;
+            s0 = dc.sync.output_enabled() && self.sync0_edge_ns.is_some_and(|e| now >= e && now - e < SYNC0_SERVICE_NS);
+            s1 = dc.sync1_within(now, SYNC0_SERVICE_NS);
+        }
+        self.mem[0x098E] = s0 as u8;
+        self.mem[0x098F] = s1 as u8;
+        let pdi_config = self.mem[0x0151];
+        let mut events = 0u32;
+        if self.pending_al.is_some() {
+            events |= 1 << 0;
+        }
+        if s0 && pdi_config & 0x08 != 0 {
+            events |= 1 << 2;
+        }
+        if s1 && pdi_config & 0x80 != 0 {
+            events |= 1 << 3;
+        }
+        self.mem[0x0220..0x0224].copy_from_slice(&events.to_le_bytes());
+    }
+
     /// The registers a TCL sample changes: the difference (0x092C) and SCD (0x0932).
     fn refresh_tcl_registers(&mut self) {
         if let Some(dc) = &self.dc {
@@ -779,6 +810,9 @@ impl Esc {
             // SYNC1 pulses are not events of their own: its registers are brought to the
             // frame's instant when read.
             self.refresh_sync1_registers();
+        }
+        if (0x098E..=0x098F).contains(&a) || (0x0220..=0x0223).contains(&a) {
+            self.refresh_pdi_events();
         }
         if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
             // Reading a latch time clears its single-event flag (ECAT-controlled latch units).

@@ -103,19 +103,7 @@ fn a_sync0_cycle_of_a_few_ns_neither_stalls_nor_exhausts_memory() {
 #[test]
 fn a_pulse_length_longer_than_the_cycle_holds_the_output() {
     // The terminal's EEPROM as a master would dump it, with word 2 set to 1000 × 10 ns.
-    let mut bus = et1100_bus();
-    let mut image: Vec<u8> = (0..512).flat_map(|w| bus.sii_read(STATION, 2 * w)[..4].to_vec()).collect();
-    let mut header = ferrocat_wire::sii::SiiHeader::parse(&image).unwrap();
-    header.sync_impulse_len = 1_000;
-    image[..ferrocat_wire::sii::HEADER_LEN].copy_from_slice(&header.with_checksum().to_bytes());
-    let path = std::env::temp_dir().join(format!("ferrocat-held-output-{}.bin", std::process::id()));
-    std::fs::write(&path, &image).unwrap();
-    let cfg: SegmentConfig =
-        toml::from_str(&format!("[[device]]\neeprom = '{}'\nesc = 'et1100'\n", path.display())).unwrap();
-    let seg = cfg.build();
-    std::fs::remove_file(&path).unwrap();
-    let mut bus = Bus::new(seg.unwrap());
-    bus.address_all();
+    let mut bus = common::patched_device(&mut et1100_bus(), STATION, |h| h.sync_impulse_len = 1_000);
     assert_eq!(bus.fp(Command::FPRD, STATION, 0x0982, &[0; 2]).0, 1_000u16.to_le_bytes(), "from the EEPROM");
     bus.fp(Command::FPWR, STATION, 0x0982, &0u16.to_le_bytes());
     assert_eq!(bus.fp(Command::FPRD, STATION, 0x0982, &[0; 2]).0, 1_000u16.to_le_bytes(), "ECAT read-only");

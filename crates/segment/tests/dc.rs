@@ -245,3 +245,75 @@ fn a_watch_sees_each_clock_at_its_instant_whatever_frames_passed_since() {
     assert_eq!(wa.system_ns[0], wb.system_ns[0], "the first slave was not written");
     assert_eq!(wa.system_ns[1].unwrap() - wb.system_ns[1].unwrap(), 1_000_000);
 }
+
+/// A single EL2004 (ET1100-like ESC) whose EEPROM words 1 and 2 — PDI configuration
+/// (0x0150–0x0151) and SYNC pulse length (0x0982) — are patched, and whose AL control a
+/// firmware answers (device emulation off in word 0).
+fn patched_terminal(pdi_config: u16, pulse_10ns: u16) -> Bus {
+    common::patched_device(&mut line(&["EL2004"], "et1100"), 0x1001, |h| {
+        h.pdi_config = pdi_config;
+        h.pdi_control &= !0x0100; // no device emulation: a firmware answers AL control
+        h.sync_impulse_len = pulse_10ns;
+    })
+}
+
+/// SYNC0/SYNC1 status (0x098E/0x098F) and the AL event request (0x0220) read by the master at
+/// chosen instants: in acknowledge mode (pulse length 0) a SYNC signal is active from its pulse
+/// until the firmware reads its status register (1 µs later in our model); with 0x0151 bits 3
+/// and 7 set (as in the HBM ClipX dump's 0xCC) 0x0220 bits 2 and 3 follow them; bit 0 is set
+/// while the firmware has not yet read a write of AL control. In pulse mode the status reads 0.
+#[test]
+fn sync_status_in_acknowledge_mode_and_the_al_event_request() {
+    for pulse_10ns in [0u16, 100] {
+        let mut bus = patched_terminal(0x8800, pulse_10ns);
+        let s = 0x1001;
+        assert_eq!(bus.fp(Command::FPRD, s, 0x0982, &[0; 2]).0, pulse_10ns.to_le_bytes());
+        let (cycle0, shift1) = (250_000u64, 100_000u64);
+        let start = (bus.fprd_u64(s, 0x0910) / cycle0 + 4) * cycle0;
+        bus.fp(Command::FPWR, s, 0x0981, &[0]);
+        bus.fp(Command::FPWR, s, 0x09A0, &(cycle0 as u32).to_le_bytes());
+        bus.fp(Command::FPWR, s, 0x09A4, &(shift1 as u32).to_le_bytes());
+        bus.fp(Command::FPWR, s, 0x0990, &start.to_le_bytes());
+        bus.fp(Command::FPWR, s, 0x0981, &[act::CYCLIC_OPERATION | act::SYNC0 | act::SYNC1]);
+        bus.t += 2_000_000;
+        // How long after its sending a frame passes the slave.
+        let probe_at = bus.t;
+        bus.fp(Command::FPRD, s, 0x0000, &[0; 2]);
+        let lead = bus.seg.last_visits()[0].1.epu_ns - probe_at;
+        bus.seg.advance_to(bus.t);
+        let pulse = bus.seg.nodes[0].esc.dc.as_ref().unwrap().next_sync0_true(bus.t + 50_000).unwrap();
+        // (0x098E, 0x098F, 0x0220) read by one frame that passes the slave at `at`.
+        let read_at = |bus: &mut Bus, at: u64| {
+            bus.t = at - lead;
+            let r = bus.tx_all(&[
+                (Command::FPRD, Address::Device { adp: s, ado: 0x098E }, &[0; 2]),
+                (Command::FPRD, Address::Device { adp: s, ado: 0x0220 }, &[0; 4]),
+            ]);
+            assert_eq!(bus.seg.last_visits()[0].1.epu_ns, at);
+            (r[0].0[0], r[0].0[1], u32::from_le_bytes(r[1].0[..4].try_into().unwrap()))
+        };
+        let ack = pulse_10ns == 0;
+        let on = |b: bool, v: u8| if b { v } else { 0 };
+        // A frame takes ≈ 6 µs on the wire: one read per pulse. The slave's clock runs within
+        // ppm of true time, tens of ns over these cycles.
+        let p = |k: u64| pulse + k * cycle0;
+        assert_eq!(
+            read_at(&mut bus, p(0) + 300),
+            (on(ack, 1), 0, on(ack, 0b0100) as u32),
+            "pulse {pulse_10ns}: SYNC0 just fired"
+        );
+        assert_eq!(read_at(&mut bus, p(1) + 1_500), (0, 0, 0), "pulse {pulse_10ns}: acknowledged");
+        assert_eq!(
+            read_at(&mut bus, p(2) + shift1 + 300),
+            (0, on(ack, 1), on(ack, 0b1000) as u32),
+            "pulse {pulse_10ns}: SYNC1"
+        );
+        assert_eq!(read_at(&mut bus, p(3) + shift1 + 1_500), (0, 0, 0), "pulse {pulse_10ns}: SYNC1 acknowledged");
+        // AL control written: bit 0 until the firmware has read it (≈ 1 ms).
+        bus.fp(Command::FPWR, s, 0x0120, &[0x02, 0x00]);
+        let t = bus.t + 10_000;
+        assert_eq!(read_at(&mut bus, t + lead).2 & 1, 1, "AL control not yet read");
+        let t = bus.t + 2_000_000;
+        assert_eq!(read_at(&mut bus, t + lead).2 & 1, 0, "read by the firmware");
+    }
+}

@@ -1,7 +1,8 @@
 //! A minimal master for the segment's tests: one datagram per frame, written from the spec.
 #![allow(dead_code)]
-use ferrocat_segment::Segment;
+use ferrocat_segment::{Segment, SegmentConfig};
 use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
+use ferrocat_wire::sii::SiiHeader;
 use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
 
 pub struct Bus {
@@ -118,4 +119,25 @@ impl Bus {
             assert_eq!(w, 1);
         }
     }
+}
+
+/// One device (ET1100-like ESC) whose EEPROM is station `station`'s of `bus`, read as a
+/// master would dump it, with its header changed by `patch` — written to a file, as a user's
+/// dump would be, and loaded from it. Station address 0x1001.
+pub fn patched_device(bus: &mut Bus, station: u16, patch: impl FnOnce(&mut SiiHeader)) -> Bus {
+    let mut image: Vec<u8> = (0..512).flat_map(|w| bus.sii_read(station, 2 * w)[..4].to_vec()).collect();
+    let mut header = SiiHeader::parse(&image).unwrap();
+    patch(&mut header);
+    image[..ferrocat_wire::sii::HEADER_LEN].copy_from_slice(&header.with_checksum().to_bytes());
+    static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("ferrocat-patched-{}-{n}.bin", std::process::id()));
+    std::fs::write(&path, &image).unwrap();
+    let cfg: SegmentConfig =
+        toml::from_str(&format!("[[device]]\neeprom = '{}'\nesc = 'et1100'\n", path.display())).unwrap();
+    let seg = cfg.build();
+    std::fs::remove_file(&path).unwrap();
+    let mut bus = Bus::new(seg.unwrap());
+    bus.address_all();
+    bus
 }
