@@ -248,8 +248,11 @@ impl Esc {
         m[6] = c.ram_kb;
         m[7] = c.port_descriptor;
         m[8..10].copy_from_slice(&c.features.to_le_bytes());
-        m[0x0100] = 0x01; // forwarding rule: destroy non-EtherCAT frames
-        m[0x0102] = 0x07; // RX FIFO size
+        // Forwarding rule: destroy non-EtherCAT frames.
+        m[0x0100] = 0x01;
+        // RX FIFO size 7; Beckhoff's ASICs also come up with bits 6–7 set (TwinCAT reads 0xC7
+        // from an EK1100's ET1100 and an EL1004's ET1200, 0x07 from the AKD's IP core).
+        m[0x0102] = if matches!(c.esc_type, 0x11 | 0x12) { 0xC7 } else { 0x07 };
         m[0x0400..0x0402].copy_from_slice(&2498u16.to_le_bytes());
         m[0x0410..0x0412].copy_from_slice(&1000u16.to_le_bytes());
         m[0x0420..0x0422].copy_from_slice(&1000u16.to_le_bytes());
@@ -508,6 +511,12 @@ impl Esc {
     /// SII busy, DC times.
     fn refresh_registers(&mut self) {
         let mut dl = 1u16; // EEPROM loaded, PDI operational
+        if self.mem[0x0140] != 0 {
+            // A PDI (0x0140: its type, 0 = none) that runs reloads the PDI watchdog: bit 1.
+            // The real captures: 1 on the EL1004 (digital I/O), EL2828 and AKD, 0 on the
+            // EK1100, which has no PDI.
+            dl |= 1 << 1;
+        }
         for p in 0..4u8 {
             let link = self.links[p as usize] && self.config.has_port(p);
             if link {

@@ -49,33 +49,49 @@ fn pairs(p: &[Packet]) -> Vec<(usize, usize)> {
     v
 }
 
-/// Product codes by slave position, from the SII reads in the capture (word 0x0A).
-fn identities(p: &[Packet], pairs: &[(usize, usize)]) -> (usize, BTreeMap<u16, u32>) {
+/// Product codes by slave position, from the SII reads in the capture (word 0x0A), keyed by
+/// the address the master sent: a position (AP commands, the first slave 0) or a station
+/// address (FP commands, assigned in position order). A response's position address comes back
+/// incremented by every slave, so the request's is used.
+fn identities(p: &[Packet], pairs: &[(usize, usize)]) -> (usize, BTreeMap<usize, u32>) {
     let mut count = 0;
-    let mut pending: BTreeMap<(u8, u16), u32> = BTreeMap::new();
-    let mut ids = BTreeMap::new();
-    for &(_, resp) in pairs {
+    let mut pending: BTreeMap<(bool, u16), u32> = BTreeMap::new();
+    let (mut by_position, mut by_station) = (BTreeMap::new(), BTreeMap::new());
+    for &(req, resp) in pairs {
+        let sent = Frame::parse(&p[req].data).unwrap().unwrap();
         let f = Frame::parse(&p[resp].data).unwrap().unwrap();
-        for d in f.pdu.datagrams() {
+        for (q, d) in sent.pdu.datagrams().zip(f.pdu.datagrams()) {
             let h = d.header();
-            let Address::Device { adp, ado } = h.address else { continue };
+            let (Address::Device { ado, .. }, Address::Device { adp: key, .. }) = (h.address, q.header().address)
+            else {
+                continue;
+            };
+            let positional = matches!(h.command, Command::APWR | Command::APRD);
+            let key = if positional { 0u16.wrapping_sub(key) } else { key };
             match (h.command, ado) {
                 (Command::BRD, 0x0000) if count == 0 => count = d.wkc() as usize,
                 (Command::APWR | Command::FPWR, 0x0502) if d.data().len() >= 6 => {
-                    pending.insert((h.command.0, adp), u32::from_le_bytes(d.data()[2..6].try_into().unwrap()));
+                    pending.insert((positional, key), u32::from_le_bytes(d.data()[2..6].try_into().unwrap()));
                 }
                 (Command::APRD | Command::FPRD, 0x0508) if d.wkc() == 1 => {
-                    let Some(&a) = pending.get(&(h.command.0 + 1, adp)) else { continue };
+                    let Some(&a) = pending.get(&(positional, key)) else { continue };
                     if a <= 0x0A && (0x0A - a) as usize * 2 + 4 <= d.data().len() {
                         let off = (0x0A - a) as usize * 2;
-                        ids.insert(adp, u32::from_le_bytes(d.data()[off..off + 4].try_into().unwrap()));
+                        let id = u32::from_le_bytes(d.data()[off..off + 4].try_into().unwrap());
+                        if positional { &mut by_position } else { &mut by_station }.insert(key, id);
                     }
                 }
                 _ => {}
             }
         }
     }
-    (count.max(ids.len()), ids)
+    let ids: BTreeMap<usize, u32> = if by_position.is_empty() {
+        by_station.into_values().enumerate().collect()
+    } else {
+        by_position.into_iter().map(|(pos, id)| (pos as usize, id)).collect()
+    };
+    let highest = ids.keys().next_back().map_or(0, |&k| k + 1);
+    (count.max(highest), ids)
 }
 
 fn source(product: Option<u32>) -> (String, Option<&'static str>) {
@@ -99,10 +115,11 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
 }
 
 /// Registers whose read data must be identical: identity and features, station address and
-/// alias, SII data, FMMU and SyncManager configuration (not the SM status bytes).
+/// alias, DL control and status, PDI control, SII data, FMMU and SyncManager configuration
+/// (not the SM status bytes).
 fn compared(ado: u16, i: usize) -> bool {
     let a = ado as usize + i;
-    matches!(a, 0x0000..=0x000B | 0x0010..=0x0013 | 0x0508..=0x050F | 0x0600..=0x06FF)
+    matches!(a, 0x0000..=0x000B | 0x0010..=0x0013 | 0x0100..=0x0103 | 0x0110..=0x0111 | 0x0140..=0x0141 | 0x0508..=0x050F | 0x0600..=0x06FF)
         || ((0x0800..=0x087F).contains(&a) && (a - 0x0800) % 8 < 5)
 }
 
@@ -188,8 +205,17 @@ fn mailbox_status_reason(ours: u8, real: u8, standin: bool) -> &'static str {
 
 /// The stand-in a datagram reaches, if any (a broadcast: all of them).
 fn standin_reached(cmd: Command, adp: u16, standins: &[(u16, &str)]) -> Option<String> {
-    let broadcast =
-        matches!(cmd, Command::BRD | Command::BWR | Command::BRW | Command::LRD | Command::LWR | Command::LRW);
+    let broadcast = matches!(
+        cmd,
+        Command::BRD
+            | Command::BWR
+            | Command::BRW
+            | Command::LRD
+            | Command::LWR
+            | Command::LRW
+            | Command::ARMW
+            | Command::FRMW
+    );
     if broadcast && !standins.is_empty() {
         return Some(format!(
             "the segment includes stand-ins ({})",
@@ -203,11 +229,23 @@ fn standin_reached(cmd: Command, adp: u16, standins: &[(u16, &str)]) -> Option<S
 }
 
 fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str) -> String {
-    if let Some(why) = standin_reached(cmd, adp, standins) {
+    let standin = standin_reached(cmd, adp, standins);
+    if (0x0910..=0x09FF).contains(&ado) && what.starts_with("WKC") && !matches!(cmd, Command::FPRD | Command::FPWR) {
+        // Seen on the EL1004 and EL2828 (SOEM's FPRD 0x0918 of the EL1004: WKC 0).
+        let dc = "a real ET1200 whose SYNC and latch units are off (0x0141 = 0x01) does not answer \
+                  0x0910–0x09FF, ours does (not yet modelled)";
+        return match standin {
+            Some(why) => format!("{what}: DC system time: {dc}; or {why}"),
+            None => format!("{what}: DC system time: {dc}"),
+        };
+    }
+    if let Some(why) = standin {
         return format!("{what}: {why}");
     }
     let r = match ado {
         0x0000..=0x000B => "ESC identity registers: the simulated ESC (ET1100/ET1200 as the captures show them) is not this unit's silicon revision",
+        0x0100..=0x0103 => "DL control's reset value: the real ESC, an IP core, is not the ET1100 modelled",
+        0x0140..=0x0141 => "PDI control: the real ESC, an IP core, has its PDI fixed at synthesis, not as SII word 0 gives it",
         0x0120..=0x0121 => "AL control: the real firmware read it at another moment than the modelled 1 ms",
         0x0130..=0x0135 => "AL status: the simulated slave changes state at another moment than the real one",
         0x0500..=0x050F => "SII interface: busy timing differs (20 µs per read here)",
@@ -226,15 +264,13 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
     let p = packets(path);
     let pairs = pairs(&p);
     let (count, ids) = identities(&p, &pairs);
-    let mut positions: Vec<u16> = ids.keys().copied().collect();
-    positions.sort();
     let fp = addressing(&p, &pairs).1.len();
     let count = count.max(fp);
     let mut toml = String::from("seed = 1\ndrift_spread_ppm = 0\n");
     let mut standins = Vec::new();
     let mut notes = Vec::new();
     for k in 0..count.max(1) {
-        let product = positions.get(k).and_then(|a| ids.get(a)).copied();
+        let product = ids.get(&k).copied();
         let (src, why) = source(product);
         if let Some(w) = why {
             standins.push((k as u16, w));
@@ -273,9 +309,11 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
         last_t = back.unwrap_or(t);
         let real = Frame::parse(&p[resp].data).unwrap().unwrap();
         let ours = Frame::parse(&frame).unwrap().unwrap();
-        for (a, b) in real.pdu.datagrams().zip(ours.pdu.datagrams()) {
+        let sent = Frame::parse(&p[req].data).unwrap().unwrap();
+        for ((a, b), q) in real.pdu.datagrams().zip(ours.pdu.datagrams()).zip(sent.pdu.datagrams()) {
             r.datagrams += 1;
-            let h = a.header();
+            // The address as sent: position addressing comes back incremented by every slave.
+            let h = q.header();
             let (adp, ado) = match h.address {
                 Address::Device { adp, ado } => (adp, ado),
                 Address::Logical(_) => (0xFFFF, 0),
