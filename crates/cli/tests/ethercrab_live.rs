@@ -99,7 +99,11 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
             }
         }
         println!("0x092C after static drift compensation: {diffs:?}");
-        assert_eq!(diffs.len(), 4, "every slave has DC");
+        // The drive and the coupler have a system time; the terminals' ET1200s (SYNC and latch
+        // units off, as their SII word 0 = 0x0104 says) have receive times only, so their
+        // 0x092C does not answer — as on real EL2004/EL1004.
+        let synced: Vec<&str> = diffs.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(synced, ["C5-E-2-21", "EK1100"], "the slaves with a system time");
         for (name, d) in &diffs {
             assert!(d.abs() < 50, "{name}: |0x092C| = {} ns", d.abs());
         }

@@ -180,6 +180,9 @@ pub struct Esc {
     al_changed: bool,
     /// ECAT event request AND mask: what this ESC ORs into every datagram's IRQ field.
     irq: u16,
+    /// The DC unit's system time part (0x0910–0x09FF) exists; without it only the receive
+    /// times 0x0900–0x090F answer.
+    system_time_unit: bool,
 }
 
 impl Esc {
@@ -221,6 +224,7 @@ impl Esc {
             dl_changed: false,
             al_changed: false,
             irq: 0,
+            system_time_unit: false,
         };
         esc.power_on(t_ns);
         esc
@@ -274,6 +278,10 @@ impl Esc {
                 Some(DcUnit::new(w, t_ns, local0, drift))
             }
         };
+        // An ET1200 with neither its SYNC out nor its latch in unit enabled (0x0141 bits 2–3,
+        // from SII word 0) answers its receive times only: the real EL1004 and EL2828 (0x0141 =
+        // 0x01) give WKC 0 for 0x0910–0x09FF, the EK1100 (ET1100, 0x0D) counts.
+        self.system_time_unit = c.esc_type != 0x12 || m[0x0141] & 0x0C != 0;
         self.reload_sm_fmmu();
         // The DL status comes up from reset (an event); AL status Init is its reset value.
         self.refresh_registers();
@@ -353,6 +361,12 @@ impl Esc {
         if let Some(dc) = &self.dc {
             self.dc = Some(DcUnit::new(dc.width, self.now_ns, local_ns, self.dc_init.0));
         }
+    }
+
+    /// Whether the DC unit's system time (0x0910–0x09FF) exists: a clock a master can
+    /// synchronise, not only receive times.
+    pub fn has_system_time(&self) -> bool {
+        self.dc.is_some() && self.system_time_unit
     }
 
     pub fn station_address(&self) -> u16 {
@@ -793,7 +807,8 @@ impl Esc {
         match a {
             0x0600..=0x06FF => (a - 0x0600) / 16 >= self.config.fmmu_count as u16,
             0x0800..=0x087F => (a - 0x0800) / 8 >= self.config.sm_count as u16,
-            0x0900..=0x09FF => self.dc.is_none(),
+            0x0900..=0x090F => self.dc.is_none(),
+            0x0910..=0x09FF => self.dc.is_none() || !self.system_time_unit,
             _ => a as usize >= self.mem.len(),
         }
     }
@@ -870,7 +885,7 @@ impl Esc {
             && !data.is_empty()
             && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
         {
-            if self.dc.is_none() {
+            if self.dc.is_none() || !self.system_time_unit {
                 return false;
             }
             self.latch_system_time();
@@ -961,6 +976,7 @@ impl Esc {
         if (0x0910..0x0918).contains(&ado)
             && end <= 0x0918
             && self.dc.is_some()
+            && self.system_time_unit
             && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
         {
             if data.is_empty() {

@@ -133,7 +133,7 @@ pub fn calibration(
 
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.
 pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
-    let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_dc).map(|(k, _)| k).collect();
+    let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_system_time).map(|(k, _)| k).collect();
     anyhow::ensure!(!dc.is_empty(), "the segment has no slave with distributed clocks");
     Ok(dc)
 }

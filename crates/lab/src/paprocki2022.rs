@@ -57,10 +57,11 @@ pub const PAPER: [(u64, f64, f64, f64, f64); 2] =
 
 fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let cycle_ns = cycle_us * 1000;
-    // A coupler and two DC slaves standing in for the drives (their SYNC0 unit is what counts).
+    // A coupler and two DC slaves standing in for the drives (their SYNC0 unit is what counts;
+    // a DC-synchronous application enables it, without which an ET1200 has no system time).
     let toml = format!(
         "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\n\
-         [[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL2004'\n",
+         [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
         o.seed
     );
     let cfg: SegmentConfig = match &o.segment {

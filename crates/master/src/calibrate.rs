@@ -52,8 +52,12 @@ impl GpioCalibration {
             return Ok(None);
         }
         let s = m.slave(self.slave)?;
-        if !s.has_dc {
-            return Err(MasterError::slave(self.slave, &s.name, "has no DC unit to latch the calibration pulse"));
+        if !s.has_system_time {
+            return Err(MasterError::slave(
+                self.slave,
+                &s.name,
+                "has no DC system time to latch the calibration pulse",
+            ));
         }
         let (station, wide) = (s.station, s.dc_64bit);
         if !self.armed {

@@ -203,11 +203,9 @@ impl<I: Io> Master<I> {
     /// cyclic operation then starts without the rate change every follower would have to
     /// relearn (docs/clock-sync.md, lock time).
     pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
-        let reference = self
-            .slaves
-            .iter()
-            .position(|s| s.has_dc)
-            .ok_or_else(|| MasterError::Config("no slave has a distributed clock".into()))?;
+        if !self.slaves.iter().any(|s| s.has_dc) {
+            return Err(MasterError::Config("no slave has a distributed clock".into()));
+        }
         // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
         //    when the latching frame passed the reference, from its stamps (half its round
         //    trip, less the segment's own loop and the frame's length), not when the master
@@ -216,13 +214,19 @@ impl<I: Io> Master<I> {
             Some(latch) => latch.built_ns.wrapping_add_signed(latch.lead_ns()),
             None => self.master_system_time(),
         };
+        // The reference: the first slave whose system time answers (the latch found out).
+        let reference = self
+            .slaves
+            .iter()
+            .position(|s| s.has_system_time)
+            .ok_or_else(|| MasterError::Config("no slave has a DC system time (receive times only)".into()))?;
         // 4. Offsets, including each slave's delay: all local copies equal the reference's,
         //    and the reference's equals the master's time at the latch.
         let r_ref = self.slaves[reference].receive_time_epu;
         let offset_ref = t_master.wrapping_sub(r_ref);
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if !s.has_dc {
+            if !s.has_system_time {
                 continue;
             }
             let offset =
@@ -235,7 +239,7 @@ impl<I: Io> Master<I> {
             self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0928 }, &mut delay.to_le_bytes(), 1)?;
         }
         // 5. Reset the time control loops: filter depth first, then the speed counter start.
-        let dc_count = self.slaves.iter().filter(|s| s.has_dc).count() as u16;
+        let dc_count = self.slaves.iter().filter(|s| s.has_system_time).count() as u16;
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0934 }, &mut [4])?;
         self.engine.expect(
             Command::BWR,
@@ -288,7 +292,7 @@ impl<I: Io> Master<I> {
             None => self
                 .slaves
                 .iter()
-                .filter(|s| s.has_dc && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
+                .filter(|s| s.has_system_time && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
                 .map(|s| s.position)
                 .collect(),
         };
@@ -339,7 +343,8 @@ impl<I: Io> Master<I> {
 
     /// Every DC slave's filtered system time difference (0x092C), signed.
     pub fn dc_differences(&mut self) -> Result<Vec<(u16, i64)>> {
-        let dc: Vec<(u16, u16)> = self.slaves.iter().filter(|s| s.has_dc).map(|s| (s.position, s.station)).collect();
+        let dc: Vec<(u16, u16)> =
+            self.slaves.iter().filter(|s| s.has_system_time).map(|s| (s.position, s.station)).collect();
         let mut bufs = vec![[0u8; 4]; dc.len()];
         {
             let mut p: Vec<Pdu<'_>> = dc
@@ -678,7 +683,7 @@ impl<I: Io> Master<I> {
     fn bias_follower_delays(&mut self, bias_ns: i64, reference: u16) -> Result<()> {
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if !s.has_dc || s.station == reference {
+            if !s.has_system_time || s.station == reference {
                 continue;
             }
             let (st, delay) = (s.station, (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32);
@@ -690,7 +695,7 @@ impl<I: Io> Master<I> {
     /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.
     fn shift_offsets_but(&mut self, shift_ns: i64, skip: Option<u16>) -> Result<()> {
         for k in 0..self.slaves.len() {
-            let (has, st, wide) = (self.slaves[k].has_dc, self.slaves[k].station, self.slaves[k].dc_64bit);
+            let (has, st, wide) = (self.slaves[k].has_system_time, self.slaves[k].station, self.slaves[k].dc_64bit);
             if !has || skip == Some(st) {
                 continue;
             }

@@ -201,6 +201,7 @@ impl<I: Io> Master<I> {
             parent: None,
             parent_port: 0,
             has_dc: features & 0x04 != 0,
+            has_system_time: features & 0x04 != 0,
             dc_64bit: features & 0x08 != 0,
             receive_times: [0; 4],
             receive_time_epu: 0,
@@ -522,12 +523,15 @@ impl<I: Io> Master<I> {
             let mut t = [0u8; 16];
             self.fprd(st, 0x0900, &mut t)?;
             let mut epu = [0u8; 8];
-            self.fprd(st, 0x0918, &mut epu)?;
+            let answered = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, &mut epu)? == 1;
             let s = &mut self.slaves[k];
             for p in 0..4 {
                 s.receive_times[p] = u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap());
             }
-            s.receive_time_epu = u64::from_le_bytes(epu);
+            // Without a system time (WKC 0) the processing unit's receive time is port 0's, as
+            // 0x0918's low word is where it exists (esc-spec §3.3).
+            s.has_system_time = answered;
+            s.receive_time_epu = if answered { u64::from_le_bytes(epu) } else { s.receive_times[0] as u64 };
             // The entry port saw the frame first (reversed cabling puts it elsewhere).
             let active: Vec<usize> = (0..4).filter(|&p| s.active_ports[p]).collect();
             if let Some(&e) = active.iter().min_by_key(|&&p| s.receive_times[p].wrapping_sub(s.receive_times[0]) as i32)
@@ -584,7 +588,7 @@ impl<I: Io> Master<I> {
                 Some((*at)? + since_entry as i32 as i64)
             })
             .collect();
-        let reference = self.slaves.iter().position(|s| s.has_dc);
+        let reference = self.slaves.iter().position(|s| s.has_system_time);
         let at_reference = reference.and_then(|r| epu_at[r]).unwrap_or(0);
         for (s, at) in self.slaves.iter_mut().zip(epu_at) {
             if s.has_dc {
@@ -1099,7 +1103,7 @@ impl<I: Io> Master<I> {
     /// Adds an FRMW of the reference clock's system time (the first DC slave) to every cyclic
     /// frame, as SOEM and ethercrab do; returns the reference's position.
     pub fn distribute_dc(&mut self) -> Option<u16> {
-        let r = self.slaves.iter().find(|s| s.has_dc)?;
+        let r = self.slaves.iter().find(|s| s.has_system_time)?;
         self.dc_reference = Some(r.station);
         Some(r.position)
     }

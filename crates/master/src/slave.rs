@@ -48,7 +48,12 @@ pub struct Slave {
     pub parent: Option<u16>,
     /// Port of the parent this slave hangs on.
     pub parent_port: u8,
+    /// Distributed clocks (0x0008 bit 2): at least the receive times 0x0900–0x090F.
     pub has_dc: bool,
+    /// The DC unit's system time (0x0910–0x09FF) answers: a clock that can be synchronised.
+    /// An ET1200 with its SYNC and latch units off has receive times only (found at the latch:
+    /// 0x0918 reads with WKC 0), like the real EL1004 and EL2828.
+    pub has_system_time: bool,
     pub dc_64bit: bool,
     /// Receive times of ports 0–3 (local time, low 32 bits) and at the processing unit.
     pub receive_times: [u32; 4],

@@ -13,7 +13,7 @@ fn segment_on(host: HostModel) -> Master<VirtualIo> {
         "seed = 9\n\
          [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 12.0\n\
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\n\
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 3.5\nesc = 'et1100'\n\
          [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = -20.0\nesc = 'et1100'\n\
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 33.0\nesc = 'et1100'\n",
@@ -23,10 +23,9 @@ fn segment_on(host: HostModel) -> Master<VirtualIo> {
 }
 
 /// The spread of the slaves' true system times at one true instant (32-bit ones compared on
-/// their low 32 bits).
+/// their low 32 bits); slaves with receive times only have no system time to compare.
 fn spread_ns(m: &Master<VirtualIo>, t: u64) -> i64 {
-    let times: Vec<u32> =
-        m.engine.io.seg.nodes.iter().map(|n| n.esc.dc.as_ref().unwrap().system_at(t) as u32).collect();
+    let times: Vec<u32> = m.engine.io.seg.system_times_at(t).iter().map(|&x| x as u32).collect();
     let r = times[0];
     let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(r) as i32 as i64).collect();
     d.iter().max().unwrap() - d.iter().min().unwrap()
@@ -213,4 +212,33 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
     let e = mine.wrapping_sub(reference) as i64;
     println!("master − reference after 200 one-frame cycles: {e} ns");
     assert!(e.abs() < 1_000, "{e}");
+}
+
+/// Terminals whose ET1200 has receive times only (the real EL2004/EL1004: SYNC and latch units
+/// off): their receive times still place them and give their delays, but the master writes no
+/// offset or delay to them, leaves them out of the time control loops' reset and the sync
+/// monitor, and synchronises the slaves behind them. Before, DC initialisation stopped at the
+/// first terminal's 0x0918 (WKC 0), as it would have on that real hardware.
+#[test]
+fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 7\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\nesc = 'et1100'\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
+    m.bring_up().unwrap();
+    let r = m.init_dc(&DcConfig::default()).unwrap();
+    assert!(r.converged, "{r:?}");
+    let flags: Vec<(bool, bool)> = m.slaves.iter().map(|s| (s.has_dc, s.has_system_time)).collect();
+    assert_eq!(flags, [(true, true), (true, false), (true, false), (true, true)]);
+    let delays: Vec<u32> = m.slaves.iter().map(|s| s.delay_ns).collect();
+    assert!(delays[0] == 0 && delays.windows(2).all(|w| w[0] < w[1]), "{delays:?}");
+    let monitored: Vec<u16> = m.dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
+    assert_eq!(monitored, [0, 3]);
+    // The slave behind the terminals follows the reference.
+    let t = m.engine.io.now_ns();
+    let nodes = &m.engine.io.seg.nodes;
+    let (a, b) = (nodes[0].esc.dc.as_ref().unwrap().system_at(t), nodes[3].esc.dc.as_ref().unwrap().system_at(t));
+    assert!((a as i64 - b as i64).abs() <= 100, "reference {a}, last slave {b}");
 }

@@ -126,8 +126,8 @@ fn synchronises(mut m: Master<VirtualIo>) {
         m.engine.io.sleep_until(next);
         if k > 200 {
             let t = m.engine.io.now_ns();
-            let times: Vec<u32> =
-                m.engine.io.seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.system_at(t) as u32)).collect();
+            // Slaves with receive times only (ET1200 terminals) have no system time to compare.
+            let times: Vec<u32> = m.engine.io.seg.system_times_at(t).iter().map(|&x| x as u32).collect();
             let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(times[0]) as i32 as i64).collect();
             worst = worst.max(d.iter().max().unwrap() - d.iter().min().unwrap());
         }

@@ -32,9 +32,13 @@ fn single(seg: &mut Segment, t: &mut u64, cmd: Command, address: Address, data: 
 
 impl CyclicBench {
     pub fn new(slaves: usize, cycle_ns: u64, seed: u64) -> Self {
+        // Every terminal's SYNC unit on, so that each ESC has a system time and takes a time
+        // control loop sample per cycle (the terminals as their SII has them, SYNC and latch
+        // units off, have receive times only and would take none).
         let mut toml = format!("seed = {seed}\n[[device]]\nbuiltin = 'EK1100'\n");
         for k in 1..slaves {
             toml += if k % 2 == 1 { "[[device]]\nbuiltin = 'EL1004'\n" } else { "[[device]]\nbuiltin = 'EL2004'\n" };
+            toml += "sync_unit = true\n";
         }
         let cfg: SegmentConfig = toml::from_str(&toml).expect("bench segment");
         let mut seg = cfg.build().expect("bench segment builds");

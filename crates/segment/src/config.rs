@@ -144,6 +144,9 @@ pub struct DeviceToml {
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
     /// puts a firmware behind AL control that checks each transition.
     pub device_emulation: Option<bool>,
+    /// Overrides the SII's SYNC out unit bit (word 0, ESC configuration bit 2). An ET1200
+    /// with neither SYNC nor latch unit has receive times only; `app = "dc"` turns it on.
+    pub sync_unit: Option<bool>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -252,6 +255,19 @@ impl SegmentConfig {
                 // Word 0 high byte is the ESC configuration (→ 0x0141); keep the CRC right.
                 if sii.len() >= 16 {
                     sii[1] = (sii[1] & !1) | emulate as u8;
+                    let crc = ferrocat_wire::sii::header_crc(&sii);
+                    sii[14] = crc;
+                }
+            }
+            // A DC-synchronous application needs the SYNC out unit (0x0141 bit 2, SII word 0);
+            // without it and the latch unit an ET1200 has no system time (docs/esc-model.md).
+            let dc_app = d.app.as_deref() == Some("dc");
+            if dc_app && d.sync_unit == Some(false) {
+                return Err(device_err(format!("device {i}"), "app = \"dc\" needs sync_unit = true"));
+            }
+            if let Some(on) = d.sync_unit.or(dc_app.then_some(true)) {
+                if sii.len() >= 16 {
+                    sii[1] = (sii[1] & !0x04) | if on { 0x04 } else { 0 };
                     let crc = ferrocat_wire::sii::header_crc(&sii);
                     sii[14] = crc;
                 }

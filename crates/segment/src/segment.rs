@@ -480,6 +480,16 @@ impl Segment {
         Some(back_at_nic + wire_ns)
     }
 
+    /// The system time at true time `t_ns` of every node whose DC unit has one (in node
+    /// order; ESCs with receive times only or no DC left out).
+    pub fn system_times_at(&self, t_ns: u64) -> Vec<u64> {
+        self.nodes
+            .iter()
+            .filter(|n| n.esc.has_system_time())
+            .filter_map(|n| Some(n.esc.dc.as_ref()?.system_at(t_ns)))
+            .collect()
+    }
+
     /// The true time at which each ESC saw the last frame at its processing unit.
     pub fn last_visits(&self) -> Vec<(usize, FrameTiming)> {
         self.route.visits.iter().map(|(node, rel)| (*node, rel.shifted(self.route.last_at))).collect()

@@ -87,18 +87,19 @@ fn dl_and_al_status_events_reach_the_irq_field_through_the_mask() {
 
 #[test]
 fn a_latch_event_is_requested_until_its_time_is_read() {
+    // The EK1100 (ET1100, latch unit on): the terminals' ET1200s answer their receive times only.
     let mut bus = line();
-    bus.fp(Command::FPWR, 0x1002, 0x0200, &[0x01, 0x00]);
-    bus.fp(Command::FPWR, 0x1002, 0x09A8, &[0x01]); // rising edge: single event
+    bus.fp(Command::FPWR, 0x1001, 0x0200, &[0x01, 0x00]);
+    bus.fp(Command::FPWR, 0x1001, 0x09A8, &[0x01]); // rising edge: single event
     let t = bus.t;
-    bus.seg.nodes[1].esc.latch_input(0, true, t + 1_000);
+    bus.seg.nodes[0].esc.latch_input(0, true, t + 1_000);
     bus.t = t + 10_000;
     assert_eq!(brd(&mut bus, 0x0000, 2), 0x0001);
-    assert_eq!(fp_irq(&mut bus, Command::FPRD, 0x1002, 0x09B0, &[0; 8]), 0x0001);
+    assert_eq!(fp_irq(&mut bus, Command::FPRD, 0x1001, 0x09B0, &[0; 8]), 0x0001);
     assert_eq!(brd(&mut bus, 0x0000, 2), 0, "reading the edge's time cleared it");
     // Continuous mode keeps no event.
     let t = bus.t;
-    bus.seg.nodes[1].esc.latch_input(0, false, t + 1_000);
+    bus.seg.nodes[0].esc.latch_input(0, false, t + 1_000);
     bus.t = t + 10_000;
     assert_eq!(brd(&mut bus, 0x0000, 2), 0);
 }

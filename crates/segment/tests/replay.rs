@@ -230,15 +230,6 @@ fn standin_reached(cmd: Command, adp: u16, standins: &[(u16, &str)]) -> Option<S
 
 fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str) -> String {
     let standin = standin_reached(cmd, adp, standins);
-    if (0x0910..=0x09FF).contains(&ado) && what.starts_with("WKC") && !matches!(cmd, Command::FPRD | Command::FPWR) {
-        // Seen on the EL1004 and EL2828 (SOEM's FPRD 0x0918 of the EL1004: WKC 0).
-        let dc = "a real ET1200 whose SYNC and latch units are off (0x0141 = 0x01) does not answer \
-                  0x0910–0x09FF, ours does (not yet modelled)";
-        return match standin {
-            Some(why) => format!("{what}: DC system time: {dc}; or {why}"),
-            None => format!("{what}: DC system time: {dc}"),
-        };
-    }
     if let Some(why) = standin {
         return format!("{what}: {why}");
     }

@@ -133,6 +133,10 @@ fn builtin_devices_and_bad_descriptions() {
         ),
         ("[[device]]\nbuiltin = 'EK1100'\nal_response_us = -1\n", "device 0: al_response_us -1.0 out of range"),
         (
+            "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\nsync_unit = false\n",
+            "device 1: app = \"dc\" needs sync_unit = true",
+        ),
+        (
             "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = -5\n",
             "device 1 (EL2004): cable_m -5.0 out of range",
         ),

@@ -10,6 +10,8 @@ import time
 
 import pysoem
 
+from wire_delays import DelayWrites, soem_delay
+
 iface, out_byte = sys.argv[1], int(sys.argv[2], 0)
 m = pysoem.Master()
 m.open(iface)
@@ -18,7 +20,9 @@ try:
     n = m.config_init()
     result["found"] = n
     m.config_map()
+    wire = DelayWrites(iface)
     result["has_dc"] = bool(m.config_dc())
+    delays = wire.stop()
     for i, s in enumerate(m.slaves):
         station = 0x1001 + i
         info = {"name": s.name, "man": s.man, "id": s.id, "rev": s.rev, "station": station}
@@ -44,7 +48,13 @@ try:
         info["fmmu"] = fm
         (dl,) = struct.unpack("<H", s._fprd(0x0110, 2))
         info["active_ports"] = [int(bool(dl & (1 << (9 + 2 * p))) and not dl & (1 << (8 + 2 * p))) for p in range(4)]
-        (info["delay_ns"],) = struct.unpack("<I", s._fprd(0x0928, 4))
+        # What SOEM computed and wrote (a terminal with receive times only does not take it).
+        info["delay_ns"] = soem_delay(s, station, delays)
+        try:
+            s._fprd(0x0928, 4)
+            info["system_time"] = True
+        except pysoem.WkcError:
+            info["system_time"] = False
         result["slaves"].append(info)
     m.state = pysoem.SAFEOP_STATE
     m.write_state()
