@@ -21,7 +21,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     "name": s.name, "description": s.description,
                     "vendor_id": s.vendor_id, "product_code": s.product_code, "revision": s.revision, "serial": s.serial,
                     "esc_type": s.esc_type, "fmmus": s.fmmu_count, "sync_managers": s.sm_count,
-                    "has_dc": s.has_dc, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
+                    "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
                     "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
                     "active_ports": s.active_ports,
                     "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
@@ -44,6 +44,9 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             );
             outln!(" ESC type {:#04x}, {} FMMUs, {} SMs", s.esc_type, s.fmmu_count, s.sm_count);
             outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
+            if s.has_dc && !s.has_system_time {
+                outln!(" DC: receive times only (no system time)");
+            }
             if let Some(mb) = &s.mailbox {
                 outln!(
                     " MBX out {:#06x}/{} in {:#06x}/{} protocols {:#04x}",

@@ -30,10 +30,13 @@ fn scan(name: &str, toml: &str, loop_ns: u32, bound_ns: i64) -> Master<VirtualIo
     let visits = m.engine.io.seg.last_visits().to_vec();
     assert_eq!(visits.len(), m.slaves.len());
     let epu = |k: usize| visits[k].1.epu_ns;
-    let reference = m.slaves.iter().position(|s| s.has_dc).unwrap();
+    // The reference is the first slave with a system time; a slave with receive times only
+    // (an ET1200 terminal) has its processing unit's time taken as its port 0's, exact where it
+    // is entered on port 0.
+    let reference = m.slaves.iter().position(|s| s.has_system_time).unwrap();
     let mut worst = 0i64;
     for (k, s) in m.slaves.iter().enumerate() {
-        if !s.has_dc {
+        if !(s.has_system_time || (s.has_dc && s.entry_port == 0)) || k < reference {
             continue;
         }
         let truth = (epu(k) - epu(reference)) as i64;
