@@ -99,8 +99,9 @@ fn prepared(stage: u8) -> (Segment, u64) {
         m.configure().expect("configure");
     }
     if stage >= 3 {
-        // Every DC slave with SYNC0 (the 32-bit one too), a short drift compensation.
-        let positions = m.slaves.iter().filter(|s| s.has_dc).map(|s| s.position).collect();
+        // Every slave with a DC system time gets SYNC0 (the 32-bit one too), a short drift
+        // compensation; the terminals with receive times only cannot.
+        let positions = m.slaves.iter().filter(|s| s.has_system_time).map(|s| s.position).collect();
         let dc =
             DcConfig { max_frames: 300, sync0_cycle_ns: 250_000, sync0_slaves: Some(positions), ..DcConfig::default() };
         m.init_dc(&dc).expect("DC initialisation");

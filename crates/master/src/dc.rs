@@ -311,6 +311,16 @@ impl<I: Io> Master<I> {
 
     fn start_sync(&mut self, targets: &[u16], cfg: &DcConfig) -> Result<u64> {
         let cycle = cfg.sync0_cycle_ns.max(1) as u64;
+        for &p in targets {
+            let s = self.slave(p)?;
+            if !s.has_system_time {
+                return Err(MasterError::slave(
+                    p,
+                    &s.name,
+                    "has receive times only (no DC system time): no SYNC0 there",
+                ));
+            }
+        }
         // Stop first: a restart with 0x0981 still set is a classic cause of "no sync" errors.
         for &p in targets {
             let st = self.slave(p)?.station;

@@ -241,4 +241,8 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     let nodes = &m.engine.io.seg.nodes;
     let (a, b) = (nodes[0].esc.dc.as_ref().unwrap().system_at(t), nodes[3].esc.dc.as_ref().unwrap().system_at(t));
     assert!((a as i64 - b as i64).abs() <= 100, "reference {a}, last slave {b}");
+    // SYNC0 asked of such a terminal: an error that says why, not a working-counter error.
+    let cfg = DcConfig { sync0_slaves: Some(vec![1]), ..DcConfig::default() };
+    let e = m.init_dc(&cfg).unwrap_err().to_string();
+    assert!(e.contains("EL2004") && e.contains("receive times only"), "{e}");
 }
