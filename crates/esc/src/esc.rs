@@ -827,34 +827,33 @@ impl Esc {
         if self.absent(a) {
             return None;
         }
-        if (0x0910..0x0918).contains(&a) {
-            self.latch_system_time();
-        }
-        if a == 0x0984 || (0x0998..0x09A0).contains(&a) {
+        // Registers whose read has a side effect; one match, as every byte of every read
+        // (process data included) passes here.
+        match a {
+            0x0910..=0x0917 => self.latch_system_time(),
             // SYNC1 pulses are not events of their own: its registers are brought to the
             // frame's instant when read.
-            self.refresh_sync1_registers();
-        }
-        if (0x098E..=0x098F).contains(&a) || (0x0220..=0x0223).contains(&a) {
-            self.refresh_pdi_events();
-        }
-        if (0x09B0..=0x09CF).contains(&a) && (a - 0x09B0) % 8 == 0 {
-            // Reading a latch time clears its single-event flag (ECAT-controlled latch units).
-            let unit = ((a - 0x09B0) / 16) as usize;
-            let edge = ((a - 0x09B0) / 8 % 2) as u8;
-            if self.mem[0x0980] & (0x10 << unit) == 0 {
-                self.mem[0x09AE + unit] &= !(1 << edge);
+            0x0984 | 0x0998..=0x099F => self.refresh_sync1_registers(),
+            0x098E..=0x098F | 0x0220..=0x0223 => self.refresh_pdi_events(),
+            0x09B0..=0x09CF if (a - 0x09B0) % 8 == 0 => {
+                // Reading a latch time clears its single-event flag (ECAT-controlled units).
+                let unit = ((a - 0x09B0) / 16) as usize;
+                let edge = ((a - 0x09B0) / 8 % 2) as u8;
+                if self.mem[0x0980] & (0x10 << unit) == 0 {
+                    self.mem[0x09AE + unit] &= !(1 << edge);
+                    self.update_irq();
+                }
+            }
+            // An ECAT read of DL or AL status clears its event (ESC datasheet, 0x0210).
+            0x0110..=0x0111 if self.dl_changed => {
+                self.dl_changed = false;
                 self.update_irq();
             }
-        }
-        // An ECAT read of DL or AL status clears its event (ESC datasheet, 0x0210).
-        if (0x0110..=0x0111).contains(&a) && self.dl_changed {
-            self.dl_changed = false;
-            self.update_irq();
-        }
-        if (0x0130..=0x0131).contains(&a) && self.al_changed {
-            self.al_changed = false;
-            self.update_irq();
+            0x0130..=0x0131 if self.al_changed => {
+                self.al_changed = false;
+                self.update_irq();
+            }
+            _ => {}
         }
         if let Some((n, s)) = self.sm_at(a) {
             if s.is_mailbox() && a == s.start && !s.ecat_writes() && self.sms[n as usize].full {

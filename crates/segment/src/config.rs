@@ -40,6 +40,15 @@ pub enum SegmentError {
     Device { place: String, message: String },
 }
 
+/// Changes an SII image's header (its first 16 bytes) and keeps its CRC right; an image too
+/// short to have one is left alone (loading it reports that).
+fn patch_sii_header(sii: &mut [u8], change: impl FnOnce(&mut [u8])) {
+    if sii.len() >= 16 {
+        change(&mut sii[..16]);
+        sii[14] = ferrocat_wire::sii::header_crc(sii);
+    }
+}
+
 fn device_err(place: impl Into<String>, message: impl Into<String>) -> SegmentError {
     SegmentError::Device { place: place.into(), message: message.into() }
 }
@@ -245,32 +254,21 @@ impl SegmentConfig {
             let src = self.source(i, d)?;
             let (mut sii, default_name, esi_dev) = load_device(&src)?;
             if let Some(alias) = d.station_alias {
-                if sii.len() >= 16 {
-                    sii[8..10].copy_from_slice(&alias.to_le_bytes());
-                    let crc = ferrocat_wire::sii::header_crc(&sii);
-                    sii[14] = crc;
-                }
+                patch_sii_header(&mut sii, |h| h[8..10].copy_from_slice(&alias.to_le_bytes()));
             }
+            // Word 0's high byte is the ESC configuration (→ 0x0141): bit 0 device emulation,
+            // bit 2 the SYNC out unit.
             if let Some(emulate) = d.device_emulation {
-                // Word 0 high byte is the ESC configuration (→ 0x0141); keep the CRC right.
-                if sii.len() >= 16 {
-                    sii[1] = (sii[1] & !1) | emulate as u8;
-                    let crc = ferrocat_wire::sii::header_crc(&sii);
-                    sii[14] = crc;
-                }
+                patch_sii_header(&mut sii, |h| h[1] = (h[1] & !1) | emulate as u8);
             }
-            // A DC-synchronous application needs the SYNC out unit (0x0141 bit 2, SII word 0);
-            // without it and the latch unit an ET1200 has no system time (docs/esc-model.md).
+            // A DC-synchronous application needs the SYNC out unit; without it and the latch
+            // unit an ET1200 has no system time (docs/esc-model.md).
             let dc_app = d.app.as_deref() == Some("dc");
             if dc_app && d.sync_unit == Some(false) {
                 return Err(device_err(format!("device {i}"), "app = \"dc\" needs sync_unit = true"));
             }
             if let Some(on) = d.sync_unit.or(dc_app.then_some(true)) {
-                if sii.len() >= 16 {
-                    sii[1] = (sii[1] & !0x04) | if on { 0x04 } else { 0 };
-                    let crc = ferrocat_wire::sii::header_crc(&sii);
-                    sii[14] = crc;
-                }
+                patch_sii_header(&mut sii, |h| h[1] = (h[1] & !0x04) | if on { 0x04 } else { 0 });
             }
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
