@@ -961,8 +961,11 @@ impl Esc {
                     _ => {}
                 }
                 self.pending.push((a, v));
+                return true;
             }
-            return true;
+            // A read-only register ignores the write and does not count it: real ESCs answer
+            // a BWR of 0x092C alone with WKC 0 (replay-dc and seven more captures).
+            return false;
         }
         self.mem[a as usize] = v;
         true

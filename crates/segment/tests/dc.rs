@@ -33,8 +33,28 @@ fn low_word_of_0918_equals_port0_time_and_write_latches_ports() {
     // Ports 1–3's receive times are read-only (datasheet II, 0x0904–0x090F r/-): a write that
     // misses 0x0900 leaves them and latches nothing. Until 2026-11-24 it overwrote them.
     let (times, _) = bus.fp(Command::FPRD, 0x1002, 0x0900, &[0; 16]);
-    bus.fp(Command::FPWR, 0x1002, 0x0904, &[0xA5; 12]);
+    assert_eq!(
+        bus.fp(Command::FPWR, 0x1002, 0x0904, &[0xA5; 12]).1,
+        0,
+        "a write of read-only bytes only does not count"
+    );
     assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0900, &[0; 16]).0, times);
+}
+
+#[test]
+fn a_write_counts_only_where_one_of_its_bytes_is_writable() {
+    // Eight real captures: a BWR of 0x092C (system time difference, r/-) alone comes back with
+    // WKC 0 from ESCs that have it, while one of 0x0928 (delay) counts each of them.
+    let mut bus = line(&["EK1100", "EL2004"], "et1100");
+    let bwr =
+        |bus: &mut Bus, ado: u16, len: usize| bus.tx(Command::BWR, Address::Device { adp: 0, ado }, &vec![0; len]).1;
+    assert_eq!(bwr(&mut bus, 0x092C, 4), 0);
+    assert_eq!(bwr(&mut bus, 0x0928, 4), 2);
+    // A write that spans writable and read-only bytes counts (TwinCAT's BWR of 0x0910–0x092F).
+    assert_eq!(bwr(&mut bus, 0x0910, 32), 2);
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0000, &[0; 8]).1, 0, "type, revision, build, counts: read-only");
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0130, &[0; 2]).1, 0, "AL status: read-only");
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0120, &[0x01, 0]).1, 1, "AL control: writable");
 }
 
 #[test]

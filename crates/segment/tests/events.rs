@@ -79,8 +79,8 @@ fn dl_and_al_status_events_reach_the_irq_field_through_the_mask() {
     assert_eq!(brd(&mut bus, 0x0000, 2), 0);
     let (req, _) = bus.fp(Command::FPRD, 0x1002, 0x0210, &[0; 2]);
     assert_eq!(u16::from_le_bytes([req[0], req[1]]), 0x0008);
-    // 0x0210 is read-only for the master.
-    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0210, &[0; 2]).1, 1);
+    // 0x0210 is read-only for the master: the write neither takes nor counts.
+    assert_eq!(bus.fp(Command::FPWR, 0x1002, 0x0210, &[0; 2]).1, 0);
     let (req, _) = bus.fp(Command::FPRD, 0x1002, 0x0210, &[0; 2]);
     assert_eq!(u16::from_le_bytes([req[0], req[1]]), 0x0008);
 }

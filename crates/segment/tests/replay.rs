@@ -102,10 +102,18 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         Some(0x07D4_3052) => (e("el2004.bin"), None),
         Some(0x0B0C_3052) => (e("el2828.hex"), None),
         Some(0x0041_4B44) => (e("akd.hex"), None),
-        Some(0x0B49_3052) => (e("el2828.hex"), Some("EL2889: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
+        // The real EL2889 has a system time (replay-dc: the FRMWs of 0x0910 count it), the
+        // EL2828 whose dump stands in has receive times only: its SYNC unit is turned on.
+        Some(0x0B49_3052) => (
+            e("el2828.hex") + "\nsync_unit = true",
+            Some("EL2889: no EEPROM dump or ESI in shared data (EL2828 with its SYNC unit on stands in)"),
+        ),
         Some(0x077A_2C52) => (e("ek1100.hex"), Some("EK1914: no EEPROM dump or ESI in shared data (EK1100 stands in)")),
         Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
-        Some(0x9252) => (e("el2004.bin"), Some("LAN9252 board: no EEPROM dump in shared data (EL2004 stands in)")),
+        Some(0x9252) => (
+            e("el2004.bin") + "\nesc = 'lan9252'",
+            Some("LAN9252 board: no EEPROM dump in shared data (EL2004 on a LAN9252 stands in)"),
+        ),
         Some(0x03EC_3052) => (
             "builtin = 'EL1004'".into(),
             Some("EL1004: no EEPROM dump in shared data (built-in description stands in)"),
