@@ -41,6 +41,9 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
         .enumerate()
         .map(|(i, n)| {
             let io = n.esc.app().as_any().downcast_ref::<DigitalIo>();
+            // A CoE device's outputs: its mapped objects as it last received them.
+            let coe = n.esc.app().as_any().downcast_ref::<ferrocat_esc::CoeDevice>();
+            let outputs = io.map(|d| d.outputs.clone()).or_else(|| coe.map(|c| c.image(true)));
             json!({
                 "position": i,
                 "name": n.name,
@@ -48,7 +51,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "al_state": n.esc.al_status().state().map(|s| s.name()),
                 "al_status_code": n.esc.al.code.0,
                 "frames": n.esc.frames,
-                "outputs": io.map(|d| d.outputs.clone()),
+                "outputs": outputs,
                 "output_updates": io.map(|d| d.output_updates),
                 "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns()),
             })

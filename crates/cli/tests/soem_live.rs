@@ -5,8 +5,8 @@ mod common;
 
 use common::{python, Sim, VethPair};
 
-fn printout_slaves() -> Vec<Vec<String>> {
-    let text = std::fs::read_to_string(ferrocat_testdata::shared("captures/soem-sdinfo-2-el2004.txt")).unwrap();
+/// The slaves of a SOEM slaveinfo printout, each as its trimmed lines.
+fn printout_slaves(text: &str) -> Vec<Vec<String>> {
     let mut v: Vec<Vec<String>> = Vec::new();
     for l in text.lines().map(str::trim) {
         if l.starts_with("Slave:") {
@@ -22,40 +22,39 @@ fn field<'a>(lines: &'a [String], prefix: &str) -> &'a str {
     lines.iter().find_map(|l| l.strip_prefix(prefix)).unwrap_or_else(|| panic!("no {prefix}")).trim()
 }
 
-#[test]
-fn needs_shared_soem_sees_the_real_hardware() {
-    let eeprom = ferrocat_testdata::shared("captures/eeprom");
-    let (ek, el) = (eeprom.join("ek1100.hex"), eeprom.join("el2004.bin"));
-    let net = VethPair::new("so");
-    let report = std::env::temp_dir().join(format!("ferrocat-soem-report-{}.json", std::process::id()));
-    let sim = Sim::start(
-        &net,
-        &[
-            "--device",
-            ek.to_str().unwrap(),
-            "--device",
-            el.to_str().unwrap(),
-            "--device",
-            el.to_str().unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-        ],
-    );
+/// Runs pysoem's slaveinfo-like script against the simulator serving `args` and writes `out`
+/// to slave `out_slave`'s outputs; returns SOEM's view and the simulator's report.
+fn soem_against(tag: &str, args: &[&str], out_slave: usize, out: &str) -> (serde_json::Value, serde_json::Value) {
+    let net = VethPair::new(tag);
+    let report = std::env::temp_dir().join(format!("ferrocat-soem-{tag}-{}.json", std::process::id()));
+    let mut sim_args: Vec<&str> = args.to_vec();
+    sim_args.extend(["--report", report.to_str().unwrap()]);
+    let sim = Sim::start(&net, &sim_args);
     // Frames an ESC drops must not stop the simulator.
     let garbage = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/send_garbage.py");
     let g = VethPair::cmd(&net.master_ns, python().to_str().unwrap()).args([garbage, &net.master_if]).output().unwrap();
     assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/soem_slaveinfo.py");
-    let out = VethPair::cmd(&net.master_ns, python().to_str().unwrap())
-        .args([script, &net.master_if, "0xA5"])
+    let o = VethPair::cmd(&net.master_ns, python().to_str().unwrap())
+        .args([script, &net.master_if, &out_slave.to_string(), out])
         .output()
         .unwrap();
     sim.stop();
-    assert!(out.status.success(), "pysoem: {}", String::from_utf8_lossy(&out.stderr));
-    let soem: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(o.status.success(), "pysoem: {}", String::from_utf8_lossy(&o.stderr));
+    let soem: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     println!("SOEM saw: {soem}");
-    let real = printout_slaves();
-    assert_eq!(soem["found"], 3);
+    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    std::fs::remove_file(&report).ok();
+    (soem, rep)
+}
+
+/// SOEM's view of the simulator against what it printed on the real hardware: count, names,
+/// identities, station addresses, active ports, delays within ±10 ns, SM and FMMU lines, the
+/// working counter it calculated; OP reached.
+fn assert_as_printed(soem: &serde_json::Value, printout: &str) {
+    let text = std::fs::read_to_string(ferrocat_testdata::shared(printout)).unwrap();
+    let real = printout_slaves(&text);
+    assert_eq!(soem["found"].as_u64().unwrap() as usize, real.len(), "slaves found");
     for (i, (s, lines)) in soem["slaves"].as_array().unwrap().iter().zip(&real).enumerate() {
         assert_eq!(s["name"], field(lines, "Name:"), "slave {i}");
         let ident = format!(
@@ -72,10 +71,6 @@ fn needs_shared_soem_sees_the_real_hardware() {
         let ports: Vec<String> = s["active_ports"].as_array().unwrap().iter().map(|p| p.to_string()).collect();
         assert_eq!(ports.join("."), field(lines, "Activeports:"), "slave {i}");
         let want_delay: i64 = field(lines, "Delay:").trim_end_matches("[ns]").parse().unwrap();
-        // SOEM's delay as it wrote it: the EL2004s' ET1200 (SII word 0 = 0x0104: SYNC and latch
-        // units off) has receive times but no system time, so their 0x0928 does not take it and
-        // cannot be read (WKC 0), as on the real terminals; the EK1100's can.
-        assert_eq!(s["system_time"], i == 0, "slave {i}: a system time only on the EK1100");
         let delay = s["delay_ns"].as_i64().unwrap();
         assert!((delay - want_delay).abs() <= 10, "slave {i}: delay {delay} ns, real hardware {want_delay} ns");
         let sm: Vec<String> = s["sm"]
@@ -122,24 +117,60 @@ fn needs_shared_soem_sees_the_real_hardware() {
         assert_eq!(fm.iter().collect::<Vec<_>>(), real_fm, "slave {i}: FMMU lines");
     }
     assert_eq!(soem["op"], true, "slaves reached OP");
-    // The working counter SOEM calculated on the real hardware.
-    let calculated: u64 = std::fs::read_to_string(ferrocat_testdata::shared("captures/soem-sdinfo-2-el2004.txt"))
-        .unwrap()
+    let calculated: u64 = text
         .lines()
         .find_map(|l| l.trim().strip_prefix("Calculated workcounter ").map(|v| v.trim().parse().unwrap()))
         .unwrap();
-    assert_eq!(soem["wkc"].as_u64().unwrap(), calculated);
+    assert_eq!(soem["wkc"].as_u64().unwrap(), calculated, "the working counter SOEM calculated on the real hardware");
+}
+
+/// Malformed frames and others were counted, not served. Two lying lengths and a runt with the
+/// EtherCAT type are malformed; the ARP-like frame is not EtherCAT. (The kernel may add frames
+/// of its own, such as IPv6 neighbour discovery.)
+fn assert_garbage_counted(rep: &serde_json::Value) {
+    assert!(rep["malformed"].as_u64().unwrap() >= 3, "lying lengths counted: {rep}");
+    assert!(rep["not_ethercat"].as_u64().unwrap() >= 1, "others counted: {rep}");
+}
+
+#[test]
+fn needs_shared_soem_sees_the_real_hardware() {
+    let eeprom = ferrocat_testdata::shared("captures/eeprom");
+    let (ek, el) = (eeprom.join("ek1100.hex"), eeprom.join("el2004.bin"));
+    let (ek, el) = (ek.to_str().unwrap(), el.to_str().unwrap());
+    // SOEM packs both EL2004s into one byte; it is written through the first one.
+    let (soem, rep) = soem_against("so", &["--device", ek, "--device", el, "--device", el], 1, "A5");
+    assert_as_printed(&soem, "captures/soem-sdinfo-2-el2004.txt");
+    // SOEM's delay as it wrote it: the EL2004s' ET1200 (SII word 0 = 0x0104: SYNC and latch
+    // units off) has receive times but no system time, so their 0x0928 does not take it and
+    // cannot be read (WKC 0), as on the real terminals; the EK1100's can.
+    for (i, s) in soem["slaves"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(s["system_time"], i == 0, "slave {i}: a system time only on the EK1100");
+    }
     // Outputs 0xA5: the first EL2004 holds the low nibble, the second the high one.
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    std::fs::remove_file(&report).ok();
     let devs = rep["devices"].as_array().unwrap();
     assert_eq!(devs[1]["outputs"], serde_json::json!([0x05]));
     assert_eq!(devs[2]["outputs"], serde_json::json!([0x0A]));
     assert!(devs.iter().all(|d| d["al_state"] == "OP"), "{rep}");
-    // Two lying lengths and a runt with the EtherCAT type are malformed; the ARP-like frame is not
-    // EtherCAT. (The kernel may add frames of its own, such as IPv6 neighbour discovery.)
-    assert!(rep["malformed"].as_u64().unwrap() >= 3, "lying lengths counted: {rep}");
-    assert!(rep["not_ethercat"].as_u64().unwrap() >= 1, "others counted: {rep}");
+    assert_garbage_counted(&rep);
+}
+
+/// Two built-in EVB-LAN9252 boards (described from a capture of one real board) as SOEM
+/// printed two real ones (../shared/captures/soem-sdinfo-2-lan9252.txt): CoE PDO mapping read
+/// by SDO, 16 output and 48 input bits each, OP, and the outputs SOEM wrote mapped into the
+/// board's objects. The 740 ns delay is the printout the LAN9252's
+/// timing was calibrated on (segment/src/timing.rs), here computed by SOEM itself.
+#[test]
+fn needs_shared_soem_sees_two_lan9252_boards_as_printed() {
+    let (soem, rep) = soem_against("sl", &["--device", "LAN9252-EVB", "--device", "LAN9252-EVB"], 1, "A55A");
+    assert_as_printed(&soem, "captures/soem-sdinfo-2-lan9252.txt");
+    for (i, s) in soem["slaves"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(s["system_time"], true, "slave {i}: a LAN9252 has a system time");
+    }
+    let devs = rep["devices"].as_array().unwrap();
+    // Eight output bits, then eight bits of padding the board does not keep.
+    assert_eq!(devs[1]["outputs"], serde_json::json!([0xA5, 0x00]), "{rep}");
+    assert!(devs.iter().all(|d| d["al_state"] == "OP"), "{rep}");
+    assert_garbage_counted(&rep);
 }
 
 /// The simulated drive is not tailored to our master: SOEM, unmodified, configures DC with

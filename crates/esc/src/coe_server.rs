@@ -137,11 +137,13 @@ impl CoeDevice {
         }
     }
 
-    fn input_image(&self) -> Vec<u8> {
-        let bits = self.image_bits(false) as usize;
+    /// The process image the dictionary holds for the outputs (as the device last received
+    /// them; padding reads 0) or the inputs.
+    pub fn image(&self, outputs: bool) -> Vec<u8> {
+        let bits = self.image_bits(outputs) as usize;
         let mut buf = vec![0u8; bits.div_ceil(8)];
         let mut bit = 0usize;
-        for m in self.mapping(false) {
+        for m in self.mapping(outputs) {
             if let Some(e) = self.od.get(m.index).and_then(|o| o.entry(m.sub)) {
                 for b in 0..m.bits as usize {
                     if e.value.get(b / 8).is_some_and(|x| x >> (b % 8) & 1 == 1) {
@@ -157,7 +159,7 @@ impl CoeDevice {
     /// Writes the input image into the input SyncManager's buffer.
     pub fn publish_inputs(&self, pdi: &mut Pdi<'_>) {
         if let Some((_, sm)) = pdi.process_data_sm(false, self.sm_count) {
-            let img = self.input_image();
+            let img = self.image(false);
             let n = img.len().min(sm.length as usize);
             pdi.write(sm.start, &img[..n]);
         }

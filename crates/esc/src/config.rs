@@ -64,17 +64,25 @@ impl EscConfig {
         }
     }
 
-    /// Microchip LAN9252: 2 MII ports, 3 FMMUs, 4 SMs, 4 KiB, 64-bit DC (esc-spec §7).
+    /// Microchip LAN9252: 2 MII ports, 3 FMMUs, 4 SMs, 4 KiB, 64-bit DC (esc-spec §7). Type,
+    /// revision, port descriptor and features as a real one answered SOEM
+    /// (soem-single-lan9252: 0x0000 = 0xC0, 0x02; 0x0007 = 0x1F; 0x0008 = 0x01CC).
     pub fn lan9252() -> Self {
         EscConfig {
             esc_type: 0xC0,
-            revision: 0x01,
+            revision: 0x02,
             build: 0x0001,
             fmmu_count: 3,
             sm_count: 4,
             ram_kb: 4,
-            port_descriptor: 0b00_00_11_11,
-            features: Features::DC | Features::DC_64BIT | Features::MII_ENHANCED_LINK_DETECTION,
+            // Ports 0 and 1 MII; port 2 (a third port through an external PHY) "not
+            // configured" (01), as the real one reads 0x0007 = 0x1F.
+            port_descriptor: 0b00_01_11_11,
+            features: Features::DC
+                | Features::DC_64BIT
+                | Features::MII_ENHANCED_LINK_DETECTION
+                | Features::SEPARATE_FCS_ERRORS
+                | Features::ENHANCED_DC_SYNC_ACTIVATION,
             dc: DcWidth::Bits64,
             sii_read_8: false,
         }
@@ -108,8 +116,9 @@ impl EscConfig {
         0x1000 + self.ram_kb as usize * 1024
     }
 
-    /// Whether port `n` exists.
+    /// Whether port `n` can carry a link: E-Bus (10) or MII (11), not "not implemented" (00)
+    /// or "not configured" (01).
     pub fn has_port(&self, n: u8) -> bool {
-        (self.port_descriptor >> (2 * (n & 3))) & 3 != 0
+        (self.port_descriptor >> (2 * (n & 3))) & 3 >= 0b10
     }
 }

@@ -531,6 +531,11 @@ impl Esc {
             // EK1100, which has no PDI.
             dl |= 1 << 1;
         }
+        if self.mem[0x0141] & 0x02 != 0 {
+            // Enhanced link detection (ESC configuration bit 1, from SII word 0): the real
+            // LAN9252 (0x0141 = 0x0E) reads 0x17, the EK1100 (0x0D) and AKD (0x0C) bit 2 clear.
+            dl |= 1 << 2;
+        }
         for p in 0..4u8 {
             let link = self.links[p as usize] && self.config.has_port(p);
             if link {

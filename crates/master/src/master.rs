@@ -608,7 +608,9 @@ impl<I: Io> Master<I> {
             .map(|s| crate::topology::PortView {
                 entry_port: s.entry_port,
                 active_ports: s.active_ports,
-                present_ports: [0, 1, 2, 3].map(|p| (s.port_descriptor >> (2 * p)) & 3 != 0),
+                // 10 E-Bus, 11 MII; 00 not implemented, 01 not configured (a LAN9252's
+                // unused third port reads 01): neither can carry a link.
+                present_ports: [0, 1, 2, 3].map(|p| (s.port_descriptor >> (2 * p)) & 3 >= 0b10),
                 receive_times: s.has_dc.then_some(s.receive_times),
                 epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
             })

@@ -2,7 +2,52 @@
 //! the facts SOEM printed for the real terminals (../shared/captures/*.txt).
 use ferrocat_esi::{Device, FmmuKind, PdoDesc, PdoEntryDesc, SmDesc, SmKind};
 
-pub const NAMES: &[&str] = &["EK1100", "EL1004", "EL2004", "SERVO"];
+pub const NAMES: &[&str] = &["EK1100", "EL1004", "EL2004", "SERVO", "LAN9252-EVB"];
+
+/// The vendor ID a built-in device carries in its SII.
+pub fn vendor_id(name: &str) -> u32 {
+    match name {
+        // ETG's "no vendor" for our own servo; Microchip's for its evaluation board.
+        "SERVO" => 0,
+        "LAN9252-EVB" => 0x0000_0009,
+        _ => 0x0000_0002, // Beckhoff
+    }
+}
+
+/// The ESC a built-in device carries where the segment file does not say.
+pub fn esc(name: &str) -> Option<&'static str> {
+    (name == "LAN9252-EVB").then_some("lan9252")
+}
+
+/// An EEPROM of `bytes` whose SII word 0 (PDI control, ESC configuration) is `word0`.
+fn eeprom(bytes: u32, word0: [u8; 2]) -> Option<ferrocat_esi::EepromDesc> {
+    Some(ferrocat_esi::EepromDesc { byte_size: Some(bytes), config_data: word0.to_vec(), bootstrap: vec![] })
+}
+
+/// SM0/SM1 as 128-byte mailboxes at 0x1000/0x1080, SM2 outputs and SM3 inputs at the given
+/// start and control byte.
+fn mailbox_and_process_data_sms(outputs: (u16, u8), inputs: (u16, u8)) -> Vec<SmDesc> {
+    let sm = |kind, start, default_size, control| SmDesc { kind, start, default_size, control, enable: true };
+    vec![
+        sm(SmKind::MailboxOut, 0x1000, Some(128), 0x26),
+        sm(SmKind::MailboxIn, 0x1080, Some(128), 0x22),
+        sm(SmKind::Outputs, outputs.0, None, outputs.1),
+        sm(SmKind::Inputs, inputs.0, None, inputs.1),
+    ]
+}
+
+/// A CoE-only mailbox with SDO information and complete access; `pdo_config`: PDO assignment
+/// and mapping writable.
+fn coe_mailbox(pdo_config: bool) -> Option<ferrocat_esi::MailboxDesc> {
+    let coe = ferrocat_esi::CoeDesc {
+        sdo_info: true,
+        pdo_assign: pdo_config,
+        pdo_config,
+        pdo_upload: false,
+        complete_access: true,
+    };
+    Some(ferrocat_esi::MailboxDesc { coe: Some(coe), ..Default::default() })
+}
 
 fn bits(index: u16, n: u8, sm: u8, name: &str) -> Vec<PdoDesc> {
     (0..n)
@@ -34,11 +79,7 @@ pub fn device(name: &str) -> Option<Device> {
             d.physics = "YKY".into();
             d.group_type = "SystemBk".into();
             d.ebus_current_ma = -2000;
-            d.eeprom = Some(ferrocat_esi::EepromDesc {
-                byte_size: Some(2048),
-                config_data: vec![0x00, 0x0D],
-                bootstrap: vec![],
-            });
+            d.eeprom = eeprom(2048, [0x00, 0x0D]);
         }
         "EL2004" => {
             d.name = "EL2004 4Ch. Dig. Output 24V, 0.5A".into();
@@ -49,11 +90,7 @@ pub fn device(name: &str) -> Option<Device> {
             d.sync_managers =
                 vec![SmDesc { kind: SmKind::Outputs, start: 0x0F00, default_size: None, control: 0x44, enable: true }];
             d.rx_pdos = bits(0x1600, 4, 0, "Output");
-            d.eeprom = Some(ferrocat_esi::EepromDesc {
-                byte_size: Some(2048),
-                config_data: vec![0x04, 0x01],
-                bootstrap: vec![],
-            });
+            d.eeprom = eeprom(2048, [0x04, 0x01]);
         }
         "EL1004" => {
             d.name = "EL1004 4Ch. Dig. Input 24V, 3ms".into();
@@ -64,13 +101,10 @@ pub fn device(name: &str) -> Option<Device> {
             d.sync_managers =
                 vec![SmDesc { kind: SmKind::Inputs, start: 0x1000, default_size: None, control: 0x00, enable: true }];
             d.tx_pdos = bits(0x1A00, 4, 0, "Input");
-            d.eeprom = Some(ferrocat_esi::EepromDesc {
-                byte_size: Some(2048),
-                config_data: vec![0x04, 0x01],
-                bootstrap: vec![],
-            });
+            d.eeprom = eeprom(2048, [0x04, 0x01]);
         }
         "SERVO" => return Some(servo()),
+        "LAN9252-EVB" => return Some(lan9252_evb()),
         _ => return None,
     }
     Some(d)
@@ -103,12 +137,7 @@ fn servo() -> Device {
         group_type: "Drive".into(),
         profile_no: Some(402),
         fmmus: vec![FmmuKind::Outputs, FmmuKind::Inputs, FmmuKind::MailboxState],
-        sync_managers: vec![
-            SmDesc { kind: SmKind::MailboxOut, start: 0x1000, default_size: Some(128), control: 0x26, enable: true },
-            SmDesc { kind: SmKind::MailboxIn, start: 0x1080, default_size: Some(128), control: 0x22, enable: true },
-            SmDesc { kind: SmKind::Outputs, start: 0x1100, default_size: None, control: 0x24, enable: true },
-            SmDesc { kind: SmKind::Inputs, start: 0x1180, default_size: None, control: 0x20, enable: true },
-        ],
+        sync_managers: mailbox_and_process_data_sms((0x1100, 0x24), (0x1180, 0x20)),
         rx_pdos: vec![pdo(
             0x1600,
             2,
@@ -134,16 +163,7 @@ fn servo() -> Device {
                 entry(0, 8, "", ""),
             ],
         )],
-        mailbox: Some(ferrocat_esi::MailboxDesc {
-            coe: Some(ferrocat_esi::CoeDesc {
-                sdo_info: true,
-                pdo_assign: true,
-                pdo_config: true,
-                pdo_upload: false,
-                complete_access: true,
-            }),
-            ..Default::default()
-        }),
+        mailbox: coe_mailbox(true),
         dc_op_modes: vec![
             ferrocat_esi::DcOpModeDesc {
                 name: "SM".into(),
@@ -159,11 +179,73 @@ fn servo() -> Device {
             },
         ],
         // SPI PDI to a microcontroller, no device emulation: the firmware runs the AL.
-        eeprom: Some(ferrocat_esi::EepromDesc {
-            byte_size: Some(2048),
-            config_data: vec![0x05, 0x0C],
-            bootstrap: vec![],
-        }),
+        eeprom: eeprom(2048, [0x05, 0x0C]),
+        ..Default::default()
+    }
+}
+
+/// Microchip's EVB-LAN9252 board running its EtherCAT sample firmware (SSC), as the real one
+/// showed itself to SOEM (../shared/captures/soem-single-lan9252.pcapng and
+/// soem-sdinfo-2-lan9252.txt): identity, name, SyncManagers, FMMUs, mailbox and CoE details
+/// from its SII reads, PDI control 0x0E89 from its 0x0140 read, and the PDO assignment and
+/// mapping from its complete-access SDO answers (0x1C12 = 0x1601, 0x1C13 = 0x1A00 + 0x1A02).
+/// The entry names are ours (the capture does not read the strings): eight output bits,
+/// eight input bits, and an analog input laid out as Beckhoff's (underrange, overrange, two
+/// 2-bit limits, TxPDO state and toggle, a 16-bit value).
+fn lan9252_evb() -> Device {
+    let entry = |index: u16, subindex: u8, bit_len: u8, name: String, data_type: &str| PdoEntryDesc {
+        index,
+        subindex,
+        bit_len,
+        name,
+        data_type: data_type.into(),
+    };
+    let pad = |bits: u8| entry(0, 0, bits, String::new(), "");
+    let bits8 = |index: u16, what: &str| {
+        let mut v: Vec<PdoEntryDesc> = (1..=8).map(|k| entry(index, k, 1, format!("{what} {k}"), "BOOL")).collect();
+        v.push(pad(8));
+        v
+    };
+    let pdo = |index: u16, name: &str, sm: u8, entries: Vec<PdoEntryDesc>| PdoDesc {
+        index,
+        name: name.into(),
+        sm: Some(sm),
+        fixed: true,
+        mandatory: true,
+        entries,
+    };
+    Device {
+        type_name: "LAN9252-EVB-HBI".into(),
+        name: "LAN9252-EVB-HBI".into(),
+        product_code: 0x0000_9252,
+        revision: 0x0000_0001,
+        physics: "YY".into(),
+        group_type: "EVB".into(),
+        fmmus: vec![FmmuKind::Outputs, FmmuKind::Inputs, FmmuKind::MailboxState],
+        sync_managers: mailbox_and_process_data_sms((0x1100, 0x64), (0x1400, 0x20)),
+        rx_pdos: vec![pdo(0x1601, "Outputs", 2, bits8(0x7010, "Output"))],
+        tx_pdos: vec![
+            pdo(0x1A00, "Inputs", 3, bits8(0x6000, "Input")),
+            pdo(
+                0x1A02,
+                "Analog input",
+                3,
+                vec![
+                    entry(0x6020, 0x01, 1, "Underrange".into(), "BOOL"),
+                    entry(0x6020, 0x02, 1, "Overrange".into(), "BOOL"),
+                    entry(0x6020, 0x03, 2, "Limit 1".into(), "BIT2"),
+                    entry(0x6020, 0x05, 2, "Limit 2".into(), "BIT2"),
+                    pad(8),
+                    entry(0x1802, 0x07, 1, "TxPDO State".into(), "BOOL"),
+                    entry(0x1802, 0x09, 1, "TxPDO Toggle".into(), "BOOL"),
+                    entry(0x6020, 0x11, 16, "Analog input".into(), "INT"),
+                ],
+            ),
+        ],
+        mailbox: coe_mailbox(false),
+        // Word 0: PDI control 0x89 (HBI), ESC configuration 0x0E (enhanced link detection, SYNC
+        // and latch units; no device emulation: the firmware runs the AL).
+        eeprom: eeprom(4096, [0x89, 0x0E]),
         ..Default::default()
     }
 }

@@ -275,7 +275,12 @@ impl SegmentConfig {
             let kinds = port_kinds(&info);
             // E-Bus terminals carry an ET1200, everything with an MII port an ET1100.
             let default_esc = if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) { "et1200" } else { "et1100" };
-            let mut config = match d.esc.as_deref().unwrap_or(default_esc) {
+            let builtin_esc = match &src {
+                DeviceSource::Builtin(name) => crate::builtin::esc(name),
+                _ => None,
+            };
+            let esc_kind = d.esc.as_deref().or(builtin_esc).unwrap_or(default_esc);
+            let mut config = match esc_kind {
                 "et1100" => EscConfig::et1100(),
                 "et1200" => EscConfig::et1200(),
                 "lan9252" => EscConfig::lan9252(),
@@ -288,10 +293,14 @@ impl SegmentConfig {
                     ))
                 }
             };
+            // The ports the SII uses; a port the ESC has but the SII leaves unused keeps the
+            // preset's "not configured" (01) where it has one (the LAN9252's third port).
+            let preset = config.port_descriptor;
             config.port_descriptor = kinds.iter().enumerate().fold(0u8, |acc, (p, k)| {
                 acc | match k {
                     Some(PortKind::Ebus) => 0b10,
                     Some(PortKind::Mii) => 0b11,
+                    None if (preset >> (2 * p)) & 0b11 == 0b01 => 0b01,
                     None => 0,
                 } << (2 * p)
             });
@@ -347,8 +356,9 @@ impl SegmentConfig {
             let mut node = Node::new(name.clone(), esc, kinds, drift_ppb);
             node.wander_ppb_per_sqrt_s =
                 in_range(&place, "wander_ppb_per_sqrt_s", d.wander_ppb_per_sqrt_s.unwrap_or(0.0), 0.0..=1e6)?;
+            let def = if esc_kind == "lan9252" { EscTiming::LAN9252 } else { EscTiming::default() };
+            node.timing = def;
             if let Some(t) = d.timing {
-                let def = EscTiming::default();
                 node.timing = EscTiming {
                     processing_ns: t.processing_ns.unwrap_or(def.processing_ns),
                     forwarding_ns: t.forwarding_ns.unwrap_or(def.forwarding_ns),
@@ -518,9 +528,9 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
                     format!("unknown built-in device (known: {})", crate::builtin::NAMES.join(", ")),
                 )
             })?;
-            // Beckhoff's vendor ID for the terminals; none for our own servo.
-            let vendor = if name == "SERVO" { 0 } else { 2 };
-            let img = dev.to_sii(vendor).map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
+            let img = dev
+                .to_sii(crate::builtin::vendor_id(name))
+                .map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
             Ok((img, dev.type_name.clone(), Some(dev)))
         }
     }

@@ -111,8 +111,8 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         Some(0x077A_2C52) => (e("ek1100.hex"), Some("EK1914: no EEPROM dump or ESI in shared data (EK1100 stands in)")),
         Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
         Some(0x9252) => (
-            e("el2004.bin") + "\nesc = 'lan9252'",
-            Some("LAN9252 board: no EEPROM dump in shared data (EL2004 on a LAN9252 stands in)"),
+            "builtin = 'LAN9252-EVB'".into(),
+            Some("EVB-LAN9252: no EEPROM dump in shared data (the built-in description, from this capture, stands in)"),
         ),
         Some(0x03EC_3052) => (
             "builtin = 'EL1004'".into(),

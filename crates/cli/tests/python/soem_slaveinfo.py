@@ -1,7 +1,8 @@
 """SOEM (through pysoem, unmodified) against a segment: what slaveinfo prints, then OP and outputs.
 
-Usage: soem_slaveinfo.py IFACE OUTPUT_BYTE
-Prints one JSON object on stdout.
+Usage: soem_slaveinfo.py IFACE SLAVE OUTPUT_HEX
+Writes OUTPUT_HEX (its bytes) to slave SLAVE's outputs (0-based; SOEM's IOmap may pack a
+slave's bits with its neighbours'). Prints one JSON object on stdout.
 """
 import json
 import struct
@@ -12,7 +13,7 @@ import pysoem
 
 from wire_delays import DelayWrites, soem_delay
 
-iface, out_byte = sys.argv[1], int(sys.argv[2], 0)
+iface, out_slave, out_bytes = sys.argv[1], int(sys.argv[2]), bytes.fromhex(sys.argv[3])
 m = pysoem.Master()
 m.open(iface)
 result = {"slaves": []}
@@ -59,21 +60,28 @@ try:
     m.state = pysoem.SAFEOP_STATE
     m.write_state()
     m.state_check(pysoem.SAFEOP_STATE, 500_000)
-    # Cyclic exchange: SOEM packs both EL2004 into one byte; write it through the first one.
-    m.slaves[1].output = bytes([out_byte])
+    m.slaves[out_slave].output = out_bytes
     m.send_processdata()
     m.receive_processdata(2000)
     m.state = pysoem.OP_STATE
     m.write_state()
     wkc = 0
-    for _ in range(200):
+    for i in range(200):
         m.send_processdata()
         wkc = m.receive_processdata(2000)
         time.sleep(0.001)
+        # Without device emulation AL control is a mailbox: a write before the firmware read
+        # the last one is refused (the real LAN9252 refused a BWR 26 us after another), and
+        # SAFEOP was just written again. Write OP again while it is not reached, as IgH does.
+        if i % 50 == 49 and m.read_state() != pysoem.OP_STATE:
+            m.state = pysoem.OP_STATE
+            m.write_state()
     result["wkc"] = wkc
     result["expected_wkc"] = m.expected_wkc
     result["op"] = m.state_check(pysoem.OP_STATE, 500_000) == pysoem.OP_STATE
+    m.read_state()
     result["states"] = [s.state for s in m.slaves]
+    result["al_status_codes"] = [s.al_status for s in m.slaves]
 finally:
     m.close()
 print(json.dumps(result))
