@@ -1,5 +1,6 @@
 //! Built-in devices, described as an ESI file would describe them. Identities and layouts are
-//! the facts SOEM printed for the real terminals (../shared/captures/*.txt).
+//! the facts SOEM printed for the real terminals and read from the real LAN9252 board
+//! (../shared/captures/); the servo is our own.
 use ferrocat_esi::{Device, FmmuKind, PdoDesc, PdoEntryDesc, SmDesc, SmKind};
 
 pub const NAMES: &[&str] = &["EK1100", "EL1004", "EL2004", "SERVO", "LAN9252-EVB"];
@@ -25,14 +26,14 @@ fn eeprom(bytes: u32, word0: [u8; 2]) -> Option<ferrocat_esi::EepromDesc> {
 }
 
 /// SM0/SM1 as 128-byte mailboxes at 0x1000/0x1080, SM2 outputs and SM3 inputs at the given
-/// start and control byte.
-fn mailbox_and_process_data_sms(outputs: (u16, u8), inputs: (u16, u8)) -> Vec<SmDesc> {
+/// start, control byte and default length.
+fn mailbox_and_process_data_sms(outputs: (u16, u8, Option<u16>), inputs: (u16, u8, Option<u16>)) -> Vec<SmDesc> {
     let sm = |kind, start, default_size, control| SmDesc { kind, start, default_size, control, enable: true };
     vec![
         sm(SmKind::MailboxOut, 0x1000, Some(128), 0x26),
         sm(SmKind::MailboxIn, 0x1080, Some(128), 0x22),
-        sm(SmKind::Outputs, outputs.0, None, outputs.1),
-        sm(SmKind::Inputs, inputs.0, None, inputs.1),
+        sm(SmKind::Outputs, outputs.0, outputs.2, outputs.1),
+        sm(SmKind::Inputs, inputs.0, inputs.2, inputs.1),
     ]
 }
 
@@ -137,7 +138,7 @@ fn servo() -> Device {
         group_type: "Drive".into(),
         profile_no: Some(402),
         fmmus: vec![FmmuKind::Outputs, FmmuKind::Inputs, FmmuKind::MailboxState],
-        sync_managers: mailbox_and_process_data_sms((0x1100, 0x24), (0x1180, 0x20)),
+        sync_managers: mailbox_and_process_data_sms((0x1100, 0x24, None), (0x1180, 0x20, None)),
         rx_pdos: vec![pdo(
             0x1600,
             2,
@@ -189,7 +190,7 @@ fn servo() -> Device {
 /// soem-sdinfo-2-lan9252.txt): identity, name, SyncManagers, FMMUs, mailbox and CoE details
 /// from its SII reads, PDI control 0x0E89 from its 0x0140 read, and the PDO assignment and
 /// mapping from its complete-access SDO answers (0x1C12 = 0x1601, 0x1C13 = 0x1A00 + 0x1A02).
-/// The entry names are ours (the capture does not read the strings): eight output bits,
+/// The entry names and the EEPROM's size are ours (the capture reads neither): eight output bits,
 /// eight input bits, and an analog input laid out as Beckhoff's (underrange, overrange, two
 /// 2-bit limits, TxPDO state and toggle, a 16-bit value).
 fn lan9252_evb() -> Device {
@@ -222,7 +223,7 @@ fn lan9252_evb() -> Device {
         physics: "YY".into(),
         group_type: "EVB".into(),
         fmmus: vec![FmmuKind::Outputs, FmmuKind::Inputs, FmmuKind::MailboxState],
-        sync_managers: mailbox_and_process_data_sms((0x1100, 0x64), (0x1400, 0x20)),
+        sync_managers: mailbox_and_process_data_sms((0x1100, 0x64, Some(2)), (0x1400, 0x20, Some(6))),
         rx_pdos: vec![pdo(0x1601, "Outputs", 2, bits8(0x7010, "Output"))],
         tx_pdos: vec![
             pdo(0x1A00, "Inputs", 3, bits8(0x6000, "Input")),
