@@ -25,6 +25,11 @@ pub struct EscConfig {
     pub dc: DcWidth,
     /// SII interface reads 8 bytes (bit 6 of 0x0502) rather than 4.
     pub sii_read_8: bool,
+    /// PDI control and ESC configuration (0x0140–0x0141) fixed at synthesis (an IP core), not
+    /// loaded from SII word 0.
+    pub pdi_control: Option<u16>,
+    /// The PDI emulates the EEPROM (0x0502 bit 5).
+    pub eeprom_emulation: bool,
 }
 
 impl EscConfig {
@@ -43,6 +48,8 @@ impl EscConfig {
             features: 0x00FC,
             dc: DcWidth::Bits64,
             sii_read_8: true,
+            pdi_control: None,
+            eeprom_emulation: false,
         }
     }
 
@@ -61,6 +68,8 @@ impl EscConfig {
             features: 0x0184,
             dc: DcWidth::Bits32,
             sii_read_8: true,
+            pdi_control: None,
+            eeprom_emulation: false,
         }
     }
 
@@ -85,6 +94,8 @@ impl EscConfig {
                 | Features::ENHANCED_DC_SYNC_ACTIVATION,
             dc: DcWidth::Bits64,
             sii_read_8: false,
+            pdi_control: None,
+            eeprom_emulation: false,
         }
     }
 
@@ -101,6 +112,31 @@ impl EscConfig {
             features: Features::DC,
             dc: DcWidth::Bits32,
             sii_read_8: false,
+            pdi_control: None,
+            eeprom_emulation: false,
+        }
+    }
+
+    /// Beckhoff's EtherCAT IP core in an FPGA as the Kollmorgen AKD drive carries it, from its
+    /// captures: 0x0000–0x0009 = 04 02 43 00 03 04 04 0F 84 01 (type 0x04, revision 2, build
+    /// 0x43, 3 FMMUs, 4 SMs, 4 KiB, two MII ports, features 0x0184: a 32-bit DC — its system
+    /// time and 0x0918 read 0 in their upper half, and TwinCAT distributes it with a 4-byte
+    /// ARMW); PDI control 0x0C08 set at synthesis (its SII word 0 says 0x0009); the EEPROM
+    /// emulated by the PDI (0x0502 reads 0x0020: bit 5, 4-byte reads).
+    pub fn ipcore() -> Self {
+        EscConfig {
+            esc_type: 0x04,
+            revision: 0x02,
+            build: 0x0043,
+            fmmu_count: 3,
+            sm_count: 4,
+            ram_kb: 4,
+            port_descriptor: 0b00_00_11_11,
+            features: Features::DC | Features::SEPARATE_FCS_ERRORS | Features::ENHANCED_DC_SYNC_ACTIVATION,
+            dc: DcWidth::Bits32,
+            sii_read_8: false,
+            pdi_control: Some(0x0C08),
+            eeprom_emulation: true,
         }
     }
 

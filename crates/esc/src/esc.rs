@@ -262,14 +262,15 @@ impl Esc {
         m[0x0420..0x0422].copy_from_slice(&1000u16.to_le_bytes());
         m[0x0440] = 1;
         let e = &self.eeprom;
-        m[0x0140..0x0142].copy_from_slice(&e.word(0).to_le_bytes());
+        m[0x0140..0x0142].copy_from_slice(&c.pdi_control.unwrap_or(e.word(0)).to_le_bytes());
         m[0x0150..0x0152].copy_from_slice(&e.word(1).to_le_bytes());
         m[0x0982..0x0984].copy_from_slice(&e.word(2).to_le_bytes());
         m[0x0152..0x0154].copy_from_slice(&e.word(3).to_le_bytes());
         m[0x0012..0x0014].copy_from_slice(&e.word(4).to_le_bytes());
         let size_kbit = e.word(0x3E) as u32 + 1;
         let ctl = if c.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 }
-            | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 };
+            | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 }
+            | if c.eeprom_emulation { SiiControl::EMULATION } else { 0 };
         m[0x0502..0x0504].copy_from_slice(&ctl.to_le_bytes());
         self.dc = match c.dc {
             DcWidth::None => None,

@@ -285,11 +285,12 @@ impl SegmentConfig {
                 "et1200" => EscConfig::et1200(),
                 "lan9252" => EscConfig::lan9252(),
                 "esc20" => EscConfig::esc20(),
+                "ipcore" => EscConfig::ipcore(),
                 "nodc" => EscConfig::et1100().without_dc(),
                 other => {
                     return Err(device_err(
                         format!("device {i}"),
-                        format!("unknown esc '{other}' (et1100, et1200, lan9252, esc20, nodc)"),
+                        format!("unknown esc '{other}' (et1100, et1200, lan9252, esc20, ipcore, nodc)"),
                     ))
                 }
             };
