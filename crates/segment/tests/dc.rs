@@ -11,10 +11,7 @@ fn line(devices: &[&str], esc: &str) -> Bus {
     for d in devices {
         toml += &format!("[[device]]\nbuiltin = '{d}'\nesc = '{esc}'\n");
     }
-    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
-    let mut bus = Bus::new(cfg.build().unwrap());
-    bus.address_all();
-    bus
+    Bus::addressed(&toml)
 }
 
 #[test]

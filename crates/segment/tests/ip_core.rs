@@ -3,7 +3,6 @@
 mod common;
 
 use common::Bus;
-use ferrocat_segment::SegmentConfig;
 use ferrocat_wire::register::SiiControl;
 use ferrocat_wire::{Address, Command};
 
@@ -11,11 +10,7 @@ const S: u16 = 0x1001;
 
 fn akd(esc: &str) -> Bus {
     let dump = ferrocat_testdata::shared("captures/eeprom/akd.hex");
-    let toml = format!("[[device]]\neeprom = '{}'\nesc = '{esc}'\n", dump.display());
-    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
-    let mut bus = Bus::new(cfg.build().unwrap());
-    bus.address_all();
-    bus
+    Bus::addressed(&format!("[[device]]\neeprom = '{}'\nesc = '{esc}'\n", dump.display()))
 }
 
 #[test]

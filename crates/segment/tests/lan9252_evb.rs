@@ -5,7 +5,6 @@
 mod common;
 
 use common::Bus;
-use ferrocat_segment::SegmentConfig;
 use ferrocat_wire::{Address, Command, Frame};
 
 const S: u16 = 0x1001;
@@ -29,10 +28,7 @@ fn answered() -> Vec<(Command, u16, u16, Vec<u8>)> {
 }
 
 fn board() -> Bus {
-    let cfg: SegmentConfig = toml::from_str("[[device]]\nbuiltin = 'LAN9252-EVB'\n").unwrap();
-    let mut bus = Bus::new(cfg.build().unwrap());
-    bus.address_all();
-    bus
+    Bus::addressed("[[device]]\nbuiltin = 'LAN9252-EVB'\n")
 }
 
 #[test]

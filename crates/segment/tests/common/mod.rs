@@ -17,6 +17,14 @@ impl Bus {
         Bus { seg, t: 1_000_000, irqs: Vec::new() }
     }
 
+    /// The segment a TOML description builds, its slaves at station addresses 0x1001, ….
+    pub fn addressed(toml: &str) -> Self {
+        let cfg: SegmentConfig = toml::from_str(toml).unwrap();
+        let mut bus = Bus::new(cfg.build().unwrap());
+        bus.address_all();
+        bus
+    }
+
     /// Several datagrams in one frame, sent at `self.t`; returns each one's (data, wkc,
     /// address as returned).
     pub fn tx_all(&mut self, datagrams: &[(Command, Address, &[u8])]) -> Vec<(Vec<u8>, u16, Address)> {
