@@ -2,8 +2,10 @@
 //! Any sequence of frames a master could send, as `ferrocat sim` takes them off an interface,
 //! through a segment of every kind of ESC the simulator models: the coupler, I/O terminals on an
 //! ET1100, a LAN9252 with an SM-synchronous application, a 32-bit DC whose local time starts
-//! just before its wrap, an ESC without DC, and the CiA402 drive behind a firmware that checks
-//! AL transitions (CoE mailbox, SDO server, PDO mapping). The simulator must not panic, and a
+//! just before its wrap, an ESC without DC, the CiA402 drive behind a firmware that checks
+//! AL transitions (CoE mailbox, SDO server, PDO mapping), the EVB-LAN9252 (a CoE device with a
+//! fixed mapping behind its firmware) and the AKD's IP core (PDI control fixed, EEPROM
+//! emulated, 32-bit DC). The simulator must not panic, and a
 //! frame it answers must still parse as the same chain of datagrams.
 //!
 //! Input: a first byte choosing where the fuzzed frames start (mod 5: a segment just powered
@@ -45,6 +47,11 @@ esc = "nodc"
 builtin = "SERVO"
 device_emulation = false
 local_time_ns = "18446744073000000000"
+[[device]]
+builtin = "LAN9252-EVB"
+[[device]]
+builtin = "EL2004"
+esc = "ipcore"
 "#;
 
 fuzz_target!(|data: &[u8]| {

@@ -69,7 +69,8 @@ fn identities(p: &[Packet], pairs: &[(usize, usize)]) -> (usize, BTreeMap<usize,
             let positional = matches!(h.command, Command::APWR | Command::APRD);
             let key = if positional { 0u16.wrapping_sub(key) } else { key };
             match (h.command, ado) {
-                (Command::BRD, 0x0000) if count == 0 => count = d.wkc() as usize,
+                // Every slave answers a broadcast read of its basic registers once.
+                (Command::BRD, 0x0000..=0x01FF) if count == 0 => count = d.wkc() as usize,
                 (Command::APWR | Command::FPWR, 0x0502) if d.data().len() >= 6 => {
                     pending.insert((positional, key), u32::from_le_bytes(d.data()[2..6].try_into().unwrap()));
                 }
