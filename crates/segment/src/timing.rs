@@ -34,7 +34,8 @@ impl EscTiming {
     /// 740 ns (../shared/captures/soem-sdinfo-2-lan9252.txt) where two ET1100s with external
     /// PHYs give 485–495 ns. The measurement does not split the extra 245 ns between PHY and
     /// ESC; it goes into the processing and forwarding delays, which SOEM's formula weighs
-    /// one to one (a calibration from that one printout, not a prediction).
+    /// one to one (a calibration from that one printout; the SOEM maintainer's "≈ 700 ns per
+    /// hop" for LAN9252 chains, ../shared/reference/existing-masters.md, agrees).
     pub const LAN9252: EscTiming = EscTiming { processing_ns: 310, forwarding_ns: 310, loopback_ns: 20 };
 }
 
