@@ -58,6 +58,8 @@ fi
 # --- checks and tests ----------------------------------------------------------------------
 log "cargo fmt --check"
 cargo fmt --all -- --check
+log "cargo doc (warnings are errors: broken intra-doc links)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 
 # --- fuzzing -------------------------------------------------------------------------------
 if [ "$FUZZ_SECONDS" != 0 ]; then

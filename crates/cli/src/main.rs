@@ -294,7 +294,7 @@ impl LabArgs {
 
 #[derive(Subcommand)]
 enum SdoCmd {
-    /// Read INDEX[:SUB] of the slave at POSITION (0-based).
+    /// Read INDEX or INDEX:SUB of the slave at POSITION (0-based).
     Read {
         position: u16,
         object: String,
@@ -307,7 +307,7 @@ enum SdoCmd {
         #[command(flatten)]
         target: target::Target,
     },
-    /// Write VALUE to INDEX[:SUB].
+    /// Write VALUE to INDEX or INDEX:SUB.
     Write {
         position: u16,
         object: String,

@@ -397,7 +397,7 @@ pub struct SyncState {
     /// Probe frames sent, and those lost.
     pub probes: u64,
     pub probes_lost: u64,
-    /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`]).
+    /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`](crate::sync::ClockSync::makes_up_lost_frames)).
     pub make_ups: u64,
     /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
     /// probes stopped early so as not to make the next cycle late.

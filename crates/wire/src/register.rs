@@ -510,7 +510,7 @@ pub mod dc_activation {
 
 /// System time difference 0x092C: sign–magnitude, bits 30:0 the mean |difference| in ns.
 /// We use the convention bit 31 = 1 ⇔ the local copy is behind the received time (older
-/// datasheet, esc-spec §3.2 [C]); masters use only the magnitude.
+/// datasheet, esc-spec §3.2, marked C there); masters use only the magnitude.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SystemTimeDifference(pub u32);
 
