@@ -15,11 +15,6 @@ pub fn vendor_id(name: &str) -> u32 {
     }
 }
 
-/// The ESC a built-in device carries where the segment file does not say.
-pub fn esc(name: &str) -> Option<&'static str> {
-    (name == "LAN9252-EVB").then_some("lan9252")
-}
-
 /// An EEPROM of `bytes` whose SII word 0 (PDI control, ESC configuration) is `word0`.
 fn eeprom(bytes: u32, word0: [u8; 2]) -> Option<ferrocat_esi::EepromDesc> {
     Some(ferrocat_esi::EepromDesc { byte_size: Some(bytes), config_data: word0.to_vec(), bootstrap: vec![] })

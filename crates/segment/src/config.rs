@@ -273,13 +273,11 @@ impl SegmentConfig {
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;
             let kinds = port_kinds(&info);
-            // E-Bus terminals carry an ET1200, everything with an MII port an ET1100.
-            let default_esc = if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) { "et1200" } else { "et1100" };
-            let builtin_esc = match &src {
-                DeviceSource::Builtin(name) => crate::builtin::esc(name),
-                _ => None,
-            };
-            let esc_kind = d.esc.as_deref().or(builtin_esc).unwrap_or(default_esc);
+            // A device whose ESC the captures show carries it; otherwise E-Bus terminals carry an
+            // ET1200, everything with an MII port an ET1100.
+            let default_esc = known_esc(info.header.vendor_id, info.header.product_code)
+                .unwrap_or(if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) { "et1200" } else { "et1100" });
+            let esc_kind = d.esc.as_deref().unwrap_or(default_esc);
             let mut config = match esc_kind {
                 "et1100" => EscConfig::et1100(),
                 "et1200" => EscConfig::et1200(),
@@ -452,6 +450,16 @@ impl SegmentConfig {
 /// controlword and statusword.
 fn is_drive(info: &SiiInfo, od: &ferrocat_esc::od::ObjectDictionary) -> bool {
     info.general().is_some_and(|g| g.ds402_channels > 0) || (od.get(0x6040).is_some() && od.get(0x6041).is_some())
+}
+
+/// The ESC kind of devices whose real ESC the shared captures show, by SII identity: the
+/// Kollmorgen AKD's IP core (docs/esc-model.md) and Microchip's LAN9252 evaluation board.
+fn known_esc(vendor_id: u32, product_code: u32) -> Option<&'static str> {
+    match (vendor_id, product_code) {
+        (0x0000_006A, 0x0041_4B44) => Some("ipcore"),
+        (0x0000_0009, 0x0000_9252) => Some("lan9252"),
+        _ => None,
+    }
 }
 
 fn describe(src: &DeviceSource) -> String {

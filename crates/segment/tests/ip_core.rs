@@ -1,5 +1,5 @@
-//! The `ipcore` ESC kind with the Kollmorgen AKD's EEPROM dump against what the real drive
-//! answered in its captures (soem-sdinfo-akd, twincat-akd-nc-mode).
+//! The `ipcore` ESC kind, which the segment gives the Kollmorgen AKD's EEPROM dump, against
+//! what the real drive answered in its captures (soem-sdinfo-akd, twincat-akd-nc-mode).
 mod common;
 
 use common::Bus;
@@ -8,14 +8,17 @@ use ferrocat_wire::{Address, Command};
 
 const S: u16 = 0x1001;
 
-fn akd(esc: &str) -> Bus {
+/// The AKD's dump on the ESC the segment picks for it, or on `esc`.
+fn akd(esc: Option<&str>) -> Bus {
     let dump = ferrocat_testdata::shared("captures/eeprom/akd.hex");
-    Bus::addressed(&format!("[[device]]\neeprom = '{}'\nesc = '{esc}'\n", dump.display()))
+    let esc = esc.map(|e| format!("esc = '{e}'\n")).unwrap_or_default();
+    Bus::addressed(&format!("[[device]]\neeprom = '{}'\n{esc}", dump.display()))
 }
 
 #[test]
 fn needs_shared_the_ip_core_answers_as_the_akd_did() {
-    let mut bus = akd("ipcore");
+    // Its identity (vendor 0x6A, product 0x414B44) picks the IP core.
+    let mut bus = akd(None);
     // TwinCAT's APRD of 0x0000–0x0009 on the real drive.
     let (id, _) = bus.fp(Command::FPRD, S, 0x0000, &[0; 10]);
     assert_eq!(id, [0x04, 0x02, 0x43, 0x00, 0x03, 0x04, 0x04, 0x0F, 0x84, 0x01]);
@@ -30,7 +33,7 @@ fn needs_shared_the_ip_core_answers_as_the_akd_did() {
     assert_eq!(bus.fprd_u64(S, 0x0918) >> 32, 0);
     assert_eq!(bus.fprd_u64(S, 0x0910) >> 32, 0);
     assert_eq!(bus.tx(Command::ARMW, Address::position(0, 0x0910), &[0; 4]).1, 1);
-    // The same dump on the default ESC of its MII ports is an ET1100, which the drive is not.
-    let mut et = akd("et1100");
+    // Asked for, the same dump sits on an ET1100, which the drive is not.
+    let mut et = akd(Some("et1100"));
     assert_eq!(et.fp(Command::FPRD, S, 0x0000, &[0; 1]).0, [0x11]);
 }

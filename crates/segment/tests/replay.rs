@@ -102,8 +102,8 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         Some(0x044C_2C52) => (e("ek1100.hex"), None),
         Some(0x07D4_3052) => (e("el2004.bin"), None),
         Some(0x0B0C_3052) => (e("el2828.hex"), None),
-        // The AKD's ESC is Beckhoff's IP core, not the ET1100 its MII ports would suggest.
-        Some(0x0041_4B44) => (e("akd.hex") + "\nesc = 'ipcore'", None),
+        // On the IP core the segment knows the AKD carries (its identity picks it).
+        Some(0x0041_4B44) => (e("akd.hex"), None),
         // The real EL2889 has a system time (replay-dc: the FRMWs of 0x0910 count it), the
         // EL2828 whose dump stands in has receive times only: its SYNC unit is turned on.
         Some(0x0B49_3052) => (
