@@ -1,7 +1,7 @@
 //! ethercrab (from crates.io, unmodified) against `ferrocat sim` over a veth pair: a segment with
-//! the Nanotec drive described by its ESI and I/O terminals goes to OP, SDOs are read and
-//! written, DC runs with SYNC0, and ethercrab's static drift compensation leaves every slave's
-//! |0x092C| below 50 ns.
+//! the EVB-LAN9252 board (the reference clock), the Nanotec drive described by its ESI and I/O
+//! terminals goes to OP, SDOs are read and written, DC runs with SYNC0, and ethercrab's static
+//! drift compensation leaves every slave's |0x092C| below 50 ns.
 mod common;
 
 use std::os::fd::AsRawFd;
@@ -48,6 +48,7 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
         &seg,
         format!(
             "seed = 11\n\
+             [[device]]\nbuiltin = 'LAN9252-EVB'\ndrift_ppm = 15.0\n\
              [[device]]\nesi = '{0}/esi/Nanotec_C5-E-2-21.xml'\nproduct = 0x4F\ndrift_ppm = 20.0\n\
              [[device]]\neeprom = '{0}/captures/eeprom/ek1100.hex'\ndrift_ppm = -35.0\n\
              [[device]]\neeprom = '{0}/captures/eeprom/el2004.bin'\ndrift_ppm = 5.0\n\
@@ -90,7 +91,7 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
         let mut group =
             md.init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now).await.map_err(|e| format!("init: {e:?}"))?;
         let names: Vec<String> = group.iter(&md).map(|s| s.name().to_string()).collect();
-        assert_eq!(names, ["C5-E-2-21", "EK1100", "EL2004", "EL1004"]);
+        assert_eq!(names, ["LAN9252-EVB-HBI", "C5-E-2-21", "EK1100", "EL2004", "EL1004"]);
         // Right after ethercrab's static drift compensation (10 000 FRMW frames).
         let mut diffs = Vec::new();
         for s in group.iter(&md) {
@@ -103,11 +104,15 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
         // units off, as their SII word 0 = 0x0104 says) have receive times only, so their
         // 0x092C does not answer — as on real EL2004/EL1004.
         let synced: Vec<&str> = diffs.iter().map(|(n, _)| n.as_str()).collect();
-        assert_eq!(synced, ["C5-E-2-21", "EK1100"], "the slaves with a system time");
+        assert_eq!(synced, ["LAN9252-EVB-HBI", "C5-E-2-21", "EK1100"], "the slaves with a system time");
         for (name, d) in &diffs {
             assert!(d.abs() < 50, "{name}: |0x092C| = {} ns", d.abs());
         }
         for mut s in group.iter_mut(&md) {
+            if s.name() == "LAN9252-EVB-HBI" {
+                let product = s.sdo_read::<u32>(0x1018, 2).await.map_err(|e| format!("EVB SDO read: {e:?}"))?;
+                assert_eq!(product, 0x9252);
+            }
             if s.name() == "C5-E-2-21" {
                 assert_eq!(s.sdo_read::<u32>(0x1018, 1).await.map_err(|e| format!("SDO read: {e:?}"))?, 0x26C);
                 s.sdo_write(0x6060, 0, 8i8).await.map_err(|e| format!("SDO write: {e:?}"))?;
@@ -165,5 +170,5 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
     println!("simulator report: {rep}");
     let devs = rep["devices"].as_array().unwrap();
     assert!(devs.iter().all(|d| d["al_state"] == "OP"), "{rep}");
-    assert!(devs[2]["outputs"][0].as_u64().unwrap() & 1 == 1, "EL2004 outputs arrived: {rep}");
+    assert!(devs[3]["outputs"][0].as_u64().unwrap() & 1 == 1, "EL2004 outputs arrived: {rep}");
 }
