@@ -249,7 +249,7 @@ fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str
         0x0140..=0x0141 => "PDI control: the real ESC, an IP core, has its PDI fixed at synthesis, not as SII word 0 gives it",
         0x0120..=0x0121 => "AL control: the real firmware read it at another moment than the modelled 1 ms",
         0x0130..=0x0135 => "AL status: the simulated slave changes state at another moment than the real one",
-        0x0500..=0x050F => "SII interface: busy timing differs (20 µs per read here)",
+        0x0500..=0x050F => "SII interface: busy timing differs (700 µs per read here; a Windows capture's times are not the wire's)",
         0x0900..=0x09FF => "DC registers: times are the simulation's",
         0x0F00..=0x1FFF => "mailbox/process RAM: the simulated slave answers at once, the real one took time",
         0x0300..=0x0313 => "error counters: the real segment saw link errors",
