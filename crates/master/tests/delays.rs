@@ -15,7 +15,12 @@ const LOOP_NS: u32 = 20;
 /// back adding up along a line) and told the loop-back (within ±5 ns, single 10 ns latches).
 /// Returns the first.
 fn check(name: &str, toml: &str) -> Master<VirtualIo> {
-    let m = scan(name, toml, 0, 10);
+    check_within(name, toml, 10)
+}
+
+/// As [`check`], with SOEM's formula allowed `soem_ns`.
+fn check_within(name: &str, toml: &str, soem_ns: i64) -> Master<VirtualIo> {
+    let m = scan(name, toml, 0, soem_ns);
     scan(&format!("{name}, loop-backs known"), toml, LOOP_NS, 5);
     m
 }
@@ -108,7 +113,10 @@ fn the_first_slave_reversed_and_couplers_cabled_in_to_in() {
          [[device]]\nbuiltin = 'EL2004'\nparent = 'c2'\nparent_port = 1\n\
          [[device]]\nbuiltin = 'EL2004'\nparent = 'c1'\nparent_port = 1\nesc = 'esc20'\n\
          [[device]]\nname = 'c3'\nbuiltin = 'EK1100'\nparent = 'c2'\nparent_port = 2\nport = 2\ncable_m = 40.0\n";
-    let m = check("reversed tree", toml);
+    // SOEM's formula makes the third coupler's hop half a loop-back (10 ns) too long, and its
+    // 10 ns latches add ±5: over seeds 1–200 its worst error on this tree is 10 ns in 130 and
+    // 15 ns in 70 (told the loop-back: 0 in 58, 5 in 142). This seed's is 10.
+    let m = check_within("reversed tree", toml, 15);
     assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 2, 2, 0]);
     assert_eq!(links(&m), [Some((3, 0)), Some((0, 1)), Some((0, 2)), None, Some((3, 1))]);
     synchronises(m);
