@@ -152,9 +152,8 @@ impl EscConfig {
         0x1000 + self.ram_kb as usize * 1024
     }
 
-    /// Whether port `n` can carry a link: E-Bus (10) or MII (11), not "not implemented" (00)
-    /// or "not configured" (01).
+    /// Whether port `n` can carry a link.
     pub fn has_port(&self, n: u8) -> bool {
-        (self.port_descriptor >> (2 * (n & 3))) & 3 >= 0b10
+        ferrocat_wire::register::PortDescriptor(self.port_descriptor).can_link(n)
     }
 }

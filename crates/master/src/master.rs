@@ -1,6 +1,6 @@
 //! Bring-up: finding the slaves, reading what they are, configuring mailboxes and process data,
 //! and walking them through the AL states.
-use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus, Fmmu, SyncManager};
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus, Fmmu, PortDescriptor, SyncManager};
 use ferrocat_wire::sii::{SiiHeader, SiiInfo, SmEntry, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
 use ferrocat_wire::{Address, Command};
 
@@ -620,9 +620,7 @@ impl<I: Io> Master<I> {
             .map(|s| crate::topology::PortView {
                 entry_port: s.entry_port,
                 active_ports: s.active_ports,
-                // 10 E-Bus, 11 MII; 00 not implemented, 01 not configured (a LAN9252's
-                // unused third port reads 01): neither can carry a link.
-                present_ports: [0, 1, 2, 3].map(|p| (s.port_descriptor >> (2 * p)) & 3 >= 0b10),
+                present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(s.port_descriptor).can_link(p)),
                 receive_times: s.has_dc.then_some(s.receive_times),
                 epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
             })

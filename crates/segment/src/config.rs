@@ -18,6 +18,7 @@ use ferrocat_esc::{
     Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, SyncApp, SyncMode,
 };
 use ferrocat_esi::EsiFile;
+use ferrocat_wire::register::{PortDescriptor, PortType};
 use ferrocat_wire::sii::dump::parse_dump;
 use ferrocat_wire::sii::SiiInfo;
 use rand::{Rng, SeedableRng};
@@ -299,7 +300,7 @@ impl SegmentConfig {
                 acc | match k {
                     Some(PortKind::Ebus) => 0b10,
                     Some(PortKind::Mii) => 0b11,
-                    None if (preset >> (2 * p)) & 0b11 == 0b01 => 0b01,
+                    None if PortDescriptor(preset).port(p as u8) == PortType::NotConfigured => 0b01,
                     None => 0,
                 } << (2 * p)
             });

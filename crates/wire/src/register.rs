@@ -159,6 +159,12 @@ impl PortDescriptor {
             _ => PortType::Mii,
         }
     }
+
+    /// Whether port `n` can carry a link: E-Bus or MII, not "not implemented" or "not
+    /// configured" (a LAN9252's unused third port reads the latter).
+    pub fn can_link(self, n: u8) -> bool {
+        matches!(self.port(n), PortType::Ebus | PortType::Mii)
+    }
 }
 
 /// DL status 0x0110.
