@@ -279,10 +279,11 @@ impl Esc {
                 Some(DcUnit::new(w, t_ns, local0, drift))
             }
         };
-        // An ET1200 with neither its SYNC out nor its latch in unit enabled (0x0141 bits 2–3,
-        // from SII word 0) answers its receive times only: the real EL1004 and EL2828 (0x0141 =
-        // 0x01) give WKC 0 for 0x0910–0x09FF, the EK1100 (ET1100, 0x0D) counts.
-        self.system_time_unit = c.esc_type != 0x12 || m[0x0141] & 0x0C != 0;
+        // An ET1100 or ET1200 with neither its SYNC out nor its latch in unit enabled (0x0141
+        // bits 2–3, from SII word 0) answers its receive times only: the real EL1004 and EL2828
+        // (ET1200, 0x0141 = 0x01) and EK1914 (ET1100) give WKC 0 for 0x0910–0x09FF, the EK1100
+        // (ET1100, 0x0D) counts.
+        self.system_time_unit = !matches!(c.esc_type, 0x11 | 0x12) || m[0x0141] & 0x0C != 0;
         self.reload_sm_fmmu();
         // The DL status comes up from reset (an event); AL status Init is its reset value.
         self.refresh_registers();

@@ -12,11 +12,11 @@ fn segment_on(host: HostModel) -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(
         "seed = 9\n\
          [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 12.0\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 3.5\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = -20.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 33.0\nesc = 'et1100'\n",
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 3.5\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = -20.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = 33.0\nesc = 'et1100'\nsync_unit = true\n",
     )
     .unwrap();
     Master::new(VirtualIo::new(cfg.build().unwrap(), host, 9))
@@ -223,7 +223,7 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
 fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     let cfg: SegmentConfig = toml::from_str(
         "seed = 7\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
-         [[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\nesc = 'et1100'\n",
+         [[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\nesc = 'et1100'\nsync_unit = true\n",
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));

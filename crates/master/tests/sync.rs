@@ -12,9 +12,9 @@ fn brought_up(host: HostModel) -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(
         "seed = 5\n\
          [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 40.0\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -20.0\nesc = 'et1100'\n",
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -20.0\nesc = 'et1100'\nsync_unit = true\n",
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, 5));

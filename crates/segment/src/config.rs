@@ -154,9 +154,11 @@ pub struct DeviceToml {
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
     /// puts a firmware behind AL control that checks each transition.
     pub device_emulation: Option<bool>,
-    /// Overrides the SII's SYNC out unit bit (word 0, ESC configuration bit 2). An ET1200
-    /// with neither SYNC nor latch unit has receive times only; `app = "dc"` turns it on.
+    /// Overrides the SII's SYNC out unit bit (word 0, ESC configuration bit 2). An ET1100 or
+    /// ET1200 with neither SYNC nor latch unit has receive times only; `app = "dc"` turns it on.
     pub sync_unit: Option<bool>,
+    /// Overrides the SII's latch in unit bit (word 0, ESC configuration bit 3).
+    pub latch_unit: Option<bool>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -263,13 +265,16 @@ impl SegmentConfig {
                 patch_sii_header(&mut sii, |h| h[1] = (h[1] & !1) | emulate as u8);
             }
             // A DC-synchronous application needs the SYNC out unit; without it and the latch
-            // unit an ET1200 has no system time (docs/esc-model.md).
+            // unit an ET1100 or ET1200 has no system time (docs/esc-model.md).
             let dc_app = d.app.as_deref() == Some("dc");
             if dc_app && d.sync_unit == Some(false) {
                 return Err(device_err(format!("device {i}"), "app = \"dc\" needs sync_unit = true"));
             }
             if let Some(on) = d.sync_unit.or(dc_app.then_some(true)) {
                 patch_sii_header(&mut sii, |h| h[1] = (h[1] & !0x04) | if on { 0x04 } else { 0 });
+            }
+            if let Some(on) = d.latch_unit {
+                patch_sii_header(&mut sii, |h| h[1] = (h[1] & !0x08) | if on { 0x08 } else { 0 });
             }
             let info = SiiInfo::from_image(&sii)
                 .map_err(|e| device_err(format!("device {i} ({})", describe(&src)), format!("SII: {e}")))?;

@@ -10,7 +10,8 @@ const STATION: u16 = 0x1001;
 
 /// An ET1100-like ESC (4 KiB of registers and 8 KiB of process RAM: memory ends at 0x3000).
 fn et1100_bus() -> Bus {
-    let cfg: SegmentConfig = toml::from_str("[[device]]\nbuiltin = 'EL2004'\nesc = 'et1100'\n").unwrap();
+    let cfg: SegmentConfig =
+        toml::from_str("[[device]]\nbuiltin = 'EL2004'\nesc = 'et1100'\nsync_unit = true\n").unwrap();
     let mut bus = Bus::new(cfg.build().unwrap());
     bus.address_all();
     bus

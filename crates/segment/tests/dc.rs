@@ -6,10 +6,12 @@ use ferrocat_segment::SegmentConfig;
 use ferrocat_wire::register::dc_activation as act;
 use ferrocat_wire::{Address, Command};
 
+/// A line of `devices` on ESCs of kind `esc`, each with its SYNC out unit on (the terminals'
+/// SIIs have it off, which leaves them receive times only).
 fn line(devices: &[&str], esc: &str) -> Bus {
     let mut toml = String::from("seed = 3\n");
     for d in devices {
-        toml += &format!("[[device]]\nbuiltin = '{d}'\nesc = '{esc}'\n");
+        toml += &format!("[[device]]\nbuiltin = '{d}'\nesc = '{esc}'\nsync_unit = true\n");
     }
     Bus::addressed(&toml)
 }
@@ -335,27 +337,34 @@ fn sync_status_in_acknowledge_mode_and_the_al_event_request() {
     }
 }
 
-/// An ET1200 whose SYNC out and latch in units are off (0x0141 bits 2–3; SII word 0 = 0x0104 on
-/// the real EL1004, EL2004 and EL2828) answers its receive times but not its system time, not
-/// even 0x0918: SOEM's FPRD 0x0918 of a real EL1004 came back with WKC 0, TwinCAT's BWRs of
-/// 0x0910, 0x0930, 0x0934 and 0x0981 counted only the EK1100. A DC-synchronous application
-/// turns the SYNC unit on; an ET1100 keeps its system time either way.
+/// An ET1100 or ET1200 whose SYNC out and latch in units are off (0x0141 bits 2–3; SII word 0 =
+/// 0x0104 on the real EL1004, EL2004 and EL2828) answers its receive times but not its system
+/// time, not even 0x0918: SOEM's FPRD 0x0918 of a real EL1004 came back with WKC 0, TwinCAT's
+/// BWRs of 0x0910, 0x0930, 0x0934 and 0x0981 counted only the EK1100; ethercrab's four captures
+/// of an EK1914 (an ET1100: features 0x00FC, 8 FMMUs and SyncManagers) show it the same. Either
+/// unit turns the system time on; a DC-synchronous application turns the SYNC unit on.
 #[test]
-fn an_et1200_without_sync_and_latch_units_has_receive_times_only() {
+fn an_et1100_or_et1200_without_sync_and_latch_units_has_receive_times_only() {
+    // The EL2004's SII has both units off (word 0 = 0x0104), the EK1100's on (0x0D00): on
+    // either ASIC the SII decides, as the real EL1004/EL2828 (ET1200) and EK1914 (ET1100) show.
     let toml = "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
-                [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL1004'\nesc = 'et1100'\n";
+                [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL1004'\nesc = 'et1100'\n\
+                [[device]]\nbuiltin = 'EL1004'\nesc = 'et1100'\nlatch_unit = true\n\
+                [[device]]\nbuiltin = 'EK1100'\nsync_unit = false\nlatch_unit = false\n";
     let cfg: SegmentConfig = toml::from_str(toml).unwrap();
     let mut bus = Bus::new(cfg.build().unwrap());
     bus.address_all();
-    let (esc_config, _) = bus.fp(Command::FPRD, 0x1002, 0x0141, &[0]);
-    assert_eq!(esc_config[0] & 0x0C, 0, "the EL2004's SII: SYNC and latch units off");
-    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 4, "receive times: all");
-    assert_ne!(bus.fprd_u32(0x1002, 0x0900), 0, "the terminal latched its port 0");
+    let units: Vec<u8> = (0x1001..=0x1006).map(|s| bus.fp(Command::FPRD, s, 0x0141, &[0]).0[0] & 0x0C).collect();
+    assert_eq!(units, [0x0C, 0, 0x04, 0, 0x08, 0], "SYNC and latch units from the SII and the overrides");
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 6, "receive times: all");
+    for s in [0x1002, 0x1004, 0x1006] {
+        assert_ne!(bus.fprd_u32(s, 0x0900), 0, "{s:#06x} latched its port 0");
+    }
     for (ado, len) in [(0x0910u16, 8usize), (0x0918, 8), (0x0920, 8), (0x0928, 4), (0x092C, 4), (0x0981, 1)] {
-        let wkc: Vec<u16> = (0x1001..=0x1004).map(|s| bus.fp(Command::FPRD, s, ado, &vec![0; len]).1).collect();
-        assert_eq!(wkc, [1, 0, 1, 1], "{ado:#06x}: EK1100, EL2004, EL2004 with a DC app, EL1004 on an ET1100");
+        let wkc: Vec<u16> = (0x1001..=0x1006).map(|s| bus.fp(Command::FPRD, s, ado, &vec![0; len]).1).collect();
+        assert_eq!(wkc, [1, 0, 1, 0, 1, 0], "{ado:#06x}");
     }
     assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0930 }, &0x1000u16.to_le_bytes()).1, 3);
     let has: Vec<bool> = bus.seg.nodes.iter().map(|n| n.esc.has_system_time()).collect();
-    assert_eq!(has, [true, false, true, true]);
+    assert_eq!(has, [true, false, true, false, true, false]);
 }

@@ -142,7 +142,8 @@ pub fn patched_device(bus: &mut Bus, station: u16, patch: impl FnOnce(&mut SiiHe
     let path = std::env::temp_dir().join(format!("ferrocat-patched-{}-{n}.bin", std::process::id()));
     std::fs::write(&path, &image).unwrap();
     let cfg: SegmentConfig =
-        toml::from_str(&format!("[[device]]\neeprom = '{}'\nesc = 'et1100'\n", path.display())).unwrap();
+        toml::from_str(&format!("[[device]]\neeprom = '{}'\nesc = 'et1100'\nsync_unit = true\n", path.display()))
+            .unwrap();
     let seg = cfg.build();
     std::fs::remove_file(&path).unwrap();
     let mut bus = Bus::new(seg.unwrap());
