@@ -1,0 +1,124 @@
+//! The firmware's side of AL control and of the mailbox SyncManagers.
+use ferrocat_wire::register::{AlState, AlStatusCode, SyncManager};
+use ferrocat_wire::sii::SmEntry;
+
+use super::{sm_area, unsupported_protocol_reply, Esc};
+use crate::app::Pdi;
+
+impl Esc {
+    pub(super) fn al_control(&mut self, control: u16) {
+        let before = self.al.clone();
+        if self.device_emulation() {
+            // Device emulation: the ESC copies AL control to AL status (esc-spec §5.1).
+            if let Some(s) = AlState::from_bits(control as u8) {
+                self.al.state = s;
+                self.al.error = false;
+                self.al.code = AlStatusCode::NO_ERROR;
+            }
+        } else {
+            let mut expected = self.expected.clone();
+            for (_, e, len) in expected.process_data.iter_mut() {
+                if let Some(b) = self.app.process_data_bytes(e.sm_type == SmEntry::TYPE_OUTPUTS) {
+                    *len = b;
+                }
+            }
+            let sms: Vec<SyncManager> = (0..self.config.sm_count).map(|n| self.sm(n)).collect();
+            let Esc { app, mem, now_ns, .. } = self;
+            let mut check = |from: AlState, to: AlState| -> Result<(), AlStatusCode> {
+                if from == AlState::Init && to == AlState::PreOp {
+                    if let Some((out, inp)) = &expected.mailbox {
+                        let good = |s: Option<&SyncManager>, e: &SmEntry, writes: bool| {
+                            s.is_some_and(|s| {
+                                s.enabled()
+                                    && s.is_mailbox()
+                                    && s.ecat_writes() == writes
+                                    && s.start == e.start
+                                    && s.length == e.length
+                            })
+                        };
+                        if !good(sms.first(), out, true) || !good(sms.get(1), inp, false) {
+                            return Err(AlStatusCode::INVALID_MAILBOX_CONFIG);
+                        }
+                    }
+                }
+                if from == AlState::PreOp && to == AlState::SafeOp {
+                    for (n, e, len) in &expected.process_data {
+                        let s = sms.get(*n as usize).copied().unwrap_or_default();
+                        let outputs = e.sm_type == SmEntry::TYPE_OUTPUTS;
+                        let good = if *len == 0 {
+                            !s.enabled() || s.length == 0
+                        } else {
+                            s.enabled() && s.length == *len && s.ecat_writes() == outputs && !s.is_mailbox()
+                        };
+                        if !good {
+                            return Err(if outputs {
+                                AlStatusCode::INVALID_OUTPUT_CONFIG
+                            } else {
+                                AlStatusCode::INVALID_INPUT_CONFIG
+                            });
+                        }
+                    }
+                }
+                let mut pdi = Pdi { mem, now_ns: *now_ns };
+                app.check_transition(&mut pdi, from, to)
+            };
+            self.al.request(control, &mut check);
+        }
+        if self.al.state == AlState::Op && before.state != AlState::Op {
+            self.wd_last_trigger_ns = self.now_ns;
+        }
+        if self.al != before {
+            self.al_changes += 1;
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.state_changed(&mut pdi, self.al.state);
+        }
+    }
+
+    /// A complete request arrived in the mailbox SM: the application answers into SM1.
+    pub(super) fn mailbox_request(&mut self, sm: u8) {
+        let s = self.sm(sm);
+        let req = self.mem[sm_area(&s, self.mem.len())].to_vec();
+        // SM0 is consumed by the PDI at once: opened (clearing the write event) and read.
+        let st = &mut self.sms[sm as usize];
+        st.full = false;
+        st.int_write = false;
+        st.int_read = true;
+        let reply = {
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.mailbox(&mut pdi, &req)
+        };
+        let reply = reply.unwrap_or_else(|| unsupported_protocol_reply(&req));
+        self.mbx_queue.push_back(reply);
+        self.deliver_mailbox();
+    }
+
+    /// Moves the next waiting message into the send mailbox if it is free.
+    pub(super) fn deliver_mailbox(&mut self) {
+        let Some((n, out)) = (0..self.config.sm_count)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, s)| s.enabled() && s.is_mailbox() && !s.ecat_writes())
+        else {
+            return;
+        };
+        if self.sms[n as usize].full {
+            return;
+        }
+        let msg = match self.mbx_queue.pop_front() {
+            Some(m) => m,
+            None => match self.app.pending_mailbox() {
+                Some(m) => m,
+                None => return,
+            },
+        };
+        let area = sm_area(&out, self.mem.len());
+        let area = &mut self.mem[area];
+        let len = area.len().min(msg.len());
+        area.fill(0);
+        area[..len].copy_from_slice(&msg[..len]);
+        let st = &mut self.sms[n as usize];
+        st.full = true;
+        st.int_write = true;
+        st.int_read = false;
+        self.put_sm_status(n);
+    }
+}

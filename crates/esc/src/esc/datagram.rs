@@ -1,0 +1,455 @@
+//! One frame's datagrams: addressing, reads and writes of the register space (shadowed until
+//! the frame ends), logical addressing through the FMMUs, and the working counter.
+use ferrocat_wire::datagram::HEADER_LEN;
+use ferrocat_wire::register::{AlState, Fmmu, SyncManager};
+use ferrocat_wire::Command;
+
+use super::{sm_area, Esc, FrameEffects, FrameTiming};
+use crate::app::Pdi;
+use crate::config::DcWidth;
+use crate::dc::DcUnit;
+use crate::regs::ecat_writable;
+
+impl Esc {
+    /// Processes the datagram chain of one frame passing the processing unit; `timing` is
+    /// relative to `origin_ns` (the segment keeps one route and shifts it per frame).
+    pub fn process_frame(&mut self, chain: &mut [u8], timing: &FrameTiming, origin_ns: u64) {
+        let epu_ns = timing.epu_ns + origin_ns;
+        self.advance_to(epu_ns);
+        self.frames += 1;
+        if self.expected.mailbox.is_some() {
+            self.deliver_mailbox();
+        }
+        if matches!(self.al.state, AlState::SafeOp | AlState::Op) {
+            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+            self.app.sample_inputs(&mut pdi);
+        }
+        if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
+            self.refresh_registers();
+        }
+        // ECAT reads of 0x0910 see the time the frame passed, minus the delay: latched now,
+        // put into the register when a datagram reads it (most frames do not).
+        self.system_time_latch = self.dc.as_ref().map(|_| epu_ns);
+        self.effects = FrameEffects::default();
+        let mut off = 0;
+        while off + HEADER_LEN + 2 <= chain.len() {
+            let len = (u16::from_le_bytes([chain[off + 6], chain[off + 7]]) & 0x07FF) as usize;
+            let end = off + HEADER_LEN + len + 2;
+            if end > chain.len() {
+                break;
+            }
+            let more = chain[off + 7] & 0x80 != 0;
+            self.datagram(&mut chain[off..end]);
+            off = end;
+            if !more {
+                break;
+            }
+        }
+        self.end_of_frame(timing, origin_ns);
+    }
+
+    pub(super) fn addressed_fp(&self, adp: u16) -> bool {
+        let alias_on = self.mem[0x0103] & 0x01 != 0;
+        adp == self.station_address() || (alias_on && adp == u16::from_le_bytes([self.mem[0x12], self.mem[0x13]]))
+    }
+
+    pub(super) fn datagram(&mut self, d: &mut [u8]) {
+        // The IRQ field passes before the data: it carries the events as they were before
+        // this datagram's own reads and writes.
+        if self.irq != 0 {
+            let irq = u16::from_le_bytes([d[8], d[9]]) | self.irq;
+            d[8..10].copy_from_slice(&irq.to_le_bytes());
+        }
+        let cmd = Command(d[0]);
+        let adp = u16::from_le_bytes([d[2], d[3]]);
+        let ado = u16::from_le_bytes([d[4], d[5]]);
+        let logical = u32::from_le_bytes([d[2], d[3], d[4], d[5]]);
+        let n = d.len() - 2;
+        let (head, rest) = d.split_at_mut(HEADER_LEN);
+        let (data, wkc) = rest.split_at_mut(n - HEADER_LEN);
+        let rw_offset = u16::from_le_bytes([self.mem[0x0108], self.mem[0x0109]]);
+        let mut inc = 0u16;
+        match cmd {
+            Command::APRD | Command::FPRD | Command::BRD => {
+                let hit = match cmd {
+                    Command::APRD => adp == 0,
+                    Command::FPRD => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit && self.read(ado, data, cmd == Command::BRD) {
+                    inc = 1;
+                }
+            }
+            Command::APWR | Command::FPWR | Command::BWR => {
+                let hit = match cmd {
+                    Command::APWR => adp == 0,
+                    Command::FPWR => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit && self.write(ado, data, cmd) {
+                    inc = 1;
+                }
+            }
+            Command::APRW | Command::FPRW | Command::BRW => {
+                let hit = match cmd {
+                    Command::APRW => adp == 0,
+                    Command::FPRW => self.addressed_fp(adp),
+                    _ => true,
+                };
+                if hit {
+                    let out = data.to_vec();
+                    if self.read(ado, data, cmd == Command::BRW) {
+                        inc += 1;
+                    }
+                    if self.write(ado.wrapping_add(rw_offset), &out, cmd) {
+                        inc += 2;
+                    }
+                }
+            }
+            Command::ARMW | Command::FRMW => {
+                let reader = if cmd == Command::ARMW { adp == 0 } else { self.addressed_fp(adp) };
+                let ok = if reader { self.read(ado, data, false) } else { self.write(ado, data, cmd) };
+                if ok {
+                    inc = 1;
+                }
+            }
+            Command::LRD | Command::LWR | Command::LRW => inc = self.logical(cmd, logical, data),
+            _ => {}
+        }
+        if cmd.increments_adp() {
+            head[2..4].copy_from_slice(&adp.wrapping_add(1).to_le_bytes());
+        }
+        let w = u16::from_le_bytes([wkc[0], wkc[1]]).wrapping_add(inc);
+        wkc.copy_from_slice(&w.to_le_bytes());
+    }
+
+    pub(super) fn sm_at(&self, a: u16) -> Option<(u8, SyncManager)> {
+        // Outside every enabled SyncManager's span (all registers, usually): no search.
+        if (a as u32) < self.sm_span.0 || a as u32 >= self.sm_span.1 {
+            return None;
+        }
+        (0..self.config.sm_count)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, s)| s.enabled() && s.length > 0 && a >= s.start && (a as u32) < s.start as u32 + s.length as u32)
+    }
+
+    /// Whether `a` is a register this ESC does not implement: FMMUs and SyncManagers beyond its
+    /// count, the DC block without a DC unit. Accesses to them do not count in the WKC.
+    pub(super) fn absent(&self, a: u16) -> bool {
+        match a {
+            0x0600..=0x06FF => (a - 0x0600) / 16 >= self.config.fmmu_count as u16,
+            0x0800..=0x087F => (a - 0x0800) / 8 >= self.config.sm_count as u16,
+            0x0900..=0x090F => self.dc.is_none(),
+            0x0910..=0x09FF => self.dc.is_none() || !self.system_time_unit,
+            _ => a as usize >= self.mem.len(),
+        }
+    }
+
+    /// Puts the time the frame passed (minus the delay) into 0x0910, once per frame.
+    pub(super) fn latch_system_time(&mut self) {
+        if let (Some(t), Some(dc)) = (self.system_time_latch.take(), &self.dc) {
+            let v = dc.ecat_system_time(t);
+            let n = if dc.width == DcWidth::Bits64 { 8 } else { 4 };
+            self.mem[0x0910..0x0910 + n].copy_from_slice(&v.to_le_bytes()[..n]);
+        }
+    }
+
+    /// One byte read by the master; `None` if it cannot be read.
+    pub(super) fn read_byte(&mut self, a: u16) -> Option<u8> {
+        if self.absent(a) {
+            return None;
+        }
+        // Registers whose read has a side effect; one match, as every byte of every read
+        // (process data included) passes here.
+        match a {
+            0x0910..=0x0917 => self.latch_system_time(),
+            // SYNC1 pulses are not events of their own: its registers are brought to the
+            // frame's instant when read.
+            0x0984 | 0x0998..=0x099F => self.refresh_sync1_registers(),
+            0x098E..=0x098F | 0x0220..=0x0223 => self.refresh_pdi_events(),
+            0x09B0..=0x09CF if (a - 0x09B0) % 8 == 0 => {
+                // Reading a latch time clears its single-event flag (ECAT-controlled units).
+                let unit = ((a - 0x09B0) / 16) as usize;
+                let edge = ((a - 0x09B0) / 8 % 2) as u8;
+                if self.mem[0x0980] & (0x10 << unit) == 0 {
+                    self.mem[0x09AE + unit] &= !(1 << edge);
+                    self.update_irq();
+                }
+            }
+            // An ECAT read of DL or AL status clears its event (ESC datasheet, 0x0210).
+            0x0110..=0x0111 if self.dl_changed => {
+                self.dl_changed = false;
+                self.update_irq();
+            }
+            0x0130..=0x0131 if self.al_changed => {
+                self.al_changed = false;
+                self.update_irq();
+            }
+            _ => {}
+        }
+        if let Some((n, s)) = self.sm_at(a) {
+            if s.is_mailbox() && a == s.start && !s.ecat_writes() && self.sms[n as usize].full {
+                // The master opens the buffer the firmware wrote.
+                self.sms[n as usize].int_write = false;
+                self.put_sm_status(n);
+            }
+            let st = &mut self.sms[n as usize];
+            if s.is_mailbox() {
+                if s.ecat_writes() || !st.full {
+                    return None;
+                }
+                if a as u32 == s.start as u32 + s.length as u32 - 1 {
+                    st.last_byte_read = true;
+                    self.effects.sm_buffer_done = true;
+                }
+            }
+        }
+        Some(self.mem[a as usize])
+    }
+
+    pub(super) fn read(&mut self, ado: u16, data: &mut [u8], or: bool) -> bool {
+        // The system time as a whole (the reference's FRMW every cycle): what `read_byte`
+        // does byte by byte, at once.
+        let end = ado as u32 + data.len() as u32;
+        if (0x0910..0x0918).contains(&ado)
+            && end <= 0x0918
+            && !data.is_empty()
+            && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
+        {
+            if self.dc.is_none() || !self.system_time_unit {
+                return false;
+            }
+            self.latch_system_time();
+            for (b, v) in data.iter_mut().zip(&self.mem[ado as usize..end as usize]) {
+                *b = if or { *b | v } else { *v };
+            }
+            return true;
+        }
+        let mut ok = false;
+        for (i, b) in data.iter_mut().enumerate() {
+            let Some(a) = ado.checked_add(i as u16) else { break };
+            if let Some(v) = self.read_byte(a) {
+                *b = if or { *b | v } else { v };
+                ok = true;
+            }
+        }
+        ok
+    }
+
+    /// One byte written by the master; false if the write does not succeed.
+    pub(super) fn write_byte(&mut self, a: u16, v: u8, cmd: Command) -> bool {
+        if self.absent(a) {
+            return false;
+        }
+        if let Some((n, s)) = self.sm_at(a) {
+            if s.is_mailbox() && a == s.start && s.ecat_writes() && !self.sms[n as usize].full {
+                // The master opens the buffer the firmware read.
+                self.sms[n as usize].int_read = false;
+                self.put_sm_status(n);
+            }
+            let st = &mut self.sms[n as usize];
+            let last = a as u32 == s.start as u32 + s.length as u32 - 1;
+            if s.is_mailbox() {
+                if !s.ecat_writes() || st.full {
+                    return false;
+                }
+                self.mem[a as usize] = v;
+            } else if s.ecat_writes() {
+                let area = sm_area(&s, self.mem.len());
+                if !st.staged || st.staging.len() != area.len() {
+                    st.staging.clear();
+                    st.staging.extend_from_slice(&self.mem[area]);
+                    st.staged = true;
+                }
+                st.staging[(a - s.start) as usize] = v;
+            } else {
+                self.mem[a as usize] = v;
+            }
+            if last {
+                st.last_byte_written = true;
+                self.effects.sm_buffer_done = true;
+            }
+            return true;
+        }
+        if a < 0x1000 {
+            if (0x0120..=0x0121).contains(&a) && self.pending_al.is_some() && !self.device_emulation() {
+                // AL control is locked until the firmware has read the last write.
+                return false;
+            }
+            if ecat_writable(a) {
+                match a {
+                    0x0900..=0x0903 => {
+                        self.effects.latch_epu = true;
+                        if matches!(cmd, Command::BWR | Command::FPWR | Command::BRW | Command::FPRW) {
+                            self.effects.latch_ports = true;
+                        }
+                    }
+                    // A write of the system time feeds the time control loop and leaves the
+                    // register as it is (esc-spec 0x0910): nothing to apply at the end.
+                    0x0910..=0x0917 => {
+                        self.system_time_byte_written(a, v);
+                        return true;
+                    }
+                    _ => {}
+                }
+                self.pending.push((a, v));
+                return true;
+            }
+            // A read-only register ignores the write and does not count it: real ESCs answer
+            // a BWR of 0x092C alone with WKC 0 (replay-dc and seven more captures).
+            return false;
+        }
+        self.mem[a as usize] = v;
+        true
+    }
+
+    pub(super) fn write(&mut self, ado: u16, data: &[u8], cmd: Command) -> bool {
+        // The system time as a whole (FRMW/ARMW/BWR of 0x0910, every follower every cycle):
+        // what `write_byte` does byte by byte, at once — a TCL sample, nothing stored.
+        let end = ado as u32 + data.len() as u32;
+        if (0x0910..0x0918).contains(&ado)
+            && end <= 0x0918
+            && self.dc.is_some()
+            && self.system_time_unit
+            && (end <= self.sm_span.0 || ado as u32 >= self.sm_span.1)
+        {
+            if data.is_empty() {
+                return false;
+            }
+            let t = self.effects.tcl.get_or_insert([None; 4]);
+            for (slot, &v) in t.iter_mut().skip((ado - 0x0910) as usize).zip(data) {
+                *slot = Some(v);
+            }
+            return true;
+        }
+        let mut ok = false;
+        for (i, &v) in data.iter().enumerate() {
+            let Some(a) = ado.checked_add(i as u16) else { break };
+            ok |= self.write_byte(a, v, cmd);
+        }
+        ok
+    }
+
+    /// LRD/LWR/LRW through the FMMUs, bit by bit where they are not byte-aligned. Returns the
+    /// WKC increment: +1 if something was read, +2 if something was written (LWR: +1).
+    pub(super) fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
+        let dg_start = logical as u64 * 8;
+        let dg_end = dg_start + data.len() as u64 * 8;
+        let overlap = |f: &Fmmu| {
+            let f_start = f.logical_start as u64 * 8 + (f.logical_start_bit & 7) as u64;
+            let f_end = (f.logical_start as u64 + f.length as u64 - 1) * 8 + (f.logical_stop_bit & 7) as u64 + 1;
+            (f_start, f_start.max(dg_start), f_end.min(dg_end))
+        };
+        // The frame bytes some FMMU maps: writes take them as they arrived (a read through
+        // another FMMU may change them first), so they are kept aside; most ESCs map only a
+        // few bytes of a long LRW.
+        let (first, last, hits) = self
+            .fmmu_cache
+            .iter()
+            .map(overlap)
+            .filter(|(_, lo, hi)| lo < hi)
+            .fold((u64::MAX, 0, 0), |(a, b, n), (_, lo, hi)| {
+                (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)), n + 1)
+            });
+        if first >= last {
+            return 0;
+        }
+        // One FMMU's runs cover disjoint frame bits, each written before it is read: only a
+        // second FMMU can read into bits another writes, so only then is a copy needed.
+        let mut original = std::mem::take(&mut self.scratch);
+        original.clear();
+        if hits > 1 {
+            original.extend_from_slice(&data[first as usize..last as usize]);
+        }
+        let (mut read_ok, mut write_ok) = (false, false);
+        for i in 0..self.fmmu_cache.len() {
+            let f = self.fmmu_cache[i];
+            let (f_start, lo, hi) = overlap(&f);
+            if lo >= hi {
+                continue;
+            }
+            let phys0 = f.physical_start as u64 * 8 + (f.physical_start_bit & 7) as u64;
+            let reads = f.fmmu_type & Fmmu::READ != 0 && matches!(cmd, Command::LRD | Command::LRW);
+            let writes = f.fmmu_type & Fmmu::WRITE != 0 && matches!(cmd, Command::LWR | Command::LRW);
+            // Walk the overlap in runs that stay within one physical and one frame byte.
+            let mut bit = lo;
+            while bit < hi {
+                let pbit = phys0 + (bit - f_start);
+                let fbit = bit - dg_start;
+                let run = (8 - pbit % 8).min(8 - fbit % 8).min(hi - bit);
+                let pa = (pbit / 8) as u16;
+                let fi = (fbit / 8) as usize;
+                let mask_p = (((1u16 << run) - 1) << (pbit % 8)) as u8;
+                let mask_f = (((1u16 << run) - 1) << (fbit % 8)) as u8;
+                let shift = |v: u8, from: u64, to: u64| -> u8 {
+                    if to >= from {
+                        v << (to - from)
+                    } else {
+                        v >> (from - to)
+                    }
+                };
+                if writes {
+                    let cur = self.current_byte(pa);
+                    let arrived = if hits > 1 { original[fi - first as usize] } else { data[fi] };
+                    let bits = shift(arrived & mask_f, fbit % 8, pbit % 8);
+                    if self.write_byte(pa, (cur & !mask_p) | bits, cmd) {
+                        write_ok = true;
+                    }
+                }
+                if reads {
+                    if let Some(v) = self.read_byte(pa) {
+                        data[fi] = (data[fi] & !mask_f) | shift(v & mask_p, pbit % 8, fbit % 8);
+                        read_ok = true;
+                    }
+                }
+                bit += run;
+            }
+        }
+        self.scratch = original;
+        match cmd {
+            Command::LRD => read_ok as u16,
+            Command::LWR => write_ok as u16,
+            _ => read_ok as u16 + 2 * write_ok as u16,
+        }
+    }
+
+    /// The value a partial (bit-wise) write builds on: the staging buffer of a buffered output
+    /// SM, a pending register write, or memory.
+    pub(super) fn current_byte(&self, a: u16) -> u8 {
+        if let Some((n, s)) = self.sm_at(a) {
+            let st = &self.sms[n as usize];
+            if !s.is_mailbox() && s.ecat_writes() && st.staged && st.staging.len() == sm_area(&s, self.mem.len()).len()
+            {
+                return st.staging[(a - s.start) as usize];
+            }
+        }
+        if let Some(&(_, v)) = self.pending.iter().rev().find(|(p, _)| *p == a) {
+            return v;
+        }
+        self.mem.get(a as usize).copied().unwrap_or(0)
+    }
+
+    /// A byte of 0x0910–0x0917 written: the low four go to the frame's TCL sample, the
+    /// register itself stays as it is (esc-spec 0x0910).
+    pub(super) fn system_time_byte_written(&mut self, a: u16, v: u8) {
+        let t = self.effects.tcl.get_or_insert([None; 4]);
+        if let Some(slot) = t.get_mut(a.wrapping_sub(0x0910) as usize) {
+            *slot = Some(v);
+        }
+    }
+
+    /// A frame's write of 0x0910 (the bytes it wrote): one TCL sample at `t`.
+    pub(super) fn feed_tcl(dc: &mut DcUnit, bytes: Option<[Option<u8>; 4]>, t: u64) {
+        // Only a write that includes byte 0x0910 produces a sample (esc-spec §3.2).
+        let Some(bytes @ [Some(_), ..]) = bytes else { return };
+        // Bytes the write left out are what the register holds (a read's value).
+        let v = match bytes {
+            [Some(a), Some(b), Some(c), Some(d)] => [a, b, c, d],
+            _ => {
+                let cur = (dc.ecat_system_time(t) as u32).to_le_bytes();
+                std::array::from_fn(|i| bytes[i].unwrap_or(cur[i]))
+            }
+        };
+        dc.tcl_sample(t, u32::from_le_bytes(v));
+    }
+}
