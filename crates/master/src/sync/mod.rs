@@ -1,0 +1,176 @@
+//! Cyclic clock synchronisation between the master and the reference clock. Every method sits
+//! behind one small interface, as linuxptp's servos do: each cycle the master hands a
+//! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
+mod chen2016;
+mod conventional;
+mod ferrocat;
+mod park2020;
+mod pi;
+
+pub use chen2016::Chen2016;
+pub use conventional::{Conventional, Nominal};
+pub use ferrocat::{Ferrocat, Steering, DENSE_FIT_WINDOW, FIT_WINDOW};
+pub use park2020::Park2020;
+pub use pi::SoemPi;
+
+/// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
+pub const MAX_CYCLE_NS: u64 = u32::MAX as u64;
+
+/// Who follows whom.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coupling {
+    /// The master writes its time into the reference's 0x0910 every cycle (IgH, Park 2020).
+    ReferenceFollowsMaster,
+    /// The reference runs free; the master adjusts its cycle to it (SOEM's examples, Chen 2016).
+    MasterFollowsReference,
+}
+
+/// What one cycle's DC frame measured. Times are DC system time (ns since 2000) on the
+/// master's clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sample {
+    /// Cycle number (gaps mean lost frames).
+    pub cycle: u64,
+    /// When the master built the frame (the time it wrote into it).
+    pub built_ns: u64,
+    /// When the frame left and when its reply began to arrive, if the link stamps them;
+    /// otherwise `tx_ns` is `None` and `rx_ns` is when the master had the reply.
+    pub tx_ns: Option<u64>,
+    pub rx_ns: u64,
+    /// The reference's system time as the frame passed it (the FRMW reply; a 32-bit
+    /// reference's unwrapped onto 64 bits).
+    pub reference_ns: u64,
+    /// The reference's System_Time_Offset (0x0920) in force as the frame passed it, where the
+    /// frame read it (methods that steer the offset); unwrapped likewise.
+    pub reference_offset_ns: Option<u64>,
+    /// The reference's 0x092C (local − received, filtered), signed.
+    pub difference_ns: i64,
+    /// How long the frame spent behind the reference before it came back through it
+    /// (receive time of its return port minus port 0).
+    pub loop_ns: u64,
+    /// Time on the wire the stamps include beyond the frame's head: the whole frame at
+    /// 100 Mbit/s when the receive time is taken after the last byte (software), 0 for a
+    /// NIC that stamps the start of frame.
+    pub frame_ns: u64,
+    /// From the frame's head to the end of its process data (its LRW datagrams), which the
+    /// slaves take at their next SYNC0; 0 for a frame without.
+    pub data_ns: u64,
+}
+
+impl Sample {
+    /// The one-way time from building the frame to its passing the reference, as a round trip
+    /// shows it: the send delay where the link stamps it, plus half of what remains of the
+    /// round trip once the loop behind the reference and the frame's own length are taken out
+    /// (Park 2020 eq. 3 per sample, without its frame-length bias).
+    pub fn lead_ns(&self) -> i64 {
+        // Differences of u64 times on the wrapping circle, as DC time does.
+        let sent = self.tx_ns.unwrap_or(self.built_ns);
+        let send = sent.wrapping_sub(self.built_ns) as i64;
+        let rtt =
+            (self.rx_ns.wrapping_sub(sent) as i64).wrapping_sub(self.loop_ns as i64).wrapping_sub(self.frame_ns as i64);
+        send.wrapping_add(rtt / 2)
+    }
+}
+
+/// What the master does after a sample.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Correction {
+    /// Add this to every DC slave's System_Time_Offset (0x0920); where the method steers the
+    /// reference's offset, to every other one (the method moves the reference itself).
+    pub shift_offsets_ns: i64,
+    /// The master's next cycle period (master-follows-reference methods).
+    pub next_period_ns: Option<u64>,
+}
+
+/// Counts of what a method's line has been through.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineEvents {
+    /// Restarts: a change of rate or phase (or a gap too long to share a line).
+    pub restarts: u64,
+    /// Changes the change test signalled and the points after it did not confirm.
+    pub false_alarms: u64,
+}
+
+impl LineEvents {
+    /// What happened since `earlier`.
+    pub fn since(self, earlier: LineEvents) -> LineEvents {
+        LineEvents {
+            restarts: self.restarts.saturating_sub(earlier.restarts),
+            false_alarms: self.false_alarms.saturating_sub(earlier.false_alarms),
+        }
+    }
+}
+
+pub trait ClockSync {
+    fn name(&self) -> &'static str;
+    fn coupling(&self) -> Coupling;
+    /// Reference-follows-master: the time to write into the reference's 0x0910 for a frame
+    /// built at `built_ns`.
+    fn reference_time(&mut self, built_ns: u64) -> u64 {
+        built_ns
+    }
+    /// Reference-follows-master: whether cycle `cycle`'s frame carries the master's time.
+    fn writes_reference_time(&self, _cycle: u64) -> bool {
+        true
+    }
+    /// Reference-follows-master: whether the method steers the reference through its
+    /// System_Time_Offset (0x0920) instead of its time control loop; its frames then read
+    /// the offset, or replace it with what [`ClockSync::reference_offset`] returns.
+    fn steers_reference_offset(&self) -> bool {
+        false
+    }
+    /// The offset to give the reference in the frame built at `built_ns`, which stands for
+    /// `holds_ns` after the frame's passage, until the next frame gives another (`None`: until
+    /// the next cycle's frame); `None`: read it only.
+    fn reference_offset(&mut self, _built_ns: u64, _holds_ns: Option<u64>) -> Option<u64> {
+        None
+    }
+    /// Offset steering: whether probe frames give the reference its offset too
+    /// ([`ClockSync::reference_offset`]), not only read it.
+    fn probes_give_offset(&self) -> bool {
+        false
+    }
+    /// Takes one cycle's sample (`None`: the frame was lost).
+    fn update(&mut self, sample: Option<&Sample>) -> Correction;
+    /// Master follows reference: the master's clock is its estimate of the reference's system
+    /// time at `host_ns` (the master's own system time); `None` where the method keeps none.
+    fn master_time(&self, _host_ns: u64) -> Option<u64> {
+        None
+    }
+    /// A master − reference error measured by an independent path (`crate::calibrate`): a
+    /// method that can takes it out from now on. Returns whether it did (the papers' methods,
+    /// as published, do not).
+    fn take_error(&mut self, _error_ns: i64) -> bool {
+        false
+    }
+    /// How many probe frames the method wants after this cycle's: each only reads the
+    /// reference's time (and offset), and its sample goes to [`ClockSync::probe`].
+    fn probes_wanted(&self) -> u32 {
+        0
+    }
+    /// How long after the cycle's frame was built its probes must have ended (ns): the next
+    /// cycle's frame is due then. None starts that, at twice the probes' mean duration so far,
+    /// would not end in time.
+    fn probe_window_ns(&self) -> u64 {
+        0
+    }
+    /// Takes a probe frame's sample.
+    fn probe(&mut self, _sample: &Sample) {}
+    /// Whether a lost cycle's frame is made up at once by a frame that gives the reference
+    /// its offset ([`ClockSync::reference_offset`]) and reads its time (a probe's sample).
+    fn makes_up_lost_frames(&self) -> bool {
+        false
+    }
+    /// What the method's line has been through so far; `None`: it keeps no line.
+    fn line_events(&self) -> Option<LineEvents> {
+        None
+    }
+    /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
+    /// from now on; `None`: leave the delays as they are.
+    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,38 @@
+//! The PI loop of SOEM's examples.
+use super::{ClockSync, Correction, Coupling, Sample, MAX_CYCLE_NS};
+
+/// The PI loop of SOEM's examples: the reference's time modulo the cycle, minus a shift, is
+/// the phase error; the next period is the cycle minus error/100 minus the error sign's
+/// running sum/20.
+#[derive(Debug)]
+pub struct SoemPi {
+    pub cycle_ns: u64,
+    pub shift_ns: i64,
+    integral: i64,
+}
+
+impl SoemPi {
+    pub fn new(cycle_ns: u64, shift_ns: i64) -> Self {
+        SoemPi { cycle_ns: cycle_ns.clamp(2, MAX_CYCLE_NS), shift_ns, integral: 0 }
+    }
+}
+
+impl ClockSync for SoemPi {
+    fn name(&self) -> &'static str {
+        "pi"
+    }
+    fn coupling(&self) -> Coupling {
+        Coupling::MasterFollowsReference
+    }
+    fn update(&mut self, s: Option<&Sample>) -> Correction {
+        let c = self.cycle_ns as i64;
+        let Some(s) = s else { return Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) } };
+        let mut delta = (s.reference_ns.wrapping_sub(self.shift_ns as u64) % self.cycle_ns) as i64;
+        if delta > c / 2 {
+            delta -= c;
+        }
+        self.integral = self.integral.saturating_add(delta.signum());
+        let period = c.saturating_sub(delta / 100).saturating_sub(self.integral / 20);
+        Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1) as u64) }
+    }
+}
