@@ -1,0 +1,212 @@
+//! How the slaves are wired and the propagation delays between them (esc-spec §3.6).
+use ferrocat_wire::register::PortDescriptor;
+use ferrocat_wire::{Address, Command};
+
+use super::Master;
+use crate::engine::Pdu;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+
+impl<I: Io> Master<I> {
+    /// Parents and ports: parsed from the processing order, the active ports, entry ports and
+    /// receive times where known (crate::topology); counting ports as SOEM does where no tree
+    /// fits or the segment is too long to parse.
+    pub(super) fn topology(&mut self) {
+        let view = self.port_views();
+        if view.len() <= 1024 {
+            if let Some(links) = crate::topology::infer(&view) {
+                for (s, l) in self.slaves.iter_mut().zip(links) {
+                    s.parent = l.map(|l| l.parent as u16);
+                    s.parent_port = l.map_or(0, |l| l.port);
+                }
+                return;
+            }
+        }
+        self.count_ports_topology();
+    }
+
+    /// SOEM's inference: every entry on port 0, the processing order a pre-order walk.
+    pub(super) fn count_ports_topology(&mut self) {
+        let count = self.slaves.len();
+        let topo: Vec<i32> = self.slaves.iter().map(|s| s.active_ports.iter().filter(|&&a| a).count() as i32).collect();
+        for i in 1..count {
+            let mut c = 0i32;
+            let mut j = i - 1;
+            loop {
+                match topo[j] {
+                    1 => c -= 1,
+                    3 => c += 1,
+                    4 => c += 2,
+                    _ => {}
+                }
+                if (c >= 0 && topo[j] > 1) || j == 0 {
+                    self.slaves[i].parent = Some(j as u16);
+                    break;
+                }
+                j -= 1;
+            }
+        }
+        // A child hangs on its parent's next active port, in processing order after the entry.
+        for p in 0..count {
+            let children: Vec<usize> = (0..count).filter(|&c| self.slaves[c].parent == Some(p as u16)).collect();
+            let mut port = self.slaves[p].entry_port;
+            for c in children {
+                for _ in 0..4 {
+                    port = [3, 2, 0, 1][port as usize];
+                    if self.slaves[p].active_ports[port as usize] && port != self.slaves[p].entry_port {
+                        break;
+                    }
+                }
+                self.slaves[c].parent_port = port;
+            }
+        }
+    }
+
+    /// Latches the receive times (BWR 0x0900) and computes every DC slave's propagation delay
+    /// from the reference (the first DC slave) for any tree: a child's hop is half of its
+    /// parent's round trip through that port minus the child's own loop; slaves behind a later
+    /// port also wait for the earlier branches (esc-spec §3.6).
+    pub fn measure_delays(&mut self) -> Result<()> {
+        self.latch_and_measure_delays().map(|_| ())
+    }
+
+    /// As [`Master::measure_delays`]; returns the stamps of the latching frame (without the
+    /// reference's readings) when there are DC slaves.
+    pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
+        if !self.slaves.iter().any(|s| s.has_dc) {
+            return Ok(None);
+        }
+        // Sent once per try, so that the stamps are of the frame that latched.
+        let mut tries = self.engine.retries.saturating_add(1);
+        let mut stamps = loop {
+            let built_ns = self.master_system_time();
+            let mut latch = [0u8; 4];
+            let mut pdus = [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch)];
+            let bytes = crate::dc::frame_bytes(&pdus);
+            tries -= 1;
+            match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
+                Ok(()) => break self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes),
+                Err(MasterError::Timeout { .. }) if tries > 0 => continue,
+                Err(e) => return Err(e),
+            }
+        };
+        for k in 0..self.slaves.len() {
+            if !self.slaves[k].has_dc {
+                continue;
+            }
+            let st = self.slaves[k].station;
+            let mut t = [0u8; 16];
+            self.fprd(st, 0x0900, &mut t)?;
+            let mut epu = [0u8; 8];
+            let answered = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, &mut epu)? == 1;
+            let s = &mut self.slaves[k];
+            for p in 0..4 {
+                s.receive_times[p] = u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap());
+            }
+            // Without a system time (WKC 0) the processing unit's receive time is port 0's, as
+            // 0x0918's low word is where it exists (esc-spec §3.3).
+            s.has_system_time = answered;
+            s.receive_time_epu = if answered { u64::from_le_bytes(epu) } else { s.receive_times[0] as u64 };
+            // The entry port saw the frame first (reversed cabling puts it elsewhere).
+            let active: Vec<usize> = (0..4).filter(|&p| s.active_ports[p]).collect();
+            if let Some(&e) = active.iter().min_by_key(|&&p| s.receive_times[p].wrapping_sub(s.receive_times[0]) as i32)
+            {
+                s.entry_port = e as u8;
+            }
+        }
+        self.topology();
+        let view = self.port_views();
+        // When the frame reaches each DC slave's entry port, relative to the first DC slave on
+        // its way; parents before children, whatever the processing order.
+        let mut entry_at: Vec<Option<i64>> = vec![None; self.slaves.len()];
+        for k in self.tree_order() {
+            if !self.slaves[k].has_dc {
+                continue;
+            }
+            // Behind non-DC slaves (which latch no receive times), measure from the nearest DC
+            // ancestor: the round trip it sees on the port toward them holds their hops both ways
+            // and this slave's own loop.
+            let (mut via, mut port) = (self.slaves[k].parent.map(|p| p as usize), self.slaves[k].parent_port);
+            // Closed ports the frame loops through on its way out, less those on its way back,
+            // that no latch separates: the child's after its last event, each non-DC slave's on
+            // the way (one loop-back each, `closed_port_loop_ns`).
+            let mut loops = -view[k].loops_after_last_event();
+            while let Some(v) = via.filter(|&v| !self.slaves[v].has_dc) {
+                loops += view[v].loops_between(view[v].before(port), port)
+                    - view[v].loops_between(port, view[v].after(port));
+                port = self.slaves[v].parent_port;
+                via = self.slaves[v].parent.map(|p| p as usize);
+            }
+            entry_at[k] = Some(match via.and_then(|v| Some((v, entry_at[v]?))) {
+                Some((v, at)) => {
+                    let before = view[v].before(port);
+                    loops += view[v].loops_between(before, port);
+                    // A child's hop is half of what the frame spent behind the port, less the
+                    // child's own loop (esc-spec §3.6), corrected for loop-backs that lengthen
+                    // one way only (the return through a closed port behind a child's last
+                    // latch: half of it would otherwise count as delay).
+                    let behind = view[v].between(before, port).unwrap_or(0) - view[k].span_ns().unwrap_or(0);
+                    let hop = (behind + loops * self.closed_port_loop_ns as i64) / 2;
+                    at + view[v].between(view[v].entry_port, before).unwrap_or(0) + hop
+                }
+                None => 0,
+            });
+        }
+        // The delay is between processing units: a slave entered on a port other than 0
+        // processes the frame after its branches before port 0 (0x0918 latches that instant).
+        let epu_at: Vec<Option<i64>> = self
+            .slaves
+            .iter()
+            .zip(&entry_at)
+            .map(|(s, at)| {
+                let since_entry = (s.receive_time_epu as u32).wrapping_sub(s.receive_times[s.entry_port as usize]);
+                Some((*at)? + since_entry as i32 as i64)
+            })
+            .collect();
+        let reference = self.slaves.iter().position(|s| s.has_system_time);
+        let at_reference = reference.and_then(|r| epu_at[r]).unwrap_or(0);
+        for (s, at) in self.slaves.iter_mut().zip(epu_at) {
+            if s.has_dc {
+                s.delay_ns = at.map_or(0, |t| t - at_reference).clamp(0, u32::MAX as i64) as u32;
+            }
+        }
+        // The first DC slave is the reference (DC initialisation makes it so).
+        if let Some(r) = reference {
+            stamps.loop_ns = self.loop_ns_of(r);
+        }
+        Ok(Some(stamps))
+    }
+
+    pub(super) fn port_views(&self) -> Vec<crate::topology::PortView> {
+        self.slaves
+            .iter()
+            .map(|s| crate::topology::PortView {
+                entry_port: s.entry_port,
+                active_ports: s.active_ports,
+                present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(s.port_descriptor).can_link(p)),
+                receive_times: s.has_dc.then_some(s.receive_times),
+                epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
+            })
+            .collect()
+    }
+
+    /// Positions with every parent before its children (breadth first from the first slave).
+    pub(super) fn tree_order(&self) -> Vec<usize> {
+        let n = self.slaves.len();
+        let mut order: Vec<usize> = (0..n).filter(|&k| self.slaves[k].parent.is_none()).collect();
+        let mut seen = vec![false; n];
+        let mut i = 0;
+        while i < order.len() {
+            let p = order[i];
+            seen[p] = true;
+            for (c, s) in self.slaves.iter().enumerate() {
+                if !seen[c] && s.parent == Some(p as u16) {
+                    seen[c] = true;
+                    order.push(c);
+                }
+            }
+            i += 1;
+        }
+        order
+    }
+}

@@ -1,0 +1,273 @@
+//! Bring-up: finding the slaves, reading what they are, configuring mailboxes and process data,
+//! and walking them through the AL states.
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
+use ferrocat_wire::sii::SiiInfo;
+use ferrocat_wire::{Address, Command};
+
+use crate::engine::{Engine, Pdu, SlaveTag};
+use crate::error::{code_text, MasterError, Result};
+use crate::io::Io;
+use crate::slave::{MailboxConfig, Slave};
+
+mod delays;
+mod process_data;
+mod sii;
+mod states;
+
+/// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).
+pub const STATION_BASE: u16 = 0x1001;
+
+/// Something that happened to a slave during operation, reported once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// The slave left OP (its AL status and code).
+    LeftOp { position: u16, name: String, status: AlStatus, code: AlStatusCode },
+    /// The slave stopped answering (link lost or powered off).
+    Lost { position: u16, name: String },
+    /// The slave is back in OP.
+    Recovered { position: u16, name: String },
+    /// A CoE emergency.
+    Emergency { position: u16, name: String, error_code: u16, error_register: u8, data: [u8; 5] },
+}
+
+impl std::fmt::Display for MasterEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MasterEvent::LeftOp { position, name, status, code } => {
+                let st = status.state().map(|s| s.name()).unwrap_or("?");
+                write!(
+                    f,
+                    "slave {position} ({name}) left OP: now {st}{}{}",
+                    if status.error() { " with an error" } else { "" },
+                    code_text(*code)
+                )
+            }
+            MasterEvent::Lost { position, name } => write!(f, "slave {position} ({name}) is not answering"),
+            MasterEvent::Recovered { position, name } => write!(f, "slave {position} ({name}) is back in OP"),
+            MasterEvent::Emergency { position, name, error_code, error_register, data } => {
+                write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
+            }
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct Master<I: Io> {
+    pub engine: Engine<I>,
+    pub slaves: Vec<Slave>,
+    /// The process image: all outputs, then all inputs.
+    pub image: Vec<u8>,
+    pub out_bytes: u32,
+    pub in_bytes: u32,
+    /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
+    /// with inputs.
+    pub expected_wkc: u16,
+    pub events: Vec<MasterEvent>,
+    /// How long a state transition may take before it is an error.
+    pub state_timeout_ns: u64,
+    /// How long an SDO may take.
+    pub mailbox_timeout_ns: u64,
+    pub(crate) cyc: crate::process::CycleState,
+    /// How long a cyclic frame may take before it counts as lost.
+    pub cyclic_timeout_ns: u64,
+    /// Check the slaves after a cycle with a short working counter.
+    pub supervise_on_wkc: bool,
+    /// Device descriptions from ESI files: the PDO mapping of slaves whose CoE and SII do not
+    /// give one (vendor, device).
+    pub esi: Vec<(u32, ferrocat_esi::Device)>,
+    /// Station address of the reference clock when the cycle distributes it (FRMW of 0x0910).
+    pub dc_reference: Option<u16>,
+    /// The reference clock's system time as the last cycle's FRMW read it.
+    pub dc_time: u64,
+    pub(crate) frmw: [u8; 8],
+    /// Master clock → DC system time (ns since 2000), fixed at first use.
+    pub(crate) epoch_offset_ns: Option<u64>,
+    /// What a closed port's loop-back adds to a frame's way, for the delay computation (0:
+    /// assume nothing, as SOEM, IgH and ethercrab do). See `measure_delays`.
+    pub closed_port_loop_ns: u32,
+}
+
+impl<I: Io> Master<I> {
+    pub fn new(io: I) -> Self {
+        Master {
+            engine: Engine::new(io),
+            slaves: Vec::new(),
+            image: Vec::new(),
+            out_bytes: 0,
+            in_bytes: 0,
+            expected_wkc: 0,
+            events: Vec::new(),
+            state_timeout_ns: 10_000_000_000,
+            mailbox_timeout_ns: 2_000_000_000,
+            cyc: Default::default(),
+            cyclic_timeout_ns: 1_000_000,
+            supervise_on_wkc: true,
+            esi: Vec::new(),
+            dc_reference: None,
+            dc_time: 0,
+            frmw: [0; 8],
+            epoch_offset_ns: None,
+            closed_port_loop_ns: 0,
+        }
+    }
+
+    pub fn slave(&self, position: u16) -> Result<&Slave> {
+        self.slaves
+            .get(position as usize)
+            .ok_or_else(|| MasterError::Config(format!("no slave at position {position}")))
+    }
+
+    /// Finds the slaves and reads everything about them: count, station addresses, identity
+    /// and the whole SII, ESC features, DL status and topology, DC receive times and delays.
+    pub fn scan(&mut self) -> Result<()> {
+        // Reset: every slave to INIT, DL control default, no FMMUs/SMs (as SOEM and IgH do).
+        let mut buf = [0u8; 2];
+        let count = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut buf)?;
+        if count == 0 {
+            return Err(MasterError::NoSlaves);
+        }
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [0x11, 0])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0600 }, &mut [0u8; 256])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0800 }, &mut [0u8; 128])?;
+        self.slaves.clear();
+        for pos in 0..count {
+            let station = STATION_BASE + pos;
+            self.engine.expect(Command::APWR, Address::position(pos, 0x0010), &mut station.to_le_bytes(), 1)?;
+        }
+        let stations: Vec<u16> = (0..count).map(|p| STATION_BASE + p).collect();
+        let images = self.read_all_sii(&stations)?;
+        for (pos, img) in images.into_iter().enumerate() {
+            let slave = self.read_slave(pos as u16, stations[pos], img)?;
+            self.slaves.push(slave);
+        }
+        self.engine.directory = self
+            .slaves
+            .iter()
+            .map(|s| SlaveTag { position: s.position, station: s.station, alias: s.alias, name: s.name.clone() })
+            .collect();
+        self.wait_state_all(AlState::Init)?;
+        self.topology();
+        self.measure_delays()?;
+        Ok(())
+    }
+
+    pub(crate) fn fprd(&mut self, station: u16, ado: u16, out: &mut [u8]) -> Result<()> {
+        self.engine.expect(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
+    }
+
+    pub(crate) fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
+        let mut d = data.to_vec();
+        self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
+    }
+
+    fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
+        let (mut id, mut alias, mut dl) = ([0u8; 10], [0u8; 2], [0u8; 2]);
+        let mut p = [
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0000 }, &mut id),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0012 }, &mut alias),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0110 }, &mut dl),
+        ];
+        self.engine.transact(&mut p)?;
+        if p.iter().any(|x| x.wkc != 1) {
+            return Err(MasterError::Wkc {
+                what: format!("identity of slave {pos}"),
+                expected: 1,
+                got: 0,
+                slaves: format!(" (station {station:#06x})"),
+            });
+        }
+        let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
+        let h = sii.header;
+        let features = u16::from_le_bytes([id[8], id[9]]);
+        let dl_status = DlStatus(u16::from_le_bytes(dl));
+        let mailbox = (h.mailbox_rx_size > 0 && h.mailbox_tx_size > 0).then_some(MailboxConfig {
+            out: (h.mailbox_rx_offset, h.mailbox_rx_size),
+            inp: (h.mailbox_tx_offset, h.mailbox_tx_size),
+            protocols: h.mailbox_protocols,
+        });
+        Ok(Slave {
+            position: pos,
+            station,
+            alias: u16::from_le_bytes(alias),
+            name: sii.string(1).unwrap_or_else(|| format!("{:#010x}", h.product_code)),
+            description: sii.name().unwrap_or_default(),
+            vendor_id: h.vendor_id,
+            product_code: h.product_code,
+            revision: h.revision,
+            serial: h.serial,
+            esc_type: id[0],
+            fmmu_count: id[4],
+            sm_count: id[5],
+            features,
+            dl_status,
+            active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
+            port_descriptor: id[7],
+            entry_port: 0,
+            parent: None,
+            parent_port: 0,
+            has_dc: features & 0x04 != 0,
+            has_system_time: features & 0x04 != 0,
+            dc_64bit: features & 0x08 != 0,
+            receive_times: [0; 4],
+            receive_time_epu: 0,
+            delay_ns: 0,
+            mailbox,
+            mbx_counter: 0,
+            outputs: Vec::new(),
+            inputs: Vec::new(),
+            out_sm: None,
+            in_sm: None,
+            out_area: (0, 0),
+            in_area: (0, 0),
+            state: AlState::Init,
+            health: Default::default(),
+            assignment: [None, None],
+            sii,
+        })
+    }
+
+    /// PREOP → SAFEOP → OP for every slave, exchanging process data meanwhile (slaves with an
+    /// SM watchdog want outputs before OP).
+    pub fn start(&mut self) -> Result<()> {
+        self.request_state_all(AlState::SafeOp)?;
+        self.cycle()?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [AlState::Op as u8, 0])?;
+        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        loop {
+            let now = self.engine.io.now_ns();
+            self.cycle()?;
+            let mut d = [0u8; 2];
+            let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0x0130 }, &mut d)?;
+            if wkc as usize == self.slaves.len() && d[0] & 0x1F == AlState::Op as u8 {
+                // BRD ORs every slave's state: all OP and no error flag.
+                break;
+            }
+            if d[0] & 0x10 != 0 || now > deadline {
+                for k in 0..self.slaves.len() as u16 {
+                    self.wait_state(k, AlState::Op)?;
+                }
+                break;
+            }
+            self.engine.io.sleep_until(now + 1_000_000);
+        }
+        for s in &mut self.slaves {
+            s.state = AlState::Op;
+        }
+        Ok(())
+    }
+
+    /// Adds an FRMW of the reference clock's system time (the first DC slave) to every cyclic
+    /// frame, as SOEM and ethercrab do; returns the reference's position.
+    pub fn distribute_dc(&mut self) -> Option<u16> {
+        let r = self.slaves.iter().find(|s| s.has_system_time)?;
+        self.dc_reference = Some(r.station);
+        Some(r.position)
+    }
+
+    /// Scan, configure, start: the whole bring-up.
+    pub fn bring_up(&mut self) -> Result<()> {
+        self.scan()?;
+        self.configure()?;
+        self.start()
+    }
+}

@@ -1,0 +1,252 @@
+//! Mailboxes, process-data mapping (CoE or SII), SyncManagers, FMMUs and the process image.
+use ferrocat_wire::register::{AlState, Fmmu, SyncManager};
+use ferrocat_wire::sii::SmEntry;
+
+use super::Master;
+use crate::error::Result;
+use crate::io::Io;
+use crate::slave::Mapped;
+
+impl<I: Io> Master<I> {
+    /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
+    /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
+    pub fn configure(&mut self) -> Result<()> {
+        for k in 0..self.slaves.len() {
+            let s = &self.slaves[k];
+            if let Some(m) = s.mailbox.clone() {
+                let st = s.station;
+                let sm0 = SyncManager {
+                    start: m.out.0,
+                    length: m.out.1,
+                    control: 0x26,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                };
+                let sm1 = SyncManager {
+                    start: m.inp.0,
+                    length: m.inp.1,
+                    control: 0x22,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                };
+                let mut both = [0u8; 16];
+                both[..8].copy_from_slice(&sm0.to_bytes());
+                both[8..].copy_from_slice(&sm1.to_bytes());
+                self.fpwr(st, 0x0800, &both)?;
+            }
+        }
+        self.request_state_all(AlState::PreOp)?;
+        for k in 0..self.slaves.len() as u16 {
+            self.read_mapping(k)?;
+        }
+        self.layout()
+    }
+
+    /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects)
+    /// when it speaks CoE, else the PDOs its SII assigns to SyncManagers.
+    pub fn read_mapping(&mut self, position: u16) -> Result<()> {
+        let k = position as usize;
+        let sms = self.slaves[k].sii.sync_managers().to_vec();
+        let out_sm =
+            sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_OUTPUTS).map(|(i, s)| (i as u8, *s));
+        let in_sm = sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_INPUTS).map(|(i, s)| (i as u8, *s));
+        let esi_dev = {
+            let s = &self.slaves[k];
+            self.esi
+                .iter()
+                .filter(|(v, d)| *v == s.vendor_id && d.product_code == s.product_code)
+                .max_by_key(|(_, d)| (d.revision == s.revision, d.revision))
+                .map(|(_, d)| d.clone())
+        };
+        let sii_has_mapping = {
+            let sii = &self.slaves[k].sii;
+            sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
+        };
+        let (outputs, inputs) = if self.slaves[k].has_coe() {
+            (self.coe_mapping(position, 0x1C12)?, self.coe_mapping(position, 0x1C13)?)
+        } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
+            // The ESI's default assignment: PDOs with an Sm attribute.
+            let from = |pdos: &[ferrocat_esi::PdoDesc]| -> Vec<Mapped> {
+                pdos.iter()
+                    .filter(|p| p.sm.is_some())
+                    .flat_map(|p| p.entries.iter())
+                    .map(|e| Mapped {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bits: e.bit_len,
+                        name: e.name.clone(),
+                        image_bit: 0,
+                    })
+                    .collect()
+            };
+            (from(&dev.rx_pdos), from(&dev.tx_pdos))
+        } else {
+            let sii = &self.slaves[k].sii;
+            let from = |pdos: &[ferrocat_wire::sii::Pdo], sm: Option<(u8, SmEntry)>| -> Vec<Mapped> {
+                pdos.iter()
+                    .filter(|p| sm.is_some_and(|(n, _)| p.sync_manager == n))
+                    .flat_map(|p| p.entries.iter())
+                    .map(|e| Mapped {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bits: e.bit_len,
+                        name: sii.string(e.name_idx).unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex)),
+                        image_bit: 0,
+                    })
+                    .collect()
+            };
+            (from(sii.rx_pdos(), out_sm), from(sii.tx_pdos(), in_sm))
+        };
+        let s = &mut self.slaves[k];
+        s.outputs = outputs;
+        s.inputs = inputs;
+        s.out_sm = out_sm;
+        s.in_sm = in_sm;
+        Ok(())
+    }
+
+    pub(super) fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
+        let mut v = Vec::new();
+        let n = self.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+        for k in 1..=n {
+            let p = self.sdo_read(position, assign, k)?;
+            let pdo = u16::from_le_bytes([p[0], *p.get(1).unwrap_or(&0)]);
+            let m = self.sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
+            for j in 1..=m {
+                let e = self.sdo_read(position, pdo, j)?;
+                if e.len() < 4 {
+                    continue;
+                }
+                let w = u32::from_le_bytes([e[0], e[1], e[2], e[3]]);
+                let (index, subindex, bits) = ((w >> 16) as u16, (w >> 8) as u8, w as u8);
+                let name = self.slaves[position as usize]
+                    .sii
+                    .rx_pdos()
+                    .iter()
+                    .chain(self.slaves[position as usize].sii.tx_pdos())
+                    .flat_map(|p| p.entries.iter())
+                    .find(|e| e.index == index && e.subindex == subindex)
+                    .and_then(|e| self.slaves[position as usize].sii.string(e.name_idx))
+                    .unwrap_or_else(|| format!("{index:#06x}:{subindex:02x}"));
+                v.push(Mapped { index, subindex, bits, name, image_bit: 0 });
+            }
+        }
+        Ok(v)
+    }
+
+    /// Lets the application choose the PDOs of one slave (PREOP only): writes the assignment
+    /// object and reads the mapping back.
+    pub fn remap(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
+        self.slaves[position as usize].assignment[!outputs as usize] = Some(pdos.to_vec());
+        self.write_assignment(position, outputs, pdos)?;
+        self.read_mapping(position)?;
+        self.layout()
+    }
+
+    pub(super) fn write_assignment(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
+        let assign = if outputs { 0x1C12 } else { 0x1C13 };
+        self.sdo_write(position, assign, 0, &[0])?;
+        for (k, p) in pdos.iter().enumerate() {
+            self.sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
+        }
+        self.sdo_write(position, assign, 0, &[pdos.len() as u8])
+    }
+
+    /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
+    /// writes the SyncManagers and FMMUs.
+    pub fn layout(&mut self) -> Result<()> {
+        let mut out = 0u32;
+        for s in &mut self.slaves {
+            let bytes = s.output_bits().div_ceil(8);
+            s.out_area = (out, bytes);
+            out += bytes;
+        }
+        let mut inp = out;
+        for s in &mut self.slaves {
+            let bytes = s.input_bits().div_ceil(8);
+            s.in_area = (inp, bytes);
+            inp += bytes;
+        }
+        self.out_bytes = out;
+        self.in_bytes = inp - out;
+        self.image = vec![0; inp as usize];
+        self.expected_wkc = 0;
+        for k in 0..self.slaves.len() {
+            let s = &mut self.slaves[k];
+            let mut bit = s.out_area.0 * 8;
+            for m in &mut s.outputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            let mut bit = s.in_area.0 * 8;
+            for m in &mut s.inputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            let has_out = s.out_area.1 > 0;
+            let has_in = s.in_area.1 > 0;
+            self.expected_wkc += 2 * has_out as u16 + has_in as u16;
+            self.write_process_config(k as u16)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the SyncManagers and FMMUs of one slave's process data, from its layout.
+    pub(crate) fn write_process_config(&mut self, position: u16) -> Result<()> {
+        let s = &self.slaves[position as usize];
+        let st = s.station;
+        let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
+        let mut fmmu = 0u16;
+        for (area, sm, write) in [(s.out_area, s.out_sm, true), (s.in_area, s.in_sm, false)] {
+            let Some((n, e)) = sm else { continue };
+            let smr = if area.1 == 0 {
+                SyncManager::default()
+            } else {
+                SyncManager {
+                    start: e.start,
+                    length: area.1 as u16,
+                    control: e.control,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                }
+            };
+            writes.push((0x0800 + 8 * n as u16, smr.to_bytes().to_vec()));
+            if area.1 > 0 {
+                let f = Fmmu {
+                    logical_start: area.0,
+                    length: area.1 as u16,
+                    logical_start_bit: 0,
+                    logical_stop_bit: 7,
+                    physical_start: e.start,
+                    physical_start_bit: 0,
+                    fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
+                    active: true,
+                };
+                writes.push((0x0600 + 16 * fmmu, f.to_bytes().to_vec()));
+                fmmu += 1;
+            }
+        }
+        for (a, d) in writes {
+            self.fpwr(st, a, &d)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the mailbox SyncManagers of one slave.
+    pub(crate) fn write_mailbox_config(&mut self, position: u16) -> Result<()> {
+        let s = &self.slaves[position as usize];
+        let Some(m) = s.mailbox.clone() else { return Ok(()) };
+        let sm0 =
+            SyncManager { start: m.out.0, length: m.out.1, control: 0x26, status: 0, activate: 1, pdi_control: 0 };
+        let sm1 =
+            SyncManager { start: m.inp.0, length: m.inp.1, control: 0x22, status: 0, activate: 1, pdi_control: 0 };
+        let mut both = [0u8; 16];
+        both[..8].copy_from_slice(&sm0.to_bytes());
+        both[8..].copy_from_slice(&sm1.to_bytes());
+        let st = s.station;
+        self.fpwr(st, 0x0800, &both)
+    }
+}

@@ -1,0 +1,281 @@
+//! The slaves' SII EEPROMs: read all at once at scan, one word at a time, or written.
+use ferrocat_wire::sii::{SiiHeader, SiiInfo, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
+use ferrocat_wire::{Address, Command};
+
+use super::Master;
+use crate::engine::Pdu;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+
+impl<I: Io> Master<I> {
+    /// Reads every slave's whole SII at once: each read command goes to all slaves in one frame,
+    /// each status-and-data read in another, so the time does not grow with the slave count.
+    pub(super) fn read_all_sii(&mut self, stations: &[u16]) -> Result<Vec<Vec<u8>>> {
+        let n = stations.len();
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0500 }, &mut [0])?;
+        let mut imgs: Vec<Vec<u8>> = vec![Vec::with_capacity(2048); n];
+        let mut done = vec![false; n];
+        let mut ctl = vec![[0u8; 2]; n];
+        {
+            let mut p: Vec<Pdu<'_>> = stations
+                .iter()
+                .zip(ctl.iter_mut())
+                .map(|(&st, c)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0502 }, c))
+                .collect();
+            self.engine.transact(&mut p)?;
+        }
+        let eight: Vec<bool> = ctl.iter().map(|c| u16::from_le_bytes(*c) & 0x0040 != 0).collect();
+        let deadline = self.engine.io.now_ns() + 10_000_000_000;
+        // The shortest read seen so far, command to data: real EEPROMs take ≈ 0.7 ms a read
+        // (docs/esc-model.md), so after the first round the master sleeps most of that before
+        // it polls, rather than polling every round trip (≈ 70 frames a read on a short line).
+        let mut read_ns: Option<u64> = None;
+        while done.iter().any(|d| !d) {
+            let active: Vec<usize> = (0..n).filter(|&k| !done[k]).collect();
+            let mut cmds: Vec<[u8; 6]> = active
+                .iter()
+                .map(|&k| {
+                    let mut c = [0x00, 0x01, 0, 0, 0, 0];
+                    c[2..6].copy_from_slice(&((imgs[k].len() / 2) as u32).to_le_bytes());
+                    c
+                })
+                .collect();
+            {
+                let mut p: Vec<Pdu<'_>> = active
+                    .iter()
+                    .zip(cmds.iter_mut())
+                    .map(|(&k, c)| Pdu::new(Command::FPWR, Address::Device { adp: stations[k], ado: 0x0502 }, c))
+                    .collect();
+                self.engine.transact(&mut p)?;
+            }
+            let commanded = self.engine.io.now_ns();
+            if let Some(ns) = read_ns {
+                self.engine.io.sleep_until(commanded + ns * 7 / 8);
+            }
+            // Status, address and data in one read; poll again only those still busy.
+            let mut pending = active.clone();
+            while !pending.is_empty() {
+                let mut regs: Vec<[u8; 14]> = vec![[0; 14]; pending.len()];
+                {
+                    let mut p: Vec<Pdu<'_>> = pending
+                        .iter()
+                        .zip(regs.iter_mut())
+                        .map(|(&k, r)| Pdu::new(Command::FPRD, Address::Device { adp: stations[k], ado: 0x0502 }, r))
+                        .collect();
+                    self.engine.transact(&mut p)?;
+                }
+                let mut still = Vec::new();
+                for (&k, r) in pending.iter().zip(&regs) {
+                    let c = u16::from_le_bytes([r[0], r[1]]);
+                    if c & 0x8000 != 0 {
+                        still.push(k);
+                        continue;
+                    }
+                    if c & 0x2000 != 0 {
+                        return Err(MasterError::Config(format!("slave {k}: SII read not acknowledged")));
+                    }
+                    imgs[k].extend_from_slice(&r[6..if eight[k] { 14 } else { 10 }]);
+                    done[k] = sii_complete(&imgs[k]);
+                }
+                if still.len() < pending.len() {
+                    let took = self.engine.io.now_ns().saturating_sub(commanded);
+                    read_ns = Some(read_ns.map_or(took, |r| r.min(took)));
+                }
+                pending = still;
+                if self.engine.io.now_ns() > deadline {
+                    return Err(MasterError::Config("SII reads stay busy".into()));
+                }
+            }
+        }
+        for img in &mut imgs {
+            let len = sii_used_len(img);
+            img.truncate(len);
+        }
+        Ok(imgs)
+    }
+
+    /// Reads the SII through the EEPROM interface: the header, then category by category up to
+    /// the end marker (or the EEPROM's size).
+    pub(super) fn read_sii(&mut self, station: u16) -> Result<Vec<u8>> {
+        // Take the EEPROM for the EtherCAT side.
+        self.fpwr(station, 0x0500, &[0])?;
+        let mut img = Vec::with_capacity(2048);
+        let mut word = 0u32;
+        let read = |m: &mut Self, img: &mut Vec<u8>, word: &mut u32| -> Result<()> {
+            let chunk = m.sii_read(station, *word)?;
+            img.extend_from_slice(&chunk);
+            *word += (chunk.len() / 2) as u32;
+            Ok(())
+        };
+        while img.len() < SII_HEADER {
+            read(self, &mut img, &mut word)?;
+        }
+        let header = SiiHeader::parse(&img)?;
+        let max = header.eeprom_size_bytes().clamp(SII_HEADER, 65536);
+        let mut at = SII_HEADER;
+        loop {
+            while img.len() < at + CATEGORY_HEADER_LEN && img.len() < max {
+                read(self, &mut img, &mut word)?;
+            }
+            if img.len() < at + CATEGORY_HEADER_LEN {
+                break;
+            }
+            let kind = u16::from_le_bytes([img[at], img[at + 1]]);
+            if kind == 0xFFFF {
+                break;
+            }
+            let len = u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+            at += CATEGORY_HEADER_LEN + len;
+            if at >= max {
+                break;
+            }
+        }
+        img.truncate(max.min(img.len()));
+        if img.len() < at.min(max) + 2 {
+            img.resize(at.min(max) + 2, 0xFF);
+        }
+        Ok(img)
+    }
+
+    /// 4 or 8 bytes of the SII at `word`.
+    pub(super) fn sii_read(&mut self, station: u16, word: u32) -> Result<Vec<u8>> {
+        let mut ctl = [0u8; 2];
+        self.fprd(station, 0x0502, &mut ctl)?;
+        let eight = u16::from_le_bytes(ctl) & 0x0040 != 0;
+        let mut cmd = [0x00, 0x01, 0, 0, 0, 0];
+        cmd[2..6].copy_from_slice(&word.to_le_bytes());
+        self.fpwr(station, 0x0502, &cmd)?;
+        let deadline = self.engine.io.now_ns() + 100_000_000;
+        loop {
+            self.fprd(station, 0x0502, &mut ctl)?;
+            let v = u16::from_le_bytes(ctl);
+            if v & 0x8000 == 0 {
+                if v & 0x2000 != 0 {
+                    return Err(MasterError::Config(format!(
+                        "slave {station:#06x}: SII read of word {word:#x} not acknowledged"
+                    )));
+                }
+                break;
+            }
+            if self.engine.io.now_ns() > deadline {
+                return Err(MasterError::Config(format!("slave {station:#06x}: SII stays busy")));
+            }
+        }
+        let mut data = vec![0u8; if eight { 8 } else { 4 }];
+        self.fprd(station, 0x0508, &mut data)?;
+        Ok(data)
+    }
+
+    /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
+    /// Returns the number of words written.
+    pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
+        // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
+        if image.len() < 16 {
+            return Err(MasterError::Config(format!(
+                "SII image of {} bytes: shorter than its 16-byte header",
+                image.len()
+            )));
+        }
+        let crc = ferrocat_wire::sii::header_crc(image);
+        if image[14] != crc {
+            return Err(MasterError::Config(format!(
+                "SII image: header CRC at byte 14 is {:#04x}, bytes 0–13 give {crc:#04x}; an ESC would not load it",
+                image[14]
+            )));
+        }
+        let (st, current) = {
+            let s = self.slave(position)?;
+            (s.station, s.sii.to_image())
+        };
+        self.fpwr(st, 0x0500, &[0])?;
+        let mut written = 0;
+        for (w, pair) in image.chunks(2).enumerate() {
+            let v = u16::from_le_bytes([pair[0], *pair.get(1).unwrap_or(&0xFF)]);
+            let old = current.get(2 * w..2 * w + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+            if old == Some(v) {
+                continue;
+            }
+            // The data first, then "write" with write enable and the word address.
+            self.fpwr(st, 0x0508, &v.to_le_bytes())?;
+            let mut cmd = [0u8; 6];
+            cmd[0..2].copy_from_slice(&0x0201u16.to_le_bytes());
+            cmd[2..6].copy_from_slice(&(w as u32).to_le_bytes());
+            self.fpwr(st, 0x0502, &cmd)?;
+            let deadline = self.engine.io.now_ns() + 100_000_000;
+            loop {
+                let mut ctl = [0u8; 2];
+                self.fprd(st, 0x0502, &mut ctl)?;
+                let c = u16::from_le_bytes(ctl);
+                if c & 0x8000 == 0 {
+                    if c & 0x6000 != 0 {
+                        let name = self.slaves[position as usize].name.clone();
+                        return Err(MasterError::slave(
+                            position,
+                            &name,
+                            format!("EEPROM write of word {w:#x} failed (status {c:#06x})"),
+                        ));
+                    }
+                    break;
+                }
+                if self.engine.io.now_ns() > deadline {
+                    return Err(MasterError::Config(format!("slave {position}: EEPROM stays busy")));
+                }
+                let now = self.engine.io.now_ns();
+                self.engine.io.sleep_until(now + 500_000);
+            }
+            written += 1;
+        }
+        let sii = self.read_sii(st)?;
+        if let Ok(info) = SiiInfo::from_image(&sii) {
+            self.slaves[position as usize].sii = info;
+        }
+        Ok(written)
+    }
+}
+
+/// Bytes of an SII image up to and including its end marker (or the whole of it).
+fn sii_used_len(img: &[u8]) -> usize {
+    if img.len() < SII_HEADER {
+        return img.len();
+    }
+    let max = SiiHeader::parse(img).map(|h| h.eeprom_size_bytes()).unwrap_or(img.len()).clamp(SII_HEADER, 65536);
+    let mut at = SII_HEADER;
+    while at + 2 <= img.len().min(max) {
+        let kind = u16::from_le_bytes([img[at], img[at + 1]]);
+        if kind == 0xFFFF {
+            return at + 2;
+        }
+        if at + CATEGORY_HEADER_LEN > img.len() {
+            return img.len();
+        }
+        at += CATEGORY_HEADER_LEN + u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+    }
+    img.len().min(max)
+}
+
+/// Whether `img` holds the whole SII: the end marker, or as much as the EEPROM is large.
+fn sii_complete(img: &[u8]) -> bool {
+    if img.len() < SII_HEADER {
+        return false;
+    }
+    let max = SiiHeader::parse(img).map(|h| h.eeprom_size_bytes()).unwrap_or(2048).clamp(SII_HEADER, 65536);
+    if img.len() >= max {
+        return true;
+    }
+    let mut at = SII_HEADER;
+    loop {
+        if at + 2 > img.len() {
+            return false;
+        }
+        if u16::from_le_bytes([img[at], img[at + 1]]) == 0xFFFF {
+            return true;
+        }
+        if at + CATEGORY_HEADER_LEN > img.len() {
+            return false;
+        }
+        at += CATEGORY_HEADER_LEN + u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
+        if at >= max {
+            return true;
+        }
+    }
+}

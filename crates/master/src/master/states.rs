@@ -1,0 +1,203 @@
+//! Walking the slaves through the AL states, and bringing fallen ones back during operation.
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode};
+use ferrocat_wire::{Address, Command};
+
+use super::{Master, MasterEvent};
+use crate::engine::Pdu;
+use crate::error::{code_text, MasterError, Result};
+use crate::io::Io;
+
+impl<I: Io> Master<I> {
+    /// Requests `state` from every slave and waits until all are there.
+    pub fn request_state_all(&mut self, state: AlState) -> Result<()> {
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [state as u8, 0])?;
+        self.wait_state_all(state)
+    }
+
+    /// Requests `state` from one slave and waits for it.
+    pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
+        let st = self.slave(position)?.station;
+        self.fpwr(st, 0x0120, &[state as u8, 0])?;
+        self.wait_state(position, state)
+    }
+
+    /// Lets a slave be addressed by its configured station alias (0x0012, from its EEPROM) as
+    /// well as by its station address (DL control bit 24), and checks that it answers to it.
+    pub fn enable_alias(&mut self, position: u16) -> Result<u16> {
+        let (st, alias, name) = {
+            let s = self.slave(position)?;
+            (s.station, s.alias, s.name.clone())
+        };
+        if alias == 0 {
+            return Err(MasterError::slave(position, &name, "has no station alias"));
+        }
+        if self
+            .slaves
+            .iter()
+            .any(|s| s.position != position && (s.alias == alias && s.alias != 0 || s.station == alias))
+        {
+            return Err(MasterError::slave(
+                position,
+                &name,
+                format!("alias {alias:#06x} is not unique on this segment"),
+            ));
+        }
+        let mut dl = [0u8; 4];
+        self.fprd(st, 0x0100, &mut dl)?;
+        dl[3] |= 0x01;
+        self.fpwr(st, 0x0100, &dl)?;
+        let mut check = [0u8; 2];
+        self.engine.expect(Command::FPRD, Address::Device { adp: alias, ado: 0x0010 }, &mut check, 1)?;
+        Ok(alias)
+    }
+
+    /// Requests `state` from a group of slaves at once and waits until all of them are there.
+    pub fn request_state_group(&mut self, positions: &[u16], state: AlState) -> Result<()> {
+        let mut bufs: Vec<[u8; 2]> = vec![[state as u8, 0]; positions.len()];
+        let stations: Vec<u16> = positions.iter().map(|&p| self.slave(p).map(|s| s.station)).collect::<Result<_>>()?;
+        {
+            let mut p: Vec<Pdu<'_>> = stations
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, b))
+                .collect();
+            self.engine.transact(&mut p)?;
+        }
+        for &p in positions {
+            self.wait_state(p, state)?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn wait_state_all(&mut self, state: AlState) -> Result<()> {
+        for k in 0..self.slaves.len() as u16 {
+            self.wait_state(k, state)?;
+        }
+        Ok(())
+    }
+
+    /// Polls AL status until `state` or an error; an error is acknowledged and reported by name.
+    pub fn wait_state(&mut self, position: u16, state: AlState) -> Result<()> {
+        let (st, name) = {
+            let s = self.slave(position)?;
+            (s.station, s.name.clone())
+        };
+        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        loop {
+            let mut d = [0u8; 6];
+            self.fprd(st, 0x0130, &mut d)?;
+            let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
+            let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
+            if status.state() == Some(state) && !status.error() {
+                self.slaves[position as usize].state = state;
+                return Ok(());
+            }
+            if status.error() || self.engine.io.now_ns() > deadline {
+                let reached = status.state().map(|s| s.name()).unwrap_or("an unknown state");
+                if status.error() {
+                    // Acknowledge, so that the slave accepts requests again.
+                    let ack = status.state_bits() as u16 | AlStatus::ERROR;
+                    let _ = self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut ack.to_le_bytes(),
+                    );
+                }
+                return Err(MasterError::State {
+                    position,
+                    name,
+                    requested: state,
+                    status: format!(
+                        "stays in {reached}{}",
+                        if status.error() { " with an error" } else { " (timeout)" }
+                    ),
+                    code: code_text(code),
+                });
+            }
+            // Give the slave time between polls.
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 100_000);
+        }
+    }
+
+    /// Checks every slave after a cycle came back short, reports what changed once per slave,
+    /// and takes one step of bringing each fallen slave back to OP (so that the cyclic exchange
+    /// keeps running meanwhile). Returns how many slaves are not operational.
+    pub fn supervise(&mut self) -> Result<usize> {
+        let mut down = 0;
+        for k in 0..self.slaves.len() {
+            let (st, name, pos) = (self.slaves[k].station, self.slaves[k].name.clone(), k as u16);
+            let mut d = [0u8; 6];
+            let mut wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+            if wkc == 0 {
+                // Powered off and on again it has lost its station address: give it back.
+                let mut a = [0u8; 2];
+                if self.engine.one(Command::APRD, Address::position(pos, 0x0010), &mut a)? == 1 && a == [0, 0] {
+                    self.engine.one(Command::APWR, Address::position(pos, 0x0010), &mut st.to_le_bytes())?;
+                    wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+                }
+            }
+            if wkc == 0 {
+                if self.slaves[k].health != crate::slave::Health::Lost {
+                    self.slaves[k].health = crate::slave::Health::Lost;
+                    self.events.push(MasterEvent::Lost { position: pos, name });
+                }
+                down += 1;
+                continue;
+            }
+            let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
+            let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
+            if status.state() == Some(AlState::Op) && !status.error() {
+                if self.slaves[k].health != crate::slave::Health::Operational {
+                    self.slaves[k].health = crate::slave::Health::Operational;
+                    self.events.push(MasterEvent::Recovered { position: pos, name });
+                }
+                continue;
+            }
+            down += 1;
+            if self.slaves[k].health == crate::slave::Health::Operational {
+                self.events.push(MasterEvent::LeftOp { position: pos, name, status, code });
+            }
+            self.slaves[k].health = crate::slave::Health::Recovering;
+            // One step towards OP.
+            if status.error() {
+                let ack = status.state_bits() as u16 | AlStatus::ERROR;
+                self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut ack.to_le_bytes())?;
+                continue;
+            }
+            match status.state() {
+                Some(AlState::Init) | Some(AlState::Bootstrap) | None => {
+                    self.write_mailbox_config(pos)?;
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::PreOp as u8, 0],
+                    )?;
+                }
+                Some(AlState::PreOp) => {
+                    if self.slaves[k].has_coe() {
+                        for (i, outputs) in [(0usize, true), (1, false)] {
+                            if let Some(p) = self.slaves[k].assignment[i].clone() {
+                                self.write_assignment(pos, outputs, &p)?;
+                            }
+                        }
+                    }
+                    self.write_process_config(pos)?;
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::SafeOp as u8, 0],
+                    )?;
+                }
+                Some(AlState::SafeOp) | Some(AlState::Op) => {
+                    self.engine.one(
+                        Command::FPWR,
+                        Address::Device { adp: st, ado: 0x0120 },
+                        &mut [AlState::Op as u8, 0],
+                    )?;
+                }
+            }
+        }
+        Ok(down)
+    }
+}
