@@ -11,31 +11,8 @@ impl<I: Io> Master<I> {
     /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
     /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
     pub fn configure(&mut self) -> Result<()> {
-        for k in 0..self.slaves.len() {
-            let s = &self.slaves[k];
-            if let Some(m) = s.mailbox.clone() {
-                let st = s.station;
-                let sm0 = SyncManager {
-                    start: m.out.0,
-                    length: m.out.1,
-                    control: 0x26,
-                    status: 0,
-                    activate: 1,
-                    pdi_control: 0,
-                };
-                let sm1 = SyncManager {
-                    start: m.inp.0,
-                    length: m.inp.1,
-                    control: 0x22,
-                    status: 0,
-                    activate: 1,
-                    pdi_control: 0,
-                };
-                let mut both = [0u8; 16];
-                both[..8].copy_from_slice(&sm0.to_bytes());
-                both[8..].copy_from_slice(&sm1.to_bytes());
-                self.fpwr(st, 0x0800, &both)?;
-            }
+        for k in 0..self.slaves.len() as u16 {
+            self.write_mailbox_config(k)?;
         }
         self.request_state_all(AlState::PreOp)?;
         for k in 0..self.slaves.len() as u16 {
