@@ -1,4 +1,4 @@
-//! The slaves' SII EEPROMs: read all at once at scan, one word at a time, or written.
+//! The slaves' SII EEPROMs: read, all slaves' at once, or written.
 use ferrocat_wire::sii::{SiiHeader, SiiInfo, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
 use ferrocat_wire::{Address, Command};
 
@@ -94,78 +94,6 @@ impl<I: Io> Master<I> {
         Ok(imgs)
     }
 
-    /// Reads the SII through the EEPROM interface: the header, then category by category up to
-    /// the end marker (or the EEPROM's size).
-    pub(super) fn read_sii(&mut self, station: u16) -> Result<Vec<u8>> {
-        // Take the EEPROM for the EtherCAT side.
-        self.fpwr(station, 0x0500, &[0])?;
-        let mut img = Vec::with_capacity(2048);
-        let mut word = 0u32;
-        let read = |m: &mut Self, img: &mut Vec<u8>, word: &mut u32| -> Result<()> {
-            let chunk = m.sii_read(station, *word)?;
-            img.extend_from_slice(&chunk);
-            *word += (chunk.len() / 2) as u32;
-            Ok(())
-        };
-        while img.len() < SII_HEADER {
-            read(self, &mut img, &mut word)?;
-        }
-        let header = SiiHeader::parse(&img)?;
-        let max = header.eeprom_size_bytes().clamp(SII_HEADER, 65536);
-        let mut at = SII_HEADER;
-        loop {
-            while img.len() < at + CATEGORY_HEADER_LEN && img.len() < max {
-                read(self, &mut img, &mut word)?;
-            }
-            if img.len() < at + CATEGORY_HEADER_LEN {
-                break;
-            }
-            let kind = u16::from_le_bytes([img[at], img[at + 1]]);
-            if kind == 0xFFFF {
-                break;
-            }
-            let len = u16::from_le_bytes([img[at + 2], img[at + 3]]) as usize * 2;
-            at += CATEGORY_HEADER_LEN + len;
-            if at >= max {
-                break;
-            }
-        }
-        img.truncate(max.min(img.len()));
-        if img.len() < at.min(max) + 2 {
-            img.resize(at.min(max) + 2, 0xFF);
-        }
-        Ok(img)
-    }
-
-    /// 4 or 8 bytes of the SII at `word`.
-    pub(super) fn sii_read(&mut self, station: u16, word: u32) -> Result<Vec<u8>> {
-        let mut ctl = [0u8; 2];
-        self.fprd(station, 0x0502, &mut ctl)?;
-        let eight = u16::from_le_bytes(ctl) & 0x0040 != 0;
-        let mut cmd = [0x00, 0x01, 0, 0, 0, 0];
-        cmd[2..6].copy_from_slice(&word.to_le_bytes());
-        self.fpwr(station, 0x0502, &cmd)?;
-        let deadline = self.engine.io.now_ns() + 100_000_000;
-        loop {
-            self.fprd(station, 0x0502, &mut ctl)?;
-            let v = u16::from_le_bytes(ctl);
-            if v & 0x8000 == 0 {
-                if v & 0x2000 != 0 {
-                    return Err(MasterError::Config(format!(
-                        "slave {station:#06x}: SII read of word {word:#x} not acknowledged"
-                    )));
-                }
-                break;
-            }
-            if self.engine.io.now_ns() > deadline {
-                return Err(MasterError::Config(format!("slave {station:#06x}: SII stays busy")));
-            }
-        }
-        let mut data = vec![0u8; if eight { 8 } else { 4 }];
-        self.fprd(station, 0x0508, &mut data)?;
-        Ok(data)
-    }
-
     /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
     /// Returns the number of words written.
     pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
@@ -225,7 +153,7 @@ impl<I: Io> Master<I> {
             }
             written += 1;
         }
-        let sii = self.read_sii(st)?;
+        let sii = self.read_all_sii(&[st])?.pop().unwrap_or_default();
         if let Ok(info) = SiiInfo::from_image(&sii) {
             self.slaves[position as usize].sii = info;
         }
