@@ -22,6 +22,7 @@ pub struct DemoArgs {
     /// A real network (or a served one) instead of the embedded virtual segment.
     pub iface: Option<String>,
     pub force: bool,
+    pub no_gpio_calibration: bool,
 }
 
 pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
@@ -34,6 +35,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
     if let Some(s) = a.seed {
         o.seed = s;
     }
+    o.gpio_calibration = !a.no_gpio_calibration;
     if !a.cycles_us.is_empty() {
         anyhow::ensure!(
             a.cycles_us.iter().all(|&c| (100..=10_000).contains(&c)),
@@ -133,6 +135,14 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
                 (Some(m), Some(x)) => format!("{m:.1}/{x:.1}"),
                 _ => "—".into(),
             }
+        );
+    }
+    let calibrated: Vec<String> =
+        rows.iter().filter_map(|r| r.calibration_ns.map(|c| format!("{}µs {} {c}ns", r.cycle_us, r.method))).collect();
+    if !calibrated.is_empty() {
+        outln!(
+            "Stamps' asymmetry measured through the host's GPIO into the reference's LATCH0 and taken out: {}",
+            calibrated.join(", ")
         );
     }
     outln!("Following error per axis (increments, largest |demand − actual|):");

@@ -151,6 +151,10 @@ enum Command {
         /// With --iface: send even on an interface that has an IPv4 or a global IPv6 address.
         #[arg(long, requires = "iface")]
         force: bool,
+        /// Leave out ferrocat's GPIO calibration of its stamps (virtual segment only; on a
+        /// real network nothing is wired).
+        #[arg(long)]
+        no_gpio_calibration: bool,
     },
     /// The papers' clock-synchronisation experiments, in virtual time.
     Lab {
@@ -400,7 +404,7 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
-        Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force } => {
+        Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force, no_gpio_calibration } => {
             demo::demo(demo::DemoArgs {
                 drives,
                 drive,
@@ -412,6 +416,7 @@ fn main() -> ExitCode {
                 out,
                 iface,
                 force,
+                no_gpio_calibration,
             })
         }
         Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames } => {

@@ -7,6 +7,7 @@
 //! see is reported: following errors from 0x60F4 when mapped, late and repeated set-points from
 //! the drives' 0x1C32:0C and 0x1C32:0B when they have them; the rest is `None`.
 use ferrocat_esc::Cia402Drive;
+use ferrocat_master::calibrate::GpioCalibration;
 use ferrocat_master::cia402::{map_for_csp, Axis, Goal};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{ClockSync, Coupling};
@@ -31,6 +32,10 @@ pub struct Options {
     pub seed: u64,
     /// Synchronisation before the drives are enabled (s).
     pub settle_s: f64,
+    /// ferrocat's methods calibrate their stamps' asymmetry through the host's GPIO into the
+    /// reference's LATCH0 input during the settling, as in the lab, where the host model has
+    /// a GPIO (simulator only: on a real network nothing is wired).
+    pub gpio_calibration: bool,
     /// Motion limits of every axis (revolutions per s, s², s³).
     pub limits_rev: Limits,
 }
@@ -45,6 +50,7 @@ impl Options {
             host,
             seed: 1,
             settle_s: 1.0,
+            gpio_calibration: true,
             limits_rev: Limits { velocity: 20.0, acceleration: 200.0, jerk: 10_000.0 },
         }
     }
@@ -61,6 +67,9 @@ pub struct Row {
     pub error_mean_ns: Option<f64>,
     pub error_rms_ns: Option<f64>,
     pub error_max_ns: Option<f64>,
+    /// The master − reference error the GPIO calibration found and took out (ns; None: not
+    /// calibrated).
+    pub calibration_ns: Option<i64>,
     /// Second drive's SYNC0 minus the first's for the same system time (Paprocki 2022, Table
     /// 2), and the largest spread of all drives' SYNC0 instants (simulator only).
     pub sync0_mean_ns: Option<f64>,
@@ -112,11 +121,22 @@ struct Rig<I: Io> {
 
 impl<I: Io> Rig<I> {
     fn step(&mut self) -> anyhow::Result<()> {
+        self.exchange()?;
+        self.wait();
+        Ok(())
+    }
+
+    /// The cycle's frames and the clock sync's correction.
+    fn exchange(&mut self) -> anyhow::Result<()> {
         self.m.cycle()?;
         let c = self.m.sync_step(self.sync.as_mut(), &mut self.st)?;
         self.next += c.next_period_ns.unwrap_or(self.cycle_ns);
-        self.m.engine.io.sleep_until(self.next);
         Ok(())
+    }
+
+    /// Until the next cycle is due.
+    fn wait(&mut self) {
+        self.m.engine.io.sleep_until(self.next);
     }
 
     /// The simulated drive at `k`, when the world is the in-process simulator.
@@ -180,12 +200,32 @@ pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
     Ok(cfg)
 }
 
-fn run_one<I: Io>(m: Master<I>, o: &Options, cycle_us: u64, method: &str) -> anyhow::Result<Row> {
+/// Makes the GPIO calibration of a method, where the world has a GPIO to calibrate with.
+type Calibrate<'a, I> = &'a dyn Fn(&mut Master<I>, &str, usize) -> Option<GpioCalibration>;
+
+fn run_one<I: Io>(
+    m: Master<I>,
+    o: &Options,
+    cycle_us: u64,
+    method: &str,
+    calibrate: Calibrate<'_, I>,
+) -> anyhow::Result<Row> {
     let (mut r, drives) = rig(m, cycle_us, method)?;
     let cycle_ns = r.cycle_ns;
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
-    for _ in 0..(o.settle_s * 1e9 / cycle_ns as f64) as u64 {
-        r.step()?;
+    let settle_cycles = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
+    // The pulses spread over the settling's middle half, at most one per cycle.
+    let pulses = crate::CALIBRATION_PULSES.min(settle_cycles as usize / 2);
+    let mut calibration = if o.gpio_calibration && pulses > 0 { calibrate(&mut r.m, method, pulses) } else { None };
+    let mut calibration_ns = None;
+    for k in 0..settle_cycles {
+        r.exchange()?;
+        // After the cycle's frames, as in the lab: a pulse before the wait does not delay the
+        // next cycle.
+        if let Some(cal) = calibration.as_mut().filter(|_| crate::calibration_cycle(k, settle_cycles)) {
+            calibration_ns = calibration_ns.or(cal.pulse(&mut r.m, r.sync.as_mut())?);
+        }
+        r.wait();
     }
     let mut axes: Vec<Axis> = drives.iter().map(|&d| Axis::new(&r.m, d)).collect::<Result<_, _>>()?;
     for a in &mut axes {
@@ -333,6 +373,7 @@ fn run_one<I: Io>(m: Master<I>, o: &Options, cycle_us: u64, method: &str) -> any
         error_mean_ns: (err.n > 0).then(|| err.mean()),
         error_rms_ns: (err.n > 0).then(|| err.rms()),
         error_max_ns: (err.n > 0).then_some(err_max),
+        calibration_ns,
         sync0_mean_ns,
         sync0_sd_ns,
         sync0_min_ns,
@@ -405,7 +446,12 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
     jobs.par_iter()
         .map(|(c, name)| {
             let m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
-            run_one(m, o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))
+            // The host's GPIO wired to the reference's (the first DC slave's) LATCH0.
+            let calibrate = |m: &mut Master<VirtualIo>, method: &str, pulses: usize| {
+                let reference = *crate::dc_slaves(m).ok()?.first()?;
+                crate::calibration(m, method, reference, pulses)
+            };
+            run_one(m, o, *c, name, &calibrate).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))
         })
         .collect()
 }
@@ -417,7 +463,7 @@ pub fn run_with<I: Io>(o: &Options, open: &mut dyn FnMut() -> anyhow::Result<Mas
     for &c in &o.cycles_us {
         for name in &o.methods {
             let m = open()?;
-            rows.push(run_one(m, o, c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))?);
+            rows.push(run_one(m, o, c, name, &|_, _, _| None).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))?);
         }
     }
     Ok(rows)

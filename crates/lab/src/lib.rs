@@ -111,24 +111,21 @@ pub fn calibration_cycle(k: u64, settle_cycles: u64) -> bool {
     k >= settle_cycles / 4 && (k - settle_cycles / 4) % every == 0
 }
 
-/// A GPIO calibration of `method` on `m`, the host's output wired to LATCH0 of the slave at
-/// position `reference`; `None` where the method takes no calibration or the host model has
-/// no GPIO.
+/// A GPIO calibration of `method` on `m` over `pulses` pulses, the host's output wired to
+/// LATCH0 of the slave at position `reference`; `None` where the method takes no calibration
+/// or the host model has no GPIO.
 pub fn calibration(
     m: &mut Master<VirtualIo>,
     method: &str,
     reference: usize,
+    pulses: usize,
 ) -> Option<ferrocat_master::calibrate::GpioCalibration> {
     let gpio = m.engine.io.host.gpio?;
     if !CALIBRATED.contains(&method) {
         return None;
     }
     m.engine.io.gpio_wire = Some((node_of(m, reference)?, 0));
-    Some(ferrocat_master::calibrate::GpioCalibration::new(
-        reference as u16,
-        gpio.mean_ns.round() as u64,
-        CALIBRATION_PULSES,
-    ))
+    Some(ferrocat_master::calibrate::GpioCalibration::new(reference as u16, gpio.mean_ns.round() as u64, pulses))
 }
 
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.

@@ -42,3 +42,27 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
     assert!(r.late_setpoints.unwrap() > 0 && r.repeated_setpoints.unwrap() > 0, "{r:?}");
     assert!(!r.late_cycles.is_empty() && !r.repeated_cycles.is_empty());
 }
+
+/// ferrocat's stamps carry the host model's send/receive asymmetry; the demo measures it
+/// through the host's GPIO into the reference's LATCH0 during the settling and takes it out,
+/// as the lab does: what the uncalibrated run is off by is what the calibration found.
+#[test]
+fn the_demo_calibrates_ferrocats_stamps_through_the_gpio() {
+    let base = Options {
+        methods: vec!["ferrocat".into(), "conventional".into()],
+        cycles_us: vec![1000],
+        ..Options::new(HostModel::pc_rt())
+    };
+    let calibrated = run(&base).unwrap();
+    let raw = run(&Options { gpio_calibration: false, ..base }).unwrap();
+    let (cal, plain) = (&calibrated[0], &raw[0]);
+    let (cal_mean, plain_mean) = (cal.error_mean_ns.unwrap(), plain.error_mean_ns.unwrap());
+    let found = cal.calibration_ns.expect("ferrocat is calibrated") as f64;
+    println!("ferrocat 1 ms: calibrated {cal_mean:.1} ns (took out {found} ns), uncalibrated {plain_mean:.1} ns");
+    assert_eq!(plain.calibration_ns, None);
+    assert!(cal_mean.abs() < 50.0 && plain_mean.abs() > 150.0, "{cal_mean} {plain_mean}");
+    assert!((plain_mean - found).abs() < 60.0, "the offset left uncalibrated is the one found: {plain_mean} {found}");
+    // conventional takes no calibration: the same run either way.
+    assert_eq!(calibrated[1].calibration_ns, None);
+    assert_eq!(calibrated[1].error_mean_ns, raw[1].error_mean_ns);
+}
