@@ -27,6 +27,7 @@ struct Written {
 }
 
 impl Written {
+    #[inline]
     fn of(pending: &[(u16, u8)]) -> Written {
         let mut w = Written::default();
         for &(a, _) in pending {
@@ -133,6 +134,7 @@ impl Esc {
     }
 
     /// The frame's writes into memory, with the registers a write clears.
+    #[inline]
     fn apply_writes(&mut self, pending: &[(u16, u8)]) {
         for &(a, v) in pending {
             self.mem[a as usize] = v;
@@ -177,6 +179,7 @@ impl Esc {
     /// SyncManager buffers this frame completed: mailboxes filled or emptied, process-data
     /// buffers handed to the application. Returns whether a mailbox was read (a reply may
     /// follow) and whether any mailbox changed.
+    #[inline]
     fn complete_sm_buffers(&mut self, t: u64) -> (bool, bool) {
         let (mut deliver, mut mailbox_moved) = (false, false);
         for n in 0..self.config.sm_count {
@@ -233,6 +236,7 @@ impl Esc {
 
     /// The DC unit's part of the frame: receive times latched, the TCL sample, and the DC
     /// registers written applied. Returns whether the TCL took a sample.
+    #[inline]
     fn dc_end_of_frame(&mut self, timing: &FrameTiming, origin_ns: u64, w: &Written) -> bool {
         let t = timing.epu_ns + origin_ns;
         let Some(dc) = self.dc.as_mut() else {
@@ -270,6 +274,7 @@ impl Esc {
 }
 
 /// The DC registers a frame wrote, into the DC unit.
+#[inline]
 fn apply_dc_registers(dc: &mut DcUnit, mem: &[u8], w: &Written, t: u64) {
     let wide = dc.width == DcWidth::Bits64;
     let rd64 = |a: usize| -> u64 {

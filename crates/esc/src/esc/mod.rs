@@ -369,10 +369,12 @@ impl Esc {
 
     /// Whether the DC unit's system time (0x0910–0x09FF) exists: a clock a master can
     /// synchronise, not only receive times.
+    #[inline]
     pub fn has_system_time(&self) -> bool {
         self.dc.is_some() && self.system_time_unit
     }
 
+    #[inline]
     pub fn station_address(&self) -> u16 {
         u16::from_le_bytes([self.mem[0x10], self.mem[0x11]])
     }
@@ -406,6 +408,7 @@ impl Esc {
     }
 
     /// Current time of this ESC's model.
+    #[inline]
     pub fn now_ns(&self) -> u64 {
         self.now_ns
     }
@@ -495,6 +498,7 @@ impl Esc {
         [sync, self.app.next_event_ns(), self.pending_al.map(|p| p.1)].into_iter().flatten().min()
     }
 
+    #[inline]
     fn device_emulation(&self) -> bool {
         self.mem[0x0141] & 0x01 != 0
     }
@@ -521,6 +525,7 @@ impl Esc {
         }
     }
 
+    #[inline]
     fn sm(&self, n: u8) -> SyncManager {
         self.sm_cache.get(n as usize).copied().unwrap_or_default()
     }
