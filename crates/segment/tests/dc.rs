@@ -368,3 +368,25 @@ fn an_et1100_or_et1200_without_sync_and_latch_units_has_receive_times_only() {
     let has: Vec<bool> = bus.seg.nodes.iter().map(|n| n.esc.has_system_time()).collect();
     assert_eq!(has, [true, false, true, false, true, false]);
 }
+
+/// Beckhoff's own ESI describes the same switch on its couplers: the EK1100 and EK1122 up to
+/// revision 0x0010 carry ConfigData 0x0001 (SYNC and latch units off), from 0x0011 on 0x000D.
+/// Built from that file, an EK1100 of revision 0x00100000 latches receive times but has no
+/// system time (so it cannot be the reference clock), one of 0x00110000 has one.
+#[test]
+fn needs_shared_an_early_ek1100_from_beckhoffs_esi_has_receive_times_only() {
+    let esi = ferrocat_testdata::shared("esi/Beckhoff_EK11xx.xml");
+    let toml = format!(
+        "seed = 3\n[[device]]\nesi = '{0}'\nproduct = 0x044C2C52\nrevision = 0x00100000\n\
+         [[device]]\nesi = '{0}'\nproduct = 0x044C2C52\nrevision = 0x00110000\n",
+        esi.display()
+    );
+    let mut bus = Bus::addressed(&toml);
+    let units: Vec<u8> = (0x1001..=0x1002).map(|s| bus.fp(Command::FPRD, s, 0x0141, &[0]).0[0]).collect();
+    assert_eq!(units, [0x01, 0x0D], "ESC configuration from the ESI's ConfigData");
+    assert_eq!(bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]).1, 2, "receive times: both");
+    let wkc: Vec<u16> = (0x1001..=0x1002).map(|s| bus.fp(Command::FPRD, s, 0x0910, &[0; 8]).1).collect();
+    assert_eq!(wkc, [0, 1], "system time: the later revision only");
+    let has: Vec<bool> = bus.seg.nodes.iter().map(|n| n.esc.has_system_time()).collect();
+    assert_eq!(has, [false, true]);
+}
