@@ -347,3 +347,137 @@ fn needs_shared_akd_eeprom_walks_every_transition() {
         assert!(s.outputs.iter().any(|e| e.index == 0x607A) && s.inputs.iter().any(|e| e.index == 0x6064));
     });
 }
+
+/// Brings the built-in servo to operation enabled in `mode`; returns the master, the axis and
+/// the drive's increments per revolution.
+fn enabled_in(mode: Mode) -> (Master<VirtualIo>, Axis, f64) {
+    let mut m = master("builtin = 'SERVO'", &|_| {});
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_mode(&mut m, mode).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    let per_rev = drive(&m).motor.increments_per_rev;
+    (m, a, per_rev)
+}
+
+/// Runs 1 ms cycles until `sw` (the statusword) satisfies `done`; returns how many it took.
+fn until(m: &mut Master<VirtualIo>, a: &Axis, max: u64, done: &dyn Fn(u16) -> bool) -> Option<u64> {
+    for k in 0..max {
+        cycles(m, 1);
+        if done(a.statusword(m)) {
+            return Some(k);
+        }
+    }
+    None
+}
+
+/// Profile velocity: the drive ramps to the target velocity at the profile acceleration and
+/// reports target reached (bit 10); halt (bit 8) brings it down at the deceleration, and bit 12
+/// reports the shaft standing.
+#[test]
+fn the_builtin_servo_runs_profile_velocity() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
+    m.sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((40.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    assert_ne!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "standing before the move");
+    let target = (4.0 * per_rev) as i32;
+    a.set_target_velocity(&mut m, target);
+    cycles(&mut m, 5);
+    assert_eq!(a.statusword(&m) & status::TARGET_REACHED, 0, "4 rev/s at 20 rev/s² takes 0.2 s");
+    let k = until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("target velocity reached") as f64;
+    assert!((180.0..260.0).contains(&k), "reached after {k} ms");
+    let v = a.velocity_actual(&m).unwrap();
+    assert!((v - target).abs() as f64 <= 0.05 * per_rev, "{v} against {target}");
+    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "moving");
+    // Halt: down at 40 rev/s², 0.1 s.
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+    let k = until(&mut m, &a, 1000, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("stopped") as f64;
+    assert!((80.0..160.0).contains(&k), "stopped after {k} ms");
+    assert!(a.velocity_actual(&m).unwrap().abs() as f64 <= 0.01 * per_rev);
+}
+
+/// Homing on the current position (method 37): the position actual becomes the home offset
+/// where the shaft stands, at once; homing attained (bit 12) and target reached (bit 10).
+#[test]
+fn homing_on_the_current_position_sets_the_home_offset_there() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, _) = enabled_in(Mode::Homing);
+    let before = a.position_actual(&m).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[37]).unwrap();
+    m.sdo_write(DRIVE, ix::HOME_OFFSET, 0, &1_000i32.to_le_bytes()).unwrap();
+    let sw = a.statusword(&m);
+    assert_eq!(sw & (status::OP_SPECIFIC_12 | status::OP_SPECIFIC_13), 0, "not homed yet");
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
+    until(&mut m, &a, 20, &|sw| sw & done == done).expect("homing attained");
+    // The position in the image was latched at the SYNC0 before the application homed.
+    cycles(&mut m, 2);
+    let after = a.position_actual(&m).unwrap();
+    assert!((after - 1_000).abs() <= 2, "position {after} after homing (was {before})");
+}
+
+/// Homing on the index pulse in the positive direction (method 34): the drive moves at the
+/// zero-search speed to the next whole turn of the shaft, where the position then reads the
+/// home offset, brakes at the homing acceleration and holds.
+#[test]
+fn homing_on_the_index_pulse_puts_the_home_offset_on_it() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, per_rev) = enabled_in(Mode::Homing);
+    let start = drive(&m).position_increments();
+    let index = (start / per_rev).ceil() * per_rev;
+    m.sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[34]).unwrap();
+    m.sdo_write(DRIVE, ix::HOME_OFFSET, 0, &(-500i32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    cycles(&mut m, 5);
+    let sw = a.statusword(&m);
+    assert_eq!(sw & (status::OP_SPECIFIC_12 | status::TARGET_REACHED), 0, "searching: {sw:#06x}");
+    assert!(a.velocity_actual(&m).unwrap() > 0, "moving the positive way");
+    let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
+    // At most a turn at 2 rev/s, then 40 ms of braking.
+    let k = until(&mut m, &a, 1000, &|sw| sw & done == done).expect("homing attained");
+    assert!(k < 700, "{k} ms");
+    cycles(&mut m, 50);
+    let shaft = drive(&m).position_increments();
+    let actual = a.position_actual(&m).unwrap() as f64;
+    // Where the shaft stands now is as far past the index as the position is past the offset.
+    assert!(((shaft - index) - (actual + 500.0)).abs() <= 2.0, "shaft {shaft}, index {index}, position {actual}");
+    assert!(shaft > index && shaft - index < 0.1 * per_rev, "stopped just past the index: {}", shaft - index);
+    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_13, 0);
+}
+
+/// A homing method that needs a limit or home switch, which this drive does not have: homing
+/// error (bit 13), and the shaft does not move.
+#[test]
+fn homing_methods_that_need_a_switch_end_in_a_homing_error() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, _) = enabled_in(Mode::Homing);
+    let before = a.position_actual(&m).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[17]).unwrap();
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    until(&mut m, &a, 20, &|sw| sw & status::OP_SPECIFIC_13 != 0).expect("homing error");
+    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0);
+    cycles(&mut m, 50);
+    assert!((a.position_actual(&m).unwrap() - before).abs() < 50);
+}
+
+/// Profile position takes every rising edge of bit 4 as a new set-point: two moves in a row.
+#[test]
+fn profile_position_takes_one_set_point_after_another() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, per_rev) = enabled_in(Mode::ProfilePosition);
+    let start = a.position_actual(&m).unwrap();
+    for (i, revs) in [1.0, -0.5].iter().enumerate() {
+        let target = start.wrapping_add((revs * per_rev) as i32);
+        a.set_target_position(&mut m, target);
+        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+        until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("set-point acknowledged");
+        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 == 0).expect("acknowledge cleared");
+        until(&mut m, &a, 3000, &|sw| sw & status::TARGET_REACHED != 0).expect("target reached");
+        let end = a.position_actual(&m).unwrap();
+        assert!(end.wrapping_sub(target).abs() < 100, "move {i}: ends at {end}, target {target}");
+    }
+}

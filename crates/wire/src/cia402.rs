@@ -16,14 +16,21 @@ pub mod index {
     pub const FOLLOWING_ERROR_WINDOW: u16 = 0x6065;
     pub const FOLLOWING_ERROR_TIMEOUT: u16 = 0x6066;
     pub const VELOCITY_ACTUAL: u16 = 0x606C;
+    pub const VELOCITY_WINDOW: u16 = 0x606D;
+    pub const VELOCITY_THRESHOLD: u16 = 0x606F;
     pub const TARGET_TORQUE: u16 = 0x6071;
     pub const MAX_TORQUE: u16 = 0x6072;
     pub const TORQUE_ACTUAL: u16 = 0x6077;
     pub const TARGET_POSITION: u16 = 0x607A;
+    pub const HOME_OFFSET: u16 = 0x607C;
     pub const PROFILE_VELOCITY: u16 = 0x6081;
     pub const PROFILE_ACCELERATION: u16 = 0x6083;
     pub const PROFILE_DECELERATION: u16 = 0x6084;
     pub const QUICK_STOP_DECELERATION: u16 = 0x6085;
+    pub const HOMING_METHOD: u16 = 0x6098;
+    /// Subindex 1: speed during the search for a switch; 2: during the search for zero.
+    pub const HOMING_SPEEDS: u16 = 0x6099;
+    pub const HOMING_ACCELERATION: u16 = 0x609A;
     pub const FOLLOWING_ERROR_ACTUAL: u16 = 0x60F4;
     pub const TARGET_VELOCITY: u16 = 0x60FF;
     pub const SUPPORTED_DRIVE_MODES: u16 = 0x6502;
@@ -38,6 +45,8 @@ pub mod control {
     pub const ENABLE_OPERATION: u16 = 1 << 3;
     /// Profile position: a rising edge takes a new set-point.
     pub const NEW_SETPOINT: u16 = 1 << 4;
+    /// Homing: a rising edge starts homing, a falling edge interrupts it (the same bit).
+    pub const HOMING_START: u16 = 1 << 4;
     pub const CHANGE_SET_IMMEDIATELY: u16 = 1 << 5;
     pub const RELATIVE: u16 = 1 << 6;
     /// A rising edge resets a fault.
@@ -67,9 +76,10 @@ pub mod status {
     pub const REMOTE: u16 = 1 << 9;
     pub const TARGET_REACHED: u16 = 1 << 10;
     pub const INTERNAL_LIMIT: u16 = 1 << 11;
-    /// Profile position: set-point acknowledge; cyclic modes: the drive follows the target.
+    /// Profile position: set-point acknowledge; cyclic modes: the drive follows the target;
+    /// profile velocity: speed is zero; homing: homing attained.
     pub const OP_SPECIFIC_12: u16 = 1 << 12;
-    /// Profile position and CSP: following error.
+    /// Profile position and CSP: following error; homing: homing error.
     pub const OP_SPECIFIC_13: u16 = 1 << 13;
 }
 

@@ -1,5 +1,6 @@
 //! A CiA402 servo drive: a CoE device (its dictionary from an ESI file, an SII or built in)
-//! whose application runs the profile's state machine, the PP/CSP/CSV/CST modes and a motor.
+//! whose application runs the profile's state machine, the PP/PV/HM/CSP/CSV/CST modes and a
+//! motor.
 //!
 //! Timing follows a drive's firmware: in DC mode the SYNC0 interrupt takes the newest output
 //! buffer and latches the feedback; the application then needs a processing time drawn from a
@@ -7,6 +8,7 @@
 //! set-point reaches the control loops and the inputs are published. A cycle whose SYNC0 found no
 //! new buffer used a *repeated* set-point; a buffer overwritten before any SYNC0 took it was a
 //! *late* set-point (it arrived after the SYNC0 it was meant for).
+mod homing;
 mod motor;
 pub mod objects;
 
@@ -226,8 +228,15 @@ pub struct Cia402Drive {
     fault_code: u16,
     following_since_ns: Option<u64>,
     active_processing: ProcessingTime,
-    /// Controlword bit 4 as last seen (profile position takes a set-point on its rising edge).
+    /// Controlword bit 4 as last seen (profile position takes a set-point on its rising edge,
+    /// homing starts on it).
     pp_bit: bool,
+    /// Profile velocity: the velocity demand ramping to the target (increments/s).
+    pv: f64,
+    /// The user's position scale on the shaft: position actual = shaft position + offset
+    /// (increments; homing sets it).
+    offset: f64,
+    homing: homing::Homing,
 }
 
 impl Cia402Drive {
@@ -270,6 +279,9 @@ impl Cia402Drive {
             following_since_ns: None,
             active_processing: pt,
             pp_bit: false,
+            pv: 0.0,
+            offset: 0.0,
+            homing: homing::Homing::default(),
         };
         d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
         d.write_feedback(d.feedback());
@@ -336,7 +348,7 @@ impl Cia402Drive {
         let fe = if self.position_controlled() { demand - pos } else { 0.0 };
         let torque_pm = self.mech.torque_nm / self.motor.rated_torque_nm * 1000.0;
         Feedback {
-            pos: pos.round() as i64 as i32,
+            pos: (pos + self.offset).round() as i64 as i32,
             vel: self.mech.velocity_increments(&self.motor).round() as i32,
             torque: torque_pm.round().clamp(i16::MIN as f64, i16::MAX as f64) as i16,
             following_error: fe.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32,
@@ -345,7 +357,12 @@ impl Cia402Drive {
 
     fn position_controlled(&self) -> bool {
         self.state == State::OperationEnabled
-            && matches!(self.mode, Some(Mode::CyclicSyncPosition | Mode::ProfilePosition))
+            && match self.mode {
+                Some(Mode::CyclicSyncPosition | Mode::ProfilePosition) => true,
+                // Homing holds the shaft while it is not moving it.
+                Some(Mode::Homing) => !self.homing.moving(),
+                _ => false,
+            }
     }
 
     fn max_torque_nm(&self) -> f64 {
@@ -369,7 +386,14 @@ impl Cia402Drive {
             at += loop_ns;
             self.demand.promote(at);
             let demand = self.step_demand(at, dt);
+            let before_rad = self.mech.pos_rad;
             self.mech.step(&self.motor, demand, max_torque, dt);
+            if let Some(index_rad) = self.homing.index_crossed(before_rad, self.mech.pos_rad) {
+                // The index pulse is the home position: there the position reads the home offset.
+                let index = index_rad * self.motor.increments_per_rev / std::f64::consts::TAU;
+                self.offset = get(&self.coe.od, ix::HOME_OFFSET, 0) as f64 - index;
+                self.homing.phase = homing::Phase::Stopping;
+            }
             if let Some((v, _)) = self.ramp {
                 if v == 0.0 && self.mech.vel_rad_s.abs() < 0.05 {
                     self.ramp = None;
@@ -433,6 +457,21 @@ impl Cia402Drive {
                     d.now.period_ns = 0;
                 }
                 Demand::Position { pos: d.now.to, vel: d.pp_vel, acc: 0.0 }
+            }
+            Some(Mode::ProfileVelocity) => {
+                // The target (or zero while halted), reached along the profile's ramps.
+                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+                let target = if halt { 0.0 } else { get(od, ix::TARGET_VELOCITY, 0) as f64 };
+                let rising = target.abs() > self.pv.abs() && target * self.pv >= 0.0;
+                let rate = get_unsigned(od, if rising { ix::PROFILE_ACCELERATION } else { ix::PROFILE_DECELERATION }, 0)
+                    .max(1) as f64;
+                self.pv += (target - self.pv).clamp(-rate * dt, rate * dt);
+                Demand::Velocity(self.pv)
+            }
+            Some(Mode::Homing) if self.homing.moving() => Demand::Velocity(self.homing.step(dt)),
+            Some(Mode::Homing) => {
+                let (pos, vel, acc) = self.demand.segment(at).at(at);
+                Demand::Position { pos, vel, acc }
             }
             Some(Mode::CyclicSyncVelocity) => Demand::Velocity(get(od, ix::TARGET_VELOCITY, 0) as f64),
             Some(Mode::CyclicSyncTorque) => {
@@ -510,29 +549,31 @@ impl Cia402Drive {
         if mode_req.is_some() && mode_req != self.mode {
             self.mode = mode_req;
             self.demand = PositionDemand::hold(self.mech.position_increments(&self.motor));
+            // Profile velocity starts from the speed the shaft has; homing from the start.
+            self.pv = self.mech.velocity_increments(&self.motor);
+            self.homing = homing::Homing::default();
         }
+        let bit4_rising = self.bit4_rising(cw);
         if self.state == State::OperationEnabled {
             match self.mode {
                 Some(Mode::CyclicSyncPosition) => {
-                    let last = self.demand.last_target();
+                    // Unwrap the 32-bit target around the last one, on the user's scale.
+                    let last = self.demand.last_target() + self.offset;
                     let target = get(&self.coe.od, ix::TARGET_POSITION, 0) as i32;
-                    // Unwrap the 32-bit target around the last one.
-                    let to = last + target.wrapping_sub(last.round() as i64 as i32) as f64;
+                    let to = last + target.wrapping_sub(last.round() as i64 as i32) as f64 - self.offset;
                     let period = self.cycle_ns.max(1);
                     self.demand.queue(to, taken_ns + period, period);
                 }
-                Some(Mode::ProfilePosition) => {
-                    let edge = cw & control::NEW_SETPOINT != 0 && self.pp_prev_edge(cw);
-                    if edge {
-                        let od = &self.coe.od;
-                        let target = get(od, ix::TARGET_POSITION, 0) as f64;
-                        let base = if cw & control::RELATIVE != 0 { self.demand.now.to } else { 0.0 };
-                        let lim = |i| get_unsigned(od, i, 0).max(1) as f64;
-                        self.demand.pp_target = Some(base + target);
-                        self.demand.pp_limits =
-                            (lim(ix::PROFILE_VELOCITY), lim(ix::PROFILE_ACCELERATION), lim(ix::PROFILE_DECELERATION));
-                    }
+                Some(Mode::ProfilePosition) if bit4_rising => {
+                    let od = &self.coe.od;
+                    let target = get(od, ix::TARGET_POSITION, 0) as f64;
+                    let base = if cw & control::RELATIVE != 0 { self.demand.now.to } else { -self.offset };
+                    let lim = |i| get_unsigned(od, i, 0).max(1) as f64;
+                    self.demand.pp_target = Some(base + target);
+                    self.demand.pp_limits =
+                        (lim(ix::PROFILE_VELOCITY), lim(ix::PROFILE_ACCELERATION), lim(ix::PROFILE_DECELERATION));
                 }
+                Some(Mode::Homing) => self.homing_control(cw, bit4_rising),
                 _ => {}
             }
         }
@@ -540,11 +581,38 @@ impl Cia402Drive {
         self.coe.publish_inputs(pdi);
     }
 
-    /// Whether bit 4 was clear in the last cycle.
-    fn pp_prev_edge(&mut self, cw: u16) -> bool {
+    /// Whether controlword bit 4 rose since the last cycle the application took (it is
+    /// recorded every cycle, so that each new set-point or homing start is one edge).
+    fn bit4_rising(&mut self, cw: u16) -> bool {
         let was = self.pp_bit;
         self.pp_bit = cw & control::NEW_SETPOINT != 0;
-        !was
+        self.pp_bit && !was
+    }
+
+    /// Homing mode's controlword: bit 4 rising starts the method, falling interrupts it, halt
+    /// (bit 8) stops it.
+    fn homing_control(&mut self, cw: u16, rising: bool) {
+        use homing::Phase;
+        let od = &self.coe.od;
+        let running = matches!(self.homing.phase, Phase::Searching { .. } | Phase::Stopping);
+        if running && (cw & control::HOMING_START == 0 || cw & control::HALT != 0) {
+            self.homing.phase = Phase::Interrupted;
+            return;
+        }
+        if !rising || cw & control::HALT != 0 {
+            return;
+        }
+        self.homing.acc = get_unsigned(od, ix::HOMING_ACCELERATION, 0).max(1) as f64;
+        self.homing.speed = get_unsigned(od, ix::HOMING_SPEEDS, 2).max(1) as f64;
+        self.homing.phase = match homing::start(get(od, ix::HOMING_METHOD, 0)) {
+            homing::Start::Here => {
+                let here = self.mech.position_increments(&self.motor);
+                self.offset = get(od, ix::HOME_OFFSET, 0) as f64 - here;
+                Phase::Attained
+            }
+            homing::Start::Index(dir) => Phase::Searching { dir },
+            homing::Start::Unsupported => Phase::Error,
+        };
     }
 
     fn write_feedback(&mut self, f: Feedback) {
@@ -579,6 +647,32 @@ impl Cia402Drive {
                 }
                 if self.demand.pp_target.is_none() && f.following_error.unsigned_abs() < 100 {
                     sw |= status::TARGET_REACHED;
+                }
+            }
+            (State::OperationEnabled, Some(Mode::ProfileVelocity)) => {
+                let od = &self.coe.od;
+                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+                let target = if halt { 0 } else { get(od, ix::TARGET_VELOCITY, 0) };
+                // Target reached: the actual velocity within the window of the target (CiA402
+                // asks for it to stay there for 0x606E, which this drive does not keep).
+                if (f.vel as i64 - target).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_WINDOW, 0) {
+                    sw |= status::TARGET_REACHED;
+                }
+                // Speed: the shaft stands (below the threshold).
+                if (f.vel as i64).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_THRESHOLD, 0) {
+                    sw |= status::OP_SPECIFIC_12;
+                }
+            }
+            (State::OperationEnabled, Some(Mode::Homing)) => {
+                let (error, attained, reached) = self.homing.status_bits();
+                for (on, bit) in [
+                    (error, status::OP_SPECIFIC_13),
+                    (attained, status::OP_SPECIFIC_12),
+                    (reached, status::TARGET_REACHED),
+                ] {
+                    if on {
+                        sw |= bit;
+                    }
                 }
             }
             _ => {}

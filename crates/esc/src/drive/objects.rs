@@ -16,8 +16,14 @@ pub const SYNC_SM: u16 = 1;
 pub const SYNC_DC_SYNC0: u16 = 2;
 
 /// The modes the simulated drive runs.
-pub const MODES: [Mode; 4] =
-    [Mode::ProfilePosition, Mode::CyclicSyncPosition, Mode::CyclicSyncVelocity, Mode::CyclicSyncTorque];
+pub const MODES: [Mode; 6] = [
+    Mode::ProfilePosition,
+    Mode::ProfileVelocity,
+    Mode::Homing,
+    Mode::CyclicSyncPosition,
+    Mode::CyclicSyncVelocity,
+    Mode::CyclicSyncTorque,
+];
 
 fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32) -> Object {
     let e = |sub: u8, name: &str, ty: u16, bits: u16, write: bool, v: u32| Entry {
@@ -59,7 +65,7 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
 /// Adds the profile's objects that `od` lacks, with the model's defaults.
 pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
-    let vars: [(u16, &str, u16, u16, Access, i64); 20] = [
+    let vars: [(u16, &str, u16, u16, Access, i64); 25] = [
         (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
         (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
         (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
@@ -71,10 +77,17 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         (ix::FOLLOWING_ERROR_WINDOW, "Following error window", dt::UDINT, 32, access(true, false, false), 13_107),
         (ix::FOLLOWING_ERROR_TIMEOUT, "Following error time out", dt::UINT, 16, access(true, false, false), 100),
         (ix::VELOCITY_ACTUAL, "Velocity actual value", dt::DINT, 32, access(false, false, true), 0),
+        // Profile velocity: target reached within 0.05 rev/s, zero speed below 0.01 rev/s.
+        (ix::VELOCITY_WINDOW, "Velocity window", dt::UINT, 16, access(true, false, false), 6_554),
+        (ix::VELOCITY_THRESHOLD, "Velocity threshold", dt::UINT, 16, access(true, false, false), 1_311),
         (ix::TARGET_TORQUE, "Target torque", dt::INT, 16, access(true, true, false), 0),
         (ix::MAX_TORQUE, "Max torque", dt::UINT, 16, access(true, true, false), 3000),
         (ix::TORQUE_ACTUAL, "Torque actual value", dt::INT, 16, access(false, false, true), 0),
         (ix::TARGET_POSITION, "Target position", dt::DINT, 32, access(true, true, false), 0),
+        (ix::HOME_OFFSET, "Home offset", dt::DINT, 32, access(true, false, false), 0),
+        // Homing on the current position (37) until told otherwise.
+        (ix::HOMING_METHOD, "Homing method", dt::SINT, 8, access(true, false, false), 37),
+        (ix::HOMING_ACCELERATION, "Homing acceleration", dt::UDINT, 32, access(true, false, false), 655_360),
         (ix::PROFILE_VELOCITY, "Profile velocity", dt::UDINT, 32, access(true, true, false), 131_072),
         (ix::PROFILE_ACCELERATION, "Profile acceleration", dt::UDINT, 32, access(true, true, false), 655_360),
         (ix::PROFILE_DECELERATION, "Profile deceleration", dt::UDINT, 32, access(true, true, false), 655_360),
@@ -86,6 +99,26 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         if od.get(index).is_none() {
             od.insert(Object::var(index, name, ty, bits, acc, v.to_le_bytes()[..bits as usize / 8].to_vec()));
         }
+    }
+    if od.get(ix::HOMING_SPEEDS).is_none() {
+        let speed = |sub: u8, name: &str, v: u32| Entry {
+            subindex: sub,
+            name: name.into(),
+            data_type: dt::UDINT,
+            bit_len: 32,
+            bit_offset: 0,
+            access: access(true, false, false),
+            value: v.to_le_bytes().to_vec(),
+        };
+        // 1 rev/s looking for a switch, 0.25 rev/s for the index pulse.
+        od.insert(Object::list(
+            ix::HOMING_SPEEDS,
+            "Homing speeds",
+            ObjectCode::Array,
+            dt::UDINT,
+            Access::RO,
+            vec![speed(1, "Speed during search for switch", 131_072), speed(2, "Speed during search for zero", 32_768)],
+        ));
     }
     if od.get(ix::SUPPORTED_DRIVE_MODES).is_none() {
         od.insert(Object::var(
