@@ -481,3 +481,45 @@ fn profile_position_takes_one_set_point_after_another() {
         assert!(end.wrapping_sub(target).abs() < 100, "move {i}: ends at {end}, target {target}");
     }
 }
+
+/// The driver's own loop homes a drive: the mode bits set once ride along with every command
+/// `update` sends, and clearing them interrupts homing as the profile says.
+#[test]
+fn the_driver_homes_through_its_update_loop() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, mut a, per_rev) = enabled_in(Mode::Homing);
+    m.sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[33]).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((1.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    a.set_mode_bits(control::HOMING_START);
+    let step = |m: &mut Master<VirtualIo>, a: &mut Axis| {
+        a.update(m);
+        cycles(m, 1);
+    };
+    for _ in 0..20 {
+        step(&mut m, &mut a);
+    }
+    assert!(a.velocity_actual(&m).unwrap() < 0, "searching the negative way");
+    a.set_mode_bits(0);
+    let mut interrupted = false;
+    for _ in 0..300 {
+        step(&mut m, &mut a);
+        let sw = a.statusword(&m);
+        if sw & status::TARGET_REACHED != 0 && a.velocity_actual(&m).unwrap().abs() < (0.01 * per_rev) as i32 {
+            interrupted = sw & (status::OP_SPECIFIC_12 | status::OP_SPECIFIC_13) == 0;
+            break;
+        }
+    }
+    assert!(interrupted, "stopped, not homed, no error");
+    assert_eq!(a.state(), Some(State::OperationEnabled));
+    a.set_mode_bits(control::HOMING_START);
+    let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
+    let mut homed = false;
+    for _ in 0..2000 {
+        step(&mut m, &mut a);
+        if a.statusword(&m) & done == done {
+            homed = true;
+            break;
+        }
+    }
+    assert!(homed, "homing attained after the restart");
+}

@@ -105,6 +105,12 @@ impl Axis {
         Ok(())
     }
 
+    /// The mode-specific controlword bits (4–6, 8, 9: new set-point, homing start, halt …)
+    /// every later `update` sends along with its command.
+    pub fn set_mode_bits(&mut self, bits: u16) {
+        self.controlword = (self.controlword & 0x008F) | (bits & !0x008F);
+    }
+
     pub fn state(&self) -> Option<State> {
         self.state
     }
