@@ -372,21 +372,23 @@ fn until(m: &mut Master<VirtualIo>, a: &Axis, max: u64, done: &dyn Fn(u16) -> bo
 }
 
 /// Profile velocity: the drive ramps to the target velocity at the profile acceleration and
-/// reports target reached (bit 10); halt (bit 8) brings it down at the deceleration, and bit 12
-/// reports the shaft standing.
+/// reports target reached (bit 10) once the velocity has stayed in its window for the window
+/// time; halt (bit 8) brings it down at the deceleration, and bit 12 reports the shaft standing.
 #[test]
 fn the_builtin_servo_runs_profile_velocity() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
     m.sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((40.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::VELOCITY_WINDOW_TIME, 0, &100u16.to_le_bytes()).unwrap();
     assert_ne!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "standing before the move");
     let target = (4.0 * per_rev) as i32;
     a.set_target_velocity(&mut m, target);
     cycles(&mut m, 5);
     assert_eq!(a.statusword(&m) & status::TARGET_REACHED, 0, "4 rev/s at 20 rev/s² takes 0.2 s");
     let k = until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("target velocity reached") as f64;
-    assert!((180.0..260.0).contains(&k), "reached after {k} ms");
+    // The ramp's 0.2 s, then 0.1 s in the window.
+    assert!((280.0..360.0).contains(&k), "reached after {k} ms");
     let v = a.velocity_actual(&m).unwrap();
     assert!((v - target).abs() as f64 <= 0.05 * per_rev, "{v} against {target}");
     assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "moving");

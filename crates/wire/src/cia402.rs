@@ -17,7 +17,9 @@ pub mod index {
     pub const FOLLOWING_ERROR_TIMEOUT: u16 = 0x6066;
     pub const VELOCITY_ACTUAL: u16 = 0x606C;
     pub const VELOCITY_WINDOW: u16 = 0x606D;
+    pub const VELOCITY_WINDOW_TIME: u16 = 0x606E;
     pub const VELOCITY_THRESHOLD: u16 = 0x606F;
+    pub const VELOCITY_THRESHOLD_TIME: u16 = 0x6070;
     pub const TARGET_TORQUE: u16 = 0x6071;
     pub const MAX_TORQUE: u16 = 0x6072;
     pub const TORQUE_ACTUAL: u16 = 0x6077;

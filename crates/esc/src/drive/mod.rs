@@ -231,8 +231,14 @@ pub struct Cia402Drive {
     /// Controlword bit 4 as last seen (profile position takes a set-point on its rising edge,
     /// homing starts on it).
     pp_bit: bool,
-    /// Profile velocity: the velocity demand ramping to the target (increments/s).
+    /// Profile velocity: the velocity demand ramping to the target (increments/s), and since
+    /// when the actual velocity has been within the window of the target and below the
+    /// threshold (ns).
     pv: f64,
+    pv_in_window_since: Option<u64>,
+    pv_still_since: Option<u64>,
+    /// Target reached and speed zero, as last judged.
+    pv_flags: (bool, bool),
     /// The user's position scale on the shaft: position actual = shaft position + offset
     /// (increments; homing sets it).
     offset: f64,
@@ -280,6 +286,9 @@ impl Cia402Drive {
             active_processing: pt,
             pp_bit: false,
             pv: 0.0,
+            pv_in_window_since: None,
+            pv_still_since: None,
+            pv_flags: (false, false),
             offset: 0.0,
             homing: homing::Homing::default(),
         };
@@ -577,8 +586,27 @@ impl Cia402Drive {
                 _ => {}
             }
         }
+        self.watch_velocity(feedback.vel, now);
         self.write_feedback(feedback);
         self.coe.publish_inputs(pdi);
+    }
+
+    /// Profile velocity's two conditions, each of which must hold for its time (0x606E,
+    /// 0x6070): the velocity within the window of the target, and below the threshold.
+    fn watch_velocity(&mut self, vel: i32, now: u64) {
+        let od = &self.coe.od;
+        let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+        let target = if halt { 0 } else { get(od, ix::TARGET_VELOCITY, 0) };
+        let within = (vel as i64 - target).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_WINDOW, 0);
+        let still = (vel as i64).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_THRESHOLD, 0);
+        self.pv_in_window_since = within.then(|| self.pv_in_window_since.unwrap_or(now));
+        self.pv_still_since = still.then(|| self.pv_still_since.unwrap_or(now));
+        self.pv_flags = (
+            self.pv_in_window_since
+                .is_some_and(|t| now - t >= get_unsigned(od, ix::VELOCITY_WINDOW_TIME, 0) * 1_000_000),
+            self.pv_still_since
+                .is_some_and(|t| now - t >= get_unsigned(od, ix::VELOCITY_THRESHOLD_TIME, 0) * 1_000_000),
+        );
     }
 
     /// Whether controlword bit 4 rose since the last cycle the application took (it is
@@ -650,16 +678,11 @@ impl Cia402Drive {
                 }
             }
             (State::OperationEnabled, Some(Mode::ProfileVelocity)) => {
-                let od = &self.coe.od;
-                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
-                let target = if halt { 0 } else { get(od, ix::TARGET_VELOCITY, 0) };
-                // Target reached: the actual velocity within the window of the target (CiA402
-                // asks for it to stay there for 0x606E, which this drive does not keep).
-                if (f.vel as i64 - target).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_WINDOW, 0) {
+                // Target reached, and speed zero (the shaft stands).
+                if self.pv_flags.0 {
                     sw |= status::TARGET_REACHED;
                 }
-                // Speed: the shaft stands (below the threshold).
-                if (f.vel as i64).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_THRESHOLD, 0) {
+                if self.pv_flags.1 {
                     sw |= status::OP_SPECIFIC_12;
                 }
             }

@@ -65,7 +65,7 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
 /// Adds the profile's objects that `od` lacks, with the model's defaults.
 pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
-    let vars: [(u16, &str, u16, u16, Access, i64); 25] = [
+    let vars: [(u16, &str, u16, u16, Access, i64); 27] = [
         (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
         (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
         (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
@@ -77,9 +77,12 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         (ix::FOLLOWING_ERROR_WINDOW, "Following error window", dt::UDINT, 32, access(true, false, false), 13_107),
         (ix::FOLLOWING_ERROR_TIMEOUT, "Following error time out", dt::UINT, 16, access(true, false, false), 100),
         (ix::VELOCITY_ACTUAL, "Velocity actual value", dt::DINT, 32, access(false, false, true), 0),
-        // Profile velocity: target reached within 0.05 rev/s, zero speed below 0.01 rev/s.
+        // Profile velocity: target reached within 0.05 rev/s, zero speed below 0.01 rev/s,
+        // each for 10 ms.
         (ix::VELOCITY_WINDOW, "Velocity window", dt::UINT, 16, access(true, false, false), 6_554),
+        (ix::VELOCITY_WINDOW_TIME, "Velocity window time", dt::UINT, 16, access(true, false, false), 10),
         (ix::VELOCITY_THRESHOLD, "Velocity threshold", dt::UINT, 16, access(true, false, false), 1_311),
+        (ix::VELOCITY_THRESHOLD_TIME, "Velocity threshold time", dt::UINT, 16, access(true, false, false), 10),
         (ix::TARGET_TORQUE, "Target torque", dt::INT, 16, access(true, true, false), 0),
         (ix::MAX_TORQUE, "Max torque", dt::UINT, 16, access(true, true, false), 3000),
         (ix::TORQUE_ACTUAL, "Torque actual value", dt::INT, 16, access(false, false, true), 0),
