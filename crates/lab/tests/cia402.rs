@@ -1,7 +1,7 @@
 //! The simulated CiA402 drive against the master's driver, in virtual time: every transition of
 //! the state machine, a following-error fault and its reset, CSP, CSV and CST — for the built-in
 //! servo and for the Nanotec drive as its ESI file describes it.
-use ferrocat_esc::Cia402Drive;
+use ferrocat_esc::{Cia402Drive, Switches};
 use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master, MasterEvent};
@@ -524,4 +524,100 @@ fn the_driver_homes_through_its_update_loop() {
         }
     }
     assert!(homed, "homing attained after the restart");
+}
+
+/// The drive in `drive_toml` enabled in homing mode, with the homing speeds (rev/s) and
+/// acceleration (rev/s²) set.
+fn homing_with(drive_toml: &str, switch_rps: f64, zero_rps: f64, acc_rps2: f64) -> (Master<VirtualIo>, Axis, f64) {
+    let mut m = master(drive_toml, &|_| {});
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_mode(&mut m, Mode::Homing).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    let per_rev = drive(&m).motor.increments_per_rev;
+    let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
+    m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 1, &u32le(switch_rps)).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &u32le(zero_rps)).unwrap();
+    m.sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &u32le(acc_rps2)).unwrap();
+    (m, a, per_rev)
+}
+
+/// Starts homing method `method` with home offset `offset` and runs until the statusword says
+/// attained (Ok, after how many cycles) or error (Err).
+fn home(m: &mut Master<VirtualIo>, a: &Axis, method: i8, offset: i32, max: u64) -> Result<u64, u16> {
+    use ferrocat_wire::cia402::{control, status};
+    m.sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[method as u8]).unwrap();
+    m.sdo_write(DRIVE, ix::HOME_OFFSET, 0, &offset.to_le_bytes()).unwrap();
+    a.write_controlword(m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
+    let end = until(m, a, max, &|sw| sw & done == done || sw & status::OP_SPECIFIC_13 != 0).expect("homing ends");
+    let sw = a.statusword(m);
+    if sw & status::OP_SPECIFIC_13 != 0 {
+        Err(sw)
+    } else {
+        Ok(end)
+    }
+}
+
+/// Where the home position is on the shaft, from what the drive now reports: position actual
+/// minus the offset is the shaft's distance past home.
+fn home_on_shaft(m: &mut Master<VirtualIo>, a: &Axis, offset: i32) -> f64 {
+    cycles(m, 20);
+    drive(m).position_increments() - (a.position_actual(m).unwrap() - offset) as f64
+}
+
+fn digital_inputs(m: &mut Master<VirtualIo>) -> u32 {
+    u32::from_le_bytes(m.sdo_read(DRIVE, ix::DIGITAL_INPUTS, 0).unwrap()[..4].try_into().unwrap())
+}
+
+/// A home switch from the segment file (active above 5 rev of the shaft; the drive starts
+/// within ±4 rev), method 20: up to the switch's edge, where the position then reads the
+/// home offset; 0x60FD shows the switch.
+#[test]
+fn homing_on_a_home_switch_from_the_segment_file() {
+    let (mut m, a, per_rev) = homing_with("builtin = 'SERVO'\nhome_switch_rev = 5.0", 5.0, 5.0, 100.0);
+    assert_eq!(digital_inputs(&mut m), 0, "below the switch");
+    let k = home(&mut m, &a, 20, 700, 5000).expect("homed");
+    let home = home_on_shaft(&mut m, &a, 700);
+    assert!((home - 5.0 * per_rev).abs() <= 2.0, "home at {} rev, after {k} ms", home / per_rev);
+    let past = (drive(&m).position_increments() - home) / per_rev;
+    // Braking from 5 rev/s at 100 rev/s²: 0.125 rev.
+    assert!((0.1..0.2).contains(&past), "stopped {past} rev past the edge");
+    assert_eq!(digital_inputs(&mut m), 0b100, "on the switch");
+}
+
+/// The negative limit switch and the index pulse (method 1): down to the switch, slowly back
+/// off it, and home on the first index pulse above its edge.
+#[test]
+fn homing_on_the_negative_limit_switch_and_the_index_pulse() {
+    let (mut m, a, per_rev) = homing_with("builtin = 'SERVO'", 4.0, 1.0, 50.0);
+    let start_rev = drive(&m).position_increments() / per_rev;
+    let limit_rev = start_rev - 1.3;
+    drive_mut(&mut m).set_switches(Switches { negative_limit_rev: Some(limit_rev), ..Switches::default() });
+    home(&mut m, &a, 1, 0, 10_000).expect("homed");
+    let home = home_on_shaft(&mut m, &a, 0) / per_rev;
+    assert!(
+        (home - limit_rev.ceil()).abs() * per_rev <= 2.0,
+        "home {home} rev; limit at {limit_rev}, start {start_rev}"
+    );
+    assert_eq!(digital_inputs(&mut m), 0, "off the limit switch");
+}
+
+/// A limit switch met while looking for the home switch (method 4, no reversal): homing error,
+/// the drive stopped near the limit.
+#[test]
+fn a_limit_switch_on_the_way_to_the_home_switch_is_a_homing_error() {
+    let (mut m, a, per_rev) = homing_with("builtin = 'SERVO'", 2.0, 2.0, 50.0);
+    let start_rev = drive(&m).position_increments() / per_rev;
+    drive_mut(&mut m).set_switches(Switches {
+        positive_limit_rev: Some(start_rev + 0.5),
+        home_rev: Some(start_rev + 2.0),
+        ..Switches::default()
+    });
+    let sw = home(&mut m, &a, 4, 0, 5000).expect_err("homing error");
+    assert_eq!(sw & ferrocat_wire::cia402::status::OP_SPECIFIC_12, 0);
+    cycles(&mut m, 200);
+    let at = drive(&m).position_increments() / per_rev - start_rev;
+    assert!((0.5..0.6).contains(&at), "stopped {at} rev from the start");
+    assert_eq!(digital_inputs(&mut m) & 0b010, 0b010, "on the positive limit");
 }

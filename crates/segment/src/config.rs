@@ -15,7 +15,8 @@
 use std::path::{Path, PathBuf};
 
 use ferrocat_esc::{
-    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, SyncApp, SyncMode,
+    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, Switches, SyncApp,
+    SyncMode,
 };
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::register::{PortDescriptor, PortType};
@@ -52,6 +53,24 @@ fn patch_sii_header(sii: &mut [u8], change: impl FnOnce(&mut [u8])) {
 
 fn device_err(place: impl Into<String>, message: impl Into<String>) -> SegmentError {
     SegmentError::Device { place: place.into(), message: message.into() }
+}
+
+/// A drive's switches from its device table: finite positions, the negative limit below the
+/// positive one.
+fn switches(d: &DeviceToml, place: &str) -> Result<Switches, SegmentError> {
+    let rev = |key: &str, v: Option<f64>| v.map(|v| in_range(place, key, v, -1e9..=1e9)).transpose();
+    let sw = Switches {
+        negative_limit_rev: rev("negative_limit_rev", d.negative_limit_rev)?,
+        positive_limit_rev: rev("positive_limit_rev", d.positive_limit_rev)?,
+        home_rev: rev("home_switch_rev", d.home_switch_rev)?,
+        home_active_below: d.home_switch_below.unwrap_or(false),
+    };
+    if let (Some(n), Some(p)) = (sw.negative_limit_rev, sw.positive_limit_rev) {
+        if n >= p {
+            return Err(device_err(place, format!("negative_limit_rev ({n}) must lie below positive_limit_rev ({p})")));
+        }
+    }
+    Ok(sw)
 }
 
 /// A number from the file, checked against the range it may take (NaN and infinities never do).
@@ -146,6 +165,13 @@ pub struct DeviceToml {
     /// "cia402" (default for CoE devices with the drive profile's objects).
     pub app: Option<String>,
     pub app_period_us: Option<f64>,
+    /// A CiA402 drive's limit switches (active at and below / at and above) and home switch
+    /// (active at and above, or at and below with `home_switch_below`), in revolutions of the
+    /// shaft on its own scale; used by homing methods 1–6 and 17–22, reported in 0x60FD.
+    pub negative_limit_rev: Option<f64>,
+    pub positive_limit_rev: Option<f64>,
+    pub home_switch_rev: Option<f64>,
+    pub home_switch_below: Option<bool>,
     /// How long the firmware of a device without device emulation takes to act on a write of
     /// AL control (µs, default 1000).
     pub al_response_us: Option<f64>,
@@ -324,11 +350,20 @@ impl SegmentConfig {
                 None => crate::od_build::from_sii(&info),
             });
             let drive = od.as_ref().is_some_and(|od| d.app.is_some() || is_drive(&info, od));
+            let has_switches = d.negative_limit_rev.is_some()
+                || d.positive_limit_rev.is_some()
+                || d.home_switch_rev.is_some()
+                || d.home_switch_below.is_some();
+            if has_switches && !(drive && matches!(d.app.as_deref(), None | Some("cia402"))) {
+                return Err(device_err(&place, "limit and home switches need a CiA402 drive (app = \"cia402\")"));
+            }
             let app: Box<dyn Application> = match (d.app.as_deref(), od) {
                 (None | Some("cia402"), Some(od)) if drive => {
                     // Each drive draws from its own stream: the others' draws stay as they were.
                     let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                    Box::new(Cia402Drive::new(od, config.sm_count, seed))
+                    let mut drive = Cia402Drive::new(od, config.sm_count, seed);
+                    drive.set_switches(switches(d, &place)?);
+                    Box::new(drive)
                 }
                 (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
                 (None, Some(od)) => Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic))),

@@ -140,6 +140,15 @@ fn builtin_devices_and_bad_descriptions() {
             "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = -5\n",
             "device 1 (EL2004): cable_m -5.0 out of range",
         ),
+        (
+            "[[device]]\nbuiltin = 'EL2004'\nhome_switch_rev = 1.0\n",
+            "device 0: limit and home switches need a CiA402 drive",
+        ),
+        (
+            "[[device]]\nbuiltin = 'SERVO'\nnegative_limit_rev = 2.0\npositive_limit_rev = -2.0\n",
+            "device 0: negative_limit_rev (2) must lie below positive_limit_rev (-2)",
+        ),
+        ("[[device]]\nbuiltin = 'SERVO'\nhome_switch_rev = nan\n", "device 0: home_switch_rev NaN out of range"),
         ("loss_probability = 1.5\n[[device]]\nbuiltin = 'EK1100'\n", "segment: loss_probability 1.5 out of range"),
         (
             "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = 5\nlink_ns = 500\n",

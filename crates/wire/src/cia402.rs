@@ -34,6 +34,8 @@ pub mod index {
     pub const HOMING_SPEEDS: u16 = 0x6099;
     pub const HOMING_ACCELERATION: u16 = 0x609A;
     pub const FOLLOWING_ERROR_ACTUAL: u16 = 0x60F4;
+    /// Bit 0 negative limit switch, 1 positive limit switch, 2 home switch.
+    pub const DIGITAL_INPUTS: u16 = 0x60FD;
     pub const TARGET_VELOCITY: u16 = 0x60FF;
     pub const SUPPORTED_DRIVE_MODES: u16 = 0x6502;
 }

@@ -1,17 +1,99 @@
-//! Homing (CiA402 mode 6) for a drive with no limit or home switch wired: the methods that need
-//! only the motor's encoder — 33 and 34 (the index pulse, searched in the negative or positive
-//! direction) and 35 and 37 (the current position). A method that needs a switch ends in a
-//! homing error, as a drive without the switch reports.
+//! Homing (CiA402 mode 6). The drive's encoder gives one index pulse per revolution (at whole
+//! turns of the shaft); limit and home switches exist where the integrator put them
+//! ([`Switches`], reported in 0x60FD). The methods:
 //!
-//! Homing defines where the user's position scale sits on the shaft: the home position (the
-//! index pulse, or where the shaft stands) becomes the home offset (0x607C).
+//! - 1, 2 / 17, 18: the negative / positive limit switch, left slowly the other way; home is
+//!   the first index pulse after it goes inactive (1, 2) or that edge itself (17, 18);
+//! - 3, 4 / 19, 20: a home switch active above its position ("positive"), approached from
+//!   below (4, 20) or left downwards (3, 19); home is the next index pulse or the edge;
+//! - 5, 6 / 21, 22: a home switch active below its position ("negative"), mirrored;
+//! - 33, 34: the index pulse, searched downwards or upwards; 35, 37: the current position.
+//!
+//! A switch is searched at 0x6099:01, the edge and the index at 0x6099:02, both at 0x609A.
+//! The methods that reverse at a limit switch while looking for the home switch (7–14, 23–30),
+//! a method needing a switch the drive does not have, or a limit switch met on the way end in
+//! a homing error. Home then reads the home offset (0x607C).
+
+use std::f64::consts::TAU;
+
+/// Where the switches sit on the shaft (revolutions on its absolute scale); `None`: none.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Switches {
+    /// Active at and below this position.
+    pub negative_limit_rev: Option<f64>,
+    /// Active at and above this position.
+    pub positive_limit_rev: Option<f64>,
+    /// Active at and above this position, or at and below it with `home_active_below`.
+    pub home_rev: Option<f64>,
+    pub home_active_below: bool,
+}
+
+/// Which switch a method looks for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Switch {
+    NegativeLimit,
+    PositiveLimit,
+    Home,
+}
+
+impl Switches {
+    fn present(&self, s: Switch) -> bool {
+        match s {
+            Switch::NegativeLimit => self.negative_limit_rev.is_some(),
+            Switch::PositiveLimit => self.positive_limit_rev.is_some(),
+            Switch::Home => self.home_rev.is_some(),
+        }
+    }
+
+    /// Whether switch `s` is active with the shaft at `rad`.
+    pub(super) fn active(&self, s: Switch, rad: f64) -> bool {
+        let rev = rad / TAU;
+        match s {
+            Switch::NegativeLimit => self.negative_limit_rev.is_some_and(|p| rev <= p),
+            Switch::PositiveLimit => self.positive_limit_rev.is_some_and(|p| rev >= p),
+            Switch::Home => self.home_rev.is_some_and(|h| if self.home_active_below { rev <= h } else { rev >= h }),
+        }
+    }
+
+    /// Where switch `s` changes state (rad).
+    fn edge_rad(&self, s: Switch) -> f64 {
+        let rev = match s {
+            Switch::NegativeLimit => self.negative_limit_rev,
+            Switch::PositiveLimit => self.positive_limit_rev,
+            Switch::Home => self.home_rev,
+        };
+        rev.unwrap_or(0.0) * TAU
+    }
+
+    /// The digital inputs object 0x60FD: bit 0 negative limit, 1 positive limit, 2 home.
+    pub fn inputs(&self, rad: f64) -> u32 {
+        self.active(Switch::NegativeLimit, rad) as u32
+            | (self.active(Switch::PositiveLimit, rad) as u32) << 1
+            | (self.active(Switch::Home, rad) as u32) << 2
+    }
+}
+
+/// An edge a method homes on: switch `switch` leaving state `from` while moving in `dir`
+/// (±1), then the next index pulse in `dir` if `index`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Edge {
+    pub switch: Switch,
+    pub from: bool,
+    pub dir: f64,
+    pub index: bool,
+}
 
 /// Where homing stands.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Phase {
     /// Not started since homing mode was entered.
     Idle,
-    /// Moving towards the index pulse in direction `dir` (±1).
+    /// Moving against the final direction, at the switch speed, until the switch reads
+    /// `edge.from`.
+    ToSwitch(Edge),
+    /// Moving in the final direction, at the zero speed, until the switch leaves `edge.from`.
+    ToEdge(Edge),
+    /// Moving towards the index pulse in direction `dir` (±1), at the zero speed.
     Searching { dir: f64 },
     /// The home position is set; braking to a stop.
     Stopping,
@@ -19,7 +101,7 @@ pub(super) enum Phase {
     Attained,
     /// Halted or stopped by the controlword before it was done (braking while still moving).
     Interrupted,
-    /// The method cannot be run here (braking while still moving).
+    /// The method cannot be run here, or met a limit switch (braking while still moving).
     Error,
 }
 
@@ -28,33 +110,65 @@ pub(super) enum Phase {
 pub(super) struct Homing {
     pub phase: Phase,
     pub vel: f64,
-    /// Speed of the search for the index pulse and the homing acceleration (increments/s, /s²).
-    pub speed: f64,
+    /// Speeds of the search for a switch and for the edge or index, and the acceleration
+    /// (increments/s, /s²).
+    pub switch_speed: f64,
+    pub zero_speed: f64,
     pub acc: f64,
 }
 
 impl Default for Homing {
     fn default() -> Self {
-        Homing { phase: Phase::Idle, vel: 0.0, speed: 0.0, acc: 1.0 }
+        Homing { phase: Phase::Idle, vel: 0.0, switch_speed: 0.0, zero_speed: 0.0, acc: 1.0 }
     }
 }
 
-/// What starting `method` does.
+/// What starting a method does.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Start {
     /// The home position is where the shaft stands (methods 35 and 37).
     Here,
     /// Search for the index pulse in this direction (33: negative, 34: positive).
     Index(f64),
-    /// Not possible without switches.
+    /// Home on a switch's edge (and the index after it).
+    Edge(Edge),
+    /// Not a method this drive runs.
     Unsupported,
 }
 
 pub(super) fn start(method: i64) -> Start {
+    let edge = |switch, from, dir, index| Start::Edge(Edge { switch, from, dir, index });
     match method {
         35 | 37 => Start::Here,
         33 => Start::Index(-1.0),
         34 => Start::Index(1.0),
+        1 | 17 => edge(Switch::NegativeLimit, true, 1.0, method == 1),
+        2 | 18 => edge(Switch::PositiveLimit, true, -1.0, method == 2),
+        3 | 19 => edge(Switch::Home, true, -1.0, method == 3),
+        4 | 20 => edge(Switch::Home, false, 1.0, method == 4),
+        5 | 21 => edge(Switch::Home, true, 1.0, method == 5),
+        6 | 22 => edge(Switch::Home, false, -1.0, method == 6),
         _ => Start::Unsupported,
+    }
+}
+
+/// The first phase of a homing on `edge` from shaft position `rad`, or an error where the
+/// switch is missing (or methods 3–6's home switch has the other polarity).
+pub(super) fn begin(edge: Edge, switches: &Switches, rad: f64) -> Phase {
+    if !switches.present(edge.switch) {
+        return Phase::Error;
+    }
+    if edge.switch == Switch::Home {
+        // Methods 3, 4 (19, 20) expect the switch active above, 5, 6 (21, 22) below.
+        let active_above = (edge.from && edge.dir < 0.0) || (!edge.from && edge.dir > 0.0);
+        if active_above == switches.home_active_below {
+            return Phase::Error;
+        }
+    }
+    if switches.active(edge.switch, rad) == edge.from {
+        Phase::ToEdge(edge)
+    } else {
+        Phase::ToSwitch(edge)
     }
 }
 
@@ -62,17 +176,20 @@ impl Homing {
     /// Whether the drive is moving under homing's velocity demand (otherwise it holds position).
     pub fn moving(&self) -> bool {
         match self.phase {
-            Phase::Searching { .. } | Phase::Stopping => true,
+            Phase::ToSwitch(_) | Phase::ToEdge(_) | Phase::Searching { .. } | Phase::Stopping => true,
             Phase::Interrupted | Phase::Error => self.vel != 0.0,
             Phase::Idle | Phase::Attained => false,
         }
     }
 
-    /// One control-loop step of the velocity demand: towards the search speed while searching,
-    /// towards zero otherwise, at the homing acceleration. A stop ends `Stopping` in `Attained`.
+    /// One control-loop step of the velocity demand towards the phase's speed and direction
+    /// (zero once home is set or on a stop), at the homing acceleration. A stop ends
+    /// `Stopping` in `Attained`.
     pub fn step(&mut self, dt: f64) -> f64 {
         let want = match self.phase {
-            Phase::Searching { dir } => dir * self.speed,
+            Phase::ToSwitch(e) => -e.dir * self.switch_speed,
+            Phase::ToEdge(e) => e.dir * self.zero_speed,
+            Phase::Searching { dir } => dir * self.zero_speed,
             _ => 0.0,
         };
         let step = self.acc * dt;
@@ -83,17 +200,39 @@ impl Homing {
         self.vel
     }
 
-    /// The index pulse between two shaft positions (rad), if the search crossed one: the
-    /// pulse comes once a revolution, at the angles 2πk.
-    pub fn index_crossed(&self, before_rad: f64, after_rad: f64) -> Option<f64> {
-        let Phase::Searching { .. } = self.phase else { return None };
-        let turn = std::f64::consts::TAU;
-        let (a, b) = ((before_rad / turn).floor(), (after_rad / turn).floor());
-        if a == b {
-            return None;
+    /// Follows the shaft from `before` to `after` (rad) through the method's phases; returns
+    /// the home position (rad) when this step found it.
+    pub fn track(&mut self, before: f64, after: f64, switches: &Switches) -> Option<f64> {
+        let limit_met = |exempt: Option<Switch>| {
+            [Switch::NegativeLimit, Switch::PositiveLimit]
+                .into_iter()
+                .any(|s| Some(s) != exempt && switches.active(s, after) && !switches.active(s, before))
+        };
+        match self.phase {
+            Phase::ToSwitch(e) | Phase::ToEdge(e) if limit_met(Some(e.switch)) => self.phase = Phase::Error,
+            Phase::ToSwitch(e) if switches.active(e.switch, after) == e.from => self.phase = Phase::ToEdge(e),
+            Phase::ToEdge(e)
+                if switches.active(e.switch, before) == e.from && switches.active(e.switch, after) != e.from =>
+            {
+                if e.index {
+                    self.phase = Phase::Searching { dir: e.dir };
+                } else {
+                    self.phase = Phase::Stopping;
+                    return Some(switches.edge_rad(e.switch));
+                }
+            }
+            Phase::Searching { .. } if limit_met(None) => self.phase = Phase::Error,
+            Phase::Searching { .. } => {
+                let (a, b) = ((before / TAU).floor(), (after / TAU).floor());
+                if a != b {
+                    self.phase = Phase::Stopping;
+                    // Upwards the pulse is at the higher turn's start, downwards at the lower's end.
+                    return Some(a.max(b) * TAU);
+                }
+            }
+            _ => {}
         }
-        // Upwards the pulse is at the higher turn's start, downwards at the lower's end.
-        Some(a.max(b) * turn)
+        None
     }
 
     /// Statusword bits 13, 12 and 10 (homing error, homing attained, target reached), CiA402's
@@ -102,7 +241,7 @@ impl Homing {
         let still = self.vel == 0.0;
         match self.phase {
             Phase::Idle => (false, false, true),
-            Phase::Searching { .. } => (false, false, false),
+            Phase::ToSwitch(_) | Phase::ToEdge(_) | Phase::Searching { .. } => (false, false, false),
             Phase::Stopping => (false, true, false),
             Phase::Attained => (false, true, true),
             Phase::Interrupted => (false, false, still),
@@ -115,22 +254,23 @@ impl Homing {
 mod tests {
     use super::*;
 
+    fn searching(dir: f64) -> Homing {
+        Homing { phase: Phase::Searching { dir }, ..Homing::default() }
+    }
+
     #[test]
     fn the_index_is_found_where_the_shaft_crosses_a_whole_turn_either_way() {
-        let s = Homing { phase: Phase::Searching { dir: 1.0 }, ..Homing::default() };
-        let turn = std::f64::consts::TAU;
-        assert_eq!(s.index_crossed(0.9 * turn, 1.1 * turn), Some(turn));
-        assert_eq!(s.index_crossed(-1.1 * turn, -0.9 * turn), Some(-turn));
-        assert_eq!(s.index_crossed(-0.1 * turn, 0.1 * turn), Some(0.0));
-        assert_eq!(s.index_crossed(2.1 * turn, 1.9 * turn), Some(2.0 * turn));
-        assert_eq!(s.index_crossed(1.2 * turn, 1.3 * turn), None);
-        let idle = Homing::default();
-        assert_eq!(idle.index_crossed(0.9 * turn, 1.1 * turn), None, "only while searching");
+        let none = Switches::default();
+        for (from, to, at) in [(0.9, 1.1, 1.0), (-1.1, -0.9, -1.0), (-0.1, 0.1, 0.0), (2.1, 1.9, 2.0)] {
+            assert_eq!(searching(1.0).track(from * TAU, to * TAU, &none), Some(at * TAU), "{from} → {to}");
+        }
+        assert_eq!(searching(1.0).track(1.2 * TAU, 1.3 * TAU, &none), None);
+        assert_eq!(Homing::default().track(0.9 * TAU, 1.1 * TAU, &none), None, "only while searching");
     }
 
     #[test]
     fn a_stop_after_the_index_attains_homing() {
-        let mut h = Homing { phase: Phase::Stopping, vel: 10.0, speed: 10.0, acc: 100.0 };
+        let mut h = Homing { phase: Phase::Stopping, vel: 10.0, acc: 100.0, ..Homing::default() };
         assert_eq!(h.status_bits(), (false, true, false));
         for _ in 0..20 {
             h.step(0.01);
@@ -140,13 +280,53 @@ mod tests {
     }
 
     #[test]
-    fn methods_needing_switches_are_refused() {
-        assert!(matches!(start(37), Start::Here));
-        assert!(matches!(start(35), Start::Here));
+    fn the_methods_map_to_their_switch_edge_and_direction() {
+        assert_eq!(start(37), Start::Here);
+        assert_eq!(start(35), Start::Here);
         assert!(matches!(start(33), Start::Index(d) if d < 0.0));
         assert!(matches!(start(34), Start::Index(d) if d > 0.0));
-        for m in [1, 2, 17, 18, 19, 27, 36, 0, -1] {
-            assert!(matches!(start(m), Start::Unsupported), "{m}");
+        let e = |m| match start(m) {
+            Start::Edge(e) => (e.switch, e.from, e.dir, e.index),
+            other => panic!("{m}: {other:?}"),
+        };
+        assert_eq!(e(1), (Switch::NegativeLimit, true, 1.0, true));
+        assert_eq!(e(18), (Switch::PositiveLimit, true, -1.0, false));
+        assert_eq!(e(3), (Switch::Home, true, -1.0, true));
+        assert_eq!(e(20), (Switch::Home, false, 1.0, false));
+        assert_eq!(e(5), (Switch::Home, true, 1.0, true));
+        assert_eq!(e(22), (Switch::Home, false, -1.0, false));
+        for m in [7, 14, 15, 16, 23, 30, 31, 32, 36, 0, -1] {
+            assert_eq!(start(m), Start::Unsupported, "{m}");
         }
+    }
+
+    #[test]
+    fn a_home_switch_method_runs_to_the_switch_then_back_to_its_edge() {
+        // Method 3: home switch active above 1 rev; from 0.5 rev up to it, then down off it.
+        let sw = Switches { home_rev: Some(1.0), ..Switches::default() };
+        let Start::Edge(edge) = start(19) else { panic!() };
+        let mut h = Homing { phase: begin(edge, &sw, 0.5 * TAU), ..Homing::default() };
+        assert!(matches!(h.phase, Phase::ToSwitch(_)));
+        assert_eq!(h.track(0.95 * TAU, 1.05 * TAU, &sw), None);
+        assert!(matches!(h.phase, Phase::ToEdge(_)), "on the switch: back down");
+        assert_eq!(h.track(1.1 * TAU, 1.05 * TAU, &sw), None, "still on it");
+        assert_eq!(h.track(1.02 * TAU, 0.98 * TAU, &sw), Some(TAU), "home on the edge");
+        assert_eq!(h.phase, Phase::Stopping);
+        // The wrong polarity for the method, or no switch: an error at once.
+        let below = Switches { home_active_below: true, ..sw };
+        assert_eq!(begin(edge, &below, 0.5 * TAU), Phase::Error);
+        assert_eq!(begin(edge, &Switches::default(), 0.5 * TAU), Phase::Error);
+    }
+
+    #[test]
+    fn a_limit_switch_met_on_the_way_is_a_homing_error() {
+        let sw = Switches { positive_limit_rev: Some(2.0), home_rev: Some(3.0), ..Switches::default() };
+        let Start::Edge(edge) = start(20) else { panic!() };
+        let mut h = Homing { phase: begin(edge, &sw, 0.0), ..Homing::default() };
+        assert!(matches!(h.phase, Phase::ToEdge(_)));
+        h.track(1.99 * TAU, 2.01 * TAU, &sw);
+        assert_eq!(h.phase, Phase::Error);
+        assert_eq!(sw.inputs(2.5 * TAU), 0b010);
+        assert_eq!(sw.inputs(3.5 * TAU), 0b110);
     }
 }

@@ -21,6 +21,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Gamma};
 
+pub use homing::Switches;
 pub use motor::{Demand, Mechanics, MotorParams};
 
 use crate::app::{Application, Pdi};
@@ -243,6 +244,8 @@ pub struct Cia402Drive {
     /// (increments; homing sets it).
     offset: f64,
     homing: homing::Homing,
+    /// Limit and home switches on the shaft (none unless set).
+    switches: Switches,
 }
 
 impl Cia402Drive {
@@ -291,6 +294,7 @@ impl Cia402Drive {
             pv_flags: (false, false),
             offset: 0.0,
             homing: homing::Homing::default(),
+            switches: Switches::default(),
         };
         d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
         d.write_feedback(d.feedback());
@@ -331,6 +335,12 @@ impl Cia402Drive {
 
     /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
     /// then FAULT, with an emergency message.
+    /// Puts limit and home switches on the shaft (homing methods 1–6 and 17–22 use them; 0x60FD
+    /// reports them).
+    pub fn set_switches(&mut self, switches: Switches) {
+        self.switches = switches;
+    }
+
     pub fn inject_fault(&mut self, code: u16) {
         self.enter_fault(code);
     }
@@ -397,11 +407,10 @@ impl Cia402Drive {
             let demand = self.step_demand(at, dt);
             let before_rad = self.mech.pos_rad;
             self.mech.step(&self.motor, demand, max_torque, dt);
-            if let Some(index_rad) = self.homing.index_crossed(before_rad, self.mech.pos_rad) {
-                // The index pulse is the home position: there the position reads the home offset.
-                let index = index_rad * self.motor.increments_per_rev / std::f64::consts::TAU;
-                self.offset = get(&self.coe.od, ix::HOME_OFFSET, 0) as f64 - index;
-                self.homing.phase = homing::Phase::Stopping;
+            if let Some(home_rad) = self.homing.track(before_rad, self.mech.pos_rad, &self.switches) {
+                // The home position (an index pulse or a switch's edge) reads the home offset.
+                let home = home_rad * self.motor.increments_per_rev / std::f64::consts::TAU;
+                self.offset = get(&self.coe.od, ix::HOME_OFFSET, 0) as f64 - home;
             }
             if let Some((v, _)) = self.ramp {
                 if v == 0.0 && self.mech.vel_rad_s.abs() < 0.05 {
@@ -631,7 +640,8 @@ impl Cia402Drive {
             return;
         }
         self.homing.acc = get_unsigned(od, ix::HOMING_ACCELERATION, 0).max(1) as f64;
-        self.homing.speed = get_unsigned(od, ix::HOMING_SPEEDS, 2).max(1) as f64;
+        self.homing.switch_speed = get_unsigned(od, ix::HOMING_SPEEDS, 1).max(1) as f64;
+        self.homing.zero_speed = get_unsigned(od, ix::HOMING_SPEEDS, 2).max(1) as f64;
         self.homing.phase = match homing::start(get(od, ix::HOMING_METHOD, 0)) {
             homing::Start::Here => {
                 let here = self.mech.position_increments(&self.motor);
@@ -639,6 +649,7 @@ impl Cia402Drive {
                 Phase::Attained
             }
             homing::Start::Index(dir) => Phase::Searching { dir },
+            homing::Start::Edge(edge) => homing::begin(edge, &self.switches, self.mech.pos_rad),
             homing::Start::Unsupported => Phase::Error,
         };
     }
@@ -709,6 +720,7 @@ impl Cia402Drive {
         set(od, ix::TORQUE_ACTUAL, 0, f.torque as i64);
         set(od, ix::FOLLOWING_ERROR_ACTUAL, 0, f.following_error as i64);
         set(od, ix::ERROR_CODE, 0, self.fault_code as i64);
+        set(od, ix::DIGITAL_INPUTS, 0, self.switches.inputs(self.mech.pos_rad) as i64);
         set(od, 0x1C32, 0x0B, self.stats.repeated_setpoints.min(u16::MAX as u64) as i64);
         set(od, 0x1C32, 0x0C, self.stats.late_setpoints.min(u16::MAX as u64) as i64);
     }

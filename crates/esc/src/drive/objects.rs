@@ -65,7 +65,7 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
 /// Adds the profile's objects that `od` lacks, with the model's defaults.
 pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
-    let vars: [(u16, &str, u16, u16, Access, i64); 27] = [
+    let vars: [(u16, &str, u16, u16, Access, i64); 28] = [
         (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
         (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
         (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
@@ -97,6 +97,7 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         (ix::QUICK_STOP_DECELERATION, "Quick stop deceleration", dt::UDINT, 32, access(true, false, false), 2_621_440),
         (ix::FOLLOWING_ERROR_ACTUAL, "Following error actual value", dt::DINT, 32, access(false, false, true), 0),
         (ix::TARGET_VELOCITY, "Target velocity", dt::DINT, 32, access(true, true, false), 0),
+        (ix::DIGITAL_INPUTS, "Digital inputs", dt::UDINT, 32, access(false, false, true), 0),
     ];
     for (index, name, ty, bits, acc, v) in vars {
         if od.get(index).is_none() {
