@@ -621,3 +621,26 @@ fn a_limit_switch_on_the_way_to_the_home_switch_is_a_homing_error() {
     assert!((0.5..0.6).contains(&at), "stopped {at} rev from the start");
     assert_eq!(digital_inputs(&mut m) & 0b010, 0b010, "on the positive limit");
 }
+
+/// A home switch of finite width (a cam from 1.0 to 1.5 rev past the start) and the positive
+/// limit switch: method 7 from beyond the cam runs up into the limit, reverses, crosses the cam
+/// downwards and homes on the first index pulse below its lower edge; method 10 from below
+/// finds the cam going up and homes on the first index pulse above its upper edge.
+#[test]
+fn homing_on_a_cam_with_reversal_at_the_limit_switch() {
+    for (method, start_off_rev, want) in [(7, 1.8, "below the lower edge"), (10, 0.0, "above the upper edge")] {
+        let (mut m, a, per_rev) = homing_with("builtin = 'SERVO'", 3.0, 1.0, 50.0);
+        let s = drive(&m).position_increments() / per_rev;
+        let (lo, hi) = (s - start_off_rev + 1.0, s - start_off_rev + 1.5);
+        drive_mut(&mut m).set_switches(Switches {
+            home_rev: Some(lo),
+            home_to_rev: Some(hi),
+            positive_limit_rev: Some(s - start_off_rev + 2.2),
+            ..Switches::default()
+        });
+        home(&mut m, &a, method, 0, 20_000).unwrap_or_else(|sw| panic!("method {method}: homing error {sw:#06x}"));
+        let home = home_on_shaft(&mut m, &a, 0) / per_rev;
+        let expect = if method == 7 { lo.floor() } else { hi.ceil() };
+        assert!((home - expect).abs() * per_rev <= 2.0, "method {method}: home {home} rev, {want} ({lo}..{hi})");
+    }
+}

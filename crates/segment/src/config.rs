@@ -64,7 +64,21 @@ fn switches(d: &DeviceToml, place: &str) -> Result<Switches, SegmentError> {
         positive_limit_rev: rev("positive_limit_rev", d.positive_limit_rev)?,
         home_rev: rev("home_switch_rev", d.home_switch_rev)?,
         home_active_below: d.home_switch_below.unwrap_or(false),
+        home_to_rev: rev("home_switch_to_rev", d.home_switch_to_rev)?,
     };
+    if let Some(to) = sw.home_to_rev {
+        match sw.home_rev {
+            Some(from) if from < to && !sw.home_active_below => {}
+            Some(from) if from >= to => {
+                return Err(device_err(
+                    place,
+                    format!("home_switch_to_rev ({to}) must lie above home_switch_rev ({from})"),
+                ));
+            }
+            Some(_) => return Err(device_err(place, "home_switch_to_rev makes a cam: not with home_switch_below")),
+            None => return Err(device_err(place, "home_switch_to_rev needs home_switch_rev")),
+        }
+    }
     if let (Some(n), Some(p)) = (sw.negative_limit_rev, sw.positive_limit_rev) {
         if n >= p {
             return Err(device_err(place, format!("negative_limit_rev ({n}) must lie below positive_limit_rev ({p})")));
@@ -172,6 +186,9 @@ pub struct DeviceToml {
     pub positive_limit_rev: Option<f64>,
     pub home_switch_rev: Option<f64>,
     pub home_switch_below: Option<bool>,
+    /// Makes the home switch a cam, active from `home_switch_rev` up to here (methods 7–14,
+    /// 23–30 need one).
+    pub home_switch_to_rev: Option<f64>,
     /// How long the firmware of a device without device emulation takes to act on a write of
     /// AL control (µs, default 1000).
     pub al_response_us: Option<f64>,
@@ -353,7 +370,8 @@ impl SegmentConfig {
             let has_switches = d.negative_limit_rev.is_some()
                 || d.positive_limit_rev.is_some()
                 || d.home_switch_rev.is_some()
-                || d.home_switch_below.is_some();
+                || d.home_switch_below.is_some()
+                || d.home_switch_to_rev.is_some();
             if has_switches && !(drive && matches!(d.app.as_deref(), None | Some("cia402"))) {
                 return Err(device_err(&place, "limit and home switches need a CiA402 drive (app = \"cia402\")"));
             }

@@ -149,6 +149,14 @@ fn builtin_devices_and_bad_descriptions() {
             "device 0: negative_limit_rev (2) must lie below positive_limit_rev (-2)",
         ),
         ("[[device]]\nbuiltin = 'SERVO'\nhome_switch_rev = nan\n", "device 0: home_switch_rev NaN out of range"),
+        (
+            "[[device]]\nbuiltin = 'SERVO'\nhome_switch_rev = 2.0\nhome_switch_to_rev = 1.0\n",
+            "device 0: home_switch_to_rev (1) must lie above home_switch_rev (2)",
+        ),
+        (
+            "[[device]]\nbuiltin = 'SERVO'\nhome_switch_to_rev = 1.0\n",
+            "device 0: home_switch_to_rev needs home_switch_rev",
+        ),
         ("loss_probability = 1.5\n[[device]]\nbuiltin = 'EK1100'\n", "segment: loss_probability 1.5 out of range"),
         (
             "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\ncable_m = 5\nlink_ns = 500\n",

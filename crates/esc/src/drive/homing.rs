@@ -7,12 +7,14 @@
 //! - 3, 4 / 19, 20: a home switch active above its position ("positive"), approached from
 //!   below (4, 20) or left downwards (3, 19); home is the next index pulse or the edge;
 //! - 5, 6 / 21, 22: a home switch active below its position ("negative"), mirrored;
+//! - 7–14 / 23–30: a home switch of finite width (a cam), searched first upwards (7–10) or
+//!   downwards (11–14), reversing at the limit switch on that side; home is its lower or upper
+//!   edge, crossed downwards or upwards, and the index after it (7–14) or the edge (23–30);
 //! - 33, 34: the index pulse, searched downwards or upwards; 35, 37: the current position.
 //!
 //! A switch is searched at 0x6099:01, the edge and the index at 0x6099:02, both at 0x609A.
-//! The methods that reverse at a limit switch while looking for the home switch (7–14, 23–30),
-//! a method needing a switch the drive does not have, or a limit switch met on the way end in
-//! a homing error. Home then reads the home offset (0x607C).
+//! A method needing a switch the drive does not have, or a limit switch met on the way (but
+//! the one 7–14 reverse at), end in a homing error. Home then reads the home offset (0x607C).
 
 use std::f64::consts::TAU;
 
@@ -23,9 +25,11 @@ pub struct Switches {
     pub negative_limit_rev: Option<f64>,
     /// Active at and above this position.
     pub positive_limit_rev: Option<f64>,
-    /// Active at and above this position, or at and below it with `home_active_below`.
+    /// Active at and above this position, or at and below it with `home_active_below`, or
+    /// up to `home_to_rev` (a cam).
     pub home_rev: Option<f64>,
     pub home_active_below: bool,
+    pub home_to_rev: Option<f64>,
 }
 
 /// Which switch a method looks for.
@@ -51,18 +55,23 @@ impl Switches {
         match s {
             Switch::NegativeLimit => self.negative_limit_rev.is_some_and(|p| rev <= p),
             Switch::PositiveLimit => self.positive_limit_rev.is_some_and(|p| rev >= p),
-            Switch::Home => self.home_rev.is_some_and(|h| if self.home_active_below { rev <= h } else { rev >= h }),
+            Switch::Home => self.home_rev.is_some_and(|h| match (self.home_to_rev, self.home_active_below) {
+                (Some(to), _) => (h..=to).contains(&rev),
+                (None, true) => rev <= h,
+                (None, false) => rev >= h,
+            }),
         }
     }
 
-    /// Where switch `s` changes state (rad).
-    fn edge_rad(&self, s: Switch) -> f64 {
-        let rev = match s {
-            Switch::NegativeLimit => self.negative_limit_rev,
-            Switch::PositiveLimit => self.positive_limit_rev,
-            Switch::Home => self.home_rev,
+    /// The edge of switch `s` between shaft positions `before` and `after` (rad), if one is.
+    fn edge_between(&self, s: Switch, before: f64, after: f64) -> Option<f64> {
+        let edges = match s {
+            Switch::NegativeLimit => [self.negative_limit_rev, None],
+            Switch::PositiveLimit => [self.positive_limit_rev, None],
+            Switch::Home => [self.home_rev, self.home_to_rev],
         };
-        rev.unwrap_or(0.0) * TAU
+        let (lo, hi) = (before.min(after), before.max(after));
+        edges.into_iter().flatten().map(|rev| rev * TAU).find(|e| (lo..=hi).contains(e))
     }
 
     /// The digital inputs object 0x60FD: bit 0 negative limit, 1 positive limit, 2 home.
@@ -88,6 +97,9 @@ pub(super) struct Edge {
 pub(super) enum Phase {
     /// Not started since homing mode was entered.
     Idle,
+    /// Methods 7–14: moving in `dir` at the switch speed until the home switch is active,
+    /// reversing once at the limit switch ahead.
+    FindCam { dir: f64, reversed: bool, edge: Edge },
     /// Moving against the final direction, at the switch speed, until the switch reads
     /// `edge.from`.
     ToSwitch(Edge),
@@ -132,6 +144,8 @@ pub(super) enum Start {
     Index(f64),
     /// Home on a switch's edge (and the index after it).
     Edge(Edge),
+    /// Find the home switch first, moving in this direction (methods 7–14, 23–30).
+    Cam(f64, Edge),
     /// Not a method this drive runs.
     Unsupported,
 }
@@ -148,7 +162,44 @@ pub(super) fn start(method: i64) -> Start {
         4 | 20 => edge(Switch::Home, false, 1.0, method == 4),
         5 | 21 => edge(Switch::Home, true, 1.0, method == 5),
         6 | 22 => edge(Switch::Home, false, -1.0, method == 6),
+        7..=14 | 23..=30 => {
+            // 7–10 search upwards and reverse at the positive limit, 11–14 mirror them; each
+            // homes on an edge crossed one way: (first direction, from, final direction).
+            let k = if method <= 14 { method - 7 } else { method - 23 };
+            let (first, from, dir) = [
+                (1.0, true, -1.0),  // 7: leave the cam at its lower edge, downwards
+                (1.0, false, 1.0),  // 8: enter it at its lower edge, upwards
+                (1.0, false, -1.0), // 9: enter it at its upper edge, downwards
+                (1.0, true, 1.0),   // 10: leave it at its upper edge, upwards
+                (-1.0, true, 1.0),  // 11: mirrors 7 (upper edge, upwards)
+                (-1.0, false, -1.0),
+                (-1.0, false, 1.0),
+                (-1.0, true, -1.0),
+            ][k as usize];
+            Start::Cam(first, Edge { switch: Switch::Home, from, dir, index: method <= 14 })
+        }
         _ => Start::Unsupported,
+    }
+}
+
+/// The first phase of methods 7–14 (23–30) from shaft position `rad`.
+pub(super) fn begin_cam(first: f64, edge: Edge, switches: &Switches, rad: f64) -> Phase {
+    if switches.home_rev.is_none() {
+        return Phase::Error;
+    }
+    if switches.active(Switch::Home, rad) {
+        after_cam(edge, switches, rad)
+    } else {
+        Phase::FindCam { dir: first, reversed: false, edge }
+    }
+}
+
+/// On the home switch: straight to the edge if it is left that way, else off it first.
+fn after_cam(edge: Edge, switches: &Switches, rad: f64) -> Phase {
+    if switches.active(Switch::Home, rad) == edge.from {
+        Phase::ToEdge(edge)
+    } else {
+        Phase::ToSwitch(edge)
     }
 }
 
@@ -158,8 +209,9 @@ pub(super) fn begin(edge: Edge, switches: &Switches, rad: f64) -> Phase {
     if !switches.present(edge.switch) {
         return Phase::Error;
     }
-    if edge.switch == Switch::Home {
-        // Methods 3, 4 (19, 20) expect the switch active above, 5, 6 (21, 22) below.
+    if edge.switch == Switch::Home && switches.home_to_rev.is_none() {
+        // Methods 3, 4 (19, 20) expect the switch active above, 5, 6 (21, 22) below (a cam
+        // is both, at its lower and upper edge).
         let active_above = (edge.from && edge.dir < 0.0) || (!edge.from && edge.dir > 0.0);
         if active_above == switches.home_active_below {
             return Phase::Error;
@@ -176,7 +228,11 @@ impl Homing {
     /// Whether the drive is moving under homing's velocity demand (otherwise it holds position).
     pub fn moving(&self) -> bool {
         match self.phase {
-            Phase::ToSwitch(_) | Phase::ToEdge(_) | Phase::Searching { .. } | Phase::Stopping => true,
+            Phase::FindCam { .. }
+            | Phase::ToSwitch(_)
+            | Phase::ToEdge(_)
+            | Phase::Searching { .. }
+            | Phase::Stopping => true,
             Phase::Interrupted | Phase::Error => self.vel != 0.0,
             Phase::Idle | Phase::Attained => false,
         }
@@ -187,6 +243,7 @@ impl Homing {
     /// `Stopping` in `Attained`.
     pub fn step(&mut self, dt: f64) -> f64 {
         let want = match self.phase {
+            Phase::FindCam { dir, .. } => dir * self.switch_speed,
             Phase::ToSwitch(e) => -e.dir * self.switch_speed,
             Phase::ToEdge(e) => e.dir * self.zero_speed,
             Phase::Searching { dir } => dir * self.zero_speed,
@@ -209,6 +266,16 @@ impl Homing {
                 .any(|s| Some(s) != exempt && switches.active(s, after) && !switches.active(s, before))
         };
         match self.phase {
+            Phase::FindCam { dir, reversed, edge } => {
+                let ahead = if dir > 0.0 { Switch::PositiveLimit } else { Switch::NegativeLimit };
+                if switches.active(Switch::Home, after) {
+                    self.phase = after_cam(edge, switches, after);
+                } else if !reversed && switches.active(ahead, after) {
+                    self.phase = Phase::FindCam { dir: -dir, reversed: true, edge };
+                } else if limit_met(None) {
+                    self.phase = Phase::Error;
+                }
+            }
             Phase::ToSwitch(e) | Phase::ToEdge(e) if limit_met(Some(e.switch)) => self.phase = Phase::Error,
             Phase::ToSwitch(e) if switches.active(e.switch, after) == e.from => self.phase = Phase::ToEdge(e),
             Phase::ToEdge(e)
@@ -218,7 +285,7 @@ impl Homing {
                     self.phase = Phase::Searching { dir: e.dir };
                 } else {
                     self.phase = Phase::Stopping;
-                    return Some(switches.edge_rad(e.switch));
+                    return switches.edge_between(e.switch, before, after);
                 }
             }
             Phase::Searching { .. } if limit_met(None) => self.phase = Phase::Error,
@@ -241,7 +308,9 @@ impl Homing {
         let still = self.vel == 0.0;
         match self.phase {
             Phase::Idle => (false, false, true),
-            Phase::ToSwitch(_) | Phase::ToEdge(_) | Phase::Searching { .. } => (false, false, false),
+            Phase::FindCam { .. } | Phase::ToSwitch(_) | Phase::ToEdge(_) | Phase::Searching { .. } => {
+                (false, false, false)
+            }
             Phase::Stopping => (false, true, false),
             Phase::Attained => (false, true, true),
             Phase::Interrupted => (false, false, still),
@@ -295,9 +364,17 @@ mod tests {
         assert_eq!(e(20), (Switch::Home, false, 1.0, false));
         assert_eq!(e(5), (Switch::Home, true, 1.0, true));
         assert_eq!(e(22), (Switch::Home, false, -1.0, false));
-        for m in [7, 14, 15, 16, 23, 30, 31, 32, 36, 0, -1] {
+        for m in [15, 16, 31, 32, 36, 0, -1, 38] {
             assert_eq!(start(m), Start::Unsupported, "{m}");
         }
+        let cam = |m| match start(m) {
+            Start::Cam(first, e) => (first, e.from, e.dir, e.index),
+            other => panic!("{m}: {other:?}"),
+        };
+        assert_eq!(cam(7), (1.0, true, -1.0, true));
+        assert_eq!(cam(10), (1.0, true, 1.0, true));
+        assert_eq!(cam(12), (-1.0, false, -1.0, true));
+        assert_eq!(cam(29), (-1.0, false, 1.0, false));
     }
 
     #[test]
@@ -328,5 +405,44 @@ mod tests {
         assert_eq!(h.phase, Phase::Error);
         assert_eq!(sw.inputs(2.5 * TAU), 0b010);
         assert_eq!(sw.inputs(3.5 * TAU), 0b110);
+    }
+
+    #[test]
+    fn a_cam_is_found_past_a_reversal_and_homed_on_the_edge_the_method_names() {
+        // A cam from 1 to 2 rev, the positive limit at 3; method 23 (as 7, no index) from 2.5:
+        // up to the limit, back down onto the cam, down off it at its lower edge.
+        let sw = Switches {
+            home_rev: Some(1.0),
+            home_to_rev: Some(2.0),
+            positive_limit_rev: Some(3.0),
+            ..Switches::default()
+        };
+        let Start::Cam(first, edge) = start(23) else { panic!() };
+        let mut h = Homing { phase: begin_cam(first, edge, &sw, 2.5 * TAU), ..Homing::default() };
+        assert!(matches!(h.phase, Phase::FindCam { dir, reversed: false, .. } if dir > 0.0));
+        h.track(2.99 * TAU, 3.01 * TAU, &sw);
+        assert!(matches!(h.phase, Phase::FindCam { dir, reversed: true, .. } if dir < 0.0), "{:?}", h.phase);
+        h.track(2.01 * TAU, 1.99 * TAU, &sw);
+        assert!(matches!(h.phase, Phase::ToEdge(_)), "on the cam, leaving it downwards: {:?}", h.phase);
+        assert_eq!(h.track(1.01 * TAU, 0.99 * TAU, &sw), Some(TAU), "its lower edge");
+        // Method 26 (as 10, no index) from inside: up and off at the upper edge.
+        let Start::Cam(first, edge) = start(26) else { panic!() };
+        let mut h = Homing { phase: begin_cam(first, edge, &sw, 1.5 * TAU), ..Homing::default() };
+        assert!(matches!(h.phase, Phase::ToEdge(_)));
+        assert_eq!(h.track(1.99 * TAU, 2.01 * TAU, &sw), Some(2.0 * TAU));
+        // Method 24 (as 8) from inside: down off the cam first, then up onto its lower edge.
+        let Start::Cam(first, edge) = start(24) else { panic!() };
+        let mut h = Homing { phase: begin_cam(first, edge, &sw, 1.5 * TAU), ..Homing::default() };
+        assert!(matches!(h.phase, Phase::ToSwitch(_)));
+        h.track(1.01 * TAU, 0.99 * TAU, &sw);
+        assert!(matches!(h.phase, Phase::ToEdge(_)));
+        assert_eq!(h.track(0.98 * TAU, 0.995 * TAU, &sw), None);
+        assert_eq!(h.track(0.995 * TAU, 1.005 * TAU, &sw), Some(TAU));
+        // Past the reversal the other limit is an error.
+        let both = Switches { negative_limit_rev: Some(-1.0), ..sw };
+        let mut h = Homing { phase: Phase::FindCam { dir: -1.0, reversed: true, edge }, ..Homing::default() };
+        h.track(-0.99 * TAU, -1.01 * TAU, &both);
+        assert_eq!(h.phase, Phase::Error);
+        assert_eq!(begin_cam(first, edge, &Switches::default(), 0.0), Phase::Error, "no home switch");
     }
 }

@@ -650,6 +650,7 @@ impl Cia402Drive {
             }
             homing::Start::Index(dir) => Phase::Searching { dir },
             homing::Start::Edge(edge) => homing::begin(edge, &self.switches, self.mech.pos_rad),
+            homing::Start::Cam(first, edge) => homing::begin_cam(first, edge, &self.switches, self.mech.pos_rad),
             homing::Start::Unsupported => Phase::Error,
         };
     }
