@@ -63,7 +63,8 @@ impl Switches {
         }
     }
 
-    /// The edge of switch `s` between shaft positions `before` and `after` (rad), if one is.
+    /// The edge of switch `s` the shaft crossed from `before` to `after` (rad): the one between
+    /// them, or, should rounding put it a hair outside, the nearest.
     fn edge_between(&self, s: Switch, before: f64, after: f64) -> Option<f64> {
         let edges = match s {
             Switch::NegativeLimit => [self.negative_limit_rev, None],
@@ -71,7 +72,16 @@ impl Switches {
             Switch::Home => [self.home_rev, self.home_to_rev],
         };
         let (lo, hi) = (before.min(after), before.max(after));
-        edges.into_iter().flatten().map(|rev| rev * TAU).find(|e| (lo..=hi).contains(e))
+        let off = |e: f64| {
+            if e < lo {
+                lo - e
+            } else if e > hi {
+                e - hi
+            } else {
+                0.0
+            }
+        };
+        edges.into_iter().flatten().map(|rev| rev * TAU).min_by(|a, b| off(*a).total_cmp(&off(*b)))
     }
 
     /// The digital inputs object 0x60FD: bit 0 negative limit, 1 positive limit, 2 home.
