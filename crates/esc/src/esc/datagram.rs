@@ -48,6 +48,17 @@ impl Esc {
         self.end_of_frame(timing, origin_ns);
     }
 
+    /// Whether a device-addressed datagram is for this ESC: position-addressed ones where the
+    /// incremented ADP reached 0, configured-address ones by station address or alias,
+    /// broadcasts always.
+    fn addressed(&self, cmd: Command, adp: u16) -> bool {
+        match cmd {
+            Command::APRD | Command::APWR | Command::APRW | Command::ARMW => adp == 0,
+            Command::FPRD | Command::FPWR | Command::FPRW | Command::FRMW => self.addressed_fp(adp),
+            _ => true,
+        }
+    }
+
     pub(super) fn addressed_fp(&self, adp: u16) -> bool {
         let alias_on = self.mem[0x0103] & 0x01 != 0;
         adp == self.station_address() || (alias_on && adp == u16::from_le_bytes([self.mem[0x12], self.mem[0x13]]))
@@ -71,47 +82,25 @@ impl Esc {
         let mut inc = 0u16;
         match cmd {
             Command::APRD | Command::FPRD | Command::BRD => {
-                let hit = match cmd {
-                    Command::APRD => adp == 0,
-                    Command::FPRD => self.addressed_fp(adp),
-                    _ => true,
-                };
-                if hit && self.read(ado, data, cmd == Command::BRD) {
-                    inc = 1;
-                }
+                inc = (self.addressed(cmd, adp) && self.read(ado, data, cmd == Command::BRD)) as u16;
             }
             Command::APWR | Command::FPWR | Command::BWR => {
-                let hit = match cmd {
-                    Command::APWR => adp == 0,
-                    Command::FPWR => self.addressed_fp(adp),
-                    _ => true,
-                };
-                if hit && self.write(ado, data, cmd) {
-                    inc = 1;
-                }
+                inc = (self.addressed(cmd, adp) && self.write(ado, data, cmd)) as u16;
             }
-            Command::APRW | Command::FPRW | Command::BRW => {
-                let hit = match cmd {
-                    Command::APRW => adp == 0,
-                    Command::FPRW => self.addressed_fp(adp),
-                    _ => true,
-                };
-                if hit {
-                    let out = data.to_vec();
-                    if self.read(ado, data, cmd == Command::BRW) {
-                        inc += 1;
-                    }
-                    if self.write(ado.wrapping_add(rw_offset), &out, cmd) {
-                        inc += 2;
-                    }
+            Command::APRW | Command::FPRW | Command::BRW if self.addressed(cmd, adp) => {
+                let out = data.to_vec();
+                if self.read(ado, data, cmd == Command::BRW) {
+                    inc += 1;
+                }
+                if self.write(ado.wrapping_add(rw_offset), &out, cmd) {
+                    inc += 2;
                 }
             }
             Command::ARMW | Command::FRMW => {
-                let reader = if cmd == Command::ARMW { adp == 0 } else { self.addressed_fp(adp) };
-                let ok = if reader { self.read(ado, data, false) } else { self.write(ado, data, cmd) };
-                if ok {
-                    inc = 1;
-                }
+                // The addressed ESC reads, every other one writes.
+                let ok =
+                    if self.addressed(cmd, adp) { self.read(ado, data, false) } else { self.write(ado, data, cmd) };
+                inc = ok as u16;
             }
             Command::LRD | Command::LWR | Command::LRW => inc = self.logical(cmd, logical, data),
             _ => {}
