@@ -22,6 +22,10 @@ pub enum CaptureError {
     Format { frame: usize, source: PcapError },
     #[error("frame {frame} refers to interface {interface}, which the file does not describe")]
     NoInterface { frame: usize, interface: u32 },
+    #[error(
+        "frame {frame}: its timestamp plus its interface's offset (if_tsoffset) lies beyond what can be represented"
+    )]
+    TimestampRange { frame: usize },
     #[error("writing capture: {0}")]
     Write(#[source] PcapError),
 }
@@ -68,28 +72,36 @@ pub fn for_each_packet(
     let fmt = |frame| move |source| CaptureError::Format { frame, source };
     if bytes[..4] == PCAPNG_MAGIC {
         let mut reader = PcapNgReader::new(bytes).map_err(fmt(0))?;
-        // Link types of the interfaces of the current section, in block order.
-        let mut link_types: Vec<u32> = Vec::new();
+        // Link type and clock of the interfaces of the current section, in block order.
+        let mut interfaces: Vec<(u32, InterfaceClock)> = Vec::new();
         let mut number = 0;
         while let Some(block) = reader.next_block() {
             let block = block.map_err(fmt(number + 1))?;
-            let (interface, timestamp, original_len, data) = match block {
+            // pcap-file 2 hands the timestamp's raw units over as nanoseconds; the interface's
+            // if_tsresol says what they are (microseconds unless it says otherwise).
+            let (interface, raw, original_len, data) = match block {
                 Block::SectionHeader(_) => {
-                    link_types.clear();
+                    interfaces.clear();
                     continue;
                 }
                 Block::InterfaceDescription(i) => {
-                    link_types.push(u32::from(i.linktype));
+                    interfaces.push((u32::from(i.linktype), InterfaceClock::of(&i)));
                     continue;
                 }
-                Block::EnhancedPacket(p) => (p.interface_id, p.timestamp, p.original_len, p.data),
-                Block::SimplePacket(p) => (0, Duration::ZERO, p.original_len, p.data),
-                Block::Packet(p) => (p.interface_id as u32, Duration::from_micros(p.timestamp), p.original_len, p.data),
+                Block::EnhancedPacket(p) => {
+                    (p.interface_id, Some(p.timestamp.as_nanos() as u64), p.original_len, p.data)
+                }
+                Block::SimplePacket(p) => (0, None, p.original_len, p.data),
+                Block::Packet(p) => (p.interface_id as u32, Some(p.timestamp), p.original_len, p.data),
                 _ => continue,
             };
             number += 1;
-            let link_type =
-                *link_types.get(interface as usize).ok_or(CaptureError::NoInterface { frame: number, interface })?;
+            let (link_type, clock) =
+                *interfaces.get(interface as usize).ok_or(CaptureError::NoInterface { frame: number, interface })?;
+            let timestamp = match raw {
+                Some(raw) => clock.time(raw).ok_or(CaptureError::TimestampRange { frame: number })?,
+                None => Duration::ZERO,
+            };
             f(Packet { number, timestamp, link_type, original_len, data })?;
         }
         Ok(())
@@ -106,6 +118,51 @@ pub fn for_each_packet(
             f(Packet { number, timestamp: p.timestamp, link_type, original_len: p.orig_len, data: p.data })?;
         }
         Ok(())
+    }
+}
+
+/// How a pcapng interface counts time: the unit of its timestamps (if_tsresol) and the seconds
+/// added to them (if_tsoffset).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct InterfaceClock {
+    resolution: u8,
+    offset_s: u64,
+}
+
+impl InterfaceClock {
+    /// The pcapng default when the interface names no resolution: microseconds.
+    const DEFAULT_RESOLUTION: u8 = 6;
+
+    fn of(idb: &InterfaceDescriptionBlock<'_>) -> Self {
+        use pcap_file::pcapng::blocks::interface_description::InterfaceDescriptionOption as Opt;
+        let mut clock = InterfaceClock { resolution: Self::DEFAULT_RESOLUTION, offset_s: 0 };
+        for option in &idb.options {
+            match option {
+                Opt::IfTsResol(r) => clock.resolution = *r,
+                Opt::IfTsOffset(s) => clock.offset_s = *s,
+                _ => {}
+            }
+        }
+        clock
+    }
+
+    /// The time of `raw` units since the epoch. Bit 7 of the resolution set: units of 2⁻ⁿ s,
+    /// else 10⁻ⁿ s; what is finer than a nanosecond is dropped (a `Duration` counts
+    /// nanoseconds). `None` only if the offset carries it beyond `Duration`'s range.
+    fn time(self, raw: u64) -> Option<Duration> {
+        const NS_PER_S: u128 = 1_000_000_000;
+        let n = (self.resolution & 0x7F) as u32;
+        let ns: u128 = if self.resolution & 0x80 != 0 {
+            (raw as u128 * NS_PER_S) >> n
+        } else if n <= 9 {
+            raw as u128 * 10u128.pow(9 - n)
+        } else {
+            // 10^(n−9) beyond 10³⁸ exceeds every u64: the time is below a nanosecond.
+            10u128.checked_pow(n - 9).map_or(0, |d| raw as u128 / d)
+        };
+        // ns < 2⁶⁴·10⁹, so the whole seconds fit a u64.
+        let t = Duration::new((ns / NS_PER_S) as u64, (ns % NS_PER_S) as u32);
+        t.checked_add(Duration::from_secs(self.offset_s))
     }
 }
 
@@ -207,6 +264,58 @@ mod tests {
             assert_eq!(p[1].link_type, LINKTYPE_ETHERNET);
             assert_eq!(&*p[1].data, &[0xBB; 64]);
         }
+    }
+
+    /// A pcapng file of one interface with `options`, and one packet of `raw` timestamp units.
+    fn pcapng_with_clock(options: Vec<InterfaceDescriptionOption>, raw: u64) -> Vec<u8> {
+        let mut w = PcapNgWriter::new(Vec::new()).unwrap();
+        w.write_pcapng_block(InterfaceDescriptionBlock { linktype: DataLink::ETHERNET, snaplen: 0, options }).unwrap();
+        // pcap-file 2 writes a `Duration`'s nanoseconds as the raw units.
+        let epb = EnhancedPacketBlock {
+            interface_id: 0,
+            timestamp: Duration::from_nanos(raw),
+            original_len: 60,
+            data: Cow::Borrowed(&[0; 60]),
+            options: vec![],
+        };
+        w.write_pcapng_block(epb).unwrap();
+        w.into_inner()
+    }
+
+    use pcap_file::pcapng::blocks::interface_description::InterfaceDescriptionOption;
+
+    #[test]
+    fn pcapng_timestamps_are_in_the_interfaces_units() {
+        use InterfaceDescriptionOption::{IfTsOffset, IfTsResol};
+        let t = |options, raw| read_packets(&pcapng_with_clock(options, raw)).unwrap()[0].timestamp;
+        // No if_tsresol: microseconds (pcapng's default; Wireshark on Windows and Linux writes
+        // such files). 1 657 036 734 840 250 µs is 2022-07-05 15:58:54.840250 UTC.
+        assert_eq!(t(vec![], 1_657_036_734_840_250), Duration::new(1_657_036_734, 840_250_000));
+        assert_eq!(t(vec![IfTsResol(6)], 1_500_001), Duration::new(1, 500_001_000));
+        assert_eq!(t(vec![IfTsResol(9)], 1_500_000_001), Duration::new(1, 500_000_001));
+        assert_eq!(t(vec![IfTsResol(3)], 2_001), Duration::new(2, 1_000_000));
+        assert_eq!(t(vec![IfTsResol(0)], 7), Duration::from_secs(7));
+        // Picoseconds: what is below a nanosecond is dropped.
+        assert_eq!(t(vec![IfTsResol(12)], 1_000_000_001_999), Duration::new(1, 1));
+        assert_eq!(t(vec![IfTsResol(127)], u64::MAX), Duration::ZERO);
+        // Bit 7: powers of two. 2⁻²⁰ s units, 3·2²⁰ + 2¹⁹ of them = 3.5 s.
+        assert_eq!(t(vec![IfTsResol(0x80 | 20)], 3 << 20 | 1 << 19), Duration::new(3, 500_000_000));
+        assert_eq!(t(vec![IfTsResol(0x80)], 5), Duration::from_secs(5));
+        // Whole seconds of if_tsoffset are added.
+        assert_eq!(t(vec![IfTsResol(9), IfTsOffset(100)], 5), Duration::new(100, 5));
+        // The largest raw values in seconds still fit.
+        assert_eq!(t(vec![IfTsResol(0)], u64::MAX), Duration::from_secs(u64::MAX));
+    }
+
+    #[test]
+    fn a_timestamp_offset_beyond_range_is_an_error_naming_the_frame() {
+        use InterfaceDescriptionOption::{IfTsOffset, IfTsResol};
+        let bytes = pcapng_with_clock(vec![IfTsResol(0), IfTsOffset(1)], u64::MAX);
+        assert!(matches!(read_packets(&bytes), Err(CaptureError::TimestampRange { frame: 1 })));
+        assert_eq!(
+            read_packets(&bytes).unwrap_err().to_string(),
+            "frame 1: its timestamp plus its interface's offset (if_tsoffset) lies beyond what can be represented"
+        );
     }
 
     #[test]

@@ -1,11 +1,13 @@
 //! `ferrocat pcap --json` against Wireshark's EtherCAT dissector, datagram by datagram, over
-//! every shared capture. tshark is an independent decoder; any difference fails the test.
+//! every shared capture. tshark is an independent decoder; any difference fails the test. The
+//! frame's time is compared too (pcapng files say in what units they count it).
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
 struct Dg {
     frame: u64,
+    time_ns: u64,
     cmd: u64,
     idx: u64,
     adp: Option<u64>,
@@ -31,25 +33,33 @@ fn attr<'a>(line: &'a str, name: &str) -> Option<&'a str> {
     Some(&line[start..start + line[start..].find('"')?])
 }
 
+/// tshark's epoch time, "1657036734.840250000", in ns.
+fn epoch_ns(s: &str) -> u64 {
+    let (secs, frac) = s.split_once('.').unwrap_or((s, "0"));
+    assert!(frac.len() <= 9, "epoch time {s} finer than ns");
+    num(secs) * 1_000_000_000 + num(&format!("{frac:0<9}"))
+}
+
 /// Datagrams as tshark's dissector reports them (PDML, one field per line).
 fn tshark_datagrams(path: &std::path::Path) -> Vec<Dg> {
     let mut child = Command::new("tshark")
         .args(["-n", "-r"])
         .arg(path)
-        .args(["-T", "pdml", "-J", "ecat"])
+        .args(["-T", "pdml", "-J", "frame ecat"])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
         .expect("tshark is not installed: scripts/test.sh installs it (Debian package tshark)");
     let mut out = Vec::new();
-    let mut frame = 0;
+    let (mut frame, mut time_ns) = (0, 0);
     for line in BufReader::new(child.stdout.take().unwrap()).lines() {
         let line = line.unwrap();
         let Some(name) = attr(&line, "name") else { continue };
         let show = attr(&line, "show").unwrap_or("");
         match name {
             "num" => frame = num(show),
-            "ecat.cmd" => out.push(Dg { frame, cmd: num(show), ..Default::default() }),
+            "frame.time_epoch" => time_ns = epoch_ns(show),
+            "ecat.cmd" => out.push(Dg { frame, time_ns, cmd: num(show), ..Default::default() }),
             _ if name.starts_with("ecat.") => {
                 let Some(d) = out.last_mut() else { continue };
                 match name {
@@ -83,6 +93,7 @@ fn ferrocat_datagrams(path: &std::path::Path) -> Vec<Dg> {
             let u = |k: &str| v.get(k).and_then(|x| x.as_u64());
             Dg {
                 frame: u("frame").unwrap(),
+                time_ns: u("time_ns").unwrap(),
                 cmd: u("cmd").unwrap(),
                 idx: u("idx").unwrap(),
                 adp: u("adp"),
