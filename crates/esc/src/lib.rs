@@ -21,4 +21,4 @@ pub use app::{Application, DigitalIo, NoApplication, Pdi, SyncApp, SyncMode};
 pub use coe_server::{CoeDevice, DeviceLogic, Mapped, PassiveLogic};
 pub use config::{DcWidth, EscConfig};
 pub use drive::{Cia402Drive, DriveStats, MotorParams, ProcessingTime, Switches};
-pub use esc::{Esc, FrameTiming, LinkState, SyncLog};
+pub use esc::{Esc, FrameTiming, LinkState, MailboxResponse, SyncLog};

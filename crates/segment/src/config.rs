@@ -15,8 +15,8 @@
 use std::path::{Path, PathBuf};
 
 use ferrocat_esc::{
-    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, NoApplication, PassiveLogic, Switches, SyncApp,
-    SyncMode,
+    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, MailboxResponse, NoApplication, PassiveLogic,
+    Switches, SyncApp, SyncMode,
 };
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::register::{PortDescriptor, PortType};
@@ -192,6 +192,10 @@ pub struct DeviceToml {
     /// How long the firmware of a device without device emulation takes to act on a write of
     /// AL control (µs, default 1000).
     pub al_response_us: Option<f64>,
+    /// How long its firmware takes to answer a mailbox request (µs, default 0: at once); with
+    /// `mailbox_response_max_us`, drawn uniformly between the two for each request.
+    pub mailbox_response_us: Option<f64>,
+    pub mailbox_response_max_us: Option<f64>,
     /// Overrides the configured station alias of the SII (word 4, loaded into 0x0012).
     pub station_alias: Option<u16>,
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
@@ -409,6 +413,16 @@ impl SegmentConfig {
             }
             if let Some(us) = d.al_response_us {
                 esc.al_response_ns = (in_range(&place, "al_response_us", us, 0.0..=10e6)? * 1000.0) as u64;
+            }
+            if d.mailbox_response_us.is_some() || d.mailbox_response_max_us.is_some() {
+                let key = "mailbox_response_us";
+                let min = in_range(&place, key, d.mailbox_response_us.unwrap_or(0.0), 0.0..=10e6)?;
+                let key = "mailbox_response_max_us";
+                let max = in_range(&place, key, d.mailbox_response_max_us.unwrap_or(min), min..=10e6)?;
+                // Each device its own stream, apart from the drives' (above).
+                let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0xD1B5_4A32_D192_ED03);
+                esc.mailbox_response =
+                    MailboxResponse::uniform((min * 1000.0).round() as u64, (max * 1000.0).round() as u64, seed);
             }
             let name = d.name.clone().unwrap_or(default_name);
             let mut node = Node::new(name.clone(), esc, kinds, drift_ppb);

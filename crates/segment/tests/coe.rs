@@ -20,8 +20,19 @@ struct Client {
 
 impl Client {
     fn new() -> Self {
+        Client::with("")
+    }
+
+    /// The drive with more keys for its `[[device]]` table (`seed` names the segment's).
+    fn with(device_keys: &str) -> Self {
         let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
-        let cfg = SegmentConfig::from_device_args(&[format!("{}:0x4F", esi.display())]).unwrap();
+        let (seed, keys) = match device_keys.strip_prefix("seed = ") {
+            Some(rest) => rest.split_once('\n').unwrap_or((rest, "")),
+            None => ("0", device_keys),
+        };
+        let toml =
+            format!("seed = {seed}\n[[device]]\nesi = {:?}\nproduct = 0x4F\n{keys}\n", esi.display().to_string());
+        let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
         let mut bus = Bus::new(cfg.build().unwrap());
         bus.address_all();
         for (n, (start, len), ctl) in [(0u16, OUT, 0x26u8), (1, INP, 0x22)] {
@@ -122,7 +133,75 @@ impl Client {
 
 #[test]
 fn needs_shared_sdo_transfers_of_every_kind() {
+    transfers_of_every_kind(Client::new());
+}
+
+#[test]
+fn needs_shared_sdo_transfers_of_every_kind_with_a_slow_firmware() {
+    transfers_of_every_kind(Client::with("mailbox_response_us = 500\nmailbox_response_max_us = 1500"));
+}
+
+/// The virtual time from an SDO upload request's write into SM0 until SM1 first reads full,
+/// polled every 50 µs.
+fn response_time_ns(c: &mut Client) -> u64 {
+    c.counter = ferrocat_wire::mailbox::next_counter(c.counter);
+    let mut b = [0u8; 128];
+    let n = Sdo::UploadRequest { index: 0x1018, subindex: 1, complete_access: false, reserved: [0; 4] }
+        .emit(&mut b)
+        .unwrap();
+    let mut msg = MailboxHeader::new(MailboxType::COE, (2 + n) as u16, c.counter).to_bytes().to_vec();
+    msg.extend_from_slice(&CoeHeader::new(CoeService::SDO_REQUEST).word().to_le_bytes());
+    msg.extend_from_slice(&b[..n]);
+    msg.resize(OUT.1 as usize, 0);
+    let written = c.bus.t;
+    assert_eq!(c.bus.fp(Command::FPWR, S, OUT.0, &msg).1, 1);
+    loop {
+        let polled = c.bus.t;
+        let (status, _) = c.bus.fp(Command::FPRD, S, 0x080D, &[0]);
+        if status[0] & 0x08 != 0 {
+            assert_eq!(c.bus.fp(Command::FPRD, S, INP.0, &[0; INP.1 as usize]).1, 1, "the reply is read");
+            return polled - written;
+        }
+        assert!(polled - written < 20_000_000, "no reply within 20 ms");
+        c.bus.t += 50_000;
+    }
+}
+
+#[test]
+fn needs_shared_the_firmware_answers_after_its_response_time() {
+    // Default: at once, the first poll finds the reply.
     let mut c = Client::new();
+    let fast: Vec<u64> = (0..5).map(|_| response_time_ns(&mut c)).collect();
+    assert!(fast.iter().all(|&t| t < 50_000), "{fast:?}");
+    // A fixed time: the reply is there from 2 ms after the request (a poll takes ≈ 10 µs of
+    // round trip and 50 µs of pause).
+    let mut c = Client::with("mailbox_response_us = 2000");
+    for _ in 0..5 {
+        let t = response_time_ns(&mut c);
+        assert!((2_000_000..2_000_000 + 70_000).contains(&t), "{t} ns");
+    }
+    // A range: each request its own time within it, the same for the same seed, other ones
+    // for another seed.
+    let times = |seed: u64| {
+        let mut c = Client::with(&format!("seed = {seed}\nmailbox_response_us = 1000\nmailbox_response_max_us = 3000"));
+        (0..20).map(|_| response_time_ns(&mut c)).collect::<Vec<u64>>()
+    };
+    let a = times(1);
+    assert!(a.iter().all(|&t| (1_000_000..3_000_000 + 70_000).contains(&t)), "{a:?}");
+    let (lo, hi) = (a.iter().min().unwrap(), a.iter().max().unwrap());
+    assert!(hi - lo > 1_000_000, "20 draws over 2 ms spread by only {} ns", hi - lo);
+    assert_eq!(a, times(1));
+    assert_ne!(a, times(2));
+}
+
+#[test]
+fn a_mailbox_response_range_must_be_ordered() {
+    let toml = "[[device]]\nbuiltin = 'EK1100'\nmailbox_response_us = 300\nmailbox_response_max_us = 200\n";
+    let err = toml::from_str::<SegmentConfig>(toml).unwrap().build().unwrap_err().to_string();
+    assert!(err.contains("device 0: mailbox_response_max_us 200.0 out of range (300.0 to"), "{err}");
+}
+
+fn transfers_of_every_kind(mut c: Client) {
     // Expedited upload.
     assert_eq!(c.upload(0x1018, 1, false).unwrap(), 0x26Cu32.to_le_bytes());
     assert_eq!(c.upload(0x1018, 2, false).unwrap(), 0x4Fu32.to_le_bytes());

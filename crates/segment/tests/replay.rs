@@ -102,8 +102,11 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         Some(0x044C_2C52) => (e("ek1100.hex"), None),
         Some(0x07D4_3052) => (e("el2004.bin"), None),
         Some(0x0B0C_3052) => (e("el2828.hex"), None),
-        // On the IP core the segment knows the AKD carries (its identity picks it).
-        Some(0x0041_4B44) => (e("akd.hex"), None),
+        // On the IP core the segment knows the AKD carries (its identity picks it). Its
+        // firmware's mailbox response time: soem-sdinfo-akd's 35 requests were each answered
+        // between SOEM's last empty and first full poll of SM1 (0.56–2.86 ms after the
+        // request); the uniform range of greatest likelihood for those intervals.
+        Some(0x0041_4B44) => (e("akd.hex") + "\nmailbox_response_us = 565\nmailbox_response_max_us = 2230", None),
         // The real EL2889 has a system time (replay-dc: the FRMWs of 0x0910 count it), the
         // EL2828 whose dump stands in has receive times only: its SYNC unit is turned on.
         Some(0x0B49_3052) => (
@@ -117,8 +120,10 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
             Some("EK1914: no EEPROM dump or ESI in shared data (EK1100 with its SYNC and latch units off stands in)"),
         ),
         Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
+        // Its sample firmware answered all six requests of soem-single-lan9252 between 37.94
+        // and 38.66 ms (last empty and first full poll of SM1): the middle of that.
         Some(0x9252) => (
-            "builtin = 'LAN9252-EVB'".into(),
+            "builtin = 'LAN9252-EVB'\nmailbox_response_us = 38300".into(),
             Some("EVB-LAN9252: no EEPROM dump in shared data (the built-in description, from this capture, stands in)"),
         ),
         Some(0x03EC_3052) => (
@@ -205,10 +210,12 @@ fn irq_reason(ours: u16, real: u16, dl_unknown: bool, standins: &[(u16, &str)]) 
 }
 
 /// Why a mailbox SyncManager's status byte differs (bits 0, 1, 3).
-fn mailbox_status_reason(ours: u8, real: u8, standin: bool) -> &'static str {
+fn mailbox_status_reason(ours: u8, real: u8, standin: bool, drawn: bool) -> &'static str {
     let full = SyncManager::STATUS_MAILBOX_FULL;
     if standin {
         "a stand-in device"
+    } else if drawn && (ours ^ real) & full != 0 {
+        "the firmware's response time: ours is drawn from the real one's range, not the real draw"
     } else if ours & full != 0 && real & full == 0 {
         "the real firmware had not answered yet; ours answers at once"
     } else if ours & 0x0B == SyncManager::STATUS_INT_READ && real == 0x80 {
@@ -256,7 +263,7 @@ fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str
         0x0130..=0x0135 => "AL status: the simulated slave changes state at another moment than the real one",
         0x0500..=0x050F => "SII interface: busy timing differs (700 µs per read here; a Windows capture's times are not the wire's)",
         0x0900..=0x09FF => "DC registers: times are the simulation's",
-        0x0F00..=0x1FFF => "mailbox/process RAM: the simulated slave answers at once, the real one took time",
+        0x0F00..=0x1FFF => "mailbox/process RAM: the simulated slave's reply was ready at another moment than the real one's",
         0x0300..=0x0313 => "error counters: the real segment saw link errors",
         _ => "not explained",
     };
@@ -275,9 +282,12 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
     let mut toml = String::from("seed = 1\ndrift_spread_ppm = 0\n");
     let mut standins = Vec::new();
     let mut notes = Vec::new();
+    // Whether some slave's firmware draws its mailbox response times.
+    let mut drawn = false;
     for k in 0..count.max(1) {
         let product = ids.get(&k).copied();
         let (src, why) = source(product);
+        drawn |= src.contains("mailbox_response_max_us");
         if let Some(w) = why {
             standins.push((k as u16, w));
             notes.push(format!("slave {k}: {w}"));
@@ -307,9 +317,19 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
     let (mut dl_fp, mut dl_ap, mut dl_all) = (BTreeSet::new(), BTreeSet::new(), false);
     let mut mailbox_sms: Vec<u16> = Vec::new();
     let t0 = p.first().map(|x| x.t_ns).unwrap_or(0);
+    // A capture whose every answer came back at least 1 µs after its request has the wire's
+    // times, and is replayed at its own spacing (shifted by 1 ms); TwinCAT's Windows captures
+    // stamp batches of frames alike (answers "0 ns" after their requests), and are replayed
+    // 1 ms after each answer at the earliest.
+    let wire_timed = pairs.iter().all(|&(q, r)| p[r].t_ns >= p[q].t_ns + 1_000);
+    if !wire_timed {
+        notes
+            .push("answers stamped as early as their requests: replayed 1 ms after each answer at the earliest".into());
+    }
     let mut last_t = 0;
     for &(req, resp) in &pairs {
-        let t = (p[req].t_ns - t0).max(last_t) + 1_000_000;
+        let captured = p[req].t_ns - t0 + 1_000_000;
+        let t = if wire_timed { captured.max(last_t + 1_000) } else { captured.max(last_t + 1_000_000) };
         let mut frame = p[req].data.clone();
         let back = seg.exchange(&mut frame, t);
         last_t = back.unwrap_or(t);
@@ -384,7 +404,7 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
                             let standin = standin_reached(h.command, adp, &standins).is_some();
                             let why = format!(
                                 "mailbox SM status {ours:#04x} vs real {real:#04x}: {}",
-                                mailbox_status_reason(ours, real, standin)
+                                mailbox_status_reason(ours, real, standin, drawn)
                             );
                             *r.reasons.entry(why).or_default() += 1;
                         }

@@ -1,7 +1,8 @@
 //! The SII interface's busy time against real ESCs: every poll of the EEPROM status that
 //! ethercrab made in its captures (recorded on Linux, with per-frame timestamps: the
-//! replay-* files) is made again at the same offset from its read command, and the busy bit
-//! must come back as the real one did.
+//! replay-* files) and SOEM in its captures of EK1100s and EL1004s (on Windows, timestamps in
+//! µs: soem-sdinfo-ek1100-*) is made again at the same offset from its read command, and the
+//! busy bit must come back as the real one did.
 mod common;
 
 use common::Bus;
@@ -48,7 +49,12 @@ fn reads(path: &std::path::Path) -> Vec<Vec<(u64, bool)>> {
 fn needs_shared_the_eeprom_is_busy_as_long_as_real_escs_were() {
     let reads: Vec<Vec<(u64, bool)>> = ferrocat_testdata::shared_files("captures", ".pcapng")
         .iter()
-        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("replay-")))
+        .filter(|p| {
+            p.file_name().is_some_and(|n| {
+                let n = n.to_string_lossy();
+                n.starts_with("replay-") || n.starts_with("soem-sdinfo-ek1100-")
+            })
+        })
         .flat_map(|p| reads(p))
         .collect();
     let dump = ferrocat_testdata::shared("captures/eeprom/ek1100.hex");

@@ -1,6 +1,8 @@
 //! The firmware's side of AL control and of the mailbox SyncManagers.
 use ferrocat_wire::register::{AlState, AlStatusCode, SyncManager};
 use ferrocat_wire::sii::SmEntry;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 use super::{sm_area, unsupported_protocol_reply, Esc};
 use crate::app::Pdi;
@@ -74,7 +76,8 @@ impl Esc {
         }
     }
 
-    /// A complete request arrived in the mailbox SM: the application answers into SM1.
+    /// A complete request arrived in the mailbox SM: the application answers into SM1 once the
+    /// firmware's response time has passed (replies leave in the order of their requests).
     pub(super) fn mailbox_request(&mut self, sm: u8) {
         let s = self.sm(sm);
         let req = self.mem[sm_area(&s, self.mem.len())].to_vec();
@@ -88,7 +91,9 @@ impl Esc {
             self.app.mailbox(&mut pdi, &req)
         };
         let reply = reply.unwrap_or_else(|| unsupported_protocol_reply(&req));
-        self.mbx_queue.push_back(reply);
+        let ready = self.now_ns.saturating_add(self.mailbox_response.draw_ns());
+        let ready = ready.max(self.mbx_queue.back().map_or(0, |m| m.0));
+        self.mbx_queue.push_back((ready, reply));
         self.deliver_mailbox();
     }
 
@@ -103,13 +108,12 @@ impl Esc {
         if self.sms[n as usize].full {
             return;
         }
-        let msg = match self.mbx_queue.pop_front() {
-            Some(m) => m,
-            None => match self.app.pending_mailbox() {
-                Some(m) => m,
-                None => return,
-            },
+        let msg = match self.mbx_queue.front() {
+            Some(&(ready, _)) if ready > self.now_ns => return,
+            Some(_) => self.mbx_queue.pop_front().map(|m| m.1),
+            None => self.app.pending_mailbox(),
         };
+        let Some(msg) = msg else { return };
         let area = sm_area(&out, self.mem.len());
         let area = &mut self.mem[area];
         let len = area.len().min(msg.len());
@@ -120,5 +124,35 @@ impl Esc {
         st.int_write = true;
         st.int_read = false;
         self.put_sm_status(n);
+    }
+}
+
+/// How long a slave's firmware takes from a mailbox request to its reply: from `min` to `max`,
+/// uniformly, drawn per request from its own seeded stream (0: at once, the default).
+#[derive(Debug, Clone)]
+pub struct MailboxResponse {
+    min_ns: u64,
+    max_ns: u64,
+    rng: ChaCha8Rng,
+}
+
+impl Default for MailboxResponse {
+    fn default() -> Self {
+        MailboxResponse::uniform(0, 0, 0)
+    }
+}
+
+impl MailboxResponse {
+    /// From `min_ns` to `max_ns` (taken as `min_ns` if smaller).
+    pub fn uniform(min_ns: u64, max_ns: u64, seed: u64) -> Self {
+        MailboxResponse { min_ns, max_ns: max_ns.max(min_ns), rng: ChaCha8Rng::seed_from_u64(seed) }
+    }
+
+    fn draw_ns(&mut self) -> u64 {
+        if self.max_ns == self.min_ns {
+            self.min_ns
+        } else {
+            self.rng.gen_range(self.min_ns..=self.max_ns)
+        }
     }
 }

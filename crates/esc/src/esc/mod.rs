@@ -13,6 +13,8 @@ mod datagram;
 mod end_of_frame;
 mod registers;
 
+pub use al_mailbox::MailboxResponse;
+
 /// When a frame met this ESC: the true time its first bit reached each port, and the time it
 /// passed the processing unit.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -170,8 +172,11 @@ pub struct Esc {
     sync_pulsed: bool,
     /// An enabled output SyncManager triggers the process-data watchdog.
     wd_armed: bool,
-    /// Messages waiting for the send mailbox (SM1) to be read.
-    mbx_queue: std::collections::VecDeque<Vec<u8>>,
+    /// Messages waiting for the send mailbox (SM1) to be read, each with the true time from
+    /// which the firmware has it ready.
+    mbx_queue: std::collections::VecDeque<(u64, Vec<u8>)>,
+    /// How long the firmware takes to answer a mailbox request.
+    pub mailbox_response: MailboxResponse,
     /// Without device emulation the firmware reads AL control this long after the master
     /// wrote it; until then the register is locked (ESC datasheet, 0x0120).
     pub al_response_ns: u64,
@@ -220,6 +225,7 @@ impl Esc {
             sync_pulsed: false,
             wd_armed: false,
             mbx_queue: Default::default(),
+            mailbox_response: MailboxResponse::default(),
             al_response_ns: 1_000_000,
             pending_al: None,
             port_generation: 0,
