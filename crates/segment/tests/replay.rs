@@ -106,7 +106,10 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         // firmware's mailbox response time: soem-sdinfo-akd's 35 requests were each answered
         // between SOEM's last empty and first full poll of SM1 (0.56–2.86 ms after the
         // request); the uniform range of greatest likelihood for those intervals.
-        Some(0x0041_4B44) => (e("akd.hex") + "\nmailbox_response_us = 565\nmailbox_response_max_us = 2230", None),
+        // Its AL control: INIT→PREOP shown 3.58–5.63 ms after SOEM's write (AL status polls).
+        Some(0x0041_4B44) => {
+            (e("akd.hex") + "\nmailbox_response_us = 565\nmailbox_response_max_us = 2230\nal_response_us = 4600", None)
+        }
         // The real EL2889 has a system time (replay-dc: the FRMWs of 0x0910 count it), the
         // EL2828 whose dump stands in has receive times only: its SYNC unit is turned on.
         Some(0x0B49_3052) => (
@@ -121,9 +124,10 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
         ),
         Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
         // Its sample firmware answered all six requests of soem-single-lan9252 between 37.94
-        // and 38.66 ms (last empty and first full poll of SM1): the middle of that.
+        // and 38.66 ms (last empty and first full poll of SM1), and showed INIT→PREOP and
+        // PREOP→SAFEOP 15.85–17.85 ms after SOEM's writes of AL control: the middles.
         Some(0x9252) => (
-            "builtin = 'LAN9252-EVB'\nmailbox_response_us = 38300".into(),
+            "builtin = 'LAN9252-EVB'\nmailbox_response_us = 38300\nal_response_us = 16850".into(),
             Some("EVB-LAN9252: no EEPROM dump in shared data (the built-in description, from this capture, stands in)"),
         ),
         Some(0x03EC_3052) => (
