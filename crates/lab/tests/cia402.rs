@@ -644,3 +644,79 @@ fn homing_on_a_cam_with_reversal_at_the_limit_switch() {
         assert!((home - expect).abs() * per_rev <= 2.0, "method {method}: home {home} rev, {want} ({lo}..{hi})");
     }
 }
+
+/// Outside homing a limit switch stops motion toward it. Profile velocity at 3 rev/s into the
+/// positive limit (0.5 rev ahead): the drive brakes at the quick-stop deceleration (60 rev/s²:
+/// 0.075 rev past the switch), holds there with bit 11 (internal limit active) and 0x60FD bit 1,
+/// however long the target still points into the limit; a target the other way moves it off.
+#[test]
+fn a_limit_switch_stops_profile_velocity_toward_it_and_lets_it_back() {
+    use ferrocat_wire::cia402::status;
+    let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
+    let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
+    m.sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &u32le(30.0)).unwrap();
+    m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(30.0)).unwrap();
+    m.sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(60.0)).unwrap();
+    let start = drive(&m).position_increments() / per_rev;
+    let limit = start + 0.5;
+    drive_mut(&mut m).set_switches(Switches { positive_limit_rev: Some(limit), ..Switches::default() });
+    assert_eq!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+    a.set_target_velocity(&mut m, (3.0 * per_rev) as i32);
+    until(&mut m, &a, 1000, &|sw| sw & status::INTERNAL_LIMIT != 0).expect("the limit reached");
+    cycles(&mut m, 500);
+    let at = drive(&m).position_increments() / per_rev - limit;
+    // 3 rev/s at 60 rev/s²: 0.075 rev, and a control period's travel.
+    assert!((0.06..0.09).contains(&at), "held {at} rev past the switch");
+    assert!(drive(&m).velocity_increments().abs() < 0.01 * per_rev, "standing");
+    let sw = a.statusword(&m);
+    assert_ne!(sw & status::INTERNAL_LIMIT, 0, "bit 11 while held: {sw:#06x}");
+    assert_eq!(a.state(), Some(State::OperationEnabled), "stopped, not faulted");
+    assert_eq!(digital_inputs(&mut m) & 0b010, 0b010, "on the positive limit");
+    // Away from the limit: free.
+    a.set_target_velocity(&mut m, -(3.0 * per_rev) as i32);
+    until(&mut m, &a, 1000, &|sw| sw & status::INTERNAL_LIMIT == 0).expect("off the limit");
+    cycles(&mut m, 300);
+    assert!(drive(&m).velocity_increments() < -2.9 * per_rev, "moving away at the target");
+    assert!(drive(&m).position_increments() / per_rev < limit, "off the switch");
+    assert_eq!(digital_inputs(&mut m) & 0b010, 0);
+}
+
+/// Cyclic synchronous position into the negative limit: the drive stops at the switch and holds
+/// while the master's set-points run on past it (following error grows, bit 11 set), and
+/// follows again once the set-points come back to its side.
+#[test]
+fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
+    use ferrocat_wire::cia402::status;
+    let (mut m, a, per_rev) = enabled_in(Mode::CyclicSyncPosition);
+    m.sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    // No following-error fault while the set-points run away (0xFFFFFFFF: check off).
+    m.sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &u32::MAX.to_le_bytes()).unwrap();
+    let shaft0 = drive(&m).position_increments();
+    let p0 = a.position_actual(&m).unwrap() as f64;
+    let limit = shaft0 / per_rev - 0.3;
+    drive_mut(&mut m).set_switches(Switches { negative_limit_rev: Some(limit), ..Switches::default() });
+    // −1 rev/s for 600 ms: 0.6 rev, twice the way to the switch.
+    let v = -per_rev;
+    let mut target = p0;
+    for _ in 0..600 {
+        target += v * 1e-3;
+        a.set_target_position(&mut m, target as i64 as i32);
+        cycles(&mut m, 1);
+    }
+    let at = drive(&m).position_increments() / per_rev - limit;
+    // 1 rev/s at 100 rev/s²: 0.005 rev past the switch.
+    assert!((-0.01..0.0).contains(&at), "stopped {at} rev from the switch");
+    let fe = drive(&m).following_error_increments() / per_rev;
+    assert!(fe.abs() > 0.2, "set-points ran on: following error {fe} rev");
+    assert_ne!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+    assert_eq!(a.state(), Some(State::OperationEnabled));
+    // Set-points back on the free side, 0.1 rev above where it stopped: it follows there.
+    let back = p0 + (limit + 0.1) * per_rev - shaft0;
+    for _ in 0..300 {
+        a.set_target_position(&mut m, back as i64 as i32);
+        cycles(&mut m, 1);
+    }
+    let off = (drive(&m).position_increments() - (back - p0 + shaft0)) / per_rev;
+    assert!(off.abs() < 0.01, "follows again: {off} rev from the set-point");
+    assert_eq!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+}

@@ -181,7 +181,8 @@ pub struct DeviceToml {
     pub app_period_us: Option<f64>,
     /// A CiA402 drive's limit switches (active at and below / at and above) and home switch
     /// (active at and above, or at and below with `home_switch_below`), in revolutions of the
-    /// shaft on its own scale; used by homing methods 1–6 and 17–22, reported in 0x60FD.
+    /// shaft on its own scale; used by homing methods 1–14 and 17–30, reported in 0x60FD; a
+    /// limit switch also stops motion toward it outside homing.
     pub negative_limit_rev: Option<f64>,
     pub positive_limit_rev: Option<f64>,
     pub home_switch_rev: Option<f64>,

@@ -246,6 +246,21 @@ pub struct Cia402Drive {
     homing: homing::Homing,
     /// Limit and home switches on the shaft (none unless set).
     switches: Switches,
+    /// A limit switch stopping motion toward it, outside homing.
+    limit_stop: Option<LimitStop>,
+}
+
+/// A limit switch the shaft stands on stops motion toward it: a ramp at the quick-stop
+/// deceleration (0x6085), then the shaft held where it stopped for as long as the demand points
+/// that way; motion away is free, and statusword bit 11 (internal limit active) shows it. The
+/// profile leaves the reaction to the manufacturer; this is the common "stop and block that
+/// direction" (model choice). Homing reads the switches itself.
+#[derive(Debug, Clone, Copy)]
+struct LimitStop {
+    /// The ramp's velocity demand (increments/s).
+    vel: f64,
+    /// Where the shaft is held once stopped (increments).
+    hold: Option<f64>,
 }
 
 impl Cia402Drive {
@@ -295,6 +310,7 @@ impl Cia402Drive {
             offset: 0.0,
             homing: homing::Homing::default(),
             switches: Switches::default(),
+            limit_stop: None,
         };
         d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
         d.write_feedback(d.feedback());
@@ -335,8 +351,8 @@ impl Cia402Drive {
 
     /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
     /// then FAULT, with an emergency message.
-    /// Puts limit and home switches on the shaft (homing methods 1–6 and 17–22 use them; 0x60FD
-    /// reports them).
+    /// Puts limit and home switches on the shaft (homing methods 1–14 and 17–30 use them, a
+    /// limit switch stops motion toward it in the other modes; 0x60FD reports them).
     pub fn set_switches(&mut self, switches: Switches) {
         self.switches = switches;
     }
@@ -405,6 +421,7 @@ impl Cia402Drive {
             at += loop_ns;
             self.demand.promote(at);
             let demand = self.step_demand(at, dt);
+            let demand = self.limit_guard(demand, dt);
             let before_rad = self.mech.pos_rad;
             self.mech.step(&self.motor, demand, max_torque, dt);
             if let Some(home_rad) = self.homing.track(before_rad, self.mech.pos_rad, &self.switches) {
@@ -497,6 +514,49 @@ impl Cia402Drive {
             }
             _ => Demand::Off,
         }
+    }
+
+    /// The demand, unless a limit switch blocks it (see [`LimitStop`]).
+    fn limit_guard(&mut self, demand: Demand, dt: f64) -> Demand {
+        let rad = self.mech.pos_rad;
+        let neg = self.switches.active(homing::Switch::NegativeLimit, rad);
+        let pos = self.switches.active(homing::Switch::PositiveLimit, rad);
+        let free = self.state != State::OperationEnabled || self.mode == Some(Mode::Homing) || self.ramp.is_some();
+        if free || !(neg || pos) {
+            self.limit_stop = None;
+            return demand;
+        }
+        let here = self.mech.position_increments(&self.motor);
+        let from = self.limit_stop.and_then(|s| s.hold).unwrap_or(here);
+        let toward = match demand {
+            // A position demand is judged by where it lies, not by its feed-forward.
+            Demand::Position { pos: p, .. } => p - from,
+            Demand::Velocity(v) => v,
+            Demand::Torque(t) => t,
+            Demand::Off => 0.0,
+        };
+        if !((neg && toward < 0.0) || (pos && toward > 0.0)) {
+            self.limit_stop = None;
+            return demand;
+        }
+        let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
+        let vel = self.mech.velocity_increments(&self.motor);
+        let s = self.limit_stop.get_or_insert(LimitStop { vel, hold: None });
+        if s.hold.is_none() {
+            if (neg && s.vel < 0.0) || (pos && s.vel > 0.0) {
+                s.vel = if s.vel > 0.0 { (s.vel - dec * dt).max(0.0) } else { (s.vel + dec * dt).min(0.0) };
+            } else {
+                s.vel = 0.0;
+            }
+            if s.vel != 0.0 {
+                self.pv = s.vel;
+                return Demand::Velocity(s.vel);
+            }
+            s.hold = Some(here);
+        }
+        // Profile velocity's own ramp starts again from standstill once released.
+        self.pv = 0.0;
+        Demand::Position { pos: s.hold.unwrap_or(here), vel: 0.0, acc: 0.0 }
     }
 
     fn ramp_finished(&mut self) {
@@ -667,7 +727,7 @@ impl Cia402Drive {
         ) {
             sw |= status::VOLTAGE_ENABLED;
         }
-        if self.mech.limited && self.state == State::OperationEnabled {
+        if (self.mech.limited || self.limit_stop.is_some()) && self.state == State::OperationEnabled {
             sw |= status::INTERNAL_LIMIT;
         }
         let window = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_WINDOW, 0);
