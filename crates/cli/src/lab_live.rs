@@ -3,7 +3,10 @@
 //! `ferrocat sim` serves the other end in another, and the simulator logs every slave's true
 //! system time at each frame's CLOCK_MONOTONIC instant; the master's clock is CLOCK_MONOTONIC
 //! plus its epoch offset (or, for a master that follows the reference, the method's line on
-//! that), so both are compared on the same time base.
+//! that), so both are compared on the same time base. Every method's cyclic frames are also
+//! placed on the reference's cycle: the reference's system time as each passed it, modulo the
+//! cycle — the phase Chen 2016 measures, and the only figure for the methods that keep no
+//! master clock (chen2016, SOEM's PI).
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
@@ -33,13 +36,23 @@ pub struct Row {
     pub method: String,
     pub slaves: usize,
     pub cycle_us: u64,
-    /// Master − reference and master − last slave over the measured part (µs).
-    pub ref_mean_us: f64,
-    pub ref_rms_us: f64,
-    pub last_mean_us: f64,
-    pub last_rms_us: f64,
+    /// Master − reference and master − last slave over the measured part (µs); `None` for a
+    /// method that keeps no master clock (it follows the reference's phase only).
+    pub ref_mean_us: Option<f64>,
+    pub ref_rms_us: Option<f64>,
+    pub last_mean_us: Option<f64>,
+    pub last_rms_us: Option<f64>,
     /// Largest |master − slave| over all slaves and samples (µs).
-    pub max_abs_us: f64,
+    pub max_abs_us: Option<f64>,
+    /// Where each cycle's frame passed the reference on its cycle: the reference's system time
+    /// then, modulo the cycle — mean (0 … cycle), standard deviation and the width max − min,
+    /// each phase taken within half a cycle of the recent ones' mean, so that a drifting phase
+    /// counts whole and a frame more than half a cycle late counts as early (µs).
+    pub phase_mean_us: f64,
+    pub phase_sd_us: f64,
+    pub phase_width_us: f64,
+    /// Cycles whose frame the log shows (the phase's samples).
+    pub phased: u64,
     /// Frames the simulator logged in the measured window: about one per cycle, and the
     /// probe frames (`probes`) ferrocat sent there.
     pub samples: u64,
@@ -161,6 +174,9 @@ struct MasterRun {
     lost: u64,
     /// Probe frames sent within the measured window (the simulator logs them too).
     probes: u64,
+    /// When each cycle of the window began (CLOCK_MONOTONIC): its frame is the first the
+    /// simulator logs after it.
+    cycle_starts: Vec<u64>,
 }
 
 /// The method's clock from `own_ns` (the master's own system time) until the next piece.
@@ -202,12 +218,17 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let mut clock = Vec::new();
     let (mut next, mut c, mut cycles) = (start, Default::default(), 0);
     let mut probes_from = None;
+    let mut cycle_starts = Vec::new();
     while next < to_ns {
         // A master that follows the reference wakes when it says.
         next = ferrocat_lab::next_wake(next, cycle_ns, &c);
         m.engine.io.sleep_until(next);
-        if m.engine.io.now_ns() >= from_ns && probes_from.is_none() {
+        let now = m.engine.io.now_ns();
+        if now >= from_ns && probes_from.is_none() {
             probes_from = Some(st.probes);
+        }
+        if (from_ns..to_ns).contains(&now) {
+            cycle_starts.push(now);
         }
         c = m.sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
@@ -224,18 +245,59 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     // A method that keeps no clock of its own leaves the master's.
     let clock = (!clock.is_empty()).then_some(clock);
     let probes = st.probes - probes_from.unwrap_or(st.probes);
-    Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost, probes })
+    Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost, probes, cycle_starts })
 }
 
-/// Master − slave errors from the simulator's clock log over the master's window.
+/// Methods that follow the reference's phase with the master's period and keep no master
+/// clock: their master − slave error would be the crystals' drift, so only the phase is theirs.
+const PHASE_ONLY: [&str; 2] = ["chen2016", "pi"];
+
+/// Where each cycle's frame passed the reference on its cycle: (mean 0 … cycle, sd, width max −
+/// min, samples), in ns; a drifting phase is followed across the cycle's edge. `log` holds (CLOCK_MONOTONIC, reference system time) per logged frame,
+/// in order; a cycle's frame is the first logged at or after its start and before the next.
+fn phase(log: &[(u64, u64)], cycle_starts: &[u64], cycle_ns: u64) -> (f64, f64, f64, u64) {
+    let c = cycle_ns as i64;
+    let (mut m, mut lo, mut hi) = (Moments::default(), f64::INFINITY, f64::NEG_INFINITY);
+    // Each phase is taken within half a cycle of a slowly moving centre (a 16-frame mean of
+    // the phases so far): a drifting phase goes on across the cycle's edge, and a frame more
+    // than half a cycle late counts as early rather than moving the others.
+    let (mut j, mut centre): (usize, Option<f64>) = (0, None);
+    for (k, &start) in cycle_starts.iter().enumerate() {
+        j += log[j..].partition_point(|&(mono, _)| mono < start);
+        let Some(&(mono, sys)) = log.get(j) else { break };
+        if cycle_starts.get(k + 1).is_some_and(|&next| mono >= next) {
+            continue;
+        }
+        let raw = (sys % cycle_ns) as i64;
+        let x = match centre {
+            None => raw as f64,
+            Some(ctr) => {
+                let near = ctr.round() as i64;
+                (near + (raw - near + c / 2).rem_euclid(c) - c / 2) as f64
+            }
+        };
+        centre = Some(centre.map_or(x, |ctr| ctr + (x - ctr) / 16.0));
+        m.push(x);
+        (lo, hi) = (lo.min(x), hi.max(x));
+    }
+    let sd = (m.rms().powi(2) - m.mean().powi(2)).max(0.0).sqrt();
+    (m.mean().rem_euclid(cycle_ns as f64), sd, hi - lo, m.n)
+}
+
+/// Master − slave errors from the simulator's clock log over the master's window, and the
+/// cyclic frames' phase on the reference's cycle.
 fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Result<Row> {
     let text = std::fs::read_to_string(log).with_context(|| format!("reading {}", log.display()))?;
     let (mut reference, mut last, mut max_abs) = (Moments::default(), Moments::default(), 0f64);
+    let mut reference_times = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let v: Vec<Option<u64>> = line.split(',').map(|x| x.parse().ok()).collect();
         let Some(Some(mono)) = v.first().copied() else { bail!("{}: line {}: no time", log.display(), i + 1) };
         if mono < r.from_ns || mono > r.to_ns {
             continue;
+        }
+        if let Some(Some(sys)) = v.get(1).copied() {
+            reference_times.push((mono, sys));
         }
         let own = mono.wrapping_add(r.epoch_offset_ns);
         let master = match &r.clock {
@@ -254,15 +316,22 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         max_abs = e.iter().fold(max_abs, |m, x| m.max(x.abs()));
     }
     ensure!(reference.n > 0, "the simulator logged no frame in the measured window");
+    let (phase_mean, phase_sd, phase_width, phased) = phase(&reference_times, &r.cycle_starts, a.cycle_us * 1000);
+    let clock = !PHASE_ONLY.contains(&method);
+    let us = |x: f64| clock.then_some(x / 1e3);
     Ok(Row {
         method: method.into(),
         slaves: a.slaves,
         cycle_us: a.cycle_us,
-        ref_mean_us: reference.mean() / 1e3,
-        ref_rms_us: reference.rms() / 1e3,
-        last_mean_us: last.mean() / 1e3,
-        last_rms_us: last.rms() / 1e3,
-        max_abs_us: max_abs / 1e3,
+        ref_mean_us: us(reference.mean()),
+        ref_rms_us: us(reference.rms()),
+        last_mean_us: us(last.mean()),
+        last_rms_us: us(last.rms()),
+        max_abs_us: us(max_abs),
+        phase_mean_us: phase_mean / 1e3,
+        phase_sd_us: phase_sd / 1e3,
+        phase_width_us: phase_width / 1e3,
+        phased,
         samples: reference.n,
         cycles: r.cycles,
         frames_lost: r.lost,
@@ -279,12 +348,12 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         a.seconds > 0.0 && a.seconds <= 3600.0 && (0.0..=3600.0).contains(&a.settle_s),
         "--seconds/--settle-s out of range"
     );
-    // The methods that keep a master clock: the master's own, or (ferrocat-mfr) its estimate of
-    // the reference's — those of the master–slave error tables. chen2016 and SOEM's PI follow
-    // the reference's phase and keep no clock.
-    const LIVE: [&str; 8] = ferrocat_lab::park2020::METHODS;
+    // The methods of the master–slave error tables, which keep a master clock (the master's
+    // own, or ferrocat-mfr's estimate of the reference's), and chen2016 and SOEM's PI, which
+    // follow the reference's phase and are measured by it alone.
+    let live: Vec<&str> = ferrocat_lab::park2020::METHODS.iter().chain(&PHASE_ONLY).copied().collect();
     for m in &a.methods {
-        ensure!(LIVE.contains(&m.as_str()), "--method {m:?}: one of {}", LIVE.join(", "));
+        ensure!(live.contains(&m.as_str()), "--method {m:?}: one of {}", live.join(", "));
     }
     let veth = Veth::new()?;
     // This thread (the master) lives in its namespace from here on; the simulator is started
@@ -309,30 +378,37 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     outln!(
-        "Live — this kernel, veth pair, {} slaves, {} µs cycle, {} s after {} s; error = master − slave clock (true, from the simulator), µs",
+        "Live — this kernel, veth pair, {} slaves, {} µs cycle, {} s after {} s; error = master − slave clock (true, from the simulator; — where the method keeps no master clock), phase = the cyclic frame's passage on the reference's cycle; µs",
         a.slaves, a.cycle_us, a.seconds, a.settle_s
     );
     outln!(
-        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>6} {:>7}",
+        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>8} {:>6} {:>7}",
         "method",
         "ref mean",
         "ref RMS",
         "last mean",
         "last RMS",
         "max |e|",
+        "phase",
+        "phase sd",
+        "width",
         "samples",
         "lost",
         "probes"
     );
+    let f = |x: Option<f64>| x.map_or("—".to_string(), |x| format!("{x:.3}"));
     for r in &rows {
         outln!(
-            "{:<13} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>8} {:>6} {:>7}",
+            "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10.3} {:>8.3} {:>8.3} {:>8} {:>6} {:>7}",
             r.method,
-            r.ref_mean_us,
-            r.ref_rms_us,
-            r.last_mean_us,
-            r.last_rms_us,
-            r.max_abs_us,
+            f(r.ref_mean_us),
+            f(r.ref_rms_us),
+            f(r.last_mean_us),
+            f(r.last_rms_us),
+            f(r.max_abs_us),
+            r.phase_mean_us,
+            r.phase_sd_us,
+            r.phase_width_us,
             r.samples,
             r.frames_lost,
             r.probes
@@ -344,6 +420,78 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_cycles_frame_is_placed_on_the_references_cycle() {
+        const C: u64 = 1_000_000;
+        // Cycles start at 0, 1, 2, 3 and 4 ms; the frames (and a probe) pass the reference at
+        // system times whose phases are 999.0, 1.0 (2 µs on, across the cycle's edge), 3.0 and,
+        // for the cycle at 4 ms, 4.0 µs; the cycle at 3 ms has no frame of its own (the next
+        // one logged came after 4 ms).
+        let log = [
+            (100, 7 * C + 999_000),
+            (1_000_100, 8 * C + 1_000),
+            (1_000_300, 8 * C + 500_000),
+            (2_000_100, 9 * C + 3_000),
+            (4_000_100, 11 * C + 4_000),
+        ];
+        let starts = [0, C, 2 * C, 3 * C, 4 * C];
+        let (mean, sd, width, n) = phase(&log, &starts, C);
+        assert_eq!(n, 4, "the probe and the frameless cycle left out");
+        // Unwrapped: 999, 1 001, 1 003, 1 004 µs.
+        assert!((mean - 1_001_750.0 % C as f64).abs() < 1e-6, "mean {mean}");
+        assert!((width - 5_000.0).abs() < 1e-6, "width {width}");
+        let want_sd = ((999f64 - 1001.75).powi(2) + 0.75f64.powi(2) + 1.25f64.powi(2) + 2.25f64.powi(2)) / 4.0;
+        assert!((sd - want_sd.sqrt() * 1e3).abs() < 1e-3, "sd {sd}");
+        // Nothing logged: no samples, NaN statistics.
+        assert_eq!(phase(&[], &starts, C).3, 0);
+        // Frames at 375 µs, one 505 µs late (880), then 390 µs: the late one counts as 495 µs
+        // early (−120) and the next is not a cycle away (from frame to frame it would have
+        // been): width 390 − (−120).
+        let log: Vec<(u64, u64)> = [375_000, 375_000, 880_000, 390_000, 375_000]
+            .iter()
+            .enumerate()
+            .map(|(k, &p)| (k as u64 * C + 10, 5 * C + k as u64 * C + p))
+            .collect();
+        let starts: Vec<u64> = (0..5).map(|k| k * C).collect();
+        let (_, _, width, n) = phase(&log, &starts, C);
+        assert_eq!(n, 5);
+        assert!((width - 510_000.0).abs() < 1e-6, "width {width}");
+    }
+
+    #[test]
+    fn a_method_without_a_master_clock_reports_its_phase_only() {
+        let a =
+            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let log = std::env::temp_dir().join(format!("ferrocat-live-phase-{}.csv", std::process::id()));
+        std::fs::write(
+            &log,
+            "t,s0
+1000,7000250000
+1001000,7001250100
+",
+        )
+        .unwrap();
+        let run = MasterRun {
+            epoch_offset_ns: 0,
+            clock: None,
+            from_ns: 0,
+            to_ns: u64::MAX,
+            cycles: 2,
+            lost: 0,
+            probes: 0,
+            cycle_starts: vec![0, 1_000_000],
+        };
+        for (method, clock) in [("chen2016", false), ("pi", false), ("conventional", true)] {
+            let row = errors(&log, &run, method, &a).unwrap();
+            assert_eq!(row.ref_mean_us.is_some(), clock, "{method}");
+            assert_eq!(row.max_abs_us.is_some(), clock, "{method}");
+            assert_eq!(row.phased, 2);
+            assert!((row.phase_mean_us - 250.05).abs() < 1e-9, "{row:?}");
+            assert!((row.phase_width_us - 0.1).abs() < 1e-9, "{row:?}");
+        }
+        std::fs::remove_file(&log).ok();
+    }
 
     #[test]
     fn a_master_that_follows_the_reference_is_measured_on_its_own_line() {
@@ -363,13 +511,14 @@ mod tests {
             cycles: 3,
             lost: 0,
             probes: 0,
+            cycle_starts: vec![],
         };
         let row = errors(&log, &run, "ferrocat-mfr", &a).unwrap();
         // The frame before the first piece is left out; the others: line − slave.
         assert_eq!(row.samples, 2);
         let e1 = 6_999_950_000.0 + 1.0001 * 50_000.0 - 7_000_000_500.0;
         let e2 = 6_999_950_000.0 + 1.0001 * 1_050_000.0 - 7_001_000_600.0;
-        assert!((row.ref_mean_us * 1e3 - (e1 + e2) / 2.0).abs() < 1.0, "{row:?}");
+        assert!((row.ref_mean_us.unwrap() * 1e3 - (e1 + e2) / 2.0).abs() < 1.0, "{row:?}");
         // Without a clock of the method's own, the master's is CLOCK_MONOTONIC + epoch.
         run.clock = None;
         let row = errors(&log, &run, "ferrocat", &a).unwrap();

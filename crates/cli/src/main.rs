@@ -188,10 +188,11 @@ enum LabCmd {
     /// settling, for every method of the error tables: peak excursion and recovery.
     Robustness(LabArgs),
     /// The master–slave clock errors on this machine's real kernel: the master in real time on a
-    /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root).
+    /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root); and
+    /// where each cycle's frame passed the reference on its cycle.
     Live {
-        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr (whose master clock is its estimate of the reference's).
-        #[arg(long, default_values = ["conventional", "park2020", "ferrocat", "ferrocat-mfr"])]
+        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
+        #[arg(long, default_values = ["conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"])]
         method: Vec<String>,
         #[arg(long, default_value_t = 2)]
         slaves: usize,

@@ -1,5 +1,6 @@
 //! `ferrocat lab live`, briefly: the master in real time on a veth pair it makes, `ferrocat sim`
-//! on the other end logging the true slave clocks; the errors come from that log (root).
+//! on the other end logging the true slave clocks; the errors and the cyclic frames' phase on
+//! the reference's cycle come from that log (root).
 use std::process::Command;
 
 #[test]
@@ -7,18 +8,29 @@ fn lab_live_measures_the_true_clock_errors_on_this_kernel() {
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
         .args(["lab", "live", "--seconds", "1", "--settle-s", "0.5", "--slaves", "3", "--json"])
         .args(["--method", "conventional", "--method", "ferrocat", "--method", "ferrocat-mfr"])
+        .args(["--method", "chen2016", "--method", "pi"])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     println!("{v:#}");
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 3);
+    assert_eq!(rows.len(), 5);
     for r in rows {
         let f = |k: &str| r[k].as_f64().unwrap();
         // About one logged frame per cycle of the measured second, and the probes sent there.
         let cyclic = f("samples") - f("probes");
         assert!((700.0..=1300.0).contains(&cyclic), "{r}");
+        // Each cycle's own frame found in the log and placed on the reference's cycle.
+        assert!((700.0..=1300.0).contains(&f("phased")), "{r}");
+        assert!((0.0..1000.0).contains(&f("phase_mean_us")) && f("phase_sd_us").is_finite(), "{r}");
+        // The methods that follow the reference's phase keep no master clock to compare.
+        if r["method"] == "chen2016" || r["method"] == "pi" {
+            for k in ["ref_mean_us", "ref_rms_us", "last_mean_us", "last_rms_us", "max_abs_us"] {
+                assert!(r[k].is_null(), "{k}: {r}");
+            }
+            continue;
+        }
         // Every slave follows the reference: the last slave's mean error is the reference's
         // to within 20 µs (followers left alone at ±50 ppm would part by 75 µs in the 1.5 s;
         // under the suite's load the reference slews hard and followers lag it by a few µs),
