@@ -53,6 +53,11 @@ pub struct Row {
     pub phase_width_us: f64,
     /// Cycles whose frame the log shows (the phase's samples).
     pub phased: u64,
+    /// What a DC-synchronous slave with SYNC0 half a cycle from the frames' mean phase would
+    /// have lost (frames overwritten before its SYNC0 took them) and repeated (SYNC0s without
+    /// a new frame): Chen 2016's packet loss, from the same frames.
+    pub dc_lost: u64,
+    pub dc_repeated: u64,
     /// Frames the simulator logged in the measured window: about one per cycle, and the
     /// probe frames (`probes`) ferrocat sent there.
     pub samples: u64,
@@ -252,12 +257,30 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
 /// clock: their master − slave error would be the crystals' drift, so only the phase is theirs.
 const PHASE_ONLY: [&str; 2] = ["chen2016", "pi"];
 
-/// Where each cycle's frame passed the reference on its cycle: (mean 0 … cycle, sd, width max −
-/// min, samples), in ns; a drifting phase is followed across the cycle's edge. `log` holds (CLOCK_MONOTONIC, reference system time) per logged frame,
-/// in order; a cycle's frame is the first logged at or after its start and before the next.
-fn phase(log: &[(u64, u64)], cycle_starts: &[u64], cycle_ns: u64) -> (f64, f64, f64, u64) {
+/// Where each cycle's frame passed the reference on its cycle (ns), and what a DC-synchronous
+/// slave would have made of those frames.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Phase {
+    /// Mean (0 … cycle), standard deviation and width max − min.
+    mean_ns: f64,
+    sd_ns: f64,
+    width_ns: f64,
+    /// Cycles whose own frame the log shows.
+    n: u64,
+    /// With SYNC0 half a cycle from the frames' mean phase, as a master would place it: frames
+    /// overwritten before a SYNC0 took them (two or more between two SYNC0s), and SYNC0s that
+    /// found no new frame — Chen 2016's lost and repeated process data.
+    lost: u64,
+    repeated: u64,
+}
+
+/// The cyclic frames' [`Phase`]. `log` holds (CLOCK_MONOTONIC, reference system time) per
+/// logged frame, in order; a cycle's frame is the first logged at or after its start and
+/// before the next. A drifting phase is followed across the cycle's edge.
+fn phase(log: &[(u64, u64)], cycle_starts: &[u64], cycle_ns: u64) -> Phase {
     let c = cycle_ns as i64;
     let (mut m, mut lo, mut hi) = (Moments::default(), f64::INFINITY, f64::NEG_INFINITY);
+    let mut passed = Vec::with_capacity(cycle_starts.len());
     // Each phase is taken within half a cycle of a slowly moving centre (a 16-frame mean of
     // the phases so far): a drifting phase goes on across the cycle's edge, and a frame more
     // than half a cycle late counts as early rather than moving the others.
@@ -268,6 +291,7 @@ fn phase(log: &[(u64, u64)], cycle_starts: &[u64], cycle_ns: u64) -> (f64, f64, 
         if cycle_starts.get(k + 1).is_some_and(|&next| mono >= next) {
             continue;
         }
+        passed.push(sys);
         let raw = (sys % cycle_ns) as i64;
         let x = match centre {
             None => raw as f64,
@@ -281,7 +305,22 @@ fn phase(log: &[(u64, u64)], cycle_starts: &[u64], cycle_ns: u64) -> (f64, f64, 
         (lo, hi) = (lo.min(x), hi.max(x));
     }
     let sd = (m.rms().powi(2) - m.mean().powi(2)).max(0.0).sqrt();
-    (m.mean().rem_euclid(cycle_ns as f64), sd, hi - lo, m.n)
+    let mean = m.mean().rem_euclid(cycle_ns as f64);
+    // SYNC0 at mean + cycle/2: count the frames between each two SYNC0s, from the first
+    // frame's interval to the last's.
+    let (mut lost, mut repeated) = (0, 0);
+    if !passed.is_empty() {
+        let sync0 = ((mean + cycle_ns as f64 / 2.0) as u64) % cycle_ns;
+        let mut slots: Vec<i128> = passed.iter().map(|&t| (t as i128 - sync0 as i128).div_euclid(c as i128)).collect();
+        slots.sort_unstable();
+        for w in slots.windows(2) {
+            match w[1] - w[0] {
+                0 => lost += 1,
+                gap => repeated += (gap - 1) as u64,
+            }
+        }
+    }
+    Phase { mean_ns: mean, sd_ns: sd, width_ns: hi - lo, n: m.n, lost, repeated }
 }
 
 /// Master − slave errors from the simulator's clock log over the master's window, and the
@@ -316,7 +355,7 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         max_abs = e.iter().fold(max_abs, |m, x| m.max(x.abs()));
     }
     ensure!(reference.n > 0, "the simulator logged no frame in the measured window");
-    let (phase_mean, phase_sd, phase_width, phased) = phase(&reference_times, &r.cycle_starts, a.cycle_us * 1000);
+    let ph = phase(&reference_times, &r.cycle_starts, a.cycle_us * 1000);
     let clock = !PHASE_ONLY.contains(&method);
     let us = |x: f64| clock.then_some(x / 1e3);
     Ok(Row {
@@ -328,10 +367,12 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         last_mean_us: us(last.mean()),
         last_rms_us: us(last.rms()),
         max_abs_us: us(max_abs),
-        phase_mean_us: phase_mean / 1e3,
-        phase_sd_us: phase_sd / 1e3,
-        phase_width_us: phase_width / 1e3,
-        phased,
+        phase_mean_us: ph.mean_ns / 1e3,
+        phase_sd_us: ph.sd_ns / 1e3,
+        phase_width_us: ph.width_ns / 1e3,
+        phased: ph.n,
+        dc_lost: ph.lost,
+        dc_repeated: ph.repeated,
         samples: reference.n,
         cycles: r.cycles,
         frames_lost: r.lost,
@@ -378,11 +419,11 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     outln!(
-        "Live — this kernel, veth pair, {} slaves, {} µs cycle, {} s after {} s; error = master − slave clock (true, from the simulator; — where the method keeps no master clock), phase = the cyclic frame's passage on the reference's cycle; µs",
+        "Live — this kernel, veth pair, {} slaves, {} µs cycle, {} s after {} s; error = master − slave clock (true, from the simulator; — where the method keeps no master clock), phase = the cyclic frame's passage on the reference's cycle, µs; dc lost/rep = process data a DC-synchronous slave (SYNC0 half a cycle from that phase) loses or repeats",
         a.slaves, a.cycle_us, a.seconds, a.settle_s
     );
     outln!(
-        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>8} {:>6} {:>7}",
+        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>7} {:>7} {:>8} {:>6} {:>7}",
         "method",
         "ref mean",
         "ref RMS",
@@ -392,6 +433,8 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         "phase",
         "phase sd",
         "width",
+        "dc lost",
+        "dc rep",
         "samples",
         "lost",
         "probes"
@@ -399,7 +442,7 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
     let f = |x: Option<f64>| x.map_or("—".to_string(), |x| format!("{x:.3}"));
     for r in &rows {
         outln!(
-            "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10.3} {:>8.3} {:>8.3} {:>8} {:>6} {:>7}",
+            "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10.3} {:>8.3} {:>8.3} {:>7} {:>7} {:>8} {:>6} {:>7}",
             r.method,
             f(r.ref_mean_us),
             f(r.ref_rms_us),
@@ -409,6 +452,8 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
             r.phase_mean_us,
             r.phase_sd_us,
             r.phase_width_us,
+            r.dc_lost,
+            r.dc_repeated,
             r.samples,
             r.frames_lost,
             r.probes
@@ -436,15 +481,19 @@ mod tests {
             (4_000_100, 11 * C + 4_000),
         ];
         let starts = [0, C, 2 * C, 3 * C, 4 * C];
-        let (mean, sd, width, n) = phase(&log, &starts, C);
+        let Phase { mean_ns: mean, sd_ns: sd, width_ns: width, n, lost, repeated } = phase(&log, &starts, C);
         assert_eq!(n, 4, "the probe and the frameless cycle left out");
+        // SYNC0 at 501.75 µs of each cycle: the frames at 7.999 and 8.001 ms fall between the
+        // same two SYNC0s (one overwritten), 9.003 between the next, and none between 9.50175
+        // and 10.50175 ms (a SYNC0 without a new frame) before 11.004.
+        assert_eq!((lost, repeated), (1, 1));
         // Unwrapped: 999, 1 001, 1 003, 1 004 µs.
         assert!((mean - 1_001_750.0 % C as f64).abs() < 1e-6, "mean {mean}");
         assert!((width - 5_000.0).abs() < 1e-6, "width {width}");
         let want_sd = ((999f64 - 1001.75).powi(2) + 0.75f64.powi(2) + 1.25f64.powi(2) + 2.25f64.powi(2)) / 4.0;
         assert!((sd - want_sd.sqrt() * 1e3).abs() < 1e-3, "sd {sd}");
         // Nothing logged: no samples, NaN statistics.
-        assert_eq!(phase(&[], &starts, C).3, 0);
+        assert_eq!(phase(&[], &starts, C).n, 0);
         // Frames at 375 µs, one 505 µs late (880), then 390 µs: the late one counts as 495 µs
         // early (−120) and the next is not a cycle away (from frame to frame it would have
         // been): width 390 − (−120).
@@ -454,9 +503,13 @@ mod tests {
             .map(|(k, &p)| (k as u64 * C + 10, 5 * C + k as u64 * C + p))
             .collect();
         let starts: Vec<u64> = (0..5).map(|k| k * C).collect();
-        let (_, _, width, n) = phase(&log, &starts, C);
-        assert_eq!(n, 5);
-        assert!((width - 510_000.0).abs() < 1e-6, "width {width}");
+        let p = phase(&log, &starts, C);
+        assert_eq!(p.n, 5);
+        assert!((p.width_ns - 510_000.0).abs() < 1e-6, "width {}", p.width_ns);
+        // SYNC0 at 779 µs (the mean, 279 µs with the late frame counted at −120, + 500): the
+        // late frame (880) passed after its cycle's SYNC0, with the next cycle's frame before
+        // the following one — one overwritten — and its own cycle's SYNC0 found none.
+        assert_eq!((p.lost, p.repeated), (1, 1));
     }
 
     #[test]

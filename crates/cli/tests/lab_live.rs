@@ -24,6 +24,8 @@ fn lab_live_measures_the_true_clock_errors_on_this_kernel() {
         // Each cycle's own frame found in the log and placed on the reference's cycle.
         assert!((700.0..=1300.0).contains(&f("phased")), "{r}");
         assert!((0.0..1000.0).contains(&f("phase_mean_us")) && f("phase_sd_us").is_finite(), "{r}");
+        // What a DC-synchronous slave would have lost and repeated: counts among those frames.
+        assert!(f("dc_lost") + f("dc_repeated") <= f("phased"), "{r}");
         // The methods that follow the reference's phase keep no master clock to compare.
         if r["method"] == "chen2016" || r["method"] == "pi" {
             for k in ["ref_mean_us", "ref_rms_us", "last_mean_us", "last_rms_us", "max_abs_us"] {
