@@ -1,9 +1,10 @@
 //! ethercrab (from crates.io, unmodified) against `ferrocat sim` over a veth pair: a segment with
 //! the EVB-LAN9252 board (the reference clock), the Nanotec drive described by its ESI and I/O
 //! terminals goes to OP, SDOs are read and written, DC runs with SYNC0, and ethercrab's static
-//! drift compensation leaves every slave's |0x092C| below 50 ns. The EVB's firmware takes the
-//! times its real one took (SOEM's capture of it: 38.3 ms per mailbox reply, 16.85 ms to act on
-//! AL control; docs/esc-model.md), so ethercrab waits for a slow slave as it would on the bench.
+//! drift compensation leaves every slave's |0x092C| below 50 ns. The built-in EVB's firmware
+//! takes the times the real one took (SOEM's capture of it: 38.3 ms per mailbox reply, 16.85 ms
+//! to act on AL control; docs/esc-model.md), so ethercrab waits for a slow slave as it would on
+//! the bench.
 mod common;
 
 use std::os::fd::AsRawFd;
@@ -51,7 +52,6 @@ fn needs_shared_ethercrab_brings_drive_and_io_to_op_with_dc() {
         format!(
             "seed = 11\n\
              [[device]]\nbuiltin = 'LAN9252-EVB'\ndrift_ppm = 15.0\n\
-             mailbox_response_us = 38300\nal_response_us = 16850\n\
              [[device]]\nesi = '{0}/esi/Nanotec_C5-E-2-21.xml'\nproduct = 0x4F\ndrift_ppm = 20.0\n\
              [[device]]\neeprom = '{0}/captures/eeprom/ek1100.hex'\ndrift_ppm = -35.0\n\
              [[device]]\neeprom = '{0}/captures/eeprom/el2004.bin'\ndrift_ppm = 5.0\n\

@@ -158,16 +158,12 @@ fn needs_shared_soem_sees_the_real_hardware() {
 /// printed two real ones (../shared/captures/soem-sdinfo-2-lan9252.txt): CoE PDO mapping read
 /// by SDO, 16 output and 48 input bits each, OP, and the outputs SOEM wrote mapped into the
 /// board's objects. The 740 ns delay is the printout the LAN9252's
-/// timing was calibrated on (segment/src/timing.rs), here computed by SOEM itself. The boards'
-/// firmware takes the times the real one took in SOEM's capture of it (38.3 ms per mailbox
-/// reply, 16.85 ms to act on AL control; docs/esc-model.md), which SOEM waits out.
+/// timing was calibrated on (segment/src/timing.rs), here computed by SOEM itself. The built-in
+/// boards' firmware takes the times the real one took in SOEM's capture of it (38.3 ms per
+/// mailbox reply, 16.85 ms to act on AL control; docs/esc-model.md), which SOEM waits out.
 #[test]
 fn needs_shared_soem_sees_two_lan9252_boards_as_printed() {
-    let seg = std::env::temp_dir().join(format!("ferrocat-soem-lan9252-{}.toml", std::process::id()));
-    let board = "[[device]]\nbuiltin = 'LAN9252-EVB'\nmailbox_response_us = 38300\nal_response_us = 16850\n";
-    std::fs::write(&seg, format!("{board}{board}")).unwrap();
-    let (soem, rep) = soem_against("sl", &["--config", seg.to_str().unwrap()], 1, "A55A");
-    std::fs::remove_file(&seg).ok();
+    let (soem, rep) = soem_against("sl", &["--device", "LAN9252-EVB", "--device", "LAN9252-EVB"], 1, "A55A");
     assert_as_printed(&soem, "captures/soem-sdinfo-2-lan9252.txt");
     for (i, s) in soem["slaves"].as_array().unwrap().iter().enumerate() {
         assert_eq!(s["system_time"], true, "slave {i}: a LAN9252 has a system time");

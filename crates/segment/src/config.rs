@@ -412,12 +412,15 @@ impl SegmentConfig {
                     .ok_or_else(|| device_err(&place, format!("local_time_ns {n:?} is not a u64 number of ns")))?;
                 esc.set_power_on_local_time(t);
             }
-            if let Some(us) = d.al_response_us {
+            // A built-in device's own firmware times, unless the file gives others.
+            let firmware = d.builtin.as_deref().and_then(crate::builtin::firmware_times_us);
+            if let Some(us) = d.al_response_us.or(firmware.map(|f| f.0)) {
                 esc.al_response_ns = (in_range(&place, "al_response_us", us, 0.0..=10e6)? * 1000.0) as u64;
             }
-            if d.mailbox_response_us.is_some() || d.mailbox_response_max_us.is_some() {
+            let mailbox_us = d.mailbox_response_us.or(firmware.map(|f| f.1));
+            if mailbox_us.is_some() || d.mailbox_response_max_us.is_some() {
                 let key = "mailbox_response_us";
-                let min = in_range(&place, key, d.mailbox_response_us.unwrap_or(0.0), 0.0..=10e6)?;
+                let min = in_range(&place, key, mailbox_us.unwrap_or(0.0), 0.0..=10e6)?;
                 let key = "mailbox_response_max_us";
                 let max = in_range(&place, key, d.mailbox_response_max_us.unwrap_or(min), min..=10e6)?;
                 // Each device its own stream, apart from the drives' (above).

@@ -123,11 +123,10 @@ fn source(product: Option<u32>) -> (String, Option<&'static str>) {
             Some("EK1914: no EEPROM dump or ESI in shared data (EK1100 with its SYNC and latch units off stands in)"),
         ),
         Some(0x0BBC_3052) => (e("el2828.hex"), Some("EL3004: no EEPROM dump or ESI in shared data (EL2828 stands in)")),
-        // Its sample firmware answered all six requests of soem-single-lan9252 between 37.94
-        // and 38.66 ms (last empty and first full poll of SM1), and showed INIT→PREOP and
-        // PREOP→SAFEOP 15.85–17.85 ms after SOEM's writes of AL control: the middles.
+        // The built-in board carries its sample firmware's times as this capture shows them
+        // (`builtin::firmware_times_us`).
         Some(0x9252) => (
-            "builtin = 'LAN9252-EVB'\nmailbox_response_us = 38300\nal_response_us = 16850".into(),
+            "builtin = 'LAN9252-EVB'".into(),
             Some("EVB-LAN9252: no EEPROM dump in shared data (the built-in description, from this capture, stands in)"),
         ),
         Some(0x03EC_3052) => (

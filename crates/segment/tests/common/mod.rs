@@ -91,9 +91,10 @@ impl Bus {
         self.read_mailbox(station, inp).expect("a reply")
     }
 
-    /// Reads SM1 once it is full (up to 100 polls).
+    /// Reads SM1 once it is full (polls 0.1 ms apart for up to 100 ms: a firmware may take
+    /// tens of ms, as the EVB-LAN9252's does).
     pub fn read_mailbox(&mut self, station: u16, inp: (u16, u16)) -> Option<Vec<u8>> {
-        for _ in 0..100 {
+        for _ in 0..1000 {
             let (d, w) = self.fp(Command::FPRD, station, inp.0, &vec![0; inp.1 as usize]);
             if w == 1 {
                 return Some(d);
@@ -109,7 +110,8 @@ impl Bus {
         let (before, _) = self.fp(Command::FPRD, station, 0x0130, &[0; 2]);
         assert_eq!(self.fp(Command::FPWR, station, 0x0120, &[state, 0]).1, 1, "AL control write");
         let mut last = (before[0], 0);
-        for _ in 0..50 {
+        // Up to 100 ms (the EVB-LAN9252's firmware takes 17).
+        for _ in 0..500 {
             let (d, _) = self.fp(Command::FPRD, station, 0x0130, &[0; 6]);
             last = (d[0], u16::from_le_bytes([d[4], d[5]]));
             if d[0] != before[0] {
