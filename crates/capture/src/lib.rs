@@ -23,7 +23,7 @@ pub enum CaptureError {
     #[error("frame {frame} refers to interface {interface}, which the file does not describe")]
     NoInterface { frame: usize, interface: u32 },
     #[error(
-        "frame {frame}: its timestamp plus its interface's offset (if_tsoffset) lies beyond what can be represented"
+        "frame {frame}: its timestamp (with its interface's offset, if_tsoffset) lies beyond 2554-07-21, the last instant 64 bits of nanoseconds since 1970 hold"
     )]
     TimestampRange { frame: usize },
     #[error("writing capture: {0}")]
@@ -148,7 +148,7 @@ impl InterfaceClock {
 
     /// The time of `raw` units since the epoch. Bit 7 of the resolution set: units of 2⁻ⁿ s,
     /// else 10⁻ⁿ s; what is finer than a nanosecond is dropped (a `Duration` counts
-    /// nanoseconds). `None` only if the offset carries it beyond `Duration`'s range.
+    /// nanoseconds). `None` beyond 2⁶⁴ − 1 ns: every tool takes the time as u64 nanoseconds.
     fn time(self, raw: u64) -> Option<Duration> {
         const NS_PER_S: u128 = 1_000_000_000;
         let n = (self.resolution & 0x7F) as u32;
@@ -160,9 +160,8 @@ impl InterfaceClock {
             // 10^(n−9) beyond 10³⁸ exceeds every u64: the time is below a nanosecond.
             10u128.checked_pow(n - 9).map_or(0, |d| raw as u128 / d)
         };
-        // ns < 2⁶⁴·10⁹, so the whole seconds fit a u64.
-        let t = Duration::new((ns / NS_PER_S) as u64, (ns % NS_PER_S) as u32);
-        t.checked_add(Duration::from_secs(self.offset_s))
+        let ns = ns.checked_add(self.offset_s as u128 * NS_PER_S)?;
+        u64::try_from(ns).ok().map(Duration::from_nanos)
     }
 }
 
@@ -303,18 +302,29 @@ mod tests {
         assert_eq!(t(vec![IfTsResol(0x80)], 5), Duration::from_secs(5));
         // Whole seconds of if_tsoffset are added.
         assert_eq!(t(vec![IfTsResol(9), IfTsOffset(100)], 5), Duration::new(100, 5));
-        // The largest raw values in seconds still fit.
-        assert_eq!(t(vec![IfTsResol(0)], u64::MAX), Duration::from_secs(u64::MAX));
+        // Up to 2⁶⁴ − 1 ns, the last instant the tools' u64 nanoseconds hold.
+        assert_eq!(t(vec![IfTsResol(9)], u64::MAX), Duration::from_nanos(u64::MAX));
+        let secs = u64::MAX / 1_000_000_000;
+        assert_eq!(t(vec![IfTsResol(0)], secs), Duration::from_secs(secs));
     }
 
     #[test]
-    fn a_timestamp_offset_beyond_range_is_an_error_naming_the_frame() {
+    fn a_timestamp_beyond_u64_nanoseconds_is_an_error_naming_the_frame() {
         use InterfaceDescriptionOption::{IfTsOffset, IfTsResol};
-        let bytes = pcapng_with_clock(vec![IfTsResol(0), IfTsOffset(1)], u64::MAX);
-        assert!(matches!(read_packets(&bytes), Err(CaptureError::TimestampRange { frame: 1 })));
+        let secs = u64::MAX / 1_000_000_000;
+        for (options, raw) in [
+            (vec![IfTsResol(0)], secs + 1),
+            (vec![IfTsResol(0)], u64::MAX),
+            (vec![IfTsResol(9), IfTsOffset(1)], u64::MAX),
+            (vec![IfTsResol(9), IfTsOffset(u64::MAX)], 0),
+        ] {
+            let bytes = pcapng_with_clock(options.clone(), raw);
+            assert!(matches!(read_packets(&bytes), Err(CaptureError::TimestampRange { frame: 1 })), "{options:?}");
+        }
+        let bytes = pcapng_with_clock(vec![IfTsResol(0)], u64::MAX);
         assert_eq!(
             read_packets(&bytes).unwrap_err().to_string(),
-            "frame 1: its timestamp plus its interface's offset (if_tsoffset) lies beyond what can be represented"
+            "frame 1: its timestamp (with its interface's offset, if_tsoffset) lies beyond 2554-07-21, the last instant 64 bits of nanoseconds since 1970 hold"
         );
     }
 
