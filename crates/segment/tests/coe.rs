@@ -20,18 +20,16 @@ struct Client {
 
 impl Client {
     fn new() -> Self {
-        Client::with("")
+        Client::with(0, "")
     }
 
-    /// The drive with more keys for its `[[device]]` table (`seed` names the segment's).
-    fn with(device_keys: &str) -> Self {
+    /// The drive, with more keys for its `[[device]]` table, on a segment of seed `seed`.
+    fn with(seed: u64, device_keys: &str) -> Self {
         let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
-        let (seed, keys) = match device_keys.strip_prefix("seed = ") {
-            Some(rest) => rest.split_once('\n').unwrap_or((rest, "")),
-            None => ("0", device_keys),
-        };
-        let toml =
-            format!("seed = {seed}\n[[device]]\nesi = {:?}\nproduct = 0x4F\n{keys}\n", esi.display().to_string());
+        let toml = format!(
+            "seed = {seed}\n[[device]]\nesi = {:?}\nproduct = 0x4F\n{device_keys}\n",
+            esi.display().to_string()
+        );
         let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
         let mut bus = Bus::new(cfg.build().unwrap());
         bus.address_all();
@@ -138,7 +136,7 @@ fn needs_shared_sdo_transfers_of_every_kind() {
 
 #[test]
 fn needs_shared_sdo_transfers_of_every_kind_with_a_slow_firmware() {
-    transfers_of_every_kind(Client::with("mailbox_response_us = 500\nmailbox_response_max_us = 1500"));
+    transfers_of_every_kind(Client::with(0, "mailbox_response_us = 500\nmailbox_response_max_us = 1500"));
 }
 
 /// The virtual time from an SDO upload request's write into SM0 until SM1 first reads full,
@@ -175,7 +173,7 @@ fn needs_shared_the_firmware_answers_after_its_response_time() {
     assert!(fast.iter().all(|&t| t < 50_000), "{fast:?}");
     // A fixed time: the reply is there from 2 ms after the request (a poll takes ≈ 10 µs of
     // round trip and 50 µs of pause).
-    let mut c = Client::with("mailbox_response_us = 2000");
+    let mut c = Client::with(0, "mailbox_response_us = 2000");
     for _ in 0..5 {
         let t = response_time_ns(&mut c);
         assert!((2_000_000..2_000_000 + 70_000).contains(&t), "{t} ns");
@@ -183,7 +181,7 @@ fn needs_shared_the_firmware_answers_after_its_response_time() {
     // A range: each request its own time within it, the same for the same seed, other ones
     // for another seed.
     let times = |seed: u64| {
-        let mut c = Client::with(&format!("seed = {seed}\nmailbox_response_us = 1000\nmailbox_response_max_us = 3000"));
+        let mut c = Client::with(seed, "mailbox_response_us = 1000\nmailbox_response_max_us = 3000");
         (0..20).map(|_| response_time_ns(&mut c)).collect::<Vec<u64>>()
     };
     let a = times(1);

@@ -349,14 +349,14 @@ impl Cia402Drive {
         self.stats = DriveStats::default();
     }
 
-    /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
-    /// then FAULT, with an emergency message.
     /// Puts limit and home switches on the shaft (homing methods 1–14 and 17–30 use them, a
     /// limit switch stops motion toward it in the other modes; 0x60FD reports them).
     pub fn set_switches(&mut self, switches: Switches) {
         self.switches = switches;
     }
 
+    /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
+    /// then FAULT, with an emergency message.
     pub fn inject_fault(&mut self, code: u16) {
         self.enter_fault(code);
     }
