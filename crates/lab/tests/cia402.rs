@@ -152,6 +152,21 @@ fn drive_mut(m: &mut Master<VirtualIo>) -> &mut Cia402Drive {
     m.engine.io.seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
 }
 
+/// 500 cycles of position set-points from `p0`: up to `v` (increments/s) over 100 ms, then at
+/// that speed (0.9 s of travel at `v` in all); the statusword after each cycle.
+fn follow_ramp(m: &mut Master<VirtualIo>, a: &mut Axis, p0: f64, v: f64) -> Vec<u16> {
+    (0..500)
+        .map(|k| {
+            let t = k as f64 * 1e-3;
+            let p = if t < 0.1 { 0.5 * v / 0.1 * t * t } else { v * 0.05 + v * (t - 0.1) };
+            a.set_target_position(m, (p0 + p) as i64 as i32);
+            cycles(m, 1);
+            a.update(m);
+            a.statusword(m)
+        })
+        .collect()
+}
+
 /// CSP follows a ramp with a small following error; CSV reaches its speed; CST accelerates
 /// the inertia as the torque says.
 fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
@@ -166,15 +181,7 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     let actual0 = drive(&m).position_increments();
     assert!((p0 - actual0).abs() < 2.0, "image {p0} vs drive {actual0}");
     drive_mut(&mut m).reset_stats();
-    let v = 2.0 * per_rev;
-    for k in 0..500 {
-        let t = k as f64 * 1e-3;
-        // Accelerate over 100 ms, then constant speed.
-        let p = if t < 0.1 { 0.5 * v / 0.1 * t * t } else { v * 0.05 + v * (t - 0.1) };
-        a.set_target_position(&mut m, (p0 + p) as i64 as i32);
-        cycles(&mut m, 1);
-        a.update(&mut m);
-    }
+    follow_ramp(&mut m, &mut a, p0, 2.0 * per_rev);
     let fe = drive(&m).stats.max_following_error;
     assert!(fe < 0.01 * per_rev, "CSP following error {fe} increments");
     assert_eq!(a.state(), Some(State::OperationEnabled));
@@ -719,4 +726,210 @@ fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
     let off = (drive(&m).position_increments() - (back - p0 + shaft0)) / per_rev;
     assert!(off.abs() < 0.01, "follows again: {off} rev from the set-point");
     assert_eq!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+}
+
+/// The AKD as its EEPROM dump describes it runs interpolated position (mode 7) on its default
+/// PDOs — the set-point 0x60C1:01 and the controlword out, the internal position and the
+/// statusword in — with the mode and the period (0x60C2) set by SDO: the same ramp as CSP's
+/// with the same small following error, bit 12 (ip mode active) while the driver holds bit 4;
+/// with bit 4 cleared the drive stops at the last set-point and ignores the next ones.
+#[test]
+fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
+    use ferrocat_wire::cia402::{control, status};
+    let p = ferrocat_testdata::shared("captures/eeprom/akd.hex");
+    let mut m = master(&format!("eeprom = '{}'", p.display()), &|_| {});
+    let s = m.slave(DRIVE).unwrap();
+    assert!(s.outputs.iter().any(|e| (e.index, e.subindex) == (ix::INTERPOLATION_DATA, 1)), "the default PDOs");
+    assert!(!s.outputs.iter().any(|e| e.index == ix::TARGET_POSITION));
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_interpolation_period(&mut m, CYCLE_NS).unwrap();
+    assert_eq!(m.sdo_read(DRIVE, ix::INTERPOLATION_TIME_PERIOD, 2).unwrap(), [(-3i8) as u8]);
+    a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    assert_eq!(drive(&m).mode(), Some(Mode::InterpolatedPosition));
+    let per_rev = drive(&m).motor.increments_per_rev;
+    let p0 = a.position_actual(&m).unwrap() as f64;
+    let actual0 = drive(&m).position_increments();
+    drive_mut(&mut m).reset_stats();
+    let v = 2.0 * per_rev;
+    let sws = follow_ramp(&mut m, &mut a, p0, v);
+    let active = sws.iter().filter(|&&sw| sw & status::OP_SPECIFIC_12 != 0).count();
+    assert!(active >= 495, "ip mode active in {active} of 500 cycles");
+    let fe = drive(&m).stats.max_following_error;
+    assert!(fe < 0.01 * per_rev, "IP following error {fe} increments");
+    let moved = (drive(&m).position_increments() - actual0) / per_rev;
+    assert!((moved - 0.9).abs() < 0.05, "moved {moved} rev (0.9 commanded, minus the pipeline)");
+    // Bit 4 cleared by hand: the set-points run on, the drive stops where the last one was.
+    let last = drive(&m).position_increments();
+    for k in 0..300 {
+        let t = 0.5 + k as f64 * 1e-3;
+        a.set_target_position(&mut m, (p0 + v * 0.05 + v * (t - 0.1)) as i64 as i32);
+        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        cycles(&mut m, 1);
+    }
+    let stopped = (drive(&m).position_increments() - last) / per_rev;
+    // At most the two set-points in the pipeline (2 rev/s × 2 ms) beyond where it was.
+    assert!((0.0..0.006).contains(&stopped), "went on {stopped} rev after bit 4 cleared");
+    let sw = a.statusword(&m);
+    assert_eq!(sw & status::OP_SPECIFIC_12, 0, "ip mode inactive: {sw:#06x}");
+    assert_ne!(sw & status::TARGET_REACHED, 0, "standing at the last set-point: {sw:#06x}");
+    assert_eq!(a.state(), Some(State::OperationEnabled));
+}
+
+/// The built-in servo in interpolated position after remapping its outputs to carry 0x60C1:01,
+/// with an interpolation period of 2 ms at a 1 ms cycle: each set-point is approached at the
+/// rate of a 2 ms step, from where the demand stands, so at a steady speed the demand runs two
+/// set-points behind instead of one — a cycle's travel more.
+#[test]
+fn interpolation_follows_the_period_0x60c2_gives() {
+    let run = |period_ns: u64| {
+        let mut m = master("builtin = 'SERVO'", &|m| {
+            let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.sdo_write(DRIVE, i, s, v).unwrap();
+            w(m, 0x1600, 0, &[0]);
+            w(m, 0x1600, 1, &0x6040_0010u32.to_le_bytes());
+            w(m, 0x1600, 2, &0x60C1_0120u32.to_le_bytes());
+            w(m, 0x1600, 3, &0x6060_0008u32.to_le_bytes());
+            w(m, 0x1600, 0, &[3]);
+            m.remap(DRIVE, true, &[0x1600]).unwrap();
+        });
+        let mut a = Axis::new(&m, DRIVE).unwrap();
+        a.set_interpolation_period(&mut m, period_ns).unwrap();
+        a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
+        a.set_goal(Goal::OperationEnabled);
+        drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+        let per_rev = drive(&m).motor.increments_per_rev;
+        let p0 = a.position_actual(&m).unwrap() as f64;
+        let actual0 = drive(&m).position_increments();
+        // 1 rev/s from standstill, 300 ms: the demand's lag behind the set-points at the end.
+        for k in 1..=300 {
+            a.set_target_position(&mut m, (p0 + per_rev * k as f64 * 1e-3) as i64 as i32);
+            cycles(&mut m, 1);
+            a.update(&mut m);
+        }
+        assert_eq!(a.state(), Some(State::OperationEnabled));
+        (0.3 * per_rev - (drive(&m).position_increments() - actual0)) / per_rev
+    };
+    let (lag_1ms, lag_2ms) = (run(1_000_000), run(2_000_000));
+    // Each set-point reached a period later than the one before: at 1 rev/s one extra
+    // millisecond is 0.001 rev.
+    let extra = lag_2ms - lag_1ms;
+    assert!((0.0007..0.0013).contains(&extra), "lags {lag_1ms} and {lag_2ms} rev");
+}
+
+/// Enables the built-in servo in CSV at 5 rev/s with the profile deceleration at 20 rev/s² and
+/// the quick-stop deceleration at 100 rev/s², sets `option` to `code`, then writes `cw`; returns
+/// the states the statusword showed (with the cycle each began) and the velocity (rev/s) 10 ms
+/// after the command.
+fn stop_by_option(option: u16, code: i16, cw: u16, fault: bool) -> (Vec<(u64, Option<State>)>, f64) {
+    let (mut m, mut a, per_rev) = enabled_in(Mode::CyclicSyncVelocity);
+    let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
+    m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(20.0)).unwrap();
+    m.sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(100.0)).unwrap();
+    m.sdo_write(DRIVE, option, 0, &code.to_le_bytes()).unwrap();
+    for _ in 0..300 {
+        a.set_target_velocity(&mut m, (5.0 * per_rev) as i32);
+        cycles(&mut m, 1);
+        a.update(&mut m);
+    }
+    assert!((drive(&m).velocity_increments() / per_rev - 5.0).abs() < 0.05);
+    if fault {
+        drive_mut(&mut m).inject_fault(error_code::OVERCURRENT);
+    } else {
+        a.write_controlword(&mut m, cw);
+    }
+    let mut states = vec![(0, State::from_statusword(a.statusword(&m)))];
+    let mut vel_10ms = 0.0;
+    for k in 1..=600 {
+        cycles(&mut m, 1);
+        if k == 10 {
+            vel_10ms = drive(&m).velocity_increments() / per_rev;
+        }
+        let s = State::from_statusword(a.statusword(&m));
+        if states.last().map(|l| l.1) != Some(s) {
+            states.push((k, s));
+        }
+    }
+    (states, vel_10ms)
+}
+
+/// The option codes 0x605C, 0x605B, 0x605A and 0x605E: 1 brakes at the profile deceleration
+/// (5 rev/s at 20 rev/s²: 250 ms, operation staying enabled meanwhile for transitions 5 and 8),
+/// 2 at the quick-stop deceleration (100 rev/s²: 50 ms), 3 at the torque limit (a few ms), 0
+/// takes the power away at once and the shaft coasts on friction alone.
+#[test]
+fn option_codes_choose_how_the_drive_stops() {
+    use ferrocat_wire::cia402::control::{DISABLE_OPERATION, QUICK_STOP_CMD, SHUTDOWN};
+    use State::*;
+    // The states after the first (operation enabled), each with the cycle it was first seen.
+    let check =
+        |(states, vel): (Vec<(u64, Option<State>)>, f64), want: &[(State, std::ops::Range<u64>)], what: &str| {
+            assert_eq!(states[0].1, Some(OperationEnabled), "{what}: {states:?}");
+            let got: Vec<_> = states[1..].iter().map(|&(k, s)| (s, k)).collect();
+            assert_eq!(got.len(), want.len(), "{what}: {states:?}");
+            for ((s, k), (ws, wk)) in got.iter().zip(want) {
+                assert!(*s == Some(*ws) && wk.contains(k), "{what}: {states:?}, wanted {want:?}");
+            }
+            vel
+        };
+    let prompt = 1..6;
+    // Disable operation (transition 5).
+    let v = check(
+        stop_by_option(ix::DISABLE_OPERATION_OPTION, 1, DISABLE_OPERATION, false),
+        &[(SwitchedOn, 240..285)],
+        "605C = 1",
+    );
+    assert!((4.7..4.9).contains(&v), "605C = 1: {v} rev/s after 10 ms");
+    let coast = check(
+        stop_by_option(ix::DISABLE_OPERATION_OPTION, 0, DISABLE_OPERATION, false),
+        &[(SwitchedOn, prompt.clone())],
+        "605C = 0",
+    );
+    // Shutdown (transition 8).
+    check(stop_by_option(ix::SHUTDOWN_OPTION, 1, SHUTDOWN, false), &[(ReadyToSwitchOn, 240..285)], "605B = 1");
+    check(stop_by_option(ix::SHUTDOWN_OPTION, 0, SHUTDOWN, false), &[(ReadyToSwitchOn, prompt.clone())], "605B = 0");
+    // Quick stop (transition 11, then 12 or staying).
+    let v = check(
+        stop_by_option(ix::QUICK_STOP_OPTION, 2, QUICK_STOP_CMD, false),
+        &[(QuickStopActive, prompt.clone()), (SwitchOnDisabled, 45..75)],
+        "605A = 2",
+    );
+    assert!((4.1..4.4).contains(&v), "605A = 2: {v} rev/s after 10 ms");
+    check(
+        stop_by_option(ix::QUICK_STOP_OPTION, 1, QUICK_STOP_CMD, false),
+        &[(QuickStopActive, prompt.clone()), (SwitchOnDisabled, 240..285)],
+        "605A = 1",
+    );
+    check(
+        stop_by_option(ix::QUICK_STOP_OPTION, 6, QUICK_STOP_CMD, false),
+        &[(QuickStopActive, prompt.clone())],
+        "605A = 6",
+    );
+    let v = check(
+        stop_by_option(ix::QUICK_STOP_OPTION, 3, QUICK_STOP_CMD, false),
+        &[(QuickStopActive, prompt.clone()), (SwitchOnDisabled, 3..15)],
+        "605A = 3",
+    );
+    assert!(v.abs() < 0.05, "605A = 3: {v} rev/s after 10 ms");
+    let v0 = check(
+        stop_by_option(ix::QUICK_STOP_OPTION, 0, QUICK_STOP_CMD, false),
+        &[(SwitchOnDisabled, prompt.clone())],
+        "605A = 0",
+    );
+    // Fault reaction.
+    check(
+        stop_by_option(ix::FAULT_REACTION_OPTION, 2, 0, true),
+        &[(FaultReactionActive, prompt.clone()), (Fault, 45..75)],
+        "605E = 2",
+    );
+    check(
+        stop_by_option(ix::FAULT_REACTION_OPTION, 1, 0, true),
+        &[(FaultReactionActive, prompt.clone()), (Fault, 240..285)],
+        "605E = 1",
+    );
+    let v1 = check(stop_by_option(ix::FAULT_REACTION_OPTION, 0, 0, true), &[(Fault, prompt)], "605E = 0");
+    // Coasting: friction alone, ≈ 21 rev/s² at 5 rev/s for this motor.
+    for (v, what) in [(coast, "605C = 0"), (v0, "605A = 0"), (v1, "605E = 0")] {
+        assert!((4.7..4.9).contains(&v), "{what}: coasting at {v} rev/s after 10 ms");
+    }
 }

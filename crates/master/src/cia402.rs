@@ -1,7 +1,7 @@
 //! A CiA402 driver: one [`Axis`] per drive walks the drive's state machine to where the
 //! application wants it (operation enabled, disabled, quick stop) one controlword per cycle,
-//! resets faults, switches modes, and starts cyclic synchronous position without a jump (the
-//! target follows the actual position until operation is enabled).
+//! resets faults, switches modes, and starts cyclic synchronous or interpolated position without
+//! a jump (the target follows the actual position until operation is enabled).
 use ferrocat_wire::cia402::{control, index as ix, Command, Mode, State};
 
 use crate::error::{MasterError, Result};
@@ -26,6 +26,8 @@ struct Handles {
     mode: Option<Handle>,
     mode_display: Option<Handle>,
     target_position: Option<Handle>,
+    /// Interpolated position's set-point, 0x60C1:01.
+    ip_setpoint: Option<Handle>,
     target_velocity: Option<Handle>,
     target_torque: Option<Handle>,
     position_actual: Option<Handle>,
@@ -40,6 +42,8 @@ pub struct Axis {
     h: Handles,
     goal: Goal,
     mode: Mode,
+    /// The application's mode-specific controlword bits (`set_mode_bits`).
+    mode_bits: u16,
     controlword: u16,
     state: Option<State>,
     /// Cycles spent in the current state, for timeouts the application may impose.
@@ -58,10 +62,13 @@ impl Axis {
     /// statusword.
     pub fn new<I: Io>(m: &Master<I>, position: u16) -> Result<Self> {
         let s = m.slave(position)?;
-        let find = |outputs: bool, index: u16| {
+        let find_sub = |outputs: bool, index: u16, sub: Option<u8>| {
             let list = if outputs { &s.outputs } else { &s.inputs };
-            list.iter().find(|e| e.index == index).map(|e| Handle { bit: e.image_bit, bits: e.bits })
+            list.iter()
+                .find(|e| e.index == index && sub.is_none_or(|k| e.subindex == k))
+                .map(|e| Handle { bit: e.image_bit, bits: e.bits })
         };
+        let find = |outputs: bool, index: u16| find_sub(outputs, index, None);
         let need = |h: Option<Handle>, what: &str| {
             h.ok_or_else(|| MasterError::slave(position, &s.name, format!("no {what} in the process image")))
         };
@@ -71,6 +78,7 @@ impl Axis {
             mode: find(true, ix::MODES_OF_OPERATION),
             mode_display: find(false, ix::MODES_OF_OPERATION_DISPLAY),
             target_position: find(true, ix::TARGET_POSITION),
+            ip_setpoint: find_sub(true, ix::INTERPOLATION_DATA, Some(1)),
             target_velocity: find(true, ix::TARGET_VELOCITY),
             target_torque: find(true, ix::TARGET_TORQUE),
             position_actual: find(false, ix::POSITION_ACTUAL).or_else(|| find(false, ix::POSITION_ACTUAL_INTERNAL)),
@@ -83,6 +91,7 @@ impl Axis {
             h,
             goal: Goal::Disabled,
             mode: Mode::CyclicSyncPosition,
+            mode_bits: 0,
             controlword: 0,
             state: None,
             cycles_in_state: 0,
@@ -106,9 +115,22 @@ impl Axis {
     }
 
     /// The mode-specific controlword bits (4–6, 8, 9: new set-point, homing start, halt …)
-    /// every later `update` sends along with its command.
+    /// every later `update` sends along with its command. In interpolated position the driver
+    /// sets bit 4 (enable ip mode) itself whenever it enables operation.
     pub fn set_mode_bits(&mut self, bits: u16) {
-        self.controlword = (self.controlword & 0x008F) | (bits & !0x008F);
+        self.mode_bits = bits & !0x008F;
+    }
+
+    /// Tells an interpolated-position drive the period of its set-points (0x60C2 by SDO, as
+    /// value × 10^index s: 1 ms is 1, −3; 250 µs is 25, −5). Call it before enabling, with the
+    /// master's cycle; a period no such pair gives exactly is an error.
+    pub fn set_interpolation_period<I: Io>(&self, m: &mut Master<I>, period_ns: u64) -> Result<()> {
+        let (value, index) = interpolation_period(period_ns).ok_or_else(|| {
+            MasterError::Config(format!("an interpolation period of {period_ns} ns is no u8 × 10^n s (0x60C2)"))
+        })?;
+        m.sdo_write(self.position, ix::INTERPOLATION_TIME_PERIOD, 1, &[value])?;
+        m.sdo_write(self.position, ix::INTERPOLATION_TIME_PERIOD, 2, &[index as u8])?;
+        Ok(())
     }
 
     pub fn state(&self) -> Option<State> {
@@ -146,8 +168,10 @@ impl Axis {
         self.h.following_error.map(|h| signed(m.get(h), h.bits) as i32)
     }
 
+    /// The position to follow: the target position (0x607A) and interpolated position's
+    /// set-point (0x60C1:01), whichever the image holds.
     pub fn set_target_position<I: Io>(&self, m: &mut Master<I>, pos: i32) {
-        if let Some(h) = self.h.target_position {
+        for h in [self.h.target_position, self.h.ip_setpoint].into_iter().flatten() {
             m.set(h, pos as u32 as u64);
         }
     }
@@ -196,7 +220,10 @@ impl Axis {
 
     fn next_controlword(&self, state: Option<State>) -> u16 {
         use State::*;
-        let keep_high = self.controlword & !0x008F;
+        let mut keep_high = self.mode_bits;
+        if self.mode == Mode::InterpolatedPosition {
+            keep_high |= control::ENABLE_IP_MODE;
+        }
         let cmd = match (self.goal, state) {
             // A fault reset is a rising edge of bit 7: alternate 0 and the reset.
             (_, Some(Fault)) => {
@@ -214,6 +241,16 @@ impl Axis {
         };
         keep_high | cmd.controlword()
     }
+}
+
+/// 0x60C2's (value, index) for a period: the largest unit (a power of ten seconds) that gives it
+/// exactly.
+fn interpolation_period(period_ns: u64) -> Option<(u8, i8)> {
+    (-9i8..=0).rev().find_map(|index| {
+        let unit = 10u64.pow((9 + index) as u32);
+        let value = period_ns / unit;
+        (period_ns % unit == 0 && (1..=255).contains(&value)).then_some((value as u8, index))
+    })
 }
 
 /// Makes sure the drive at `position` (in PREOP) carries a target position and a position
@@ -292,4 +329,20 @@ pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64,
             a.goal
         ),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::interpolation_period;
+
+    #[test]
+    fn interpolation_periods_are_value_times_a_power_of_ten() {
+        assert_eq!(interpolation_period(1_000_000), Some((1, -3)));
+        assert_eq!(interpolation_period(250_000), Some((25, -5)));
+        assert_eq!(interpolation_period(125_000), Some((125, -6)));
+        assert_eq!(interpolation_period(2_000_000_000), Some((2, 0)));
+        assert_eq!(interpolation_period(62_500), None, "625 × 10⁻⁷ s: no u8 value");
+        assert_eq!(interpolation_period(0), None);
+        assert_eq!(interpolation_period(300_000_000_000), None, "300 s");
+    }
 }

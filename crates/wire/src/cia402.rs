@@ -9,6 +9,14 @@ pub mod index {
     pub const CONTROLWORD: u16 = 0x6040;
     pub const STATUSWORD: u16 = 0x6041;
     pub const QUICK_STOP_OPTION: u16 = 0x605A;
+    /// What transition 8 (shutdown from operation enabled) does: 0 coast, 1 the profile
+    /// deceleration first.
+    pub const SHUTDOWN_OPTION: u16 = 0x605B;
+    /// What transition 5 (disable operation) does: 0 coast, 1 the profile deceleration first.
+    pub const DISABLE_OPERATION_OPTION: u16 = 0x605C;
+    /// What the fault reaction does: 0 coast, 1 profile deceleration, 2 quick-stop
+    /// deceleration, 3 current limit, 4 voltage limit.
+    pub const FAULT_REACTION_OPTION: u16 = 0x605E;
     pub const MODES_OF_OPERATION: u16 = 0x6060;
     pub const MODES_OF_OPERATION_DISPLAY: u16 = 0x6061;
     pub const POSITION_ACTUAL_INTERNAL: u16 = 0x6063;
@@ -37,6 +45,12 @@ pub mod index {
     /// Bit 0 negative limit switch, 1 positive limit switch, 2 home switch.
     pub const DIGITAL_INPUTS: u16 = 0x60FD;
     pub const TARGET_VELOCITY: u16 = 0x60FF;
+    /// Interpolated position: 0 linear interpolation.
+    pub const INTERPOLATION_SUB_MODE: u16 = 0x60C0;
+    /// Subindex 1: the interpolated position mode's set-point.
+    pub const INTERPOLATION_DATA: u16 = 0x60C1;
+    /// Subindex 1: the period's value, 2: its unit as a power of ten seconds (1, −3: 1 ms).
+    pub const INTERPOLATION_TIME_PERIOD: u16 = 0x60C2;
     pub const SUPPORTED_DRIVE_MODES: u16 = 0x6502;
 }
 
@@ -51,6 +65,8 @@ pub mod control {
     pub const NEW_SETPOINT: u16 = 1 << 4;
     /// Homing: a rising edge starts homing, a falling edge interrupts it (the same bit).
     pub const HOMING_START: u16 = 1 << 4;
+    /// Interpolated position: set, the drive follows the set-points; clear, it holds.
+    pub const ENABLE_IP_MODE: u16 = 1 << 4;
     pub const CHANGE_SET_IMMEDIATELY: u16 = 1 << 5;
     pub const RELATIVE: u16 = 1 << 6;
     /// A rising edge resets a fault.
@@ -81,9 +97,10 @@ pub mod status {
     pub const TARGET_REACHED: u16 = 1 << 10;
     pub const INTERNAL_LIMIT: u16 = 1 << 11;
     /// Profile position: set-point acknowledge; cyclic modes: the drive follows the target;
-    /// profile velocity: speed is zero; homing: homing attained.
+    /// profile velocity: speed is zero; homing: homing attained; interpolated position: ip mode
+    /// active.
     pub const OP_SPECIFIC_12: u16 = 1 << 12;
-    /// Profile position and CSP: following error; homing: homing error.
+    /// Profile position, CSP and interpolated position: following error; homing: homing error.
     pub const OP_SPECIFIC_13: u16 = 1 << 13;
 }
 
@@ -198,6 +215,7 @@ pub enum Mode {
     ProfilePosition,
     ProfileVelocity,
     Homing,
+    InterpolatedPosition,
     CyclicSyncPosition,
     CyclicSyncVelocity,
     CyclicSyncTorque,
@@ -209,6 +227,7 @@ impl Mode {
             Mode::ProfilePosition => 1,
             Mode::ProfileVelocity => 3,
             Mode::Homing => 6,
+            Mode::InterpolatedPosition => 7,
             Mode::CyclicSyncPosition => 8,
             Mode::CyclicSyncVelocity => 9,
             Mode::CyclicSyncTorque => 10,
@@ -220,6 +239,7 @@ impl Mode {
             1 => Mode::ProfilePosition,
             3 => Mode::ProfileVelocity,
             6 => Mode::Homing,
+            7 => Mode::InterpolatedPosition,
             8 => Mode::CyclicSyncPosition,
             9 => Mode::CyclicSyncVelocity,
             10 => Mode::CyclicSyncTorque,
@@ -233,6 +253,7 @@ impl Mode {
             Mode::ProfilePosition => 1 << 0,
             Mode::ProfileVelocity => 1 << 2,
             Mode::Homing => 1 << 5,
+            Mode::InterpolatedPosition => 1 << 6,
             Mode::CyclicSyncPosition => 1 << 7,
             Mode::CyclicSyncVelocity => 1 << 8,
             Mode::CyclicSyncTorque => 1 << 9,
@@ -244,6 +265,7 @@ impl Mode {
             Mode::ProfilePosition => "PP",
             Mode::ProfileVelocity => "PV",
             Mode::Homing => "HM",
+            Mode::InterpolatedPosition => "IP",
             Mode::CyclicSyncPosition => "CSP",
             Mode::CyclicSyncVelocity => "CSV",
             Mode::CyclicSyncTorque => "CST",

@@ -1,6 +1,6 @@
 //! A CiA402 servo drive: a CoE device (its dictionary from an ESI file, an SII or built in)
-//! whose application runs the profile's state machine, the PP/PV/HM/CSP/CSV/CST modes and a
-//! motor.
+//! whose application runs the profile's state machine, the PP/PV/HM/IP/CSP/CSV/CST modes and
+//! a motor.
 //!
 //! Timing follows a drive's firmware: in DC mode the SYNC0 interrupt takes the newest output
 //! buffer and latches the feedback; the application then needs a processing time drawn from a
@@ -187,12 +187,14 @@ impl PositionDemand {
             self.now = self.next.take().unwrap_or_default();
         }
     }
-    /// Queues the line to `to` over [`t0_ns`, `t0_ns` + `period_ns`].
-    fn queue(&mut self, to: f64, t0_ns: u64, period_ns: u64) {
+    /// Queues the line to `to` over [`t0_ns`, `t0_ns` + `period_ns`], from the last target, or
+    /// (`from_demand`) from where the demand will stand at `t0_ns` — the same but where the
+    /// line before has not ended by then (an interpolation period longer than the cycle).
+    fn queue(&mut self, to: f64, t0_ns: u64, period_ns: u64, from_demand: bool) {
         if let Some(n) = self.next.take() {
             self.now = n;
         }
-        let from = self.now.to;
+        let from = if from_demand { self.now.at(t0_ns).0 } else { self.now.to };
         let mut seg = Segment { from, to, t0_ns, period_ns, acc: 0.0 };
         seg.acc = (seg.slope() - self.now.slope()) / (period_ns.max(1) as f64 * 1e-9);
         self.next = Some(seg);
@@ -216,8 +218,13 @@ pub struct Cia402Drive {
     mech: Mechanics,
     model_ns: Option<u64>,
     demand: PositionDemand,
-    /// Quick-stop or fault-reaction ramp: velocity demand (increments/s) and deceleration.
+    /// Quick-stop, fault-reaction or stopping ramp: velocity demand (increments/s) and
+    /// deceleration.
     ramp: Option<(f64, f64)>,
+    /// The state a shutdown or disable operation (option code 1) enters once its ramp ends.
+    after_ramp: Option<State>,
+    /// Interpolated position: bit 4 set and no halt, so the drive follows the set-points.
+    ip_active: bool,
     op: bool,
     dc: bool,
     written: u64,
@@ -291,6 +298,8 @@ impl Cia402Drive {
             model_ns: None,
             demand: PositionDemand::default(),
             ramp: None,
+            after_ramp: None,
+            ip_active: false,
             op: false,
             dc: false,
             written: 0,
@@ -367,13 +376,33 @@ impl Cia402Drive {
         }
         self.fault_code = code;
         self.coe.emergency(Emergency { error_code: code, error_register: 0x01, data: [0; 5] });
+        self.after_ramp = None;
         let powered = matches!(self.state, State::OperationEnabled | State::QuickStopActive);
-        if powered {
-            self.state = State::FaultReactionActive;
-            let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
-            self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
-        } else {
-            self.state = State::Fault;
+        // 0x605E: 0 coasts (the power stage off at once), the others brake first.
+        match self.stop_deceleration(get(&self.coe.od, ix::FAULT_REACTION_OPTION, 0)) {
+            Some(dec) if powered => {
+                self.state = State::FaultReactionActive;
+                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+            }
+            _ => {
+                self.ramp = None;
+                self.state = State::Fault;
+            }
+        }
+    }
+
+    /// How an option code (0x605A, 0x605E) stops the shaft: `None` coasts (0: disable the drive
+    /// function), 1 and 5 at the profile deceleration (0x6084), 3, 4, 7 and 8 at the current
+    /// (or voltage) limit — infinite: the most torque against the motion until the shaft stands
+    /// — 2, 6 and manufacturer codes at the quick-stop deceleration (0x6085).
+    fn stop_deceleration(&self, option: i64) -> Option<f64> {
+        let od = &self.coe.od;
+        let dec = |index| get_unsigned(od, index, 0).max(1) as f64;
+        match option {
+            0 => None,
+            1 | 5 => Some(dec(ix::PROFILE_DECELERATION)),
+            3 | 4 | 7 | 8 => Some(f64::INFINITY),
+            _ => Some(dec(ix::QUICK_STOP_DECELERATION)),
         }
     }
 
@@ -391,9 +420,11 @@ impl Cia402Drive {
     }
 
     fn position_controlled(&self) -> bool {
+        // A stopping ramp (shutdown or disable operation, option 1) drives the velocity.
         self.state == State::OperationEnabled
+            && self.ramp.is_none()
             && match self.mode {
-                Some(Mode::CyclicSyncPosition | Mode::ProfilePosition) => true,
+                Some(Mode::CyclicSyncPosition | Mode::InterpolatedPosition | Mode::ProfilePosition) => true,
                 // Homing holds the shaft while it is not moving it.
                 Some(Mode::Homing) => !self.homing.moving(),
                 _ => false,
@@ -459,7 +490,16 @@ impl Cia402Drive {
     }
 
     fn step_demand(&mut self, at: u64, dt: f64) -> Demand {
+        let max_torque = self.max_torque_nm();
         if let Some((v, dec)) = self.ramp.as_mut() {
+            if dec.is_infinite() {
+                // At the current limit: the most torque against the motion, no velocity loop
+                // (whose integral would wind up and reverse the shaft), until it stands.
+                if *v * self.mech.vel_rad_s > 0.0 {
+                    return Demand::Torque(-v.signum() * max_torque);
+                }
+                *v = 0.0;
+            }
             *v = if *v > 0.0 { (*v - *dec * dt).max(0.0) } else { (*v + *dec * dt).min(0.0) };
             return Demand::Velocity(*v);
         }
@@ -468,7 +508,7 @@ impl Cia402Drive {
         }
         let od = &self.coe.od;
         match self.mode {
-            Some(Mode::CyclicSyncPosition) => {
+            Some(Mode::CyclicSyncPosition | Mode::InterpolatedPosition) => {
                 let (pos, vel, acc) = self.demand.segment(at).at(at);
                 Demand::Position { pos, vel, acc }
             }
@@ -560,6 +600,10 @@ impl Cia402Drive {
     }
 
     fn ramp_finished(&mut self) {
+        if let Some(next) = self.after_ramp.take() {
+            self.state = next;
+            return;
+        }
         match self.state {
             State::FaultReactionActive => self.state = State::Fault,
             // Option codes 0–4: then switch on disabled; 5–8: stay in quick stop active.
@@ -577,6 +621,21 @@ impl Cia402Drive {
         self.prev_cw = cw;
         let cmd = Command::from_controlword(cw);
         let before = self.state;
+        if self.after_ramp.is_some() && self.state == OperationEnabled {
+            // Braking before a shutdown or disable operation: only a stronger command counts.
+            match cmd {
+                Command::DisableVoltage => {
+                    (self.ramp, self.after_ramp) = (None, None);
+                    self.state = SwitchOnDisabled;
+                }
+                Command::QuickStop => {
+                    (self.ramp, self.after_ramp) = (None, None);
+                    self.state = self.quick_stop();
+                }
+                _ => {}
+            }
+            return;
+        }
         self.state = match (self.state, cmd) {
             (Fault, _) if reset_edge => {
                 self.fault_code = 0;
@@ -588,13 +647,10 @@ impl Cia402Drive {
             (ReadyToSwitchOn, Command::SwitchOn) => SwitchedOn,
             // Transitions 3 and 4 in one step, as most drives allow.
             (ReadyToSwitchOn | SwitchedOn, Command::EnableOperation) => OperationEnabled,
-            (SwitchedOn | OperationEnabled, Command::Shutdown) => ReadyToSwitchOn,
-            (OperationEnabled, Command::SwitchOn) => SwitchedOn,
-            (OperationEnabled, Command::QuickStop) => {
-                let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
-                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
-                QuickStopActive
-            }
+            (OperationEnabled, Command::Shutdown) => self.stop_then(ix::SHUTDOWN_OPTION, ReadyToSwitchOn),
+            (SwitchedOn, Command::Shutdown) => ReadyToSwitchOn,
+            (OperationEnabled, Command::SwitchOn) => self.stop_then(ix::DISABLE_OPERATION_OPTION, SwitchedOn),
+            (OperationEnabled, Command::QuickStop) => self.quick_stop(),
             (QuickStopActive, Command::EnableOperation)
                 if (5..=8).contains(&get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) && self.ramp.is_none() =>
             {
@@ -616,6 +672,42 @@ impl Cia402Drive {
         }
     }
 
+    /// Transitions 5 and 8 (disable operation, shutdown) by their option code (0x605C, 0x605B):
+    /// 1 brakes at the profile deceleration first, operation staying enabled until the shaft
+    /// stands; 0 (and any other) takes the power away at once and the shaft coasts.
+    fn stop_then(&mut self, option: u16, next: State) -> State {
+        if get(&self.coe.od, option, 0) != 1 {
+            return next;
+        }
+        let dec = get_unsigned(&self.coe.od, ix::PROFILE_DECELERATION, 0).max(1) as f64;
+        self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+        self.after_ramp = Some(next);
+        State::OperationEnabled
+    }
+
+    /// Transition 11 by 0x605A: a ramp then quick stop active, or (option 0) switch on disabled
+    /// at once, the shaft coasting.
+    fn quick_stop(&mut self) -> State {
+        match self.stop_deceleration(get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) {
+            Some(dec) => {
+                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+                State::QuickStopActive
+            }
+            None => State::SwitchOnDisabled,
+        }
+    }
+
+    /// The interpolation period 0x60C2 gives (value × 10^index s), else the SYNC0 cycle.
+    fn interpolation_period_ns(&self) -> u64 {
+        let od = &self.coe.od;
+        let value = get_unsigned(od, ix::INTERPOLATION_TIME_PERIOD, 1);
+        let index = get(od, ix::INTERPOLATION_TIME_PERIOD, 2);
+        if value == 0 || !(-9..=0).contains(&index) {
+            return self.cycle_ns.max(1);
+        }
+        value * 10u64.pow((9 + index) as u32)
+    }
+
     /// The application's work for one cycle: state machine, mode, new targets, inputs.
     fn complete(&mut self, pdi: &mut Pdi<'_>, feedback: Feedback, taken_ns: u64) {
         let now = pdi.now_ns();
@@ -632,15 +724,27 @@ impl Cia402Drive {
             self.homing = homing::Homing::default();
         }
         let bit4_rising = self.bit4_rising(cw);
-        if self.state == State::OperationEnabled {
+        let braking = self.ramp.is_some();
+        self.ip_active = self.state == State::OperationEnabled
+            && !braking
+            && self.mode == Some(Mode::InterpolatedPosition)
+            && cw & control::ENABLE_IP_MODE != 0
+            && cw & control::HALT == 0;
+        if self.state == State::OperationEnabled && !braking {
             match self.mode {
                 Some(Mode::CyclicSyncPosition) => {
-                    // Unwrap the 32-bit target around the last one, on the user's scale.
-                    let last = self.demand.last_target() + self.offset;
                     let target = get(&self.coe.od, ix::TARGET_POSITION, 0) as i32;
-                    let to = last + target.wrapping_sub(last.round() as i64 as i32) as f64 - self.offset;
                     let period = self.cycle_ns.max(1);
-                    self.demand.queue(to, taken_ns + period, period);
+                    self.queue_set_point(target, taken_ns + period, period, false);
+                }
+                // Linear interpolation (0x60C0 = 0) over the period 0x60C2 gives, starting one
+                // cycle after SYNC0 as CSP does, from where the demand stands then (a period
+                // longer than the cycle: each set-point is approached, never jumped to); with
+                // bit 4 clear (or halt) the set-points are ignored and the demand stops at the
+                // last one.
+                Some(Mode::InterpolatedPosition) if self.ip_active => {
+                    let target = get(&self.coe.od, ix::INTERPOLATION_DATA, 1) as i32;
+                    self.queue_set_point(target, taken_ns + self.cycle_ns.max(1), self.interpolation_period_ns(), true);
                 }
                 Some(Mode::ProfilePosition) if bit4_rising => {
                     let od = &self.coe.od;
@@ -658,6 +762,14 @@ impl Cia402Drive {
         self.watch_velocity(feedback.vel, now);
         self.write_feedback(feedback);
         self.coe.publish_inputs(pdi);
+    }
+
+    /// Queues a 32-bit position set-point (on the user's scale, unwrapped around the last one)
+    /// as the line reached over [`t0_ns`, `t0_ns` + `period_ns`].
+    fn queue_set_point(&mut self, target: i32, t0_ns: u64, period_ns: u64, from_demand: bool) {
+        let last = self.demand.last_target() + self.offset;
+        let to = last + target.wrapping_sub(last.round() as i64 as i32) as f64 - self.offset;
+        self.demand.queue(to, t0_ns, period_ns, from_demand);
     }
 
     /// Profile velocity's two conditions, each of which must hold for its time (0x606E,
@@ -740,6 +852,19 @@ impl Cia402Drive {
             }
             (State::OperationEnabled, Some(Mode::CyclicSyncVelocity | Mode::CyclicSyncTorque)) => {
                 sw |= status::OP_SPECIFIC_12;
+            }
+            (State::OperationEnabled, Some(Mode::InterpolatedPosition)) => {
+                if self.ip_active {
+                    sw |= status::OP_SPECIFIC_12;
+                }
+                if window != 0xFFFF_FFFF && f.following_error.unsigned_abs() as u64 > window {
+                    sw |= status::OP_SPECIFIC_13;
+                }
+                // Target reached: the demand stands at the last set-point, the shaft with it.
+                let (at, vel) = self.demand.at(self.model_ns.unwrap_or(0));
+                if vel == 0.0 && at == self.demand.last_target() && f.following_error.unsigned_abs() < 100 {
+                    sw |= status::TARGET_REACHED;
+                }
             }
             (State::OperationEnabled, Some(Mode::ProfilePosition)) => {
                 if self.pp_bit {
@@ -847,7 +972,7 @@ impl Application for Cia402Drive {
             if !matches!(self.state, State::Fault | State::FaultReactionActive) {
                 self.state = State::SwitchOnDisabled;
             }
-            self.ramp = None;
+            (self.ramp, self.after_ramp) = (None, None);
         }
         self.coe.state_changed(pdi, state);
         let f = self.feedback();

@@ -16,10 +16,11 @@ pub const SYNC_SM: u16 = 1;
 pub const SYNC_DC_SYNC0: u16 = 2;
 
 /// The modes the simulated drive runs.
-pub const MODES: [Mode; 6] = [
+pub const MODES: [Mode; 7] = [
     Mode::ProfilePosition,
     Mode::ProfileVelocity,
     Mode::Homing,
+    Mode::InterpolatedPosition,
     Mode::CyclicSyncPosition,
     Mode::CyclicSyncVelocity,
     Mode::CyclicSyncTorque,
@@ -65,11 +66,19 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
 /// Adds the profile's objects that `od` lacks, with the model's defaults.
 pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
-    let vars: [(u16, &str, u16, u16, Access, i64); 28] = [
+    // The option codes' defaults are the profile's (CiA 402-2): shutdown coasts, disable
+    // operation and the quick stop brake (profile and quick-stop deceleration), a fault at the
+    // quick-stop deceleration.
+    let vars: [(u16, &str, u16, u16, Access, i64); 32] = [
         (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
         (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
         (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
         (ix::QUICK_STOP_OPTION, "Quick stop option code", dt::INT, 16, access(true, false, false), 2),
+        (ix::SHUTDOWN_OPTION, "Shutdown option code", dt::INT, 16, access(true, false, false), 0),
+        (ix::DISABLE_OPERATION_OPTION, "Disable operation option code", dt::INT, 16, access(true, false, false), 1),
+        (ix::FAULT_REACTION_OPTION, "Fault reaction option code", dt::INT, 16, access(true, false, false), 2),
+        // Linear interpolation, the only kind the model runs.
+        (ix::INTERPOLATION_SUB_MODE, "Interpolation sub mode select", dt::INT, 16, access(true, false, false), 0),
         (ix::MODES_OF_OPERATION, "Modes of operation", dt::SINT, 8, access(true, true, false), 0),
         (ix::MODES_OF_OPERATION_DISPLAY, "Modes of operation display", dt::SINT, 8, access(false, false, true), 0),
         (ix::POSITION_ACTUAL, "Position actual value", dt::DINT, 32, access(false, false, true), 0),
@@ -122,6 +131,39 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
             dt::UDINT,
             Access::RO,
             vec![speed(1, "Speed during search for switch", 131_072), speed(2, "Speed during search for zero", 32_768)],
+        ));
+    }
+    let sub = |sub: u8, name: &str, ty: u16, bits: u16, acc: Access, v: i64| Entry {
+        subindex: sub,
+        name: name.into(),
+        data_type: ty,
+        bit_len: bits,
+        bit_offset: 0,
+        access: acc,
+        value: v.to_le_bytes()[..bits as usize / 8].to_vec(),
+    };
+    if od.get(ix::INTERPOLATION_DATA).is_none() {
+        od.insert(Object::list(
+            ix::INTERPOLATION_DATA,
+            "Interpolation data record",
+            ObjectCode::Array,
+            dt::DINT,
+            Access::RO,
+            vec![sub(1, "1st set-point", dt::DINT, 32, access(true, true, false), 0)],
+        ));
+    }
+    if od.get(ix::INTERPOLATION_TIME_PERIOD).is_none() {
+        // 1 ms (1 × 10⁻³ s) until the master says its cycle.
+        od.insert(Object::list(
+            ix::INTERPOLATION_TIME_PERIOD,
+            "Interpolation time period",
+            ObjectCode::Record,
+            0x0080,
+            Access::RO,
+            vec![
+                sub(1, "Interpolation time period value", dt::USINT, 8, access(true, false, false), 1),
+                sub(2, "Interpolation time index", dt::SINT, 8, access(true, false, false), -3),
+            ],
         ));
     }
     if od.get(ix::SUPPORTED_DRIVE_MODES).is_none() {
