@@ -97,6 +97,11 @@ enum Command {
         #[command(subcommand)]
         action: SdoCmd,
     },
+    /// Read or write a file of a slave by FoE (firmware, parameter sets), in PREOP.
+    Foe {
+        #[command(subcommand)]
+        action: FoeCmd,
+    },
     /// Bring the segment to OP and exchange process data for a while, with live statistics.
     Run {
         #[command(flatten)]
@@ -333,6 +338,34 @@ enum SdoCmd {
 }
 
 #[derive(Subcommand)]
+enum FoeCmd {
+    /// Read file NAME of the slave at POSITION into FILE.
+    Read {
+        position: u16,
+        name: String,
+        file: PathBuf,
+        /// The password the slave asks for (a number: decimal or 0x…).
+        #[arg(long, default_value = "0")]
+        password: String,
+        /// A longer file is an error.
+        #[arg(long, default_value_t = 64 << 20)]
+        max_bytes: usize,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// Write FILE to the slave at POSITION as file NAME.
+    Write {
+        position: u16,
+        name: String,
+        file: PathBuf,
+        #[arg(long, default_value = "0")]
+        password: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+}
+
+#[derive(Subcommand)]
 enum EepromCmd {
     /// Read the SII of the slave at POSITION (hex dump, or --out FILE).
     Read {
@@ -404,6 +437,14 @@ fn main() -> ExitCode {
                 master_cmd::sdo(&target, position, master_cmd::SdoAction::Write { object, value, complete, ty })
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
+        },
+        Command::Foe { action } => match action {
+            FoeCmd::Read { position, name, file, password, max_bytes, target } => {
+                master_cmd::foe(&target, position, &name, &password, master_cmd::FoeAction::Read { file, max_bytes })
+            }
+            FoeCmd::Write { position, name, file, password, target } => {
+                master_cmd::foe(&target, position, &name, &password, master_cmd::FoeAction::Write { file })
+            }
         },
         Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force, no_gpio_calibration } => {
             demo::demo(demo::DemoArgs {

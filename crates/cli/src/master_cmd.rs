@@ -160,6 +160,40 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
     Ok(ExitCode::SUCCESS)
 }
 
+pub enum FoeAction {
+    Read { file: std::path::PathBuf, max_bytes: usize },
+    Write { file: std::path::PathBuf },
+}
+
+/// `ferrocat foe read|write`: one file by FoE, the segment in PREOP.
+pub fn foe(t: &Target, position: u16, name: &str, password: &str, action: FoeAction) -> anyhow::Result<ExitCode> {
+    let password = ferrocat_esi::parse_number(password)
+        .and_then(|p| u32::try_from(p).ok())
+        .with_context(|| format!("--password '{password}' is not a 32-bit number"))?;
+    // The file first: a missing one should not cost a bring-up.
+    let data = match &action {
+        FoeAction::Write { file } => Some(std::fs::read(file).with_context(|| format!("reading {}", file.display()))?),
+        FoeAction::Read { .. } => None,
+    };
+    let mut m = t.master()?;
+    m.scan()?;
+    m.configure()?;
+    match action {
+        FoeAction::Write { file } => {
+            let data = data.unwrap_or_default();
+            m.foe_write(position, name, password, &data)?;
+            eprintln!("wrote {} ({} bytes) to slave {position} as '{name}'", file.display(), data.len());
+        }
+        FoeAction::Read { file, max_bytes } => {
+            let data = m.foe_read(position, name, password, max_bytes)?;
+            std::fs::write(&file, &data).with_context(|| format!("writing {}", file.display()))?;
+            eprintln!("read '{name}' ({} bytes) from slave {position} into {}", data.len(), file.display());
+        }
+    }
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
 pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
     m.scan()?;

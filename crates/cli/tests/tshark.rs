@@ -129,3 +129,59 @@ fn needs_shared_pcap_json_matches_tshark_on_every_capture() {
     }
     println!("total {total} datagrams");
 }
+
+/// FoE as Wireshark decodes what `ferrocat foe` put on the (virtual) wire, recorded with
+/// `--pcap`: the received frames (working counter ≥ 1) of a 300-byte write to the servo —
+/// write request with the name, acknowledge 0, data packets 1–3 (116, 116, 68 bytes) each
+/// acknowledged — and of a read of a missing file, answered by error 0x8001 with its text.
+#[test]
+fn tshark_decodes_foe_as_we_sent_it() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-tshark-foe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("fw.bin");
+    std::fs::write(&file, (0..300u32).map(|k| k as u8).collect::<Vec<_>>()).unwrap();
+    let run = |args: &[&str], pcap: &std::path::Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(args)
+            .args(["--device", "EK1100", "--device", "SERVO", "--pcap"])
+            .arg(pcap)
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let foe = |pcap: &std::path::Path| -> Vec<String> {
+        let out = Command::new("tshark")
+            .args(["-n", "-r"])
+            .arg(pcap)
+            .args(["-Y", "ecat_mailbox.foe && ecat.cnt > 0", "-T", "fields"])
+            .args(["-e", "ecat_mailbox.length", "-e", "ecat_mailbox.foe_opmode", "-e", "ecat_mailbox.foe_packetno"])
+            .args(["-e", "ecat_mailbox.foe_filename"])
+            .args(["-e", "ecat_mailbox.foe_errcode", "-e", "ecat_mailbox.foe_errtext"])
+            .stderr(Stdio::null())
+            .output()
+            .expect("tshark is not installed: scripts/test.sh installs it (Debian package tshark)");
+        String::from_utf8_lossy(&out.stdout).lines().map(|l| l.trim_end().to_string()).collect()
+    };
+    let written = dir.join("write.pcapng");
+    let said = run(&["foe", "write", "1", "fw.bin", file.to_str().unwrap()], &written);
+    assert!(said.contains("wrote") && said.contains("300 bytes"), "{said}");
+    assert_eq!(
+        foe(&written),
+        // The mailbox length: the FoE header's 6 bytes and the name or the data.
+        [
+            "12\t0x02\t\tfw.bin",
+            "6\t0x04\t0",
+            "122\t0x03\t1",
+            "6\t0x04\t1",
+            "122\t0x03\t2",
+            "6\t0x04\t2",
+            "74\t0x03\t3",
+            "6\t0x04\t3"
+        ]
+    );
+    let missing = dir.join("missing.pcapng");
+    let said = run(&["foe", "read", "1", "none.bin", dir.join("out").to_str().unwrap()], &missing);
+    assert!(said.contains("file not found"), "{said}");
+    assert_eq!(foe(&missing), ["14\t0x01\t\tnone.bin", "20\t0x05\t\t\t32769\tfile not found"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -56,7 +56,9 @@ pub trait Application: Debug + Send {
     fn outputs_written(&mut self, _pdi: &mut Pdi<'_>, _sm: u8) {}
     /// The SYNC0 signal fired at system time `sys_ns`.
     fn sync0(&mut self, _pdi: &mut Pdi<'_>, _sys_ns: u64) {}
-    /// A complete mailbox request arrived in SM0; the reply (if any) goes to SM1.
+    /// A complete mailbox request arrived in SM0; the reply goes to SM1. `None`: a protocol
+    /// the application does not serve (the ESC answers "unsupported protocol"); an empty reply:
+    /// handled, nothing to send.
     fn mailbox(&mut self, _pdi: &mut Pdi<'_>, _request: &[u8]) -> Option<Vec<u8>> {
         None
     }

@@ -11,6 +11,7 @@ use ferrocat_wire::mailbox::{Mailbox, MailboxHeader, MailboxType, HEADER_LEN as 
 use ferrocat_wire::register::{AlState, AlStatusCode};
 
 use crate::app::{Application, Pdi};
+use crate::foe_server::FoeServer;
 use crate::od::ObjectDictionary;
 
 #[derive(Debug, Clone)]
@@ -62,6 +63,8 @@ pub struct CoeDevice {
     counter: u8,
     /// Station address of this device, for the mailbox header.
     pub sdo_requests: u64,
+    /// The FoE file server, where the SII names FoE among the mailbox protocols.
+    pub foe: Option<FoeServer>,
 }
 
 /// A mapped entry of the process image.
@@ -84,6 +87,7 @@ impl CoeDevice {
             queue: VecDeque::new(),
             counter: 0,
             sdo_requests: 0,
+            foe: None,
         }
     }
 
@@ -166,9 +170,13 @@ impl CoeDevice {
     }
 
     fn message(&mut self, coe_body: &[u8]) -> Vec<u8> {
+        self.typed_message(MailboxType::COE, coe_body)
+    }
+
+    fn typed_message(&mut self, mailbox_type: MailboxType, body: &[u8]) -> Vec<u8> {
         self.counter = ferrocat_wire::mailbox::next_counter(self.counter);
-        let mut v = MailboxHeader::new(MailboxType::COE, coe_body.len() as u16, self.counter).to_bytes().to_vec();
-        v.extend_from_slice(coe_body);
+        let mut v = MailboxHeader::new(mailbox_type, body.len() as u16, self.counter).to_bytes().to_vec();
+        v.extend_from_slice(body);
         v
     }
 
@@ -455,6 +463,12 @@ impl Application for CoeDevice {
     }
     fn mailbox(&mut self, pdi: &mut Pdi<'_>, request: &[u8]) -> Option<Vec<u8>> {
         let m = Mailbox::parse(request).ok()?;
+        if m.header.mailbox_type == MailboxType::FOE {
+            let out_len = pdi.sm(0).length as usize;
+            let in_len = pdi.process_mailbox_len();
+            let reply = self.foe.as_mut()?.handle(m.payload, out_len, in_len);
+            return Some(if reply.is_empty() { reply } else { self.typed_message(MailboxType::FOE, &reply) });
+        }
         if m.header.mailbox_type != MailboxType::COE {
             return None;
         }

@@ -8,6 +8,20 @@ use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::{Master, MasterEvent};
 
+/// The SII's mailbox-protocol bit of a mailbox type (0 for types the SII does not list).
+fn protocol_bit(t: MailboxType) -> u16 {
+    use ferrocat_wire::sii::mailbox_protocol as p;
+    match t {
+        MailboxType::AOE => p::AOE,
+        MailboxType::EOE => p::EOE,
+        MailboxType::COE => p::COE,
+        MailboxType::FOE => p::FOE,
+        MailboxType::SOE => p::SOE,
+        MailboxType::VOE => p::VOE,
+        _ => 0,
+    }
+}
+
 /// An object's description from SDO information.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ObjectInfo {
@@ -29,31 +43,45 @@ pub struct EntryInfo {
 }
 
 impl<I: Io> Master<I> {
-    fn mailbox_of(&self, position: u16) -> Result<(u16, String, crate::slave::MailboxConfig)> {
+    /// The slave's station address, name and mailbox, if its SII names `protocol` (a
+    /// `sii::mailbox_protocol` bit; `what` names it in the error).
+    pub(crate) fn mailbox_of(
+        &self,
+        position: u16,
+        protocol: u16,
+        what: &str,
+    ) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let s = self.slave(position)?;
         let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &s.name, "has no mailbox"))?;
-        if !s.has_coe() {
-            return Err(MasterError::slave(position, &s.name, "does not support CoE"));
+        if !s.has_protocol(protocol) {
+            return Err(MasterError::slave(position, &s.name, format!("does not support {what}")));
         }
         Ok((s.station, s.name.clone(), m))
     }
 
-    /// Writes one mailbox message into SM0 (waiting while it is full).
+    /// Writes one CoE message into SM0 (waiting while it is full).
     fn mbx_send(&mut self, position: u16, service: CoeService, body: &[u8]) -> Result<()> {
-        let (st, name, m) = self.mailbox_of(position)?;
+        let mut payload = Vec::with_capacity(2 + body.len());
+        payload.extend_from_slice(&CoeHeader::new(service).word().to_le_bytes());
+        payload.extend_from_slice(body);
+        self.mbx_write(position, MailboxType::COE, &payload)
+    }
+
+    /// Writes one message of `mailbox_type` into SM0 (waiting while it is full).
+    pub(crate) fn mbx_write(&mut self, position: u16, mailbox_type: MailboxType, payload: &[u8]) -> Result<()> {
+        let (st, name, m) = self.mailbox_of(position, protocol_bit(mailbox_type), mailbox_type.name())?;
         let c = next_counter(self.slaves[position as usize].mbx_counter);
         self.slaves[position as usize].mbx_counter = c;
         let mut buf = vec![0u8; m.out.1 as usize];
-        if 8 + body.len() > buf.len() {
+        if 6 + payload.len() > buf.len() {
             return Err(MasterError::slave(
                 position,
                 &name,
-                format!("request of {} bytes exceeds the {}-byte mailbox", body.len(), buf.len()),
+                format!("request of {} bytes exceeds the {}-byte mailbox", payload.len(), buf.len()),
             ));
         }
-        MailboxHeader::new(MailboxType::COE, (2 + body.len()) as u16, c).emit(&mut buf)?;
-        CoeHeader::new(service).emit(&mut buf[6..])?;
-        buf[8..8 + body.len()].copy_from_slice(body);
+        MailboxHeader::new(mailbox_type, payload.len() as u16, c).emit(&mut buf)?;
+        buf[6..6 + payload.len()].copy_from_slice(payload);
         let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
         loop {
             if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: m.out.0 }, &mut buf)? == 1 {
@@ -69,7 +97,13 @@ impl<I: Io> Master<I> {
 
     /// The next CoE message from SM1 that is not an emergency (emergencies become events).
     fn mbx_receive(&mut self, position: u16) -> Result<Vec<u8>> {
-        let (st, name, m) = self.mailbox_of(position)?;
+        self.mbx_read(position, MailboxType::COE)
+    }
+
+    /// The next message of `mailbox_type` from SM1 (CoE emergencies met on the way become
+    /// events; a mailbox error reply is an error; messages of other protocols are dropped).
+    pub(crate) fn mbx_read(&mut self, position: u16, mailbox_type: MailboxType) -> Result<Vec<u8>> {
+        let (st, name, m) = self.mailbox_of(position, protocol_bit(mailbox_type), mailbox_type.name())?;
         let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
         let mut buf = vec![0u8; m.inp.1 as usize];
         loop {
@@ -91,6 +125,8 @@ impl<I: Io> Master<I> {
                         });
                         continue;
                     }
+                }
+                if mbx.header.mailbox_type == mailbox_type {
                     return Ok(mbx.payload.to_vec());
                 }
             }
@@ -201,7 +237,7 @@ impl<I: Io> Master<I> {
         complete_access: bool,
         data: &[u8],
     ) -> Result<()> {
-        let (_, name, m) = self.mailbox_of(position)?;
+        let (_, name, m) = self.mailbox_of(position, ferrocat_wire::sii::mailbox_protocol::COE, "CoE")?;
         let first_max = (m.out.1 as usize).saturating_sub(6 + 2 + 8);
         let seg_max = (m.out.1 as usize).saturating_sub(6 + 2 + 1);
         let check = |me: &Self, reply: &[u8]| -> Result<()> {

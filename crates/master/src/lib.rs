@@ -10,6 +10,7 @@ mod coe;
 mod dc;
 mod engine;
 mod error;
+mod foe;
 pub mod io;
 pub mod line_fit;
 mod master;

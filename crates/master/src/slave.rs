@@ -95,7 +95,11 @@ impl Slave {
         self.inputs.iter().map(|m| m.bits as u32).sum()
     }
     pub fn has_coe(&self) -> bool {
-        self.mailbox.as_ref().is_some_and(|m| m.protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0)
+        self.has_protocol(ferrocat_wire::sii::mailbox_protocol::COE)
+    }
+    /// Whether the SII names this mailbox protocol (a `sii::mailbox_protocol` bit).
+    pub fn has_protocol(&self, bit: u16) -> bool {
+        self.mailbox.as_ref().is_some_and(|m| m.protocols & bit != 0)
     }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {

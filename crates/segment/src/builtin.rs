@@ -172,7 +172,8 @@ fn servo() -> Device {
                 entry(0, 8, "", ""),
             ],
         )],
-        mailbox: coe_mailbox(true),
+        // Drives take their firmware and parameter files by FoE.
+        mailbox: coe_mailbox(true).map(|m| ferrocat_esi::MailboxDesc { foe: true, ..m }),
         dc_op_modes: vec![
             ferrocat_esi::DcOpModeDesc {
                 name: "SM".into(),

@@ -15,8 +15,8 @@
 use std::path::{Path, PathBuf};
 
 use ferrocat_esc::{
-    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, MailboxResponse, NoApplication, PassiveLogic,
-    Switches, SyncApp, SyncMode,
+    Application, Cia402Drive, CoeDevice, DigitalIo, Esc, EscConfig, FoeServer, MailboxResponse, NoApplication,
+    PassiveLogic, Switches, SyncApp, SyncMode,
 };
 use ferrocat_esi::EsiFile;
 use ferrocat_wire::register::{PortDescriptor, PortType};
@@ -197,6 +197,9 @@ pub struct DeviceToml {
     /// `mailbox_response_max_us`, drawn uniformly between the two for each request.
     pub mailbox_response_us: Option<f64>,
     pub mailbox_response_max_us: Option<f64>,
+    /// The password FoE read and write requests must carry (default 0: any), on a CoE device
+    /// whose SII names FoE.
+    pub foe_password: Option<u32>,
     /// Overrides the configured station alias of the SII (word 4, loaded into 0x0012).
     pub station_alias: Option<u16>,
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
@@ -366,6 +369,12 @@ impl SegmentConfig {
             };
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
             let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;
+            // FoE is served next to the SDO server, where the SII names it.
+            let foe = (info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::FOE != 0)
+                .then(|| FoeServer::with_password(d.foe_password.unwrap_or(0)));
+            if d.foe_password.is_some() && !(coe && foe.is_some()) {
+                return Err(device_err(&place, "foe_password needs a device whose SII names CoE and FoE"));
+            }
             // The dictionary is built once, for CoE devices only.
             let od = coe.then(|| match &esi_dev {
                 Some(dev) => crate::od_build::from_esi(dev, &info),
@@ -386,10 +395,15 @@ impl SegmentConfig {
                     let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
                     let mut drive = Cia402Drive::new(od, config.sm_count, seed);
                     drive.set_switches(switches(d, &place)?);
+                    drive.coe.foe = foe;
                     Box::new(drive)
                 }
                 (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
-                (None, Some(od)) => Box::new(CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic))),
+                (None, Some(od)) => {
+                    let mut dev = CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic));
+                    dev.foe = foe;
+                    Box::new(dev)
+                }
                 (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
                 (None | Some("io"), _) => Box::new(DigitalIo::new(config.sm_count)),
                 (Some("sm"), _) => sync(SyncMode::SmSynchronous),

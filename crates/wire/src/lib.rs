@@ -19,6 +19,7 @@ pub mod coe;
 pub mod datagram;
 mod error;
 pub mod ethernet;
+pub mod foe;
 pub mod frame;
 #[cfg(feature = "alloc")]
 pub mod hex;

@@ -91,6 +91,10 @@ impl Esc {
             self.app.mailbox(&mut pdi, &req)
         };
         let reply = reply.unwrap_or_else(|| unsupported_protocol_reply(&req));
+        if reply.is_empty() {
+            // Handled with nothing to answer (FoE's last acknowledge).
+            return;
+        }
         let ready = self.now_ns.saturating_add(self.mailbox_response.draw_ns());
         let ready = ready.max(self.mbx_queue.back().map_or(0, |m| m.0));
         self.mbx_queue.push_back((ready, reply));

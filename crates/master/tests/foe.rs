@@ -1,0 +1,72 @@
+//! FoE between the master's client and the simulated drive's file server, in virtual time.
+use ferrocat_esc::{Cia402Drive, FoeServer};
+use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_master::Master;
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::foe::max_data_len;
+
+const DRIVE: u16 = 1;
+
+/// EK1100 and the built-in servo (whose SII names FoE), in PREOP.
+fn master(drive_keys: &str) -> Master<VirtualIo> {
+    let toml = format!("seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n{drive_keys}\n");
+    let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    m
+}
+
+fn server(m: &Master<VirtualIo>) -> &FoeServer {
+    let app = m.engine.io.seg.nodes[DRIVE as usize].esc.app();
+    app.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.foe.as_ref().expect("the drive serves FoE")
+}
+
+/// A file of `n` bytes that no shift of itself matches (a lost or repeated packet shows).
+fn file(n: usize) -> Vec<u8> {
+    (0..n).map(|k| (k * 7 + k / 251) as u8).collect()
+}
+
+#[test]
+fn files_of_every_length_go_there_and_back() {
+    let mut m = master("");
+    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox.as_ref().unwrap().out.1 as usize);
+    assert!(packet > 0);
+    // Empty, shorter than a packet, exactly one and three packets (an empty packet ends those),
+    // and a few packets and a bit.
+    for n in [0, 1, packet - 1, packet, 3 * packet, 5 * packet + 17] {
+        let name = format!("file-{n}.bin");
+        let data = file(n);
+        m.foe_write(DRIVE, &name, 0, &data).unwrap();
+        assert_eq!(server(&m).files.get(name.as_bytes()), Some(&data), "{n} bytes stored");
+        assert_eq!(m.foe_read(DRIVE, &name, 0, 1 << 20).unwrap(), data, "{n} bytes read back");
+    }
+    let s = server(&m);
+    assert_eq!((s.writes, s.reads), (6, 6));
+    // A file read into too small a bound is an error, not a shorter file.
+    let e = m.foe_read(DRIVE, &format!("file-{}.bin", 3 * packet), 0, packet + 1).unwrap_err().to_string();
+    assert!(e.contains("longer than"), "{e}");
+    // The aborted transfer left the server ready for the next.
+    assert_eq!(m.foe_read(DRIVE, "file-1.bin", 0, 10).unwrap(), file(1));
+}
+
+#[test]
+fn the_slaves_errors_reach_the_caller_by_name() {
+    let mut m = master("foe_password = 0x0012_3456");
+    let e = m.foe_write(DRIVE, "fw.bin", 1, b"x").unwrap_err().to_string();
+    assert!(e.contains("access denied") && e.contains("fw.bin"), "{e}");
+    m.foe_write(DRIVE, "fw.bin", 0x0012_3456, b"firmware").unwrap();
+    let e = m.foe_read(DRIVE, "none.bin", 0x0012_3456, 100).unwrap_err().to_string();
+    assert!(e.contains("file not found") && e.contains("0x8001"), "{e}");
+    assert_eq!(m.foe_read(DRIVE, "fw.bin", 0x0012_3456, 100).unwrap(), b"firmware");
+    // The coupler has no mailbox at all.
+    let e = m.foe_write(0, "fw.bin", 0, b"x").unwrap_err().to_string();
+    assert!(e.contains("no mailbox"), "{e}");
+}
+
+#[test]
+fn a_password_on_a_device_without_foe_is_refused() {
+    let toml = "[[device]]\nbuiltin = 'EL2004'\nfoe_password = 1\n";
+    let e = toml::from_str::<SegmentConfig>(toml).unwrap().build().unwrap_err().to_string();
+    assert!(e.contains("device 0") && e.contains("foe_password"), "{e}");
+}
