@@ -97,7 +97,7 @@ enum Command {
         #[command(subcommand)]
         action: SdoCmd,
     },
-    /// Read or write a file of a slave by FoE (firmware, parameter sets), in PREOP.
+    /// Read or write a file of a slave by FoE (firmware, parameter sets), in PREOP or BOOT.
     Foe {
         #[command(subcommand)]
         action: FoeCmd,
@@ -350,6 +350,9 @@ enum FoeCmd {
         /// A longer file is an error.
         #[arg(long, default_value_t = 64 << 20)]
         max_bytes: usize,
+        /// In BOOT, through the SII's bootstrap mailbox (firmware), then back to INIT.
+        #[arg(long)]
+        boot: bool,
         #[command(flatten)]
         target: target::Target,
     },
@@ -360,6 +363,9 @@ enum FoeCmd {
         file: PathBuf,
         #[arg(long, default_value = "0")]
         password: String,
+        /// In BOOT, through the SII's bootstrap mailbox (firmware), then back to INIT.
+        #[arg(long)]
+        boot: bool,
         #[command(flatten)]
         target: target::Target,
     },
@@ -439,11 +445,12 @@ fn main() -> ExitCode {
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
         Command::Foe { action } => match action {
-            FoeCmd::Read { position, name, file, password, max_bytes, target } => {
-                master_cmd::foe(&target, position, &name, &password, master_cmd::FoeAction::Read { file, max_bytes })
+            FoeCmd::Read { position, name, file, password, max_bytes, boot, target } => {
+                let action = master_cmd::FoeAction::Read { file, max_bytes };
+                master_cmd::foe(&target, position, &name, &password, boot, action)
             }
-            FoeCmd::Write { position, name, file, password, target } => {
-                master_cmd::foe(&target, position, &name, &password, master_cmd::FoeAction::Write { file })
+            FoeCmd::Write { position, name, file, password, boot, target } => {
+                master_cmd::foe(&target, position, &name, &password, boot, master_cmd::FoeAction::Write { file })
             }
         },
         Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force, no_gpio_calibration } => {

@@ -165,8 +165,16 @@ pub enum FoeAction {
     Write { file: std::path::PathBuf },
 }
 
-/// `ferrocat foe read|write`: one file by FoE, the segment in PREOP.
-pub fn foe(t: &Target, position: u16, name: &str, password: &str, action: FoeAction) -> anyhow::Result<ExitCode> {
+/// `ferrocat foe read|write`: one file by FoE, the segment in PREOP, or (`boot`) the slave in
+/// BOOT and back to INIT afterwards.
+pub fn foe(
+    t: &Target,
+    position: u16,
+    name: &str,
+    password: &str,
+    boot: bool,
+    action: FoeAction,
+) -> anyhow::Result<ExitCode> {
     let password = ferrocat_esi::parse_number(password)
         .and_then(|p| u32::try_from(p).ok())
         .with_context(|| format!("--password '{password}' is not a 32-bit number"))?;
@@ -177,7 +185,11 @@ pub fn foe(t: &Target, position: u16, name: &str, password: &str, action: FoeAct
     };
     let mut m = t.master()?;
     m.scan()?;
-    m.configure()?;
+    if boot {
+        m.enter_bootstrap(position)?;
+    } else {
+        m.configure()?;
+    }
     match action {
         FoeAction::Write { file } => {
             let data = data.unwrap_or_default();
@@ -189,6 +201,9 @@ pub fn foe(t: &Target, position: u16, name: &str, password: &str, action: FoeAct
             std::fs::write(&file, &data).with_context(|| format!("writing {}", file.display()))?;
             eprintln!("read '{name}' ({} bytes) from slave {position} into {}", data.len(), file.display());
         }
+    }
+    if boot {
+        m.leave_bootstrap(position)?;
     }
     finish(m)?;
     Ok(ExitCode::SUCCESS)

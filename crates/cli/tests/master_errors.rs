@@ -100,3 +100,29 @@ fn lab_chen2016_refuses_bad_cycles_and_hosts() {
     let (ok, _, err) = ferrocat(&["lab", "chen2016", "--host", "vax"]);
     assert!(!ok && err.contains("rtx-10us"), "{err}");
 }
+
+/// `ferrocat foe`: firmware into the AKD in BOOT (its SII's bootstrap mailbox), and the
+/// failures one line each — a slave without a bootstrap mailbox, a missing file on the slave,
+/// a missing file here, a password that is no number.
+#[test]
+fn needs_shared_foe_writes_firmware_in_boot_and_names_its_failures() {
+    let akd = ferrocat_testdata::shared("captures/eeprom/akd.hex");
+    let fw = std::env::temp_dir().join(format!("ferrocat-fw-{}.bin", std::process::id()));
+    std::fs::write(&fw, vec![0x5A; 3000]).unwrap();
+    let fw_s = fw.to_str().unwrap();
+    let akd_s = akd.to_str().unwrap();
+    let (ok, _, err) =
+        ferrocat(&["foe", "write", "1", "akd.i00", fw_s, "--boot", "--device", "EK1100", "--device", akd_s]);
+    assert!(ok && err.contains("wrote") && err.contains("3000 bytes"), "{err}");
+    let failures: [(&[&str], &str); 4] = [
+        (&["foe", "write", "0", "x", fw_s, "--boot", "--device", "SERVO"], "no bootstrap mailbox"),
+        (&["foe", "read", "0", "none", "/dev/null", "--device", "SERVO"], "0x8001 (file not found)"),
+        (&["foe", "write", "0", "x", "/nonexistent/fw", "--device", "SERVO"], "reading /nonexistent/fw"),
+        (&["foe", "write", "0", "x", fw_s, "--password", "zz", "--device", "SERVO"], "--password 'zz'"),
+    ];
+    for (args, want) in failures {
+        let (ok, _, err) = ferrocat(args);
+        assert!(!ok && err.lines().count() == 1 && err.contains(want), "{args:?}: {err}");
+    }
+    std::fs::remove_file(&fw).unwrap();
+}

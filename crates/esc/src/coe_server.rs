@@ -469,7 +469,8 @@ impl Application for CoeDevice {
             let reply = self.foe.as_mut()?.handle(m.payload, out_len, in_len);
             return Some(if reply.is_empty() { reply } else { self.typed_message(MailboxType::FOE, &reply) });
         }
-        if m.header.mailbox_type != MailboxType::COE {
+        // In BOOT a device's bootloader serves file access only.
+        if m.header.mailbox_type != MailboxType::COE || self.state == AlState::Bootstrap {
             return None;
         }
         let mbx_len = pdi.process_mailbox_len();

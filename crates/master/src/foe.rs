@@ -2,17 +2,49 @@
 //! packet, each acknowledged (ETG.1000.6 §5.7).
 use ferrocat_wire::foe::{max_data_len, Foe};
 use ferrocat_wire::mailbox::MailboxType;
+use ferrocat_wire::register::AlState;
 use ferrocat_wire::sii::mailbox_protocol;
 
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
+use crate::slave::MailboxConfig;
 
 /// How often a slave may answer "busy" to one packet before the transfer is given up (each
 /// busy costs a mailbox round trip; firmware erasing its flash says so for seconds).
 const MAX_BUSY: u32 = 100_000;
 
 impl<I: Io> Master<I> {
+    /// Puts the slave at `position` into BOOT, where a bootloader takes firmware by FoE: INIT,
+    /// the SII's bootstrap mailbox written to SM0 and SM1, then BOOT. Its mailbox functions use
+    /// the bootstrap mailbox until [`leave_bootstrap`](Self::leave_bootstrap).
+    pub fn enter_bootstrap(&mut self, position: u16) -> Result<()> {
+        let (boot, name) = {
+            let s = self.slave(position)?;
+            (MailboxConfig::bootstrap(&s.sii.header), s.name.clone())
+        };
+        let boot = boot.ok_or_else(|| MasterError::slave(position, &name, "its SII gives no bootstrap mailbox"))?;
+        self.request_state(position, AlState::Init)?;
+        self.slaves[position as usize].mailbox = Some(boot);
+        let entered =
+            self.write_mailbox_config(position).and_then(|_| self.request_state(position, AlState::Bootstrap));
+        if entered.is_err() {
+            self.slaves[position as usize].mailbox =
+                MailboxConfig::standard(&self.slaves[position as usize].sii.header);
+        }
+        entered
+    }
+
+    /// Back from BOOT to INIT, the standard mailbox written to SM0 and SM1 again (a new
+    /// firmware starts there, and PREOP can be requested at once).
+    pub fn leave_bootstrap(&mut self, position: u16) -> Result<()> {
+        let left = self.request_state(position, AlState::Init);
+        let s = &mut self.slaves[position as usize];
+        s.mailbox = MailboxConfig::standard(&s.sii.header);
+        left?;
+        self.write_mailbox_config(position)
+    }
+
     fn foe_error(&self, position: u16, what: String) -> MasterError {
         let name = self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default();
         MasterError::slave(position, &name, what)
@@ -44,7 +76,7 @@ impl<I: Io> Master<I> {
     }
 
     /// Writes `data` as file `file` to the slave at `position` (in a state with a mailbox:
-    /// PREOP and above, or BOOT for firmware).
+    /// PREOP and above, or BOOT for firmware — see [`enter_bootstrap`](Self::enter_bootstrap)).
     pub fn foe_write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<()> {
         let (_, _, m) = self.mailbox_of(position, mailbox_protocol::FOE, "FoE")?;
         let max = max_data_len(m.out.1 as usize);

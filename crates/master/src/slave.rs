@@ -22,6 +22,26 @@ pub struct MailboxConfig {
     pub protocols: u16,
 }
 
+impl MailboxConfig {
+    /// The standard mailbox the SII gives (INIT to OP), if any.
+    pub fn standard(h: &ferrocat_wire::sii::SiiHeader) -> Option<Self> {
+        (h.mailbox_rx_size > 0 && h.mailbox_tx_size > 0).then_some(MailboxConfig {
+            out: (h.mailbox_rx_offset, h.mailbox_rx_size),
+            inp: (h.mailbox_tx_offset, h.mailbox_tx_size),
+            protocols: h.mailbox_protocols,
+        })
+    }
+
+    /// The bootstrap mailbox the SII gives (BOOT), if any.
+    pub fn bootstrap(h: &ferrocat_wire::sii::SiiHeader) -> Option<Self> {
+        (h.bootstrap_rx_size > 0 && h.bootstrap_tx_size > 0).then_some(MailboxConfig {
+            out: (h.bootstrap_rx_offset, h.bootstrap_rx_size),
+            inp: (h.bootstrap_tx_offset, h.bootstrap_tx_size),
+            protocols: h.mailbox_protocols,
+        })
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Slave {
     pub position: u16,

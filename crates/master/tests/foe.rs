@@ -70,3 +70,37 @@ fn a_password_on_a_device_without_foe_is_refused() {
     let e = toml::from_str::<SegmentConfig>(toml).unwrap().build().unwrap_err().to_string();
     assert!(e.contains("device 0") && e.contains("foe_password"), "{e}");
 }
+
+/// Firmware the way it is loaded: the AKD (as its EEPROM dump describes it) into BOOT with the
+/// SII's bootstrap mailbox (0x1800/0x1C00, 1 024 bytes each), a file by FoE — where CoE is not
+/// served — then INIT with the standard mailbox and PREOP, where CoE answers again. The
+/// built-in servo's SII has no bootstrap mailbox: the master says so, and the ESC refuses BOOT
+/// with 0x0013.
+#[test]
+fn needs_shared_akd_eeprom_takes_firmware_in_boot() {
+    use ferrocat_wire::register::AlState;
+    let akd = ferrocat_testdata::shared("captures/eeprom/akd.hex");
+    let mut m = master(&format!("[[device]]\neeprom = '{}'\n", akd.display()));
+    let akd_at = 2;
+    let standard = m.slave(akd_at).unwrap().mailbox.clone().unwrap();
+    m.enter_bootstrap(akd_at).unwrap();
+    let boot = m.slave(akd_at).unwrap().mailbox.clone().unwrap();
+    assert_eq!((boot.out, boot.inp), ((0x1800, 1024), (0x1C00, 1024)));
+    let e = m.sdo_read(akd_at, 0x1018, 1).unwrap_err().to_string();
+    assert!(e.contains("protocol not supported"), "CoE in BOOT: {e}");
+    let firmware = file(10_000);
+    m.foe_write(akd_at, "akd.i00", 0, &firmware).unwrap();
+    let s = m.engine.io.seg.nodes[akd_at as usize].esc.app();
+    let files = &s.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.foe.as_ref().unwrap().files;
+    assert_eq!(files.get(&b"akd.i00"[..]), Some(&firmware));
+    m.leave_bootstrap(akd_at).unwrap();
+    assert_eq!(m.slave(akd_at).unwrap().mailbox, Some(standard));
+    m.request_state(akd_at, AlState::PreOp).unwrap();
+    assert_eq!(m.sdo_read(akd_at, 0x1018, 1).unwrap(), 0x6Au32.to_le_bytes(), "CoE in PREOP again");
+    // No bootstrap mailbox in the servo's SII.
+    let e = m.enter_bootstrap(DRIVE).unwrap_err().to_string();
+    assert!(e.contains("no bootstrap mailbox"), "{e}");
+    m.request_state(DRIVE, AlState::Init).unwrap();
+    let e = m.request_state(DRIVE, AlState::Bootstrap).unwrap_err().to_string();
+    assert!(e.contains("0x0013"), "{e}");
+}

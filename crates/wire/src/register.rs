@@ -259,6 +259,8 @@ impl AlStatusCode {
     pub const NO_ERROR: Self = Self(0x0000);
     pub const INVALID_STATE_CHANGE: Self = Self(0x0011);
     pub const UNKNOWN_STATE: Self = Self(0x0012);
+    pub const BOOTSTRAP_NOT_SUPPORTED: Self = Self(0x0013);
+    pub const INVALID_BOOT_MAILBOX_CONFIG: Self = Self(0x0015);
     pub const INVALID_MAILBOX_CONFIG: Self = Self(0x0016);
     pub const INVALID_SM_CONFIG: Self = Self(0x0017);
     pub const SYNC_ERROR: Self = Self(0x001A);

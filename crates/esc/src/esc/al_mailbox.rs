@@ -27,20 +27,31 @@ impl Esc {
             let sms: Vec<SyncManager> = (0..self.config.sm_count).map(|n| self.sm(n)).collect();
             let Esc { app, mem, now_ns, .. } = self;
             let mut check = |from: AlState, to: AlState| -> Result<(), AlStatusCode> {
+                // SM0 and SM1 as the SII's (standard or bootstrap) mailbox.
+                let mailbox_as = |(out, inp): &(SmEntry, SmEntry)| {
+                    let good = |s: Option<&SyncManager>, e: &SmEntry, writes: bool| {
+                        s.is_some_and(|s| {
+                            s.enabled()
+                                && s.is_mailbox()
+                                && s.ecat_writes() == writes
+                                && s.start == e.start
+                                && s.length == e.length
+                        })
+                    };
+                    good(sms.first(), out, true) && good(sms.get(1), inp, false)
+                };
                 if from == AlState::Init && to == AlState::PreOp {
-                    if let Some((out, inp)) = &expected.mailbox {
-                        let good = |s: Option<&SyncManager>, e: &SmEntry, writes: bool| {
-                            s.is_some_and(|s| {
-                                s.enabled()
-                                    && s.is_mailbox()
-                                    && s.ecat_writes() == writes
-                                    && s.start == e.start
-                                    && s.length == e.length
-                            })
-                        };
-                        if !good(sms.first(), out, true) || !good(sms.get(1), inp, false) {
+                    if let Some(m) = &expected.mailbox {
+                        if !mailbox_as(m) {
                             return Err(AlStatusCode::INVALID_MAILBOX_CONFIG);
                         }
+                    }
+                }
+                if from == AlState::Init && to == AlState::Bootstrap {
+                    match &expected.bootstrap {
+                        None => return Err(AlStatusCode::BOOTSTRAP_NOT_SUPPORTED),
+                        Some(m) if !mailbox_as(m) => return Err(AlStatusCode::INVALID_BOOT_MAILBOX_CONFIG),
+                        Some(_) => {}
                     }
                 }
                 if from == AlState::PreOp && to == AlState::SafeOp {

@@ -56,6 +56,8 @@ struct SmState {
 #[derive(Debug, Clone, Default)]
 struct Expected {
     mailbox: Option<(SmEntry, SmEntry)>,
+    /// The bootstrap mailbox (SM0, SM1 in BOOT), where the SII gives one.
+    bootstrap: Option<(SmEntry, SmEntry)>,
     /// SM index, SII entry, expected length in bytes.
     process_data: Vec<(u8, SmEntry, u16)>,
 }
@@ -82,6 +84,10 @@ impl Expected {
                 SmEntry { start: h.mailbox_tx_offset, length: h.mailbox_tx_size, ..inp },
             )
         });
+        let bootstrap = (h.bootstrap_rx_size > 0 && h.bootstrap_tx_size > 0).then(|| {
+            let sm = |start, length, control| SmEntry { start, length, control, ..Default::default() };
+            (sm(h.bootstrap_rx_offset, h.bootstrap_rx_size, 0x26), sm(h.bootstrap_tx_offset, h.bootstrap_tx_size, 0x22))
+        });
         let mut process_data = Vec::new();
         for (i, s) in sms.iter().enumerate() {
             if s.sm_type == SmEntry::TYPE_OUTPUTS || s.sm_type == SmEntry::TYPE_INPUTS {
@@ -91,7 +97,7 @@ impl Expected {
                 process_data.push((i as u8, *s, len));
             }
         }
-        Expected { mailbox, process_data }
+        Expected { mailbox, bootstrap, process_data }
     }
 }
 

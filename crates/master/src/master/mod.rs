@@ -180,11 +180,7 @@ impl<I: Io> Master<I> {
         let h = sii.header;
         let features = u16::from_le_bytes([id[8], id[9]]);
         let dl_status = DlStatus(u16::from_le_bytes(dl));
-        let mailbox = (h.mailbox_rx_size > 0 && h.mailbox_tx_size > 0).then_some(MailboxConfig {
-            out: (h.mailbox_rx_offset, h.mailbox_rx_size),
-            inp: (h.mailbox_tx_offset, h.mailbox_tx_size),
-            protocols: h.mailbox_protocols,
-        });
+        let mailbox = MailboxConfig::standard(&h);
         Ok(Slave {
             position: pos,
             station,

@@ -14,10 +14,21 @@ impl<I: Io> Master<I> {
         self.wait_state_all(state)
     }
 
-    /// Requests `state` from one slave and waits for it.
+    /// Requests `state` from one slave and waits for it. A slave whose firmware has not yet
+    /// read the last AL control write refuses the next (no working counter): the request is
+    /// repeated until it is taken or the state timeout passes.
     pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
         let st = self.slave(position)?.station;
-        self.fpwr(st, 0x0120, &[state as u8, 0])?;
+        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        loop {
+            let mut control = [state as u8, 0];
+            let wkc = self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut control)?;
+            if wkc == 1 || self.engine.io.now_ns() > deadline {
+                break;
+            }
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 100_000);
+        }
         self.wait_state(position, state)
     }
 
