@@ -21,7 +21,9 @@ fuzz_target!(|data: &[u8]| {
             // (processing and forwarding alike, a 20 ns loop-back), every frame delivered.
             let knowable = cfg.devices.iter().all(|d| d.timing.is_none())
                 && cfg.loss_probability.unwrap_or(0.0) == 0.0
-                && cfg.corruption_probability.unwrap_or(0.0) == 0.0;
+                && cfg.corruption_probability.unwrap_or(0.0) == 0.0
+                && cfg.events.is_empty()
+                && cfg.secondary.is_none();
             if let Ok(seg) = cfg.build() {
                 // A LAN9252 has its own processing and forwarding delays (its ESC kind's, not
                 // the default): where it sits among others, no master can know the delays.

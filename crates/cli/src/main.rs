@@ -66,6 +66,10 @@ enum Command {
         /// Network interface to serve (AF_PACKET raw socket; needs CAP_NET_RAW).
         #[arg(long)]
         iface: Option<String>,
+        /// With --iface: the master's second port of a ring (cable redundancy), wired where the
+        /// segment's `[secondary]` says or to the last device's free port.
+        #[arg(long, requires = "iface", value_name = "IF")]
+        secondary_iface: Option<String>,
         /// Serve EtherCAT over UDP on this address instead, e.g. 127.0.0.1:34980.
         #[arg(long, value_name = "ADDR:PORT")]
         udp: Option<String>,
@@ -80,7 +84,7 @@ enum Command {
         #[arg(long)]
         seed: Option<u64>,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
-        #[arg(long, conflicts_with_all = ["config", "device", "iface", "udp", "report", "clock_log"])]
+        #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
         bench: bool,
         #[arg(long, requires = "bench")]
         json: bool,
@@ -409,8 +413,8 @@ fn main() -> ExitCode {
         },
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
         Command::Sim { bench: true, json, .. } => sim::bench(json),
-        Command::Sim { config, device, iface, udp, report, clock_log, seed, .. } => {
-            sim::run(sim::SimArgs { config, devices: device, iface, udp, report, clock_log, seed })
+        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, .. } => {
+            sim::run(sim::SimArgs { config, devices: device, iface, secondary_iface, udp, report, clock_log, seed })
         }
         Command::Lab { experiment } => {
             use ferrocat_lab::scenario::Experiment;

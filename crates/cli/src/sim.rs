@@ -14,6 +14,7 @@ pub struct SimArgs {
     pub config: Option<PathBuf>,
     pub devices: Vec<String>,
     pub iface: Option<String>,
+    pub secondary_iface: Option<String>,
     pub udp: Option<String>,
     pub report: Option<PathBuf>,
     pub clock_log: Option<PathBuf>,
@@ -22,6 +23,10 @@ pub struct SimArgs {
 
 /// Builds the segment a command describes with `--config` or `--device`.
 pub fn segment_from(config: Option<&Path>, devices: &[String], seed: Option<u64>) -> anyhow::Result<Segment> {
+    Ok(segment_config(config, devices, seed)?.build()?)
+}
+
+fn segment_config(config: Option<&Path>, devices: &[String], seed: Option<u64>) -> anyhow::Result<SegmentConfig> {
     let mut cfg = match (config, devices.is_empty()) {
         (Some(p), true) => SegmentConfig::from_file(p)?,
         (None, false) => SegmentConfig::from_device_args(devices)?,
@@ -31,7 +36,7 @@ pub fn segment_from(config: Option<&Path>, devices: &[String], seed: Option<u64>
     if let Some(s) = seed {
         cfg.seed = s;
     }
-    Ok(cfg.build()?)
+    Ok(cfg)
 }
 
 fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
@@ -60,6 +65,10 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
     json!({
         "frames_in": stats.frames_in,
         "frames_out": stats.frames_out,
+        "frames_in_secondary": stats.frames_in_secondary,
+        "frames_out_secondary": stats.frames_out_secondary,
+        "frames_lost": seg.stats.lost,
+        "frames_destroyed_circulating": seg.stats.destroyed_circulating,
         "not_ethercat": stats.not_ethercat,
         "malformed": stats.malformed,
         "busy_ns_per_frame": stats.busy_ns.checked_div(stats.frames_out).unwrap_or(0),
@@ -146,7 +155,16 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
-    let mut seg = segment_from(a.config.as_deref(), &a.devices, a.seed)?;
+    let mut cfg = segment_config(a.config.as_deref(), &a.devices, a.seed)?;
+    // A second interface closes the segment into a ring: at the last device's free port
+    // unless the description says where.
+    if a.secondary_iface.is_some() && cfg.secondary.is_none() {
+        cfg.secondary = Some(Default::default());
+    }
+    let mut seg = cfg.build()?;
+    if let (Some(_), None) = (seg.secondary(), &a.secondary_iface) {
+        eprintln!("ferrocat sim: the segment is a ring but no --secondary-iface serves its second port");
+    }
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
@@ -155,14 +173,27 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     let stats = match (&a.iface, &a.udp) {
         (Some(iface), None) => {
             let sock = RawSocket::open(iface).with_context(|| format!("serving interface {iface}"))?;
-            eprintln!("ferrocat sim: {} slaves ({}) on {iface}", names.len(), names.join(", "));
+            let secondary = match &a.secondary_iface {
+                Some(s) => Some(RawSocket::open(s).with_context(|| format!("serving interface {s}"))?),
+                None => None,
+            };
+            match (&a.secondary_iface, seg.secondary()) {
+                (Some(s), Some(l)) => eprintln!(
+                    "ferrocat sim: {} slaves ({}) in a ring on {iface} and {s} (port {} of device {})",
+                    names.len(),
+                    names.join(", "),
+                    l.port,
+                    l.node
+                ),
+                _ => eprintln!("ferrocat sim: {} slaves ({}) on {iface}", names.len(), names.join(", ")),
+            }
             // Answer like hardware: real-time priority on CPU 0 (a master pins itself to CPU 1),
             // below a master's 80 so that neither starves the other on a shared core.
             let rt = ferrocat_link::real_time(70, Some(0));
             if !rt.refused.is_empty() {
                 eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
             }
-            serve_raw(&mut seg, &sock, &stop, a.clock_log.is_some())?
+            serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, a.clock_log.is_some())?
         }
         (None, Some(addr)) => {
             let sock = std::net::UdpSocket::bind(addr).with_context(|| format!("binding UDP {addr}"))?;

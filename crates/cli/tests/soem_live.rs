@@ -220,6 +220,57 @@ fn soem_writes_and_reads_files_by_foe() {
     assert_eq!(r["wrong_password"]["result"], "-5", "{r}");
 }
 
+/// SOEM's cable redundancy, unmodified, on a simulated ring: two couplers with a terminal
+/// each, the second coupler's X2 OUT back to SOEM's second interface. The ring reaches OP;
+/// 1.5 s into the run the cable between the couplers is pulled, and from then on SOEM serves
+/// each half from its own port (sending the primary's answer round the second half again):
+/// every cycle still has the whole ring's working counter, the second half still gets its
+/// outputs, and the second coupler has lost the link on its port 0.
+#[test]
+fn soem_keeps_a_broken_ring_running_on_its_second_port() {
+    let net = VethPair::new("rg");
+    let (master_red, segment_red) = net.second_link();
+    let path = std::env::temp_dir().join(format!("ferrocat-ring-{}.toml", std::process::id()));
+    let report = std::env::temp_dir().join(format!("ferrocat-ring-{}.json", std::process::id()));
+    std::fs::write(
+        &path,
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
+         [secondary]\ndevice = 2\n\
+         [[event]]\nat_ms = 1500\nlink_down = { device = 2, port = 0 }\n",
+    )
+    .unwrap();
+    let sim = Sim::start(
+        &net,
+        &["--config", path.to_str().unwrap(), "--secondary-iface", &segment_red, "--report", report.to_str().unwrap()],
+    );
+    let r = soem_script(&net, "soem_ring.py", &[&master_red, "3"]);
+    sim.stop();
+    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    std::fs::remove_file(&path).ok();
+    std::fs::remove_file(&report).ok();
+    println!("simulator: {rep}");
+    assert_eq!(r["found"], 4, "{r}");
+    assert_eq!(r["op"], true, "{r}");
+    // Two EL2004 written by the LRW: working counter 2 each (SOEM's own expectation counts the
+    // one byte they share).
+    let counts = r["wkc_counts"].as_object().unwrap();
+    let good = counts.get("4").and_then(|v| v.as_u64()).unwrap_or(0);
+    assert_eq!(good, r["cycles"].as_u64().unwrap(), "every cycle the whole ring's working counter: {r}");
+    assert!(good > 300, "{r}");
+    // The break happened while SOEM ran: the second coupler's port 0 has no link (DL status
+    // bit 4), the first coupler's port 2 neither (bit 6).
+    let dl: Vec<u64> = r["dl_status"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+    assert_eq!(dl[2] & 0x10, 0, "{r}");
+    assert_eq!(dl[0] & 0x40, 0, "{r}");
+    // After the break, frames answered on the secondary port: SOEM's re-sent ones.
+    assert!(rep["frames_in_secondary"].as_u64().unwrap() > 300, "{rep}");
+    // The second half's terminal has the last outputs SOEM wrote.
+    let last = r["last_output"].as_u64().unwrap();
+    assert_eq!(rep["devices"][3]["outputs"][0].as_u64().unwrap() & 0x0F, last, "{rep}");
+    assert_eq!(rep["devices"][1]["outputs"][0].as_u64().unwrap() & 0x0F, last, "{rep}");
+}
+
 /// Runs `tests/python/SCRIPT IFACE ARGS…` in the master's namespace; its JSON, once it has
 /// succeeded.
 fn soem_script(net: &VethPair, script: &str, args: &[&str]) -> serde_json::Value {

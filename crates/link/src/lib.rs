@@ -257,6 +257,24 @@ impl RawSocket {
         self.recvmsg(buf, 0)
     }
 
+    /// The next frame already queued, with its kernel receive timestamp, without waiting.
+    pub fn try_recv_stamped(&self, buf: &mut [u8]) -> io::Result<Option<(usize, Option<u64>)>> {
+        self.recvmsg(buf, libc::MSG_DONTWAIT)
+    }
+
+    /// Waits up to `timeout_ms` until one of `socks` has a frame; says which have.
+    pub fn wait_readable(socks: &[&RawSocket], timeout_ms: i32) -> io::Result<Vec<bool>> {
+        let mut fds: Vec<libc::pollfd> =
+            socks.iter().map(|s| libc::pollfd { fd: s.fd.as_raw_fd(), events: libc::POLLIN, revents: 0 }).collect();
+        // SAFETY: poll reads and writes the pollfd array we own, of the length we pass.
+        let r = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms) };
+        if r < 0 {
+            let e = io::Error::last_os_error();
+            return if e.kind() == io::ErrorKind::Interrupted { Ok(vec![false; socks.len()]) } else { Err(e) };
+        }
+        Ok(fds.iter().map(|f| f.revents & libc::POLLIN != 0).collect())
+    }
+
     /// The kernel's transmit timestamp of the last frame sent, if it has arrived.
     pub fn tx_timestamp(&self) -> Option<u64> {
         // Every frame sent queues a stamp, whether or not anyone reads it: the newest is the

@@ -27,7 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
 use crate::files::{read_eeprom_dump, read_esi, read_toml};
-use crate::segment::{Node, Segment};
+use crate::segment::{Event, Node, Segment};
 use crate::timing::{link_delay_ns, EscTiming, PortKind};
 
 #[derive(Debug, thiserror::Error)]
@@ -212,6 +212,40 @@ pub struct DeviceToml {
     pub latch_unit: Option<bool>,
 }
 
+/// The master's second port (cable redundancy): wired to a free port of a device, it closes
+/// the line into a ring.
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct SecondaryToml {
+    /// Default: the last device.
+    pub device: Option<NodeRef>,
+    /// Default: the device's first free port in processing order after its entry port.
+    pub port: Option<u8>,
+    pub cable_m: Option<f64>,
+    pub link_ns: Option<u32>,
+}
+
+/// A device's port, in an event.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PortToml {
+    pub device: NodeRef,
+    pub port: u8,
+}
+
+/// A change at a given instant of the segment's time (in live mode: since the simulator
+/// started): exactly one of the kinds.
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct EventToml {
+    pub at_ms: f64,
+    /// Pulls the cable at this port (both ends lose their link).
+    pub link_down: Option<PortToml>,
+    pub link_up: Option<PortToml>,
+    pub power_off: Option<NodeRef>,
+    pub power_on: Option<NodeRef>,
+}
+
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
 #[serde(deny_unknown_fields)]
 pub struct SegmentConfig {
@@ -224,6 +258,10 @@ pub struct SegmentConfig {
     pub corruption_probability: Option<f64>,
     #[serde(default, rename = "device")]
     pub devices: Vec<DeviceToml>,
+    /// The master's secondary port, for a ring (cable redundancy).
+    pub secondary: Option<SecondaryToml>,
+    #[serde(default, rename = "event")]
+    pub events: Vec<EventToml>,
     /// Folder relative paths are resolved against (the TOML file's folder).
     #[serde(skip)]
     pub base: PathBuf,
@@ -502,20 +540,8 @@ impl SegmentConfig {
             };
             let pport = match d.parent_port {
                 Some(p) => p,
-                None => {
-                    // The parent's next free port in processing order after its entry port.
-                    let pn = &seg.nodes[parent];
-                    let mut q = pn.entry_port;
-                    let mut found = None;
-                    for _ in 0..3 {
-                        q = [3, 2, 0, 1][q as usize];
-                        if pn.port_kinds[q as usize].is_some() && pn.peers[q as usize].is_none() && q != pn.entry_port {
-                            found = Some(q);
-                            break;
-                        }
-                    }
-                    found.ok_or_else(|| device_err(&place, format!("parent '{}' has no free port", names[parent])))?
-                }
+                None => free_port(&seg.nodes[parent])
+                    .ok_or_else(|| device_err(&place, format!("parent '{}' has no free port", names[parent])))?,
             };
             let pn = &seg.nodes[parent];
             let Some(pkind) = pn.port_kinds.get(pport as usize).copied().flatten() else {
@@ -532,9 +558,106 @@ impl SegmentConfig {
             let delay = d.link_ns.unwrap_or_else(|| link_delay_ns(pkind, kind, cable_m));
             seg.connect(parent, pport, i, port, delay);
         }
+        if let Some(sec) = &self.secondary {
+            self.wire_secondary(&mut seg, sec, &names)?;
+        }
+        for (k, e) in self.events.iter().enumerate() {
+            let (t_ns, event) = self.event(&seg, k, e, &names)?;
+            seg.schedule(t_ns, event);
+        }
         seg.refresh_links();
         Ok(seg)
     }
+
+    fn wire_secondary(&self, seg: &mut Segment, sec: &SecondaryToml, names: &[String]) -> Result<(), SegmentError> {
+        let place = "[secondary]";
+        let node = match &sec.device {
+            None => names.len() - 1,
+            Some(r) => node_index(r, names).map_err(|m| device_err(place, m))?,
+        };
+        let n = &seg.nodes[node];
+        let port = match sec.port {
+            Some(p) => p,
+            None => free_port(n)
+                .ok_or_else(|| device_err(place, format!("device {node} ('{}') has no free port", names[node])))?,
+        };
+        let Some(kind) = n.port_kinds.get(port as usize).copied().flatten() else {
+            return Err(device_err(place, format!("device {node} ('{}') has no port {port}", names[node])));
+        };
+        if n.peers[port as usize].is_some() || port == n.entry_port {
+            return Err(device_err(
+                place,
+                format!("port {port} of device {node} ('{}') is already in use", names[node]),
+            ));
+        }
+        if sec.cable_m.is_some() && sec.link_ns.is_some() {
+            return Err(device_err(place, "give cable_m or link_ns, not both (link_ns is the whole hop)"));
+        }
+        let delay = match sec.link_ns {
+            Some(ns) => ns,
+            None if sec.cable_m.is_none() => seg.master_link_ns,
+            None => link_delay_ns(
+                PortKind::Mii,
+                kind,
+                in_range(place, "cable_m", sec.cable_m.unwrap_or(2.0), 0.0..=1000.0)?,
+            ),
+        };
+        seg.connect_secondary(node, port, delay);
+        Ok(())
+    }
+
+    fn event(&self, seg: &Segment, k: usize, e: &EventToml, names: &[String]) -> Result<(u64, Event), SegmentError> {
+        let place = format!("event {k}");
+        let at_ms = in_range(&place, "at_ms", e.at_ms, 0.0..=1e10)?;
+        let node = |r: &NodeRef| node_index(r, names).map_err(|m| device_err(&place, m));
+        let port = |p: &PortToml| -> Result<(usize, u8), SegmentError> {
+            let i = node(&p.device)?;
+            if p.port > 3 || seg.nodes[i].port_kinds[p.port as usize].is_none() {
+                return Err(device_err(&place, format!("device {i} ('{}') has no port {}", names[i], p.port)));
+            }
+            Ok((i, p.port))
+        };
+        let mut kinds = Vec::new();
+        if let Some(p) = &e.link_down {
+            let (node, port) = port(p)?;
+            kinds.push(Event::LinkDown { node, port });
+        }
+        if let Some(p) = &e.link_up {
+            let (node, port) = port(p)?;
+            kinds.push(Event::LinkUp { node, port });
+        }
+        if let Some(r) = &e.power_off {
+            kinds.push(Event::PowerOff { node: node(r)? });
+        }
+        if let Some(r) = &e.power_on {
+            kinds.push(Event::PowerOn { node: node(r)? });
+        }
+        match (kinds.pop(), kinds.is_empty()) {
+            (Some(ev), true) => Ok(((at_ms * 1e6).round() as u64, ev)),
+            _ => Err(device_err(place, "give exactly one of link_down, link_up, power_off, power_on")),
+        }
+    }
+}
+
+/// A device by index or name.
+fn node_index(r: &NodeRef, names: &[String]) -> Result<usize, String> {
+    match r {
+        NodeRef::Index(i) if *i < names.len() => Ok(*i),
+        NodeRef::Index(i) => Err(format!("no device {i} (there are {})", names.len())),
+        NodeRef::Name(n) => names.iter().position(|x| x == n).ok_or_else(|| format!("no device named '{n}'")),
+    }
+}
+
+/// A node's first free port in processing order after its entry port.
+fn free_port(n: &Node) -> Option<u8> {
+    let mut q = n.entry_port;
+    for _ in 0..3 {
+        q = [3, 2, 0, 1][q as usize];
+        if n.port_kinds[q as usize].is_some() && n.peers[q as usize].is_none() && q != n.entry_port {
+            return Some(q);
+        }
+    }
+    None
 }
 
 /// A CiA402 drive: the SII says so (DS402 channels), or the dictionary has the profile's

@@ -10,8 +10,10 @@ mod segment;
 pub mod timing;
 mod watch;
 
-pub use config::{load_device, DeviceSource, DeviceToml, SegmentConfig, SegmentError};
-pub use segment::{Event, Node, Peer, Segment, SegmentStats};
+pub use config::{
+    load_device, DeviceSource, DeviceToml, EventToml, PortToml, SecondaryToml, SegmentConfig, SegmentError,
+};
+pub use segment::{Event, MasterPort, Node, Peer, SecondaryLink, Segment, SegmentStats};
 pub use watch::Watch;
 
 use ferrocat_wire::ethernet::{EthernetRepr, ETHERTYPE_ETHERCAT, ETHERTYPE_IPV4};

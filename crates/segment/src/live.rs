@@ -6,7 +6,7 @@ use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::Segment;
+use crate::{MasterPort, Segment};
 
 pub use ferrocat_link::{monotonic_ns, RawSocket};
 
@@ -15,6 +15,9 @@ pub use ferrocat_link::{monotonic_ns, RawSocket};
 pub struct ServeStats {
     pub frames_in: u64,
     pub frames_out: u64,
+    /// Of those, the frames taken from and answered on the secondary port of a ring.
+    pub frames_in_secondary: u64,
+    pub frames_out_secondary: u64,
     /// Frames that were not EtherCAT (dropped, as an ESC with DL control bit 0 set does).
     pub not_ethercat: u64,
     /// Malformed EtherCAT frames (counted and dropped).
@@ -51,10 +54,18 @@ impl ServeStats {
 /// One received frame through the segment: counted, dropped as an ESC drops it (not EtherCAT,
 /// or malformed), or processed. Returns when the answer would be back at the master, if there is
 /// one.
-fn handle(seg: &mut Segment, frame: &mut [u8], t_ns: u64, stats: &mut ServeStats) -> Option<u64> {
+fn handle(
+    seg: &mut Segment,
+    from: MasterPort,
+    frame: &mut [u8],
+    t_ns: u64,
+    stats: &mut ServeStats,
+) -> Option<(MasterPort, u64)> {
     stats.frames_in += 1;
     match ferrocat_wire::Frame::parse(frame) {
-        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => seg.exchange(frame, t_ns),
+        Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => {
+            seg.exchange_on(from, frame, t_ns)
+        }
         Ok(_) => {
             stats.not_ethercat += 1;
             None
@@ -111,23 +122,66 @@ impl Placement {
     }
 }
 
-/// Serves `seg` on a raw socket until `stop` is set; `log_clocks` fills `clock_log`.
-pub fn serve_raw(seg: &mut Segment, sock: &RawSocket, stop: &AtomicBool, log_clocks: bool) -> io::Result<ServeStats> {
+/// Serves `seg` on a raw socket until `stop` is set; `log_clocks` fills `clock_log`. With
+/// `secondary`, that interface is the master's second port of a ring (the segment's
+/// [`Segment::connect_secondary`]): frames are taken from both and answered on the port the
+/// segment returns them to.
+pub fn serve_raw(
+    seg: &mut Segment,
+    sock: &RawSocket,
+    secondary: Option<&RawSocket>,
+    stop: &AtomicBool,
+    log_clocks: bool,
+) -> io::Result<ServeStats> {
     let t0 = monotonic_ns();
     let mut buf = vec![0u8; 9216];
     let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
     let mut place = Placement::default();
+    let socks: Vec<&RawSocket> = [Some(sock), secondary].into_iter().flatten().collect();
+    // With one port, a blocking receive (its timeout lets the segment's time move on); with
+    // two, a poll of both, then whatever each has queued.
+    let mut ready = vec![false; socks.len()];
+    let mut next = 0usize;
     while !stop.load(Ordering::Relaxed) {
-        let Some((n, stamp)) = sock.recv_stamped(&mut buf)? else {
+        let got = if socks.len() == 1 {
+            sock.recv_stamped(&mut buf)?.map(|x| (MasterPort::Primary, x))
+        } else {
+            if !ready.iter().any(|r| *r) {
+                ready = RawSocket::wait_readable(&socks, 50)?;
+            }
+            // Take turns, so that neither port starves the other.
+            let mut got = None;
+            for k in 0..socks.len() {
+                let i = (next + k) % socks.len();
+                if ready[i] {
+                    match socks[i].try_recv_stamped(&mut buf)? {
+                        Some(x) => {
+                            got = Some(([MasterPort::Primary, MasterPort::Secondary][i], x));
+                            next = i + 1;
+                            break;
+                        }
+                        None => ready[i] = false,
+                    }
+                }
+            }
+            got
+        };
+        let Some((from, (n, stamp))) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
             continue;
         };
+        stats.frames_in_secondary += (from == MasterPort::Secondary) as u64;
         let start = monotonic_ns();
         let arrived = stamp.map_or(start, |s| s.clamp(t0, start));
         let entry = place.entry_ns(n, arrived - t0, start - t0);
-        if let Some(back) = handle(seg, &mut buf[..n], entry, &mut stats) {
+        if let Some((to, back)) = handle(seg, from, &mut buf[..n], entry, &mut stats) {
+            let sock = match to {
+                MasterPort::Primary => sock,
+                MasterPort::Secondary => secondary.unwrap_or(sock),
+            };
             sock.send(&buf[..n])?;
             stats.frames_out += 1;
+            stats.frames_out_secondary += (to == MasterPort::Secondary) as u64;
             let sent = monotonic_ns();
             stats.record(sent - start);
             // The answer reaches the other end partway through the send call: its kernel
@@ -170,7 +224,7 @@ pub fn serve_udp(seg: &mut Segment, sock: &UdpSocket, stop: &AtomicBool) -> io::
         // Wrap the PDU in an Ethernet header so that the segment sees a frame.
         buf[..12].fill(0xFF);
         buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
-        if handle(seg, &mut buf[..HDR + n], start - t0, &mut stats).is_some() {
+        if handle(seg, MasterPort::Primary, &mut buf[..HDR + n], start - t0, &mut stats).is_some() {
             sock.send_to(&buf[HDR..HDR + n], from)?;
             stats.frames_out += 1;
             stats.record(monotonic_ns() - start);

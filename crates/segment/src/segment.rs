@@ -16,6 +16,22 @@ pub struct Peer {
     pub delay_ns: u32,
 }
 
+/// The master's two ports: the line starts at the primary; with cable redundancy the last
+/// device's free port is wired back to the secondary, closing the line into a ring.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MasterPort {
+    Primary,
+    Secondary,
+}
+
+/// Where the master's secondary port is wired: a device's port and the link's one-way delay.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SecondaryLink {
+    pub node: usize,
+    pub port: u8,
+    pub delay_ns: u32,
+}
+
 /// One slave: its ESC and how it is wired.
 #[derive(Debug)]
 pub struct Node {
@@ -92,6 +108,9 @@ pub struct Segment {
     pub nodes: Vec<Node>,
     /// One-way delay between the master's NIC and the first slave's entry port.
     pub master_link_ns: u32,
+    /// The master's secondary port, where the segment is a ring (cable redundancy); set it
+    /// with [`Segment::connect_secondary`].
+    secondary: Option<SecondaryLink>,
     /// The oscillators' wander, drawn at fixed instants: the same for every master.
     rng: ChaCha8Rng,
     /// Frame faults, one draw per frame: a master that sends more frames does not change the
@@ -108,13 +127,16 @@ pub struct Segment {
     wander_step_ns: u64,
     next_wander_ns: u64,
     pub stats: SegmentStats,
-    route: Route,
+    /// The walk from each master port.
+    routes: [Route; 2],
     /// Instants whose system times are still being filled in, oldest first.
     watches: VecDeque<Watch>,
-    /// When the master's link can take the next frame's first bit, and when the last frame's
+    /// When each master link can take the next frame's first bit, and when the last frame's
     /// first bit left: one frame at a time on a wire.
-    link_free_ns: u64,
+    link_free_ns: [u64; 2],
     last_departure_ns: u64,
+    /// The port the last frame was sent from (whose route `last_visits` reports).
+    last_route: MasterPort,
 }
 
 /// The last walk through the segment, relative to the instant the frame reached the first ESC:
@@ -127,10 +149,14 @@ struct Route {
     scratch: Vec<u64>,
     valid: bool,
     visits: Vec<(usize, FrameTiming)>,
-    back_ns: u64,
+    /// Where the frame leaves for the master and when (None: it circles until it dies).
+    exit: Exit,
     /// When the last frame reached the first ESC: the route's origin for `last_visits`.
     last_at: u64,
 }
+
+/// The master port a walk leaves by, and when relative to its start.
+type Exit = Option<(MasterPort, u64)>;
 
 /// Processing order: after port 0 comes 3, after 3 comes 1, after 1 comes 2, after 2 comes 0.
 fn next_port(p: u8) -> u8 {
@@ -142,6 +168,7 @@ impl Segment {
         Segment {
             nodes,
             master_link_ns: 500,
+            secondary: None,
             rng: ChaCha8Rng::seed_from_u64(seed),
             fault_rng: ChaCha8Rng::seed_from_u64(seed ^ 0xFA17),
             loss_probability: 0.0,
@@ -151,10 +178,11 @@ impl Segment {
             wander_step_ns: 100_000_000,
             next_wander_ns: 100_000_000,
             stats: SegmentStats::default(),
-            route: Route::default(),
+            routes: [Route::default(), Route::default()],
             watches: VecDeque::new(),
-            link_free_ns: 0,
+            link_free_ns: [0; 2],
             last_departure_ns: 0,
+            last_route: MasterPort::Primary,
         }
     }
 
@@ -215,7 +243,44 @@ impl Segment {
         self.nodes[a].peers[port_a as usize] = Some(Peer { node: b, port: port_b, delay_ns });
         self.nodes[b].peers[port_b as usize] = Some(Peer { node: a, port: port_a, delay_ns });
         self.nodes[b].entry_port = port_b;
-        self.route.valid = false;
+        self.invalidate_routes();
+    }
+
+    /// Wires the master's secondary port to `node.port` with a one-way delay: the segment
+    /// becomes a ring (cable redundancy).
+    pub fn connect_secondary(&mut self, node: usize, port: u8, delay_ns: u32) {
+        self.secondary = Some(SecondaryLink { node, port, delay_ns });
+        self.invalidate_routes();
+    }
+
+    /// The master's secondary link, if the segment is a ring.
+    pub fn secondary(&self) -> Option<SecondaryLink> {
+        self.secondary
+    }
+
+    fn invalidate_routes(&mut self) {
+        for r in &mut self.routes {
+            r.valid = false;
+        }
+    }
+
+    /// The master port wired to `node.port`, if any.
+    fn master_at(&self, node: usize, port: u8) -> Option<MasterPort> {
+        if node == 0 && port == self.nodes[0].entry_port {
+            Some(MasterPort::Primary)
+        } else if self.secondary.is_some_and(|s| s.node == node && s.port == port) {
+            Some(MasterPort::Secondary)
+        } else {
+            None
+        }
+    }
+
+    /// Where a frame from the master's `port` enters, and the link's one-way delay.
+    fn entry_of(&self, port: MasterPort) -> Option<(usize, u8, u32)> {
+        match port {
+            MasterPort::Primary => (!self.nodes.is_empty()).then(|| (0, self.nodes[0].entry_port, self.master_link_ns)),
+            MasterPort::Secondary => self.secondary.map(|s| (s.node, s.port, s.delay_ns)),
+        }
     }
 
     fn link_up(&self, node: usize, port: u8) -> bool {
@@ -223,7 +288,7 @@ impl Segment {
         if !n.powered || n.cut[port as usize] {
             return false;
         }
-        if node == 0 && port == n.entry_port {
+        if self.master_at(node, port).is_some() {
             return true; // the master's NIC
         }
         n.peers[port as usize].is_some_and(|p| self.nodes[p.node].powered && !self.nodes[p.node].cut[p.port as usize])
@@ -319,52 +384,61 @@ impl Segment {
         [esc, ev].into_iter().flatten().min()
     }
 
-    /// The frame's walk through `node`, entered on `entry` at `t_in`: records the timing of
-    /// every ESC it passes and returns when it leaves `entry` again. The wiring is a tree
-    /// (every device hangs off an earlier one), so the depth never exceeds the node count.
-    fn walk(&mut self, node: usize, entry: u8, t_in: u64, depth: usize) -> u64 {
-        let mut timing = FrameTiming::default();
-        timing.port_ns[entry as usize] = Some(t_in);
-        let (proc_ns, fwd_ns, loop_ns) = {
-            let t = &self.nodes[node].timing;
-            (t.processing_ns as u64, t.forwarding_ns as u64, t.loopback_ns as u64)
-        };
-        let mut slot = None;
-        let (mut p, mut t, mut from_wire) = (entry, t_in, true);
-        loop {
+    /// The walk of a frame's head from the master's `from` port, relative to its arrival at the
+    /// first ESC: every ESC's port times and processing-unit pass in the order they happen, and
+    /// where and when the head leaves for the master. Each port passes the frame to the next in
+    /// processing order; an open port with a link sends it down the wire, a closed one loops it
+    /// back. On a tree and on a ring every port is passed at most twice, so a walk longer than
+    /// that circles (a port closed by hand) and the frame never returns.
+    fn walk(&mut self, from: MasterPort) -> (Vec<(usize, FrameTiming)>, Exit) {
+        let mut visits = std::mem::take(&mut self.routes[from as usize].visits);
+        visits.clear();
+        let Some((start, start_port, _)) = self.entry_of(from) else { return (visits, None) };
+        // Per node: its port times so far, and its visit's index once it has one.
+        let mut timing = vec![FrameTiming::default(); self.nodes.len()];
+        let mut slot = vec![None; self.nodes.len()];
+        let (mut node, mut p, mut t, mut from_wire) = (start, start_port, 0u64, true);
+        timing[node].port_ns[p as usize] = Some(0);
+        let mut exit = None;
+        for _ in 0..8 * self.nodes.len() + 8 {
+            let esc_timing = self.nodes[node].timing;
             let mut t_tx = t;
             if p == 0 {
-                timing.epu_ns = t;
-                slot = Some(self.route.visits.len());
-                self.route.visits.push((node, timing));
-                t_tx += proc_ns;
+                timing[node].epu_ns = t;
+                slot[node] = Some(visits.len());
+                visits.push((node, FrameTiming::default()));
+                t_tx += esc_timing.processing_ns as u64;
             } else if from_wire {
-                t_tx += fwd_ns;
+                t_tx += esc_timing.forwarding_ns as u64;
             }
             let q = next_port(p);
-            if q == entry {
-                if let Some(i) = slot {
-                    self.route.visits[i].1.port_ns = timing.port_ns;
-                }
-                return t_tx;
-            }
-            let exists = self.nodes[node].esc.config.has_port(q);
-            if !exists {
+            if !self.nodes[node].esc.config.has_port(q) {
                 (p, t, from_wire) = (q, t_tx, false);
                 continue;
             }
-            match self.nodes[node].peers[q as usize] {
-                Some(peer)
-                    if depth < self.nodes.len() && self.link_up(node, q) && self.nodes[node].esc.port_open(q) =>
-                {
-                    let d = peer.delay_ns as u64;
-                    let back = self.walk(peer.node, peer.port, t_tx + d, depth + 1) + d;
-                    timing.port_ns[q as usize] = Some(back);
-                    (p, t, from_wire) = (q, back, true);
+            let open = self.link_up(node, q) && self.nodes[node].esc.port_open(q);
+            if let Some(m) = self.master_at(node, q) {
+                // The primary port's cable is checked before the frame leaves (a cut loses it).
+                if open || m == MasterPort::Primary {
+                    exit = Some((m, t_tx));
+                    break;
                 }
-                _ => (p, t, from_wire) = (q, t_tx + loop_ns, false),
+            }
+            match self.nodes[node].peers[q as usize] {
+                Some(peer) if open => {
+                    t = t_tx + peer.delay_ns as u64;
+                    (node, p, from_wire) = (peer.node, peer.port, true);
+                    timing[node].port_ns[p as usize] = Some(t);
+                }
+                _ => (p, t, from_wire) = (q, t_tx + self.nodes[node].timing.loopback_ns as u64, false),
             }
         }
+        for (n, s) in slot.iter().enumerate() {
+            if let Some(i) = s {
+                visits[*i].1 = timing[n];
+            }
+        }
+        (visits, exit)
     }
 
     /// What decides a node's part of the route and may change between frames (timings and
@@ -376,36 +450,50 @@ impl Segment {
         (n.esc.port_generation() as u64) << 32 | (n.powered as u64) << 31 | cut as u64
     }
 
-    /// Walks the segment again if any node's route state changed since the last walk.
-    fn refresh_route(&mut self) {
-        let mut key = std::mem::take(&mut self.route.scratch);
+    /// Walks the segment from `from` again if any node's route state changed since the last
+    /// walk from there.
+    fn refresh_route(&mut self, from: MasterPort) {
+        let r = from as usize;
+        let mut key = std::mem::take(&mut self.routes[r].scratch);
         key.clear();
         key.extend((0..self.nodes.len()).map(|i| self.route_state(i)));
-        if !(self.route.valid && key == self.route.key) {
-            self.route.visits.clear();
-            let entry = self.nodes[0].entry_port;
-            self.route.back_ns = self.walk(0, entry, 0, 0);
-            self.route.valid = true;
+        if !(self.routes[r].valid && key == self.routes[r].key) {
+            let (visits, exit) = self.walk(from);
+            self.routes[r].visits = visits;
+            self.routes[r].exit = exit;
+            self.routes[r].valid = true;
         }
-        self.route.scratch = std::mem::replace(&mut self.route.key, key);
+        self.routes[r].scratch = std::mem::replace(&mut self.routes[r].key, key);
     }
 
-    /// Sends an Ethernet frame (without FCS) whose first preamble bit leaves the master at
-    /// `t_tx_ns`, or once the link is free of the frame before ([`Segment::last_departure_ns`]).
-    /// Returns the true time at which the master has received the whole frame back,
-    /// with `frame` modified in place, or `None` if it does not come back.
+    /// Sends an Ethernet frame (without FCS) from the master's primary port, its first preamble
+    /// bit leaving at `t_tx_ns` or once the link is free of the frame before
+    /// ([`Segment::last_departure_ns`]). Returns the true time at which the master has received
+    /// the whole frame back (on either port: on a ring it comes back on the secondary), with
+    /// `frame` modified in place, or `None` if it does not come back.
     pub fn exchange(&mut self, frame: &mut [u8], t_tx_ns: u64) -> Option<u64> {
+        self.exchange_on(MasterPort::Primary, frame, t_tx_ns).map(|(_, t)| t)
+    }
+
+    /// [`Segment::exchange`] from either master port: also says on which port the frame came
+    /// back.
+    pub fn exchange_on(&mut self, from: MasterPort, frame: &mut [u8], t_tx_ns: u64) -> Option<(MasterPort, u64)> {
         // A frame handed over while the last one is still on the master's link leaves after it
         // and the inter-frame gap, as from a NIC's transmit queue.
-        let t_tx_ns = t_tx_ns.max(self.link_free_ns);
+        let link = from as usize;
+        let t_tx_ns = t_tx_ns.max(self.link_free_ns[link]);
         self.last_departure_ns = t_tx_ns;
         let wire_ns = (PREAMBLE_BYTES + frame.len().max(60) as u64 + FCS_BYTES) * NS_PER_BYTE;
-        self.link_free_ns = t_tx_ns + wire_ns + IFG_BYTES * NS_PER_BYTE;
+        self.link_free_ns[link] = t_tx_ns + wire_ns + IFG_BYTES * NS_PER_BYTE;
         self.close_watches_until(t_tx_ns);
         self.advance_shared(t_tx_ns);
         self.stats.frames += 1;
         // No first slave powered, or the cable from the master pulled: nothing gets through.
-        if self.nodes.is_empty() || !self.nodes[0].powered || self.nodes[0].cut[self.nodes[0].entry_port as usize & 3] {
+        let Some((first, entry, link_ns)) = self.entry_of(from) else {
+            self.stats.lost += 1;
+            return None;
+        };
+        if !self.nodes[first].powered || self.nodes[first].cut[entry as usize & 3] {
             self.stats.lost += 1;
             return None;
         }
@@ -413,27 +501,29 @@ impl Segment {
         // Timing pass: where the frame head is when.
         // An ESC latches the start of the frame, its first preamble bit (esc-spec 0x0900): the
         // "head" that walks the segment is that bit.
-        let head_at_first = t_tx_ns + self.master_link_ns as u64;
-        self.refresh_route();
-        self.route.last_at = head_at_first;
-        let back_at_nic = head_at_first + self.route.back_ns + self.master_link_ns as u64;
+        let head_at_first = t_tx_ns + link_ns as u64;
+        self.refresh_route(from);
+        let route = &mut self.routes[link];
+        route.last_at = head_at_first;
+        self.last_route = from;
+        let exit = route.exit;
         // Faults: a lost or corrupted frame is processed by the ESCs before the fault only.
-        let mut reach = self.route.visits.len();
-        let mut lost = false;
+        let mut reach = route.visits.len();
+        let mut lost = exit.is_none();
         let mut corrupted = false;
         if self.loss_probability > 0.0 && self.fault_rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
-            reach = self.fault_rng.gen_range(0..=self.route.visits.len());
+            reach = self.fault_rng.gen_range(0..=reach);
             lost = true;
         } else if self.corruption_probability > 0.0
             && self.fault_rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0))
         {
-            reach = self.fault_rng.gen_range(0..=self.route.visits.len());
+            reach = self.fault_rng.gen_range(0..=reach);
             lost = true;
             corrupted = true;
             self.stats.corrupted += 1;
         }
         // Processing pass, in the order the frame passes the processing units.
-        let visits = std::mem::take(&mut self.route.visits);
+        let visits = std::mem::take(&mut self.routes[link].visits);
         let hdr = ECAT_HEADER_LEN;
         // ESCs change neither the header nor the length: the chain's bounds hold for the walk.
         let len = crate::pdu_len(&frame[pdu_at..]).map(|(len, _)| len);
@@ -449,8 +539,8 @@ impl Segment {
             let n = &mut self.nodes[*node];
             let Some(len) = len else { break };
             let chain = &mut frame[pdu_at + hdr..pdu_at + hdr + len];
-            if !n.esc.port_open(0) && n.entry_port != 0 {
-                // Circulating-frame prevention at an auto-closed port 0 (esc-spec §1.6).
+            if n.esc.port0_auto_closed() {
+                // Circulating-frame prevention at an automatically closed port 0 (esc-spec §1.6).
                 if crate::circulating(chain) {
                     self.stats.destroyed_circulating += 1;
                     lost = true;
@@ -466,18 +556,23 @@ impl Segment {
             }
             n.esc.process_frame(chain, rel, head_at_first);
         }
-        self.route.visits = visits;
+        let processed = !visits.is_empty();
+        self.routes[link].visits = visits;
         // The ESC marks frames it processed by setting the locally administered bit of the
         // source MAC (DL control bit 0, esc-spec §1.1).
-        if frame.len() > 6 {
+        if processed && frame.len() > 6 {
             frame[6] |= 0x02;
         }
-        if lost {
+        let Some((port, out_ns)) = exit.filter(|_| !lost) else {
             self.stats.lost += 1;
             return None;
-        }
+        };
+        let back_link_ns = match port {
+            MasterPort::Primary => self.master_link_ns,
+            MasterPort::Secondary => self.secondary.map_or(0, |s| s.delay_ns),
+        };
         self.stats.returned += 1;
-        Some(back_at_nic + wire_ns)
+        Some((port, head_at_first + out_ns + back_link_ns as u64 + wire_ns))
     }
 
     /// The system time at true time `t_ns` of every node whose DC unit has one (in node
@@ -492,7 +587,8 @@ impl Segment {
 
     /// The true time at which each ESC saw the last frame at its processing unit.
     pub fn last_visits(&self) -> Vec<(usize, FrameTiming)> {
-        self.route.visits.iter().map(|(node, rel)| (*node, rel.shifted(self.route.last_at))).collect()
+        let r = &self.routes[self.last_route as usize];
+        r.visits.iter().map(|(node, rel)| (*node, rel.shifted(r.last_at))).collect()
     }
 }
 

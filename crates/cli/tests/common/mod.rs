@@ -45,6 +45,19 @@ impl VethPair {
         p
     }
 
+    /// A second veth pair between the same namespaces (a master's redundant port): the master's
+    /// end and the segment's. It goes with the namespaces.
+    pub fn second_link(&self) -> (String, String) {
+        let stem = self.master_if.strip_suffix('a').unwrap();
+        let (m, s) = (format!("{stem}c"), format!("{stem}d"));
+        ip(&["link", "add", &m, "type", "veth", "peer", "name", &s]);
+        ip(&["link", "set", &m, "netns", &self.master_ns]);
+        ip(&["link", "set", &s, "netns", &self.segment_ns]);
+        ip(&["-n", &self.master_ns, "link", "set", &m, "up"]);
+        ip(&["-n", &self.segment_ns, "link", "set", &s, "up"]);
+        (m, s)
+    }
+
     /// A command run inside `ns`.
     pub fn cmd(ns: &str, program: &str) -> Command {
         let mut c = Command::new("ip");

@@ -407,6 +407,12 @@ impl Esc {
         (self.mem[0x0101] >> (2 * p)) & 3 != 3
     }
 
+    /// Port 0 closed for want of a link under automatic loop control (0x0101 00 or 01): the
+    /// case in which the ESC marks and destroys circulating frames (esc-spec §1.6).
+    pub fn port0_auto_closed(&self) -> bool {
+        !self.links[0] && self.mem[0x0101] & 3 <= 1
+    }
+
     /// Changes whenever `port_open` may answer differently (link, loop control, power-on):
     /// the segment re-walks its route only then.
     pub fn port_generation(&self) -> u32 {
