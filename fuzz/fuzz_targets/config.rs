@@ -3,7 +3,8 @@
 //! (`ferrocat lab run`). A segment that builds — any topology of built-in devices, ports,
 //! cables, timings, oscillators, faults — is scanned by our master, which initialises its
 //! clocks; with the ESCs' default timing every DC slave's computed delay must be the true one
-//! within ±10 ns (tests/delays.rs's oracle, on any topology). A scenario is planned for every
+//! within ±10 ns (tests/delays.rs's oracle, on any topology), and on a ring whose port the
+//! master found, the delays of the line that port makes when closed. A scenario is planned for every
 //! experiment. Errors are expected; a panic, a hang or a wrong delay is the fault. Files the text names (EEPROM dumps, ESI files, a scenario's
 //! segment) are left out: the `sii`, `esi` and `device` targets take their bytes.
 use ferrocat_lab::scenario::{Experiment, Scenario};
@@ -22,8 +23,7 @@ fuzz_target!(|data: &[u8]| {
             let knowable = cfg.devices.iter().all(|d| d.timing.is_none())
                 && cfg.loss_probability.unwrap_or(0.0) == 0.0
                 && cfg.corruption_probability.unwrap_or(0.0) == 0.0
-                && cfg.events.is_empty()
-                && cfg.secondary.is_none();
+                && cfg.events.is_empty();
             if let Ok(seg) = cfg.build() {
                 // A LAN9252 has its own processing and forwarding delays (its ESC kind's, not
                 // the default): where it sits among others, no master can know the delays.
@@ -32,8 +32,11 @@ fuzz_target!(|data: &[u8]| {
                 let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
                 m.closed_port_loop_ns = 20;
                 if m.scan().is_ok() {
-                    if knowable {
+                    if knowable && cfg.secondary.is_none() {
                         check_delays(&m, text);
+                    }
+                    if knowable && m.ring_port.is_some() {
+                        check_ring_delays(&m, &cfg, text);
                     }
                     let _ = m.init_dc(&DcConfig { max_frames: 300, ..DcConfig::default() });
                 }
@@ -50,6 +53,26 @@ fuzz_target!(|data: &[u8]| {
         }
     }
 });
+
+/// A ring whose port the master found has the delays of the line that port makes when closed:
+/// the forward path is the same (the line's own delays are `check_delays`'s).
+fn check_ring_delays(ring: &Master<VirtualIo>, cfg: &SegmentConfig, text: &str) {
+    let line_cfg = SegmentConfig { secondary: None, ..cfg.clone() };
+    let Ok(seg) = line_cfg.build() else { return };
+    let mut line = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
+    line.closed_port_loop_ns = 20;
+    if line.scan().is_err() || line.slaves.len() != ring.slaves.len() {
+        return;
+    }
+    for (k, (r, l)) in ring.slaves.iter().zip(&line.slaves).enumerate() {
+        assert!(
+            (r.delay_ns as i64 - l.delay_ns as i64).abs() <= 10,
+            "slave {k}: ring {} ns, line {} ns, on\n{text}",
+            r.delay_ns,
+            l.delay_ns
+        );
+    }
+}
 
 /// Each DC slave's delay from the reference (the first with a system time) against the
 /// simulator's truth: when the last frame of the scan reached its processing unit, less when it

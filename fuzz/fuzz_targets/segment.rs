@@ -5,7 +5,8 @@
 //! just before its wrap, an ESC without DC, the CiA402 drive behind a firmware that checks
 //! AL transitions (CoE mailbox, SDO server, PDO mapping), the EVB-LAN9252 (a CoE device with a
 //! fixed mapping behind its firmware) and the AKD's IP core (PDI control fixed, EEPROM
-//! emulated, 32-bit DC). The simulator must not panic, and a
+//! emulated, 32-bit DC), closed into a ring back to the master's second port (so that our
+//! master's bring-up takes its redundancy path). The simulator must not panic, and a
 //! frame it answers must still parse as the same chain of datagrams.
 //!
 //! Input: a first byte choosing where the fuzzed frames start (mod 5: a segment just powered
@@ -17,11 +18,12 @@
 //! chains the next record's datagram into the same frame; otherwise the frame goes out after
 //! `gap²` µs (up to ≈ 65 ms, so that watchdogs, SYNC pulses, EEPROM busy and AL responses come
 //! due). Flag bit 1 makes the record raw bytes after the Ethernet header instead (EtherCAT
-//! header and all, which may lie about the length). Built this way the fuzzer spends its time
+//! header and all, which may lie about the length); flag bit 2 sends the frame from the
+//! secondary port. Built this way the fuzzer spends its time
 //! in the ESCs, not in guessing the frame format, which the `frame` target covers.
 use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
-use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_segment::{MasterPort, Segment, SegmentConfig};
 use ferrocat_wire::Frame;
 use libfuzzer_sys::fuzz_target;
 
@@ -52,6 +54,7 @@ builtin = "LAN9252-EVB"
 [[device]]
 builtin = "EL2004"
 esc = "ipcore"
+[secondary]
 "#;
 
 fuzz_target!(|data: &[u8]| {
@@ -88,7 +91,8 @@ fuzz_target!(|data: &[u8]| {
         }
         frame.extend_from_slice(&body);
         body.clear();
-        send(&mut seg, &mut frame, &mut t_ns);
+        let port = if flags & 4 != 0 { MasterPort::Secondary } else { MasterPort::Primary };
+        send(&mut seg, port, &mut frame, &mut t_ns);
     }
 });
 
@@ -123,12 +127,12 @@ fn prepared(stage: u8) -> (Segment, u64) {
 
 /// What the live server does with a frame off the wire (segment/src/live.rs), and what must
 /// hold of the answer.
-fn send(seg: &mut Segment, frame: &mut [u8], t_ns: &mut u64) {
+fn send(seg: &mut Segment, port: MasterPort, frame: &mut [u8], t_ns: &mut u64) {
     let before = match Frame::parse(frame) {
         Ok(Some(f)) if f.pdu.header.frame_type == ferrocat_wire::frame::TYPE_DLPDU => f.pdu.datagram_count(),
         _ => return,
     };
-    if let Some(back_ns) = seg.exchange(frame, *t_ns) {
+    if let Some((_, back_ns)) = seg.exchange_on(port, frame, *t_ns) {
         assert!(back_ns > *t_ns, "a frame came back at {back_ns} ns, sent at {t_ns} ns");
         let after = Frame::parse(frame).expect("an answered frame parses").expect("and is EtherCAT");
         assert_eq!(after.pdu.datagram_count(), before, "the ESCs changed the datagram chain");

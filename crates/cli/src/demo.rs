@@ -58,6 +58,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
         Some(iface) => {
             let target = crate::target::Target {
                 iface: Some(iface.clone()),
+                secondary_iface: None,
                 udp: None,
                 force: a.force,
                 config: None,

@@ -202,6 +202,7 @@ impl ClockPiece {
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
     let target = crate::target::Target {
         iface: Some(iface.into()),
+        secondary_iface: None,
         udp: None,
         force: false,
         config: None,

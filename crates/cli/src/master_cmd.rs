@@ -24,6 +24,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
                     "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
                     "active_ports": s.active_ports,
+                    "ring_port": m.ring_port.filter(|r| r.0 == s.position).map(|r| r.1),
                     "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
             })
@@ -46,6 +47,9 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
             if s.has_dc && !s.has_system_time {
                 outln!(" DC: receive times only (no system time)");
+            }
+            if let Some((_, port)) = m.ring_port.filter(|r| r.0 == s.position) {
+                outln!(" Ring: port {port} leads back to the master's secondary port");
             }
             if let Some(mb) = &s.mailbox {
                 outln!(
@@ -348,6 +352,15 @@ pub fn run(
         s.max_round_trip_ns as f64 / 1000.0,
         m.engine.stats.lost
     );
+    if m.engine.io.has_secondary() {
+        let ring = match m.engine.ring {
+            ferrocat_master::RingState::Intact => "intact",
+            ferrocat_master::RingState::Broken => "broken",
+            ferrocat_master::RingState::Line => "open (no answer on the secondary port)",
+            ferrocat_master::RingState::Unknown => "unknown",
+        };
+        outln!("ring {ring} at the end; {} frames sent round the far half again", m.engine.stats.resent);
+    }
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }

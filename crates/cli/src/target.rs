@@ -15,6 +15,10 @@ pub struct Target {
     /// Network interface with the EtherCAT segment (raw socket; needs CAP_NET_RAW).
     #[arg(long, conflicts_with_all = ["config", "device"])]
     pub iface: Option<String>,
+    /// With --iface: the master's second port, where the segment's far end comes back (cable
+    /// redundancy).
+    #[arg(long, requires = "iface", value_name = "IF")]
+    pub secondary_iface: Option<String>,
     /// EtherCAT over UDP to this address (e.g. 127.0.0.1:34980).
     #[arg(long, value_name = "ADDR:PORT", conflicts_with_all = ["iface", "config", "device"])]
     pub udp: Option<String>,
@@ -96,6 +100,29 @@ impl Io for CliIo {
             World::Udp(u) => u.send(frame),
         }
     }
+    fn has_secondary(&self) -> bool {
+        match &self.world {
+            World::Virtual(v) => v.has_secondary(),
+            World::Raw(r) => r.has_secondary(),
+            World::Udp(_) => false,
+        }
+    }
+    fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        let t = self.now_ns();
+        self.record(t, frame);
+        match &mut self.world {
+            World::Virtual(v) => v.send_secondary(frame),
+            World::Raw(r) => r.send_secondary(frame),
+            World::Udp(u) => u.send_secondary(frame),
+        }
+    }
+    fn last_rx_secondary(&self) -> bool {
+        match &self.world {
+            World::Virtual(v) => v.last_rx_secondary(),
+            World::Raw(r) => r.last_rx_secondary(),
+            World::Udp(_) => false,
+        }
+    }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
         let r = match &mut self.world {
             World::Virtual(v) => v.recv(buf, deadline_ns),
@@ -168,7 +195,12 @@ impl Target {
                         addrs.join(", ")
                     );
                 }
-                World::Raw(RawIo::open(iface).with_context(|| format!("opening {iface}"))?)
+                match &self.secondary_iface {
+                    Some(sec) => World::Raw(
+                        RawIo::open_redundant(iface, sec).with_context(|| format!("opening {iface} and {sec}"))?,
+                    ),
+                    None => World::Raw(RawIo::open(iface).with_context(|| format!("opening {iface}"))?),
+                }
             }
             (None, true) => {
                 let seg = crate::sim::segment_from(self.config.as_deref(), &self.device, self.seed)?;

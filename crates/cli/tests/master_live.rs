@@ -5,7 +5,7 @@ mod common;
 
 use std::process::{Command, Stdio};
 
-use common::{python, Sim, VethPair};
+use common::{python, RingSim, Sim, VethPair};
 
 fn ferrocat_in(ns: &str) -> Command {
     VethPair::cmd(ns, env!("CARGO_BIN_EXE_ferrocat"))
@@ -180,4 +180,41 @@ fn an_interface_without_permission_is_one_line() {
     assert!(!out.status.success() && err.lines().count() == 1, "{err}");
     assert!(err.contains(&net.master_if) && err.contains("CAP_NET_RAW"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
+}
+
+/// ferrocat's cable redundancy in real time: `ferrocat run` on both ends of a ring that
+/// `ferrocat sim` serves on two veth pairs. It finds the ring's port, reaches OP with DC, and
+/// when the cable between the couplers is pulled 2.5 s after the simulator started, the far
+/// half goes on taking its process data round the secondary port.
+#[test]
+fn run_keeps_a_ring_going_across_a_pulled_cable() {
+    let net = VethPair::new("rr");
+    let ring = RingSim::start(&net, "ring-run", 2500);
+    let master_red = ring.master_secondary.clone();
+    let scan = ferrocat_in(&net.master_ns)
+        .args(["scan", "--iface", &net.master_if, "--secondary-iface", &master_red, "--json"])
+        .output()
+        .unwrap();
+    let run = ferrocat_in(&net.master_ns)
+        .args(["run", "--iface", &net.master_if, "--secondary-iface", &master_red])
+        .args(["--seconds", "4", "--cycle-us", "1000", "--dc", "--dc-static-frames", "2000"])
+        .output()
+        .unwrap();
+    let rep = ring.report();
+    assert!(scan.status.success(), "ferrocat scan: {}", String::from_utf8_lossy(&scan.stderr));
+    let slaves: serde_json::Value = serde_json::from_slice(&scan.stdout).unwrap();
+    assert_eq!(slaves[2]["ring_port"], 2, "{slaves}");
+    assert_eq!(slaves[2]["delay_ns"], 805, "{slaves}");
+    let out = String::from_utf8_lossy(&run.stdout).to_string();
+    let err = String::from_utf8_lossy(&run.stderr).to_string();
+    println!("{out}{err}\nsimulator: {rep}");
+    assert!(run.status.success(), "{err}");
+    assert!(out.contains("ring broken at the end"), "{out}");
+    let resent: u64 = out.split("; ").last().and_then(|p| p.split(' ').next()).and_then(|n| n.parse().ok()).unwrap();
+    assert!(resent > 500, "{out}");
+    // Every slave in OP at the end, the far half's terminal taking outputs after the break.
+    for d in rep["devices"].as_array().unwrap() {
+        assert_eq!(d["al_state"], "OP", "{rep}");
+    }
+    assert!(rep["frames_out_secondary"].as_u64().unwrap() > 1000, "{rep}");
 }

@@ -3,7 +3,7 @@
 //! (../shared/captures/soem-sdinfo-2-el2004.txt), reach OP, and receive its outputs.
 mod common;
 
-use common::{python, Sim, VethPair};
+use common::{python, RingSim, Sim, VethPair};
 
 /// The slaves of a SOEM slaveinfo printout, each as its trimmed lines.
 fn printout_slaves(text: &str) -> Vec<Vec<String>> {
@@ -229,26 +229,9 @@ fn soem_writes_and_reads_files_by_foe() {
 #[test]
 fn soem_keeps_a_broken_ring_running_on_its_second_port() {
     let net = VethPair::new("rg");
-    let (master_red, segment_red) = net.second_link();
-    let path = std::env::temp_dir().join(format!("ferrocat-ring-{}.toml", std::process::id()));
-    let report = std::env::temp_dir().join(format!("ferrocat-ring-{}.json", std::process::id()));
-    std::fs::write(
-        &path,
-        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
-         [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
-         [secondary]\ndevice = 2\n\
-         [[event]]\nat_ms = 1500\nlink_down = { device = 2, port = 0 }\n",
-    )
-    .unwrap();
-    let sim = Sim::start(
-        &net,
-        &["--config", path.to_str().unwrap(), "--secondary-iface", &segment_red, "--report", report.to_str().unwrap()],
-    );
-    let r = soem_script(&net, "soem_ring.py", &[&master_red, "3"]);
-    sim.stop();
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    std::fs::remove_file(&path).ok();
-    std::fs::remove_file(&report).ok();
+    let ring = RingSim::start(&net, "ring-soem", 1500);
+    let r = soem_script(&net, "soem_ring.py", &[&ring.master_secondary, "3"]);
+    let rep = ring.report();
     println!("simulator: {rep}");
     assert_eq!(r["found"], 4, "{r}");
     assert_eq!(r["op"], true, "{r}");

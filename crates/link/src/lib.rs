@@ -262,12 +262,17 @@ impl RawSocket {
         self.recvmsg(buf, libc::MSG_DONTWAIT)
     }
 
-    /// Waits up to `timeout_ms` until one of `socks` has a frame; says which have.
-    pub fn wait_readable(socks: &[&RawSocket], timeout_ms: i32) -> io::Result<Vec<bool>> {
+    /// Waits up to `timeout_ns` until one of `socks` has a frame; says which have.
+    pub fn wait_readable(socks: &[&RawSocket], timeout_ns: u64) -> io::Result<Vec<bool>> {
         let mut fds: Vec<libc::pollfd> =
             socks.iter().map(|s| libc::pollfd { fd: s.fd.as_raw_fd(), events: libc::POLLIN, revents: 0 }).collect();
-        // SAFETY: poll reads and writes the pollfd array we own, of the length we pass.
-        let r = unsafe { libc::poll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, timeout_ms) };
+        let ts = libc::timespec {
+            tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
+            tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
+        };
+        // SAFETY: ppoll reads and writes the pollfd array we own, of the length we pass, and
+        // reads the timespec; no signal mask.
+        let r = unsafe { libc::ppoll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, &ts, std::ptr::null()) };
         if r < 0 {
             let e = io::Error::last_os_error();
             return if e.kind() == io::ErrorKind::Interrupted { Ok(vec![false; socks.len()]) } else { Err(e) };

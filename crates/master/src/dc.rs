@@ -441,8 +441,11 @@ impl<I: Io> Master<I> {
 
     /// How long a frame spends behind the reference before it passes it again on its way
     /// back: the latest receive time of its other open ports minus that of its entry port.
+    /// On an intact ring the frame leaves for the secondary port instead of coming back through
+    /// the reference: the loop is shorter by what `find_ring_port` measured.
     pub fn reference_loop_ns(&self) -> Result<u64> {
-        Ok(self.loop_ns_of(self.reference_index()?))
+        let line = self.loop_ns_of(self.reference_index()?);
+        Ok((line as i64 - self.ring_shortening_ns).max(0) as u64)
     }
 
     /// How long a frame spends behind slave `k` before it passes it again on its way back.

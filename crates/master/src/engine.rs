@@ -33,6 +33,35 @@ pub struct EngineStats {
     /// Replies that came after their frame had been given up or answered.
     pub late: u64,
     pub retries: u64,
+    /// Cable redundancy: frames sent round the second half of a broken ring again.
+    pub resent: u64,
+}
+
+/// What the master's two ports show of a ring (cable redundancy).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum RingState {
+    /// One port, or no frame yet.
+    #[default]
+    Unknown,
+    /// The primary's frames come back on the secondary port: every slave on one pass.
+    Intact,
+    /// Each port's frames come back to it: the primary's answer goes round the second half
+    /// again from the secondary port.
+    Broken,
+    /// The primary's frames come back to it and nothing answers on the secondary.
+    Line,
+}
+
+/// How a frame that goes round the second half of a broken ring again treats the clock
+/// distribution in it (docs/master.md, "Cable redundancy").
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum SplitRingClocks {
+    /// FRMW and ARMW become NOPs: the second half's clocks hold their last rate instead of
+    /// taking a reference time that is a whole master round trip old.
+    #[default]
+    HoldOver,
+    /// As sent: the second half takes the reference time read on the first pass (SOEM).
+    AsSent,
 }
 
 const SLOTS: usize = 16;
@@ -49,6 +78,13 @@ struct Slot {
     tries: u32,
     deadline: u64,
     buf: Box<[u8; FRAME]>,
+    /// Cable redundancy: the primary's answer, kept while the secondary's probe is awaited
+    /// (length, receive time), and that probe's port and working counter once back.
+    held: Option<(usize, u64)>,
+    held_buf: Box<[u8; FRAME]>,
+    probe: Option<(bool, u16)>,
+    /// The held answer has been sent round the second half.
+    resent: bool,
 }
 
 #[derive(Debug)]
@@ -65,7 +101,18 @@ pub struct Engine<I: Io> {
     pub last_rx_ns: u64,
     /// Who is on the segment, so that an error can name the slave a datagram was meant for.
     pub directory: Vec<SlaveTag>,
+    /// Cable redundancy: what the last frame showed of the ring, and how a split ring's second
+    /// half gets its clock.
+    pub ring: RingState,
+    pub split_ring_clocks: SplitRingClocks,
+    /// The secondary's last probe came back: worth waiting for the next.
+    secondary_alive: bool,
 }
+
+/// Source MAC address bytes: the primary's frames, and the probe sent from the secondary port
+/// with the same index (the last byte tells them apart; ESCs change only the first).
+const SRC_PRIMARY: [u8; 6] = [0x10; 6];
+const SRC_PROBE: [u8; 6] = [0x10, 0x10, 0x10, 0x10, 0x10, 0x11];
 
 /// A slave as errors name it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -96,16 +143,18 @@ impl<I: Io> Engine<I> {
                     tries: 0,
                     deadline: 0,
                     buf: Box::new([0; FRAME]),
+                    held: None,
+                    held_buf: Box::new([0; FRAME]),
+                    probe: None,
+                    resent: false,
                 })
                 .collect(),
+            ring: RingState::Unknown,
+            split_ring_clocks: SplitRingClocks::HoldOver,
+            secondary_alive: true,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
-            eth: EthernetRepr {
-                dst: BROADCAST,
-                src: [0x10, 0x10, 0x10, 0x10, 0x10, 0x10],
-                vlan_tci: None,
-                ethertype: 0,
-            },
+            eth: EthernetRepr { dst: BROADCAST, src: SRC_PRIMARY, vlan_tci: None, ethertype: 0 },
         }
     }
 
@@ -170,13 +219,83 @@ impl<I: Io> Engine<I> {
         Ok(k)
     }
 
+    /// Whether to wait for the secondary's probe when the primary's frame comes back to the
+    /// primary port (false while the master has closed the ring itself; a probe that comes
+    /// back sets it again).
+    pub fn expect_secondary(&mut self, wait: bool) {
+        self.secondary_alive = wait;
+    }
+
+    /// The secondary's probe for slot `s`: a BRD with the frame's index. On an intact ring it
+    /// runs the ring backwards unprocessed; on a broken one it counts the second half.
+    fn send_probe(&mut self, s: usize) -> Result<()> {
+        let idx = self.slots[s].idx;
+        let mut buf = [0u8; 64];
+        let eth = EthernetRepr { src: SRC_PROBE, ..self.eth };
+        let mut w = FrameWriter::new(&mut buf[..], &eth)?;
+        w.push_chained(&DatagramHeader::new(Command::BRD, idx, Address::Device { adp: 0, ado: 0 }, 2), &[0, 0], 0)?;
+        let n = w.finish()?;
+        self.io.send_secondary(&buf[..n])?;
+        Ok(())
+    }
+
     fn send(&mut self, s: usize) -> Result<()> {
         let now = self.io.now_ns();
         let slot = &mut self.slots[s];
         slot.tries += 1;
         slot.deadline = now + self.timeout_ns;
+        slot.held = None;
+        slot.probe = None;
+        slot.resent = false;
         self.io.send(&slot.buf[..slot.len])?;
         self.stats.frames_sent += 1;
+        if self.io.has_secondary() {
+            self.send_probe(s)?;
+        }
+        Ok(())
+    }
+
+    /// Copies an answer's data and working counters into the PDUs `first..first + count`.
+    fn fill(first: usize, count: usize, frame: &[u8], pdus: &mut [Pdu<'_>]) {
+        if let Ok(Some(f)) = Frame::parse(frame) {
+            let mut ds = f.pdu.datagrams();
+            for p in &mut pdus[first..first + count] {
+                let Some(d) = ds.next() else { break };
+                let n = p.data.len().min(d.data().len());
+                p.data[..n].copy_from_slice(&d.data()[..n]);
+                p.wkc = d.wkc();
+            }
+        }
+    }
+
+    /// The held answer is the answer: the slot is done.
+    fn complete_held(&mut self, s: usize, pdus: &mut [Pdu<'_>]) {
+        let slot = &mut self.slots[s];
+        if let Some((n, _)) = slot.held {
+            Self::fill(slot.first, slot.count, &slot.held_buf[..n], pdus);
+        }
+        slot.busy = false;
+        self.stats.frames_received += 1;
+    }
+
+    /// The primary's answer came back to the primary port and the probe is known (or given
+    /// up): round the second half again if the probe found one, else done.
+    fn decide(&mut self, s: usize, pdus: &mut [Pdu<'_>]) -> Result<()> {
+        let slot = &mut self.slots[s];
+        let Some((n, _)) = slot.held else { return Ok(()) };
+        if matches!(slot.probe, Some((true, wkc)) if wkc > 0) {
+            if self.split_ring_clocks == SplitRingClocks::HoldOver {
+                nop_clock_distribution(&mut slot.held_buf[..n]);
+            }
+            slot.resent = true;
+            slot.deadline = self.io.now_ns() + self.timeout_ns;
+            self.io.send_secondary(&slot.held_buf[..n])?;
+            self.stats.resent += 1;
+            self.ring = RingState::Broken;
+        } else {
+            self.complete_held(s, pdus);
+            self.ring = RingState::Line;
+        }
         Ok(())
     }
 
@@ -185,10 +304,23 @@ impl<I: Io> Engine<I> {
         match self.io.recv(&mut self.rx[..], deadline)? {
             Some((n, t)) => {
                 self.last_rx_ns = t;
+                let on_secondary = self.io.last_rx_secondary();
                 let Ok(Some(f)) = Frame::parse(&self.rx[..n]) else { return Ok(()) };
-                let mut ds = f.pdu.datagrams();
+                let ds = f.pdu.datagrams();
                 let Some(first) = ds.clone().next() else { return Ok(()) };
                 let idx = first.header().index;
+                if self.io.has_secondary() && self.rx.get(11) == Some(&SRC_PROBE[5]) {
+                    // The secondary's probe: it tells whether a second half is there.
+                    self.secondary_alive = true;
+                    let wkc = first.wkc();
+                    if let Some(s) = self.slots.iter().position(|s| s.busy && s.idx == idx && s.probe.is_none()) {
+                        self.slots[s].probe = Some((on_secondary, wkc));
+                        if self.slots[s].held.is_some() && !self.slots[s].resent {
+                            self.decide(s, pdus)?;
+                        }
+                    }
+                    return Ok(());
+                }
                 let Some(s) =
                     self.slots.iter().position(|s| s.busy && s.idx == idx && s.count == f.pdu.datagram_count())
                 else {
@@ -196,12 +328,23 @@ impl<I: Io> Engine<I> {
                     return Ok(());
                 };
                 let slot = &mut self.slots[s];
-                for p in &mut pdus[slot.first..slot.first + slot.count] {
-                    let Some(d) = ds.next() else { break };
-                    let n = p.data.len().min(d.data().len());
-                    p.data[..n].copy_from_slice(&d.data()[..n]);
-                    p.wkc = d.wkc();
+                if slot.resent {
+                    // Round the second half: the whole ring's answer. Its timing is the first
+                    // pass's, which passed the reference.
+                    self.last_rx_ns = slot.held.map_or(t, |h| h.1);
+                } else if self.io.has_secondary() && !on_secondary {
+                    // Back on the port it left: a line, or the first half of a broken ring.
+                    slot.held_buf[..n].copy_from_slice(&self.rx[..n]);
+                    slot.held = Some((n, t));
+                    if slot.probe.is_some() || !self.secondary_alive {
+                        self.decide(s, pdus)?;
+                    }
+                    return Ok(());
+                } else if self.io.has_secondary() {
+                    self.ring = RingState::Intact;
                 }
+                let slot = &mut self.slots[s];
+                Self::fill(slot.first, slot.count, &self.rx[..n], pdus);
                 slot.busy = false;
                 self.stats.frames_received += 1;
                 Ok(())
@@ -210,6 +353,24 @@ impl<I: Io> Engine<I> {
                 let now = self.io.now_ns();
                 for s in 0..self.slots.len() {
                     if !self.slots[s].busy || self.slots[s].deadline > now {
+                        continue;
+                    }
+                    // Redundancy: an answer in hand whose probe or second pass did not come
+                    // back is what there is; the secondary is not waited for again until a
+                    // probe returns.
+                    if self.slots[s].held.is_some() {
+                        self.secondary_alive = false;
+                        self.complete_held(s, pdus);
+                        continue;
+                    }
+                    // The primary's frame lost (its cable pulled?) but the probe found slaves
+                    // behind the secondary: the frame goes round from there.
+                    let slot = &mut self.slots[s];
+                    if matches!(slot.probe, Some((true, w)) if w > 0) && !slot.resent {
+                        let len = slot.len;
+                        slot.held_buf[..len].copy_from_slice(&slot.buf[..len]);
+                        slot.held = Some((len, now));
+                        self.decide(s, pdus)?;
                         continue;
                     }
                     if self.slots[s].tries > self.retries {
@@ -273,6 +434,23 @@ impl<I: Io> Engine<I> {
                 }
             }
             _ => format!(": {got} of {expected} expected answers"),
+        }
+    }
+}
+
+/// Turns the FRMW and ARMW datagrams of a frame into NOPs (command 0): nobody reads or writes
+/// them, their data and working counter go on as they were.
+fn nop_clock_distribution(frame: &mut [u8]) {
+    let Ok((_, mut at)) = EthernetRepr::parse(frame) else { return };
+    at += 2; // the EtherCAT header
+    while at + HEADER_LEN + WKC_LEN <= frame.len() {
+        if matches!(frame[at], 13 | 14) {
+            frame[at] = 0;
+        }
+        let len_field = u16::from_le_bytes([frame[at + 6], frame[at + 7]]);
+        at += HEADER_LEN + (len_field & 0x07FF) as usize + WKC_LEN;
+        if len_field & 0x8000 == 0 {
+            break;
         }
     }
 }

@@ -1,6 +1,6 @@
 //! The two worlds the master runs in, behind one small trait: virtual time with the in-process
 //! segment and a model of the host, or real time on a network interface.
-use ferrocat_segment::Segment;
+use ferrocat_segment::{MasterPort, Segment};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -43,6 +43,19 @@ pub trait Io {
     /// to it (Chen 2016's Algorithm 1).
     fn timer_resolution_ns(&self) -> u64 {
         1
+    }
+    /// The master has a second port (cable redundancy): the segment is a ring, closed back to
+    /// it, and the engine sends through both.
+    fn has_secondary(&self) -> bool {
+        false
+    }
+    /// Sends one Ethernet frame from the secondary port.
+    fn send_secondary(&mut self, _frame: &[u8]) -> std::io::Result<()> {
+        Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "this link has no secondary port"))
+    }
+    /// Whether the frame the last [`Io::recv`] returned came in on the secondary port.
+    fn last_rx_secondary(&self) -> bool {
+        false
     }
     /// Drives the host's calibration output (a GPIO wired to a slave's LATCH input) to
     /// `level`; the pin changes one output latency after the call. Unsupported where the host
@@ -280,8 +293,12 @@ pub struct VirtualIo {
     slot_rng: ChaCha8Rng,
     cycles: Option<CycleSlots>,
     woke: bool,
-    /// Frames on their way back: (time the master has them, length, bytes). Preallocated.
+    /// Frames on their way back: (time the master has them, length, bytes, in flight).
+    /// Preallocated.
     slots: Vec<(u64, usize, Box<[u8; 1536]>, bool)>,
+    /// Per slot: the frame comes back on the secondary port.
+    slot_secondary: [bool; 32],
+    last_rx_secondary: bool,
     /// Frames the segment did not return.
     pub lost: u64,
     last_tx: Option<u64>,
@@ -308,6 +325,8 @@ impl VirtualIo {
             cycles: None,
             woke: false,
             slots: (0..32).map(|_| (0, 0, Box::new([0u8; 1536]), false)).collect(),
+            slot_secondary: [false; 32],
+            last_rx_secondary: false,
             lost: 0,
             last_tx: None,
             rx_stamps: [0; 32],
@@ -340,45 +359,33 @@ impl VirtualIo {
     }
 }
 
-impl Io for VirtualIo {
-    fn now_ns(&mut self) -> u64 {
-        self.now
-    }
-    fn wake_target_ns(&self) -> Option<u64> {
-        self.wake_target_ns
-    }
-    fn segment(&self) -> Option<&Segment> {
-        Some(&self.seg)
-    }
-    fn segment_mut(&mut self) -> Option<&mut Segment> {
-        Some(&mut self.seg)
-    }
-    fn timer_resolution_ns(&self) -> u64 {
-        self.host.timer_resolution_ns.max(1)
-    }
-    fn is_virtual(&self) -> bool {
-        true
-    }
-
-    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+impl VirtualIo {
+    /// A frame from either of the master's ports, through the host's send path.
+    fn send_on(&mut self, port: MasterPort, frame: &[u8]) -> std::io::Result<()> {
         let rng = if std::mem::take(&mut self.woke) { &mut self.slot_rng } else { &mut self.rng };
         let t_wire = self.now + self.host.send.sample(rng);
-        // The kernel stamps the hand-over to the NIC, which cannot see the NIC's queue.
-        self.last_tx = match self.host.stamps {
+        // The kernel stamps the hand-over to the NIC, which cannot see the NIC's queue. The
+        // secondary port's stamps are its own socket's: `last_tx_ns` is the primary's.
+        let tx_stamp = match self.host.stamps {
             Stamps::None => None,
             Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(rng))),
             Stamps::Hardware => None,
         };
+        if port == MasterPort::Primary {
+            self.last_tx = tx_stamp;
+        }
         let Some(k) = self.slots.iter().position(|s| !s.3) else {
             return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
         };
         let slot = &mut self.slots[k];
         let n = frame.len().min(slot.2.len());
         slot.2[..n].copy_from_slice(&frame[..n]);
-        let back = self.seg.exchange(&mut slot.2[..n], t_wire);
+        let back = self.seg.exchange_on(port, &mut slot.2[..n], t_wire);
+        self.slot_secondary[k] = back.is_some_and(|(p, _)| p == MasterPort::Secondary);
+        let back = back.map(|(_, t)| t);
         // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit
         // leaves, which is later than handed over if the frame before was still on the wire.
-        if self.host.stamps == Stamps::Hardware {
+        if self.host.stamps == Stamps::Hardware && port == MasterPort::Primary {
             self.last_tx = Some(self.seg.last_departure_ns() + 8 * 80);
         }
         match back {
@@ -400,6 +407,41 @@ impl Io for VirtualIo {
         self.now = t_wire;
         Ok(())
     }
+}
+
+impl Io for VirtualIo {
+    fn now_ns(&mut self) -> u64 {
+        self.now
+    }
+    fn wake_target_ns(&self) -> Option<u64> {
+        self.wake_target_ns
+    }
+    fn segment(&self) -> Option<&Segment> {
+        Some(&self.seg)
+    }
+    fn segment_mut(&mut self) -> Option<&mut Segment> {
+        Some(&mut self.seg)
+    }
+    fn timer_resolution_ns(&self) -> u64 {
+        self.host.timer_resolution_ns.max(1)
+    }
+    fn is_virtual(&self) -> bool {
+        true
+    }
+
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.send_on(MasterPort::Primary, frame)
+    }
+
+    fn has_secondary(&self) -> bool {
+        self.seg.secondary().is_some()
+    }
+    fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.send_on(MasterPort::Secondary, frame)
+    }
+    fn last_rx_secondary(&self) -> bool {
+        self.last_rx_secondary
+    }
 
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
         let next = self.slots.iter_mut().enumerate().filter(|(_, s)| s.3).min_by_key(|(_, s)| s.0);
@@ -409,6 +451,7 @@ impl Io for VirtualIo {
                 let n = s.1.min(buf.len());
                 buf[..n].copy_from_slice(&s.2[..n]);
                 s.3 = false;
+                self.last_rx_secondary = self.slot_secondary[k];
                 Ok(Some((n, self.rx_stamps[k])))
             }
             _ => {
@@ -469,12 +512,28 @@ impl Io for VirtualIo {
 #[derive(Debug)]
 pub struct RawIo {
     sock: ferrocat_link::RawSocket,
+    /// The second port of a ring (cable redundancy).
+    secondary: Option<ferrocat_link::RawSocket>,
+    last_rx_secondary: bool,
     wake_target_ns: Option<u64>,
 }
 
 impl RawIo {
     pub fn open(iface: &str) -> std::io::Result<Self> {
-        Ok(RawIo { sock: ferrocat_link::RawSocket::open(iface)?, wake_target_ns: None })
+        Ok(RawIo {
+            sock: ferrocat_link::RawSocket::open(iface)?,
+            secondary: None,
+            last_rx_secondary: false,
+            wake_target_ns: None,
+        })
+    }
+
+    /// Both ports of a ring: the line starts at `primary`, its far end comes back to
+    /// `secondary`.
+    pub fn open_redundant(primary: &str, secondary: &str) -> std::io::Result<Self> {
+        let mut io = RawIo::open(primary)?;
+        io.secondary = Some(ferrocat_link::RawSocket::open(secondary)?);
+        Ok(io)
     }
 
     /// Which timestamps are in use, in words.
@@ -496,11 +555,35 @@ impl Io for RawIo {
             if now >= deadline_ns {
                 return Ok(None);
             }
-            self.sock.set_timeout_ns(deadline_ns - now)?;
-            if let Some((n, stamp)) = self.sock.recv_stamped(buf)? {
-                return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
+            let Some(sec) = &self.secondary else {
+                self.sock.set_timeout_ns(deadline_ns - now)?;
+                if let Some((n, stamp)) = self.sock.recv_stamped(buf)? {
+                    return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
+                }
+                continue;
+            };
+            let ready = ferrocat_link::RawSocket::wait_readable(&[&self.sock, sec], deadline_ns - now)?;
+            for (k, sock) in [&self.sock, sec].into_iter().enumerate() {
+                if ready[k] {
+                    if let Some((n, stamp)) = sock.try_recv_stamped(buf)? {
+                        self.last_rx_secondary = k == 1;
+                        return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
+                    }
+                }
             }
         }
+    }
+    fn has_secondary(&self) -> bool {
+        self.secondary.is_some()
+    }
+    fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        match &self.secondary {
+            Some(s) => s.send(frame),
+            None => Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "no secondary interface")),
+        }
+    }
+    fn last_rx_secondary(&self) -> bool {
+        self.last_rx_secondary
     }
     fn sleep_until(&mut self, t_ns: u64) {
         self.wake_target_ns = Some(t_ns);

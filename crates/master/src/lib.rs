@@ -24,7 +24,7 @@ mod trimmed;
 
 pub use coe::{EntryInfo, ObjectInfo};
 pub use dc::{DcConfig, DcReport, SyncState};
-pub use engine::{describe, Engine, EngineStats, Pdu, SlaveTag};
+pub use engine::{describe, Engine, EngineStats, Pdu, RingState, SlaveTag, SplitRingClocks};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};
 pub use process::{CycleStats, Handle};

@@ -572,7 +572,7 @@ impl SegmentConfig {
     fn wire_secondary(&self, seg: &mut Segment, sec: &SecondaryToml, names: &[String]) -> Result<(), SegmentError> {
         let place = "[secondary]";
         let node = match &sec.device {
-            None => names.len() - 1,
+            None => names.len().checked_sub(1).ok_or_else(|| device_err(place, "no device to wire it to"))?,
             Some(r) => node_index(r, names).map_err(|m| device_err(place, m))?,
         };
         let n = &seg.nodes[node];

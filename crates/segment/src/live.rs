@@ -147,7 +147,7 @@ pub fn serve_raw(
             sock.recv_stamped(&mut buf)?.map(|x| (MasterPort::Primary, x))
         } else {
             if !ready.iter().any(|r| *r) {
-                ready = RawSocket::wait_readable(&socks, 50)?;
+                ready = RawSocket::wait_readable(&socks, 50_000_000)?;
             }
             // Take turns, so that neither port starves the other.
             let mut got = None;

@@ -493,7 +493,10 @@ impl Segment {
             self.stats.lost += 1;
             return None;
         };
-        if !self.nodes[first].powered || self.nodes[first].cut[entry as usize & 3] {
+        // A port closed by loop control takes nothing in: its receive side is replaced by the
+        // loop-back.
+        let n = &self.nodes[first];
+        if !n.powered || n.cut[entry as usize & 3] || n.esc.port_forced_closed(entry) {
             self.stats.lost += 1;
             return None;
         }

@@ -131,6 +131,7 @@ fn bad_rings_and_events_are_named() {
         let cfg: SegmentConfig = toml::from_str(toml).unwrap();
         cfg.build().unwrap_err().to_string()
     };
+    assert_eq!(err("[secondary]\n"), "[secondary]: no device to wire it to");
     let two = "[[device]]\nbuiltin = \"EK1100\"\n[[device]]\nbuiltin = \"EL2004\"\n";
     assert_eq!(
         err(&format!("{two}[secondary]\ndevice = 0\nport = 1\n")),

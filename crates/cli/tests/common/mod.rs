@@ -145,3 +145,53 @@ impl Drop for Sim {
         let _ = self.child.wait();
     }
 }
+
+/// A ring served on two veth pairs: two couplers with an EL2004 each, the second coupler's
+/// X2 OUT back to the master's second interface, the cable between the couplers pulled
+/// `break_ms` after the simulator starts. Returns the simulator, the master's second
+/// interface, and the report it writes on exit (read with [`RingSim::report`]).
+pub struct RingSim {
+    pub sim: Sim,
+    pub master_secondary: String,
+    path: PathBuf,
+    report: PathBuf,
+}
+
+impl RingSim {
+    pub fn start(net: &VethPair, tag: &str, break_ms: u32) -> Self {
+        let (master_secondary, segment_secondary) = net.second_link();
+        let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
+        let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
+        std::fs::write(
+            &path,
+            format!(
+                "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+                 [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
+                 [secondary]\ndevice = 2\n\
+                 [[event]]\nat_ms = {break_ms}\nlink_down = {{ device = 2, port = 0 }}\n"
+            ),
+        )
+        .unwrap();
+        let sim = Sim::start(
+            net,
+            &[
+                "--config",
+                path.to_str().unwrap(),
+                "--secondary-iface",
+                &segment_secondary,
+                "--report",
+                report.to_str().unwrap(),
+            ],
+        );
+        RingSim { sim, master_secondary, path, report }
+    }
+
+    /// Stops the simulator; its report.
+    pub fn report(self) -> serde_json::Value {
+        self.sim.stop();
+        let rep = serde_json::from_str(&std::fs::read_to_string(&self.report).unwrap()).unwrap();
+        std::fs::remove_file(&self.path).ok();
+        std::fs::remove_file(&self.report).ok();
+        rep
+    }
+}

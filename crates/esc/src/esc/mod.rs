@@ -407,6 +407,11 @@ impl Esc {
         (self.mem[0x0101] >> (2 * p)) & 3 != 3
     }
 
+    /// Loop control 0x0101 closes `port` whatever its link (11).
+    pub fn port_forced_closed(&self, port: u8) -> bool {
+        (self.mem[0x0101] >> (2 * (port & 3))) & 3 == 3
+    }
+
     /// Port 0 closed for want of a link under automatic loop control (0x0101 00 or 01): the
     /// case in which the ESC marks and destroys circulating frames (esc-spec §1.6).
     pub fn port0_auto_closed(&self) -> bool {

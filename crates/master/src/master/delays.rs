@@ -62,6 +62,79 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// On an intact ring (the primary's frames come back on the secondary port), finds the port
+    /// they leave by: closing it by loop control (0x0101) turns them back to the primary with
+    /// every slave's working counter, which no other port does (closing a branch drops its
+    /// slaves, and the frame still goes round). Tried from the last slave back, ports 3, 1, 2
+    /// (a slave's entry, port 0 on a ring cabled in order, is never closed: nothing could
+    /// reopen it). That port is taken out of the tree, and closed again while receive times
+    /// are latched so that they are a line's (delays are the forward path's, the same on the
+    /// ring).
+    pub(super) fn find_ring_port(&mut self) -> Result<()> {
+        self.ring_port = None;
+        self.ring_shortening_ns = 0;
+        if !self.engine.io.has_secondary() || self.engine.ring != crate::engine::RingState::Intact {
+            return Ok(());
+        }
+        let n = self.slaves.len() as u16;
+        for k in (0..self.slaves.len()).rev() {
+            for port in [3u8, 1, 2] {
+                if !self.slaves[k].active_ports[port as usize] {
+                    continue;
+                }
+                let st = self.slaves[k].station;
+                let mut loop_control = [0u8; 1];
+                self.fprd(st, 0x0101, &mut loop_control)?;
+                self.fpwr(st, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
+                // Its probe cannot come back through the closed port: do not wait for it.
+                self.engine.expect_secondary(false);
+                let mut b = [0u8; 2];
+                let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut b)?;
+                let turned = self.engine.ring == crate::engine::RingState::Line && wkc == n;
+                self.fpwr(st, 0x0101, &loop_control)?;
+                self.engine.expect_secondary(true);
+                if turned {
+                    self.ring_port = Some((k as u16, port));
+                    self.slaves[k].active_ports[port as usize] = false;
+                    return self.measure_ring_shortening(st, loop_control[0], port);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// How much sooner the frame is back on the intact ring (at the secondary port) than it
+    /// is on the line the ring's port makes when closed: the median of 32 round trips of the
+    /// same broadcast each way, by the link's stamps. A master that follows the reference
+    /// times the reference's pass from the round trip less the loop behind it; on the ring the
+    /// loop is this much shorter than the line's receive times say.
+    fn measure_ring_shortening(&mut self, station: u16, loop_control: u8, port: u8) -> Result<()> {
+        let mut trips = [Vec::new(), Vec::new()];
+        for (closed, v) in trips.iter_mut().enumerate() {
+            if closed == 1 {
+                self.fpwr(station, 0x0101, &[loop_control | 3 << (2 * port)])?;
+                self.engine.expect_secondary(false);
+            }
+            for _ in 0..32 {
+                let built = self.engine.io.now_ns();
+                self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
+                let tx = self.engine.io.last_tx_ns().unwrap_or(built);
+                v.push(self.engine.last_rx_ns.wrapping_sub(tx) as i64);
+            }
+            if closed == 1 {
+                self.fpwr(station, 0x0101, &[loop_control])?;
+                self.engine.expect_secondary(true);
+            }
+        }
+        let median = |v: &mut Vec<i64>| {
+            v.sort_unstable();
+            v[v.len() / 2]
+        };
+        let (ring, line) = (median(&mut trips[0]), median(&mut trips[1]));
+        self.ring_shortening_ns = line - ring;
+        Ok(())
+    }
+
     /// Latches the receive times (BWR 0x0900) and computes every DC slave's propagation delay
     /// from the reference (the first DC slave) for any tree: a child's hop is half of its
     /// parent's round trip through that port minus the child's own loop; slaves behind a later
@@ -76,20 +149,37 @@ impl<I: Io> Master<I> {
         if !self.slaves.iter().any(|s| s.has_dc) {
             return Ok(None);
         }
+        // On a ring, the frame turns at the ring's port as on a line's end.
+        let ring = match self.ring_port {
+            Some((k, port)) => {
+                let st = self.slaves[k as usize].station;
+                let mut loop_control = [0u8; 1];
+                self.fprd(st, 0x0101, &mut loop_control)?;
+                self.fpwr(st, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
+                self.engine.expect_secondary(false);
+                Some((st, loop_control))
+            }
+            None => None,
+        };
         // Sent once per try, so that the stamps are of the frame that latched.
         let mut tries = self.engine.retries.saturating_add(1);
-        let mut stamps = loop {
+        let latched = loop {
             let built_ns = self.master_system_time();
             let mut latch = [0u8; 4];
             let mut pdus = [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch)];
             let bytes = crate::dc::frame_bytes(&pdus);
             tries -= 1;
             match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
-                Ok(()) => break self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes),
+                Ok(()) => break Ok(self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes)),
                 Err(MasterError::Timeout { .. }) if tries > 0 => continue,
-                Err(e) => return Err(e),
+                Err(e) => break Err(e),
             }
         };
+        if let Some((st, loop_control)) = ring {
+            self.fpwr(st, 0x0101, &loop_control)?;
+            self.engine.expect_secondary(true);
+        }
+        let mut stamps = latched?;
         for k in 0..self.slaves.len() {
             if !self.slaves[k].has_dc {
                 continue;

@@ -85,6 +85,12 @@ pub struct Master<I: Io> {
     /// What a closed port's loop-back adds to a frame's way, for the delay computation (0:
     /// assume nothing, as SOEM, IgH and ethercrab do). See `measure_delays`.
     pub closed_port_loop_ns: u32,
+    /// Cable redundancy: the port (slave position, port) by which an intact ring's frames
+    /// leave for the master's secondary port — a link, but no branch of the tree.
+    pub ring_port: Option<(u16, u8)>,
+    /// On an intact ring, how much sooner a frame is back than on the line the ring's port
+    /// makes when closed (measured by `find_ring_port`; 0 otherwise).
+    pub ring_shortening_ns: i64,
 }
 
 impl<I: Io> Master<I> {
@@ -108,6 +114,8 @@ impl<I: Io> Master<I> {
             frmw: [0; 8],
             epoch_offset_ns: None,
             closed_port_loop_ns: 0,
+            ring_port: None,
+            ring_shortening_ns: 0,
         }
     }
 
@@ -146,6 +154,7 @@ impl<I: Io> Master<I> {
             .map(|s| SlaveTag { position: s.position, station: s.station, alias: s.alias, name: s.name.clone() })
             .collect();
         self.wait_state_all(AlState::Init)?;
+        self.find_ring_port()?;
         self.topology();
         self.measure_delays()?;
         Ok(())
