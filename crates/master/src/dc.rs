@@ -403,6 +403,8 @@ pub struct SyncState {
     /// probes stopped early so as not to make the next cycle late.
     pub probe_mean_ns: u64,
     pub probes_cut: u64,
+    /// Cable redundancy: the ring's state `loop_ns` was measured for.
+    pub ring: crate::engine::RingState,
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -436,7 +438,7 @@ impl<I: Io> Master<I> {
 
     /// A fresh state for cyclic synchronisation, with the reference's loop time.
     pub fn sync_state(&self) -> Result<SyncState> {
-        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ..SyncState::default() })
+        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ring: self.engine.ring, ..SyncState::default() })
     }
 
     /// How long a frame spends behind the reference before it passes it again on its way
@@ -446,6 +448,33 @@ impl<I: Io> Master<I> {
     pub fn reference_loop_ns(&self) -> Result<u64> {
         let line = self.loop_ns_of(self.reference_index()?);
         Ok((line as i64 - self.ring_shortening_ns).max(0) as u64)
+    }
+
+    /// The reference's loop as the ring now is: on an intact ring the one `find_ring_port`
+    /// measured; on a broken one (or a ring whose secondary cable is pulled, now a line) the
+    /// frame turns where the link is gone, so the receive times are latched again and the
+    /// reference's active ports read afresh.
+    fn current_reference_loop_ns(&mut self) -> Result<u64> {
+        use crate::engine::RingState;
+        if matches!(self.engine.ring, RingState::Intact | RingState::Unknown) {
+            return self.reference_loop_ns();
+        }
+        let r = self.reference_index()?;
+        let st = self.slaves[r].station;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+        let mut dl = [0u8; 2];
+        self.fprd(st, 0x0110, &mut dl)?;
+        let mut t = [0u8; 16];
+        self.fprd(st, 0x0900, &mut t)?;
+        let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
+        let times: [u32; 4] = std::array::from_fn(|p| u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap()));
+        let e = self.slaves[r].entry_port as usize;
+        Ok((0..4)
+            .filter(|&p| p != e && dl.port_active(p as u8))
+            .map(|p| times[p].wrapping_sub(times[e]) as i32 as i64)
+            .max()
+            .unwrap_or(0)
+            .max(0) as u64)
     }
 
     /// How long a frame spends behind slave `k` before it passes it again on its way back.
@@ -541,6 +570,13 @@ impl<I: Io> Master<I> {
             let frmw = u64::from_le_bytes(p.frmw);
             st.reference_ns = Some(if wide { frmw } else { unwrap32(st.reference_ns, frmw) });
             let mut s = self.stamped_sample(st, p.built_ns, frame_bytes);
+            // The ring broke or closed under this frame: the reference's loop is measured
+            // again (after the stamps were taken, which its frames would replace).
+            if self.engine.io.has_secondary() && self.engine.ring != st.ring {
+                st.ring = self.engine.ring;
+                st.loop_ns = self.current_reference_loop_ns()?;
+                s.loop_ns = st.loop_ns;
+            }
             s.reference_offset_ns = offset.and(st.reference_offset_ns);
             s.difference_ns = SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns();
             s.data_ns = data_bytes * 80;
