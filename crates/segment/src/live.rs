@@ -92,24 +92,24 @@ struct Placement {
     last_ns: u64,
     /// Running mean of the processing and send, to the answer's transmit stamp.
     finish_ns: Option<u64>,
-    /// The segment's round trip by frame length.
+    /// The segment's round trip by way: the frame's length, and the port it came in by.
     trip_ns: HashMap<usize, u64>,
 }
 
 impl Placement {
-    /// The segment time at which a frame of `len` bytes that arrived at `arrived_ns` and is
-    /// handled from `start_ns` on enters the segment.
-    fn entry_ns(&mut self, len: usize, arrived_ns: u64, start_ns: u64) -> u64 {
+    /// The segment time at which a frame taking `way` (its length and entry port, as a key)
+    /// that arrived at `arrived_ns` and is handled from `start_ns` on enters the segment.
+    fn entry_ns(&mut self, way: usize, arrived_ns: u64, start_ns: u64) -> u64 {
         let answer = start_ns.saturating_sub(arrived_ns) + self.finish_ns.unwrap_or(0);
-        let trip = self.trip_ns.get(&len).copied().unwrap_or(0);
+        let trip = self.trip_ns.get(&way).copied().unwrap_or(0);
         self.last_ns = self.last_ns.max(arrived_ns + answer.saturating_sub(trip) / 2);
         self.last_ns
     }
 
-    /// The answer to the frame of `len` bytes left `finish_ns` after it was handled; its trip
+    /// The answer to the frame taking `way` left `finish_ns` after it was handled; its trip
     /// through the segment took `trip_ns`.
-    fn answered(&mut self, len: usize, trip_ns: u64, finish_ns: u64) {
-        self.trip_ns.insert(len, trip_ns);
+    fn answered(&mut self, way: usize, trip_ns: u64, finish_ns: u64) {
+        self.trip_ns.insert(way, trip_ns);
         // Over ~16 frames; a preempted send counts as 1 ms at most.
         let f = finish_ns.min(1_000_000);
         self.finish_ns = Some(self.finish_ns.map_or(f, |m| (m * 15 + f) / 16));
@@ -173,7 +173,9 @@ pub fn serve_raw(
         stats.frames_in_secondary += (from == MasterPort::Secondary) as u64;
         let start = monotonic_ns();
         let arrived = stamp.map_or(start, |s| s.clamp(t0, start));
-        let entry = place.entry_ns(n, arrived - t0, start - t0);
+        // A ring's two ports take different ways through the segment.
+        let way = 2 * n + (from == MasterPort::Secondary) as usize;
+        let entry = place.entry_ns(way, arrived - t0, start - t0);
         if let Some((to, back)) = handle(seg, from, &mut buf[..n], entry, &mut stats) {
             let sock = match to {
                 MasterPort::Primary => sock,
@@ -188,7 +190,7 @@ pub fn serve_raw(
             // transmit stamp says when (the call's return, without one).
             let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(start, sent));
             // The trip from the frame's departure: a wait for the link is not part of it.
-            place.answered(n, back.saturating_sub(seg.last_departure_ns()), left - start);
+            place.answered(way, back.saturating_sub(seg.last_departure_ns()), left - start);
         }
         if let Some(log) = stats.clock_log.as_mut() {
             log.push(t0 + place.last_ns);
