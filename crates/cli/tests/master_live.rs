@@ -210,6 +210,11 @@ fn run_keeps_a_ring_going_across_a_pulled_cable() {
     println!("{out}{err}\nsimulator: {rep}");
     assert!(run.status.success(), "{err}");
     assert!(out.contains("ring broken at the end"), "{out}");
+    assert_eq!(
+        err.matches("ring broken: the slaves behind the break are served from the secondary port").count(),
+        1,
+        "{err}"
+    );
     let resent: u64 = out.split("; ").last().and_then(|p| p.split(' ').next()).and_then(|n| n.parse().ok()).unwrap();
     assert!(resent > 500, "{out}");
     // Every slave in OP at the end, the far half's terminal taking outputs after the break.

@@ -527,7 +527,9 @@ impl<I: Io> Master<I> {
             Ok(()) => SyncPdus::answered(&pdus),
             Err(_) => SyncAnswers::NONE,
         };
-        self.sync_end(sync, st, &p, answered, frame_bytes, 0)
+        let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0);
+        self.note_ring();
+        c
     }
 
     /// The sync datagrams of this cycle, built now (the master's time goes into them).

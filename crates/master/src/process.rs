@@ -44,9 +44,22 @@ pub struct CycleStats {
 pub(crate) struct CycleState {
     pub stats: CycleStats,
     last_start: Option<u64>,
+    /// The ring's state last reported (cable redundancy).
+    ring: crate::engine::RingState,
 }
 
 impl<I: Io> Master<I> {
+    /// Reports a change of the ring's state once (cable redundancy); the first state seen is
+    /// the starting point, not news.
+    pub(crate) fn note_ring(&mut self) {
+        use crate::engine::RingState;
+        let now = self.engine.ring;
+        let before = std::mem::replace(&mut self.cyc.ring, now);
+        if now != before && before != RingState::Unknown && now != RingState::Unknown {
+            self.events.push(crate::MasterEvent::Ring { state: now });
+        }
+    }
+
     /// The handle of an output entry of slave `position` by its name (first match).
     pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.slave(position)?;
@@ -216,6 +229,7 @@ impl<I: Io> Master<I> {
             }
             _ => None,
         };
+        self.note_ring();
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;

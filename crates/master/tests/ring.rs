@@ -73,6 +73,9 @@ fn process_data_goes_on_across_a_pulled_ring_cable() {
     // The far half's terminal still takes its outputs: its SyncManager saw every cycle.
     let stats = m.cycle_stats();
     assert_eq!(stats.wkc_errors, 0, "{stats:?}");
+    // Said once.
+    let said: Vec<String> = m.events.iter().map(|e| e.to_string()).collect();
+    assert_eq!(said, ["ring broken: the slaves behind the break are served from the secondary port"]);
 }
 
 #[test]

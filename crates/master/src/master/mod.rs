@@ -28,6 +28,8 @@ pub enum MasterEvent {
     Recovered { position: u16, name: String },
     /// A CoE emergency.
     Emergency { position: u16, name: String, error_code: u16, error_register: u8, data: [u8; 5] },
+    /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
+    Ring { state: crate::engine::RingState },
 }
 
 impl std::fmt::Display for MasterEvent {
@@ -47,6 +49,14 @@ impl std::fmt::Display for MasterEvent {
             MasterEvent::Emergency { position, name, error_code, error_register, data } => {
                 write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
             }
+            MasterEvent::Ring { state } => f.write_str(match state {
+                crate::engine::RingState::Broken => {
+                    "ring broken: the slaves behind the break are served from the secondary port"
+                }
+                crate::engine::RingState::Intact => "ring closed again",
+                crate::engine::RingState::Line => "ring open: nothing answers on the secondary port",
+                crate::engine::RingState::Unknown => "ring state unknown",
+            }),
         }
     }
 }
