@@ -32,6 +32,20 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
         outln!("{}", serde_json::Value::Array(v));
     } else {
         outln!("{} slaves found", m.slaves.len());
+        use ferrocat_master::io::Io;
+        if m.engine.io.has_secondary() {
+            outln!(
+                "{}",
+                match m.engine.ring {
+                    ferrocat_master::RingState::Intact => "Ring intact: every slave on one pass",
+                    ferrocat_master::RingState::Broken => {
+                        "Ring broken: the slaves behind the break answer from the secondary port; \
+                         their delays are not measured from the reference"
+                    }
+                    _ => "Ring open: nothing answers on the secondary port",
+                }
+            );
+        }
         for s in &m.slaves {
             outln!("");
             outln!("Slave:{} {} ({})", s.position + 1, s.name, s.description);

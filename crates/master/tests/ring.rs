@@ -143,3 +143,25 @@ fn a_master_leading_the_reference_keeps_it_across_a_break() {
         assert!((after.0 - before.0).abs() < bound_ns, "{}: {before:?} → {after:?}", host.name);
     }
 }
+
+/// A ring already broken when the master starts: the second passes count and address the far
+/// half, so the scan finds every slave and the whole ring reaches OP and exchanges its
+/// process data (its delays behind the break are not the reference's: docs/master.md).
+#[test]
+fn a_ring_broken_at_start_up_comes_up_whole() {
+    let mut m = master(
+        &format!("{DEVICES}{RING}[[event]]\nat_ms = 0\nlink_down = {{ device = 2, port = 0 }}\n"),
+        HostModel::pc_rt(),
+    );
+    m.bring_up().unwrap();
+    assert_eq!(m.slaves.len(), 4);
+    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_port, None);
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..100 {
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+        next += 1_000_000;
+        m.engine.io.sleep_until(next);
+    }
+    assert_eq!(m.expected_wkc, 4, "both EL2004s written");
+}
