@@ -83,23 +83,35 @@ impl<I: Io> Master<I> {
                     continue;
                 }
                 let st = self.slaves[k].station;
-                let mut loop_control = [0u8; 1];
-                self.fprd(st, 0x0101, &mut loop_control)?;
-                self.fpwr(st, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
-                // Its probe cannot come back through the closed port: do not wait for it.
-                self.engine.expect_secondary(false);
+                let loop_control = self.close_port(st, port)?;
                 let mut b = [0u8; 2];
                 let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut b)?;
                 let turned = self.engine.ring == crate::engine::RingState::Line && wkc == n;
-                self.fpwr(st, 0x0101, &loop_control)?;
-                self.engine.expect_secondary(true);
+                self.reopen_port(st, loop_control)?;
                 if turned {
                     self.ring_port = Some((k as u16, port));
                     self.slaves[k].active_ports[port as usize] = false;
-                    return self.measure_ring_shortening(st, loop_control[0], port);
+                    return self.measure_ring_shortening(st, port);
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Closes `port` of the slave at `station` by loop control (0x0101): the ring turns there as
+    /// a line's end. The probes cannot come back through it, so they are not waited for.
+    /// Returns the loop control to restore with [`Master::reopen_port`].
+    fn close_port(&mut self, station: u16, port: u8) -> Result<u8> {
+        let mut loop_control = [0u8; 1];
+        self.fprd(station, 0x0101, &mut loop_control)?;
+        self.fpwr(station, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
+        self.engine.expect_secondary(false);
+        Ok(loop_control[0])
+    }
+
+    fn reopen_port(&mut self, station: u16, loop_control: u8) -> Result<()> {
+        self.fpwr(station, 0x0101, &[loop_control])?;
+        self.engine.expect_secondary(true);
         Ok(())
     }
 
@@ -108,31 +120,26 @@ impl<I: Io> Master<I> {
     /// same broadcast each way, by the link's stamps. A master that follows the reference
     /// times the reference's pass from the round trip less the loop behind it; on the ring the
     /// loop is this much shorter than the line's receive times say.
-    fn measure_ring_shortening(&mut self, station: u16, loop_control: u8, port: u8) -> Result<()> {
-        let mut trips = [Vec::new(), Vec::new()];
-        for (closed, v) in trips.iter_mut().enumerate() {
-            if closed == 1 {
-                self.fpwr(station, 0x0101, &[loop_control | 3 << (2 * port)])?;
-                self.engine.expect_secondary(false);
-            }
-            for _ in 0..32 {
-                let built = self.engine.io.now_ns();
-                self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
-                let tx = self.engine.io.last_tx_ns().unwrap_or(built);
-                v.push(self.engine.last_rx_ns.wrapping_sub(tx) as i64);
-            }
-            if closed == 1 {
-                self.fpwr(station, 0x0101, &[loop_control])?;
-                self.engine.expect_secondary(true);
-            }
-        }
-        let median = |v: &mut Vec<i64>| {
-            v.sort_unstable();
-            v[v.len() / 2]
-        };
-        let (ring, line) = (median(&mut trips[0]), median(&mut trips[1]));
-        self.ring_shortening_ns = line - ring;
+    fn measure_ring_shortening(&mut self, station: u16, port: u8) -> Result<()> {
+        let ring = self.median_round_trip_ns()?;
+        let loop_control = self.close_port(station, port)?;
+        let line = self.median_round_trip_ns();
+        self.reopen_port(station, loop_control)?;
+        self.ring_shortening_ns = line? - ring;
         Ok(())
+    }
+
+    /// The median round trip of 32 two-byte broadcasts, by the link's stamps.
+    fn median_round_trip_ns(&mut self) -> Result<i64> {
+        let mut trips = Vec::with_capacity(32);
+        for _ in 0..32 {
+            let built = self.engine.io.now_ns();
+            self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
+            let tx = self.engine.io.last_tx_ns().unwrap_or(built);
+            trips.push(self.engine.last_rx_ns.wrapping_sub(tx) as i64);
+        }
+        trips.sort_unstable();
+        Ok(trips[trips.len() / 2])
     }
 
     /// Latches the receive times (BWR 0x0900) and computes every DC slave's propagation delay
@@ -153,11 +160,7 @@ impl<I: Io> Master<I> {
         let ring = match self.ring_port {
             Some((k, port)) => {
                 let st = self.slaves[k as usize].station;
-                let mut loop_control = [0u8; 1];
-                self.fprd(st, 0x0101, &mut loop_control)?;
-                self.fpwr(st, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
-                self.engine.expect_secondary(false);
-                Some((st, loop_control))
+                Some((st, self.close_port(st, port)?))
             }
             None => None,
         };
@@ -176,8 +179,7 @@ impl<I: Io> Master<I> {
             }
         };
         if let Some((st, loop_control)) = ring {
-            self.fpwr(st, 0x0101, &loop_control)?;
-            self.engine.expect_secondary(true);
+            self.reopen_port(st, loop_control)?;
         }
         let mut stamps = latched?;
         for k in 0..self.slaves.len() {
