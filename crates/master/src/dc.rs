@@ -407,6 +407,18 @@ pub struct SyncState {
     pub ring: crate::engine::RingState,
 }
 
+/// The latest receive time of the other active ports less the entry port's (across the 32-bit
+/// wrap): how long a frame spent behind a slave.
+fn loop_of(receive_times: &[u32; 4], active_ports: [bool; 4], entry_port: u8) -> u64 {
+    let e = entry_port as usize;
+    (0..4)
+        .filter(|&p| p != e && active_ports[p])
+        .map(|p| receive_times[p].wrapping_sub(receive_times[e]) as i32 as i64)
+        .max()
+        .unwrap_or(0)
+        .max(0) as u64
+}
+
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
 fn unwrap32(prev: Option<u64>, low: u64) -> u64 {
     match prev {
@@ -468,25 +480,13 @@ impl<I: Io> Master<I> {
         self.fprd(st, 0x0900, &mut t)?;
         let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
         let times: [u32; 4] = std::array::from_fn(|p| u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap()));
-        let e = self.slaves[r].entry_port as usize;
-        Ok((0..4)
-            .filter(|&p| p != e && dl.port_active(p as u8))
-            .map(|p| times[p].wrapping_sub(times[e]) as i32 as i64)
-            .max()
-            .unwrap_or(0)
-            .max(0) as u64)
+        Ok(loop_of(&times, [0, 1, 2, 3].map(|p| dl.port_active(p)), self.slaves[r].entry_port))
     }
 
     /// How long a frame spends behind slave `k` before it passes it again on its way back.
     pub(crate) fn loop_ns_of(&self, k: usize) -> u64 {
         let s = &self.slaves[k];
-        let e = s.entry_port as usize;
-        (0..4)
-            .filter(|&p| p != e && s.active_ports[p])
-            .map(|p| s.receive_times[p].wrapping_sub(s.receive_times[e]) as i32 as i64)
-            .max()
-            .unwrap_or(0)
-            .max(0) as u64
+        loop_of(&s.receive_times, s.active_ports, s.entry_port)
     }
 
     /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master,

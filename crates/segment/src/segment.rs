@@ -388,8 +388,9 @@ impl Segment {
     /// first ESC: every ESC's port times and processing-unit pass in the order they happen, and
     /// where and when the head leaves for the master. Each port passes the frame to the next in
     /// processing order; an open port with a link sends it down the wire, a closed one loops it
-    /// back. On a tree and on a ring every port is passed at most twice, so a walk longer than
-    /// that circles (a port closed by hand) and the frame never returns.
+    /// back; a port closed by loop control drops what its wire brings. On a tree and on a ring
+    /// every port is passed at most twice, so a walk longer than that circles (a port closed by
+    /// hand) and the frame never returns.
     fn walk(&mut self, from: MasterPort) -> (Vec<(usize, FrameTiming)>, Exit) {
         let mut visits = std::mem::take(&mut self.routes[from as usize].visits);
         visits.clear();
@@ -400,7 +401,11 @@ impl Segment {
         let (mut node, mut p, mut t, mut from_wire) = (start, start_port, 0u64, true);
         timing[node].port_ns[p as usize] = Some(0);
         let mut exit = None;
-        for _ in 0..8 * self.nodes.len() + 8 {
+        // A port closed by loop control takes nothing in from its wire: its receive side is
+        // the loop-back.
+        let mut steps = if self.nodes[start].esc.port_forced_closed(start_port) { 0 } else { 8 * self.nodes.len() + 8 };
+        while steps > 0 {
+            steps -= 1;
             let esc_timing = self.nodes[node].timing;
             let mut t_tx = t;
             if p == 0 {
@@ -426,6 +431,9 @@ impl Segment {
             }
             match self.nodes[node].peers[q as usize] {
                 Some(peer) if open => {
+                    if self.nodes[peer.node].esc.port_forced_closed(peer.port) {
+                        break;
+                    }
                     t = t_tx + peer.delay_ns as u64;
                     (node, p, from_wire) = (peer.node, peer.port, true);
                     timing[node].port_ns[p as usize] = Some(t);
@@ -493,10 +501,8 @@ impl Segment {
             self.stats.lost += 1;
             return None;
         };
-        // A port closed by loop control takes nothing in: its receive side is replaced by the
-        // loop-back.
         let n = &self.nodes[first];
-        if !n.powered || n.cut[entry as usize & 3] || n.esc.port_forced_closed(entry) {
+        if !n.powered || n.cut[entry as usize & 3] {
             self.stats.lost += 1;
             return None;
         }
