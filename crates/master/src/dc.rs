@@ -1,7 +1,7 @@
 //! Distributed-clock initialisation: delays and offsets written, the time control loops reset,
 //! static drift compensation until every slave has converged, SYNC0/SYNC1 started on the cycle
 //! grid, and a sync monitor (esc-spec §3.4).
-use ferrocat_wire::register::{dc_activation as act, SystemTimeDifference};
+use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDifference};
 use ferrocat_wire::{Address, Command};
 
 use crate::engine::Pdu;
@@ -480,7 +480,17 @@ impl<I: Io> Master<I> {
         self.fprd(st, 0x0900, &mut t)?;
         let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
         let times: [u32; 4] = std::array::from_fn(|p| u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap()));
-        Ok(loop_of(&times, [0, 1, 2, 3].map(|p| dl.port_active(p)), self.slaves[r].entry_port))
+        let view = crate::topology::PortView {
+            entry_port: self.slaves[r].entry_port,
+            active_ports: [0, 1, 2, 3].map(|p| dl.port_active(p)),
+            present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(self.slaves[r].port_descriptor).can_link(p)),
+            receive_times: Some(times),
+            epu_time: None,
+        };
+        // The port that lost its link now loops the frame back after the last latched return,
+        // where on the ring it latched one: its loop-back belongs to the loop.
+        let loops = view.loops_after_last_event() * self.closed_port_loop_ns as i64;
+        Ok(loop_of(&times, view.active_ports, view.entry_port) + loops.max(0) as u64)
     }
 
     /// How long a frame spends behind slave `k` before it passes it again on its way back.
@@ -527,9 +537,9 @@ impl<I: Io> Master<I> {
             Ok(()) => SyncPdus::answered(&pdus),
             Err(_) => SyncAnswers::NONE,
         };
-        let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0);
-        self.note_ring();
-        c
+        let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
+        self.note_ring()?;
+        Ok(c)
     }
 
     /// The sync datagrams of this cycle, built now (the master's time goes into them).
@@ -741,6 +751,28 @@ impl<I: Io> Master<I> {
             self.fpwr(st, 0x0928, &delay.to_le_bytes())?;
         }
         Ok(())
+    }
+
+    /// The ring split or closed (cable redundancy). Split, with
+    /// [`SplitRingClocks::FarReference`](crate::SplitRingClocks::FarReference), the first slave
+    /// with a system time behind the break becomes the far half's reference: the FRMW of the
+    /// second pass reads it. Nothing else changes: an ECAT read of 0x0910 gives the system time
+    /// less the reader's own delay register (esc-spec §3), so the far reference hands on the
+    /// reference's time as of the reference's pass, and its followers add their delays from
+    /// the reference as ever. Closed, the reference's FRMW again.
+    pub(crate) fn ring_changed(&mut self, before: crate::engine::RingState) {
+        use crate::engine::{RingState, SplitRingClocks};
+        let now = self.engine.ring;
+        if now == RingState::Broken && before != RingState::Broken {
+            let far = self.engine.far_half_slaves as usize;
+            let n = self.slaves.len();
+            if self.engine.split_ring_clocks == SplitRingClocks::FarReference && far > 0 && far < n {
+                self.engine.far_reference =
+                    (n - far..n).find(|&k| self.slaves[k].has_system_time).map(|k| self.slaves[k].station);
+            }
+        } else if now != RingState::Broken {
+            self.engine.far_reference = None;
+        }
     }
 
     /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.

@@ -56,9 +56,13 @@ pub enum RingState {
 /// distribution in it (docs/master.md, "Cable redundancy").
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum SplitRingClocks {
-    /// FRMW and ARMW become NOPs: the second half's clocks hold their last rate instead of
-    /// taking a reference time that is a whole master round trip old.
+    /// The far half follows its first slave with a system time, which the master chooses
+    /// ([`Engine::far_reference`]): the FRMW of the second pass reads that slave's time instead
+    /// of carrying the reference's, a whole master round trip old; that slave holds its last
+    /// rate, and the far half keeps together.
     #[default]
+    FarReference,
+    /// FRMW and ARMW become NOPs: every clock behind the break holds its last rate on its own.
     HoldOver,
     /// As sent: the second half takes the reference time read on the first pass (SOEM).
     AsSent,
@@ -105,6 +109,12 @@ pub struct Engine<I: Io> {
     /// half gets its clock.
     pub ring: RingState,
     pub split_ring_clocks: SplitRingClocks,
+    /// While the ring is split ([`SplitRingClocks::FarReference`]): the station whose time the
+    /// far half's FRMW carries (the first slave with a system time behind the break, which the
+    /// master chooses); none: every far clock on its own.
+    pub far_reference: Option<u16>,
+    /// How many slaves the last secondary probe counted behind a break.
+    pub far_half_slaves: u16,
     /// The secondary's last probe came back: worth waiting for the next.
     secondary_alive: bool,
 }
@@ -150,7 +160,9 @@ impl<I: Io> Engine<I> {
                 })
                 .collect(),
             ring: RingState::Unknown,
-            split_ring_clocks: SplitRingClocks::HoldOver,
+            split_ring_clocks: SplitRingClocks::FarReference,
+            far_reference: None,
+            far_half_slaves: 0,
             secondary_alive: true,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
@@ -268,6 +280,23 @@ impl<I: Io> Engine<I> {
         }
     }
 
+    /// The FRMW and ARMW datagrams (as sent) of the slot, filled from its held first pass.
+    fn fill_clock_datagrams(slot: &Slot, held_len: usize, pdus: &mut [Pdu<'_>]) {
+        let (Ok(Some(sent)), Ok(Some(held))) =
+            (Frame::parse(&slot.buf[..slot.len]), Frame::parse(&slot.held_buf[..held_len]))
+        else {
+            return;
+        };
+        let pairs = sent.pdu.datagrams().zip(held.pdu.datagrams());
+        for (p, (a, b)) in pdus[slot.first..slot.first + slot.count].iter_mut().zip(pairs) {
+            if matches!(a.header().command.0, 13 | 14) {
+                let n = p.data.len().min(b.data().len());
+                p.data[..n].copy_from_slice(&b.data()[..n]);
+                p.wkc = b.wkc();
+            }
+        }
+    }
+
     /// The held answer is the answer: the slot is done.
     fn complete_held(&mut self, s: usize, pdus: &mut [Pdu<'_>]) {
         let slot = &mut self.slots[s];
@@ -283,9 +312,14 @@ impl<I: Io> Engine<I> {
     fn decide(&mut self, s: usize, pdus: &mut [Pdu<'_>]) -> Result<()> {
         let slot = &mut self.slots[s];
         let Some((n, _)) = slot.held else { return Ok(()) };
-        if matches!(slot.probe, Some((true, wkc)) if wkc > 0) {
-            if self.split_ring_clocks == SplitRingClocks::HoldOver {
-                nop_clock_distribution(&mut slot.held_buf[..n]);
+        if let Some((true, wkc @ 1..)) = slot.probe {
+            self.far_half_slaves = wkc;
+            match self.split_ring_clocks {
+                SplitRingClocks::FarReference => {
+                    redirect_clock_distribution(&mut slot.held_buf[..n], self.far_reference)
+                }
+                SplitRingClocks::HoldOver => redirect_clock_distribution(&mut slot.held_buf[..n], None),
+                SplitRingClocks::AsSent => {}
             }
             slot.resent = true;
             slot.deadline = self.io.now_ns() + self.timeout_ns;
@@ -345,6 +379,13 @@ impl<I: Io> Engine<I> {
                 }
                 let slot = &mut self.slots[s];
                 Self::fill(slot.first, slot.count, &self.rx[..n], pdus);
+                if slot.resent {
+                    // The clock datagrams as the first pass left them: the reference's time,
+                    // not what the far half did with them.
+                    if let Some((h, _)) = slot.held {
+                        Self::fill_clock_datagrams(slot, h, pdus);
+                    }
+                }
                 slot.busy = false;
                 self.stats.frames_received += 1;
                 Ok(())
@@ -438,14 +479,17 @@ impl<I: Io> Engine<I> {
     }
 }
 
-/// Turns the FRMW and ARMW datagrams of a frame into NOPs (command 0): nobody reads or writes
-/// them, their data and working counter go on as they were.
-fn nop_clock_distribution(frame: &mut [u8]) {
+/// The FRMW datagrams of a frame addressed to `far_reference` (its configured address), or
+/// made NOPs (command 0) where there is none, as the ARMWs always are (addressed by position):
+/// nobody behind the break takes the first pass's time.
+fn redirect_clock_distribution(frame: &mut [u8], far_reference: Option<u16>) {
     let Ok((_, mut at)) = EthernetRepr::parse(frame) else { return };
     at += 2; // the EtherCAT header
     while at + HEADER_LEN + WKC_LEN <= frame.len() {
-        if matches!(frame[at], 13 | 14) {
-            frame[at] = 0;
+        match (frame[at], far_reference) {
+            (14, Some(station)) => frame[at + 2..at + 4].copy_from_slice(&station.to_le_bytes()),
+            (13 | 14, _) => frame[at] = 0,
+            _ => {}
         }
         let len_field = u16::from_le_bytes([frame[at + 6], frame[at + 7]]);
         at += HEADER_LEN + (len_field & 0x07FF) as usize + WKC_LEN;

@@ -49,15 +49,19 @@ pub(crate) struct CycleState {
 }
 
 impl<I: Io> Master<I> {
-    /// Reports a change of the ring's state once (cable redundancy); the first state seen is
-    /// the starting point, not news.
-    pub(crate) fn note_ring(&mut self) {
+    /// Reports a change of the ring's state once (cable redundancy; the first state seen is
+    /// the starting point, not news) and sets the clocks up for it.
+    pub(crate) fn note_ring(&mut self) -> Result<()> {
         use crate::engine::RingState;
         let now = self.engine.ring;
         let before = std::mem::replace(&mut self.cyc.ring, now);
         if now != before && before != RingState::Unknown && now != RingState::Unknown {
             self.events.push(crate::MasterEvent::Ring { state: now });
         }
+        if now != before {
+            self.ring_changed(before);
+        }
+        Ok(())
     }
 
     /// The handle of an output entry of slave `position` by its name (first match).
@@ -229,7 +233,7 @@ impl<I: Io> Master<I> {
             }
             _ => None,
         };
-        self.note_ring();
+        self.note_ring()?;
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;

@@ -2,7 +2,8 @@
 //! second coupler's X2 OUT back to the master's secondary port). It finds the port the ring
 //! closes through and measures a line's delays; the process data keeps its whole working
 //! counter when a cable in the ring is pulled; and the split ring's far half keeps its clocks
-//! by holding over instead of taking a reference time a master round trip old.
+//! by holding over instead of taking a reference time a master round trip old, together behind
+//! its own first clock.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_master::{RingState, SplitRingClocks};
@@ -105,6 +106,8 @@ fn the_far_half_of_a_split_ring_holds_its_clock() {
 fn ferrocat_across_a_break(host: HostModel) -> [(f64, f64); 2] {
     use ferrocat_master::sync::{Coupling, Ferrocat};
     let mut m = master(&format!("{DEVICES}{RING}"), host);
+    // A closed port's loop-back, as the lab tells the master (ferrocat_lab::loop_back_ns).
+    m.closed_port_loop_ns = 20;
     m.bring_up().unwrap();
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
@@ -164,4 +167,52 @@ fn a_ring_broken_at_start_up_comes_up_whole() {
         m.engine.io.sleep_until(next);
     }
     assert_eq!(m.expected_wkc, 4, "both EL2004s written");
+}
+
+/// Behind the break, two clocks (the far coupler and its terminal, both with a system time):
+/// with the far coupler as the far half's reference they keep together while the ring is
+/// split; held over each on its own they drift apart. Returns the worst |terminal − coupler|
+/// over 10 s after the break, and after the ring is closed again the worst over the last
+/// second of 2 s.
+fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
+    let mut m = master(&format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}"), HostModel::pc_rt());
+    m.engine.split_ring_clocks = clocks;
+    m.bring_up().unwrap();
+    assert!(m.init_dc(&DcConfig::default()).unwrap().converged);
+    let t0 = m.engine.io.now_ns();
+    let s = 1_000_000_000;
+    m.engine.io.seg.schedule(t0 + s, Event::LinkDown { node: 2, port: 0 });
+    m.engine.io.seg.schedule(t0 + 11 * s, Event::LinkUp { node: 2, port: 0 });
+    let (mut split, mut closed) = (0i64, 0i64);
+    let mut next = t0;
+    for k in 0..13_000u64 {
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
+        next += 1_000_000;
+        m.engine.io.sleep_until(next);
+        let now = m.engine.io.now_ns();
+        // The coupler's and the terminal's (an ET1200: 32 bits) system times.
+        let t = m.engine.io.seg.system_times_at(now);
+        let apart = ((t[2] as u32).wrapping_sub(t[1] as u32) as i32 as i64).abs();
+        if (1_001..11_000).contains(&k) {
+            split = split.max(apart);
+        } else if k >= 12_000 {
+            closed = closed.max(apart);
+        }
+    }
+    assert_eq!(m.engine.ring, RingState::Intact);
+    (split, closed)
+}
+
+#[test]
+fn the_far_half_keeps_together_behind_its_own_reference() {
+    let (far, far_closed) = far_half_spread(SplitRingClocks::FarReference);
+    let (apart, apart_closed) = far_half_spread(SplitRingClocks::HoldOver);
+    println!(
+        "far terminal − far coupler, worst over 10 s split: {far} ns following the far coupler, {apart} ns each held \
+         over; after the ring closed again: {far_closed} and {apart_closed} ns"
+    );
+    assert!(far < 50, "{far}");
+    assert!(apart > 4 * far.max(50), "{apart} vs {far}");
+    // Closed again, the delays are the reference's once more: back together either way.
+    assert!(far_closed < 50 && apart_closed < 50, "{far_closed}, {apart_closed}");
 }
