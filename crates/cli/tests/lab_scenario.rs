@@ -89,3 +89,40 @@ fn bad_scenarios_are_named_with_their_key() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--rounds: does not apply to chen2016"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The shipped ring scenario against the same segment as a line: ferrocat's GPIO calibration
+/// finds the same stamp asymmetry on both (the master measured how much shorter the ring's
+/// loop is; without that, 0.22 µs more on the ring), and its error stays a few ns.
+#[test]
+fn a_ring_measures_as_its_line_does() {
+    let line = std::env::temp_dir().join(format!("ferrocat-line-{}.toml", std::process::id()));
+    let ring =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenarios/segments/ring.toml")).unwrap();
+    std::fs::write(&line, ring.split("\n[secondary]").next().unwrap()).unwrap();
+    let run = |segment: Option<&str>| -> serde_json::Value {
+        let mut args = vec![
+            "lab",
+            "run",
+            "scenarios/park2020-ring.toml",
+            "--quick",
+            "--rounds",
+            "1",
+            "--method",
+            "ferrocat",
+            "--json",
+        ];
+        if let Some(s) = segment {
+            args.extend(["--segment", s]);
+        }
+        let out = ferrocat(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["rows"][0].clone()
+    };
+    let (r, l) = (run(None), run(Some(line.to_str().unwrap())));
+    std::fs::remove_file(&line).ok();
+    println!("ring {r}\nline {l}");
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+    assert!((f(&r, "calibration_us") - f(&l, "calibration_us")).abs() < 0.02, "ring {r}\nline {l}");
+    assert!(f(&r, "ref_gmean_us").abs() < 0.01 && f(&r, "ref_mrms_us") < 0.02, "{r}");
+}
