@@ -297,11 +297,13 @@ impl<I: Io> Engine<I> {
         }
     }
 
-    /// The held answer is the answer: the slot is done.
+    /// The held answer is the answer: the slot is done, its receive time the held one's (a
+    /// probe may have come in since).
     fn complete_held(&mut self, s: usize, pdus: &mut [Pdu<'_>]) {
         let slot = &mut self.slots[s];
-        if let Some((n, _)) = slot.held {
+        if let Some((n, t)) = slot.held {
             Self::fill(slot.first, slot.count, &slot.held_buf[..n], pdus);
+            self.last_rx_ns = t;
         }
         slot.busy = false;
         self.stats.frames_received += 1;
