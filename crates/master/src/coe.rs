@@ -8,20 +8,6 @@ use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::{Master, MasterEvent};
 
-/// The SII's mailbox-protocol bit of a mailbox type (0 for types the SII does not list).
-fn protocol_bit(t: MailboxType) -> u16 {
-    use ferrocat_wire::sii::mailbox_protocol as p;
-    match t {
-        MailboxType::AOE => p::AOE,
-        MailboxType::EOE => p::EOE,
-        MailboxType::COE => p::COE,
-        MailboxType::FOE => p::FOE,
-        MailboxType::SOE => p::SOE,
-        MailboxType::VOE => p::VOE,
-        _ => 0,
-    }
-}
-
 /// An object's description from SDO information.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ObjectInfo {
@@ -43,18 +29,16 @@ pub struct EntryInfo {
 }
 
 impl<I: Io> Master<I> {
-    /// The slave's station address, name and mailbox, if its SII names `protocol` (a
-    /// `sii::mailbox_protocol` bit; `what` names it in the error).
+    /// The slave's station address, name and mailbox, if its SII names `protocol`.
     pub(crate) fn mailbox_of(
         &self,
         position: u16,
-        protocol: u16,
-        what: &str,
+        protocol: MailboxType,
     ) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let s = self.slave(position)?;
         let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &s.name, "has no mailbox"))?;
-        if !s.has_protocol(protocol) {
-            return Err(MasterError::slave(position, &s.name, format!("does not support {what}")));
+        if !s.has_protocol(protocol.sii_protocol()) {
+            return Err(MasterError::slave(position, &s.name, format!("does not support {}", protocol.name())));
         }
         Ok((s.station, s.name.clone(), m))
     }
@@ -69,7 +53,7 @@ impl<I: Io> Master<I> {
 
     /// Writes one message of `mailbox_type` into SM0 (waiting while it is full).
     pub(crate) fn mbx_write(&mut self, position: u16, mailbox_type: MailboxType, payload: &[u8]) -> Result<()> {
-        let (st, name, m) = self.mailbox_of(position, protocol_bit(mailbox_type), mailbox_type.name())?;
+        let (st, name, m) = self.mailbox_of(position, mailbox_type)?;
         let c = next_counter(self.slaves[position as usize].mbx_counter);
         self.slaves[position as usize].mbx_counter = c;
         let mut buf = vec![0u8; m.out.1 as usize];
@@ -103,7 +87,7 @@ impl<I: Io> Master<I> {
     /// The next message of `mailbox_type` from SM1 (CoE emergencies met on the way become
     /// events; a mailbox error reply is an error; messages of other protocols are dropped).
     pub(crate) fn mbx_read(&mut self, position: u16, mailbox_type: MailboxType) -> Result<Vec<u8>> {
-        let (st, name, m) = self.mailbox_of(position, protocol_bit(mailbox_type), mailbox_type.name())?;
+        let (st, name, m) = self.mailbox_of(position, mailbox_type)?;
         let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
         let mut buf = vec![0u8; m.inp.1 as usize];
         loop {
@@ -176,8 +160,12 @@ impl<I: Io> Master<I> {
     }
 
     fn abort(&self, position: u16, index: u16, subindex: u8, code: ferrocat_wire::coe::AbortCode) -> MasterError {
-        let name = self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default();
-        MasterError::Abort { position, name, index, subindex, code }
+        MasterError::Abort { position, name: self.name_of(position), index, subindex, code }
+    }
+
+    /// The name of the slave at `position`, for an error (empty if there is none).
+    pub(crate) fn name_of(&self, position: u16) -> String {
+        self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default()
     }
 
     /// Reads an object entry (or, with `complete_access`, the whole object).
@@ -237,7 +225,7 @@ impl<I: Io> Master<I> {
         complete_access: bool,
         data: &[u8],
     ) -> Result<()> {
-        let (_, name, m) = self.mailbox_of(position, ferrocat_wire::sii::mailbox_protocol::COE, "CoE")?;
+        let (_, name, m) = self.mailbox_of(position, MailboxType::COE)?;
         let first_max = (m.out.1 as usize).saturating_sub(6 + 2 + 8);
         let seg_max = (m.out.1 as usize).saturating_sub(6 + 2 + 1);
         let check = |me: &Self, reply: &[u8]| -> Result<()> {

@@ -3,7 +3,6 @@
 use ferrocat_wire::foe::{max_data_len, Foe};
 use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::AlState;
-use ferrocat_wire::sii::mailbox_protocol;
 
 use crate::error::{MasterError, Result};
 use crate::io::Io;
@@ -46,8 +45,7 @@ impl<I: Io> Master<I> {
     }
 
     fn foe_error(&self, position: u16, what: String) -> MasterError {
-        let name = self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default();
-        MasterError::slave(position, &name, what)
+        MasterError::slave(position, &self.name_of(position), what)
     }
 
     fn foe_exchange(&mut self, position: u16, msg: Foe<'_>) -> Result<Vec<u8>> {
@@ -78,7 +76,7 @@ impl<I: Io> Master<I> {
     /// Writes `data` as file `file` to the slave at `position` (in a state with a mailbox:
     /// PREOP and above, or BOOT for firmware — see [`enter_bootstrap`](Self::enter_bootstrap)).
     pub fn foe_write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<()> {
-        let (_, _, m) = self.mailbox_of(position, mailbox_protocol::FOE, "FoE")?;
+        let (_, _, m) = self.mailbox_of(position, MailboxType::FOE)?;
         let max = max_data_len(m.out.1 as usize);
         if max == 0 {
             return Err(self.foe_error(position, format!("FoE: a {}-byte mailbox carries no data", m.out.1)));
@@ -123,7 +121,7 @@ impl<I: Io> Master<I> {
     /// Reads file `file` from the slave at `position`. `max_bytes` bounds what is kept: a
     /// slave sending more is an error (the transfer is aborted), not a truncated file.
     pub fn foe_read(&mut self, position: u16, file: &str, password: u32, max_bytes: usize) -> Result<Vec<u8>> {
-        let (_, _, m) = self.mailbox_of(position, mailbox_protocol::FOE, "FoE")?;
+        let (_, _, m) = self.mailbox_of(position, MailboxType::FOE)?;
         let max = max_data_len(m.inp.1 as usize);
         let mut data = Vec::new();
         let mut expect = 1u32;

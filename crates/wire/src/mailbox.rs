@@ -31,6 +31,21 @@ impl MailboxType {
             _ => "reserved",
         }
     }
+
+    /// The SII's mailbox-protocol bit for this type (`sii::mailbox_protocol`; 0 for a type the
+    /// SII does not list).
+    pub fn sii_protocol(self) -> u16 {
+        use crate::sii::mailbox_protocol as p;
+        match self {
+            Self::AOE => p::AOE,
+            Self::EOE => p::EOE,
+            Self::COE => p::COE,
+            Self::FOE => p::FOE,
+            Self::SOE => p::SOE,
+            Self::VOE => p::VOE,
+            _ => 0,
+        }
+    }
 }
 
 impl fmt::Debug for MailboxType {

@@ -382,13 +382,19 @@ impl Cia402Drive {
         match self.stop_deceleration(get(&self.coe.od, ix::FAULT_REACTION_OPTION, 0)) {
             Some(dec) if powered => {
                 self.state = State::FaultReactionActive;
-                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+                self.brake(dec);
             }
             _ => {
                 self.ramp = None;
                 self.state = State::Fault;
             }
         }
+    }
+
+    /// Starts a stopping ramp from the shaft's velocity at `dec` (increments/s²; infinite: at
+    /// the current limit).
+    fn brake(&mut self, dec: f64) {
+        self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
     }
 
     /// How an option code (0x605A, 0x605E) stops the shaft: `None` coasts (0: disable the drive
@@ -680,7 +686,7 @@ impl Cia402Drive {
             return next;
         }
         let dec = get_unsigned(&self.coe.od, ix::PROFILE_DECELERATION, 0).max(1) as f64;
-        self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+        self.brake(dec);
         self.after_ramp = Some(next);
         State::OperationEnabled
     }
@@ -690,7 +696,7 @@ impl Cia402Drive {
     fn quick_stop(&mut self) -> State {
         match self.stop_deceleration(get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) {
             Some(dec) => {
-                self.ramp = Some((self.mech.velocity_increments(&self.motor), dec));
+                self.brake(dec);
                 State::QuickStopActive
             }
             None => State::SwitchOnDisabled,
