@@ -176,6 +176,13 @@ impl Io for CliIo {
             World::Udp(u) => u.last_tx_ns(),
         }
     }
+    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
+        match &mut self.world {
+            World::Virtual(v) => v.last_tx_secondary_ns(),
+            World::Raw(r) => r.last_tx_secondary_ns(),
+            World::Udp(_) => None,
+        }
+    }
 }
 
 impl Target {

@@ -532,13 +532,16 @@ impl<I: Io> Master<I> {
         let mut nop: [u8; 0] = [];
         let mut pdus = p.pdus(&mut nop);
         let frame_bytes = frame_bytes(&pdus);
+        self.engine.split_passes = None;
         let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
+        let passes = self.engine.split_passes.take();
         let answered = match res {
             Ok(()) => SyncPdus::answered(&pdus),
             Err(_) => SyncAnswers::NONE,
         };
         let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
         self.note_ring()?;
+        self.keep_far_reference(passes)?;
         Ok(c)
     }
 
@@ -766,7 +769,11 @@ impl<I: Io> Master<I> {
         if now == RingState::Broken && before != RingState::Broken {
             let far = self.engine.far_half_slaves as usize;
             let n = self.slaves.len();
-            if self.engine.split_ring_clocks == SplitRingClocks::FarReference && far > 0 && far < n {
+            let follows = matches!(
+                self.engine.split_ring_clocks,
+                SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld
+            );
+            if follows && far > 0 && far < n {
                 self.engine.far_reference =
                     (n - far..n).find(|&k| self.slaves[k].has_system_time).map(|k| self.slaves[k].station);
             }

@@ -58,14 +58,40 @@ pub enum RingState {
 pub enum SplitRingClocks {
     /// The far half follows its first slave with a system time, which the master chooses
     /// ([`Engine::far_reference`]): the FRMW of the second pass reads that slave's time instead
-    /// of carrying the reference's, a whole master round trip old; that slave holds its last
-    /// rate, and the far half keeps together.
+    /// of carrying the reference's, a whole master round trip old, and the far half keeps
+    /// together. The master keeps that slave on the reference's time through its offset
+    /// ([`crate::far_clock`]).
     #[default]
     FarReference,
+    /// As [`SplitRingClocks::FarReference`], the far reference held over at its last rate
+    /// and left alone.
+    FarReferenceHeld,
     /// FRMW and ARMW become NOPs: every clock behind the break holds its last rate on its own.
     HoldOver,
     /// As sent: the second half takes the reference time read on the first pass (SOEM).
     AsSent,
+}
+
+/// A frame with an FRMW that went round both halves of a broken ring: what the FRMW read on
+/// each pass and when the master sent and had each pass (world clock). The master keeps the
+/// far half's reference on the reference's time with these (docs/master.md, "Cable
+/// redundancy").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SplitPasses {
+    /// Each pass's transmit stamp (on a link without them, when its send was asked for) and
+    /// receive stamp.
+    pub near_tx_ns: u64,
+    pub near_rx_ns: u64,
+    pub far_tx_ns: u64,
+    pub far_rx_ns: u64,
+    /// The FRMW's data after the first pass (the reference's system time) and after the
+    /// second (the far reference's), little-endian over its `len` bytes (4 or 8).
+    pub near_time: u64,
+    pub far_time: u64,
+    pub len: usize,
+    /// What the second pass added to the FRMW's working counter (one per clock behind the
+    /// break: the far reference read, the others took).
+    pub far_wkc: u16,
 }
 
 const SLOTS: usize = 16;
@@ -89,6 +115,10 @@ struct Slot {
     probe: Option<(bool, u16)>,
     /// The held answer has been sent round the second half.
     resent: bool,
+    /// The transmit stamps of the frame and of its second pass (on a link without them, when
+    /// their sends were asked for; world clock).
+    sent_ns: u64,
+    resent_ns: u64,
 }
 
 #[derive(Debug)]
@@ -115,6 +145,9 @@ pub struct Engine<I: Io> {
     pub far_reference: Option<u16>,
     /// How many slaves the last secondary probe counted behind a break.
     pub far_half_slaves: u16,
+    /// The last frame with an FRMW that went round both halves of a broken ring (the master
+    /// takes it).
+    pub split_passes: Option<SplitPasses>,
     /// The secondary's last probe came back: worth waiting for the next.
     secondary_alive: bool,
 }
@@ -157,12 +190,15 @@ impl<I: Io> Engine<I> {
                     held_buf: Box::new([0; FRAME]),
                     probe: None,
                     resent: false,
+                    sent_ns: 0,
+                    resent_ns: 0,
                 })
                 .collect(),
             ring: RingState::Unknown,
             split_ring_clocks: SplitRingClocks::FarReference,
             far_reference: None,
             far_half_slaves: 0,
+            split_passes: None,
             secondary_alive: true,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
@@ -259,9 +295,15 @@ impl<I: Io> Engine<I> {
         slot.held = None;
         slot.probe = None;
         slot.resent = false;
+        slot.sent_ns = now;
         self.io.send(&slot.buf[..slot.len])?;
         self.stats.frames_sent += 1;
         if self.io.has_secondary() {
+            // Its stamp now, before the probe and other frames follow (a ring's two passes
+            // are timed from it).
+            if let Some(t) = self.io.last_tx_ns() {
+                self.slots[s].sent_ns = t;
+            }
             self.send_probe(s)?;
         }
         Ok(())
@@ -317,15 +359,18 @@ impl<I: Io> Engine<I> {
         if let Some((true, wkc @ 1..)) = slot.probe {
             self.far_half_slaves = wkc;
             match self.split_ring_clocks {
-                SplitRingClocks::FarReference => {
+                SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld => {
                     redirect_clock_distribution(&mut slot.held_buf[..n], self.far_reference)
                 }
                 SplitRingClocks::HoldOver => redirect_clock_distribution(&mut slot.held_buf[..n], None),
                 SplitRingClocks::AsSent => {}
             }
             slot.resent = true;
-            slot.deadline = self.io.now_ns() + self.timeout_ns;
+            let now = self.io.now_ns();
+            slot.deadline = now + self.timeout_ns;
             self.io.send_secondary(&slot.held_buf[..n])?;
+            // Its stamp now: other frames' second passes may follow before it is back.
+            slot.resent_ns = self.io.last_tx_secondary_ns().unwrap_or(now);
             self.stats.resent += 1;
             self.ring = RingState::Broken;
         } else {
@@ -363,12 +408,31 @@ impl<I: Io> Engine<I> {
                     self.stats.late += 1;
                     return Ok(());
                 };
-                let slot = &mut self.slots[s];
-                if slot.resent {
+                if self.slots[s].resent {
                     // Round the second half: the whole ring's answer. Its timing is the first
                     // pass's, which passed the reference.
+                    let slot = &self.slots[s];
                     self.last_rx_ns = slot.held.map_or(t, |h| h.1);
-                } else if self.io.has_secondary() && !on_secondary {
+                    if let Some((h, near_rx_ns)) = slot.held {
+                        // Only where the first pass went past the reference (not a frame
+                        // the primary lost and the secondary sent round as it was).
+                        let passes = frmw_passes(&slot.held_buf[..h], &self.rx[..n]).filter(|(near, _)| near.2 > 0);
+                        if let Some((near, far)) = passes {
+                            self.split_passes = Some(SplitPasses {
+                                near_tx_ns: slot.sent_ns,
+                                near_rx_ns,
+                                far_tx_ns: slot.resent_ns,
+                                far_rx_ns: t,
+                                near_time: near.0,
+                                far_time: far.0,
+                                len: near.1,
+                                far_wkc: far.2.wrapping_sub(near.2),
+                            });
+                        }
+                    }
+                }
+                let slot = &mut self.slots[s];
+                if !slot.resent && self.io.has_secondary() && !on_secondary {
                     // Back on the port it left: a line, or the first half of a broken ring.
                     slot.held_buf[..n].copy_from_slice(&self.rx[..n]);
                     slot.held = Some((n, t));
@@ -376,7 +440,7 @@ impl<I: Io> Engine<I> {
                         self.decide(s, pdus)?;
                     }
                     return Ok(());
-                } else if self.io.has_secondary() {
+                } else if !slot.resent && self.io.has_secondary() {
                     self.ring = RingState::Intact;
                 }
                 let slot = &mut self.slots[s];
@@ -499,6 +563,23 @@ fn redirect_clock_distribution(frame: &mut [u8], far_reference: Option<u16>) {
             break;
         }
     }
+}
+
+/// An FRMW as a pass left it: its data (little-endian), length and working counter.
+type FrmwSeen = (u64, usize, u16);
+
+/// The first FRMW of a frame's two passes round a broken ring, after each.
+fn frmw_passes(first: &[u8], second: &[u8]) -> Option<(FrmwSeen, FrmwSeen)> {
+    let frmw = |frame: &[u8]| {
+        let f = Frame::parse(frame).ok()??;
+        let d = f.pdu.datagrams().find(|d| d.header().command == Command::FRMW)?;
+        let data = d.data();
+        let len = data.len().min(8);
+        let mut b = [0u8; 8];
+        b[..len].copy_from_slice(&data[..len]);
+        Some((u64::from_le_bytes(b), len, d.wkc()))
+    };
+    Some((frmw(first)?, frmw(second)?))
 }
 
 /// "FPRD 0x1001:0x0130 (2 bytes)": a datagram in words.

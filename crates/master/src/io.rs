@@ -57,6 +57,10 @@ pub trait Io {
     fn last_rx_secondary(&self) -> bool {
         false
     }
+    /// [`Io::last_tx_ns`] of the secondary port.
+    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
+        None
+    }
     /// Drives the host's calibration output (a GPIO wired to a slave's LATCH input) to
     /// `level`; the pin changes one output latency after the call. Unsupported where the host
     /// has no such output or nothing is wired to it.
@@ -302,6 +306,7 @@ pub struct VirtualIo {
     /// Frames the segment did not return.
     pub lost: u64,
     last_tx: Option<u64>,
+    last_tx_secondary: Option<u64>,
     /// The NIC's receive stamp of the frame in each slot.
     rx_stamps: [u64; 32],
     /// Where the host's calibration output is wired: (segment node, LATCH unit).
@@ -329,6 +334,7 @@ impl VirtualIo {
             last_rx_secondary: false,
             lost: 0,
             last_tx: None,
+            last_tx_secondary: None,
             rx_stamps: [0; 32],
             gpio_wire: None,
             gpio_rng: ChaCha8Rng::seed_from_u64(seed ^ 0x6710),
@@ -364,15 +370,16 @@ impl VirtualIo {
     fn send_on(&mut self, port: MasterPort, frame: &[u8]) -> std::io::Result<()> {
         let rng = if std::mem::take(&mut self.woke) { &mut self.slot_rng } else { &mut self.rng };
         let t_wire = self.now + self.host.send.sample(rng);
-        // The kernel stamps the hand-over to the NIC, which cannot see the NIC's queue. The
-        // secondary port's stamps are its own socket's: `last_tx_ns` is the primary's.
+        // The kernel stamps the hand-over to the NIC, which cannot see the NIC's queue. Each
+        // port's stamps are its own socket's.
         let tx_stamp = match self.host.stamps {
             Stamps::None => None,
             Stamps::Software { tx_early, .. } => Some(t_wire.saturating_sub(tx_early.sample(rng))),
             Stamps::Hardware => None,
         };
-        if port == MasterPort::Primary {
-            self.last_tx = tx_stamp;
+        match port {
+            MasterPort::Primary => self.last_tx = tx_stamp,
+            MasterPort::Secondary => self.last_tx_secondary = tx_stamp,
         }
         let Some(k) = self.slots.iter().position(|s| !s.3) else {
             return Err(std::io::Error::new(std::io::ErrorKind::WouldBlock, "more than 32 frames in flight"));
@@ -385,8 +392,12 @@ impl VirtualIo {
         let back = back.map(|(_, t)| t);
         // A NIC stamps the end of the start-of-frame delimiter, 8 bytes after the first bit
         // leaves, which is later than handed over if the frame before was still on the wire.
-        if self.host.stamps == Stamps::Hardware && port == MasterPort::Primary {
-            self.last_tx = Some(self.seg.last_departure_ns() + 8 * 80);
+        if self.host.stamps == Stamps::Hardware {
+            let stamp = Some(self.seg.last_departure_ns() + 8 * 80);
+            match port {
+                MasterPort::Primary => self.last_tx = stamp,
+                MasterPort::Secondary => self.last_tx_secondary = stamp,
+            }
         }
         match back {
             Some(back) => {
@@ -441,6 +452,9 @@ impl Io for VirtualIo {
     }
     fn last_rx_secondary(&self) -> bool {
         self.last_rx_secondary
+    }
+    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
+        self.last_tx_secondary
     }
 
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
@@ -516,6 +530,9 @@ pub struct RawIo {
     secondary: Option<ferrocat_link::RawSocket>,
     last_rx_secondary: bool,
     wake_target_ns: Option<u64>,
+    /// Each port's last transmit stamp, taken once from the socket's queue (which reading
+    /// drains) and kept until that port sends again, so that it can be asked twice.
+    tx_stamps: [Option<u64>; 2],
 }
 
 impl RawIo {
@@ -524,6 +541,7 @@ impl RawIo {
             sock: ferrocat_link::RawSocket::open(iface)?,
             secondary: None,
             last_rx_secondary: false,
+            tx_stamps: [None; 2],
             wake_target_ns: None,
         })
     }
@@ -547,6 +565,7 @@ impl Io for RawIo {
         ferrocat_link::monotonic_ns()
     }
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.tx_stamps[0] = None;
         self.sock.send(frame)
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
@@ -577,6 +596,7 @@ impl Io for RawIo {
         self.secondary.is_some()
     }
     fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.tx_stamps[1] = None;
         match &self.secondary {
             Some(s) => s.send(frame),
             None => Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "no secondary interface")),
@@ -593,7 +613,16 @@ impl Io for RawIo {
         self.wake_target_ns
     }
     fn last_tx_ns(&mut self) -> Option<u64> {
-        self.sock.tx_timestamp()
+        if let Some(t) = self.sock.tx_timestamp() {
+            self.tx_stamps[0] = Some(t);
+        }
+        self.tx_stamps[0]
+    }
+    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
+        if let Some(t) = self.secondary.as_ref().and_then(|s| s.tx_timestamp()) {
+            self.tx_stamps[1] = Some(t);
+        }
+        self.tx_stamps[1]
     }
 }
 

@@ -10,6 +10,7 @@ mod coe;
 mod dc;
 mod engine;
 mod error;
+pub mod far_clock;
 mod foe;
 pub mod io;
 pub mod line_fit;
@@ -24,7 +25,7 @@ mod trimmed;
 
 pub use coe::{EntryInfo, ObjectInfo};
 pub use dc::{DcConfig, DcReport, SyncState};
-pub use engine::{describe, Engine, EngineStats, Pdu, RingState, SlaveTag, SplitRingClocks};
+pub use engine::{describe, Engine, EngineStats, Pdu, RingState, SlaveTag, SplitPasses, SplitRingClocks};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, STATION_BASE};
 pub use process::{CycleStats, Handle};

@@ -146,6 +146,16 @@ impl LineFit {
         }
     }
 
+    /// A fit whose slope starts from `slope` (the rate less 1), known to a standard deviation
+    /// `sd`, until its points say more; a restarted window's prior is the old line's, with the
+    /// same `sd`.
+    pub fn with_prior(max_len: usize, slope: f64, sd: f64) -> Self {
+        let mut f = LineFit::new(max_len);
+        f.prior_slope = Some(slope.clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR));
+        f.rate_change_sd = if sd > 0.0 { sd } else { RATE_CHANGE_SD };
+        f
+    }
+
     /// Points in the window.
     pub fn len(&self) -> usize {
         self.points.len()

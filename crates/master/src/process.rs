@@ -203,7 +203,9 @@ impl<I: Io> Master<I> {
         let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
         let data_bytes = crate::dc::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
+        engine.split_passes = None;
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
+        let passes = engine.split_passes.take();
         let answered = match (r.is_ok(), with_sync) {
             (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
             _ => crate::dc::SyncAnswers::NONE,
@@ -234,6 +236,7 @@ impl<I: Io> Master<I> {
             _ => None,
         };
         self.note_ring()?;
+        self.keep_far_reference(passes)?;
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;

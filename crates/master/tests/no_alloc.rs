@@ -57,4 +57,35 @@ fn ten_thousand_cycles_allocate_nothing() {
     println!("10 000 cycles: {allocations} allocations, {} WKC errors, last WKC {}", s.wkc_errors, s.last_wkc);
     assert_eq!(s.wkc_errors, 0);
     assert_eq!(allocations, 0);
+
+    // A ring whose cable is pulled: the far half served from the secondary port, its
+    // reference kept on the reference's time, once the split is known (in the same test: the
+    // counter is the process's).
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\n\
+         parent = 0\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 2\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.bring_up().unwrap();
+    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
+    let mut next = m.engine.io.now_ns();
+    m.engine.io.seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
+    let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
+        for _ in 0..cycles {
+            m.cycle().unwrap();
+            next += period;
+            m.engine.io.sleep_until(next);
+        }
+    };
+    run(&mut m, 3_000);
+    assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    run(&mut m, 10_000);
+    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let moved = m.far_reference_offset_ns();
+    println!("ring split: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns");
+    assert!(moved.is_some(), "the far reference is being kept");
+    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(allocations, 0);
 }

@@ -169,36 +169,55 @@ fn a_ring_broken_at_start_up_comes_up_whole() {
     assert_eq!(m.expected_wkc, 4, "both EL2004s written");
 }
 
+/// The ring `toml` under `host`, in OP with DC, `events` scheduled (ns after that), then one
+/// cycle a millisecond for `cycles`, each with the whole working counter; `each(k, clocks)`
+/// gets the true system times after cycle `k`.
+fn cycle_ring(
+    toml: &str,
+    host: HostModel,
+    clocks: SplitRingClocks,
+    events: &[(u64, Event)],
+    cycles: u64,
+    mut each: impl FnMut(u64, &[u64]),
+) -> Master<VirtualIo> {
+    let mut m = master(toml, host);
+    m.engine.split_ring_clocks = clocks;
+    m.bring_up().unwrap();
+    assert!(m.init_dc(&DcConfig::default()).unwrap().converged);
+    let t0 = m.engine.io.now_ns();
+    for (at, event) in events {
+        m.engine.io.seg.schedule(t0 + at, event.clone());
+    }
+    let mut next = t0;
+    for k in 0..cycles {
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
+        next += 1_000_000;
+        m.engine.io.sleep_until(next);
+        let now = m.engine.io.now_ns();
+        each(k, &m.engine.io.seg.system_times_at(now));
+    }
+    m
+}
+
 /// Behind the break, two clocks (the far coupler and its terminal, both with a system time):
 /// with the far coupler as the far half's reference they keep together while the ring is
 /// split; held over each on its own they drift apart. Returns the worst |terminal − coupler|
 /// over 10 s after the break, and after the ring is closed again the worst over the last
 /// second of 2 s.
 fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
-    let mut m = master(&format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}"), HostModel::pc_rt());
-    m.engine.split_ring_clocks = clocks;
-    m.bring_up().unwrap();
-    assert!(m.init_dc(&DcConfig::default()).unwrap().converged);
-    let t0 = m.engine.io.now_ns();
     let s = 1_000_000_000;
-    m.engine.io.seg.schedule(t0 + s, Event::LinkDown { node: 2, port: 0 });
-    m.engine.io.seg.schedule(t0 + 11 * s, Event::LinkUp { node: 2, port: 0 });
+    let events = [(s, Event::LinkDown { node: 2, port: 0 }), (11 * s, Event::LinkUp { node: 2, port: 0 })];
+    let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}");
     let (mut split, mut closed) = (0i64, 0i64);
-    let mut next = t0;
-    for k in 0..13_000u64 {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
-        next += 1_000_000;
-        m.engine.io.sleep_until(next);
-        let now = m.engine.io.now_ns();
+    let m = cycle_ring(&toml, HostModel::pc_rt(), clocks, &events, 13_000, |k, t| {
         // The coupler's and the terminal's (an ET1200: 32 bits) system times.
-        let t = m.engine.io.seg.system_times_at(now);
         let apart = ((t[2] as u32).wrapping_sub(t[1] as u32) as i32 as i64).abs();
         if (1_001..11_000).contains(&k) {
             split = split.max(apart);
         } else if k >= 12_000 {
             closed = closed.max(apart);
         }
-    }
+    });
     assert_eq!(m.engine.ring, RingState::Intact);
     (split, closed)
 }
@@ -215,4 +234,54 @@ fn the_far_half_keeps_together_behind_its_own_reference() {
     assert!(apart > 4 * far.max(50), "{apart} vs {far}");
     // Closed again, the delays are the reference's once more: back together either way.
     assert!(far_closed < 50 && apart_closed < 50, "{far_closed}, {apart_closed}");
+}
+
+/// A ring split for `split_s` seconds (pulled 1 s in), the far coupler's crystal 3 ppm faster
+/// from 3 s on (it warms up): per 100 ms, the worst |far coupler − reference| true error over
+/// it; and the offset the master added to the far coupler.
+fn far_reference_error(clocks: SplitRingClocks, host: HostModel, split_s: u64) -> (Vec<i64>, i64) {
+    let s = 1_000_000_000;
+    let events = [(s, Event::LinkDown { node: 2, port: 0 }), (3 * s, Event::DriftStep { node: 2, delta_ppb: 3_000 })];
+    let mut worst = Vec::new();
+    let m = cycle_ring(&format!("{DEVICES}{RING}"), host, clocks, &events, (1 + split_s) * 1000, |k, t| {
+        if k > 1000 {
+            let e = (t[1].wrapping_sub(t[0]) as i64).abs();
+            if (k - 1001) % 100 == 0 {
+                worst.push(e);
+            } else if let Some(w) = worst.last_mut() {
+                *w = (*w).max(e);
+            }
+        }
+    });
+    assert_eq!(m.engine.ring, RingState::Broken);
+    (worst, m.far_reference_offset_ns().unwrap_or(0))
+}
+
+/// Split for 30 s, the far coupler warming up by 3 ppm 2 s after the break: kept through
+/// its offset, it stays on the reference's time, where held over it drifts tens of µs away.
+#[test]
+fn the_far_reference_of_a_split_ring_is_kept_on_the_reference() {
+    let worst = |v: &[i64]| *v.iter().max().unwrap();
+    for host in [HostModel::nic_hwts(), HostModel::pc_rt()] {
+        let (kept, added) = far_reference_error(SplitRingClocks::FarReference, host, 30);
+        let (held, _) = far_reference_error(SplitRingClocks::FarReferenceHeld, host, 30);
+        // Per 100 ms: the 2 s before the warm-up, the 3 s after it, and the rest.
+        let (kept_before, kept_step, kept_after) = (worst(&kept[..20]), worst(&kept[20..50]), worst(&kept[50..]));
+        println!(
+            "{}: far coupler − reference, worst |·| kept: {kept_before} ns over the 2 s after the break, \
+             {kept_step} ns over the 3 s after the warm-up, {kept_after} ns over the 25 s after that; \
+             held over: {} ns, {} ns, {} ns; offset added {added} ns",
+            host.name,
+            worst(&held[..20]),
+            worst(&held[20..50]),
+            worst(&held[50..])
+        );
+        assert!(kept_before <= worst(&held[..20]).max(150), "{kept_before} vs {:?}", &held[..20]);
+        assert!(kept_step < 600, "{kept_step}");
+        assert!(kept_after < 100, "{kept_after}");
+        assert!(worst(&held[50..]) > 500 * kept_after, "{} vs {kept_after}", worst(&held[50..]));
+        // What was added is what held over drifted.
+        let drifted = *held.last().unwrap();
+        assert!((added + drifted).abs() < 200, "added {added} ns, held over drifted {drifted} ns");
+    }
 }

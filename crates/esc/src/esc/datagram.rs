@@ -88,11 +88,24 @@ impl Esc {
                 inc = (self.addressed(cmd, adp) && self.write(ado, data, cmd)) as u16;
             }
             Command::APRW | Command::FPRW | Command::BRW if self.addressed(cmd, adp) => {
-                let out = data.to_vec();
+                // What is written is the data as it came; a register's worth is copied aside
+                // without allocating (an FPRW of an offset is cyclic traffic).
+                let mut small = [0u8; 16];
+                let big;
+                let out: &[u8] = match small.get_mut(..data.len()) {
+                    Some(s) => {
+                        s.copy_from_slice(data);
+                        s
+                    }
+                    None => {
+                        big = data.to_vec();
+                        &big
+                    }
+                };
                 if self.read(ado, data, cmd == Command::BRW) {
                     inc += 1;
                 }
-                if self.write(ado.wrapping_add(rw_offset), &out, cmd) {
+                if self.write(ado.wrapping_add(rw_offset), out, cmd) {
                     inc += 2;
                 }
             }

@@ -101,6 +101,8 @@ pub struct Master<I: Io> {
     /// On an intact ring, how much sooner a frame is back than on the line the ring's port
     /// makes when closed (measured by `find_ring_port`; 0 otherwise).
     pub ring_shortening_ns: i64,
+    /// A split ring's far reference being kept on the reference's time (`far_clock.rs`).
+    pub(crate) far_steer: Option<crate::far_clock::FarSteer>,
 }
 
 impl<I: Io> Master<I> {
@@ -126,6 +128,7 @@ impl<I: Io> Master<I> {
             closed_port_loop_ns: 0,
             ring_port: None,
             ring_shortening_ns: 0,
+            far_steer: None,
         }
     }
 

@@ -1,0 +1,325 @@
+//! A split ring's far reference kept on the reference's time (cable redundancy).
+//!
+//! Behind a break the far half follows its own first clock ([`crate::SplitRingClocks`]), which
+//! no longer hears the reference and holds the rate its time control loop last had: good for
+//! seconds, not for the hours a machine may run on a broken ring. The two halves share nothing
+//! but the master, which sees both clocks in every cyclic frame: the FRMW reads the reference
+//! on the first pass and the far reference on the second. Less the master's own time between
+//! the passes (each pass's mid-point, from its transmit and receive stamps), what is left is
+//! the far reference's time less the reference's, up to a constant: the passes' geometry, the
+//! stamps' latencies and the far reference's delay register, which its reading subtracts.
+//!
+//! That constant is learned from the break itself: until then the far reference followed the
+//! reference, so their difference was its time control loop's residual, nanoseconds. The
+//! measured difference's level at the break (a line through the first [`ANCHOR_NS`] of samples,
+//! taken back to the break) is the constant; from then on the far reference's error is the
+//! line's level now less that one, and the master adds what cancels it to the far reference's
+//! System_Time_Offset. The far half follows it, as it follows the far reference anyway.
+//!
+//! [`FarClock`] is sans-IO: samples in, an offset change out; the master does the I/O after
+//! each cyclic frame.
+use crate::engine::{SplitPasses, SplitRingClocks};
+use crate::error::Result;
+use crate::io::Io;
+use crate::line_fit::LineFit;
+use crate::Master;
+use ferrocat_wire::{Address, Command};
+
+/// The level at the break is taken from a line through this much of the samples after it
+/// (the far reference drifts meanwhile, which the line's slope takes up).
+pub const ANCHOR_NS: u64 = 2_000_000_000;
+/// Held over, the far reference runs at the reference's rate as its loop last set it, to
+/// within a few ppm of drift since: the slope's prior (rate less 1) and its spread, so that
+/// the first few noisy samples do not give a steep line.
+const RATE_PRIOR_SD: f64 = 10e-6;
+/// A line whose level is known this well (ns, one standard deviation) is settled.
+const SETTLED_SD_NS: f64 = 25.0;
+/// The largest move beyond the drift since the last (ns).
+const STEP_NS: f64 = 5.0;
+/// Points in the line (16 s at 1 ms).
+const WINDOW: usize = 16_384;
+/// Samples before the error is trusted (the line's noise scale is learned over about as
+/// many; a window restarted later keeps it).
+const MIN_POINTS: u64 = 128;
+/// The far reference's offset is moved at most this often (a step each time, which its
+/// followers take up through their own loops).
+pub const STEER_EVERY_NS: u64 = 10_000_000;
+
+/// The estimator: samples of the measured difference, the offset added since the break.
+#[derive(Debug, Clone)]
+pub struct FarClock {
+    break_x: Option<u64>,
+    /// The measured difference's level at the break, once [`ANCHOR_NS`] of samples fixed it.
+    anchor_ns: Option<i64>,
+    fit: LineFit,
+    samples: u64,
+    /// What has been added to the far reference's offset since the break.
+    applied_ns: i64,
+}
+
+impl Default for FarClock {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl FarClock {
+    pub fn new() -> Self {
+        FarClock {
+            break_x: None,
+            anchor_ns: None,
+            fit: LineFit::with_prior(WINDOW, 0.0, RATE_PRIOR_SD),
+            samples: 0,
+            applied_ns: 0,
+        }
+    }
+
+    /// A sample at master time `x_ns`: the far reference's time less the reference's as
+    /// measured (`diff_ns`, the offset added so far included).
+    pub fn push(&mut self, x_ns: u64, diff_ns: i64) {
+        let break_x = *self.break_x.get_or_insert(x_ns);
+        let held_ns = diff_ns.wrapping_sub(self.applied_ns);
+        self.samples += 1;
+        self.fit.push(x_ns, x_ns.wrapping_add_signed(held_ns));
+        if self.anchor_ns.is_none() && x_ns.wrapping_sub(break_x) >= ANCHOR_NS {
+            self.anchor_ns = self.level_at(break_x);
+        }
+    }
+
+    /// The line's level (the difference without the offset added) at `x_ns`.
+    fn level_at(&self, x_ns: u64) -> Option<i64> {
+        Some(self.fit.at(x_ns)?.wrapping_sub(x_ns) as i64)
+    }
+
+    /// The far reference's estimated error at `x_ns` (its time less the reference's) and that
+    /// estimate's standard deviation, once enough samples have come. Until the level at the
+    /// break is fixed, the error is the line's rise since the break, known as well as its
+    /// slope; after, the line's level now less that one, known as well as the line at its
+    /// newest point (the level at the break is a constant of the measurement: its own error is
+    /// a bias no later sample can show).
+    pub fn error_ns(&self, x_ns: u64) -> Option<(i64, f64)> {
+        if self.samples < MIN_POINTS {
+            return None;
+        }
+        let break_x = self.break_x?;
+        let (anchor, sd) = match self.anchor_ns {
+            Some(a) => (a, self.fit.sd_ahead_ns(0)?),
+            None => (self.level_at(break_x)?, self.fit.rate_sd()? * x_ns.wrapping_sub(break_x) as f64),
+        };
+        Some((self.level_at(x_ns)?.wrapping_sub(anchor).wrapping_add(self.applied_ns), sd))
+    }
+
+    /// The far reference's rate against the master's clock, less 1, as the line has it.
+    pub fn drift(&self) -> f64 {
+        self.fit.rate().map_or(0.0, |r| r - 1.0)
+    }
+
+    /// The far reference's offset was moved by `delta_ns`.
+    pub fn applied(&mut self, delta_ns: i64) {
+        self.applied_ns = self.applied_ns.wrapping_add(delta_ns);
+    }
+
+    /// What has been added to the far reference's offset since the break.
+    pub fn applied_ns(&self) -> i64 {
+        self.applied_ns
+    }
+}
+
+/// The far reference being kept, when its offset was last moved (master time), and what its
+/// offset register holds as far as the master knows.
+#[derive(Debug, Clone)]
+pub(crate) struct FarSteer {
+    pub(crate) station: u16,
+    pub(crate) clock: FarClock,
+    last_move_ns: Option<u64>,
+    offset: Option<u64>,
+}
+
+/// The far reference's time less the reference's as the two passes measured them, less the
+/// master's time between the passes (mid-point to mid-point).
+pub fn measured_difference_ns(p: &SplitPasses, wide: bool) -> (u64, i64) {
+    let mid = |tx: u64, rx: u64| tx.wrapping_add_signed(rx.wrapping_sub(tx) as i64 / 2);
+    let (near, far) = (mid(p.near_tx_ns, p.near_rx_ns), mid(p.far_tx_ns, p.far_rx_ns));
+    let apart = if wide {
+        p.far_time.wrapping_sub(p.near_time) as i64
+    } else {
+        (p.far_time as u32).wrapping_sub(p.near_time as u32) as i32 as i64
+    };
+    (far, apart.wrapping_sub(far.wrapping_sub(near) as i64))
+}
+
+impl<I: Io> Master<I> {
+    /// After a cyclic frame (`passes`, if it went round both halves): while the ring is split
+    /// and the far half follows its own reference ([`SplitRingClocks::FarReference`]), the
+    /// frame's two passes are a sample of that reference's error, and its System_Time_Offset
+    /// is moved to cancel it (module comment). A closed ring ends it; the next break starts
+    /// afresh.
+    pub(crate) fn keep_far_reference(&mut self, passes: Option<SplitPasses>) -> Result<()> {
+        let steered = self.engine.split_ring_clocks == SplitRingClocks::FarReference;
+        let Some(station) = self.engine.far_reference.filter(|_| steered) else {
+            self.far_steer = None;
+            return Ok(());
+        };
+        let Some(p) = passes else { return Ok(()) };
+        // The second pass went through every clock behind the break: the far reference read,
+        // each other one took.
+        let n = self.slaves.len();
+        let far = (self.engine.far_half_slaves as usize).min(n);
+        let clocks = self.slaves[n - far..].iter().filter(|s| s.has_system_time).count();
+        let Some(k) = self.slaves.iter().position(|s| s.station == station) else { return Ok(()) };
+        if p.far_wkc as usize != clocks {
+            return Ok(());
+        }
+        let wide = p.len >= 8 && self.slaves[k].dc_64bit;
+        let (x, diff) = measured_difference_ns(&p, wide);
+        if self.far_steer.as_ref().is_none_or(|f| f.station != station) {
+            self.far_steer = Some(FarSteer { station, clock: FarClock::new(), last_move_ns: None, offset: None });
+        }
+        let Some(f) = self.far_steer.as_mut() else { return Ok(()) };
+        f.clock.push(x, diff);
+        if f.last_move_ns.is_some_and(|t| x.wrapping_sub(t) < STEER_EVERY_NS) {
+            return Ok(());
+        }
+        // A settled line moves the far reference to its estimate every time (the estimate
+        // changes little from one move to the next); a young one only by an error it shows
+        // (three standard deviations), since its noise would move it further than holding
+        // over does. Each move aims at zero halfway to the next, and takes up a level error
+        // by at most `STEP_NS` (the far half's loops follow small steps smoothly).
+        let Some((error, sd)) = f.clock.error_ns(x) else { return Ok(()) };
+        let ahead_ns = f.clock.drift() * (STEER_EVERY_NS / 2) as f64;
+        let aim = error as f64 + ahead_ns;
+        if sd > SETTLED_SD_NS && aim.abs() <= 3.0 * sd {
+            return Ok(());
+        }
+        let limit = 2.0 * ahead_ns.abs() + STEP_NS;
+        let delta = -aim.clamp(-limit, limit).round() as i64;
+        f.last_move_ns = Some(x);
+        let wide_offset = self.slaves[k].dc_64bit;
+        if delta != 0 && self.move_far_offset(station, wide_offset, delta).is_ok() {
+            if let Some(f) = self.far_steer.as_mut() {
+                f.clock.applied(delta);
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds `delta_ns` to the far reference's System_Time_Offset: one FPRW of the value it
+    /// should hold now, which answers the value it replaced. If someone else moved it since
+    /// (a method that moves every offset, Park's eq. 5), that value is moved instead. A
+    /// frame that goes astray leaves the offset as the master knows it not (read again).
+    fn move_far_offset(&mut self, station: u16, wide: bool, delta_ns: i64) -> Result<()> {
+        let len = if wide { 8 } else { 4 };
+        let known = self.far_steer.as_ref().and_then(|f| f.offset);
+        let mut d = [0u8; 8];
+        let result = (|| {
+            let before = match known {
+                Some(v) => v,
+                None => {
+                    self.fprd(station, 0x0920, &mut d[..len])?;
+                    u64::from_le_bytes(d)
+                }
+            };
+            let mut w = before.wrapping_add_signed(delta_ns).to_le_bytes();
+            self.engine.expect(Command::FPRW, Address::Device { adp: station, ado: 0x0920 }, &mut w[..len], 3)?;
+            w[len..].fill(0);
+            let replaced = u64::from_le_bytes(w);
+            let mask = if wide { u64::MAX } else { u32::MAX as u64 };
+            let mut now = before.wrapping_add_signed(delta_ns) & mask;
+            if replaced != before & mask {
+                now = replaced.wrapping_add_signed(delta_ns) & mask;
+                let mut w = now.to_le_bytes();
+                self.engine.expect(Command::FPWR, Address::Device { adp: station, ado: 0x0920 }, &mut w[..len], 1)?;
+            }
+            Ok(now)
+        })();
+        if let Some(f) = self.far_steer.as_mut() {
+            f.offset = result.as_ref().ok().copied();
+        }
+        result.map(|_| ())
+    }
+}
+
+impl<I: Io> Master<I> {
+    /// What the master has added to the far reference's offset since the ring split (None
+    /// while it keeps none).
+    pub fn far_reference_offset_ns(&self) -> Option<i64> {
+        self.far_steer.as_ref().map(|f| f.clock.applied_ns())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    /// A far reference drifting `ppm` from the break, measured through a constant bias and
+    /// stamps scattered by `sd_ns`, one sample per ms; every move the estimator asks for
+    /// applied. Returns its true error after `ms`.
+    fn steer(ppm: f64, bias_ns: f64, sd_ns: f64, ms: u64) -> (f64, FarClock) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let noise = Normal::new(0.0, sd_ns).unwrap();
+        let mut f = FarClock::new();
+        let x0 = 5_000_000_000_000u64;
+        let mut added = 0i64;
+        let mut true_error = 0.0;
+        for k in 0..ms {
+            let dx = k * 1_000_000;
+            true_error = ppm * 1e-6 * dx as f64 + added as f64;
+            let measured = true_error + bias_ns + noise.sample(&mut rng);
+            f.push(x0 + dx, measured.round() as i64);
+            if k % 10 == 0 {
+                if let Some((e, _)) = f.error_ns(x0 + dx) {
+                    added -= e;
+                    f.applied(-e);
+                }
+            }
+        }
+        (true_error, f)
+    }
+
+    #[test]
+    fn the_measurements_bias_is_learned_at_the_break_and_the_drift_taken_out() {
+        // Exact stamps: the error stays within the drift of one move's interval.
+        let (e, f) = steer(0.5, -1_234.0, 0.0, 20_000);
+        assert!(e.abs() < 6.0, "{e}");
+        assert!((f.drift() - 0.5e-6).abs() < 1e-9, "{}", f.drift());
+        assert!((f.applied_ns() as f64 + 0.5e-6 * 19_999e6).abs() < 10.0, "{}", f.applied_ns());
+        // Stamps scattered by 300 ns: within tens of ns after 20 s (10 µs held over).
+        let (e, _) = steer(0.5, 2_000.0, 300.0, 20_000);
+        assert!(e.abs() < 30.0, "{e}");
+    }
+
+    #[test]
+    fn nothing_is_said_before_enough_samples() {
+        let mut f = FarClock::new();
+        for k in 0..MIN_POINTS - 1 {
+            f.push(k * 1_000_000, 100);
+        }
+        assert_eq!(f.error_ns(MIN_POINTS * 1_000_000), None);
+        f.push(MIN_POINTS * 1_000_000, 100);
+        let (e, _) = f.error_ns(MIN_POINTS * 1_000_000).unwrap();
+        assert_eq!(e, 0, "a constant difference is the bias, not an error");
+    }
+
+    #[test]
+    fn the_difference_is_taken_across_a_32_bit_wrap_and_less_the_masters_time() {
+        let p = SplitPasses {
+            near_tx_ns: 1_000,
+            near_rx_ns: 41_000,
+            far_tx_ns: 100_000,
+            far_rx_ns: 140_000,
+            near_time: 0xFFFF_FF00,
+            far_time: 0x1_0001_0000 + 0x100,
+            len: 4,
+            far_wkc: 1,
+        };
+        // The far reference's reading is 0x10200 ns on, the master's mid-points 99 000 apart.
+        assert_eq!(measured_difference_ns(&p, false), (120_000, 0x10200 - 99_000));
+        let wide = SplitPasses { near_time: 5_000_000, far_time: 4_990_000, len: 8, ..p };
+        assert_eq!(measured_difference_ns(&wide, true), (120_000, -10_000 - 99_000));
+        // Stamps out of order (a receive stamp before its send) do not overflow.
+        let odd = SplitPasses { near_tx_ns: u64::MAX, near_rx_ns: 0, far_tx_ns: 0, far_rx_ns: u64::MAX, ..wide };
+        let _ = measured_difference_ns(&odd, true);
+    }
+}
