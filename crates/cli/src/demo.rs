@@ -56,17 +56,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
     let rows = match &a.iface {
         None => run(&o)?,
         Some(iface) => {
-            let target = crate::target::Target {
-                iface: Some(iface.clone()),
-                secondary_iface: None,
-                udp: None,
-                force: a.force,
-                config: None,
-                device: Vec::new(),
-                seed: None,
-                esi: Vec::new(),
-                pcap: None,
-            };
+            let target = crate::target::Target::on_iface(iface, a.force);
             crate::target::go_real_time();
             run_with(&o, &mut || target.master())?
         }

@@ -200,17 +200,7 @@ impl ClockPiece {
 }
 
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
-    let target = crate::target::Target {
-        iface: Some(iface.into()),
-        secondary_iface: None,
-        udp: None,
-        force: false,
-        config: None,
-        device: Vec::new(),
-        seed: None,
-        esi: Vec::new(),
-        pcap: None,
-    };
+    let target = crate::target::Target::on_iface(iface, false);
     let mut m = target.master()?;
     m.bring_up()?;
     let cycle_ns = a.cycle_us * 1000;

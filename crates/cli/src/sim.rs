@@ -40,6 +40,16 @@ fn segment_config(config: Option<&Path>, devices: &[String], seed: Option<u64>) 
 }
 
 fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
+    // What only a simulator knows: each clock's true system time less the first's, now.
+    let now = seg.now_ns();
+    let first = seg.nodes.iter().find(|n| n.esc.has_system_time()).and_then(|n| n.esc.dc.as_ref());
+    let less_first = |n: &ferrocat_segment::Node| -> Option<i64> {
+        let (dc, first) = (n.esc.dc.as_ref().filter(|_| n.esc.has_system_time())?, first?);
+        let d = dc.system_at(now).wrapping_sub(first.system_at(now));
+        // Either clock 32 bits wide: the difference in 32 bits.
+        let wide = [dc, first].iter().all(|u| u.width == ferrocat_esc::DcWidth::Bits64);
+        Some(if wide { d as i64 } else { d as u32 as i32 as i64 })
+    };
     let devices: Vec<_> = seg
         .nodes
         .iter()
@@ -59,6 +69,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "outputs": outputs,
                 "output_updates": io.map(|d| d.output_updates),
                 "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns()),
+                "system_time_less_first_ns": less_first(n),
             })
         })
         .collect();

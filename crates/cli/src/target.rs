@@ -19,6 +19,12 @@ pub struct Target {
     /// redundancy).
     #[arg(long, requires = "iface", value_name = "IF")]
     pub secondary_iface: Option<String>,
+    /// On a broken ring, how the far half gets its clock: from its first DC slave, kept on the
+    /// reference's time by the master (far-reference), the same left to hold its rate
+    /// (far-reference-held), every far clock on its own (hold-over), or the reference's time
+    /// of the first pass, as SOEM sends it (as-sent).
+    #[arg(long, value_enum, default_value = "far-reference")]
+    pub split_ring_clocks: SplitClocks,
     /// EtherCAT over UDP to this address (e.g. 127.0.0.1:34980).
     #[arg(long, value_name = "ADDR:PORT", conflicts_with_all = ["iface", "config", "device"])]
     pub udp: Option<String>,
@@ -40,6 +46,26 @@ pub struct Target {
     /// Write every frame sent and received to this pcapng file.
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
+}
+
+/// [`ferrocat_master::SplitRingClocks`] on the command line.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SplitClocks {
+    FarReference,
+    FarReferenceHeld,
+    HoldOver,
+    AsSent,
+}
+
+impl From<SplitClocks> for ferrocat_master::SplitRingClocks {
+    fn from(c: SplitClocks) -> Self {
+        match c {
+            SplitClocks::FarReference => Self::FarReference,
+            SplitClocks::FarReferenceHeld => Self::FarReferenceHeld,
+            SplitClocks::HoldOver => Self::HoldOver,
+            SplitClocks::AsSent => Self::AsSent,
+        }
+    }
 }
 
 enum World {
@@ -186,6 +212,22 @@ impl Io for CliIo {
 }
 
 impl Target {
+    /// A real interface, one port, everything else as the flags' defaults.
+    pub fn on_iface(iface: &str, force: bool) -> Self {
+        Target {
+            iface: Some(iface.to_string()),
+            secondary_iface: None,
+            split_ring_clocks: SplitClocks::FarReference,
+            udp: None,
+            force,
+            config: None,
+            device: Vec::new(),
+            seed: None,
+            esi: Vec::new(),
+            pcap: None,
+        }
+    }
+
     /// Opens the world this target names and a master on it.
     pub fn master(&self) -> anyhow::Result<Master<CliIo>> {
         let world = match (&self.iface, self.config.is_some() || !self.device.is_empty()) {
@@ -223,6 +265,7 @@ impl Target {
             None => None,
         };
         let mut m = Master::new(CliIo { world, capture });
+        m.engine.split_ring_clocks = self.split_ring_clocks.into();
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;

@@ -229,7 +229,7 @@ fn soem_writes_and_reads_files_by_foe() {
 #[test]
 fn soem_keeps_a_broken_ring_running_on_its_second_port() {
     let net = VethPair::new("rg");
-    let ring = RingSim::start(&net, "ring-soem", 1500);
+    let ring = RingSim::start(&net, "ring-soem", 1500, "");
     let r = soem_script(&net, "soem_ring.py", &[&ring.master_secondary, "3"]);
     let rep = ring.report();
     println!("simulator: {rep}");

@@ -21,12 +21,13 @@
 use crate::engine::{SplitPasses, SplitRingClocks};
 use crate::error::Result;
 use crate::io::Io;
-use crate::line_fit::LineFit;
+use crate::line_fit::{Fate, LineFit};
 use crate::Master;
 use ferrocat_wire::{Address, Command};
 
 /// The level at the break is taken from a line through this much of the samples after it
-/// (the far reference drifts meanwhile, which the line's slope takes up).
+/// (the far reference drifts meanwhile, which the line's slope takes up), or through those
+/// before the line restarts, if sooner.
 pub const ANCHOR_NS: u64 = 2_000_000_000;
 /// Held over, the far reference runs at the reference's rate as its loop last set it, to
 /// within a few ppm of drift since: the slope's prior (rate less 1) and its spread, so that
@@ -49,8 +50,9 @@ pub const STEER_EVERY_NS: u64 = 10_000_000;
 #[derive(Debug, Clone)]
 pub struct FarClock {
     break_x: Option<u64>,
-    /// The measured difference's level at the break, once [`ANCHOR_NS`] of samples fixed it.
-    anchor_ns: Option<i64>,
+    /// The measured difference's level at the break, once [`ANCHOR_NS`] of samples fixed it,
+    /// and its standard deviation.
+    anchor_ns: Option<(i64, f64)>,
     fit: LineFit,
     samples: u64,
     /// What has been added to the far reference's offset since the break.
@@ -80,9 +82,17 @@ impl FarClock {
         let break_x = *self.break_x.get_or_insert(x_ns);
         let held_ns = diff_ns.wrapping_sub(self.applied_ns);
         self.samples += 1;
-        self.fit.push(x_ns, x_ns.wrapping_add_signed(held_ns));
-        if self.anchor_ns.is_none() && x_ns.wrapping_sub(break_x) >= ANCHOR_NS {
-            self.anchor_ns = self.level_at(break_x);
+        let at_break = || self.level_at(break_x).zip(self.fit.sd_at_ns(break_x));
+        // A window that restarts (the far crystal changed) no longer reaches back to the
+        // break: the level there is fixed by the line it had until then.
+        let before = if self.anchor_ns.is_none() { at_break() } else { None };
+        let fate = self.fit.push(x_ns, x_ns.wrapping_add_signed(held_ns));
+        if self.anchor_ns.is_none() {
+            if fate == Fate::Restarted {
+                self.anchor_ns = before;
+            } else if x_ns.wrapping_sub(break_x) >= ANCHOR_NS {
+                self.anchor_ns = self.level_at(break_x).zip(self.fit.sd_at_ns(break_x));
+            }
         }
     }
 
@@ -94,24 +104,31 @@ impl FarClock {
     /// The far reference's estimated error at `x_ns` (its time less the reference's) and that
     /// estimate's standard deviation, once enough samples have come. Until the level at the
     /// break is fixed, the error is the line's rise since the break, known as well as its
-    /// slope; after, the line's level now less that one, known as well as the line at its
-    /// newest point (the level at the break is a constant of the measurement: its own error is
-    /// a bias no later sample can show).
+    /// slope; after, the line's level now less that one, known as well as the line now and
+    /// that level (a constant of the measurement, whose own error is a bias no later sample
+    /// can show; a window restarted before it was fixed knows it poorly, and says so).
     pub fn error_ns(&self, x_ns: u64) -> Option<(i64, f64)> {
         if self.samples < MIN_POINTS {
             return None;
         }
         let break_x = self.break_x?;
         let (anchor, sd) = match self.anchor_ns {
-            Some(a) => (a, self.fit.sd_ahead_ns(0)?),
+            Some((a, sd_a)) => (a, self.fit.sd_at_ns(x_ns)?.hypot(sd_a)),
             None => (self.level_at(break_x)?, self.fit.rate_sd()? * x_ns.wrapping_sub(break_x) as f64),
         };
         Some((self.level_at(x_ns)?.wrapping_sub(anchor).wrapping_add(self.applied_ns), sd))
     }
 
-    /// The far reference's rate against the master's clock, less 1, as the line has it.
+    /// The far reference's rate against the master's clock, less 1, as the line has it; 0
+    /// while the line cannot tell it from 0 (three standard deviations).
     pub fn drift(&self) -> f64 {
-        self.fit.rate().map_or(0.0, |r| r - 1.0)
+        let drift = self.fit.rate().map_or(0.0, |r| r - 1.0);
+        let sd = self.fit.rate_sd().unwrap_or(f64::INFINITY);
+        if drift.abs() > 3.0 * sd {
+            drift
+        } else {
+            0.0
+        }
     }
 
     /// The far reference's offset was moved by `delta_ns`.

@@ -294,6 +294,11 @@ impl LineFit {
         Some(self.scale() * self.line_var_at(newest.wrapping_add(ahead_ns))?.sqrt())
     }
 
+    /// The standard deviation (ns) of the line's value at `x`.
+    pub fn sd_at_ns(&self, x: u64) -> Option<f64> {
+        Some(self.scale() * self.line_var_at(x)?.sqrt())
+    }
+
     /// The variance of the line's value at `x` in units of σ²: 1/n + (x − x̄)²/P.
     fn line_var_at(&self, x: u64) -> Option<f64> {
         let s = self.sums;

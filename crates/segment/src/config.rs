@@ -244,6 +244,16 @@ pub struct EventToml {
     pub link_up: Option<PortToml>,
     pub power_off: Option<NodeRef>,
     pub power_on: Option<NodeRef>,
+    /// A device's crystal changes frequency by `ppm` (a temperature step).
+    pub drift_step: Option<DriftStepToml>,
+}
+
+/// A device's oscillator step, in an event.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DriftStepToml {
+    pub device: NodeRef,
+    pub ppm: f64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -632,9 +642,13 @@ impl SegmentConfig {
         if let Some(r) = &e.power_on {
             kinds.push(Event::PowerOn { node: node(r)? });
         }
+        if let Some(d) = &e.drift_step {
+            let ppm = in_range(&place, "drift_step.ppm", d.ppm, -MAX_DRIFT_PPM..=MAX_DRIFT_PPM)?;
+            kinds.push(Event::DriftStep { node: node(&d.device)?, delta_ppb: (ppm * 1000.0).round() as i64 });
+        }
         match (kinds.pop(), kinds.is_empty()) {
             (Some(ev), true) => Ok(((at_ms * 1e6).round() as u64, ev)),
-            _ => Err(device_err(place, "give exactly one of link_down, link_up, power_off, power_on")),
+            _ => Err(device_err(place, "give exactly one of link_down, link_up, power_off, power_on, drift_step")),
         }
     }
 }

@@ -144,7 +144,15 @@ fn bad_rings_and_events_are_named() {
     );
     assert_eq!(
         err(&format!("{two}[[event]]\nat_ms = 1\npower_off = 1\npower_on = 1\n")),
-        "event 0: give exactly one of link_down, link_up, power_off, power_on"
+        "event 0: give exactly one of link_down, link_up, power_off, power_on, drift_step"
+    );
+    assert_eq!(
+        err(&format!("{two}[[event]]\nat_ms = 1\ndrift_step = {{ device = 0, ppm = 2000.0 }}\n")),
+        "event 0: drift_step.ppm 2000.0 out of range (-1000.0 to 1000.0)"
+    );
+    assert_eq!(
+        err(&format!("{two}[[event]]\nat_ms = 1\ndrift_step = {{ device = 7, ppm = 1.0 }}\n")),
+        "event 0: no device 7 (there are 2)"
     );
     assert_eq!(
         err(&format!("{two}[[event]]\nat_ms = -1\npower_off = 1\n")),
@@ -154,4 +162,23 @@ fn bad_rings_and_events_are_named() {
         err(&format!("{two}[[event]]\nat_ms = 1\nlink_down = {{ device = \"EL2004\", port = 2 }}\n")),
         "event 0: device 1 ('EL2004') has no port 2"
     );
+}
+
+/// `drift_step` in a segment file: the device's crystal that much faster from the event on.
+#[test]
+fn a_drift_step_in_the_file_speeds_the_crystal_up() {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 1\n[[device]]\nbuiltin = \"EK1100\"\n[[event]]\nat_ms = 500\ndrift_step = { device = 0, ppm = 50.0 }\n",
+    )
+    .unwrap();
+    let mut seg = cfg.build().unwrap();
+    let mut clock_at = |t_ns: u64| {
+        seg.advance_to(t_ns);
+        seg.system_times_at(t_ns)[0] as i64
+    };
+    let ms = 1_000_000;
+    let before = clock_at(400 * ms) - clock_at(100 * ms);
+    let after = clock_at(900 * ms) - clock_at(600 * ms);
+    // 50 ppm of 300 ms, to the clock's 10 ns tick.
+    assert!((after - before - 15_000).abs() <= 20, "{before} → {after}");
 }

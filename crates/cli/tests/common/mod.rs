@@ -148,8 +148,9 @@ impl Drop for Sim {
 
 /// A ring served on two veth pairs: two couplers with an EL2004 each, the second coupler's
 /// X2 OUT back to the master's second interface, the cable between the couplers pulled
-/// `break_ms` after the simulator starts. Returns the simulator, the master's second
-/// interface, and the report it writes on exit (read with [`RingSim::report`]).
+/// `break_ms` after the simulator starts; `events`, more `[[event]]` tables. Returns the
+/// simulator, the master's second interface, and the report it writes on exit (read with
+/// [`RingSim::report`]).
 pub struct RingSim {
     pub sim: Sim,
     pub master_secondary: String,
@@ -158,7 +159,7 @@ pub struct RingSim {
 }
 
 impl RingSim {
-    pub fn start(net: &VethPair, tag: &str, break_ms: u32) -> Self {
+    pub fn start(net: &VethPair, tag: &str, break_ms: u32, events: &str) -> Self {
         let (master_secondary, segment_secondary) = net.second_link();
         let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
         let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
@@ -168,7 +169,7 @@ impl RingSim {
                 "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
                  [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
                  [secondary]\ndevice = 2\n\
-                 [[event]]\nat_ms = {break_ms}\nlink_down = {{ device = 2, port = 0 }}\n"
+                 [[event]]\nat_ms = {break_ms}\nlink_down = {{ device = 2, port = 0 }}\n{events}"
             ),
         )
         .unwrap();
