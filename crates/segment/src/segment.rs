@@ -320,7 +320,8 @@ impl Segment {
             }
             Event::DriftStep { node, delta_ppb } => {
                 let n = &mut self.nodes[node];
-                n.drift_ppb += delta_ppb;
+                // However many steps, the crystal stays within ±1000 ppm (the DC unit's range).
+                n.drift_ppb = n.drift_ppb.saturating_add(delta_ppb).clamp(-1_000_000, 1_000_000);
                 if let Some(dc) = n.esc.dc.as_mut() {
                     dc.set_drift_ppb(t, n.drift_ppb);
                 }

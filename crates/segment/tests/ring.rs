@@ -182,3 +182,23 @@ fn a_drift_step_in_the_file_speeds_the_crystal_up() {
     // 50 ppm of 300 ms, to the clock's 10 ns tick.
     assert!((after - before - 15_000).abs() <= 20, "{before} → {after}");
 }
+
+/// Steps that add up beyond ±1000 ppm leave the crystal at that bound (the DC unit's range),
+/// however many a file gives.
+#[test]
+fn drift_steps_add_up_to_no_more_than_1000_ppm() {
+    let steps: String =
+        (0..40).map(|k| format!("[[event]]\nat_ms = {k}\ndrift_step = {{ device = 0, ppm = 900.0 }}\n")).collect();
+    let cfg: SegmentConfig =
+        toml::from_str(&format!("seed = 1\n[[device]]\nbuiltin = \"EK1100\"\ndrift_ppm = 0.0\n{steps}")).unwrap();
+    let mut seg = cfg.build().unwrap();
+    let ms = 1_000_000;
+    let mut clock_at = |t_ns: u64| {
+        seg.advance_to(t_ns);
+        seg.system_times_at(t_ns)[0] as i64
+    };
+    let span = clock_at(1_300 * ms) - clock_at(100 * ms);
+    // 1.2 s at 1000 ppm fast.
+    assert!((span - 1_201_200_000).abs() <= 20, "{span}");
+    assert_eq!(seg.nodes[0].drift_ppb, 1_000_000);
+}
