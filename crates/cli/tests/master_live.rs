@@ -237,7 +237,7 @@ fn run_keeps_a_ring_going_across_a_pulled_cable() {
     assert!(held_run.status.success(), "{}", String::from_utf8_lossy(&held_run.stderr));
     let far = |rep: &serde_json::Value| rep["devices"][2]["system_time_less_first_ns"].as_i64().unwrap();
     println!("far coupler − reference at the end: {} ns kept, {} ns held over", far(&rep), far(&held));
-    // Held over, the warm-up alone puts it 5 µs off per second since (measured 25.4–26.9 µs);
+    // Held over, the warm-up alone puts it 5 µs off per second since (measured 25.2–26.9 µs);
     // kept, this machine's software stamps leave it 0.06–11.0 µs off (docs/master.md).
     assert!(far(&held).abs() > 15_000, "{held}");
     assert!(4 * far(&rep).abs() < 3 * far(&held).abs(), "kept {rep}\nheld {held}");
