@@ -178,6 +178,19 @@ fn cycle_ring(
     clocks: SplitRingClocks,
     events: &[(u64, Event)],
     cycles: u64,
+    each: impl FnMut(u64, &[u64]),
+) -> Master<VirtualIo> {
+    cycle_ring_every(toml, host, clocks, events, cycles, 1_000_000, each)
+}
+
+/// [`cycle_ring`] with cycles of `cycle_ns`.
+fn cycle_ring_every(
+    toml: &str,
+    host: HostModel,
+    clocks: SplitRingClocks,
+    events: &[(u64, Event)],
+    cycles: u64,
+    cycle_ns: u64,
     mut each: impl FnMut(u64, &[u64]),
 ) -> Master<VirtualIo> {
     let mut m = master(toml, host);
@@ -191,7 +204,7 @@ fn cycle_ring(
     let mut next = t0;
     for k in 0..cycles {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
-        next += 1_000_000;
+        next += cycle_ns;
         m.engine.io.sleep_until(next);
         let now = m.engine.io.now_ns();
         each(k, &m.engine.io.seg.system_times_at(now));
@@ -284,4 +297,32 @@ fn the_far_reference_of_a_split_ring_is_kept_on_the_reference() {
         let drifted = *held.last().unwrap();
         assert!((added + drifted).abs() < 200, "added {added} ns, held over drifted {drifted} ns");
     }
+}
+
+/// Cycles longer than the far reference's moves are apart (15 ms against 10 ms): each move
+/// takes up all the drift since the last, so the far coupler, 3 ppm fast from 2 s after the
+/// break, stays with the reference over the last 20 s of 30 (320 ns at worst: 67 samples a
+/// second leave the line unsettled, moved only by errors it shows); a move limited to one
+/// interval's drift fell behind by 0.7 ppm, 19.5 µs by the end.
+#[test]
+fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
+    let s = 1_000_000_000;
+    let events = [(s, Event::LinkDown { node: 2, port: 0 }), (3 * s, Event::DriftStep { node: 2, delta_ppb: 3_000 })];
+    let (mut worst, cycle_ns) = (0i64, 15_000_000);
+    let m = cycle_ring_every(
+        &format!("{DEVICES}{RING}"),
+        HostModel::pc_rt(),
+        SplitRingClocks::FarReference,
+        &events,
+        30 * s / cycle_ns,
+        cycle_ns,
+        |k, t| {
+            if k * cycle_ns > 10 * s {
+                worst = worst.max((t[1].wrapping_sub(t[0]) as i64).abs());
+            }
+        },
+    );
+    println!("15 ms cycles: far coupler − reference worst {worst} ns over the last 20 s");
+    assert_eq!(m.engine.ring, RingState::Broken);
+    assert!(worst < 500, "{worst}");
 }
