@@ -5,9 +5,13 @@
 //! or drop it — as a faulty or hostile device, or a corrupting link whose NIC kept the frame,
 //! would. The master brings the segment up (scan, CoE mapping, DC, OP), runs cycles and reads
 //! the drive's dictionary. It may fail with an error at any point; it must not panic or hang.
+//! An input whose first byte is odd closes the line into a ring back to the master's second
+//! port and pulls the cable before the third device once the slaves are in OP: the frames of
+//! both ports are tampered with, the far half served round the secondary port, its reference
+//! kept on the reference's time from what the two passes read.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
-use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_segment::{Event, Segment, SegmentConfig};
 use libfuzzer_sys::fuzz_target;
 
 const SEGMENT: &str = r#"
@@ -70,12 +74,27 @@ impl Io for Lying<'_> {
     fn segment_mut(&mut self) -> Option<&mut Segment> {
         self.inner.segment_mut()
     }
+    fn has_secondary(&self) -> bool {
+        self.inner.has_secondary()
+    }
+    fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.inner.send_secondary(frame)
+    }
+    fn last_rx_secondary(&self) -> bool {
+        self.inner.last_rx_secondary()
+    }
+    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
+        self.inner.last_tx_secondary_ns()
+    }
 }
 
 fuzz_target!(|data: &[u8]| {
-    let cfg: SegmentConfig = toml::from_str(SEGMENT).expect("the fuzz segment parses");
+    let Some((&mode, script)) = data.split_first() else { return };
+    let ring = mode & 1 == 1;
+    let toml = if ring { format!("{SEGMENT}[secondary]\ndevice = 3\n") } else { SEGMENT.to_string() };
+    let cfg: SegmentConfig = toml::from_str(&toml).expect("the fuzz segment parses");
     let seg = cfg.build().expect("the fuzz segment builds");
-    let io = Lying { inner: VirtualIo::new(seg, HostModel::ideal(), 1), script: data };
+    let io = Lying { inner: VirtualIo::new(seg, HostModel::ideal(), 1), script };
     let mut m = Master::new(io);
     if m.scan().is_err() || m.configure().is_err() {
         return;
@@ -85,9 +104,22 @@ fuzz_target!(|data: &[u8]| {
     if m.start().is_err() {
         return;
     }
-    for _ in 0..20 {
+    // A ring: its cable pulled now, and cycles enough for the far reference to be kept.
+    let cycles = if ring {
+        let now = m.engine.io.now_ns();
+        m.engine.io.inner.seg.schedule(now, Event::LinkDown { node: 2, port: 0 });
+        200
+    } else {
+        20
+    };
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..cycles {
         let _ = m.cycle();
         let _ = m.dc_monitor();
+        if ring {
+            next += 1_000_000;
+            m.engine.io.sleep_until(next);
+        }
     }
     let _ = m.supervise();
     if let Ok(list) = m.od_list(3) {
