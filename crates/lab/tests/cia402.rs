@@ -406,6 +406,82 @@ fn the_builtin_servo_runs_profile_velocity() {
     assert!(a.velocity_actual(&m).unwrap().abs() as f64 <= 0.01 * per_rev);
 }
 
+/// Halt in profile velocity stops the shaft as 0x605D says — 1 the profile deceleration, 2
+/// the quick-stop deceleration, 3 the current limit — and the drive stays in operation
+/// enabled: released, it runs up to the target again.
+#[test]
+fn halt_stops_as_its_option_code_says() {
+    use ferrocat_wire::cia402::{control, status};
+    let mut stops = Vec::new();
+    for code in [1i16, 2, 3] {
+        let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
+        m.sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
+        m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+        m.sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes()).unwrap();
+        m.sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
+        let target = (4.0 * per_rev) as i32;
+        a.set_target_velocity(&mut m, target);
+        cycles(&mut m, 5);
+        assert_eq!(a.statusword(&m) & (status::TARGET_REACHED | status::OP_SPECIFIC_12), 0, "accelerating");
+        until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("target velocity reached");
+        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+        let k = until(&mut m, &a, 1000, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("stopped");
+        let sw = a.statusword(&m);
+        assert_eq!(sw & 0x6F, 0x27, "halt {code}: still operation enabled ({sw:#06x})");
+        stops.push(k);
+        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        cycles(&mut m, 5);
+        until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("running again");
+        let v = a.velocity_actual(&m).unwrap();
+        assert!((v - target).abs() as f64 <= 0.05 * per_rev, "halt {code}: {v} against {target} after release");
+    }
+    println!(
+        "4 rev/s to standing (bit 12, 10 ms below 0.01 rev/s): halt 1 {} ms, 2 {} ms, 3 {} ms",
+        stops[0], stops[1], stops[2]
+    );
+    // 0.2 s at 20 rev/s², 40 ms at 100 rev/s², shorter still at the current limit (each
+    // with the 10 ms of standing that bit 12 waits for).
+    assert!((180..260).contains(&stops[0]), "{stops:?}");
+    assert!((35..80).contains(&stops[1]), "{stops:?}");
+    assert!(stops[2] < stops[1], "{stops:?}");
+}
+
+/// Halt in profile position stops the move at the halt option's deceleration and keeps its
+/// target: the drive reports target reached (halted, standing) short of it, and released,
+/// the move goes on to the target.
+#[test]
+fn halt_interrupts_a_profile_position_move_and_release_resumes_it() {
+    use ferrocat_wire::cia402::{control, status};
+    let (mut m, a, per_rev) = enabled_in(Mode::ProfilePosition);
+    m.sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    let start = a.position_actual(&m).unwrap();
+    let target = start.wrapping_add((3.0 * per_rev) as i32);
+    a.set_target_position(&mut m, target);
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+    until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("set-point acknowledged");
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+    cycles(&mut m, 500);
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+    // From 2 rev/s at 20 rev/s²: 0.1 s.
+    let k = until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("halted");
+    cycles(&mut m, 20);
+    let held = a.position_actual(&m).unwrap();
+    let v = a.velocity_actual(&m).unwrap();
+    println!("halted after {k} ms at {:.2} rev of 3", held.wrapping_sub(start) as f64 / per_rev);
+    assert!((90..200).contains(&k), "{k} ms");
+    assert!((v as f64).abs() < 0.01 * per_rev, "{v}");
+    let done = held.wrapping_sub(start) as f64 / per_rev;
+    assert!((0.5..2.0).contains(&done), "{done} rev");
+    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+    cycles(&mut m, 5);
+    assert_eq!(a.statusword(&m) & status::TARGET_REACHED, 0, "moving again");
+    until(&mut m, &a, 3000, &|sw| sw & status::TARGET_REACHED != 0).expect("target reached");
+    let end = a.position_actual(&m).unwrap();
+    assert!(end.wrapping_sub(target).abs() < 100, "ends at {end}, target {target}");
+}
+
 /// Homing on the current position (method 37): the position actual becomes the home offset
 /// where the shaft stands, at once; homing attained (bit 12) and target reached (bit 10).
 #[test]

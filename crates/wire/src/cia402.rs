@@ -14,6 +14,9 @@ pub mod index {
     pub const SHUTDOWN_OPTION: u16 = 0x605B;
     /// What transition 5 (disable operation) does: 0 coast, 1 the profile deceleration first.
     pub const DISABLE_OPERATION_OPTION: u16 = 0x605C;
+    /// How halt (controlword bit 8) stops the shaft: 1 profile deceleration, 2 quick-stop
+    /// deceleration, 3 current limit, 4 voltage limit.
+    pub const HALT_OPTION: u16 = 0x605D;
     /// What the fault reaction does: 0 coast, 1 profile deceleration, 2 quick-stop
     /// deceleration, 3 current limit, 4 voltage limit.
     pub const FAULT_REACTION_OPTION: u16 = 0x605E;

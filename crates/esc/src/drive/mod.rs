@@ -412,6 +412,22 @@ impl Cia402Drive {
         }
     }
 
+    /// How halt stops the shaft (0x605D), in increments/s²: 2 at the quick-stop
+    /// deceleration, 3 and 4 at the current (voltage) limit — the most torque the drive may
+    /// give (0x6072) over the inertia, a ramp the loops follow, so the drive stays enabled and
+    /// holds where it stops — 1 and any other code at the profile deceleration.
+    fn halt_deceleration(&self) -> f64 {
+        let od = &self.coe.od;
+        match get(od, ix::HALT_OPTION, 0) {
+            2 => get_unsigned(od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64,
+            3 | 4 => {
+                let per_rad = self.motor.increments_per_rev / std::f64::consts::TAU;
+                (self.max_torque_nm() / self.motor.inertia_kg_m2 * per_rad).max(1.0)
+            }
+            _ => get_unsigned(od, ix::PROFILE_DECELERATION, 0).max(1) as f64,
+        }
+    }
+
     fn feedback(&self) -> Feedback {
         let pos = self.mech.position_increments(&self.motor);
         let (demand, _) = self.demand.at(self.model_ns.unwrap_or(0));
@@ -519,17 +535,30 @@ impl Cia402Drive {
                 Demand::Position { pos, vel, acc }
             }
             Some(Mode::ProfilePosition) => {
+                // Halt stops the move as 0x605D says and keeps its target: released, the
+                // move goes on to it.
+                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+                let halt_dec = if halt { self.halt_deceleration() } else { 0.0 };
                 let d = &mut self.demand;
                 if let Some(target) = d.pp_target {
                     let (vmax, acc, dec) = d.pp_limits;
                     let rest = target - d.now.to;
                     // Decelerate when the stopping distance reaches what is left.
                     let stopping = d.pp_vel * d.pp_vel / (2.0 * dec);
-                    let want = if rest.abs() <= stopping { 0.0 } else { vmax * rest.signum() };
-                    let step = if want.abs() < d.pp_vel.abs() { dec } else { acc } * dt;
+                    let want = if halt || rest.abs() <= stopping { 0.0 } else { vmax * rest.signum() };
+                    let step = if halt {
+                        halt_dec
+                    } else if want.abs() < d.pp_vel.abs() {
+                        dec
+                    } else {
+                        acc
+                    } * dt;
                     d.pp_vel += (want - d.pp_vel).clamp(-step, step);
                     d.now.to += d.pp_vel * dt;
-                    if (target - d.now.to).abs() <= (d.pp_vel * dt).abs().max(0.5) && d.pp_vel.abs() <= dec * dt * 2.0 {
+                    if !halt
+                        && (target - d.now.to).abs() <= (d.pp_vel * dt).abs().max(0.5)
+                        && d.pp_vel.abs() <= dec * dt * 2.0
+                    {
                         d.now.to = target;
                         d.pp_vel = 0.0;
                         d.pp_target = None;
@@ -544,8 +573,12 @@ impl Cia402Drive {
                 let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
                 let target = if halt { 0.0 } else { get(od, ix::TARGET_VELOCITY, 0) as f64 };
                 let rising = target.abs() > self.pv.abs() && target * self.pv >= 0.0;
-                let rate = get_unsigned(od, if rising { ix::PROFILE_ACCELERATION } else { ix::PROFILE_DECELERATION }, 0)
-                    .max(1) as f64;
+                let rate = if halt {
+                    self.halt_deceleration()
+                } else {
+                    get_unsigned(od, if rising { ix::PROFILE_ACCELERATION } else { ix::PROFILE_DECELERATION }, 0).max(1)
+                        as f64
+                };
                 self.pv += (target - self.pv).clamp(-rate * dt, rate * dt);
                 Demand::Velocity(self.pv)
             }
@@ -876,7 +909,10 @@ impl Cia402Drive {
                 if self.pp_bit {
                     sw |= status::OP_SPECIFIC_12;
                 }
-                if self.demand.pp_target.is_none() && f.following_error.unsigned_abs() < 100 {
+                // Target reached, or halted and standing.
+                let halted = get_unsigned(&self.coe.od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0
+                    && self.demand.pp_vel == 0.0;
+                if (self.demand.pp_target.is_none() || halted) && f.following_error.unsigned_abs() < 100 {
                     sw |= status::TARGET_REACHED;
                 }
             }

@@ -68,14 +68,15 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
     // The option codes' defaults are the profile's (CiA 402-2): shutdown coasts, disable
     // operation and the quick stop brake (profile and quick-stop deceleration), a fault at the
-    // quick-stop deceleration.
-    let vars: [(u16, &str, u16, u16, Access, i64); 32] = [
+    // quick-stop deceleration, halt at the profile deceleration.
+    let vars: [(u16, &str, u16, u16, Access, i64); 33] = [
         (ix::ERROR_CODE, "Error code", dt::UINT, 16, access(false, false, true), 0),
         (ix::CONTROLWORD, "Controlword", dt::UINT, 16, access(true, true, false), 0),
         (ix::STATUSWORD, "Statusword", dt::UINT, 16, access(false, false, true), 0),
         (ix::QUICK_STOP_OPTION, "Quick stop option code", dt::INT, 16, access(true, false, false), 2),
         (ix::SHUTDOWN_OPTION, "Shutdown option code", dt::INT, 16, access(true, false, false), 0),
         (ix::DISABLE_OPERATION_OPTION, "Disable operation option code", dt::INT, 16, access(true, false, false), 1),
+        (ix::HALT_OPTION, "Halt option code", dt::INT, 16, access(true, false, false), 1),
         (ix::FAULT_REACTION_OPTION, "Fault reaction option code", dt::INT, 16, access(true, false, false), 2),
         // Linear interpolation, the only kind the model runs.
         (ix::INTERPOLATION_SUB_MODE, "Interpolation sub mode select", dt::INT, 16, access(true, false, false), 0),
