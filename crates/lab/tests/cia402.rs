@@ -853,6 +853,28 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     assert_eq!(a.state(), Some(State::OperationEnabled));
 }
 
+/// The built-in servo with its outputs remapped to carry 0x60C1:01 (controlword, set-point,
+/// mode), in interpolated position with the period `period_ns`, operation enabled; and its
+/// increments per revolution.
+fn ip_servo(period_ns: u64) -> (Master<VirtualIo>, Axis, f64) {
+    let mut m = master("builtin = 'SERVO'", &|m| {
+        let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.sdo_write(DRIVE, i, s, v).unwrap();
+        w(m, 0x1600, 0, &[0]);
+        w(m, 0x1600, 1, &0x6040_0010u32.to_le_bytes());
+        w(m, 0x1600, 2, &0x60C1_0120u32.to_le_bytes());
+        w(m, 0x1600, 3, &0x6060_0008u32.to_le_bytes());
+        w(m, 0x1600, 0, &[3]);
+        m.remap(DRIVE, true, &[0x1600]).unwrap();
+    });
+    let mut a = Axis::new(&m, DRIVE).unwrap();
+    a.set_interpolation_period(&mut m, period_ns).unwrap();
+    a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
+    a.set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
+    let per_rev = drive(&m).motor.increments_per_rev;
+    (m, a, per_rev)
+}
+
 /// The built-in servo in interpolated position after remapping its outputs to carry 0x60C1:01,
 /// with an interpolation period of 2 ms at a 1 ms cycle: each set-point is approached at the
 /// rate of a 2 ms step, from where the demand stands, so at a steady speed the demand runs two
@@ -860,21 +882,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
 #[test]
 fn interpolation_follows_the_period_0x60c2_gives() {
     let run = |period_ns: u64| {
-        let mut m = master("builtin = 'SERVO'", &|m| {
-            let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.sdo_write(DRIVE, i, s, v).unwrap();
-            w(m, 0x1600, 0, &[0]);
-            w(m, 0x1600, 1, &0x6040_0010u32.to_le_bytes());
-            w(m, 0x1600, 2, &0x60C1_0120u32.to_le_bytes());
-            w(m, 0x1600, 3, &0x6060_0008u32.to_le_bytes());
-            w(m, 0x1600, 0, &[3]);
-            m.remap(DRIVE, true, &[0x1600]).unwrap();
-        });
-        let mut a = Axis::new(&m, DRIVE).unwrap();
-        a.set_interpolation_period(&mut m, period_ns).unwrap();
-        a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
-        a.set_goal(Goal::OperationEnabled);
-        drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-        let per_rev = drive(&m).motor.increments_per_rev;
+        let (mut m, mut a, per_rev) = ip_servo(period_ns);
         let p0 = a.position_actual(&m).unwrap() as f64;
         let actual0 = drive(&m).position_increments();
         // 1 rev/s from standstill, 300 ms: the demand's lag behind the set-points at the end.
@@ -891,6 +899,61 @@ fn interpolation_follows_the_period_0x60c2_gives() {
     // millisecond is 0.001 rev.
     let extra = lag_2ms - lag_1ms;
     assert!((0.0007..0.0013).contains(&extra), "lags {lag_1ms} and {lag_2ms} rev");
+}
+
+/// Halt in interpolated position: the built-in servo following 2 rev/s of set-points stops at
+/// 0x605D's deceleration from where halt found its demand (at 20 rev/s², 0.1 rev further;
+/// at the current limit, sooner), holds there in operation enabled with target reached while
+/// the set-points run on, and released approaches them again.
+#[test]
+fn halt_in_interpolated_position_stops_at_the_halt_option_deceleration() {
+    use ferrocat_wire::cia402::{control, status};
+    let run = |code: i16| {
+        let (mut m, mut a, per_rev) = ip_servo(CYCLE_NS);
+        m.sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+        m.sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
+        let p0 = a.position_actual(&m).unwrap() as f64;
+        let mut k = 0u64;
+        let mut step = |m: &mut Master<VirtualIo>, a: &mut Axis, cw: u16| {
+            k += 1;
+            // 2 rev/s, reached over the first 100 ms.
+            let t = k as f64 * 1e-3;
+            let p = if t < 0.1 { per_rev * 10.0 * t * t } else { per_rev * (0.1 + 2.0 * (t - 0.1)) };
+            a.set_target_position(m, (p0 + p) as i64 as i32);
+            a.write_controlword(m, control::ENABLE_OPERATION_CMD | control::ENABLE_IP_MODE | cw);
+            cycles(m, 1);
+        };
+        for _ in 0..300 {
+            step(&mut m, &mut a, 0);
+        }
+        let at_halt = drive(&m).position_increments();
+        for _ in 0..300 {
+            step(&mut m, &mut a, control::HALT);
+        }
+        let after = (drive(&m).position_increments() - at_halt) / per_rev;
+        let sw = a.statusword(&m);
+        assert_eq!(a.state(), Some(State::OperationEnabled), "halt {code}");
+        assert_ne!(sw & status::TARGET_REACHED, 0, "halt {code}: standing ({sw:#06x})");
+        assert_eq!(sw & status::OP_SPECIFIC_12, 0, "halt {code}: ip mode inactive ({sw:#06x})");
+        assert!(a.velocity_actual(&m).unwrap().abs() as f64 <= 0.01 * per_rev);
+        // Released: the set-points are approached again, from where it stood.
+        for _ in 0..1_000 {
+            step(&mut m, &mut a, 0);
+        }
+        let moving = a.velocity_actual(&m).unwrap() as f64 / per_rev;
+        (after, moving)
+    };
+    let (profile, profile_after) = run(1);
+    let (limit, limit_after) = run(3);
+    println!(
+        "after halt: {profile:.4} rev at the profile deceleration, {limit:.4} rev at the current limit; \
+         {profile_after:.2} and {limit_after:.2} rev/s after release"
+    );
+    // 2 rev/s at 20 rev/s²: 0.1 rev, give or take the cycle the halt waited for.
+    assert!((0.08..0.13).contains(&profile), "{profile}");
+    assert!(limit < profile / 2.0, "{limit} vs {profile}");
+    // Released, the set-points run away at 2 rev/s: the drive follows them again.
+    assert!(profile_after > 1.0 && limit_after > 1.0, "{profile_after}, {limit_after}");
 }
 
 /// Enables the built-in servo in CSV at 5 rev/s with the profile deceleration at 20 rev/s² and

@@ -225,6 +225,8 @@ pub struct Cia402Drive {
     after_ramp: Option<State>,
     /// Interpolated position: bit 4 set and no halt, so the drive follows the set-points.
     ip_active: bool,
+    /// Interpolated position halted: the demand ramps down from where halt found it.
+    ip_halting: bool,
     op: bool,
     dc: bool,
     written: u64,
@@ -300,6 +302,7 @@ impl Cia402Drive {
             ramp: None,
             after_ramp: None,
             ip_active: false,
+            ip_halting: false,
             op: false,
             dc: false,
             written: 0,
@@ -529,15 +532,32 @@ impl Cia402Drive {
             return Demand::Off;
         }
         let od = &self.coe.od;
+        let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
         match self.mode {
+            // Halt in interpolated position: from the demand's position and velocity as halt
+            // found them, down at 0x605D's deceleration, then held; released, the set-points
+            // are approached from there (`queue_set_point` from the demand).
+            Some(Mode::InterpolatedPosition) if halt => {
+                let dec = self.halt_deceleration();
+                let d = &mut self.demand;
+                if !self.ip_halting {
+                    self.ip_halting = true;
+                    let (pos, vel, _) = d.segment(at).at(at);
+                    *d = PositionDemand { pp_vel: vel, ..PositionDemand::hold(pos) };
+                }
+                d.pp_vel -= d.pp_vel.clamp(-dec * dt, dec * dt);
+                d.now.to += d.pp_vel * dt;
+                d.now.from = d.now.to;
+                Demand::Position { pos: d.now.to, vel: d.pp_vel, acc: 0.0 }
+            }
             Some(Mode::CyclicSyncPosition | Mode::InterpolatedPosition) => {
+                self.ip_halting = false;
                 let (pos, vel, acc) = self.demand.segment(at).at(at);
                 Demand::Position { pos, vel, acc }
             }
             Some(Mode::ProfilePosition) => {
                 // Halt stops the move as 0x605D says and keeps its target: released, the
                 // move goes on to it.
-                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
                 let halt_dec = if halt { self.halt_deceleration() } else { 0.0 };
                 let d = &mut self.demand;
                 if let Some(target) = d.pp_target {
@@ -570,7 +590,6 @@ impl Cia402Drive {
             }
             Some(Mode::ProfileVelocity) => {
                 // The target (or zero while halted), reached along the profile's ramps.
-                let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
                 let target = if halt { 0.0 } else { get(od, ix::TARGET_VELOCITY, 0) as f64 };
                 let rising = target.abs() > self.pv.abs() && target * self.pv >= 0.0;
                 let rate = if halt {
@@ -758,6 +777,7 @@ impl Cia402Drive {
         if mode_req.is_some() && mode_req != self.mode {
             self.mode = mode_req;
             self.demand = PositionDemand::hold(self.mech.position_increments(&self.motor));
+            self.ip_halting = false;
             // Profile velocity starts from the speed the shaft has; homing from the start.
             self.pv = self.mech.velocity_increments(&self.motor);
             self.homing = homing::Homing::default();
@@ -899,9 +919,12 @@ impl Cia402Drive {
                 if window != 0xFFFF_FFFF && f.following_error.unsigned_abs() as u64 > window {
                     sw |= status::OP_SPECIFIC_13;
                 }
-                // Target reached: the demand stands at the last set-point, the shaft with it.
+                // Target reached: the demand stands at the last set-point (or where halt
+                // stopped it), the shaft with it.
                 let (at, vel) = self.demand.at(self.model_ns.unwrap_or(0));
-                if vel == 0.0 && at == self.demand.last_target() && f.following_error.unsigned_abs() < 100 {
+                let stopping = self.ip_halting && self.demand.pp_vel != 0.0;
+                if !stopping && vel == 0.0 && at == self.demand.last_target() && f.following_error.unsigned_abs() < 100
+                {
                     sw |= status::TARGET_REACHED;
                 }
             }
