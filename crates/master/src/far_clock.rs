@@ -211,7 +211,8 @@ impl<I: Io> Master<I> {
         // Keeping up takes the drift since the last move (which aimed halfway to this one;
         // at least one interval's, however late this move comes).
         let since_ns = f.last_move_ns.map_or(STEER_EVERY_NS, |t| x.wrapping_sub(t).max(STEER_EVERY_NS)) as f64;
-        let limit = (f.clock.drift() * since_ns).abs() + STEP_NS;
+        // (`max` also keeps the bound a number whatever the line says: `clamp` refuses NaN.)
+        let limit = ((f.clock.drift() * since_ns).abs() + STEP_NS).max(STEP_NS);
         let delta = -aim.clamp(-limit, limit).round() as i64;
         f.last_move_ns = Some(x);
         let wide_offset = self.slaves[k].dc_64bit;
