@@ -109,105 +109,75 @@ impl CliIo {
     }
 }
 
+impl CliIo {
+    /// The world underneath, for the calls that only pass through.
+    fn io(&self) -> &dyn Io {
+        match &self.world {
+            World::Virtual(v) => &**v,
+            World::Raw(r) => r,
+            World::Udp(u) => u,
+        }
+    }
+    fn io_mut(&mut self) -> &mut dyn Io {
+        match &mut self.world {
+            World::Virtual(v) => &mut **v,
+            World::Raw(r) => r,
+            World::Udp(u) => u,
+        }
+    }
+}
+
+/// Every call passes through to the world; frames are recorded on their way.
 impl Io for CliIo {
     fn now_ns(&mut self) -> u64 {
-        match &mut self.world {
-            World::Virtual(v) => v.now_ns(),
-            World::Raw(r) => r.now_ns(),
-            World::Udp(u) => u.now_ns(),
-        }
+        self.io_mut().now_ns()
     }
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let t = self.now_ns();
         self.record(t, frame);
-        match &mut self.world {
-            World::Virtual(v) => v.send(frame),
-            World::Raw(r) => r.send(frame),
-            World::Udp(u) => u.send(frame),
-        }
+        self.io_mut().send(frame)
     }
     fn has_secondary(&self) -> bool {
-        match &self.world {
-            World::Virtual(v) => v.has_secondary(),
-            World::Raw(r) => r.has_secondary(),
-            World::Udp(_) => false,
-        }
+        self.io().has_secondary()
     }
     fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
         let t = self.now_ns();
         self.record(t, frame);
-        match &mut self.world {
-            World::Virtual(v) => v.send_secondary(frame),
-            World::Raw(r) => r.send_secondary(frame),
-            World::Udp(u) => u.send_secondary(frame),
-        }
+        self.io_mut().send_secondary(frame)
     }
     fn last_rx_secondary(&self) -> bool {
-        match &self.world {
-            World::Virtual(v) => v.last_rx_secondary(),
-            World::Raw(r) => r.last_rx_secondary(),
-            World::Udp(_) => false,
-        }
+        self.io().last_rx_secondary()
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
-        let r = match &mut self.world {
-            World::Virtual(v) => v.recv(buf, deadline_ns),
-            World::Raw(r) => r.recv(buf, deadline_ns),
-            World::Udp(u) => u.recv(buf, deadline_ns),
-        }?;
+        let r = self.io_mut().recv(buf, deadline_ns)?;
         if let Some((n, t)) = r {
             self.record(t, &buf[..n]);
         }
         Ok(r)
     }
     fn sleep_until(&mut self, t_ns: u64) {
-        match &mut self.world {
-            World::Virtual(v) => v.sleep_until(t_ns),
-            World::Raw(r) => r.sleep_until(t_ns),
-            World::Udp(u) => u.sleep_until(t_ns),
-        }
+        self.io_mut().sleep_until(t_ns)
     }
     fn wake_target_ns(&self) -> Option<u64> {
-        match &self.world {
-            World::Virtual(v) => v.wake_target_ns(),
-            World::Raw(r) => r.wake_target_ns(),
-            World::Udp(u) => u.wake_target_ns(),
-        }
+        self.io().wake_target_ns()
     }
     fn is_virtual(&self) -> bool {
-        matches!(self.world, World::Virtual(_))
+        self.io().is_virtual()
     }
     fn segment(&self) -> Option<&ferrocat_segment::Segment> {
-        match &self.world {
-            World::Virtual(v) => v.segment(),
-            _ => None,
-        }
+        self.io().segment()
     }
     fn segment_mut(&mut self) -> Option<&mut ferrocat_segment::Segment> {
-        match &mut self.world {
-            World::Virtual(v) => v.segment_mut(),
-            _ => None,
-        }
+        self.io_mut().segment_mut()
     }
     fn timer_resolution_ns(&self) -> u64 {
-        match &self.world {
-            World::Virtual(v) => v.timer_resolution_ns(),
-            _ => 1,
-        }
+        self.io().timer_resolution_ns()
     }
     fn last_tx_ns(&mut self) -> Option<u64> {
-        match &mut self.world {
-            World::Virtual(v) => v.last_tx_ns(),
-            World::Raw(r) => r.last_tx_ns(),
-            World::Udp(u) => u.last_tx_ns(),
-        }
+        self.io_mut().last_tx_ns()
     }
     fn last_tx_secondary_ns(&mut self) -> Option<u64> {
-        match &mut self.world {
-            World::Virtual(v) => v.last_tx_secondary_ns(),
-            World::Raw(r) => r.last_tx_secondary_ns(),
-            World::Udp(_) => None,
-        }
+        self.io_mut().last_tx_secondary_ns()
     }
 }
 

@@ -532,7 +532,6 @@ impl<I: Io> Master<I> {
         let mut nop: [u8; 0] = [];
         let mut pdus = p.pdus(&mut nop);
         let frame_bytes = frame_bytes(&pdus);
-        self.engine.split_passes = None;
         let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
         let passes = self.engine.split_passes.take();
         let answered = match res {
@@ -540,8 +539,7 @@ impl<I: Io> Master<I> {
             Err(_) => SyncAnswers::NONE,
         };
         let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
-        self.note_ring()?;
-        self.keep_far_reference(passes)?;
+        self.note_ring(passes)?;
         Ok(c)
     }
 

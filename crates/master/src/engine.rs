@@ -145,8 +145,8 @@ pub struct Engine<I: Io> {
     pub far_reference: Option<u16>,
     /// How many slaves the last secondary probe counted behind a break.
     pub far_half_slaves: u16,
-    /// The last frame with an FRMW that went round both halves of a broken ring (the master
-    /// takes it).
+    /// The last frame with an FRMW that went round both halves of a broken ring, since the
+    /// last [`Engine::transact_once`] began (the master takes it after its cyclic frame).
     pub split_passes: Option<SplitPasses>,
     /// The secondary's last probe came back: worth waiting for the next.
     secondary_alive: bool,
@@ -211,6 +211,7 @@ impl<I: Io> Engine<I> {
     /// [`Engine::transact`] once, within `timeout_ns`: cyclic frames are not sent twice (a lost
     /// frame costs its cycle, not the next ones).
     pub fn transact_once(&mut self, pdus: &mut [Pdu<'_>], timeout_ns: u64) -> Result<()> {
+        self.split_passes = None;
         let (timeout, retries) = (self.timeout_ns, self.retries);
         (self.timeout_ns, self.retries) = (timeout_ns, 0);
         let r = self.transact(pdus);

@@ -49,9 +49,11 @@ pub(crate) struct CycleState {
 }
 
 impl<I: Io> Master<I> {
-    /// Reports a change of the ring's state once (cable redundancy; the first state seen is
-    /// the starting point, not news) and sets the clocks up for it.
-    pub(crate) fn note_ring(&mut self) -> Result<()> {
+    /// After a cyclic frame (`passes`: its two passes round a broken ring, if it made them):
+    /// reports a change of the ring's state once (cable redundancy; the first state seen is
+    /// the starting point, not news), sets the clocks up for it, and keeps a split ring's far
+    /// reference on the reference's time.
+    pub(crate) fn note_ring(&mut self, passes: Option<crate::SplitPasses>) -> Result<()> {
         use crate::engine::RingState;
         let now = self.engine.ring;
         let before = std::mem::replace(&mut self.cyc.ring, now);
@@ -61,7 +63,7 @@ impl<I: Io> Master<I> {
         if now != before {
             self.ring_changed(before);
         }
-        Ok(())
+        self.keep_far_reference(passes)
     }
 
     /// The handle of an output entry of slave `position` by its name (first match).
@@ -203,7 +205,6 @@ impl<I: Io> Master<I> {
         let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
         let data_bytes = crate::dc::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
-        engine.split_passes = None;
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
         let passes = engine.split_passes.take();
         let answered = match (r.is_ok(), with_sync) {
@@ -235,8 +236,7 @@ impl<I: Io> Master<I> {
             }
             _ => None,
         };
-        self.note_ring()?;
-        self.keep_far_reference(passes)?;
+        self.note_ring(passes)?;
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;
