@@ -11,6 +11,8 @@ use crate::target::{finish, CliIo, Target};
 pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
     m.scan()?;
+    // A ring split from the start: the secondary's cable comes in at the far half's root.
+    let split_root = m.split_latch.as_ref().map(|l| (l.root as u16, l.root_port));
     if json {
         let v: Vec<_> = m
             .slaves
@@ -24,7 +26,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
                     "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
                     "active_ports": s.active_ports,
-                    "ring_port": m.ring_port.filter(|r| r.0 == s.position).map(|r| r.1),
+                    "ring_port": m.ring_port.or(split_root).filter(|r| r.0 == s.position).map(|r| r.1),
                     "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
             })
@@ -34,15 +36,20 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
         outln!("{} slaves found", m.slaves.len());
         use ferrocat_master::io::Io;
         if m.engine.io.has_secondary() {
+            let far = m.split_latch.as_ref().and_then(|l| l.far_reference);
             outln!(
                 "{}",
-                match m.engine.ring {
-                    ferrocat_master::RingState::Intact => "Ring intact: every slave on one pass",
-                    ferrocat_master::RingState::Broken => {
+                match (m.engine.ring, far) {
+                    (ferrocat_master::RingState::Intact, _) => "Ring intact: every slave on one pass".to_string(),
+                    (ferrocat_master::RingState::Broken, Some(f)) => format!(
                         "Ring broken: the slaves behind the break answer from the secondary port; \
-                         their delays are not measured from the reference"
+                         their delays are from slave {}, the first clock behind the break",
+                        f + 1
+                    ),
+                    (ferrocat_master::RingState::Broken, None) => {
+                        "Ring broken: the slaves behind the break answer from the secondary port".to_string()
                     }
-                    _ => "Ring open: nothing answers on the secondary port",
+                    _ => "Ring open: nothing answers on the secondary port".to_string(),
                 }
             );
         }
@@ -62,7 +69,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             if s.has_dc && !s.has_system_time {
                 outln!(" DC: receive times only (no system time)");
             }
-            if let Some((_, port)) = m.ring_port.filter(|r| r.0 == s.position) {
+            if let Some((_, port)) = m.ring_port.or(split_root).filter(|r| r.0 == s.position) {
                 outln!(" Ring: port {port} leads back to the master's secondary port");
             }
             if let Some(mb) = &s.mailbox {

@@ -4,7 +4,7 @@
 use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDifference};
 use ferrocat_wire::{Address, Command};
 
-use crate::engine::Pdu;
+use crate::engine::{Pdu, SplitRingClocks};
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
@@ -224,13 +224,20 @@ impl<I: Io> Master<I> {
         //    and the reference's equals the master's time at the latch.
         let r_ref = self.slaves[reference].receive_time_epu;
         let offset_ref = t_master.wrapping_sub(r_ref);
+        // A ring split from the start: the far half latched on the second pass, this much
+        // later, and its delays are from its own reference (master/split_start.rs).
+        let far_lag = self.split_latch.as_ref().and_then(|l| Some((l.first_far, l.far_lag_ns()?)));
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
             if !s.has_system_time {
                 continue;
             }
-            let offset =
-                r_ref.wrapping_add(offset_ref).wrapping_sub(s.receive_time_epu).wrapping_add(s.delay_ns as u64);
+            let lag = far_lag.filter(|&(f, _)| k >= f).map_or(0, |(_, lag)| lag);
+            let offset = r_ref
+                .wrapping_add(offset_ref)
+                .wrapping_sub(s.receive_time_epu)
+                .wrapping_add(s.delay_ns as u64)
+                .wrapping_add_signed(lag);
             let mut d = [0u8; 12];
             let n = if s.dc_64bit { 8 } else { 4 };
             d[..8].copy_from_slice(&offset.to_le_bytes());
@@ -257,6 +264,12 @@ impl<I: Io> Master<I> {
             }
             None => None,
         };
+        // Split from the start: the far half follows its own reference from now on.
+        let far = self.split_latch.as_ref().and_then(|l| l.far_reference).map(|r| self.slaves[r].station);
+        if matches!(self.engine.split_ring_clocks, SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld) {
+            self.engine.far_reference = far;
+        }
+        self.far_steer = None;
         let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
         let mut converged = false;
         let static_from_ns = self.engine.io.now_ns();
@@ -267,7 +280,10 @@ impl<I: Io> Master<I> {
                 }
                 None => {
                     let mut t = [0u8; 8];
+                    self.engine.split_passes = None;
                     self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
+                    let passes = self.engine.split_passes.take();
+                    self.keep_far_reference(passes)?;
                 }
             }
             frames += 1;
@@ -281,6 +297,14 @@ impl<I: Io> Master<I> {
             }
         }
         let static_ns = self.engine.io.now_ns().wrapping_sub(static_from_ns);
+        // The far half's offsets were written for the latching frame's two passes, one
+        // sample; the static drift compensation's frames gave many (1 ms of µs-scattered
+        // stamps on a PC): the far half is moved by what they say, all its clocks together.
+        if let Some(e) = self.far_steer.take().and_then(|f| f.clock.error_now()) {
+            for st in self.far_clocks() {
+                self.shift_offset(st, -e)?;
+            }
+        }
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
         }
@@ -469,6 +493,8 @@ impl<I: Io> Master<I> {
     fn current_reference_loop_ns(&mut self) -> Result<u64> {
         use crate::engine::RingState;
         if matches!(self.engine.ring, RingState::Intact | RingState::Unknown) {
+            // Closed after a latch that found it split: its delays and loop measured now.
+            self.rejoin_far_half()?;
             return self.reference_loop_ns();
         }
         let r = self.reference_index()?;
@@ -782,18 +808,22 @@ impl<I: Io> Master<I> {
 
     /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.
     fn shift_offsets_but(&mut self, shift_ns: i64, skip: Option<u16>) -> Result<()> {
-        for k in 0..self.slaves.len() {
-            let (has, st, wide) = (self.slaves[k].has_system_time, self.slaves[k].station, self.slaves[k].dc_64bit);
-            if !has || skip == Some(st) {
-                continue;
-            }
-            let n = if wide { 8 } else { 4 };
-            let mut d = [0u8; 8];
-            self.fprd(st, 0x0920, &mut d[..n])?;
-            let v = u64::from_le_bytes(d).wrapping_add_signed(shift_ns);
-            self.fpwr(st, 0x0920, &v.to_le_bytes()[..n])?;
+        let clocks: Vec<u16> =
+            self.slaves.iter().filter(|s| s.has_system_time && skip != Some(s.station)).map(|s| s.station).collect();
+        for st in clocks {
+            self.shift_offset(st, shift_ns)?;
         }
         Ok(())
+    }
+
+    /// Adds `shift_ns` to the System_Time_Offset of the slave at station `st`.
+    pub(crate) fn shift_offset(&mut self, st: u16, shift_ns: i64) -> Result<()> {
+        let wide = self.slaves.iter().find(|s| s.station == st).is_some_and(|s| s.dc_64bit);
+        let n = if wide { 8 } else { 4 };
+        let mut d = [0u8; 8];
+        self.fprd(st, 0x0920, &mut d[..n])?;
+        let v = u64::from_le_bytes(d).wrapping_add_signed(shift_ns);
+        self.fpwr(st, 0x0920, &v.to_le_bytes()[..n])
     }
 }
 

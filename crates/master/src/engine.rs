@@ -72,10 +72,10 @@ pub enum SplitRingClocks {
     AsSent,
 }
 
-/// A frame with an FRMW that went round both halves of a broken ring: what the FRMW read on
-/// each pass and when the master sent and had each pass (world clock). The master keeps the
-/// far half's reference on the reference's time with these (docs/master.md, "Cable
-/// redundancy").
+/// A frame that went round both halves of a broken ring: when the master sent and had each
+/// pass (world clock) and, for a frame with an FRMW, what it read on each. The master keeps
+/// the far half's reference on the reference's time with these, and times the far half's
+/// latch of a ring split from the start (docs/master.md, "Cable redundancy").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SplitPasses {
     /// Each pass's transmit stamp (on a link without them, when its send was asked for) and
@@ -85,7 +85,8 @@ pub struct SplitPasses {
     pub far_tx_ns: u64,
     pub far_rx_ns: u64,
     /// The FRMW's data after the first pass (the reference's system time) and after the
-    /// second (the far reference's), little-endian over its `len` bytes (4 or 8).
+    /// second (the far reference's), little-endian over its `len` bytes (4 or 8; 0 and no
+    /// data for a frame without an FRMW).
     pub near_time: u64,
     pub far_time: u64,
     pub len: usize,
@@ -145,8 +146,8 @@ pub struct Engine<I: Io> {
     pub far_reference: Option<u16>,
     /// How many slaves the last secondary probe counted behind a break.
     pub far_half_slaves: u16,
-    /// The last frame with an FRMW that went round both halves of a broken ring, since the
-    /// last [`Engine::transact_once`] began (the master takes it after its cyclic frame).
+    /// The last frame that went round both halves of a broken ring, since the last
+    /// [`Engine::transact_once`] began (the master takes it after its cyclic frame).
     pub split_passes: Option<SplitPasses>,
     /// The secondary's last probe came back: worth waiting for the next.
     secondary_alive: bool,
@@ -417,7 +418,11 @@ impl<I: Io> Engine<I> {
                     if let Some((h, near_rx_ns)) = slot.held {
                         // Only where the first pass went past the reference (not a frame
                         // the primary lost and the secondary sent round as it was).
-                        let passes = frmw_passes(&slot.held_buf[..h], &self.rx[..n]).filter(|(near, _)| near.2 > 0);
+                        let passes = match frmw_passes(&slot.held_buf[..h], &self.rx[..n]) {
+                            Some((near, far)) if near.2 > 0 => Some((near, far)),
+                            Some(_) => None,
+                            None => Some(((0, 0, 0), (0, 0, 0))),
+                        };
                         if let Some((near, far)) = passes {
                             self.split_passes = Some(SplitPasses {
                                 near_tx_ns: slot.sent_ns,

@@ -42,6 +42,9 @@ const WINDOW: usize = 16_384;
 /// Samples before the error is trusted (the line's noise scale is learned over about as
 /// many; a window restarted later keeps it).
 const MIN_POINTS: u64 = 128;
+/// How well the latched receive times give the level of a ring split from the start (ns, one
+/// standard deviation): four latches of 10 ns ticks, halved or not.
+const ANCHOR_SD_NS: f64 = 10.0;
 /// The far reference's offset is moved at most this often (a step each time, which its
 /// followers take up through their own loops).
 pub const STEER_EVERY_NS: u64 = 10_000_000;
@@ -55,6 +58,7 @@ pub struct FarClock {
     anchor_ns: Option<(i64, f64)>,
     fit: LineFit,
     samples: u64,
+    last_x: Option<u64>,
     /// What has been added to the far reference's offset since the break.
     applied_ns: i64,
 }
@@ -72,14 +76,23 @@ impl FarClock {
             anchor_ns: None,
             fit: LineFit::with_prior(WINDOW, 0.0, RATE_PRIOR_SD),
             samples: 0,
+            last_x: None,
             applied_ns: 0,
         }
+    }
+
+    /// The level is known beforehand (`anchor_ns`, standard deviation `sd_ns`): a ring split
+    /// from the start, whose geometry the latched receive times gave
+    /// ([`crate::SplitLatch::anchor_ns`]).
+    pub fn anchored(anchor_ns: i64, sd_ns: f64) -> Self {
+        FarClock { anchor_ns: Some((anchor_ns, sd_ns)), ..Self::new() }
     }
 
     /// A sample at master time `x_ns`: the far reference's time less the reference's as
     /// measured (`diff_ns`, the offset added so far included).
     pub fn push(&mut self, x_ns: u64, diff_ns: i64) {
         let break_x = *self.break_x.get_or_insert(x_ns);
+        self.last_x = Some(x_ns);
         let held_ns = diff_ns.wrapping_sub(self.applied_ns);
         self.samples += 1;
         let at_break = || self.level_at(break_x).zip(self.fit.sd_at_ns(break_x));
@@ -117,6 +130,11 @@ impl FarClock {
             None => (self.level_at(break_x)?, self.fit.rate_sd()? * x_ns.wrapping_sub(break_x) as f64),
         };
         Some((self.level_at(x_ns)?.wrapping_sub(anchor).wrapping_add(self.applied_ns), sd))
+    }
+
+    /// [`FarClock::error_ns`] at the last sample.
+    pub fn error_now(&self) -> Option<i64> {
+        Some(self.error_ns(self.last_x?)?.0)
     }
 
     /// The far reference's rate against the master's clock, less 1, as the line has it; 0
@@ -177,7 +195,7 @@ impl<I: Io> Master<I> {
             self.far_steer = None;
             return Ok(());
         };
-        let Some(p) = passes else { return Ok(()) };
+        let Some(p) = passes.filter(|p| p.len > 0) else { return Ok(()) };
         // The second pass went through every clock behind the break: the far reference read,
         // each other one took.
         let n = self.slaves.len();
@@ -190,7 +208,10 @@ impl<I: Io> Master<I> {
         let wide = p.len >= 8 && self.slaves[k].dc_64bit;
         let (x, diff) = measured_difference_ns(&p, wide);
         if self.far_steer.as_ref().is_none_or(|f| f.station != station) {
-            self.far_steer = Some(FarSteer { station, clock: FarClock::new(), last_move_ns: None, offset: None });
+            // Split from the start: the level is the latch's geometry, not the break's.
+            let latch = self.split_latch.as_ref().filter(|l| l.far_reference == Some(k));
+            let clock = latch.map_or_else(FarClock::new, |l| FarClock::anchored(l.anchor_ns, ANCHOR_SD_NS));
+            self.far_steer = Some(FarSteer { station, clock, last_move_ns: None, offset: None });
         }
         let Some(f) = self.far_steer.as_mut() else { return Ok(()) };
         f.clock.push(x, diff);

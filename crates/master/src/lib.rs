@@ -27,6 +27,6 @@ pub use coe::{EntryInfo, ObjectInfo};
 pub use dc::{DcConfig, DcReport, SyncState};
 pub use engine::{describe, Engine, EngineStats, Pdu, RingState, SlaveTag, SplitPasses, SplitRingClocks};
 pub use error::{MasterError, Result};
-pub use master::{Master, MasterEvent, STATION_BASE};
+pub use master::{Master, MasterEvent, SplitLatch, STATION_BASE};
 pub use process::{CycleStats, Handle};
 pub use slave::{Health, MailboxConfig, Mapped, Slave};

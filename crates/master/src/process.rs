@@ -63,6 +63,7 @@ impl<I: Io> Master<I> {
         if now != before {
             self.ring_changed(before);
         }
+        self.rejoin_far_half()?;
         self.keep_far_reference(passes)
     }
 

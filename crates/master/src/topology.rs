@@ -137,6 +137,28 @@ impl PortView {
         q
     }
 
+    /// When the frame left for `port` (ns after this slave's entry) and the closed ports it
+    /// looped through on the way: from the return or entry before it, or from the processing
+    /// unit where that lies between them and was latched later (a slave entered elsewhere
+    /// than on port 0 may reach its processing unit only through closed ports, whose time
+    /// 0x0918 shows).
+    pub fn leaves_for(&self, port: u8) -> Option<(i64, i64)> {
+        let (e, before) = (self.entry_port & 3, self.before(port));
+        let at = self.between(e, before)?;
+        // The processing unit sits between port 0 and port 3: on the way iff port 0 is.
+        let mut q = before;
+        let mut epu_on_way = false;
+        while q != port & 3 {
+            epu_on_way |= q == 0;
+            q = next(q);
+        }
+        let epu = self.epu_time.zip(self.receive_times).map(|(epu, t)| epu.wrapping_sub(t[e as usize]) as i32 as i64);
+        match epu {
+            Some(epu) if epu_on_way && epu > at => Some((epu, self.loops_between(0, port))),
+            _ => Some((at, self.loops_between(before, port))),
+        }
+    }
+
     /// How long the frame was out through `port`, from leaving `before(port)` to its return.
     fn loop_ns(&self, port: u8) -> Option<i64> {
         self.between(self.before(port), port)

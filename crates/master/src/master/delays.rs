@@ -14,7 +14,18 @@ impl<I: Io> Master<I> {
     pub(super) fn topology(&mut self) {
         let view = self.port_views();
         if view.len() <= 1024 {
-            if let Some(links) = crate::topology::infer(&view) {
+            let links = match self.first_far_position() {
+                // A split ring: two trees, each hanging on its own port of the master.
+                Some(f) => {
+                    crate::topology::infer(&view[..f]).zip(crate::topology::infer(&view[f..])).map(|(near, far)| {
+                        let far =
+                            far.into_iter().map(|l| l.map(|l| crate::topology::Link { parent: l.parent + f, ..l }));
+                        near.into_iter().chain(far).collect()
+                    })
+                }
+                None => crate::topology::infer(&view),
+            };
+            if let Some(links) = links {
                 for (s, l) in self.slaves.iter_mut().zip(links) {
                     s.parent = l.map(|l| l.parent as u16);
                     s.parent_port = l.map_or(0, |l| l.port);
@@ -120,7 +131,7 @@ impl<I: Io> Master<I> {
     /// same broadcast each way, by the link's stamps. A master that follows the reference
     /// times the reference's pass from the round trip less the loop behind it; on the ring the
     /// loop is this much shorter than the line's receive times say.
-    fn measure_ring_shortening(&mut self, station: u16, port: u8) -> Result<()> {
+    pub(super) fn measure_ring_shortening(&mut self, station: u16, port: u8) -> Result<()> {
         let ring = self.median_round_trip_ns()?;
         let loop_control = self.close_port(station, port)?;
         let line = self.median_round_trip_ns();
@@ -153,6 +164,7 @@ impl<I: Io> Master<I> {
     /// As [`Master::measure_delays`]; returns the stamps of the latching frame (without the
     /// reference's readings) when there are DC slaves.
     pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
+        self.split_latch = None;
         if !self.slaves.iter().any(|s| s.has_dc) {
             return Ok(None);
         }
@@ -166,6 +178,7 @@ impl<I: Io> Master<I> {
         };
         // Sent once per try, so that the stamps are of the frame that latched.
         let mut tries = self.engine.retries.saturating_add(1);
+        let mut passes = None;
         let latched = loop {
             let built_ns = self.master_system_time();
             let mut latch = [0u8; 4];
@@ -173,7 +186,10 @@ impl<I: Io> Master<I> {
             let bytes = crate::dc::frame_bytes(&pdus);
             tries -= 1;
             match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
-                Ok(()) => break Ok(self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes)),
+                Ok(()) => {
+                    passes = self.engine.split_passes.take();
+                    break Ok(self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes));
+                }
                 Err(MasterError::Timeout { .. }) if tries > 0 => continue,
                 Err(e) => break Err(e),
             }
@@ -231,15 +247,16 @@ impl<I: Io> Master<I> {
             }
             entry_at[k] = Some(match via.and_then(|v| Some((v, entry_at[v]?))) {
                 Some((v, at)) => {
-                    let before = view[v].before(port);
-                    loops += view[v].loops_between(before, port);
+                    let (left, loops_out) = view[v].leaves_for(port).unwrap_or((0, 0));
+                    loops += loops_out;
                     // A child's hop is half of what the frame spent behind the port, less the
                     // child's own loop (esc-spec §3.6), corrected for loop-backs that lengthen
                     // one way only (the return through a closed port behind a child's last
                     // latch: half of it would otherwise count as delay).
-                    let behind = view[v].between(before, port).unwrap_or(0) - view[k].span_ns().unwrap_or(0);
+                    let back = view[v].between(view[v].entry_port, port).unwrap_or(0);
+                    let behind = back - left - view[k].span_ns().unwrap_or(0);
                     let hop = (behind + loops * self.closed_port_loop_ns as i64) / 2;
-                    at + view[v].between(view[v].entry_port, before).unwrap_or(0) + hop
+                    at + left + hop
                 }
                 None => 0,
             });
@@ -257,11 +274,35 @@ impl<I: Io> Master<I> {
             .collect();
         let reference = self.slaves.iter().position(|s| s.has_system_time);
         let at_reference = reference.and_then(|r| epu_at[r]).unwrap_or(0);
-        for (s, at) in self.slaves.iter_mut().zip(epu_at) {
+        // A split ring's far half is its own tree: delays from its own first clock.
+        let first_far = self.first_far_position().filter(|&f| reference.is_some_and(|r| r < f));
+        let n = self.slaves.len();
+        let far_reference = first_far.and_then(|f| (f..n).find(|&k| self.slaves[k].has_system_time));
+        let at_far_reference = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
+        for (k, (s, at)) in self.slaves.iter_mut().zip(&epu_at).enumerate() {
             if s.has_dc {
-                s.delay_ns = at.map_or(0, |t| t - at_reference).clamp(0, u32::MAX as i64) as u32;
+                let from = if first_far.is_some_and(|f| k >= f) { at_far_reference } else { at_reference };
+                s.delay_ns = at.map_or(0, |t| t - from).clamp(0, u32::MAX as i64) as u32;
             }
         }
+        self.split_latch = first_far.map(|f| {
+            // The frame's way in and out of each half, less the loops behind the reference
+            // and behind the far root (a closed port's loop-back after the last latch counted).
+            let way_back = |k: usize| {
+                view[k].span_ns().unwrap_or(0) + view[k].loops_after_last_event() * self.closed_port_loop_ns as i64
+            };
+            let near = reference.map_or(0, way_back);
+            let root = (f..n).find(|&k| self.slaves[k].parent.is_none()).unwrap_or(f);
+            let far_at = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
+            crate::master::SplitLatch {
+                first_far: f,
+                root,
+                root_port: self.slaves[root].entry_port,
+                far_reference,
+                anchor_ns: (near - way_back(root)) / 2 + far_at,
+                passes,
+            }
+        });
         // The first DC slave is the reference (DC initialisation makes it so).
         if let Some(r) = reference {
             stamps.loop_ns = self.loop_ns_of(r);

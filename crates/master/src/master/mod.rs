@@ -12,7 +12,10 @@ use crate::slave::{MailboxConfig, Slave};
 mod delays;
 mod process_data;
 mod sii;
+mod split_start;
 mod states;
+
+pub use split_start::SplitLatch;
 
 /// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).
 pub const STATION_BASE: u16 = 0x1001;
@@ -103,6 +106,9 @@ pub struct Master<I: Io> {
     pub ring_shortening_ns: i64,
     /// A split ring's far reference being kept on the reference's time (`far_clock.rs`).
     pub(crate) far_steer: Option<crate::far_clock::FarSteer>,
+    /// The last latch of the receive times found the ring split: the far half's delays are
+    /// from its own reference (`split_start.rs`).
+    pub split_latch: Option<SplitLatch>,
 }
 
 impl<I: Io> Master<I> {
@@ -129,6 +135,7 @@ impl<I: Io> Master<I> {
             ring_port: None,
             ring_shortening_ns: 0,
             far_steer: None,
+            split_latch: None,
         }
     }
 

@@ -1,0 +1,102 @@
+//! A ring already split when the master latches its receive times (cable redundancy).
+//!
+//! The latching frame goes round each half from its own port: the near half from the primary,
+//! the far half from the secondary a whole master round trip later, entered at the far end.
+//! No frame passes both, so the far half's delays cannot be the reference's: they are taken
+//! from the far reference (its first clock, which reads the second pass's FRMW), a tree of
+//! their own rooted where the secondary's cable comes in. What ties the halves together is the
+//! master, which timed both passes: with the loops behind the reference and behind the far
+//! root (from the latched receive times) the passes' stamps give how much later the far
+//! reference took the frame than the reference did — the far half's offsets are written for
+//! that instant — and what a cyclic frame's two passes measure when both clocks agree (the
+//! anchor a ring that split under the master learns from the break instead).
+//!
+//! When the ring closes, the far half is latched again from the reference, as a line whose end
+//! is the port the secondary's cable comes in by, and its delays written.
+use super::Master;
+use crate::engine::{RingState, SplitPasses};
+use crate::error::Result;
+use crate::io::Io;
+
+/// What the latch of a split ring found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SplitLatch {
+    /// The first position behind the break: the far half is it and those after it.
+    pub first_far: usize,
+    /// The far half's root (the slave the secondary's cable reaches) and its entry port.
+    pub root: usize,
+    pub root_port: u8,
+    /// The far reference (the far half's first slave with a system time), if any.
+    pub far_reference: Option<usize>,
+    /// What a frame's two passes measure (the far reference's FRMW reading less the
+    /// reference's, less the master's time from the first pass's mid-point to the second's)
+    /// when the two clocks agree: half the loop behind the reference less half the loop
+    /// behind the far root, plus the far reference's processing after the root's entry.
+    pub anchor_ns: i64,
+    /// The latching frame's two passes.
+    pub passes: Option<SplitPasses>,
+}
+
+impl SplitLatch {
+    /// How much later (master ns) the far reference took the latching frame than the
+    /// reference did.
+    pub fn far_lag_ns(&self) -> Option<i64> {
+        let p = self.passes?;
+        let mid = |tx: u64, rx: u64| tx.wrapping_add_signed(rx.wrapping_sub(tx) as i64 / 2);
+        let apart = mid(p.far_tx_ns, p.far_rx_ns).wrapping_sub(mid(p.near_tx_ns, p.near_rx_ns)) as i64;
+        Some(apart.wrapping_add(self.anchor_ns))
+    }
+}
+
+impl<I: Io> Master<I> {
+    /// On a broken ring, the first position behind the break (the second passes reach it and
+    /// those after it).
+    pub(crate) fn first_far_position(&self) -> Option<usize> {
+        let (n, far) = (self.slaves.len(), self.engine.far_half_slaves as usize);
+        let split = self.engine.io.has_secondary() && self.engine.ring == RingState::Broken;
+        (split && far > 0 && far < n).then_some(n - far)
+    }
+
+    /// The far half's slaves with a system time, as stations.
+    pub(crate) fn far_clocks(&self) -> Vec<u16> {
+        let Some(far) = self.split_latch.as_ref().and_then(|l| self.slaves.get(l.first_far..)) else {
+            return Vec::new();
+        };
+        far.iter().filter(|s| s.has_system_time).map(|s| s.station).collect()
+    }
+
+    /// The ring closed after a latch that found it split: the far half's delays are latched
+    /// again from the reference, the ring's port closed as on a line's end (it is the far
+    /// root's entry), and written; the shortening of the intact ring measured. The clocks
+    /// keep their offsets: the far half was kept on the reference's time meanwhile.
+    pub(crate) fn rejoin_far_half(&mut self) -> Result<()> {
+        let Some(l) = self.split_latch.take() else { return Ok(()) };
+        if l.root >= self.slaves.len() {
+            return Ok(());
+        }
+        if self.engine.ring != RingState::Intact {
+            self.split_latch = Some(l);
+            return Ok(());
+        }
+        // The ports at the break have their links again.
+        for k in 0..self.slaves.len() {
+            let mut dl = [0u8; 2];
+            self.fprd(self.slaves[k].station, 0x0110, &mut dl)?;
+            let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
+            self.slaves[k].dl_status = dl;
+            self.slaves[k].active_ports = [0, 1, 2, 3].map(|p| dl.port_active(p));
+        }
+        self.ring_port = Some((l.root as u16, l.root_port));
+        self.slaves[l.root].active_ports[l.root_port as usize] = false;
+        self.latch_and_measure_delays()?;
+        for k in l.first_far..self.slaves.len() {
+            let s = &self.slaves[k];
+            if s.has_system_time {
+                let (st, delay) = (s.station, s.delay_ns);
+                self.fpwr(st, 0x0928, &delay.to_le_bytes())?;
+            }
+        }
+        let st = self.slaves[l.root].station;
+        self.measure_ring_shortening(st, l.root_port)
+    }
+}
