@@ -308,6 +308,8 @@ impl<I: Io> Master<I> {
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
         }
+        // A ring split from the start closes only when the master opens it.
+        self.arm_split_watch()?;
         // 7. Cyclic distribution from now on.
         self.distribute_dc();
         // 9. SYNC0 on the cycle grid of the reference's time.

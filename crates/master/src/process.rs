@@ -64,7 +64,8 @@ impl<I: Io> Master<I> {
             self.ring_changed(before);
         }
         self.rejoin_far_half()?;
-        self.keep_far_reference(passes)
+        self.keep_far_reference(passes)?;
+        self.watch_split()
     }
 
     /// The handle of an output entry of slave `position` by its name (first match).

@@ -395,10 +395,13 @@ fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
     }
 }
 
-/// Split from the start and closed 3 s in: the far half is latched again from the reference
-/// (the port the secondary's cable comes in by closed as a line's end), and the ring's port,
-/// its shortening and every delay are what a scan of the intact ring finds; the far coupler is
-/// back with the reference within 2 s.
+/// Split from the start and the cable back 3 s in: the ports at the break wait closed
+/// (auto-close) until the master sees their link and opens them, then the far half is latched
+/// again from the reference (the port the secondary's cable comes in by closed as a line's
+/// end) before any clock is distributed round the closed ring. The ring's port, its shortening
+/// and every delay are what a scan of the intact ring finds, and the far coupler never takes
+/// the reference's time with its old delay (805 ns off: 263 ns away when the ring closed by
+/// itself).
 #[test]
 fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     let mut intact = master(&format!("{DEVICES}{RING}"), HostModel::nic_hwts());
@@ -423,5 +426,5 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     assert_eq!(m.split_latch, None);
     assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
     assert_eq!(wiring(&m), wiring(&intact));
-    assert!(after < 50, "{after}");
+    assert!(transient < 60 && after < 50, "{transient}, {after}");
 }

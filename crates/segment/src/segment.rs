@@ -151,12 +151,17 @@ struct Route {
     visits: Vec<(usize, FrameTiming)>,
     /// Where the frame leaves for the master and when (None: it circles until it dies).
     exit: Exit,
+    /// The auto-close port waiting closed (node, port) where the frame ends, which it opens.
+    lands: Option<(usize, u8)>,
     /// When the last frame reached the first ESC: the route's origin for `last_visits`.
     last_at: u64,
 }
 
 /// The master port a walk leaves by, and when relative to its start.
 type Exit = Option<(MasterPort, u64)>;
+
+/// The auto-close port waiting closed (node, port) where a walk ends.
+type Lands = Option<(usize, u8)>;
 
 /// Processing order: after port 0 comes 3, after 3 comes 1, after 1 comes 2, after 2 comes 0.
 fn next_port(p: u8) -> u8 {
@@ -392,10 +397,11 @@ impl Segment {
     /// back; a port closed by loop control drops what its wire brings. On a tree and on a ring
     /// every port is passed at most twice, so a walk longer than that circles (a port closed by
     /// hand) and the frame never returns.
-    fn walk(&mut self, from: MasterPort) -> (Vec<(usize, FrameTiming)>, Exit) {
+    fn walk(&mut self, from: MasterPort) -> (Vec<(usize, FrameTiming)>, Exit, Lands) {
         let mut visits = std::mem::take(&mut self.routes[from as usize].visits);
         visits.clear();
-        let Some((start, start_port, _)) = self.entry_of(from) else { return (visits, None) };
+        let Some((start, start_port, _)) = self.entry_of(from) else { return (visits, None, None) };
+        let mut lands = None;
         // Per node: its port times so far, and its visit's index once it has one.
         let mut timing = vec![FrameTiming::default(); self.nodes.len()];
         let mut slot = vec![None; self.nodes.len()];
@@ -405,6 +411,9 @@ impl Segment {
         // A port closed by loop control takes nothing in from its wire: its receive side is
         // the loop-back.
         let mut steps = if self.nodes[start].esc.port_forced_closed(start_port) { 0 } else { 8 * self.nodes.len() + 8 };
+        if self.nodes[start].esc.port_closed_waiting(start_port) {
+            (steps, lands) = (0, Some((start, start_port)));
+        }
         while steps > 0 {
             steps -= 1;
             let esc_timing = self.nodes[node].timing;
@@ -435,6 +444,10 @@ impl Segment {
                     if self.nodes[peer.node].esc.port_forced_closed(peer.port) {
                         break;
                     }
+                    if self.nodes[peer.node].esc.port_closed_waiting(peer.port) {
+                        lands = Some((peer.node, peer.port));
+                        break;
+                    }
                     t = t_tx + peer.delay_ns as u64;
                     (node, p, from_wire) = (peer.node, peer.port, true);
                     timing[node].port_ns[p as usize] = Some(t);
@@ -447,7 +460,7 @@ impl Segment {
                 visits[*i].1 = timing[n];
             }
         }
-        (visits, exit)
+        (visits, exit, lands)
     }
 
     /// What decides a node's part of the route and may change between frames (timings and
@@ -467,9 +480,10 @@ impl Segment {
         key.clear();
         key.extend((0..self.nodes.len()).map(|i| self.route_state(i)));
         if !(self.routes[r].valid && key == self.routes[r].key) {
-            let (visits, exit) = self.walk(from);
+            let (visits, exit, lands) = self.walk(from);
             self.routes[r].visits = visits;
             self.routes[r].exit = exit;
+            self.routes[r].lands = lands;
             self.routes[r].valid = true;
         }
         self.routes[r].scratch = std::mem::replace(&mut self.routes[r].key, key);
@@ -516,19 +530,19 @@ impl Segment {
         let route = &mut self.routes[link];
         route.last_at = head_at_first;
         self.last_route = from;
-        let exit = route.exit;
+        let (exit, mut lands) = (route.exit, route.lands);
         // Faults: a lost or corrupted frame is processed by the ESCs before the fault only.
         let mut reach = route.visits.len();
         let mut lost = exit.is_none();
         let mut corrupted = false;
         if self.loss_probability > 0.0 && self.fault_rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
             reach = self.fault_rng.gen_range(0..=reach);
-            lost = true;
+            (lost, lands) = (true, None);
         } else if self.corruption_probability > 0.0
             && self.fault_rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0))
         {
             reach = self.fault_rng.gen_range(0..=reach);
-            lost = true;
+            (lost, lands) = (true, None);
             corrupted = true;
             self.stats.corrupted += 1;
         }
@@ -553,7 +567,7 @@ impl Segment {
                 // Circulating-frame prevention at an automatically closed port 0 (esc-spec §1.6).
                 if crate::circulating(chain) {
                     self.stats.destroyed_circulating += 1;
-                    lost = true;
+                    (lost, lands) = (true, None);
                     break;
                 }
                 crate::set_circulating(chain);
@@ -568,6 +582,10 @@ impl Segment {
         }
         let processed = !visits.is_empty();
         self.routes[link].visits = visits;
+        // A whole frame at an auto-close port waiting closed opens it.
+        if let Some((node, port)) = lands.filter(|_| !corrupted) {
+            self.nodes[node].esc.frame_arrived_closed(port);
+        }
         // The ESC marks frames it processed by setting the locally administered bit of the
         // source MAC (DL control bit 0, esc-spec §1.1).
         if processed && frame.len() > 6 {

@@ -202,3 +202,47 @@ fn drift_steps_add_up_to_no_more_than_1000_ppm() {
     assert!((span - 1_201_200_000).abs() <= 20, "{span}");
     assert_eq!(seg.nodes[0].drift_ppb, 1_000_000);
 }
+
+/// Loop control auto-close (0x0101 = 01 per port): a link that comes back leaves the port
+/// closed until the master writes DL control again or a valid frame arrives at it (Beckhoff,
+/// EtherCAT Technology Section I, "Auto close").
+#[test]
+fn auto_close_ports_stay_closed_when_the_link_comes_back_until_opened() {
+    let mut seg = ring("[[event]]\nat_ms = 10\nlink_down = { device = 2, port = 0 }\n[[event]]\nat_ms = 30\nlink_up = { device = 2, port = 0 }\n");
+    let ms = 1_000_000;
+    // Auto-close on every port of every slave, written round each half of the broken ring.
+    for (k, from) in [MasterPort::Primary, MasterPort::Secondary].into_iter().enumerate() {
+        send(&mut seg, from, 20 * ms + k as u64 * 100_000, Command::BWR, 0x0101, &[0x55]).unwrap();
+    }
+    // The cable is back at 30 ms, but both of its ports wait closed: still two halves.
+    let (f, port, _) = send(&mut seg, MasterPort::Primary, 40 * ms, Command::BRD, 0x0000, &[0; 2]).unwrap();
+    assert_eq!((port, wkc_and_circulating(&f).0), (MasterPort::Primary, 2));
+    // The first coupler's DL status: link on port 2, its loop closed.
+    let (f, _, _) = send(&mut seg, MasterPort::Primary, 41 * ms, Command::APRD, 0x0110, &[0; 2]).unwrap();
+    let d = Frame::parse(&f).unwrap().unwrap();
+    let dl = u16::from_le_bytes(d.pdu.datagrams().next().unwrap().data()[..2].try_into().unwrap());
+    assert_eq!((dl >> 6 & 1, dl >> 12 & 1), (1, 1), "{dl:#06x}");
+    // DL control written again from the primary opens the first coupler's side only: the next
+    // frame out of it arrives at the second coupler's port, still closed, and is lost there —
+    // but opens it. Then the ring is whole.
+    send(&mut seg, MasterPort::Primary, 42 * ms, Command::BWR, 0x0101, &[0x55]).unwrap();
+    assert!(send(&mut seg, MasterPort::Primary, 43 * ms, Command::BRD, 0x0000, &[0; 2]).is_none());
+    let (f, port, _) = send(&mut seg, MasterPort::Primary, 44 * ms, Command::BRD, 0x0000, &[0; 2]).unwrap();
+    assert_eq!((port, wkc_and_circulating(&f)), (MasterPort::Secondary, (4, false)));
+}
+
+/// Written again round both halves at once (a frame's two passes), both ports open together
+/// and no frame is lost.
+#[test]
+fn auto_close_ports_opened_from_both_sides_close_the_ring_at_once() {
+    let mut seg = ring("[[event]]\nat_ms = 10\nlink_down = { device = 2, port = 0 }\n[[event]]\nat_ms = 30\nlink_up = { device = 2, port = 0 }\n");
+    let ms = 1_000_000;
+    for (at, from) in
+        [(20, MasterPort::Primary), (21, MasterPort::Secondary), (40, MasterPort::Primary), (41, MasterPort::Secondary)]
+    {
+        send(&mut seg, from, at * ms, Command::BWR, 0x0101, &[0x55]).unwrap();
+    }
+    let (f, port, _) = send(&mut seg, MasterPort::Primary, 42 * ms, Command::BRD, 0x0000, &[0; 2]).unwrap();
+    assert_eq!((port, wkc_and_circulating(&f)), (MasterPort::Secondary, (4, false)));
+    assert_eq!(seg.stats.lost, 0);
+}

@@ -80,8 +80,10 @@ impl Esc {
         }
         let w = Written::of(&pending);
         if w.dl_ctl {
-            // Loop control changes which ports the frame walks, and shows in the DL status.
+            // Loop control changes which ports the frame walks, and shows in the DL status;
+            // written again, it opens auto-close ports waiting closed.
             self.port_generation = self.port_generation.wrapping_add(1);
+            self.closed_wait = [false; 4];
         }
         self.apply_writes(&pending);
         if w.event_mask {

@@ -148,6 +148,10 @@ pub struct Esc {
     eeprom: Eeprom,
     pub dc: Option<DcUnit>,
     links: [bool; 4],
+    /// Auto-close ports (loop control 01) whose link came back: closed until the master
+    /// writes DL control again or a valid frame arrives at them (Beckhoff EtherCAT
+    /// Technology, Section I, "Auto close").
+    closed_wait: [bool; 4],
     pub al: AlMachine,
     app: Box<dyn Application>,
     now_ns: u64,
@@ -210,6 +214,7 @@ impl Esc {
             eeprom: Eeprom::new(sii),
             dc: None,
             links: [false; 4],
+            closed_wait: [false; 4],
             al: AlMachine::default(),
             app,
             now_ns: t_ns,
@@ -392,9 +397,17 @@ impl Esc {
     }
 
     pub fn set_link(&mut self, port: u8, link: bool) {
-        self.links[(port & 3) as usize] = link;
+        let p = (port & 3) as usize;
+        // Under auto-close a link that comes back leaves the port closed (closed wait).
+        self.closed_wait[p] = link && !self.links[p] && self.loop_control(port) == 1;
+        self.links[p] = link;
         self.port_generation = self.port_generation.wrapping_add(1);
         self.refresh_registers();
+    }
+
+    /// Loop control 0x0101 for `port`: 00 auto, 01 auto-close, 10 open, 11 closed.
+    fn loop_control(&self, port: u8) -> u8 {
+        (self.mem[0x0101] >> (2 * (port & 3))) & 3
     }
 
     /// Whether a frame leaves through `port` (link up and loop open), or loops back.
@@ -403,8 +416,28 @@ impl Esc {
         if !self.config.has_port(port) || !self.links[p] {
             return false;
         }
-        // Loop control 0x0101: 00 auto, 01 auto-close, 10 open, 11 closed.
-        (self.mem[0x0101] >> (2 * p)) & 3 != 3
+        match self.loop_control(port) {
+            3 => false,
+            1 => !self.closed_wait[p],
+            _ => true,
+        }
+    }
+
+    /// An auto-close port whose link came back and that stays closed until opened: a frame
+    /// that arrives at it is taken in by nothing, but opens it ([`Esc::frame_arrived_closed`]).
+    pub fn port_closed_waiting(&self, port: u8) -> bool {
+        self.closed_wait[(port & 3) as usize] && self.links[(port & 3) as usize]
+    }
+
+    /// A valid frame arrived at an auto-close port waiting closed: it opens once the frame's
+    /// CRC is in (the frame itself goes no further).
+    pub fn frame_arrived_closed(&mut self, port: u8) {
+        let p = (port & 3) as usize;
+        if self.closed_wait[p] {
+            self.closed_wait[p] = false;
+            self.port_generation = self.port_generation.wrapping_add(1);
+            self.refresh_registers();
+        }
     }
 
     /// Loop control 0x0101 closes `port` whatever its link (11).

@@ -301,6 +301,7 @@ impl<I: Io> Master<I> {
                 far_reference,
                 anchor_ns: (near - way_back(root)) / 2 + far_at,
                 passes,
+                watch_next_ns: None,
             }
         });
         // The first DC slave is the reference (DC initialisation makes it so).

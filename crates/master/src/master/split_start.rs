@@ -13,10 +13,19 @@
 //!
 //! When the ring closes, the far half is latched again from the reference, as a line whose end
 //! is the port the secondary's cable comes in by, and its delays written.
+use ferrocat_wire::register::DlStatus;
+use ferrocat_wire::{Address, Command};
+
 use super::Master;
-use crate::engine::{RingState, SplitPasses};
+use crate::engine::{Pdu, RingState, SplitPasses};
 use crate::error::Result;
 use crate::io::Io;
+
+/// How often the master reads the slaves' DL status for the break's link.
+const WATCH_EVERY_NS: u64 = 100_000_000;
+/// Loop control 0x0101: every port auto-close (01), or auto (00).
+const AUTO_CLOSE: u8 = 0x55;
+const AUTO: u8 = 0x00;
 
 /// What the latch of a split ring found.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -35,6 +44,9 @@ pub struct SplitLatch {
     pub anchor_ns: i64,
     /// The latching frame's two passes.
     pub passes: Option<SplitPasses>,
+    /// Watched (DC set up for the split): every port is auto-close, and the master next
+    /// looks for the break's link at this time (docs/master.md, "Cable redundancy").
+    pub watch_next_ns: Option<u64>,
 }
 
 impl SplitLatch {
@@ -63,6 +75,69 @@ impl<I: Io> Master<I> {
             return Vec::new();
         };
         far.iter().filter(|s| s.has_system_time).map(|s| s.station).collect()
+    }
+
+    /// Once the far half's clocks are set up for a split, the ring must not close behind
+    /// the master's back: the first frame round it would give the far half the reference's
+    /// time with delays from the far reference (805 ns off on the test ring, one sample that
+    /// took the far coupler 263 ns away). Every port goes to auto-close, so that a link that
+    /// comes back leaves its ports closed until the master opens them
+    /// ([`Master::watch_split`]).
+    pub(crate) fn arm_split_watch(&mut self) -> Result<()> {
+        if self.split_latch.is_none() {
+            return Ok(());
+        }
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO_CLOSE])?;
+        let now = self.engine.io.now_ns();
+        if let Some(l) = self.split_latch.as_mut() {
+            l.watch_next_ns = Some(now);
+        }
+        Ok(())
+    }
+
+    /// While a ring split from the start is watched, every [`WATCH_EVERY_NS`] the slaves' DL
+    /// status: a link on a port the latch found without one is the cable at the break back
+    /// (or a new one). The master then opens the ports (loop control written again round both
+    /// halves, auto from now on), sees the ring whole with a frame that carries no clock, and
+    /// latches the far half again from the reference before the next cyclic frame. A ring
+    /// still split (another cable came back) is watched on.
+    pub(crate) fn watch_split(&mut self) -> Result<()> {
+        let Some(next) = self.split_latch.as_ref().and_then(|l| l.watch_next_ns) else { return Ok(()) };
+        let now = self.engine.io.now_ns();
+        if now < next {
+            return Ok(());
+        }
+        if let Some(l) = self.split_latch.as_mut() {
+            l.watch_next_ns = Some(now.saturating_add(WATCH_EVERY_NS));
+        }
+        let mut dl = vec![[0u8; 2]; self.slaves.len()];
+        let mut pdus: Vec<Pdu<'_>> = self
+            .slaves
+            .iter()
+            .zip(dl.iter_mut())
+            .map(|(s, b)| Pdu::new(Command::FPRD, Address::Device { adp: s.station, ado: 0x0110 }, b))
+            .collect();
+        // A frame lost is tried again at the next look.
+        if self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns).is_err() {
+            return Ok(());
+        }
+        let answered: Vec<bool> = pdus.iter().map(|p| p.wkc == 1).collect();
+        drop(pdus);
+        let back = self.slaves.iter().zip(&dl).zip(answered).any(|((s, d), ok)| {
+            let d = DlStatus(u16::from_le_bytes(*d));
+            ok && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize])
+        });
+        if !back {
+            return Ok(());
+        }
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO])?;
+        self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
+        if self.engine.ring == RingState::Intact {
+            self.rejoin_far_half()
+        } else {
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO_CLOSE])?;
+            Ok(())
+        }
     }
 
     /// The ring closed after a latch that found it split: the far half's delays are latched
