@@ -311,6 +311,14 @@ pub fn run(
             r.max_difference_ns,
             r.sync0_slaves
         );
+        if let Some((l, lag)) = m.split_latch.as_ref().and_then(|l| Some((l, l.far_lag_ns()?))) {
+            eprintln!(
+                "DC: ring split from the start: the far half (from slave {}) latched {:.1} µs after the reference, \
+                 its clocks set for that instant",
+                l.first_far + 1,
+                lag as f64 / 1e3
+            );
+        }
     }
     m.start()?;
     let t_op = {

@@ -242,3 +242,59 @@ fn run_keeps_a_ring_going_across_a_pulled_cable() {
     assert!(far(&held).abs() > 15_000, "{held}");
     assert!(4 * far(&rep).abs() < 3 * far(&held).abs(), "kept {rep}\nheld {held}");
 }
+
+/// `ferrocat run` for `seconds` on a ring `ferrocat sim` serves split from its start (the
+/// cable between the couplers pulled), `events` more of the simulator's; `scan --json`'s
+/// slaves, the run's output and the simulator's report.
+fn split_from_start_run(tag: &str, seconds: &str, events: &str) -> (serde_json::Value, String, serde_json::Value) {
+    let net = VethPair::new(tag);
+    let ring = RingSim::start(&net, tag, 0, events);
+    let master_red = ring.master_secondary.clone();
+    let scan = ferrocat_in(&net.master_ns)
+        .args(["scan", "--iface", &net.master_if, "--secondary-iface", &master_red, "--json"])
+        .output()
+        .unwrap();
+    assert!(scan.status.success(), "ferrocat scan: {}", String::from_utf8_lossy(&scan.stderr));
+    let run = ferrocat_in(&net.master_ns)
+        .args(["run", "--iface", &net.master_if, "--secondary-iface", &master_red])
+        .args(["--seconds", seconds, "--cycle-us", "1000", "--dc", "--dc-static-frames", "2000"])
+        .output()
+        .unwrap();
+    let out = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(run.status.success(), "{out}");
+    (serde_json::from_slice(&scan.stdout).unwrap(), out, ring.report())
+}
+
+/// A ring split before the master starts, in real time: the far half's delays are from its
+/// own first clock, which the master sets up on the reference's time from the latch's two
+/// passes (before, it started a master round trip off and stayed there); when the cable
+/// comes back the master opens the ring itself and the far coupler takes the reference's
+/// delays.
+#[test]
+fn run_sets_up_a_ring_split_from_the_start() {
+    let far = |rep: &serde_json::Value| rep["devices"][2]["system_time_less_first_ns"].as_i64().unwrap();
+    // How much later the far half latched, as the run says: what its clocks were off by before.
+    let lag_ns = |out: &str| {
+        let at = out.find("latched ")? + "latched ".len();
+        let us: f64 = out[at..].split(' ').next()?.parse().ok()?;
+        Some((us * 1e3) as i64)
+    };
+    let (slaves, out, rep) = split_from_start_run("rs", "5", "");
+    let lag = lag_ns(&out).unwrap_or_else(|| panic!("{out}"));
+    println!(
+        "{out}\nsimulator: {rep}\nfar coupler − reference at the end, split: {} ns ({lag} ns between passes)",
+        far(&rep)
+    );
+    assert_eq!(slaves[2]["ring_port"], 2, "the secondary's cable comes in at the far coupler: {slaves}");
+    assert_eq!((slaves[2]["delay_ns"].as_u64(), slaves[3]["delay_ns"].as_u64()), (Some(0), Some(155)), "{slaves}");
+    assert!(out.contains("ring broken at the end"), "{out}");
+    // This machine's software stamps leave it microseconds off (0.6–17 µs measured, the master
+    // round trip between the passes 40–44 µs, which it was off before).
+    assert!(lag > 10_000 && far(&rep).abs() < lag / 2, "{}: {rep}", far(&rep));
+    let (_, out, closed) =
+        split_from_start_run("rc", "6", "[[event]]\nat_ms = 4000\nlink_up = { device = 2, port = 0 }\n");
+    println!("{out}\nsimulator: {closed}\nfar coupler − reference at the end, closed: {} ns", far(&closed));
+    assert!(out.contains("ring intact at the end") && out.contains("ring closed again"), "{out}");
+    // Closed, on the reference's delays: the time control loops' residual (4–15 ns measured).
+    assert!(far(&closed).abs() < 200, "{closed}");
+}

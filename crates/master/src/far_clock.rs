@@ -45,6 +45,9 @@ const MIN_POINTS: u64 = 128;
 /// How well the latched receive times give the level of a ring split from the start (ns, one
 /// standard deviation): four latches of 10 ns ticks, halved or not.
 const ANCHOR_SD_NS: f64 = 10.0;
+/// An error beyond this, clear of the line's noise, on a far half set up from the latch's
+/// geometry, moves all its clocks at once (ns).
+const WHOLE_HALF_NS: f64 = 1_000.0;
 /// The far reference's offset is moved at most this often (a step each time, which its
 /// followers take up through their own loops).
 pub const STEER_EVERY_NS: u64 = 10_000_000;
@@ -59,6 +62,8 @@ pub struct FarClock {
     fit: LineFit,
     samples: u64,
     last_x: Option<u64>,
+    /// The level was known beforehand ([`FarClock::anchored`]), not learned at a break.
+    known_level: bool,
     /// What has been added to the far reference's offset since the break.
     applied_ns: i64,
 }
@@ -77,6 +82,7 @@ impl FarClock {
             fit: LineFit::with_prior(WINDOW, 0.0, RATE_PRIOR_SD),
             samples: 0,
             last_x: None,
+            known_level: false,
             applied_ns: 0,
         }
     }
@@ -85,7 +91,12 @@ impl FarClock {
     /// from the start, whose geometry the latched receive times gave
     /// ([`crate::SplitLatch::anchor_ns`]).
     pub fn anchored(anchor_ns: i64, sd_ns: f64) -> Self {
-        FarClock { anchor_ns: Some((anchor_ns, sd_ns)), ..Self::new() }
+        FarClock { anchor_ns: Some((anchor_ns, sd_ns)), known_level: true, ..Self::new() }
+    }
+
+    /// Whether the level was known beforehand ([`FarClock::anchored`]).
+    pub fn knew_level(&self) -> bool {
+        self.known_level
     }
 
     /// A sample at master time `x_ns`: the far reference's time less the reference's as
@@ -227,6 +238,25 @@ impl<I: Io> Master<I> {
         let ahead_ns = f.clock.drift() * (STEER_EVERY_NS / 2) as f64;
         let aim = error as f64 + ahead_ns;
         if sd > SETTLED_SD_NS && aim.abs() <= 3.0 * sd {
+            return Ok(());
+        }
+        // Split from the start (the level was the latch's geometry): an error far beyond the
+        // fine steps — the latch's and the static drift compensation's stamps saw other
+        // latencies than the cycles' do — moves the whole far half at once, its clocks
+        // together, so that their loops see no step.
+        if f.clock.knew_level() && aim.abs() > WHOLE_HALF_NS && aim.abs() > 5.0 * sd {
+            f.last_move_ns = Some(x);
+            f.offset = None;
+            let delta = -aim.round() as i64;
+            let followers: Vec<u16> = self.far_clocks().into_iter().filter(|&st| st != station).collect();
+            for st in followers {
+                let _ = self.shift_offset(st, delta);
+            }
+            if self.shift_offset(station, delta).is_ok() {
+                if let Some(f) = self.far_steer.as_mut() {
+                    f.clock.applied(delta);
+                }
+            }
             return Ok(());
         }
         // Keeping up takes the drift since the last move (which aimed halfway to this one;
