@@ -314,6 +314,26 @@ mod tests {
         PortView { receive_times: Some(times), epu_time: Some(times[0]), ..view }
     }
 
+    #[test]
+    fn a_port_after_the_processing_unit_is_left_for_once_the_frame_has_passed_it() {
+        // An EK1100 entered on port 2 (a ring's far coupler seen from the secondary), port 0
+        // closed: 2 → 0 (loop-back) → EPU 90 ns after entry → 1, where a terminal answers at
+        // +400. The frame left for port 1 at the EPU, not at the entry.
+        let mut far = t(2, &[(1, 400)], 1_000);
+        far.present_ports = [true, true, true, false];
+        far.epu_time = Some(1_090);
+        assert_eq!(far.leaves_for(1), Some((90, 0)));
+        // Entered on port 0 the EPU is the entry: nothing changes (closed port 3 on the way).
+        let line = t(0, &[(1, 310)], 5);
+        assert_eq!(line.leaves_for(1), Some((0, 1)));
+        // A branch before the EPU (entered on 1, a branch on 0): left for at the entry.
+        let reversed = PortView { epu_time: Some(7 + 500), ..t(1, &[(0, 400)], 7) };
+        assert_eq!(reversed.leaves_for(0), Some((0, 1)), "closed port 2 on the way");
+        // After that branch and the EPU, port 3: from the EPU, which came after port 0's return.
+        let with_3 = PortView { epu_time: Some(7 + 420), ..t(1, &[(0, 400), (3, 700)], 7) };
+        assert_eq!(with_3.leaves_for(3), Some((420, 0)));
+    }
+
     fn links(view: &[PortView]) -> Vec<Option<(usize, u8)>> {
         infer(view).expect("a tree").into_iter().map(|l| l.map(|l| (l.parent, l.port))).collect()
     }
