@@ -298,8 +298,9 @@ impl<I: Io> Master<I> {
         }
         let static_ns = self.engine.io.now_ns().wrapping_sub(static_from_ns);
         // The far half's offsets were written for the latching frame's two passes, one
-        // sample; the static drift compensation's frames gave many (1 ms of µs-scattered
-        // stamps on a PC): the far half is moved by what they say, all its clocks together.
+        // sample (scattered by microseconds on a PC's software stamps); the static drift
+        // compensation's frames gave hundreds: the far half is moved by what they say, all
+        // its clocks together.
         if let Some(e) = self.far_steer.take().and_then(|f| f.clock.error_now()) {
             for st in self.far_clocks() {
                 self.shift_offset(st, -e)?;

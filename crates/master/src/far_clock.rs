@@ -363,6 +363,27 @@ mod tests {
     }
 
     #[test]
+    fn a_level_known_beforehand_is_not_learned() {
+        // The measurement's constant is 300 ns and the far reference 200 ns off from the start:
+        // learned from its first samples the error would read 0; known, it reads 200.
+        let mut f = FarClock::anchored(300, 10.0);
+        assert!(f.knew_level() && !FarClock::new().knew_level());
+        for k in 0..MIN_POINTS {
+            f.push(k * 1_000_000, 500);
+        }
+        let (e, sd) = f.error_ns(MIN_POINTS * 1_000_000).unwrap();
+        assert_eq!(e, 200);
+        assert!(sd >= 10.0, "{sd}");
+        assert_eq!(f.error_now(), Some(200));
+        // Moved by −200, the next samples measure the constant: no error left.
+        f.applied(-200);
+        for k in MIN_POINTS..2 * MIN_POINTS {
+            f.push(k * 1_000_000, 300);
+        }
+        assert!(f.error_now().unwrap().abs() <= 1, "{:?}", f.error_now());
+    }
+
+    #[test]
     fn nothing_is_said_before_enough_samples() {
         let mut f = FarClock::new();
         for k in 0..MIN_POINTS - 1 {

@@ -208,7 +208,11 @@ fn drift_steps_add_up_to_no_more_than_1000_ppm() {
 /// EtherCAT Technology Section I, "Auto close").
 #[test]
 fn auto_close_ports_stay_closed_when_the_link_comes_back_until_opened() {
-    let mut seg = ring("[[event]]\nat_ms = 10\nlink_down = { device = 2, port = 0 }\n[[event]]\nat_ms = 30\nlink_up = { device = 2, port = 0 }\n");
+    // (Said twice: a link that is up already does not open the port.)
+    let mut seg = ring(
+        "[[event]]\nat_ms = 10\nlink_down = { device = 2, port = 0 }\n[[event]]\nat_ms = 30\nlink_up = { device = 2, port = 0 }\n\
+         [[event]]\nat_ms = 35\nlink_up = { device = 2, port = 0 }\n",
+    );
     let ms = 1_000_000;
     // Auto-close on every port of every slave, written round each half of the broken ring.
     for (k, from) in [MasterPort::Primary, MasterPort::Secondary].into_iter().enumerate() {

@@ -255,6 +255,7 @@ impl Esc {
         let c = self.config.clone();
         self.port_generation = self.port_generation.wrapping_add(1);
         self.mem.fill(0);
+        self.closed_wait = [false; 4];
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
         self.mbx_queue.clear();
@@ -398,8 +399,13 @@ impl Esc {
 
     pub fn set_link(&mut self, port: u8, link: bool) {
         let p = (port & 3) as usize;
-        // Under auto-close a link that comes back leaves the port closed (closed wait).
-        self.closed_wait[p] = link && !self.links[p] && self.loop_control(port) == 1;
+        // Under auto-close a link that comes back leaves the port closed (closed wait); one
+        // that goes closes it anyway.
+        if link && !self.links[p] {
+            self.closed_wait[p] = self.loop_control(port) == 1;
+        } else if !link {
+            self.closed_wait[p] = false;
+        }
         self.links[p] = link;
         self.port_generation = self.port_generation.wrapping_add(1);
         self.refresh_registers();

@@ -285,25 +285,7 @@ impl<I: Io> Master<I> {
                 s.delay_ns = at.map_or(0, |t| t - from).clamp(0, u32::MAX as i64) as u32;
             }
         }
-        self.split_latch = first_far.map(|f| {
-            // The frame's way in and out of each half, less the loops behind the reference
-            // and behind the far root (a closed port's loop-back after the last latch counted).
-            let way_back = |k: usize| {
-                view[k].span_ns().unwrap_or(0) + view[k].loops_after_last_event() * self.closed_port_loop_ns as i64
-            };
-            let near = reference.map_or(0, way_back);
-            let root = (f..n).find(|&k| self.slaves[k].parent.is_none()).unwrap_or(f);
-            let far_at = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
-            crate::master::SplitLatch {
-                first_far: f,
-                root,
-                root_port: self.slaves[root].entry_port,
-                far_reference,
-                anchor_ns: (near - way_back(root)) / 2 + far_at,
-                passes,
-                watch_next_ns: None,
-            }
-        });
+        self.split_latch = first_far.map(|f| self.split_latch_of(&view, &epu_at, reference, f, passes));
         // The first DC slave is the reference (DC initialisation makes it so).
         if let Some(r) = reference {
             stamps.loop_ns = self.loop_ns_of(r);

@@ -61,6 +61,38 @@ impl SplitLatch {
 }
 
 impl<I: Io> Master<I> {
+    /// What a latch that went round both halves found: `view` and `epu_at` (each DC slave's
+    /// processing unit after its tree's root's entry) as the delay computation has them,
+    /// `reference` the first clock, `first_far` the first position behind the break.
+    pub(super) fn split_latch_of(
+        &self,
+        view: &[crate::topology::PortView],
+        epu_at: &[Option<i64>],
+        reference: Option<usize>,
+        first_far: usize,
+        passes: Option<SplitPasses>,
+    ) -> SplitLatch {
+        let n = self.slaves.len();
+        // The frame's way in and out of each half, less the loops behind the reference and
+        // behind the far root (a closed port's loop-back after the last latch counted).
+        let way_back = |k: usize| {
+            view[k].span_ns().unwrap_or(0) + view[k].loops_after_last_event() * self.closed_port_loop_ns as i64
+        };
+        let near = reference.map_or(0, way_back);
+        let root = (first_far..n).find(|&k| self.slaves[k].parent.is_none()).unwrap_or(first_far);
+        let far_reference = (first_far..n).find(|&k| self.slaves[k].has_system_time);
+        let far_at = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
+        SplitLatch {
+            first_far,
+            root,
+            root_port: self.slaves[root].entry_port,
+            far_reference,
+            anchor_ns: (near - way_back(root)) / 2 + far_at,
+            passes,
+            watch_next_ns: None,
+        }
+    }
+
     /// On a broken ring, the first position behind the break (the second passes reach it and
     /// those after it).
     pub(crate) fn first_far_position(&self) -> Option<usize> {
