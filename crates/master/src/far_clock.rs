@@ -48,6 +48,9 @@ const ANCHOR_SD_NS: f64 = 10.0;
 /// An error beyond this, clear of the line's noise, on a far half set up from the latch's
 /// geometry, moves all its clocks at once (ns).
 const WHOLE_HALF_NS: f64 = 1_000.0;
+/// A far reference drifting from the reference by more than this (rate less 1) is moved with
+/// every frame rather than every `STEER_EVERY_NS`.
+const FAST_DRIFT: f64 = 1e-6;
 /// The far reference's offset is moved at most this often (a step each time, which its
 /// followers take up through their own loops).
 pub const STEER_EVERY_NS: u64 = 10_000_000;
@@ -143,6 +146,11 @@ impl FarClock {
         Some((self.level_at(x_ns)?.wrapping_sub(anchor).wrapping_add(self.applied_ns), sd))
     }
 
+    /// When the last sample was taken (master ns).
+    pub fn last_sample_ns(&self) -> Option<u64> {
+        self.last_x
+    }
+
     /// [`FarClock::error_ns`] at the last sample.
     pub fn error_now(&self) -> Option<i64> {
         Some(self.error_ns(self.last_x?)?.0)
@@ -225,8 +233,15 @@ impl<I: Io> Master<I> {
             self.far_steer = Some(FarSteer { station, clock, last_move_ns: None, offset: None });
         }
         let Some(f) = self.far_steer.as_mut() else { return Ok(()) };
+        let spacing_ns = f.clock.last_sample_ns().map_or(STEER_EVERY_NS, |p| x.wrapping_sub(p)).min(STEER_EVERY_NS);
         f.clock.push(x, diff);
-        if f.last_move_ns.is_some_and(|t| x.wrapping_sub(t) < STEER_EVERY_NS) {
+        // Moved every 10 ms, a far reference drifting from the reference saw-tooths by half an
+        // interval's drift (±50 ns at 10 ppm: one that never followed the reference, split
+        // from the start, runs at its own crystal's rate); drifting by more than `FAST_DRIFT`
+        // it is moved with every frame instead.
+        let every_ns = if f.clock.drift().abs() > FAST_DRIFT { 0 } else { STEER_EVERY_NS };
+        let interval_ns = every_ns.max(spacing_ns);
+        if f.last_move_ns.is_some_and(|t| x.wrapping_sub(t) < every_ns) {
             return Ok(());
         }
         // A settled line moves the far reference to its estimate every time (the estimate
@@ -235,7 +250,7 @@ impl<I: Io> Master<I> {
         // over does. Each move aims at zero halfway to the next, and takes up a level error
         // by at most `STEP_NS` (the far half's loops follow small steps smoothly).
         let Some((error, sd)) = f.clock.error_ns(x) else { return Ok(()) };
-        let ahead_ns = f.clock.drift() * (STEER_EVERY_NS / 2) as f64;
+        let ahead_ns = f.clock.drift() * (interval_ns / 2) as f64;
         let aim = error as f64 + ahead_ns;
         if sd > SETTLED_SD_NS && aim.abs() <= 3.0 * sd {
             return Ok(());
@@ -261,7 +276,7 @@ impl<I: Io> Master<I> {
         }
         // Keeping up takes the drift since the last move (which aimed halfway to this one;
         // at least one interval's, however late this move comes).
-        let since_ns = f.last_move_ns.map_or(STEER_EVERY_NS, |t| x.wrapping_sub(t).max(STEER_EVERY_NS)) as f64;
+        let since_ns = f.last_move_ns.map_or(interval_ns, |t| x.wrapping_sub(t).max(interval_ns)) as f64;
         // (`max` also keeps the bound a number whatever the line says: `clamp` refuses NaN.)
         let limit = ((f.clock.drift() * since_ns).abs() + STEP_NS).max(STEP_NS);
         let delta = -aim.clamp(-limit, limit).round() as i64;
