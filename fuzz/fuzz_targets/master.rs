@@ -8,7 +8,10 @@
 //! An input whose first byte is odd closes the line into a ring back to the master's second
 //! port and pulls the cable before the third device once the slaves are in OP: the frames of
 //! both ports are tampered with, the far half served round the secondary port, its reference
-//! kept on the reference's time from what the two passes read.
+//! kept on the reference's time from what the two passes read. If its second bit is set too,
+//! the cable is pulled before the master starts instead (the far half latched as its own
+//! tree, set up from the two passes, its ports auto-close) and put back 50 ms into the cycles
+//! (the master opens the ring and latches the far half again).
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::{Event, Segment, SegmentConfig};
@@ -91,9 +94,13 @@ impl Io for Lying<'_> {
 fuzz_target!(|data: &[u8]| {
     let Some((&mode, script)) = data.split_first() else { return };
     let ring = mode & 1 == 1;
+    let split_first = ring && mode & 2 == 2;
     let toml = if ring { format!("{SEGMENT}[secondary]\ndevice = 3\n") } else { SEGMENT.to_string() };
     let cfg: SegmentConfig = toml::from_str(&toml).expect("the fuzz segment parses");
-    let seg = cfg.build().expect("the fuzz segment builds");
+    let mut seg = cfg.build().expect("the fuzz segment builds");
+    if split_first {
+        seg.schedule(0, Event::LinkDown { node: 2, port: 0 });
+    }
     let io = Lying { inner: VirtualIo::new(seg, HostModel::ideal(), 1), script };
     let mut m = Master::new(io);
     if m.scan().is_err() || m.configure().is_err() {
@@ -107,7 +114,12 @@ fuzz_target!(|data: &[u8]| {
     // A ring: its cable pulled now, and cycles enough for the far reference to be kept.
     let cycles = if ring {
         let now = m.engine.io.now_ns();
-        m.engine.io.inner.seg.schedule(now, Event::LinkDown { node: 2, port: 0 });
+        let event = if split_first {
+            (now + 50_000_000, Event::LinkUp { node: 2, port: 0 })
+        } else {
+            (now, Event::LinkDown { node: 2, port: 0 })
+        };
+        m.engine.io.inner.seg.schedule(event.0, event.1);
         200
     } else {
         20
