@@ -1,6 +1,7 @@
 //! Robustness: each method of the master–slave error tables on the same realisation, disturbed once
 //! after it has settled — 1 % of frames lost from then on, the reference's crystal stepping by
-//! 50 ppm (a temperature step), or the master overrunning three cycles (no frames for 3 ms) —
+//! 50 ppm (a temperature step), the master overrunning three cycles (no frames for 3 ms), or on
+//! a ring a cable pulled —
 //! and how far and for how long the master–reference error leaves its band, and how long until
 //! the segment is locked again (as the lock time counts it).
 //!
@@ -18,6 +19,11 @@ use serde::Serialize;
 use crate::stats::Moments;
 
 pub const SCENARIOS: [&str; 3] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles"];
+/// On a ring segment (one with `[secondary]`): the cable into the device the secondary port is
+/// wired to pulled, splitting the ring there (cable redundancy, docs/master.md).
+pub const RING_CABLE_PULLED: &str = "ring-cable-pulled";
+/// Every disturbance a run can name: [`SCENARIOS`] and, on a ring, [`RING_CABLE_PULLED`].
+pub const KNOWN: [&str; 4] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles", RING_CABLE_PULLED];
 /// The undisturbed run every disturbed one is paired with.
 pub const CONTROL: &str = "control";
 
@@ -210,8 +216,14 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
                 }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
+                RING_CABLE_PULLED => {
+                    let Some(ring) = m.engine.io.seg.secondary() else {
+                        anyhow::bail!("{RING_CABLE_PULLED} needs a ring segment (one with [secondary])")
+                    };
+                    m.engine.io.seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
+                }
                 CONTROL => {}
-                other => anyhow::bail!("unknown scenario {other:?} (known: {})", SCENARIOS.join(", ")),
+                other => anyhow::bail!("unknown scenario {other:?} (known: {})", KNOWN.join(", ")),
             }
         }
         // A master that follows the reference times its next cycle by it.

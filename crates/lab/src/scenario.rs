@@ -296,10 +296,10 @@ impl Scenario {
                 }
                 o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
                 if let Some(ds) = &self.disturbances {
-                    if let Some(d) = ds.iter().find(|d| !crate::robustness::SCENARIOS.contains(&d.as_str())) {
+                    if let Some(d) = ds.iter().find(|d| !crate::robustness::KNOWN.contains(&d.as_str())) {
                         return Err(self.err(
                             "disturbances",
-                            format!("{d:?} is not one of {}", crate::robustness::SCENARIOS.join(", ")),
+                            format!("{d:?} is not one of {}", crate::robustness::KNOWN.join(", ")),
                         ));
                     }
                     o.scenarios = ds.clone();

@@ -301,7 +301,7 @@ fn the_far_reference_of_a_split_ring_is_kept_on_the_reference() {
 
 /// Cycles longer than the far reference's moves are apart (15 ms against 10 ms): each move
 /// takes up all the drift since the last, so the far coupler, 3 ppm fast from 2 s after the
-/// break, stays with the reference over the last 20 s of 30 (320 ns at worst: 67 samples a
+/// break, stays with the reference over the last 20 s of 30 (316 ns at worst: 67 samples a
 /// second leave the line unsettled, moved only by errors it shows); a move limited to one
 /// interval's drift fell behind by 0.7 ppm, 19.5 µs by the end.
 #[test]

@@ -204,6 +204,6 @@ impl<I: Io> Master<I> {
             }
         }
         let st = self.slaves[l.root].station;
-        self.measure_ring_shortening(st, l.root_port)
+        self.measure_ring_shortening(st, l.root_port, super::delays::REJOIN_SHORTENING_TRIPS)
     }
 }
