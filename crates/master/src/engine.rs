@@ -95,6 +95,14 @@ pub struct SplitPasses {
     pub far_wkc: u16,
 }
 
+impl SplitPasses {
+    /// Each pass's mid-point between its transmit and receive stamps (near, far).
+    pub fn mid_points_ns(&self) -> (u64, u64) {
+        let mid = |tx: u64, rx: u64| tx.wrapping_add_signed(rx.wrapping_sub(tx) as i64 / 2);
+        (mid(self.near_tx_ns, self.near_rx_ns), mid(self.far_tx_ns, self.far_rx_ns))
+    }
+}
+
 const SLOTS: usize = 16;
 const FRAME: usize = 1536;
 

@@ -192,8 +192,7 @@ pub(crate) struct FarSteer {
 /// The far reference's time less the reference's as the two passes measured them, less the
 /// master's time between the passes (mid-point to mid-point).
 pub fn measured_difference_ns(p: &SplitPasses, wide: bool) -> (u64, i64) {
-    let mid = |tx: u64, rx: u64| tx.wrapping_add_signed(rx.wrapping_sub(tx) as i64 / 2);
-    let (near, far) = (mid(p.near_tx_ns, p.near_rx_ns), mid(p.far_tx_ns, p.far_rx_ns));
+    let (near, far) = p.mid_points_ns();
     let apart = if wide {
         p.far_time.wrapping_sub(p.near_time) as i64
     } else {

@@ -11,8 +11,11 @@
 //! that instant — and what a cyclic frame's two passes measure when both clocks agree (the
 //! anchor a ring that split under the master learns from the break instead).
 //!
-//! When the ring closes, the far half is latched again from the reference, as a line whose end
-//! is the port the secondary's cable comes in by, and its delays written.
+//! Once DC is set up, every port is auto-close, so that the ring cannot close behind the
+//! master's back; the master watches the DL status, and when the cable at the break is back
+//! it opens the ring itself and latches the far half again from the reference, as a line whose
+//! end is the port the secondary's cable comes in by, and writes its delays before any clock
+//! goes round.
 use ferrocat_wire::register::DlStatus;
 use ferrocat_wire::{Address, Command};
 
@@ -53,10 +56,8 @@ impl SplitLatch {
     /// How much later (master ns) the far reference took the latching frame than the
     /// reference did.
     pub fn far_lag_ns(&self) -> Option<i64> {
-        let p = self.passes?;
-        let mid = |tx: u64, rx: u64| tx.wrapping_add_signed(rx.wrapping_sub(tx) as i64 / 2);
-        let apart = mid(p.far_tx_ns, p.far_rx_ns).wrapping_sub(mid(p.near_tx_ns, p.near_rx_ns)) as i64;
-        Some(apart.wrapping_add(self.anchor_ns))
+        let (near, far) = self.passes?.mid_points_ns();
+        Some((far.wrapping_sub(near) as i64).wrapping_add(self.anchor_ns))
     }
 }
 
