@@ -328,7 +328,9 @@ fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
 }
 
 /// (parent, parent port, delay) of every slave.
-fn wiring(m: &Master<VirtualIo>) -> Vec<(Option<u16>, u8, u32)> {
+type Wiring = Vec<(Option<u16>, u8, u32)>;
+
+fn wiring(m: &Master<VirtualIo>) -> Wiring {
     m.slaves.iter().map(|s| (s.parent, s.parent_port, s.delay_ns)).collect()
 }
 
@@ -427,4 +429,67 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
     assert_eq!(wiring(&m), wiring(&intact));
     assert!(transient < 60 && after < 50, "{transient}, {after}");
+}
+
+/// Three couplers with a terminal each, the third's X2 OUT back to the secondary port, split
+/// from the start between the first and the second: the far tree's root is the third coupler
+/// (entered by its X2 port), the far reference the second coupler hanging on the root's X1
+/// port — processed first, on the frame's way back. Returns (parent, port, delay) of every
+/// slave after `init_dc`, the worst |far coupler − reference| of both far couplers over the
+/// first 3 s and over the 3 s after the cable is put back, and the master at the end.
+fn three_couplers_split_from_the_start(host: HostModel) -> (Wiring, [i64; 2], Master<VirtualIo>) {
+    let toml = format!("{THREE_COUPLERS}[[event]]\nat_ms = 0\nlink_down = {{ device = 2, port = 0 }}\n");
+    let s = 1_000_000_000;
+    let mut worst = [0i64; 2];
+    let m = cycle_ring(
+        &toml,
+        host,
+        SplitRingClocks::FarReference,
+        &[(3 * s, Event::LinkUp { node: 2, port: 0 })],
+        6_000,
+        |k, t| {
+            let e = [1, 2].map(|c| (t[c].wrapping_sub(t[0]) as i64).abs()).into_iter().max().unwrap();
+            let w = &mut worst[usize::from(k >= 3_000)];
+            *w = (*w).max(e);
+        },
+    );
+    // (The wiring as init_dc left it is gone once the ring closed: cycle_ring's callback sees
+    // only clocks, so the split latch's view is checked by a second bring-up.)
+    let mut again = master(&toml, host);
+    again.bring_up().unwrap();
+    again.init_dc(&DcConfig::default()).unwrap();
+    let l = again.split_latch.as_ref().unwrap();
+    assert_eq!((l.first_far, l.root, l.root_port, l.far_reference), (2, 4, 2, Some(2)));
+    (wiring(&again), worst, m)
+}
+
+const THREE_COUPLERS: &str = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+    [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
+    [[device]]\nbuiltin = 'EK1100'\nparent = 2\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 4\n";
+
+#[test]
+fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_comes_in() {
+    for host in [HostModel::nic_hwts(), HostModel::pc_rt()] {
+        let mut intact = master(THREE_COUPLERS, host);
+        intact.scan().unwrap();
+        let whole = wiring(&intact);
+        let (split, worst, m) = three_couplers_split_from_the_start(host);
+        println!(
+            "{}: intact {whole:?}\n  split {split:?}\n  worst |far couplers − reference| {} ns over the first 3 s, {} ns \
+             over the 3 s after the cable is back",
+            host.name, worst[0], worst[1]
+        );
+        // The far half's delays from the second coupler: its terminal, the third coupler (on
+        // the root's X1 port, seen the other way round) and its terminal, as the intact ring's
+        // differences to within the receive times' 10 ns.
+        assert_eq!((split[2].0, split[4].0), (Some(4), None), "the third coupler is the root: {split:?}");
+        for k in [3, 4, 5] {
+            let (apart, intact_apart) = (split[k].2 as i64, whole[k].2 as i64 - whole[2].2 as i64);
+            assert!((apart - intact_apart).abs() <= 10, "slave {k}: {apart} vs {intact_apart}");
+        }
+        assert!(worst[0] < 200 && worst[1] < 50, "{worst:?}");
+        // Closed again: the intact ring's tree and delays.
+        assert_eq!(m.engine.ring, RingState::Intact);
+        assert_eq!(wiring(&m), whole);
+    }
 }
