@@ -302,9 +302,7 @@ impl<I: Io> Master<I> {
         // compensation's frames gave hundreds: the far half is moved by what they say, all
         // its clocks together.
         if let Some(e) = self.far_steer.take().and_then(|f| f.clock.error_now()) {
-            for st in self.far_clocks() {
-                self.shift_offset(st, -e)?;
-            }
+            self.shift_far_half(-e, None);
         }
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);

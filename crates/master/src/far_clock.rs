@@ -262,11 +262,7 @@ impl<I: Io> Master<I> {
             f.last_move_ns = Some(x);
             f.offset = None;
             let delta = -aim.round() as i64;
-            let followers: Vec<u16> = self.far_clocks().into_iter().filter(|&st| st != station).collect();
-            for st in followers {
-                let _ = self.shift_offset(st, delta);
-            }
-            if self.shift_offset(station, delta).is_ok() {
+            if self.shift_far_half(delta, Some(station)) {
                 if let Some(f) = self.far_steer.as_mut() {
                     f.clock.applied(delta);
                 }

@@ -88,4 +88,37 @@ fn ten_thousand_cycles_allocate_nothing() {
     assert!(moved.is_some(), "the far reference is being kept");
     assert_eq!(m.cycle_stats().wkc_errors, 0);
     assert_eq!(allocations, 0);
+
+    // The same ring split before the master starts: the far reference kept from the latch's
+    // geometry, moved with every frame while it drifts, and the DL status read every 100 ms
+    // for the cable at the break.
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\n\
+         parent = 0\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 2\n\
+         [[event]]\nat_ms = 0\nlink_down = { device = 2, port = 0 }\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.bring_up().unwrap();
+    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
+    assert!(m.split_latch.as_ref().is_some_and(|l| l.watch_next_ns.is_some()), "{:?}", m.split_latch);
+    let mut next = m.engine.io.now_ns();
+    let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
+        for _ in 0..cycles {
+            m.cycle().unwrap();
+            next += period;
+            m.engine.io.sleep_until(next);
+        }
+    };
+    run(&mut m, 3_000);
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    run(&mut m, 10_000);
+    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let moved = m.far_reference_offset_ns();
+    println!(
+        "ring split from the start: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns"
+    );
+    assert!(moved.is_some_and(|ns| ns != 0), "the far reference is being kept");
+    assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
+    assert_eq!(allocations, 0);
 }

@@ -24,8 +24,10 @@ use crate::engine::{Pdu, RingState, SplitPasses};
 use crate::error::Result;
 use crate::io::Io;
 
-/// How often the master reads the slaves' DL status for the break's link.
+/// How often the master reads the slaves' DL status for the break's link, and how many per
+/// frame.
 const WATCH_EVERY_NS: u64 = 100_000_000;
+const WATCH_CHUNK: usize = 32;
 /// Loop control 0x0101: every port auto-close (01), or auto (00).
 const AUTO_CLOSE: u8 = 0x55;
 const AUTO: u8 = 0x00;
@@ -102,12 +104,17 @@ impl<I: Io> Master<I> {
         (split && far > 0 && far < n).then_some(n - far)
     }
 
-    /// The far half's slaves with a system time, as stations.
-    pub(crate) fn far_clocks(&self) -> Vec<u16> {
-        let Some(far) = self.split_latch.as_ref().and_then(|l| self.slaves.get(l.first_far..)) else {
-            return Vec::new();
-        };
-        far.iter().filter(|s| s.has_system_time).map(|s| s.station).collect()
+    /// Adds `shift_ns` to the offset of every clock of the far half, `last` the last of them
+    /// (the others follow it through their loops meanwhile); whether `last`'s moved.
+    pub(crate) fn shift_far_half(&mut self, shift_ns: i64, last: Option<u16>) -> bool {
+        let first_far = self.split_latch.as_ref().map_or(self.slaves.len(), |l| l.first_far);
+        for k in first_far..self.slaves.len() {
+            let (clock, st) = (self.slaves[k].has_system_time, self.slaves[k].station);
+            if clock && Some(st) != last {
+                let _ = self.shift_offset(st, shift_ns);
+            }
+        }
+        last.is_some_and(|st| self.shift_offset(st, shift_ns).is_ok())
     }
 
     /// Once the far half's clocks are set up for a split, the ring must not close behind
@@ -143,23 +150,32 @@ impl<I: Io> Master<I> {
         if let Some(l) = self.split_latch.as_mut() {
             l.watch_next_ns = Some(now.saturating_add(WATCH_EVERY_NS));
         }
-        let mut dl = vec![[0u8; 2]; self.slaves.len()];
-        let mut pdus: Vec<Pdu<'_>> = self
-            .slaves
-            .iter()
-            .zip(dl.iter_mut())
-            .map(|(s, b)| Pdu::new(Command::FPRD, Address::Device { adp: s.station, ado: 0x0110 }, b))
-            .collect();
-        // A frame lost is tried again at the next look.
-        if self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns).is_err() {
-            return Ok(());
+        // Every slave's DL status, a chunk of them per frame, on the stack: this runs among
+        // the cycles, which allocate nothing.
+        let mut back = false;
+        for first in (0..self.slaves.len()).step_by(WATCH_CHUNK) {
+            let count = WATCH_CHUNK.min(self.slaves.len() - first);
+            let mut dl = [[0u8; 2]; WATCH_CHUNK];
+            let mut bufs = dl.iter_mut();
+            let mut pdus: [Pdu<'_>; WATCH_CHUNK] = std::array::from_fn(|i| {
+                let station = self.slaves.get(first + i).map_or(0, |s| s.station);
+                Pdu::new(
+                    Command::FPRD,
+                    Address::Device { adp: station, ado: 0x0110 },
+                    bufs.next().map_or(&mut [][..], |b| &mut b[..]),
+                )
+            });
+            // A frame lost is tried again at the next look.
+            if self.engine.transact_once(&mut pdus[..count], self.cyclic_timeout_ns).is_err() {
+                return Ok(());
+            }
+            let answered: [bool; WATCH_CHUNK] = std::array::from_fn(|i| pdus[i].wkc == 1);
+            back |= (0..count).any(|i| {
+                let d = DlStatus(u16::from_le_bytes(dl[i]));
+                let s = &self.slaves[first + i];
+                answered[i] && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize])
+            });
         }
-        let answered: Vec<bool> = pdus.iter().map(|p| p.wkc == 1).collect();
-        drop(pdus);
-        let back = self.slaves.iter().zip(&dl).zip(answered).any(|((s, d), ok)| {
-            let d = DlStatus(u16::from_le_bytes(*d));
-            ok && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize])
-        });
         if !back {
             return Ok(());
         }
