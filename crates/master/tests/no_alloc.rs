@@ -50,9 +50,7 @@ fn ten_thousand_cycles_allocate_nothing() {
         }
     };
     run(&mut m, 200);
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    run(&mut m, 10_000);
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = counted(|| run(&mut m, 10_000));
     let s = m.cycle_stats();
     println!("10 000 cycles: {allocations} allocations, {} WKC errors, last WKC {}", s.wkc_errors, s.last_wkc);
     assert_eq!(s.wkc_errors, 0);
@@ -61,28 +59,11 @@ fn ten_thousand_cycles_allocate_nothing() {
     // A ring whose cable is pulled: the far half served from the secondary port, its
     // reference kept on the reference's time, once the split is known (in the same test: the
     // counter is the process's).
-    let cfg: SegmentConfig = toml::from_str(
-        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\n\
-         parent = 0\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 2\n",
-    )
-    .unwrap();
-    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.bring_up().unwrap();
-    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
-    let mut next = m.engine.io.now_ns();
+    let (mut m, mut next) = ring("");
     m.engine.io.seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
-    let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
-        for _ in 0..cycles {
-            m.cycle().unwrap();
-            next += period;
-            m.engine.io.sleep_until(next);
-        }
-    };
-    run(&mut m, 3_000);
+    run_cycles(&mut m, &mut next, 3_000);
     assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    run(&mut m, 10_000);
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
     let moved = m.far_reference_offset_ns();
     println!("ring split: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns");
     assert!(moved.is_some(), "the far reference is being kept");
@@ -92,28 +73,10 @@ fn ten_thousand_cycles_allocate_nothing() {
     // The same ring split before the master starts: the far reference kept from the latch's
     // geometry, moved with every frame while it drifts, and the DL status read every 100 ms
     // for the cable at the break.
-    let cfg: SegmentConfig = toml::from_str(
-        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\n\
-         parent = 0\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 2\n\
-         [[event]]\nat_ms = 0\nlink_down = { device = 2, port = 0 }\n",
-    )
-    .unwrap();
-    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.bring_up().unwrap();
-    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
+    let (mut m, mut next) = ring("[[event]]\nat_ms = 0\nlink_down = { device = 2, port = 0 }\n");
     assert!(m.split_latch.as_ref().is_some_and(|l| l.watch_next_ns.is_some()), "{:?}", m.split_latch);
-    let mut next = m.engine.io.now_ns();
-    let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
-        for _ in 0..cycles {
-            m.cycle().unwrap();
-            next += period;
-            m.engine.io.sleep_until(next);
-        }
-    };
-    run(&mut m, 3_000);
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    run(&mut m, 10_000);
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    run_cycles(&mut m, &mut next, 3_000);
+    let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
     let moved = m.far_reference_offset_ns();
     println!(
         "ring split from the start: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns"
@@ -121,4 +84,35 @@ fn ten_thousand_cycles_allocate_nothing() {
     assert!(moved.is_some_and(|ns| ns != 0), "the far reference is being kept");
     assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
     assert_eq!(allocations, 0);
+}
+
+/// Two couplers with an output terminal each as a ring, `events` in its file, in OP with DC
+/// (no SYNC0); and the master's time.
+fn ring(events: &str) -> (Master<VirtualIo>, u64) {
+    let cfg: SegmentConfig = toml::from_str(&format!(
+        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\n\
+         parent = 0\n[[device]]\nbuiltin = 'EL2004'\n[secondary]\ndevice = 2\n{events}"
+    ))
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.bring_up().unwrap();
+    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
+    let now = m.engine.io.now_ns();
+    (m, now)
+}
+
+/// `cycles` 1 ms cycles from `next` on.
+fn run_cycles(m: &mut Master<VirtualIo>, next: &mut u64, cycles: u64) {
+    for _ in 0..cycles {
+        m.cycle().unwrap();
+        *next += 1_000_000;
+        m.engine.io.sleep_until(*next);
+    }
+}
+
+/// The allocations `f` made.
+fn counted(f: impl FnOnce()) -> u64 {
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    f();
+    ALLOCATIONS.load(Ordering::Relaxed) - before
 }
