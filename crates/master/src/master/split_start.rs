@@ -150,31 +150,13 @@ impl<I: Io> Master<I> {
         if let Some(l) = self.split_latch.as_mut() {
             l.watch_next_ns = Some(now.saturating_add(WATCH_EVERY_NS));
         }
-        // Every slave's DL status, a chunk of them per frame, on the stack: this runs among
-        // the cycles, which allocate nothing.
+        // A frame lost is tried again at the next look.
         let mut back = false;
-        for first in (0..self.slaves.len()).step_by(WATCH_CHUNK) {
-            let count = WATCH_CHUNK.min(self.slaves.len() - first);
-            let mut dl = [[0u8; 2]; WATCH_CHUNK];
-            let mut bufs = dl.iter_mut();
-            let mut pdus: [Pdu<'_>; WATCH_CHUNK] = std::array::from_fn(|i| {
-                let station = self.slaves.get(first + i).map_or(0, |s| s.station);
-                Pdu::new(
-                    Command::FPRD,
-                    Address::Device { adp: station, ado: 0x0110 },
-                    bufs.next().map_or(&mut [][..], |b| &mut b[..]),
-                )
-            });
-            // A frame lost is tried again at the next look.
-            if self.engine.transact_once(&mut pdus[..count], self.cyclic_timeout_ns).is_err() {
-                return Ok(());
-            }
-            let answered: [bool; WATCH_CHUNK] = std::array::from_fn(|i| pdus[i].wkc == 1);
-            back |= (0..count).any(|i| {
-                let d = DlStatus(u16::from_le_bytes(dl[i]));
-                let s = &self.slaves[first + i];
-                answered[i] && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize])
-            });
+        let read = self.each_dl_status(true, |s, d, answered| {
+            back |= answered && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize]);
+        });
+        if read.is_err() {
+            return Ok(());
         }
         if !back {
             return Ok(());
@@ -187,6 +169,40 @@ impl<I: Io> Master<I> {
             self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO_CLOSE])?;
             Ok(())
         }
+    }
+
+    /// Every slave's DL status (0x0110), up to [`WATCH_CHUNK`] slaves a frame, read into the
+    /// stack (the watch runs among the cycles, which allocate nothing): `each` gets the slave,
+    /// its status and whether it answered. A cyclic look sends each frame once, within the
+    /// cyclic timeout; otherwise lost frames are sent again.
+    fn each_dl_status(
+        &mut self,
+        cyclic: bool,
+        mut each: impl FnMut(&mut crate::slave::Slave, DlStatus, bool),
+    ) -> Result<()> {
+        for first in (0..self.slaves.len()).step_by(WATCH_CHUNK) {
+            let count = WATCH_CHUNK.min(self.slaves.len() - first);
+            let mut dl = [[0u8; 2]; WATCH_CHUNK];
+            let mut bufs = dl.iter_mut();
+            let mut pdus: [Pdu<'_>; WATCH_CHUNK] = std::array::from_fn(|i| {
+                let station = self.slaves.get(first + i).map_or(0, |s| s.station);
+                Pdu::new(
+                    Command::FPRD,
+                    Address::Device { adp: station, ado: 0x0110 },
+                    bufs.next().map_or(&mut [][..], |b| &mut b[..]),
+                )
+            });
+            if cyclic {
+                self.engine.transact_once(&mut pdus[..count], self.cyclic_timeout_ns)?;
+            } else {
+                self.engine.transact(&mut pdus[..count])?;
+            }
+            let answered: [bool; WATCH_CHUNK] = std::array::from_fn(|i| pdus[i].wkc == 1);
+            for i in 0..count {
+                each(&mut self.slaves[first + i], DlStatus(u16::from_le_bytes(dl[i])), answered[i]);
+            }
+        }
+        Ok(())
     }
 
     /// The ring closed after a latch that found it split: the far half's delays are latched
@@ -203,12 +219,22 @@ impl<I: Io> Master<I> {
             return Ok(());
         }
         // The ports at the break have their links again.
-        for k in 0..self.slaves.len() {
-            let mut dl = [0u8; 2];
-            self.fprd(self.slaves[k].station, 0x0110, &mut dl)?;
-            let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
-            self.slaves[k].dl_status = dl;
-            self.slaves[k].active_ports = [0, 1, 2, 3].map(|p| dl.port_active(p));
+        let mut unanswered = None;
+        self.each_dl_status(false, |s, d, answered| {
+            if answered {
+                s.dl_status = d;
+                s.active_ports = [0, 1, 2, 3].map(|p| d.port_active(p));
+            } else {
+                unanswered = unanswered.or(Some(s.position));
+            }
+        })?;
+        if let Some(position) = unanswered {
+            return Err(crate::error::MasterError::Wkc {
+                what: format!("DL status of slave {position}"),
+                expected: 1,
+                got: 0,
+                slaves: String::new(),
+            });
         }
         self.ring_port = Some((l.root as u16, l.root_port));
         self.slaves[l.root].active_ports[l.root_port as usize] = false;
