@@ -11,6 +11,21 @@ pub enum DcWidth {
     Bits64,
 }
 
+/// Which frame the receive-time latches of ports 1–3 take after a write to 0x0900 (esc-spec
+/// 0x0900, 0x0936). Port 0 and 0x0918 always take the frame that carries the write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReceiveLatch {
+    /// Every port the frame that carries the write, also one that passed before the
+    /// processing unit saw it (ET1100; assumed for the LAN9252, whose datasheet does not say).
+    ThisFrame,
+    /// The write latches port 0 and enables ports 1–3, each of which then takes the first
+    /// frame it receives and is disabled (ET1200, ESC20; register description, 0x0904).
+    NextFrame,
+    /// The IP core: 0x0936 = 0 forwarding mode (as `NextFrame`), 1 reverse mode (ports 1–3
+    /// take the last frame each received before the write).
+    Selectable,
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EscConfig {
     pub esc_type: u8,
@@ -30,6 +45,7 @@ pub struct EscConfig {
     pub pdi_control: Option<u16>,
     /// The PDI emulates the EEPROM (0x0502 bit 5).
     pub eeprom_emulation: bool,
+    pub receive_latch: ReceiveLatch,
 }
 
 impl EscConfig {
@@ -50,6 +66,7 @@ impl EscConfig {
             sii_read_8: true,
             pdi_control: None,
             eeprom_emulation: false,
+            receive_latch: ReceiveLatch::ThisFrame,
         }
     }
 
@@ -70,6 +87,7 @@ impl EscConfig {
             sii_read_8: true,
             pdi_control: None,
             eeprom_emulation: false,
+            receive_latch: ReceiveLatch::NextFrame,
         }
     }
 
@@ -96,6 +114,7 @@ impl EscConfig {
             sii_read_8: false,
             pdi_control: None,
             eeprom_emulation: false,
+            receive_latch: ReceiveLatch::ThisFrame,
         }
     }
 
@@ -114,6 +133,7 @@ impl EscConfig {
             sii_read_8: false,
             pdi_control: None,
             eeprom_emulation: false,
+            receive_latch: ReceiveLatch::NextFrame,
         }
     }
 
@@ -137,6 +157,7 @@ impl EscConfig {
             sii_read_8: false,
             pdi_control: Some(0x0C08),
             eeprom_emulation: true,
+            receive_latch: ReceiveLatch::Selectable,
         }
     }
 

@@ -159,6 +159,11 @@ pub struct Engine<I: Io> {
     pub split_passes: Option<SplitPasses>,
     /// The secondary's last probe came back: worth waiting for the next.
     secondary_alive: bool,
+    /// While set on a broken ring, frames go without a probe and round the far half as soon
+    /// as they are back, counted as the last probe counted: a probe passes the far half's
+    /// ports before the frame and would be the frame an ET1200's receive-time latch takes
+    /// (the master's second latch, master/next_frame_latch.rs).
+    pub probes_off: bool,
 }
 
 /// Source MAC address bytes: the primary's frames, and the probe sent from the secondary port
@@ -209,6 +214,7 @@ impl<I: Io> Engine<I> {
             far_half_slaves: 0,
             split_passes: None,
             secondary_alive: true,
+            probes_off: false,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
             eth: EthernetRepr { dst: BROADCAST, src: SRC_PRIMARY, vlan_tci: None, ethertype: 0 },
@@ -314,7 +320,11 @@ impl<I: Io> Engine<I> {
             if let Some(t) = self.io.last_tx_ns() {
                 self.slots[s].sent_ns = t;
             }
-            self.send_probe(s)?;
+            if self.probes_off && self.ring == RingState::Broken {
+                self.slots[s].probe = Some((true, self.far_half_slaves));
+            } else {
+                self.send_probe(s)?;
+            }
         }
         Ok(())
     }

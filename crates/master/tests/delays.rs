@@ -4,6 +4,7 @@
 use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::{Address, Command};
 
 /// The closed-port loop-back of the simulated ESCs (docs/segment-model.md), which a master
 /// told it compensates.
@@ -20,15 +21,21 @@ fn check(name: &str, toml: &str) -> Master<VirtualIo> {
 
 /// As [`check`], with SOEM's formula allowed `soem_ns`.
 fn check_within(name: &str, toml: &str, soem_ns: i64) -> Master<VirtualIo> {
-    let m = scan(name, toml, 0, soem_ns);
-    scan(&format!("{name}, loop-backs known"), toml, LOOP_NS, 5);
+    check_prepared(name, toml, soem_ns, |_| {})
+}
+
+/// As [`check_within`], with `prepare` run on the segment before the scan.
+fn check_prepared(name: &str, toml: &str, soem_ns: i64, prepare: fn(&mut Master<VirtualIo>)) -> Master<VirtualIo> {
+    let m = scan(name, toml, 0, soem_ns, prepare);
+    scan(&format!("{name}, loop-backs known"), toml, LOOP_NS, 5, prepare);
     m
 }
 
-fn scan(name: &str, toml: &str, loop_ns: u32, bound_ns: i64) -> Master<VirtualIo> {
+fn scan(name: &str, toml: &str, loop_ns: u32, bound_ns: i64, prepare: fn(&mut Master<VirtualIo>)) -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(toml).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
     m.closed_port_loop_ns = loop_ns;
+    prepare(&mut m);
     m.scan().unwrap();
     // The last frame of the scan visited every slave; any frame does: delays are fixed.
     // Visits are in processing order, which is the order of positions.
@@ -120,6 +127,43 @@ fn the_first_slave_reversed_and_couplers_cabled_in_to_in() {
     assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 2, 2, 0]);
     assert_eq!(links(&m), [Some((3, 0)), Some((0, 1)), Some((0, 2)), None, Some((3, 1))]);
     synchronises(m);
+}
+
+/// Controllers whose ports 1–3 take the frame after the write to 0x0900 (ET1200, ESC20, the
+/// IP core), entered on port 1 with a slave behind their port 0: the first latch gives their
+/// entry port a later frame's time; the master latches them again.
+const NEXT_FRAME_REVERSED: &str = "seed = 6\n\
+     [[device]]\nname = 'c'\nbuiltin = 'EK1100'\n\
+     [[device]]\nname = 'in'\nbuiltin = 'EL1004'\nparent = 'c'\nparent_port = 1\nport = 1\napp = 'dc'\n\
+     [[device]]\nbuiltin = 'EL2004'\nparent = 'in'\nparent_port = 0\napp = 'dc'\n\
+     [[device]]\nname = 'ip'\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'c'\nparent_port = 2\nport = 1\ncable_m = 20.0\n\
+     [[device]]\nname = 'e20'\nbuiltin = 'SERVO'\nesc = 'esc20'\nparent = 'ip'\nparent_port = 0\nport = 1\n\
+     [[device]]\nbuiltin = 'SERVO'\nparent = 'e20'\nparent_port = 0\ncable_m = 5.0\n";
+
+#[test]
+fn next_frame_controllers_entered_on_port_1() {
+    let m = check("next-frame reversed", NEXT_FRAME_REVERSED);
+    let entries: Vec<(&str, u8)> = m.slaves.iter().map(|s| (s.name.as_str(), s.entry_port)).collect();
+    println!("{entries:?}");
+    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 1, 0, 1, 1]);
+    synchronises(m);
+}
+
+#[test]
+fn ip_cores_left_in_reverse_latch_mode() {
+    // 0x0936 = 1: the ports after the processing unit give the frame before the write (the
+    // first IP core's port 1, entered on port 0). The master sets forwarding mode.
+    let toml = "seed = 7\n\
+         [[device]]\nname = 'c'\nbuiltin = 'EK1100'\n\
+         [[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nname = 'a'\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'c'\nparent_port = 2\n\
+         [[device]]\nname = 'b'\nbuiltin = 'SERVO'\nparent = 'a'\nparent_port = 1\ncable_m = 10.0\n\
+         [[device]]\nname = 'r'\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'b'\nparent_port = 1\nport = 1\n\
+         [[device]]\nbuiltin = 'SERVO'\nparent = 'r'\nparent_port = 0\n";
+    let m = check_prepared("reverse mode", toml, 10, |m| {
+        m.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [1]).unwrap();
+    });
+    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 0, 0, 0, 1]);
 }
 
 /// Brings `m` up with DC and runs a second of 1 ms cycles: every DC slave's true system time

@@ -153,12 +153,18 @@ struct Route {
     exit: Exit,
     /// The auto-close port waiting closed (node, port) where the frame ends, which it opens.
     lands: Option<(usize, u8)>,
+    /// Nodes whose ports the frame passes without reaching their processing unit (a ring's
+    /// frames in the forwarding direction): receive-time latches that wait for a frame take it.
+    passes: Vec<(usize, FrameTiming)>,
     /// When the last frame reached the first ESC: the route's origin for `last_visits`.
     last_at: u64,
 }
 
 /// The master port a walk leaves by, and when relative to its start.
 type Exit = Option<(MasterPort, u64)>;
+
+/// Nodes and their port times on a walk, in the order the walk reached them.
+type Visits = Vec<(usize, FrameTiming)>;
 
 /// The auto-close port waiting closed (node, port) where a walk ends.
 type Lands = Option<(usize, u8)>;
@@ -397,10 +403,10 @@ impl Segment {
     /// back; a port closed by loop control drops what its wire brings. On a tree and on a ring
     /// every port is passed at most twice, so a walk longer than that circles (a port closed by
     /// hand) and the frame never returns.
-    fn walk(&mut self, from: MasterPort) -> (Vec<(usize, FrameTiming)>, Exit, Lands) {
+    fn walk(&mut self, from: MasterPort) -> (Visits, Exit, Lands, Visits) {
         let mut visits = std::mem::take(&mut self.routes[from as usize].visits);
         visits.clear();
-        let Some((start, start_port, _)) = self.entry_of(from) else { return (visits, None, None) };
+        let Some((start, start_port, _)) = self.entry_of(from) else { return (visits, None, None, Vec::new()) };
         let mut lands = None;
         // Per node: its port times so far, and its visit's index once it has one.
         let mut timing = vec![FrameTiming::default(); self.nodes.len()];
@@ -455,12 +461,15 @@ impl Segment {
                 _ => (p, t, from_wire) = (q, t_tx + self.nodes[node].timing.loopback_ns as u64, false),
             }
         }
+        let mut passes = Vec::new();
         for (n, s) in slot.iter().enumerate() {
-            if let Some(i) = s {
-                visits[*i].1 = timing[n];
+            match s {
+                Some(i) => visits[*i].1 = timing[n],
+                None if timing[n].port_ns.iter().any(Option::is_some) => passes.push((n, timing[n])),
+                None => {}
             }
         }
-        (visits, exit, lands)
+        (visits, exit, lands, passes)
     }
 
     /// What decides a node's part of the route and may change between frames (timings and
@@ -480,8 +489,9 @@ impl Segment {
         key.clear();
         key.extend((0..self.nodes.len()).map(|i| self.route_state(i)));
         if !(self.routes[r].valid && key == self.routes[r].key) {
-            let (visits, exit, lands) = self.walk(from);
+            let (visits, exit, lands, passes) = self.walk(from);
             self.routes[r].visits = visits;
+            self.routes[r].passes = passes;
             self.routes[r].exit = exit;
             self.routes[r].lands = lands;
             self.routes[r].valid = true;
@@ -535,14 +545,15 @@ impl Segment {
         let mut reach = route.visits.len();
         let mut lost = exit.is_none();
         let mut corrupted = false;
+        let mut faulted = false;
         if self.loss_probability > 0.0 && self.fault_rng.gen_bool(self.loss_probability.clamp(0.0, 1.0)) {
             reach = self.fault_rng.gen_range(0..=reach);
-            (lost, lands) = (true, None);
+            (lost, lands, faulted) = (true, None, true);
         } else if self.corruption_probability > 0.0
             && self.fault_rng.gen_bool(self.corruption_probability.clamp(0.0, 1.0))
         {
             reach = self.fault_rng.gen_range(0..=reach);
-            (lost, lands) = (true, None);
+            (lost, lands, faulted) = (true, None, true);
             corrupted = true;
             self.stats.corrupted += 1;
         }
@@ -582,6 +593,13 @@ impl Segment {
         }
         let processed = !visits.is_empty();
         self.routes[link].visits = visits;
+        // Faults are drawn for the processing units only: a lost or corrupted frame latches
+        // nothing at the ports it merely passes.
+        if !faulted {
+            for (node, rel) in &self.routes[link].passes {
+                self.nodes[*node].esc.frame_passed(rel, head_at_first);
+            }
+        }
         // A whole frame at an auto-close port waiting closed opens it.
         if let Some((node, port)) = lands.filter(|_| !corrupted) {
             self.nodes[node].esc.frame_arrived_closed(port);

@@ -390,3 +390,69 @@ fn needs_shared_an_early_ek1100_from_beckhoffs_esi_has_receive_times_only() {
     let has: Vec<bool> = bus.seg.nodes.iter().map(|n| n.esc.has_system_time()).collect();
     assert_eq!(has, [false, true]);
 }
+
+/// A coupler, then a device of kind `esc` entered on its port 1 with a terminal behind its
+/// port 0 (processing order: coupler, terminal, device at 0x1003).
+fn reversed(esc: &str) -> Bus {
+    Bus::addressed(&format!(
+        "seed = 4\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'\n\
+         [[device]]\nname = 'x'\nbuiltin = 'SERVO'\nesc = '{esc}'\nparent = 'c'\nparent_port = 2\nport = 1\n\
+         [[device]]\nbuiltin = 'SERVO'\nparent = 'x'\nparent_port = 0\n"
+    ))
+}
+
+/// Port 1 less port 0 of station `st`, as one read sees them.
+fn port1_less_port0(bus: &mut Bus, st: u16) -> i64 {
+    let (t, _) = bus.fp(Command::FPRD, st, 0x0900, &[0; 8]);
+    let p = |k: usize| u32::from_le_bytes(t[4 * k..4 * k + 4].try_into().unwrap());
+    p(1).wrapping_sub(p(0)) as i32 as i64
+}
+
+#[test]
+fn which_frame_ports_1_to_3_latch_by_controller() {
+    // Entered on port 1, the frame reaches port 1 before the processing unit sees the write,
+    // and port 0 (coming back from the terminal) just before it.
+    // An ET1100 takes the writing frame at every port: port 1 before port 0.
+    let mut bus = reversed("et1100");
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+    let same = port1_less_port0(&mut bus, 0x1003);
+    assert!((-3_000..0).contains(&same), "{same}");
+    // An ET1200 or ESC20 only enables port 1: the read's own frame is the next it receives
+    // (reads run before the frame's end), a frame later; the one after finds it disabled.
+    for esc in ["esc20", "ipcore"] {
+        let mut bus = reversed(esc);
+        bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+        let next = port1_less_port0(&mut bus, 0x1003);
+        assert!(next > 0, "{esc}: {next}");
+        assert_eq!(port1_less_port0(&mut bus, 0x1003), next, "{esc}: port 1 takes one frame");
+        // Enabled again, port 1 takes the next frame, which reads it and then writes: port 0
+        // takes that frame too. Port 1 and port 0 of one frame, read across two frames.
+        bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+        let both = bus.tx_all(&[
+            (Command::FPRD, Address::Device { adp: 0x1003, ado: 0x0904 }, &[0; 4]),
+            (Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]),
+        ]);
+        let p1 = u32::from_le_bytes(both[0].0[..4].try_into().unwrap());
+        let p0 = bus.fprd_u32(0x1003, 0x0900);
+        assert_eq!(p1.wrapping_sub(p0) as i32 as i64, same, "{esc}: the geometry of one frame");
+    }
+    // The IP core in reverse mode (0x0936 = 1) takes the last frame each port received
+    // before the write: here the writing frame itself.
+    let mut bus = reversed("ipcore");
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &[1]);
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+    assert_eq!(port1_less_port0(&mut bus, 0x1003), same);
+}
+
+#[test]
+fn an_ip_core_in_reverse_mode_gives_the_ports_after_its_processing_unit_an_older_frame() {
+    let mut bus = line(&["EK1100", "SERVO", "SERVO"], "ipcore");
+    // Forwarding mode: port 1 takes the writing frame coming back, after port 0.
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+    let forwarding = port1_less_port0(&mut bus, 0x1002);
+    assert!((0..5_000).contains(&forwarding), "{forwarding}");
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &[1]);
+    bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+    let reverse = port1_less_port0(&mut bus, 0x1002);
+    assert!(reverse < 0, "the frame before the write came back before this one came in: {reverse}");
+}

@@ -31,6 +31,7 @@ impl Esc {
         // put into the register when a datagram reads it (most frames do not).
         self.system_time_latch = self.dc.as_ref().map(|_| epu_ns);
         self.effects = FrameEffects::default();
+        self.receptions_before_epu(timing, origin_ns);
         let mut off = 0;
         while off + HEADER_LEN + 2 <= chain.len() {
             let len = (u16::from_le_bytes([chain[off + 6], chain[off + 7]]) & 0x07FF) as usize;

@@ -241,21 +241,13 @@ impl Esc {
     #[inline]
     fn dc_end_of_frame(&mut self, timing: &FrameTiming, origin_ns: u64, w: &Written) -> bool {
         let t = timing.epu_ns + origin_ns;
+        self.latch_receive_times(timing, origin_ns, self.effects.latch_ports, self.effects.latch_epu);
         let Some(dc) = self.dc.as_mut() else {
             return false;
         };
         if self.effects.latch_epu {
             let local = dc.local_at(t);
             self.mem[0x0918..0x0920].copy_from_slice(&local.to_le_bytes());
-        }
-        if self.effects.latch_ports {
-            for (p, at) in timing.port_ns.iter().enumerate() {
-                // Ports the frame did not reach keep their old value (esc-spec §3.3).
-                if let Some(at) = at {
-                    let v = dc.local_at(at + origin_ns) as u32;
-                    self.mem[0x0900 + 4 * p..0x0904 + 4 * p].copy_from_slice(&v.to_le_bytes());
-                }
-            }
         }
         // The time written is compared with the copy latched at SOF (esc-spec 0x0910): with
         // the offset and delay in force before this frame's writes apply.

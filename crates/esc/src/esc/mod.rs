@@ -11,6 +11,7 @@ use crate::eeprom::Eeprom;
 mod al_mailbox;
 mod datagram;
 mod end_of_frame;
+mod receive_latch;
 mod registers;
 
 pub use al_mailbox::MailboxResponse;
@@ -200,6 +201,10 @@ pub struct Esc {
     /// The DC unit's system time part (0x0910–0x09FF) exists; without it only the receive
     /// times 0x0900–0x090F answer.
     system_time_unit: bool,
+    /// Ports 1–3 enabled to latch the next frame they receive (`ReceiveLatch::NextFrame`).
+    rx_armed: u8,
+    /// Each port's last receive time (local, low 32 bits): the IP core's reverse mode.
+    rx_hidden: [u32; 4],
 }
 
 impl Esc {
@@ -244,6 +249,8 @@ impl Esc {
             al_changed: false,
             irq: 0,
             system_time_unit: false,
+            rx_armed: 0,
+            rx_hidden: [0; 4],
         };
         esc.power_on(t_ns);
         esc
@@ -256,6 +263,7 @@ impl Esc {
         self.port_generation = self.port_generation.wrapping_add(1);
         self.mem.fill(0);
         self.closed_wait = [false; 4];
+        (self.rx_armed, self.rx_hidden) = (0, [0; 4]);
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
         self.mbx_queue.clear();

@@ -20,7 +20,7 @@ impl<I: Io> Master<I> {
     /// Parents and ports: parsed from the processing order, the active ports, entry ports and
     /// receive times where known (crate::topology); counting ports as SOEM does where no tree
     /// fits or the segment is too long to parse.
-    pub(super) fn topology(&mut self) {
+    pub(super) fn topology(&mut self) -> bool {
         let view = self.port_views();
         if view.len() <= 1024 {
             let links = match self.first_far_position() {
@@ -39,10 +39,11 @@ impl<I: Io> Master<I> {
                     s.parent = l.map(|l| l.parent as u16);
                     s.parent_port = l.map_or(0, |l| l.port);
                 }
-                return;
+                return true;
             }
         }
         self.count_ports_topology();
+        false
     }
 
     /// SOEM's inference: every entry on port 0, the processing order a pre-order walk.
@@ -177,6 +178,7 @@ impl<I: Io> Master<I> {
         if !self.slaves.iter().any(|s| s.has_dc) {
             return Ok(None);
         }
+        self.forwarding_latch_mode()?;
         // On a ring, the frame turns at the ring's port as on a line's end.
         let ring = match self.ring_port {
             Some((k, port)) => {
@@ -224,14 +226,29 @@ impl<I: Io> Master<I> {
             // 0x0918's low word is where it exists (esc-spec §3.3).
             s.has_system_time = answered;
             s.receive_time_epu = if answered { u64::from_le_bytes(epu) } else { s.receive_times[0] as u64 };
-            // The entry port saw the frame first (reversed cabling puts it elsewhere).
-            let active: Vec<usize> = (0..4).filter(|&p| s.active_ports[p]).collect();
-            if let Some(&e) = active.iter().min_by_key(|&&p| s.receive_times[p].wrapping_sub(s.receive_times[0]) as i32)
-            {
-                s.entry_port = e as u8;
-            }
+            s.entry_port = super::next_frame_latch::entry_by_times(s.receive_times, s.active_ports, s.entry_port);
         }
-        self.topology();
+        let inferred = self.topology();
+        // An ET1200, ESC20 or IP core entered elsewhere than on port 0 may have taken a later
+        // frame at the ports before its processing unit: no tree fits, or (on a split ring,
+        // whose probes pass the far half first) any may be off. Latch those again.
+        let next_frame = self.next_frame_slaves();
+        let far = self.first_far_position();
+        if !next_frame.is_empty() && (!inferred || far.is_some_and(|f| next_frame.iter().any(|&k| k >= f))) {
+            let ring = match self.ring_port {
+                Some((k, port)) => {
+                    let st = self.slaves[k as usize].station;
+                    Some((st, self.close_port(st, port)?))
+                }
+                None => None,
+            };
+            let relatched = self.relatch_next_frame(&next_frame);
+            if let Some((st, loop_control)) = ring {
+                self.reopen_port(st, loop_control)?;
+            }
+            relatched?;
+            self.topology();
+        }
         let view = self.port_views();
         // When the frame reaches each DC slave's entry port, relative to the first DC slave on
         // its way; parents before children, whatever the processing order.

@@ -10,6 +10,7 @@ use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
 
 mod delays;
+mod next_frame_latch;
 mod process_data;
 mod sii;
 mod split_start;

@@ -1,0 +1,182 @@
+//! A second latch for controllers whose ports 1–3 take the frame after the write to 0x0900:
+//! the ET1200 and ESC20 (register description, 0x0904) and the IP core in forwarding mode
+//! (0x0936 = 0; esc-spec).
+//!
+//! Entered on port 0, such an ESC sees the writing frame at ports 1–3 only after its
+//! processing unit, and takes it there. Entered elsewhere (reversed cabling, the far half of
+//! a ring split before the master started), the ports the frame passed before the processing
+//! unit take the next frame through them, a master round trip or more later: the times then
+//! fit no tree, or a wrong one. The master latches such slaves again: a write R, then frames S
+//! and T that each read the ports and then write 0x0900, then U that reads. A read runs before
+//! its frame's write applies (at the end of the frame), so S reads what S's own arrival
+//! latched at a port R enabled, and T reads what S's write latched (port 0, the processing
+//! unit, the ports after it). A port's two readings differ by the spacing of R and S if they
+//! are written frames' stamps (R's, then S's) and by that of S and T if they are arrivals
+//! (S's, then T's); the ESC's own processing-unit (or port 0) times give both spacings, which
+//! a pause before T keeps apart. Every time is then S's, and is carried into the first
+//! latch's frame by the processing unit's (or port 0's) time in each: the offsets stay those
+//! of one frame for every slave, and the geometry (times within one ESC) is exact.
+use ferrocat_wire::{Address, Command};
+
+use super::Master;
+use crate::engine::Pdu;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+
+/// ESC types (0x0000) whose ports 1–3 take the frame after the write: ESC20, IP core, ET1200.
+const NEXT_FRAME_TYPES: [u8; 3] = [0x02, IP_CORE, 0x12];
+const IP_CORE: u8 = 0x04;
+/// Slaves per round: one frame of reads (16 + 8 bytes of data and two headers each).
+const PER_ROUND: usize = 24;
+/// The pause before T, so that the spacings R→S and S→T differ.
+const PAUSE_NS: u64 = 50_000;
+/// A reading within this of a spacing is of it: 10 ns latches, and drift over the spacing.
+const MATCH_NS: i64 = 60;
+const ATTEMPTS: usize = 3;
+
+/// One slave's readings of 0x0900–0x090F and 0x0918 (where it has a system time).
+#[derive(Debug, Clone, Copy, Default)]
+struct Reading {
+    ports: [u32; 4],
+    epu: Option<u32>,
+}
+
+impl<I: Io> Master<I> {
+    /// An IP core's receive-time latch in forwarding mode (0x0936 = 0, the reset value, which
+    /// a master before may have changed): in reverse mode the ports after the processing unit
+    /// would give the frame before the write.
+    pub(super) fn forwarding_latch_mode(&mut self) -> Result<()> {
+        if self.slaves.iter().any(|s| s.has_dc && s.esc_type == IP_CORE) {
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [0])?;
+        }
+        Ok(())
+    }
+
+    /// DC slaves of a next-frame type with a port besides the one they are entered by: the
+    /// first latch may have given them a later frame's time.
+    pub(super) fn next_frame_slaves(&self) -> Vec<usize> {
+        (0..self.slaves.len())
+            .filter(|&k| {
+                let s = &self.slaves[k];
+                s.has_dc && NEXT_FRAME_TYPES.contains(&s.esc_type) && s.active_ports.iter().filter(|&&a| a).count() >= 2
+            })
+            .collect()
+    }
+
+    /// Latches `targets` again (module doc) and puts their receive times, as the first latch's
+    /// frame would have given them, in place of the first latch's.
+    pub(super) fn relatch_next_frame(&mut self, targets: &[usize]) -> Result<()> {
+        let probes = std::mem::replace(&mut self.engine.probes_off, true);
+        let done = targets.chunks(PER_ROUND).try_for_each(|chunk| self.relatch_round(chunk));
+        self.engine.probes_off = probes;
+        done
+    }
+
+    fn relatch_round(&mut self, chunk: &[usize]) -> Result<()> {
+        for _ in 0..ATTEMPTS {
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0; 4])?;
+            let s = self.read_receive_times(chunk, true)?;
+            let resume_ns = self.engine.io.now_ns() + PAUSE_NS;
+            self.engine.io.sleep_until(resume_ns);
+            let t = self.read_receive_times(chunk, true)?;
+            let u = self.read_receive_times(chunk, false)?;
+            let merged: Option<Vec<[u32; 4]>> = chunk
+                .iter()
+                .enumerate()
+                .map(|(i, &k)| as_written_by_s(&s[i], &t[i], &u[i], self.slaves[k].active_ports))
+                .collect();
+            let Some(merged) = merged else { continue };
+            for (i, (&k, times)) in chunk.iter().zip(merged).enumerate() {
+                let sl = &mut self.slaves[k];
+                // S's times into the first latch's frame, by the processing unit's time in
+                // each (port 0's without a system time: 0x0918's low word where it exists).
+                let (first, in_s) = match t[i].epu {
+                    Some(epu) if sl.has_system_time => (sl.receive_time_epu as u32, epu),
+                    _ => (sl.receive_times[0], times[0]),
+                };
+                let shift = first.wrapping_sub(in_s);
+                sl.receive_times = times.map(|x| x.wrapping_add(shift));
+                sl.entry_port = entry_by_times(sl.receive_times, sl.active_ports, sl.entry_port);
+            }
+            return Ok(());
+        }
+        Err(MasterError::Config(format!(
+            "receive times of {} could not be latched again: the spacings of the latching frames did not tell their readings apart in {ATTEMPTS} tries",
+            chunk.iter().map(|&k| self.slaves[k].name.clone()).collect::<Vec<_>>().join(", ")
+        )))
+    }
+
+    /// One frame: each slave's 0x0900–0x090F and 0x0918, then (with `write`) a BWR of 0x0900.
+    fn read_receive_times(&mut self, chunk: &[usize], write: bool) -> Result<Vec<Reading>> {
+        let mut ports = vec![[0u8; 16]; chunk.len()];
+        let mut epus = vec![[0u8; 8]; chunk.len()];
+        let mut latch = [0u8; 4];
+        let mut pdus = Vec::with_capacity(2 * chunk.len() + 1);
+        let mut epu_at = Vec::with_capacity(chunk.len());
+        for ((&k, p), e) in chunk.iter().zip(&mut ports).zip(&mut epus) {
+            let st = self.slaves[k].station;
+            pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0900 }, p));
+            epu_at.push(self.slaves[k].has_system_time.then_some(pdus.len()));
+            if self.slaves[k].has_system_time {
+                pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, e));
+            }
+        }
+        if write {
+            pdus.push(Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch));
+        }
+        self.engine.transact(&mut pdus)?;
+        if let Some(p) = pdus.iter().find(|p| p.cmd == Command::FPRD && p.wkc != 1) {
+            return Err(MasterError::Config(format!(
+                "{} answered with working counter {} while latching receive times again",
+                crate::engine::describe(p.cmd, p.address, p.data.len()),
+                p.wkc
+            )));
+        }
+        let epu_values: Vec<Option<u32>> =
+            epu_at.iter().map(|at| at.map(|i| u32::from_le_bytes(pdus[i].data[..4].try_into().unwrap()))).collect();
+        drop(pdus);
+        Ok(ports
+            .iter()
+            .zip(epu_values)
+            .map(|(p, epu)| Reading {
+                ports: [0, 1, 2, 3].map(|q| u32::from_le_bytes(p[4 * q..4 * q + 4].try_into().unwrap())),
+                epu,
+            })
+            .collect())
+    }
+}
+
+/// The entry port: the active port that saw the frame first (reversed cabling puts it
+/// elsewhere than port 0).
+pub(super) fn entry_by_times(times: [u32; 4], active: [bool; 4], otherwise: u8) -> u8 {
+    (0..4u8)
+        .filter(|&p| active[p as usize])
+        .min_by_key(|&p| times[p as usize].wrapping_sub(times[0]) as i32)
+        .unwrap_or(otherwise)
+}
+
+/// The slave's port times as frame S latched them, from S's, T's and U's readings; `None`
+/// where the two spacings are too close to tell apart or a reading fits neither.
+fn as_written_by_s(s: &Reading, t: &Reading, u: &Reading, active: [bool; 4]) -> Option<[u32; 4]> {
+    let diff = |a: u32, b: u32| b.wrapping_sub(a) as i32 as i64;
+    // R→S and S→T in this ESC's clock.
+    let (rs, st) = match (s.epu, t.epu, u.epu) {
+        (Some(a), Some(b), Some(c)) => (diff(a, b), diff(b, c)),
+        _ if active[0] => (diff(s.ports[0], t.ports[0]), diff(t.ports[0], u.ports[0])),
+        _ => return None,
+    };
+    if (st - rs).abs() <= 2 * MATCH_NS {
+        return None;
+    }
+    let mut out = t.ports;
+    for p in (1..4).filter(|&p| active[p]) {
+        let d = diff(s.ports[p], t.ports[p]);
+        if (d - st).abs() <= MATCH_NS {
+            // S's arrival, which S read.
+            out[p] = s.ports[p];
+        } else if (d - rs).abs() > MATCH_NS {
+            return None;
+        }
+    }
+    Some(out)
+}
