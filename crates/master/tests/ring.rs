@@ -493,3 +493,39 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         assert_eq!(wiring(&m), whole);
     }
 }
+
+/// A ring of drives whose controllers are IP cores (ports 1–3 take the frame after the write
+/// to 0x0900), split before the master starts between the first and second drive: the far
+/// half is entered on the last drive's port 1, so the first latch gives its port 1 the next
+/// frame through it — a probe from the secondary. The master latches the far half again with
+/// the probes off (master/next_frame_latch.rs).
+const IP_CORE_RING: &str = "seed = 8\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+    [[device]]\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'c'\nparent_port = 2\n\
+    [[device]]\nbuiltin = 'SERVO'\nesc = 'ipcore'\ncable_m = 10.0\n\
+    [[device]]\nbuiltin = 'SERVO'\nesc = 'ipcore'\n[secondary]\ndevice = 4\n";
+
+#[test]
+fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
+    let mut intact = master(IP_CORE_RING, HostModel::pc_rt());
+    intact.scan().unwrap();
+    let whole = wiring(&intact);
+    let toml = format!("{IP_CORE_RING}[[event]]\nat_ms = 0\nlink_down = {{ device = 3, port = 0 }}\n");
+    let mut worst = 0i64;
+    let m = cycle_ring(&toml, HostModel::pc_rt(), SplitRingClocks::FarReference, &[], 3_000, |k, t| {
+        if k >= 1_000 {
+            // Clocks with a system time: the coupler (the reference), then the drives.
+            worst = worst
+                .max([2, 3].map(|d| (t[d].wrapping_sub(t[0]) as u32 as i32 as i64).abs()).into_iter().max().unwrap());
+        }
+    });
+    let split = wiring(&m);
+    let l = m.split_latch.as_ref().expect("the latch saw the split");
+    println!("intact {whole:?}\nsplit {split:?}\nworst |far drives − reference| over the last 2 s: {worst} ns");
+    assert_eq!((l.first_far, l.root, l.root_port), (3, 4, 1), "entered on the last drive's port 1");
+    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 0, 1, 1]);
+    // The last drive's delay from the far reference (the second drive), as the intact ring's
+    // difference, to within the receive times' 10 ns.
+    let (apart, intact_apart) = (split[4].2 as i64 - split[3].2 as i64, whole[4].2 as i64 - whole[3].2 as i64);
+    assert!((apart - intact_apart).abs() <= 10, "{apart} vs {intact_apart}");
+    assert!(worst < 200, "{worst} ns");
+}

@@ -52,13 +52,13 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    /// DC slaves of a next-frame type with a port besides the one they are entered by: the
-    /// first latch may have given them a later frame's time.
+    /// DC slaves of a next-frame type with a port other than 0 in use (the one they are
+    /// entered by, or a branch): the first latch may have given it a later frame's time.
     pub(super) fn next_frame_slaves(&self) -> Vec<usize> {
         (0..self.slaves.len())
             .filter(|&k| {
                 let s = &self.slaves[k];
-                s.has_dc && NEXT_FRAME_TYPES.contains(&s.esc_type) && s.active_ports.iter().filter(|&&a| a).count() >= 2
+                s.has_dc && NEXT_FRAME_TYPES.contains(&s.esc_type) && s.active_ports[1..].iter().any(|&a| a)
             })
             .collect()
     }
@@ -80,13 +80,18 @@ impl<I: Io> Master<I> {
             self.engine.io.sleep_until(resume_ns);
             let t = self.read_receive_times(chunk, true)?;
             let u = self.read_receive_times(chunk, false)?;
-            let merged: Option<Vec<[u32; 4]>> = chunk
+            let merged: Vec<Merged> = chunk
                 .iter()
                 .enumerate()
                 .map(|(i, &k)| as_written_by_s(&s[i], &t[i], &u[i], self.slaves[k].active_ports))
                 .collect();
-            let Some(merged) = merged else { continue };
-            for (i, (&k, times)) in chunk.iter().zip(merged).enumerate() {
+            if merged.contains(&Merged::Ambiguous) {
+                continue;
+            }
+            for (i, (&k, merged)) in chunk.iter().zip(merged).enumerate() {
+                // Without a processing-unit time or port 0 in use, nothing tells the readings
+                // apart: the first latch's stand.
+                let Merged::Times(times) = merged else { continue };
                 let sl = &mut self.slaves[k];
                 // S's times into the first latch's frame, by the processing unit's time in
                 // each (port 0's without a system time: 0x0918's low word where it exists).
@@ -155,18 +160,27 @@ pub(super) fn entry_by_times(times: [u32; 4], active: [bool; 4], otherwise: u8) 
         .unwrap_or(otherwise)
 }
 
-/// The slave's port times as frame S latched them, from S's, T's and U's readings; `None`
-/// where the two spacings are too close to tell apart or a reading fits neither.
-fn as_written_by_s(s: &Reading, t: &Reading, u: &Reading, active: [bool; 4]) -> Option<[u32; 4]> {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Merged {
+    /// The port times as frame S latched them.
+    Times([u32; 4]),
+    /// Neither a processing-unit time nor port 0 in use to measure the spacings by.
+    NoReference,
+    /// The two spacings too close to tell apart, or a reading that fits neither.
+    Ambiguous,
+}
+
+/// The slave's port times as frame S latched them, from S's, T's and U's readings.
+fn as_written_by_s(s: &Reading, t: &Reading, u: &Reading, active: [bool; 4]) -> Merged {
     let diff = |a: u32, b: u32| b.wrapping_sub(a) as i32 as i64;
     // R→S and S→T in this ESC's clock.
     let (rs, st) = match (s.epu, t.epu, u.epu) {
         (Some(a), Some(b), Some(c)) => (diff(a, b), diff(b, c)),
         _ if active[0] => (diff(s.ports[0], t.ports[0]), diff(t.ports[0], u.ports[0])),
-        _ => return None,
+        _ => return Merged::NoReference,
     };
     if (st - rs).abs() <= 2 * MATCH_NS {
-        return None;
+        return Merged::Ambiguous;
     }
     let mut out = t.ports;
     for p in (1..4).filter(|&p| active[p]) {
@@ -175,8 +189,8 @@ fn as_written_by_s(s: &Reading, t: &Reading, u: &Reading, active: [bool; 4]) -> 
             // S's arrival, which S read.
             out[p] = s.ports[p];
         } else if (d - rs).abs() > MATCH_NS {
-            return None;
+            return Merged::Ambiguous;
         }
     }
-    Some(out)
+    Merged::Times(out)
 }
