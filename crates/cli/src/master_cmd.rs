@@ -25,7 +25,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     "esc_type": s.esc_type, "fmmus": s.fmmu_count, "sync_managers": s.sm_count,
                     "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
                     "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
-                    "active_ports": s.active_ports,
+                    "active_ports": s.active_ports, "relatched": m.relatched.contains(&(s.position as usize)),
                     "ring_port": m.ring_port.or(split_root).filter(|r| r.0 == s.position).map(|r| r.1),
                     "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
@@ -68,6 +68,12 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
             if s.has_dc && !s.has_system_time {
                 outln!(" DC: receive times only (no system time)");
+            }
+            if s.entry_port != 0 {
+                outln!(" Entered on port {}", s.entry_port);
+            }
+            if m.relatched.contains(&(s.position as usize)) {
+                outln!(" DC: latched again (its ports 1–3 take the frame after the write to 0x0900)");
             }
             if let Some((_, port)) = m.ring_port.or(split_root).filter(|r| r.0 == s.position) {
                 outln!(" Ring: port {port} leads back to the master's secondary port");

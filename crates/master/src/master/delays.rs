@@ -175,6 +175,7 @@ impl<I: Io> Master<I> {
     /// reference's readings) when there are DC slaves.
     pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
         self.split_latch = None;
+        self.relatched.clear();
         if !self.slaves.iter().any(|s| s.has_dc) {
             return Ok(None);
         }
@@ -246,7 +247,7 @@ impl<I: Io> Master<I> {
             if let Some((st, loop_control)) = ring {
                 self.reopen_port(st, loop_control)?;
             }
-            relatched?;
+            self.relatched = relatched?;
             self.topology();
         }
         let view = self.port_views();

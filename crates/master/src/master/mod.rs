@@ -110,6 +110,9 @@ pub struct Master<I: Io> {
     /// The last latch of the receive times found the ring split: the far half's delays are
     /// from its own reference (`split_start.rs`).
     pub split_latch: Option<SplitLatch>,
+    /// Positions whose receive times the last latch took from a second latch: controllers whose
+    /// ports 1–3 take the frame after the write, where the first did not fit (`next_frame_latch.rs`).
+    pub relatched: Vec<usize>,
 }
 
 impl<I: Io> Master<I> {
@@ -137,6 +140,7 @@ impl<I: Io> Master<I> {
             ring_shortening_ns: 0,
             far_steer: None,
             split_latch: None,
+            relatched: Vec::new(),
         }
     }
 

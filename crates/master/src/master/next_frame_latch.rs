@@ -64,15 +64,16 @@ impl<I: Io> Master<I> {
     }
 
     /// Latches `targets` again (module doc) and puts their receive times, as the first latch's
-    /// frame would have given them, in place of the first latch's.
-    pub(super) fn relatch_next_frame(&mut self, targets: &[usize]) -> Result<()> {
+    /// frame would have given them, in place of the first latch's; returns where it did.
+    pub(super) fn relatch_next_frame(&mut self, targets: &[usize]) -> Result<Vec<usize>> {
         let probes = std::mem::replace(&mut self.engine.probes_off, true);
-        let done = targets.chunks(PER_ROUND).try_for_each(|chunk| self.relatch_round(chunk));
+        let mut replaced = Vec::new();
+        let done = targets.chunks(PER_ROUND).try_for_each(|chunk| self.relatch_round(chunk, &mut replaced));
         self.engine.probes_off = probes;
-        done
+        done.map(|()| replaced)
     }
 
-    fn relatch_round(&mut self, chunk: &[usize]) -> Result<()> {
+    fn relatch_round(&mut self, chunk: &[usize], replaced: &mut Vec<usize>) -> Result<()> {
         for _ in 0..ATTEMPTS {
             self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0; 4])?;
             let s = self.read_receive_times(chunk, true)?;
@@ -102,6 +103,7 @@ impl<I: Io> Master<I> {
                 let shift = first.wrapping_sub(in_s);
                 sl.receive_times = times.map(|x| x.wrapping_add(shift));
                 sl.entry_port = entry_by_times(sl.receive_times, sl.active_ports, sl.entry_port);
+                replaced.push(k);
             }
             return Ok(());
         }
