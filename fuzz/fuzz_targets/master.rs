@@ -11,7 +11,9 @@
 //! kept on the reference's time from what the two passes read. If its second bit is set too,
 //! the cable is pulled before the master starts instead (the far half latched as its own
 //! tree, set up from the two passes, its ports auto-close) and put back 50 ms into the cycles
-//! (the master opens the ring and latches the far half again).
+//! (the master opens the ring and latches the far half again). Its third bit enters the input
+//! terminal (an ET1200) on port 1 with the drive behind its port 0, which the master latches
+//! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::{Event, Segment, SegmentConfig};
@@ -25,8 +27,6 @@ builtin = "EK1100"
 builtin = "EL2004"
 [[device]]
 builtin = "EL1004"
-[[device]]
-builtin = "SERVO"
 "#;
 
 /// The in-process world with the input's tampering applied to every frame received.
@@ -95,7 +95,12 @@ fuzz_target!(|data: &[u8]| {
     let Some((&mode, script)) = data.split_first() else { return };
     let ring = mode & 1 == 1;
     let split_first = ring && mode & 2 == 2;
-    let toml = if ring { format!("{SEGMENT}[secondary]\ndevice = 3\n") } else { SEGMENT.to_string() };
+    let entered = if mode & 4 != 0 { "port = 1\n" } else { "" };
+    let esc = if mode & 8 != 0 { "esc = \"ipcore\"\n" } else { "" };
+    let mut toml = format!("{SEGMENT}{entered}[[device]]\nbuiltin = \"SERVO\"\n{esc}");
+    if ring {
+        toml += "[secondary]\ndevice = 3\n";
+    }
     let cfg: SegmentConfig = toml::from_str(&toml).expect("the fuzz segment parses");
     let mut seg = cfg.build().expect("the fuzz segment builds");
     if split_first {
@@ -134,11 +139,13 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     let _ = m.supervise();
-    if let Ok(list) = m.od_list(3) {
+    // The drive's position: the last, or before the reversed terminal behind which it hangs.
+    let drive = m.slaves.iter().position(|s| s.name == "SERVO").unwrap_or(3) as u16;
+    if let Ok(list) = m.od_list(drive) {
         for index in list.into_iter().take(16) {
-            let _ = m.object_info(3, index);
-            let _ = m.sdo_read(3, index, 0);
+            let _ = m.object_info(drive, index);
+            let _ = m.sdo_read(drive, index, 0);
         }
     }
-    let _ = m.sdo_write(3, 0x6060, 0, &[8]);
+    let _ = m.sdo_write(drive, 0x6060, 0, &[8]);
 });
