@@ -298,3 +298,48 @@ fn run_sets_up_a_ring_split_from_the_start() {
     // Closed, on the reference's delays: the time control loops' residual (4–15 ns measured).
     assert!(far(&closed).abs() < 200, "{closed}");
 }
+
+#[test]
+fn a_reversed_et1200_is_latched_again_in_real_time() {
+    // An EL1004 (ET1200: its ports 1–3 take the frame after the write to 0x0900) entered on
+    // port 1 with a terminal behind its port 0, both with a system time: the master latches
+    // them again over the veth pair as in virtual time (master/next_frame_latch.rs).
+    let seg = std::env::temp_dir().join(format!("ferrocat-reversed-live-{}.toml", std::process::id()));
+    std::fs::write(
+        &seg,
+        "seed = 4\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'EL1004'\nport = 1\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
+    )
+    .unwrap();
+    let path = seg.to_str().unwrap();
+    let scan_json = |out: std::process::Output| -> Vec<serde_json::Value> {
+        assert!(out.status.success(), "ferrocat scan: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap().as_array().unwrap().clone()
+    };
+    let virtual_time = scan_json(
+        Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["scan", "--json", "--config", path]).output().unwrap(),
+    );
+    let net = VethPair::new("rv");
+    let sim = Sim::start(&net, &["--config", path]);
+    let live =
+        scan_json(ferrocat_in(&net.master_ns).args(["scan", "--json", "--iface", &net.master_if]).output().unwrap());
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/soem_scan.py");
+    let soem =
+        VethPair::cmd(&net.master_ns, python().to_str().unwrap()).args([script, &net.master_if]).output().unwrap();
+    sim.stop();
+    std::fs::remove_file(&seg).ok();
+    let field = |v: &[serde_json::Value], k: &str| v.iter().map(|s| s[k].clone()).collect::<Vec<_>>();
+    println!("virtual: {:?}\nlive:    {:?}", field(&virtual_time, "delay_ns"), field(&live, "delay_ns"));
+    if soem.status.success() {
+        let soem: serde_json::Value = serde_json::from_slice(&soem.stdout).unwrap();
+        println!("SOEM:    {:?}", soem.as_array().unwrap().iter().map(|s| s["delay_ns"].clone()).collect::<Vec<_>>());
+    }
+    for k in ["entry_port", "parent", "parent_port", "relatched"] {
+        assert_eq!(field(&live, k), field(&virtual_time, k), "{k}");
+    }
+    assert_eq!(field(&live, "entry_port"), [0, 0, 0, 1].map(serde_json::Value::from));
+    for (a, b) in live.iter().zip(&virtual_time) {
+        let (d1, d2) = (a["delay_ns"].as_i64().unwrap(), b["delay_ns"].as_i64().unwrap());
+        assert!((d1 - d2).abs() <= 10, "{}: live {d1} ns, virtual {d2} ns", a["name"]);
+    }
+}
