@@ -195,3 +195,17 @@ fn synchronises(mut m: Master<VirtualIo>) {
 fn links(m: &Master<VirtualIo>) -> Vec<Option<(u16, u8)>> {
     m.slaves.iter().map(|s| s.parent.map(|p| (p, s.parent_port))).collect()
 }
+
+#[test]
+fn a_reversed_terminal_at_the_end() {
+    // A terminal entered on port 1 with nothing on its port 0 (closed), which therefore
+    // latches nothing: no receive time gives its processing unit's, and with a single port in
+    // use it is still placed (its parent's round trip holds it). A second coupler on the
+    // first one's X2: SOEM's formula makes its hop 25 ns long here (the closed-port bias, 20 ns
+    // with the terminal cabled normally); told the loop-back, 5 ns.
+    let toml = "seed = 9\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'EL1004'\nport = 1\n[[device]]\nbuiltin = 'EK1100'\nparent = 0\napp = 'dc'\n";
+    let m = check_within("reversed at the end", toml, 30);
+    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 1, 0]);
+    assert_eq!(links(&m), [None, Some((0, 1)), Some((1, 1)), Some((0, 2))]);
+}
