@@ -59,6 +59,9 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
             // A CoE device's outputs: its mapped objects as it last received them.
             let coe = n.esc.app().as_any().downcast_ref::<ferrocat_esc::CoeDevice>();
             let outputs = io.map(|d| d.outputs.clone()).or_else(|| coe.map(|c| c.image(true)));
+            // Its FoE server's transfers, where it has one (a plain CoE device or a drive).
+            let drive = n.esc.app().as_any().downcast_ref::<ferrocat_esc::Cia402Drive>();
+            let foe = coe.and_then(|c| c.foe.as_ref()).or_else(|| drive.and_then(|d| d.coe.foe.as_ref()));
             json!({
                 "position": i,
                 "name": n.name,
@@ -70,6 +73,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "output_updates": io.map(|d| d.output_updates),
                 "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns()),
                 "system_time_less_first_ns": less_first(n),
+                "foe": foe.map(|f| json!({"writes": f.writes, "reads": f.reads, "busy_sent": f.busy_sent})),
             })
         })
         .collect();

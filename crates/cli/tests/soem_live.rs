@@ -196,15 +196,22 @@ fn soem_enables_the_simulated_cia402_drive() {
 
 /// SOEM's FoE client, unmodified, against the simulated drive's file server: files shorter
 /// than a packet, of exactly one and three packets (ended by an empty packet) and of many,
-/// written and read back the same; a missing file and a wrong password refused.
+/// written and read back the same, the first packet of each answered busy twice; a missing
+/// file and a wrong password refused.
 #[test]
 fn soem_writes_and_reads_files_by_foe() {
     let net = VethPair::new("sf");
     let segment = foe_segment();
-    let sim = Sim::start(&net, &["--config", &segment]);
+    let report = std::env::temp_dir().join(format!("ferrocat-foe-report-{}.json", std::process::id()));
+    let sim = Sim::start(&net, &["--config", &segment, "--report", report.to_str().unwrap()]);
     let r = soem_script(&net, "soem_foe.py", &["1", "0x5A5A"]);
     sim.stop();
     std::fs::remove_file(&segment).unwrap();
+    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    std::fs::remove_file(&report).ok();
+    // The drive answered the first packet of each of the five writes busy twice (flash being
+    // erased, `foe_busy = 2`), and SOEM sent it again each time.
+    assert_eq!(rep["devices"][1]["foe"], serde_json::json!({"writes": 5, "reads": 5, "busy_sent": 10}), "{rep}");
     assert_eq!(r["found"], 2);
     let files = r["files"].as_array().unwrap();
     assert_eq!(files.len(), 5, "{r}");
@@ -281,10 +288,14 @@ fn soem_script(net: &VethPair, script: &str, args: &[&str]) -> serde_json::Value
     r
 }
 
-/// EK1100 and the built-in servo with an FoE password, as a segment file.
+/// EK1100 and the built-in servo with an FoE password, busy twice at each write's first
+/// packet, as a segment file.
 fn foe_segment() -> String {
     let path = std::env::temp_dir().join(format!("ferrocat-foe-{}.toml", std::process::id()));
-    std::fs::write(&path, "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\nfoe_password = 0x5A5A\n")
-        .unwrap();
+    std::fs::write(
+        &path,
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\nfoe_password = 0x5A5A\nfoe_busy = 2\n",
+    )
+    .unwrap();
     path.display().to_string()
 }

@@ -11,8 +11,9 @@ pub const CAPACITY_BYTES: usize = 64 << 20;
 
 #[derive(Debug, Clone)]
 enum Transfer {
-    /// Receiving `name`; `next` is the packet number expected.
-    Write { name: Vec<u8>, data: Vec<u8>, next: u32 },
+    /// Receiving `name`; `next` is the packet number expected, `busy_left` how many more
+    /// times its first data packet is answered busy.
+    Write { name: Vec<u8>, data: Vec<u8>, next: u32, busy_left: u32 },
     /// Sending `data`; `packet` was the last one sent and `sent` bytes have gone, `last` whether
     /// that packet ended the file.
     Read { data: Vec<u8>, sent: usize, packet: u32, last: bool },
@@ -25,9 +26,13 @@ pub struct FoeServer {
     /// The password read and write requests must carry (0: any).
     pub password: u32,
     transfer: Option<Transfer>,
-    /// Files received whole, and files sent whole.
+    /// How many times the first data packet of each write is answered busy (a device
+    /// erasing its flash before it takes the file); the master sends the packet again.
+    pub busy_per_write: u32,
+    /// Files received whole, files sent whole, busy replies sent.
     pub writes: u64,
     pub reads: u64,
+    pub busy_sent: u64,
 }
 
 /// An FoE reply's service data.
@@ -66,7 +71,9 @@ impl FoeServer {
                 if self.password != 0 && password != self.password {
                     return error(FoeErrorCode::ACCESS_DENIED);
                 }
-                self.transfer = Some(Transfer::Write { name: file_name.to_vec(), data: Vec::new(), next: 1 });
+                let busy_left = self.busy_per_write;
+                self.transfer =
+                    Some(Transfer::Write { name: file_name.to_vec(), data: Vec::new(), next: 1, busy_left });
                 emit(Foe::Ack { packet: 0 })
             }
             (Foe::ReadRequest { password, file_name }, _) => {
@@ -78,10 +85,18 @@ impl FoeServer {
                 };
                 self.next_packet(data, 0, 0, in_len)
             }
-            (Foe::Data { packet, data }, Some(Transfer::Write { name, data: mut file, next })) => {
+            (Foe::Data { packet, data }, Some(Transfer::Write { name, data: mut file, next, busy_left })) => {
                 let max = max_data_len(out_len);
                 if packet != next {
                     return error(FoeErrorCode::PACKET_NUMBER_WRONG);
+                }
+                if busy_left > 0 {
+                    // Not taken: the master sends this packet again (ETG.1000.6 §5.7).
+                    self.transfer = Some(Transfer::Write { name, data: file, next, busy_left: busy_left - 1 });
+                    self.busy_sent += 1;
+                    let entire = self.busy_per_write.min(u16::MAX as u32) as u16;
+                    let done = (self.busy_per_write - busy_left + 1).min(entire as u32) as u16;
+                    return emit(Foe::Busy { done, entire });
                 }
                 if data.len() > max {
                     return error(FoeErrorCode::ILLEGAL);
@@ -95,7 +110,8 @@ impl FoeServer {
                     self.files.insert(name, file);
                     self.writes += 1;
                 } else {
-                    self.transfer = Some(Transfer::Write { name, data: file, next: next.wrapping_add(1) });
+                    self.transfer =
+                        Some(Transfer::Write { name, data: file, next: next.wrapping_add(1), busy_left: 0 });
                 }
                 emit(Foe::Ack { packet })
             }
@@ -193,6 +209,24 @@ mod tests {
         assert!(!s.files.contains_key(&b"y"[..]));
         s.handle(&req(Foe::Data { packet: 2, data: &[] }), MBX, MBX);
         assert_eq!(s.files.get(&b"y"[..]), Some(&vec![1; 12]));
+    }
+
+    #[test]
+    fn a_busy_server_takes_the_first_packet_when_it_comes_again() {
+        let mut s = FoeServer { busy_per_write: 2, ..FoeServer::default() };
+        s.handle(&req(Foe::WriteRequest { password: 0, file_name: b"fw" }), MBX, MBX);
+        let first = req(Foe::Data { packet: 1, data: &[9; 12] });
+        assert_eq!(parse(&s.handle(&first, MBX, MBX)), Foe::Busy { done: 1, entire: 2 });
+        assert_eq!(parse(&s.handle(&first, MBX, MBX)), Foe::Busy { done: 2, entire: 2 });
+        assert_eq!(parse(&s.handle(&first, MBX, MBX)), Foe::Ack { packet: 1 });
+        // Only the first packet: the rest is acknowledged at once.
+        assert_eq!(parse(&s.handle(&req(Foe::Data { packet: 2, data: &[8] }), MBX, MBX)), Foe::Ack { packet: 2 });
+        assert_eq!(s.files.get(&b"fw"[..]), Some(&[[9; 12].as_slice(), &[8]].concat()));
+        // A packet number skipped while busy is still wrong.
+        s.handle(&req(Foe::WriteRequest { password: 0, file_name: b"g" }), MBX, MBX);
+        let skipped = s.handle(&req(Foe::Data { packet: 2, data: &[] }), MBX, MBX);
+        assert!(matches!(parse(&skipped), Foe::Error { code: FoeErrorCode::PACKET_NUMBER_WRONG, .. }));
+        assert_eq!((s.writes, s.busy_sent), (1, 2));
     }
 
     #[test]

@@ -65,10 +65,26 @@ fn the_slaves_errors_reach_the_caller_by_name() {
 }
 
 #[test]
-fn a_password_on_a_device_without_foe_is_refused() {
-    let toml = "[[device]]\nbuiltin = 'EL2004'\nfoe_password = 1\n";
-    let e = toml::from_str::<SegmentConfig>(toml).unwrap().build().unwrap_err().to_string();
-    assert!(e.contains("device 0") && e.contains("foe_password"), "{e}");
+fn a_password_or_busy_on_a_device_without_foe_is_refused() {
+    for key in ["foe_password", "foe_busy"] {
+        let toml = format!("[[device]]\nbuiltin = 'EL2004'\n{key} = 1\n");
+        let e = toml::from_str::<SegmentConfig>(&toml).unwrap().build().unwrap_err().to_string();
+        assert!(e.contains("device 0") && e.contains(key), "{e}");
+    }
+}
+
+#[test]
+fn a_slave_busy_erasing_its_flash_gets_the_first_packet_again() {
+    // The drive answers busy five times to the first data packet of every write.
+    let mut m = master("foe_busy = 5");
+    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox.as_ref().unwrap().out.1 as usize);
+    for n in [1, 3 * packet + 5] {
+        let name = format!("fw-{n}.bin");
+        m.foe_write(DRIVE, &name, 0, &file(n)).unwrap();
+        assert_eq!(server(&m).files.get(name.as_bytes()), Some(&file(n)), "{n} bytes stored whole");
+        assert_eq!(m.foe_read(DRIVE, &name, 0, 1 << 20).unwrap(), file(n));
+    }
+    assert_eq!((server(&m).writes, server(&m).busy_sent), (2, 10));
 }
 
 /// Firmware the way it is loaded: the AKD (as its EEPROM dump describes it) into BOOT with the

@@ -200,6 +200,9 @@ pub struct DeviceToml {
     /// The password FoE read and write requests must carry (default 0: any), on a CoE device
     /// whose SII names FoE.
     pub foe_password: Option<u32>,
+    /// How many times the FoE server answers busy to the first data packet of each write (a
+    /// device erasing its flash; default 0), on a CoE device whose SII names FoE.
+    pub foe_busy: Option<u32>,
     /// Overrides the configured station alias of the SII (word 4, loaded into 0x0012).
     pub station_alias: Option<u16>,
     /// Overrides the SII's device-emulation bit (word 0, ESC configuration bit 0): `false`
@@ -418,10 +421,15 @@ impl SegmentConfig {
             let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
             let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;
             // FoE is served next to the SDO server, where the SII names it.
-            let foe = (info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::FOE != 0)
-                .then(|| FoeServer::with_password(d.foe_password.unwrap_or(0)));
-            if d.foe_password.is_some() && !(coe && foe.is_some()) {
-                return Err(device_err(&place, "foe_password needs a device whose SII names CoE and FoE"));
+            let foe = (info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::FOE != 0).then(|| {
+                let mut server = FoeServer::with_password(d.foe_password.unwrap_or(0));
+                server.busy_per_write = d.foe_busy.unwrap_or(0);
+                server
+            });
+            for (set, key) in [(d.foe_password.is_some(), "foe_password"), (d.foe_busy.is_some(), "foe_busy")] {
+                if set && !(coe && foe.is_some()) {
+                    return Err(device_err(&place, format!("{key} needs a device whose SII names CoE and FoE")));
+                }
             }
             // The dictionary is built once, for CoE devices only.
             let od = coe.then(|| match &esi_dev {
