@@ -2,9 +2,10 @@
 mod common;
 
 use common::Bus;
-use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{MasterPort, SegmentConfig};
+use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
 use ferrocat_wire::register::dc_activation as act;
-use ferrocat_wire::{Address, Command};
+use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
 
 /// A line of `devices` on ESCs of kind `esc`, each with its SYNC out unit on (the terminals'
 /// SIIs have it off, which leaves them receive times only).
@@ -455,4 +456,40 @@ fn an_ip_core_in_reverse_mode_gives_the_ports_after_its_processing_unit_an_older
     bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
     let reverse = port1_less_port0(&mut bus, 0x1002);
     assert!(reverse < 0, "the frame before the write came back before this one came in: {reverse}");
+}
+
+#[test]
+fn a_frame_that_only_passes_a_port_is_the_one_an_enabled_port_takes() {
+    // An intact ring: the primary's frames leave by the last device's port 1 and never come
+    // back through the middle one's port 1; the secondary's run the ring backwards through
+    // every port 1 to port 0 without reaching a processing unit.
+    for (esc, taken) in [("esc20", true), ("et1100", false)] {
+        let mut bus = Bus::addressed(&format!(
+            "seed = 4\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'\n\
+             [[device]]\nbuiltin = 'SERVO'\nesc = '{esc}'\nparent = 'c'\nparent_port = 2\n\
+             [[device]]\nbuiltin = 'SERVO'\n[secondary]\ndevice = 2\n"
+        ));
+        bus.tx(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &[0; 4]);
+        let before = bus.fprd_u32(0x1002, 0x0904);
+        // A broadcast read from the secondary port.
+        let eth = EthernetRepr { dst: BROADCAST, src: [0x12; 6], vlan_tci: None, ethertype: 0 };
+        let mut buf = [0u8; 128];
+        let mut w = FrameWriter::new(&mut buf, &eth).unwrap();
+        w.push_chained(&DatagramHeader::new(Command::BRD, 1, Address::Device { adp: 0, ado: 0 }, 2), &[0, 0], 0)
+            .unwrap();
+        let n = w.finish().unwrap();
+        let (port, back) = bus.seg.exchange_on(MasterPort::Secondary, &mut buf[..n], bus.t).expect("round the ring");
+        assert_eq!(port, MasterPort::Primary);
+        let wkc = Frame::parse(&buf[..n]).unwrap().unwrap().pdu.datagrams().next().unwrap().wkc();
+        assert_eq!(wkc, 0, "no processing unit saw it");
+        bus.t = back + 10_000;
+        let after = bus.fprd_u32(0x1002, 0x0904);
+        assert_eq!(after != before, taken, "{esc}: port 1 {before} then {after}");
+        // Taken once: the next one passes it by.
+        if taken {
+            bus.seg.exchange_on(MasterPort::Secondary, &mut buf[..n], bus.t + 50_000).unwrap();
+            bus.t += 100_000;
+            assert_eq!(bus.fprd_u32(0x1002, 0x0904), after, "{esc}");
+        }
+    }
 }
