@@ -160,19 +160,24 @@ pub struct RingSim {
 
 impl RingSim {
     pub fn start(net: &VethPair, tag: &str, break_ms: u32, events: &str) -> Self {
-        let (master_secondary, segment_secondary) = net.second_link();
-        let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
-        let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
-        std::fs::write(
-            &path,
-            format!(
+        Self::start_segment(
+            net,
+            tag,
+            &format!(
                 "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
                  [[device]]\nbuiltin = 'EK1100'\nparent = 0\n[[device]]\nbuiltin = 'EL2004'\n\
                  [secondary]\ndevice = 2\n\
                  [[event]]\nat_ms = {break_ms}\nlink_down = {{ device = 2, port = 0 }}\n{events}"
             ),
         )
-        .unwrap();
+    }
+
+    /// A ring the segment file `toml` describes (with its `[secondary]` and events).
+    pub fn start_segment(net: &VethPair, tag: &str, toml: &str) -> Self {
+        let (master_secondary, segment_secondary) = net.second_link();
+        let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
+        let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
+        std::fs::write(&path, toml).unwrap();
         let sim = Sim::start(
             net,
             &[
