@@ -196,3 +196,67 @@ fn as_written_by_s(s: &Reading, t: &Reading, u: &Reading, active: [bool; 4]) -> 
     }
     Merged::Times(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One ESC entered on port 1 with a branch on port 0 and one on port 3: port 1 (entry)
+    /// 300 ns and port 0 20 ns before its processing unit, port 3 500 ns after; frames R, S,
+    /// T written at `epu[0..3]` (local ns, wrapping), U reading.
+    fn readings(next_frame: bool, epu: [u32; 3]) -> (Reading, Reading, Reading) {
+        let at = |e: u32| [e.wrapping_sub(20), e.wrapping_sub(300), 0, e.wrapping_add(500)];
+        let frame = |k: usize| at(epu[k]);
+        // What a read finds after frame k wrote, read in frame `k + 1` (whose arrival an
+        // enabled port 1 takes before the read).
+        let read = |k: usize| {
+            let mut p = frame(k);
+            if next_frame {
+                p[1] = epu.get(k + 1).map_or(epu[k].wrapping_add(200_000), |&e| e).wrapping_sub(300);
+            }
+            Reading { ports: p, epu: Some(epu[k]) }
+        };
+        (read(0), read(1), read(2))
+    }
+
+    const ACTIVE: [bool; 4] = [true, true, false, true];
+
+    #[test]
+    fn every_port_comes_out_as_frame_s_took_it_across_the_32_bit_wrap() {
+        // R, S and T 40 µs then 90 µs apart, S's processing unit just past the wrap.
+        let s_epu = 25u32;
+        let epu = [s_epu.wrapping_sub(40_000), s_epu, s_epu.wrapping_add(90_000)];
+        let want = [s_epu.wrapping_sub(20), s_epu.wrapping_sub(300), 0, s_epu.wrapping_add(500)];
+        for next_frame in [false, true] {
+            let (s, t, u) = readings(next_frame, epu);
+            let Merged::Times(got) = as_written_by_s(&s, &t, &u, ACTIVE) else { panic!("{next_frame}") };
+            assert_eq!([got[0], got[1], got[3]], [want[0], want[1], want[3]], "next frame: {next_frame}");
+        }
+    }
+
+    #[test]
+    fn spacings_too_close_or_nothing_to_measure_them_by() {
+        let (s, t, u) = readings(true, [0, 40_000, 80_050]);
+        assert_eq!(as_written_by_s(&s, &t, &u, ACTIVE), Merged::Ambiguous);
+        let no_epu = |r: Reading| Reading { epu: None, ..r };
+        let (s, t, u) = readings(true, [0, 40_000, 130_000]);
+        assert_eq!(
+            as_written_by_s(&no_epu(s), &no_epu(t), &no_epu(u), [false, true, false, false]),
+            Merged::NoReference
+        );
+        // Without a processing-unit time, port 0 (in use) measures the spacings.
+        assert!(matches!(as_written_by_s(&no_epu(s), &no_epu(t), &no_epu(u), ACTIVE), Merged::Times(_)));
+        // A reading that fits neither spacing.
+        let mut odd = t;
+        odd.ports[3] = odd.ports[3].wrapping_add(7_000);
+        assert_eq!(as_written_by_s(&s, &odd, &u, ACTIVE), Merged::Ambiguous);
+    }
+
+    #[test]
+    fn the_entry_is_the_earliest_port_in_use() {
+        let t = [1_000, 700, 5, u32::MAX];
+        assert_eq!(entry_by_times(t, [true, true, false, false], 0), 1);
+        assert_eq!(entry_by_times(t, [true, false, false, true], 3), 3, "across the wrap: earliest");
+        assert_eq!(entry_by_times(t, [false; 4], 2), 2);
+    }
+}
