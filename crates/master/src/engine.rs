@@ -164,6 +164,11 @@ pub struct Engine<I: Io> {
     /// ports before the frame and would be the frame an ET1200's receive-time latch takes
     /// (the master's second latch, master/next_frame_latch.rs).
     pub probes_off: bool,
+    /// The working counter of the last probe back on the primary port: on an intact ring it
+    /// ran the ring backwards, past every processing unit a frame reaches only after the next
+    /// device (a device entered by a port other than 0), and counted those: slaves the
+    /// primary's frames pass without processing.
+    pub backward_wkc: u16,
 }
 
 /// Source MAC address bytes: the primary's frames, and the probe sent from the secondary port
@@ -215,6 +220,7 @@ impl<I: Io> Engine<I> {
             split_passes: None,
             secondary_alive: true,
             probes_off: false,
+            backward_wkc: 0,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
             eth: EthernetRepr { dst: BROADCAST, src: SRC_PRIMARY, vlan_tci: None, ethertype: 0 },
@@ -414,6 +420,9 @@ impl<I: Io> Engine<I> {
                     // The secondary's probe: it tells whether a second half is there.
                     self.secondary_alive = true;
                     let wkc = first.wkc();
+                    if !on_secondary {
+                        self.backward_wkc = wkc;
+                    }
                     if let Some(s) = self.slots.iter().position(|s| s.busy && s.idx == idx && s.probe.is_none()) {
                         self.slots[s].probe = Some((on_secondary, wkc));
                         if self.slots[s].held.is_some() && !self.slots[s].resent {

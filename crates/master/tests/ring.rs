@@ -529,3 +529,20 @@ fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
     assert!((apart - intact_apart).abs() <= 10, "{apart} vs {intact_apart}");
     assert!(worst < 200, "{worst} ns");
 }
+
+#[test]
+fn a_ring_with_a_device_cabled_the_wrong_way_round_is_refused_by_name() {
+    // The last drive entered by its port 1 from the one before, its port 0 back to the
+    // master: the primary's frames leave by its port 0 before its processing unit, so only the
+    // secondary's probe counts it. A scan that went on would lose it from every count.
+    let toml = "seed = 5\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+        [[device]]\nname = 'a'\nbuiltin = 'SERVO'\nparent = 'c'\nparent_port = 2\n\
+        [[device]]\nbuiltin = 'SERVO'\nparent = 'a'\nparent_port = 1\nport = 1\n[secondary]\ndevice = 3\n";
+    let mut m = master(toml, HostModel::pc_rt());
+    let e = m.scan().unwrap_err().to_string();
+    assert!(e.contains("1 slave(s) on the ring answer only frames from the secondary port"), "{e}");
+    // Cabled the right way round (its port 1 back to the master), it is a ring like any other.
+    let mut m = master(&toml.replace("port = 1\n[secondary]", "[secondary]"), HostModel::pc_rt());
+    m.scan().unwrap();
+    assert_eq!((m.slaves.len(), m.engine.ring, m.ring_port), (4, RingState::Intact, Some((3, 1))));
+}

@@ -167,6 +167,17 @@ impl<I: Io> Master<I> {
             let station = STATION_BASE + pos;
             self.engine.expect(Command::APWR, Address::position(pos, 0x0010), &mut station.to_le_bytes(), 1)?;
         }
+        // On an intact ring a slave the primary's frames pass without processing (entered by a
+        // port other than 0, whose port 0 leads on round the ring) answers only the
+        // secondary's probe: it would be missing from every count and every image.
+        if self.engine.ring == crate::engine::RingState::Intact && self.engine.backward_wkc > 0 {
+            return Err(MasterError::Config(format!(
+                "{} slave(s) on the ring answer only frames from the secondary port: a device is \
+                 entered by a port other than 0 and its port 0 leads on round the ring, so the \
+                 primary's frames pass it without processing it; cable it the other way round",
+                self.engine.backward_wkc
+            )));
+        }
         let stations: Vec<u16> = (0..count).map(|p| STATION_BASE + p).collect();
         let images = self.read_all_sii(&stations)?;
         for (pos, img) in images.into_iter().enumerate() {
