@@ -95,7 +95,7 @@ impl FoeServer {
                     self.transfer = Some(Transfer::Write { name, data: file, next, busy_left: busy_left - 1 });
                     self.busy_sent += 1;
                     let entire = self.busy_per_write.min(u16::MAX as u32) as u16;
-                    let done = (self.busy_per_write - busy_left + 1).min(entire as u32) as u16;
+                    let done = (self.busy_per_write.saturating_sub(busy_left) + 1).min(entire as u32) as u16;
                     return emit(Foe::Busy { done, entire });
                 }
                 if data.len() > max {

@@ -164,10 +164,10 @@ pub struct Engine<I: Io> {
     /// ports before the frame and would be the frame an ET1200's receive-time latch takes
     /// (the master's second latch, master/next_frame_latch.rs).
     pub probes_off: bool,
-    /// The working counter of the last probe back on the primary port: on an intact ring it
-    /// ran the ring backwards, past every processing unit a frame reaches only after the next
-    /// device (a device entered by a port other than 0), and counted those: slaves the
-    /// primary's frames pass without processing.
+    /// The working counter of the last probe back on the primary port. On an intact ring it ran
+    /// the ring backwards, which only a slave entered by a port other than 0 whose port 0 leads
+    /// on round the ring processes — a slave the primary's frames pass unprocessed: 0 on a ring
+    /// cabled right.
     pub backward_wkc: u16,
 }
 

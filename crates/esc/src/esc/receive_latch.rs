@@ -56,9 +56,9 @@ impl Esc {
         self.receptions(timing, origin_ns, 0..u64::MAX);
     }
 
-    /// At the end of the frame: the latch of a write to 0x0900 (`by_write`: BWR or FPWR for
-    /// an ET1100 or the IP core, any write access for an ET1200 or ESC20), then the frame's
-    /// receptions after the processing unit.
+    /// At the end of the frame: the latch of a write to 0x0900 (`write`: by BWR or FPWR,
+    /// which latches an ET1100 or the IP core; `any_write`: by any command, which latches an
+    /// ET1200 or ESC20), then the frame's receptions after the processing unit.
     pub(super) fn latch_receive_times(&mut self, timing: &FrameTiming, origin_ns: u64, write: bool, any_write: bool) {
         if self.dc.is_none() {
             return;
