@@ -546,3 +546,37 @@ fn a_ring_with_a_device_cabled_the_wrong_way_round_is_refused_by_name() {
     m.scan().unwrap();
     assert_eq!((m.slaves.len(), m.engine.ring, m.ring_port), (4, RingState::Intact, Some((3, 1))));
 }
+
+#[test]
+fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
+    // The cable back 1 s in: the master opens the ring and latches the far half again from the
+    // reference, as a line entered on port 0 everywhere (no second latch needed).
+    let s = 1_000_000_000;
+    let toml = format!("{IP_CORE_RING}[[event]]\nat_ms = 0\nlink_down = {{ device = 3, port = 0 }}\n");
+    let mut worst = 0i64;
+    let m = cycle_ring(
+        &toml,
+        HostModel::pc_rt(),
+        SplitRingClocks::FarReference,
+        &[(s, Event::LinkUp { node: 3, port: 0 })],
+        3_000,
+        |k, t| {
+            if k >= 2_000 {
+                worst = worst.max(
+                    [2, 3].map(|d| (t[d].wrapping_sub(t[0]) as u32 as i32 as i64).abs()).into_iter().max().unwrap(),
+                );
+            }
+        },
+    );
+    let mut intact = master(IP_CORE_RING, HostModel::pc_rt());
+    intact.scan().unwrap();
+    println!(
+        "closed {:?}\nintact {:?}\nworst |far drives − reference| over the last second: {worst} ns",
+        wiring(&m),
+        wiring(&intact)
+    );
+    assert_eq!(m.engine.ring, RingState::Intact);
+    assert_eq!(wiring(&m), wiring(&intact), "the intact ring's tree and delays");
+    assert!(m.relatched.is_empty(), "{:?}", m.relatched);
+    assert!(worst < 100, "{worst} ns");
+}
