@@ -16,11 +16,15 @@ impl Esc {
         self.config.receive_latch == ReceiveLatch::Selectable && self.mem[0x0936] & 1 != 0
     }
 
+    /// Port `port`'s latch takes the local time at true time `at_ns`.
     fn put_receive_time(&mut self, port: usize, at_ns: u64) {
-        if let Some(dc) = &self.dc {
-            let v = dc.local_at(at_ns) as u32;
-            self.mem[0x0900 + 4 * port..0x0904 + 4 * port].copy_from_slice(&v.to_le_bytes());
+        if let Some(v) = self.dc.as_ref().map(|dc| dc.local_at(at_ns) as u32) {
+            self.set_receive_time(port, v);
         }
+    }
+
+    fn set_receive_time(&mut self, port: usize, local: u32) {
+        self.mem[0x0900 + 4 * port..0x0904 + 4 * port].copy_from_slice(&local.to_le_bytes());
     }
 
     /// Ports 1–3 that received the frame in `range` (relative times): an enabled one takes
@@ -83,8 +87,7 @@ impl Esc {
                     }
                     if self.reverse_mode() {
                         for p in 1..4 {
-                            let v = self.rx_hidden[p];
-                            self.mem[0x0900 + 4 * p..0x0904 + 4 * p].copy_from_slice(&v.to_le_bytes());
+                            self.set_receive_time(p, self.rx_hidden[p]);
                         }
                     } else {
                         self.rx_armed = (1..4u8).filter(|&p| self.config.has_port(p)).fold(0, |m, p| m | 1 << p);

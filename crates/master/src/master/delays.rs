@@ -119,6 +119,21 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// On a ring, closes the ring's port so that frames turn there as at a line's end (for a
+    /// latch of the receive times); what [`Master::reopen_ring_port`] restores.
+    fn close_ring_port(&mut self) -> Result<Option<(u16, u8)>> {
+        let Some((k, port)) = self.ring_port else { return Ok(None) };
+        let st = self.slaves[k as usize].station;
+        Ok(Some((st, self.close_port(st, port)?)))
+    }
+
+    fn reopen_ring_port(&mut self, closed: Option<(u16, u8)>) -> Result<()> {
+        match closed {
+            Some((st, loop_control)) => self.reopen_port(st, loop_control),
+            None => Ok(()),
+        }
+    }
+
     /// Closes `port` of the slave at `station` by loop control (0x0101): the ring turns there as
     /// a line's end. The probes cannot come back through it, so they are not waited for.
     /// Returns the loop control to restore with [`Master::reopen_port`].
@@ -181,13 +196,7 @@ impl<I: Io> Master<I> {
         }
         self.forwarding_latch_mode()?;
         // On a ring, the frame turns at the ring's port as on a line's end.
-        let ring = match self.ring_port {
-            Some((k, port)) => {
-                let st = self.slaves[k as usize].station;
-                Some((st, self.close_port(st, port)?))
-            }
-            None => None,
-        };
+        let ring = self.close_ring_port()?;
         // Sent once per try, so that the stamps are of the frame that latched.
         let mut tries = self.engine.retries.saturating_add(1);
         let mut passes = None;
@@ -206,9 +215,7 @@ impl<I: Io> Master<I> {
                 Err(e) => break Err(e),
             }
         };
-        if let Some((st, loop_control)) = ring {
-            self.reopen_port(st, loop_control)?;
-        }
+        self.reopen_ring_port(ring)?;
         let mut stamps = latched?;
         for k in 0..self.slaves.len() {
             if !self.slaves[k].has_dc {
@@ -236,17 +243,9 @@ impl<I: Io> Master<I> {
         let next_frame = self.next_frame_slaves();
         let far = self.first_far_position();
         if !next_frame.is_empty() && (!inferred || far.is_some_and(|f| next_frame.iter().any(|&k| k >= f))) {
-            let ring = match self.ring_port {
-                Some((k, port)) => {
-                    let st = self.slaves[k as usize].station;
-                    Some((st, self.close_port(st, port)?))
-                }
-                None => None,
-            };
+            let ring = self.close_ring_port()?;
             let relatched = self.relatch_next_frame(&next_frame);
-            if let Some((st, loop_control)) = ring {
-                self.reopen_port(st, loop_control)?;
-            }
+            self.reopen_ring_port(ring)?;
             self.relatched = relatched?;
             self.topology();
         }
