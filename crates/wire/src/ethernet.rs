@@ -89,13 +89,19 @@ impl Ipv4Repr {
     /// A header for a UDP datagram with `udp_payload_len` bytes after the UDP header; the
     /// checksum is computed.
     pub fn for_udp(src: [u8; 4], dst: [u8; 4], udp_payload_len: usize) -> Self {
+        Self::new(src, dst, IP_PROTO_UDP, 8 + udp_payload_len)
+    }
+
+    /// A header without options for `payload_len` bytes of `protocol`, don't-fragment set,
+    /// TTL 64; the checksum is computed.
+    pub fn new(src: [u8; 4], dst: [u8; 4], protocol: u8, payload_len: usize) -> Self {
         let mut ip = Ipv4Repr {
             dscp_ecn: 0,
-            total_len: (20 + 8 + udp_payload_len) as u16,
+            total_len: (20 + payload_len) as u16,
             ident: 0,
             flags_fragment: 0x4000,
             ttl: 64,
-            protocol: IP_PROTO_UDP,
+            protocol,
             checksum: 0,
             src,
             dst,
@@ -164,14 +170,7 @@ impl Ipv4Repr {
     pub fn compute_checksum(&self) -> u16 {
         let mut hdr = [0u8; 60];
         self.write_header(&mut hdr, 0);
-        let mut sum = 0u32;
-        for pair in hdr[..self.header_len()].chunks(2) {
-            sum += u16::from_be_bytes([pair[0], pair[1]]) as u32;
-        }
-        while sum > 0xFFFF {
-            sum = (sum & 0xFFFF) + (sum >> 16);
-        }
-        !(sum as u16)
+        crate::inet::checksum(&hdr[..self.header_len()])
     }
 
     pub fn emit(&self, out: &mut [u8]) -> Result<usize> {

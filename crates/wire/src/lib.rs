@@ -17,12 +17,14 @@ mod bytes;
 pub mod cia402;
 pub mod coe;
 pub mod datagram;
+pub mod eoe;
 mod error;
 pub mod ethernet;
 pub mod foe;
 pub mod frame;
 #[cfg(feature = "alloc")]
 pub mod hex;
+pub mod inet;
 pub mod mailbox;
 pub mod register;
 pub mod sii;

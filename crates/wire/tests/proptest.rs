@@ -194,3 +194,55 @@ proptest! {
         let _ = ferrocat_wire::sii::dump::parse_dump(&bytes);
     }
 }
+
+proptest! {
+    /// Any frame cut for any mailbox comes back whole, and a fragment 0 always starts afresh.
+    #[test]
+    fn eoe_fragments_reassemble(
+        frame in proptest::collection::vec(any::<u8>(), 1..=ferrocat_wire::eoe::MAX_FRAME_LEN),
+        max_len in 36usize..1500,
+        frame_number in 0u8..16,
+    ) {
+        use ferrocat_wire::eoe::{fragments, Reassembler};
+        let mut r = Reassembler::default();
+        let parts: Vec<_> = fragments(&frame, max_len, frame_number).unwrap().collect();
+        prop_assert!(parts.iter().all(|(_, d)| d.len() + 4 <= max_len));
+        let (last, rest) = parts.split_last().unwrap();
+        for (h, d) in rest {
+            prop_assert_eq!(r.push(h, d), Ok(None));
+        }
+        let got = r.push(&last.0, last.1).unwrap().unwrap();
+        prop_assert_eq!(got.frame, &frame[..]);
+    }
+
+    #[test]
+    fn eoe_parsers_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..120), pushes in 1usize..6) {
+        use ferrocat_wire::eoe::{EoeHeader, IpParameters, Reassembler};
+        let mut r = Reassembler::default();
+        for k in 0..pushes {
+            let b = &bytes[(k * 7).min(bytes.len())..];
+            if let Ok(h) = EoeHeader::parse(b) {
+                let _ = r.push(&h, &b[4..]);
+                let _ = IpParameters::parse(&b[4..]);
+            }
+        }
+        let _ = ferrocat_wire::inet::ArpRepr::parse(&bytes);
+        let _ = ferrocat_wire::inet::IcmpEcho::parse(&bytes);
+    }
+
+    #[test]
+    fn eoe_ip_parameters_round_trip(
+        mac in proptest::option::of(any::<[u8; 6]>()),
+        ip in proptest::option::of(any::<[u8; 4]>()),
+        mask in proptest::option::of(any::<[u8; 4]>()),
+        gw in proptest::option::of(any::<[u8; 4]>()),
+        dns in proptest::option::of(any::<[u8; 4]>()),
+        name in proptest::option::of(any::<[u8; 32]>()),
+    ) {
+        use ferrocat_wire::eoe::{IpParameters, IP_PARAMETERS_LEN};
+        let p = IpParameters { mac, ip, subnet_mask: mask, gateway: gw, dns_server: dns, dns_name: name };
+        let mut b = [0u8; IP_PARAMETERS_LEN];
+        p.emit(&mut b).unwrap();
+        prop_assert_eq!(IpParameters::parse(&b).unwrap(), p);
+    }
+}
