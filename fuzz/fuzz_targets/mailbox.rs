@@ -1,8 +1,11 @@
 #![no_main]
 //! Any bytes as an SM1 mailbox buffer: mailbox header, CoE, SDO, SDO information, emergency,
-//! FoE; and as a sequence of FoE requests (split at 0xFF bytes) to the simulated file server,
-//! whose every reply must decode.
-use ferrocat_esc::FoeServer;
+//! FoE; as a sequence of FoE requests (split at 0xFF bytes) to the simulated file server,
+//! whose every reply must decode; and as a sequence of EoE messages (split at 0xFE bytes) to
+//! the simulated EoE endpoint, whose every reply must decode, fit the mailbox and, in
+//! fragments, put together into whole frames.
+use ferrocat_esc::{EoeServer, FoeServer};
+use ferrocat_wire::eoe::{frame_type, EoeHeader, Reassembler};
 use ferrocat_wire::coe::{self, CoeMessage, Sdo, SdoInfo};
 use ferrocat_wire::foe::Foe;
 use ferrocat_wire::mailbox::{Mailbox, MailboxErrorCode};
@@ -17,6 +20,16 @@ fuzz_target!(|data: &[u8]| {
             Foe::parse(&reply).expect("the server's reply decodes");
         }
     }
+    let (mut eoe, mut frames) = (EoeServer::default(), Reassembler::default());
+    for request in data.split(|&b| b == 0xFE) {
+        for reply in eoe.handle(request, 70) {
+            assert!(reply.len() <= 70, "an EoE reply longer than the mailbox");
+            let h = EoeHeader::parse(&reply).expect("the endpoint's reply decodes");
+            if h.frame_type == frame_type::FRAGMENT {
+                frames.push(&h, &reply[4..]).expect("the endpoint's fragments fit together");
+            }
+        }
+    }
     let Ok(m) = Mailbox::parse(data) else { return };
     if let Ok(f) = Foe::parse(m.payload) {
         let mut out = vec![0u8; f.len()];
@@ -25,7 +38,8 @@ fuzz_target!(|data: &[u8]| {
     }
     let _ = MailboxErrorCode::parse(m.payload);
     if let Ok((h, msg)) = coe::parse(m.payload) {
-        let mut out = [0u8; 2048];
+        // Room for anything the input holds (a segment may be as long as the input).
+        let mut out = vec![0u8; data.len() + 64];
         match msg {
             CoeMessage::Sdo(s) => {
                 let n = s.emit(&mut out).expect("re-emit");

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod demo;
+mod eoe_cmd;
 mod esi;
 mod lab;
 mod lab_live;
@@ -105,6 +106,11 @@ enum Command {
     Foe {
         #[command(subcommand)]
         action: FoeCmd,
+    },
+    /// Set or read a slave's IP parameters by EoE, or ping it over EoE, in PREOP.
+    Eoe {
+        #[command(subcommand)]
+        action: eoe_cmd::EoeCmd,
     },
     /// Bring the segment to OP and exchange process data for a while, with live statistics.
     Run {
@@ -457,6 +463,7 @@ fn main() -> ExitCode {
                 master_cmd::foe(&target, position, &name, &password, boot, master_cmd::FoeAction::Write { file })
             }
         },
+        Command::Eoe { action } => eoe_cmd::run(action),
         Command::Demo { drives, drive, cycle_us, method, host, seed, json, out, iface, force, no_gpio_calibration } => {
             demo::demo(demo::DemoArgs {
                 drives,

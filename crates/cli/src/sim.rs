@@ -61,7 +61,14 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
             let outputs = io.map(|d| d.outputs.clone()).or_else(|| coe.map(|c| c.image(true)));
             // Its FoE server's transfers, where it has one (a plain CoE device or a drive).
             let drive = n.esc.app().as_any().downcast_ref::<ferrocat_esc::Cia402Drive>();
-            let foe = coe.and_then(|c| c.foe.as_ref()).or_else(|| drive.and_then(|d| d.coe.foe.as_ref()));
+            let coe = coe.or_else(|| drive.map(|d| &d.coe));
+            let foe = coe.and_then(|c| c.foe.as_ref());
+            // Its EoE endpoint: the address the master gave it and the frames it took and sent.
+            let eoe = coe.and_then(|c| c.eoe.as_ref()).map(|e| {
+                let ip = e.params.ip.map(|a| std::net::Ipv4Addr::from(a).to_string());
+                json!({"ip": ip, "frames_in": e.frames_in, "frames_out": e.frames_out, "ignored": e.ignored,
+                       "fragment_errors": e.fragment_errors})
+            });
             json!({
                 "position": i,
                 "name": n.name,
@@ -74,6 +81,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "system_time_difference": n.esc.dc.as_ref().map(|d| d.diff_mean_ns()),
                 "system_time_less_first_ns": less_first(n),
                 "foe": foe.map(|f| json!({"writes": f.writes, "reads": f.reads, "busy_sent": f.busy_sent})),
+                "eoe": eoe,
             })
         })
         .collect();

@@ -383,3 +383,28 @@ fn a_reversed_et1200_is_latched_again_in_real_time() {
         assert!((d1 - d2).abs() <= 10, "{}: live {d1} ns, virtual {d2} ns", a["name"]);
     }
 }
+
+/// The AKD from its real EEPROM dump (whose SII names EoE) over a veth pair: its IP set and
+/// pinged over EoE in real time, a 1 042-byte frame each way in two fragments (992 + 50 bytes)
+/// through its 1 024-byte mailboxes.
+#[test]
+fn needs_shared_the_akd_answers_ping_over_eoe_in_real_time() {
+    let akd = ferrocat_testdata::shared("captures/eeprom/akd.hex").display().to_string();
+    let net = VethPair::new("eo");
+    let sim = Sim::start(&net, &["--device", &akd]);
+    let out = ferrocat_in(&net.master_ns)
+        .args(["eoe", "ping", "0", "--ip", "192.168.0.10", "--gateway", "192.168.0.1", "--count", "5"])
+        .args(["--size", "1000", "--iface", &net.master_if])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout).to_string();
+    println!("{said}");
+    let got =
+        ferrocat_in(&net.master_ns).args(["eoe", "get-ip", "0", "--json", "--iface", &net.master_if]).output().unwrap();
+    sim.stop();
+    assert!(out.status.success(), "{said}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(said.contains("5 sent, 5 received, 0 lost"), "{said}");
+    // The simulated drive keeps its parameters from one master session to the next.
+    let p: serde_json::Value = serde_json::from_slice(&got.stdout).unwrap();
+    assert_eq!((p["ip"].as_str(), p["mac"].as_str()), (Some("192.168.0.10"), Some("02:00:00:00:10:01")));
+}

@@ -185,3 +185,57 @@ fn tshark_decodes_foe_as_we_sent_it() {
     assert_eq!(foe(&missing), ["14\t0x01\t\tnone.bin", "20\t0x05\t\t\t32769\tfile not found"]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Wireshark decodes our EoE as we sent it: Set IP Parameter with its fields, the response,
+/// Get IP Parameter, the drive's ARP announcement and the ping's echo request and reply inside
+/// their fragments, checksums good.
+#[test]
+fn tshark_decodes_eoe_as_we_sent_it() {
+    let pcap = std::env::temp_dir().join(format!("ferrocat-tshark-eoe-{}.pcapng", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["eoe", "ping", "1", "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--netmask", "255.255.255.0"])
+        .args(["--name", "axis-1", "--count", "1", "--size", "8", "--device", "EK1100", "--device", "SERVO", "--pcap"])
+        .arg(&pcap)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && said.contains("1 received"), "{said}{}", String::from_utf8_lossy(&out.stderr));
+    let fields = [
+        "ecat_mailbox.eoe.type",
+        "ecat_mailbox.eoe.init.macaddr",
+        "ecat_mailbox.eoe.init.ipaddr",
+        "ecat_mailbox.eoe.init.subnetmask",
+        "ecat_mailbox.eoe.init.defaultgateway",
+        "ecat_mailbox.eoe.init.dnsname",
+        "ecat_mailbox.eoe.frame",
+        "ecat_mailbox.eoe.last",
+        "arp.opcode",
+        "arp.src.proto_ipv4",
+        "icmp.type",
+        "icmp.checksum.status",
+    ];
+    let mut cmd = Command::new("tshark");
+    cmd.args(["-n", "-r"]).arg(&pcap).args(["-Y", "ecat_mailbox.eoe && ecat.cnt > 0", "-T", "fields"]);
+    for f in fields {
+        cmd.args(["-e", f]);
+    }
+    let out = cmd
+        .stderr(Stdio::null())
+        .output()
+        .expect("tshark is not installed: scripts/test.sh installs it (Debian package tshark)");
+    let lines: Vec<String> = String::from_utf8_lossy(&out.stdout).lines().map(|l| l.trim_end().to_string()).collect();
+    assert_eq!(
+        lines,
+        [
+            // The MAC from the station address 0x1002 (locally administered).
+            "2\t02:00:00:00:10:02\t192.168.7.2\t255.255.255.0\t192.168.7.1\taxis-1",
+            "3",
+            "6",
+            "0\t\t\t\t\t\t0\t1\t1\t192.168.7.2",
+            "7",
+            "0\t\t\t\t\t\t0\t1\t\t\t8\t1",
+            "0\t\t\t\t\t\t1\t1\t\t\t0\t1",
+        ]
+    );
+    std::fs::remove_file(&pcap).unwrap();
+}

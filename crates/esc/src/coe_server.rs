@@ -11,6 +11,7 @@ use ferrocat_wire::mailbox::{Mailbox, MailboxHeader, MailboxType, HEADER_LEN as 
 use ferrocat_wire::register::{AlState, AlStatusCode};
 
 use crate::app::{Application, Pdi};
+use crate::eoe_server::EoeServer;
 use crate::foe_server::FoeServer;
 use crate::od::ObjectDictionary;
 
@@ -65,6 +66,8 @@ pub struct CoeDevice {
     pub sdo_requests: u64,
     /// The FoE file server, where the SII names FoE among the mailbox protocols.
     pub foe: Option<FoeServer>,
+    /// The EoE endpoint, where the SII names EoE among the mailbox protocols.
+    pub eoe: Option<EoeServer>,
 }
 
 /// A mapped entry of the process image.
@@ -88,6 +91,7 @@ impl CoeDevice {
             counter: 0,
             sdo_requests: 0,
             foe: None,
+            eoe: None,
         }
     }
 
@@ -445,6 +449,11 @@ impl Application for CoeDevice {
     }
     fn state_changed(&mut self, pdi: &mut Pdi<'_>, state: AlState) {
         self.state = state;
+        // The mailbox counts afresh from INIT: the AKD's replies in twincat-akd-nc-mode are
+        // numbered 1, 2 in each of TwinCAT's four sessions.
+        if state == AlState::Init {
+            self.counter = 0;
+        }
         self.logic.state_changed(&mut self.od, state);
         if matches!(state, AlState::SafeOp | AlState::Op) {
             self.publish_inputs(pdi);
@@ -470,7 +479,18 @@ impl Application for CoeDevice {
             return Some(if reply.is_empty() { reply } else { self.typed_message(MailboxType::FOE, &reply) });
         }
         // In BOOT a device's bootloader serves file access only.
-        if m.header.mailbox_type != MailboxType::COE || self.state == AlState::Bootstrap {
+        if self.state == AlState::Bootstrap {
+            return None;
+        }
+        if m.header.mailbox_type == MailboxType::EOE {
+            let max_len = pdi.process_mailbox_len().saturating_sub(MBX_HEADER);
+            let bodies = self.eoe.as_mut()?.handle(m.payload, max_len);
+            let mut msgs: VecDeque<Vec<u8>> = bodies.iter().map(|b| self.typed_message(MailboxType::EOE, b)).collect();
+            let first = msgs.pop_front().unwrap_or_default();
+            self.queue.extend(msgs);
+            return Some(first);
+        }
+        if m.header.mailbox_type != MailboxType::COE {
             return None;
         }
         let mbx_len = pdi.process_mailbox_len();

@@ -28,6 +28,17 @@ pub struct EntryInfo {
     pub name: String,
 }
 
+/// What one read of a send mailbox found.
+pub(crate) enum Polled {
+    /// Nothing (the mailbox was empty).
+    Empty,
+    /// A message handled on the way: a CoE emergency (now an event) or an EoE fragment (now
+    /// in the slave's EoE inbox).
+    Taken,
+    /// Any other message: its type and service data.
+    Message(MailboxType, Vec<u8>),
+}
+
 impl<I: Io> Master<I> {
     /// The slave's station address, name and mailbox, if its SII names `protocol`.
     pub(crate) fn mailbox_of(
@@ -85,33 +96,15 @@ impl<I: Io> Master<I> {
     }
 
     /// The next message of `mailbox_type` from SM1 (CoE emergencies met on the way become
-    /// events; a mailbox error reply is an error; messages of other protocols are dropped).
+    /// events, EoE fragments go to the slave's EoE inbox; a mailbox error reply is an error;
+    /// messages of other protocols are dropped).
     pub(crate) fn mbx_read(&mut self, position: u16, mailbox_type: MailboxType) -> Result<Vec<u8>> {
-        let (st, name, m) = self.mailbox_of(position, mailbox_type)?;
+        let name = self.mailbox_of(position, mailbox_type)?.1;
         let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
-        let mut buf = vec![0u8; m.inp.1 as usize];
         loop {
-            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? == 1 {
-                let mbx = Mailbox::parse(&buf)
-                    .map_err(|e| MasterError::slave(position, &name, format!("mailbox reply: {e}")))?;
-                if mbx.header.mailbox_type == MailboxType::ERR {
-                    let code = MailboxErrorCode::parse(mbx.payload)?;
-                    return Err(MasterError::slave(position, &name, code.to_string()));
-                }
-                if mbx.header.mailbox_type == MailboxType::COE {
-                    if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
-                        self.events.push(MasterEvent::Emergency {
-                            position,
-                            name: name.clone(),
-                            error_code: e.error_code,
-                            error_register: e.error_register,
-                            data: e.data,
-                        });
-                        continue;
-                    }
-                }
-                if mbx.header.mailbox_type == mailbox_type {
-                    return Ok(mbx.payload.to_vec());
+            if let Polled::Message(t, payload) = self.mbx_poll(position)? {
+                if t == mailbox_type {
+                    return Ok(payload);
                 }
             }
             if self.engine.io.now_ns() > deadline {
@@ -120,6 +113,39 @@ impl<I: Io> Master<I> {
             let now = self.engine.io.now_ns();
             self.engine.io.sleep_until(now + 50_000);
         }
+    }
+
+    /// One read of the slave's send mailbox (SM1).
+    pub(crate) fn mbx_poll(&mut self, position: u16) -> Result<Polled> {
+        let s = self.slave(position)?;
+        let (st, name) = (s.station, s.name.clone());
+        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &name, "has no mailbox"))?;
+        let mut buf = vec![0u8; m.inp.1 as usize];
+        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
+            return Ok(Polled::Empty);
+        }
+        let mbx =
+            Mailbox::parse(&buf).map_err(|e| MasterError::slave(position, &name, format!("mailbox reply: {e}")))?;
+        if mbx.header.mailbox_type == MailboxType::ERR {
+            let code = MailboxErrorCode::parse(mbx.payload)?;
+            return Err(MasterError::slave(position, &name, code.to_string()));
+        }
+        if mbx.header.mailbox_type == MailboxType::COE {
+            if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
+                self.events.push(MasterEvent::Emergency {
+                    position,
+                    name,
+                    error_code: e.error_code,
+                    error_register: e.error_register,
+                    data: e.data,
+                });
+                return Ok(Polled::Taken);
+            }
+        }
+        if mbx.header.mailbox_type == MailboxType::EOE && self.eoe_take_fragment(position, mbx.payload) {
+            return Ok(Polled::Taken);
+        }
+        Ok(Polled::Message(mbx.header.mailbox_type, mbx.payload.to_vec()))
     }
 
     /// Reads every CoE slave's send mailbox once: emergencies waiting there become events.
@@ -153,7 +179,10 @@ impl<I: Io> Master<I> {
     }
 
     fn sdo_exchange(&mut self, position: u16, req: Sdo<'_>) -> Result<Vec<u8>> {
-        let mut b = vec![0u8; 2048];
+        // As long as the mailbox: a segment fills it (a 2 048-byte buffer here refused the
+        // segments of mailboxes longer than that).
+        let mailbox_len = self.mailbox_of(position, MailboxType::COE)?.2.out.1 as usize;
+        let mut b = vec![0u8; mailbox_len.max(64)];
         let n = req.emit(&mut b)?;
         self.mbx_send(position, CoeService::SDO_REQUEST, &b[..n])?;
         self.mbx_receive(position)

@@ -94,6 +94,8 @@ pub struct Slave {
     pub health: Health,
     /// The PDO assignment the application chose (written again after a power cycle).
     pub(crate) assignment: [Option<Vec<u16>>; 2],
+    /// EoE frames from the slave, put together and waiting.
+    pub(crate) eoe: crate::eoe::EoeLink,
 }
 
 /// Where a slave stands during cyclic operation.

@@ -173,7 +173,7 @@ fn servo() -> Device {
             ],
         )],
         // Drives take their firmware and parameter files by FoE.
-        mailbox: coe_mailbox(true).map(|m| ferrocat_esi::MailboxDesc { foe: true, ..m }),
+        mailbox: coe_mailbox(true).map(|m| ferrocat_esi::MailboxDesc { foe: true, eoe: true, ..m }),
         dc_op_modes: vec![
             ferrocat_esi::DcOpModeDesc {
                 name: "SM".into(),

@@ -431,6 +431,9 @@ impl SegmentConfig {
                     return Err(device_err(&place, format!("{key} needs a device whose SII names CoE and FoE")));
                 }
             }
+            // So is EoE: an endpoint with no address until the master sets one.
+            let eoe = (coe && info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::EOE != 0)
+                .then(ferrocat_esc::EoeServer::default);
             // The dictionary is built once, for CoE devices only.
             let od = coe.then(|| match &esi_dev {
                 Some(dev) => crate::od_build::from_esi(dev, &info),
@@ -452,12 +455,14 @@ impl SegmentConfig {
                     let mut drive = Cia402Drive::new(od, config.sm_count, seed);
                     drive.set_switches(switches(d, &place)?);
                     drive.coe.foe = foe;
+                    drive.coe.eoe = eoe;
                     Box::new(drive)
                 }
                 (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
                 (None, Some(od)) => {
                     let mut dev = CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic));
                     dev.foe = foe;
+                    dev.eoe = eoe;
                     Box::new(dev)
                 }
                 (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),

@@ -31,19 +31,24 @@ fn shape(f: &[u8]) -> Vec<(u8, u8, u16)> {
     f.pdu.datagrams().map(|d| (d.header().command.0, d.header().index, d.header().len)).collect()
 }
 
-/// Request/response pairs: a frame followed by one with the same datagram shape. A frame
-/// followed by an identical one was lost and sent again: the second is the request.
+/// Request/response pairs: a frame and the next one with the same datagram shape (commands,
+/// indices, lengths) within the next four — a master with two frames in flight has them
+/// interleaved (TwinCAT's SM1 write in twincat-akd-nc-mode, frames 3337 and 3339, around a
+/// read of 0x080D). A frame whose match is identical to it was lost and sent again: the
+/// second is the request.
 fn pairs(p: &[Packet]) -> Vec<(usize, usize)> {
+    let shapes: Vec<_> = p.iter().map(|x| shape(&x.data)).collect();
+    let mut used = vec![false; p.len()];
     let mut v = Vec::new();
-    let mut i = 0;
-    while i + 1 < p.len() {
-        if p[i].data == p[i + 1].data {
-            i += 1;
-        } else if shape(&p[i].data) == shape(&p[i + 1].data) {
-            v.push((i, i + 1));
-            i += 2;
-        } else {
-            i += 1;
+    for i in 0..p.len() {
+        if used[i] {
+            continue;
+        }
+        let Some(j) = (i + 1..(i + 5).min(p.len())).find(|&j| !used[j] && shapes[j] == shapes[i]) else { continue };
+        if p[j].data != p[i].data {
+            v.push((i, j));
+            used[i] = true;
+            used[j] = true;
         }
     }
     v
@@ -168,6 +173,14 @@ fn addressing(p: &[Packet], pairs: &[(usize, usize)]) -> (bool, Vec<u16>) {
     (assigns, fixed.into_iter().collect())
 }
 
+/// An EoE message read whole from a mailbox: its counter byte and service data.
+fn eoe_message(data: &[u8], wkc: u16) -> Option<Vec<u8>> {
+    let h = ferrocat_wire::mailbox::MailboxHeader::parse(data).ok()?;
+    let end = 6 + h.length as usize;
+    (wkc > 0 && h.mailbox_type == ferrocat_wire::mailbox::MailboxType::EOE && end <= data.len())
+        .then(|| data[5..end].to_vec())
+}
+
 fn setup_frame(cmd: Command, address: Address, data: &[u8]) -> Vec<u8> {
     use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
     use ferrocat_wire::{DatagramHeader, FrameWriter};
@@ -193,6 +206,10 @@ struct Report {
     /// Reads of a mailbox SyncManager's status, and those equal in bits 0, 1 and 3.
     mbx_status_compared: usize,
     mbx_status_same: usize,
+    /// The EoE messages the real slaves sent (read from their mailboxes, a message read
+    /// twice counted once), and ours, in order.
+    eoe_real: Vec<Vec<u8>>,
+    eoe_ours: Vec<Vec<u8>>,
     reasons: BTreeMap<String, usize>,
     examples: Vec<String>,
 }
@@ -414,6 +431,15 @@ fn replay(path: &std::path::Path) -> (Report, Vec<String>) {
                     }
                 }
             }
+            if h.command.reads() && !h.command.is_logical() && ado >= 0x1000 {
+                for (data, wkc, list) in [(a.data(), a.wkc(), &mut r.eoe_real), (b.data(), b.wkc(), &mut r.eoe_ours)] {
+                    if let Some(m) = eoe_message(data, wkc) {
+                        if list.last() != Some(&m) {
+                            list.push(m);
+                        }
+                    }
+                }
+            }
             if a.wkc() == b.wkc() && back.is_some() {
                 r.wkc_same += 1;
             } else {
@@ -473,6 +499,20 @@ fn needs_shared_replay_every_capture() {
             r.mbx_status_same,
             r.mbx_status_compared
         );
+        if !r.eoe_real.is_empty() {
+            let same = r.eoe_real.iter().zip(&r.eoe_ours).filter(|(a, b)| a == b).count();
+            println!(
+                "    EoE messages as real (mailbox counter and service data): {same}/{} (ours: {})",
+                r.eoe_real.len(),
+                r.eoe_ours.len()
+            );
+            if same != r.eoe_real.len() || r.eoe_ours.len() != r.eoe_real.len() {
+                for (k, (a, b)) in r.eoe_real.iter().zip(&r.eoe_ours).enumerate().filter(|(_, (a, b))| a != b) {
+                    println!("    EoE message {k}: ours {b:02x?}\n        real {a:02x?}");
+                }
+                failures.push(format!("{name}: EoE messages differ from the real device's"));
+            }
+        }
         for n in &notes {
             println!("    {n}");
         }

@@ -263,6 +263,7 @@ impl<I: Io> Master<I> {
             state: AlState::Init,
             health: Default::default(),
             assignment: [None, None],
+            eoe: Default::default(),
             sii,
         })
     }

@@ -1,0 +1,225 @@
+//! `ferrocat eoe`: a slave's IP parameters by EoE, and ping over EoE.
+use std::net::Ipv4Addr;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand};
+use ferrocat_master::EoePing;
+use ferrocat_wire::eoe::IpParameters;
+use serde_json::json;
+
+use crate::outln;
+use crate::target::{finish, Target};
+
+#[derive(Subcommand)]
+pub enum EoeCmd {
+    /// Set the IP parameters of the slave at POSITION (those given; it keeps the others).
+    SetIp {
+        position: u16,
+        #[command(flatten)]
+        params: ParamArgs,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Print the IP parameters the slave at POSITION reports.
+    GetIp {
+        position: u16,
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Ping the slave at POSITION over EoE (ICMP echo), after setting the parameters given.
+    Ping {
+        position: u16,
+        #[command(flatten)]
+        params: ParamArgs,
+        /// Echo requests to send.
+        #[arg(long, default_value_t = 4)]
+        count: u16,
+        /// Data bytes per request (1 472 fill a 1 514-byte frame).
+        #[arg(long, default_value_t = 56)]
+        size: usize,
+        /// Wait for each reply at most this long.
+        #[arg(long, default_value_t = 1000)]
+        timeout_ms: u64,
+        /// The master's address on the EoE network (default: the slave's gateway).
+        #[arg(long)]
+        from: Option<Ipv4Addr>,
+        /// The master's MAC address on the EoE network.
+        #[arg(long, default_value = "02:00:00:00:00:01")]
+        from_mac: String,
+        #[command(flatten)]
+        target: Target,
+    },
+}
+
+#[derive(Args)]
+pub struct ParamArgs {
+    /// The slave's IP address.
+    #[arg(long)]
+    ip: Option<Ipv4Addr>,
+    /// Its MAC address (aa:bb:cc:dd:ee:ff; default with --ip: 02:00:00:00 and its station
+    /// address, locally administered and one per slave).
+    #[arg(long)]
+    mac: Option<String>,
+    #[arg(long)]
+    netmask: Option<Ipv4Addr>,
+    #[arg(long)]
+    gateway: Option<Ipv4Addr>,
+    #[arg(long)]
+    dns: Option<Ipv4Addr>,
+    /// Its DNS name (32 bytes at most).
+    #[arg(long)]
+    name: Option<String>,
+}
+
+impl ParamArgs {
+    fn given(&self) -> bool {
+        self.ip.is_some()
+            || self.mac.is_some()
+            || self.netmask.is_some()
+            || self.gateway.is_some()
+            || self.dns.is_some()
+            || self.name.is_some()
+    }
+
+    fn to_params(&self, station: u16) -> anyhow::Result<IpParameters> {
+        let mac = match &self.mac {
+            Some(m) => Some(parse_mac(m).with_context(|| format!("--mac '{m}'"))?),
+            None => self.ip.map(|_| {
+                let [hi, lo] = station.to_be_bytes();
+                [0x02, 0, 0, 0, hi, lo]
+            }),
+        };
+        let name = match &self.name {
+            Some(n) => Some(
+                IpParameters::dns_name_field(n.as_bytes())
+                    .map_err(|_| anyhow::anyhow!("--name '{n}' is longer than 32 bytes"))?,
+            ),
+            None => None,
+        };
+        Ok(IpParameters {
+            mac,
+            ip: self.ip.map(|a| a.octets()),
+            subnet_mask: self.netmask.map(|a| a.octets()),
+            gateway: self.gateway.map(|a| a.octets()),
+            dns_server: self.dns.map(|a| a.octets()),
+            dns_name: name,
+        })
+    }
+}
+
+/// Six hex bytes separated by ':' or '-'.
+fn parse_mac(s: &str) -> anyhow::Result<[u8; 6]> {
+    let parts: Vec<&str> = s.split([':', '-']).collect();
+    if parts.len() != 6 {
+        bail!("a MAC address is six hex bytes separated by ':' (found {} parts)", parts.len());
+    }
+    let mut mac = [0u8; 6];
+    for (b, p) in mac.iter_mut().zip(&parts) {
+        *b = u8::from_str_radix(p, 16).with_context(|| format!("'{p}' is not a hex byte"))?;
+    }
+    Ok(mac)
+}
+
+fn mac_text(m: [u8; 6]) -> String {
+    m.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(":")
+}
+
+fn show(p: &IpParameters, json: bool) {
+    let ip = |a: Option<[u8; 4]>| a.map(|a| Ipv4Addr::from(a).to_string());
+    let name = p.dns_name_bytes().map(|n| String::from_utf8_lossy(n).into_owned());
+    if json {
+        outln!(
+            "{}",
+            json!({"mac": p.mac.map(mac_text), "ip": ip(p.ip), "netmask": ip(p.subnet_mask), "gateway": ip(p.gateway),
+                   "dns": ip(p.dns_server), "name": name})
+        );
+        return;
+    }
+    let or_unset = |v: Option<String>| v.unwrap_or_else(|| "(not set)".into());
+    outln!("MAC      {}", or_unset(p.mac.map(mac_text)));
+    outln!("IP       {}", or_unset(ip(p.ip)));
+    outln!("netmask  {}", or_unset(ip(p.subnet_mask)));
+    outln!("gateway  {}", or_unset(ip(p.gateway)));
+    outln!("DNS      {}", or_unset(ip(p.dns_server)));
+    outln!("name     {}", or_unset(name));
+}
+
+pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
+    match cmd {
+        EoeCmd::SetIp { position, params, target } => {
+            if !params.given() {
+                bail!("eoe set-ip: give at least one of --ip, --mac, --netmask, --gateway, --dns, --name");
+            }
+            let mut m = target.master()?;
+            m.scan()?;
+            m.configure()?;
+            let p = params.to_params(m.slave(position)?.station)?;
+            m.eoe_set_ip(position, &p)?;
+            eprintln!("set the IP parameters of slave {position}");
+            show(&m.eoe_get_ip(position)?, false);
+            finish(m)?;
+        }
+        EoeCmd::GetIp { position, json, target } => {
+            let mut m = target.master()?;
+            m.scan()?;
+            m.configure()?;
+            show(&m.eoe_get_ip(position)?, json);
+            finish(m)?;
+        }
+        EoeCmd::Ping { position, params, count, size, timeout_ms, from, from_mac, target } => {
+            let from_mac = parse_mac(&from_mac).with_context(|| format!("--from-mac '{from_mac}'"))?;
+            if size > 1472 {
+                bail!("--size {size}: at most 1 472 bytes fit one Ethernet frame");
+            }
+            let mut m = target.master()?;
+            m.scan()?;
+            m.configure()?;
+            if params.given() {
+                let p = params.to_params(m.slave(position)?.station)?;
+                m.eoe_set_ip(position, &p)?;
+            }
+            let p = m.eoe_get_ip(position)?;
+            let (Some(to_mac), Some(to_ip)) = (p.mac, p.ip) else {
+                bail!("slave {position} has no MAC or IP address: give --ip (and --mac)");
+            };
+            let from_ip = match (from, p.gateway) {
+                (Some(f), _) => f.octets(),
+                (None, Some(g)) if g != [0; 4] => g,
+                _ => bail!("slave {position} has no gateway to ping from: give --from"),
+            };
+            let ping = EoePing { from_mac, from_ip, to_mac, to_ip };
+            let to = Ipv4Addr::from(to_ip);
+            outln!("PING {to} over EoE (slave {position}) from {}: {size} data bytes", Ipv4Addr::from(from_ip));
+            let mut rtts = Vec::new();
+            for seq in 0..count {
+                match m.eoe_ping(position, &ping, seq, size, timeout_ms * 1_000_000)? {
+                    Some(ns) => {
+                        outln!("{} bytes from {to}: seq={seq} time={:.3} ms", size + 8, ns as f64 / 1e6);
+                        rtts.push(ns);
+                    }
+                    None => outln!("no reply from {to}: seq={seq} (within {timeout_ms} ms)"),
+                }
+            }
+            rtts.sort_unstable();
+            let lost = count as usize - rtts.len();
+            outln!("{count} sent, {} received, {lost} lost", rtts.len());
+            if let (Some(min), Some(max)) = (rtts.first(), rtts.last()) {
+                let median = rtts[rtts.len() / 2];
+                outln!(
+                    "round trip min/median/max = {:.3}/{:.3}/{:.3} ms",
+                    *min as f64 / 1e6,
+                    median as f64 / 1e6,
+                    *max as f64 / 1e6
+                );
+            }
+            finish(m)?;
+            if lost > 0 {
+                return Ok(ExitCode::FAILURE);
+            }
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,195 @@
+//! The EoE client (ETG.1000.6 §5.5): a slave's IP parameters set and read, Ethernet frames sent
+//! to it in fragments and taken from it whole, and a ping over them. Fragments a slave sends
+//! unasked (an ARP announcement after Set IP Parameter, replies) are put together and kept in
+//! the slave's inbox whichever exchange met them, so that no frame is lost to an SDO transfer.
+use std::collections::VecDeque;
+
+use ferrocat_wire::eoe::{self, frame_type, EoeHeader, EoeResult, IpParameters, Reassembler};
+use ferrocat_wire::ethernet::{EthernetRepr, Ipv4Repr, ETHERTYPE_IPV4};
+use ferrocat_wire::inet::{IcmpEcho, IP_PROTO_ICMP};
+use ferrocat_wire::mailbox::MailboxType;
+
+use crate::coe::Polled;
+use crate::error::{MasterError, Result};
+use crate::io::Io;
+use crate::master::Master;
+
+/// Frames kept per slave until the application takes them; older ones are dropped (and
+/// counted) beyond this.
+pub const INBOX_FRAMES: usize = 64;
+
+/// A slave's EoE receive side: the frame being put together and the frames waiting.
+#[derive(Debug, Clone, Default)]
+pub struct EoeLink {
+    reassembler: Reassembler,
+    inbox: VecDeque<Vec<u8>>,
+    /// The next frame number the master sends (4 bits).
+    frame_number: u8,
+    /// Frames dropped because the inbox was full, and fragments that did not fit.
+    pub dropped: u64,
+    pub fragment_errors: u64,
+}
+
+/// Who pings: the master's address on the EoE network, and the slave's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EoePing {
+    pub from_mac: [u8; 6],
+    pub from_ip: [u8; 4],
+    pub to_mac: [u8; 6],
+    pub to_ip: [u8; 4],
+}
+
+impl<I: Io> Master<I> {
+    /// Takes an EoE message met while reading a mailbox if it is a fragment: `true` if taken.
+    pub(crate) fn eoe_take_fragment(&mut self, position: u16, payload: &[u8]) -> bool {
+        let Ok(h) = EoeHeader::parse(payload) else { return false };
+        if h.frame_type != frame_type::FRAGMENT {
+            return false;
+        }
+        let link = &mut self.slaves[position as usize].eoe;
+        match link.reassembler.push(&h, &payload[eoe::HEADER_LEN..]) {
+            Ok(Some(r)) => {
+                if link.inbox.len() == INBOX_FRAMES {
+                    link.inbox.pop_front();
+                    link.dropped += 1;
+                }
+                link.inbox.push_back(r.frame.to_vec());
+            }
+            Ok(None) => {}
+            Err(_) => link.fragment_errors += 1,
+        }
+        true
+    }
+
+    /// Sends an EoE request and returns the service data after the header of the first EoE
+    /// message of `response` type (fragments met meanwhile go to the inbox).
+    fn eoe_request(&mut self, position: u16, request: u8, body: &[u8], response: u8) -> Result<(EoeHeader, Vec<u8>)> {
+        let mut msg = EoeHeader::new(request, 0).to_bytes().to_vec();
+        msg.extend_from_slice(body);
+        self.mbx_write(position, MailboxType::EOE, &msg)?;
+        loop {
+            let reply = self.mbx_read(position, MailboxType::EOE)?;
+            let h = EoeHeader::parse(&reply)?;
+            if h.frame_type == response {
+                return Ok((h, reply[eoe::HEADER_LEN..].to_vec()));
+            }
+        }
+    }
+
+    fn eoe_result(&self, position: u16, what: &str, result: EoeResult) -> Result<()> {
+        if result == EoeResult::SUCCESS {
+            return Ok(());
+        }
+        Err(MasterError::slave(position, &self.name_of(position), format!("EoE {what}: {result}")))
+    }
+
+    /// Sets the slave's IP parameters (those given; the others it keeps).
+    pub fn eoe_set_ip(&mut self, position: u16, params: &IpParameters) -> Result<()> {
+        let mut body = [0u8; eoe::IP_PARAMETERS_LEN];
+        params.emit(&mut body)?;
+        let (h, _) = self.eoe_request(position, frame_type::SET_IP_REQUEST, &body, frame_type::SET_IP_RESPONSE)?;
+        self.eoe_result(position, "Set IP Parameter", h.result())
+    }
+
+    /// The slave's IP parameters as it reports them.
+    pub fn eoe_get_ip(&mut self, position: u16) -> Result<IpParameters> {
+        let (h, body) = self.eoe_request(position, frame_type::GET_IP_REQUEST, &[], frame_type::GET_IP_RESPONSE)?;
+        self.eoe_result(position, "Get IP Parameter", h.result())?;
+        IpParameters::parse(&body)
+            .map_err(|e| MasterError::slave(position, &self.name_of(position), format!("EoE Get IP Parameter: {e}")))
+    }
+
+    /// Sends one Ethernet frame to the slave, in as many fragments as its mailbox needs.
+    pub fn eoe_send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
+        let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
+        let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
+        let number = self.slaves[position as usize].eoe.frame_number;
+        let parts = eoe::fragments(frame, max_len, number).ok_or_else(|| {
+            MasterError::slave(
+                position,
+                &name,
+                format!(
+                    "EoE: a {}-byte frame does not go through a {}-byte mailbox (1–{} bytes, 32 per fragment)",
+                    frame.len(),
+                    m.out.1,
+                    eoe::MAX_FRAME_LEN
+                ),
+            )
+        })?;
+        for (h, d) in parts {
+            let mut msg = h.to_bytes().to_vec();
+            msg.extend_from_slice(d);
+            self.mbx_write(position, MailboxType::EOE, &msg)?;
+        }
+        self.slaves[position as usize].eoe.frame_number = (number + 1) & 0xF;
+        Ok(())
+    }
+
+    /// The next Ethernet frame from the slave, waiting up to `timeout_ns` for one; `None` if
+    /// none came.
+    pub fn eoe_receive(&mut self, position: u16, timeout_ns: u64) -> Result<Option<Vec<u8>>> {
+        self.mailbox_of(position, MailboxType::EOE)?;
+        let deadline = self.engine.io.now_ns() + timeout_ns;
+        loop {
+            if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {
+                return Ok(Some(f));
+            }
+            // Anything but a fragment here is an answer nobody waits for: dropped.
+            let polled = self.mbx_poll(position)?;
+            let now = self.engine.io.now_ns();
+            if now > deadline {
+                return Ok(self.slaves[position as usize].eoe.inbox.pop_front());
+            }
+            if let Polled::Empty = polled {
+                self.engine.io.sleep_until((now + 50_000).min(deadline + 1));
+            }
+        }
+    }
+
+    /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
+    pub fn eoe_link(&self, position: u16) -> Result<&EoeLink> {
+        Ok(&self.slave(position)?.eoe)
+    }
+
+    /// Sends an ICMP echo request with `data_len` bytes of data to the slave and waits up to
+    /// `timeout_ns` for its reply: the round trip in ns, or `None`. Other frames that arrive
+    /// meanwhile are dropped.
+    pub fn eoe_ping(
+        &mut self,
+        position: u16,
+        p: &EoePing,
+        seq: u16,
+        data_len: usize,
+        timeout_ns: u64,
+    ) -> Result<Option<u64>> {
+        let data: Vec<u8> = (0..data_len).map(|i| i as u8).collect();
+        let ident = 0xFE00 | (position & 0xFF);
+        let echo = IcmpEcho { reply: false, ident, seq, data: &data };
+        let ip = Ipv4Repr::new(p.from_ip, p.to_ip, IP_PROTO_ICMP, echo.len());
+        let eth = EthernetRepr { dst: p.to_mac, src: p.from_mac, vlan_tci: None, ethertype: ETHERTYPE_IPV4 };
+        let mut frame = vec![0u8; 14 + 20 + echo.len()];
+        eth.emit(&mut frame)?;
+        ip.emit(&mut frame[14..])?;
+        echo.emit(&mut frame[34..])?;
+        let t0 = self.engine.io.now_ns();
+        self.eoe_send(position, &frame)?;
+        let deadline = t0 + timeout_ns;
+        loop {
+            let now = self.engine.io.now_ns();
+            let Some(f) = self.eoe_receive(position, deadline.saturating_sub(now))? else { return Ok(None) };
+            if is_echo_reply(&f, p, ident, seq, &data) {
+                return Ok(Some(self.engine.io.now_ns() - t0));
+            }
+        }
+    }
+}
+
+fn is_echo_reply(f: &[u8], p: &EoePing, ident: u16, seq: u16, data: &[u8]) -> bool {
+    let Ok((eth, n)) = EthernetRepr::parse(f) else { return false };
+    let Ok((ip, hl)) = Ipv4Repr::parse(&f[n..]) else { return false };
+    let end = (n + ip.total_len as usize).min(f.len());
+    if eth.dst != p.from_mac || ip.src != p.to_ip || ip.protocol != IP_PROTO_ICMP || n + hl > end {
+        return false;
+    }
+    IcmpEcho::parse(&f[n + hl..end]).is_ok_and(|e| e.reply && e.ident == ident && e.seq == seq && e.data == data)
+}
