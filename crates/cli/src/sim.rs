@@ -82,6 +82,8 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "system_time_less_first_ns": less_first(n),
                 "foe": foe.map(|f| json!({"writes": f.writes, "reads": f.reads, "busy_sent": f.busy_sent})),
                 "eoe": eoe,
+                // Mailbox repeat requests answered, and requests taken once though written twice.
+                "mailbox": {"repeats": n.esc.mbx_repeats, "duplicates": n.esc.mbx_duplicates},
             })
         })
         .collect();

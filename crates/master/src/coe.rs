@@ -121,11 +121,25 @@ impl<I: Io> Master<I> {
         let (st, name) = (s.station, s.name.clone());
         let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &name, "has no mailbox"))?;
         let mut buf = vec![0u8; m.inp.1 as usize];
+        let retries = self.engine.stats.retries;
         if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
+            // The read's frame was sent again and found the mailbox empty: the first may
+            // have been lost after the slave handed its message over. Ask for it again.
+            if self.engine.stats.retries > retries {
+                self.mbx_repeat(position)?;
+            }
             return Ok(Polled::Empty);
         }
         let mbx =
             Mailbox::parse(&buf).map_err(|e| MasterError::slave(position, &name, format!("mailbox reply: {e}")))?;
+        // After a repeat request the slave may put back a message that had reached us (the
+        // lost frame had not got there): the same counter as the last one taken is that one.
+        let counter = mbx.header.counter;
+        let slave = &mut self.slaves[position as usize];
+        if slave.mbx_repeated.take().is_some_and(|c| c != 0 && c == counter) {
+            return Ok(Polled::Taken);
+        }
+        slave.mbx_in_counter = counter;
         if mbx.header.mailbox_type == MailboxType::ERR {
             let code = MailboxErrorCode::parse(mbx.payload)?;
             return Err(MasterError::slave(position, &name, code.to_string()));
@@ -146,6 +160,41 @@ impl<I: Io> Master<I> {
             return Ok(Polled::Taken);
         }
         Ok(Polled::Message(mbx.header.mailbox_type, mbx.payload.to_vec()))
+    }
+
+    /// The mailbox repeat (ETG.1000.4): toggles the send mailbox's repeat request (SM1
+    /// activate bit 1) and waits for the slave's acknowledge (PDI control bit 1 the same),
+    /// after which the message it last sent is in the mailbox again.
+    fn mbx_repeat(&mut self, position: u16) -> Result<()> {
+        let (st, name) = (self.slave(position)?.station, self.name_of(position));
+        let mut reg = [0u8; 2];
+        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x080E }, &mut reg)? != 1 {
+            return Ok(());
+        }
+        // A slave whose acknowledge does not follow its request does not repeat.
+        if (reg[0] ^ reg[1]) & 0x02 != 0 {
+            return Ok(());
+        }
+        let request = reg[0] ^ 0x02;
+        self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x080E }, &mut [request])?;
+        let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
+        loop {
+            let mut ack = [0u8];
+            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x080F }, &mut ack)? == 1
+                && (ack[0] ^ request) & 0x02 == 0
+            {
+                break;
+            }
+            let now = self.engine.io.now_ns();
+            if now > deadline {
+                return Err(MasterError::slave(position, &name, "mailbox repeat request not acknowledged"));
+            }
+            self.engine.io.sleep_until(now + 50_000);
+        }
+        let slave = &mut self.slaves[position as usize];
+        slave.mbx_repeated = Some(slave.mbx_in_counter);
+        slave.mbx_repeats += 1;
+        Ok(())
     }
 
     /// Reads every CoE slave's send mailbox once: emergencies waiting there become events.

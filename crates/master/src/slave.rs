@@ -82,6 +82,12 @@ pub struct Slave {
     pub delay_ns: u32,
     pub mailbox: Option<MailboxConfig>,
     pub(crate) mbx_counter: u8,
+    /// The counter of the last message taken from the slave's send mailbox; after a repeat
+    /// request, the counter then (a message with it again is the one already taken).
+    pub(crate) mbx_in_counter: u8,
+    pub(crate) mbx_repeated: Option<u8>,
+    /// Mailbox repeat requests made (reads lost after the slave handed its message over).
+    pub mbx_repeats: u64,
     pub outputs: Vec<Mapped>,
     pub inputs: Vec<Mapped>,
     pub out_sm: Option<(u8, SmEntry)>,

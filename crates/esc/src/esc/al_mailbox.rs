@@ -84,6 +84,11 @@ impl Esc {
             self.al_changes += 1;
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
             self.app.state_changed(&mut pdi, self.al.state);
+            // The firmware starts its mailbox afresh in INIT: a new master's first counter
+            // is no repeat of the last one's.
+            if self.al.state == AlState::Init {
+                (self.mbx_in_counter, self.mbx_repeat_at) = (0, None);
+            }
         }
     }
 
@@ -97,6 +102,15 @@ impl Esc {
         st.full = false;
         st.int_write = false;
         st.int_read = true;
+        // A request with the counter of the one before is that one written again by a master
+        // that lost the frame after it got here (ETG.1000.4; SOEM and ours write it again as
+        // it was): taken and dropped. Counter 0 is never a repeat.
+        let counter = req.get(5).map_or(0, |b| (b >> 4) & 0x07);
+        if counter != 0 && counter == self.mbx_in_counter {
+            self.mbx_duplicates += 1;
+            return;
+        }
+        self.mbx_in_counter = counter;
         let reply = {
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
             self.app.mailbox(&mut pdi, &req)
@@ -112,14 +126,44 @@ impl Esc {
         self.deliver_mailbox();
     }
 
-    /// Moves the next waiting message into the send mailbox if it is free.
-    pub(super) fn deliver_mailbox(&mut self) {
-        let Some((n, out)) = (0..self.config.sm_count)
+    /// The send mailbox: the first mailbox SyncManager the ECAT side reads.
+    fn send_mailbox(&self) -> Option<(u8, SyncManager)> {
+        (0..self.config.sm_count)
             .map(|n| (n, self.sm(n)))
             .find(|(_, s)| s.enabled() && s.is_mailbox() && !s.ecat_writes())
-        else {
+    }
+
+    /// The master toggled the send mailbox's repeat request (SM activate bit 1) away from the
+    /// firmware's acknowledge (PDI control bit 1): the firmware will answer it once its
+    /// response time has passed.
+    pub(super) fn check_repeat_request(&mut self) {
+        let Some((_, s)) = self.send_mailbox() else { return };
+        if (s.activate ^ s.pdi_control) & 0x02 != 0 && self.mbx_repeat_at.is_none() {
+            self.mbx_repeat_at = Some(self.now_ns.saturating_add(self.mailbox_response.draw_ns()));
+        }
+    }
+
+    /// Moves the next waiting message into the send mailbox if it is free; a repeat request
+    /// due is answered first.
+    pub(super) fn deliver_mailbox(&mut self) {
+        let Some((n, out)) = self.send_mailbox() else { return };
+        if let Some(at) = self.mbx_repeat_at {
+            if at > self.now_ns {
+                return;
+            }
+            self.mbx_repeat_at = None;
+            self.mbx_repeats += 1;
+            // The message again where the master took it (and lost it); one still unread
+            // stays as it is. Then the acknowledge: PDI control bit 1 as the request.
+            if !self.sms[n as usize].full && !self.mbx_last.is_empty() {
+                let msg = std::mem::take(&mut self.mbx_last);
+                self.put_in_send_mailbox(n, &out, &msg);
+                self.mbx_last = msg;
+            }
+            let a = ferrocat_wire::register::addr::sm(n) as usize + 7;
+            self.mem[a] = (self.mem[a] & !0x02) | (out.activate & 0x02);
             return;
-        };
+        }
         if self.sms[n as usize].full {
             return;
         }
@@ -129,7 +173,12 @@ impl Esc {
             None => self.app.pending_mailbox(),
         };
         let Some(msg) = msg else { return };
-        let area = sm_area(&out, self.mem.len());
+        self.put_in_send_mailbox(n, &out, &msg);
+        self.mbx_last = msg;
+    }
+
+    fn put_in_send_mailbox(&mut self, n: u8, out: &SyncManager, msg: &[u8]) {
+        let area = sm_area(out, self.mem.len());
         let area = &mut self.mem[area];
         let len = area.len().min(msg.len());
         area.fill(0);

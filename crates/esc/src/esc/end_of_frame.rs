@@ -98,6 +98,7 @@ impl Esc {
         }
         if w.sm_cfg {
             self.sm_reconfigured(&pending);
+            self.check_repeat_request();
         }
         let (deliver, mailbox_moved) = self.complete_sm_buffers(t);
         if deliver || w.sm_cfg {

@@ -186,6 +186,18 @@ pub struct Esc {
     /// Messages waiting for the send mailbox (SM1) to be read, each with the true time from
     /// which the firmware has it ready.
     mbx_queue: std::collections::VecDeque<(u64, Vec<u8>)>,
+    /// The last message the firmware put into the send mailbox, and when it will put it there
+    /// again for a repeat request the master made (ETG.1000.4 mailbox repeat: the master
+    /// toggles SM activate bit 1 after losing a read; the firmware answers by writing the
+    /// message again and setting PDI control bit 1 to the same value).
+    mbx_last: Vec<u8>,
+    mbx_repeat_at: Option<u64>,
+    /// The counter of the last mailbox request taken (0: none since INIT), and how many
+    /// requests were dropped as that one written again.
+    mbx_in_counter: u8,
+    pub mbx_duplicates: u64,
+    /// Repeat requests the firmware answered.
+    pub mbx_repeats: u64,
     /// How long the firmware takes to answer a mailbox request.
     pub mailbox_response: MailboxResponse,
     /// Without device emulation the firmware reads AL control this long after the master
@@ -241,6 +253,11 @@ impl Esc {
             sync_pulsed: false,
             wd_armed: false,
             mbx_queue: Default::default(),
+            mbx_last: Vec::new(),
+            mbx_repeat_at: None,
+            mbx_in_counter: 0,
+            mbx_duplicates: 0,
+            mbx_repeats: 0,
             mailbox_response: MailboxResponse::default(),
             al_response_ns: 1_000_000,
             pending_al: None,
@@ -267,6 +284,7 @@ impl Esc {
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
         self.mbx_queue.clear();
+        (self.mbx_last, self.mbx_repeat_at, self.mbx_in_counter) = (Vec::new(), None, 0);
         self.pending_al = None;
         self.al = AlMachine::default();
         self.now_ns = t_ns;
