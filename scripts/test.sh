@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark and iproute2 from Debian, pysoem from PyPI into .venv, cargo-nextest and cargo-fuzz from
+# (tshark, iproute2 and iputils-ping from Debian, pysoem from PyPI into .venv, cargo-nextest and cargo-fuzz from
 # crates.io), then runs unit, property and
 # integration tests with nextest, and every fuzz target for a bounded time (before the tests,
 # so that the run ends on the test summary).
@@ -28,6 +28,11 @@ if ! command -v ip >/dev/null; then
   log "installing iproute2 (network namespaces and veth pairs for the live tests)"
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iproute2 >/dev/null
+fi
+if ! command -v ping >/dev/null; then
+  log "installing iputils-ping (Linux's own ping through an EoE bridge)"
+  as_root apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iputils-ping >/dev/null
 fi
 if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem' 2>/dev/null; then
   log "creating .venv with pysoem (SOEM as an independent master)"

@@ -52,6 +52,21 @@ pub enum EoeCmd {
         #[command(flatten)]
         target: Target,
     },
+    /// Bridge the slave at POSITION to a TAP interface of this host (as IgH's EoE devices do):
+    /// what the host sends out of it goes to the slave by EoE, and back. Runs until SIGINT or
+    /// SIGTERM, or for --seconds; the segment stays in PREOP.
+    Bridge {
+        position: u16,
+        /// The TAP interface to create (give it an address and bring it up with `ip`).
+        #[arg(long)]
+        tap: String,
+        #[command(flatten)]
+        params: ParamArgs,
+        #[arg(long)]
+        seconds: Option<f64>,
+        #[command(flatten)]
+        target: Target,
+    },
 }
 
 #[derive(Args)]
@@ -174,13 +189,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             if size > 1472 {
                 bail!("--size {size}: at most 1 472 bytes fit one Ethernet frame");
             }
-            let mut m = target.master()?;
-            m.scan()?;
-            m.configure()?;
-            if params.given() {
-                let p = params.to_params(m.slave(position)?.station)?;
-                m.eoe_set_ip(position, &p)?;
-            }
+            let mut m = preop_with(&target, position, &params)?;
             let p = m.eoe_get_ip(position)?;
             let (Some(to_mac), Some(to_ip)) = (p.mac, p.ip) else {
                 bail!("slave {position} has no MAC or IP address: give --ip (and --mac)");
@@ -220,6 +229,86 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
                 return Ok(ExitCode::FAILURE);
             }
         }
+        EoeCmd::Bridge { position, tap, params, seconds, target } => {
+            return bridge(position, &tap, &params, seconds, target)
+        }
     }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The segment in PREOP, the slave's IP parameters set where any were given.
+fn preop_with(
+    target: &Target,
+    position: u16,
+    params: &ParamArgs,
+) -> anyhow::Result<ferrocat_master::Master<crate::target::CliIo>> {
+    let mut m = target.master()?;
+    m.scan()?;
+    m.configure()?;
+    if params.given() {
+        let p = params.to_params(m.slave(position)?.station)?;
+        m.eoe_set_ip(position, &p)?;
+    }
+    Ok(m)
+}
+
+/// Frames between the TAP interface and the slave until stopped: the host's first, then one
+/// read of the slave's mailbox, a short sleep when neither had anything.
+fn bridge(
+    position: u16,
+    tap: &str,
+    params: &ParamArgs,
+    seconds: Option<f64>,
+    target: Target,
+) -> anyhow::Result<ExitCode> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    if let Some(s) = seconds {
+        if !(s > 0.0 && s < 1e7) {
+            bail!("--seconds {s}: give a positive number of seconds");
+        }
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
+    }
+    let mut m = preop_with(&target, position, params)?;
+    let tap = ferrocat_link::Tap::open(tap)
+        .with_context(|| format!("creating TAP interface '{tap}' (needs CAP_NET_ADMIN)"))?;
+    eprintln!("bridging slave {position} to {} (EoE)", tap.name());
+    let t0 = std::time::Instant::now();
+    let (mut to_slave, mut to_host, mut too_long, mut host_down) = (0u64, 0u64, 0u64, 0u64);
+    let mut buf = vec![0u8; 65536];
+    while !stop.load(Ordering::Relaxed) && seconds.is_none_or(|s| t0.elapsed().as_secs_f64() < s) {
+        let mut busy = false;
+        while let Some(n) = tap.try_read(&mut buf)? {
+            busy = true;
+            if n > ferrocat_wire::eoe::MAX_FRAME_LEN {
+                too_long += 1;
+                continue;
+            }
+            m.eoe_send(position, &buf[..n])?;
+            to_slave += 1;
+        }
+        if let Some(f) = m.eoe_receive(position, 0)? {
+            busy = true;
+            match tap.write(&f) {
+                Ok(()) => to_host += 1,
+                // The interface is not up yet (or no more): the frame is dropped, as a wire would.
+                Err(e) if e.raw_os_error() == Some(libc::EIO) => host_down += 1,
+                Err(e) => return Err(e).with_context(|| format!("writing to {}", tap.name())),
+            }
+        }
+        if !busy {
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+    }
+    let link = m.eoe_link(position)?;
+    eprintln!(
+        "bridge stopped: {to_slave} frames to the slave, {to_host} to the host ({host_down} while it was down), \
+         {too_long} too long for EoE, {} dropped, {} fragments that did not fit",
+        link.dropped, link.fragment_errors
+    );
+    finish(m)?;
     Ok(ExitCode::SUCCESS)
 }

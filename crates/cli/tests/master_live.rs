@@ -408,3 +408,47 @@ fn needs_shared_the_akd_answers_ping_over_eoe_in_real_time() {
     let p: serde_json::Value = serde_json::from_slice(&got.stdout).unwrap();
     assert_eq!((p["ip"].as_str(), p["mac"].as_str()), (Some("192.168.0.10"), Some("02:00:00:00:10:01")));
 }
+
+/// `ferrocat eoe bridge` over veth: Linux's own ping, from a TAP interface the bridge made in
+/// the master's namespace, reaches the simulated drive by EoE (ARP, then ICMP echo, each frame
+/// in fragments through its 128-byte mailboxes) and gets its replies.
+#[test]
+fn linux_pings_the_drive_through_an_eoe_bridge() {
+    let net = VethPair::new("eb");
+    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+    let tap = net.master_if.replace('a', "t");
+    let mut bridge = ferrocat_in(&net.master_ns)
+        .args(["eoe", "bridge", "1", "--tap", &tap, "--ip", "192.168.7.2", "--gateway", "192.168.7.1"])
+        .args(["--seconds", "20", "--iface", &net.master_if])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The TAP appears once the bridge has set the drive's address.
+    let t0 = std::time::Instant::now();
+    while !Command::new("ip").args(["-n", &net.master_ns, "link", "show", &tap]).output().unwrap().status.success() {
+        if let Some(status) = bridge.try_wait().unwrap() {
+            let mut e = String::new();
+            std::io::Read::read_to_string(bridge.stderr.as_mut().unwrap(), &mut e).unwrap();
+            panic!("the bridge stopped ({status}): {e}");
+        }
+        assert!(t0.elapsed().as_secs() < 10, "the bridge made no TAP interface");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    for args in [vec!["addr", "add", "192.168.7.1/24", "dev", &tap], vec!["link", "set", &tap, "up"]] {
+        assert!(Command::new("ip").args(["-n", &net.master_ns]).args(&args).status().unwrap().success());
+    }
+    let ping = VethPair::cmd(&net.master_ns, "ping")
+        .args(["-c", "3", "-W", "2", "-s", "300", "192.168.7.2"])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&ping.stdout).to_string();
+    println!("{said}");
+    Command::new("kill").args(["-TERM", &bridge.id().to_string()]).status().unwrap();
+    let out = bridge.wait_with_output().unwrap();
+    let told = String::from_utf8_lossy(&out.stderr).to_string();
+    println!("{told}");
+    sim.stop();
+    assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
+    assert!(out.status.success() && told.contains("bridge stopped"), "{told}");
+}

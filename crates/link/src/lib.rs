@@ -1,6 +1,10 @@
 //! Linux links for EtherCAT: an AF_PACKET raw socket bound to one interface, CLOCK_MONOTONIC,
 //! and what a real-time cyclic task needs (absolute sleeps, SCHED_FIFO, locked memory, a pinned
 //! CPU). Shared by the live segment and the master.
+mod tap;
+
+pub use tap::Tap;
+
 use std::io;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 
