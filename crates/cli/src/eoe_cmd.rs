@@ -312,3 +312,47 @@ fn bridge(
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }
+
+/// The EoE bridge inside `run`'s cyclic loop: after each cycle, the host's frames queued and
+/// one step of the pump (a fragment written, the mailbox read once).
+pub struct CyclicBridge {
+    position: u16,
+    tap: ferrocat_link::Tap,
+    buf: Vec<u8>,
+    to_slave: u64,
+    to_host: u64,
+    host_down: u64,
+    refused: u64,
+}
+
+impl CyclicBridge {
+    pub fn new(position: u16, tap: ferrocat_link::Tap) -> Self {
+        CyclicBridge { position, tap, buf: vec![0u8; 65536], to_slave: 0, to_host: 0, host_down: 0, refused: 0 }
+    }
+
+    pub fn step(&mut self, m: &mut ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<()> {
+        while let Some(n) = self.tap.try_read(&mut self.buf)? {
+            // A frame with no EoE form, or one more than the queue holds, is dropped.
+            match m.eoe_queue(self.position, &self.buf[..n]) {
+                Ok(true) => self.to_slave += 1,
+                Ok(false) | Err(_) => self.refused += 1,
+            }
+        }
+        if let Some(f) = m.eoe_pump(self.position)? {
+            match self.tap.write(&f) {
+                Ok(()) => self.to_host += 1,
+                Err(e) if e.raw_os_error() == Some(libc::EIO) => self.host_down += 1,
+                Err(e) => return Err(e).with_context(|| format!("writing to {}", self.tap.name())),
+            }
+        }
+        Ok(())
+    }
+
+    pub fn summary(&self, m: &ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {
+        let link = m.eoe_link(self.position)?;
+        Ok(format!(
+            "EoE bridge: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit",
+            self.to_slave, self.refused, self.to_host, self.host_down, link.dropped, link.fragment_errors
+        ))
+    }
+}

@@ -131,6 +131,10 @@ enum Command {
         /// once converged).
         #[arg(long, default_value_t = 15_000, requires = "dc")]
         dc_static_frames: u32,
+        /// POS:TAP — bridge the slave at POS to a new TAP interface TAP by EoE during the run
+        /// (one fragment each way between cycles).
+        #[arg(long)]
+        eoe_tap: Option<String>,
     },
     /// CiA402 drives with DC on the embedded virtual segment: a synchronised move of every axis
     /// per clock-sync method and cycle time; the master–slave error, SYNC0 simultaneity,
@@ -479,8 +483,8 @@ fn main() -> ExitCode {
                 no_gpio_calibration,
             })
         }
-        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames } => {
-            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate)
+        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames, eoe_tap } => {
+            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate, eoe_tap.as_deref())
         }
     };
     match result {

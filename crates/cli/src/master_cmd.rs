@@ -285,11 +285,20 @@ pub fn run(
     cycle_us: u64,
     dc_static_frames: Option<u32>,
     max_rate: bool,
+    eoe_tap: Option<&str>,
 ) -> anyhow::Result<ExitCode> {
     let dc = dc_static_frames.is_some();
     if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
         bail!("--seconds must be positive and --cycle-us at least 1");
     }
+    let eoe_tap = match eoe_tap {
+        Some(v) => {
+            let (pos, name) = v.split_once(':').with_context(|| format!("--eoe-tap '{v}': give POS:TAP"))?;
+            let pos: u16 = pos.parse().with_context(|| format!("--eoe-tap '{v}': '{pos}' is not a slave position"))?;
+            Some((pos, name))
+        }
+        None => None,
+    };
     let mut m = t.master()?;
     if !m.engine.io.is_virtual() {
         crate::target::go_real_time();
@@ -327,6 +336,16 @@ pub fn run(
         }
     }
     m.start()?;
+    let mut bridge = match eoe_tap {
+        Some((pos, name)) => {
+            m.eoe_link(pos)?;
+            let tap = ferrocat_link::Tap::open(name)
+                .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
+            eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
+            Some(crate::eoe_cmd::CyclicBridge::new(pos, tap))
+        }
+        None => None,
+    };
     let t_op = {
         use ferrocat_master::io::Io;
         m.engine.io.now_ns()
@@ -345,6 +364,9 @@ pub fn run(
     while m.engine.io.now_ns() < end {
         next += period;
         m.cycle()?;
+        if let Some(b) = bridge.as_mut() {
+            b.step(&mut m)?;
+        }
         for e in &m.events[shown..] {
             eprintln!("t={:7.3} s  {e}", (m.engine.io.now_ns() - start) as f64 * 1e-9);
         }
@@ -369,6 +391,9 @@ pub fn run(
         }
     }
     let cpu = cpu_ns() - cpu0;
+    if let Some(b) = &bridge {
+        eprintln!("{}", b.summary(&m)?);
+    }
     if dc {
         eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc_monitor()?);
     }

@@ -409,6 +409,49 @@ fn needs_shared_the_akd_answers_ping_over_eoe_in_real_time() {
     assert_eq!((p["ip"].as_str(), p["mac"].as_str()), (Some("192.168.0.10"), Some("02:00:00:00:10:01")));
 }
 
+/// Runs `ferrocat ARGS --iface IF` in the master's namespace, which makes the TAP interface
+/// `tap`; once it is there, gives it 192.168.7.1/24, pings the simulated drive (192.168.7.2)
+/// three times with Linux's own ping and stops the command (SIGTERM) or, with `wait`, lets it
+/// end: ping's output and the command's.
+fn ping_through_tap(
+    net: &VethPair,
+    args: &[&str],
+    tap: &str,
+    wait: bool,
+) -> (std::process::Output, std::process::Output) {
+    let mut bridge = ferrocat_in(&net.master_ns)
+        .args(args)
+        .args(["--iface", &net.master_if])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !Command::new("ip").args(["-n", &net.master_ns, "link", "show", tap]).output().unwrap().status.success() {
+        if let Some(status) = bridge.try_wait().unwrap() {
+            let mut e = String::new();
+            std::io::Read::read_to_string(bridge.stderr.as_mut().unwrap(), &mut e).unwrap();
+            panic!("ferrocat stopped ({status}): {e}");
+        }
+        assert!(t0.elapsed().as_secs() < 20, "ferrocat made no TAP interface");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    for args in [vec!["addr", "add", "192.168.7.1/24", "dev", tap], vec!["link", "set", tap, "up"]] {
+        assert!(Command::new("ip").args(["-n", &net.master_ns]).args(&args).status().unwrap().success());
+    }
+    let ping = VethPair::cmd(&net.master_ns, "ping")
+        .args(["-c", "3", "-W", "2", "-s", "300", "192.168.7.2"])
+        .output()
+        .unwrap();
+    println!("{}", String::from_utf8_lossy(&ping.stdout));
+    if !wait {
+        Command::new("kill").args(["-TERM", &bridge.id().to_string()]).status().unwrap();
+    }
+    let out = bridge.wait_with_output().unwrap();
+    println!("{}", String::from_utf8_lossy(&out.stderr));
+    (ping, out)
+}
+
 /// `ferrocat eoe bridge` over veth: Linux's own ping, from a TAP interface the bridge made in
 /// the master's namespace, reaches the simulated drive by EoE (ARP, then ICMP echo, each frame
 /// in fragments through its 128-byte mailboxes) and gets its replies.
@@ -417,38 +460,34 @@ fn linux_pings_the_drive_through_an_eoe_bridge() {
     let net = VethPair::new("eb");
     let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
     let tap = net.master_if.replace('a', "t");
-    let mut bridge = ferrocat_in(&net.master_ns)
-        .args(["eoe", "bridge", "1", "--tap", &tap, "--ip", "192.168.7.2", "--gateway", "192.168.7.1"])
-        .args(["--seconds", "20", "--iface", &net.master_if])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The TAP appears once the bridge has set the drive's address.
-    let t0 = std::time::Instant::now();
-    while !Command::new("ip").args(["-n", &net.master_ns, "link", "show", &tap]).output().unwrap().status.success() {
-        if let Some(status) = bridge.try_wait().unwrap() {
-            let mut e = String::new();
-            std::io::Read::read_to_string(bridge.stderr.as_mut().unwrap(), &mut e).unwrap();
-            panic!("the bridge stopped ({status}): {e}");
-        }
-        assert!(t0.elapsed().as_secs() < 10, "the bridge made no TAP interface");
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    for args in [vec!["addr", "add", "192.168.7.1/24", "dev", &tap], vec!["link", "set", &tap, "up"]] {
-        assert!(Command::new("ip").args(["-n", &net.master_ns]).args(&args).status().unwrap().success());
-    }
-    let ping = VethPair::cmd(&net.master_ns, "ping")
-        .args(["-c", "3", "-W", "2", "-s", "300", "192.168.7.2"])
-        .output()
-        .unwrap();
-    let said = String::from_utf8_lossy(&ping.stdout).to_string();
-    println!("{said}");
-    Command::new("kill").args(["-TERM", &bridge.id().to_string()]).status().unwrap();
-    let out = bridge.wait_with_output().unwrap();
-    let told = String::from_utf8_lossy(&out.stderr).to_string();
-    println!("{told}");
+    let args =
+        ["eoe", "bridge", "1", "--tap", &tap, "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--seconds", "20"];
+    let (ping, out) = ping_through_tap(&net, &args, &tap, false);
     sim.stop();
+    let (said, told) = (String::from_utf8_lossy(&ping.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
     assert!(out.status.success() && told.contains("bridge stopped"), "{told}");
+}
+
+/// The same during cyclic operation: `ferrocat run --eoe-tap 1:TAP` in OP at 1 ms, one EoE
+/// fragment each way between cycles, every cycle's working counter whole.
+#[test]
+fn linux_pings_the_drive_during_a_cyclic_run() {
+    let net = VethPair::new("er");
+    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+    let tap = net.master_if.replace('a', "t");
+    // The drive's address from a first session (the simulated drive keeps it).
+    let set = ferrocat_in(&net.master_ns)
+        .args(["eoe", "set-ip", "1", "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--iface", &net.master_if])
+        .output()
+        .unwrap();
+    assert!(set.status.success(), "{}", String::from_utf8_lossy(&set.stderr));
+    let spec = format!("1:{tap}");
+    let (ping, out) = ping_through_tap(&net, &["run", "--seconds", "6", "--eoe-tap", &spec], &tap, true);
+    sim.stop();
+    let (said, told) = (String::from_utf8_lossy(&ping.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
+    assert!(out.status.success() && told.contains("EoE bridge:"), "{told}");
+    let status: Vec<&str> = told.lines().filter(|l| l.contains(" wkc ")).collect();
+    assert!(!status.is_empty() && status.iter().all(|l| l.contains("(0 errors)")), "{told}");
 }

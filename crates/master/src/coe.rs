@@ -64,9 +64,23 @@ impl<I: Io> Master<I> {
 
     /// Writes one message of `mailbox_type` into SM0 (waiting while it is full).
     pub(crate) fn mbx_write(&mut self, position: u16, mailbox_type: MailboxType, payload: &[u8]) -> Result<()> {
-        let (st, name, m) = self.mailbox_of(position, mailbox_type)?;
-        let c = next_counter(self.slaves[position as usize].mbx_counter);
-        self.slaves[position as usize].mbx_counter = c;
+        let mut buf = self.mbx_message(position, mailbox_type, payload)?;
+        let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
+        loop {
+            if self.mbx_try_write(position, &mut buf)? {
+                return Ok(());
+            }
+            if self.engine.io.now_ns() > deadline {
+                return Err(MasterError::slave(position, &self.name_of(position), "mailbox stays full"));
+            }
+            let now = self.engine.io.now_ns();
+            self.engine.io.sleep_until(now + 100_000);
+        }
+    }
+
+    /// A message of `mailbox_type` as the whole receive mailbox, under the next counter.
+    pub(crate) fn mbx_message(&mut self, position: u16, mailbox_type: MailboxType, payload: &[u8]) -> Result<Vec<u8>> {
+        let (_, name, m) = self.mailbox_of(position, mailbox_type)?;
         let mut buf = vec![0u8; m.out.1 as usize];
         if 6 + payload.len() > buf.len() {
             return Err(MasterError::slave(
@@ -75,19 +89,19 @@ impl<I: Io> Master<I> {
                 format!("request of {} bytes exceeds the {}-byte mailbox", payload.len(), buf.len()),
             ));
         }
+        let c = next_counter(self.slaves[position as usize].mbx_counter);
+        self.slaves[position as usize].mbx_counter = c;
         MailboxHeader::new(mailbox_type, payload.len() as u16, c).emit(&mut buf)?;
         buf[6..6 + payload.len()].copy_from_slice(payload);
-        let deadline = self.engine.io.now_ns() + self.mailbox_timeout_ns;
-        loop {
-            if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: m.out.0 }, &mut buf)? == 1 {
-                return Ok(());
-            }
-            if self.engine.io.now_ns() > deadline {
-                return Err(MasterError::slave(position, &name, "mailbox stays full"));
-            }
-            let now = self.engine.io.now_ns();
-            self.engine.io.sleep_until(now + 100_000);
-        }
+        Ok(buf)
+    }
+
+    /// One write of a message into SM0: whether the slave took it (not while it is full).
+    pub(crate) fn mbx_try_write(&mut self, position: u16, buf: &mut [u8]) -> Result<bool> {
+        let s = self.slave(position)?;
+        let (st, name) = (s.station, s.name.clone());
+        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &name, "has no mailbox"))?;
+        Ok(self.engine.one(Command::FPWR, Address::Device { adp: st, ado: m.out.0 }, buf)? == 1)
     }
 
     /// The next CoE message from SM1 that is not an emergency (emergencies become events).

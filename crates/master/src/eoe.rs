@@ -15,7 +15,7 @@ use crate::io::Io;
 use crate::master::Master;
 
 /// Frames kept per slave until the application takes them; older ones are dropped (and
-/// counted) beyond this.
+/// counted) beyond this. The same bound holds frames queued for the slave by [`Master::eoe_queue`].
 pub const INBOX_FRAMES: usize = 64;
 
 /// A slave's EoE receive side: the frame being put together and the frames waiting.
@@ -25,6 +25,11 @@ pub struct EoeLink {
     inbox: VecDeque<Vec<u8>>,
     /// The next frame number the master sends (4 bits).
     frame_number: u8,
+    /// Fragments queued by `eoe_queue` (EoE header and data), and the first of them as a
+    /// mailbox message once a write of it was tried (its counter kept for the next try).
+    outbox: VecDeque<Vec<u8>>,
+    outbox_frames: VecDeque<usize>,
+    trying: Option<Vec<u8>>,
     /// Frames dropped because the inbox was full, and fragments that did not fit.
     pub dropped: u64,
     pub fragment_errors: u64,
@@ -146,6 +151,65 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// Queues one Ethernet frame for the slave, cut into fragments, for [`eoe_pump`](Self::eoe_pump)
+    /// to send between cycles. `false` (and counted as dropped) where 64 frames are already
+    /// waiting; an error where the frame has no EoE form.
+    pub fn eoe_queue(&mut self, position: u16, frame: &[u8]) -> Result<bool> {
+        let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
+        let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
+        let link = &mut self.slaves[position as usize].eoe;
+        if link.outbox_frames.len() >= INBOX_FRAMES {
+            link.dropped += 1;
+            return Ok(false);
+        }
+        let parts = eoe::fragments(frame, max_len, link.frame_number).ok_or_else(|| {
+            MasterError::slave(position, &name, format!("EoE: a {}-byte frame has no EoE form here", frame.len()))
+        })?;
+        let mut n = 0;
+        for (h, d) in parts {
+            let mut msg = h.to_bytes().to_vec();
+            msg.extend_from_slice(d);
+            link.outbox.push_back(msg);
+            n += 1;
+        }
+        link.outbox_frames.push_back(n);
+        link.frame_number = (link.frame_number + 1) & 0xF;
+        Ok(true)
+    }
+
+    /// One step of EoE traffic that never waits, for a cyclic loop: at most one fragment
+    /// written (where the slave's receive mailbox is free) and one read of its send mailbox.
+    /// Returns a frame from the slave if one is complete.
+    pub fn eoe_pump(&mut self, position: u16) -> Result<Option<Vec<u8>>> {
+        self.mailbox_of(position, MailboxType::EOE)?;
+        let link = &mut self.slaves[position as usize].eoe;
+        if link.trying.is_none() {
+            if let Some(msg) = link.outbox.pop_front() {
+                let buf = self.mbx_message(position, MailboxType::EOE, &msg)?;
+                self.slaves[position as usize].eoe.trying = Some(buf);
+            }
+        }
+        if let Some(mut buf) = self.slaves[position as usize].eoe.trying.take() {
+            if self.mbx_try_write(position, &mut buf)? {
+                let link = &mut self.slaves[position as usize].eoe;
+                // The frame's last fragment went: one frame fewer waiting.
+                if let Some(left) = link.outbox_frames.front_mut() {
+                    *left -= 1;
+                    if *left == 0 {
+                        link.outbox_frames.pop_front();
+                    }
+                }
+            } else {
+                self.slaves[position as usize].eoe.trying = Some(buf);
+            }
+        }
+        if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {
+            return Ok(Some(f));
+        }
+        self.mbx_poll(position)?;
+        Ok(self.slaves[position as usize].eoe.inbox.pop_front())
+    }
+
     /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
     pub fn eoe_link(&self, position: u16) -> Result<&EoeLink> {
         Ok(&self.slave(position)?.eoe)
@@ -163,33 +227,45 @@ impl<I: Io> Master<I> {
         timeout_ns: u64,
     ) -> Result<Option<u64>> {
         let data: Vec<u8> = (0..data_len).map(|i| i as u8).collect();
-        let ident = 0xFE00 | (position & 0xFF);
-        let echo = IcmpEcho { reply: false, ident, seq, data: &data };
-        let ip = Ipv4Repr::new(p.from_ip, p.to_ip, IP_PROTO_ICMP, echo.len());
-        let eth = EthernetRepr { dst: p.to_mac, src: p.from_mac, vlan_tci: None, ethertype: ETHERTYPE_IPV4 };
-        let mut frame = vec![0u8; 14 + 20 + echo.len()];
-        eth.emit(&mut frame)?;
-        ip.emit(&mut frame[14..])?;
-        echo.emit(&mut frame[34..])?;
+        let frame = p.echo_request(seq, &data)?;
         let t0 = self.engine.io.now_ns();
         self.eoe_send(position, &frame)?;
         let deadline = t0 + timeout_ns;
         loop {
             let now = self.engine.io.now_ns();
             let Some(f) = self.eoe_receive(position, deadline.saturating_sub(now))? else { return Ok(None) };
-            if is_echo_reply(&f, p, ident, seq, &data) {
+            if p.is_echo_reply(&f, seq, &data) {
                 return Ok(Some(self.engine.io.now_ns() - t0));
             }
         }
     }
 }
 
-fn is_echo_reply(f: &[u8], p: &EoePing, ident: u16, seq: u16, data: &[u8]) -> bool {
-    let Ok((eth, n)) = EthernetRepr::parse(f) else { return false };
-    let Ok((ip, hl)) = Ipv4Repr::parse(&f[n..]) else { return false };
-    let end = (n + ip.total_len as usize).min(f.len());
-    if eth.dst != p.from_mac || ip.src != p.to_ip || ip.protocol != IP_PROTO_ICMP || n + hl > end {
-        return false;
+impl EoePing {
+    /// The identifier its echo requests carry.
+    pub const IDENT: u16 = 0xFE00;
+
+    /// An Ethernet frame with an ICMP echo request from the master to the slave.
+    pub fn echo_request(&self, seq: u16, data: &[u8]) -> Result<Vec<u8>> {
+        let echo = IcmpEcho { reply: false, ident: Self::IDENT, seq, data };
+        let ip = Ipv4Repr::new(self.from_ip, self.to_ip, IP_PROTO_ICMP, echo.len());
+        let eth = EthernetRepr { dst: self.to_mac, src: self.from_mac, vlan_tci: None, ethertype: ETHERTYPE_IPV4 };
+        let mut frame = vec![0u8; 14 + 20 + echo.len()];
+        eth.emit(&mut frame)?;
+        ip.emit(&mut frame[14..])?;
+        echo.emit(&mut frame[34..])?;
+        Ok(frame)
     }
-    IcmpEcho::parse(&f[n + hl..end]).is_ok_and(|e| e.reply && e.ident == ident && e.seq == seq && e.data == data)
+
+    /// Whether `f` is the slave's reply to the request `seq` with `data`.
+    pub fn is_echo_reply(&self, f: &[u8], seq: u16, data: &[u8]) -> bool {
+        let Ok((eth, n)) = EthernetRepr::parse(f) else { return false };
+        let Ok((ip, hl)) = Ipv4Repr::parse(&f[n..]) else { return false };
+        let end = (n + ip.total_len as usize).min(f.len());
+        if eth.dst != self.from_mac || ip.src != self.to_ip || ip.protocol != IP_PROTO_ICMP || n + hl > end {
+            return false;
+        }
+        IcmpEcho::parse(&f[n + hl..end])
+            .is_ok_and(|e| e.reply && e.ident == Self::IDENT && e.seq == seq && e.data == data)
+    }
 }
