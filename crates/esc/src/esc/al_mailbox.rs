@@ -84,10 +84,13 @@ impl Esc {
             self.al_changes += 1;
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
             self.app.state_changed(&mut pdi, self.al.state);
-            // The firmware starts its mailbox afresh in INIT: a new master's first counter
-            // is no repeat of the last one's.
+            // The firmware stops its mailbox in INIT (a new master's first counter is no repeat
+            // of the last one's) and starts it on leaving INIT, the master's SyncManager
+            // configuration written.
             if self.al.state == AlState::Init {
-                (self.mbx_in_counter, self.mbx_repeat_at) = (0, None);
+                (self.mbx_in_counter, self.mbx_repeat_at, self.mbx_request_bit) = (0, None, None);
+            } else if before.state == AlState::Init {
+                self.check_repeat_request();
             }
         }
     }
@@ -133,13 +136,33 @@ impl Esc {
             .find(|(_, s)| s.enabled() && s.is_mailbox() && !s.ecat_writes())
     }
 
-    /// The master toggled the send mailbox's repeat request (SM activate bit 1) away from the
-    /// firmware's acknowledge (PDI control bit 1): the firmware will answer it once its
-    /// response time has passed.
+    /// The master toggled the send mailbox's repeat request (SM activate bit 1): the firmware
+    /// will answer it once its response time has passed. A mailbox the firmware starts (on
+    /// leaving INIT, or enabled later) takes the request bit as it finds it and acknowledges
+    /// it, without a repeat (as SOES syncs its toggle when it starts the mailbox): a master's
+    /// configuration writes the bit without asking for anything.
     pub(super) fn check_repeat_request(&mut self) {
-        let Some((_, s)) = self.send_mailbox() else { return };
-        if (s.activate ^ s.pdi_control) & 0x02 != 0 && self.mbx_repeat_at.is_none() {
-            self.mbx_repeat_at = Some(self.now_ns.saturating_add(self.mailbox_response.draw_ns()));
+        if self.al.state == AlState::Init {
+            return;
+        }
+        let Some((n, s)) = self.send_mailbox() else {
+            self.mbx_request_bit = None;
+            return;
+        };
+        let request = s.activate & 0x02;
+        match self.mbx_request_bit {
+            None => {
+                let a = ferrocat_wire::register::addr::sm(n) as usize + 7;
+                self.mem[a] = (self.mem[a] & !0x02) | request;
+                self.mbx_request_bit = Some(request);
+            }
+            Some(seen) if seen != request => {
+                self.mbx_request_bit = Some(request);
+                if self.mbx_repeat_at.is_none() {
+                    self.mbx_repeat_at = Some(self.now_ns.saturating_add(self.mailbox_response.draw_ns()));
+                }
+            }
+            Some(_) => {}
         }
     }
 

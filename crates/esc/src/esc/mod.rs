@@ -192,6 +192,8 @@ pub struct Esc {
     /// message again and setting PDI control bit 1 to the same value).
     mbx_last: Vec<u8>,
     mbx_repeat_at: Option<u64>,
+    /// The repeat request bit as the firmware last saw it (None: the mailbox not started).
+    mbx_request_bit: Option<u8>,
     /// The counter of the last mailbox request taken (0: none since INIT), and how many
     /// requests were dropped as that one written again.
     mbx_in_counter: u8,
@@ -255,6 +257,7 @@ impl Esc {
             mbx_queue: Default::default(),
             mbx_last: Vec::new(),
             mbx_repeat_at: None,
+            mbx_request_bit: None,
             mbx_in_counter: 0,
             mbx_duplicates: 0,
             mbx_repeats: 0,
@@ -284,7 +287,7 @@ impl Esc {
         self.pending.clear();
         self.sms.iter_mut().for_each(|s| *s = SmState::default());
         self.mbx_queue.clear();
-        (self.mbx_last, self.mbx_repeat_at, self.mbx_in_counter) = (Vec::new(), None, 0);
+        (self.mbx_last, self.mbx_repeat_at, self.mbx_in_counter, self.mbx_request_bit) = (Vec::new(), None, 0, None);
         self.pending_al = None;
         self.al = AlMachine::default();
         self.now_ns = t_ns;
