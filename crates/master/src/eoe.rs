@@ -105,8 +105,14 @@ impl<I: Io> Master<I> {
     }
 
     /// Sends one Ethernet frame to the slave, in as many fragments as its mailbox needs.
+    /// Refused while frames queued for [`eoe_pump`](Self::eoe_pump) are still going out (the
+    /// fragments of two frames would interleave).
     pub fn eoe_send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
         let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
+        let link = &self.slaves[position as usize].eoe;
+        if !link.outbox.is_empty() || link.trying.is_some() {
+            return Err(MasterError::slave(position, &name, "EoE: frames queued for eoe_pump are still going out"));
+        }
         let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
         let number = self.slaves[position as usize].eoe.frame_number;
         let parts = eoe::fragments(frame, max_len, number).ok_or_else(|| {

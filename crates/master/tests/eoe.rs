@@ -129,6 +129,9 @@ fn the_pump_moves_frames_between_cycles_in_op_without_waiting() {
     for seq in 0..3 {
         assert!(m.eoe_queue(DRIVE, &p.echo_request(seq, &data).unwrap()).unwrap());
     }
+    // Meanwhile a blocking send would interleave its fragments with the queue's.
+    let e = m.eoe_send(DRIVE, &p.echo_request(9, &data).unwrap()).unwrap_err().to_string();
+    assert!(e.contains("still going out"), "{e}");
     let mut echoes = Vec::new();
     let mut cycles = 0;
     while echoes.len() < 3 && cycles < 200 {
