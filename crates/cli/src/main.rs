@@ -84,6 +84,11 @@ enum Command {
         /// Seed for oscillators and faults (overrides the file's).
         #[arg(long)]
         seed: Option<u64>,
+        /// DEVICE:TAP (repeatable) — with --iface: bridge the EoE endpoint of the device at
+        /// position DEVICE to a new TAP interface TAP of this host, whose own network stack
+        /// then answers for it.
+        #[arg(long, requires = "iface")]
+        eoe_tap: Vec<String>,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
         #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
         bench: bool,
@@ -423,8 +428,18 @@ fn main() -> ExitCode {
         },
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
         Command::Sim { bench: true, json, .. } => sim::bench(json),
-        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, .. } => {
-            sim::run(sim::SimArgs { config, devices: device, iface, secondary_iface, udp, report, clock_log, seed })
+        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, eoe_tap, .. } => {
+            sim::run(sim::SimArgs {
+                config,
+                devices: device,
+                iface,
+                secondary_iface,
+                udp,
+                report,
+                clock_log,
+                seed,
+                eoe_taps: eoe_tap,
+            })
         }
         Command::Lab { experiment } => {
             use ferrocat_lab::scenario::Experiment;

@@ -19,6 +19,21 @@ pub struct SimArgs {
     pub report: Option<PathBuf>,
     pub clock_log: Option<PathBuf>,
     pub seed: Option<u64>,
+    /// DEVICE:TAP bridges of EoE endpoints to the host.
+    pub eoe_taps: Vec<String>,
+}
+
+/// `--eoe-tap DEVICE:TAP`: the device's EoE endpoint bridged to a new TAP interface.
+fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_segment::live::EoeTap> {
+    let (dev, name) = spec.split_once(':').with_context(|| format!("--eoe-tap '{spec}': give DEVICE:TAP"))?;
+    let node: usize = dev.parse().with_context(|| format!("--eoe-tap '{spec}': '{dev}' is not a device position"))?;
+    let n = seg.nodes.get_mut(node).with_context(|| format!("--eoe-tap '{spec}': no device {node}"))?;
+    if !n.esc.set_eoe_bridged(true) {
+        bail!("--eoe-tap '{spec}': device {node} ({}) has no EoE endpoint (its SII does not name EoE)", n.name);
+    }
+    let tap = ferrocat_link::Tap::open(name)
+        .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
+    Ok(ferrocat_segment::live::EoeTap { node, tap, to_host: 0, from_host: 0, dropped: 0 })
 }
 
 /// Builds the segment a command describes with `--config` or `--device`.
@@ -194,7 +209,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
     }
-    let names: Vec<_> = seg.nodes.iter().map(|n| n.name.as_str()).collect();
+    let names: Vec<String> = seg.nodes.iter().map(|n| n.name.clone()).collect();
     let stats = match (&a.iface, &a.udp) {
         (Some(iface), None) => {
             let sock = RawSocket::open(iface).with_context(|| format!("serving interface {iface}"))?;
@@ -202,6 +217,10 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                 Some(s) => Some(RawSocket::open(s).with_context(|| format!("serving interface {s}"))?),
                 None => None,
             };
+            let mut taps = a.eoe_taps.iter().map(|t| eoe_tap(&mut seg, t)).collect::<anyhow::Result<Vec<_>>>()?;
+            for t in &taps {
+                eprintln!("ferrocat sim: device {}'s EoE on {}", t.node, t.tap.name());
+            }
             match (&a.secondary_iface, seg.secondary()) {
                 (Some(s), Some(l)) => eprintln!(
                     "ferrocat sim: {} slaves ({}) in a ring on {iface} and {s} (port {} of device {})",
@@ -218,7 +237,18 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             if !rt.refused.is_empty() {
                 eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
             }
-            serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, a.clock_log.is_some())?
+            let stats = serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, a.clock_log.is_some(), &mut taps)?;
+            for t in &taps {
+                eprintln!(
+                    "ferrocat sim: device {}'s EoE on {}: {} frames to the host, {} from it, {} dropped",
+                    t.node,
+                    t.tap.name(),
+                    t.to_host,
+                    t.from_host,
+                    t.dropped
+                );
+            }
+            stats
         }
         (None, Some(addr)) => {
             let sock = std::net::UdpSocket::bind(addr).with_context(|| format!("binding UDP {addr}"))?;

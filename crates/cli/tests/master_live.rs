@@ -452,13 +452,13 @@ fn ping_through_tap(
     (ping, out)
 }
 
-/// `ferrocat eoe bridge` over veth: Linux's own ping, from a TAP interface the bridge made in
-/// the master's namespace, reaches the simulated drive by EoE (ARP, then ICMP echo, each frame
-/// in fragments through its 128-byte mailboxes) and gets its replies.
-#[test]
-fn linux_pings_the_drive_through_an_eoe_bridge() {
-    let net = VethPair::new("eb");
-    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+/// Serves EK1100 + SERVO (and `sim_args`), runs `prepare`, then pings the drive's address
+/// from the master's namespace through `ferrocat eoe bridge`: ping's output, and the
+/// bridge's, once it has stopped.
+fn ping_through_eoe_bridge(tag: &str, sim_args: &[&str], prepare: impl FnOnce(&VethPair)) -> (String, String) {
+    let net = VethPair::new(tag);
+    let sim = Sim::start(&net, &[&["--device", "EK1100", "--device", "SERVO"], sim_args].concat());
+    prepare(&net);
     let tap = net.master_if.replace('a', "t");
     let args =
         ["eoe", "bridge", "1", "--tap", &tap, "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--seconds", "20"];
@@ -467,6 +467,15 @@ fn linux_pings_the_drive_through_an_eoe_bridge() {
     let (said, told) = (String::from_utf8_lossy(&ping.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
     assert!(out.status.success() && told.contains("bridge stopped"), "{told}");
+    (said.to_string(), told.to_string())
+}
+
+/// `ferrocat eoe bridge` over veth: Linux's own ping, from a TAP interface the bridge made in
+/// the master's namespace, reaches the simulated drive by EoE (ARP, then ICMP echo, each frame
+/// in fragments through its 128-byte mailboxes) and gets its replies.
+#[test]
+fn linux_pings_the_drive_through_an_eoe_bridge() {
+    ping_through_eoe_bridge("eb", &[], |_| {});
 }
 
 /// The same during cyclic operation: `ferrocat run --eoe-tap 1:TAP` in OP at 1 ms, one EoE
@@ -490,4 +499,26 @@ fn linux_pings_the_drive_during_a_cyclic_run() {
     assert!(out.status.success() && told.contains("EoE bridge:"), "{told}");
     let status: Vec<&str> = told.lines().filter(|l| l.contains(" wkc ")).collect();
     assert!(!status.is_empty() && status.iter().all(|l| l.contains("(0 errors)")), "{told}");
+}
+
+/// EoE from one Linux stack to another through the simulated segment: `ferrocat sim
+/// --eoe-tap 1:TAP` puts a TAP interface of the segment's namespace behind the drive's EoE
+/// endpoint, and Linux's ping from the master's namespace, through `ferrocat eoe bridge`,
+/// is answered by the segment namespace's own stack.
+#[test]
+fn linux_pings_linux_behind_a_simulated_drive() {
+    // Named as VethPair names its interfaces, in the segment's namespace.
+    let behind = format!("fcel{}u", std::process::id() % 100_000);
+    let spec = format!("1:{behind}");
+    let (said, _) = ping_through_eoe_bridge("el", &["--eoe-tap", &spec], |net| {
+        for args in [vec!["addr", "add", "192.168.7.2/24", "dev", &behind], vec!["link", "set", &behind, "up"]] {
+            assert!(Command::new("ip").args(["-n", &net.segment_ns]).args(&args).status().unwrap().success());
+        }
+        // A TTL of its own, so that the replies show whose stack sent them.
+        let ttl =
+            VethPair::cmd(&net.segment_ns, "sh").args(["-c", "echo 99 > /proc/sys/net/ipv4/ip_default_ttl"]).status();
+        assert!(ttl.unwrap().success());
+    });
+    // The segment namespace's stack answered (the drive's own would say 64).
+    assert!(said.contains("ttl=99"), "{said}");
 }

@@ -95,6 +95,31 @@ impl CoeDevice {
         }
     }
 
+    /// A frame from the host a bridged EoE endpoint stands for: its fragments, of at most
+    /// `max_len` bytes of service data, queued for the master's reads of the send mailbox.
+    /// `false` where the device has no EoE endpoint or the frame has no EoE form.
+    pub fn eoe_from_host(&mut self, frame: &[u8], max_len: usize) -> bool {
+        let Some(e) = self.eoe.as_mut() else { return false };
+        let bodies = e.send(frame, max_len);
+        if bodies.is_empty() {
+            return false;
+        }
+        for b in bodies {
+            let msg = self.typed_message(MailboxType::EOE, &b);
+            self.queue.push_back(msg);
+        }
+        true
+    }
+
+    /// The CoE device an application is or holds (a drive's), if any.
+    pub fn of(app: &mut dyn Application) -> Option<&mut CoeDevice> {
+        let any = app.as_any_mut();
+        if any.is::<CoeDevice>() {
+            return any.downcast_mut::<CoeDevice>();
+        }
+        any.downcast_mut::<crate::Cia402Drive>().map(|d| &mut d.coe)
+    }
+
     /// Queues an emergency message for the master.
     pub fn emergency(&mut self, e: Emergency) {
         let mut body = CoeHeader::new(CoeService::EMERGENCY).word().to_le_bytes().to_vec();

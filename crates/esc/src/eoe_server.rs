@@ -7,10 +7,18 @@ use ferrocat_wire::eoe::{self, frame_type, EoeHeader, EoeResult, IpParameters, R
 use ferrocat_wire::ethernet::{EthernetRepr, Ipv4Repr, BROADCAST, ETHERTYPE_IPV4};
 use ferrocat_wire::inet::{self, ArpRepr, IcmpEcho, ARP_LEN, ETHERTYPE_ARP, IP_PROTO_ICMP};
 
+/// Frames kept for the host of a bridged endpoint until it takes them.
+pub const HOST_FRAMES: usize = 64;
+
 #[derive(Debug, Clone, Default)]
 pub struct EoeServer {
     /// What the master set; a device without a MAC address answers no frame.
     pub params: IpParameters,
+    /// Bridged to a host (`ferrocat sim --eoe-tap`): the frames it receives go to the host
+    /// (`to_host`), not to its own small stack, and the host's frames come in by
+    /// [`Esc::eoe_from_host`](crate::Esc::eoe_from_host).
+    pub bridged: bool,
+    pub to_host: std::collections::VecDeque<Vec<u8>>,
     reassembler: Reassembler,
     /// The next frame number it sends (4 bits; not reset by INIT: the AKD's announcements in
     /// the capture count 0, 1, 2, 3 across TwinCAT's four sessions).
@@ -48,7 +56,8 @@ impl EoeServer {
                         dns_name: p.dns_name.or(old.dns_name),
                     };
                     let mut out = vec![response(frame_type::SET_IP_RESPONSE, EoeResult::SUCCESS)];
-                    if announce {
+                    // Bridged, the host's own stack announces what it is told (or not).
+                    if announce && !self.bridged {
                         if let Some(frame) = self.announcement() {
                             out.extend(self.send(&frame, max_len));
                         }
@@ -73,6 +82,15 @@ impl EoeServer {
             }
             frame_type::FRAGMENT => {
                 let reply = match self.reassembler.push(&h, body) {
+                    Ok(Some(r)) if self.bridged => {
+                        self.frames_in += 1;
+                        if self.to_host.len() == HOST_FRAMES {
+                            self.to_host.pop_front();
+                            self.ignored += 1;
+                        }
+                        self.to_host.push_back(r.frame.to_vec());
+                        return Vec::new();
+                    }
                     Ok(Some(r)) => {
                         self.frames_in += 1;
                         answer(&self.params, r.frame)
@@ -97,7 +115,7 @@ impl EoeServer {
     }
 
     /// The frame's fragments as service data, under the next frame number.
-    fn send(&mut self, frame: &[u8], max_len: usize) -> Vec<Vec<u8>> {
+    pub fn send(&mut self, frame: &[u8], max_len: usize) -> Vec<Vec<u8>> {
         let Some(parts) = eoe::fragments(frame, max_len, self.frame_number) else { return Vec::new() };
         let out = parts
             .map(|(h, d)| {

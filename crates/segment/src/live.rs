@@ -129,17 +129,55 @@ impl Placement {
     }
 }
 
+/// A device's EoE endpoint bridged to a TAP interface of the simulator's host: the host's
+/// stack stands behind the simulated slave (`ferrocat sim --eoe-tap DEVICE:TAP`).
+#[derive(Debug)]
+pub struct EoeTap {
+    pub node: usize,
+    pub tap: ferrocat_link::Tap,
+    /// Frames handed to the host, frames from it queued for the master, and those dropped
+    /// (the host's interface down; a frame with no EoE form or no mailbox configured yet).
+    pub to_host: u64,
+    pub from_host: u64,
+    pub dropped: u64,
+}
+
+impl EoeTap {
+    /// Moves frames both ways between the TAP and the device, without waiting.
+    fn exchange(&mut self, seg: &mut Segment, buf: &mut [u8]) -> io::Result<()> {
+        let Some(n) = seg.nodes.get_mut(self.node) else { return Ok(()) };
+        while let Some(len) = self.tap.try_read(buf)? {
+            if n.esc.eoe_from_host(&buf[..len]) {
+                self.from_host += 1;
+            } else {
+                self.dropped += 1;
+            }
+        }
+        while let Some(f) = n.esc.eoe_to_host() {
+            match self.tap.write(&f) {
+                Ok(()) => self.to_host += 1,
+                Err(e) if e.raw_os_error() == Some(libc::EIO) => self.dropped += 1,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Serves `seg` on a raw socket until `stop` is set; `log_clocks` fills `clock_log`. With
 /// `secondary`, that interface is the master's second port of a ring (the segment's
 /// [`Segment::connect_secondary`]): frames are taken from both and answered on the port the
-/// segment returns them to.
+/// segment returns them to. `taps` bridge devices' EoE endpoints to the host, their frames
+/// moved before and after each frame the master sends (the master reads a mailbox only then).
 pub fn serve_raw(
     seg: &mut Segment,
     sock: &RawSocket,
     secondary: Option<&RawSocket>,
     stop: &AtomicBool,
     log_clocks: bool,
+    taps: &mut [EoeTap],
 ) -> io::Result<ServeStats> {
+    let mut tap_buf = vec![0u8; 65536];
     let t0 = monotonic_ns();
     let mut buf = vec![0u8; 9216];
     let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
@@ -173,6 +211,9 @@ pub fn serve_raw(
             }
             got
         };
+        for t in taps.iter_mut() {
+            t.exchange(seg, &mut tap_buf)?;
+        }
         let Some((from, (n, stamp))) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
             continue;
@@ -198,6 +239,9 @@ pub fn serve_raw(
             let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(start, sent));
             // The trip from the frame's departure: a wait for the link is not part of it.
             place.answered(way, back.saturating_sub(seg.last_departure_ns()), left - start);
+        }
+        for t in taps.iter_mut() {
+            t.exchange(seg, &mut tap_buf)?;
         }
         if let Some(log) = stats.clock_log.as_mut() {
             log.push(t0 + place.last_ns);

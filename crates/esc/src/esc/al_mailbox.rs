@@ -129,6 +129,27 @@ impl Esc {
         self.deliver_mailbox();
     }
 
+    /// A frame from the host of a bridged EoE endpoint, queued for the master in fragments as
+    /// long as the send mailbox allows. `false` where the device has no EoE endpoint, its send
+    /// mailbox is not configured, or the frame has no EoE form.
+    pub fn eoe_from_host(&mut self, frame: &[u8]) -> bool {
+        let Some((_, s)) = self.send_mailbox() else { return false };
+        let max_len = (s.length as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
+        crate::CoeDevice::of(self.app.as_mut()).is_some_and(|c| c.eoe_from_host(frame, max_len))
+    }
+
+    /// The next frame a bridged EoE endpoint received from the master for its host.
+    pub fn eoe_to_host(&mut self) -> Option<Vec<u8>> {
+        crate::CoeDevice::of(self.app.as_mut())?.eoe.as_mut()?.to_host.pop_front()
+    }
+
+    /// Bridges the device's EoE endpoint to a host (or not): `false` where it has none.
+    pub fn set_eoe_bridged(&mut self, bridged: bool) -> bool {
+        let Some(e) = crate::CoeDevice::of(self.app.as_mut()).and_then(|c| c.eoe.as_mut()) else { return false };
+        e.bridged = bridged;
+        true
+    }
+
     /// The send mailbox: the first mailbox SyncManager the ECAT side reads.
     fn send_mailbox(&self) -> Option<(u8, SyncManager)> {
         (0..self.config.sm_count)
