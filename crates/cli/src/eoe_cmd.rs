@@ -204,7 +204,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             outln!("PING {to} over EoE (slave {position}) from {}: {size} data bytes", Ipv4Addr::from(from_ip));
             let mut rtts = Vec::new();
             for seq in 0..count {
-                match m.eoe_ping(position, &ping, seq, size, timeout_ms * 1_000_000)? {
+                match m.eoe_ping(position, &ping, seq, size, timeout_ms.saturating_mul(1_000_000))? {
                     Some(ns) => {
                         outln!("{} bytes from {to}: seq={seq} time={:.3} ms", size + 8, ns as f64 / 1e6);
                         rtts.push(ns);
