@@ -140,7 +140,7 @@ impl<I: Io> Master<I> {
     /// none came.
     pub fn eoe_receive(&mut self, position: u16, timeout_ns: u64) -> Result<Option<Vec<u8>>> {
         self.mailbox_of(position, MailboxType::EOE)?;
-        let deadline = self.engine.io.now_ns() + timeout_ns;
+        let deadline = self.engine.io.now_ns().saturating_add(timeout_ns);
         loop {
             if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {
                 return Ok(Some(f));
@@ -236,7 +236,7 @@ impl<I: Io> Master<I> {
         let frame = p.echo_request(seq, &data)?;
         let t0 = self.engine.io.now_ns();
         self.eoe_send(position, &frame)?;
-        let deadline = t0 + timeout_ns;
+        let deadline = t0.saturating_add(timeout_ns);
         loop {
             let now = self.engine.io.now_ns();
             let Some(f) = self.eoe_receive(position, deadline.saturating_sub(now))? else { return Ok(None) };
