@@ -152,7 +152,7 @@ impl<I: Io> Master<I> {
                 return Ok(self.slaves[position as usize].eoe.inbox.pop_front());
             }
             if let Polled::Empty = polled {
-                self.engine.io.sleep_until((now + 50_000).min(deadline + 1));
+                self.engine.io.sleep_until((now + 50_000).min(deadline.saturating_add(1)));
             }
         }
     }
