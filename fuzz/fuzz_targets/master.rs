@@ -14,8 +14,10 @@
 //! (the master opens the ring and latches the far half again). Its third bit enters the input
 //! terminal (an ET1200) on port 1 with the drive behind its port 0, which the master latches
 //! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
+//! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
-use ferrocat_master::{DcConfig, Master};
+use ferrocat_master::{DcConfig, EoePing, Master};
+use ferrocat_wire::eoe::IpParameters;
 use ferrocat_segment::{Event, Segment, SegmentConfig};
 use libfuzzer_sys::fuzz_target;
 
@@ -148,4 +150,17 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     let _ = m.sdo_write(drive, 0x6060, 0, &[8]);
+    // EoE with the drive: its address set and read, a ping, and the pump between cycles.
+    let params = IpParameters { mac: Some([2, 0, 0, 0, 0, 2]), ip: Some([10, 0, 0, 2]), ..Default::default() };
+    let _ = m.eoe_set_ip(drive, &params);
+    let _ = m.eoe_get_ip(drive);
+    let p = EoePing { from_mac: [2, 0, 0, 0, 0, 1], from_ip: [10, 0, 0, 1], to_mac: [2, 0, 0, 0, 0, 2], to_ip: [10, 0, 0, 2] };
+    let _ = m.eoe_ping(drive, &p, 1, 200, 5_000_000);
+    if let Ok(frame) = p.echo_request(2, &[7; 300]) {
+        let _ = m.eoe_queue(drive, &frame);
+        for _ in 0..20 {
+            let _ = m.cycle();
+            let _ = m.eoe_pump(drive);
+        }
+    }
 });
