@@ -5,8 +5,8 @@
 //! the simulated EoE endpoint, whose every reply must decode, fit the mailbox and, in
 //! fragments, put together into whole frames.
 use ferrocat_esc::{EoeServer, FoeServer};
-use ferrocat_wire::eoe::{frame_type, EoeHeader, Reassembler};
 use ferrocat_wire::coe::{self, CoeMessage, Sdo, SdoInfo};
+use ferrocat_wire::eoe::{frame_type, EoeHeader, Reassembler};
 use ferrocat_wire::foe::Foe;
 use ferrocat_wire::mailbox::{Mailbox, MailboxErrorCode};
 use libfuzzer_sys::fuzz_target;

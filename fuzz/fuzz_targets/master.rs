@@ -17,8 +17,8 @@
 //! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, EoePing, Master};
-use ferrocat_wire::eoe::IpParameters;
 use ferrocat_segment::{Event, Segment, SegmentConfig};
+use ferrocat_wire::eoe::IpParameters;
 use libfuzzer_sys::fuzz_target;
 
 const SEGMENT: &str = r#"
@@ -154,7 +154,12 @@ fuzz_target!(|data: &[u8]| {
     let params = IpParameters { mac: Some([2, 0, 0, 0, 0, 2]), ip: Some([10, 0, 0, 2]), ..Default::default() };
     let _ = m.eoe_set_ip(drive, &params);
     let _ = m.eoe_get_ip(drive);
-    let p = EoePing { from_mac: [2, 0, 0, 0, 0, 1], from_ip: [10, 0, 0, 1], to_mac: [2, 0, 0, 0, 0, 2], to_ip: [10, 0, 0, 2] };
+    let p = EoePing {
+        from_mac: [2, 0, 0, 0, 0, 1],
+        from_ip: [10, 0, 0, 1],
+        to_mac: [2, 0, 0, 0, 0, 2],
+        to_ip: [10, 0, 0, 2],
+    };
     let _ = m.eoe_ping(drive, &p, 1, 200, 5_000_000);
     if let Ok(frame) = p.echo_request(2, &[7; 300]) {
         let _ = m.eoe_queue(drive, &frame);
