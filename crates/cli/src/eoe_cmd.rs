@@ -351,8 +351,15 @@ impl CyclicBridge {
     pub fn summary(&self, m: &ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {
         let link = m.eoe_link(self.position)?;
         Ok(format!(
-            "EoE bridge: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit",
-            self.to_slave, self.refused, self.to_host, self.host_down, link.dropped, link.fragment_errors
+            "EoE bridge of slave {} to {}: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit",
+            self.position,
+            self.tap.name(),
+            self.to_slave,
+            self.refused,
+            self.to_host,
+            self.host_down,
+            link.dropped,
+            link.fragment_errors
         ))
     }
 }

@@ -136,10 +136,10 @@ enum Command {
         /// once converged).
         #[arg(long, default_value_t = 15_000, requires = "dc")]
         dc_static_frames: u32,
-        /// POS:TAP — bridge the slave at POS to a new TAP interface TAP by EoE during the run
-        /// (one fragment each way between cycles).
+        /// POS:TAP (repeatable) — bridge the slave at POS to a new TAP interface TAP by EoE
+        /// during the run (one fragment each way between cycles, per slave).
         #[arg(long)]
-        eoe_tap: Option<String>,
+        eoe_tap: Vec<String>,
     },
     /// CiA402 drives with DC on the embedded virtual segment: a synchronised move of every axis
     /// per clock-sync method and cycle time; the master–slave error, SYNC0 simultaneity,
@@ -499,7 +499,7 @@ fn main() -> ExitCode {
             })
         }
         Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames, eoe_tap } => {
-            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate, eoe_tap.as_deref())
+            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate, &eoe_tap)
         }
     };
     match result {

@@ -285,20 +285,20 @@ pub fn run(
     cycle_us: u64,
     dc_static_frames: Option<u32>,
     max_rate: bool,
-    eoe_tap: Option<&str>,
+    eoe_taps: &[String],
 ) -> anyhow::Result<ExitCode> {
     let dc = dc_static_frames.is_some();
     if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
         bail!("--seconds must be positive and --cycle-us at least 1");
     }
-    let eoe_tap = match eoe_tap {
-        Some(v) => {
+    let eoe_taps = eoe_taps
+        .iter()
+        .map(|v| {
             let (pos, name) = v.split_once(':').with_context(|| format!("--eoe-tap '{v}': give POS:TAP"))?;
             let pos: u16 = pos.parse().with_context(|| format!("--eoe-tap '{v}': '{pos}' is not a slave position"))?;
-            Some((pos, name))
-        }
-        None => None,
-    };
+            Ok((pos, name))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
     if !m.engine.io.is_virtual() {
         crate::target::go_real_time();
@@ -336,16 +336,14 @@ pub fn run(
         }
     }
     m.start()?;
-    let mut bridge = match eoe_tap {
-        Some((pos, name)) => {
-            m.eoe_link(pos)?;
-            let tap = ferrocat_link::Tap::open(name)
-                .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
-            eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
-            Some(crate::eoe_cmd::CyclicBridge::new(pos, tap))
-        }
-        None => None,
-    };
+    let mut bridges = Vec::new();
+    for &(pos, name) in &eoe_taps {
+        m.eoe_link(pos)?;
+        let tap = ferrocat_link::Tap::open(name)
+            .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
+        eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
+        bridges.push(crate::eoe_cmd::CyclicBridge::new(pos, tap));
+    }
     let t_op = {
         use ferrocat_master::io::Io;
         m.engine.io.now_ns()
@@ -364,7 +362,7 @@ pub fn run(
     while m.engine.io.now_ns() < end {
         next += period;
         m.cycle()?;
-        if let Some(b) = bridge.as_mut() {
+        for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
         for e in &m.events[shown..] {
@@ -391,7 +389,7 @@ pub fn run(
         }
     }
     let cpu = cpu_ns() - cpu0;
-    if let Some(b) = &bridge {
+    for b in &bridges {
         eprintln!("{}", b.summary(&m)?);
     }
     if dc {

@@ -409,16 +409,16 @@ fn needs_shared_the_akd_answers_ping_over_eoe_in_real_time() {
     assert_eq!((p["ip"].as_str(), p["mac"].as_str()), (Some("192.168.0.10"), Some("02:00:00:00:10:01")));
 }
 
-/// Runs `ferrocat ARGS --iface IF` in the master's namespace, which makes the TAP interface
-/// `tap`; once it is there, gives it 192.168.7.1/24, pings the simulated drive (192.168.7.2)
-/// three times with Linux's own ping and stops the command (SIGTERM) or, with `wait`, lets it
-/// end: ping's output and the command's.
-fn ping_through_tap(
+/// Runs `ferrocat ARGS --iface IF` in the master's namespace, which makes the TAP interfaces
+/// `taps` (name, the host's address on it, the slave's); once they are there, gives each its
+/// address, pings each slave three times with Linux's own ping and stops the command
+/// (SIGTERM) or, with `wait`, lets it end: each ping's output and the command's.
+fn ping_through_taps(
     net: &VethPair,
     args: &[&str],
-    tap: &str,
+    taps: &[(&str, &str, &str)],
     wait: bool,
-) -> (std::process::Output, std::process::Output) {
+) -> (Vec<std::process::Output>, std::process::Output) {
     let mut bridge = ferrocat_in(&net.master_ns)
         .args(args)
         .args(["--iface", &net.master_if])
@@ -427,7 +427,8 @@ fn ping_through_tap(
         .spawn()
         .unwrap();
     let t0 = std::time::Instant::now();
-    while !Command::new("ip").args(["-n", &net.master_ns, "link", "show", tap]).output().unwrap().status.success() {
+    let present = |tap: &str| Command::new("ip").args(["-n", &net.master_ns, "link", "show", tap]).output().unwrap();
+    while !taps.iter().all(|(tap, _, _)| present(tap).status.success()) {
         if let Some(status) = bridge.try_wait().unwrap() {
             let mut e = String::new();
             std::io::Read::read_to_string(bridge.stderr.as_mut().unwrap(), &mut e).unwrap();
@@ -436,20 +437,24 @@ fn ping_through_tap(
         assert!(t0.elapsed().as_secs() < 20, "ferrocat made no TAP interface");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
-    for args in [vec!["addr", "add", "192.168.7.1/24", "dev", tap], vec!["link", "set", tap, "up"]] {
-        assert!(Command::new("ip").args(["-n", &net.master_ns]).args(&args).status().unwrap().success());
+    let mut pings = Vec::new();
+    for (tap, host, _) in taps {
+        for args in [vec!["addr", "add", host, "dev", tap], vec!["link", "set", tap, "up"]] {
+            assert!(Command::new("ip").args(["-n", &net.master_ns]).args(&args).status().unwrap().success());
+        }
     }
-    let ping = VethPair::cmd(&net.master_ns, "ping")
-        .args(["-c", "3", "-W", "2", "-s", "300", "192.168.7.2"])
-        .output()
-        .unwrap();
-    println!("{}", String::from_utf8_lossy(&ping.stdout));
+    for (_, _, slave) in taps {
+        let ping =
+            VethPair::cmd(&net.master_ns, "ping").args(["-c", "3", "-W", "2", "-s", "300", slave]).output().unwrap();
+        println!("{}", String::from_utf8_lossy(&ping.stdout));
+        pings.push(ping);
+    }
     if !wait {
         Command::new("kill").args(["-TERM", &bridge.id().to_string()]).status().unwrap();
     }
     let out = bridge.wait_with_output().unwrap();
     println!("{}", String::from_utf8_lossy(&out.stderr));
-    (ping, out)
+    (pings, out)
 }
 
 /// Serves EK1100 + SERVO (and `sim_args`), runs `prepare`, then pings the drive's address
@@ -462,10 +467,10 @@ fn ping_through_eoe_bridge(tag: &str, sim_args: &[&str], prepare: impl FnOnce(&V
     let tap = net.master_if.replace('a', "t");
     let args =
         ["eoe", "bridge", "1", "--tap", &tap, "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--seconds", "20"];
-    let (ping, out) = ping_through_tap(&net, &args, &tap, false);
+    let (pings, out) = ping_through_taps(&net, &args, &[(&tap, "192.168.7.1/24", "192.168.7.2")], false);
     sim.stop();
-    let (said, told) = (String::from_utf8_lossy(&ping.stdout), String::from_utf8_lossy(&out.stderr));
-    assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
+    let (said, told) = (String::from_utf8_lossy(&pings[0].stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(pings[0].status.success() && said.contains("3 received"), "{said}{told}");
     assert!(out.status.success() && told.contains("bridge stopped"), "{told}");
     (said.to_string(), told.to_string())
 }
@@ -478,25 +483,33 @@ fn linux_pings_the_drive_through_an_eoe_bridge() {
     ping_through_eoe_bridge("eb", &[], |_| {});
 }
 
-/// The same during cyclic operation: `ferrocat run --eoe-tap 1:TAP` in OP at 1 ms, one EoE
-/// fragment each way between cycles, every cycle's working counter whole.
+/// The same during cyclic operation, two drives each on a TAP of its own: `ferrocat run
+/// --eoe-tap 1:TAP1 --eoe-tap 2:TAP2` in OP at 1 ms, one EoE fragment each way per drive
+/// between cycles, every cycle's working counter whole.
 #[test]
-fn linux_pings_the_drive_during_a_cyclic_run() {
+fn linux_pings_two_drives_during_a_cyclic_run() {
     let net = VethPair::new("er");
-    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
-    let tap = net.master_if.replace('a', "t");
-    // The drive's address from a first session (the simulated drive keeps it).
-    let set = ferrocat_in(&net.master_ns)
-        .args(["eoe", "set-ip", "1", "--ip", "192.168.7.2", "--gateway", "192.168.7.1", "--iface", &net.master_if])
-        .output()
-        .unwrap();
-    assert!(set.status.success(), "{}", String::from_utf8_lossy(&set.stderr));
-    let spec = format!("1:{tap}");
-    let (ping, out) = ping_through_tap(&net, &["run", "--seconds", "6", "--eoe-tap", &spec], &tap, true);
+    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO", "--device", "SERVO"]);
+    let (tap1, tap2) = (net.master_if.replace('a', "t"), net.master_if.replace('a', "v"));
+    // The drives' addresses from a first session (the simulated drives keep them).
+    for (pos, ip, gw) in [("1", "192.168.7.2", "192.168.7.1"), ("2", "192.168.8.2", "192.168.8.1")] {
+        let set = ferrocat_in(&net.master_ns)
+            .args(["eoe", "set-ip", pos, "--ip", ip, "--gateway", gw, "--iface", &net.master_if])
+            .output()
+            .unwrap();
+        assert!(set.status.success(), "{}", String::from_utf8_lossy(&set.stderr));
+    }
+    let (spec1, spec2) = (format!("1:{tap1}"), format!("2:{tap2}"));
+    let args = ["run", "--seconds", "8", "--eoe-tap", &spec1, "--eoe-tap", &spec2];
+    let taps = [(tap1.as_str(), "192.168.7.1/24", "192.168.7.2"), (tap2.as_str(), "192.168.8.1/24", "192.168.8.2")];
+    let (pings, out) = ping_through_taps(&net, &args, &taps, true);
     sim.stop();
-    let (said, told) = (String::from_utf8_lossy(&ping.stdout), String::from_utf8_lossy(&out.stderr));
-    assert!(ping.status.success() && said.contains("3 received"), "{said}{told}");
-    assert!(out.status.success() && told.contains("EoE bridge:"), "{told}");
+    let told = String::from_utf8_lossy(&out.stderr);
+    for p in &pings {
+        let said = String::from_utf8_lossy(&p.stdout);
+        assert!(p.status.success() && said.contains("3 received"), "{said}{told}");
+    }
+    assert!(out.status.success() && told.matches("EoE bridge of slave").count() == 2, "{told}");
     let status: Vec<&str> = told.lines().filter(|l| l.contains(" wkc ")).collect();
     assert!(!status.is_empty() && status.iter().all(|l| l.contains("(0 errors)")), "{told}");
 }
