@@ -15,9 +15,9 @@
 //! terminal (an ET1200) on port 1 with the drive behind its port 0, which the master latches
 //! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
 //! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::{HostModel, Io, Tamper, VirtualIo};
 use ferrocat_master::{DcConfig, EoePing, Master};
-use ferrocat_segment::{Event, Segment, SegmentConfig};
+use ferrocat_segment::{Event, SegmentConfig};
 use ferrocat_wire::eoe::IpParameters;
 use libfuzzer_sys::fuzz_target;
 
@@ -31,65 +31,20 @@ builtin = "EL2004"
 builtin = "EL1004"
 "#;
 
-/// The in-process world with the input's tampering applied to every frame received.
-struct Lying<'a> {
-    inner: VirtualIo,
-    script: &'a [u8],
-}
-
-impl Io for Lying<'_> {
-    fn now_ns(&mut self) -> u64 {
-        self.inner.now_ns()
-    }
-    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        self.inner.send(frame)
-    }
-    fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
-        loop {
-            let Some((n, t)) = self.inner.recv(buf, deadline_ns)? else { return Ok(None) };
-            let [op, lo, hi, value, rest @ ..] = self.script else { return Ok(Some((n, t))) };
-            self.script = rest;
-            let at = u16::from_le_bytes([*lo, *hi]) as usize % n.max(1);
-            match op % 4 {
-                0 => return Ok(Some((n, t))),
-                1 => {
-                    buf[at] = *value;
-                    return Ok(Some((n, t)));
-                }
-                2 => return Ok(Some((at, t))),
-                _ => continue, // dropped: wait for the next frame, or the deadline
-            }
+/// The input's instruction for the next frame received: pass it, set one byte, cut it short
+/// or drop it; every frame passes once the script is used up.
+fn tamper(script: &mut &[u8], buf: &mut [u8], n: usize) -> Option<usize> {
+    let [op, lo, hi, value, rest @ ..] = *script else { return Some(n) };
+    *script = rest;
+    let at = u16::from_le_bytes([*lo, *hi]) as usize % n.max(1);
+    match op % 4 {
+        0 => Some(n),
+        1 => {
+            buf[at] = *value;
+            Some(n)
         }
-    }
-    fn sleep_until(&mut self, t_ns: u64) {
-        self.inner.sleep_until(t_ns)
-    }
-    fn wake_target_ns(&self) -> Option<u64> {
-        self.inner.wake_target_ns()
-    }
-    fn last_tx_ns(&mut self) -> Option<u64> {
-        self.inner.last_tx_ns()
-    }
-    fn is_virtual(&self) -> bool {
-        true
-    }
-    fn segment(&self) -> Option<&Segment> {
-        self.inner.segment()
-    }
-    fn segment_mut(&mut self) -> Option<&mut Segment> {
-        self.inner.segment_mut()
-    }
-    fn has_secondary(&self) -> bool {
-        self.inner.has_secondary()
-    }
-    fn send_secondary(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        self.inner.send_secondary(frame)
-    }
-    fn last_rx_secondary(&self) -> bool {
-        self.inner.last_rx_secondary()
-    }
-    fn last_tx_secondary_ns(&mut self) -> Option<u64> {
-        self.inner.last_tx_secondary_ns()
+        2 => Some(at),
+        _ => None,
     }
 }
 
@@ -108,7 +63,9 @@ fuzz_target!(|data: &[u8]| {
     if split_first {
         seg.schedule(0, Event::LinkDown { node: 2, port: 0 });
     }
-    let io = Lying { inner: VirtualIo::new(seg, HostModel::ideal(), 1), script };
+    let mut script = script;
+    let hook = move |buf: &mut [u8], n: usize, _: bool| tamper(&mut script, buf, n);
+    let io = Tamper { inner: VirtualIo::new(seg, HostModel::ideal(), 1), hook };
     let mut m = Master::new(io);
     if m.scan().is_err() || m.configure().is_err() {
         return;

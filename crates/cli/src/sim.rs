@@ -219,7 +219,15 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             };
             let mut taps = a.eoe_taps.iter().map(|t| eoe_tap(&mut seg, t)).collect::<anyhow::Result<Vec<_>>>()?;
             for t in &taps {
-                eprintln!("ferrocat sim: device {}'s EoE on {}", t.node, t.tap.name());
+                eprintln!("ferrocat sim: device {}'s EoE bridged to {}", t.node, t.tap.name());
+            }
+            // Answer like hardware: real-time priority on CPU 0 (a master pins itself to CPU 1),
+            // below a master's 80 so that neither starves the other on a shared core. Set up
+            // before saying it serves: locking the memory can take a while, and a master that
+            // starts on the word would wait for its first answers.
+            let rt = ferrocat_link::real_time(70, Some(0));
+            if !rt.refused.is_empty() {
+                eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
             }
             match (&a.secondary_iface, seg.secondary()) {
                 (Some(s), Some(l)) => eprintln!(
@@ -231,16 +239,10 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                 ),
                 _ => eprintln!("ferrocat sim: {} slaves ({}) on {iface}", names.len(), names.join(", ")),
             }
-            // Answer like hardware: real-time priority on CPU 0 (a master pins itself to CPU 1),
-            // below a master's 80 so that neither starves the other on a shared core.
-            let rt = ferrocat_link::real_time(70, Some(0));
-            if !rt.refused.is_empty() {
-                eprintln!("ferrocat sim: real time refused ({}); answers may be late", rt.refused.join("; "));
-            }
             let stats = serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, a.clock_log.is_some(), &mut taps)?;
             for t in &taps {
                 eprintln!(
-                    "ferrocat sim: device {}'s EoE on {}: {} frames to the host, {} from it, {} dropped",
+                    "ferrocat sim: device {}'s EoE bridged to {}: {} frames to the host, {} from it, {} dropped",
                     t.node,
                     t.tap.name(),
                     t.to_host,

@@ -296,6 +296,11 @@ impl<I: Io> Engine<I> {
         self.secondary_alive = wait;
     }
 
+    /// Whether the secondary's last probe came back (before its frame was given up on).
+    pub fn secondary_alive(&self) -> bool {
+        self.secondary_alive
+    }
+
     /// The secondary's probe for slot `s`: a BRD with the frame's index. On an intact ring it
     /// runs the ring backwards unprocessed; on a broken one it counts the second half.
     fn send_probe(&mut self, s: usize) -> Result<()> {

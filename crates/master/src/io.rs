@@ -5,6 +5,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+mod tamper;
+pub use tamper::Tamper;
+
 /// Time and frames. All times are ns of the world's clock (CLOCK_MONOTONIC in real time).
 pub trait Io {
     fn now_ns(&mut self) -> u64;

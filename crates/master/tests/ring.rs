@@ -4,7 +4,7 @@
 //! counter when a cable in the ring is pulled; and the split ring's far half keeps its clocks
 //! by holding over instead of taking a reference time a master round trip old, together behind
 //! its own first clock.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::{HostModel, Io, Tamper, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_master::{RingState, SplitRingClocks};
 use ferrocat_segment::{Event, SegmentConfig};
@@ -167,6 +167,30 @@ fn a_ring_broken_at_start_up_comes_up_whole() {
         m.engine.io.sleep_until(next);
     }
     assert_eq!(m.expected_wkc, 4, "both EL2004s written");
+}
+
+/// A ring broken at start-up whose first probe comes back too late: the scan's count does not
+/// stop at the near half (before, it found 2 of the 4 slaves, as `ferrocat scan` once did over
+/// veth while the machine was busy compiling), but counts again until a probe is back.
+#[test]
+fn a_late_first_probe_does_not_hide_the_far_half_of_a_broken_ring() {
+    let cfg: SegmentConfig = toml::from_str(&format!("{DEVICES}{RING}{BROKEN_FROM_START}")).unwrap();
+    // The first frame back on the secondary port (the first probe's answer) never arrives: a
+    // probe later than the engine waits, as a slow or busy segment gives.
+    let lost = std::rc::Rc::new(std::cell::Cell::new(0));
+    let held_back = lost.clone();
+    let hook = move |_: &mut [u8], n: usize, secondary: bool| {
+        if secondary && held_back.get() == 0 {
+            held_back.set(1);
+            return None;
+        }
+        Some(n)
+    };
+    let mut m = Master::new(Tamper { inner: VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5), hook });
+    m.scan().unwrap();
+    assert_eq!(lost.get(), 1, "the first probe's answer was held back");
+    assert_eq!(m.slaves.len(), 4);
+    assert_eq!(m.engine.ring, RingState::Broken);
 }
 
 /// The ring `toml` under `host`, in OP with DC, `events` scheduled (ns after that), then one

@@ -155,7 +155,17 @@ impl<I: Io> Master<I> {
     pub fn scan(&mut self) -> Result<()> {
         // Reset: every slave to INIT, DL control default, no FMMUs/SMs (as SOEM and IgH do).
         let mut buf = [0u8; 2];
-        let count = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut buf)?;
+        let mut count = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut buf)?;
+        // With a second port, a probe that came back too late (a slow or busy segment) leaves
+        // the count at the near half of a broken ring: count again, up to three times, until
+        // a probe has come back (a second port with nothing on it never answers one).
+        for _ in 0..3 {
+            if !self.engine.io.has_secondary() || self.engine.secondary_alive() {
+                break;
+            }
+            self.engine.expect_secondary(true);
+            count = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut buf)?;
+        }
         if count == 0 {
             return Err(MasterError::NoSlaves);
         }
