@@ -168,11 +168,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             if !params.given() {
                 bail!("eoe set-ip: give at least one of --ip, --mac, --netmask, --gateway, --dns, --name");
             }
-            let mut m = target.master()?;
-            m.scan()?;
-            m.configure()?;
-            let p = params.to_params(m.slave(position)?.station)?;
-            m.eoe_set_ip(position, &p)?;
+            let mut m = preop_with(&target, position, &params)?;
             eprintln!("set the IP parameters of slave {position}");
             show(&m.eoe_get_ip(position)?, false);
             finish(m)?;
