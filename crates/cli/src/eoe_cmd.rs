@@ -248,8 +248,8 @@ fn preop_with(
     Ok(m)
 }
 
-/// Frames between the TAP interface and the slave until stopped: the host's first, then one
-/// read of the slave's mailbox, a short sleep when neither had anything.
+/// Frames between the TAP interface and the slave until stopped, in PREOP: the bridge's
+/// steps back to back while anything moves, a short sleep when nothing did.
 fn bridge(
     position: u16,
     tap: &str,
@@ -269,49 +269,23 @@ fn bridge(
         signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
     }
     let mut m = preop_with(&target, position, params)?;
-    let tap = ferrocat_link::Tap::open(tap)
-        .with_context(|| format!("creating TAP interface '{tap}' (needs CAP_NET_ADMIN)"))?;
-    eprintln!("bridging slave {position} to {} (EoE)", tap.name());
+    let mut b = TapBridge::open(position, tap)?;
+    eprintln!("bridging slave {position} to {tap} (EoE)");
     let t0 = std::time::Instant::now();
-    let (mut to_slave, mut to_host, mut too_long, mut host_down) = (0u64, 0u64, 0u64, 0u64);
-    let mut buf = vec![0u8; 65536];
     while !stop.load(Ordering::Relaxed) && seconds.is_none_or(|s| t0.elapsed().as_secs_f64() < s) {
-        let mut busy = false;
-        while let Some(n) = tap.try_read(&mut buf)? {
-            busy = true;
-            if n > ferrocat_wire::eoe::MAX_FRAME_LEN {
-                too_long += 1;
-                continue;
-            }
-            m.eoe_send(position, &buf[..n])?;
-            to_slave += 1;
-        }
-        if let Some(f) = m.eoe_receive(position, 0)? {
-            busy = true;
-            match tap.write(&f) {
-                Ok(()) => to_host += 1,
-                // The interface is not up yet (or no more): the frame is dropped, as a wire would.
-                Err(e) if e.raw_os_error() == Some(libc::EIO) => host_down += 1,
-                Err(e) => return Err(e).with_context(|| format!("writing to {}", tap.name())),
-            }
-        }
-        if !busy {
+        if !b.step(&mut m)? {
             std::thread::sleep(std::time::Duration::from_micros(200));
         }
     }
-    let link = m.eoe_link(position)?;
-    eprintln!(
-        "bridge stopped: {to_slave} frames to the slave, {to_host} to the host ({host_down} while it was down), \
-         {too_long} too long for EoE, {} dropped, {} fragments that did not fit",
-        link.dropped, link.fragment_errors
-    );
+    eprintln!("bridge stopped: {}", b.summary(&m)?);
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }
 
-/// The EoE bridge inside `run`'s cyclic loop: after each cycle, the host's frames queued and
-/// one step of the pump (a fragment written, the mailbox read once).
-pub struct CyclicBridge {
+/// A slave bridged to a TAP interface by EoE: each step queues the host's frames and runs
+/// one step of the pump (a fragment written, the mailbox read once) — after each cycle in
+/// `run`, back to back in `eoe bridge`.
+pub struct TapBridge {
     position: u16,
     tap: ferrocat_link::Tap,
     buf: Vec<u8>,
@@ -321,13 +295,19 @@ pub struct CyclicBridge {
     refused: u64,
 }
 
-impl CyclicBridge {
-    pub fn new(position: u16, tap: ferrocat_link::Tap) -> Self {
-        CyclicBridge { position, tap, buf: vec![0u8; 65536], to_slave: 0, to_host: 0, host_down: 0, refused: 0 }
+impl TapBridge {
+    /// Creates the TAP interface `name` for the slave at `position`.
+    pub fn open(position: u16, name: &str) -> anyhow::Result<Self> {
+        let tap = ferrocat_link::Tap::open(name)
+            .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
+        Ok(TapBridge { position, tap, buf: vec![0u8; 65536], to_slave: 0, to_host: 0, host_down: 0, refused: 0 })
     }
 
-    pub fn step(&mut self, m: &mut ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<()> {
+    /// One step; whether anything moved or is still on its way.
+    pub fn step(&mut self, m: &mut ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<bool> {
+        let mut moved = false;
         while let Some(n) = self.tap.try_read(&mut self.buf)? {
+            moved = true;
             // A frame with no EoE form, or one more than the queue holds, is dropped.
             match m.eoe_queue(self.position, &self.buf[..n]) {
                 Ok(true) => self.to_slave += 1,
@@ -335,13 +315,14 @@ impl CyclicBridge {
             }
         }
         if let Some(f) = m.eoe_pump(self.position)? {
-            match self.tap.write(&f) {
-                Ok(()) => self.to_host += 1,
-                Err(e) if e.raw_os_error() == Some(libc::EIO) => self.host_down += 1,
-                Err(e) => return Err(e).with_context(|| format!("writing to {}", self.tap.name())),
+            moved = true;
+            if self.tap.write(&f).with_context(|| format!("writing to {}", self.tap.name()))? {
+                self.to_host += 1;
+            } else {
+                self.host_down += 1;
             }
         }
-        Ok(())
+        Ok(moved || m.eoe_link(self.position)?.sending())
     }
 
     pub fn summary(&self, m: &ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {

@@ -339,10 +339,8 @@ pub fn run(
     let mut bridges = Vec::new();
     for &(pos, name) in &eoe_taps {
         m.eoe_link(pos)?;
-        let tap = ferrocat_link::Tap::open(name)
-            .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
+        bridges.push(crate::eoe_cmd::TapBridge::open(pos, name)?);
         eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
-        bridges.push(crate::eoe_cmd::CyclicBridge::new(pos, tap));
     }
     let t_op = {
         use ferrocat_master::io::Io;

@@ -116,14 +116,7 @@ impl EoeServer {
 
     /// The frame's fragments as service data, under the next frame number.
     pub fn send(&mut self, frame: &[u8], max_len: usize) -> Vec<Vec<u8>> {
-        let Some(parts) = eoe::fragments(frame, max_len, self.frame_number) else { return Vec::new() };
-        let out = parts
-            .map(|(h, d)| {
-                let mut v = h.to_bytes().to_vec();
-                v.extend_from_slice(d);
-                v
-            })
-            .collect();
+        let Some(out) = eoe::fragment_messages(frame, max_len, self.frame_number) else { return Vec::new() };
         self.frame_number = (self.frame_number + 1) & 0xF;
         self.frames_out += 1;
         out

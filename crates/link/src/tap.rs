@@ -51,14 +51,16 @@ impl Tap {
         Ok(Some(n as usize))
     }
 
-    /// Hands one frame to the host.
-    pub fn write(&self, frame: &[u8]) -> io::Result<()> {
+    /// Hands one frame to the host: `false` where the interface is down (not up yet, or no
+    /// more), the frame then dropped as a wire would drop it.
+    pub fn write(&self, frame: &[u8]) -> io::Result<bool> {
         // SAFETY: write from the slice we were given, its length.
         let n = unsafe { libc::write(self.fd.as_raw_fd(), frame.as_ptr().cast(), frame.len()) };
         if n < 0 {
-            return Err(io::Error::last_os_error());
+            let e = io::Error::last_os_error();
+            return if e.raw_os_error() == Some(libc::EIO) { Ok(false) } else { Err(e) };
         }
-        Ok(())
+        Ok(true)
     }
 }
 

@@ -50,11 +50,17 @@ impl<I: Io> Master<I> {
         position: u16,
         protocol: MailboxType,
     ) -> Result<(u16, String, crate::slave::MailboxConfig)> {
+        let (st, name, m) = self.mailbox_any(position)?;
+        if !self.slave(position)?.has_protocol(protocol.sii_protocol()) {
+            return Err(MasterError::slave(position, &name, format!("does not support {}", protocol.name())));
+        }
+        Ok((st, name, m))
+    }
+
+    /// The slave's station address, name and mailbox, whatever protocols it speaks.
+    fn mailbox_any(&self, position: u16) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let s = self.slave(position)?;
         let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &s.name, "has no mailbox"))?;
-        if !s.has_protocol(protocol.sii_protocol()) {
-            return Err(MasterError::slave(position, &s.name, format!("does not support {}", protocol.name())));
-        }
         Ok((s.station, s.name.clone(), m))
     }
 
@@ -102,9 +108,7 @@ impl<I: Io> Master<I> {
 
     /// One write of a message into SM0: whether the slave took it (not while it is full).
     pub(crate) fn mbx_try_write(&mut self, position: u16, buf: &mut [u8]) -> Result<bool> {
-        let s = self.slave(position)?;
-        let (st, name) = (s.station, s.name.clone());
-        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &name, "has no mailbox"))?;
+        let (st, _, m) = self.mailbox_any(position)?;
         Ok(self.engine.one(Command::FPWR, Address::Device { adp: st, ado: m.out.0 }, buf)? == 1)
     }
 
@@ -135,9 +139,7 @@ impl<I: Io> Master<I> {
 
     /// One read of the slave's send mailbox (SM1).
     pub(crate) fn mbx_poll(&mut self, position: u16) -> Result<Polled> {
-        let s = self.slave(position)?;
-        let (st, name) = (s.station, s.name.clone());
-        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &name, "has no mailbox"))?;
+        let (st, name, m) = self.mailbox_any(position)?;
         let mut buf = vec![0u8; m.inp.1 as usize];
         let retries = self.engine.stats.retries;
         if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
@@ -159,7 +161,8 @@ impl<I: Io> Master<I> {
         }
         slave.mbx_in_counter = counter;
         if mbx.header.mailbox_type == MailboxType::ERR {
-            let code = MailboxErrorCode::parse(mbx.payload)?;
+            let code = MailboxErrorCode::parse(mbx.payload)
+                .map_err(|e| MasterError::slave(position, &name, format!("mailbox error reply: {e}")))?;
             return Err(MasterError::slave(position, &name, code.to_string()));
         }
         if mbx.header.mailbox_type == MailboxType::COE {
@@ -225,25 +228,15 @@ impl<I: Io> Master<I> {
         let mut read = 0;
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            let (Some(m), true) = (s.mailbox.clone(), s.has_coe()) else { continue };
-            let (st, name) = (s.station, s.name.clone());
-            let mut buf = vec![0u8; m.inp.1 as usize];
-            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
+            if s.mailbox.is_none() || !s.has_coe() {
                 continue;
             }
-            read += 1;
-            let Ok(mbx) = Mailbox::parse(&buf) else { continue };
-            if mbx.header.mailbox_type != MailboxType::COE {
-                continue;
-            }
-            if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
-                self.events.push(MasterEvent::Emergency {
-                    position: k as u16,
-                    name,
-                    error_code: e.error_code,
-                    error_register: e.error_register,
-                    data: e.data,
-                });
+            // Through the one mailbox read: EoE fragments kept, counters followed, a lost read
+            // asked for again. A message that is an error or does not parse is read and left.
+            match self.mbx_poll(k as u16) {
+                Ok(Polled::Empty) => {}
+                Ok(_) | Err(MasterError::Slave { .. }) => read += 1,
+                Err(e) => return Err(e),
             }
         }
         Ok(read)

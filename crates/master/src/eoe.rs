@@ -25,14 +25,21 @@ pub struct EoeLink {
     inbox: VecDeque<Vec<u8>>,
     /// The next frame number the master sends (4 bits).
     frame_number: u8,
-    /// Fragments queued by `eoe_queue` (EoE header and data), and the first of them as a
-    /// mailbox message once a write of it was tried (its counter kept for the next try).
-    outbox: VecDeque<Vec<u8>>,
-    outbox_frames: VecDeque<usize>,
+    /// Frames queued by `eoe_queue`, each as its fragments still to go (EoE header and
+    /// data), and the next fragment as a mailbox message once a write of it was tried (its
+    /// counter kept for the next try).
+    outbox: VecDeque<VecDeque<Vec<u8>>>,
     trying: Option<Vec<u8>>,
     /// Frames dropped because the inbox was full, and fragments that did not fit.
     pub dropped: u64,
     pub fragment_errors: u64,
+}
+
+impl EoeLink {
+    /// Whether frames queued by `eoe_queue` are still going out.
+    pub fn sending(&self) -> bool {
+        !self.outbox.is_empty() || self.trying.is_some()
+    }
 }
 
 /// Who pings: the master's address on the EoE network, and the slave's.
@@ -104,18 +111,13 @@ impl<I: Io> Master<I> {
             .map_err(|e| MasterError::slave(position, &self.name_of(position), format!("EoE Get IP Parameter: {e}")))
     }
 
-    /// Sends one Ethernet frame to the slave, in as many fragments as its mailbox needs.
-    /// Refused while frames queued for [`eoe_pump`](Self::eoe_pump) are still going out (the
-    /// fragments of two frames would interleave).
-    pub fn eoe_send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
+    /// The frame cut into fragments for the slave's receive mailbox, under the next frame
+    /// number.
+    fn eoe_cut(&mut self, position: u16, frame: &[u8]) -> Result<Vec<Vec<u8>>> {
         let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
-        let link = &self.slaves[position as usize].eoe;
-        if !link.outbox.is_empty() || link.trying.is_some() {
-            return Err(MasterError::slave(position, &name, "EoE: frames queued for eoe_pump are still going out"));
-        }
         let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
-        let number = self.slaves[position as usize].eoe.frame_number;
-        let parts = eoe::fragments(frame, max_len, number).ok_or_else(|| {
+        let link = &mut self.slaves[position as usize].eoe;
+        let msgs = eoe::fragment_messages(frame, max_len, link.frame_number).ok_or_else(|| {
             MasterError::slave(
                 position,
                 &name,
@@ -127,12 +129,21 @@ impl<I: Io> Master<I> {
                 ),
             )
         })?;
-        for (h, d) in parts {
-            let mut msg = h.to_bytes().to_vec();
-            msg.extend_from_slice(d);
+        link.frame_number = (link.frame_number + 1) & 0xF;
+        Ok(msgs)
+    }
+
+    /// Sends one Ethernet frame to the slave, in as many fragments as its mailbox needs.
+    /// Refused while frames queued for [`eoe_pump`](Self::eoe_pump) are still going out (the
+    /// fragments of two frames would interleave).
+    pub fn eoe_send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
+        if self.slave(position)?.eoe.sending() {
+            let name = self.name_of(position);
+            return Err(MasterError::slave(position, &name, "EoE: frames queued for eoe_pump are still going out"));
+        }
+        for msg in self.eoe_cut(position, frame)? {
             self.mbx_write(position, MailboxType::EOE, &msg)?;
         }
-        self.slaves[position as usize].eoe.frame_number = (number + 1) & 0xF;
         Ok(())
     }
 
@@ -161,25 +172,13 @@ impl<I: Io> Master<I> {
     /// to send between cycles. `false` (and counted as dropped) where 64 frames are already
     /// waiting; an error where the frame has no EoE form.
     pub fn eoe_queue(&mut self, position: u16, frame: &[u8]) -> Result<bool> {
-        let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
-        let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
-        let link = &mut self.slaves[position as usize].eoe;
-        if link.outbox_frames.len() >= INBOX_FRAMES {
-            link.dropped += 1;
+        self.mailbox_of(position, MailboxType::EOE)?;
+        if self.slaves[position as usize].eoe.outbox.len() >= INBOX_FRAMES {
+            self.slaves[position as usize].eoe.dropped += 1;
             return Ok(false);
         }
-        let parts = eoe::fragments(frame, max_len, link.frame_number).ok_or_else(|| {
-            MasterError::slave(position, &name, format!("EoE: a {}-byte frame has no EoE form here", frame.len()))
-        })?;
-        let mut n = 0;
-        for (h, d) in parts {
-            let mut msg = h.to_bytes().to_vec();
-            msg.extend_from_slice(d);
-            link.outbox.push_back(msg);
-            n += 1;
-        }
-        link.outbox_frames.push_back(n);
-        link.frame_number = (link.frame_number + 1) & 0xF;
+        let msgs = self.eoe_cut(position, frame)?;
+        self.slaves[position as usize].eoe.outbox.push_back(msgs.into());
         Ok(true)
     }
 
@@ -190,23 +189,19 @@ impl<I: Io> Master<I> {
         self.mailbox_of(position, MailboxType::EOE)?;
         let link = &mut self.slaves[position as usize].eoe;
         if link.trying.is_none() {
-            if let Some(msg) = link.outbox.pop_front() {
+            if let Some(msg) = link.outbox.front_mut().and_then(VecDeque::pop_front) {
                 let buf = self.mbx_message(position, MailboxType::EOE, &msg)?;
                 self.slaves[position as usize].eoe.trying = Some(buf);
             }
         }
         if let Some(mut buf) = self.slaves[position as usize].eoe.trying.take() {
-            if self.mbx_try_write(position, &mut buf)? {
-                let link = &mut self.slaves[position as usize].eoe;
+            let written = self.mbx_try_write(position, &mut buf)?;
+            let link = &mut self.slaves[position as usize].eoe;
+            if !written {
+                link.trying = Some(buf);
+            } else if link.outbox.front().is_some_and(VecDeque::is_empty) {
                 // The frame's last fragment went: one frame fewer waiting.
-                if let Some(left) = link.outbox_frames.front_mut() {
-                    *left -= 1;
-                    if *left == 0 {
-                        link.outbox_frames.pop_front();
-                    }
-                }
-            } else {
-                self.slaves[position as usize].eoe.trying = Some(buf);
+                link.outbox.pop_front();
             }
         }
         if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {

@@ -154,10 +154,10 @@ impl EoeTap {
             }
         }
         while let Some(f) = n.esc.eoe_to_host() {
-            match self.tap.write(&f) {
-                Ok(()) => self.to_host += 1,
-                Err(e) if e.raw_os_error() == Some(libc::EIO) => self.dropped += 1,
-                Err(e) => return Err(e),
+            if self.tap.write(&f)? {
+                self.to_host += 1;
+            } else {
+                self.dropped += 1;
             }
         }
         Ok(())

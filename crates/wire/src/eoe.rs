@@ -273,6 +273,26 @@ pub fn fragments(frame: &[u8], max_len: usize, frame_number: u8) -> Option<impl 
     }))
 }
 
+/// [`fragments`] as the service data of one mailbox message each (EoE header, then data).
+#[cfg(feature = "alloc")]
+pub fn fragment_messages(
+    frame: &[u8],
+    max_len: usize,
+    frame_number: u8,
+) -> Option<alloc::vec::Vec<alloc::vec::Vec<u8>>> {
+    let parts = fragments(frame, max_len, frame_number)?;
+    Some(
+        parts
+            .map(|(h, d)| {
+                let mut v = alloc::vec::Vec::with_capacity(HEADER_LEN + d.len());
+                v.extend_from_slice(&h.to_bytes());
+                v.extend_from_slice(d);
+                v
+            })
+            .collect(),
+    )
+}
+
 /// Why a fragment did not fit the frame being put together.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ReassemblyError {

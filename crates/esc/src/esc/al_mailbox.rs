@@ -173,8 +173,7 @@ impl Esc {
         let request = s.activate & 0x02;
         match self.mbx_request_bit {
             None => {
-                let a = ferrocat_wire::register::addr::sm(n) as usize + 7;
-                self.mem[a] = (self.mem[a] & !0x02) | request;
+                self.set_repeat_ack(n, request);
                 self.mbx_request_bit = Some(request);
             }
             Some(seen) if seen != request => {
@@ -185,6 +184,12 @@ impl Esc {
             }
             Some(_) => {}
         }
+    }
+
+    /// The firmware's repeat acknowledge: SyncManager `n`'s PDI control bit 1 set to `bit`.
+    fn set_repeat_ack(&mut self, n: u8, bit: u8) {
+        let a = ferrocat_wire::register::addr::sm(n) as usize + 7;
+        self.mem[a] = (self.mem[a] & !0x02) | (bit & 0x02);
     }
 
     /// Moves the next waiting message into the send mailbox if it is free; a repeat request
@@ -204,8 +209,7 @@ impl Esc {
                 self.put_in_send_mailbox(n, &out, &msg);
                 self.mbx_last = msg;
             }
-            let a = ferrocat_wire::register::addr::sm(n) as usize + 7;
-            self.mem[a] = (self.mem[a] & !0x02) | (out.activate & 0x02);
+            self.set_repeat_ack(n, out.activate & 0x02);
             return;
         }
         if self.sms[n as usize].full {
