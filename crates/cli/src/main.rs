@@ -407,6 +407,14 @@ enum EepromCmd {
         #[command(flatten)]
         target: target::Target,
     },
+    /// Write a configured station alias (decimal or 0x…) into the EEPROM of the slave at
+    /// POSITION, with the header checksum; the ESC takes it at its next power-on.
+    Alias {
+        position: u16,
+        alias: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
 }
 
 fn main() -> ExitCode {
@@ -425,6 +433,7 @@ fn main() -> ExitCode {
         Command::Sii { action: Some(action), .. } => match action {
             EepromCmd::Read { position, out, target } => master_cmd::sii_read(&target, position, out.as_deref()),
             EepromCmd::Write { position, file, target } => master_cmd::sii_write(&target, position, &file),
+            EepromCmd::Alias { position, alias, target } => master_cmd::sii_alias(&target, position, &alias),
         },
         Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
         Command::Sim { bench: true, json, .. } => sim::bench(json),

@@ -25,7 +25,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     "esc_type": s.esc_type, "fmmus": s.fmmu_count, "sync_managers": s.sm_count,
                     "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
                     "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
-                    "active_ports": s.active_ports, "relatched": m.relatched.contains(&(s.position as usize)),
+                    "active_ports": s.active_ports, "eeprom_loaded": s.dl_status.pdi_operational(), "relatched": m.relatched.contains(&(s.position as usize)),
                     "ring_port": m.ring_port.or(split_root).filter(|r| r.0 == s.position).map(|r| r.1),
                     "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
@@ -66,6 +66,9 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             );
             outln!(" ESC type {:#04x}, {} FMMUs, {} SMs", s.esc_type, s.fmmu_count, s.sm_count);
             outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
+            if let Some(problem) = s.eeprom_problem() {
+                outln!(" {problem}");
+            }
             if s.has_dc && !s.has_system_time {
                 outln!(" DC: receive times only (no system time)");
             }
@@ -266,6 +269,22 @@ pub fn sii_write(t: &Target, position: u16, file: &std::path::Path) -> anyhow::R
     m.scan()?;
     let words = m.sii_write(position, &img)?;
     eprintln!("wrote {words} words to slave {position}'s EEPROM");
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn sii_alias(t: &Target, position: u16, alias: &str) -> anyhow::Result<ExitCode> {
+    let value = ferrocat_esi::parse_number(alias)
+        .and_then(|v| u16::try_from(v).ok())
+        .with_context(|| format!("alias '{alias}' is not a 16-bit number"))?;
+    let mut m = t.master()?;
+    m.scan()?;
+    let words = m.sii_set_alias(position, value)?;
+    let name = &m.slaves[position as usize].name;
+    eprintln!(
+        "slave {position} ({name}): alias {value:#06x} in its EEPROM ({words} words written); \
+         its ESC takes it at the next power-on"
+    );
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -88,6 +88,8 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "position": i,
                 "name": n.name,
                 "station_address": n.esc.station_address(),
+                "alias": u16::from_le_bytes([n.esc.peek(0x0012, 2)[0], n.esc.peek(0x0012, 2)[1]]),
+                "eeprom_loaded": n.esc.sii_loaded(),
                 "al_state": n.esc.al_status().state().map(|s| s.name()),
                 "al_status_code": n.esc.al.code.0,
                 "frames": n.esc.frames,
@@ -204,6 +206,14 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     let mut seg = cfg.build()?;
     if let (Some(_), None) = (seg.secondary(), &a.secondary_iface) {
         eprintln!("ferrocat sim: the segment is a ring but no --secondary-iface serves its second port");
+    }
+    for (k, n) in seg.nodes.iter().enumerate().filter(|(_, n)| !n.esc.sii_loaded()) {
+        // As hardware with such an EEPROM: served, but unconfigured and held in INIT.
+        eprintln!(
+            "ferrocat sim: device {k} ({}): its EEPROM's configuration area fails its checksum (word 7); \
+             its ESC stays unconfigured and in INIT",
+            n.name
+        );
     }
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {

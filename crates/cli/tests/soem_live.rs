@@ -330,3 +330,44 @@ fn soem_sdo_transfers_come_through_frame_loss() {
     assert!(same >= 285, "{r}");
     assert!(mailbox["repeats"].as_u64().unwrap() > 0, "SOEM's repeat requests answered: {mailbox}");
 }
+
+/// SOEM through a slave's power cycles: an EL2004 between an EK1100 and an EL1004 is powered
+/// off and on while process data runs. SOEM's own supervision, as its simple_test does it,
+/// finds the slave lost, recovers it (its identity read again from the EEPROM at a temporary
+/// address), reconfigures it and brings it back to OP. Then SOEM writes a station alias into
+/// its EEPROM as its eepromtool does (word 4 and the checksum word 7); after the second power
+/// cycle the ESC has taken it into 0x0012.
+#[test]
+fn soem_recovers_a_power_cycled_slave_and_its_new_alias_loads() {
+    let net = VethPair::new("pc");
+    let segment = std::env::temp_dir().join(format!("ferrocat-power-{}.toml", std::process::id()));
+    std::fs::write(
+        &segment,
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
+         [[event]]\nat_ms = 2500\npower_off = 1\n[[event]]\nat_ms = 2800\npower_on = 1\n\
+         [[event]]\nat_ms = 7000\npower_off = 1\n[[event]]\nat_ms = 7300\npower_on = 1\n",
+    )
+    .unwrap();
+    let report = std::env::temp_dir().join(format!("ferrocat-power-report-{}.json", std::process::id()));
+    let sim = Sim::start(&net, &["--config", segment.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let r = soem_script(&net, "soem_recovery.py", &["2", "0x0BAD"]);
+    sim.stop();
+    std::fs::remove_file(&segment).unwrap();
+    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    std::fs::remove_file(&report).ok();
+    assert_eq!(r["found"], 3, "{r}");
+    assert_eq!(r["op"], true, "{r}");
+    // The EL2004 (SOEM's slave index 1) lost, recovered, reconfigured and back in OP.
+    let log: Vec<(u64, String)> = serde_json::from_value(r["log"].clone()).unwrap();
+    for step in ["lost", "recovered", "reconfigured"] {
+        assert!(log.contains(&(1, step.to_string())), "SOEM's supervision: {step}: {r}");
+    }
+    assert_eq!(r["back_in_op"], true, "{r}");
+    assert_eq!(r["good_cycles_after"], 200, "{r}");
+    // The alias SOEM wrote, taken at the second power-on.
+    assert_eq!(r["second_cycle_seen"], true, "{r}");
+    assert_eq!(r["found_again"], 3, "{r}");
+    assert_eq!(r["alias_register"], 0x0BAD, "{r}");
+    assert_eq!(rep["devices"][1]["alias"], 0x0BAD, "{rep}");
+    assert_eq!(rep["devices"][1]["eeprom_loaded"], true, "{rep}");
+}

@@ -16,9 +16,17 @@ pub struct Eeprom {
     pub busy_until_ns: u64,
     /// Error bits (ack/command error, write error) of 0x0502.
     pub errors: u16,
-    /// Set when a reload finished and the ESC should take the configuration words again.
+    /// Set when a reload was commanded; the ESC takes the configuration words again once the
+    /// interface is no longer busy.
     pub reloaded: bool,
+    /// 0x0502 bits 11 (checksum error) and 12 (configuration not loaded) from the last load of
+    /// the ESC configuration area; unlike `errors`, a command does not clear them.
+    pub load_status: u16,
 }
+
+/// Word 7 with this value switches the ESC configuration area's checksum test off, for
+/// debugging (Beckhoff, EtherCAT Slave Controller Technology, Section I, Table 37, note).
+pub const CHECKSUM_BYPASS: u16 = 0x88A4;
 
 impl Eeprom {
     pub fn new(mut data: Vec<u8>) -> Self {
@@ -26,7 +34,7 @@ impl Eeprom {
         if data.len() < 128 {
             data.resize(128, 0xFF);
         }
-        Eeprom { data, busy_until_ns: 0, errors: 0, reloaded: false }
+        Eeprom { data, busy_until_ns: 0, errors: 0, reloaded: false, load_status: 0 }
     }
 
     pub fn word(&self, w: usize) -> u16 {
@@ -34,6 +42,13 @@ impl Eeprom {
             Some(b) => u16::from_le_bytes([b[0], b[1]]),
             None => 0xFFFF,
         }
+    }
+
+    /// Whether the ESC configuration area (words 0–6) matches its checksum, the low byte of
+    /// word 7 (esc-spec §5.4), or word 7 switches the test off.
+    pub fn config_area_ok(&self) -> bool {
+        let check = self.word(7);
+        check == CHECKSUM_BYPASS || check & 0xFF == ferrocat_wire::sii::header_crc(&self.data[..14]) as u16
     }
 
     pub fn busy(&self, now_ns: u64) -> bool {

@@ -61,6 +61,10 @@ pub struct Slave {
     pub features: u16,
     pub sii: SiiInfo,
     pub dl_status: DlStatus,
+    /// The SII interface's status 0x0502, read at the scan where DL status bit 0 (PDI
+    /// operational) was clear (0 otherwise): bits 11–12 say why the ESC did not load the
+    /// EEPROM's configuration area.
+    pub eeprom_status: u16,
     pub active_ports: [bool; 4],
     /// Ports the ESC has (0x0007: two bits per port, 00 for none).
     pub port_descriptor: u8,
@@ -129,8 +133,34 @@ impl Slave {
     pub fn has_protocol(&self, bit: u16) -> bool {
         self.mailbox.as_ref().is_some_and(|m| m.protocols & bit != 0)
     }
+    /// Why the ESC runs unconfigured, if it does: DL status bit 0 (PDI operational) clear
+    /// because the EEPROM's configuration area did not load. Such a slave stays in INIT.
+    pub fn eeprom_problem(&self) -> Option<String> {
+        eeprom_problem(self.dl_status, self.eeprom_status)
+    }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {
         self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
     }
+}
+
+/// What DL status and the SII status 0x0502 say of an ESC whose PDI is not operational.
+pub(crate) fn eeprom_problem(dl: DlStatus, sii_status: u16) -> Option<String> {
+    use ferrocat_wire::register::SiiControl;
+    if dl.pdi_operational() {
+        return None;
+    }
+    let why = if sii_status & SiiControl::CHECKSUM_ERROR != 0 {
+        "the checksum of its EEPROM's configuration area (word 7) is wrong"
+    } else if sii_status & SiiControl::ACK_ERROR != 0 {
+        "its EEPROM does not answer"
+    } else if sii_status & SiiControl::NOT_LOADED != 0 {
+        "its EEPROM's configuration area did not load"
+    } else {
+        "its PDI is not operational (DL status bit 0)"
+    };
+    Some(format!(
+        "ESC unconfigured (0x0502 = {sii_status:#06x}): {why}; it stays in INIT until a good image \
+         is programmed (`ferrocat sii write`) and it is powered off and on"
+    ))
 }

@@ -250,6 +250,57 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
 
+/// IgH's `ethercat alias`: the alias goes into EEPROM word 4 with the checksum, and the ESC
+/// takes it at its next power-on (not before, and not at a reload).
+#[test]
+fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
+    use ferrocat_master::io::Io;
+    let mut m =
+        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
+    m.scan().unwrap();
+    assert_eq!(m.sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
+    m.scan().unwrap();
+    assert_eq!(m.slaves[1].alias, 0, "the register keeps its power-on value");
+    assert!(m.slaves[1].eeprom_problem().is_none());
+    let t = m.engine.io.now_ns();
+    m.engine.io.seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
+    m.engine.io.seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
+    m.engine.io.sleep_until(t + 3_000_000);
+    m.scan().unwrap();
+    assert_eq!(m.slaves[1].alias, 0x0BAD);
+    assert_eq!(m.enable_alias(1).unwrap(), 0x0BAD);
+    m.bring_up().unwrap();
+}
+
+/// An EEPROM whose configuration area fails its checksum (an alias written without it): the
+/// ESC runs unconfigured and stays in INIT, and the master says so at once, by name.
+#[test]
+fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
+    use ferrocat_master::io::Io;
+    let mut m =
+        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
+    m.scan().unwrap();
+    let mut image = m.slaves[1].sii.to_image();
+    image[8] ^= 0x01;
+    let path = std::env::temp_dir().join(format!("ferrocat-badcrc-{}.bin", std::process::id()));
+    std::fs::write(&path, &image).unwrap();
+    let mut m = master(
+        &format!("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\neeprom = '{}'\n", path.display()),
+        HostModel::ideal(),
+    );
+    std::fs::remove_file(&path).unwrap();
+    m.scan().unwrap();
+    let problem = m.slaves[1].eeprom_problem().expect("an unconfigured ESC");
+    assert!(problem.contains("checksum"), "{problem}");
+    assert_eq!(m.slaves[1].eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
+    assert!(m.slaves[0].eeprom_problem().is_none());
+    let t0 = m.engine.io.now_ns();
+    let e = m.bring_up().unwrap_err().to_string();
+    println!("{e}");
+    assert!(e.contains("slave 1 (EL2004)") && e.contains("checksum"), "{e}");
+    assert!(m.engine.io.now_ns() - t0 < m.state_timeout_ns / 10, "not after the state timeout");
+}
+
 /// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the
 /// second leaves after the first. A NIC's transmit stamp shows the wait; the kernel's software
 /// stamp, taken at the hand-over, does not — as on real hardware.

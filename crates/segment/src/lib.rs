@@ -16,6 +16,9 @@ pub use config::{
 pub use segment::{Event, MasterPort, Node, Peer, SecondaryLink, Segment, SegmentStats};
 pub use watch::Watch;
 
+/// The names `builtin = …` accepts in a segment file.
+pub use builtin::NAMES as BUILTIN_NAMES;
+
 use ferrocat_wire::ethernet::{EthernetRepr, ETHERTYPE_ETHERCAT, ETHERTYPE_IPV4};
 use ferrocat_wire::frame::{EcatHeader, TYPE_DLPDU};
 

@@ -144,7 +144,8 @@ impl Esc {
             0x0800..=0x087F => (a - 0x0800) / 8 >= self.config.sm_count as u16,
             0x0900..=0x090F => self.dc.is_none(),
             0x0910..=0x09FF => self.dc.is_none() || !self.system_time_unit,
-            _ => a as usize >= self.mem.len(),
+            // Process memory is not accessible until the configuration area has loaded.
+            _ => a as usize >= self.mem.len() || a >= 0x1000 && !self.sii_loaded,
         }
     }
 

@@ -108,7 +108,9 @@ impl Esc {
             self.sii_command(t);
         }
         let tcl_fed = self.dc_end_of_frame(timing, origin_ns, &w);
-        if w.al_ctl {
+        // Without a loaded configuration area neither device emulation nor a PDI acts on AL
+        // control: the write stays in the register.
+        if w.al_ctl && self.sii_loaded {
             let control = u16::from_le_bytes([self.mem[0x0120], self.mem[0x0121]]);
             if self.device_emulation() || self.al_response_ns == 0 {
                 self.al_control(control);

@@ -215,6 +215,9 @@ pub struct Esc {
     /// The DC unit's system time part (0x0910–0x09FF) exists; without it only the receive
     /// times 0x0900–0x090F answer.
     system_time_unit: bool,
+    /// The ESC configuration area passed its checksum at power-on or a later reload: the PDI
+    /// runs (DL status bit 0) and process memory is accessible.
+    sii_loaded: bool,
     /// Ports 1–3 enabled to latch the next frame they receive (`ReceiveLatch::NextFrame`).
     rx_armed: u8,
     /// Each port's last receive time (local, low 32 bits): the IP core's reverse mode.
@@ -269,6 +272,7 @@ impl Esc {
             al_changed: false,
             irq: 0,
             system_time_unit: false,
+            sii_loaded: false,
             rx_armed: 0,
             rx_hidden: [0; 4],
         };
@@ -310,12 +314,21 @@ impl Esc {
         m[0x0410..0x0412].copy_from_slice(&1000u16.to_le_bytes());
         m[0x0420..0x0422].copy_from_slice(&1000u16.to_le_bytes());
         m[0x0440] = 1;
+        // The ESC configuration area is taken only when its checksum holds; otherwise the
+        // registers it initialises keep their reset values, the PDI stays off (nothing acts on
+        // AL control) and process memory is not accessible (Section I, "SII EEPROM errors").
+        self.sii_loaded = self.eeprom.config_area_ok();
+        self.eeprom.load_status = if self.sii_loaded { 0 } else { SiiControl::CHECKSUM_ERROR | SiiControl::NOT_LOADED };
+        if let Some(pdi) = c.pdi_control {
+            m[0x0140..0x0142].copy_from_slice(&pdi.to_le_bytes());
+        }
+        if self.sii_loaded {
+            // The alias only at this first load, never at a reload.
+            m[0x0012..0x0014].copy_from_slice(&self.eeprom.word(4).to_le_bytes());
+            self.take_config_area(0);
+        }
+        let m = &mut self.mem;
         let e = &self.eeprom;
-        m[0x0140..0x0142].copy_from_slice(&c.pdi_control.unwrap_or(e.word(0)).to_le_bytes());
-        m[0x0150..0x0152].copy_from_slice(&e.word(1).to_le_bytes());
-        m[0x0982..0x0984].copy_from_slice(&e.word(2).to_le_bytes());
-        m[0x0152..0x0154].copy_from_slice(&e.word(3).to_le_bytes());
-        m[0x0012..0x0014].copy_from_slice(&e.word(4).to_le_bytes());
         let size_kbit = e.word(0x3E) as u32 + 1;
         let ctl = if c.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 }
             | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 }
@@ -328,16 +341,48 @@ impl Esc {
                 Some(DcUnit::new(w, t_ns, local0, drift))
             }
         };
-        // An ET1100 or ET1200 with neither its SYNC out nor its latch in unit enabled (0x0141
-        // bits 2–3, from SII word 0) answers its receive times only: the real EL1004 and EL2828
-        // (ET1200, 0x0141 = 0x01) and EK1914 (ET1100) give WKC 0 for 0x0910–0x09FF, the EK1100
-        // (ET1100, 0x0D) counts.
-        self.system_time_unit = !matches!(c.esc_type, 0x11 | 0x12) || m[0x0141] & 0x0C != 0;
+        self.system_time_unit = self.system_time_unit_on();
         self.reload_sm_fmmu();
         // The DL status comes up from reset (an event); AL status Init is its reset value.
         self.refresh_registers();
         self.al_changed = false;
         self.update_irq();
+    }
+
+    /// Words 0–3 of the ESC configuration area into their registers; the bits of 0x0141 in
+    /// `keep_0141` keep their values (a reload leaves enhanced link detection, bits 1 and 4–7,
+    /// as the first load set them).
+    fn take_config_area(&mut self, keep_0141: u8) {
+        let e = &self.eeprom;
+        let mut pdi = self.config.pdi_control.unwrap_or(e.word(0)).to_le_bytes();
+        pdi[1] = (pdi[1] & !keep_0141) | (self.mem[0x0141] & keep_0141);
+        let m = &mut self.mem;
+        m[0x0140..0x0142].copy_from_slice(&pdi);
+        m[0x0150..0x0152].copy_from_slice(&e.word(1).to_le_bytes());
+        m[0x0982..0x0984].copy_from_slice(&e.word(2).to_le_bytes());
+        m[0x0152..0x0154].copy_from_slice(&e.word(3).to_le_bytes());
+    }
+
+    /// An EEPROM reload has finished: the configuration area taken again if its checksum
+    /// holds, else bit 11 of 0x0502 and every register as it was (Section I, Table 40).
+    fn finish_reload(&mut self) {
+        if !self.eeprom.config_area_ok() {
+            self.eeprom.load_status |= SiiControl::CHECKSUM_ERROR;
+        } else {
+            self.eeprom.load_status = 0;
+            self.sii_loaded = true;
+            self.take_config_area(0xF2);
+            self.system_time_unit = self.system_time_unit_on();
+        }
+        self.refresh_registers();
+    }
+
+    /// An ET1100 or ET1200 with neither its SYNC out nor its latch in unit enabled (0x0141
+    /// bits 2–3, from SII word 0) answers its receive times only: the real EL1004 and EL2828
+    /// (ET1200, 0x0141 = 0x01) and EK1914 (ET1100) give WKC 0 for 0x0910–0x09FF, the EK1100
+    /// (ET1100, 0x0D) counts.
+    fn system_time_unit_on(&self) -> bool {
+        !matches!(self.config.esc_type, 0x11 | 0x12) || self.mem[0x0141] & 0x0C != 0
     }
 
     /// Decodes the SyncManager and FMMU registers after they were written.
@@ -417,6 +462,11 @@ impl Esc {
     /// Whether the DC unit's system time (0x0910–0x09FF) exists: a clock a master can
     /// synchronise, not only receive times.
     #[inline]
+    /// Whether the ESC configuration area passed its checksum (DL status bit 0).
+    pub fn sii_loaded(&self) -> bool {
+        self.sii_loaded
+    }
+
     pub fn has_system_time(&self) -> bool {
         self.dc.is_some() && self.system_time_unit
     }
@@ -568,6 +618,7 @@ impl Esc {
         self.check_watchdog();
         if self.eeprom.reloaded && !self.eeprom.busy(t_ns) {
             self.eeprom.reloaded = false;
+            self.finish_reload();
         }
     }
 

@@ -8,7 +8,7 @@ impl Esc {
     /// Rewrites registers whose value follows from state: DL status, AL status, SM status,
     /// SII busy, DC times.
     pub(super) fn refresh_registers(&mut self) {
-        let mut dl = 1u16; // EEPROM loaded, PDI operational
+        let mut dl = self.sii_loaded as u16; // EEPROM loaded, PDI operational
         if self.mem[0x0140] != 0 {
             // A PDI (0x0140: its type, 0 = none) that runs reloads the PDI watchdog: bit 1.
             // The real captures: 1 on the EL1004 (digital I/O), EL2828 and AKD, 0 on the
@@ -42,7 +42,8 @@ impl Esc {
         self.sii_busy_shown = self.eeprom.busy(self.now_ns);
         let busy = if self.sii_busy_shown { SiiControl::BUSY } else { 0 };
         let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800);
-        self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | self.eeprom.errors).to_le_bytes());
+        let errors = self.eeprom.errors | self.eeprom.load_status;
+        self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | errors).to_le_bytes());
         self.refresh_dc_registers();
         self.update_irq();
     }

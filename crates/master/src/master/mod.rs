@@ -216,7 +216,7 @@ impl<I: Io> Master<I> {
     }
 
     fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
-        let (mut id, mut alias, mut dl) = ([0u8; 10], [0u8; 2], [0u8; 2]);
+        let (mut id, mut alias, mut dl, mut sii_status) = ([0u8; 10], [0u8; 2], [0u8; 2], [0u8; 2]);
         let mut p = [
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0000 }, &mut id),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0012 }, &mut alias),
@@ -231,10 +231,15 @@ impl<I: Io> Master<I> {
                 slaves: format!(" (station {station:#06x})"),
             });
         }
+        let dl_status = DlStatus(u16::from_le_bytes(dl));
+        if !dl_status.pdi_operational() {
+            // An unconfigured ESC: the SII status says why (read only then, so that a healthy
+            // segment's bring-up is the same frames as ever).
+            self.fprd(station, 0x0502, &mut sii_status)?;
+        }
         let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
         let h = sii.header;
         let features = u16::from_le_bytes([id[8], id[9]]);
-        let dl_status = DlStatus(u16::from_le_bytes(dl));
         let mailbox = MailboxConfig::standard(&h);
         Ok(Slave {
             position: pos,
@@ -251,6 +256,7 @@ impl<I: Io> Master<I> {
             sm_count: id[5],
             features,
             dl_status,
+            eeprom_status: u16::from_le_bytes(sii_status),
             active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
             port_descriptor: id[7],
             entry_port: 0,

@@ -94,6 +94,16 @@ impl<I: Io> Master<I> {
         Ok(imgs)
     }
 
+    /// Writes a configured station alias into the slave's EEPROM: word 4 and, with it, the
+    /// checksum word 7 (as IgH's `ethercat alias` does). The ESC takes an alias from its
+    /// EEPROM only at power-on, never at a reload. Returns the number of words written.
+    pub fn sii_set_alias(&mut self, position: u16, alias: u16) -> Result<usize> {
+        let mut image = self.slave(position)?.sii.to_image();
+        image[8..10].copy_from_slice(&alias.to_le_bytes());
+        image[14] = ferrocat_wire::sii::header_crc(&image);
+        self.sii_write(position, &image)
+    }
+
     /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
     /// Returns the number of words written.
     pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {

@@ -1,5 +1,5 @@
 //! Walking the slaves through the AL states, and bringing fallen ones back during operation.
-use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode};
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
 use ferrocat_wire::{Address, Command};
 
 use super::{Master, MasterEvent};
@@ -87,6 +87,17 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// DL status and the SII status read again; why the ESC is unconfigured, if it is.
+    fn eeprom_problem_now(&mut self, position: u16) -> Result<Option<String>> {
+        let st = self.slave(position)?.station;
+        let (mut dl, mut sii) = ([0u8; 2], [0u8; 2]);
+        self.fprd(st, 0x0110, &mut dl)?;
+        self.fprd(st, 0x0502, &mut sii)?;
+        let s = &mut self.slaves[position as usize];
+        (s.dl_status, s.eeprom_status) = (DlStatus(u16::from_le_bytes(dl)), u16::from_le_bytes(sii));
+        Ok(s.eeprom_problem())
+    }
+
     /// Polls AL status until `state` or an error; an error is acknowledged and reported by name.
     pub fn wait_state(&mut self, position: u16, state: AlState) -> Result<()> {
         let (st, name) = {
@@ -103,7 +114,21 @@ impl<I: Io> Master<I> {
                 self.slaves[position as usize].state = state;
                 return Ok(());
             }
-            if status.error() || self.engine.io.now_ns() > deadline {
+            // An ESC without its configuration area (seen at the scan) cannot leave INIT: say
+            // why at once rather than after the timeout, if it still has none.
+            let timed_out = self.engine.io.now_ns() > deadline;
+            if state != AlState::Init && (timed_out || !self.slaves[position as usize].dl_status.pdi_operational()) {
+                if let Some(why) = self.eeprom_problem_now(position)? {
+                    return Err(MasterError::State {
+                        position,
+                        name,
+                        requested: state,
+                        status: String::new(),
+                        code: why,
+                    });
+                }
+            }
+            if status.error() || timed_out {
                 let reached = status.state().map(|s| s.name()).unwrap_or("an unknown state");
                 if status.error() {
                     // Acknowledge, so that the slave accepts requests again.
