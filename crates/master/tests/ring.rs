@@ -236,14 +236,18 @@ fn cycle_ring_every(
     m
 }
 
-/// Behind the break, two clocks (the far coupler and its terminal, both with a system time):
-/// with the far coupler as the far half's reference they keep together while the ring is
-/// split; held over each on its own they drift apart. Returns the worst |terminal − coupler|
-/// over 10 s after the break, and after the ring is closed again the worst over the last
-/// second of 2 s.
+/// Behind the break, two clocks (the far coupler and its terminal, both with a system time),
+/// the terminal warming up by 1 ppm 2 s after the break: with the far coupler as the far
+/// half's reference they keep together while the ring is split; held over each on its own
+/// they drift apart. Returns the worst |terminal − coupler| over 10 s after the break, and
+/// after the ring is closed again the worst over the last second of 2 s.
 fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
     let s = 1_000_000_000;
-    let events = [(s, Event::LinkDown { node: 2, port: 0 }), (11 * s, Event::LinkUp { node: 2, port: 0 })];
+    let events = [
+        (s, Event::LinkDown { node: 2, port: 0 }),
+        (3 * s, Event::DriftStep { node: 3, delta_ppb: 1_000 }),
+        (11 * s, Event::LinkUp { node: 2, port: 0 }),
+    ];
     let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}");
     let (mut split, mut closed) = (0i64, 0i64);
     let m = cycle_ring(&toml, HostModel::pc_rt(), clocks, &events, 13_000, |k, t| {
@@ -267,8 +271,11 @@ fn the_far_half_keeps_together_behind_its_own_reference() {
         "far terminal − far coupler, worst over 10 s split: {far} ns following the far coupler, {apart} ns each held \
          over; after the ring closed again: {far_closed} and {apart_closed} ns"
     );
-    assert!(far < 50, "{far}");
-    assert!(apart > 4 * far.max(50), "{apart} vs {far}");
+    // Seeds 1–12 (session 41): 35–87 ns following, 7.2–9.0 µs held over. Until then the
+    // test had no warm-up and asserted < 50 ns: seed 5's figure (23 ns); other seeds gave up
+    // to 87, and held over, without a change after the break, as little as 26 ns.
+    assert!(far < 100, "{far}");
+    assert!(apart > 20 * far, "{apart} vs {far}");
     // Closed again, the delays are the reference's once more: back together either way.
     assert!(far_closed < 50 && apart_closed < 50, "{far_closed}, {apart_closed}");
 }
