@@ -300,9 +300,15 @@ impl<I: Io> Master<I> {
         // The far half's offsets were written for the latching frame's two passes, one
         // sample (scattered by microseconds on a PC's software stamps); the static drift
         // compensation's frames gave hundreds: the far half is moved by what they say, all
-        // its clocks together.
-        if let Some(e) = self.far_steer.take().and_then(|f| f.clock.error_now()) {
+        // its clocks together. Their line goes on into the cycles: it knows the far
+        // reference's rate, which a new one took 128 samples to learn while the far half
+        // drifted away (3.8 µs at 30 ppm before session 41).
+        if let Some(e) = self.far_steer.as_ref().and_then(|f| f.clock.error_now()) {
             self.shift_far_half(-e, None);
+            if let Some(f) = self.far_steer.as_mut() {
+                f.clock.applied(-e);
+                f.forget_offset();
+            }
         }
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);

@@ -201,6 +201,13 @@ pub fn measured_difference_ns(p: &SplitPasses, wide: bool) -> (u64, i64) {
     (far, apart.wrapping_sub(far.wrapping_sub(near) as i64))
 }
 
+impl FarSteer {
+    /// The far reference's offset register was changed by others (the whole far half moved).
+    pub(crate) fn forget_offset(&mut self) {
+        self.offset = None;
+    }
+}
+
 impl<I: Io> Master<I> {
     /// After a cyclic frame (`passes`, if it went round both halves): while the ring is split
     /// and the far half follows its own reference ([`SplitRingClocks::FarReference`]), the

@@ -365,15 +365,45 @@ fn wiring(m: &Master<VirtualIo>) -> Wiring {
     m.slaves.iter().map(|s| (s.parent, s.parent_port, s.delay_ns)).collect()
 }
 
+/// The true delays behind a split ring's break, from one more cycle: each far slave's
+/// processing unit's time on the far half's pass (the secondary's, a cycle's last frame) less
+/// the far reference's — for a terminal with receive times only, its port 0's time, which the
+/// master takes for its processing unit's (as `delays.rs` does).
+fn far_pass_truth(m: &mut Master<VirtualIo>, far_ref: usize) -> Vec<Option<i64>> {
+    m.cycle().unwrap();
+    let visits = m.engine.io.seg.last_visits();
+    assert!(visits.iter().all(|(n, _)| *n >= far_ref.min(2)), "the far half's pass: {visits:?}");
+    let at = |n: usize| {
+        let (_, t) = visits.iter().find(|(k, _)| *k == n)?;
+        let clock = m.slaves[n].has_system_time;
+        Some(if clock { t.epu_ns } else { t.port_ns[0]? } as i64)
+    };
+    let r = at(far_ref).expect("the far reference on the far pass");
+    (0..m.slaves.len()).map(|n| at(n).map(|e| e - r)).collect()
+}
+
+/// The intact ring's tree (parents and ports) and delays to within the receive times' 10 ns
+/// ticks: a latch taken at another instant may halve a loop one tick the other way (5 ns).
+fn assert_wiring_as_intact(got: &Wiring, intact: &Wiring) {
+    let tree = |w: &Wiring| w.iter().map(|&(p, port, _)| (p, port)).collect::<Vec<_>>();
+    assert_eq!(tree(got), tree(intact), "tree: {got:?} vs {intact:?}");
+    for (g, i) in got.iter().zip(intact) {
+        assert!((g.2 as i64 - i.2 as i64).abs() <= 10, "delays: {got:?} vs {intact:?}");
+    }
+}
+
 /// A ring split before the master starts: the far half is latched from the secondary, its
 /// delays from its own reference, and its offsets written for when the second pass passed
 /// it; the far coupler, 3 ppm faster from 2 s on, is kept on the reference's time from the
 /// latch's geometry (there was no break to learn it from). Per 100 ms over 10 s, the worst
 /// |far coupler − reference| true error; the far terminal's delay less the far coupler's.
-fn split_from_the_start(clocks: SplitRingClocks, host: HostModel) -> (Vec<i64>, i64) {
+/// `seed` draws the crystals (the far coupler's 0.7 ppm off the reference with seed 5, 6–30
+/// ppm with 6–10).
+fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> (Vec<i64>, i64) {
     let s = 1_000_000_000;
     let events = [(2 * s, Event::DriftStep { node: 2, delta_ppb: 3_000 })];
-    let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}{BROKEN_FROM_START}");
+    let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}{BROKEN_FROM_START}")
+        .replace("seed = 5", &format!("seed = {seed}"));
     let mut worst = Vec::new();
     let m = cycle_ring(&toml, host, clocks, &events, 10_000, |k, t| {
         let e = (t[1].wrapping_sub(t[0]) as i64).abs();
@@ -397,12 +427,14 @@ fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
     intact.scan().unwrap();
     let intact_apart = intact.slaves[3].delay_ns as i64 - intact.slaves[2].delay_ns as i64;
     let worst = |v: &[i64]| *v.iter().max().unwrap();
-    for host in [HostModel::nic_hwts(), HostModel::pc_rt()] {
-        let (kept, apart) = split_from_the_start(SplitRingClocks::FarReference, host);
-        let (held, _) = split_from_the_start(SplitRingClocks::FarReferenceHeld, host);
+    for (host, seed) in
+        [HostModel::nic_hwts(), HostModel::pc_rt()].into_iter().flat_map(|h| (5..=8).map(move |s| (h, s)))
+    {
+        let (kept, apart) = split_from_the_start(SplitRingClocks::FarReference, host, seed);
+        let (held, _) = split_from_the_start(SplitRingClocks::FarReferenceHeld, host, seed);
         println!(
-            "{}: split from the start, far coupler − reference worst |·| kept: {} ns over the first 100 ms, {} ns \
-             over the first 2 s, {} ns over \
+            "{} seed {seed}: split from the start, far coupler − reference worst |·| kept: {} ns over the first \
+             100 ms, {} ns over the first 2 s, {} ns over \
              the 3 s after a 3 ppm warm-up, {} ns over the 5 s after; held over: {} ns, {} ns, {} ns; far terminal \
              {apart} ns behind the far coupler ({intact_apart} ns on the intact ring)",
             host.name,
@@ -418,9 +450,11 @@ fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
         assert_eq!(apart, intact_apart);
         // Written for the second pass's instant (a master round trip off before: 19 µs under
         // nic-hwts, 24 µs under pc-rt). Held over, the far coupler runs at its own crystal's
-        // rate, never having followed the reference; kept, within a few hundred ns while the
-        // line learns that rate.
-        assert!(kept[0] < 100, "{kept:?}");
+        // rate, never having followed the reference; kept, from the line the static drift
+        // compensation's frames began, which knows that rate (until session 41 the cycles
+        // began a new line and the far coupler drifted for its first 128 samples: up to
+        // 3.8 µs at 30 ppm, seed 8; seed 5's 0.7 ppm hid it).
+        assert!(kept[0] < 150, "{kept:?}");
         assert!(worst(&kept[..20]) < 250, "{kept:?}");
         assert!(worst(&kept[20..50]) < 1_000, "{kept:?}");
         assert!(worst(&kept[50..]) < 100, "{kept:?}");
@@ -441,25 +475,34 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     intact.scan().unwrap();
     let s = 1_000_000_000;
     let events = [(3 * s, Event::LinkUp { node: 2, port: 0 })];
-    let toml = format!("{DEVICES}{RING}{BROKEN_FROM_START}");
-    let (mut transient, mut after) = (0i64, 0i64);
-    let m = cycle_ring(&toml, HostModel::nic_hwts(), SplitRingClocks::FarReference, &events, 6_000, |k, t| {
-        let e = (t[1].wrapping_sub(t[0]) as i64).abs();
-        if k >= 5_000 {
-            after = after.max(e);
-        } else if k >= 3_000 {
-            transient = transient.max(e);
-        }
-    });
-    println!(
-        "closed after a split from the start: far coupler − reference worst {transient} ns over the 2 s after, \
-         {after} ns over the next second"
-    );
-    assert_eq!(m.engine.ring, RingState::Intact);
-    assert_eq!(m.split_latch, None);
-    assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
-    assert_eq!(wiring(&m), wiring(&intact));
-    assert!(transient < 60 && after < 50, "{transient}, {after}");
+    // Four crystal draws: the far coupler 0.7 ppm off the reference with seed 5, 15–30 ppm
+    // with 6–8.
+    for seed in 5..=8 {
+        let toml = format!("{DEVICES}{RING}{BROKEN_FROM_START}").replace("seed = 5", &format!("seed = {seed}"));
+        let (mut transient, mut after) = (0i64, 0i64);
+        let m = cycle_ring(&toml, HostModel::nic_hwts(), SplitRingClocks::FarReference, &events, 6_000, |k, t| {
+            let e = (t[1].wrapping_sub(t[0]) as i64).abs();
+            if k >= 5_000 {
+                after = after.max(e);
+            } else if k >= 3_000 {
+                transient = transient.max(e);
+            }
+        });
+        println!(
+            "seed {seed}: closed after a split from the start: far coupler − reference worst {transient} ns over \
+             the 2 s after, {after} ns over the next second"
+        );
+        assert_eq!(m.engine.ring, RingState::Intact);
+        assert_eq!(m.split_latch, None);
+        assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
+        assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
+        // Split from the start, the far coupler never followed the reference: the master kept
+        // it by its offset, and its own loop takes up its crystal's whole offset once the
+        // reference's time reaches it (about 16 ns per ppm, gone within half a second; 22,
+        // 125, 364 and 489 ns measured). Until session 41 the test ran seed 5 alone and asked
+        // for 60 ns.
+        assert!(transient < 600 && after < 50, "{transient}, {after}");
+    }
 }
 
 /// Three couplers with a terminal each, the third's X2 OUT back to the secondary port, split
@@ -467,11 +510,16 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
 /// (entered by its X2 port), the far reference the second coupler hanging on the root's X1
 /// port — processed first, on the frame's way back. Returns (parent, port, delay) of every
 /// slave after `init_dc`, the worst |far coupler − reference| of both far couplers over the
-/// first 3 s and over the 3 s after the cable is put back, and the master at the end.
-fn three_couplers_split_from_the_start(host: HostModel) -> (Wiring, [i64; 2], Master<VirtualIo>) {
-    let toml = format!("{THREE_COUPLERS}[[event]]\nat_ms = 0\nlink_down = {{ device = 2, port = 0 }}\n");
+/// first 3 s, the 2 s after the cable is put back and the second after, and the master at the end.
+#[allow(clippy::type_complexity)]
+fn three_couplers_split_from_the_start(
+    host: HostModel,
+    seed: u64,
+) -> (Wiring, Vec<Option<i64>>, [i64; 3], Master<VirtualIo>) {
+    let toml = format!("{THREE_COUPLERS}[[event]]\nat_ms = 0\nlink_down = {{ device = 2, port = 0 }}\n")
+        .replace("seed = 5", &format!("seed = {seed}"));
     let s = 1_000_000_000;
-    let mut worst = [0i64; 2];
+    let mut worst = [0i64; 3];
     let m = cycle_ring(
         &toml,
         host,
@@ -480,7 +528,7 @@ fn three_couplers_split_from_the_start(host: HostModel) -> (Wiring, [i64; 2], Ma
         6_000,
         |k, t| {
             let e = [1, 2].map(|c| (t[c].wrapping_sub(t[0]) as i64).abs()).into_iter().max().unwrap();
-            let w = &mut worst[usize::from(k >= 3_000)];
+            let w = &mut worst[usize::from(k >= 3_000) + usize::from(k >= 5_000)];
             *w = (*w).max(e);
         },
     );
@@ -491,7 +539,9 @@ fn three_couplers_split_from_the_start(host: HostModel) -> (Wiring, [i64; 2], Ma
     again.init_dc(&DcConfig::default()).unwrap();
     let l = again.split_latch.as_ref().unwrap();
     assert_eq!((l.first_far, l.root, l.root_port, l.far_reference), (2, 4, 2, Some(2)));
-    (wiring(&again), worst, m)
+    let split = wiring(&again);
+    let truth = far_pass_truth(&mut again, 2);
+    (split, truth, worst, m)
 }
 
 const THREE_COUPLERS: &str = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
@@ -500,28 +550,36 @@ const THREE_COUPLERS: &str = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device
 
 #[test]
 fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_comes_in() {
-    for host in [HostModel::nic_hwts(), HostModel::pc_rt()] {
+    for (host, seed) in
+        [HostModel::nic_hwts(), HostModel::pc_rt()].into_iter().flat_map(|h| (5..=8).map(move |s| (h, s)))
+    {
         let mut intact = master(THREE_COUPLERS, host);
         intact.scan().unwrap();
         let whole = wiring(&intact);
-        let (split, worst, m) = three_couplers_split_from_the_start(host);
+        let (split, truth, worst, m) = three_couplers_split_from_the_start(host, seed);
         println!(
-            "{}: intact {whole:?}\n  split {split:?}\n  worst |far couplers − reference| {} ns over the first 3 s, {} ns \
-             over the 3 s after the cable is back",
-            host.name, worst[0], worst[1]
+            "{} seed {seed}: intact {whole:?}\n  split {split:?}\n  true on the far pass {truth:?}\n  worst |far couplers − \
+             reference| {} ns over the first 3 s, {} ns over the 2 s after the cable is back, {} ns over the third",
+            host.name, worst[0], worst[1], worst[2]
         );
         // The far half's delays from the second coupler: its terminal, the third coupler (on
-        // the root's X1 port, seen the other way round) and its terminal, as the intact ring's
-        // differences to within the receive times' 10 ns.
+        // the root's X1 port, seen the other way round) and its terminal, within 15 ns of the
+        // true ones — the far tree is entered by X2, a reversed tree, where SOEM's formula is
+        // half a loop-back long and the latches add ±5 ns (`delays.rs`; 10 ns off with seed 5,
+        // 15 with 6). Until session 41 they were compared with the intact ring's differences
+        // (within 10 ns), themselves measured: seed 6 put them 15 ns apart.
         assert_eq!((split[2].0, split[4].0), (Some(4), None), "the third coupler is the root: {split:?}");
         for k in [3, 4, 5] {
-            let (apart, intact_apart) = (split[k].2 as i64, whole[k].2 as i64 - whole[2].2 as i64);
-            assert!((apart - intact_apart).abs() <= 10, "slave {k}: {apart} vs {intact_apart}");
+            let t = truth[k].expect("on the far pass");
+            assert!((split[k].2 as i64 - t).abs() <= 15, "slave {k}: {} vs true {t}", split[k].2);
         }
-        assert!(worst[0] < 200 && worst[1] < 50, "{worst:?}");
+        // Back together, both far couplers' loops take up their crystals' whole offsets (the
+        // master kept them by their offsets while split): 25–797 ns over seeds 5–8, which
+        // seed 5 alone (25 ns) had hidden until session 41; settled a second later.
+        assert!(worst[0] < 200 && worst[1] < 1_000 && worst[2] < 50, "{worst:?}");
         // Closed again: the intact ring's tree and delays.
         assert_eq!(m.engine.ring, RingState::Intact);
-        assert_eq!(wiring(&m), whole);
+        assert_wiring_as_intact(&wiring(&m), &whole);
     }
 }
 
@@ -549,15 +607,20 @@ fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
                 .max([2, 3].map(|d| (t[d].wrapping_sub(t[0]) as u32 as i32 as i64).abs()).into_iter().max().unwrap());
         }
     });
+    let mut m = m;
     let split = wiring(&m);
     let l = m.split_latch.as_ref().expect("the latch saw the split");
-    println!("intact {whole:?}\nsplit {split:?}\nworst |far drives − reference| over the last 2 s: {worst} ns");
     assert_eq!((l.first_far, l.root, l.root_port), (3, 4, 1), "entered on the last drive's port 1");
     assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 0, 1, 1]);
-    // The last drive's delay from the far reference (the second drive), as the intact ring's
-    // difference, to within the receive times' 10 ns.
-    let (apart, intact_apart) = (split[4].2 as i64 - split[3].2 as i64, whole[4].2 as i64 - whole[3].2 as i64);
-    assert!((apart - intact_apart).abs() <= 10, "{apart} vs {intact_apart}");
+    let truth = far_pass_truth(&mut m, 3);
+    println!(
+        "intact {whole:?}\nsplit {split:?}\ntrue on the far pass {truth:?}\nworst |far drives − reference| over the \
+         last 2 s: {worst} ns"
+    );
+    // The last drive's delay from the far reference (the second drive) within 10 ns of the
+    // true one (the intact ring's difference may be 15 ns off it: seen with seed 9).
+    let (apart, t) = (split[4].2 as i64 - split[3].2 as i64, truth[4].expect("on the far pass"));
+    assert!((apart - t).abs() <= 10, "{apart} vs true {t}");
     assert!(worst < 200, "{worst} ns");
 }
 
@@ -607,7 +670,7 @@ fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
         wiring(&intact)
     );
     assert_eq!(m.engine.ring, RingState::Intact);
-    assert_eq!(wiring(&m), wiring(&intact), "the intact ring's tree and delays");
+    assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
     assert!(m.relatched.is_empty(), "{:?}", m.relatched);
     assert!(worst < 100, "{worst} ns");
 }
