@@ -9,21 +9,31 @@ const CYCLE_NS: u64 = 1_000_000;
 
 /// Four slaves brought up (no DC initialisation yet).
 fn brought_up(host: HostModel) -> Master<VirtualIo> {
+    brought_up_seeded(host, 5)
+}
+
+/// [`brought_up`] with `seed` for the segment's and the host's random draws.
+fn brought_up_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(
-        "seed = 5\n\
+        &"seed = 5\n\
          [[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 40.0\n\
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
          [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 50.0\nesc = 'et1100'\nsync_unit = true\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -20.0\nesc = 'et1100'\nsync_unit = true\n",
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -20.0\nesc = 'et1100'\nsync_unit = true\n"
+            .replace("seed = 5", &format!("seed = {seed}")),
     )
     .unwrap();
-    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, 5));
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, seed));
     m.bring_up().unwrap();
     m
 }
 
 fn segment(host: HostModel) -> Master<VirtualIo> {
-    let mut m = brought_up(host);
+    segment_seeded(host, 5)
+}
+
+fn segment_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
+    let mut m = brought_up_seeded(host, seed);
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     m
 }
@@ -126,8 +136,8 @@ fn reference_follows_master_methods_side_by_side() {
 
 /// Master-follows-reference: the phase at which each frame passes the reference, in its own
 /// cycle, over the second half of the run.
-fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64) -> (f64, f64) {
-    let mut m = segment(HostModel::pc_rt());
+fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64, seed: u64) -> (f64, f64) {
+    let mut m = segment_seeded(HostModel::pc_rt(), seed);
     let mut sync = make();
     let mut st = m.sync_state().unwrap();
     let mut next = m.engine.io.now_ns();
@@ -167,16 +177,28 @@ fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64) -> (f64, f64)
 
 #[test]
 fn master_follows_reference_methods_hold_the_phase() {
-    // Without following, the reference (+40 ppm) would move 40 µs per second against the master.
-    let (_, chen) = run_mfr(|| Box::new(Chen2016::new(CYCLE_NS, 100, 10_000)), 6000);
-    let (_, pi) = run_mfr(|| Box::new(SoemPi::new(CYCLE_NS, 0)), 6000);
-    let (ours_mean, ours) = run_mfr(|| Box::new(Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS)), 6000);
-    println!("phase sd over 3 s: chen2016 {chen:.0} ns, pi {pi:.0} ns, ferrocat {ours:.0} ns");
-    assert!(chen < 20_000.0 && pi < 20_000.0, "both follow the reference: {chen} {pi}");
-    // The host's wake-up jitter dominates what is left, for every method alike: ferrocat
-    // does better than Chen's averaging and no worse than SOEM's PI within 10 %.
-    assert!(ours < chen && ours <= pi * 1.1, "{ours} {chen} {pi}");
-    assert!(ours_mean.abs() < 20_000.0, "ferrocat holds the wake-up near the target phase: {ours_mean}");
+    // Without following, the reference (+40 ppm) would move 40 µs per second against the
+    // master. Four realisations of the host's noise (seeds 5–8): the wake-up jitter dominates
+    // what is left, for every method alike, and one 3 s run's sd moves by ±15 % with it
+    // (ferrocat / PI was 0.96–1.15 over seeds 5–12; seed 5 alone until session 41).
+    let mut pooled = [0.0f64; 3];
+    for seed in 5..=8 {
+        let (_, chen) = run_mfr(|| Box::new(Chen2016::new(CYCLE_NS, 100, 10_000)), 6000, seed);
+        let (_, pi) = run_mfr(|| Box::new(SoemPi::new(CYCLE_NS, 0)), 6000, seed);
+        let (ours_mean, ours) =
+            run_mfr(|| Box::new(Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS)), 6000, seed);
+        println!("seed {seed}: phase sd over 3 s: chen2016 {chen:.0} ns, pi {pi:.0} ns, ferrocat {ours:.0} ns");
+        assert!(chen < 20_000.0 && pi < 20_000.0, "both follow the reference: {chen} {pi}");
+        assert!(ours < chen, "better than Chen's averaging in every run: {ours} {chen}");
+        assert!(ours_mean.abs() < 20_000.0, "ferrocat holds the wake-up near the target phase: {ours_mean}");
+        for (p, sd) in pooled.iter_mut().zip([chen, pi, ours]) {
+            *p += sd * sd / 4.0;
+        }
+    }
+    let [chen, pi, ours] = pooled.map(f64::sqrt);
+    println!("pooled phase sd: chen2016 {chen:.0} ns, pi {pi:.0} ns, ferrocat {ours:.0} ns");
+    // Over the four: no worse than SOEM's PI within 5 %.
+    assert!(ours <= pi * 1.05, "{ours} {pi}");
 }
 
 /// The largest |follower − reference| and |master − reference| over the first `cycles` cycles
