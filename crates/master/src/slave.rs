@@ -138,6 +138,13 @@ impl Slave {
     pub fn eeprom_problem(&self) -> Option<String> {
         eeprom_problem(self.dl_status, self.eeprom_status)
     }
+    /// Whether the ESC's configuration area failed to load for good (the scan saw DL status
+    /// bit 0 clear with a checksum error or no EEPROM acknowledge), not merely not yet.
+    pub fn eeprom_failed(&self) -> bool {
+        use ferrocat_wire::register::SiiControl;
+        !self.dl_status.pdi_operational()
+            && self.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
+    }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {
         self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")

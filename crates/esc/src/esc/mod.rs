@@ -459,14 +459,14 @@ impl Esc {
         }
     }
 
-    /// Whether the DC unit's system time (0x0910–0x09FF) exists: a clock a master can
-    /// synchronise, not only receive times.
-    #[inline]
     /// Whether the ESC configuration area passed its checksum (DL status bit 0).
     pub fn sii_loaded(&self) -> bool {
         self.sii_loaded
     }
 
+    /// Whether the DC unit's system time (0x0910–0x09FF) exists: a clock a master can
+    /// synchronise, not only receive times.
+    #[inline]
     pub fn has_system_time(&self) -> bool {
         self.dc.is_some() && self.system_time_unit
     }

@@ -114,11 +114,13 @@ impl<I: Io> Master<I> {
                 self.slaves[position as usize].state = state;
                 return Ok(());
             }
-            // An ESC without its configuration area (seen at the scan) cannot leave INIT: say
-            // why at once rather than after the timeout, if it still has none.
+            // An ESC whose configuration area failed to load (a wrong checksum or no EEPROM,
+            // seen at the scan) cannot leave INIT: say why at once rather than after the
+            // timeout, if it still has none. One still loading (a controller that emulates
+            // the EEPROM and is booting) is waited for; at the timeout the reason is given.
             let timed_out = self.engine.io.now_ns() > deadline;
-            if state != AlState::Init && (timed_out || !self.slaves[position as usize].dl_status.pdi_operational()) {
-                if let Some(why) = self.eeprom_problem_now(position)? {
+            if state != AlState::Init && (timed_out || self.slaves[position as usize].eeprom_failed()) {
+                if let Ok(Some(why)) = self.eeprom_problem_now(position) {
                     return Err(MasterError::State {
                         position,
                         name,
