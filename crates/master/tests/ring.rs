@@ -573,10 +573,14 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
             let t = truth[k].expect("on the far pass");
             assert!((split[k].2 as i64 - t).abs() <= 15, "slave {k}: {} vs true {t}", split[k].2);
         }
+        // Split, the far couplers within 100 ns (`nic-hwts`) and 400 ns (`pc-rt`, software
+        // stamps) of the reference: 14–49 and 64–274 ns over 40 realisations (segment seeds
+        // 5–12, host seeds 5–9; the test asked 200 ns of seed 5's 95 and 145 until session 41).
         // Back together, both far couplers' loops take up their crystals' whole offsets (the
-        // master kept them by their offsets while split): 25–797 ns over seeds 5–8, which
-        // seed 5 alone (25 ns) had hidden until session 41; settled a second later.
-        assert!(worst[0] < 200 && worst[1] < 1_000 && worst[2] < 50, "{worst:?}");
+        // master kept them by their offsets while split): 24–797 ns, which seed 5 alone (25
+        // ns) had hidden; settled a second later (19–25 ns).
+        let split_bound = if host.name == "nic-hwts" { 100 } else { 400 };
+        assert!(worst[0] < split_bound && worst[1] < 1_000 && worst[2] < 50, "{worst:?}");
         // Closed again: the intact ring's tree and delays.
         assert_eq!(m.engine.ring, RingState::Intact);
         assert_wiring_as_intact(&wiring(&m), &whole);
