@@ -164,6 +164,12 @@ impl<I: Io> Master<I> {
     pub fn supervise(&mut self) -> Result<usize> {
         let mut down = 0;
         for k in 0..self.slaves.len() {
+            // Only slaves the master has brought to OP can fall from it: one still on its way
+            // (a frame lost while `start` walks it up) or put elsewhere on purpose is not
+            // "left OP", and is not pushed back there.
+            if self.slaves[k].state != AlState::Op {
+                continue;
+            }
             let (st, name, pos) = (self.slaves[k].station, self.slaves[k].name.clone(), k as u16);
             let mut d = [0u8; 6];
             let mut wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
