@@ -204,19 +204,21 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     // A fault while moving: the reaction decelerates (13), then the fault (14); the driver
     // resets it and enables again.
     drive_mut(&mut m).inject_fault(error_code::DC_LINK_UNDERVOLTAGE);
-    let mut states = Vec::new();
+    // From the state it was in: the first cycle after the injection may still show it (the
+    // drive takes the fault at its next processing, which the seed places).
+    let mut states = vec![Some(State::OperationEnabled)];
     for _ in 0..1000 {
         cycles(&mut m, 1);
         let s = a.update(&mut m);
         if states.last() != Some(&s) {
             states.push(s);
         }
-        if a.ready(&m) && states.len() > 2 {
+        if a.ready(&m) && states.len() > 3 {
             break;
         }
     }
     assert_eq!(
-        states[..3],
+        states[1..4],
         [Some(State::FaultReactionActive), Some(State::Fault), Some(State::SwitchOnDisabled)],
         "{states:?}"
     );
@@ -715,10 +717,14 @@ fn homing_on_a_cam_with_reversal_at_the_limit_switch() {
         let (mut m, a, per_rev) = homing_with("builtin = 'SERVO'", 3.0, 1.0, 50.0);
         let s = drive(&m).position_increments() / per_rev;
         let (lo, hi) = (s - start_off_rev + 1.0, s - start_off_rev + 1.5);
+        // The limit beyond the index pulse method 10 homes on (the start's fraction of a turn
+        // is the seed's: with the limit at a fixed 2.2 rev, seed 7 put it before that pulse,
+        // and homing rightly failed).
+        let limit = (s - start_off_rev + 2.2).max(hi.ceil() + 0.25);
         drive_mut(&mut m).set_switches(Switches {
             home_rev: Some(lo),
             home_to_rev: Some(hi),
-            positive_limit_rev: Some(s - start_off_rev + 2.2),
+            positive_limit_rev: Some(limit),
             ..Switches::default()
         });
         home(&mut m, &a, method, 0, 20_000).unwrap_or_else(|sw| panic!("method {method}: homing error {sw:#06x}"));
@@ -892,7 +898,10 @@ fn interpolation_follows_the_period_0x60c2_gives() {
             a.update(&mut m);
         }
         assert_eq!(a.state(), Some(State::OperationEnabled));
-        (0.3 * per_rev - (drive(&m).position_increments() - actual0)) / per_rev
+        // The demand (actual plus following error): the servo's own lag behind it moves with
+        // the drive's processing-time draws by a few 0.1 ms of travel from run to run.
+        let d = drive(&m);
+        (0.3 * per_rev - (d.position_increments() + d.following_error_increments() - actual0)) / per_rev
     };
     let (lag_1ms, lag_2ms) = (run(1_000_000), run(2_000_000));
     // Each set-point reached a period later than the one before: at 1 rev/s one extra
