@@ -25,7 +25,8 @@ pub struct Eeprom {
 }
 
 /// Word 7 with this value switches the ESC configuration area's checksum test off, for
-/// debugging (Beckhoff, EtherCAT Slave Controller Technology, Section I, Table 37, note).
+/// debugging (Beckhoff, EtherCAT Slave Controller Technology, Section I, Table 37, note; our
+/// copy of it breaks off after "0x8", docs/esc-model.md).
 pub const CHECKSUM_BYPASS: u16 = 0x88A4;
 
 impl Eeprom {
