@@ -16,6 +16,8 @@ import time
 
 import pysoem
 
+from soem_states import to_op
+
 iface, seconds = sys.argv[1], float(sys.argv[2])
 m = pysoem.Master()
 m.open(iface)
@@ -45,15 +47,7 @@ try:
                 mine.append({"logical": ls, "length": ll, "type": ty})
         fmmus.append(mine)
     result["fmmus"] = fmmus
-    m.state = pysoem.SAFEOP_STATE
-    m.write_state()
-    m.state_check(pysoem.SAFEOP_STATE, 500_000)
-    m.state = pysoem.OP_STATE
-    m.write_state()
-    for _ in range(200):
-        exchange()
-        if m.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
-            break
+    to_op(m, exchange)
     result["op"] = m.read_state() == pysoem.OP_STATE
     terminal = next(s for s in m.slaves if len(s.output) > 0 and len(s.input) == 0)
     drive = next(s for s in m.slaves if len(s.output) > 0 and len(s.input) > 0)

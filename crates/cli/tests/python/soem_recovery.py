@@ -16,6 +16,8 @@ import time
 
 import pysoem
 
+from soem_states import to_op
+
 iface, position, alias = sys.argv[1], int(sys.argv[2]), int(sys.argv[3], 0)
 
 
@@ -27,21 +29,6 @@ def crc8(data):
         for _ in range(8):
             crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
     return crc
-
-
-def to_op(m):
-    m.config_map()
-    m.state = pysoem.SAFEOP_STATE
-    m.write_state()
-    m.state_check(pysoem.SAFEOP_STATE, 500_000)
-    m.state = pysoem.OP_STATE
-    m.write_state()
-    for _ in range(200):
-        m.send_processdata()
-        m.receive_processdata(2000)
-        if m.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
-            return True
-    return False
 
 
 def supervise(m, log):
@@ -95,7 +82,8 @@ m.open(iface)
 result = {"log": []}
 try:
     result["found"] = m.config_init()
-    result["op"] = to_op(m)
+    m.config_map()
+    result["op"] = to_op(m, lambda: (m.send_processdata(), m.receive_processdata(2000)))
     # The working counter of a whole cycle, as it comes back in OP (this pysoem's
     # expected_wkc reads 0 here).
     expected = max(cycle(m, k) for k in range(10))
