@@ -44,6 +44,10 @@ fn bad_arguments_are_errors_not_panics() {
         &["sdo", "read", "0", "zz:1", "--device", "EK1100"],
         &["run", "--seconds", "-1", "--device", "EK1100"],
         &["sii", "write", "0", "/nonexistent.bin", "--device", "EK1100"],
+        &["sii", "alias", "0", "70000", "--device", "EK1100"],
+        &["sii", "alias", "0", "-1", "--device", "EK1100"],
+        &["sii", "alias", "0", "0xZZ", "--device", "EK1100"],
+        &["sii", "alias", "5", "7", "--device", "EK1100"],
         // A multi-byte character in a hex value: was sliced by bytes, a panic.
         &["sdo", "write", "0", "0x6000:1", "0\u{113}0", "--type", "hex", "--device", "EK1100"],
     ] {
@@ -125,4 +129,28 @@ fn needs_shared_foe_writes_firmware_in_boot_and_names_its_failures() {
         assert!(!ok && err.lines().count() == 1 && err.contains(want), "{args:?}: {err}");
     }
     std::fs::remove_file(&fw).unwrap();
+}
+
+/// `ferrocat sii alias`: the alias and the checksum written (two words), the ESC told to take it
+/// at its next power-on; a slave whose EEPROM's checksum is wrong named by `scan`.
+#[test]
+fn sii_alias_writes_two_words_and_scan_names_a_bad_checksum() {
+    let (ok, _, err) = ferrocat(&["sii", "alias", "1", "0x0BAD", "--device", "EK1100", "--device", "EL2004"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("slave 1 (EL2004): alias 0x0bad") && err.contains("2 words written"), "{err}");
+    // An EL2004 image whose alias was changed without its checksum.
+    let img = std::env::temp_dir().join(format!("ferrocat-badcrc-{}.bin", std::process::id()));
+    let (ok, _, err) =
+        ferrocat(&["sii", "read", "1", "--out", img.to_str().unwrap(), "--device", "EK1100", "--device", "EL2004"]);
+    assert!(ok, "{err}");
+    let mut bytes = std::fs::read(&img).unwrap();
+    bytes[8] ^= 0x01;
+    std::fs::write(&img, &bytes).unwrap();
+    let (ok, out, err) = ferrocat(&["scan", "--device", "EK1100", "--device", img.to_str().unwrap()]);
+    let (ok_json, json, _) = ferrocat(&["scan", "--json", "--device", "EK1100", "--device", img.to_str().unwrap()]);
+    std::fs::remove_file(&img).ok();
+    assert!(ok, "{err}");
+    assert!(out.contains("ESC unconfigured") && out.contains("checksum"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(ok_json && v[1]["eeprom_loaded"] == false && v[0]["eeprom_loaded"] == true, "{json}");
 }
