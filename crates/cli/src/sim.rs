@@ -88,7 +88,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "position": i,
                 "name": n.name,
                 "station_address": n.esc.station_address(),
-                "alias": u16::from_le_bytes([n.esc.peek(0x0012, 2)[0], n.esc.peek(0x0012, 2)[1]]),
+                "alias": u16::from_le_bytes(n.esc.peek(0x0012, 2).try_into().unwrap_or_default()),
                 "eeprom_loaded": n.esc.sii_loaded(),
                 "al_state": n.esc.al_status().state().map(|s| s.name()),
                 "al_status_code": n.esc.al.code.0,

@@ -3,7 +3,7 @@
 //! (../shared/captures/soem-sdinfo-2-el2004.txt), reach OP, and receive its outputs.
 mod common;
 
-use common::{python, RingSim, Sim, VethPair};
+use common::{python, ReportingSim, RingSim, Sim, VethPair};
 
 /// The slaves of a SOEM slaveinfo printout, each as its trimmed lines.
 fn printout_slaves(text: &str) -> Vec<Vec<String>> {
@@ -309,19 +309,10 @@ fn foe_segment() -> String {
 #[test]
 fn soem_sdo_transfers_come_through_frame_loss() {
     let net = VethPair::new("sl");
-    let segment = std::env::temp_dir().join(format!("ferrocat-loss-{}.toml", std::process::id()));
-    std::fs::write(
-        &segment,
-        "seed = 3\nloss_probability = 0.02\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n",
-    )
-    .unwrap();
-    let report = std::env::temp_dir().join(format!("ferrocat-loss-report-{}.json", std::process::id()));
-    let sim = Sim::start(&net, &["--config", segment.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let toml = "seed = 3\nloss_probability = 0.02\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n";
+    let sim = ReportingSim::start(&net, "loss", toml, &[]);
     let r = soem_script(&net, "soem_sdo_loss.py", &["1", "300"]);
-    sim.stop();
-    std::fs::remove_file(&segment).unwrap();
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    std::fs::remove_file(&report).ok();
+    let rep = sim.report();
     let mailbox = &rep["devices"][1]["mailbox"];
     println!("frames lost {}, drive's mailbox {mailbox}", rep["frames_lost"]);
     assert_eq!(r["found"], 2);
@@ -340,21 +331,12 @@ fn soem_sdo_transfers_come_through_frame_loss() {
 #[test]
 fn soem_recovers_a_power_cycled_slave_and_its_new_alias_loads() {
     let net = VethPair::new("pc");
-    let segment = std::env::temp_dir().join(format!("ferrocat-power-{}.toml", std::process::id()));
-    std::fs::write(
-        &segment,
-        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
-         [[event]]\nat_ms = 2500\npower_off = 1\n[[event]]\nat_ms = 2800\npower_on = 1\n\
-         [[event]]\nat_ms = 7000\npower_off = 1\n[[event]]\nat_ms = 7300\npower_on = 1\n",
-    )
-    .unwrap();
-    let report = std::env::temp_dir().join(format!("ferrocat-power-report-{}.json", std::process::id()));
-    let sim = Sim::start(&net, &["--config", segment.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let toml = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
+                [[event]]\nat_ms = 2500\npower_off = 1\n[[event]]\nat_ms = 2800\npower_on = 1\n\
+                [[event]]\nat_ms = 7000\npower_off = 1\n[[event]]\nat_ms = 7300\npower_on = 1\n";
+    let sim = ReportingSim::start(&net, "power", toml, &[]);
     let r = soem_script(&net, "soem_recovery.py", &["2", "0x0BAD"]);
-    sim.stop();
-    std::fs::remove_file(&segment).unwrap();
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    std::fs::remove_file(&report).ok();
+    let rep = sim.report();
     assert_eq!(r["found"], 3, "{r}");
     assert_eq!(r["op"], true, "{r}");
     // The EL2004 (SOEM's slave index 1) lost, recovered, reconfigured and back in OP.
@@ -380,26 +362,11 @@ fn soem_recovers_a_power_cycled_slave_and_its_new_alias_loads() {
 #[test]
 fn soem_overlapping_io_map_drives_the_servo() {
     let net = VethPair::new("ov");
-    let report = std::env::temp_dir().join(format!("ferrocat-overlap-{}.json", std::process::id()));
-    let sim = Sim::start(
-        &net,
-        &[
-            "--device",
-            "EK1100",
-            "--device",
-            "EL2004",
-            "--device",
-            "SERVO",
-            "--device",
-            "EL1004",
-            "--report",
-            report.to_str().unwrap(),
-        ],
-    );
+    let toml = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n\
+                [[device]]\nbuiltin = 'EL1004'\n";
+    let sim = ReportingSim::start(&net, "overlap", toml, &[]);
     let r = soem_script(&net, "soem_overlap.py", &["1"]);
-    sim.stop();
-    let rep: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    std::fs::remove_file(&report).ok();
+    let rep = sim.report();
     assert_eq!((r["found"].as_u64(), r["op"].as_bool()), (Some(4), Some(true)), "{r}");
     // The servo's two FMMUs start at the same logical byte: overlapped.
     let servo = r["fmmus"][2].as_array().unwrap();

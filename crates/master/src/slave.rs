@@ -136,7 +136,24 @@ impl Slave {
     /// Why the ESC runs unconfigured, if it does: DL status bit 0 (PDI operational) clear
     /// because the EEPROM's configuration area did not load. Such a slave stays in INIT.
     pub fn eeprom_problem(&self) -> Option<String> {
-        eeprom_problem(self.dl_status, self.eeprom_status)
+        use ferrocat_wire::register::SiiControl;
+        if self.dl_status.pdi_operational() {
+            return None;
+        }
+        let sii_status = self.eeprom_status;
+        let why = if sii_status & SiiControl::CHECKSUM_ERROR != 0 {
+            "the checksum of its EEPROM's configuration area (word 7) is wrong"
+        } else if sii_status & SiiControl::ACK_ERROR != 0 {
+            "its EEPROM does not answer"
+        } else if sii_status & SiiControl::NOT_LOADED != 0 {
+            "its EEPROM's configuration area did not load"
+        } else {
+            "its PDI is not operational (DL status bit 0)"
+        };
+        Some(format!(
+            "ESC unconfigured (0x0502 = {sii_status:#06x}): {why}; it stays in INIT until a good image \
+             is programmed (`ferrocat sii write`) and it is powered off and on"
+        ))
     }
     /// Whether the ESC's configuration area failed to load for good (the scan saw DL status
     /// bit 0 clear with a checksum error or no EEPROM acknowledge), not merely not yet.
@@ -149,25 +166,4 @@ impl Slave {
     pub fn active_ports_text(&self) -> String {
         self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
     }
-}
-
-/// What DL status and the SII status 0x0502 say of an ESC whose PDI is not operational.
-pub(crate) fn eeprom_problem(dl: DlStatus, sii_status: u16) -> Option<String> {
-    use ferrocat_wire::register::SiiControl;
-    if dl.pdi_operational() {
-        return None;
-    }
-    let why = if sii_status & SiiControl::CHECKSUM_ERROR != 0 {
-        "the checksum of its EEPROM's configuration area (word 7) is wrong"
-    } else if sii_status & SiiControl::ACK_ERROR != 0 {
-        "its EEPROM does not answer"
-    } else if sii_status & SiiControl::NOT_LOADED != 0 {
-        "its EEPROM's configuration area did not load"
-    } else {
-        "its PDI is not operational (DL status bit 0)"
-    };
-    Some(format!(
-        "ESC unconfigured (0x0502 = {sii_status:#06x}): {why}; it stays in INIT until a good image \
-         is programmed (`ferrocat sii write`) and it is powered off and on"
-    ))
 }

@@ -146,16 +146,43 @@ impl Drop for Sim {
     }
 }
 
+/// `ferrocat sim` serving the segment file `toml` (written for it) with `args` besides, and
+/// the report it writes on exit (read with [`ReportingSim::report`]).
+pub struct ReportingSim {
+    pub sim: Sim,
+    path: PathBuf,
+    report: PathBuf,
+}
+
+impl ReportingSim {
+    pub fn start(net: &VethPair, tag: &str, toml: &str, args: &[&str]) -> Self {
+        let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
+        let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
+        std::fs::write(&path, toml).unwrap();
+        let mut all = vec!["--config", path.to_str().unwrap(), "--report", report.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let sim = Sim::start(net, &all);
+        ReportingSim { sim, path, report }
+    }
+
+    /// Stops the simulator; its report.
+    pub fn report(self) -> serde_json::Value {
+        self.sim.stop();
+        let rep = serde_json::from_str(&std::fs::read_to_string(&self.report).unwrap()).unwrap();
+        std::fs::remove_file(&self.path).ok();
+        std::fs::remove_file(&self.report).ok();
+        rep
+    }
+}
+
 /// A ring served on two veth pairs: two couplers with an EL2004 each, the second coupler's
 /// X2 OUT back to the master's second interface, the cable between the couplers pulled
 /// `break_ms` after the simulator starts; `events`, more `[[event]]` tables. Returns the
 /// simulator, the master's second interface, and the report it writes on exit (read with
 /// [`RingSim::report`]).
 pub struct RingSim {
-    pub sim: Sim,
+    pub sim: ReportingSim,
     pub master_secondary: String,
-    path: PathBuf,
-    report: PathBuf,
 }
 
 impl RingSim {
@@ -175,29 +202,12 @@ impl RingSim {
     /// A ring the segment file `toml` describes (with its `[secondary]` and events).
     pub fn start_segment(net: &VethPair, tag: &str, toml: &str) -> Self {
         let (master_secondary, segment_secondary) = net.second_link();
-        let stem = std::env::temp_dir().join(format!("ferrocat-{tag}-{}", std::process::id()));
-        let (path, report) = (stem.with_extension("toml"), stem.with_extension("json"));
-        std::fs::write(&path, toml).unwrap();
-        let sim = Sim::start(
-            net,
-            &[
-                "--config",
-                path.to_str().unwrap(),
-                "--secondary-iface",
-                &segment_secondary,
-                "--report",
-                report.to_str().unwrap(),
-            ],
-        );
-        RingSim { sim, master_secondary, path, report }
+        let sim = ReportingSim::start(net, tag, toml, &["--secondary-iface", &segment_secondary]);
+        RingSim { sim, master_secondary }
     }
 
     /// Stops the simulator; its report.
     pub fn report(self) -> serde_json::Value {
-        self.sim.stop();
-        let rep = serde_json::from_str(&std::fs::read_to_string(&self.report).unwrap()).unwrap();
-        std::fs::remove_file(&self.path).ok();
-        std::fs::remove_file(&self.report).ok();
-        rep
+        self.sim.report()
     }
 }
