@@ -194,21 +194,26 @@ fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
 }
 
 fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
-    use ferrocat_lab::chen2016::{run, PAPER};
+    use ferrocat_lab::chen2016::{run, setup, PAPER};
     let host = o.host;
+    let setup = setup(&o)?;
     let rows = run(&o, &progress("runs"))?;
     if let Some(dir) = out {
-        chen_outputs(dir, &o, &rows)?;
+        chen_outputs(dir, &o, &setup, &rows)?;
     }
     if json {
         let v = serde_json::json!({ "experiment": "chen2016", "seed": o.seed, "seconds": o.seconds,
-            "reference_ppm": o.reference_ppm, "rows": rows });
+            "reference_ppm": setup.reference_ppm, "counted_slaves": setup.counted_slaves, "rows": rows });
         outln!("{v}");
         return Ok(ExitCode::SUCCESS);
     }
     outln!(
-        "Chen 2016 Table 2 — host {}, seed {}, {} s per run, reference crystal {:+} ppm; jitter of the reference's time against the master's grid",
-        host.name, o.seed, o.seconds, o.reference_ppm
+        "Chen 2016 Table 2 — host {}, seed {}, {} s per run, reference crystal {:+} ppm; jitter of the reference's time against the master's grid;",
+        host.name, o.seed, o.seconds, setup.reference_ppm
+    );
+    outln!(
+        "lost and repeated: the cycles of the DC-synchronous slaves with outputs, at positions {:?}",
+        setup.counted_slaves
     );
     outln!(
         "{:>6}  {:<9} {:>10} {:>10} {:>8} {:>7} {:>9} {:>6} {:>8}   paper: {:>7} {:>7} {:>6} {:>5}",
@@ -251,14 +256,16 @@ fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) 
 fn chen_outputs(
     dir: &Path,
     o: &ferrocat_lab::chen2016::Options,
+    setup: &ferrocat_lab::chen2016::Setup,
     rows: &[ferrocat_lab::chen2016::Row],
 ) -> anyhow::Result<()> {
     use crate::plots::{line_chart, Series};
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut md = format!(
-        "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm.\n\n\
+        "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm; lost and repeated \
+         cycles of the DC-synchronous slaves with outputs, at positions {:?}.\n\n\
          | cycle µs | method | jitter min µs | max µs | width % | sd µs | cycles | lost | repeated | paper (chen2016) |\n|---|---|---|---|---|---|---|---|---|---|\n",
-        o.host.name, o.seed, o.seconds, o.reference_ppm
+        o.host.name, o.seed, o.seconds, setup.reference_ppm, setup.counted_slaves
     );
     for r in rows {
         let paper = ferrocat_lab::chen2016::PAPER

@@ -2,7 +2,7 @@
 //! jitter of the reference's timestamps against the master's cycle grid (min, max, width as a
 //! share of the cycle) and the process-data cycles that DC-synchronous slaves lost or consumed
 //! twice, for 500, 250, 100 and 50 µs cycles.
-use ferrocat_esc::SyncApp;
+use ferrocat_esc::{SyncApp, SyncMode};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Nominal};
 use ferrocat_master::{DcConfig, Master};
@@ -88,8 +88,21 @@ impl Row {
 pub const PAPER: [(u64, f64, f64, f64, f64); 3] =
     [(500, 26.36, -56.0, 16.5, 0.0), (250, 15.12, -66.96, 32.8, 0.0), (100, 14.48, -49.96, 64.4, 0.0)];
 
-fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
-    let cycle_ns = cycle_us * 1000;
+/// What a table was measured on, the same for every run of it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Setup {
+    /// The reference clock's crystal error at the start of the runs (ppm; the master's clock
+    /// is exact): the scenario's `reference_ppm` on the experiment's own segment, whatever a
+    /// segment file gave it otherwise.
+    pub reference_ppm: f64,
+    /// The slaves (positions) whose lost and repeated cycles the table counts: DC-synchronous
+    /// (`app = "dc"`) with process-data outputs. One without outputs gets SYNC0 but has
+    /// nothing to lose or repeat.
+    pub counted_slaves: Vec<u16>,
+}
+
+/// The segment brought up and configured, with the slaves that take SYNC0 and those that count.
+fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> {
     let toml = format!(
         "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = {}\n\
          [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
@@ -102,16 +115,39 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let mut m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
     m.scan()?;
     m.configure()?;
-    let synced: Vec<u16> = (0..m.slaves.len())
-        .filter(|&k| crate::node_of(&m, k).is_some_and(|n| m.engine.io.seg.nodes[n].esc.app().as_any().is::<SyncApp>()))
-        .map(|k| k as u16)
-        .collect();
+    let dc_synchronous = |k: usize| {
+        crate::node_of(&m, k)
+            .and_then(|n| m.engine.io.seg.nodes[n].esc.app().as_any().downcast_ref::<SyncApp>())
+            .is_some_and(|a| a.mode == SyncMode::DcSynchronous)
+    };
+    let synced: Vec<u16> = (0..m.slaves.len()).filter(|&k| dc_synchronous(k)).map(|k| k as u16).collect();
     anyhow::ensure!(!synced.is_empty(), "the segment has no DC-synchronous slave (app = \"dc\")");
+    let counted_slaves: Vec<u16> = synced.iter().copied().filter(|&k| m.slaves[k as usize].output_bits() > 0).collect();
+    anyhow::ensure!(
+        !counted_slaves.is_empty(),
+        "no DC-synchronous slave (app = \"dc\") of the segment has process-data outputs (slaves {synced:?} have \
+         none): there would be no cycle to lose or repeat"
+    );
+    let reference = crate::dc_slaves(&m)?[0];
+    let reference_ppm = crate::node_of(&m, reference)
+        .and_then(|n| m.engine.io.seg.nodes[n].esc.dc.as_ref())
+        .map_or(0.0, |dc| dc.drift_ppb as f64 / 1000.0);
+    Ok((m, synced, Setup { reference_ppm, counted_slaves }))
+}
+
+/// The table's [`Setup`], without running it.
+pub fn setup(o: &Options) -> anyhow::Result<Setup> {
+    Ok(prepare(o)?.2)
+}
+
+fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
+    let cycle_ns = cycle_us * 1000;
+    let (mut m, synced, setup) = prepare(o)?;
     // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
     m.init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
         sync0_shift_ns: (cycle_ns / 2) as i32,
-        sync0_slaves: Some(synced.clone()),
+        sync0_slaves: Some(synced),
         start_delay_ns: 20_000_000,
         ..DcConfig::default()
     })?;
@@ -141,7 +177,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     // The reference read r0 one lead after `sent`; a send at sent + d passes at r0 + d.
     let mut next = sent + 2 * cycle_ns - r0 % cycle_ns;
     m.engine.io.sleep_until(next);
-    for a in apps(&mut m) {
+    for a in apps(&mut m, &setup.counted_slaves) {
         a.reset_counts();
     }
     let total = (o.seconds * 1e9 / cycle_ns as f64) as u64;
@@ -175,7 +211,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         next += period;
         m.engine.io.sleep_until(next);
     }
-    let (lost, repeated) = apps(&mut m).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
+    let (lost, repeated) =
+        apps(&mut m, &setup.counted_slaves).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
     let cycles = total;
     Ok(Row {
         cycle_us,
@@ -188,7 +225,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         cycles,
         lost,
         repeated,
-        loss_rate: lost as f64 / (synced.len() as u64 * cycles).max(1) as f64,
+        loss_rate: lost as f64 / (setup.counted_slaves.len() as u64 * cycles).max(1) as f64,
         frames_lost: st.lost + m.cycle_stats().lost_frames,
         trace,
     })
@@ -204,8 +241,18 @@ fn spread_ns(n: i128, sum: i128, sq: i128) -> f64 {
     (var_n2 as f64).sqrt() / n as f64
 }
 
-fn apps(m: &mut Master<VirtualIo>) -> Vec<&mut SyncApp> {
-    m.engine.io.seg.nodes.iter_mut().filter_map(|n| n.esc.app_mut().as_any_mut().downcast_mut::<SyncApp>()).collect()
+/// The applications of the slaves at `positions`.
+fn apps<'m>(m: &'m mut Master<VirtualIo>, positions: &[u16]) -> Vec<&'m mut SyncApp> {
+    let nodes: Vec<usize> = positions.iter().filter_map(|&k| crate::node_of(m, k as usize)).collect();
+    m.engine
+        .io
+        .seg
+        .nodes
+        .iter_mut()
+        .enumerate()
+        .filter(|(n, _)| nodes.contains(n))
+        .filter_map(|(_, n)| n.esc.app_mut().as_any_mut().downcast_mut::<SyncApp>())
+        .collect()
 }
 
 pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Vec<Row>> {

@@ -71,6 +71,8 @@ pub struct Ferrocat {
     pub held_back: u64,
     /// The reference time the next frame is aimed at (its slot on the grid of `phase_ns`).
     aimed_ns: Option<u64>,
+    /// Frames in a row held back.
+    late_run: u32,
     /// Master follows reference: when this cycle was planned to start on the master's clock
     /// (the last one plus the period returned), and how late cycles start on average against
     /// it. A wake-up's lateness is known after the fact and says nothing of the next one's,
@@ -78,6 +80,8 @@ pub struct Ferrocat {
     /// actual start: feeding a part of each cycle's lateness back (as until 2026-11-23) made
     /// the loop chase the host's jitter and a coarse timer's rounding, and widened both.
     plan_ns: Option<u64>,
+    /// Cycles in a row more than half a cycle off the plan.
+    off_plan_run: u32,
     lateness: RunningMean,
     /// Reference following by offset: a calibration moves the reference at once by what it
     /// found, and so does the first offset it is given (from wherever the DC initialisation
@@ -116,6 +120,12 @@ pub enum Steering {
 }
 
 const WINDOW: usize = 64;
+/// Late frames in a row after which the count of slots starts again (`Ferrocat::slots_to_hold`):
+/// more than a late wake-up and a late send in a row.
+const SLOT_SLIP_RUN: u32 = 4;
+/// Cycles in a row more than half a cycle off the plan before it starts again from them
+/// (`Ferrocat::lateness_deviation`).
+const PLAN_MOVED_RUN: u32 = 4;
 /// The half round trips' centre is a trimmed mean over this many. A cycle's probes come in a
 /// burst and share the centre; over 64 (two cycles of bursts) its error was a burst's own and
 /// counted in the change test once per point, which took it for a change of the line (a false
@@ -196,8 +206,10 @@ impl Ferrocat {
             sync0_phase_ns: None,
             held_back: 0,
             aimed_ns: None,
+            late_run: 0,
             plan_ns: None,
             lateness: RunningMean::default(),
+            off_plan_run: 0,
             pending_shift_ns: 0,
             reference_offset_read: None,
             offset_given: false,
@@ -227,22 +239,38 @@ impl Ferrocat {
     fn slots_to_hold(&mut self, s: &Sample) -> u64 {
         let Some(sync0) = self.sync0_phase_ns else { return 0 };
         let c = self.cycle_ns;
-        let nearest = || {
-            let off = s.reference_ns.wrapping_sub(self.phase_ns).wrapping_add(c / 2) % c;
-            s.reference_ns.wrapping_sub(off).wrapping_add(c / 2)
-        };
         let late_of = |aimed: u64| s.reference_ns.wrapping_add(s.data_ns).wrapping_sub(aimed) as i64;
-        let mut aimed = self.aimed_ns.unwrap_or_else(nearest);
+        let mut aimed = self.aimed_ns.unwrap_or_else(|| self.nearest_slot(s.reference_ns));
         // Far off the count (a stall, a jump of the reference): start counting again here.
         if !(-(c as i64) / 2..=8 * c as i64).contains(&late_of(aimed)) {
-            aimed = nearest();
+            aimed = self.nearest_slot(s.reference_ns);
         }
-        let late = late_of(aimed);
         let room = (sync0.wrapping_sub(self.phase_ns) % c) as i64;
+        let hold_for = |late: i64| if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
+        // A late frame is held back, and the next one, on time, is not. Late frames in a row
+        // are a schedule that moved past the SYNC0: the loop, which steers to the nearest slot,
+        // takes it on to the next one, while the count stays behind — and counting on held
+        // every frame back from then on, each a repeated cycle (until 2026-11-26: 85 % of the
+        // cycles at 250 µs on pc-stock with seed 1; at 100 µs, with the plan's fix in
+        // `lateness_deviation` alone, more than every other one with each of seeds 1–8). So the
+        // `SLOT_SLIP_RUN`-th late frame in a row starts the count again at its own slot.
+        let mut hold = hold_for(late_of(aimed));
+        self.late_run = if hold > 0 { self.late_run + 1 } else { 0 };
+        if self.late_run >= SLOT_SLIP_RUN {
+            aimed = self.nearest_slot(s.reference_ns);
+            hold = hold_for(late_of(aimed));
+            self.late_run = 0;
+        }
         // At most the 8 cycles a frame may be late before the count starts again.
-        let hold = if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
         self.aimed_ns = Some(aimed.wrapping_add((1 + hold) * c));
         hold
+    }
+
+    /// The slot (reference time on the grid of `phase_ns`) nearest to reference time `t_ns`.
+    fn nearest_slot(&self, t_ns: u64) -> u64 {
+        let c = self.cycle_ns;
+        let off = t_ns.wrapping_sub(self.phase_ns).wrapping_add(c / 2) % c;
+        t_ns.wrapping_sub(off).wrapping_add(c / 2)
     }
 
     /// Offers (passage of `s` on the master's clock, `y`) to the fit. The passage is the
@@ -283,8 +311,13 @@ impl Ferrocat {
     }
 
     /// This cycle's lateness against its plan less the mean lateness. A cycle more than half
-    /// a cycle off is where the schedule itself moved (a master that skipped cycles without
-    /// a word, an outlier as long): the plan starts again from it, deviation 0.
+    /// a cycle off is an outlier of the host (a wake-up that late), taken back to the plan
+    /// like any other but kept out of the mean; `PLAN_MOVED_RUN` of them in a row are the
+    /// schedule itself moving (a master that skipped cycles without a word), and the plan
+    /// starts again from there, deviation 0. (Starting again at a single outlier, as until
+    /// 2026-11-26, put the plan where that one late wake-up was: the cycles after it, back on
+    /// the master's schedule, then all looked early by as much, and the loop moved the frames
+    /// that much later, to the SYNC0 and past it, for thousands of cycles on pc-stock.)
     fn lateness_deviation(&mut self, built_ns: u64) -> i64 {
         let Some(plan) = self.plan_ns else {
             self.plan_ns = Some(built_ns);
@@ -295,9 +328,15 @@ impl Ferrocat {
         let mean = self.lateness.mean();
         let dev = late.wrapping_sub(mean);
         if dev.unsigned_abs() > self.cycle_ns / 2 {
+            self.off_plan_run += 1;
+            if self.off_plan_run < PLAN_MOVED_RUN {
+                return dev;
+            }
             self.plan_ns = Some(built_ns.wrapping_add_signed(mean.wrapping_neg()));
+            self.off_plan_run = 0;
             return 0;
         }
+        self.off_plan_run = 0;
         self.lateness.push(late);
         dev
     }
@@ -466,6 +505,23 @@ mod tests {
     use super::*;
     use crate::sync::tests::sample;
 
+    /// Cycle `k`'s frame, built at `built_ns` on a master whose clock the reference keeps
+    /// exactly: it passes the reference 5 µs after it is built and is back 5 µs later.
+    fn passing(k: u64, built_ns: u64, frame_ns: u64, data_ns: u64) -> Sample {
+        Sample {
+            cycle: k,
+            built_ns,
+            tx_ns: None,
+            rx_ns: built_ns + 10_000,
+            reference_ns: built_ns + 5_000,
+            reference_offset_ns: None,
+            difference_ns: 0,
+            loop_ns: 0,
+            frame_ns,
+            data_ns,
+        }
+    }
+
     #[test]
     fn error_feedback_takes_the_last_send_error_back_out() {
         let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
@@ -522,6 +578,63 @@ mod tests {
     }
 
     #[test]
+    fn a_schedule_that_moved_past_the_sync0_is_not_held_back_for_good() {
+        // The reference on the master's clock; the master wakes on its own absolute schedule
+        // (each wake-up at the last plus the period returned, as the lab's loop does), its
+        // frame passing 5 µs after it is built. From frame 200 on every wake-up is 60 % of a
+        // cycle late (a busy CPU): the frames pass after the SYNC0 half a cycle on. The first
+        // is a late frame and held back; then the loop moves the schedule to the next slot,
+        // and the count must follow it rather than hold every frame back from then on (it did,
+        // until 2026-11-26: every frame of the run's rest, each a repeated cycle).
+        let c = 250_000u64;
+        let mut f = Ferrocat::new(Coupling::MasterFollowsReference, c);
+        f.sync0_phase_ns = Some(c / 2);
+        f.probing = false;
+        let mut t = 3 * c;
+        let mut holds = Vec::new();
+        for k in 1..600u64 {
+            let built = t + if k >= 200 { c * 6 / 10 } else { 0 };
+            let s = passing(k, built, 8_000, 3_000);
+            let before = f.held_back;
+            t += f.update(Some(&s)).next_period_ns.unwrap();
+            holds.push(f.held_back - before);
+        }
+        let late_holds: u64 = holds[198..].iter().sum();
+        assert_eq!(holds[..198].iter().sum::<u64>(), 0, "{holds:?}");
+        assert!(
+            (1..=SLOT_SLIP_RUN as u64 + 1).contains(&late_holds),
+            "{late_holds} held back after the move: {holds:?}"
+        );
+        assert!(holds[300..].iter().all(|&h| h == 0), "{holds:?}");
+    }
+
+    #[test]
+    fn one_wake_up_later_than_half_a_cycle_does_not_move_the_plan() {
+        let c = 250_000u64;
+        let mut f = Ferrocat::new(Coupling::MasterFollowsReference, c);
+        let t0 = 10 * c;
+        let mut plan = t0;
+        let mut step = |f: &mut Ferrocat, late: u64| {
+            let dev = f.lateness_deviation(plan + late);
+            f.plan_ns = f.plan_ns.map(|p| p + c);
+            plan += c;
+            dev
+        };
+        for _ in 0..100 {
+            assert_eq!(step(&mut f, 20_000), 0);
+        }
+        // One wake-up 300 µs late is that far off, and the cycles after it are on the plan
+        // again (they looked 280 µs early when that one had moved the plan).
+        assert_eq!(step(&mut f, 320_000), 300_000);
+        for _ in 0..10 {
+            assert_eq!(step(&mut f, 20_000), 0);
+        }
+        // A schedule that moved by 300 µs for good: the plan follows on the fourth cycle.
+        let devs: Vec<i64> = (0..6).map(|_| step(&mut f, 320_000)).collect();
+        assert_eq!(devs, [300_000, 300_000, 300_000, 0, 0, 0]);
+    }
+
+    #[test]
     fn a_late_wake_up_is_not_fed_back_into_the_period() {
         // The reference on the master's clock exactly; each cycle starts 0–40 µs late (known
         // only after the fact) and its frame passes the reference 5 µs after it is built.
@@ -534,18 +647,7 @@ mod tests {
         for k in 1..4_000u64 {
             lcg = lcg.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
             let built = plan + (lcg >> 33) % 40_000;
-            let s = Sample {
-                cycle: k,
-                built_ns: built,
-                tx_ns: None,
-                rx_ns: built + 10_000,
-                reference_ns: built + 5_000,
-                reference_offset_ns: None,
-                difference_ns: 0,
-                loop_ns: 0,
-                frame_ns: 0,
-                data_ns: 0,
-            };
+            let s = passing(k, built, 0, 0);
             let p = f.update(Some(&s)).next_period_ns.unwrap();
             if k == 3_000 {
                 // A master that skipped three cycles without a word: the plan starts again.
