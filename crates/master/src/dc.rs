@@ -393,7 +393,8 @@ impl<I: Io> Master<I> {
                 .zip(bufs.iter_mut())
                 .map(|(&(_, st), b)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x092C }, b))
                 .collect();
-            self.engine.transact(&mut p)?;
+            // A slave that did not answer read zero: not "synchronised".
+            self.engine.expect_each(&mut p, 1)?;
         }
         Ok(dc
             .iter()
@@ -815,10 +816,29 @@ impl<I: Io> Master<I> {
 
     /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.
     fn shift_offsets_but(&mut self, shift_ns: i64, skip: Option<u16>) -> Result<()> {
-        let clocks: Vec<u16> =
-            self.slaves.iter().filter(|s| s.has_system_time && skip != Some(s.station)).map(|s| s.station).collect();
-        for st in clocks {
-            self.shift_offset(st, shift_ns)?;
+        let clocks: Vec<(u16, usize)> = self
+            .slaves
+            .iter()
+            .filter(|s| s.has_system_time && skip != Some(s.station))
+            .map(|s| (s.station, if s.dc_64bit { 8 } else { 4 }))
+            .collect();
+        // Every offset read in one frame and written in one: each ESC takes a write at the end
+        // of the frame, so the clocks move nanoseconds apart. A read and a write per slave, a
+        // frame each, left a round trip or more between two slaves' moves, and a SYNC0 there
+        // fired one move apart (Park's eq. 5 on pc-stock: two drives' SYNC0s 2.2 µs apart).
+        let mut offsets = vec![[0u8; 8]; clocks.len()];
+        for cmd in [Command::FPRD, Command::FPWR] {
+            if cmd == Command::FPWR {
+                for o in offsets.iter_mut() {
+                    *o = u64::from_le_bytes(*o).wrapping_add_signed(shift_ns).to_le_bytes();
+                }
+            }
+            let mut pdus: Vec<Pdu<'_>> = clocks
+                .iter()
+                .zip(offsets.iter_mut())
+                .map(|(&(st, n), o)| Pdu::new(cmd, Address::Device { adp: st, ado: 0x0920 }, &mut o[..n]))
+                .collect();
+            self.engine.expect_each(&mut pdus, 1)?;
         }
         Ok(())
     }

@@ -556,6 +556,20 @@ impl<I: Io> Engine<I> {
         Ok(())
     }
 
+    /// All `pdus` (in as few frames as fit), each of which must reach `expected` slaves.
+    pub fn expect_each(&mut self, pdus: &mut [Pdu<'_>], expected: u16) -> Result<()> {
+        self.transact(pdus)?;
+        match pdus.iter().find(|p| p.wkc != expected) {
+            Some(p) => Err(MasterError::Wkc {
+                what: describe(p.cmd, p.address, p.data.len()),
+                expected,
+                got: p.wkc,
+                slaves: self.who(p.cmd, p.address, expected, p.wkc),
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Names the slave(s) a datagram was meant for, for an error message.
     fn who(&self, cmd: Command, address: Address, expected: u16, got: u16) -> String {
         let tag = |t: &SlaveTag| format!("slave {} ({}, station {:#06x})", t.position, t.name, t.station);

@@ -70,6 +70,31 @@ fn init_dc_converges_and_starts_sync0_together() {
     assert!(spread <= 100, "{spread}");
 }
 
+#[test]
+fn every_offset_moves_in_one_frame() {
+    // Six DC slaves; Park's eq. 5 (and ferrocat's first offset) move every offset by the same
+    // amount. One frame reads them all and one writes them all, so every clock moves at the
+    // end of the same frame: the true spread stays what it was (a read and a write per slave,
+    // twelve frames, left a SYNC0 between two slaves' moves firing one move apart).
+    let mut m = segment();
+    m.bring_up().unwrap();
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    let read_offsets = |m: &Master<VirtualIo>| -> Vec<u64> {
+        m.engine.io.seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.offset)).collect()
+    };
+    let offsets = read_offsets(&m);
+    let t = m.engine.io.now_ns();
+    let spread = spread_ns(&m, t);
+    let frames = m.engine.stats.frames_sent;
+    m.shift_offsets(-5_000).unwrap();
+    assert_eq!(m.engine.stats.frames_sent - frames, 2, "one frame to read, one to write");
+    let moved: Vec<i64> =
+        read_offsets(&m).iter().zip(&offsets).map(|(new, old)| (new.wrapping_sub(*old) as u32) as i32 as i64).collect();
+    assert_eq!(moved, [-5_000; 6]);
+    let t = m.engine.io.now_ns();
+    assert!(spread_ns(&m, t).abs_diff(spread) <= 20, "spread {spread} ns before, {} after", spread_ns(&m, t));
+}
+
 /// SYNC1 as the master sets it up (0x09A4 = `sync1_ns`, 0x0981 bit 2): every slave's next SYNC1
 /// pulse (0x0998) is its SYNC0 grid shifted by `sync1_ns`, and SYNC1 pulses once per SYNC0.
 #[test]
