@@ -9,6 +9,9 @@ use ferrocat_master::io::HostModel;
 use ferrocat_segment::SegmentConfig;
 use serde::Deserialize;
 
+/// The shortest time measured after a robustness disturbance (s): ten recovery criteria of 100 ms.
+const MIN_AFTER_S: f64 = 1.0;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Experiment {
@@ -291,7 +294,12 @@ impl Scenario {
                     o.settle_s = s;
                 }
                 if let Some(d) = duration_s {
-                    ensure!(d > 0.0, self.err("duration_s", "must be positive"));
+                    // Recovery is judged by the run's last 10 % and the after-figures are its
+                    // last half: a shorter window had none of them (NaN in the table).
+                    ensure!(
+                        d >= MIN_AFTER_S,
+                        self.err("duration_s", format!("must be at least {MIN_AFTER_S} s after the disturbance"))
+                    );
                     o.after_s = d;
                 }
                 o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
@@ -408,6 +416,8 @@ mod tests {
             ("experiment = 'robustness'\ndisturbances = ['earthquake']\n", "`disturbances`"),
             ("experiment = 'chen2016'\ngpio_calibration = false\n", "`gpio_calibration`"),
             ("experiment = 'park2020'\ncontrol = false\n", "`control`"),
+            // Shorter than the recovery window: the table had NaN for its after-figures.
+            ("experiment = 'robustness'\nduration_s = 0.0001\n", "`duration_s`"),
         ] {
             let e = format!("{:#}", scenario(text).unwrap_err());
             assert!(e.contains("test.toml") && e.contains(key), "{text}: {e}");
