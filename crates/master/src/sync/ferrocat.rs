@@ -246,6 +246,7 @@ impl Ferrocat {
             aimed = self.nearest_slot(s.reference_ns);
         }
         let room = (sync0.wrapping_sub(self.phase_ns) % c) as i64;
+        // At most the 8 cycles a frame may be late before the count starts again.
         let hold_for = |late: i64| if late >= room { ((late - room) / c as i64 + 1).min(8) as u64 } else { 0 };
         // A late frame is held back, and the next one, on time, is not. Late frames in a row
         // are a schedule that moved past the SYNC0: the loop, which steers to the nearest slot,
@@ -261,7 +262,6 @@ impl Ferrocat {
             hold = hold_for(late_of(aimed));
             self.late_run = 0;
         }
-        // At most the 8 cycles a frame may be late before the count starts again.
         self.aimed_ns = Some(aimed.wrapping_add((1 + hold) * c));
         hold
     }
