@@ -22,7 +22,8 @@ pub struct Options {
     /// The reference's crystal error (the master's clock is exact).
     pub reference_ppm: f64,
     /// A segment of one's own instead of a coupler and two DC-synchronous outputs (its
-    /// slaves with `app = "dc"` are the ones whose lost and repeated cycles count).
+    /// slaves with `app = "dc"` and process-data outputs are the ones whose lost and repeated
+    /// cycles count; its reference's crystal is its own, `reference_ppm` applies only without).
     pub segment: Option<SegmentConfig>,
 }
 
