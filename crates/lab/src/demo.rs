@@ -215,7 +215,7 @@ fn run_one<I: Io>(
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
     let settle_cycles = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
     // The pulses spread over the settling's middle half, at most one per cycle.
-    let pulses = crate::CALIBRATION_PULSES.min(settle_cycles as usize / 2);
+    let pulses = crate::calibration_pulses(settle_cycles);
     let mut calibration = if o.gpio_calibration && pulses > 0 { calibrate(&mut r.m, method, pulses) } else { None };
     let mut calibration_ns = None;
     for k in 0..settle_cycles {

@@ -102,6 +102,14 @@ pub const CALIBRATED: [&str; 5] = ["ferrocat", "ferrocat-mfr", "ferrocat-tcl", "
 /// Pulses per calibration.
 pub const CALIBRATION_PULSES: usize = 1000;
 
+/// How many pulses a calibration over `settle_cycles` takes: its middle half, at most one a
+/// cycle, at most [`CALIBRATION_PULSES`]. (Asked for 1 000 at 4 ms cycles, robustness's 3 s
+/// before its band window had room for 375 and never finished: ferrocat ran uncalibrated,
+/// −0.29 µs off on pc-rt; park2020 finished its pulses 62 cycles into the measurement.)
+pub fn calibration_pulses(settle_cycles: u64) -> usize {
+    CALIBRATION_PULSES.min((settle_cycles / 2) as usize)
+}
+
 /// Whether cycle `k` of a run that settles for `settle_cycles` pulses the calibration: the
 /// pulses are spread evenly over the middle half of the settling time, since the master's
 /// error wanders (on a stock kernel its one-second means spread by ≈ 80 ns) and a pulse
@@ -194,4 +202,24 @@ pub fn method<I: Io>(
             FERROCAT_DENSE.join(", ")
         ),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{calibration_cycle, calibration_pulses};
+
+    #[test]
+    fn the_calibration_pulses_fit_the_settling() {
+        // 5 s at 1 ms, 3 s at 4 ms (robustness before its band window), 300 s at 1 ms, none.
+        for settle in [5_000u64, 750, 1_250, 300_000, 1, 0] {
+            let pulses = calibration_pulses(settle);
+            let pulsed: Vec<u64> = (0..settle).filter(|&k| calibration_cycle(k, settle)).collect();
+            assert!(pulsed.len() >= pulses, "{settle}: {} cycles for {pulses} pulses", pulsed.len());
+            if let Some(&last) = pulsed.get(pulses.max(1) - 1) {
+                assert!(pulses == 0 || last < settle * 3 / 4 + 1, "{settle}: pulse {pulses} at {last}");
+            }
+        }
+        assert_eq!(calibration_pulses(750), 375);
+        assert_eq!(calibration_pulses(300_000), super::CALIBRATION_PULSES);
+    }
 }

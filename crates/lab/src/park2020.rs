@@ -142,11 +142,9 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
     let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
     let mut c = Correction::default();
-    let mut calibration = if opts.gpio_calibration {
-        crate::calibration(&mut m, method, reference, crate::CALIBRATION_PULSES)
-    } else {
-        None
-    };
+    let pulses = crate::calibration_pulses(settle);
+    let mut calibration =
+        if opts.gpio_calibration && pulses > 0 { crate::calibration(&mut m, method, reference, pulses) } else { None };
     // The reference, every follower, the last slave last: the lock needs them all.
     let mut sampler = crate::sampler::Sampler::new(&m, &dc, seed);
     let mut take = |samples: Vec<crate::sampler::Sample>, r: &mut Round| {

@@ -167,12 +167,10 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let mut sampler = crate::sampler::Sampler::new(&m, &dc, o.seed);
     // The calibration's pulses are over before the band window, so that the step it takes out
     // is not part of the level the band is drawn around.
-    let mut calibration = if o.gpio_calibration {
-        crate::calibration(&mut m, method, reference, crate::CALIBRATION_PULSES)
-    } else {
-        None
-    };
     let calibrated_by = settle.saturating_sub(window);
+    let pulses = crate::calibration_pulses(calibrated_by);
+    let mut calibration =
+        if o.gpio_calibration && pulses > 0 { crate::calibration(&mut m, method, reference, pulses) } else { None };
     let mut calibration_ns = None;
     // Each cycle's sample, once every clock has passed its instant.
     let mut take = |samples: Vec<crate::sampler::Sample>| {

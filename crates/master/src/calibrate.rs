@@ -67,7 +67,7 @@ impl GpioCalibration {
         }
         let own = m.master_system_time().wrapping_add(self.output_latency_ns);
         m.engine.io.set_gpio(true)?;
-        let claimed = sync.master_time(own).unwrap_or(own);
+        let claimed = sync.reference_belief_ns(own);
         let mut latch = [0u8; 8];
         let n = if wide { 8 } else { 4 };
         m.fprd(station, LATCH0_POS, &mut latch[..n])?;

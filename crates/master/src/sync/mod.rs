@@ -137,6 +137,14 @@ pub trait ClockSync {
     fn master_time(&self, _host_ns: u64) -> Option<u64> {
         None
     }
+    /// What the method believes the reference's system time is at the master's own system
+    /// time `host_ns`, for a calibration to compare with what the reference latched. By
+    /// default the master's clock (its own time, or [`ClockSync::master_time`]); a method that
+    /// lets the reference run on its crystal between corrections knows where in that
+    /// sawtooth the instant falls, which is not an error of its stamps.
+    fn reference_belief_ns(&self, host_ns: u64) -> u64 {
+        self.master_time(host_ns).unwrap_or(host_ns)
+    }
     /// A master − reference error measured by an independent path (`crate::calibrate`): a
     /// method that can takes it out from now on. Returns whether it did (the papers' methods,
     /// as published, do not).
