@@ -260,7 +260,7 @@ impl Ferrocat {
         // takes it on to the next one, while the count stays behind — and counting on held
         // every frame back from then on, each a repeated cycle (until 2026-11-26: 85 % of the
         // cycles at 250 µs on pc-stock with seed 1; at 100 µs, with the plan's fix in
-        // `lateness_deviation` alone, more than every other one with each of seeds 1–8). So the
+        // `lateness_deviation` alone, more than every other one with each seed tried). So the
         // `SLOT_SLIP_RUN`-th late frame in a row starts the count again at its own slot.
         let mut hold = hold_for(late_of(aimed));
         self.late_run = if hold > 0 { self.late_run + 1 } else { 0 };
