@@ -534,19 +534,24 @@ impl<I: Io> Master<I> {
     }
 
     /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master,
-    /// then the reference's port 0/1 receive times. Returns the averaged delay.
+    /// then the reference's receive times. Returns the averaged delay.
     pub fn park_delay(&mut self, n: u32) -> Result<i64> {
-        let st = self.slaves[self.reference_index()?].station;
+        let r = self.reference_index()?;
+        let (st, active, entry) = (self.slaves[r].station, self.slaves[r].active_ports, self.slaves[r].entry_port);
         let mut trips = Vec::with_capacity(n as usize);
         for _ in 0..n {
             let t0 = self.engine.io.now_ns();
             self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
             let t1 = self.engine.io.now_ns();
-            let mut r = [0u8; 8];
-            self.fprd(st, 0x0900, &mut r)?;
-            let p0 = u32::from_le_bytes(r[0..4].try_into().unwrap_or_default());
-            let p1 = u32::from_le_bytes(r[4..8].try_into().unwrap_or_default());
-            trips.push((t1 - t0, p1.wrapping_sub(p0) as u64));
+            let mut b = [0u8; 16];
+            self.fprd(st, 0x0900, &mut b)?;
+            let times: [u32; 4] =
+                std::array::from_fn(|p| u32::from_le_bytes([b[4 * p], b[4 * p + 1], b[4 * p + 2], b[4 * p + 3]]));
+            // Eq. 3's t_p1 − t_p0 is the time the frame spends behind the reference: on a line
+            // through its port 1, but none where the reference is the last slave (port 1
+            // closed, its receive time never latched: taken as it read, it put Park's delay,
+            // and the reference, 2.1 s off with one slave), and its other ports' on a tree.
+            trips.push((t1 - t0, loop_of(&times, active, entry)));
         }
         Ok(crate::sync::Park2020::delay_from(&trips))
     }

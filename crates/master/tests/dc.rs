@@ -271,3 +271,26 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     let e = m.init_dc(&cfg).unwrap_err().to_string();
     assert!(e.contains("EL2004") && e.contains("receive times only"), "{e}");
 }
+
+#[test]
+fn parks_delay_needs_no_slave_behind_the_reference() {
+    // Eq. 3 takes the time the frame spends behind the reference out of the round trip; with
+    // the reference alone its port 1 is closed and never latches, and taking that register as
+    // it read put Park's delay, and with it the reference, 2.1 s off (`lab park2020 --slaves
+    // 1`, until 2026-11-26). The reference's delay does not depend on what follows it.
+    let delay = |devices: &str| {
+        let cfg: SegmentConfig = toml::from_str(&format!("seed = 2\n{devices}")).unwrap();
+        let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 2));
+        m.bring_up().unwrap();
+        m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+        m.park_delay(100).unwrap()
+    };
+    let alone = delay("[[device]]\nbuiltin = 'EK1100'\n");
+    let line = delay("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EK1100'\n");
+    let tree = delay(
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EK1100'\nparent = 0\n",
+    );
+    println!("Park's delay: alone {alone} ns, on a line {line} ns, with a branch on the coupler's X2 {tree} ns");
+    assert!(alone.abs_diff(line) <= 20 && tree.abs_diff(line) <= 20, "{alone} {line} {tree}");
+    assert!((0..5_000).contains(&line), "{line}");
+}
