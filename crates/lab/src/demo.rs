@@ -445,7 +445,8 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
     jobs.par_iter()
         .map(|(c, name)| {
-            let m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
+            // ferrocat's methods know the simulated ESCs' closed-port loop-back, as in the lab.
+            let m = crate::master(cfg.clone(), o.host, o.seed, name)?;
             // The host's GPIO wired to the reference's (the first DC slave's) LATCH0.
             let calibrate = |m: &mut Master<VirtualIo>, method: &str, pulses: usize| {
                 let reference = *crate::dc_slaves(m).ok()?.first()?;
