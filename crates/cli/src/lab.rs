@@ -194,10 +194,9 @@ fn park_figures(dir: &Path, rows: &[Row]) -> anyhow::Result<()> {
 }
 
 fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
-    use ferrocat_lab::chen2016::{run, setup, PAPER};
+    use ferrocat_lab::chen2016::{run, Table, PAPER};
     let host = o.host;
-    let setup = setup(&o)?;
-    let rows = run(&o, &progress("runs"))?;
+    let Table { setup, rows } = run(&o, &progress("runs"))?;
     if let Some(dir) = out {
         chen_outputs(dir, &o, &setup, &rows)?;
     }

@@ -141,7 +141,7 @@ pub fn setup(o: &Options) -> anyhow::Result<Setup> {
     Ok(prepare(o)?.2)
 }
 
-fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
+fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<(Setup, Row)> {
     let cycle_ns = cycle_us * 1000;
     let (mut m, synced, setup) = prepare(o)?;
     // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
@@ -215,7 +215,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let (lost, repeated) =
         apps(&mut m, &setup.counted_slaves).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
     let cycles = total;
-    Ok(Row {
+    let row = Row {
         cycle_us,
         method: name.to_string(),
         host: o.host.name.to_string(),
@@ -229,7 +229,8 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         loss_rate: lost as f64 / (setup.counted_slaves.len() as u64 * cycles).max(1) as f64,
         frames_lost: st.lost + m.cycle_stats().lost_frames,
         trace,
-    })
+    };
+    Ok((setup, row))
 }
 
 /// Population standard deviation (ns) from exact sums: n·Σj² − (Σj)² is the exact n²·variance.
@@ -256,17 +257,31 @@ fn apps<'m>(m: &'m mut Master<VirtualIo>, positions: &[u16]) -> Vec<&'m mut Sync
         .collect()
 }
 
-pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Vec<Row>> {
+/// A table: its set-up and a row per (cycle, method).
+#[derive(Debug, Clone)]
+pub struct Table {
+    pub setup: Setup,
+    pub rows: Vec<Row>,
+}
+
+pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Table> {
     let jobs: Vec<(u64, String)> =
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
-    jobs.par_iter()
+    let runs: Vec<(Setup, Row)> = jobs
+        .par_iter()
         .map(|(c, name)| {
             let r = run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"));
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, jobs.len());
             r
         })
-        .collect()
+        .collect::<anyhow::Result<_>>()?;
+    // Every run brought the same segment up on the same seed: one set-up for the table.
+    let setup = match runs.first() {
+        Some((s, _)) => s.clone(),
+        None => setup(o)?,
+    };
+    Ok(Table { setup, rows: runs.into_iter().map(|(_, r)| r).collect() })
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use ferrocat_master::io::HostModel;
 #[test]
 fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
     let o = Options { cycles_us: vec![500, 250, 100], seconds: 4.0, ..Options::quick(HostModel::rtx_10us()) };
-    let rows = run(&o, &|_, _| {}).unwrap();
+    let rows = run(&o, &|_, _| {}).unwrap().rows;
     for r in &rows {
         // Jitter min, max (µs), width (%), sd (µs), cycles, lost, repeated.
         println!("{:>3} µs {:9}: {}", r.cycle_us, r.method, r.figures().join("  "));
@@ -50,7 +50,7 @@ fn at_50_us_ferrocat_holds_a_frame_back_after_a_late_one_and_loses_none() {
         methods: vec!["chen2016".into(), "ferrocat".into()],
         ..Options::quick(HostModel::rtx_10us())
     };
-    let rows = run(&o, &|_, _| {}).unwrap();
+    let rows = run(&o, &|_, _| {}).unwrap().rows;
     let (chen, f) = (&rows[0], &rows[1]);
     let show = |r: &ferrocat_lab::chen2016::Row| {
         format!(
@@ -79,7 +79,7 @@ fn on_a_stock_kernel_ferrocat_holds_back_only_the_frame_after_a_late_one() {
         methods: vec!["pi".into(), "ferrocat".into()],
         ..Options::quick(HostModel::pc_stock())
     };
-    let rows = run(&o, &|_, _| {}).unwrap();
+    let rows = run(&o, &|_, _| {}).unwrap().rows;
     let (pi, f) = (&rows[0], &rows[1]);
     println!("pi lost {} repeated {}; ferrocat lost {} repeated {}", pi.lost, pi.repeated, f.lost, f.repeated);
     // Seeds 1–10: PI lost 376–502, ferrocat none, and repeated 0.99–1.07 times PI's.

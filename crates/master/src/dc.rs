@@ -510,10 +510,8 @@ impl<I: Io> Master<I> {
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
         let mut dl = [0u8; 2];
         self.fprd(st, 0x0110, &mut dl)?;
-        let mut t = [0u8; 16];
-        self.fprd(st, 0x0900, &mut t)?;
+        let times = self.port_receive_times(st)?;
         let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
-        let times: [u32; 4] = std::array::from_fn(|p| u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap()));
         let view = crate::topology::PortView {
             entry_port: self.slaves[r].entry_port,
             active_ports: [0, 1, 2, 3].map(|p| dl.port_active(p)),
@@ -543,10 +541,7 @@ impl<I: Io> Master<I> {
             let t0 = self.engine.io.now_ns();
             self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
             let t1 = self.engine.io.now_ns();
-            let mut b = [0u8; 16];
-            self.fprd(st, 0x0900, &mut b)?;
-            let times: [u32; 4] =
-                std::array::from_fn(|p| u32::from_le_bytes([b[4 * p], b[4 * p + 1], b[4 * p + 2], b[4 * p + 3]]));
+            let times = self.port_receive_times(st)?;
             // Eq. 3's t_p1 − t_p0 is the time the frame spends behind the reference: on a line
             // through its port 1, but none where the reference is the last slave (port 1
             // closed, its receive time never latched: taken as it read, it put Park's delay,

@@ -544,16 +544,7 @@ impl<I: Io> Engine<I> {
 
     /// One datagram that must reach `expected` slaves.
     pub fn expect(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
-        let wkc = self.one(cmd, address, data)?;
-        if wkc != expected {
-            return Err(MasterError::Wkc {
-                what: describe(cmd, address, data.len()),
-                expected,
-                got: wkc,
-                slaves: self.who(cmd, address, expected, wkc),
-            });
-        }
-        Ok(())
+        self.expect_each(&mut [Pdu::new(cmd, address, data)], expected)
     }
 
     /// All `pdus` (in as few frames as fit), each of which must reach `expected` slaves.

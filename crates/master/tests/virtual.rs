@@ -10,6 +10,14 @@ fn master(toml: &str, host: HostModel) -> Master<VirtualIo> {
     Master::new(VirtualIo::new(cfg.build().unwrap(), host, 1))
 }
 
+/// An EK1100 and an EL2004 on an ideal host, scanned.
+fn coupler_and_output_scanned() -> Master<VirtualIo> {
+    let mut m =
+        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
+    m.scan().unwrap();
+    m
+}
+
 fn real_io_segment() -> String {
     let e = ferrocat_testdata::shared("captures/eeprom");
     format!(
@@ -231,9 +239,7 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
 
 #[test]
 fn sii_write_programs_only_changed_words_and_reads_back() {
-    let mut m =
-        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
-    m.scan().unwrap();
+    let mut m = coupler_and_output_scanned();
     let mut info = m.slaves[1].sii.clone();
     assert_eq!(info.header.station_alias, 0);
     info.header.station_alias = 0x0321;
@@ -255,9 +261,7 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
 #[test]
 fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     use ferrocat_master::io::Io;
-    let mut m =
-        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
-    m.scan().unwrap();
+    let mut m = coupler_and_output_scanned();
     assert_eq!(m.sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
     m.scan().unwrap();
     assert_eq!(m.slaves[1].alias, 0, "the register keeps its power-on value");
@@ -277,9 +281,7 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
 #[test]
 fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     use ferrocat_master::io::Io;
-    let mut m =
-        master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
-    m.scan().unwrap();
+    let m = coupler_and_output_scanned();
     let mut image = m.slaves[1].sii.to_image();
     image[8] ^= 0x01;
     let path = std::env::temp_dir().join(format!("ferrocat-badcrc-{}.bin", std::process::id()));

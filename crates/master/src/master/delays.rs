@@ -222,14 +222,11 @@ impl<I: Io> Master<I> {
                 continue;
             }
             let st = self.slaves[k].station;
-            let mut t = [0u8; 16];
-            self.fprd(st, 0x0900, &mut t)?;
+            let times = self.port_receive_times(st)?;
             let mut epu = [0u8; 8];
             let answered = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, &mut epu)? == 1;
             let s = &mut self.slaves[k];
-            for p in 0..4 {
-                s.receive_times[p] = u32::from_le_bytes(t[4 * p..4 * p + 4].try_into().unwrap());
-            }
+            s.receive_times = times;
             // Without a system time (WKC 0) the processing unit's receive time is port 0's, as
             // 0x0918's low word is where it exists (esc-spec §3.3).
             s.has_system_time = answered;

@@ -210,6 +210,13 @@ impl<I: Io> Master<I> {
         self.engine.expect(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
     }
 
+    /// The receive times of ports 0–3 (0x0900–0x090F) of the slave at `station`.
+    pub(crate) fn port_receive_times(&mut self, station: u16) -> Result<[u32; 4]> {
+        let mut t = [0u8; 16];
+        self.fprd(station, 0x0900, &mut t)?;
+        Ok(port_times(&t))
+    }
+
     pub(crate) fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
         let mut d = data.to_vec();
         self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
@@ -331,4 +338,9 @@ impl<I: Io> Master<I> {
         self.configure()?;
         self.start()
     }
+}
+
+/// Ports 0–3's receive times from the 16 bytes of 0x0900–0x090F.
+pub(crate) fn port_times(b: &[u8; 16]) -> [u32; 4] {
+    std::array::from_fn(|p| u32::from_le_bytes([b[4 * p], b[4 * p + 1], b[4 * p + 2], b[4 * p + 3]]))
 }

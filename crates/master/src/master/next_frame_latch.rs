@@ -142,14 +142,7 @@ impl<I: Io> Master<I> {
         let epu_values: Vec<Option<u32>> =
             epu_at.iter().map(|at| at.map(|i| u32::from_le_bytes(pdus[i].data[..4].try_into().unwrap()))).collect();
         drop(pdus);
-        Ok(ports
-            .iter()
-            .zip(epu_values)
-            .map(|(p, epu)| Reading {
-                ports: [0, 1, 2, 3].map(|q| u32::from_le_bytes(p[4 * q..4 * q + 4].try_into().unwrap())),
-                epu,
-            })
-            .collect())
+        Ok(ports.iter().zip(epu_values).map(|(p, epu)| Reading { ports: super::port_times(p), epu }).collect())
     }
 }
 

@@ -444,11 +444,10 @@ impl ClockSync for Ferrocat {
         // fell for an error of the stamps (at 4 ms cycles up to ±75 ns; in the demo at 1 ms
         // 17 ns, its whole mean error there).
         match (self.coupling, self.steering, self.offset_given_ns) {
-            (Coupling::MasterFollowsReference, ..) => self.fit.at(host_ns).unwrap_or(host_ns),
             (Coupling::ReferenceFollowsMaster, Steering::Offset, Some(offset)) => {
                 self.fit.at(host_ns).map_or(host_ns, |local| local.wrapping_add(offset))
             }
-            _ => host_ns,
+            _ => self.master_time(host_ns).unwrap_or(host_ns),
         }
     }
     fn probes_wanted(&self) -> u32 {
