@@ -140,7 +140,7 @@ impl FarClock {
         }
         let break_x = self.break_x?;
         let (anchor, sd) = match self.anchor_ns {
-            Some((a, sd_a)) => (a, self.fit.sd_at_ns(x_ns)?.hypot(sd_a)),
+            Some((a, sd_a)) => (a, libm::hypot(self.fit.sd_at_ns(x_ns)?, sd_a)),
             None => (self.level_at(break_x)?, self.fit.rate_sd()? * x_ns.wrapping_sub(break_x) as f64),
         };
         Some((self.level_at(x_ns)?.wrapping_sub(anchor).wrapping_add(self.applied_ns), sd))

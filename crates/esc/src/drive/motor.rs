@@ -99,8 +99,9 @@ impl Mechanics {
         };
         let limited_cmd = cmd.clamp(-max_torque_nm, max_torque_nm);
         self.limited = limited_cmd != cmd;
-        // Current loop: first-order lag, exact for a constant command over the step.
-        let k = 1.0 - (-dt / p.torque_lag_s).exp();
+        // Current loop: first-order lag, exact for a constant command over the step. `libm`,
+        // not the platform's `exp`: the same seed gives the same trajectory on every machine.
+        let k = 1.0 - libm::exp(-dt / p.torque_lag_s);
         self.torque_nm = if demand == Demand::Off { 0.0 } else { self.torque_nm + (limited_cmd - self.torque_nm) * k };
         // Load: inertia, viscous and Coulomb friction; friction holds a slow motor at rest.
         let drive = self.torque_nm - p.viscous_nm_per_rad_s * self.vel_rad_s;
