@@ -185,6 +185,8 @@ fn soem_enables_the_simulated_cia402_drive() {
     sim.stop();
     assert_eq!(r["found"], 2);
     assert_eq!(r["has_dc"], true);
+    // The drive's error settings, written and read back by SOEM.
+    assert_eq!(r["sync_error_limit"], 0, "{r}");
     assert_eq!(r["op"], true);
     let states: Vec<&str> = r["states"].as_array().unwrap().iter().filter_map(|s| s.as_str()).collect();
     assert_eq!(states, ["switch on disabled", "ready to switch on", "switched on", "operation enabled"], "{r}");

@@ -4,6 +4,8 @@ use std::fmt::Debug;
 
 use ferrocat_wire::register::{AlState, AlStatusCode, SyncManager};
 
+use crate::sync_monitor::SmSyncMonitor;
+
 /// The application's view of the ESC: its memory and SyncManager configuration.
 #[derive(Debug)]
 pub struct Pdi<'a> {
@@ -56,6 +58,11 @@ pub trait Application: Debug + Send {
     fn outputs_written(&mut self, _pdi: &mut Pdi<'_>, _sm: u8) {}
     /// The SYNC0 signal fired at system time `sys_ns`.
     fn sync0(&mut self, _pdi: &mut Pdi<'_>, _sys_ns: u64) {}
+    /// A local error the application found since it was last asked, which takes the slave from
+    /// OP to SAFEOP with this status code (the SM-synchronisation supervision's 0x001A).
+    fn take_fault(&mut self) -> Option<AlStatusCode> {
+        None
+    }
     /// A complete mailbox request arrived in SM0; the reply goes to SM1. `None`: a protocol
     /// the application does not serve (the ESC answers "unsupported protocol"); an empty reply:
     /// handled, nothing to send.
@@ -185,6 +192,9 @@ pub struct SyncApp {
     pub consumed: u64,
     pub lost: u64,
     pub repeated: u64,
+    /// DC-synchronous mode: the SM-synchronisation supervision (limit 0, off, unless set).
+    pub monitor: SmSyncMonitor,
+    fault: Option<AlStatusCode>,
     running: bool,
     timer_t0: u64,
     timer_k: u64,
@@ -208,6 +218,8 @@ impl SyncApp {
             consumed: 0,
             lost: 0,
             repeated: 0,
+            monitor: SmSyncMonitor::default(),
+            fault: None,
             running: false,
             timer_t0: 0,
             timer_k: 0,
@@ -252,6 +264,9 @@ impl Application for SyncApp {
             self.timer_t0 = pdi.now_ns();
             self.timer_k = 0;
         }
+        if self.running && !was {
+            self.monitor.restart();
+        }
     }
     fn sample_inputs(&mut self, pdi: &mut Pdi<'_>) {
         self.io.sample_inputs(pdi);
@@ -259,6 +274,9 @@ impl Application for SyncApp {
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         self.written += 1;
         self.io.output_updates += 1;
+        if self.running {
+            self.monitor.sm_event();
+        }
         if self.mode == SyncMode::SmSynchronous {
             self.consume(pdi);
         }
@@ -267,7 +285,13 @@ impl Application for SyncApp {
     fn sync0(&mut self, pdi: &mut Pdi<'_>, _sys_ns: u64) {
         if self.mode == SyncMode::DcSynchronous {
             self.consume(pdi);
+            if self.running && self.monitor.sync0() {
+                self.fault = Some(AlStatusCode::SYNC_ERROR);
+            }
         }
+    }
+    fn take_fault(&mut self) -> Option<AlStatusCode> {
+        self.fault.take()
     }
     fn next_event_ns(&self) -> Option<u64> {
         match self.mode {

@@ -17,6 +17,7 @@ mod foe_server;
 pub mod od;
 mod rate_table;
 mod regs;
+mod sync_monitor;
 
 pub use al::AlMachine;
 pub use app::{Application, DigitalIo, NoApplication, Pdi, SyncApp, SyncMode};
@@ -26,3 +27,4 @@ pub use drive::{Cia402Drive, DriveStats, MotorParams, ProcessingTime, Switches};
 pub use eoe_server::EoeServer;
 pub use esc::{Esc, FrameTiming, LinkState, MailboxResponse, SyncLog};
 pub use foe_server::FoeServer;
+pub use sync_monitor::{SmSyncMonitor, DEFAULT_SYNC_ERROR_LIMIT};

@@ -173,8 +173,10 @@ fn rig<I: Io>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Result<(
         start_delay_ns: 20_000_000,
         ..DcConfig::default()
     })?;
-    m.start()?;
+    // Before OP: Park's 1000 delay round trips carry no process data, and in OP the drives'
+    // SM-synchronisation supervision would take them out of OP (sync error 0x001A).
     let sync = crate::method(method, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    m.start()?;
     let st = m.sync_state()?;
     // The master's cycles on the grid: SYNC0 half a cycle after each frame leaves.
     let grid = report.sync0_start.unwrap_or(0).wrapping_sub(shift as u64);

@@ -46,6 +46,9 @@ pub(crate) struct CycleState {
     last_start: Option<u64>,
     /// The ring's state last reported (cable redundancy).
     ring: crate::engine::RingState,
+    /// Slaves the last supervision found out of OP: supervised every cycle until all are back,
+    /// since a slave in SAFEOP may answer its process data in full.
+    pub recovering: bool,
 }
 
 impl<I: Io> Master<I> {
@@ -245,12 +248,15 @@ impl<I: Io> Master<I> {
         st.last_wkc = wkc;
         st.last_round_trip_ns = end - start;
         st.max_round_trip_ns = st.max_round_trip_ns.max(end - start);
-        if wkc != self.expected_wkc {
+        let short = wkc != self.expected_wkc;
+        if short {
             st.wkc_errors += 1;
-            // A short cycle: find out why (a lost frame alone changes nothing).
-            if self.supervise_on_wkc {
-                self.supervise()?;
-            }
+        }
+        // A short cycle: find out why (a lost frame alone changes nothing); and until every
+        // fallen slave is back, since one acknowledged in SAFEOP answers its process data in
+        // full (its outputs given back) and would stay there.
+        if (short || self.cyc.recovering) && self.supervise_on_wkc {
+            self.supervise()?;
         }
         Ok((wkc, correction))
     }

@@ -179,6 +179,12 @@ pub struct DeviceToml {
     /// "cia402" (default for CoE devices with the drive profile's objects).
     pub app: Option<String>,
     pub app_period_us: Option<f64>,
+    /// The sync error counter limit (ETG.1020 0x10F1:02) of the SM-synchronisation supervision
+    /// that takes a DC-synchronous application out of OP with 0x001A after missed outputs
+    /// (docs/esc-model.md); 0 turns the reaction off. Default: 4 (the Slave Stack Code's) for
+    /// the built-in SERVO, off for `app = "dc"` and drives from ESI files (which get 0x10F1
+    /// with this limit where it is given).
+    pub sync_error_limit: Option<u16>,
     /// A CiA402 drive's limit switches (active at and below / at and above) and home switch
     /// (active at and above, or at and below with `home_switch_below`), in revolutions of the
     /// shaft on its own scale; used by homing methods 1–14 and 17–30, reported in 0x60FD; a
@@ -418,7 +424,11 @@ impl SegmentConfig {
                 }
                 None => (rng.gen_range(-spread..=spread) * 1000.0).round() as i64,
             };
-            let sync = |mode| -> Box<dyn Application> { Box::new(SyncApp::new(mode, config.sm_count, drift_ppb)) };
+            let sync = |mode| -> Box<dyn Application> {
+                let mut app = SyncApp::new(mode, config.sm_count, drift_ppb);
+                app.monitor.limit = d.sync_error_limit.unwrap_or(0);
+                Box::new(app)
+            };
             let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;
             // FoE is served next to the SDO server, where the SII names it.
             let foe = (info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::FOE != 0).then(|| {
@@ -448,11 +458,21 @@ impl SegmentConfig {
             if has_switches && !(drive && matches!(d.app.as_deref(), None | Some("cia402"))) {
                 return Err(device_err(&place, "limit and home switches need a CiA402 drive (app = \"cia402\")"));
             }
+            let supervised =
+                matches!(d.app.as_deref(), Some("dc")) || (drive && matches!(d.app.as_deref(), None | Some("cia402")));
+            if d.sync_error_limit.is_some() && !supervised {
+                return Err(device_err(&place, "sync_error_limit needs app = \"dc\" or a CiA402 drive"));
+            }
             let app: Box<dyn Application> = match (d.app.as_deref(), od) {
                 (None | Some("cia402"), Some(od)) if drive => {
                     // Each drive draws from its own stream: the others' draws stay as they were.
                     let seed = self.seed ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
                     let mut drive = Cia402Drive::new(od, config.sm_count, seed);
+                    let builtin_limit =
+                        (d.builtin.as_deref() == Some("SERVO")).then_some(ferrocat_esc::DEFAULT_SYNC_ERROR_LIMIT);
+                    if let Some(limit) = d.sync_error_limit.or(builtin_limit) {
+                        drive.supervise_sync(limit);
+                    }
                     drive.set_switches(switches(d, &place)?);
                     drive.coe.foe = foe;
                     drive.coe.eoe = eoe;

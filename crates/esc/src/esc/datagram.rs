@@ -192,6 +192,9 @@ impl Esc {
             _ => {}
         }
         if let Some((n, s)) = self.sm_at(a) {
+            if s.pdi_control & 1 != 0 {
+                return None;
+            }
             if s.is_mailbox() && a == s.start && !s.ecat_writes() && self.sms[n as usize].full {
                 // The master opens the buffer the firmware wrote.
                 self.sms[n as usize].int_write = false;
@@ -246,6 +249,9 @@ impl Esc {
             return false;
         }
         if let Some((n, s)) = self.sm_at(a) {
+            if s.pdi_control & 1 != 0 {
+                return false;
+            }
             if s.is_mailbox() && a == s.start && s.ecat_writes() && !self.sms[n as usize].full {
                 // The master opens the buffer the firmware read.
                 self.sms[n as usize].int_read = false;

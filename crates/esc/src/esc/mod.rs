@@ -581,6 +581,9 @@ impl Esc {
                     self.sync0_log.push((due.last_sys_ns, tp), due.pulses);
                     let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
                     self.app.sync0(&mut pdi, due.last_sys_ns);
+                    if let Some(code) = self.app.take_fault() {
+                        self.leave_op(code);
+                    }
                 }
             } else {
                 let mut pdi = Pdi { mem: &mut self.mem, now_ns: tp };
@@ -659,12 +662,50 @@ impl Esc {
         if self.al.state == AlState::Op && self.now_ns.saturating_sub(self.wd_last_trigger_ns) > wd {
             self.mem[0x0440] = 0;
             self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
-            self.al.fail(AlState::SafeOp, AlStatusCode::SM_WATCHDOG);
-            self.al_changes += 1;
-            let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
-            self.app.state_changed(&mut pdi, AlState::SafeOp);
-            self.refresh_registers();
+            self.leave_op(AlStatusCode::SM_WATCHDOG);
         }
+    }
+
+    /// A local error in OP: SAFEOP with the error bit and `code` (esc-spec §5.1). A firmware
+    /// (no device emulation) also deactivates its output SyncManager, as the Slave Stack Code
+    /// does, so that the master sees the error in its working counter.
+    fn leave_op(&mut self, code: AlStatusCode) {
+        if self.al.state != AlState::Op {
+            return;
+        }
+        if !self.device_emulation() {
+            self.pdi_deactivate_outputs(true);
+        }
+        self.al.fail(AlState::SafeOp, code);
+        self.al_changes += 1;
+        let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
+        self.app.state_changed(&mut pdi, AlState::SafeOp);
+        self.refresh_registers();
+    }
+
+    /// SyncManager deactivation by the PDI (0x0807 bit 0; datasheet I §8.7) of the buffered
+    /// output SyncManagers: their buffers are read/write protected, accesses to them do not
+    /// count in the working counter, and their state starts afresh. Undone when the master
+    /// acknowledges the error.
+    pub(super) fn pdi_deactivate_outputs(&mut self, on: bool) {
+        for n in 0..self.config.sm_count {
+            let s = self.sm(n);
+            if !s.enabled() || s.is_mailbox() || !s.ecat_writes() {
+                continue;
+            }
+            let a = addr::sm(n) as usize + 7;
+            let was = self.mem[a] & 1 != 0;
+            if on && !was {
+                self.mem[a] |= 1;
+                if let Some(st) = self.sms.get_mut(n as usize) {
+                    let staging = std::mem::take(&mut st.staging);
+                    *st = SmState { staging, ..SmState::default() };
+                }
+            } else if !on && was {
+                self.mem[a] &= !1;
+            }
+        }
+        self.reload_sm_fmmu();
     }
 
     #[inline]

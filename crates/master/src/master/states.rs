@@ -242,6 +242,7 @@ impl<I: Io> Master<I> {
                 }
             }
         }
+        self.cyc.recovering = down > 0;
         Ok(down)
     }
 }

@@ -1,0 +1,129 @@
+//! The SM-synchronisation supervision of a DC-synchronous slave (ETG.1020's error settings,
+//! object 0x10F1), as Beckhoff's Slave Stack Code runs it (Application Note ET9300; SSC 5.11 is
+//! what Paprocki 2022's drives ran): a SYNC0 that finds no SM2 event since the one before the
+//! last adds 3 to a counter, each SM2 event takes 1 off, and a counter at the limit (0x10F1:02,
+//! 4 by default; 0 turns the reaction off) takes the slave from OP to SAFEOP with error 0x001A.
+//!
+//! One SYNC0 interval without outputs is tolerated (a frame that crossed its SYNC0 comes in the
+//! next interval); a master that sends nothing for three cycles trips it. The SSC compares the
+//! counter with the limit in a 1 ms timer; here it is compared at each SYNC0, the same or up to
+//! 1 ms earlier.
+
+/// SSC's default limit (`MAX_SM_EVENT_MISSED`).
+pub const DEFAULT_SYNC_ERROR_LIMIT: u16 = 4;
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SmSyncMonitor {
+    /// 0x10F1:02; 0: counted, never a fault.
+    pub limit: u16,
+    /// The SM-event-missed counter (+3 per missed event, −1 per SM2 event).
+    pub missed: u16,
+    /// SYNC0 pulses since the last SM2 event.
+    sync0_since_sm: u16,
+    /// Supervising: in OP and outputs have come at least once.
+    armed: bool,
+    /// The limit was reached since OP was last entered (0x1C32:20, "sync error").
+    pub sync_error: bool,
+}
+
+impl SmSyncMonitor {
+    pub fn new(limit: u16) -> Self {
+        SmSyncMonitor { limit, ..Default::default() }
+    }
+
+    /// Entering OP starts the supervision afresh; it arms on the first outputs.
+    pub fn restart(&mut self) {
+        *self = SmSyncMonitor::new(self.limit);
+    }
+
+    /// A complete output buffer (the SM2 event).
+    pub fn sm_event(&mut self) {
+        self.armed = true;
+        self.sync0_since_sm = 0;
+        self.missed = self.missed.saturating_sub(1);
+    }
+
+    /// A SYNC0 pulse in OP. True when this pulse takes the counter to the limit: the slave
+    /// leaves OP with 0x001A.
+    pub fn sync0(&mut self) -> bool {
+        if !self.armed {
+            return false;
+        }
+        // One SYNC0 per SM cycle: more than one since the last outputs is a missed event. The
+        // counter stops growing above the limit, as the SSC's does.
+        if self.sync0_since_sm > 1 && self.missed <= self.limit {
+            self.missed = self.missed.saturating_add(3);
+        }
+        self.sync0_since_sm = self.sync0_since_sm.saturating_add(1);
+        if self.limit > 0 && self.missed >= self.limit && !self.sync_error {
+            self.sync_error = true;
+            return true;
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// SYNC0 pulses with outputs (true) or without (false) before each; the pulse that trips.
+    fn run(limit: u16, outputs: &[bool]) -> (Option<usize>, u16) {
+        let mut m = SmSyncMonitor::new(limit);
+        m.restart();
+        let mut tripped = None;
+        for (k, &o) in outputs.iter().enumerate() {
+            if o {
+                m.sm_event();
+            }
+            if m.sync0() && tripped.is_none() {
+                tripped = Some(k);
+            }
+        }
+        (tripped, m.missed)
+    }
+
+    #[test]
+    fn one_empty_interval_is_tolerated_and_counts_nothing() {
+        // A late frame: one interval empty, the next with two buffers.
+        let mut o = vec![true; 10];
+        o[4] = false;
+        assert_eq!(run(4, &o), (None, 0));
+        // Every other interval empty: never two in a row.
+        let o: Vec<bool> = (0..100).map(|k| k % 2 == 0).collect();
+        assert_eq!(run(4, &o), (None, 0));
+    }
+
+    #[test]
+    fn three_cycles_without_outputs_trip_the_default_limit() {
+        // Outputs, then none for three SYNC0s: the 2nd and 3rd empty pulses count 3 each.
+        let o = [true, true, false, false, false, true, true];
+        assert_eq!(run(DEFAULT_SYNC_ERROR_LIMIT, &o), (Some(4), 4));
+        // Two empty pulses count once: 3, under the limit, and the outputs wear it down.
+        let o = [true, true, false, false, true, true, true, true];
+        assert_eq!(run(DEFAULT_SYNC_ERROR_LIMIT, &o), (None, 0));
+    }
+
+    #[test]
+    fn a_limit_of_zero_counts_but_never_trips() {
+        let o = [true, false, false, false, false, false, false];
+        let (tripped, missed) = run(0, &o);
+        assert_eq!(tripped, None);
+        // The counter stops at the first step above the limit (0 + 3), as the SSC's.
+        assert_eq!(missed, 3);
+    }
+
+    #[test]
+    fn no_supervision_before_the_first_outputs() {
+        assert_eq!(run(4, &[false; 20]), (None, 0));
+    }
+
+    #[test]
+    fn a_higher_limit_needs_more_missed_events() {
+        let mut o = vec![true; 3];
+        o.extend([false; 4]);
+        // Empty pulses 2-4 count: 3, 6, 9; limit 9 trips on the third counted one.
+        assert_eq!(run(9, &o).0, Some(6));
+        assert_eq!(run(10, &o).0, None);
+    }
+}

@@ -1,0 +1,93 @@
+//! A DC-synchronous drive's SM-synchronisation supervision (ETG.1020, the Slave Stack Code's):
+//! a master that sends nothing for three cycles takes the built-in SERVO out of OP with a sync
+//! error (0x001A), one missed cycle does not, a limit of 0 (0x10F1:02 by SDO, or the segment
+//! file) turns the reaction off; the master reports the drive once and brings it back to OP.
+use ferrocat_esc::Cia402Drive;
+use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::{DcConfig, Master, MasterEvent};
+use ferrocat_segment::SegmentConfig;
+use ferrocat_wire::register::AlStatusCode;
+
+const CYCLE_NS: u64 = 1_000_000;
+
+/// EK1100 and a SERVO in OP with SYNC0 every cycle, after 100 cycles of process data; the
+/// SDO writes `setup` makes in PREOP first.
+fn servo_in_op(extra: &str, setup: &[(u16, u8, Vec<u8>)]) -> (Master<VirtualIo>, u64) {
+    let cfg: SegmentConfig =
+        toml::from_str(&format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n{extra}")).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    for (index, sub, data) in setup {
+        m.sdo_write(1, *index, *sub, data).unwrap();
+    }
+    m.init_dc(&DcConfig {
+        sync0_cycle_ns: CYCLE_NS as u32,
+        sync0_shift_ns: (CYCLE_NS / 2) as i32,
+        sync0_slaves: Some(vec![1]),
+        ..DcConfig::default()
+    })
+    .unwrap();
+    m.start().unwrap();
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..100 {
+        m.cycle().unwrap();
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+    }
+    (m, next)
+}
+
+/// Skips `missed` cycles, then cycles 2 000 times; the events that came.
+fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent> {
+    let before = m.events.len();
+    next += missed * CYCLE_NS;
+    m.engine.io.sleep_until(next);
+    for _ in 0..2000 {
+        m.cycle().unwrap();
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+    }
+    m.events[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
+}
+
+fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
+    m.engine.io.segment().unwrap().nodes[1].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
+}
+
+#[test]
+fn three_cycles_without_process_data_are_a_sync_error_one_is_not() {
+    let (mut m, next) = servo_in_op("", &[]);
+    let events = gap(&mut m, next, 1);
+    assert!(events.is_empty(), "one missed cycle: {events:?}");
+    let next = m.engine.io.now_ns() + 1;
+    let events = gap(&mut m, next, 3);
+    let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
+    assert!(
+        matches!(events.first(), Some(MasterEvent::LeftOp { position: 1, code, .. }) if *code == AlStatusCode::SYNC_ERROR),
+        "{text:#?}"
+    );
+    assert!(text[0].contains("SAFEOP with an error"), "{text:#?}");
+    assert_eq!(text.len(), 2, "left OP once, back once: {text:#?}");
+    assert!(text[1].contains("slave 1") && text[1].contains("back in OP"), "{text:#?}");
+    assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+    // Back in OP the supervision starts afresh.
+    assert!(!drive(&m).sync_monitor().sync_error);
+}
+
+#[test]
+fn a_limit_of_zero_turns_the_reaction_off() {
+    // By SDO in PREOP, as an integrator would.
+    let (mut m, next) = servo_in_op("", &[(0x10F1, 2, 0u16.to_le_bytes().to_vec())]);
+    assert!(gap(&mut m, next, 3).is_empty());
+    assert_eq!(drive(&m).sync_monitor().limit, 0);
+    // From the segment file.
+    let (mut m, next) = servo_in_op("sync_error_limit = 0\n", &[]);
+    assert!(gap(&mut m, next, 10).is_empty());
+    // And a higher limit needs more missed cycles: 9 lets three pass (3 + 3 counted, and
+    // the outputs' SM events wear it down), not ten.
+    let (mut m, next) = servo_in_op("sync_error_limit = 9\n", &[]);
+    assert!(gap(&mut m, next, 3).is_empty());
+    let next = m.engine.io.now_ns() + 1;
+    assert_eq!(gap(&mut m, next, 10).len(), 2);
+}
