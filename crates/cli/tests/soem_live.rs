@@ -196,6 +196,24 @@ fn soem_enables_the_simulated_cia402_drive() {
     assert!(r["moved"].as_i64().unwrap().abs() < 50, "{r}");
 }
 
+/// SOEM stalls for 10 ms while the drive runs DC-synchronous at 1 ms: the drive leaves OP
+/// with a sync error (0x001A, SAFE_OP + ERROR) and SOEM sees it in the working counter (its
+/// output SyncManager deactivated by the firmware), acknowledges it and brings it back to OP
+/// as its examples' ecatcheck does (docs/esc-model.md).
+#[test]
+fn soem_sees_the_drives_sync_error_after_a_stall_and_brings_it_back() {
+    let net = VethPair::new("se");
+    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+    let r = soem_script(&net, "soem_sync_error.py", &["1"]);
+    sim.stop();
+    assert_eq!(r["found"], 2);
+    assert_eq!(r["op_before"], true, "{r}");
+    assert_eq!(r["after_stall"]["state"], 0x14, "{r}");
+    assert_eq!(r["after_stall"]["al_status"], 0x001A, "{r}");
+    assert!(r["short_cycles"].as_u64().is_some_and(|n| n >= 1), "{r}");
+    assert_eq!(r["back_in_op"], true, "{r}");
+}
+
 /// SOEM's FoE client, unmodified, against the simulated drive's file server: files shorter
 /// than a packet, of exactly one and three packets (ended by an empty packet) and of many,
 /// written and read back the same, the first packet of each answered busy twice; a missing

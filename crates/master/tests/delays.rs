@@ -209,3 +209,16 @@ fn a_reversed_terminal_at_the_end() {
     assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 1, 0]);
     assert_eq!(links(&m), [None, Some((0, 1)), Some((1, 1)), Some((0, 2))]);
 }
+
+#[test]
+fn a_reversed_clock_at_the_end() {
+    // The same terminal with a system time (the SYNC unit on), entered on port 1 with port 0
+    // closed: the only tree fits the first latch's times, whose port 1 holds a later frame's;
+    // its delay came out 0 ns for 230 (the config fuzz target found it). Latched again now.
+    let toml = "seed = 6\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'\n\
+         [[device]]\nbuiltin = 'EL1004'\nparent = 'c'\nparent_port = 1\nport = 1\napp = 'dc'\n";
+    let m = check("reversed clock at the end", toml);
+    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 1]);
+    assert!(m.slaves[1].has_system_time);
+    synchronises(m);
+}

@@ -239,7 +239,13 @@ impl<I: Io> Master<I> {
         // whose probes pass the far half first) any may be off. Latch those again.
         let next_frame = self.next_frame_slaves();
         let far = self.first_far_position();
-        if !next_frame.is_empty() && (!inferred || far.is_some_and(|f| next_frame.iter().any(|&k| k >= f))) {
+        // A tree that fits may still be wrong, or right on wrong times: one entered elsewhere
+        // than on port 0 (by its times, or with port 0 closed, where nothing else can be) is
+        // latched again too (an EL1004 entered on port 1 as the last slave fits the only tree
+        // there is, with a later frame's time at port 1: its delay came out 0 for 230 ns).
+        let reversed = next_frame.iter().any(|&k| self.slaves[k].entry_port != 0 || !self.slaves[k].active_ports[0]);
+        if !next_frame.is_empty() && (!inferred || reversed || far.is_some_and(|f| next_frame.iter().any(|&k| k >= f)))
+        {
             let ring = self.close_ring_port()?;
             let relatched = self.relatch_next_frame(&next_frame);
             self.reopen_ring_port(ring)?;
