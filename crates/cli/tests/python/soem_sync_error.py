@@ -13,6 +13,8 @@ import time
 
 import pysoem
 
+from soem_states import to_op
+
 iface, pos = sys.argv[1], int(sys.argv[2])
 m = pysoem.Master()
 m.open(iface)
@@ -32,17 +34,7 @@ try:
     m.config_dc()
     d = m.slaves[pos]
     d.dc_sync(True, 1_000_000)
-    m.state = pysoem.SAFEOP_STATE
-    m.write_state()
-    m.state_check(pysoem.SAFEOP_STATE, 500_000)
-    m.state = pysoem.OP_STATE
-    m.write_state()
-    for _ in range(300):
-        cycle()
-        if m.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
-            break
-        m.write_state()
-    result["op_before"] = m.read_state() == pysoem.OP_STATE
+    result["op_before"] = to_op(m, cycle)
     for _ in range(1000):
         cycle()
     time.sleep(0.010)
