@@ -91,3 +91,35 @@ fn a_limit_of_zero_turns_the_reaction_off() {
     let next = m.engine.io.now_ns() + 1;
     assert_eq!(gap(&mut m, next, 10).len(), 2);
 }
+
+#[test]
+fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
+    // The drive left OP with its outputs deactivated, and no one acknowledged it; a new
+    // bring-up (as a second `ferrocat run` against the same `ferrocat sim`) disables the
+    // SyncManagers before it acknowledges: the outputs must come back all the same (they stayed
+    // deactivated, every cycle short, until the deactivation was undone for the SyncManagers
+    // it had been done to rather than for those enabled at the acknowledge).
+    let (mut m, mut next) = servo_in_op("", &[]);
+    m.supervise_on_wkc = false;
+    next += 4 * CYCLE_NS;
+    m.engine.io.sleep_until(next);
+    assert!(m.cycle().unwrap() < m.expected_wkc);
+    let seg = m.engine.io.segment().unwrap();
+    assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    m.init_dc(&DcConfig {
+        sync0_cycle_ns: CYCLE_NS as u32,
+        sync0_shift_ns: (CYCLE_NS / 2) as i32,
+        sync0_slaves: Some(vec![1]),
+        ..DcConfig::default()
+    })
+    .unwrap();
+    m.start().unwrap();
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..100 {
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+    }
+}

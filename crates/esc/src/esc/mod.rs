@@ -157,6 +157,9 @@ pub struct Esc {
     app: Box<dyn Application>,
     now_ns: u64,
     sms: Vec<SmState>,
+    /// SyncManagers the firmware deactivated by the PDI (bit n: SM n), until the error is
+    /// acknowledged.
+    pdi_deactivated: u32,
     expected: Expected,
     effects: FrameEffects,
     wd_last_trigger_ns: u64,
@@ -231,6 +234,7 @@ impl Esc {
         let mut esc = Esc {
             mem: vec![0; config.memory_len()],
             sms: vec![SmState::default(); config.sm_count as usize],
+            pdi_deactivated: 0,
             config,
             pending: Vec::with_capacity(64),
             eeprom: Eeprom::new(sii),
@@ -688,22 +692,26 @@ impl Esc {
     /// count in the working counter, and their state starts afresh. Undone when the master
     /// acknowledges the error.
     pub(super) fn pdi_deactivate_outputs(&mut self, on: bool) {
-        for n in 0..self.config.sm_count {
-            let s = self.sm(n);
-            if !s.enabled() || s.is_mailbox() || !s.ecat_writes() {
-                continue;
-            }
+        for n in 0..self.config.sm_count.min(32) {
             let a = addr::sm(n) as usize + 7;
-            let was = self.mem[a] & 1 != 0;
-            if on && !was {
+            if on {
+                let s = self.sm(n);
+                if !s.enabled() || s.is_mailbox() || !s.ecat_writes() {
+                    continue;
+                }
                 self.mem[a] |= 1;
+                self.pdi_deactivated |= 1 << n;
                 if let Some(st) = self.sms.get_mut(n as usize) {
                     let staging = std::mem::take(&mut st.staging);
                     *st = SmState { staging, ..SmState::default() };
                 }
-            } else if !on && was {
+            } else if self.pdi_deactivated & (1 << n) != 0 {
+                // Whatever the master did to the SyncManager meanwhile (disabled it in INIT).
                 self.mem[a] &= !1;
             }
+        }
+        if !on {
+            self.pdi_deactivated = 0;
         }
         self.reload_sm_fmmu();
     }
