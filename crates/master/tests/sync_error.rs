@@ -16,6 +16,18 @@ fn servo_in_op(extra: &str, setup: &[(u16, u8, Vec<u8>)]) -> (Master<VirtualIo>,
     let cfg: SegmentConfig =
         toml::from_str(&format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n{extra}")).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
+    bring_up(&mut m, setup);
+    let mut next = m.engine.io.now_ns();
+    for _ in 0..100 {
+        m.cycle().unwrap();
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+    }
+    (m, next)
+}
+
+/// Scan, PREOP set-up (`setup`'s SDO writes), DC with SYNC0 on the drive every cycle, OP.
+fn bring_up(m: &mut Master<VirtualIo>, setup: &[(u16, u8, Vec<u8>)]) {
     m.scan().unwrap();
     m.configure().unwrap();
     for (index, sub, data) in setup {
@@ -29,13 +41,6 @@ fn servo_in_op(extra: &str, setup: &[(u16, u8, Vec<u8>)]) -> (Master<VirtualIo>,
     })
     .unwrap();
     m.start().unwrap();
-    let mut next = m.engine.io.now_ns();
-    for _ in 0..100 {
-        m.cycle().unwrap();
-        next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
-    }
-    (m, next)
 }
 
 /// Skips `missed` cycles, then cycles 2 000 times; the events that came.
@@ -106,16 +111,7 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     assert!(m.cycle().unwrap() < m.expected_wkc);
     let seg = m.engine.io.segment().unwrap();
     assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
-    m.scan().unwrap();
-    m.configure().unwrap();
-    m.init_dc(&DcConfig {
-        sync0_cycle_ns: CYCLE_NS as u32,
-        sync0_shift_ns: (CYCLE_NS / 2) as i32,
-        sync0_slaves: Some(vec![1]),
-        ..DcConfig::default()
-    })
-    .unwrap();
-    m.start().unwrap();
+    bring_up(&mut m, &[]);
     let mut next = m.engine.io.now_ns();
     for _ in 0..100 {
         next += CYCLE_NS;
