@@ -150,6 +150,14 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
             list(&r.repeated_cycles)
         );
     }
+    for r in rows.iter().filter(|r| r.left_op > 0) {
+        outln!(
+            "{:>4}µs  {:<12} drives left OP {} times (a sync error: three cycles without set-points), each brought back",
+            r.cycle_us,
+            r.method,
+            r.left_op
+        );
+    }
     outln!("Plots and CSV in {}", a.out.display());
     Ok(ExitCode::SUCCESS)
 }

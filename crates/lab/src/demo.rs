@@ -12,7 +12,7 @@ use ferrocat_master::cia402::{map_for_csp, Axis, Goal};
 use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{ClockSync, Coupling};
 use ferrocat_master::trajectory::{Limits, Move};
-use ferrocat_master::{DcConfig, Master, SyncState};
+use ferrocat_master::{DcConfig, Master, MasterEvent, SyncState};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_wire::cia402::{index as ix, Mode, State};
 use rayon::prelude::*;
@@ -88,6 +88,9 @@ pub struct Row {
     pub max_following_error: Option<f64>,
     /// Drives in operation enabled at the end of the move (as their statuswords say).
     pub drives_enabled: usize,
+    /// Times a drive left OP during the run (a sync error, where a drive supervises its SM
+    /// synchronisation, after three cycles without set-points), each brought back by the master.
+    pub left_op: usize,
     pub drives: usize,
     /// Application-layer time (SYNC0 to set-point in the loops), all drives: mean and max µs
     /// (Paprocki 2022, Tables 3–4; simulator only).
@@ -213,6 +216,7 @@ fn run_one<I: Io>(
     calibrate: Calibrate<'_, I>,
 ) -> anyhow::Result<Row> {
     let (mut r, drives) = rig(m, cycle_us, method)?;
+    let events0 = r.m.events.len();
     let cycle_ns = r.cycle_ns;
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
     let settle_cycles = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
@@ -367,6 +371,10 @@ fn run_one<I: Io>(
     };
     let n_proc: u64 = stats.iter().flatten().map(|s| s.processing_count).sum();
     let enabled = axes.iter().filter(|a| a.state() == Some(State::OperationEnabled)).count();
+    let left_op = r.m.events[events0..]
+        .iter()
+        .filter(|e| matches!(e, MasterEvent::LeftOp { position, .. } if drives.contains(position)))
+        .count();
     let (sync0_mean_ns, sync0_sd_ns, sync0_min_ns, sync0_max_ns, sync0_spread_max_ns) = sync0.figures();
     Ok(Row {
         method: method.to_string(),
@@ -388,6 +396,7 @@ fn run_one<I: Io>(
         max_following_error: following_error.iter().flatten().copied().reduce(f64::max),
         following_error,
         drives_enabled: enabled,
+        left_op,
         drives: drives.len(),
         processing_mean_us: (n_proc > 0)
             .then(|| stats.iter().flatten().map(|s| s.processing_sum_ns).sum::<f64>() / n_proc as f64 / 1e3),

@@ -22,6 +22,8 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
             r.drives
         );
         assert_eq!(r.drives_enabled, 2, "{r:?}");
+        // A real-time host never leaves the drives three cycles without set-points.
+        assert_eq!(r.left_op, 0, "{r:?}");
         assert!(r.cycles > 0 && r.trace.len() > 100);
         let (mean, max) = (r.processing_mean_us.unwrap(), r.processing_max_us.unwrap());
         assert!(mean > 20.0 && max < 150.0, "{r:?}");
@@ -48,6 +50,15 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
     println!("pc-stock 250 µs ferrocat: late {:?}, repeated {:?}", r.late_setpoints, r.repeated_setpoints);
     assert!(r.late_setpoints.unwrap() > 0 && r.repeated_setpoints.unwrap() > 0, "{r:?}");
     assert!(!r.late_cycles.is_empty() && !r.repeated_cycles.is_empty());
+    // Late by one cycle at most: the drives' sync supervision lets that pass.
+    assert_eq!(r.left_op, 0, "{r:?}");
+    // At 100 µs its 1 % of wake-ups up to 200 µs late leave the drives three cycles without
+    // set-points now and then: they leave OP with a sync error, and the master brings them
+    // back (the move goes on, both enabled at its end).
+    let fast = Options { cycles_us: vec![100], ..stock };
+    let r = &run(&fast).unwrap()[0];
+    println!("pc-stock 100 µs ferrocat: drives left OP {} times, enabled {}/2", r.left_op, r.drives_enabled);
+    assert!(r.left_op > 0 && r.drives_enabled == 2, "{r:?}");
 }
 
 /// ferrocat's stamps carry the host model's send/receive asymmetry; the demo measures it

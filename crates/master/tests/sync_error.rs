@@ -119,3 +119,18 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc);
     }
 }
+
+#[test]
+fn supervision_reads_every_al_status_in_one_frame() {
+    // Five slaves in OP: one frame for the check, not one per slave (a frame each, 100 µs
+    // cycles on a stock kernel overran the next cycles while the master brought a drive back,
+    // and took the drives out of OP again: the demo's park2020 run left OP 199 times, now 25).
+    let (mut m, _) = servo_in_op(
+        "[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n[[device]]\nbuiltin = 'EL1004'\n",
+        &[],
+    );
+    assert_eq!(m.slaves.len(), 5);
+    let before = m.engine.stats.frames_sent;
+    assert_eq!(m.supervise().unwrap(), 0);
+    assert_eq!(m.engine.stats.frames_sent - before, 1);
+}

@@ -162,17 +162,26 @@ impl<I: Io> Master<I> {
     /// and takes one step of bringing each fallen slave back to OP (so that the cyclic exchange
     /// keeps running meanwhile). Returns how many slaves are not operational.
     pub fn supervise(&mut self) -> Result<usize> {
+        // Only slaves the master has brought to OP can fall from it: one still on its way (a
+        // frame lost while `start` walks it up) or put elsewhere on purpose is not "left OP",
+        // and is not pushed back there.
+        let watched: Vec<usize> = (0..self.slaves.len()).filter(|&k| self.slaves[k].state == AlState::Op).collect();
+        // Every AL status in one exchange (as few frames as fit): a frame each, in a cycle of
+        // 100 µs on a stock kernel, overran the next cycles and took more drives out of OP.
+        let mut status = vec![[0u8; 6]; watched.len()];
+        let wkcs: Vec<u16> = {
+            let mut pdus: Vec<Pdu<'_>> = watched
+                .iter()
+                .zip(status.iter_mut())
+                .map(|(&k, d)| Pdu::new(Command::FPRD, Address::Device { adp: self.slaves[k].station, ado: 0x0130 }, d))
+                .collect();
+            self.engine.transact(&mut pdus)?;
+            pdus.iter().map(|p| p.wkc).collect()
+        };
         let mut down = 0;
-        for k in 0..self.slaves.len() {
-            // Only slaves the master has brought to OP can fall from it: one still on its way
-            // (a frame lost while `start` walks it up) or put elsewhere on purpose is not
-            // "left OP", and is not pushed back there.
-            if self.slaves[k].state != AlState::Op {
-                continue;
-            }
+        for (i, &k) in watched.iter().enumerate() {
             let (st, name, pos) = (self.slaves[k].station, self.slaves[k].name.clone(), k as u16);
-            let mut d = [0u8; 6];
-            let mut wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+            let (mut d, mut wkc) = (status[i], wkcs[i]);
             if wkc == 0 {
                 // Powered off and on again it has lost its station address: give it back.
                 let mut a = [0u8; 2];
