@@ -203,15 +203,18 @@ fn soem_enables_the_simulated_cia402_drive() {
 #[test]
 fn soem_sees_the_drives_sync_error_after_a_stall_and_brings_it_back() {
     let net = VethPair::new("se");
-    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "SERVO"]);
+    let sim = ReportingSim::start(&net, "se", "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n", &[]);
     let r = soem_script(&net, "soem_sync_error.py", &["1"]);
-    sim.stop();
+    let rep = sim.report();
     assert_eq!(r["found"], 2);
     assert_eq!(r["op_before"], true, "{r}");
     assert_eq!(r["after_stall"]["state"], 0x14, "{r}");
     assert_eq!(r["after_stall"]["al_status"], 0x001A, "{r}");
     assert!(r["short_cycles"].as_u64().is_some_and(|n| n >= 1), "{r}");
     assert_eq!(r["back_in_op"], true, "{r}");
+    // The simulator's report counts it (once, or more if this machine stalled besides).
+    assert!(rep["devices"][1]["sync_errors"].as_u64().is_some_and(|n| n >= 1), "{rep}");
+    assert_eq!(rep["devices"][0]["sync_errors"], 0, "{rep}");
 }
 
 /// SOEM's FoE client, unmodified, against the simulated drive's file server: files shorter

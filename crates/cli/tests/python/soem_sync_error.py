@@ -13,8 +13,6 @@ import time
 
 import pysoem
 
-from soem_states import to_op
-
 iface, pos = sys.argv[1], int(sys.argv[2])
 m = pysoem.Master()
 m.open(iface)
@@ -28,39 +26,46 @@ def cycle():
     return wkc
 
 
+def ecatcheck(cycles, until_op_for):
+    """SOEM's examples' ecatcheck for up to `cycles` cycles: on a short working counter, and
+    until the drive is back in OP, read the states; acknowledge SAFE_OP + ERROR, ask SAFE_OP
+    for OP. Stops once the drive has been in OP for `until_op_for` cycles in a row. The first
+    error seen (state, AL status code), short cycles, and whether it ended in OP."""
+    seen, short, check, in_op = None, 0, True, 0
+    for _ in range(cycles):
+        wkc = cycle()
+        short += wkc < m.expected_wkc
+        if wkc < m.expected_wkc or check:
+            m.read_state()
+            check = d.state != pysoem.OP_STATE
+            if d.state == pysoem.SAFEOP_STATE + pysoem.STATE_ERROR:
+                seen = seen or {"state": d.state, "al_status": d.al_status}
+                d.state = pysoem.SAFEOP_STATE + pysoem.STATE_ACK
+                d.write_state()
+            elif d.state == pysoem.SAFEOP_STATE:
+                d.state = pysoem.OP_STATE
+                d.write_state()
+        in_op = 0 if check else in_op + 1
+        if in_op >= until_op_for:
+            return seen, short, True
+    return seen, short, False
+
+
 try:
     result["found"] = m.config_init()
     m.config_map()
     m.config_dc()
     d = m.slaves[pos]
     d.dc_sync(True, 1_000_000)
-    result["op_before"] = to_op(m, cycle)
-    for _ in range(1000):
-        cycle()
+    m.state = pysoem.SAFEOP_STATE
+    m.write_state()
+    m.state_check(pysoem.SAFEOP_STATE, 500_000)
+    m.state = pysoem.OP_STATE
+    m.write_state()
+    # To OP and a second there; a stall of this machine meanwhile is a sync error it recovers.
+    _, _, result["op_before"] = ecatcheck(5000, 1000)
     time.sleep(0.010)
-    # SOEM's ecatcheck: on a short working counter, and until every slave is back in OP.
-    seen, short, back, check = None, 0, False, False
-    for _ in range(3000):
-        wkc = cycle()
-        if wkc < m.expected_wkc:
-            short += 1
-        if not (wkc < m.expected_wkc or check):
-            continue
-        check = False
-        m.read_state()
-        if d.state == pysoem.SAFEOP_STATE + pysoem.STATE_ERROR:
-            if seen is None:
-                seen = {"state": d.state, "al_status": d.al_status}
-            d.state = pysoem.SAFEOP_STATE + pysoem.STATE_ACK
-            d.write_state()
-            check = True
-        elif d.state == pysoem.SAFEOP_STATE:
-            d.state = pysoem.OP_STATE
-            d.write_state()
-            check = True
-        elif d.state == pysoem.OP_STATE and seen is not None:
-            back = True
-            break
+    seen, short, back = ecatcheck(3000, 10)
     result["after_stall"] = seen
     result["short_cycles"] = short
     result["back_in_op"] = back

@@ -203,6 +203,8 @@ pub struct Esc {
     pub mbx_duplicates: u64,
     /// Repeat requests the firmware answered.
     pub mbx_repeats: u64,
+    /// Times the application took the slave out of OP with a sync error (0x001A).
+    pub sync_errors: u64,
     /// How long the firmware takes to answer a mailbox request.
     pub mailbox_response: MailboxResponse,
     /// Without device emulation the firmware reads AL control this long after the master
@@ -268,6 +270,7 @@ impl Esc {
             mbx_in_counter: 0,
             mbx_duplicates: 0,
             mbx_repeats: 0,
+            sync_errors: 0,
             mailbox_response: MailboxResponse::default(),
             al_response_ns: 1_000_000,
             pending_al: None,
@@ -680,6 +683,7 @@ impl Esc {
         if !self.device_emulation() {
             self.pdi_deactivate_outputs(true);
         }
+        self.sync_errors += (code == AlStatusCode::SYNC_ERROR) as u64;
         self.al.fail(AlState::SafeOp, code);
         self.al_changes += 1;
         let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
