@@ -192,7 +192,7 @@ pub struct SyncApp {
     pub consumed: u64,
     pub lost: u64,
     pub repeated: u64,
-    /// DC-synchronous mode: the SM-synchronisation supervision (limit 0, off, unless set).
+    /// DC-synchronous mode: the SM-synchronisation supervision (off unless set).
     pub monitor: SmSyncMonitor,
     fault: Option<AlStatusCode>,
     running: bool,
@@ -276,6 +276,10 @@ impl Application for SyncApp {
         self.io.output_updates += 1;
         if self.running {
             self.monitor.sm_event();
+            let cycle = u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64;
+            if self.mode == SyncMode::DcSynchronous && self.monitor.sync0_lost(pdi.now_ns(), cycle) {
+                self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
+            }
         }
         if self.mode == SyncMode::SmSynchronous {
             self.consume(pdi);
@@ -285,7 +289,7 @@ impl Application for SyncApp {
     fn sync0(&mut self, pdi: &mut Pdi<'_>, _sys_ns: u64) {
         if self.mode == SyncMode::DcSynchronous {
             self.consume(pdi);
-            if self.running && self.monitor.sync0() {
+            if self.running && self.monitor.sync0(pdi.now_ns()) {
                 self.fault = Some(AlStatusCode::SYNC_ERROR);
             }
         }

@@ -12,9 +12,22 @@
 /// SSC's default limit (`MAX_SM_EVENT_MISSED`).
 pub const DEFAULT_SYNC_ERROR_LIMIT: u16 = 4;
 
+/// How long SYNC0 may stay away in OP before the SSC's SYNC0 watchdog takes the slave to
+/// SAFEOP with a fatal sync error (0x002C): its value is 1 ms below a 500 µs cycle, else twice
+/// the cycle in whole ms (0.1 ms units, truncated), counted in 1 ms ticks reset by each SYNC0,
+/// which expire one tick after the value; here from the last SYNC0, exactly.
+pub fn sync0_watchdog_ns(cycle_ns: u64) -> u64 {
+    let tenths = cycle_ns / 100_000;
+    let ms = if tenths < 5 { 1 } else { tenths * 2 / 10 };
+    (ms + 1) * 1_000_000
+}
+
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SmSyncMonitor {
-    /// 0x10F1:02; 0: counted, never a fault.
+    /// Supervising at all (the drive has the SSC's 0x10F1; `sync_error_limit` was given). Off,
+    /// the counter still counts and nothing is a fault.
+    pub on: bool,
+    /// 0x10F1:02; 0: counted, never a sync error (the SYNC0 watchdog still applies).
     pub limit: u16,
     /// The SM-event-missed counter (+3 per missed event, −1 per SM2 event).
     pub missed: u16,
@@ -24,16 +37,19 @@ pub struct SmSyncMonitor {
     armed: bool,
     /// The limit was reached since OP was last entered (0x1C32:20, "sync error").
     pub sync_error: bool,
+    /// The last SYNC0 in OP (ns), for the SYNC0 watchdog.
+    last_sync0_ns: Option<u64>,
 }
 
 impl SmSyncMonitor {
+    /// Supervising with `limit`.
     pub fn new(limit: u16) -> Self {
-        SmSyncMonitor { limit, ..Default::default() }
+        SmSyncMonitor { on: true, limit, ..Default::default() }
     }
 
     /// Entering OP starts the supervision afresh; it arms on the first outputs.
     pub fn restart(&mut self) {
-        *self = SmSyncMonitor::new(self.limit);
+        *self = SmSyncMonitor { on: self.on, limit: self.limit, ..Default::default() };
     }
 
     /// A complete output buffer (the SM2 event).
@@ -43,9 +59,16 @@ impl SmSyncMonitor {
         self.missed = self.missed.saturating_sub(1);
     }
 
-    /// A SYNC0 pulse in OP. True when this pulse takes the counter to the limit: the slave
-    /// leaves OP with 0x001A.
-    pub fn sync0(&mut self) -> bool {
+    /// Whether SYNC0 has stayed away longer than the SYNC0 watchdog of a `cycle_ns` cycle at
+    /// `now_ns` (in OP, after one SYNC0): the slave leaves OP with 0x002C, whatever the limit.
+    pub fn sync0_lost(&self, now_ns: u64, cycle_ns: u64) -> bool {
+        self.on && self.last_sync0_ns.is_some_and(|t| now_ns.saturating_sub(t) >= sync0_watchdog_ns(cycle_ns))
+    }
+
+    /// A SYNC0 pulse in OP at `now_ns`. True when this pulse takes the counter to the limit:
+    /// the slave leaves OP with 0x001A.
+    pub fn sync0(&mut self, now_ns: u64) -> bool {
+        self.last_sync0_ns = Some(now_ns);
         if !self.armed {
             return false;
         }
@@ -55,7 +78,7 @@ impl SmSyncMonitor {
             self.missed = self.missed.saturating_add(3);
         }
         self.sync0_since_sm = self.sync0_since_sm.saturating_add(1);
-        if self.limit > 0 && self.missed >= self.limit && !self.sync_error {
+        if self.on && self.limit > 0 && self.missed >= self.limit && !self.sync_error {
             self.sync_error = true;
             return true;
         }
@@ -71,12 +94,13 @@ mod tests {
     fn run(limit: u16, outputs: &[bool]) -> (Option<usize>, u16) {
         let mut m = SmSyncMonitor::new(limit);
         m.restart();
+        assert!(m.on);
         let mut tripped = None;
         for (k, &o) in outputs.iter().enumerate() {
             if o {
                 m.sm_event();
             }
-            if m.sync0() && tripped.is_none() {
+            if m.sync0(k as u64 * 1_000_000) && tripped.is_none() {
                 tripped = Some(k);
             }
         }
@@ -116,6 +140,20 @@ mod tests {
     #[test]
     fn no_supervision_before_the_first_outputs() {
         assert_eq!(run(4, &[false; 20]), (None, 0));
+    }
+
+    #[test]
+    fn the_sync0_watchdog_is_the_sscs() {
+        // 1 ms: twice the cycle, one tick more; 250 µs: 1 ms, one tick more; 750 µs truncated.
+        assert_eq!(sync0_watchdog_ns(1_000_000), 3_000_000);
+        assert_eq!(sync0_watchdog_ns(250_000), 2_000_000);
+        assert_eq!(sync0_watchdog_ns(750_000), 2_000_000);
+        assert_eq!(sync0_watchdog_ns(4_000_000), 9_000_000);
+        let mut m = SmSyncMonitor::new(4);
+        assert!(!m.sync0_lost(10_000_000, 1_000_000), "no SYNC0 yet: nothing to miss");
+        m.sync0(1_000_000);
+        assert!(!m.sync0_lost(3_999_999, 1_000_000));
+        assert!(m.sync0_lost(4_000_000, 1_000_000));
     }
 
     #[test]

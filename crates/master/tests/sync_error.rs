@@ -7,6 +7,7 @@ use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::{DcConfig, Master, MasterEvent};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_wire::register::AlStatusCode;
+use ferrocat_wire::{Address, Command};
 
 const CYCLE_NS: u64 = 1_000_000;
 
@@ -133,4 +134,35 @@ fn supervision_reads_every_al_status_in_one_frame() {
     let before = m.engine.stats.frames_sent;
     assert_eq!(m.supervise().unwrap(), 0);
     assert_eq!(m.engine.stats.frames_sent - before, 1);
+}
+
+#[test]
+fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
+    // The master deactivates the drive's SYNC0 unit (0x0981 = 0) in OP and goes on cycling:
+    // after the SSC's SYNC0 watchdog (1 ms cycle: 3 ms) the drive leaves OP with 0x002C.
+    let (mut m, mut next) = servo_in_op("", &[]);
+    let st = m.slaves[1].station;
+    m.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0]).unwrap();
+    let t0 = m.engine.io.now_ns();
+    let before = m.events.len();
+    let mut left_after_ns = None;
+    for _ in 0..20 {
+        next += CYCLE_NS;
+        m.engine.io.sleep_until(next);
+        m.cycle().unwrap();
+        if left_after_ns.is_none() && m.events.len() > before {
+            left_after_ns = Some(m.engine.io.now_ns() - t0);
+        }
+    }
+    let text: Vec<String> = m.events[before..].iter().map(|e| e.to_string()).collect();
+    assert!(
+        matches!(m.events.get(before), Some(MasterEvent::LeftOp { position: 1, code, .. }) if *code == AlStatusCode::FATAL_SYNC_ERROR),
+        "{text:#?}"
+    );
+    let after = left_after_ns.unwrap();
+    println!("left OP, seen {after} ns after SYNC0 stopped");
+    assert!((3_000_000..5_000_000).contains(&after), "seen {after} ns after SYNC0 stopped");
+    // It cannot come back without SYNC0: the master reports it once.
+    assert_eq!(text.len(), 1, "{text:#?}");
+    assert_eq!(m.engine.io.segment().unwrap().nodes[1].esc.sync_errors, 1);
 }

@@ -426,7 +426,9 @@ impl SegmentConfig {
             };
             let sync = |mode| -> Box<dyn Application> {
                 let mut app = SyncApp::new(mode, config.sm_count, drift_ppb);
-                app.monitor.limit = d.sync_error_limit.unwrap_or(0);
+                if let Some(limit) = d.sync_error_limit {
+                    app.monitor = ferrocat_esc::SmSyncMonitor::new(limit);
+                }
                 Box::new(app)
             };
             let coe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::COE != 0;

@@ -267,6 +267,7 @@ impl AlStatusCode {
     pub const SM_WATCHDOG: Self = Self(0x001B);
     pub const INVALID_OUTPUT_CONFIG: Self = Self(0x001D);
     pub const INVALID_INPUT_CONFIG: Self = Self(0x001E);
+    pub const FATAL_SYNC_ERROR: Self = Self(0x002C);
     pub const INVALID_DC_SYNC_CONFIG: Self = Self(0x0030);
 
     /// The standard description (ETG.1000.6 / esc-spec §5.2), or `None` for vendor codes.

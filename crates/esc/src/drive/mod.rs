@@ -258,7 +258,8 @@ pub struct Cia402Drive {
     switches: Switches,
     /// A limit switch stopping motion toward it, outside homing.
     limit_stop: Option<LimitStop>,
-    /// The SM-synchronisation supervision in DC mode, its limit 0x10F1:02 (none without it).
+    /// The SM-synchronisation supervision in DC mode, where the dictionary has the SSC's 0x10F1
+    /// (its limit 0x10F1:02).
     monitor: SmSyncMonitor,
     fault: Option<AlStatusCode>,
 }
@@ -1043,6 +1044,7 @@ impl Application for Cia402Drive {
         self.op = state == AlState::Op;
         if self.op && !was_op {
             // The limit as 0x10F1:02 holds it now (0 without the object: no supervision).
+            self.monitor.on = self.coe.od.get(0x10F1).is_some();
             self.monitor.limit = get_unsigned(&self.coe.od, 0x10F1, 2).min(u16::MAX as u64) as u16;
             self.monitor.restart();
         }
@@ -1068,6 +1070,9 @@ impl Application for Cia402Drive {
         self.written += 1;
         if self.op {
             self.monitor.sm_event();
+            if self.dc && self.monitor.sync0_lost(pdi.now_ns(), self.cycle_ns) {
+                self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
+            }
         }
         if self.op && !self.dc {
             self.take(pdi);
@@ -1101,7 +1106,7 @@ impl Application for Cia402Drive {
         s.sync0_events += 1;
         self.taken = self.written;
         self.last_sync0_ns = Some(now);
-        if self.monitor.sync0() {
+        if self.monitor.sync0(now) {
             self.fault = Some(AlStatusCode::SYNC_ERROR);
         }
         set(&mut self.coe.od, 0x1C32, 0x20, self.monitor.sync_error as i64);

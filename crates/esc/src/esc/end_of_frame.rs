@@ -222,6 +222,9 @@ impl Esc {
                 }
             }
         }
+        if let Some(code) = self.app.take_fault() {
+            self.leave_op(code);
+        }
         (deliver, mailbox_moved)
     }
 

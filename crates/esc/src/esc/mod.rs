@@ -203,7 +203,8 @@ pub struct Esc {
     pub mbx_duplicates: u64,
     /// Repeat requests the firmware answered.
     pub mbx_repeats: u64,
-    /// Times the application took the slave out of OP with a sync error (0x001A).
+    /// Times the application took the slave out of OP with a sync error (0x001A, or 0x002C:
+    /// SYNC0 lost).
     pub sync_errors: u64,
     /// How long the firmware takes to answer a mailbox request.
     pub mailbox_response: MailboxResponse,
@@ -683,7 +684,7 @@ impl Esc {
         if !self.device_emulation() {
             self.pdi_deactivate_outputs(true);
         }
-        self.sync_errors += (code == AlStatusCode::SYNC_ERROR) as u64;
+        self.sync_errors += matches!(code, AlStatusCode::SYNC_ERROR | AlStatusCode::FATAL_SYNC_ERROR) as u64;
         self.al.fail(AlState::SafeOp, code);
         self.al_changes += 1;
         let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
