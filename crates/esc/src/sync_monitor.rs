@@ -7,7 +7,7 @@
 //! One SYNC0 interval without outputs is tolerated (a frame that crossed its SYNC0 comes in the
 //! next interval); a master that sends nothing for three cycles trips it. The SSC compares the
 //! counter with the limit in a 1 ms timer; here it is compared at each SYNC0, the same or up to
-//! 1 ms earlier.
+//! 1 ms earlier. Its SYNC0 watchdog as well: SYNC0 gone in OP is a fatal sync error (0x002C).
 
 /// SSC's default limit (`MAX_SM_EVENT_MISSED`).
 pub const DEFAULT_SYNC_ERROR_LIMIT: u16 = 4;
