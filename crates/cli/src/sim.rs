@@ -101,7 +101,7 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "eoe": eoe,
                 // Mailbox repeat requests answered, and requests taken once though written twice.
                 "mailbox": {"repeats": n.esc.mbx_repeats, "duplicates": n.esc.mbx_duplicates},
-                // Times its application took it out of OP with a sync error (0x001A).
+                // Times its application took it out of OP with a sync error (0x001A; 0x002C: SYNC0 lost).
                 "sync_errors": n.esc.sync_errors,
             })
         })

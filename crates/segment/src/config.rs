@@ -180,8 +180,8 @@ pub struct DeviceToml {
     pub app: Option<String>,
     pub app_period_us: Option<f64>,
     /// The sync error counter limit (ETG.1020 0x10F1:02) of the SM-synchronisation supervision
-    /// that takes a DC-synchronous application out of OP with 0x001A after missed outputs
-    /// (docs/esc-model.md); 0 turns the reaction off. Default: 4 (the Slave Stack Code's) for
+    /// that takes a DC-synchronous application out of OP with 0x001A after missed outputs, and
+    /// its SYNC0 watchdog (0x002C; docs/esc-model.md); 0 turns the first reaction off. Default: 4 (the Slave Stack Code's) for
     /// the built-in SERVO, off for `app = "dc"` and drives from ESI files (which get 0x10F1
     /// with this limit where it is given).
     pub sync_error_limit: Option<u16>,
