@@ -276,9 +276,11 @@ impl Application for SyncApp {
         self.io.output_updates += 1;
         if self.running {
             self.monitor.sm_event();
-            let cycle = u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64;
-            if self.mode == SyncMode::DcSynchronous && self.monitor.sync0_lost(pdi.now_ns(), cycle) {
-                self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
+            if self.mode == SyncMode::DcSynchronous && self.monitor.on {
+                let cycle = u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64;
+                if self.monitor.sync0_lost(pdi.now_ns(), cycle) {
+                    self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
+                }
             }
         }
         if self.mode == SyncMode::SmSynchronous {

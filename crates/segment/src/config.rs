@@ -465,6 +465,13 @@ impl SegmentConfig {
             if d.sync_error_limit.is_some() && !supervised {
                 return Err(device_err(&place, "sync_error_limit needs app = \"dc\" or a CiA402 drive"));
             }
+            // Supervision is the firmware's: a device-emulating ESC has none to do it.
+            if d.sync_error_limit.is_some() && sii.get(1).is_some_and(|c| c & 1 != 0) {
+                return Err(device_err(
+                    &place,
+                    "sync_error_limit needs a firmware behind AL control (device_emulation = false)",
+                ));
+            }
             let app: Box<dyn Application> = match (d.app.as_deref(), od) {
                 (None | Some("cia402"), Some(od)) if drive => {
                     // Each drive draws from its own stream: the others' draws stay as they were.

@@ -149,6 +149,10 @@ fn builtin_devices_and_bad_descriptions() {
             "device 0: sync_error_limit needs app = \"dc\" or a CiA402 drive",
         ),
         (
+            "[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\nsync_error_limit = 4\n",
+            "device 0: sync_error_limit needs a firmware behind AL control (device_emulation = false)",
+        ),
+        (
             "[[device]]\nbuiltin = 'SERVO'\nnegative_limit_rev = 2.0\npositive_limit_rev = -2.0\n",
             "device 0: negative_limit_rev (2) must lie below positive_limit_rev (-2)",
         ),
