@@ -194,7 +194,6 @@ pub struct SyncApp {
     pub repeated: u64,
     /// DC-synchronous mode: the SM-synchronisation supervision (off unless set).
     pub monitor: SmSyncMonitor,
-    fault: Option<AlStatusCode>,
     running: bool,
     timer_t0: u64,
     timer_k: u64,
@@ -219,7 +218,6 @@ impl SyncApp {
             lost: 0,
             repeated: 0,
             monitor: SmSyncMonitor::default(),
-            fault: None,
             running: false,
             timer_t0: 0,
             timer_k: 0,
@@ -275,13 +273,9 @@ impl Application for SyncApp {
         self.written += 1;
         self.io.output_updates += 1;
         if self.running {
-            self.monitor.sm_event();
-            if self.mode == SyncMode::DcSynchronous && self.monitor.on {
-                let cycle = u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64;
-                if self.monitor.sync0_lost(pdi.now_ns(), cycle) {
-                    self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
-                }
-            }
+            let supervised = self.mode == SyncMode::DcSynchronous && self.monitor.on;
+            let cycle = supervised.then(|| u32::from_le_bytes(pdi.read(0x09A0, 4).try_into().unwrap_or([0; 4])) as u64);
+            self.monitor.outputs(pdi.now_ns(), cycle);
         }
         if self.mode == SyncMode::SmSynchronous {
             self.consume(pdi);
@@ -291,13 +285,13 @@ impl Application for SyncApp {
     fn sync0(&mut self, pdi: &mut Pdi<'_>, _sys_ns: u64) {
         if self.mode == SyncMode::DcSynchronous {
             self.consume(pdi);
-            if self.running && self.monitor.sync0(pdi.now_ns()) {
-                self.fault = Some(AlStatusCode::SYNC_ERROR);
+            if self.running {
+                self.monitor.pulse(pdi.now_ns());
             }
         }
     }
     fn take_fault(&mut self) -> Option<AlStatusCode> {
-        self.fault.take()
+        self.monitor.take_fault()
     }
     fn next_event_ns(&self) -> Option<u64> {
         match self.mode {

@@ -8,6 +8,7 @@
 //! next interval); a master that sends nothing for three cycles trips it. The SSC compares the
 //! counter with the limit in a 1 ms timer; here it is compared at each SYNC0, the same or up to
 //! 1 ms earlier. Its SYNC0 watchdog as well: SYNC0 gone in OP is a fatal sync error (0x002C).
+use ferrocat_wire::register::AlStatusCode;
 
 /// SSC's default limit (`MAX_SM_EVENT_MISSED`).
 pub const DEFAULT_SYNC_ERROR_LIMIT: u16 = 4;
@@ -39,6 +40,8 @@ pub struct SmSyncMonitor {
     pub sync_error: bool,
     /// The last SYNC0 in OP (ns), for the SYNC0 watchdog.
     last_sync0_ns: Option<u64>,
+    /// A fault found and not yet taken by the ESC.
+    fault: Option<AlStatusCode>,
 }
 
 impl SmSyncMonitor {
@@ -52,8 +55,28 @@ impl SmSyncMonitor {
         *self = SmSyncMonitor { on: self.on, limit: self.limit, ..Default::default() };
     }
 
-    /// A complete output buffer (the SM2 event).
-    pub fn sm_event(&mut self) {
+    /// A complete output buffer in OP at `now_ns` (the SM2 event); `sync0_cycle_ns`, where the
+    /// application runs on SYNC0, for the SYNC0 watchdog.
+    pub fn outputs(&mut self, now_ns: u64, sync0_cycle_ns: Option<u64>) {
+        self.sm_event();
+        if sync0_cycle_ns.is_some_and(|c| self.sync0_lost(now_ns, c)) {
+            self.fault = self.fault.or(Some(AlStatusCode::FATAL_SYNC_ERROR));
+        }
+    }
+
+    /// A SYNC0 pulse in OP at `now_ns`.
+    pub fn pulse(&mut self, now_ns: u64) {
+        if self.sync0(now_ns) {
+            self.fault = self.fault.or(Some(AlStatusCode::SYNC_ERROR));
+        }
+    }
+
+    /// The fault found since last asked: the slave leaves OP with it.
+    pub fn take_fault(&mut self) -> Option<AlStatusCode> {
+        self.fault.take()
+    }
+
+    fn sm_event(&mut self) {
         self.armed = true;
         self.sync0_since_sm = 0;
         self.missed = self.missed.saturating_sub(1);
@@ -61,13 +84,13 @@ impl SmSyncMonitor {
 
     /// Whether SYNC0 has stayed away longer than the SYNC0 watchdog of a `cycle_ns` cycle at
     /// `now_ns` (in OP, after one SYNC0): the slave leaves OP with 0x002C, whatever the limit.
-    pub fn sync0_lost(&self, now_ns: u64, cycle_ns: u64) -> bool {
+    fn sync0_lost(&self, now_ns: u64, cycle_ns: u64) -> bool {
         self.on && self.last_sync0_ns.is_some_and(|t| now_ns.saturating_sub(t) >= sync0_watchdog_ns(cycle_ns))
     }
 
     /// A SYNC0 pulse in OP at `now_ns`. True when this pulse takes the counter to the limit:
     /// the slave leaves OP with 0x001A.
-    pub fn sync0(&mut self, now_ns: u64) -> bool {
+    fn sync0(&mut self, now_ns: u64) -> bool {
         self.last_sync0_ns = Some(now_ns);
         if !self.armed {
             return false;

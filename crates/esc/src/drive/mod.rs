@@ -261,7 +261,6 @@ pub struct Cia402Drive {
     /// The SM-synchronisation supervision in DC mode, where the dictionary has the SSC's 0x10F1
     /// (its limit 0x10F1:02).
     monitor: SmSyncMonitor,
-    fault: Option<AlStatusCode>,
 }
 
 /// A limit switch the shaft stands on stops motion toward it: a ramp at the quick-stop
@@ -329,7 +328,6 @@ impl Cia402Drive {
             switches: Switches::default(),
             limit_stop: None,
             monitor: SmSyncMonitor::default(),
-            fault: None,
         };
         d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
         d.write_feedback(d.feedback());
@@ -1047,8 +1045,6 @@ impl Application for Cia402Drive {
             self.monitor.on = self.coe.od.get(0x10F1).is_some();
             self.monitor.limit = get_unsigned(&self.coe.od, 0x10F1, 2).min(u16::MAX as u64) as u16;
             self.monitor.restart();
-        }
-        if self.op && !was_op {
             self.model_ns = Some(pdi.now_ns());
             self.last_sync0_ns = None;
             self.taken = self.written;
@@ -1069,10 +1065,7 @@ impl Application for Cia402Drive {
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         self.written += 1;
         if self.op {
-            self.monitor.sm_event();
-            if self.dc && self.monitor.sync0_lost(pdi.now_ns(), self.cycle_ns) {
-                self.fault = Some(AlStatusCode::FATAL_SYNC_ERROR);
-            }
+            self.monitor.outputs(pdi.now_ns(), self.dc.then_some(self.cycle_ns));
         }
         if self.op && !self.dc {
             self.take(pdi);
@@ -1106,14 +1099,12 @@ impl Application for Cia402Drive {
         s.sync0_events += 1;
         self.taken = self.written;
         self.last_sync0_ns = Some(now);
-        if self.monitor.sync0(now) {
-            self.fault = Some(AlStatusCode::SYNC_ERROR);
-        }
+        self.monitor.pulse(now);
         set(&mut self.coe.od, 0x1C32, 0x20, self.monitor.sync_error as i64);
         self.take(pdi);
     }
     fn take_fault(&mut self) -> Option<AlStatusCode> {
-        self.fault.take()
+        self.monitor.take_fault()
     }
     fn mailbox(&mut self, pdi: &mut Pdi<'_>, request: &[u8]) -> Option<Vec<u8>> {
         self.coe.mailbox(pdi, request)

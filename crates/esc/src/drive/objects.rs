@@ -40,7 +40,6 @@ fn entry(sub: u8, name: &str, ty: u16, bits: u16, write: bool, v: u32) -> Entry 
 }
 
 fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32) -> Object {
-    let e = entry;
     let mut o = Object::list(
         index,
         name,
@@ -48,17 +47,17 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
         0x0042,
         Access::RO,
         vec![
-            e(0x01, "Synchronization type", dt::UINT, 16, true, SYNC_FREE_RUN as u32),
-            e(0x02, "Cycle time", dt::UDINT, 32, true, 0),
-            e(0x03, "Shift time", dt::UDINT, 32, false, 0),
-            e(0x04, "Synchronization types supported", dt::UINT, 16, false, SYNC_TYPES_SUPPORTED as u32),
-            e(0x05, "Minimum cycle time", dt::UDINT, 32, false, min_cycle_ns),
-            e(0x06, "Calc and copy time", dt::UDINT, 32, false, calc_copy_ns),
-            e(0x09, "Delay time", dt::UDINT, 32, false, 0),
-            e(0x0A, "Sync0 cycle time", dt::UDINT, 32, false, 0),
-            e(0x0B, "SM event missed", dt::UINT, 16, false, 0),
-            e(0x0C, "Cycle time too small", dt::UINT, 16, false, 0),
-            e(0x20, "Sync error", dt::BOOL, 8, false, 0),
+            entry(0x01, "Synchronization type", dt::UINT, 16, true, SYNC_FREE_RUN as u32),
+            entry(0x02, "Cycle time", dt::UDINT, 32, true, 0),
+            entry(0x03, "Shift time", dt::UDINT, 32, false, 0),
+            entry(0x04, "Synchronization types supported", dt::UINT, 16, false, SYNC_TYPES_SUPPORTED as u32),
+            entry(0x05, "Minimum cycle time", dt::UDINT, 32, false, min_cycle_ns),
+            entry(0x06, "Calc and copy time", dt::UDINT, 32, false, calc_copy_ns),
+            entry(0x09, "Delay time", dt::UDINT, 32, false, 0),
+            entry(0x0A, "Sync0 cycle time", dt::UDINT, 32, false, 0),
+            entry(0x0B, "SM event missed", dt::UINT, 16, false, 0),
+            entry(0x0C, "Cycle time too small", dt::UINT, 16, false, 0),
+            entry(0x20, "Sync error", dt::BOOL, 8, false, 0),
         ],
     );
     // Subindex 0 holds the highest subindex, not the count.
@@ -193,7 +192,6 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
 /// error reaction 1, and the sync error counter limit (writable; 0 turns the reaction off).
 pub fn add_error_settings(od: &mut ObjectDictionary, limit: u16) {
     if od.get(0x10F1).is_none() {
-        let e = entry;
         od.insert(Object::list(
             0x10F1,
             "Error settings",
@@ -201,8 +199,8 @@ pub fn add_error_settings(od: &mut ObjectDictionary, limit: u16) {
             0x0000,
             Access::RO,
             vec![
-                e(0x01, "Local error reaction", dt::UDINT, 32, true, 1),
-                e(0x02, "Sync error counter limit", dt::UINT, 16, true, 0),
+                entry(0x01, "Local error reaction", dt::UDINT, 32, true, 1),
+                entry(0x02, "Sync error counter limit", dt::UINT, 16, true, 0),
             ],
         ));
     }

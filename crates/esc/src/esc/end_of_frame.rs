@@ -186,7 +186,7 @@ impl Esc {
     /// follow) and whether any mailbox changed.
     #[inline]
     fn complete_sm_buffers(&mut self, t: u64) -> (bool, bool) {
-        let (mut deliver, mut mailbox_moved) = (false, false);
+        let (mut deliver, mut mailbox_moved, mut handed) = (false, false, false);
         for n in 0..self.config.sm_count {
             let s = self.sm(n);
             let st = &mut self.sms[n as usize];
@@ -219,10 +219,12 @@ impl Esc {
                 if matches!(self.al.state, AlState::Op) {
                     let mut pdi = Pdi { mem: &mut self.mem, now_ns: t };
                     self.app.outputs_written(&mut pdi, n);
+                    handed = true;
                 }
             }
         }
-        if let Some(code) = self.app.take_fault() {
+        // Outputs handed over may show the SYNC0 watchdog expired.
+        if let Some(code) = if handed { self.app.take_fault() } else { None } {
             self.leave_op(code);
         }
         (deliver, mailbox_moved)
