@@ -22,7 +22,14 @@
 //!
 //! The sums are kept exactly in i128 about an origin, so adding and dropping a point costs
 //! O(1) however long the window and the line never drifts from rounding.
+//!
+//! Inside the window, shorter ones (its newest points) keep lines of their own, and one of
+//! them is the line in use where it has foretold the points better: crystals that wander in
+//! frequency (shorter.rs).
 use std::collections::VecDeque;
+
+mod shorter;
+use shorter::{Score, Shorter, MAX_SHORTER};
 
 /// Points the noise scale is learned on before any is rejected or counted as a change.
 const WARM_UP: usize = 16;
@@ -60,6 +67,16 @@ const MAX_RATE_ERROR: f64 = 1e-3;
 /// With at most `MAX_POINTS` points of |dx|, |dz| ≤ 2·SPAN the i128 sums cannot overflow.
 const SPAN: u64 = 1 << 40;
 const MAX_POINTS: usize = 1 << 16;
+/// The shorter windows' scores are kept every this many points, this many times back: a
+/// restart at a change takes them back to before the change began, so that the change's own
+/// points, which any shorter line foretold better than the old whole one, do not count as
+/// evidence of a wandering crystal.
+const SNAPSHOT_EVERY: u64 = 64;
+const SNAPSHOTS: usize = 32;
+/// …taken back to this many points before the change's estimated start: a rate step's ramp
+/// hides in the noise for its first points, before the CUSUM leaves zero (in 300 ns of noise
+/// at 1 ms ≈ 30 points for a 5 ppm step, ≈ 150 for 1 ppm).
+const SCORES_BEFORE_CHANGE: u64 = 256;
 
 /// What became of a point.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -83,14 +100,45 @@ struct Sums {
     xz: i128,
 }
 
+impl Sums {
+    fn account(&mut self, dx: i64, dz: i64, sign: i128) {
+        let (dx, dz) = (dx as i128, dz as i128);
+        self.n += sign;
+        self.x += sign * dx;
+        self.xx += sign * dx * dx;
+        self.z += sign * dz;
+        self.xz += sign * dx * dz;
+    }
+
+    /// n·Σ(xᵢ − x̄)² and n·Σ(xᵢ − x̄)(zᵢ − z̄) (n² times var(x) and cov(x, z)), exact.
+    fn centred(&self) -> (i128, i128) {
+        (self.n * self.xx - self.x * self.x, self.n * self.xz - self.x * self.z)
+    }
+}
+
+/// A line as (slope of dz on dx, mean dx, mean dz).
+type Line = (f64, f64, f64);
+
+/// The line's dz at `dx`.
+fn dz_at((slope, mx, mz): Line, dx: f64) -> f64 {
+    mz + slope * (dx - mx)
+}
+
 #[derive(Debug, Clone)]
 pub struct LineFit {
     max_len: usize,
     points: VecDeque<(u64, u64)>,
     origin: (u64, u64),
     sums: Sums,
-    /// The line as (slope of dz on dx, mean dx, mean dz), refreshed on every change.
-    line: Option<(f64, f64, f64)>,
+    /// The whole window's line, refreshed on every change.
+    line: Option<Line>,
+    /// Shorter windows of the newest points, and which of them, if any, is the line in use.
+    shorter: Vec<Shorter>,
+    chosen: Option<usize>,
+    /// (points added, the shorter windows' scores then), oldest first.
+    snapshots: VecDeque<(u64, [Score; MAX_SHORTER])>,
+    /// Whether a shorter window's line may be chosen (tests compare the fit without).
+    choose: bool,
     /// The slope of the line before the last restart: the prior of the new window's.
     prior_slope: Option<f64>,
     /// The prior's standard deviation (`RATE_CHANGE_SD`; tests compare others).
@@ -131,6 +179,10 @@ impl LineFit {
             origin: (0, 0),
             sums: Sums::default(),
             line: None,
+            shorter: shorter::lengths(max_len).map(Shorter::new).collect(),
+            chosen: None,
+            snapshots: VecDeque::with_capacity(SNAPSHOTS + 1),
+            choose: true,
             prior_slope: None,
             rate_change_sd: RATE_CHANGE_SD,
             scale_ns: 0.0,
@@ -249,6 +301,7 @@ impl LineFit {
         // The scale follows the accepted innovations (mean |·| of a normal is 0.8 σ).
         let a = innovation.abs().min(SPAN as f64) * 1.2533;
         self.scale_ns = if self.innovations == 1 { a } else { self.scale_ns + (a - self.scale_ns) / SCALE_MEMORY };
+        self.score_shorter(x, y);
         if self.add(x, y) {
             self.restarts += 1;
             return Fate::Restarted;
@@ -259,14 +312,68 @@ impl LineFit {
     /// A change began when `since` points had been added: the window keeps the points from
     /// there on (at least `MIN_RESTART`) and takes (x, y).
     fn restart_at_change(&mut self, since: u64, x: u64, y: u64) -> Fate {
+        self.scores_back_to(since.saturating_sub(SCORES_BEFORE_CHANGE));
         self.restart(((self.added - since) as usize).max(MIN_RESTART));
         self.add(x, y);
         Fate::Restarted
     }
 
+    /// Scores the shorter windows' lines on the accepted point (x, y) before it joins, and
+    /// chooses the line in use (shorter.rs).
+    fn score_shorter(&mut self, x: u64, y: u64) {
+        let Some(whole) = self.line.filter(|_| self.choose) else { return };
+        let (dx, dz) = self.rel((x, y));
+        let (dx, dz) = (dx as f64, dz as f64);
+        let r_whole = dz - dz_at(whole, dx);
+        let n = self.sums.n;
+        let mut best: Option<(usize, f64)> = None;
+        for (k, w) in self.shorter.iter_mut().enumerate() {
+            // A window no shorter than the whole one is the same line.
+            let Some(line) = w.line.filter(|_| w.sums.n < n) else { continue };
+            w.score.add(dz - dz_at(line, dx), r_whole);
+            if let Some(by) = w.score.better_by() {
+                if best.is_none_or(|(_, b)| by < b) {
+                    best = Some((k, by));
+                }
+            }
+        }
+        self.chosen = best.map(|(k, _)| k);
+        // The scores now count this point, the (added + 1)th.
+        let counted = self.added + 1;
+        if counted % SNAPSHOT_EVERY == 0 {
+            if self.snapshots.len() == SNAPSHOTS {
+                self.snapshots.pop_front();
+            }
+            let mut scores = [Score::default(); MAX_SHORTER];
+            for (s, w) in scores.iter_mut().zip(&self.shorter) {
+                *s = w.score;
+            }
+            self.snapshots.push_back((counted, scores));
+        }
+    }
+
+    /// The shorter windows' scores as they were when at most `since` points had been added
+    /// (none if no snapshot is that old).
+    fn scores_back_to(&mut self, since: u64) {
+        while self.snapshots.back().is_some_and(|&(counted, _)| counted > since) {
+            self.snapshots.pop_back();
+        }
+        let scores = self.snapshots.back().map_or([Score::default(); MAX_SHORTER], |&(_, s)| s);
+        for (w, s) in self.shorter.iter_mut().zip(scores) {
+            w.score = s;
+        }
+    }
+
+    /// The shorter windows' scores start again.
+    fn forget_scores(&mut self) {
+        self.snapshots.clear();
+        self.scores_back_to(0);
+    }
+
     /// Drops all but the newest `keep` points.
     fn restart(&mut self, keep: usize) {
         self.keep_prior();
+        self.chosen = None;
         let n = self.points.len();
         let keep = keep.min(n);
         self.points.drain(..n - keep);
@@ -280,18 +387,38 @@ impl LineFit {
 
     /// The line at `x` (None before the first point).
     pub fn at(&self, x: u64) -> Option<u64> {
-        let (slope, mx, mz) = self.line?;
-        let dx = x.wrapping_sub(self.origin.0) as i64;
-        let dz = mz + slope * (dx as f64 - mx);
-        Some(self.origin.1.wrapping_add_signed(dx).wrapping_add_signed(dz.round() as i64))
+        Some(self.value_at(self.in_use().1?, x))
     }
 
-    /// The standard deviation (ns) of the line's value `ahead_ns` past its newest point, from
-    /// the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/(Σ(xᵢ − x̄)² + λ)), λ the
-    /// prior's weight (0 without one). `None` before two distinct x where there is no prior.
+    fn value_at(&self, line: Line, x: u64) -> u64 {
+        let dx = x.wrapping_sub(self.origin.0) as i64;
+        let dz = dz_at(line, dx as f64);
+        self.origin.1.wrapping_add_signed(dx).wrapping_add_signed(dz.round() as i64)
+    }
+
+    /// The sums and the line in use: the whole window's or a shorter one's that foretold the
+    /// points better.
+    fn in_use(&self) -> (&Sums, Option<Line>) {
+        match self.chosen.and_then(|k| self.shorter.get(k)) {
+            Some(w) => (&w.sums, w.line),
+            None => (&self.sums, self.line),
+        }
+    }
+
+    /// Points in the line in use (the window's, or the shorter window's chosen).
+    pub fn len_in_use(&self) -> usize {
+        self.in_use().0.n as usize
+    }
+
+    /// The standard deviation (ns) of the whole window's line `ahead_ns` past its newest point,
+    /// from the noise scale and the window's spread: σ·√(1/n + (x − x̄)²/(Σ(xᵢ − x̄)² + λ)), λ
+    /// the prior's weight (0 without one). `None` before two distinct x where there is no
+    /// prior. The whole window's even where a shorter line is in use: this is what waiting for
+    /// points makes certain, which is what probing asks (with wandering crystals, probing by
+    /// the shorter line's spread bought nothing measurable: docs/clock-sync.md).
     pub fn sd_ahead_ns(&self, ahead_ns: u64) -> Option<f64> {
         let &(newest, _) = self.points.back()?;
-        Some(self.scale() * self.line_var_at(newest.wrapping_add(ahead_ns))?.sqrt())
+        Some(self.scale() * self.var_at(&self.sums, newest.wrapping_add(ahead_ns))?.sqrt())
     }
 
     /// The standard deviation (ns) of the line's value at `x`.
@@ -299,10 +426,14 @@ impl LineFit {
         Some(self.scale() * self.line_var_at(x)?.sqrt())
     }
 
-    /// The variance of the line's value at `x` in units of σ²: 1/n + (x − x̄)²/P.
+    /// The variance of the line in use's value at `x` in units of σ²: 1/n + (x − x̄)²/P.
     fn line_var_at(&self, x: u64) -> Option<f64> {
-        let s = self.sums;
-        let precision = self.slope_precision()?;
+        self.var_at(self.in_use().0, x)
+    }
+
+    /// The same for the line through `s`.
+    fn var_at(&self, s: &Sums, x: u64) -> Option<f64> {
+        let precision = self.slope_precision(s)?;
         let n = s.n as f64;
         let d = x.wrapping_sub(self.origin.0) as i64 as f64 - s.x as f64 / n;
         Some(1.0 / n + d * d / precision)
@@ -316,7 +447,7 @@ impl LineFit {
 
     /// The reference's rate against the master's (1 before there are two distinct x).
     pub fn rate(&self) -> Option<f64> {
-        self.line.map(|(slope, _, _)| 1.0 + slope)
+        self.in_use().1.map(|(slope, _, _)| 1.0 + slope)
     }
 
     /// The master time from the window's oldest point to its newest (ns).
@@ -330,22 +461,16 @@ impl LineFit {
     /// The standard deviation of [`LineFit::rate`], from the noise scale and the window's
     /// spread: σ/√(Σ(xᵢ − x̄)² + λ). `None` before two distinct x where there is no prior.
     pub fn rate_sd(&self) -> Option<f64> {
-        Some(self.scale() / self.slope_precision()?.sqrt())
+        Some(self.scale() / self.slope_precision(self.in_use().0)?.sqrt())
     }
 
-    /// Σ(xᵢ − x̄)² plus the prior's λ (ns²): the slope's precision times σ². `None` while
-    /// the window says nothing of its slope and there is no prior.
-    fn slope_precision(&self) -> Option<f64> {
-        let (sxx, _) = self.centred();
-        let spread = if sxx > 0 { sxx as f64 / self.sums.n as f64 } else { 0.0 };
+    /// Σ(xᵢ − x̄)² plus the prior's λ (ns²) of the points summed in `s`: the slope's
+    /// precision times σ². `None` while they say nothing of the slope and there is no prior.
+    fn slope_precision(&self, s: &Sums) -> Option<f64> {
+        let (sxx, _) = s.centred();
+        let spread = if sxx > 0 { sxx as f64 / s.n as f64 } else { 0.0 };
         let precision = spread + self.prior_weight();
-        (self.sums.n >= 1 && precision > 0.0).then_some(precision)
-    }
-
-    /// n·Σ(xᵢ − x̄)² and n·Σ(xᵢ − x̄)(zᵢ − z̄) (n² times var(x) and cov(x, z)), exact.
-    fn centred(&self) -> (i128, i128) {
-        let s = self.sums;
-        (s.n * s.xx - s.x * s.x, s.n * s.xz - s.x * s.z)
+        (s.n >= 1 && precision > 0.0).then_some(precision)
     }
 
     /// λ = σ²/τ² of the prior on the slope (0 without one).
@@ -385,6 +510,8 @@ impl LineFit {
             let (_, dz) = self.rel((x, y));
             if far(dx_oldest) || far(dz) {
                 self.keep_prior();
+                self.forget_scores();
+                self.chosen = None;
                 self.pending = None;
                 self.points.clear();
                 self.points.push_back((x, y));
@@ -398,7 +525,7 @@ impl LineFit {
         if self.points.len() >= self.max_len {
             if let Some(old) = self.points.pop_front() {
                 let (dx, dz) = self.rel(old);
-                self.account(dx, dz, -1);
+                self.sums.account(dx, dz, -1);
             }
         }
         self.points.push_back((x, y));
@@ -407,10 +534,22 @@ impl LineFit {
         // well inside i64; 2⁴⁰ ns is 18 minutes).
         if far(dx) || far(dz) {
             self.rebuild();
-        } else {
-            self.account(dx, dz, 1);
-            self.refresh();
+            return false;
         }
+        self.sums.account(dx, dz, 1);
+        // Each shorter window takes the point and, once full, drops the one `len` back (the
+        // whole window's oldest is never in a shorter one: `len` < `max_len`).
+        let n = self.points.len();
+        for k in 0..self.shorter.len() {
+            let len = self.shorter[k].len;
+            let dropped = (n > len).then(|| self.rel(self.points[n - 1 - len]));
+            let w = &mut self.shorter[k];
+            w.sums.account(dx, dz, 1);
+            if let Some((dx, dz)) = dropped {
+                w.sums.account(dx, dz, -1);
+            }
+        }
+        self.refresh();
         false
     }
 
@@ -423,16 +562,6 @@ impl LineFit {
         let dx = x.wrapping_sub(o.0) as i64;
         let dy = y.wrapping_sub(o.1) as i64;
         (dx, dy.wrapping_sub(dx))
-    }
-
-    fn account(&mut self, dx: i64, dz: i64, sign: i128) {
-        let (dx, dz) = (dx as i128, dz as i128);
-        let s = &mut self.sums;
-        s.n += sign;
-        s.x += sign * dx;
-        s.xx += sign * dx * dx;
-        s.z += sign * dz;
-        s.xz += sign * dx * dz;
     }
 
     /// The sums again from the points, about the newest point.
@@ -450,33 +579,46 @@ impl LineFit {
             }
             self.points.pop_front();
         }
-        for k in 0..self.points.len() {
+        let n = self.points.len();
+        for w in &mut self.shorter {
+            w.sums = Sums::default();
+        }
+        for k in 0..n {
             let (dx, dz) = self.rel(self.points[k]);
-            self.account(dx, dz, 1);
+            self.sums.account(dx, dz, 1);
+            for w in self.shorter.iter_mut().filter(|w| k + w.len >= n) {
+                w.sums.account(dx, dz, 1);
+            }
         }
         self.refresh();
     }
 
     fn refresh(&mut self) {
-        let s = self.sums;
-        if s.n == 0 {
-            self.line = None;
-            return;
+        self.line = self.line_through(&self.sums);
+        for k in 0..self.shorter.len() {
+            self.shorter[k].line = self.line_through(&self.shorter[k].sums);
         }
-        // Least squares; with the prior, the maximum a posteriori slope (module comment).
-        let (sxx, sxz) = self.centred();
+    }
+
+    /// The line through the points summed in `s`: least squares, or with the prior the maximum
+    /// a posteriori slope (module comment). `None` for no points.
+    fn line_through(&self, s: &Sums) -> Option<Line> {
+        if s.n == 0 {
+            return None;
+        }
+        let (sxx, sxz) = s.centred();
         let n = s.n as f64;
         let slope = match self.prior_slope {
             Some(prior) => {
                 let covariance = if sxx > 0 { sxz as f64 / n } else { 0.0 };
                 // Σ(x − x̄)² + λ: never 0 with a prior.
-                self.slope_precision().map_or(prior, |p| (covariance + self.prior_weight() * prior) / p)
+                self.slope_precision(s).map_or(prior, |p| (covariance + self.prior_weight() * prior) / p)
             }
             None if sxx > 0 => sxz as f64 / sxx as f64,
             None => 0.0,
         }
         .clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR);
-        self.line = Some((slope, s.x as f64 / n, s.z as f64 / n));
+        Some((slope, s.x as f64 / n, s.z as f64 / n))
     }
 }
 
@@ -718,6 +860,88 @@ mod tests {
         assert_eq!(fates[1000 + JUMP_RUN], Fate::Outlier);
         assert!(fates[1000 + JUMP_RUN + 1..].iter().all(|&f| f == Fate::Added));
         assert_eq!(f.restarts, 1);
+    }
+
+    /// (master time, reference time) of a reference whose rate starts 30 ppm fast and
+    /// random-walks by `wander_ppb` per √s (a step every 100 ms, as the simulator's crystals
+    /// do), one a millisecond for `n` ms, each with the master's stamp of it scattered by
+    /// `sd_ns`: (true x, stamped x, y).
+    fn wandering(n: usize, wander_ppb: f64, sd_ns: f64, seed: u64) -> Vec<(u64, u64, u64)> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sd_ns).unwrap();
+        let step = Normal::new(0.0, wander_ppb * 1e-9 * 0.1f64.sqrt()).unwrap();
+        let (mut rate, mut phase) = (30e-6, 0.0);
+        (0..n as u64)
+            .map(|k| {
+                if k % 100 == 0 {
+                    rate += step.sample(&mut rng);
+                }
+                phase += rate * 1e6;
+                let t = 5_000_000_000 + k * 1_000_000;
+                (t, t.wrapping_add_signed(noise.sample(&mut rng) as i64), 700_000_000_000 + t + phase as u64)
+            })
+            .collect()
+    }
+
+    /// RMS (ns) of the line in use against each point's true reference time, before the point
+    /// joins, over the points after the first 20 000 of 40 000; whether a shorter line was ever
+    /// in use; with shorter lines or without.
+    fn wandering_error(wander_ppb: f64, seed: u64, choose: bool) -> (f64, bool) {
+        let mut f = LineFit::new(16_384);
+        f.choose = choose;
+        let (mut sq, mut n, mut shorter) = (0.0, 0.0, false);
+        for (k, &(t, x, y)) in wandering(40_000, wander_ppb, 300.0, seed).iter().enumerate() {
+            if k >= 20_000 {
+                sq += (f.at(t).unwrap().wrapping_sub(y) as i64 as f64).powi(2);
+                n += 1.0;
+            }
+            f.push(x, y);
+            shorter |= f.len_in_use() < f.len();
+        }
+        ((sq / n).sqrt(), shorter)
+    }
+
+    #[test]
+    fn a_wandering_rate_puts_a_shorter_line_in_use_nearer_the_truth() {
+        // 50 ppb/√s with 300 ns stamps (pc-rt's scale): 16 s of points carry the wander, and
+        // the change test restarts such a window now and then.
+        for seed in 7..10 {
+            let (with, shorter) = wandering_error(50.0, seed, true);
+            let (without, _) = wandering_error(50.0, seed, false);
+            assert!(shorter, "seed {seed}");
+            assert!(with < 0.6 * without, "seed {seed}: {with:.1} ns with shorter lines, {without:.1} without");
+        }
+    }
+
+    #[test]
+    fn without_wander_the_whole_window_stays_in_use() {
+        for seed in 10..13 {
+            let (with, shorter) = wandering_error(0.0, seed, true);
+            assert!(!shorter, "seed {seed}");
+            assert_eq!(with, wandering_error(0.0, seed, false).0);
+        }
+    }
+
+    #[test]
+    fn a_rate_step_is_no_evidence_of_wander() {
+        // Before the change test restarts the window, every shorter line foretells the step's
+        // points better than the whole one; taken as evidence, that would keep a shorter,
+        // noisier line in use for seconds after a step of steady crystals. A 1 ppm step in
+        // 300 ns of noise: its ramp takes hundreds of points to show (without the scores taken
+        // back, a 8 192-point line is in use 8 s after it).
+        for seed in 0..3 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(40 + seed);
+            let noise = Normal::new(0.0, 300.0).unwrap();
+            let mut f = LineFit::new(16_384);
+            let mut phase = 0.0;
+            for k in 0..40_000u64 {
+                phase += if k < 20_000 { 10.0 } else { 11.0 } * 1e-6 * 1e6;
+                let t = 5_000_000_000 + k * 1_000_000;
+                f.push(t.wrapping_add_signed(noise.sample(&mut rng) as i64), 700_000_000_000 + t + phase as u64);
+                assert_eq!(f.len_in_use(), f.len(), "seed {seed}, point {k}");
+            }
+            assert_eq!(f.restarts, 1, "seed {seed}");
+        }
     }
 
     #[test]
