@@ -149,10 +149,10 @@ fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
 }
 
 /// Three couplers whose crystals random-walk by 50 ppb/√s (a plain crystal: a few), seeds
-/// 1–4 of one round each: ferrocat's line takes the shorter window that foretells the points
-/// best (since session 44). Reference MRMS, mean of the four seeds, `ferrocat` / `ferrocat-mfr`:
-/// 31 / 27 ns; with the whole window only 83 / 68 ns (docs/clock-sync.md, robustness chapter,
-/// oscillator wander, sessions 42 and 44).
+/// 1–4 of one round each after 30 s of settling: ferrocat's line takes the shorter window that
+/// foretells the cycles' points best (since session 44). Reference MRMS, mean of the four
+/// seeds, `ferrocat` / `ferrocat-mfr`: 15 / 16 ns; with the whole window only 58 / 56 ns
+/// (docs/clock-sync.md, robustness chapter, oscillator wander, sessions 42 and 44).
 #[test]
 fn wandering_crystals_shorten_ferrocats_line() {
     let device = "[[device]]\nbuiltin = \"EK1100\"\nwander_ppb_per_sqrt_s = 50.0\n";
@@ -161,6 +161,10 @@ fn wandering_crystals_shorten_ferrocats_line() {
         methods: vec!["ferrocat".into(), "ferrocat-mfr".into()],
         slaves: vec![3],
         segment: Some(toml::from_str(&format!("seed = 1\n{}", device.repeat(3))).unwrap()),
+        // The shorter lines are scored on the cycles' frames and one counts after 8 192 of
+        // them; the GPIO calibration, in the middle half of the settling, must come after that
+        // (else it takes the whole line's wander error there for the stamps' asymmetry).
+        settle_s: 30.0,
         ..Options::quick(HostModel::pc_rt())
     };
     let mut mrms_us = [0.0; 2];
@@ -170,5 +174,5 @@ fn wandering_crystals_shorten_ferrocats_line() {
             mrms_us[k] += r.ref_mrms_us / 4.0;
         }
     }
-    assert!(mrms_us.iter().all(|&m| m < 0.045), "{mrms_us:?}");
+    assert!(mrms_us.iter().all(|&m| m < 0.03), "{mrms_us:?}");
 }

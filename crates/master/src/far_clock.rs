@@ -82,7 +82,7 @@ impl FarClock {
         FarClock {
             break_x: None,
             anchor_ns: None,
-            fit: LineFit::with_prior(WINDOW, 0.0, RATE_PRIOR_SD),
+            fit: LineFit::with_prior(WINDOW, 0.0, RATE_PRIOR_SD).whole_only(),
             samples: 0,
             last_x: None,
             known_level: false,

@@ -137,8 +137,8 @@ pub struct LineFit {
     chosen: Option<usize>,
     /// (points added, the shorter windows' scores then), oldest first.
     snapshots: VecDeque<(u64, [Score; MAX_SHORTER])>,
-    /// Whether a shorter window's line may be chosen (tests compare the fit without).
-    choose: bool,
+    /// Only points at least this long after the one before are scored (`LineFit::score_gap`).
+    score_gap_ns: i64,
     /// The slope of the line before the last restart: the prior of the new window's.
     prior_slope: Option<f64>,
     /// The prior's standard deviation (`RATE_CHANGE_SD`; tests compare others).
@@ -182,7 +182,7 @@ impl LineFit {
             shorter: shorter::lengths(max_len).map(Shorter::new).collect(),
             chosen: None,
             snapshots: VecDeque::with_capacity(SNAPSHOTS + 1),
-            choose: true,
+            score_gap_ns: 0,
             prior_slope: None,
             rate_change_sd: RATE_CHANGE_SD,
             scale_ns: 0.0,
@@ -206,6 +206,25 @@ impl LineFit {
         f.prior_slope = Some(slope.clamp(-MAX_RATE_ERROR, MAX_RATE_ERROR));
         f.rate_change_sd = if sd > 0.0 { sd } else { RATE_CHANGE_SD };
         f
+    }
+
+    /// Scores the shorter lines only on points at least `gap_ns` after the one before: where
+    /// points come in bursts whose stamps share the host's state (probes, a few µs apart), a
+    /// line of the burst's own points foretells the next one of it better than the truth does,
+    /// and would be chosen for that (on a live kernel: 256 points, 20 ms of probes, and the
+    /// reference's error grew; docs/clock-sync.md). A cycle's frame, well after its last
+    /// probe, is scored.
+    pub fn score_gap(mut self, gap_ns: u64) -> Self {
+        self.score_gap_ns = gap_ns.min(i64::MAX as u64) as i64;
+        self
+    }
+
+    /// Keeps no shorter windows: the whole window's line is always the line in use (where
+    /// the line is read back far into the past, which a shorter one does not reach).
+    pub fn whole_only(mut self) -> Self {
+        self.shorter.clear();
+        self.chosen = None;
+        self
     }
 
     /// Points in the window.
@@ -321,7 +340,11 @@ impl LineFit {
     /// Scores the shorter windows' lines on the accepted point (x, y) before it joins, and
     /// chooses the line in use (shorter.rs).
     fn score_shorter(&mut self, x: u64, y: u64) {
-        let Some(whole) = self.line.filter(|_| self.choose) else { return };
+        self.snapshot_scores();
+        let Some(whole) = self.line else { return };
+        if self.points.back().is_some_and(|&(newest, _)| (x.wrapping_sub(newest) as i64) < self.score_gap_ns) {
+            return;
+        }
         let (dx, dz) = self.rel((x, y));
         let (dx, dz) = (dx as f64, dz as f64);
         let r_whole = dz - dz_at(whole, dx);
@@ -338,8 +361,11 @@ impl LineFit {
             }
         }
         self.chosen = best.map(|(k, _)| k);
-        // The scores now count this point, the (added + 1)th.
-        let counted = self.added + 1;
+    }
+
+    /// Keeps the scores every `SNAPSHOT_EVERY` points (before the point about to be added).
+    fn snapshot_scores(&mut self) {
+        let counted = self.added;
         if counted % SNAPSHOT_EVERY == 0 {
             if self.snapshots.len() == SNAPSHOTS {
                 self.snapshots.pop_front();
@@ -887,8 +913,8 @@ mod tests {
     /// joins, over the points after the first 20 000 of 40 000; whether a shorter line was ever
     /// in use; with shorter lines or without.
     fn wandering_error(wander_ppb: f64, seed: u64, choose: bool) -> (f64, bool) {
-        let mut f = LineFit::new(16_384);
-        f.choose = choose;
+        let f = LineFit::new(16_384);
+        let mut f = if choose { f } else { f.whole_only() };
         let (mut sq, mut n, mut shorter) = (0.0, 0.0, false);
         for (k, &(t, x, y)) in wandering(40_000, wander_ppb, 300.0, seed).iter().enumerate() {
             if k >= 20_000 {
@@ -920,6 +946,28 @@ mod tests {
             assert!(!shorter, "seed {seed}");
             assert_eq!(with, wandering_error(0.0, seed, false).0);
         }
+    }
+
+    #[test]
+    fn probes_in_a_burst_are_not_scored() {
+        // Each 1 ms cycle a frame and 15 probes 20 µs apart: with a quarter cycle's gap only
+        // the frames are scored (the probes' stamps share the host's state with the burst's
+        // other points, which a short line of them follows).
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let noise = Normal::new(0.0, 300.0).unwrap();
+        let (mut gapped, mut every) = (LineFit::new(4096).score_gap(250_000), LineFit::new(4096));
+        for cycle in 0..1_000u64 {
+            for k in 0..16 {
+                let t = 5_000_000_000 + cycle * 1_000_000 + k * 20_000;
+                let x = t.wrapping_add_signed(noise.sample(&mut rng) as i64);
+                gapped.push(x, 700_000_000_000 + t);
+                every.push(x, 700_000_000_000 + t);
+            }
+        }
+        let scored = |f: &LineFit| f.shorter.iter().map(|w| w.score.scored()).max().unwrap();
+        // Scoring starts once the window is longer than the shortest one (256 points).
+        assert!((980..=1_000).contains(&scored(&gapped)), "{}", scored(&gapped));
+        assert!(scored(&every) > 15_000, "{}", scored(&every));
     }
 
     #[test]

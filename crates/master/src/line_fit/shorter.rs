@@ -66,6 +66,11 @@ impl Score {
         self.var = (1.0 - a) * (self.var + a * diff * diff);
     }
 
+    #[cfg(test)]
+    pub fn scored(&self) -> u64 {
+        self.scored
+    }
+
     /// How much better than the whole window's the line foretold the points (its mean score,
     /// ns², negative), if it did by `CHOOSE_SE` standard errors after a memory's worth of them.
     pub fn better_by(&self) -> Option<f64> {

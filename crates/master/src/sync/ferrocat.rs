@@ -191,18 +191,23 @@ pub const FIT_WINDOW: usize = 16_384;
 /// it spans 2–5 s, where 16 384 points spanned one and let a stock kernel's stamps move the
 /// level by tens of ns over seconds (docs/clock-sync.md, "Dense probing").
 pub const DENSE_FIT_WINDOW: usize = 65_536;
+/// The line's shorter windows are scored on points this fraction of a cycle or more after the
+/// one before: the cycle's frames, not the probes of a burst, whose stamps share the host's
+/// state (`LineFit::score_gap`).
+const SCORE_GAP_DIVISOR: u64 = 4;
 
 impl Ferrocat {
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
+        let cycle_ns = cycle_ns.clamp(1, MAX_CYCLE_NS);
         Ferrocat {
             coupling,
             steering: Steering::Offset,
-            cycle_ns: cycle_ns.clamp(1, MAX_CYCLE_NS),
+            cycle_ns,
             phase_ns: 0,
             write_every: 1,
             leads: TrimmedWindow::new(WINDOW),
             lead_ns: None,
-            fit: LineFit::new(FIT_WINDOW),
+            fit: LineFit::new(FIT_WINDOW).score_gap(cycle_ns / SCORE_GAP_DIVISOR),
             halves: TrimmedWindow::new(CENTRE_WINDOW),
             rtt: RttWeight::new(),
             sends: TrimmedWindow::new(WINDOW),
@@ -231,7 +236,9 @@ impl Ferrocat {
 
     /// ferrocat probing in half of every cycle, with a window long enough for that many points.
     pub fn dense(coupling: Coupling, cycle_ns: u64) -> Self {
-        Ferrocat { probe_every_cycle: true, fit: LineFit::new(DENSE_FIT_WINDOW), ..Ferrocat::new(coupling, cycle_ns) }
+        let f = Ferrocat::new(coupling, cycle_ns);
+        let fit = LineFit::new(DENSE_FIT_WINDOW).score_gap(f.cycle_ns / SCORE_GAP_DIVISOR);
+        Ferrocat { probe_every_cycle: true, fit, ..f }
     }
 
     /// The lead in use (None before the first sample).
