@@ -1095,5 +1095,41 @@ mod tests {
             let r = f.rate().unwrap();
             prop_assert!((r - 1.0).abs() <= MAX_RATE_ERROR + 1e-12);
         }
+
+        #[test]
+        fn the_shorter_windows_sum_exactly_their_newest_points(
+            base_x in any::<u64>(), base_y in any::<u64>(),
+            steps in proptest::collection::vec((0u64..3_000_000, -3_000i64..3_000, 0u8..100), 1..2_000),
+            len in 512usize..1_100,
+        ) {
+            // Jumps (a run of far points), steps of the rate, gaps that restart the window and
+            // shifts of x, across any wrap: each shorter window sums exactly the newest `len`
+            // points of the window (or all of them, fewer).
+            let mut f = LineFit::new(len);
+            let (mut x, mut y, mut drift) = (base_x, base_y, 0i64);
+            for (k, (dt, jitter, event)) in steps.into_iter().enumerate() {
+                match event {
+                    0 => drift = jitter,
+                    1 => y = y.wrapping_add(50_000),
+                    2 => x = x.wrapping_add(SPAN + 1),
+                    3 if k % 7 == 0 => f.shift_x(jitter),
+                    _ => {}
+                }
+                x = x.wrapping_add(dt);
+                y = y.wrapping_add(dt).wrapping_add_signed(drift * dt as i64 / 1_000_000);
+                f.push(x.wrapping_add_signed(jitter), y);
+                let n = f.points.len();
+                for w in &f.shorter {
+                    let mut sums = Sums::default();
+                    for &p in f.points.iter().skip(n.saturating_sub(w.len)) {
+                        let (dx, dz) = f.rel(p);
+                        sums.account(dx, dz, 1);
+                    }
+                    prop_assert_eq!((w.sums.n, w.sums.x, w.sums.xx, w.sums.z, w.sums.xz), (sums.n, sums.x, sums.xx, sums.z, sums.xz));
+                }
+                prop_assert!(f.len_in_use() <= f.len());
+                let _ = (f.at(x), f.rate(), f.sd_ahead_ns(1_000_000), f.rate_sd());
+            }
+        }
     }
 }
