@@ -151,7 +151,7 @@ fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
 /// Three couplers whose crystals random-walk by 50 ppb/√s (a plain crystal: a few), seeds
 /// 1–4 of one round each after 30 s of settling: ferrocat's line takes the shorter window that
 /// foretells the cycles' points best (since session 44). Reference MRMS, mean of the four
-/// seeds, `ferrocat` / `ferrocat-mfr`: 15 / 16 ns; with the whole window only 58 / 56 ns
+/// seeds, `ferrocat` / `ferrocat-mfr`: 16 / 19 ns; with the whole window only 58 / 56 ns
 /// (docs/clock-sync.md, robustness chapter, oscillator wander, sessions 42 and 44).
 #[test]
 fn wandering_crystals_shorten_ferrocats_line() {

@@ -12,7 +12,12 @@
 //! leaves the mean. So the line in use is the shorter window's whose mean stands lowest, if
 //! it stands below zero by `CHOOSE_SE` standard errors (over about `SCORE_MEMORY` points);
 //! else the whole window's. With crystals that keep their rates the whole window is the
-//! better line, the means stay above zero and nothing changes.
+//! better line, the means stay above zero and nothing changes. A line in use is kept until
+//! it no longer beats the whole window by `KEEP_SE` standard errors or another beats it by as
+//! many ([`choose`]): each change of line moves the line's value by the two lines'
+//! difference, tens of ns on a stock kernel, and a reference steered by its offset passes that
+//! on as a step its followers' loops must chase (choosing afresh at every point flipped
+//! between two windows every few points and put followers 100 ns off the reference).
 use super::{Line, Sums};
 
 /// The shortest window tried (points): at 1 ms a quarter of a second.
@@ -23,6 +28,9 @@ const SCORE_MEMORY: f64 = 8192.0;
 /// the whole window's (a false choice then costs a shorter line's noise, which is small; a
 /// missed one the wander's error).
 const CHOOSE_SE: f64 = 3.0;
+/// A line in use is kept while it beats the whole window's by this many standard errors, and
+/// until another beats it by this many of the larger of theirs.
+const KEEP_SE: f64 = 1.0;
 
 /// The lengths tried inside a window of `max_len`: halving down to `SHORTEST`.
 pub(super) fn lengths(max_len: usize) -> impl Iterator<Item = usize> {
@@ -46,24 +54,43 @@ impl Shorter {
     }
 }
 
-/// Exponential mean and variance of r_short² − r_whole² (ns²), and the points scored.
+/// The exponential mean of r_short² − r_whole² (ns²) over every point scored, 0 where the
+/// window was no shorter than the whole one (its line then is the whole one's): so every
+/// window's mean is over the same points, against the same whole window, and the means
+/// compare. The spread is learned over the points where the window was shorter only (the
+/// zeros would understate it), and a window is ready once a memory's worth of those came.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct Score {
     mean: f64,
-    var: f64,
     scored: u64,
+    /// Mean and variance of the score where the window was shorter, and how many.
+    shorter_mean: f64,
+    var: f64,
+    shorter: u64,
+}
+
+/// Folds `x` into an exponential mean (and variance) over `n` points so far: a plain one over
+/// the first, then over about `SCORE_MEMORY`.
+fn fold(mean: &mut f64, var: Option<&mut f64>, n: u64, x: f64) {
+    let a = (1.0 / n as f64).max(1.0 / SCORE_MEMORY);
+    let diff = x - *mean;
+    *mean += a * diff;
+    if let Some(var) = var {
+        *var = (1.0 - a) * (*var + a * diff * diff);
+    }
 }
 
 impl Score {
-    /// Scores a point `r_short` from the shorter line and `r_whole` from the whole window's (ns).
-    pub fn add(&mut self, r_short: f64, r_whole: f64) {
-        let d = r_short * r_short - r_whole * r_whole;
+    /// Scores a point `r_short` from the shorter line and `r_whole` from the whole window's (ns);
+    /// `shorter`: whether the window was shorter than the whole one.
+    pub fn add(&mut self, r_short: f64, r_whole: f64, shorter: bool) {
+        let d = if shorter { r_short * r_short - r_whole * r_whole } else { 0.0 };
         self.scored += 1;
-        // A plain mean and variance over the first points, then exponential ones.
-        let a = (1.0 / self.scored as f64).max(1.0 / SCORE_MEMORY);
-        let diff = d - self.mean;
-        self.mean += a * diff;
-        self.var = (1.0 - a) * (self.var + a * diff * diff);
+        fold(&mut self.mean, None, self.scored, d);
+        if shorter {
+            self.shorter += 1;
+            fold(&mut self.shorter_mean, Some(&mut self.var), self.shorter, d);
+        }
     }
 
     #[cfg(test)]
@@ -71,13 +98,35 @@ impl Score {
         self.scored
     }
 
-    /// How much better than the whole window's the line foretold the points (its mean score,
-    /// ns², negative), if it did by `CHOOSE_SE` standard errors after a memory's worth of them.
-    pub fn better_by(&self) -> Option<f64> {
-        // The standard error of a plain mean over the memory: an exponential mean's is
-        // 1/√2 of it, so this errs towards the whole window.
-        let se = (self.var / SCORE_MEMORY).sqrt();
-        (self.scored as f64 >= SCORE_MEMORY && self.mean < -CHOOSE_SE * se).then_some(self.mean)
+    /// Whether a memory's worth of points was scored while the window was shorter.
+    fn ready(&self) -> bool {
+        self.shorter as f64 >= SCORE_MEMORY
+    }
+
+    /// The mean score's standard error, as if it were a plain mean over the memory: an
+    /// exponential mean's is 1/√2 of that, so this errs towards the whole window.
+    fn se(&self) -> f64 {
+        (self.var / SCORE_MEMORY).sqrt()
+    }
+
+    /// Whether the line foretold the points better than the whole window's by `z` standard
+    /// errors.
+    fn beats_whole(&self, z: f64) -> bool {
+        self.ready() && self.mean < -z * self.se()
+    }
+}
+
+/// The line to use after `current`: a shorter window's (an index of `windows`, of those whose
+/// line differs from the whole window's: `differs`) or the whole window's (None).
+pub(super) fn choose(current: Option<usize>, windows: &[Shorter], differs: impl Fn(usize) -> bool) -> Option<usize> {
+    let score = |k: usize| &windows[k].score;
+    let best = (0..windows.len())
+        .filter(|&k| differs(k) && score(k).beats_whole(CHOOSE_SE))
+        .min_by(|&a, &b| score(a).mean.total_cmp(&score(b).mean));
+    match (current.filter(|&c| differs(c) && score(c).beats_whole(KEEP_SE)), best) {
+        (None, best) => best,
+        (Some(c), Some(b)) if score(b).mean < score(c).mean - KEEP_SE * score(b).se().max(score(c).se()) => Some(b),
+        (Some(c), _) => Some(c),
     }
 }
 
@@ -93,23 +142,52 @@ mod tests {
         assert_eq!(lengths(511).count(), 0);
     }
 
+    /// A window whose line is `own_ns` off the truth at every point, the whole window's
+    /// `whole_ns`, each point ±100 ns off the truth: its mean score is own² − whole², and the
+    /// standard error 2·|own − whole|·100/√8192 ns² (z = (own + whole)·0.45).
+    fn window(own_ns: f64, whole_ns: f64) -> Shorter {
+        let mut w = Shorter::new(256);
+        for k in 0..(SCORE_MEMORY as u64) {
+            let noise = if k % 2 == 0 { 100.0 } else { -100.0 };
+            w.score.add(noise + own_ns, noise + whole_ns, true);
+        }
+        w
+    }
+
     #[test]
     fn a_line_is_chosen_only_when_it_foretold_the_points_better_beyond_their_spread() {
-        let mut s = Score::default();
-        // Equal errors but for noise: never chosen.
-        for k in 0..20_000u64 {
-            let noise = if k % 2 == 0 { 30.0 } else { -30.0 };
-            s.add(100.0 + noise, 100.0 - noise);
+        // As good as the whole window's: never chosen.
+        assert_eq!(choose(None, &[window(10.0, 10.0)], |_| true), None);
+        // Better by 4.5 standard errors: chosen, by the difference of the squares…
+        let w = window(0.0, 10.0);
+        assert!((w.score.mean + 100.0).abs() < 1e-6, "{}", w.score.mean);
+        assert_eq!(choose(None, std::slice::from_ref(&w), |_| true), Some(0));
+        // …but not before a memory's worth of points.
+        let mut young = Shorter::new(256);
+        for _ in 1..(SCORE_MEMORY as u64) {
+            young.score.add(0.0, 10.0, true);
         }
-        assert_eq!(s.better_by(), None);
-        // 20 ns closer on every point: chosen, by the difference of the squares.
-        let mut s = Score::default();
-        for _ in 0..(SCORE_MEMORY as u64 - 1) {
-            s.add(80.0, 100.0);
-        }
-        assert_eq!(s.better_by(), None, "not before a memory's worth of points");
-        s.add(80.0, 100.0);
-        let by = s.better_by().expect("chosen");
-        assert!((by + 3600.0).abs() < 1e-6, "{by}");
+        assert_eq!(choose(None, &[young], |_| true), None);
+        // Better by two standard errors: not chosen.
+        assert_eq!(choose(None, &[window(1.4, 3.0)], |_| true), None);
+        // The better of two; none whose line is the whole window's.
+        let two = [window(5.0, 20.0), window(0.0, 20.0)];
+        assert_eq!(choose(None, &two, |_| true), Some(1));
+        assert_eq!(choose(None, &two, |k| k == 0), Some(0));
+    }
+
+    #[test]
+    fn a_line_in_use_stays_until_another_is_clearly_better_or_it_no_longer_beats_the_whole() {
+        // In use: 2 ns off (mean −396 ns², se 40); the other 0 ns off (−400, se 44): kept.
+        let close = [window(2.0, 20.0), window(0.0, 20.0)];
+        assert_eq!(choose(Some(0), &close, |_| true), Some(0));
+        assert_eq!(choose(None, &close, |_| true), Some(1), "afresh, the lower mean");
+        // In use 15 ns off (−175, se 11): the other is lower by 5 of its standard errors.
+        assert_eq!(choose(Some(0), &[window(15.0, 20.0), window(0.0, 20.0)], |_| true), Some(1));
+        // Beating the whole window by two standard errors it stays; by 0.9, it goes.
+        assert_eq!(choose(Some(0), &[window(1.4, 3.0)], |_| true), Some(0));
+        assert_eq!(choose(Some(0), &[window(0.5, 1.5)], |_| true), None);
+        // A window whose line became the whole one's (a restart) is not kept.
+        assert_eq!(choose(Some(0), &[window(0.0, 10.0)], |_| false), None);
     }
 }

@@ -303,6 +303,13 @@ impl Ferrocat {
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
         let fate = self.fit.push(x, y);
         self.rtt.learn(dev, residual.filter(|_| fate == Fate::Added));
+        // The line in use changed windows: steering by offset, the reference steps by the
+        // change at its next offset, and every follower with it (their loops would take
+        // milliseconds to chase a step of tens of ns, 100 ns on a stock kernel).
+        let jump = self.fit.take_switch_jump_ns();
+        if self.steers_reference_offset() {
+            self.pending_shift_ns = self.pending_shift_ns.saturating_sub(jump);
+        }
         x
     }
 
