@@ -29,7 +29,7 @@
 use std::collections::VecDeque;
 
 mod shorter;
-use shorter::{Score, Shorter, MAX_SHORTER};
+use shorter::Shorter;
 
 /// Points the noise scale is learned on before any is rejected or counted as a change.
 const WARM_UP: usize = 16;
@@ -67,16 +67,6 @@ const MAX_RATE_ERROR: f64 = 1e-3;
 /// With at most `MAX_POINTS` points of |dx|, |dz| ≤ 2·SPAN the i128 sums cannot overflow.
 const SPAN: u64 = 1 << 40;
 const MAX_POINTS: usize = 1 << 16;
-/// The shorter windows' scores are kept every this many points, this many times back: a
-/// restart at a change takes them back to before the change began, so that the change's own
-/// points, which any shorter line foretold better than the old whole one, do not count as
-/// evidence of a wandering crystal.
-const SNAPSHOT_EVERY: u64 = 64;
-const SNAPSHOTS: usize = 32;
-/// …taken back to this many points before the change's estimated start: a rate step's ramp
-/// hides in the noise for its first points, before the CUSUM leaves zero (in 300 ns of noise
-/// at 1 ms ≈ 30 points for a 5 ppm step, ≈ 150 for 1 ppm).
-const SCORES_BEFORE_CHANGE: u64 = 256;
 
 /// What became of a point.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -135,8 +125,6 @@ pub struct LineFit {
     /// Shorter windows of the newest points, and which of them, if any, is the line in use.
     shorter: Vec<Shorter>,
     chosen: Option<usize>,
-    /// (points added, the shorter windows' scores then), oldest first.
-    snapshots: VecDeque<(u64, [Score; MAX_SHORTER])>,
     /// Only points at least this long after the one before are scored (`LineFit::score_gap`).
     score_gap_ns: i64,
     /// How far changes of the line in use moved its value, not yet taken (ns).
@@ -183,7 +171,6 @@ impl LineFit {
             line: None,
             shorter: shorter::lengths(max_len).map(Shorter::new).collect(),
             chosen: None,
-            snapshots: VecDeque::with_capacity(SNAPSHOTS + 1),
             score_gap_ns: 0,
             switch_jump_ns: 0.0,
             prior_slope: None,
@@ -334,7 +321,6 @@ impl LineFit {
     /// A change began when `since` points had been added: the window keeps the points from
     /// there on (at least `MIN_RESTART`) and takes (x, y).
     fn restart_at_change(&mut self, since: u64, x: u64, y: u64) -> Fate {
-        self.scores_back_to(since.saturating_sub(SCORES_BEFORE_CHANGE));
         self.restart(((self.added - since) as usize).max(MIN_RESTART));
         self.add(x, y);
         Fate::Restarted
@@ -343,7 +329,6 @@ impl LineFit {
     /// Scores the shorter windows' lines on the accepted point (x, y) before it joins, and
     /// chooses the line in use (shorter.rs).
     fn score_shorter(&mut self, x: u64, y: u64) {
-        self.snapshot_scores();
         let Some(whole) = self.line else { return };
         if self.points.back().is_some_and(|&(newest, _)| (x.wrapping_sub(newest) as i64) < self.score_gap_ns) {
             return;
@@ -370,37 +355,12 @@ impl LineFit {
         }
     }
 
-    /// Keeps the scores every `SNAPSHOT_EVERY` points (before the point about to be added).
-    fn snapshot_scores(&mut self) {
-        let counted = self.added;
-        if counted % SNAPSHOT_EVERY == 0 {
-            if self.snapshots.len() == SNAPSHOTS {
-                self.snapshots.pop_front();
-            }
-            let mut scores = [Score::default(); MAX_SHORTER];
-            for (s, w) in scores.iter_mut().zip(&self.shorter) {
-                *s = w.score;
-            }
-            self.snapshots.push_back((counted, scores));
-        }
-    }
-
-    /// The shorter windows' scores as they were when at most `since` points had been added
-    /// (none if no snapshot is that old).
-    fn scores_back_to(&mut self, since: u64) {
-        while self.snapshots.back().is_some_and(|&(counted, _)| counted > since) {
-            self.snapshots.pop_back();
-        }
-        let scores = self.snapshots.back().map_or([Score::default(); MAX_SHORTER], |&(_, s)| s);
-        for (w, s) in self.shorter.iter_mut().zip(scores) {
-            w.score = s;
-        }
-    }
-
-    /// The shorter windows' scores start again.
+    /// The shorter windows' scores start again (points too far from the window's to share a
+    /// line: whatever the scores said was of another run).
     fn forget_scores(&mut self) {
-        self.snapshots.clear();
-        self.scores_back_to(0);
+        for w in &mut self.shorter {
+            w.score = Default::default();
+        }
     }
 
     /// Drops all but the newest `keep` points.
@@ -988,10 +948,12 @@ mod tests {
     #[test]
     fn a_rate_step_is_no_evidence_of_wander() {
         // Before the change test restarts the window, every shorter line foretells the step's
-        // points better than the whole one; taken as evidence, that would keep a shorter,
+        // points better than the whole one; kept as evidence, that would keep a shorter,
         // noisier line in use for seconds after a step of steady crystals. A 1 ppm step in
-        // 300 ns of noise: its ramp takes hundreds of points to show (without the scores taken
-        // back, a 8 192-point line is in use 8 s after it).
+        // 300 ns of noise: its ramp takes hundreds of points to show. After the restart every
+        // shorter window is the whole one's line again and scores 0, which outweighs the
+        // ramp's points within a second (scored only while shorter, as first built, the
+        // evidence stayed: an 8 192-point line in use 8 s after the step).
         for seed in 0..3 {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(40 + seed);
             let noise = Normal::new(0.0, 300.0).unwrap();

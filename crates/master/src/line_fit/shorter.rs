@@ -37,9 +37,6 @@ pub(super) fn lengths(max_len: usize) -> impl Iterator<Item = usize> {
     std::iter::successors(Some(max_len / 2), |&len| Some(len / 2)).take_while(|&len| len >= SHORTEST)
 }
 
-/// At most this many shorter windows (a window of 2¹⁶ points, the fit's largest, has 8).
-pub(super) const MAX_SHORTER: usize = 8;
-
 #[derive(Debug, Clone)]
 pub(super) struct Shorter {
     pub len: usize,
@@ -137,7 +134,7 @@ mod tests {
     #[test]
     fn lengths_halve_down_to_the_shortest() {
         assert_eq!(lengths(16_384).collect::<Vec<_>>(), [8192, 4096, 2048, 1024, 512, 256]);
-        assert_eq!(lengths(1 << 16).count(), MAX_SHORTER);
+        assert_eq!(lengths(1 << 16).count(), 8);
         assert_eq!(lengths(512).collect::<Vec<_>>(), [256]);
         assert_eq!(lengths(511).count(), 0);
     }
