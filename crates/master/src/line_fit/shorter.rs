@@ -1,5 +1,5 @@
 //! Shorter windows inside a line's: the newest `len` points, each with its own line, scored on
-//! how well it foretold every point before the point joined.
+//! how well it foretold each scored point (`LineFit::score_gap`) before the point joined.
 //!
 //! Why: a long window averages the stamps' noise away (its phase error falls as 1/√n) while
 //! the two crystals keep their rates. Real crystals also wander in frequency (a random walk of
@@ -15,9 +15,9 @@
 //! better line, the means stay above zero and nothing changes. A line in use is kept until
 //! it no longer beats the whole window by `KEEP_SE` standard errors or another beats it by as
 //! many ([`choose`]): each change of line moves the line's value by the two lines'
-//! difference, tens of ns on a stock kernel, and a reference steered by its offset passes that
-//! on as a step its followers' loops must chase (choosing afresh at every point flipped
-//! between two windows every few points and put followers 100 ns off the reference).
+//! difference, tens of ns on a stock kernel (a step `Ferrocat` hands to the followers with
+//! the reference's offset), and choosing afresh at every point flipped between two windows
+//! every few points.
 use super::{Line, Sums};
 
 /// The shortest window tried (points): at 1 ms a quarter of a second.
