@@ -148,6 +148,13 @@ fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
     }
 }
 
+/// The quick run on a line of three couplers whose crystals random-walk by 50 ppb/√s.
+fn wandering_couplers(host: HostModel) -> Options {
+    let device = "[[device]]\nbuiltin = \"EK1100\"\nwander_ppb_per_sqrt_s = 50.0\n";
+    let segment = toml::from_str(&format!("seed = 1\n{}", device.repeat(3))).unwrap();
+    Options { slaves: vec![3], segment: Some(segment), ..Options::quick(host) }
+}
+
 /// Three couplers whose crystals random-walk by 50 ppb/√s (a plain crystal: a few), seeds
 /// 1–4 of one round each after 30 s of settling: ferrocat's line takes the shorter window that
 /// foretells the cycles' points best (since session 44). Reference MRMS, mean of the four
@@ -155,17 +162,14 @@ fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
 /// (docs/clock-sync.md, robustness chapter, oscillator wander, sessions 42 and 44).
 #[test]
 fn wandering_crystals_shorten_ferrocats_line() {
-    let device = "[[device]]\nbuiltin = \"EK1100\"\nwander_ppb_per_sqrt_s = 50.0\n";
     let o = Options {
         rounds: 1,
         methods: vec!["ferrocat".into(), "ferrocat-mfr".into()],
-        slaves: vec![3],
-        segment: Some(toml::from_str(&format!("seed = 1\n{}", device.repeat(3))).unwrap()),
         // The shorter lines are scored on the cycles' frames and one counts after 8 192 of
         // them; the GPIO calibration, in the middle half of the settling, must come after that
         // (else it takes the whole line's wander error there for the stamps' asymmetry).
         settle_s: 30.0,
-        ..Options::quick(HostModel::pc_rt())
+        ..wandering_couplers(HostModel::pc_rt())
     };
     let mut mrms_us = [0.0; 2];
     for seed in 1..=4 {
@@ -183,13 +187,7 @@ fn wandering_crystals_shorten_ferrocats_line() {
 /// this run's lock time was 8.3 s).
 #[test]
 fn a_change_of_line_moves_the_followers_with_the_reference() {
-    let device = "[[device]]\nbuiltin = \"EK1100\"\nwander_ppb_per_sqrt_s = 50.0\n";
-    let o = Options {
-        methods: vec!["ferrocat".into()],
-        slaves: vec![3],
-        segment: Some(toml::from_str(&format!("seed = 1\n{}", device.repeat(3))).unwrap()),
-        ..Options::quick(HostModel::pc_stock())
-    };
+    let o = Options { methods: vec!["ferrocat".into()], ..wandering_couplers(HostModel::pc_stock()) };
     let r = &run(&o, &|_, _| {}).unwrap()[0];
     println!("ref GMEAN {:7.4} MRMS {:7.4} µs, lock {:?}", r.ref_gmean_us, r.ref_mrms_us, r.lock_ms);
     assert_eq!(r.lock_ms, Some(0.0), "{r:?}");

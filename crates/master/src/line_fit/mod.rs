@@ -402,8 +402,8 @@ impl LineFit {
     /// another's since the last call: a reference steered by its offset takes that as a step,
     /// which its followers should take with it rather than chase (`Ferrocat`).
     pub fn take_switch_jump_ns(&mut self) -> i64 {
-        let jump = std::mem::take(&mut self.switch_jump_ns);
-        jump.round().clamp(i64::MIN as f64, i64::MAX as f64) as i64
+        // `as` saturates, and a jump is at most the window's spread anyway.
+        std::mem::take(&mut self.switch_jump_ns).round() as i64
     }
 
     /// Points in the line in use (the window's, or the shorter window's chosen).

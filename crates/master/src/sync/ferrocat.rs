@@ -207,7 +207,7 @@ impl Ferrocat {
             write_every: 1,
             leads: TrimmedWindow::new(WINDOW),
             lead_ns: None,
-            fit: LineFit::new(FIT_WINDOW).score_gap(cycle_ns / SCORE_GAP_DIVISOR),
+            fit: Ferrocat::line(FIT_WINDOW, cycle_ns),
             halves: TrimmedWindow::new(CENTRE_WINDOW),
             rtt: RttWeight::new(),
             sends: TrimmedWindow::new(WINDOW),
@@ -237,8 +237,12 @@ impl Ferrocat {
     /// ferrocat probing in half of every cycle, with a window long enough for that many points.
     pub fn dense(coupling: Coupling, cycle_ns: u64) -> Self {
         let f = Ferrocat::new(coupling, cycle_ns);
-        let fit = LineFit::new(DENSE_FIT_WINDOW).score_gap(f.cycle_ns / SCORE_GAP_DIVISOR);
-        Ferrocat { probe_every_cycle: true, fit, ..f }
+        Ferrocat { probe_every_cycle: true, fit: Ferrocat::line(DENSE_FIT_WINDOW, f.cycle_ns), ..f }
+    }
+
+    /// The method's line over up to `window` points, its shorter windows scored on the frames.
+    fn line(window: usize, cycle_ns: u64) -> LineFit {
+        LineFit::new(window).score_gap(cycle_ns / SCORE_GAP_DIVISOR)
     }
 
     /// The lead in use (None before the first sample).
