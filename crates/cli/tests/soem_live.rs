@@ -196,8 +196,9 @@ fn soem_enables_the_simulated_cia402_drive() {
     assert!(r["moved"].as_i64().unwrap().abs() < 50, "{r}");
 }
 
-/// SOEM stalls for 10 ms while the drive runs DC-synchronous at 1 ms: the drive leaves OP
-/// with a sync error (0x001A, SAFE_OP + ERROR) and SOEM sees it in the working counter (its
+/// SOEM stalls for 10 ms while the drive runs DC-synchronous at 1 ms (its sync error counter
+/// limit raised to 12 by SDO, as the script says why): the drive leaves OP with a sync error
+/// (0x001A, SAFE_OP + ERROR) and SOEM sees it in the working counter (its
 /// output SyncManager deactivated by the firmware), acknowledges it and brings it back to OP
 /// as its examples' ecatcheck does (docs/esc-model.md).
 #[test]
@@ -207,6 +208,7 @@ fn soem_sees_the_drives_sync_error_after_a_stall_and_brings_it_back() {
     let r = soem_script(&net, "soem_sync_error.py", &["1"]);
     let rep = sim.report();
     assert_eq!(r["found"], 2);
+    assert_eq!(r["sync_error_limit"], 12, "{r}");
     assert_eq!(r["op_before"], true, "{r}");
     assert_eq!(r["after_stall"]["state"], 0x14, "{r}");
     assert_eq!(r["after_stall"]["al_status"], 0x001A, "{r}");
