@@ -597,7 +597,9 @@ impl LineFit {
     fn refresh(&mut self) {
         self.line = self.line_through(&self.sums);
         for k in 0..self.shorter.len() {
-            self.shorter[k].line = self.line_through(&self.shorter[k].sums);
+            // A window no shorter than the whole one sums the same points: the same line.
+            let s = self.shorter[k].sums;
+            self.shorter[k].line = if s.n == self.sums.n { self.line } else { self.line_through(&s) };
         }
     }
 
