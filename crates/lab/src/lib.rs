@@ -97,7 +97,15 @@ pub fn loop_back_ns() -> u32 {
 }
 
 /// Methods that take out what a calibration measured (`ClockSync::take_error`).
-pub const CALIBRATED: [&str; 5] = ["ferrocat", "ferrocat-mfr", "ferrocat-tcl", "ferrocat-dense", "ferrocat-mfr-dense"];
+pub const CALIBRATED: [&str; 7] = [
+    "ferrocat",
+    "ferrocat-mfr",
+    "ferrocat-tcl",
+    "ferrocat-dense",
+    "ferrocat-mfr-dense",
+    "ferrocat-fly",
+    "ferrocat-mfr-fly",
+];
 
 /// Pulses per calibration.
 pub const CALIBRATION_PULSES: usize = 1000;
@@ -196,6 +204,8 @@ pub fn method<I: Io>(
             let coupling = if dense == FERROCAT_DENSE[0] { coupling } else { Coupling::MasterFollowsReference };
             Box::new(Ferrocat::dense(coupling, cycle_ns))
         }
+        "ferrocat-fly" => Box::new(Ferrocat::new(coupling, cycle_ns).with_flywheel()),
+        "ferrocat-mfr-fly" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel()),
         other => anyhow::bail!(
             "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {})",
             METHODS.join(", "),

@@ -11,7 +11,7 @@ use ferrocat_segment::SegmentConfig;
 
 /// The methods whose master clock this experiment compares with the slaves' (the
 /// reference-follows-master methods, and none at all).
-pub const METHODS: [&str; 8] = [
+pub const METHODS: [&str; 10] = [
     "none",
     "conventional",
     "park2020",
@@ -20,6 +20,8 @@ pub const METHODS: [&str; 8] = [
     "ferrocat-tcl",
     "ferrocat-dense",
     "ferrocat-mfr-dense",
+    "ferrocat-fly",
+    "ferrocat-mfr-fly",
 ];
 
 #[derive(Debug, Clone)]

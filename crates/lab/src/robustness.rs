@@ -22,8 +22,13 @@ pub const SCENARIOS: [&str; 3] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cy
 /// On a ring segment (one with `[secondary]`): the cable into the device the secondary port is
 /// wired to pulled, splitting the ring there (cable redundancy, docs/master.md).
 pub const RING_CABLE_PULLED: &str = "ring-cable-pulled";
-/// Every disturbance a run can name: [`SCENARIOS`] and, on a ring, [`RING_CABLE_PULLED`].
-pub const KNOWN: [&str; 4] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles", RING_CABLE_PULLED];
+/// The first follower's crystal stepping by +50 ppm instead of the reference's: what a method
+/// that takes a follower's crystal for a flywheel (`ferrocat-fly`) must tell from the other.
+pub const FOLLOWER_DRIFT_STEP: &str = "follower-drift-step-50ppm";
+/// Every disturbance a run can name: [`SCENARIOS`], [`FOLLOWER_DRIFT_STEP`] and, on a ring,
+/// [`RING_CABLE_PULLED`].
+pub const KNOWN: [&str; 5] =
+    ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles", FOLLOWER_DRIFT_STEP, RING_CABLE_PULLED];
 /// The undisturbed run every disturbed one is paired with.
 pub const CONTROL: &str = "control";
 
@@ -211,6 +216,11 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
                 "loss-1pct" => m.engine.io.seg.loss_probability = 0.01,
                 "drift-step-50ppm" => {
                     m.engine.io.seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
+                }
+                FOLLOWER_DRIFT_STEP => {
+                    let Some(&follower) = dc.get(1) else { anyhow::bail!("{FOLLOWER_DRIFT_STEP} needs two DC slaves") };
+                    let node = crate::node_of(&m, follower).unwrap_or(0);
+                    m.engine.io.seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
                 }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,

@@ -149,3 +149,44 @@ fn a_pulled_ring_cable_leaves_every_method_where_it_was() {
     let e = run(&line).unwrap_err().to_string();
     assert!(e.contains("needs a ring segment"), "{e}");
 }
+
+/// ferrocat with a follower's crystal for its flywheel (`ferrocat-fly`, `ferrocat-mfr-fly`;
+/// `sync/flywheel.rs`) on a stock kernel, whose stamps left plain ferrocat more than 100 ms
+/// from its control after the reference's crystal step on these seeds (docs/clock-sync.md,
+/// "A follower's crystal as flywheel"): back within 100 ms of the control after a step of
+/// either crystal, the reference's (the flywheel's ε sees it at once) or the follower's (the
+/// line through the reference's own points wins the contest).
+/// Seeds on which plain ferrocat was 108–1 282 ms from its control after the reference's step.
+const SEEDS_PLAIN_MISSES: [u64; 3] = [2, 4, 6];
+
+#[test]
+fn a_followers_crystal_as_flywheel_recovers_from_either_crystals_step_on_a_stock_kernel() {
+    use ferrocat_lab::robustness::FOLLOWER_DRIFT_STEP;
+    let plain = |seed| {
+        let o = Options {
+            methods: vec!["ferrocat".into()],
+            scenarios: vec!["drift-step-50ppm".into()],
+            seed,
+            ..Options::new(HostModel::pc_stock())
+        };
+        run(&o).unwrap().into_iter().find(|r| r.scenario != CONTROL).unwrap().recovery_vs_control_ms
+    };
+    for seed in SEEDS_PLAIN_MISSES {
+        let base = plain(seed);
+        println!("seed {seed} ferrocat: {base:?} ms");
+        assert!(base.is_none_or(|ms| ms > 100.0), "seed {seed}: plain ferrocat back in {base:?} ms");
+        let o = Options {
+            methods: vec!["ferrocat-fly".into(), "ferrocat-mfr-fly".into()],
+            scenarios: vec!["drift-step-50ppm".into(), FOLLOWER_DRIFT_STEP.into()],
+            seed,
+            ..Options::new(HostModel::pc_stock())
+        };
+        for r in run(&o).unwrap().iter().filter(|r| r.scenario != CONTROL) {
+            println!(
+                "seed {seed} {} {}: {:?} ms, peak {:.0} ns",
+                r.method, r.scenario, r.recovery_vs_control_ms, r.peak_ns
+            );
+            assert!(r.recovery_vs_control_ms.is_some_and(|ms| ms <= 100.0), "{r:?}");
+        }
+    }
+}

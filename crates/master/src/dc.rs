@@ -40,7 +40,14 @@ pub(crate) struct SyncPdus {
     first: FirstPdu,
     pub(crate) frmw: [u8; 8],
     diff: [u8; 4],
+    /// A follower whose clock the frame reads ([`crate::sync::ClockSync::reads_follower_clock`]),
+    /// and its 0x0910–0x0933.
+    follower: Option<u16>,
+    clock: [u8; FOLLOWER_CLOCK_LEN],
 }
+
+/// A follower's 0x0910 (system time) to 0x0933 (speed counter difference) in one read.
+const FOLLOWER_CLOCK_LEN: usize = 0x0934 - 0x0910;
 
 /// What the sync frame does to the reference before its FRMW.
 #[derive(Debug)]
@@ -65,19 +72,27 @@ pub(crate) struct SyncAnswers {
     pub(crate) sync: bool,
     /// The reference's 0x0920 (read or replaced).
     pub(crate) offset: bool,
+    /// The follower's clock, where the frame read one.
+    pub(crate) follower: bool,
 }
 
 impl SyncAnswers {
     /// A frame that did not come back.
-    pub(crate) const NONE: SyncAnswers = SyncAnswers { sync: false, offset: false };
+    pub(crate) const NONE: SyncAnswers = SyncAnswers { sync: false, offset: false, follower: false };
 }
 
 impl SyncPdus {
-    /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference.
-    pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> [Pdu<'a>; 3] {
+    /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference, and
+    /// an FPRD of a follower's clock where one is read: the datagrams and how many there are.
+    pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> ([Pdu<'a>; 4], usize) {
         let station = self.station;
         let at = |ado| Address::Device { adp: station, ado };
-        [
+        let n = 3 + self.follower.is_some() as usize;
+        let clock = match self.follower {
+            Some(f) => Pdu::new(Command::FPRD, Address::Device { adp: f, ado: 0x0910 }, &mut self.clock),
+            None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []),
+        };
+        let pdus = [
             match &mut self.first {
                 FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(0x0910), w),
                 FirstPdu::Offset { data, len, write } => {
@@ -87,18 +102,37 @@ impl SyncPdus {
             },
             Pdu::new(Command::FRMW, at(0x0910), &mut self.frmw),
             Pdu::new(Command::FPRD, at(0x092C), &mut self.diff),
-        ]
+            clock,
+        ];
+        (pdus, n)
+    }
+
+    /// The follower's clock as the frame read it.
+    fn follower_clock(&self) -> Option<crate::sync::FollowerClock> {
+        self.follower?;
+        let c = &self.clock;
+        let u64_at = |k: usize| u64::from_le_bytes(c[k..k + 8].try_into().unwrap_or_default());
+        let u16_at = |k: usize| u16::from_le_bytes([c[k], c[k + 1]]);
+        let (system, offset) = (u64_at(0), u64_at(0x10));
+        let delay = u32::from_le_bytes(c[0x18..0x1C].try_into().unwrap_or_default()) as u64;
+        Some(crate::sync::FollowerClock {
+            // An ECAT read of 0x0910 gives the system time less the delay (esc-spec §3).
+            local_ns: system.wrapping_add(delay).wrapping_sub(offset),
+            speed_start: u16_at(0x20),
+            speed_diff: u16_at(0x22) as i16,
+        })
     }
 
     /// Which datagrams the reference answered (an FPRW counts 3: read and write).
     pub(crate) fn answered(pdus: &[Pdu<'_>]) -> SyncAnswers {
         let sync = pdus.len() >= 3 && pdus[1].wkc > 0 && pdus[2].wkc == 1;
+        let follower = pdus.len() >= 4 && pdus[3].cmd == Command::FPRD && pdus[3].wkc == 1;
         let offset = pdus.first().is_some_and(|p| match p.cmd {
             Command::FPRD => p.wkc == 1,
             Command::FPRW => p.wkc == 3,
             _ => false,
         });
-        SyncAnswers { sync, offset }
+        SyncAnswers { sync, offset, follower }
     }
 
     /// The reference's offset the frame read, if it carried a read.
@@ -564,12 +598,13 @@ impl<I: Io> Master<I> {
     ) -> Result<crate::sync::Correction> {
         let mut p = self.sync_begin(sync, st)?;
         let mut nop: [u8; 0] = [];
-        let mut pdus = p.pdus(&mut nop);
-        let frame_bytes = frame_bytes(&pdus);
-        let res = self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns);
+        let (mut pdus, n) = p.pdus(&mut nop);
+        let pdus = &mut pdus[..n];
+        let frame_bytes = frame_bytes(pdus);
+        let res = self.engine.transact_once(pdus, self.cyclic_timeout_ns);
         let passes = self.engine.split_passes.take();
         let answered = match res {
-            Ok(()) => SyncPdus::answered(&pdus),
+            Ok(()) => SyncPdus::answered(pdus),
             Err(_) => SyncAnswers::NONE,
         };
         let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
@@ -595,7 +630,22 @@ impl<I: Io> Master<I> {
         } else {
             FirstPdu::Nop
         };
-        Ok(SyncPdus { station: self.slaves[r].station, wide, built_ns, first, frmw: [0; 8], diff: [0; 4] })
+        // The first 64-bit follower after the reference (a 32-bit one's 0x0910 is 4 bytes).
+        let follower = sync
+            .reads_follower_clock()
+            .then(|| self.slaves.iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
+            .flatten()
+            .map(|s| s.station);
+        Ok(SyncPdus {
+            station: self.slaves[r].station,
+            wide,
+            built_ns,
+            first,
+            frmw: [0; 8],
+            diff: [0; 4],
+            follower,
+            clock: [0; FOLLOWER_CLOCK_LEN],
+        })
     }
 
     /// The sample of an answered (or lost) sync frame to the method, and its correction done.
@@ -627,6 +677,7 @@ impl<I: Io> Master<I> {
             s.reference_offset_ns = offset.and(st.reference_offset_ns);
             s.difference_ns = SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns();
             s.data_ns = data_bytes * 80;
+            s.follower = p.follower_clock().filter(|_| answered.follower);
             Some(s)
         } else {
             st.lost += 1;
@@ -766,6 +817,7 @@ impl<I: Io> Master<I> {
             // A stamp after the last byte (software, or none) includes the whole frame.
             frame_ns: if hw { 0 } else { frame_bytes * 80 },
             data_ns: 0,
+            follower: None,
         }
     }
 

@@ -13,8 +13,9 @@ use crate::master::Master;
 const CHUNK: usize = MAX_PDU_LEN - HEADER_LEN - WKC_LEN;
 /// Up to this many frames per cycle (8 × 1486 bytes of process image).
 const MAX_CHUNKS: usize = 8;
-/// The image's LRWs and, with DC distribution, one FRMW or the three sync datagrams.
-const MAX_PDUS: usize = MAX_CHUNKS + 3;
+/// The image's LRWs and, with DC distribution, one FRMW or the sync datagrams (three, and a
+/// follower's clock where the method reads one).
+const MAX_PDUS: usize = MAX_CHUNKS + 4;
 
 /// Where an entry sits in the image: bit offset and width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -188,8 +189,11 @@ impl<I: Io> Master<I> {
         let mut frmw = Some(&mut frmw[..]);
         let reference = *dc_reference;
         let with_sync = sp.is_some();
-        let mut extra = sp.as_mut().map(|p| p.pdus(&mut nop).into_iter());
-        let n = chunks + if extra.is_some() { 3 } else { reference.is_some() as usize };
+        let mut extra = sp.as_mut().map(|p| {
+            let (pdus, n) = p.pdus(&mut nop);
+            pdus.into_iter().take(n)
+        });
+        let n = chunks + extra.as_ref().map_or(reference.is_some() as usize, |x| x.len());
         let mut pdus: [Pdu<'_>; MAX_PDUS] = std::array::from_fn(|k| {
             if let Some(p) = parts.next() {
                 return Pdu::new(Command::LRW, Address::Logical((k * CHUNK) as u32), p);

@@ -1,4 +1,5 @@
 //! ferrocat's own method (design and measurements: docs/clock-sync.md).
+use super::flywheel::Flywheel;
 use super::{ClockSync, Correction, Coupling, LineEvents, Sample, MAX_CYCLE_NS};
 use crate::line_fit::{Fate, LineFit};
 use crate::rtt_weight::RttWeight;
@@ -110,7 +111,28 @@ pub struct Ferrocat {
     pub probes_steer: bool,
     /// The bias last given to the followers' delay registers.
     delay_bias_ns: i64,
+    /// A follower's crystal as the flywheel the line runs on (`Ferrocat::with_flywheel`).
+    flywheel: Option<Flywheel>,
+    contest: Option<Contest>,
 }
+
+/// Which of two estimates of the reference foretells the stamps' points better: the flywheel's
+/// (the follower's crystal plus ε) or the line through the reference's own points. They part
+/// only when one of the two crystals changes, and then the one whose crystal kept its rate
+/// stays with the points.
+#[derive(Debug)]
+struct Contest {
+    /// The line through the reference's own points (ferrocat without a flywheel).
+    direct: LineFit,
+    /// Leaky sum of the log-likelihood ratio, flywheel over direct, in units of the stamps'
+    /// variance.
+    llr: f64,
+    use_direct: bool,
+}
+
+/// The contest's memory (points) and the evidence that changes the estimate in use.
+const CONTEST_LEAK: f64 = 1.0 / 256.0;
+const CONTEST_SWITCH: f64 = 8.0;
 
 /// How a method makes the reference follow the master.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -231,7 +253,73 @@ impl Ferrocat {
             make_up: true,
             probes_steer: true,
             delay_bias_ns: 0,
+            flywheel: None,
+            contest: None,
         }
+    }
+
+    /// ferrocat whose line runs on a follower's crystal, the reference's difference from it
+    /// read from the hardware every cycle (flywheel.rs).
+    pub fn with_flywheel(self) -> Self {
+        let eps = Ferrocat::line(FIT_WINDOW, self.cycle_ns);
+        let direct = Ferrocat::line(FIT_WINDOW, self.cycle_ns);
+        Ferrocat {
+            flywheel: Some(Flywheel::new(eps)),
+            contest: Some(Contest { direct, llr: 0.0, use_direct: false }),
+            ..self
+        }
+    }
+
+    /// The flywheel's estimate of the reference at master time `x` (the crystal's line plus ε).
+    fn flywheel_at(&self, x: u64) -> Option<u64> {
+        let c = self.fit.at(x)?;
+        let Some(fw) = &self.flywheel else { return Some(c) };
+        let e0 = fw.last_eps_ns().unwrap_or(0);
+        let e = fw.eps_at(c.wrapping_add_signed(e0)).unwrap_or(e0);
+        Some(c.wrapping_add_signed(e))
+    }
+
+    /// Scores the point (x, y of the reference) on both estimates, keeps the direct line, and
+    /// returns how far the estimate in use moved at `x` if it changed.
+    fn contest_point(&mut self, x: u64, y: u64) -> i64 {
+        let fly = self.flywheel_at(x);
+        let Some(c) = self.contest.as_mut() else { return 0 };
+        let direct = c.direct.at(x);
+        let sd = c.direct.scale_ns().max(1.0);
+        c.direct.push(x, y);
+        let (Some(a), Some(b)) = (fly, direct) else { return 0 };
+        // A host's outliers (a stamp hundreds of µs late) say nothing of which is right: the
+        // residuals are clipped at 4 σ.
+        let clip = |r: f64| r.clamp(-4.0 * sd, 4.0 * sd);
+        let (ra, rb) = (clip(y.wrapping_sub(a) as i64 as f64), clip(y.wrapping_sub(b) as i64 as f64));
+        let limit = 2.0 * CONTEST_SWITCH;
+        c.llr = (c.llr * (1.0 - CONTEST_LEAK) + (rb * rb - ra * ra) / (2.0 * sd * sd)).clamp(-limit, limit);
+        let switch = if c.use_direct { c.llr > CONTEST_SWITCH } else { c.llr < -CONTEST_SWITCH };
+        if !switch {
+            return 0;
+        }
+        c.use_direct = !c.use_direct;
+        let (from, to) = if c.use_direct { (a, b) } else { (b, a) };
+        to.wrapping_sub(from) as i64
+    }
+
+    /// The line's estimate of the reference's time at master time `x`: with a flywheel, the
+    /// crystal's line there plus ε.
+    fn line_at(&self, x: u64) -> Option<u64> {
+        match &self.contest {
+            Some(c) if c.use_direct => c.direct.at(x),
+            _ => self.flywheel_at(x),
+        }
+    }
+
+    /// The line's rate (reference per master time).
+    fn line_rate(&self) -> Option<f64> {
+        if let Some(c) = self.contest.as_ref().filter(|c| c.use_direct) {
+            return c.direct.rate();
+        }
+        let r = self.fit.rate()?;
+        // dR/dx = dC/dx + dε/dR·dR/dx.
+        Some(self.flywheel.as_ref().map_or(r, |fw| r / (1.0 - fw.eps_slope())))
     }
 
     /// ferrocat probing in half of every cycle, with a window long enough for that many points.
@@ -296,6 +384,16 @@ impl Ferrocat {
     /// by the part of this frame's own deviation from it learned to be the way out
     /// (rtt_weight.rs).
     fn fit_passage(&mut self, s: &Sample, y: u64) -> u64 {
+        // With a flywheel the line runs on the follower's crystal: a frame that read the
+        // follower gives its crystal time; any other point the reference's less ε.
+        let y_reference = y;
+        let y = match (&mut self.flywheel, &s.follower) {
+            (None, _) => y,
+            (Some(fw), Some(f)) => fw.frame(y, f),
+            // Before the first reading (or with no follower to read) ε is 0: the crystal's
+            // count starts where the reference is, so the line goes on through it unbroken.
+            (Some(fw), None) => y.wrapping_sub(fw.eps_at(y).unwrap_or(0) as u64),
+        };
         let sent = s.tx_ns.unwrap_or(s.built_ns);
         let half = s.lead_ns().wrapping_sub(sent.wrapping_sub(s.built_ns) as i64);
         self.halves.push(half);
@@ -305,12 +403,22 @@ impl Ferrocat {
         let x = stamp.wrapping_add_signed(self.rtt.shift_ns(dev));
         // The weight is learned from the reference's time against the line at the stamp alone.
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
+        let contest_jump = self.contest_point(x, y_reference);
         let fate = self.fit.push(x, y);
         self.rtt.learn(dev, residual.filter(|_| fate == Fate::Added));
         // The line in use changed windows: steering by offset, the reference steps by the
         // change at its next offset, and every follower with it (their loops would take
         // milliseconds to chase a step of tens of ns, 100 ns on a stock kernel).
-        let jump = self.fit.take_switch_jump_ns();
+        // With a flywheel, only the jumps of the estimate in use move the reference.
+        let fly_jump = self.fit.take_switch_jump_ns() + self.flywheel.as_mut().map_or(0, |fw| fw.take_switch_jump_ns());
+        let jump = match self.contest.as_mut() {
+            Some(c) if c.use_direct => c.direct.take_switch_jump_ns(),
+            Some(c) => {
+                c.direct.take_switch_jump_ns();
+                fly_jump
+            }
+            None => fly_jump,
+        } + contest_jump;
         if self.steers_reference_offset() {
             self.pending_shift_ns = self.pending_shift_ns.saturating_sub(jump);
         }
@@ -415,7 +523,7 @@ impl ClockSync for Ferrocat {
         // The reference's time, from the fit, where this frame would have passed had its
         // cycle started as late as cycles do on average; its phase in the cycle against the
         // target, in integers.
-        let (Some(y), Some(rate)) = (self.fit.at(x.wrapping_add_signed(dev.wrapping_neg())), self.fit.rate()) else {
+        let (Some(y), Some(rate)) = (self.line_at(x.wrapping_add_signed(dev.wrapping_neg())), self.line_rate()) else {
             return self.planned(Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) });
         };
         let c = self.cycle_ns as f64;
@@ -440,7 +548,7 @@ impl ClockSync for Ferrocat {
         // sawtooth (±|rate − 1|·span/2) on the master's time.
         let passage = built_ns.wrapping_add_signed(self.lead_ns?);
         let aim = passage.wrapping_add(holds_ns.unwrap_or(self.cycle_ns) / 2);
-        let offset = aim.wrapping_sub(self.fit.at(aim)?);
+        let offset = aim.wrapping_sub(self.line_at(aim)?);
         self.offset_given_ns = Some(offset);
         if !self.offset_given {
             let step = offset.wrapping_sub(self.reference_offset_read?) as i64;
@@ -451,7 +559,7 @@ impl ClockSync for Ferrocat {
     }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
         match self.coupling {
-            Coupling::MasterFollowsReference => self.fit.at(host_ns),
+            Coupling::MasterFollowsReference => self.line_at(host_ns),
             Coupling::ReferenceFollowsMaster => None,
         }
     }
@@ -463,10 +571,13 @@ impl ClockSync for Ferrocat {
         // 17 ns, its whole mean error there).
         match (self.coupling, self.steering, self.offset_given_ns) {
             (Coupling::ReferenceFollowsMaster, Steering::Offset, Some(offset)) => {
-                self.fit.at(host_ns).map_or(host_ns, |local| local.wrapping_add(offset))
+                self.line_at(host_ns).map_or(host_ns, |local| local.wrapping_add(offset))
             }
             _ => self.master_time(host_ns).unwrap_or(host_ns),
         }
+    }
+    fn reads_follower_clock(&self) -> bool {
+        self.flywheel.is_some() && self.keeps_line()
     }
     fn probes_wanted(&self) -> u32 {
         let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
@@ -509,7 +620,7 @@ impl ClockSync for Ferrocat {
         // register larger by b puts a follower b later (its loop compares the time received
         // with its own less the delay), so −(rate − 1)·cycle/2 centres them on the reference.
         let half_cycle = self.cycle_ns as f64 / 2.0;
-        let bias = -(self.fit.rate()? - 1.0) * half_cycle;
+        let bias = -(self.line_rate()? - 1.0) * half_cycle;
         // No crystal is 200 ppm off: a wilder rate is a young line's.
         let limit = half_cycle * 2e-4;
         let bias = bias.clamp(-limit, limit).round() as i64;
@@ -533,6 +644,9 @@ impl ClockSync for Ferrocat {
         self.calibration_ns = self.calibration_ns.saturating_sub(error_ns);
         self.lead_ns = self.lead_ns.map(|l| l.wrapping_add(error_ns));
         self.fit.shift_x(error_ns);
+        if let Some(c) = self.contest.as_mut() {
+            c.direct.shift_x(error_ns);
+        }
         if self.steers_reference_offset() {
             self.pending_shift_ns = self.pending_shift_ns.saturating_add(error_ns);
         }
@@ -559,6 +673,7 @@ mod tests {
             loop_ns: 0,
             frame_ns,
             data_ns,
+            follower: None,
         }
     }
 
@@ -601,6 +716,7 @@ mod tests {
             loop_ns: 0,
             frame_ns: 8_000,
             data_ns: 5_000,
+            follower: None,
         };
         let period = |f: &mut Ferrocat, k, late| f.update(Some(&frame(k, late))).next_period_ns.unwrap();
         for k in 1..100 {

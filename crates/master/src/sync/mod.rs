@@ -4,6 +4,7 @@
 mod chen2016;
 mod conventional;
 mod ferrocat;
+mod flywheel;
 mod park2020;
 mod pi;
 
@@ -55,6 +56,22 @@ pub struct Sample {
     /// From the frame's head to the end of its process data (its LRW datagrams), which the
     /// slaves take at their next SYNC0; 0 for a frame without.
     pub data_ns: u64,
+    /// A follower's clock as the same frame found it, where the method asks for one
+    /// ([`ClockSync::reads_follower_clock`]).
+    pub follower: Option<FollowerClock>,
+}
+
+/// A follower's clock as a frame passed it: its local time and the speed its time control
+/// loop was applying, from which the master takes the loop's corrections back out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FollowerClock {
+    /// Local time (ns) at the frame's arrival: the ECAT read of 0x0910 plus its delay (0x0928)
+    /// less its offset (0x0920), all from the same read.
+    pub local_ns: u64,
+    /// Speed counter start (0x0930) and difference (0x0932): the rate the loop applied since
+    /// its last sample (esc-spec §3.5).
+    pub speed_start: u16,
+    pub speed_diff: i16,
 }
 
 impl Sample {
@@ -128,6 +145,10 @@ pub trait ClockSync {
     /// Offset steering: whether probe frames give the reference its offset too
     /// ([`ClockSync::reference_offset`]), not only read it.
     fn probes_give_offset(&self) -> bool {
+        false
+    }
+    /// Whether the cycle's frame should also read a follower's clock ([`Sample::follower`]).
+    fn reads_follower_clock(&self) -> bool {
         false
     }
     /// Takes one cycle's sample (`None`: the frame was lost).

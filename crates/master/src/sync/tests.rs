@@ -26,6 +26,7 @@ fn any_sample() -> impl Strategy<Value = Sample> {
                 loop_ns,
                 frame_ns,
                 data_ns,
+                follower: None,
             },
         )
 }
@@ -71,7 +72,7 @@ proptest! {
                                           loop_ns in 0u64..1_000_000) {
         let s = |b: u64| Sample {
             cycle: 0, built_ns: b, tx_ns: Some(b.wrapping_add(send)), rx_ns: b.wrapping_add(send).wrapping_add(rtt),
-            reference_ns: 0, reference_offset_ns: None, difference_ns: 0, loop_ns, frame_ns: 0, data_ns: 0,
+            reference_ns: 0, reference_offset_ns: None, difference_ns: 0, loop_ns, frame_ns: 0, data_ns: 0, follower: None,
         };
         prop_assert_eq!(s(base).lead_ns(), s(0).lead_ns());
     }
@@ -89,6 +90,7 @@ pub(super) fn sample(cycle: u64, reference_ns: u64, difference_ns: i64) -> Sampl
         loop_ns: 4_000,
         frame_ns: 6_000,
         data_ns: 0,
+        follower: None,
     }
 }
 
