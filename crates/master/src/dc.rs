@@ -120,6 +120,7 @@ impl SyncPdus {
             local_ns: system.wrapping_add(delay).wrapping_sub(offset),
             speed_start: u16_at(0x20),
             speed_diff: u16_at(0x22) as i16,
+            speed_diff_slows: None,
         })
     }
 
@@ -288,6 +289,16 @@ impl<I: Io> Master<I> {
             &mut 0x1000u16.to_le_bytes(),
             dc_count,
         )?;
+        // 5a. For a method that takes the loops' corrections back out of a follower's clock:
+        //     the raw crystal rates now, which way the speed counter moves them once converged.
+        //     Not where the method steers the reference's offset from here on: the followers
+        //     then converge on the master's rate, not the reference crystal's (that method's
+        //     offsets work the loops hard enough for its own trial to tell the direction).
+        let measure = sync.as_ref().is_some_and(|s| s.reads_follower_clock() && !s.steers_reference_offset());
+        let crystal_rates = match measure {
+            true => Some(self.measure_crystal_rates(reference)?),
+            false => None,
+        };
         // 6. Static drift compensation, until converged (checked, not a fixed count).
         let ref_station = self.slaves[reference].station;
         // (`steers_reference_offset` implies the reference follows the master.)
@@ -346,6 +357,9 @@ impl<I: Io> Master<I> {
         }
         if !converged {
             max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
+        }
+        if let Some(rates) = crystal_rates.filter(|_| converged) {
+            self.measure_speed_direction(&rates)?;
         }
         // A ring split from the start closes only when the master opens it.
         self.arm_split_watch()?;
@@ -677,7 +691,12 @@ impl<I: Io> Master<I> {
             s.reference_offset_ns = offset.and(st.reference_offset_ns);
             s.difference_ns = SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns();
             s.data_ns = data_bytes * 80;
-            s.follower = p.follower_clock().filter(|_| answered.follower);
+            s.follower = p.follower_clock().filter(|_| answered.follower).map(|mut c| {
+                let station = p.follower;
+                c.speed_diff_slows =
+                    self.slaves.iter().find(|s| Some(s.station) == station).and_then(|s| s.speed_diff_slows);
+                c
+            });
             Some(s)
         } else {
             st.lost += 1;

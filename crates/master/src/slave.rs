@@ -82,6 +82,9 @@ pub struct Slave {
     /// Receive times of ports 0–3 (local time, low 32 bits) and at the processing unit.
     pub receive_times: [u32; 4],
     pub receive_time_epu: u64,
+    /// Which way a positive speed counter difference (0x0932) moves this ESC's clock, where
+    /// the master measured it (`Master::measure_speed_direction`): true if it slows it.
+    pub speed_diff_slows: Option<bool>,
     /// Propagation delay from the reference clock (the first DC slave), in ns.
     pub delay_ns: u32,
     pub mailbox: Option<MailboxConfig>,

@@ -13,6 +13,7 @@ mod delays;
 mod next_frame_latch;
 mod process_data;
 mod sii;
+mod speed_direction;
 mod split_start;
 mod states;
 
@@ -274,6 +275,7 @@ impl<I: Io> Master<I> {
             dc_64bit: features & 0x08 != 0,
             receive_times: [0; 4],
             receive_time_epu: 0,
+            speed_diff_slows: None,
             delay_ns: 0,
             mailbox,
             mbx_counter: 0,

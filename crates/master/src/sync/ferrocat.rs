@@ -114,7 +114,35 @@ pub struct Ferrocat {
     /// A follower's crystal as the flywheel the line runs on (`Ferrocat::with_flywheel`).
     flywheel: Option<Flywheel>,
     contest: Option<Contest>,
+    /// Which way the speed counter moves the clock, while it is being found out.
+    trial: Option<Trial>,
 }
+
+/// The datasheet gives the speed counter's deviation but not its direction, so the flywheel
+/// starts with both readings: `Ferrocat::flywheel` and `fit` take a positive SCD to slow the
+/// clock (our model's reading), these the other way. The reading whose ε line stays clean
+/// while the other's restarts again and again (the loop's work taken out the wrong way,
+/// doubled) is kept. Until then the direct line is the estimate: the follower's loop may be too
+/// calm to tell for a long while (the master following the reference, crystals alike), and a
+/// guess would take the loop's first real work, a step's, the wrong way. Where neither reading
+/// stays clean the flywheel is refused after a while (an ESC that does not implement 0x0932
+/// would look so).
+#[derive(Debug)]
+struct Trial {
+    other: Flywheel,
+    other_fit: LineFit,
+    /// Frames that read the follower so far.
+    frames: u64,
+}
+
+/// Frames before the trial may end; the other reading's restarts that decide it,
+/// `TRIAL_RATIO` times the kept one's and `TRIAL_MARGIN_RESTARTS` more; restarts above which a
+/// reading is not clean, and frames after which a trial where neither is refuses the flywheel.
+const TRIAL_FRAMES: u64 = 1024;
+const TRIAL_CLEAN_RESTARTS: u64 = 1;
+const TRIAL_RATIO: u64 = 3;
+const TRIAL_MARGIN_RESTARTS: u64 = 3;
+const TRIAL_GIVE_UP_FRAMES: u64 = 8 * TRIAL_FRAMES;
 
 /// Which of two estimates of the reference foretells the stamps' points better: the flywheel's
 /// (the follower's crystal plus ε) or the line through the reference's own points. They part
@@ -130,9 +158,15 @@ struct Contest {
     use_direct: bool,
 }
 
-/// The contest's memory (points) and the evidence that changes the estimate in use.
+/// The contest's memory (points) and the evidence that hands the estimate to the direct line.
 const CONTEST_LEAK: f64 = 1.0 / 256.0;
 const CONTEST_SWITCH: f64 = 8.0;
+/// Evidence each point adds for the flywheel, whose ε needs no stamps: where the two agree the
+/// sum settles at `CONTEST_PRIOR / CONTEST_LEAK` (2.56), and the flywheel is used again once it
+/// is above 0 and the crystal's line is as certain as the direct one — after a step of the
+/// follower's crystal, once its restarted line has grown as long, so that a later step of the
+/// reference finds the flywheel in use.
+const CONTEST_PRIOR: f64 = 0.01;
 
 /// How a method makes the reference follow the master.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -255,19 +289,54 @@ impl Ferrocat {
             delay_bias_ns: 0,
             flywheel: None,
             contest: None,
+            trial: None,
         }
     }
 
     /// ferrocat whose line runs on a follower's crystal, the reference's difference from it
     /// read from the hardware every cycle (flywheel.rs).
     pub fn with_flywheel(self) -> Self {
-        let eps = Ferrocat::line(FIT_WINDOW, self.cycle_ns);
-        let direct = Ferrocat::line(FIT_WINDOW, self.cycle_ns);
+        let line = || Ferrocat::line(FIT_WINDOW, self.cycle_ns);
+        let trial = Trial { other: Flywheel::new(line(), false), other_fit: line(), frames: 0 };
         Ferrocat {
-            flywheel: Some(Flywheel::new(eps)),
-            contest: Some(Contest { direct, llr: 0.0, use_direct: false }),
+            flywheel: Some(Flywheel::new(line(), true)),
+            contest: Some(Contest { direct: line(), llr: 0.0, use_direct: true }),
+            trial: Some(trial),
             ..self
         }
+    }
+
+    /// Ends the trial of the speed counter's direction where the frames have answered it
+    /// (`measured`: the direction the master measured at the DC initialisation, which ends it
+    /// at once). The direct line is the estimate throughout, so nothing in use moves.
+    fn judge_trial(&mut self, measured: Option<bool>) {
+        let Some(t) = self.trial.as_mut().filter(|t| t.frames >= TRIAL_FRAMES || measured.is_some()) else { return };
+        let mine = self.flywheel.as_ref().map_or(u64::MAX, |f| f.eps_restarts());
+        let other = t.other.eps_restarts();
+        // The loop's start-up (the compensation's first frames, the first offsets) can restart
+        // the right reading's line once or twice too: what tells is the other's many more.
+        let clean = |a: u64, b: u64| b >= TRIAL_RATIO * a + TRIAL_MARGIN_RESTARTS;
+        if measured == Some(true) || (measured.is_none() && clean(mine, other)) {
+            self.trial = None;
+        } else if measured == Some(false) || clean(other, mine) {
+            let t = self.trial.take().expect("on trial");
+            self.flywheel = Some(t.other);
+            self.fit = t.other_fit;
+            // The contest's evidence so far was the first reading's.
+            if let Some(c) = self.contest.as_mut() {
+                c.llr = 0.0;
+            }
+        } else if t.frames >= TRIAL_GIVE_UP_FRAMES && mine > TRIAL_CLEAN_RESTARTS && other > TRIAL_CLEAN_RESTARTS {
+            // Neither reading is clean: no flywheel, the direct line for good.
+            self.trial = None;
+            self.flywheel = None;
+        }
+    }
+
+    /// With a flywheel: the reference's time of the last frame that read the follower, and
+    /// the ε = reference − follower's crystal it measured (ns).
+    pub fn flywheel_eps(&self) -> Option<(u64, i64)> {
+        self.flywheel.as_ref()?.last_point()
     }
 
     /// The flywheel's estimate of the reference at master time `x` (the crystal's line plus ε).
@@ -283,18 +352,30 @@ impl Ferrocat {
     /// returns how far the estimate in use moved at `x` if it changed.
     fn contest_point(&mut self, x: u64, y: u64) -> i64 {
         let fly = self.flywheel_at(x);
+        let fly_sd = self.fit.sd_ahead_ns(self.cycle_ns);
+        // Not while the flywheel's direction is unknown and matters, nor once it was refused.
+        let fly_present = self.flywheel.is_some();
+        let fly_ok = fly_present && self.trial.is_none();
         let Some(c) = self.contest.as_mut() else { return 0 };
+        // Back to the flywheel only once the crystal's line is as certain as the direct one: a
+        // line restarted by the follower's step is young, and the stamps cannot tell its tens
+        // of ns from the direct line's for a long while (back as soon as it was settled enough
+        // to stop probing, the estimate jumped by that much seconds after the step: 95 of 100
+        // seeds within 100 ms of the control on pc-stock, against 100).
+        let settled = fly_ok && fly_sd.zip(c.direct.sd_ahead_ns(self.cycle_ns)).is_some_and(|(f, d)| f <= d);
         let direct = c.direct.at(x);
         let sd = c.direct.scale_ns().max(1.0);
         c.direct.push(x, y);
-        let (Some(a), Some(b)) = (fly, direct) else { return 0 };
+        // Refused, the flywheel is not in the contest.
+        let (Some(a), Some(b), true) = (fly, direct, fly_present) else { return 0 };
         // A host's outliers (a stamp hundreds of µs late) say nothing of which is right: the
         // residuals are clipped at 4 σ.
         let clip = |r: f64| r.clamp(-4.0 * sd, 4.0 * sd);
         let (ra, rb) = (clip(y.wrapping_sub(a) as i64 as f64), clip(y.wrapping_sub(b) as i64 as f64));
         let limit = 2.0 * CONTEST_SWITCH;
-        c.llr = (c.llr * (1.0 - CONTEST_LEAK) + (rb * rb - ra * ra) / (2.0 * sd * sd)).clamp(-limit, limit);
-        let switch = if c.use_direct { c.llr > CONTEST_SWITCH } else { c.llr < -CONTEST_SWITCH };
+        let evidence = (rb * rb - ra * ra) / (2.0 * sd * sd) + CONTEST_PRIOR;
+        c.llr = (c.llr * (1.0 - CONTEST_LEAK) + evidence).clamp(-limit, limit);
+        let switch = if c.use_direct { c.llr > 0.0 && settled } else { c.llr < -CONTEST_SWITCH };
         if !switch {
             return 0;
         }
@@ -307,14 +388,14 @@ impl Ferrocat {
     /// crystal's line there plus ε.
     fn line_at(&self, x: u64) -> Option<u64> {
         match &self.contest {
-            Some(c) if c.use_direct => c.direct.at(x),
+            Some(c) if c.use_direct || self.flywheel.is_none() => c.direct.at(x),
             _ => self.flywheel_at(x),
         }
     }
 
     /// The line's rate (reference per master time).
     fn line_rate(&self) -> Option<f64> {
-        if let Some(c) = self.contest.as_ref().filter(|c| c.use_direct) {
+        if let Some(c) = self.contest.as_ref().filter(|c| c.use_direct || self.flywheel.is_none()) {
             return c.direct.rate();
         }
         let r = self.fit.rate()?;
@@ -387,6 +468,10 @@ impl Ferrocat {
         // With a flywheel the line runs on the follower's crystal: a frame that read the
         // follower gives its crystal time; any other point the reference's less ε.
         let y_reference = y;
+        let y_other = self.trial.as_mut().map(|t| match &s.follower {
+            Some(f) => t.other.frame(y, f),
+            None => y.wrapping_sub(t.other.eps_at(y).unwrap_or(0) as u64),
+        });
         let y = match (&mut self.flywheel, &s.follower) {
             (None, _) => y,
             (Some(fw), Some(f)) => fw.frame(y, f),
@@ -405,6 +490,13 @@ impl Ferrocat {
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
         let contest_jump = self.contest_point(x, y_reference);
         let fate = self.fit.push(x, y);
+        if let (Some(t), Some(y_other)) = (self.trial.as_mut(), y_other) {
+            t.other_fit.push(x, y_other);
+            // Neither reading is the estimate in use yet: their changes of line move nothing.
+            t.other_fit.take_switch_jump_ns();
+            t.other.take_switch_jump_ns();
+            t.frames += s.follower.is_some() as u64;
+        }
         self.rtt.learn(dev, residual.filter(|_| fate == Fate::Added));
         // The line in use changed windows: steering by offset, the reference steps by the
         // change at its next offset, and every follower with it (their loops would take
@@ -412,13 +504,14 @@ impl Ferrocat {
         // With a flywheel, only the jumps of the estimate in use move the reference.
         let fly_jump = self.fit.take_switch_jump_ns() + self.flywheel.as_mut().map_or(0, |fw| fw.take_switch_jump_ns());
         let jump = match self.contest.as_mut() {
-            Some(c) if c.use_direct => c.direct.take_switch_jump_ns(),
+            Some(c) if c.use_direct || self.flywheel.is_none() => c.direct.take_switch_jump_ns(),
             Some(c) => {
                 c.direct.take_switch_jump_ns();
                 fly_jump
             }
             None => fly_jump,
         } + contest_jump;
+        self.judge_trial(s.follower.and_then(|f| f.speed_diff_slows));
         if self.steers_reference_offset() {
             self.pending_shift_ns = self.pending_shift_ns.saturating_sub(jump);
         }
@@ -646,6 +739,9 @@ impl ClockSync for Ferrocat {
         self.fit.shift_x(error_ns);
         if let Some(c) = self.contest.as_mut() {
             c.direct.shift_x(error_ns);
+        }
+        if let Some(t) = self.trial.as_mut() {
+            t.other_fit.shift_x(error_ns);
         }
         if self.steers_reference_offset() {
             self.pending_shift_ns = self.pending_shift_ns.saturating_add(error_ns);

@@ -24,11 +24,16 @@ pub struct Flywheel {
     /// reference's own time, which the stamps' noise does not reach.
     eps: LineFit,
     last_eps_ns: Option<i64>,
+    /// The reference's time of the last frame that read the follower.
+    last_reference_ns: u64,
+    /// +1 where a positive SCD slows the local clock (our model's reading of the datasheet),
+    /// −1 for the other: the datasheet does not say, so the master tries both (`Ferrocat`).
+    sign: f64,
 }
 
 /// The clock deviation one speed counter difference applies: SCD / (5·(SCS + SCD + 2)·(SCS −
-/// SCD + 2)) (esc-spec §3.5, the datasheet's formula); a positive one slows the local clock
-/// (the model's sign, docs/esc-model.md). 0 where the registers make no sense.
+/// SCD + 2)) (esc-spec §3.5, the datasheet's formula); 0 where the registers make no sense.
+/// Which way it moves the clock is not documented: the master measures it (`Slave::speed_diff_slows`).
 pub fn speed_deviation(speed_start: u16, speed_diff: i16) -> f64 {
     let (s, d) = ((speed_start & 0x7FFF) as f64, speed_diff as f64);
     let den = 5.0 * (s + d + 2.0) * (s - d + 2.0);
@@ -40,8 +45,24 @@ pub fn speed_deviation(speed_start: u16, speed_diff: i16) -> f64 {
 }
 
 impl Flywheel {
-    pub fn new(eps: LineFit) -> Self {
-        Flywheel { last: None, crystal_ns: 0, carry_ns: 0.0, eps, last_eps_ns: None }
+    /// A flywheel whose ε runs on `eps`, taking a positive SCD to slow the local clock where
+    /// `slows` (as our ESC model does), to speed it up otherwise.
+    pub fn new(eps: LineFit, slows: bool) -> Self {
+        Flywheel {
+            last: None,
+            crystal_ns: 0,
+            carry_ns: 0.0,
+            eps,
+            last_eps_ns: None,
+            last_reference_ns: 0,
+            sign: if slows { 1.0 } else { -1.0 },
+        }
+    }
+
+    /// How often ε's line restarted: a loop's corrections taken out the wrong way (or not at
+    /// all) leave ε as jagged as the loop's own work, and its line restarts again and again.
+    pub fn eps_restarts(&self) -> u64 {
+        self.eps.restarts
     }
 
     /// A frame read the reference at `reference_ns` and the follower as `f`: the follower's
@@ -53,7 +74,7 @@ impl Flywheel {
                 // The speed read is the one in force since the loop's last sample, the frame
                 // before: over the whole interval but the frame's own passage. An ESC corrects
                 // every so many of its crystal's ticks, so local = crystal·(1 − deviation).
-                let dev = speed_deviation(f.speed_start, f.speed_diff);
+                let dev = self.sign * speed_deviation(f.speed_start, f.speed_diff);
                 let corr = d as f64 * dev / (1.0 - dev) + self.carry_ns;
                 let whole = corr.round();
                 self.carry_ns = corr - whole;
@@ -70,6 +91,7 @@ impl Flywheel {
         self.last = Some(*f);
         let e = reference_ns.wrapping_sub(self.crystal_ns) as i64;
         self.last_eps_ns = Some(e);
+        self.last_reference_ns = reference_ns;
         self.eps.push(reference_ns, reference_ns.wrapping_add_signed(e));
         self.crystal_ns
     }
@@ -90,6 +112,11 @@ impl Flywheel {
         self.last_eps_ns
     }
 
+    /// The last ε measured and the reference's time it was measured at.
+    pub fn last_point(&self) -> Option<(u64, i64)> {
+        Some((self.last_reference_ns, self.last_eps_ns?))
+    }
+
     /// How far ε's line moved when it changed windows (see `LineFit::take_switch_jump_ns`).
     pub fn take_switch_jump_ns(&mut self) -> i64 {
         self.eps.take_switch_jump_ns()
@@ -99,6 +126,25 @@ impl Flywheel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Whatever the wire brings (any SCS, SCD and local time, wraps and jumps included), the
+        /// deviation stays a small finite fraction and the flywheel neither panics nor
+        /// overflows.
+        #[test]
+        fn any_reading_is_taken_without_panic(
+            readings in proptest::collection::vec((any::<u64>(), any::<u64>(), any::<u16>(), any::<i16>()), 1..64)
+        ) {
+            let mut fw = Flywheel::new(LineFit::new(64), true);
+            for (reference_ns, local_ns, speed_start, speed_diff) in readings {
+                let dev = speed_deviation(speed_start, speed_diff);
+                prop_assert!(dev.is_finite() && dev.abs() < 0.5, "{dev}");
+                fw.frame(reference_ns, &FollowerClock { local_ns, speed_start, speed_diff, speed_diff_slows: None });
+                let _ = (fw.eps_at(reference_ns), fw.eps_slope());
+            }
+        }
+    }
 
     #[test]
     fn speed_deviation_is_the_datasheets_formula() {
@@ -119,7 +165,7 @@ mod tests {
     #[test]
     fn the_crystal_comes_back_out_of_a_steered_local_time() {
         let (ref_ppm, fol_ppm) = (23.0, -31.0);
-        let mut fw = Flywheel::new(LineFit::new(4096));
+        let mut fw = Flywheel::new(LineFit::new(4096), true);
         let (mut t, mut local, mut crystal, mut reference) = (0.0f64, 5e8f64, 5e8f64, 7e9f64);
         let mut ref_rate = 1.0 + ref_ppm * 1e-6;
         let mut scd: i16 = 0;
@@ -139,8 +185,12 @@ mod tests {
             local += crystal_dt * (1.0 - speed_deviation(0x1000, scd));
             reference += dt * ref_rate;
             // Read on the 10 ns grid of the local clock.
-            let f =
-                FollowerClock { local_ns: (local / 10.0).floor() as u64 * 10, speed_start: 0x1000, speed_diff: scd };
+            let f = FollowerClock {
+                local_ns: (local / 10.0).floor() as u64 * 10,
+                speed_start: 0x1000,
+                speed_diff: scd,
+                speed_diff_slows: None,
+            };
             let got = fw.frame(reference as u64, &f) as f64;
             let offset = got - crystal;
             let first = *first_offset.get_or_insert(offset);

@@ -11,6 +11,7 @@ mod pi;
 pub use chen2016::Chen2016;
 pub use conventional::{Conventional, Nominal};
 pub use ferrocat::{Ferrocat, Steering, DENSE_FIT_WINDOW, FIT_WINDOW};
+pub use flywheel::speed_deviation;
 pub use park2020::Park2020;
 pub use pi::SoemPi;
 
@@ -72,6 +73,9 @@ pub struct FollowerClock {
     /// its last sample (esc-spec §3.5).
     pub speed_start: u16,
     pub speed_diff: i16,
+    /// Which way a positive speed counter difference moves this ESC's clock, where the master
+    /// measured it at the DC initialisation (true: it slows it).
+    pub speed_diff_slows: Option<bool>,
 }
 
 impl Sample {
