@@ -152,13 +152,13 @@ const TRIAL_GIVE_UP_FRAMES: u64 = 8 * TRIAL_FRAMES;
 struct Contest {
     /// The line through the reference's own points (ferrocat without a flywheel).
     direct: LineFit,
-    /// Leaky sum of the log-likelihood ratio, flywheel over direct, in units of the stamps'
-    /// variance.
+    /// Leaky sum of the log-likelihood ratio, flywheel over direct, one term per cycle's frame,
+    /// in units of the stamps' variance.
     llr: f64,
     use_direct: bool,
 }
 
-/// The contest's memory (points) and the evidence that hands the estimate to the direct line.
+/// The contest's memory (frames) and the evidence that hands the estimate to the direct line.
 const CONTEST_LEAK: f64 = 1.0 / 256.0;
 const CONTEST_SWITCH: f64 = 8.0;
 /// Evidence each point adds for the flywheel, whose ε needs no stamps: where the two agree the
@@ -348,9 +348,13 @@ impl Ferrocat {
         Some(c.wrapping_add_signed(e))
     }
 
-    /// Scores the point (x, y of the reference) on both estimates, keeps the direct line, and
-    /// returns how far the estimate in use moved at `x` if it changed.
-    fn contest_point(&mut self, x: u64, y: u64) -> i64 {
+    /// Keeps the direct line, scores the point (x, y of the reference) on both estimates where
+    /// it is a cycle's frame (`frame`), and returns how far the estimate in use moved at `x` if
+    /// it changed. A cycle's probes come in a burst whose stamps share the host's state: scored
+    /// as independent points they made the evidence many times what it was (on this machine's
+    /// kernel, robust noise scale ≈ 30 ns: a hand-over every second or so, by 8–207 ns each;
+    /// docs/clock-sync.md).
+    fn contest_point(&mut self, x: u64, y: u64, frame: bool) -> i64 {
         let fly = self.flywheel_at(x);
         let fly_sd = self.fit.sd_ahead_ns(self.cycle_ns);
         // Not while the flywheel's direction is unknown and matters, nor once it was refused.
@@ -366,6 +370,9 @@ impl Ferrocat {
         let direct = c.direct.at(x);
         let sd = c.direct.scale_ns().max(1.0);
         c.direct.push(x, y);
+        if !frame {
+            return 0;
+        }
         // Refused, the flywheel is not in the contest.
         let (Some(a), Some(b), true) = (fly, direct, fly_present) else { return 0 };
         // A host's outliers (a stamp hundreds of µs late) say nothing of which is right: the
@@ -488,7 +495,7 @@ impl Ferrocat {
         let x = stamp.wrapping_add_signed(self.rtt.shift_ns(dev));
         // The weight is learned from the reference's time against the line at the stamp alone.
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
-        let contest_jump = self.contest_point(x, y_reference);
+        let contest_jump = self.contest_point(x, y_reference, s.follower.is_some());
         let fate = self.fit.push(x, y);
         if let (Some(t), Some(y_other)) = (self.trial.as_mut(), y_other) {
             t.other_fit.push(x, y_other);
