@@ -161,7 +161,7 @@ struct Contest {
 /// The contest's memory (frames) and the evidence that hands the estimate to the direct line.
 const CONTEST_LEAK: f64 = 1.0 / 256.0;
 const CONTEST_SWITCH: f64 = 8.0;
-/// Evidence each point adds for the flywheel, whose ε needs no stamps: where the two agree the
+/// Evidence each frame adds for the flywheel, whose ε needs no stamps: where the two agree the
 /// sum settles at `CONTEST_PRIOR / CONTEST_LEAK` (2.56), and the flywheel is used again once it
 /// is above 0 and the crystal's line is as certain as the direct one — after a step of the
 /// follower's crystal, once its restarted line has grown as long, so that a later step of the
