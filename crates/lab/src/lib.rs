@@ -107,6 +107,21 @@ pub const CALIBRATED: [&str; 7] = [
     "ferrocat-mfr-fly",
 ];
 
+/// `a` then `b`, for method lists built from others (`C` must be their lengths' sum).
+pub(crate) const fn concat_names<const A: usize, const B: usize, const C: usize>(
+    a: [&'static str; A],
+    b: [&'static str; B],
+) -> [&'static str; C] {
+    assert!(A + B == C, "concat_names: C must be A + B");
+    let mut out = [""; C];
+    let mut i = 0;
+    while i < C {
+        out[i] = if i < A { a[i] } else { b[i - A] };
+        i += 1;
+    }
+    out
+}
+
 /// Pulses per calibration.
 pub const CALIBRATION_PULSES: usize = 1000;
 

@@ -11,18 +11,7 @@ use ferrocat_segment::SegmentConfig;
 
 /// The methods whose master clock this experiment compares with the slaves' (the
 /// reference-follows-master methods, and none at all).
-pub const METHODS: [&str; 10] = [
-    "none",
-    "conventional",
-    "park2020",
-    "ferrocat",
-    "ferrocat-mfr",
-    "ferrocat-tcl",
-    "ferrocat-dense",
-    "ferrocat-mfr-dense",
-    "ferrocat-fly",
-    "ferrocat-mfr-fly",
-];
+pub const METHODS: [&str; 10] = crate::concat_names(["none", "conventional", "park2020"], crate::CALIBRATED);
 
 #[derive(Debug, Clone)]
 pub struct Options {

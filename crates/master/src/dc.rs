@@ -40,9 +40,9 @@ pub(crate) struct SyncPdus {
     first: FirstPdu,
     pub(crate) frmw: [u8; 8],
     diff: [u8; 4],
-    /// A follower whose clock the frame reads ([`crate::sync::ClockSync::reads_follower_clock`]),
-    /// and its 0x0910–0x0933.
-    follower: Option<u16>,
+    /// A follower whose clock the frame reads ([`crate::sync::ClockSync::reads_follower_clock`]):
+    /// its station and which way its speed counter turns, where measured; and its 0x0910–0x0933.
+    follower: Option<(u16, Option<bool>)>,
     clock: [u8; FOLLOWER_CLOCK_LEN],
 }
 
@@ -89,7 +89,7 @@ impl SyncPdus {
         let at = |ado| Address::Device { adp: station, ado };
         let n = 3 + self.follower.is_some() as usize;
         let clock = match self.follower {
-            Some(f) => Pdu::new(Command::FPRD, Address::Device { adp: f, ado: 0x0910 }, &mut self.clock),
+            Some((f, _)) => Pdu::new(Command::FPRD, Address::Device { adp: f, ado: 0x0910 }, &mut self.clock),
             None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []),
         };
         let pdus = [
@@ -109,7 +109,7 @@ impl SyncPdus {
 
     /// The follower's clock as the frame read it.
     fn follower_clock(&self) -> Option<crate::sync::FollowerClock> {
-        self.follower?;
+        let (_, speed_diff_slows) = self.follower?;
         let c = &self.clock;
         let u64_at = |k: usize| u64::from_le_bytes(c[k..k + 8].try_into().unwrap_or_default());
         let u16_at = |k: usize| u16::from_le_bytes([c[k], c[k + 1]]);
@@ -120,7 +120,7 @@ impl SyncPdus {
             local_ns: system.wrapping_add(delay).wrapping_sub(offset),
             speed_start: u16_at(0x20),
             speed_diff: u16_at(0x22) as i16,
-            speed_diff_slows: None,
+            speed_diff_slows,
         })
     }
 
@@ -649,7 +649,7 @@ impl<I: Io> Master<I> {
             .reads_follower_clock()
             .then(|| self.slaves.iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
             .flatten()
-            .map(|s| s.station);
+            .map(|s| (s.station, s.speed_diff_slows));
         Ok(SyncPdus {
             station: self.slaves[r].station,
             wide,
@@ -691,12 +691,7 @@ impl<I: Io> Master<I> {
             s.reference_offset_ns = offset.and(st.reference_offset_ns);
             s.difference_ns = SystemTimeDifference(u32::from_le_bytes(p.diff)).as_ns();
             s.data_ns = data_bytes * 80;
-            s.follower = p.follower_clock().filter(|_| answered.follower).map(|mut c| {
-                let station = p.follower;
-                c.speed_diff_slows =
-                    self.slaves.iter().find(|s| Some(s.station) == station).and_then(|s| s.speed_diff_slows);
-                c
-            });
+            s.follower = p.follower_clock().filter(|_| answered.follower);
             Some(s)
         } else {
             st.lost += 1;

@@ -15,7 +15,8 @@ const MAX_GAP_NS: u64 = 1_000_000_000;
 
 #[derive(Debug)]
 pub struct Flywheel {
-    last: Option<FollowerClock>,
+    /// The follower's local time at the last reading.
+    last_local_ns: Option<u64>,
     /// The follower's local time with its loop's corrections taken back out (ns).
     crystal_ns: u64,
     /// What of the corrections is not yet a whole ns.
@@ -23,9 +24,8 @@ pub struct Flywheel {
     /// (reference time, reference time + ε), ε = reference − crystal: its line, on the
     /// reference's own time, which the stamps' noise does not reach.
     eps: LineFit,
-    last_eps_ns: Option<i64>,
-    /// The reference's time of the last frame that read the follower.
-    last_reference_ns: u64,
+    /// The reference's time of the last frame that read the follower, and the ε it measured.
+    last_point: Option<(u64, i64)>,
     /// +1 where a positive SCD slows the local clock (our model's reading of the datasheet),
     /// −1 for the other: the datasheet does not say, so the master tries both (`Ferrocat`).
     sign: f64,
@@ -49,12 +49,11 @@ impl Flywheel {
     /// `slows` (as our ESC model does), to speed it up otherwise.
     pub fn new(eps: LineFit, slows: bool) -> Self {
         Flywheel {
-            last: None,
+            last_local_ns: None,
             crystal_ns: 0,
             carry_ns: 0.0,
             eps,
-            last_eps_ns: None,
-            last_reference_ns: 0,
+            last_point: None,
             sign: if slows { 1.0 } else { -1.0 },
         }
     }
@@ -68,7 +67,7 @@ impl Flywheel {
     /// A frame read the reference at `reference_ns` and the follower as `f`: the follower's
     /// crystal time at that instant (the point for the crystal's line against the master).
     pub fn frame(&mut self, reference_ns: u64, f: &FollowerClock) -> u64 {
-        let step = self.last.map(|prev| f.local_ns.wrapping_sub(prev.local_ns));
+        let step = self.last_local_ns.map(|prev| f.local_ns.wrapping_sub(prev));
         match step {
             Some(d) if d > 0 && d <= MAX_GAP_NS => {
                 // The speed read is the one in force since the loop's last sample, the frame
@@ -88,10 +87,9 @@ impl Flywheel {
                 self.carry_ns = 0.0;
             }
         }
-        self.last = Some(*f);
+        self.last_local_ns = Some(f.local_ns);
         let e = reference_ns.wrapping_sub(self.crystal_ns) as i64;
-        self.last_eps_ns = Some(e);
-        self.last_reference_ns = reference_ns;
+        self.last_point = Some((reference_ns, e));
         self.eps.push(reference_ns, reference_ns.wrapping_add_signed(e));
         self.crystal_ns
     }
@@ -99,7 +97,7 @@ impl Flywheel {
     /// ε = reference − crystal at reference time `reference_ns`, from its line (the last one
     /// measured before the line has two points); `None` before the first frame.
     pub fn eps_at(&self, reference_ns: u64) -> Option<i64> {
-        self.eps.at(reference_ns).map(|v| v.wrapping_sub(reference_ns) as i64).or(self.last_eps_ns)
+        self.eps.at(reference_ns).map(|v| v.wrapping_sub(reference_ns) as i64).or(self.last_eps_ns())
     }
 
     /// dε/d(reference time).
@@ -109,12 +107,12 @@ impl Flywheel {
 
     /// The last ε measured.
     pub fn last_eps_ns(&self) -> Option<i64> {
-        self.last_eps_ns
+        self.last_point.map(|(_, e)| e)
     }
 
     /// The last ε measured and the reference's time it was measured at.
     pub fn last_point(&self) -> Option<(u64, i64)> {
-        Some((self.last_reference_ns, self.last_eps_ns?))
+        self.last_point
     }
 
     /// How far ε's line moved when it changed windows (see `LineFit::take_switch_jump_ns`).
