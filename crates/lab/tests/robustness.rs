@@ -186,11 +186,9 @@ fn a_followers_crystal_as_flywheel_recovers_from_either_crystals_step_on_a_stock
                 "seed {seed} {} {}: {:?} ms, peak {:.0} ns",
                 r.method, r.scenario, r.recovery_vs_control_ms, r.peak_ns
             );
-            // The reference's step: within 100 ms. The follower's: the contest weighs the
-            // cycles' frames only, and on a stock kernel hands over later (30–118 ms here;
-            // 70 / 84 of 100 seeds within 100 ms, docs/clock-sync.md).
-            let bound_ms = if r.scenario == FOLLOWER_DRIFT_STEP { 300.0 } else { 100.0 };
-            assert!(r.recovery_vs_control_ms.is_some_and(|ms| ms <= bound_ms), "{r:?}");
+            // Either crystal's step: within 100 ms (the follower's is told from the
+            // reference's by the kink test, docs/clock-sync.md).
+            assert!(r.recovery_vs_control_ms.is_some_and(|ms| ms <= 100.0), "{r:?}");
         }
     }
 }

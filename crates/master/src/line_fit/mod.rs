@@ -114,6 +114,22 @@ fn dz_at((slope, mx, mz): Line, dx: f64) -> f64 {
     mz + slope * (dx - mx)
 }
 
+/// A line kept as it was: y = y0 + (x − x0)·(1 + slope), on the wrapping u64 circle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrozenLine {
+    x0: u64,
+    y0: u64,
+    slope: f64,
+}
+
+impl FrozenLine {
+    pub fn at(&self, x: u64) -> u64 {
+        let dx = x.wrapping_sub(self.x0) as i64;
+        // `as` saturates: a line read seconds away stays finite.
+        self.y0.wrapping_add_signed(dx).wrapping_add_signed((self.slope * dx as f64).round() as i64)
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct LineFit {
     max_len: usize,
@@ -396,6 +412,12 @@ impl LineFit {
             Some(w) => (&w.sums, w.line),
             None => (&self.sums, self.line),
         }
+    }
+
+    /// The line in use at `x`, frozen: what it foretells from here on however the window
+    /// changes (None before the first point).
+    pub fn frozen_at(&self, x: u64) -> Option<FrozenLine> {
+        Some(FrozenLine { x0: x, y0: self.at(x)?, slope: self.rate()? - 1.0 })
     }
 
     /// How far the line's value moved (ns) when the line in use changed from one window's to
@@ -718,6 +740,38 @@ mod tests {
         assert_eq!(f.restarts, 1, "no restart but the step's");
         let rate = f.rate().unwrap();
         assert!((rate - 1.000070).abs() < 2e-6, "rate after the step {rate}");
+    }
+
+    /// A line frozen before a rate step goes on foretelling the old rate after the window
+    /// restarted at the step, to within the fit's own error, seconds away and across the u64
+    /// wrap; the window's own line follows the new rate.
+    #[test]
+    fn a_frozen_line_keeps_the_old_rate_after_the_window_restarted() {
+        let mut f = LineFit::new(4096);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let noise = Normal::new(0.0, 1000.0).unwrap();
+        // Starts 2 s before the u64 wrap, 20 ppm fast, then 70 ppm fast from point 2000.
+        let (mut y, x0) = (u64::MAX - 2_000_000_000, u64::MAX - 1_500_000_000);
+        let mut frozen = None;
+        for k in 0..3000u64 {
+            let ppm: u64 = if k < 2000 { 20 } else { 70 };
+            y = y.wrapping_add(1_000_000 + ppm);
+            let x = x0.wrapping_add(k * 1_000_000);
+            if k == 2000 {
+                frozen = f.frozen_at(x);
+            }
+            f.push(x.wrapping_add_signed(noise.sample(&mut rng) as i64), y);
+        }
+        assert!(f.restarts >= 1, "the step restarted the window");
+        let frozen = frozen.unwrap();
+        // 1 s after the step: the old line is 50 ppm·1 s = 50 µs behind the reference.
+        let x = x0.wrapping_add(2999 * 1_000_000);
+        let old_rate_there = y.wrapping_sub(1000 * 50);
+        let off = frozen.at(x).wrapping_sub(old_rate_there) as i64;
+        println!("frozen line off the old rate by {off} ns");
+        assert!(off.abs() < 300, "frozen line off the old rate by {off} ns");
+        let now = f.at(x).unwrap().wrapping_sub(y) as i64;
+        assert!(now.abs() < 300, "the window's own line off by {now} ns");
     }
 
     /// A window of `mature` points of a 20 ppm fast reference in 1 µs of noise, then `extra`

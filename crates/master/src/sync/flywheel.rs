@@ -7,11 +7,15 @@
 //! while the crystal against the master still needs the host's noisy stamps. A change of the
 //! reference's crystal shows in the first at once and not at all in the second.
 use super::FollowerClock;
-use crate::line_fit::LineFit;
+use crate::line_fit::{FrozenLine, LineFit};
 
 /// Readings further apart than this (or going backwards: a power cycle, a 32-bit wrap) start
 /// the crystal's count again from the reference's time.
 const MAX_GAP_NS: u64 = 1_000_000_000;
+/// ε's line is worth freezing at a restart only with this many points behind it: a young
+/// line's slope is its last restart's guess, and a change measured from it would be that
+/// guess's error.
+const KINK_MIN_POINTS: usize = 256;
 
 #[derive(Debug)]
 pub struct Flywheel {
@@ -29,6 +33,8 @@ pub struct Flywheel {
     /// +1 where a positive SCD slows the local clock (our model's reading of the datasheet),
     /// −1 for the other: the datasheet does not say, so the master tries both (`Ferrocat`).
     sign: f64,
+    /// ε's line as it stood before its last restart, not yet taken (`Flywheel::take_kink`).
+    kink: Option<FrozenLine>,
 }
 
 /// The clock deviation one speed counter difference applies: SCD / (5·(SCS + SCD + 2)·(SCS −
@@ -55,6 +61,7 @@ impl Flywheel {
             eps,
             last_point: None,
             sign: if slows { 1.0 } else { -1.0 },
+            kink: None,
         }
     }
 
@@ -90,7 +97,12 @@ impl Flywheel {
         self.last_local_ns = Some(f.local_ns);
         let e = reference_ns.wrapping_sub(self.crystal_ns) as i64;
         self.last_point = Some((reference_ns, e));
+        let before = self.eps.frozen_at(reference_ns).filter(|_| self.eps.len() >= KINK_MIN_POINTS);
+        let restarts = self.eps.restarts;
         self.eps.push(reference_ns, reference_ns.wrapping_add_signed(e));
+        if self.eps.restarts != restarts && before.is_some() {
+            self.kink = before;
+        }
         self.crystal_ns
     }
 
@@ -113,6 +125,13 @@ impl Flywheel {
     /// The last ε measured and the reference's time it was measured at.
     pub fn last_point(&self) -> Option<(u64, i64)> {
         self.last_point
+    }
+
+    /// ε's line (reference time ↦ reference time + ε) as it stood before it last restarted
+    /// after a long run, if not taken yet: one of the two crystals changed then, and how far
+    /// ε has left that line since is how far the one that changed has left its old rate.
+    pub fn take_kink(&mut self) -> Option<FrozenLine> {
+        self.kink.take()
     }
 
     /// How far ε's line moved when it changed windows (see `LineFit::take_switch_jump_ns`).
