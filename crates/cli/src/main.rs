@@ -215,7 +215,7 @@ enum LabCmd {
     /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root); and
     /// where each cycle's frame passed the reference on its cycle.
     Live {
-        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
+        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr and their variants -direct, -dense (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
         #[arg(long, default_values = ["conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"])]
         method: Vec<String>,
         #[arg(long, default_value_t = 2)]
@@ -259,7 +259,9 @@ struct LabArgs {
     /// A segment file (as for `sim --config`) instead of the experiment's own segment.
     #[arg(long)]
     segment: Option<PathBuf>,
-    /// Methods (repeatable): none, conventional, park2020, chen2016, pi, ferrocat.
+    /// Methods (repeatable): none, conventional, park2020, chen2016, pi, ferrocat, ferrocat-mfr; and
+    /// ferrocat's variants ferrocat-tcl, ferrocat-dense, ferrocat-mfr-dense, ferrocat-direct,
+    /// ferrocat-mfr-direct (docs/clock-sync.md).
     #[arg(long)]
     method: Vec<String>,
     /// Segment sizes (repeatable; park2020 default 2 and 6).

@@ -30,6 +30,11 @@ pub const FERROCAT_TCL: &str = "ferrocat-tcl";
 /// not only while the line is uncertain (`Ferrocat::dense`).
 pub const FERROCAT_DENSE: [&str; 2] = ["ferrocat-dense", "ferrocat-mfr-dense"];
 
+/// ferrocat in either coupling without a follower's crystal for its flywheel: the line through
+/// the reference's own points alone (`ferrocat` and `ferrocat-mfr` until session 46), for
+/// comparison.
+pub const FERROCAT_DIRECT: [&str; 2] = ["ferrocat-direct", "ferrocat-mfr-direct"];
+
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.
 pub fn line(slaves: usize) -> SegmentConfig {
     let mut cfg = SegmentConfig { drift_spread_ppm: Some(50.0), ..SegmentConfig::default() };
@@ -103,8 +108,8 @@ pub const CALIBRATED: [&str; 7] = [
     "ferrocat-tcl",
     "ferrocat-dense",
     "ferrocat-mfr-dense",
-    "ferrocat-fly",
-    "ferrocat-mfr-fly",
+    "ferrocat-direct",
+    "ferrocat-mfr-direct",
 ];
 
 /// `a` then `b`, for method lists built from others (`C` must be their lengths' sum).
@@ -205,9 +210,11 @@ pub fn method<I: Io>(
         // N = 100 timestamp differences per speed update; the host's timer resolution.
         "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.timer_resolution_ns())),
         "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
-        "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns)),
+        // A follower's crystal for the flywheel where the segment has a 64-bit follower
+        // (sync/flywheel.rs); without one, the same as the direct line.
+        "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns).with_flywheel()),
         // ferrocat with the master following the reference whatever the experiment's coupling.
-        "ferrocat-mfr" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
+        "ferrocat-mfr" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel()),
         // ferrocat's earlier reference-follows-master design: its time into the reference's
         // time control loop (0x0910) rather than the reference's offset.
         FERROCAT_TCL => {
@@ -219,12 +226,15 @@ pub fn method<I: Io>(
             let coupling = if dense == FERROCAT_DENSE[0] { coupling } else { Coupling::MasterFollowsReference };
             Box::new(Ferrocat::dense(coupling, cycle_ns))
         }
-        "ferrocat-fly" => Box::new(Ferrocat::new(coupling, cycle_ns).with_flywheel()),
-        "ferrocat-mfr-fly" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel()),
+        direct if FERROCAT_DIRECT.contains(&direct) => {
+            let coupling = if direct == FERROCAT_DIRECT[0] { coupling } else { Coupling::MasterFollowsReference };
+            Box::new(Ferrocat::new(coupling, cycle_ns))
+        }
         other => anyhow::bail!(
-            "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {})",
+            "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {}, {})",
             METHODS.join(", "),
-            FERROCAT_DENSE.join(", ")
+            FERROCAT_DENSE.join(", "),
+            FERROCAT_DIRECT.join(", ")
         ),
     })
 }

@@ -18,12 +18,13 @@ use serde::Serialize;
 
 use crate::stats::Moments;
 
-pub const SCENARIOS: [&str; 3] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles"];
+/// The disturbances a run takes by default.
+pub const SCENARIOS: [&str; 4] = ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles", FOLLOWER_DRIFT_STEP];
 /// On a ring segment (one with `[secondary]`): the cable into the device the secondary port is
 /// wired to pulled, splitting the ring there (cable redundancy, docs/master.md).
 pub const RING_CABLE_PULLED: &str = "ring-cable-pulled";
-/// The first follower's crystal stepping by +50 ppm instead of the reference's: what a method
-/// that takes a follower's crystal for a flywheel (`ferrocat-fly`) must tell from the other.
+/// The first follower's crystal stepping by +50 ppm instead of the reference's: what ferrocat,
+/// which takes a follower's crystal for its flywheel, must tell from the other.
 pub const FOLLOWER_DRIFT_STEP: &str = "follower-drift-step-50ppm";
 /// Every disturbance a run can name: [`SCENARIOS`], [`FOLLOWER_DRIFT_STEP`] and, on a ring,
 /// [`RING_CABLE_PULLED`].

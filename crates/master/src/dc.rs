@@ -644,10 +644,13 @@ impl<I: Io> Master<I> {
         } else {
             FirstPdu::Nop
         };
-        // The first 64-bit follower after the reference (a 32-bit one's 0x0910 is 4 bytes).
+        // The first 64-bit follower after the reference (a 32-bit one's 0x0910 is 4 bytes), on
+        // the reference's side of a broken ring: behind the break the clocks follow another
+        // reference, moved by their offsets, and the frame reaches them a pass later.
+        let near = self.first_far_position().unwrap_or(self.slaves.len());
         let follower = sync
             .reads_follower_clock()
-            .then(|| self.slaves.iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
+            .then(|| self.slaves[..near].iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
             .flatten()
             .map(|s| (s.station, s.speed_diff_slows));
         Ok(SyncPdus {

@@ -763,7 +763,13 @@ impl ClockSync for Ferrocat {
         self.probes_steer && self.steers_reference_offset()
     }
     fn line_events(&self) -> Option<LineEvents> {
-        self.keeps_line().then_some(LineEvents { restarts: self.fit.restarts, false_alarms: self.fit.false_alarms })
+        // With a flywheel the estimate is two lines, the crystal's and ε's: a step of either
+        // crystal restarts one of them.
+        let eps = self.flywheel.as_ref().map(|fw| fw.eps_events()).unwrap_or_default();
+        self.keeps_line().then_some(LineEvents {
+            restarts: self.fit.restarts + eps.restarts,
+            false_alarms: self.fit.false_alarms + eps.false_alarms,
+        })
     }
     fn makes_up_lost_frames(&self) -> bool {
         // Steering by offset, a lost frame leaves the reference on its crystal's rate for two

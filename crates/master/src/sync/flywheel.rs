@@ -6,7 +6,7 @@
 //! known to a few ns every cycle from hardware alone (both times latched by the same frame),
 //! while the crystal against the master still needs the host's noisy stamps. A change of the
 //! reference's crystal shows in the first at once and not at all in the second.
-use super::FollowerClock;
+use super::{FollowerClock, LineEvents};
 use crate::line_fit::{FrozenLine, LineFit};
 
 /// Readings further apart than this (or going backwards: a power cycle, a 32-bit wrap) start
@@ -69,6 +69,11 @@ impl Flywheel {
     /// all) leave ε as jagged as the loop's own work, and its line restarts again and again.
     pub fn eps_restarts(&self) -> u64 {
         self.eps.restarts
+    }
+
+    /// What ε's line has been through.
+    pub fn eps_events(&self) -> LineEvents {
+        LineEvents { restarts: self.eps.restarts, false_alarms: self.eps.false_alarms }
     }
 
     /// A frame read the reference at `reference_ns` and the follower as `f`: the follower's
