@@ -40,6 +40,9 @@ pub struct Row {
     /// method that keeps no master clock (it follows the reference's phase only).
     pub ref_mean_us: Option<f64>,
     pub ref_rms_us: Option<f64>,
+    /// The median of |master − reference| (µs): a kernel's rare stalls of tens of µs rule the
+    /// RMS of a 10 s run, and not this.
+    pub ref_median_abs_us: Option<f64>,
     pub last_mean_us: Option<f64>,
     pub last_rms_us: Option<f64>,
     /// Largest |master − slave| over all slaves and samples (µs).
@@ -320,6 +323,7 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
     let text = std::fs::read_to_string(log).with_context(|| format!("reading {}", log.display()))?;
     let (mut reference, mut last, mut max_abs) = (Moments::default(), Moments::default(), 0f64);
     let mut reference_times = Vec::new();
+    let mut reference_abs = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let v: Vec<Option<u64>> = line.split(',').map(|x| x.parse().ok()).collect();
         let Some(Some(mono)) = v.first().copied() else { bail!("{}: line {}: no time", log.display(), i + 1) };
@@ -342,6 +346,7 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         let e: Vec<f64> = v[1..].iter().flatten().map(|&s| master.wrapping_sub(s as u32) as i32 as f64).collect();
         ensure!(e.len() == a.slaves, "{}: line {}: {} slave clocks, not {}", log.display(), i + 1, e.len(), a.slaves);
         reference.push(e[0]);
+        reference_abs.push(e[0].abs());
         last.push(e[e.len() - 1]);
         max_abs = e.iter().fold(max_abs, |m, x| m.max(x.abs()));
     }
@@ -355,6 +360,7 @@ fn errors(log: &Path, r: &MasterRun, method: &str, a: &LiveArgs) -> anyhow::Resu
         cycle_us: a.cycle_us,
         ref_mean_us: us(reference.mean()),
         ref_rms_us: us(reference.rms()),
+        ref_median_abs_us: us(ferrocat_lab::stats::median(&reference_abs)),
         last_mean_us: us(last.mean()),
         last_rms_us: us(last.rms()),
         max_abs_us: us(max_abs),
@@ -414,10 +420,11 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
         a.slaves, a.cycle_us, a.seconds, a.settle_s
     );
     outln!(
-        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>7} {:>7} {:>8} {:>6} {:>7}",
+        "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>8} {:>8} {:>7} {:>7} {:>8} {:>6} {:>7}",
         "method",
         "ref mean",
         "ref RMS",
+        "ref |e|50",
         "last mean",
         "last RMS",
         "max |e|",
@@ -433,10 +440,11 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
     let f = |x: Option<f64>| x.map_or("—".to_string(), |x| format!("{x:.3}"));
     for r in &rows {
         outln!(
-            "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10.3} {:>8.3} {:>8.3} {:>7} {:>7} {:>8} {:>6} {:>7}",
+            "{:<13} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10.3} {:>8.3} {:>8.3} {:>7} {:>7} {:>8} {:>6} {:>7}",
             r.method,
             f(r.ref_mean_us),
             f(r.ref_rms_us),
+            f(r.ref_median_abs_us),
             f(r.last_mean_us),
             f(r.last_rms_us),
             f(r.max_abs_us),
@@ -501,6 +509,38 @@ mod tests {
         // late frame (880) passed after its cycle's SYNC0, with the next cycle's frame before
         // the following one — one overwritten — and its own cycle's SYNC0 found none.
         assert_eq!((p.lost, p.repeated), (1, 1));
+    }
+
+    #[test]
+    fn one_stall_rules_the_rms_and_not_the_median_error() {
+        let a =
+            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let log = std::env::temp_dir().join(format!("ferrocat-live-median-{}.csv", std::process::id()));
+        // Master − reference: +100, −200, +300 ns and one 50 µs stall.
+        let lines: String = [100i64, -200, 300, 50_000]
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                let t = 1_000_000 * (k as i64 + 1);
+                format!("{t},{}\n", t - e)
+            })
+            .collect();
+        std::fs::write(&log, format!("t,s0\n{lines}")).unwrap();
+        let run = MasterRun {
+            epoch_offset_ns: 0,
+            clock: None,
+            from_ns: 0,
+            to_ns: u64::MAX,
+            cycles: 4,
+            lost: 0,
+            probes: 0,
+            cycle_starts: vec![],
+        };
+        let row = errors(&log, &run, "conventional", &a).unwrap();
+        std::fs::remove_file(&log).ok();
+        assert!((row.ref_median_abs_us.unwrap() - 0.25).abs() < 1e-9, "{row:?}");
+        assert!(row.ref_rms_us.unwrap() > 25.0, "{row:?}");
+        assert!((row.max_abs_us.unwrap() - 50.0).abs() < 1e-9, "{row:?}");
     }
 
     #[test]
