@@ -47,7 +47,8 @@ try:
                 mine.append({"logical": ls, "length": ll, "type": ty})
         fmmus.append(mine)
     result["fmmus"] = fmmus
-    to_op(m, exchange)
+    result["acks"] = []
+    to_op(m, exchange, log=result["acks"])
     result["op"] = m.read_state() == pysoem.OP_STATE
     terminal = next(s for s in m.slaves if len(s.output) > 0 and len(s.input) == 0)
     drive = next(s for s in m.slaves if len(s.output) > 0 and len(s.input) > 0)
