@@ -202,3 +202,22 @@ fn a_followers_crystal_as_flywheel_recovers_from_either_crystals_step_on_a_stock
         }
     }
 }
+
+/// The master following on Chen's host, seed 14: the two crystals too alike for the DC
+/// initialisation to measure which way the speed counter turns, and the follower's loop too
+/// calm for the trial to have told it 5 s later, when the reference's crystal steps. The kink
+/// test scores both readings' templates: the step tells the direction, and the flywheel takes
+/// over (the direct line alone took 159 ms until session 46's trial-aware test; 38 ms since).
+#[test]
+fn a_step_during_the_speed_counters_trial_tells_its_direction() {
+    let o = Options {
+        methods: vec!["ferrocat-mfr".into()],
+        scenarios: vec!["drift-step-50ppm".into()],
+        seed: 14,
+        ..Options::new(HostModel::rtx_10us())
+    };
+    let rows = run(&o).unwrap();
+    let r = rows.iter().find(|r| r.scenario != CONTROL).unwrap();
+    println!("recovery vs control {:?} ms, peak {:.0} ns", r.recovery_vs_control_ms, r.peak_ns);
+    assert!(r.recovery_vs_control_ms.is_some_and(|ms| ms <= 100.0), "{r:?}");
+}

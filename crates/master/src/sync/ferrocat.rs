@@ -169,6 +169,13 @@ struct Contest {
 /// 25 ms). The lines themselves restart at a change and follow the points again, which left
 /// the leaky contest nothing to tell them apart by (pc-stock: 70 of 100 seeds back within
 /// 100 ms of a follower's step).
+///
+/// While the speed counter's direction is on trial, each reading has its own ε, and the test
+/// scores both templates: the follower's loop takes up a reference's step within tens of ms,
+/// and the reading that takes it out the wrong way shows it doubled, against the other's
+/// clean change. A reference that changed by one reading's template and not the other's
+/// decides the direction as well (a loop too calm before the step to tell it: rtx-10us seed
+/// 14, the direction unmeasured, the step taken by the direct line in 159 ms).
 #[derive(Debug)]
 struct KinkTest {
     direct: FrozenLine,
@@ -176,7 +183,57 @@ struct KinkTest {
     eps: FrozenLine,
     /// Log-likelihood ratio, the reference changed over the follower changed.
     llr: f64,
+    /// The same for the other reading's ε, while the direction is on trial.
+    other: Option<(FrozenLine, f64)>,
     frames: u32,
+}
+
+/// What a kink test found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Verdict {
+    /// The follower's crystal changed: the direct line.
+    FollowerChanged,
+    /// The reference's: the flywheel, on the reading in use.
+    ReferenceChanged,
+    /// The reference's, by the other reading's template: that reading, and the flywheel.
+    ReferenceChangedOtherReading,
+}
+
+impl KinkTest {
+    /// Scores a frame: `y` of the reference at `x`, ε measured at reference time `r_ns` by
+    /// the reading in use (`eps_ns`) and by the other (`other_eps_ns`), σ of the stamps `sd`.
+    fn score(&mut self, x: u64, y: u64, r_ns: u64, eps_ns: i64, other_eps_ns: Option<i64>, sd: f64) -> Option<Verdict> {
+        let residual = y.wrapping_sub(self.direct.at(x)) as i64 as f64;
+        // ε's departure from its frozen line: the reference's from the direct line, if it
+        // was the reference that changed.
+        let departure = |line: &FrozenLine, eps: i64| eps.wrapping_sub(line.at(r_ns).wrapping_sub(r_ns) as i64) as f64;
+        // A host's outliers say nothing: the residual is clipped 4 σ beyond both predictions.
+        let evidence = |g: f64| {
+            let r = residual.clamp(g.min(0.0) - 4.0 * sd, g.max(0.0) + 4.0 * sd);
+            g * (2.0 * r - g) / (2.0 * sd * sd)
+        };
+        self.llr += evidence(departure(&self.eps, eps_ns));
+        if let (Some((line, llr)), Some(e)) = (self.other.as_mut(), other_eps_ns) {
+            *llr += evidence(departure(line, e));
+        }
+        self.frames += 1;
+        let Some((_, other)) = self.other else {
+            return match self.llr {
+                l if l <= -KINK_DECIDE => Some(Verdict::FollowerChanged),
+                l if l >= KINK_DECIDE => Some(Verdict::ReferenceChanged),
+                _ => None,
+            };
+        };
+        if self.llr <= -KINK_DECIDE && other <= -KINK_DECIDE {
+            Some(Verdict::FollowerChanged)
+        } else if self.llr >= KINK_DECIDE && self.llr - other >= KINK_DECIDE {
+            Some(Verdict::ReferenceChanged)
+        } else if other >= KINK_DECIDE && other - self.llr >= KINK_DECIDE {
+            Some(Verdict::ReferenceChangedOtherReading)
+        } else {
+            None
+        }
+    }
 }
 
 /// The contest's memory (frames) and the evidence that hands the estimate to the direct line.
@@ -344,11 +401,7 @@ impl Ferrocat {
         if measured == Some(true) || (measured.is_none() && clean(mine, other)) {
             self.trial = None;
         } else if measured == Some(false) || clean(other, mine) {
-            let mut t = self.trial.take().expect("on trial");
-            // Its line's restarts during the trial were not changes of a crystal.
-            t.other.take_kink();
-            self.flywheel = Some(t.other);
-            self.fit = t.other_fit;
+            self.keep_other_reading();
             // The contest's evidence so far was the first reading's.
             if let Some(c) = self.contest.as_mut() {
                 c.llr = 0.0;
@@ -358,6 +411,15 @@ impl Ferrocat {
             self.trial = None;
             self.flywheel = None;
         }
+    }
+
+    /// Ends the trial with the other reading of the speed counter's direction.
+    fn keep_other_reading(&mut self) {
+        let Some(mut t) = self.trial.take() else { return };
+        // Its line's restarts during the trial were not changes of a crystal.
+        t.other.take_kink();
+        self.flywheel = Some(t.other);
+        self.fit = t.other_fit;
     }
 
     /// With a flywheel: the reference's time of the last frame that read the follower, and
@@ -387,8 +449,25 @@ impl Ferrocat {
         // Not while the flywheel's direction is unknown and matters, nor once it was refused.
         let fly_present = self.flywheel.is_some();
         let fly_ok = fly_present && self.trial.is_none();
-        let kink = self.flywheel.as_mut().and_then(|fw| fw.take_kink()).filter(|_| fly_ok);
         let eps_point = self.flywheel.as_ref().and_then(|fw| fw.last_point());
+        let other_eps_ns = self.trial.as_ref().and_then(|t| t.other.last_eps_ns());
+        // A restart of ε after a long run, with the lines to measure it from: on trial, either
+        // reading's (the other frozen as it stands where only one restarted), once the trial
+        // has run as long as it must before it may end. Before, the loops' start-up (the
+        // reference's first offsets, the followers' first corrections) is no single crystal's
+        // change: tested then, pc-rt seed 7 took the wrong reading 39 ms in, and 7 / 100
+        // seeds lost the flywheel.
+        let mine = self.flywheel.as_mut().and_then(|fw| fw.take_kink());
+        let kink = match (self.trial.as_mut(), self.flywheel.as_ref(), eps_point) {
+            (None, _, _) => mine.filter(|_| fly_ok).map(|eps| (eps, None)),
+            (Some(t), Some(fw), Some((r_ns, _))) => {
+                let other = t.other.take_kink();
+                (t.frames >= TRIAL_FRAMES && (mine.is_some() || other.is_some()))
+                    .then(|| Some((mine.or(fw.eps_frozen_at(r_ns))?, Some(other.or(t.other.eps_frozen_at(r_ns))?))))
+                    .flatten()
+            }
+            (Some(_), _, _) => None,
+        };
         let Some(c) = self.contest.as_mut() else { return 0 };
         // Back to the flywheel only once the crystal's line is as certain as the direct one: a
         // line restarted by the follower's step is young, and the stamps cannot tell its tens
@@ -400,9 +479,9 @@ impl Ferrocat {
         let sd = c.direct.scale_ns().max(1.0);
         // A test already running keeps the lines it froze: a second restart of ε is the same
         // change, measured again.
-        if let (Some(eps), None) = (kink, &c.kink) {
+        if let (Some((eps, other)), None) = (kink, &c.kink) {
             if let Some(direct) = c.direct.frozen_at(x) {
-                c.kink = Some(KinkTest { direct, eps, llr: 0.0, frames: 0 });
+                c.kink = Some(KinkTest { direct, eps, llr: 0.0, other: other.map(|o| (o, 0.0)), frames: 0 });
             }
         }
         c.direct.push(x, y);
@@ -419,32 +498,35 @@ impl Ferrocat {
         let evidence = (rb * rb - ra * ra) / (2.0 * sd * sd) + CONTEST_PRIOR;
         c.llr = (c.llr * (1.0 - CONTEST_LEAK) + evidence).clamp(-limit, limit);
         let mut switch = if c.use_direct { c.llr > 0.0 && settled } else { c.llr < -CONTEST_SWITCH };
+        let mut verdict = None;
         if let (Some(k), Some((reference_ns, eps_ns))) = (c.kink.as_mut(), eps_point) {
-            // ε's departure from its frozen line, and the reference's from the direct line's.
-            let g = eps_ns.wrapping_sub(k.eps.at(reference_ns).wrapping_sub(reference_ns) as i64) as f64;
-            let r = y.wrapping_sub(k.direct.at(x)) as i64 as f64;
-            let r = r.clamp(g.min(0.0) - 4.0 * sd, g.max(0.0) + 4.0 * sd);
-            k.llr += g * (2.0 * r - g) / (2.0 * sd * sd);
-            k.frames += 1;
-            let decided = if k.llr <= -KINK_DECIDE {
-                Some(true)
-            } else if k.llr >= KINK_DECIDE {
-                Some(false)
-            } else {
-                None
-            };
-            if let Some(to_direct) = decided {
-                // The leaky contest starts from the verdict, as sure of it as it can be.
-                c.llr = if to_direct { -limit } else { limit };
-                switch = c.use_direct != to_direct;
-                c.kink = None;
-            } else if k.frames >= KINK_MAX_FRAMES {
+            verdict = k.score(x, y, reference_ns, eps_ns, other_eps_ns, sd);
+            if verdict.is_some() || k.frames >= KINK_MAX_FRAMES {
                 c.kink = None;
             }
         }
+        if let Some(v) = verdict {
+            let to_direct = v == Verdict::FollowerChanged;
+            // The leaky contest starts from the verdict, as sure of it as it can be.
+            c.llr = if to_direct { -limit } else { limit };
+            switch = c.use_direct != to_direct;
+        }
+        // A reference's change told the direction too; a follower's leaves the trial on.
+        let a = match verdict {
+            Some(Verdict::ReferenceChanged) => {
+                self.trial = None;
+                a
+            }
+            Some(Verdict::ReferenceChangedOtherReading) => {
+                self.keep_other_reading();
+                self.flywheel_at(x).unwrap_or(a)
+            }
+            _ => a,
+        };
         if !switch {
             return 0;
         }
+        let Some(c) = self.contest.as_mut() else { return 0 };
         c.use_direct = !c.use_direct;
         let (from, to) = if c.use_direct { (a, b) } else { (b, a) };
         to.wrapping_sub(from) as i64

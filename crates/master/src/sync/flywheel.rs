@@ -139,6 +139,12 @@ impl Flywheel {
         self.kink.take()
     }
 
+    /// ε's line at `reference_ns` as it stands, frozen, if it has run long enough to be worth
+    /// it (the other reading's, when this one's restarted: see `Ferrocat`'s kink test).
+    pub fn eps_frozen_at(&self, reference_ns: u64) -> Option<FrozenLine> {
+        self.eps.frozen_at(reference_ns).filter(|_| self.eps.len() >= KINK_MIN_POINTS)
+    }
+
     /// How far ε's line moved when it changed windows (see `LineFit::take_switch_jump_ns`).
     pub fn take_switch_jump_ns(&mut self) -> i64 {
         self.eps.take_switch_jump_ns()
