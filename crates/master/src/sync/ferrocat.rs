@@ -437,13 +437,32 @@ impl Ferrocat {
         Some(c.wrapping_add_signed(e))
     }
 
+    /// A restart of ε after a long run, with its line as it stood, to test which crystal
+    /// changed: on trial, either reading's, with the other's line (frozen as it stands where
+    /// only one restarted), once the trial has run as long as it must before it may end.
+    /// Before, the loops' start-up (the reference's first offsets, the followers' first
+    /// corrections) is no single crystal's change: tested then, pc-rt seed 7 took the wrong
+    /// reading 39 ms in, and 7 / 100 seeds lost the flywheel.
+    fn take_kink(&mut self) -> Option<(FrozenLine, Option<FrozenLine>)> {
+        let mine = self.flywheel.as_mut()?.take_kink();
+        let Some(t) = self.trial.as_mut() else { return mine.map(|eps| (eps, None)) };
+        let other = t.other.take_kink();
+        let fw = self.flywheel.as_ref()?;
+        let (r_ns, _) = fw.last_point()?;
+        if t.frames < TRIAL_FRAMES || (mine.is_none() && other.is_none()) {
+            return None;
+        }
+        Some((mine.or(fw.eps_frozen_at(r_ns))?, Some(other.or(t.other.eps_frozen_at(r_ns))?)))
+    }
+
     /// Keeps the direct line, scores the point (x, y of the reference) on both estimates where
     /// it is a cycle's frame (`frame`), and returns how far the estimate in use moved at `x` if
-    /// it changed. A cycle's probes come in a burst whose stamps share the host's state: scored
+    /// it changed, and whether the other reading of the speed counter's direction is now the
+    /// flywheel's (its point is the one for the crystal's line). A cycle's probes come in a burst whose stamps share the host's state: scored
     /// as independent points they made the evidence many times what it was (on this machine's
     /// kernel, robust noise scale ≈ 30 ns: a hand-over every second or so, by 8–207 ns each;
     /// docs/clock-sync.md).
-    fn contest_point(&mut self, x: u64, y: u64, frame: bool) -> i64 {
+    fn contest_point(&mut self, x: u64, y: u64, frame: bool) -> (i64, bool) {
         let fly = self.flywheel_at(x);
         let fly_sd = self.fit.sd_ahead_ns(self.cycle_ns);
         // Not while the flywheel's direction is unknown and matters, nor once it was refused.
@@ -451,24 +470,8 @@ impl Ferrocat {
         let fly_ok = fly_present && self.trial.is_none();
         let eps_point = self.flywheel.as_ref().and_then(|fw| fw.last_point());
         let other_eps_ns = self.trial.as_ref().and_then(|t| t.other.last_eps_ns());
-        // A restart of ε after a long run, with the lines to measure it from: on trial, either
-        // reading's (the other frozen as it stands where only one restarted), once the trial
-        // has run as long as it must before it may end. Before, the loops' start-up (the
-        // reference's first offsets, the followers' first corrections) is no single crystal's
-        // change: tested then, pc-rt seed 7 took the wrong reading 39 ms in, and 7 / 100
-        // seeds lost the flywheel.
-        let mine = self.flywheel.as_mut().and_then(|fw| fw.take_kink());
-        let kink = match (self.trial.as_mut(), self.flywheel.as_ref(), eps_point) {
-            (None, _, _) => mine.filter(|_| fly_ok).map(|eps| (eps, None)),
-            (Some(t), Some(fw), Some((r_ns, _))) => {
-                let other = t.other.take_kink();
-                (t.frames >= TRIAL_FRAMES && (mine.is_some() || other.is_some()))
-                    .then(|| Some((mine.or(fw.eps_frozen_at(r_ns))?, Some(other.or(t.other.eps_frozen_at(r_ns))?))))
-                    .flatten()
-            }
-            (Some(_), _, _) => None,
-        };
-        let Some(c) = self.contest.as_mut() else { return 0 };
+        let kink = self.take_kink();
+        let Some(c) = self.contest.as_mut() else { return (0, false) };
         // Back to the flywheel only once the crystal's line is as certain as the direct one: a
         // line restarted by the follower's step is young, and the stamps cannot tell its tens
         // of ns from the direct line's for a long while (back as soon as it was settled enough
@@ -486,10 +489,10 @@ impl Ferrocat {
         }
         c.direct.push(x, y);
         if !frame {
-            return 0;
+            return (0, false);
         }
         // Refused, the flywheel is not in the contest.
-        let (Some(a), Some(b), true) = (fly, direct, fly_present) else { return 0 };
+        let (Some(a), Some(b), true) = (fly, direct, fly_present) else { return (0, false) };
         // A host's outliers (a stamp hundreds of µs late) say nothing of which is right: the
         // residuals are clipped at 4 σ.
         let clip = |r: f64| r.clamp(-4.0 * sd, 4.0 * sd);
@@ -512,6 +515,7 @@ impl Ferrocat {
             switch = c.use_direct != to_direct;
         }
         // A reference's change told the direction too; a follower's leaves the trial on.
+        let swapped = verdict == Some(Verdict::ReferenceChangedOtherReading) && self.trial.is_some();
         let a = match verdict {
             Some(Verdict::ReferenceChanged) => {
                 self.trial = None;
@@ -524,12 +528,12 @@ impl Ferrocat {
             _ => a,
         };
         if !switch {
-            return 0;
+            return (0, swapped);
         }
-        let Some(c) = self.contest.as_mut() else { return 0 };
+        let Some(c) = self.contest.as_mut() else { return (0, swapped) };
         c.use_direct = !c.use_direct;
         let (from, to) = if c.use_direct { (a, b) } else { (b, a) };
-        to.wrapping_sub(from) as i64
+        (to.wrapping_sub(from) as i64, swapped)
     }
 
     /// The line's estimate of the reference's time at master time `x`: with a flywheel, the
@@ -636,7 +640,9 @@ impl Ferrocat {
         let x = stamp.wrapping_add_signed(self.rtt.shift_ns(dev));
         // The weight is learned from the reference's time against the line at the stamp alone.
         let residual = self.fit.at(stamp).map(|p| y.wrapping_sub(p) as i64);
-        let contest_jump = self.contest_point(x, y_reference, s.follower.is_some());
+        let (contest_jump, swapped) = self.contest_point(x, y_reference, s.follower.is_some());
+        // The other reading, now the flywheel's: its crystal's point.
+        let y = if swapped { y_other.unwrap_or(y) } else { y };
         let fate = self.fit.push(x, y);
         if let (Some(t), Some(y_other)) = (self.trial.as_mut(), y_other) {
             t.other_fit.push(x, y_other);
