@@ -102,7 +102,7 @@ impl Flywheel {
         self.last_local_ns = Some(f.local_ns);
         let e = reference_ns.wrapping_sub(self.crystal_ns) as i64;
         self.last_point = Some((reference_ns, e));
-        let before = self.eps.frozen_at(reference_ns).filter(|_| self.eps.len() >= KINK_MIN_POINTS);
+        let before = self.eps_frozen_at(reference_ns);
         let restarts = self.eps.restarts;
         self.eps.push(reference_ns, reference_ns.wrapping_add_signed(e));
         if self.eps.restarts != restarts && before.is_some() {
