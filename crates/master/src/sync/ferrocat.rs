@@ -213,8 +213,10 @@ impl KinkTest {
             g * (2.0 * r - g) / (2.0 * sd * sd)
         };
         self.llr += evidence(departure(&self.eps, eps_ns));
-        if let (Some((line, llr)), Some(e)) = (self.other.as_mut(), other_eps_ns) {
-            *llr += evidence(departure(line, e));
+        // A trial that ended meanwhile (its restarts told it) leaves one reading to test.
+        match (self.other.as_mut(), other_eps_ns) {
+            (Some((line, llr)), Some(e)) => *llr += evidence(departure(line, e)),
+            _ => self.other = None,
         }
         self.frames += 1;
         let Some((_, other)) = self.other else {
@@ -393,8 +395,8 @@ impl Ferrocat {
     /// at once). The direct line is the estimate throughout, so nothing in use moves.
     fn judge_trial(&mut self, measured: Option<bool>) {
         let Some(t) = self.trial.as_mut().filter(|t| t.frames >= TRIAL_FRAMES || measured.is_some()) else { return };
-        let mine = self.flywheel.as_ref().map_or(u64::MAX, |f| f.eps_restarts());
-        let other = t.other.eps_restarts();
+        let mine = self.flywheel.as_ref().map_or(u64::MAX, |f| f.eps_events().restarts);
+        let other = t.other.eps_events().restarts;
         // The loop's start-up (the compensation's first frames, the first offsets) can restart
         // the right reading's line once or twice too: what tells is the other's many more.
         let clean = |a: u64, b: u64| b >= TRIAL_RATIO * a + TRIAL_MARGIN_RESTARTS;
@@ -515,7 +517,7 @@ impl Ferrocat {
             switch = c.use_direct != to_direct;
         }
         // A reference's change told the direction too; a follower's leaves the trial on.
-        let swapped = verdict == Some(Verdict::ReferenceChangedOtherReading) && self.trial.is_some();
+        let swapped = verdict == Some(Verdict::ReferenceChangedOtherReading);
         let a = match verdict {
             Some(Verdict::ReferenceChanged) => {
                 self.trial = None;

@@ -65,13 +65,8 @@ impl Flywheel {
         }
     }
 
-    /// How often ε's line restarted: a loop's corrections taken out the wrong way (or not at
-    /// all) leave ε as jagged as the loop's own work, and its line restarts again and again.
-    pub fn eps_restarts(&self) -> u64 {
-        self.eps.restarts
-    }
-
-    /// What ε's line has been through.
+    /// What ε's line has been through. A loop's corrections taken out the wrong way (or not
+    /// at all) leave ε as jagged as the loop's own work, and its line restarts again and again.
     pub fn eps_events(&self) -> LineEvents {
         LineEvents { restarts: self.eps.restarts, false_alarms: self.eps.false_alarms }
     }
