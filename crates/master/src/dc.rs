@@ -211,8 +211,8 @@ impl<I: Io> Master<I> {
 
     /// The master's clock as DC system time when the world's clock reads `t_ns`.
     pub fn master_system_time_at(&mut self, t_ns: u64) -> u64 {
-        let now = self.engine.io.now_ns();
         if self.epoch_offset_ns.is_none() {
+            let now = self.engine.io.now_ns();
             self.epoch_offset_ns = Some(if self.engine.io.is_virtual() {
                 // Virtual time starts at 2026-01-01 00:00 UTC.
                 1_767_225_600_000_000_000 - EPOCH_2000_NS
@@ -812,10 +812,10 @@ impl<I: Io> Master<I> {
     /// A sample of the frame just answered, with its stamps; the reference's readings are
     /// the caller's to fill in.
     pub(crate) fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
-        let to_sys = |m: &mut Self, world: u64| -> u64 {
-            let now = m.engine.io.now_ns();
-            m.master_system_time().wrapping_sub(now.wrapping_sub(world))
-        };
+        // A stamp is a reading of the world's clock: the master's clock at it is the same
+        // epoch away. (Taken as "the master's clock now, less how long ago the stamp was",
+        // the two readings of a real clock were ≈ 30 ns apart and every stamp that late.)
+        let to_sys = |m: &mut Self, world: u64| m.master_system_time_at(world);
         // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
         // first preamble bit, which is what an ESC latches: take them back to that bit.
         let hw = self.engine.io.rx_stamps_start_of_frame();
