@@ -48,13 +48,18 @@ impl Timestamps {
     }
 }
 
-/// CLOCK_REALTIME − CLOCK_MONOTONIC now: kernel timestamps are realtime.
+/// CLOCK_REALTIME − CLOCK_MONOTONIC now: kernel timestamps are realtime. The realtime reading
+/// is bracketed by two monotonic ones and set against their midpoint: set against the one
+/// after it, the offset came out one reading short (≈ 20 ns on this VM), and every stamp
+/// converted with it that much late.
 fn realtime_offset_ns() -> i128 {
+    let before = monotonic_ns() as i128;
     let mut r = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: clock_gettime writes into the timespec we own.
     unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
+    let after = monotonic_ns() as i128;
     let real = r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128;
-    real - monotonic_ns() as i128
+    real - (before + after) / 2
 }
 
 #[repr(C)]
@@ -438,4 +443,30 @@ pub fn routable_addresses(iface: &str) -> io::Result<Vec<String>> {
         libc::freeifaddrs(list);
     }
     Ok(found)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A realtime reading converted with the offset lands where monotonic readings around it
+    /// put it: the median over many, against the midpoint of the two readings around each.
+    #[test]
+    fn a_realtime_reading_converts_to_the_monotonic_instant_it_was_taken() {
+        let mut errors: Vec<i128> = (0..20_000)
+            .map(|_| {
+                let before = monotonic_ns() as i128;
+                let mut r = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+                // SAFETY: clock_gettime writes into the timespec we own.
+                unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
+                let after = monotonic_ns() as i128;
+                let real = r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128;
+                real - realtime_offset_ns() - (before + after) / 2
+            })
+            .collect();
+        errors.sort_unstable();
+        let median = errors[errors.len() / 2];
+        println!("median conversion error {median} ns (p10 {}, p90 {})", errors[2_000], errors[18_000]);
+        assert!(median.abs() <= 5, "median {median} ns");
+    }
 }
