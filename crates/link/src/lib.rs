@@ -54,12 +54,17 @@ impl Timestamps {
 /// converted with it that much late.
 fn realtime_offset_ns() -> i128 {
     let before = monotonic_ns() as i128;
+    let real = realtime_ns();
+    let after = monotonic_ns() as i128;
+    real - (before + after) / 2
+}
+
+/// CLOCK_REALTIME now, ns.
+fn realtime_ns() -> i128 {
     let mut r = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: clock_gettime writes into the timespec we own.
     unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
-    let after = monotonic_ns() as i128;
-    let real = r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128;
-    real - (before + after) / 2
+    r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128
 }
 
 #[repr(C)]
@@ -456,11 +461,8 @@ mod tests {
         let mut errors: Vec<i128> = (0..20_000)
             .map(|_| {
                 let before = monotonic_ns() as i128;
-                let mut r = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-                // SAFETY: clock_gettime writes into the timespec we own.
-                unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
+                let real = realtime_ns();
                 let after = monotonic_ns() as i128;
-                let real = r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128;
                 real - realtime_offset_ns() - (before + after) / 2
             })
             .collect();

@@ -814,7 +814,7 @@ impl<I: Io> Master<I> {
     pub(crate) fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
         // A stamp is a reading of the world's clock: the master's clock at it is the same
         // epoch away. (Taken as "the master's clock now, less how long ago the stamp was",
-        // the two readings of a real clock were ≈ 30 ns apart and every stamp that late.)
+        // the two readings of a real clock were ≈ 20–40 ns apart here and every stamp that late.)
         let to_sys = |m: &mut Self, world: u64| m.master_system_time_at(world);
         // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
         // first preamble bit, which is what an ESC latches: take them back to that bit.

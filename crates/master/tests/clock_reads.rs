@@ -1,7 +1,7 @@
 //! A real clock moves between two readings of it; the master's conversion of the link's stamps
 //! to its own clock must not depend on how many readings it takes. In the virtual world every
 //! reading within an instant is the same, so a world whose readings each take time stands in
-//! for a real one: on this VM two readings were ≈ 30 ns apart, and every stamp was converted
+//! for a real one: on this VM two readings were ≈ 20–40 ns apart, and every stamp was converted
 //! that much late, which put the master's copy of the reference's clock that much behind
 //! (`ferrocat lab live`).
 use ferrocat_master::io::{HostModel, Io, Stamps, VirtualIo};
