@@ -205,6 +205,8 @@ impl ClockPiece {
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
     let target = crate::target::Target::on_iface(iface, false);
     let mut m = target.master()?;
+    // The simulator's ESCs, as in the virtual lab: ferrocat's methods are told their loop-back.
+    ferrocat_lab::tell_loop_back(&mut m, method);
     m.bring_up()?;
     let cycle_ns = a.cycle_us * 1000;
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };

@@ -89,10 +89,16 @@ pub fn init_with_method<I: Io>(
 /// baselines' as SOEM and IgH do.
 pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> anyhow::Result<Master<VirtualIo>> {
     let mut m = Master::new(VirtualIo::new(cfg.build()?, host, seed));
+    tell_loop_back(&mut m, method);
+    Ok(m)
+}
+
+/// Tells a master for `method` what the ESCs' closed-port loop-back takes, where the method is
+/// one of ferrocat's (in virtual time or against `ferrocat sim` on a real interface alike).
+pub fn tell_loop_back<I: Io>(m: &mut Master<I>, method: &str) {
     if CALIBRATED.contains(&method) {
         m.closed_port_loop_ns = loop_back_ns();
     }
-    Ok(m)
 }
 
 /// The simulated ESCs' closed-port loop-back (docs/segment-model.md), as a master would take
