@@ -26,10 +26,8 @@ pub const RING_CABLE_PULLED: &str = "ring-cable-pulled";
 /// The first follower's crystal stepping by +50 ppm instead of the reference's: what ferrocat,
 /// which takes a follower's crystal for its flywheel, must tell from the other.
 pub const FOLLOWER_DRIFT_STEP: &str = "follower-drift-step-50ppm";
-/// Every disturbance a run can name: [`SCENARIOS`], [`FOLLOWER_DRIFT_STEP`] and, on a ring,
-/// [`RING_CABLE_PULLED`].
-pub const KNOWN: [&str; 5] =
-    ["loss-1pct", "drift-step-50ppm", "overrun-3-cycles", FOLLOWER_DRIFT_STEP, RING_CABLE_PULLED];
+/// Every disturbance a run can name: [`SCENARIOS`] and, on a ring, [`RING_CABLE_PULLED`].
+pub const KNOWN: [&str; 5] = crate::concat_names(SCENARIOS, [RING_CABLE_PULLED]);
 /// The undisturbed run every disturbed one is paired with.
 pub const CONTROL: &str = "control";
 
