@@ -541,3 +541,62 @@ fn linux_pings_linux_behind_a_simulated_drive() {
     // The segment namespace's stack answered (the drive's own would say 64).
     assert!(said.contains("ttl=99"), "{said}");
 }
+
+/// The shared real EEPROM dumps (EK1100, EL2004, EL2262: every one runs its ESC in device
+/// emulation) served by `ferrocat sim` and brought to OP with DC by the master. The scan's
+/// frames show the hardware's copy of AL control: after the master's BWR of 0x0011 each slave
+/// reads back AL status 0x0011 with code 0, as the real terminals do
+/// (`soem-sdinfo-ek1100-el1004.pcapng` frames 132–133 and 204–205), and the master takes that
+/// as INIT reached.
+#[test]
+fn needs_shared_real_eeprom_dumps_reach_op_with_dc_under_device_emulation() {
+    use ferrocat_wire::{Address, Command as Cmd, Frame};
+    let e = ferrocat_testdata::shared("captures/eeprom");
+    let dumps: Vec<String> =
+        ["ek1100.hex", "el2004.bin", "el2262.bin"].iter().map(|f| e.join(f).display().to_string()).collect();
+    let net = VethPair::new("de");
+    let mut args: Vec<&str> = Vec::new();
+    for d in &dumps {
+        args.extend(["--device", d.as_str()]);
+    }
+    let sim = Sim::start(&net, &args);
+    let pcap = std::env::temp_dir().join(format!("ferrocat-emulation-{}.pcapng", std::process::id()));
+    let scan =
+        ferrocat_in(&net.master_ns).args(["scan", "--iface", &net.master_if, "--pcap"]).arg(&pcap).output().unwrap();
+    assert!(scan.status.success(), "ferrocat scan: {}", String::from_utf8_lossy(&scan.stderr));
+    let run = ferrocat_in(&net.master_ns)
+        .args(["run", "--iface", &net.master_if, "--dc", "--seconds", "1", "--cycle-us", "1000"])
+        .output()
+        .unwrap();
+    sim.stop();
+    let (out, err) = (String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    println!("{out}{err}");
+    assert!(run.status.success(), "ferrocat run --dc: {err}");
+    assert!(err.contains("bring-up to OP"), "{err}");
+    assert!(err.contains("DC: reference slave"), "{err}");
+    // AL status as each slave answered the scan's reads of 0x0130 (stations 0x1001–0x1003).
+    let bytes = std::fs::read(&pcap).unwrap();
+    std::fs::remove_file(&pcap).ok();
+    let mut al_status: std::collections::BTreeMap<u16, Vec<[u8; 2]>> = Default::default();
+    ferrocat_capture::for_each_packet(&bytes, |p| {
+        if let Ok(Some(f)) = Frame::parse(&p.data) {
+            for d in f.pdu.datagrams() {
+                let h = d.header();
+                if let (Cmd::FPRD, Address::Device { adp, ado: 0x0130 }) = (h.command, h.address) {
+                    if d.wkc() == 1 && d.data().len() >= 6 && d.data()[4..6] == [0, 0] {
+                        al_status.entry(adp).or_default().push([d.data()[0], d.data()[1]]);
+                    }
+                }
+            }
+        }
+        Ok(())
+    })
+    .unwrap();
+    for station in 0x1001..=0x1003u16 {
+        let seen = al_status.get(&station).cloned().unwrap_or_default();
+        assert!(
+            seen.contains(&[0x11, 0x00]),
+            "station {station:#06x}: AL status read {seen:02x?}, not the copy 0x0011"
+        );
+    }
+}

@@ -7,11 +7,14 @@ pub struct AlMachine {
     pub state: AlState,
     pub error: bool,
     pub code: AlStatusCode,
+    /// AL status as the hardware copied it from AL control under device emulation, bits the
+    /// state machine has no name for included; `None` while the state machine sets it.
+    pub copied: Option<u16>,
 }
 
 impl Default for AlMachine {
     fn default() -> Self {
-        AlMachine { state: AlState::Init, error: false, code: AlStatusCode::NO_ERROR }
+        AlMachine { state: AlState::Init, error: false, code: AlStatusCode::NO_ERROR, copied: None }
     }
 }
 
@@ -32,11 +35,25 @@ fn valid(from: AlState, to: AlState) -> bool {
 
 impl AlMachine {
     pub fn status(&self) -> AlStatus {
-        AlStatus::new(self.state, self.error)
+        self.copied.map_or(AlStatus::new(self.state, self.error), AlStatus)
+    }
+
+    /// Device emulation: the ESC copies AL control into AL status as it is written, the
+    /// error-indication bit included (real EK1100, EL1004 and EL2004 read back 0x0011 after a
+    /// write of 0x0011: `soem-sdinfo-ek1100-el1004.pcapng` frames 132–133, 204–205). The
+    /// status code is the PDI's to write and stays as it is. The state that gates mailbox and
+    /// process data follows the copied state bits where they name one.
+    pub fn copy_control(&mut self, control: u16) {
+        self.copied = Some(control);
+        self.error = control & AlStatus::ERROR != 0;
+        if let Some(s) = AlState::from_bits((control & 0x0F) as u8) {
+            self.state = s;
+        }
     }
 
     /// Sets an error from the application side (e.g. a watchdog): state and code.
     pub fn fail(&mut self, state: AlState, code: AlStatusCode) {
+        self.copied = None;
         self.state = state;
         self.error = true;
         self.code = code;
@@ -45,6 +62,7 @@ impl AlMachine {
     /// Handles a write of AL control. `check` runs the checks of an upward transition and may
     /// refuse it with a status code.
     pub fn request(&mut self, control: u16, check: &mut dyn FnMut(AlState, AlState) -> Result<(), AlStatusCode>) {
+        self.copied = None;
         let ack = control & AlStatus::ERROR != 0;
         let bits = (control & 0x0F) as u8;
         if self.error && !ack && bits != AlState::Init as u8 {

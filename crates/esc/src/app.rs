@@ -63,6 +63,8 @@ pub trait Application: Debug + Send {
     fn take_fault(&mut self) -> Option<AlStatusCode> {
         None
     }
+    /// The process data watchdog expired under device emulation: outputs to their safe state.
+    fn watchdog_expired(&mut self) {}
     /// A complete mailbox request arrived in SM0; the reply goes to SM1. `None`: a protocol
     /// the application does not serve (the ESC answers "unsupported protocol"); an empty reply:
     /// handled, nothing to send.
@@ -150,6 +152,9 @@ impl Application for DigitalIo {
             self.publish_inputs(pdi);
         }
         Ok(())
+    }
+    fn watchdog_expired(&mut self) {
+        self.outputs.fill(0);
     }
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
         let s = pdi.sm(sm);
@@ -245,6 +250,9 @@ impl SyncApp {
 }
 
 impl Application for SyncApp {
+    fn watchdog_expired(&mut self) {
+        self.io.watchdog_expired();
+    }
     fn check_transition(&mut self, pdi: &mut Pdi<'_>, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
         if to == AlState::Op && self.mode == SyncMode::DcSynchronous {
             // DC-synchronous operation needs the SYNC unit running with SYNC0.

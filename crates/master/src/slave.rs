@@ -1,5 +1,5 @@
 //! What the master knows about each slave.
-use ferrocat_wire::register::{AlState, DlStatus};
+use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
 use ferrocat_wire::sii::{SiiInfo, SmEntry};
 
 /// A mapped process-data entry and where it sits in the process image.
@@ -59,6 +59,10 @@ pub struct Slave {
     pub fmmu_count: u8,
     pub sm_count: u8,
     pub features: u16,
+    /// Device emulation (ESC configuration 0x0141 bit 0): the ESC copies AL control into AL
+    /// status itself, the error-indication bit included, and the status code stays 0. Real
+    /// EK1100, EL1004 and EL2004 run so.
+    pub device_emulation: bool,
     pub sii: SiiInfo,
     pub dl_status: DlStatus,
     /// The SII interface's status 0x0502, read at the scan where DL status bit 0 (PDI
@@ -164,6 +168,17 @@ impl Slave {
         use ferrocat_wire::register::SiiControl;
         !self.dl_status.pdi_operational()
             && self.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
+    }
+    /// Whether AL status reports an error the master must deal with. Under device emulation
+    /// the error-indication bit only mirrors the acknowledge bit the master wrote (real
+    /// EK1100, EL1004 and EL2004 read back 0x0011 with code 0 after a write of 0x0011), so it
+    /// is an error only with a status code.
+    pub fn al_error(&self, status: AlStatus, code: AlStatusCode) -> bool {
+        status.error() && !(self.device_emulation && code == AlStatusCode::NO_ERROR)
+    }
+    /// Whether AL status shows `state` reached without an error (see [`Slave::al_error`]).
+    pub fn al_reached(&self, status: AlStatus, code: AlStatusCode, state: AlState) -> bool {
+        status.state() == Some(state) && !self.al_error(status, code)
     }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {

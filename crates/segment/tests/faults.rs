@@ -91,9 +91,13 @@ fn link_pulled_and_restored_and_slave_power_cycled() {
     assert_eq!(bus.tx(Command::BRD, Address::Device { adp: 0, ado: 0 }, &[0]).1, 3, "plugged in again");
 }
 
+/// Under device emulation (the EL2004's ESC has no firmware) an expired process data watchdog
+/// resets the outputs and nothing else: AL status is only ever a copy of AL control, so the
+/// terminal stays in OP with status code 0, and the next output buffer sets the outputs again.
 #[test]
-fn expired_process_data_watchdog_takes_op_to_safeop() {
-    use ferrocat_wire::register::{AlStatusCode, Fmmu, SyncManager};
+fn expired_process_data_watchdog_resets_a_device_emulation_terminals_outputs() {
+    use ferrocat_esc::DigitalIo;
+    use ferrocat_wire::register::{Fmmu, SyncManager};
     let mut bus = Bus::new(line("").build().unwrap());
     bus.address_all();
     // EL2004 outputs SM with the watchdog trigger (control 0x44), default 100 ms watchdog.
@@ -113,19 +117,24 @@ fn expired_process_data_watchdog_takes_op_to_safeop() {
     for s in [2u8, 4, 8] {
         bus.fp(Command::FPWR, 0x1002, 0x0120, &[s, 0]);
     }
-    // Process data every millisecond keeps it in OP...
+    let outputs = |bus: &Bus| bus.seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone();
+    // Process data every millisecond keeps the watchdog from expiring...
     for _ in 0..300 {
         bus.tx(Command::LWR, Address::Logical(0), &[0x0F]);
         bus.t += 1_000_000;
     }
-    let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x0130, &[0; 6]);
-    assert_eq!(st[0], 8, "still OP");
-    // ...150 ms without it do not.
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0440, &[0; 2]).0[0] & 1, 1, "0x0440: active");
+    assert_eq!(outputs(&bus), [0x0F]);
+    // ...150 ms without it expire it once: outputs off, OP kept.
     bus.t += 150_000_000;
     let (st, _) = bus.fp(Command::FPRD, 0x1002, 0x0130, &[0; 6]);
-    assert_eq!((st[0], u16::from_le_bytes([st[4], st[5]])), (0x14, AlStatusCode::SM_WATCHDOG.0));
+    assert_eq!((st[0], u16::from_le_bytes([st[4], st[5]])), (0x08, 0), "still OP, no status code");
     assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0440, &[0; 2]).0[0] & 1, 0, "0x0440: expired");
-    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0442, &[0]).0, [1], "0x0442 counts the expiry");
+    assert_eq!(outputs(&bus), [0x00], "outputs in their safe state");
+    bus.t += 150_000_000;
+    assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0442, &[0]).0, [1], "0x0442 counts the expiry once");
+    bus.tx(Command::LWR, Address::Logical(0), &[0x05]);
+    assert_eq!(outputs(&bus), [0x05], "the next buffer drives the outputs again");
     // A write of either watchdog counter clears both (datasheet II, 0x0442–0x0443).
     bus.fp(Command::FPWR, 0x1002, 0x0443, &[0x55]);
     assert_eq!(bus.fp(Command::FPRD, 0x1002, 0x0442, &[0; 2]).0, [0, 0], "cleared");

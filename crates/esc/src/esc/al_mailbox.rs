@@ -11,12 +11,7 @@ impl Esc {
     pub(super) fn al_control(&mut self, control: u16) {
         let before = self.al.clone();
         if self.device_emulation() {
-            // Device emulation: the ESC copies AL control to AL status (esc-spec §5.1).
-            if let Some(s) = AlState::from_bits(control as u8) {
-                self.al.state = s;
-                self.al.error = false;
-                self.al.code = AlStatusCode::NO_ERROR;
-            }
+            self.al.copy_control(control);
         } else {
             let mut expected = self.expected.clone();
             for (_, e, len) in expected.process_data.iter_mut() {

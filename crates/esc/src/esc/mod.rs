@@ -667,11 +667,22 @@ impl Esc {
             return;
         }
         let Some(wd) = self.process_data_watchdog_ns() else { return };
-        if self.al.state == AlState::Op && self.now_ns.saturating_sub(self.wd_last_trigger_ns) > wd {
-            self.mem[0x0440] = 0;
-            self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
-            self.leave_op(AlStatusCode::SM_WATCHDOG);
+        if self.now_ns.saturating_sub(self.wd_last_trigger_ns) <= wd {
+            return;
         }
+        if self.device_emulation() {
+            // No PDI writes AL status under device emulation: the ESC only resets its digital
+            // outputs, once per expiry, and stays in OP (datasheet I, process data watchdog).
+            if self.mem[0x0440] != 0 {
+                self.mem[0x0440] = 0;
+                self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
+                self.app.watchdog_expired();
+            }
+            return;
+        }
+        self.mem[0x0440] = 0;
+        self.mem[0x0442] = self.mem[0x0442].saturating_add(1);
+        self.leave_op(AlStatusCode::SM_WATCHDOG);
     }
 
     /// A local error in OP: SAFEOP with the error bit and `code` (esc-spec §5.1). A firmware

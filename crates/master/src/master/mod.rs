@@ -224,11 +224,12 @@ impl<I: Io> Master<I> {
     }
 
     fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
-        let (mut id, mut alias, mut dl, mut sii_status) = ([0u8; 10], [0u8; 2], [0u8; 2], [0u8; 2]);
+        let (mut id, mut alias, mut dl, mut pdi, mut sii_status) = ([0u8; 10], [0u8; 2], [0u8; 2], [0u8; 2], [0u8; 2]);
         let mut p = [
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0000 }, &mut id),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0012 }, &mut alias),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0110 }, &mut dl),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0140 }, &mut pdi),
         ];
         self.engine.transact(&mut p)?;
         if p.iter().any(|x| x.wkc != 1) {
@@ -263,6 +264,7 @@ impl<I: Io> Master<I> {
             fmmu_count: id[4],
             sm_count: id[5],
             features,
+            device_emulation: pdi[1] & 0x01 != 0,
             dl_status,
             eeprom_status: u16::from_le_bytes(sii_status),
             active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),

@@ -110,7 +110,8 @@ impl<I: Io> Master<I> {
             self.fprd(st, 0x0130, &mut d)?;
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-            if status.state() == Some(state) && !status.error() {
+            let error = self.slaves[position as usize].al_error(status, code);
+            if status.state() == Some(state) && !error {
                 self.slaves[position as usize].state = state;
                 return Ok(());
             }
@@ -130,9 +131,9 @@ impl<I: Io> Master<I> {
                     });
                 }
             }
-            if status.error() || timed_out {
+            if error || timed_out {
                 let reached = status.state().map(|s| s.name()).unwrap_or("an unknown state");
-                if status.error() {
+                if error {
                     // Acknowledge, so that the slave accepts requests again.
                     let ack = status.state_bits() as u16 | AlStatus::ERROR;
                     let _ = self.engine.one(
@@ -145,10 +146,7 @@ impl<I: Io> Master<I> {
                     position,
                     name,
                     requested: state,
-                    status: format!(
-                        "stays in {reached}{}",
-                        if status.error() { " with an error" } else { " (timeout)" }
-                    ),
+                    status: format!("stays in {reached}{}", if error { " with an error" } else { " (timeout)" }),
                     code: code_text(code),
                 });
             }
@@ -200,7 +198,8 @@ impl<I: Io> Master<I> {
             }
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-            if status.state() == Some(AlState::Op) && !status.error() {
+            let error = self.slaves[k].al_error(status, code);
+            if status.state() == Some(AlState::Op) && !error {
                 if self.slaves[k].health != crate::slave::Health::Operational {
                     self.slaves[k].health = crate::slave::Health::Operational;
                     self.events.push(MasterEvent::Recovered { position: pos, name });
@@ -213,7 +212,7 @@ impl<I: Io> Master<I> {
             }
             self.slaves[k].health = crate::slave::Health::Recovering;
             // One step towards OP.
-            if status.error() {
+            if error {
                 let ack = status.state_bits() as u16 | AlStatus::ERROR;
                 self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut ack.to_le_bytes())?;
                 continue;
