@@ -71,8 +71,10 @@ impl EscConfig {
     }
 
     /// Beckhoff ET1200, the ESC of E-Bus terminals: 3 FMMUs, 4 SMs, 1 KiB. Type and features as
-    /// real EL terminals report them in the shared captures (features 0x0184: DC present, bit 3
-    /// clear, so a 32-bit system time; a BRD of 0x0000 over ET1100 + ET1200 reads 0x13).
+    /// real EL terminals report them in the shared captures: features 0x01FC, a 64-bit DC
+    /// (bit 3) and enhanced DC SYNC activation (bit 8), read from the EL2828, EL1004 and EL3004
+    /// (`replay-dc.pcapng` frame 364, `soem-sdinfo-ek1100-el1004.pcapng` frame 199,
+    /// `twincat-scan-boxes.pcapng` frame 545); a BRD of 0x0000 over ET1100 + ET1200 reads 0x13.
     pub fn et1200() -> Self {
         EscConfig {
             esc_type: 0x12,
@@ -82,8 +84,8 @@ impl EscConfig {
             sm_count: 4,
             ram_kb: 1,
             port_descriptor: 0b00_00_10_10,
-            features: 0x0184,
-            dc: DcWidth::Bits32,
+            features: 0x01FC,
+            dc: DcWidth::Bits64,
             sii_read_8: true,
             pdi_control: None,
             eeprom_emulation: false,
