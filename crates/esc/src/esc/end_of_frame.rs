@@ -239,9 +239,8 @@ impl Esc {
         if let Some(out) = self.eeprom.command(t, ctl, word, data, self.config.sii_read_8) {
             self.mem[0x0508..0x0510].copy_from_slice(&out);
         }
-        let keep = ctl & (SiiControl::READ_8_BYTES | SiiControl::TWO_BYTE_ADDRESS | SiiControl::WRITE_ENABLE);
-        let base = if self.config.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 };
-        self.mem[0x0502..0x0504].copy_from_slice(&(keep | base).to_le_bytes());
+        let keep = (ctl & SiiControl::WRITE_ENABLE) | self.sii_mode_bits();
+        self.mem[0x0502..0x0504].copy_from_slice(&keep.to_le_bytes());
     }
 
     /// The DC unit's part of the frame: receive times latched, the TCL sample, and the DC

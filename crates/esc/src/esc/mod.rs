@@ -335,12 +335,8 @@ impl Esc {
             m[0x0012..0x0014].copy_from_slice(&self.eeprom.word(4).to_le_bytes());
             self.take_config_area(0);
         }
+        let ctl = self.sii_mode_bits();
         let m = &mut self.mem;
-        let e = &self.eeprom;
-        let size_kbit = e.word(0x3E) as u32 + 1;
-        let ctl = if c.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 }
-            | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 }
-            | if c.eeprom_emulation { SiiControl::EMULATION } else { 0 };
         m[0x0502..0x0504].copy_from_slice(&ctl.to_le_bytes());
         self.dc = match c.dc {
             DcWidth::None => None,
@@ -649,6 +645,17 @@ impl Esc {
     pub fn next_event_ns(&self) -> Option<u64> {
         let sync = self.next_sync0_edge_ns();
         [sync, self.app.next_event_ns(), self.pending_al.map(|p| p.1)].into_iter().flatten().min()
+    }
+
+    /// The SII interface's read-only mode bits (0x0502): read size, address algorithm and
+    /// EEPROM emulation, which a command written leaves as they are (the AKD's IP core reads
+    /// 0x0020 after SOEM's reads: `soem-sdinfo-akd.pcapng` frame 51).
+    pub(super) fn sii_mode_bits(&self) -> u16 {
+        let c = &self.config;
+        let size_kbit = self.eeprom.word(0x3E) as u32 + 1;
+        (if c.sii_read_8 { SiiControl::READ_8_BYTES } else { 0 })
+            | if size_kbit > 16 { SiiControl::TWO_BYTE_ADDRESS } else { 0 }
+            | if c.eeprom_emulation { SiiControl::EMULATION } else { 0 }
     }
 
     #[inline]
