@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark, iproute2 and iputils-ping from Debian, pysoem from PyPI into .venv, cargo-nextest and cargo-fuzz from
+# (tshark, iproute2 and iputils-ping from Debian, pysoem and kickcat from PyPI into .venv, cargo-nextest and cargo-fuzz from
 # crates.io), then runs unit, property and
 # integration tests with nextest, and every fuzz target for a bounded time (before the tests,
 # so that the run ends on the test summary).
@@ -34,10 +34,10 @@ if ! command -v ping >/dev/null; then
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iputils-ping >/dev/null
 fi
-if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem' 2>/dev/null; then
-  log "creating .venv with pysoem (SOEM as an independent master)"
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem, kickcat' 2>/dev/null; then
+  log "creating .venv with pysoem and kickcat (SOEM and KickCAT as independent masters)"
   python3 -m venv .venv
-  .venv/bin/pip install -q --disable-pip-version-check pysoem
+  .venv/bin/pip install -q --disable-pip-version-check pysoem 'kickcat>=2.5'
 fi
 export FERROCAT_PYTHON="$(pwd)/.venv/bin/python"
 if ! cargo nextest --version >/dev/null 2>&1; then
