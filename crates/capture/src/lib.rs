@@ -18,7 +18,7 @@ pub const LINKTYPE_ETHERNET: u32 = 1;
 pub enum CaptureError {
     #[error("not a pcap or pcapng file (first bytes {0:02x?})")]
     UnknownFormat(Vec<u8>),
-    #[error("malformed capture at frame {frame}: {source}")]
+    #[error("malformed capture at frame {frame}")]
     Format { frame: usize, source: PcapError },
     #[error("frame {frame} refers to interface {interface}, which the file does not describe")]
     NoInterface { frame: usize, interface: u32 },
@@ -110,12 +110,20 @@ pub fn for_each_packet(
             PcapError::InvalidField(_) => CaptureError::UnknownFormat(bytes[..4].to_vec()),
             e => CaptureError::Format { frame: 0, source: e },
         })?;
-        let link_type = u32::from(reader.header().datalink);
+        let header = reader.header();
+        let link_type = u32::from(header.datalink);
+        let nanos = header.ts_resolution == pcap_file::TsResolution::NanoSecond;
         let mut number = 0;
-        while let Some(p) = reader.next_packet() {
+        // Raw records: pcap-file's checked ones reject a packet longer on the wire than the
+        // file's snap length, which is every packet a `tcpdump -s N` cut; such a packet keeps
+        // its original length and reads as truncated.
+        while let Some(p) = reader.next_raw_packet() {
             number += 1;
             let p = p.map_err(fmt(number))?;
-            f(Packet { number, timestamp: p.timestamp, link_type, original_len: p.orig_len, data: p.data })?;
+            let frac = if nanos { p.ts_frac as u64 } else { p.ts_frac as u64 * 1_000 };
+            let timestamp = Duration::from_secs(p.ts_sec as u64) + Duration::from_nanos(frac);
+            let original_len = p.orig_len.max(p.data.len() as u32);
+            f(Packet { number, timestamp, link_type, original_len, data: p.data })?;
         }
         Ok(())
     }

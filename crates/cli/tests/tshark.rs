@@ -239,3 +239,51 @@ fn tshark_decodes_eoe_as_we_sent_it() {
     );
     std::fs::remove_file(&pcap).unwrap();
 }
+
+/// Every shared capture cut to a snap length of 64 bytes by Wireshark's `editcap -s 64` (as
+/// `tcpdump -s 64` would have recorded it) and written as classic pcap (in microseconds):
+/// `ferrocat pcap` reads
+/// the whole file, every datagram that survived whole decodes as from the full capture, and
+/// the one the cut fell in is marked `truncated`, with no working counter and its data a prefix
+/// of the real one's.
+#[test]
+fn needs_shared_pcap_reads_files_cut_by_a_snap_length() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-snaplen-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let json = |path: &std::path::Path| -> Vec<serde_json::Value> {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).arg("pcap").arg("--json").arg(path).output().unwrap();
+        assert!(out.status.success(), "{}: {}", path.display(), String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    };
+    let (mut truncated, mut whole) = (0, 0);
+    for path in ferrocat_testdata::shared_files("captures", ".pcapng") {
+        let cut = dir.join(path.file_name().unwrap()).with_extension("pcap");
+        let st = Command::new("editcap").args(["-s", "64", "-F", "pcap"]).arg(&path).arg(&cut).status().unwrap();
+        assert!(st.success(), "editcap on {}", path.display());
+        let full = json(&path);
+        let key = |v: &serde_json::Value| (v["frame"].as_u64().unwrap(), v["datagram"].as_u64().unwrap());
+        let by_key: std::collections::HashMap<_, _> = full.iter().map(|v| (key(v), v)).collect();
+        for mut v in json(&cut) {
+            let real = by_key[&key(&v)];
+            // Classic pcap counts microseconds.
+            let (t, t_real) = (v["time_ns"].as_u64().unwrap(), real["time_ns"].as_u64().unwrap());
+            assert_eq!(t, t_real / 1000 * 1000, "{}: time of {v}", path.display());
+            v["time_ns"] = t_real.into();
+            if v.get("truncated").is_some() {
+                truncated += 1;
+                assert!(v["wkc"].is_null(), "{v}");
+                let (d, r) = (v["data"].as_str().unwrap(), real["data"].as_str().unwrap());
+                assert!(r.starts_with(d), "{}: {v} against {real}", path.display());
+                for k in ["cmd", "idx", "len", "adp", "ado", "logical", "irq", "time_ns"] {
+                    assert_eq!(v.get(k), real.get(k), "{}: {k} of {v}", path.display());
+                }
+            } else {
+                whole += 1;
+                assert_eq!(&v, real, "{}", path.display());
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    println!("{whole} datagrams whole, {truncated} truncated by the snap length");
+    assert!(truncated > 100 && whole > 1000, "{whole} whole, {truncated} truncated");
+}
