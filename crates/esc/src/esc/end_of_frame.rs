@@ -239,7 +239,7 @@ impl Esc {
         if let Some(out) = self.eeprom.command(t, ctl, word, data, self.config.sii_read_8) {
             self.mem[0x0508..0x0510].copy_from_slice(&out);
         }
-        let keep = (ctl & SiiControl::WRITE_ENABLE) | self.sii_mode_bits();
+        let keep = (ctl & (SiiControl::WRITE_ENABLE | 0x0700)) | self.sii_mode_bits();
         self.mem[0x0502..0x0504].copy_from_slice(&keep.to_le_bytes());
     }
 

@@ -41,7 +41,11 @@ impl Esc {
         }
         self.sii_busy_shown = self.eeprom.busy(self.now_ns);
         let busy = if self.sii_busy_shown { SiiControl::BUSY } else { 0 };
-        let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800);
+        // The command bits read back with busy while the command runs, and clear with it (a
+        // real EK1100 reads 0x8140 during a read, 0x0040 after: soem-sdinfo-ek1100-only
+        // frames 70–80).
+        let command = if self.sii_busy_shown { 0 } else { 0x0700 };
+        let ctl = u16::from_le_bytes([self.mem[0x0502], self.mem[0x0503]]) & !(SiiControl::BUSY | 0x7800 | command);
         let errors = self.eeprom.errors | self.eeprom.load_status;
         self.mem[0x0502..0x0504].copy_from_slice(&(ctl | busy | errors).to_le_bytes());
         self.refresh_dc_registers();
