@@ -219,6 +219,27 @@ pub struct DeviceToml {
     pub sync_unit: Option<bool>,
     /// Overrides the SII's latch in unit bit (word 0, ESC configuration bit 3).
     pub latch_unit: Option<bool>,
+    /// The ESC's identity registers 0x0000–0x0009 as a particular unit reads them, in hex, one
+    /// byte per pair of digits (spaces allowed), `..` for a byte the ESC kind keeps: type,
+    /// revision, build (2 bytes), FMMUs, SyncManagers, RAM (KiB), port descriptor, features
+    /// (2 bytes). For example `"12 01 01 00 03 04 01 4a fc 01"`, an EL1004's ET1200.
+    pub esc_identity: Option<String>,
+}
+
+/// `esc_identity`: ten bytes, `None` where the text says `..`.
+fn parse_identity(text: &str) -> Result<[Option<u8>; 10], String> {
+    let digits: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    if digits.len() != 20 {
+        return Err(format!("esc_identity: {} hex digits or dots where 20 are needed (10 bytes)", digits.len()));
+    }
+    let mut out = [None; 10];
+    for (k, slot) in out.iter_mut().enumerate() {
+        let pair = &digits[2 * k..2 * k + 2];
+        if pair != ".." {
+            *slot = Some(u8::from_str_radix(pair, 16).map_err(|_| format!("esc_identity: byte {k} is '{pair}'"))?);
+        }
+    }
+    Ok(out)
 }
 
 /// The master's second port (cable redundancy): wired to a free port of a device, it closes
@@ -418,6 +439,32 @@ impl SegmentConfig {
                 } << (2 * p)
             });
             let place = format!("device {i}");
+            if let Some(text) = &d.esc_identity {
+                let b = parse_identity(text).map_err(|e| device_err(&place, e))?;
+                let c = &mut config;
+                let keep = |v: &mut u8, k: usize| *v = b[k].unwrap_or(*v);
+                keep(&mut c.esc_type, 0);
+                keep(&mut c.revision, 1);
+                let build = c.build.to_le_bytes();
+                c.build = u16::from_le_bytes([b[2].unwrap_or(build[0]), b[3].unwrap_or(build[1])]);
+                keep(&mut c.fmmu_count, 4);
+                keep(&mut c.sm_count, 5);
+                keep(&mut c.ram_kb, 6);
+                keep(&mut c.port_descriptor, 7);
+                let f = c.features.to_le_bytes();
+                c.features = u16::from_le_bytes([b[8].unwrap_or(f[0]), b[9].unwrap_or(f[1])]);
+                // The register map has room for 16 FMMUs (0x0600–0x06FF) and 16 SyncManagers
+                // (0x0800–0x087F); process RAM ends at 0xFFFF.
+                if c.fmmu_count > 16 || c.sm_count > 16 || c.ram_kb > 60 {
+                    return Err(device_err(
+                        &place,
+                        format!(
+                            "esc_identity: {} FMMUs, {} SyncManagers, {} KiB: at most 16, 16 and 60",
+                            c.fmmu_count, c.sm_count, c.ram_kb
+                        ),
+                    ));
+                }
+            }
             let drift_ppb = match d.drift_ppm {
                 Some(ppm) => {
                     (in_range(&place, "drift_ppm", ppm, -MAX_DRIFT_PPM..=MAX_DRIFT_PPM)? * 1000.0).round() as i64

@@ -169,3 +169,25 @@ fn a_tree_through_a_junction() {
     let t_el1004 = bus.seg.last_visits().iter().find(|(n, _)| *n == 2).unwrap().1.epu_ns;
     assert!(t_el1004 > t_el2004 + 200);
 }
+
+/// `esc_identity` sets the ESC's identity registers to a particular unit's, keeping the kind's
+/// bytes where it says `..`; malformed or impossible values are refused with the device named.
+#[test]
+fn esc_identity_sets_the_identity_registers() {
+    let cfg: SegmentConfig =
+        toml::from_str("seed = 1\n[[device]]\nbuiltin = 'EL1004'\nesc_identity = '12 01 01 00 03 04 01 .. fc 01'\n")
+            .unwrap();
+    let seg = cfg.build().unwrap();
+    let ports = seg.nodes[0].esc.peek(0x0007, 1)[0];
+    assert_eq!(seg.nodes[0].esc.peek(0, 10), [0x12, 0x01, 0x01, 0x00, 0x03, 0x04, 0x01, ports, 0xFC, 0x01]);
+    for (bad, says) in [
+        ("12 01", "20 are needed"),
+        ("12 01 01 00 03 04 01 4a fc zz", "byte 9 is 'zz'"),
+        ("12 01 01 00 11 04 01 4a fc 01", "at most 16"),
+    ] {
+        let cfg: SegmentConfig =
+            toml::from_str(&format!("seed = 1\n[[device]]\nbuiltin = 'EL1004'\nesc_identity = '{bad}'\n")).unwrap();
+        let err = cfg.build().err().unwrap().to_string();
+        assert!(err.contains("device 0") && err.contains(says), "{bad}: {err}");
+    }
+}
