@@ -421,7 +421,7 @@ fn reason(cmd: Command, adp: u16, ado: u16, standins: &[(u16, &str)], what: &str
         0x0140..=0x0141 => "PDI control: the real ESC, an IP core, has its PDI fixed at synthesis, not as SII word 0 gives it",
         0x0120..=0x0121 => "AL control: the real firmware read it at another moment than the modelled 1 ms",
         0x0130..=0x0135 => "AL status: the simulated slave changes state at another moment than the real one",
-        0x0502 => "SII interface, 0x0502 bit 4 (reserved in the datasheet): the real ET1200s of the EL2828, EL1004 and EL3004 read it set from power-on, the EL2004's clear, and the EL1004's clears after SOEM hands the EEPROM to the PDI and back; not modelled (no source says what it means)",
+        0x0502 => "SII interface, 0x0502 bit 4 (reserved in the datasheet): the real ET1200s of the EL2828, EL1004 and EL3004 read it set, the EL2004's clear; the EL1004's and EL3004's clear later in their sessions, the EL2828's not after the same EEPROM hand-over to the PDI; not modelled (no source says what it means)",
         0x0500..=0x050F => "SII interface: busy timing differs (700 µs per read, 3 ms per write here; a PDI-emulated EEPROM answers sooner)",
         0x0800..=0x087F => "mailbox SyncManager status: the firmware's response time (drawn from the real one's range, not the real draw)",
         0x0900..=0x09FF => "DC registers: times are the simulation's",
