@@ -185,16 +185,21 @@ enum Command {
         #[command(subcommand)]
         experiment: LabCmd,
     },
-    /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times.
+    /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times
+    /// of the frames a slave answered. Stops with an error when 20 frames in a row get no
+    /// answer (each waits at most 50 ms).
     Rtt {
         #[arg(long)]
         iface: String,
-        /// Frames to send.
-        #[arg(long, default_value_t = 2000)]
+        /// Frames to send (at least 1).
+        #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u32).range(1..))]
         frames: u32,
         /// Slaves the frame is built for (one process-data nibble each, after the coupler).
         #[arg(long, default_value_t = 6)]
         slaves: u16,
+        /// Send even on an interface that has an IPv4 or a global IPv6 address.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -332,9 +337,9 @@ enum SdoCmd {
         /// Complete access (the whole object).
         #[arg(long)]
         complete: bool,
-        /// How to show the value: u8 i8 u16 i16 u32 i32 u64 string hex.
-        #[arg(long = "type", default_value = "hex")]
-        ty: String,
+        /// How to show the value; a number type needs the object to have exactly its width.
+        #[arg(long = "type", value_enum, default_value_t = master_cmd::SdoType::Hex)]
+        ty: master_cmd::SdoType,
         #[command(flatten)]
         target: target::Target,
     },
@@ -342,11 +347,13 @@ enum SdoCmd {
     Write {
         position: u16,
         object: String,
+        #[arg(allow_negative_numbers = true)]
         value: String,
         #[arg(long)]
         complete: bool,
-        #[arg(long = "type", default_value = "u32")]
-        ty: String,
+        /// How to encode VALUE (numbers decimal or 0x hex, range-checked for the type).
+        #[arg(long = "type", value_enum, default_value_t = master_cmd::SdoType::U32)]
+        ty: master_cmd::SdoType,
         #[command(flatten)]
         target: target::Target,
     },
@@ -473,7 +480,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Rtt { iface, frames, slaves } => sim::rtt(&iface, frames, slaves),
+        Command::Rtt { iface, frames, slaves, force } => sim::rtt(&iface, frames, slaves, force),
         Command::Scan { target, json } => master_cmd::scan(&target, json),
         Command::Sdo { action } => match action {
             SdoCmd::Read { position, object, complete, ty, target } => {

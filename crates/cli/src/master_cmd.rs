@@ -125,41 +125,112 @@ fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
     Ok((index, sub))
 }
 
-fn encode(value: &str, ty: &str) -> anyhow::Result<Vec<u8>> {
-    let int = || ferrocat_esi::parse_number(value).with_context(|| format!("'{value}' is not a number"));
-    Ok(match ty {
-        "u8" => u8::try_from(int()?)?.to_le_bytes().to_vec(),
-        "i8" => i8::try_from(int()?)?.to_le_bytes().to_vec(),
-        "u16" => u16::try_from(int()?)?.to_le_bytes().to_vec(),
-        "i16" => i16::try_from(int()?)?.to_le_bytes().to_vec(),
-        "u32" => u32::try_from(int()?)?.to_le_bytes().to_vec(),
-        "i32" => i32::try_from(int()?)?.to_le_bytes().to_vec(),
-        "u64" => u64::try_from(int()?)?.to_le_bytes().to_vec(),
-        "string" => value.as_bytes().to_vec(),
-        "hex" => ferrocat_wire::hex::decode(value).map_err(|e| anyhow::anyhow!("hex value: {e}"))?,
-        other => bail!("unknown type '{other}' (u8 i8 u16 i16 u32 i32 u64 string hex)"),
-    })
+/// How an SDO value is read from or written to its bytes (little-endian numbers).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SdoType {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    U64,
+    I64,
+    F32,
+    F64,
+    String,
+    Hex,
 }
 
-fn show(bytes: &[u8], ty: &str) -> String {
-    let le = |n: usize| {
-        let mut b = [0u8; 8];
-        b[..n.min(bytes.len())].copy_from_slice(&bytes[..n.min(bytes.len())]);
-        u64::from_le_bytes(b)
-    };
-    match ty {
-        "u8" | "u16" | "u32" | "u64" => le(bytes.len().min(8)).to_string(),
-        "i8" => (le(1) as u8 as i8).to_string(),
-        "i16" => (le(2) as u16 as i16).to_string(),
-        "i32" => (le(4) as u32 as i32).to_string(),
-        "string" => String::from_utf8_lossy(bytes).trim_end_matches('\0').to_string(),
-        _ => bytes.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "),
+impl SdoType {
+    /// The width of a number type in bytes.
+    fn width(self) -> Option<usize> {
+        use SdoType::*;
+        match self {
+            U8 | I8 => Some(1),
+            U16 | I16 => Some(2),
+            U32 | I32 | F32 => Some(4),
+            U64 | I64 | F64 => Some(8),
+            String | Hex => None,
+        }
+    }
+    fn name(self) -> String {
+        clap::ValueEnum::to_possible_value(&self).map(|v| v.get_name().to_string()).unwrap_or_default()
     }
 }
 
+fn encode(value: &str, ty: SdoType) -> anyhow::Result<Vec<u8>> {
+    use SdoType::*;
+    let name = ty.name();
+    let int = || {
+        let (neg, body) = value.trim().strip_prefix('-').map_or((false, value.trim()), |b| (true, b));
+        let n = match body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
+            Some(h) => i128::from_str_radix(h, 16),
+            None => body.parse::<i128>(),
+        };
+        n.map(|n| if neg { -n } else { n })
+            .with_context(|| format!("value '{value}' is not a number (decimal or 0x hex) for --type {name}"))
+    };
+    let range = match ty {
+        U8 => "0 to 255",
+        I8 => "-128 to 127",
+        U16 => "0 to 65535",
+        I16 => "-32768 to 32767",
+        U32 => "0 to 4294967295",
+        I32 => "-2147483648 to 2147483647",
+        U64 => "0 to 18446744073709551615",
+        _ => "-9223372036854775808 to 9223372036854775807",
+    };
+    let fit = |_| anyhow::anyhow!("value {value} is out of the range of --type {name} ({range})");
+    let float = || value.parse::<f64>().with_context(|| format!("value '{value}' is not a number for --type {name}"));
+    Ok(match ty {
+        U8 => u8::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        I8 => i8::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        U16 => u16::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        I16 => i16::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        U32 => u32::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        I32 => i32::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        U64 => u64::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        I64 => i64::try_from(int()?).map_err(fit)?.to_le_bytes().to_vec(),
+        F32 => (float()? as f32).to_le_bytes().to_vec(),
+        F64 => float()?.to_le_bytes().to_vec(),
+        String => value.as_bytes().to_vec(),
+        Hex => ferrocat_wire::hex::decode(value).map_err(|e| anyhow::anyhow!("hex value '{value}': {e}"))?,
+    })
+}
+
+/// The value of an object's bytes as `ty`: a number type only where the object has exactly its
+/// width (a wider object read as a narrower type would drop bytes unseen).
+fn show(bytes: &[u8], ty: SdoType) -> anyhow::Result<String> {
+    use SdoType::*;
+    if let Some(w) = ty.width() {
+        if bytes.len() != w {
+            bail!(
+                "the object holds {} byte(s) and --type {} reads {w}: read it with --type hex or string, or a type of its width",
+                bytes.len(),
+                ty.name()
+            );
+        }
+    }
+    let mut b = [0u8; 8];
+    b[..bytes.len().min(8)].copy_from_slice(&bytes[..bytes.len().min(8)]);
+    let u = u64::from_le_bytes(b);
+    Ok(match ty {
+        U8 | U16 | U32 | U64 => u.to_string(),
+        I8 => (u as u8 as i8).to_string(),
+        I16 => (u as u16 as i16).to_string(),
+        I32 => (u as u32 as i32).to_string(),
+        I64 => (u as i64).to_string(),
+        F32 => f32::from_bits(u as u32).to_string(),
+        F64 => f64::from_bits(u).to_string(),
+        String => std::string::String::from_utf8_lossy(bytes).trim_end_matches('\0').to_string(),
+        Hex => bytes.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "),
+    })
+}
+
 pub enum SdoAction {
-    Read { object: String, complete: bool, ty: String },
-    Write { object: String, value: String, complete: bool, ty: String },
+    Read { object: String, complete: bool, ty: SdoType },
+    Write { object: String, value: String, complete: bool, ty: SdoType },
     List,
 }
 
@@ -171,11 +242,12 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
         SdoAction::Read { object, complete, ty } => {
             let (i, s) = parse_object(&object)?;
             let v = m.sdo_upload(position, i, s, complete)?;
-            outln!("{}", show(&v, &ty));
+            outln!("{}", show(&v, ty)?);
         }
         SdoAction::Write { object, value, complete, ty } => {
             let (i, s) = parse_object(&object)?;
-            m.sdo_download(position, i, s, complete, &encode(&value, &ty)?)?;
+            let bytes = encode(&value, ty)?;
+            m.sdo_download(position, i, s, complete, &bytes)?;
         }
         SdoAction::List => {
             for index in m.od_list(position)? {

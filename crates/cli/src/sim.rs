@@ -318,10 +318,14 @@ fn write_clock_log(p: &Path, seg: &Segment, log: &[u64]) -> std::io::Result<()> 
 }
 
 /// `ferrocat rtt`: round trips of an LRW + FRMW frame through whatever answers on `iface`.
-pub fn rtt(iface: &str, frames: u32, slaves: u16) -> anyhow::Result<ExitCode> {
+pub fn rtt(iface: &str, frames: u32, slaves: u16, force: bool) -> anyhow::Result<ExitCode> {
     use ferrocat_segment::live::{monotonic_ns, RawSocket};
     use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
-    use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
+    use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
+    /// Frames in a row that no slave answers before the measurement stops.
+    const GIVE_UP: u32 = 20;
+    const WAIT_NS: u64 = 50_000_000;
+    crate::target::check_iface(iface, force)?;
     let sock = RawSocket::open(iface).with_context(|| format!("opening {iface}"))?;
     let image = (slaves.saturating_sub(1) as usize * 4).div_ceil(8).max(1);
     let eth = EthernetRepr { dst: BROADCAST, src: [0x02, 0, 0, 0, 0, 0x01], vlan_tci: None, ethertype: 0 };
@@ -334,32 +338,54 @@ pub fn rtt(iface: &str, frames: u32, slaves: u16) -> anyhow::Result<ExitCode> {
         0,
     )?;
     let len = w.finish()?;
-    let mut rtts = Vec::new();
-    let mut buf = [0u8; 2048];
-    let mut lost = 0;
-    for _ in 0..frames {
+    let (mut rtts, mut buf) = (Vec::new(), [0u8; 2048]);
+    let (mut lost, mut unprocessed, mut in_a_row) = (0u32, 0u32, 0u32);
+    let mut progress_at = monotonic_ns() + 2_000_000_000;
+    for k in 0..frames {
         let t0 = monotonic_ns();
         sock.send(&frame[..len])?;
-        let mut got = false;
-        while monotonic_ns() - t0 < 50_000_000 {
-            match sock.recv(&mut buf)? {
-                Some(n) if n >= len && buf[12..14] == [0x88, 0xA4] && buf[16 + 1] == 0x42 => {
-                    rtts.push(monotonic_ns() - t0);
-                    got = true;
-                    break;
-                }
-                _ => {}
+        let mut answered = false;
+        while !answered && monotonic_ns() - t0 < WAIT_NS {
+            let Some(n) = sock.recv(&mut buf)? else { continue };
+            let Ok(Some(f)) = Frame::parse(&buf[..n]) else { continue };
+            let mut d = f.pdu.datagrams();
+            if d.next().is_none_or(|d| d.header().index != 0x42) {
+                continue;
             }
+            // A frame back with every working counter 0 passed no slave: a loopback (`lo`
+            // hands our own frame back) or a port with a cable and nothing on it.
+            if f.pdu.datagrams().all(|d| d.wkc() == 0) {
+                unprocessed += 1;
+                break;
+            }
+            rtts.push(monotonic_ns() - t0);
+            answered = true;
         }
-        lost += !got as u32;
+        lost += !answered as u32;
+        in_a_row = if answered { 0 } else { in_a_row + 1 };
+        if in_a_row >= GIVE_UP {
+            let why = match unprocessed {
+                0 => String::from("nothing came back"),
+                n => format!("{n} came back unprocessed: a loopback or an open port, not an EtherCAT segment"),
+            };
+            anyhow::bail!(
+                "no slave answered {GIVE_UP} frames in a row on {iface} ({why}); stopped after {} of {frames} frames",
+                k + 1
+            );
+        }
+        if monotonic_ns() > progress_at {
+            eprintln!("rtt: {} of {frames} frames sent, {lost} unanswered", k + 1);
+            progress_at += 2_000_000_000;
+        }
     }
     rtts.sort_unstable();
-    let q = |p: f64| {
-        rtts.get(((rtts.len().max(1) - 1) as f64 * p).round() as usize).map(|v| *v as f64 / 1000.0).unwrap_or(f64::NAN)
-    };
+    let q = |p: f64| rtts[((rtts.len() - 1) as f64 * p).round() as usize] as f64 / 1000.0;
+    if rtts.is_empty() {
+        anyhow::bail!("no slave answered any of {frames} frame(s) on {iface}");
+    }
     println!(
-        "{} frames, {lost} lost; round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
-        frames,
+        "{frames} {}, {lost} unanswered ({unprocessed} back unprocessed); round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        if frames == 1 { "frame" } else { "frames" },
         q(0.5),
         q(0.9),
         q(0.99),

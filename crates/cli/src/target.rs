@@ -206,14 +206,7 @@ impl Target {
                 World::Udp(UdpIo::open(a).with_context(|| format!("UDP to {a}"))?)
             }
             (Some(iface), false) => {
-                let addrs = ferrocat_link::routable_addresses(iface)
-                    .with_context(|| format!("reading the addresses of {iface}"))?;
-                if !addrs.is_empty() && !self.force {
-                    bail!(
-                        "{iface} has address(es) {}: EtherCAT broadcasts do not belong on an office LAN (use --force to send anyway)",
-                        addrs.join(", ")
-                    );
-                }
+                check_iface(iface, self.force)?;
                 match &self.secondary_iface {
                     Some(sec) => World::Raw(
                         RawIo::open_redundant(iface, sec).with_context(|| format!("opening {iface} and {sec}"))?,
@@ -243,6 +236,20 @@ impl Target {
         }
         Ok(m)
     }
+}
+
+/// Refuses an interface with an IPv4 or a global IPv6 address unless `force`: EtherCAT
+/// broadcasts do not belong on an office LAN. Every command that sends frames asks this.
+pub fn check_iface(iface: &str, force: bool) -> anyhow::Result<()> {
+    let addrs =
+        ferrocat_link::routable_addresses(iface).with_context(|| format!("reading the addresses of {iface}"))?;
+    if !addrs.is_empty() && !force {
+        bail!(
+            "{iface} has address(es) {}: EtherCAT broadcasts do not belong on an office LAN (use --force to send anyway)",
+            addrs.join(", ")
+        );
+    }
+    Ok(())
 }
 
 /// Flushes the pcap file, if any.

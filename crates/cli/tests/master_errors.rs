@@ -154,3 +154,27 @@ fn sii_alias_writes_two_words_and_scan_names_a_bad_checksum() {
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert!(ok_json && v[1]["eeprom_loaded"] == false && v[0]["eeprom_loaded"] == true, "{json}");
 }
+
+/// `sdo read|write --type` takes only the types it knows; a number type reads only an object
+/// of exactly its width, and a value that does not fit its type is refused with the range.
+#[test]
+fn sdo_types_are_checked_both_ways() {
+    let seg = ["--device", "EK1100", "--device", "SERVO"];
+    let sdo = |args: &[&str]| ferrocat(&[&["sdo"], args, &seg[..]].concat());
+    let (ok, _, err) = sdo(&["read", "1", "0x1008", "--type", "bogus"]);
+    assert!(!ok && err.contains("invalid value 'bogus'") && err.contains("possible values"), "{err}");
+    let (ok, _, err) = sdo(&["read", "1", "0x1008", "--type", "u8"]);
+    assert!(!ok && err.contains("holds 37 byte(s) and --type u8 reads 1"), "{err}");
+    let (ok, out, _) = sdo(&["read", "1", "0x1008", "--type", "string"]);
+    assert!(ok && out.trim() == "ferrocat simulated CiA402 servo drive", "{out}");
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "300", "--type", "u8"]);
+    assert!(!ok && err.contains("value 300 is out of the range of --type u8 (0 to 255)"), "{err}");
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "zzz", "--type", "i8"]);
+    assert!(!ok && err.contains("value 'zzz' is not a number (decimal or 0x hex) for --type i8"), "{err}");
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "-1", "--type", "i8"]);
+    assert!(ok, "{err}");
+    let (ok, out, err) = sdo(&["read", "1", "0x6060", "--type", "i8"]);
+    assert!(ok && out.trim() == "0", "a fresh segment each run: {out}{err}");
+    let (ok, out, err) = sdo(&["read", "1", "0x1000", "--type", "u32"]);
+    assert!(ok && out.trim().parse::<u32>().is_ok(), "{out}{err}");
+}
