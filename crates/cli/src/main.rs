@@ -121,9 +121,12 @@ enum Command {
     Run {
         #[command(flatten)]
         target: target::Target,
+        /// How long to exchange process data (s); SIGINT or SIGTERM end it sooner, with the
+        /// same summary.
         #[arg(long, default_value_t = 5.0)]
         seconds: f64,
-        #[arg(long, default_value_t = 1000)]
+        /// The cycle time (µs, 10 to 1 000 000).
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
         cycle_us: u64,
         /// Distribute the reference clock's time with an FRMW in every cyclic frame.
         #[arg(long)]
@@ -424,6 +427,11 @@ enum EepromCmd {
         #[command(flatten)]
         target: target::Target,
     },
+}
+
+/// "1 slave found", "3 slaves found": a count with its noun in the right number.
+pub(crate) fn count(n: usize, noun: &str, rest: &str) -> String {
+    format!("{n} {noun}{} {rest}", if n == 1 { "" } else { "s" })
 }
 
 fn main() -> ExitCode {

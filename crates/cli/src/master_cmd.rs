@@ -1,5 +1,7 @@
 //! Commands that run the master: scan, sdo, sii, run.
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use ferrocat_master::Master;
@@ -33,7 +35,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             .collect();
         outln!("{}", serde_json::Value::Array(v));
     } else {
-        outln!("{} slaves found", m.slaves.len());
+        outln!("{}", crate::count(m.slaves.len(), "slave", "found"));
         use ferrocat_master::io::Io;
         if m.engine.io.has_secondary() {
             let far = m.split_latch.as_ref().and_then(|l| l.far_reference);
@@ -43,8 +45,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     (ferrocat_master::RingState::Intact, _) => "Ring intact: every slave on one pass".to_string(),
                     (ferrocat_master::RingState::Broken, Some(f)) => format!(
                         "Ring broken: the slaves behind the break answer from the secondary port; \
-                         their delays are from slave {}, the first clock behind the break",
-                        f + 1
+                         their delays are from slave {f}, the first clock behind the break"
                     ),
                     (ferrocat_master::RingState::Broken, None) => {
                         "Ring broken: the slaves behind the break answer from the secondary port".to_string()
@@ -55,7 +56,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
         }
         for s in &m.slaves {
             outln!("");
-            outln!("Slave:{} {} ({})", s.position + 1, s.name, s.description);
+            outln!("Slave {}: {} ({})", s.position, s.name, s.description);
             outln!(" Configured address: {:04x}  alias {}", s.station, s.alias);
             outln!(
                 " Man: {:08x} ID: {:08x} Rev: {:08x} Serial: {:08x}",
@@ -102,7 +103,7 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                 outln!(
                     "{}{} {} (port {} of its parent, {} ns)",
                     "  ".repeat(depth + 1),
-                    s.position + 1,
+                    s.position,
                     s.name,
                     s.parent_port,
                     s.delay_ns
@@ -379,8 +380,12 @@ pub fn run(
     eoe_taps: &[String],
 ) -> anyhow::Result<ExitCode> {
     let dc = dc_static_frames.is_some();
-    if !(seconds > 0.0 && seconds < 1e6) || cycle_us == 0 {
-        bail!("--seconds must be positive and --cycle-us at least 1");
+    if !(seconds > 0.0 && seconds < 1e6) {
+        bail!("--seconds {seconds}: give a time above 0 and below 1 000 000 s");
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
     }
     let eoe_taps = eoe_taps
         .iter()
@@ -410,18 +415,22 @@ pub fn run(
         };
         let r = m.init_dc(&cfg)?;
         eprintln!(
-            "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on slaves {:?}",
+            "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on {}",
             r.reference,
             r.static_frames,
             if r.converged { "converged" } else { "not converged" },
             r.max_difference_ns,
-            r.sync0_slaves
+            match r.sync0_slaves.as_slice() {
+                [] => String::from("no slave"),
+                [one] => format!("slave {one}"),
+                many => format!("slaves {}", many.iter().map(|p| p.to_string()).collect::<Vec<_>>().join(", ")),
+            }
         );
         if let Some((l, lag)) = m.split_latch.as_ref().and_then(|l| Some((l, l.far_lag_ns()?))) {
             eprintln!(
                 "DC: ring split from the start: the far half (from slave {}) latched {:.1} µs after the reference, \
                  its clocks set for that instant",
-                l.first_far + 1,
+                l.first_far,
                 lag as f64 / 1e3
             );
         }
@@ -448,7 +457,7 @@ pub fn run(
     let mut next = start;
     let mut report = start + 1_000_000_000;
     let mut shown = m.events.len();
-    while m.engine.io.now_ns() < end {
+    while m.engine.io.now_ns() < end && !stop.load(Ordering::Relaxed) {
         next += period;
         m.cycle()?;
         for b in bridges.iter_mut() {
@@ -461,12 +470,12 @@ pub fn run(
         if m.engine.io.now_ns() >= report {
             let s = m.cycle_stats();
             eprintln!(
-                "t={:5.1} s  cycles {}  wkc {}/{} ({} errors)  max jitter {:.1} us  round trip {:.1} us (max {:.1})",
+                "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} us  round trip {:.1} us (max {:.1})",
                 (m.engine.io.now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
                 m.expected_wkc,
-                s.wkc_errors,
+                crate::count(s.wkc_errors as usize, "error", "").trim_end(),
                 s.max_jitter_ns as f64 / 1000.0,
                 s.last_round_trip_ns as f64 / 1000.0,
                 s.max_round_trip_ns as f64 / 1000.0
@@ -491,9 +500,18 @@ pub fn run(
         s.cycles as f64 / (wall as f64 * 1e-9),
         cpu as f64 / 1000.0 / s.cycles.max(1) as f64
     );
+    if stop.load(Ordering::Relaxed) {
+        eprintln!("stopped by a signal after {:.3} s", wall as f64 * 1e-9);
+    }
+    let mean_period_us = wall as f64 / 1000.0 / s.cycles.max(1) as f64;
+    let cycles = match (max_rate, s.cycles) {
+        (true, 1) => String::from("1 cycle back to back"),
+        (true, n) => format!("{n} cycles back to back"),
+        (false, 1) => format!("1 cycle of {cycle_us} us"),
+        (false, n) => format!("{n} cycles of {cycle_us} us"),
+    };
     outln!(
-        "{} cycles of {cycle_us} us; {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
-        s.cycles,
+        "{cycles} (mean period {mean_period_us:.1} us); {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
         s.wkc_errors,
         s.max_jitter_ns as f64 / 1000.0,
         s.max_round_trip_ns as f64 / 1000.0,

@@ -266,10 +266,10 @@ pub fn finish(m: Master<CliIo>) -> anyhow::Result<()> {
 pub fn go_real_time() {
     let rt = ferrocat_link::real_time(80, Some(1));
     eprintln!(
-        "real time: memory locked {}, SCHED_FIFO {:?}, CPU {:?}{}",
-        rt.memory_locked,
-        rt.fifo_priority,
-        rt.cpu,
+        "real time: memory {}, {}, {}{}",
+        if rt.memory_locked { "locked" } else { "not locked" },
+        rt.fifo_priority.map_or(String::from("normal scheduling"), |p| format!("SCHED_FIFO priority {p}")),
+        rt.cpu.map_or(String::from("any CPU"), |c| format!("CPU {c}")),
         if rt.refused.is_empty() { String::new() } else { format!(" (refused: {})", rt.refused.join("; ")) }
     );
 }

@@ -178,3 +178,66 @@ fn sdo_types_are_checked_both_ways() {
     let (ok, out, err) = sdo(&["read", "1", "0x1000", "--type", "u32"]);
     assert!(ok && out.trim().parse::<u32>().is_ok(), "{out}{err}");
 }
+
+/// `run --cycle-us` is bounded; the summary says what the cycle was (back to back for
+/// --max-rate) and the period achieved; SIGINT ends a run with the same summary.
+#[test]
+fn run_bounds_its_cycle_and_sums_up_when_interrupted() {
+    let seg = ["--device", "EK1100", "--device", "EL2004"];
+    for bad in ["1", "9", "1000001", "99999999999"] {
+        let (ok, _, err) = ferrocat(&[&["run", "--cycle-us", bad], &seg[..]].concat());
+        assert!(!ok && err.contains("--cycle-us") && err.contains("10..=1000000"), "{bad}: {err}");
+    }
+    let (ok, out, err) = ferrocat(&[&["run", "--seconds", "0.05", "--max-rate"], &seg[..]].concat());
+    assert!(ok && out.contains("cycles back to back (mean period "), "{out}{err}");
+    let (ok, out, err) = ferrocat(&[&["run", "--seconds", "0.05", "--cycle-us", "250"], &seg[..]].concat());
+    assert!(ok && out.starts_with("200 cycles of 250 us (mean period 250.0 us)"), "{out}{err}");
+    // A virtual-time run far longer than the test, stopped by SIGINT once it is cycling (its
+    // handlers are in place before the bring-up it reports).
+    use std::io::{BufRead, Read};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args([&["run", "--seconds", "900000"], &seg[..]].concat())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut err = String::new();
+    while !err.contains("bring-up to OP") {
+        assert!(lines.read_line(&mut err).unwrap() > 0, "{err}");
+    }
+    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    lines.read_to_string(&mut err).unwrap();
+    let o = child.wait_with_output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}{err}");
+    assert!(err.contains("stopped by a signal after") && out.contains("cycles of 1000 us (mean period"), "{out}{err}");
+}
+
+/// Slave positions count from 0 in every command and output: `scan` as text and JSON, `sdo`,
+/// `run`'s SYNC0 line, and the error for a position past the end.
+#[test]
+fn positions_count_from_zero_everywhere() {
+    let seg = ["--device", "EK1100", "--device", "EL2004", "--device", "EL1004", "--device", "SERVO"];
+    let (ok, text, err) = ferrocat(&[&["scan"], &seg[..]].concat());
+    assert!(ok && text.starts_with("4 slaves found"), "{text}{err}");
+    assert!(text.contains("Slave 0: EK1100") && text.contains("Slave 3: SERVO") && !text.contains("Slave 4"), "{text}");
+    assert!(
+        text.contains("\n  0 EK1100 (port 0") && text.contains("\n        3 SERVO (port 1"),
+        "topology from 0: {text}"
+    );
+    let (_, json, _) = ferrocat(&[&["scan", "--json"], &seg[..]].concat());
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!((v[3]["position"].as_u64(), v[3]["name"].as_str()), (Some(3), Some("SERVO")));
+    let (ok, out, _) = ferrocat(&[&["sdo", "read", "3", "0x1008", "--type", "string"], &seg[..]].concat());
+    assert!(ok && out.contains("servo"), "{out}");
+    let (ok, _, err) = ferrocat(&[&["sdo", "read", "4", "0x1008"], &seg[..]].concat());
+    assert!(!ok && err.contains("no slave at position 4 (positions count from 0: 0 to 3)"), "{err}");
+    let (ok, _, err) = ferrocat(&[&["run", "--dc", "--seconds", "0.1"], &seg[..]].concat());
+    assert!(ok && (err.contains("SYNC0 on slave 3;") || err.contains("SYNC0 on slave 3\n")), "{err}");
+    let (ok, text, _) = ferrocat(&["scan", "--device", "ek1100"]);
+    assert!(
+        ok && text.starts_with("1 slave found") && text.contains("Slave 0: EK1100"),
+        "built-in names in any case: {text}"
+    );
+}

@@ -24,7 +24,7 @@ fn scan_names_a_reversed_terminal_and_its_second_latch() {
     let (text, json) = (scan(false), scan(true));
     std::fs::remove_file(&seg).ok();
     // Processing order: coupler, first terminal, the terminal behind the reversed one, it.
-    let slave4 = text.split("Slave:4").nth(1).expect("four slaves");
+    let slave4 = text.split("Slave 3:").nth(1).expect("four slaves, counted from 0");
     assert!(slave4.contains("EL1004") && slave4.contains("Entered on port 1"), "{text}");
     assert!(slave4.contains("latched again"), "{text}");
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();

@@ -6,6 +6,11 @@ use ferrocat_esi::{Device, FmmuKind, PdoDesc, PdoEntryDesc, SmDesc, SmKind};
 pub const NAMES: &[&str] = &["EK1100", "EL1004", "EL2004", "SERVO", "LAN9252-EVB"];
 
 /// The vendor ID a built-in device carries in its SII.
+/// The built-in device's name as `NAMES` spells it, whatever the case of `name`.
+pub fn canonical(name: &str) -> Option<&'static str> {
+    NAMES.iter().copied().find(|n| n.eq_ignore_ascii_case(name))
+}
+
 pub fn vendor_id(name: &str) -> u32 {
     match name {
         // ETG's "no vendor" for our own servo; Microchip's for its evaluation board.

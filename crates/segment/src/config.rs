@@ -383,6 +383,9 @@ impl SegmentConfig {
         let mut nodes = Vec::new();
         let mut names = Vec::new();
         for (i, d) in self.devices.iter().enumerate() {
+            // Built-in names in any case: "ek1100" is the EK1100.
+            let canonical = d.builtin.as_deref().and_then(crate::builtin::canonical);
+            let d = &DeviceToml { builtin: canonical.map(String::from).or_else(|| d.builtin.clone()), ..d.clone() };
             let src = self.source(i, d)?;
             let (mut sii, default_name, esi_dev) = load_device(&src)?;
             if let Some(alias) = d.station_alias {

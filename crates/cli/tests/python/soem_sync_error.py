@@ -69,9 +69,10 @@ try:
     m.state_check(pysoem.SAFEOP_STATE, 500_000)
     m.state = pysoem.OP_STATE
     m.write_state()
-    # To OP and half a second there; a stall of this machine meanwhile is a sync error it
-    # recovers.
-    _, _, result["op_before"] = ecatcheck(10000, 500)
+    # To OP and 200 cycles in a row there (up to 20 s): a stall of this machine meanwhile is a
+    # sync error it recovers, and on two loaded cores Python misses cycles often enough that
+    # 500 in a row did not come within 10 s once.
+    _, _, result["op_before"] = ecatcheck(20000, 200)
     time.sleep(0.010)
     seen, short, back = ecatcheck(3000, 10)
     result["after_stall"] = seen

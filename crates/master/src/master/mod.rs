@@ -146,9 +146,12 @@ impl<I: Io> Master<I> {
     }
 
     pub fn slave(&self, position: u16) -> Result<&Slave> {
-        self.slaves
-            .get(position as usize)
-            .ok_or_else(|| MasterError::Config(format!("no slave at position {position}")))
+        self.slaves.get(position as usize).ok_or_else(|| {
+            MasterError::Config(match self.slaves.len() {
+                0 => format!("no slave at position {position}: the segment has none"),
+                n => format!("no slave at position {position} (positions count from 0: 0 to {})", n - 1),
+            })
+        })
     }
 
     /// Finds the slaves and reads everything about them: count, station addresses, identity
