@@ -84,49 +84,68 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
             r0.move_s
         ),
     }
-    outln!("Error: master − reference clock (reference follows master) or the reference's time at the master's cycle start off");
-    outln!("the cycle grid (master follows reference). SYNC0 Δ: second drive minus first (Paprocki 2022 Table 2).");
     outln!(
-        "{:>6}  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>7} {:>14}",
-        "cycle",
-        "method",
-        "err mean",
-        "err rms",
-        "err max",
-        "Δ mean",
-        "Δ sd",
-        "Δ min",
-        "Δ max",
-        "spread",
-        "late",
-        "repeated",
-        "max FE incr",
-        "enabled",
-        "app µs mean/max"
+        "SYNC0 Δ: second drive minus first (Paprocki 2022 Table 2); spread: the largest of all drives' SYNC0 instants."
     );
-    for r in &rows {
+    // Two measures, one per coupling: a method whose reference follows the master is judged by
+    // the clock error; one whose master follows the reference by its phase on the reference's
+    // cycle, which is no error.
+    for (title, label, phased) in [
+        ("The reference follows the master — err: master clock − reference clock", "err", false),
+        ("The master follows the reference — phase: the reference's time at the master's cycle start, off its cycle grid", "phase", true),
+    ] {
+        let group: Vec<&ferrocat_lab::demo::Row> = rows.iter().filter(|r| r.phase_mean_ns.is_some() == phased).collect();
+        if group.is_empty() || (phased && group.iter().all(|r| r.phase_mean_ns.is_none())) {
+            continue;
+        }
+        outln!("{title}:");
         outln!(
-            "{:>4}µs  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>5}/{} {:>15}",
-            r.cycle_us,
-            r.method,
-            ns(r.error_mean_ns),
-            ns(r.error_rms_ns),
-            ns(r.error_max_ns),
-            opt(r.sync0_mean_ns, 1),
-            opt(r.sync0_sd_ns, 1),
-            opt(r.sync0_min_ns.map(|v| v as f64), 0),
-            opt(r.sync0_max_ns.map(|v| v as f64), 0),
-            r.sync0_spread_max_ns.map_or("—".into(), |v| format!("{v}ns")),
-            opt(r.late_setpoints.map(|v| v as f64), 0),
-            opt(r.repeated_setpoints.map(|v| v as f64), 0),
-            opt(r.max_following_error, 0),
-            r.drives_enabled,
-            r.drives,
-            match (r.processing_mean_us, r.processing_max_us) {
-                (Some(m), Some(x)) => format!("{m:.1}/{x:.1}"),
-                _ => "—".into(),
-            }
+            "{:>6}  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>7} {:>14}",
+            "cycle",
+            "method",
+            format!("{label} mean"),
+            format!("{label} rms"),
+            format!("{label} max"),
+            "Δ mean",
+            "Δ sd",
+            "Δ min",
+            "Δ max",
+            "spread",
+            "late",
+            "repeated",
+            "max FE incr",
+            "enabled",
+            "app µs mean/max"
         );
+        for r in group {
+            let (mean, rms, max) = if phased {
+                (r.phase_mean_ns, r.phase_rms_ns, r.phase_max_ns)
+            } else {
+                (r.error_mean_ns, r.error_rms_ns, r.error_max_ns)
+            };
+            outln!(
+                "{:>4}µs  {:<12} {:>10} {:>10} {:>10}   {:>7} {:>6} {:>6} {:>6} {:>7}   {:>5} {:>8}   {:>12} {:>5}/{} {:>15}",
+                r.cycle_us,
+                r.method,
+                ns(mean),
+                ns(rms),
+                ns(max),
+                opt(r.sync0_mean_ns, 1),
+                opt(r.sync0_sd_ns, 1),
+                opt(r.sync0_min_ns.map(|v| v as f64), 0),
+                opt(r.sync0_max_ns.map(|v| v as f64), 0),
+                r.sync0_spread_max_ns.map_or("—".into(), |v| format!("{v}ns")),
+                opt(r.late_setpoints.map(|v| v as f64), 0),
+                opt(r.repeated_setpoints.map(|v| v as f64), 0),
+                opt(r.max_following_error, 0),
+                r.drives_enabled,
+                r.drives,
+                match (r.processing_mean_us, r.processing_max_us) {
+                    (Some(m), Some(x)) => format!("{m:.1}/{x:.1}"),
+                    _ => "—".into(),
+                }
+            );
+        }
     }
     let calibrated: Vec<String> =
         rows.iter().filter_map(|r| r.calibration_ns.map(|c| format!("{}µs {} {c}ns", r.cycle_us, r.method))).collect();

@@ -158,7 +158,7 @@ enum Command {
         #[arg(long)]
         cycle_us: Vec<u64>,
         /// Clock-sync methods (repeatable; default all: none, conventional, park2020, chen2016,
-        /// pi, ferrocat).
+        /// pi, ferrocat, ferrocat-mfr).
         #[arg(long)]
         method: Vec<String>,
         /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.

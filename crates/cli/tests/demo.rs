@@ -31,6 +31,10 @@ fn the_demo_prints_every_method_as_json_and_writes_its_plots() {
             assert!(!m[key].is_null(), "{key} missing in {m}");
         }
         assert_eq!(m["drives_enabled"], 2, "{m}");
+        // One measure per coupling, never both: a clock error, or a phase on the reference's
+        // cycle where the master follows it.
+        let mfr = ["none", "chen2016", "pi", "ferrocat-mfr"].contains(&m["method"].as_str().unwrap());
+        assert_eq!((m["error_mean_ns"].is_null(), m["phase_mean_ns"].is_null()), (mfr, !mfr), "{m}");
     }
     for f in ["demo.csv", "positions-1000us.svg", "following-error-250us.svg", "clock-error-1000us.svg"] {
         let p = out_dir.join(f);
@@ -39,6 +43,14 @@ fn the_demo_prints_every_method_as_json_and_writes_its_plots() {
     }
     figures::assert_chart_png(&out_dir.join("clock-error-1000us.png"));
     let _ = std::fs::remove_dir_all(&out_dir);
+    // The text has the two measures under their own headings.
+    let text = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["demo", "--cycle-us", "1000"]).output().unwrap();
+    let text = String::from_utf8_lossy(&text.stdout).to_string();
+    let (err_part, rest) = text.split_once("The master follows the reference").expect("two tables");
+    let phase_part = rest.split("Following error").next().unwrap();
+    assert!(err_part.contains("err mean") && err_part.contains("\n1000µs  ferrocat "), "{text}");
+    assert!(phase_part.contains("phase mean") && phase_part.contains("\n1000µs  ferrocat-mfr "), "{text}");
+    assert!(!err_part.contains("ferrocat-mfr") && !phase_part.contains("\n1000µs  ferrocat "), "{text}");
     // Bad input is one clear line, not a panic.
     let bad = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["demo", "--method", "magic"]).output().unwrap();
     assert!(!bad.status.success());

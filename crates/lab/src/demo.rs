@@ -61,12 +61,18 @@ pub struct Row {
     pub method: String,
     pub cycle_us: u64,
     pub host: String,
-    /// Master–reference error (ns) over the move (simulator only): master clock minus reference
-    /// clock where the reference follows the master; where the master follows, the reference's
-    /// time at the master's cycle start off the cycle grid.
+    /// Master clock minus reference clock (ns) over the move, for a method whose reference
+    /// follows the master (simulator only; `None` for the others).
     pub error_mean_ns: Option<f64>,
     pub error_rms_ns: Option<f64>,
     pub error_max_ns: Option<f64>,
+    /// For a method where the master follows the reference: the reference's system time at
+    /// the master's cycle start off the cycle grid (ns, within ± half a cycle; simulator only,
+    /// `None` for the others). A phase, not a clock error: it says where in the reference's
+    /// cycle the master sends.
+    pub phase_mean_ns: Option<f64>,
+    pub phase_rms_ns: Option<f64>,
+    pub phase_max_ns: Option<f64>,
     /// The master − reference error the GPIO calibration found and took out (ns; None: not
     /// calibrated).
     pub calibration_ns: Option<i64>,
@@ -380,9 +386,12 @@ fn run_one<I: Io>(
         method: method.to_string(),
         cycle_us,
         host: if simulated { o.host.name.to_string() } else { "real".to_string() },
-        error_mean_ns: (err.n > 0).then(|| err.mean()),
-        error_rms_ns: (err.n > 0).then(|| err.rms()),
-        error_max_ns: (err.n > 0).then_some(err_max),
+        error_mean_ns: (err.n > 0 && !mfr).then(|| err.mean()),
+        error_rms_ns: (err.n > 0 && !mfr).then(|| err.rms()),
+        error_max_ns: (err.n > 0 && !mfr).then_some(err_max),
+        phase_mean_ns: (err.n > 0 && mfr).then(|| err.mean()),
+        phase_rms_ns: (err.n > 0 && mfr).then(|| err.rms()),
+        phase_max_ns: (err.n > 0 && mfr).then_some(err_max),
         calibration_ns,
         sync0_mean_ns,
         sync0_sd_ns,
