@@ -20,6 +20,8 @@ pub enum CaptureError {
     UnknownFormat(Vec<u8>),
     #[error("malformed capture at frame {frame}")]
     Format { frame: usize, source: PcapError },
+    #[error("malformed capture file header")]
+    Header { source: PcapError },
     #[error("frame {frame} refers to interface {interface}, which the file does not describe")]
     NoInterface { frame: usize, interface: u32 },
     #[error(
@@ -71,7 +73,7 @@ pub fn for_each_packet(
     }
     let fmt = |frame| move |source| CaptureError::Format { frame, source };
     if bytes[..4] == PCAPNG_MAGIC {
-        let mut reader = PcapNgReader::new(bytes).map_err(fmt(0))?;
+        let mut reader = PcapNgReader::new(bytes).map_err(|source| CaptureError::Header { source })?;
         // Link type and clock of the interfaces of the current section, in block order.
         let mut interfaces: Vec<(u32, InterfaceClock)> = Vec::new();
         let mut number = 0;
@@ -108,7 +110,7 @@ pub fn for_each_packet(
     } else {
         let mut reader = PcapReader::new(bytes).map_err(|e| match e {
             PcapError::InvalidField(_) => CaptureError::UnknownFormat(bytes[..4].to_vec()),
-            e => CaptureError::Format { frame: 0, source: e },
+            source => CaptureError::Header { source },
         })?;
         let header = reader.header();
         let link_type = u32::from(header.datalink);

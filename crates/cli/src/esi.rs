@@ -45,6 +45,9 @@ fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
 pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool) -> anyhow::Result<ExitCode> {
     let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
     let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    if file.devices.is_empty() {
+        bail!("{}: the file describes no device (no Descriptions/Devices/Device)", path.display());
+    }
     let chosen = match (device, sii_out) {
         (Some(sel), _) => Some(select(&file, sel)?),
         (None, Some(_)) if file.devices.len() == 1 => Some(&file.devices[0]),

@@ -120,7 +120,11 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
 /// `INDEX[:SUB]` with numbers in hex (0x…, #x…) or decimal.
 fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
     let (i, sub) = s.split_once(':').unwrap_or((s, "0"));
-    let n = |t: &str| ferrocat_esi::parse_number(t).with_context(|| format!("'{t}' in '{s}' is not a number"));
+    let n = |t: &str| {
+        ferrocat_esi::parse_number(t).with_context(|| {
+            format!("object '{s}': '{t}' is not a number (give INDEX or INDEX:SUB, decimal or 0x hex)")
+        })
+    };
     let index = u16::try_from(n(i)?).with_context(|| format!("index '{i}' out of range"))?;
     let sub = u8::try_from(n(sub)?).with_context(|| format!("subindex '{sub}' out of range"))?;
     Ok((index, sub))

@@ -241,3 +241,40 @@ fn positions_count_from_zero_everywhere() {
         "built-in names in any case: {text}"
     );
 }
+
+/// Error messages say each thing once, in the user's terms, with what and where.
+#[test]
+fn error_texts_say_it_once_in_the_users_terms() {
+    let dir = std::env::temp_dir().join(format!("ferrocat-texts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A pcap cut inside its file header: the header named, the reader's reason once.
+    let short = dir.join("short.pcap");
+    std::fs::write(&short, [0xd4, 0xc3, 0xb2, 0xa1, 0x02, 0x00, 0x04, 0x00]).unwrap();
+    let (ok, _, err) = ferrocat(&["pcap", short.to_str().unwrap()]);
+    assert!(!ok && err.contains("malformed capture file header") && !err.contains("frame 0"), "{err}");
+    assert_eq!(err.matches("unexpected end of file").count(), 1, "{err}");
+    // An object that is no number.
+    let (ok, _, err) = ferrocat(&["sdo", "read", "1", "zzz", "--device", "EK1100", "--device", "SERVO"]);
+    assert!(!ok && err.contains("object 'zzz': 'zzz' is not a number (give INDEX or INDEX:SUB"), "{err}");
+    // An ESI file without devices is an error, not an empty listing.
+    let empty = dir.join("empty.xml");
+    std::fs::write(
+        &empty,
+        "<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices/></Descriptions></EtherCATInfo>",
+    )
+    .unwrap();
+    let (ok, _, err) = ferrocat(&["esi", empty.to_str().unwrap()]);
+    assert!(!ok && err.contains("describes no device"), "{err}");
+    // The demo's drive named as --drive names it: a terminal's EEPROM (read out of the built-in
+    // EL2004) is no CiA402 drive.
+    let dump = dir.join("el2004.bin");
+    let (ok, _, err) =
+        ferrocat(&["sii", "read", "1", "--out", dump.to_str().unwrap(), "--device", "EK1100", "--device", "EL2004"]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = ferrocat(&["demo", "--drive", dump.to_str().unwrap(), "--cycle-us", "1000"]);
+    assert!(
+        !ok && err.contains("has no CoE mailbox in its SII, so it is no CiA402 drive") && !err.contains("app = "),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

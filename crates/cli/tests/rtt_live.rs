@@ -34,4 +34,14 @@ fn rtt_measures_a_segment_and_refuses_what_is_not_one() {
     sim.stop();
     assert!(ok, "{out}{err}");
     assert!(out.starts_with("200 frames, 0 unanswered (0 back unprocessed); round trip median "), "{out}");
+    // An interface that is down: the system's reason, once.
+    let st =
+        std::process::Command::new("ip").args(["-n", &net.master_ns, "link", "set", &net.master_if, "down"]).status();
+    assert!(st.unwrap().success());
+    let o = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--iface", &net.master_if, "--seconds", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.matches("Network is down").count() == 1, "{err}");
 }

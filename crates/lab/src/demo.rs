@@ -206,6 +206,15 @@ pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
         o.seed
     ))?;
     let mut drive = SegmentConfig::from_device_args(std::slice::from_ref(&o.drive))?.devices.remove(0);
+    // A device without a CoE mailbox (a terminal's EEPROM, say) cannot be a CiA402 drive: say so
+    // in the terms of --drive, before the segment is built with the drive application.
+    let alone = SegmentConfig { devices: vec![drive.clone()], ..SegmentConfig::default() }.build()?;
+    let node = &alone.nodes[0];
+    if node.esc.app().as_any().is::<ferrocat_esc::DigitalIo>()
+        || node.esc.app().as_any().is::<ferrocat_esc::NoApplication>()
+    {
+        anyhow::bail!("--drive {}: {} has no CoE mailbox in its SII, so it is no CiA402 drive", o.drive, node.name);
+    }
     drive.app = Some("cia402".into());
     cfg.devices.extend(std::iter::repeat_n(drive, o.drives));
     Ok(cfg)

@@ -3,7 +3,7 @@ use ferrocat_wire::register::{AlState, AlStatusCode};
 
 #[derive(Debug, thiserror::Error)]
 pub enum MasterError {
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     #[error("no answer to {what} after {tries} tries (frame lost or the segment answers nothing)")]
     Timeout { what: String, tries: u32 },
