@@ -233,13 +233,38 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
             "increments",
             &per_method(&|p| p.following_error.first().copied().unwrap_or(f64::NAN)),
         )?;
-        line_chart(
-            &dir.join(format!("clock-error-{c}us")),
-            &format!("Master–reference error, {c} µs"),
-            "time (s)",
-            "ns",
-            &per_method(&|p| p.error_ns),
-        )?;
+        // The two measures apart, as in the table: the clock error of the methods whose
+        // reference follows the master; the phase of those whose master follows the reference,
+        // a panel each (their traces lie on one another).
+        let split = |phased: bool| -> Vec<Series> {
+            of_cycle
+                .iter()
+                .filter(|r| {
+                    r.phase_mean_ns.is_some() == phased && (r.phase_mean_ns.is_some() || r.error_mean_ns.is_some())
+                })
+                .map(|r| Series::new(r.method.clone(), r.trace.iter().map(|p| (p.t_s, p.error_ns)).collect()))
+                .collect()
+        };
+        let errors = split(false);
+        if !errors.is_empty() {
+            line_chart(
+                &dir.join(format!("clock-error-{c}us")),
+                &format!("Master clock − reference clock, {c} µs (the reference follows the master)"),
+                "time (s)",
+                "ns",
+                &errors,
+            )?;
+        }
+        let phases = split(true);
+        if !phases.is_empty() {
+            crate::plots::panel_chart(
+                &dir.join(format!("phase-{c}us")),
+                &format!("The reference's time at the master's cycle start, off its grid, {c} µs"),
+                "time (s)",
+                "ns",
+                &phases,
+            )?;
+        }
     }
     Ok(())
 }

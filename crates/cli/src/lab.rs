@@ -31,12 +31,16 @@ pub fn host(name: &str) -> anyhow::Result<ferrocat_master::io::HostModel> {
 
 /// An experiment as planned from its scenario and flags: run, print, and write `out`.
 pub fn run(plan: Plan, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
-    match plan {
+    let code = match plan {
         Plan::Park2020(o) => park2020(o, json, out),
         Plan::Chen2016(o) => chen2016(o, json, out),
         Plan::Paprocki2022(o) => paprocki2022(o, json, out),
         Plan::Robustness(o) => robustness(o, json, out),
+    }?;
+    if let Some(dir) = out {
+        crate::report::announce(dir)?;
     }
+    Ok(code)
 }
 
 fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
@@ -258,7 +262,7 @@ fn chen_outputs(
     setup: &ferrocat_lab::chen2016::Setup,
     rows: &[ferrocat_lab::chen2016::Row],
 ) -> anyhow::Result<()> {
-    use crate::plots::{line_chart, Series};
+    use crate::plots::{panel_chart, Series};
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut md = format!(
         "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm; lost and repeated \
@@ -282,14 +286,15 @@ fn chen_outputs(
                 .map(|r| Series::new(r.method.clone(), r.trace.iter().map(|p| (p.0 as f64, f(p))).collect()))
                 .collect()
         };
-        line_chart(
+        // A panel per method: in one chart their traces overlap and hide one another.
+        panel_chart(
             &dir.join(format!("fig12-jitter-{c}us")),
             &format!("Reference time against the master's grid, {c} µs cycle"),
             "master cycle",
             "µs",
             &series(&|p| p.1),
         )?;
-        line_chart(
+        panel_chart(
             &dir.join(format!("fig12-period-{c}us")),
             &format!("The master's cycle period, {c} µs nominal"),
             "master cycle",
@@ -324,6 +329,26 @@ fn paprocki2022(o: ferrocat_lab::paprocki2022::Options, json: bool, out: Option<
         }
         write_report(dir, "paprocki2022.md", &md)?;
         write_report(dir, "paprocki2022.csv", &crate::report::csv_of(&rows))?;
+        // The distribution of the difference, a panel per method (their spreads differ by an
+        // order of magnitude).
+        for &c in &o.cycles_us {
+            let series: Vec<crate::plots::Series> = rows
+                .iter()
+                .filter(|r| r.cycle_us == c && !r.diffs_ns.0.is_empty())
+                .map(|r| {
+                    let v: Vec<f64> = r.diffs_ns.0.iter().map(|&(_, d)| d).collect();
+                    let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+                    crate::plots::Series::new(r.method.clone(), crate::plots::histogram(&v, lo, hi, 60, 1.0))
+                })
+                .collect();
+            crate::plots::panel_chart(
+                &dir.join(format!("table2-sync0-{c}us")),
+                &format!("Second slave's SYNC0 minus the first's, {c} µs cycle"),
+                "ns",
+                "% of pulses",
+                &series,
+            )?;
+        }
     }
     if json {
         let v =
@@ -390,6 +415,23 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
             md.push_str(&format!("| {} |\n", robustness_cells(r).join(" | ")));
         }
         write_report(dir, "robustness.md", &md)?;
+        // Each disturbance's error around it, a panel per method.
+        let mut scenarios: Vec<&str> = rows.iter().map(|r| r.scenario.as_str()).collect();
+        scenarios.dedup();
+        for sc in scenarios {
+            let series: Vec<crate::plots::Series> = rows
+                .iter()
+                .filter(|r| r.scenario == sc)
+                .map(|r| crate::plots::Series::new(r.method.clone(), r.trace.0.clone()))
+                .collect();
+            crate::plots::panel_chart(
+                &dir.join(format!("robustness-{sc}")),
+                &format!("Master − reference around the disturbance: {sc}"),
+                "ms from the disturbance",
+                "ns",
+                &series,
+            )?;
+        }
     }
     if json {
         let v = serde_json::json!({ "experiment": "robustness", "seed": o.seed, "settle_s": o.settle_s,
@@ -401,33 +443,38 @@ fn robustness(o: ferrocat_lab::robustness::Options, json: bool, out: Option<&Pat
         "Robustness — host {}, seed {}, {} slaves, {} µs; one disturbance after {} s, {} s measured; error = master − reference, ns",
         host.name, o.seed, o.slaves, o.cycle_ns / 1000, o.settle_s, o.after_s
     );
-    // One width per cell: a cell without one would be dropped silently.
-    let widths: [i32; 16] = [-18, -13, 9, 7, 7, 9, 11, 8, 9, 9, 9, 9, 9, 5, 7, 7];
-    let line = |cells: &[String]| -> String {
-        let pad = |(c, w): (&String, &i32)| match *w {
-            w if w < 0 => format!("{c:<0$}", (-w) as usize),
-            w => format!("{c:>0$}", w as usize),
-        };
-        cells.iter().zip(&widths).map(pad).collect::<Vec<_>>().join(" ")
-    };
+    // One token per header, so that the table splits into columns on white space; each column
+    // as wide as its header or the widest value it usually holds.
     let head = [
         "scenario",
         "method",
-        "before",
-        "sd",
-        "band",
-        "peak",
-        "recovery ms",
-        "vs ctrl",
-        "peak ctrl",
-        "relock ms",
-        "outside %",
-        "after",
-        "after RMS",
+        "before_ns",
+        "sd_ns",
+        "band_ns",
+        "peak_ns",
+        "recovery_ms",
+        "vs_ctrl_ms",
+        "peak_vs_ctrl_ns",
+        "relock_ms",
+        "outside_pct",
+        "after_ns",
+        "after_rms_ns",
         "lost",
-        "made up",
+        "made_up",
         "probes",
     ];
+    let min: [usize; 16] = [18, 13, 9, 7, 7, 9, 11, 8, 9, 9, 9, 9, 9, 5, 7, 7];
+    let line = |cells: &[String]| -> String {
+        let pad = |(k, c): (usize, &String)| {
+            let w = min[k].max(head[k].len());
+            if k < 2 {
+                format!("{c:<w$}")
+            } else {
+                format!("{c:>w$}")
+            }
+        };
+        cells.iter().enumerate().map(pad).collect::<Vec<_>>().join(" ")
+    };
     outln!("{}", line(&head.map(String::from)));
     for r in &rows {
         outln!("{}", line(&robustness_cells(r)));
@@ -444,7 +491,11 @@ fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 16] {
         format!("{:.1}", r.before_sd_ns),
         format!("{:.1}", r.band_ns),
         format!("{:.1}", r.peak_ns),
-        r.recovery_ms.map(|v| format!("{v:.0}")).unwrap_or_else(|| "never".into()),
+        match (r.scenario == ferrocat_lab::robustness::CONTROL, r.recovery_ms) {
+            (true, _) => "—".into(),
+            (false, Some(v)) => format!("{v:.0}"),
+            (false, None) => "never".into(),
+        },
         match (r.peak_vs_control_ns, r.recovery_vs_control_ms) {
             (None, _) => "—".into(),
             (Some(_), Some(v)) => format!("{v:.0}"),
@@ -452,6 +503,7 @@ fn robustness_cells(r: &ferrocat_lab::robustness::Row) -> [String; 16] {
         },
         r.peak_vs_control_ns.map(|v| format!("{v:.1}")).unwrap_or_else(|| "—".into()),
         match (r.locked_before, r.relock_ms) {
+            _ if r.scenario == ferrocat_lab::robustness::CONTROL => "—".into(),
             (false, _) => "unlocked".into(),
             (true, Some(v)) => format!("{v:.0}"),
             (true, None) => "never".into(),

@@ -11,7 +11,66 @@ use plotters::prelude::*;
 /// Points of a line.
 pub type Points = Vec<(f64, f64)>;
 
-const COLOURS: [RGBColor; 6] = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
+/// Ten colours told apart at a glance (the category-10 palette), none of them black, the
+/// axes' colour: the first ten series of a chart each get their own.
+pub const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+/// Width of the legend column right of the plot (pixels).
+const LEGEND_W: u32 = 170;
+
+/// A tick label: whole numbers without a decimal point, others with what they need.
+fn tick(v: f64) -> String {
+    if (v - v.round()).abs() <= 1e-9 * v.abs().max(1.0) {
+        format!("{}", v.round() as i64)
+    } else {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+/// The range of the finite points of `series`, padded a little in y.
+fn ranges(series: &[Series]) -> ((f64, f64), (f64, f64)) {
+    let finite = || series.iter().flat_map(|s| s.points.iter()).filter(|(x, y)| x.is_finite() && y.is_finite());
+    let (x0, x1, y0, y1) = finite()
+        .fold((f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY), |(a, b, c, d), &(x, y)| {
+            (a.min(x), b.max(x), c.min(y), d.max(y))
+        });
+    let (x0, x1) = if x0.is_finite() { (x0, x1.max(x0 + 1e-9)) } else { (0.0, 1.0) };
+    let (y0, y1) = if y0.is_finite() { (y0, y1) } else { (0.0, 1.0) };
+    let pad = ((y1 - y0) * 0.05).max(1e-9 + (y1.abs() * 1e-3));
+    ((x0, x1), (y0 - pad, y1 + pad))
+}
+
+fn style_of(k: usize, s: &Series) -> ShapeStyle {
+    let c = PALETTE[k % PALETTE.len()];
+    if s.wide {
+        c.mix(0.5).stroke_width(3)
+    } else {
+        c.stroke_width(1)
+    }
+}
+
+/// The legend in its own column, so that it covers no data.
+fn legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &[Series], top: i32) -> anyhow::Result<()> {
+    for (k, s) in series.iter().enumerate() {
+        let y = top + 18 * k as i32;
+        let style = style_of(k, s);
+        area.draw(&PathElement::new([(4, y), (24, y)], style.stroke_width(style.stroke_width.max(2)))).map_err(err)?;
+        area.draw(&Text::new(s.label.clone(), (30, y - 7), ("sans-serif", 13))).map_err(err)?;
+    }
+    Ok(())
+}
 
 /// A named series of (x, y) points; non-finite points are left out.
 pub struct Series {
@@ -68,34 +127,76 @@ fn draw<DB: DrawingBackend>(
     y_desc: &str,
     series: &[Series],
 ) -> anyhow::Result<()> {
-    let finite = || series.iter().flat_map(|s| s.points.iter()).filter(|(x, y)| x.is_finite() && y.is_finite());
-    let (x0, x1, y0, y1) = finite()
-        .fold((f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY), |(a, b, c, d), &(x, y)| {
-            (a.min(x), b.max(x), c.min(y), d.max(y))
-        });
-    let (x0, x1) = if x0.is_finite() { (x0, x1.max(x0 + 1e-9)) } else { (0.0, 1.0) };
-    let (y0, y1) = if y0.is_finite() { (y0, y1) } else { (0.0, 1.0) };
-    let pad = ((y1 - y0) * 0.05).max(1e-9 + (y1.abs() * 1e-3));
+    let ((x0, x1), (y0, y1)) = ranges(series);
     root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
+    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+    let (plot, key) = root.split_horizontally(SIZE.0 - LEGEND_W);
+    let mut chart = ChartBuilder::on(&plot)
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
+        .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(err)?;
-    chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .draw()
+        .map_err(err)?;
     for (k, s) in series.iter().enumerate() {
-        let c = COLOURS[k % COLOURS.len()];
-        let style = if s.wide { c.mix(0.5).stroke_width(3) } else { c.stroke_width(1) };
         let pts = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite());
-        chart
-            .draw_series(LineSeries::new(pts, style))
-            .map_err(err)?
-            .label(s.label.clone())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], style));
+        chart.draw_series(LineSeries::new(pts, style_of(k, s))).map_err(err)?;
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).draw().map_err(err)?;
+    legend(&key, series, 20)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// One panel per series, stacked, each on its own y range and all on one x range, written to
+/// `stem`.svg and `stem`.png: for traces that would hide one another in a single chart.
+pub fn panel_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: &[Series]) -> anyhow::Result<()> {
+    font_registered()?;
+    let svg = PathBuf::from(format!("{}.svg", stem.display()));
+    draw_panels(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+        .with_context(|| format!("writing {}", svg.display()))?;
+    let png = PathBuf::from(format!("{}.png", stem.display()));
+    draw_panels(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+        .with_context(|| format!("writing {}", png.display()))
+}
+
+fn draw_panels<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    series: &[Series],
+) -> anyhow::Result<()> {
+    let ((x0, x1), _) = ranges(series);
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+    let (plots, key) = root.split_horizontally(SIZE.0 - LEGEND_W);
+    let n = series.len().max(1);
+    for (k, (s, area)) in series.iter().zip(plots.split_evenly((n, 1))).enumerate() {
+        let (_, (y0, y1)) = ranges(std::slice::from_ref(s));
+        let last = k + 1 == n;
+        let mut chart = ChartBuilder::on(&area)
+            .margin(4)
+            .x_label_area_size(if last { 35 } else { 0 })
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(err)?;
+        let mut mesh = chart.configure_mesh();
+        mesh.y_desc(y_desc).y_labels(4).x_label_formatter(&|v| tick(*v)).y_label_formatter(&|v| tick(*v));
+        if last {
+            mesh.x_desc(x_desc);
+        }
+        mesh.draw().map_err(err)?;
+        let pts = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite());
+        chart.draw_series(LineSeries::new(pts, style_of(k, s))).map_err(err)?;
+    }
+    legend(&key, series, 20)?;
     root.present().map_err(err)?;
     Ok(())
 }
@@ -143,6 +244,14 @@ pub fn running_mean_rms(samples: &[f64], points: usize) -> (Points, Points) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ticks_show_whole_numbers_without_a_point() {
+        assert_eq!(tick(10000.0), "10000");
+        assert_eq!(tick(-2.0), "-2");
+        assert_eq!(tick(0.25), "0.25");
+        assert_eq!(tick(0.125), "0.125");
+    }
 
     #[test]
     fn histogram_and_running_figures() {

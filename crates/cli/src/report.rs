@@ -34,3 +34,14 @@ pub fn write(dir: &Path, name: &str, text: &str) -> anyhow::Result<()> {
     let path = dir.join(name);
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
 }
+
+/// Says on stderr which files `dir` holds now, after an experiment wrote them there.
+pub fn announce(dir: &Path) -> anyhow::Result<()> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("listing {}", dir.display()))?
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .collect();
+    names.sort();
+    eprintln!("wrote {} files to {}: {}", names.len(), dir.display(), names.join(", "));
+    Ok(())
+}

@@ -155,13 +155,17 @@ pub fn run(path: &Path, json: bool) -> anyhow::Result<ExitCode> {
     outln!("EEPROM:     {} bytes, SII version {}", h.eeprom_size_bytes(), h.version);
     if let Some(g) = g {
         outln!(
-            "General:    group {:?} order {:?}; CoE details {:#04x} FoE {:#04x} EoE {:#04x}; E-Bus current {} mA; ports {:#06x}",
+            "General:    group {:?} order {:?}; CoE details {:#04x} FoE {:#04x} EoE {:#04x}; E-Bus current {}; ports {:#06x}",
             info.string(g.group_idx).unwrap_or_default(),
             info.string(g.order_idx).unwrap_or_default(),
             g.coe_details,
             g.foe_details,
             g.eoe_details,
-            g.current_on_ebus_ma,
+            match g.current_on_ebus_ma {
+                // A negative figure is what the device feeds into the E-Bus (a coupler's supply).
+                ma if ma < 0 => format!("{ma} mA (it supplies {} mA to the E-Bus)", -(ma as i32)),
+                ma => format!("{ma} mA (it draws from the E-Bus)"),
+            },
             g.physical_ports
         );
     }

@@ -5,9 +5,13 @@ use std::process::Command;
 
 mod figures;
 
+/// Runs the experiment; it must say where it wrote what.
 fn run(args: &[&str]) {
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
-    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{args:?}: {err}");
+    let dir = args.last().unwrap();
+    assert!(err.contains(&format!(" files to {dir}: ")), "{args:?} does not say where it wrote: {err}");
 }
 
 fn has(dir: &Path, file: &str, needle: &str) {
@@ -41,5 +45,31 @@ fn every_experiment_writes_csv_figures_and_a_report() {
     run(&["lab", "paprocki2022", "--out", &d("pap")]);
     has(&dir.join("pap"), "paprocki2022.md", "| 1000 | ferrocat |");
     has(&dir.join("pap"), "paprocki2022.csv", "cycle_us,method");
+    has(&dir.join("pap"), "table2-sync0-1000us.svg", "ferrocat");
+    figures::assert_chart_png(&dir.join("pap").join("table2-sync0-500us.png"));
+    run(&["lab", "robustness", "--out", &d("rob")]);
+    has(&dir.join("rob"), "robustness.md", "| drift-step-50ppm | ferrocat |");
+    for sc in ["control", "loss-1pct", "drift-step-50ppm", "overrun-3-cycles"] {
+        figures::assert_chart_png(&dir.join("rob").join(format!("robustness-{sc}.png")));
+    }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `lab robustness` prints a table that splits into its 16 columns on white space, header and
+/// rows alike, and the control rows (no disturbance) show no recovery or relock time.
+#[test]
+fn the_robustness_table_splits_into_columns() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["lab", "robustness"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split_whitespace().collect()).collect();
+    assert!(rows.len() > 8, "{text}");
+    assert!(rows.iter().all(|r| r.len() == 16), "{text}");
+    let col = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name}: {text}"));
+    let (recovery, relock) = (col("recovery_ms"), col("relock_ms"));
+    for r in rows.iter().skip(1) {
+        let control = r[0] == "control";
+        assert_eq!(control, r[recovery] == "—", "{r:?}");
+        assert!(!control || r[relock] == "—", "{r:?}");
+    }
 }

@@ -278,3 +278,14 @@ fn error_texts_say_it_once_in_the_users_terms() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A coupler's negative E-Bus current is explained: it is what the coupler supplies.
+#[test]
+fn the_ebus_current_says_which_way_it_flows() {
+    let img = std::env::temp_dir().join(format!("ferrocat-ek1100-{}.bin", std::process::id()));
+    let (ok, _, err) = ferrocat(&["sii", "read", "0", "--out", img.to_str().unwrap(), "--device", "EK1100"]);
+    assert!(ok, "{err}");
+    let (ok, out, err) = ferrocat(&["sii", img.to_str().unwrap()]);
+    std::fs::remove_file(&img).ok();
+    assert!(ok && out.contains("E-Bus current -2000 mA (it supplies 2000 mA to the E-Bus)"), "{out}{err}");
+}

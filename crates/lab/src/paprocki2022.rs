@@ -48,6 +48,9 @@ pub struct Row {
     pub min_ns: i64,
     pub sd_ns: f64,
     pub samples: usize,
+    /// Every difference (ns), for the figures, not the tables.
+    #[serde(skip)]
+    pub diffs_ns: crate::stats::Trace,
 }
 
 /// Table 2 as published: cycle µs, mean, max, min, standard deviation (ns; the paper's headings
@@ -110,6 +113,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         min_ns: min.unwrap_or(0),
         sd_ns: sd.unwrap_or(f64::NAN),
         samples: sync0.diffs.n as usize,
+        diffs_ns: crate::stats::Trace(sync0.values.iter().enumerate().map(|(k, &d)| (k as f64, d as f64)).collect()),
     })
 }
 

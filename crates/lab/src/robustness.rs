@@ -86,7 +86,8 @@ pub struct Row {
     pub peak_ns: f64,
     /// From the disturbance until the error stayed inside the band for good (None: it did not
     /// return within the run). Under lasting loss the band is left now and then at random:
-    /// `outside_pct` says how often.
+    /// `outside_pct` says how often. For the control, which has no disturbance, the same
+    /// instant counts from the time the others' disturbance comes: the band's last departure.
     pub recovery_ms: Option<f64>,
     /// From the disturbance until the segment was locked for good as the lock time counts it:
     /// every DC slave within 100 ns of the reference, the master within 1 µs (None: not
@@ -117,6 +118,10 @@ pub struct Row {
     /// run, or no control), and the largest distance from it.
     pub recovery_vs_control_ms: Option<f64>,
     pub peak_vs_control_ns: Option<f64>,
+    /// The error (ns) against the time from the disturbance (ms, negative before it), from the
+    /// band window on, at most 2 000 points: for the figures, not the tables.
+    #[serde(skip)]
+    pub trace: crate::stats::Trace,
 }
 
 /// A run's row and its errors from the start of the band window on.
@@ -281,6 +286,17 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         calibration_ns,
         recovery_vs_control_ms: None,
         peak_vs_control_ns: None,
+        trace: {
+            let (every, cycle_ms) = ((errors.len() / 2000).max(1), o.cycle_ns as f64 / 1e6);
+            crate::stats::Trace(
+                errors
+                    .iter()
+                    .enumerate()
+                    .step_by(every)
+                    .map(|(i, &e)| ((i as f64 - window as f64) * cycle_ms, e))
+                    .collect(),
+            )
+        },
     };
     Ok(Run { row, errors, window: window as usize, cycle_ns: o.cycle_ns })
 }
@@ -356,6 +372,7 @@ mod tests {
             calibration_ns: None,
             recovery_vs_control_ms: None,
             peak_vs_control_ns: None,
+            trace: crate::stats::Trace::default(),
         };
         Run { row, errors, window, cycle_ns: 1_000_000 }
     }

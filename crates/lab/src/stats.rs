@@ -63,11 +63,23 @@ mod tests {
     }
 }
 
+/// Points of a figure: (x, y). Debug output gives their number, not every point.
+#[derive(Clone, Default, PartialEq)]
+pub struct Trace(pub Vec<(f64, f64)>);
+
+impl std::fmt::Debug for Trace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "[{} points]", self.0.len())
+    }
+}
+
 /// SYNC0 simultaneity from the slaves' pulse logs (Paprocki 2022, Table 2): the second slave
 /// minus the first for the same system time, and the spread of all.
 #[derive(Debug, Default)]
 pub struct Sync0Stats {
     pub diffs: Moments,
+    /// Every difference (ns), in order.
+    pub values: Vec<i64>,
     min: i64,
     max: i64,
     spread_max: u64,
@@ -96,6 +108,7 @@ impl Sync0Stats {
                 (self.min, self.max) = (d, d);
             }
             self.diffs.push(d as f64);
+            self.values.push(d);
             self.min = self.min.min(d);
             self.max = self.max.max(d);
         }
