@@ -245,6 +245,31 @@ pub fn running_mean_rms(samples: &[f64], points: usize) -> (Points, Points) {
 mod tests {
     use super::*;
 
+    /// Seven methods (the demo's) are seven colours, none of them black, and the legend sits
+    /// right of the plot, where no data is.
+    #[test]
+    fn every_series_has_its_own_colour_and_the_legend_covers_no_data() {
+        font_registered().unwrap();
+        let series: Vec<Series> = (0..7)
+            .map(|k| Series::new(format!("m{k}"), (0..100).map(|x| (x as f64, k as f64)).collect()))
+            .collect();
+        let (w, h) = SIZE;
+        let mut buf = vec![0u8; (w * h * 3) as usize];
+        draw(BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(), "t", "x", "y", &series).unwrap();
+        let count = |c: RGBColor, xs: std::ops::Range<u32>| {
+            (0..h)
+                .flat_map(|y| xs.clone().map(move |x| ((y * w + x) * 3) as usize))
+                .filter(|&i| buf[i] == c.0 && buf[i + 1] == c.1 && buf[i + 2] == c.2)
+                .count()
+        };
+        let plot = 0..w - LEGEND_W;
+        for (k, c) in PALETTE.iter().take(7).enumerate() {
+            assert!(count(*c, plot.clone()) > 200, "series {k} not drawn in its colour");
+            assert!(count(*c, w - LEGEND_W..w) > 0, "series {k} not in the legend");
+        }
+        assert!(PALETTE.iter().all(|c| c.0 as u32 + c.1 as u32 + c.2 as u32 > 150), "a colour too near black");
+    }
+
     #[test]
     fn ticks_show_whole_numbers_without_a_point() {
         assert_eq!(tick(10000.0), "10000");
