@@ -250,9 +250,8 @@ mod tests {
     #[test]
     fn every_series_has_its_own_colour_and_the_legend_covers_no_data() {
         font_registered().unwrap();
-        let series: Vec<Series> = (0..7)
-            .map(|k| Series::new(format!("m{k}"), (0..100).map(|x| (x as f64, k as f64)).collect()))
-            .collect();
+        let series: Vec<Series> =
+            (0..7).map(|k| Series::new(format!("m{k}"), (0..100).map(|x| (x as f64, k as f64)).collect())).collect();
         let (w, h) = SIZE;
         let mut buf = vec![0u8; (w * h * 3) as usize];
         draw(BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(), "t", "x", "y", &series).unwrap();

@@ -422,7 +422,7 @@ fn ping_through_taps(
     let mut bridge = ferrocat_in(&net.master_ns)
         .args(args)
         .args(["--iface", &net.master_if])
-        .stdout(Stdio::null())
+        .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
@@ -510,14 +510,20 @@ fn linux_pings_two_drives_during_a_cyclic_run() {
         assert!(p.status.success() && said.contains("3 received"), "{said}{told}");
     }
     assert!(out.status.success() && told.matches("EoE bridge of slave").count() == 2, "{told}");
-    // Every cycle's working counter whole but for a stall of this shared machine now and then
-    // (once in a run while a release build shared the two cores: a 27 ms wake-up); EoE's own
-    // steps between cycles cost none.
-    let errors: Vec<u64> = told
-        .lines()
-        .filter_map(|l| l.split(" wkc ").nth(1)?.split('(').nth(1)?.split(' ').next()?.parse().ok())
-        .collect();
-    assert!(!errors.is_empty() && errors.iter().all(|&e| e <= 2), "{told}");
+    // EoE's own steps between cycles cost no working counter: every short cycle is a frame
+    // that did not come back in time, which a loaded machine's stalls give (5–10 of 8 000 with
+    // both cores busy with another job), never a frame back short.
+    let summary = String::from_utf8_lossy(&out.stdout).to_string();
+    let field = |suffix: &str| -> u64 {
+        summary
+            .split(';')
+            .find_map(|p| p.trim().strip_suffix(suffix).or_else(|| p.trim().strip_prefix(suffix)))
+            .and_then(|n| n.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{suffix:?} in {summary}"))
+    };
+    let (errors, lost) = (field(" working-counter errors"), field("frames lost "));
+    println!("{summary}");
+    assert!(errors <= lost + 2 && lost < 400, "{errors} short cycles, {lost} frames lost: {summary}{told}");
 }
 
 /// EoE from one Linux stack to another through the simulated segment: `ferrocat sim
