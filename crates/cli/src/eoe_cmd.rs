@@ -15,6 +15,7 @@ use crate::target::{finish, Target};
 pub enum EoeCmd {
     /// Set the IP parameters of the slave at POSITION (those given; it keeps the others).
     SetIp {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         #[command(flatten)]
         params: ParamArgs,
@@ -23,6 +24,7 @@ pub enum EoeCmd {
     },
     /// Print the IP parameters the slave at POSITION reports.
     GetIp {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         #[arg(long)]
         json: bool,
@@ -31,6 +33,7 @@ pub enum EoeCmd {
     },
     /// Ping the slave at POSITION over EoE (ICMP echo), after setting the parameters given.
     Ping {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         #[command(flatten)]
         params: ParamArgs,
@@ -56,6 +59,7 @@ pub enum EoeCmd {
     /// what the host sends out of it goes to the slave by EoE, and back. Runs until SIGINT or
     /// SIGTERM, or for --seconds; the segment stays in PREOP.
     Bridge {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         /// The TAP interface to create (give it an address and bring it up with `ip`).
         #[arg(long)]

@@ -106,17 +106,18 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
         );
         for s in &d.sync_managers {
             outln!(
-                "  SM  {:?} start {:#06x} size {:?} control {:#04x} enable {}",
+                "  SM  {:?} start {:#06x} size {} control {:#04x} enable {}",
                 s.kind,
                 s.start,
-                s.default_size,
+                s.default_size.map_or("from the PDOs".into(), |b| format!("{b} bytes")),
                 s.control,
                 s.enable
             );
         }
         for (kind, pdos) in [("RxPDO", &d.rx_pdos), ("TxPDO", &d.tx_pdos)] {
             for p in pdos {
-                outln!("  {kind} {:#06x} {:?} SM {:?} ({} bits)", p.index, p.name, p.sm, p.bit_len());
+                let sm = p.sm.map_or("unassigned (the master may assign it)".into(), |n| format!("SM{n}"));
+                outln!("  {kind} {:#06x} {:?} {sm} ({} bits)", p.index, p.name, p.bit_len());
                 for e in &p.entries {
                     outln!(
                         "        {:#06x}:{:02x} {:2} bits {} {:?}",

@@ -333,8 +333,9 @@ impl LabArgs {
 
 #[derive(Subcommand)]
 enum SdoCmd {
-    /// Read INDEX or INDEX:SUB of the slave at POSITION (0-based).
+    /// Read INDEX or INDEX:SUB of the slave at POSITION.
     Read {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         object: String,
         /// Complete access (the whole object).
@@ -348,6 +349,7 @@ enum SdoCmd {
     },
     /// Write VALUE to INDEX or INDEX:SUB.
     Write {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         object: String,
         #[arg(allow_negative_numbers = true)]
@@ -362,6 +364,7 @@ enum SdoCmd {
     },
     /// List the object dictionary (SDO information).
     List {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         #[command(flatten)]
         target: target::Target,
@@ -372,6 +375,7 @@ enum SdoCmd {
 enum FoeCmd {
     /// Read file NAME of the slave at POSITION into FILE.
     Read {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         name: String,
         file: PathBuf,
@@ -389,6 +393,7 @@ enum FoeCmd {
     },
     /// Write FILE to the slave at POSITION as file NAME.
     Write {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         name: String,
         file: PathBuf,
@@ -406,6 +411,7 @@ enum FoeCmd {
 enum EepromCmd {
     /// Read the SII of the slave at POSITION (hex dump, or --out FILE).
     Read {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         #[arg(long)]
         out: Option<PathBuf>,
@@ -414,6 +420,7 @@ enum EepromCmd {
     },
     /// Program the SII of the slave at POSITION from an image file.
     Write {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         file: PathBuf,
         #[command(flatten)]
@@ -422,6 +429,7 @@ enum EepromCmd {
     /// Write a configured station alias (decimal or 0x…) into the EEPROM of the slave at
     /// POSITION, with the header checksum; the ESC takes it at its next power-on.
     Alias {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
         alias: String,
         #[command(flatten)]

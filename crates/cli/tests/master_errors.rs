@@ -289,3 +289,22 @@ fn the_ebus_current_says_which_way_it_flows() {
     std::fs::remove_file(&img).ok();
     assert!(ok && out.contains("E-Bus current -2000 mA (it supplies 2000 mA to the E-Bus)"), "{out}{err}");
 }
+
+/// What the commands print is in the user's words: no `Some(…)` or `None` of Rust's.
+#[test]
+fn needs_shared_no_rust_internals_in_the_output() {
+    let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
+    let esi = esi.to_str().unwrap();
+    let seg = ["--device", "EK1100", "--device", "EL2004", "--device", "SERVO"];
+    for args in [
+        vec!["esi", esi, "--device", "0"],
+        [&["scan"][..], &seg[..]].concat(),
+        [&["run", "--dc", "--seconds", "0.1"][..], &seg[..]].concat(),
+        vec!["sii", ferrocat_testdata::shared("captures/eeprom/ek1100.hex").to_str().unwrap()],
+    ] {
+        let (ok, out, err) = ferrocat(&args);
+        assert!(ok, "{args:?}: {err}");
+        let all = format!("{out}{err}");
+        assert!(!all.contains("Some(") && !all.contains("None"), "{args:?}: {all}");
+    }
+}

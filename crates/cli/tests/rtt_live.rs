@@ -44,4 +44,6 @@ fn rtt_measures_a_segment_and_refuses_what_is_not_one() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.matches("Network is down").count() == 1, "{err}");
+    // The real-time set-up in words, not Rust's.
+    assert!(err.contains("real time: memory ") && !err.contains("Some(") && !err.contains("None"), "{err}");
 }
