@@ -26,6 +26,7 @@ pub enum EoeCmd {
     GetIp {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
         #[command(flatten)]
@@ -66,6 +67,7 @@ pub enum EoeCmd {
         tap: String,
         #[command(flatten)]
         params: ParamArgs,
+        /// How long to bridge (s; default: until SIGINT or SIGTERM).
         #[arg(long)]
         seconds: Option<f64>,
         #[command(flatten)]
@@ -82,10 +84,13 @@ pub struct ParamArgs {
     /// address, locally administered and one per slave).
     #[arg(long)]
     mac: Option<String>,
+    /// The subnet mask to set.
     #[arg(long)]
     netmask: Option<Ipv4Addr>,
+    /// The default gateway to set.
     #[arg(long)]
     gateway: Option<Ipv4Addr>,
+    /// The DNS server to set.
     #[arg(long)]
     dns: Option<Ipv4Addr>,
     /// Its DNS name (32 bytes at most).

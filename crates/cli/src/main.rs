@@ -28,6 +28,7 @@ struct Cli {
 enum Command {
     /// List every EtherCAT datagram of a pcap or pcapng file, one line per datagram.
     Pcap {
+        /// The pcap or pcapng file.
         file: PathBuf,
         /// One JSON object per line instead of text.
         #[arg(long)]
@@ -39,12 +40,15 @@ enum Command {
     Sii {
         #[command(subcommand)]
         action: Option<EepromCmd>,
+        /// The SII image to decode (raw binary, Intel HEX or hex text).
         file: Option<PathBuf>,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
     /// List the devices of an ESI file, show one, or write its SII image.
     Esi {
+        /// The ESI XML file.
         file: PathBuf,
         /// Device to show or build: its position in the listing (0-based) or `#xPRODUCT[:#xREVISION]`.
         #[arg(long)]
@@ -52,6 +56,7 @@ enum Command {
         /// Write the device's SII EEPROM image to this file.
         #[arg(long, value_name = "OUT")]
         sii: Option<PathBuf>,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -92,6 +97,7 @@ enum Command {
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
         #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
         bench: bool,
+        /// Print JSON instead of text.
         #[arg(long, requires = "bench")]
         json: bool,
     },
@@ -99,6 +105,7 @@ enum Command {
     Scan {
         #[command(flatten)]
         target: target::Target,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -164,8 +171,10 @@ enum Command {
         /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
         #[arg(long, default_value = "pc-rt")]
         host: String,
+        /// Seed of the simulation's random draws (crystals, latencies): the same seed gives the same numbers on any machine (default 1).
         #[arg(long)]
         seed: Option<u64>,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
         /// Folder for the CSV and the plots (SVG and PNG).
@@ -192,6 +201,7 @@ enum Command {
     /// of the frames a slave answered. Stops with an error when 20 frames in a row get no
     /// answer (each waits at most 50 ms).
     Rtt {
+        /// The network interface to send on (raw socket; needs CAP_NET_RAW).
         #[arg(long)]
         iface: String,
         /// Frames to send (at least 1).
@@ -226,8 +236,10 @@ enum LabCmd {
         /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr and their variants -direct, -dense (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
         #[arg(long, default_values = ["conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"])]
         method: Vec<String>,
+        /// Slaves on the simulated line (EK1100s; the first is the reference clock).
         #[arg(long, default_value_t = 2)]
         slaves: usize,
+        /// The cycle time (µs).
         #[arg(long, default_value_t = 1000)]
         cycle_us: u64,
         /// Seconds of cyclic operation before measuring.
@@ -236,13 +248,16 @@ enum LabCmd {
         /// Seconds measured per method.
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
+        /// Seed of the simulator's random draws (crystals, latencies): the same seed gives the same segment.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
     /// Run the experiment a scenario file names (docs/clock-sync.md, scenarios/).
     Run {
+        /// The scenario file (TOML; scenarios/ holds the papers' set-ups).
         scenario: PathBuf,
         #[command(flatten)]
         args: LabArgs,
@@ -259,6 +274,7 @@ struct LabArgs {
     /// chen2016 10 s per run.
     #[arg(long)]
     quick: bool,
+    /// Seed of the simulation's random draws (crystals, latencies, faults): the same seed gives the same numbers on any machine (default: the scenario's, else 1).
     #[arg(long)]
     seed: Option<u64>,
     /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
@@ -284,6 +300,7 @@ struct LabArgs {
     /// park2020, robustness: ferrocat without its GPIO calibration of the stamps' asymmetry.
     #[arg(long)]
     no_gpio_calibration: bool,
+    /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
     /// Folder for the CSV, the figures (SVG and PNG) and a Markdown report.
@@ -337,6 +354,7 @@ enum SdoCmd {
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The object: INDEX or INDEX:SUB, decimal or 0x hex (e.g. 0x6041, 0x1018:1).
         object: String,
         /// Complete access (the whole object).
         #[arg(long)]
@@ -351,9 +369,12 @@ enum SdoCmd {
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The object: INDEX or INDEX:SUB, decimal or 0x hex (e.g. 0x6060:0).
         object: String,
+        /// The value to write, as --type reads it (numbers decimal or 0x hex).
         #[arg(allow_negative_numbers = true)]
         value: String,
+        /// Complete access: the whole object, every subindex, in one transfer.
         #[arg(long)]
         complete: bool,
         /// How to encode VALUE (numbers decimal or 0x hex, range-checked for the type).
@@ -377,7 +398,9 @@ enum FoeCmd {
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The file's name on the slave.
         name: String,
+        /// Where to write what the slave sends.
         file: PathBuf,
         /// The password the slave asks for (a number: decimal or 0x…).
         #[arg(long, default_value = "0")]
@@ -395,8 +418,11 @@ enum FoeCmd {
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The name the file gets on the slave.
         name: String,
+        /// The file to send.
         file: PathBuf,
+        /// The password the slave asks for (a number: decimal or 0x…).
         #[arg(long, default_value = "0")]
         password: String,
         /// In BOOT, through the SII's bootstrap mailbox (firmware), then back to INIT.
@@ -413,6 +439,7 @@ enum EepromCmd {
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// Write the image to this file (raw binary) instead of printing a hex dump.
         #[arg(long)]
         out: Option<PathBuf>,
         #[command(flatten)]
@@ -422,6 +449,7 @@ enum EepromCmd {
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The image to program (raw binary, Intel HEX or hex text).
         file: PathBuf,
         #[command(flatten)]
         target: target::Target,
@@ -431,6 +459,7 @@ enum EepromCmd {
     Alias {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
         position: u16,
+        /// The station alias to configure (0 to 65535, decimal or 0x…).
         alias: String,
         #[command(flatten)]
         target: target::Target,
@@ -557,4 +586,32 @@ pub(crate) fn out(line: std::fmt::Arguments<'_>) {
 #[macro_export]
 macro_rules! outln {
     ($($t:tt)*) => { $crate::out(format_args!($($t)*)) };
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every option and argument of every subcommand says what it means (the man pages are
+    /// made from these), as linuxptp's pages do for every setting.
+    #[test]
+    fn every_argument_has_its_meaning() {
+        fn walk(cmd: &clap::Command, path: String, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let id = a.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                if a.get_help().is_none() && a.get_long_help().is_none() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for s in cmd.get_subcommands() {
+                walk(s, format!("{path} {}", s.get_name()), missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&super::Cli::command(), "ferrocat".into(), &mut missing);
+        assert!(missing.is_empty(), "{} without help:\n{}", missing.len(), missing.join("\n"));
+    }
 }
