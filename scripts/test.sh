@@ -65,6 +65,8 @@ log "cargo fmt --check"
 cargo fmt --all -- --check
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
+log "cargo package (every crate packs: licences, metadata, versions of the path dependencies)"
+cargo package --workspace --no-verify --quiet
 
 # --- fuzzing -------------------------------------------------------------------------------
 if [ "$FUZZ_SECONDS" != 0 ]; then

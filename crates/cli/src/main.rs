@@ -9,6 +9,7 @@ mod eoe_cmd;
 mod esi;
 mod lab;
 mod lab_live;
+mod manpages;
 mod master_cmd;
 mod pcap;
 mod plots;
@@ -196,6 +197,17 @@ enum Command {
     Lab {
         #[command(subcommand)]
         experiment: LabCmd,
+    },
+    /// Print a shell completion script for ferrocat (bash, zsh, fish, elvish or powershell).
+    Completions {
+        /// The shell the script is for.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Write the manual pages, ferrocat(1) and one per subcommand (roff), into a folder.
+    Manpages {
+        /// The folder to write them into (made if missing).
+        dir: PathBuf,
     },
     /// Send a segment's cyclic frame (LRW + FRMW) over an interface and print round-trip times
     /// of the frames a slave answered. Stops with an error when 20 frames in a row get no
@@ -526,6 +538,12 @@ fn main() -> ExitCode {
             }
         }
         Command::Rtt { iface, frames, slaves, force } => sim::rtt(&iface, frames, slaves, force),
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            clap_complete::generate(shell, &mut Cli::command(), "ferrocat", &mut std::io::stdout());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Manpages { dir } => manpages::write_all(&dir),
         Command::Scan { target, json } => master_cmd::scan(&target, json),
         Command::Sdo { action } => match action {
             SdoCmd::Read { position, object, complete, ty, target } => {
