@@ -29,6 +29,11 @@ if ! command -v ip >/dev/null; then
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iproute2 >/dev/null
 fi
+if ! command -v setcap >/dev/null || ! command -v setpriv >/dev/null; then
+  log "installing libcap2-bin and util-linux (setcap, setpriv: the unprivileged-run tests)"
+  as_root apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends libcap2-bin util-linux >/dev/null
+fi
 if ! command -v ping >/dev/null; then
   log "installing iputils-ping (Linux's own ping through an EoE bridge)"
   as_root apt-get update -qq
@@ -67,6 +72,28 @@ log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 log "cargo package (every crate packs: licences, metadata, versions of the path dependencies)"
 cargo package --workspace --no-verify --quiet
+
+# The Debian package: built by its script (cargo install --locked inside), then inspected.
+log "Debian package (scripts/package-deb.sh), and what it holds"
+deb=$(scripts/package-deb.sh target/debian)
+debroot=$(mktemp -d)
+dpkg-deb -x "$deb" "$debroot"
+dpkg-deb -e "$deb" "$debroot/DEBIAN"
+for f in usr/bin/ferrocat usr/share/man/man1/ferrocat.1.gz usr/share/man/man1/ferrocat-run.1.gz \
+  usr/share/man/man1/ferrocat-sdo-read.1.gz usr/share/bash-completion/completions/ferrocat \
+  usr/share/zsh/vendor-completions/_ferrocat usr/share/fish/vendor_completions.d/ferrocat.fish \
+  usr/share/doc/ferrocat/copyright usr/share/doc/ferrocat/examples/ferrocat-run@.service \
+  usr/share/doc/ferrocat/examples/ferrocat-sim@.service; do
+  [ -s "$debroot/$f" ] || { echo "the package lacks $f"; exit 1; }
+done
+"$debroot/usr/bin/ferrocat" --version | grep -q "^ferrocat " || { echo "the packaged binary does not run"; exit 1; }
+zcat "$debroot/usr/share/man/man1/ferrocat-run.1.gz" | grep -qF 'cycle\-us' || { echo "ferrocat-run(1) lacks --cycle-us"; exit 1; }
+grep -q "Depends: .*libcap2-bin" "$debroot/DEBIAN/control" || { echo "control lacks libcap2-bin"; exit 1; }
+grep -q "setcap cap_net_raw,cap_sys_nice,cap_ipc_lock+ep /usr/bin/ferrocat" "$debroot/DEBIAN/postinst" \
+  || { echo "postinst grants no capabilities"; exit 1; }
+bash -n "$debroot/usr/share/bash-completion/completions/ferrocat"
+echo "$(basename "$deb"): $(dpkg-deb -c "$deb" | wc -l) entries, $(du -h "$deb" | cut -f1); postinst: setcap cap_net_raw,cap_sys_nice,cap_ipc_lock+ep"
+rm -rf "$debroot"
 
 # --- fuzzing -------------------------------------------------------------------------------
 if [ "$FUZZ_SECONDS" != 0 ]; then

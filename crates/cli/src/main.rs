@@ -129,8 +129,8 @@ enum Command {
     Run {
         #[command(flatten)]
         target: target::Target,
-        /// How long to exchange process data (s); SIGINT or SIGTERM end it sooner, with the
-        /// same summary.
+        /// How long to exchange process data (s; 0: until SIGINT or SIGTERM, as a service
+        /// runs it); SIGINT or SIGTERM end it sooner, with the same summary.
         #[arg(long, default_value_t = 5.0)]
         seconds: f64,
         /// The cycle time (µs, 10 to 1 000 000).

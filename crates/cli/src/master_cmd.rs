@@ -384,8 +384,8 @@ pub fn run(
     eoe_taps: &[String],
 ) -> anyhow::Result<ExitCode> {
     let dc = dc_static_frames.is_some();
-    if !(seconds > 0.0 && seconds < 1e6) {
-        bail!("--seconds {seconds}: give a time above 0 and below 1 000 000 s");
+    if !(0.0..1e6).contains(&seconds) {
+        bail!("--seconds {seconds}: give 0 (until SIGINT or SIGTERM) or a time below 1 000 000 s");
     }
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -457,7 +457,7 @@ pub fn run(
     let cpu0 = cpu_ns();
     use ferrocat_master::io::Io;
     let start = m.engine.io.now_ns();
-    let end = start + (seconds * 1e9) as u64;
+    let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
     let mut report = start + 1_000_000_000;
     let mut shown = m.events.len();

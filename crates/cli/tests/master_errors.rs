@@ -192,11 +192,11 @@ fn run_bounds_its_cycle_and_sums_up_when_interrupted() {
     assert!(ok && out.contains("cycles back to back (mean period "), "{out}{err}");
     let (ok, out, err) = ferrocat(&[&["run", "--seconds", "0.05", "--cycle-us", "250"], &seg[..]].concat());
     assert!(ok && out.starts_with("200 cycles of 250 us (mean period 250.0 us)"), "{out}{err}");
-    // A virtual-time run far longer than the test, stopped by SIGINT once it is cycling (its
-    // handlers are in place before the bring-up it reports).
+    // A run without end (--seconds 0, as a service runs it), stopped by SIGINT once it is
+    // cycling (its handlers are in place before the bring-up it reports).
     use std::io::{BufRead, Read};
     let mut child = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-        .args([&["run", "--seconds", "900000"], &seg[..]].concat())
+        .args([&["run", "--seconds", "0"], &seg[..]].concat())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
