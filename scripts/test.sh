@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark, iproute2 and iputils-ping from Debian, pysoem and kickcat from PyPI into .venv, cargo-nextest and cargo-fuzz from
-# crates.io), then runs unit, property and
-# integration tests with nextest, and every fuzz target for a bounded time (before the tests,
-# so that the run ends on the test summary).
+# (tshark, iproute2, iputils-ping and libcap2-bin from Debian, pysoem and kickcat from PyPI into
+# .venv, cargo-nextest and cargo-fuzz from crates.io), then checks formatting, clippy, the API
+# docs, `cargo package` and the Debian package, runs every fuzz target for a bounded time, and
+# last the unit, property and integration tests with nextest (so that the run ends on the test
+# summary). The live tests (cli/tests/*_live.rs) need root; without it they are skipped.
 #
 #   scripts/test.sh                 everything
 #   FUZZ_SECONDS=0 scripts/test.sh  skip fuzzing
@@ -56,18 +57,34 @@ fi
 
 # --- shared data ---------------------------------------------------------------------------
 shared="${FERROCAT_SHARED:-$(pwd)/../shared}"
-filter=()
+skip=()
 if [ -d "$shared/captures" ]; then
   export FERROCAT_SHARED="$(cd "$shared" && pwd)"
   echo "shared test data: $FERROCAT_SHARED"
 else
   echo "SKIPPED: tests named needs_shared_* — shared test data not found at $shared (set FERROCAT_SHARED)"
-  filter=(-E 'not test(needs_shared)')
+  skip+=('test(needs_shared)')
+fi
+# The live tests (cli/tests/*_live.rs) make network namespaces, veth pairs and raw sockets.
+if [ "$(id -u)" != 0 ]; then
+  echo "SKIPPED: the live tests (cli/tests/*_live.rs) — they make network namespaces and raw sockets, which needs root"
+  skip+=('binary(~_live)')
+fi
+filter=()
+if [ ${#skip[@]} -gt 0 ]; then
+  joined=$(printf ' or %s' "${skip[@]}")
+  filter=(-E "not (${joined# or })")
 fi
 
 # --- checks and tests ----------------------------------------------------------------------
 log "cargo fmt --check"
 cargo fmt --all -- --check
+if cargo clippy --version >/dev/null 2>&1; then
+  log "cargo clippy (warnings are errors)"
+  cargo clippy --workspace --all-targets --quiet -- -D warnings
+else
+  echo "SKIPPED: cargo clippy — this toolchain has no clippy component"
+fi
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 log "cargo package (every crate packs: licences, metadata, versions of the path dependencies)"
