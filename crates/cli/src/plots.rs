@@ -106,6 +106,17 @@ fn font_registered() -> anyhow::Result<()> {
 /// One chart with every series, a legend, and axes fitted to the data, written to
 /// `stem`.svg and `stem`.png.
 pub fn line_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: &[Series]) -> anyhow::Result<()> {
+    write_both(stem, title, x_desc, y_desc, series, false)
+}
+
+/// One panel per series, stacked, each on its own y range and all on one x range, written to
+/// `stem`.svg and `stem`.png: for traces that would hide one another in a single chart.
+pub fn panel_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: &[Series]) -> anyhow::Result<()> {
+    write_both(stem, title, x_desc, y_desc, series, true)
+}
+
+/// The chart drawn twice, SVG and PNG, overlaid or in panels.
+fn write_both(stem: &Path, title: &str, x: &str, y: &str, series: &[Series], panels: bool) -> anyhow::Result<()> {
     font_registered()?;
     let with = |ext: &str| -> PathBuf {
         let mut name = stem.as_os_str().to_owned();
@@ -113,10 +124,12 @@ pub fn line_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: 
         PathBuf::from(name)
     };
     let svg = with(".svg");
-    draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+    let area = SVGBackend::new(&svg, SIZE).into_drawing_area();
+    if panels { draw_panels(area, title, x, y, series) } else { draw(area, title, x, y, series) }
         .with_context(|| format!("writing {}", svg.display()))?;
     let png = with(".png");
-    draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
+    let area = BitMapBackend::new(&png, SIZE).into_drawing_area();
+    if panels { draw_panels(area, title, x, y, series) } else { draw(area, title, x, y, series) }
         .with_context(|| format!("writing {}", png.display()))
 }
 
@@ -152,18 +165,6 @@ fn draw<DB: DrawingBackend>(
     legend(&key, series, 20)?;
     root.present().map_err(err)?;
     Ok(())
-}
-
-/// One panel per series, stacked, each on its own y range and all on one x range, written to
-/// `stem`.svg and `stem`.png: for traces that would hide one another in a single chart.
-pub fn panel_chart(stem: &Path, title: &str, x_desc: &str, y_desc: &str, series: &[Series]) -> anyhow::Result<()> {
-    font_registered()?;
-    let svg = PathBuf::from(format!("{}.svg", stem.display()));
-    draw_panels(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
-        .with_context(|| format!("writing {}", svg.display()))?;
-    let png = PathBuf::from(format!("{}.png", stem.display()));
-    draw_panels(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x_desc, y_desc, series)
-        .with_context(|| format!("writing {}", png.display()))
 }
 
 fn draw_panels<DB: DrawingBackend>(

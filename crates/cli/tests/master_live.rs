@@ -7,6 +7,16 @@ use std::process::{Command, Stdio};
 
 use common::{python, RingSim, Sim, VethPair};
 
+/// A count from `run`'s summary line: the `;`-separated part that ends with `suffix` or
+/// starts with it.
+fn summary_field(summary: &str, suffix: &str) -> u64 {
+    summary
+        .split(';')
+        .find_map(|p| p.trim().strip_suffix(suffix).or_else(|| p.trim().strip_prefix(suffix)))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{suffix:?} in {summary}"))
+}
+
 fn ferrocat_in(ns: &str) -> Command {
     VethPair::cmd(ns, env!("CARGO_BIN_EXE_ferrocat"))
 }
@@ -95,14 +105,7 @@ fn run_to_op_and_tshark_decodes_every_frame() {
     // A debug build on a loaded machine, or a VM that stalls for tens of ms (seen: 52 ms), may
     // miss the 1 ms cyclic timeout now and then — a lost frame counts as a short cycle. The
     // exchange itself must hold: answered frames with the right working counter, losses rare.
-    let field = |suffix: &str| -> u64 {
-        summary
-            .split(';')
-            .find_map(|p| p.trim().strip_suffix(suffix).or_else(|| p.trim().strip_prefix(suffix)))
-            .and_then(|n| n.trim().parse().ok())
-            .unwrap_or_else(|| panic!("{suffix:?} in {summary}"))
-    };
-    let (errors, lost) = (field(" working-counter errors"), field("frames lost "));
+    let (errors, lost) = (summary_field(&summary, " working-counter errors"), summary_field(&summary, "frames lost "));
     assert!(errors.saturating_sub(lost) < 10 && lost < 50, "{errors} short cycles, {lost} lost, of 1000: {summary}");
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(
@@ -514,14 +517,7 @@ fn linux_pings_two_drives_during_a_cyclic_run() {
     // that did not come back in time, which a loaded machine's stalls give (5–10 of 8 000 with
     // both cores busy with another job), never a frame back short.
     let summary = String::from_utf8_lossy(&out.stdout).to_string();
-    let field = |suffix: &str| -> u64 {
-        summary
-            .split(';')
-            .find_map(|p| p.trim().strip_suffix(suffix).or_else(|| p.trim().strip_prefix(suffix)))
-            .and_then(|n| n.trim().parse().ok())
-            .unwrap_or_else(|| panic!("{suffix:?} in {summary}"))
-    };
-    let (errors, lost) = (field(" working-counter errors"), field("frames lost "));
+    let (errors, lost) = (summary_field(&summary, " working-counter errors"), summary_field(&summary, "frames lost "));
     println!("{summary}");
     assert!(errors <= lost + 2 && lost < 400, "{errors} short cycles, {lost} frames lost: {summary}{told}");
 }
