@@ -57,7 +57,7 @@ fn bad_arguments_are_errors_not_panics() {
 }
 
 /// An endless file (/dev/zero) where a command takes a file: an error naming the file and the
-/// bound, at once. Until 2026-11-24 each of these read until memory ran out.
+/// bound, at once, not a read until memory runs out.
 #[test]
 fn an_endless_file_is_refused_by_every_command_that_reads_one() {
     let toml = std::env::temp_dir().join(format!("ferrocat-endless-{}.toml", std::process::id()));

@@ -3,8 +3,8 @@ use ferrocat_wire::register::SiiControl;
 
 /// Time an EEPROM read of one block keeps the interface busy, as real ESCs showed ethercrab
 /// (Linux captures with per-frame timestamps, replay-*): of its 3 062 status polls, the busy
-/// bit agrees with this time in 99.4 % (any time in 610–790 µs: ≥ 99.1 %; 20 µs, the guess
-/// until 2026-11-25: 34.8 %). The datasheet's figures are not in our sources.
+/// bit agrees with this time in 99.4 % (any time in 610–790 µs: ≥ 99.1 %; 20 µs: 34.8 %). The
+/// datasheet's figures are not in our sources.
 pub const READ_BUSY_NS: u64 = 700_000;
 /// A word write (EEPROM page program) takes milliseconds.
 pub const WRITE_BUSY_NS: u64 = 3_000_000;

@@ -119,8 +119,8 @@ fn malformed_xml_names_line_and_column() {
     assert_eq!(e.line, 2);
     assert!(e.message.contains("out of range"), "{e}");
 
-    // A multi-byte character in hex data (the `device` fuzz target's find, 2026-11-24: the
-    // parser sliced the text by bytes and panicked inside the character).
+    // A multi-byte character in hex data (a find of the `device` fuzz target: a parser that
+    // slices the text by bytes panics inside the character).
     let xml = "<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices><Device><Type ProductCode=\"#x1\">X</Type>\n<Eeprom><ConfigData>080\u{113}ments0</ConfigData></Eeprom></Device></Devices></Descriptions></EtherCATInfo>";
     let e = EsiFile::parse(xml).unwrap_err();
     assert_eq!((e.line, e.message.as_str()), (2, "'\u{113}' at character 3 is not a hex digit"), "{e}");

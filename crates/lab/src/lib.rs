@@ -31,8 +31,7 @@ pub const FERROCAT_TCL: &str = "ferrocat-tcl";
 pub const FERROCAT_DENSE: [&str; 2] = ["ferrocat-dense", "ferrocat-mfr-dense"];
 
 /// ferrocat in either coupling without a follower's crystal for its flywheel: the line through
-/// the reference's own points alone (`ferrocat` and `ferrocat-mfr` until session 46), for
-/// comparison.
+/// the reference's own points alone, for comparison.
 pub const FERROCAT_DIRECT: [&str; 2] = ["ferrocat-direct", "ferrocat-mfr-direct"];
 
 /// A line of `slaves` EK1100-like DC slaves (E-Bus hops), crystals spread ±50 ppm.

@@ -20,7 +20,7 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
         } else if r.method == "chen2016" && r.cycle_us == 100 {
             // Chen's method at 100 µs loses a cycle now and then on some host draws: 37 in
             // 600 000 over a minute (docs/clock-sync.md), 2 and 2 repeated in these 40 000
-            // with seed 3, none with seed 1 (until session 41 the test asked for none).
+            // with seed 3, none with seed 1.
             assert!(r.lost + r.repeated <= 8, "{r:?}");
             assert!(r.jitter_width_pct < 70.0, "{r:?}");
         } else {
@@ -70,8 +70,8 @@ fn on_a_stock_kernel_ferrocat_holds_back_only_the_frame_after_a_late_one() {
     // pc-stock at 250 µs: 1 % of wake-ups up to 500 µs late and 1 % of sends up to 200 µs, so
     // about one frame in a hundred passes the SYNC0 half a cycle after its target. PI's next
     // frame overwrites it (one cycle lost, one repeated); ferrocat holds the next one back
-    // (one repeated). Until 2026-11-26 a wake-up more than half a cycle late moved ferrocat's
-    // plan, the schedule slid past the SYNC0 and it held every frame back from then on: with
+    // (one repeated). Were a wake-up more than half a cycle late to move ferrocat's plan, the
+    // schedule would slide past the SYNC0 and every frame be held back from then on: with
     // this seed 19 052 repeated in these 4 s (67 776 in the quick run's 10 s).
     let o = Options {
         cycles_us: vec![250],

@@ -31,8 +31,8 @@ fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {
     for r in rows.iter().filter(|r| r.method == "ferrocat") {
         assert!(r.sync0_spread_max_ns.unwrap() <= 100, "{r:?}");
         // Its delays count the closed ports' loop-back, as in the lab: the drives' SYNC0s
-        // centred on each other (−10 ns with SOEM's delays, which the demo gave it until
-        // session 42; `conventional`'s still are).
+        // centred on each other (SOEM's delays would put them −10 ns apart, as `conventional`'s
+        // are).
         assert!(r.sync0_mean_ns.unwrap().abs() < 3.0, "{r:?}");
         assert_eq!((r.late_setpoints, r.repeated_setpoints), (Some(0), Some(0)), "{r:?}");
         // A tenth of a revolution would be a poor servo; the model follows within ~0.2 %.
@@ -78,8 +78,7 @@ fn the_demo_calibrates_ferrocats_stamps_through_the_gpio() {
     let found = cal.calibration_ns.expect("ferrocat is calibrated") as f64;
     println!("ferrocat 1 ms: calibrated {cal_mean:.1} ns (took out {found} ns), uncalibrated {plain_mean:.1} ns");
     assert_eq!(plain.calibration_ns, None);
-    // Seeds 1–10: calibrated −55 to +37 ns, uncalibrated −313 to −274 ns (the bound was 50 ns,
-    // seed 1's −18, until session 41; seed 9 gave −55).
+    // Seeds 1–10: calibrated −55 to +37 ns (seed 9 the −55), uncalibrated −313 to −274 ns.
     assert!(cal_mean.abs() < 75.0 && plain_mean.abs() > 150.0, "{cal_mean} {plain_mean}");
     assert!((plain_mean - found).abs() < 60.0, "the offset left uncalibrated is the one found: {plain_mean} {found}");
     // conventional takes no calibration: the same run either way.

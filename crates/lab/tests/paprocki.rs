@@ -22,7 +22,7 @@ fn two_slaves_see_sync0_together() {
 fn park2020s_offset_corrections_move_both_drives_at_once() {
     // Park's eq. 5 moves every slave's offset by the bias estimate every 100 ms; on pc-stock
     // that is up to µs. Written a slave per frame, a SYNC0 between the two drives' writes
-    // fired one correction apart: until 2026-11-26 this run's minimum was −2 195 ns (sd 86).
+    // would fire one correction apart: this run's minimum −2 195 ns (sd 86) that way.
     let o = Options { cycles_us: vec![500], methods: vec!["park2020".into()], ..Options::new(HostModel::pc_stock()) };
     let r = &run(&o).unwrap()[0];
     println!("mean {:.1} ns, max {}, min {}, sd {:.1}", r.mean_ns, r.max_ns, r.min_ns, r.sd_ns);

@@ -108,8 +108,9 @@ fn the_same_seed_gives_the_same_table() {
 
 /// The ring of scenarios/segments/ring.toml with the cable between its couplers pulled before
 /// the master starts: the far coupler (the "last" clock) is set up behind the break from the
-/// latch's two passes and kept on the reference's time, for every method (before session 38
-/// it stayed a master round trip off: 25.7 µs under nic-hwts, 18.1 µs under pc-rt).
+/// latch's two passes and kept on the reference's time, for every method (set up from the
+/// first pass alone it would stay a master round trip off: 25.7 µs under nic-hwts, 18.1 µs
+/// under pc-rt).
 #[test]
 fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
     let toml = format!(
@@ -140,8 +141,7 @@ fn a_ring_split_from_the_start_keeps_its_far_clock_with_the_master() {
         }
         // Seeds 1–10: ferrocat's far coupler within 28 ns (GMEAN) and 30 ns (MRMS) but for
         // one draw under pc-rt, 57 and 58 ns (seed 9: the far reference, kept from software
-        // stamps of two passes, wandered); ferrocat-mfr's within 15 and 16 ns. Until session
-        // 41 the bound was 50 ns, from seed 1.
+        // stamps of two passes, wandered); ferrocat-mfr's within 15 and 16 ns.
         for f in rows.iter().filter(|r| r.method.starts_with("ferrocat")) {
             assert!(f.last_gmean_us.abs() <= 0.075 && f.last_mrms_us <= 0.075, "{f:?}");
         }
@@ -157,9 +157,9 @@ fn wandering_couplers(host: HostModel) -> Options {
 
 /// Three couplers whose crystals random-walk by 50 ppb/√s (a plain crystal: a few), seeds
 /// 1–4 of one round each after 30 s of settling: ferrocat's line takes the shorter window that
-/// foretells the cycles' points best (since session 44). Reference MRMS, mean of the four
-/// seeds, `ferrocat` / `ferrocat-mfr`: 16 / 19 ns; with the whole window only 58 / 56 ns
-/// (docs/clock-sync.md, robustness chapter, oscillator wander, sessions 42 and 44).
+/// foretells the cycles' points best. Reference MRMS, mean of the four seeds, `ferrocat` /
+/// `ferrocat-mfr`: 16 / 19 ns; with the whole window only 58 / 56 ns (docs/clock-sync.md,
+/// robustness chapter, oscillator wander).
 #[test]
 fn wandering_crystals_shorten_ferrocats_line() {
     let o = Options {

@@ -113,7 +113,7 @@ fn ferrocat_relocks_every_slave_within_100_ms_of_a_crystal_step() {
 fn ferrocat_recovers_within_100_ms_of_a_crystal_step_on_beaglebone_rt() {
     // The seeds on which the reference-following coupling, its sawtooth taking half the band,
     // stayed out: 1 and 4 for 460–493 ms with a line probed only to 1/16 of its noise scale;
-    // 3, 5 and 9 for 102–185 ms with 5 probes a cycle (2026-11-23, session 18's build).
+    // 3, 5 and 9 for 102–185 ms with 5 probes a cycle.
     for seed in [1, 3, 4, 5, 9] {
         let o = Options {
             methods: vec!["ferrocat".into(), "ferrocat-mfr".into()],
@@ -135,8 +135,8 @@ fn ferrocat_recovers_within_100_ms_of_a_crystal_step_on_beaglebone_rt() {
 /// measured again; 200 ns off when the intact ring's shortening came from 32 round trips each
 /// way), and ferrocat's segment, the far coupler kept behind the break, is locked again within
 /// 2.5 s: relock 0–2 001 ms over seeds 1–10, the late ones bunched just below the 2 s after
-/// which the level at the break is fixed from its samples (`far_clock::ANCHOR_NS`); the bound
-/// was 2 s until session 41 (seed 7: 2 001 ms). On a line the disturbance is refused.
+/// which the level at the break is fixed from its samples (`far_clock::ANCHOR_NS`; seed 7:
+/// 2 001 ms). On a line the disturbance is refused.
 #[test]
 fn a_pulled_ring_cable_leaves_every_method_where_it_was() {
     let toml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenarios/segments/ring.toml"));
@@ -162,7 +162,7 @@ fn a_pulled_ring_cable_leaves_every_method_where_it_was() {
 }
 
 /// ferrocat, its flywheel a follower's crystal (`sync/flywheel.rs`), on a stock kernel whose
-/// stamps left the direct line alone (`ferrocat-direct`, the default until session 46) more
+/// stamps left the direct line alone (`ferrocat-direct`) more
 /// than 100 ms from its control after the reference's crystal step on these seeds
 /// (docs/clock-sync.md, "A follower's crystal as flywheel"): back within 100 ms of the control
 /// after the reference's step (ε sees it at once) and after the follower's (the kink test hands
@@ -207,7 +207,7 @@ fn a_followers_crystal_as_flywheel_recovers_from_either_crystals_step_on_a_stock
 /// initialisation to measure which way the speed counter turns, and the follower's loop too
 /// calm for the trial to have told it 5 s later, when the reference's crystal steps. The kink
 /// test scores both readings' templates: the step tells the direction, and the flywheel takes
-/// over (the direct line alone took 159 ms until session 46's trial-aware test; 38 ms since).
+/// over (38 ms; 159 ms with the direct line alone and a test that scores one reading).
 #[test]
 fn a_step_during_the_speed_counters_trial_tells_its_direction() {
     let o = Options {

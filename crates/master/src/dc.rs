@@ -347,7 +347,7 @@ impl<I: Io> Master<I> {
         // compensation's frames gave hundreds: the far half is moved by what they say, all
         // its clocks together. Their line goes on into the cycles: it knows the far
         // reference's rate, which a new one took 128 samples to learn while the far half
-        // drifted away (3.8 µs at 30 ppm before session 41).
+        // drifted away (3.8 µs at 30 ppm).
         if let Some(e) = self.far_steer.as_ref().and_then(|f| f.clock.error_now()) {
             self.shift_far_half(-e, None);
             if let Some(f) = self.far_steer.as_mut() {

@@ -276,8 +276,8 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
 fn parks_delay_needs_no_slave_behind_the_reference() {
     // Eq. 3 takes the time the frame spends behind the reference out of the round trip; with
     // the reference alone its port 1 is closed and never latches, and taking that register as
-    // it read put Park's delay, and with it the reference, 2.1 s off (`lab park2020 --slaves
-    // 1`, until 2026-11-26). The reference's delay does not depend on what follows it.
+    // it read would put Park's delay, and with it the reference, 2.1 s off (`lab park2020
+    // --slaves 1`). The reference's delay does not depend on what follows it.
     let delay = |devices: &str| {
         let cfg: SegmentConfig = toml::from_str(&format!("seed = 2\n{devices}")).unwrap();
         let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 2));

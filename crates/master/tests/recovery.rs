@@ -61,9 +61,9 @@ fn loss_power_cycle_and_link_pull() {
 }
 
 /// A cyclic frame lost while `start` walks the slaves from SAFEOP to OP: the short cycle
-/// finds the slaves on their way, which are not "left OP" (until session 41 every one was
-/// reported so, and "back in OP" when the next short cycle looked again: a seed of 1 % loss
-/// gave it). The answer to the first LRW after the request of SAFEOP is dropped.
+/// finds the slaves on their way, which are not "left OP" (nor "back in OP" when the next
+/// short cycle looks again; a seed of 1 % loss gives it). The answer to the first LRW after
+/// the request of SAFEOP is dropped.
 #[test]
 fn a_frame_lost_while_starting_is_no_event() {
     use ferrocat_master::io::Tamper;

@@ -271,9 +271,8 @@ fn the_far_half_keeps_together_behind_its_own_reference() {
         "far terminal − far coupler, worst over 10 s split: {far} ns following the far coupler, {apart} ns each held \
          over; after the ring closed again: {far_closed} and {apart_closed} ns"
     );
-    // Seeds 1–12 (session 41): 35–87 ns following, 7.2–9.0 µs held over. Until then the
-    // test had no warm-up and asserted < 50 ns: seed 5's figure (23 ns); other seeds gave up
-    // to 87, and held over, without a change after the break, as little as 26 ns.
+    // Seeds 1–12: 35–87 ns following, 7.2–9.0 µs held over (without a warm-up, held over
+    // without a change after the break gives as little as 26 ns).
     assert!(far < 100, "{far}");
     assert!(apart > 20 * far, "{apart} vs {far}");
     // Closed again, the delays are the reference's once more: back together either way.
@@ -325,7 +324,7 @@ fn the_far_reference_of_a_split_ring_is_kept_on_the_reference() {
         // Segment and host seeds 5–17: 20–23 ns under nic-hwts; 22–70 ns under pc-rt but for
         // two draws, 146 and 234 ns — a steady offset over the 25 s, the error of the level at
         // the break that 2 s of software-stamped samples fixed (a bias no later sample shows,
-        // far_clock.rs); until session 41 the test asked seed 5's 100 ns of both.
+        // far_clock.rs).
         assert!(kept_after < if host.name == "nic-hwts" { 100 } else { 300 }, "{kept_after}");
         assert!(worst(&held[50..]) > 100 * kept_after, "{} vs {kept_after}", worst(&held[50..]));
         // What was added is what held over drifted.
@@ -456,9 +455,9 @@ fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
         // Written for the second pass's instant (a master round trip off before: 19 µs under
         // nic-hwts, 24 µs under pc-rt). Held over, the far coupler runs at its own crystal's
         // rate, never having followed the reference; kept, from the line the static drift
-        // compensation's frames began, which knows that rate (until session 41 the cycles
-        // began a new line and the far coupler drifted for its first 128 samples: up to
-        // 3.8 µs at 30 ppm, seed 8; seed 5's 0.7 ppm hid it).
+        // compensation's frames began, which knows that rate (a new line for the cycles would
+        // let the far coupler drift for its first 128 samples: up to 3.8 µs at 30 ppm, seed 8;
+        // seed 5's 0.7 ppm hides it).
         assert!(kept[0] < 150, "{kept:?}");
         assert!(worst(&kept[..20]) < 250, "{kept:?}");
         assert!(worst(&kept[20..50]) < 1_000, "{kept:?}");
@@ -504,8 +503,7 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
         // Split from the start, the far coupler never followed the reference: the master kept
         // it by its offset, and its own loop takes up its crystal's whole offset once the
         // reference's time reaches it (about 16 ns per ppm, gone within half a second; 22,
-        // 125, 364 and 489 ns measured). Until session 41 the test ran seed 5 alone and asked
-        // for 60 ns.
+        // 125, 364 and 489 ns measured).
         assert!(transient < 600 && after < 50, "{transient}, {after}");
     }
 }
@@ -571,8 +569,8 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         // the root's X1 port, seen the other way round) and its terminal, within 15 ns of the
         // true ones — the far tree is entered by X2, a reversed tree, where SOEM's formula is
         // half a loop-back long and the latches add ±5 ns (`delays.rs`; 10 ns off with seed 5,
-        // 15 with 6). Until session 41 they were compared with the intact ring's differences
-        // (within 10 ns), themselves measured: seed 6 put them 15 ns apart.
+        // 15 with 6). Against the true delays, not the intact ring's measured differences,
+        // which seed 6 puts 15 ns apart themselves.
         assert_eq!((split[2].0, split[4].0), (Some(4), None), "the third coupler is the root: {split:?}");
         for k in [3, 4, 5] {
             let t = truth[k].expect("on the far pass");
@@ -580,7 +578,7 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         }
         // Split, the far couplers within 100 ns (`nic-hwts`) and 400 ns (`pc-rt`, software
         // stamps) of the reference: 14–49 and 64–274 ns over 40 realisations (segment seeds
-        // 5–12, host seeds 5–9; the test asked 200 ns of seed 5's 95 and 145 until session 41).
+        // 5–12, host seeds 5–9).
         // Back together, both far couplers' loops take up their crystals' whole offsets (the
         // master kept them by their offsets while split): 24–797 ns, which seed 5 alone (25
         // ns) had hidden; settled a second later (19–25 ns).

@@ -180,7 +180,7 @@ fn master_follows_reference_methods_hold_the_phase() {
     // Without following, the reference (+40 ppm) would move 40 µs per second against the
     // master. Four realisations of the host's noise (seeds 5–8): the wake-up jitter dominates
     // what is left, for every method alike, and one 3 s run's sd moves by ±15 % with it
-    // (ferrocat / PI was 0.96–1.15 over seeds 5–12; seed 5 alone until session 41).
+    // (ferrocat / PI was 0.96–1.15 over seeds 5–12).
     let mut pooled = [0.0f64; 3];
     for seed in 5..=8 {
         let (_, chen) = run_mfr(|| Box::new(Chen2016::new(CYCLE_NS, 100, 10_000)), 6000, seed);

@@ -31,7 +31,7 @@ fn low_word_of_0918_equals_port0_time_and_write_latches_ports() {
     assert_eq!(bus.tx(Command::APWR, Address::position(1, 0x0900), &[0; 4]).1, 1);
     assert_eq!(bus.fprd_u32(0x1002, 0x0904), before);
     // Ports 1–3's receive times are read-only (datasheet II, 0x0904–0x090F r/-): a write that
-    // misses 0x0900 leaves them and latches nothing. Until 2026-11-24 it overwrote them.
+    // misses 0x0900 leaves them and latches nothing.
     let (times, _) = bus.fp(Command::FPRD, 0x1002, 0x0900, &[0; 16]);
     assert_eq!(
         bus.fp(Command::FPWR, 0x1002, 0x0904, &[0xA5; 12]).1,

@@ -61,7 +61,7 @@ try:
     # The sync error counter limit (0x10F1:02) from its default 4 (three cycles without
     # process data trip it) to 12 (five): this loop is Python on a machine that runs other
     # tests beside it, and missed three cycles often enough that the drive was never in OP for
-    # a second (CI, session 44). The stall below misses ten.
+    # a second in CI. The stall below misses ten.
     d.sdo_write(0x10F1, 2, struct.pack("<H", 12))
     result["sync_error_limit"] = struct.unpack("<H", d.sdo_read(0x10F1, 2))[0]
     m.state = pysoem.SAFEOP_STATE

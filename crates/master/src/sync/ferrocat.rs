@@ -78,8 +78,8 @@ pub struct Ferrocat {
     /// (the last one plus the period returned), and how late cycles start on average against
     /// it. A wake-up's lateness is known after the fact and says nothing of the next one's,
     /// so the period is chosen for the planned start plus the mean lateness, not for the
-    /// actual start: feeding a part of each cycle's lateness back (as until 2026-11-23) made
-    /// the loop chase the host's jitter and a coarse timer's rounding, and widened both.
+    /// actual start: feeding a part of each cycle's lateness back makes the loop chase the
+    /// host's jitter and a coarse timer's rounding, and widens both.
     plan_ns: Option<u64>,
     /// Cycles in a row more than half a cycle off the plan.
     off_plan_run: u32,
@@ -592,8 +592,8 @@ impl Ferrocat {
         // A late frame is held back, and the next one, on time, is not. Late frames in a row
         // are a schedule that moved past the SYNC0: the loop, which steers to the nearest slot,
         // takes it on to the next one, while the count stays behind — and counting on held
-        // every frame back from then on, each a repeated cycle (until 2026-11-26: 85 % of the
-        // cycles at 250 µs on pc-stock with seed 1; at 100 µs, with the plan's fix in
+        // every frame back from then on, each a repeated cycle (85 % of the cycles at 250 µs on
+        // pc-stock with seed 1 without this rule; at 100 µs, with the plan's restart in
         // `lateness_deviation` alone, more than every other one with each seed tried). So the
         // `SLOT_SLIP_RUN`-th late frame in a row starts the count again at its own slot.
         let mut hold = hold_for(late_of(aimed));
@@ -697,10 +697,10 @@ impl Ferrocat {
     /// up after it), taken back to the plan like any other but kept out of the mean;
     /// `PLAN_MOVED_RUN` of them in a row are the schedule itself moving (a master that
     /// skipped cycles without a word), and the plan starts again from there, deviation 0.
-    /// (Starting again at a single outlier, as until 2026-11-26, put the plan where that one
-    /// late wake-up was: the cycles after it, back on the master's schedule, then all looked
-    /// early by as much, and the loop moved the frames that much later, to the SYNC0 and past
-    /// it, for thousands of cycles on pc-stock.)
+    /// (Starting again at a single outlier would put the plan where that one late wake-up
+    /// was: the cycles after it, back on the master's schedule, would all look early by as
+    /// much, and the loop would move the frames that much later, to the SYNC0 and past it,
+    /// for thousands of cycles on pc-stock.)
     fn lateness_deviation(&mut self, built_ns: u64) -> i64 {
         let Some(plan) = self.plan_ns else {
             self.plan_ns = Some(built_ns);
@@ -1057,8 +1057,8 @@ mod tests {
         // frame passing 5 µs after it is built. From frame 200 on every wake-up is 60 % of a
         // cycle late (a busy CPU): the frames pass after the SYNC0 half a cycle on. The first
         // is a late frame and held back; then the loop moves the schedule to the next slot,
-        // and the count must follow it rather than hold every frame back from then on (it did,
-        // until 2026-11-26: every frame of the run's rest, each a repeated cycle).
+        // and the count must follow it rather than hold every frame back from then on (every
+        // frame of the run's rest, each a repeated cycle).
         let c = 250_000u64;
         let mut f = Ferrocat::new(Coupling::MasterFollowsReference, c);
         f.sync0_phase_ns = Some(c / 2);
