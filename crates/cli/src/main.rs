@@ -23,6 +23,34 @@ mod target;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Log more on stderr: -v the bring-up's steps and the slaves' events, -vv each slave and
+    /// state, each lost frame and each error before it is returned (RUST_LOG, e.g.
+    /// `ferrocat_master=debug`, overrides both).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    /// Log errors only (the default logs warnings too: what the master handled itself, such as
+    /// acknowledging a slave's error to bring it back to OP).
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    quiet: bool,
+}
+
+/// Logging to stderr at the level -v/-q ask for, unless RUST_LOG says otherwise.
+fn init_logging(verbose: u8, quiet: bool) {
+    use tracing_subscriber::EnvFilter;
+    let level = match (quiet, verbose) {
+        (true, _) => "error",
+        (false, 0) => "warn",
+        (false, 1) => "info",
+        _ => "debug",
+    };
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_target(false)
+        .without_time()
+        .try_init();
 }
 
 #[derive(Subcommand)]
@@ -490,6 +518,7 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let cli = Cli::parse();
+    init_logging(cli.verbose, cli.quiet);
     let result = match cli.command {
         Command::Pcap { file, json } => pcap::run(&file, json),
         Command::Sii { action: None, file: Some(file), json } => sii::run(&file, json),

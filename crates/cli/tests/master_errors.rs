@@ -308,3 +308,28 @@ fn needs_shared_no_rust_internals_in_the_output() {
         assert!(!all.contains("Some(") && !all.contains("None"), "{args:?}: {all}");
     }
 }
+
+/// Logging: quiet by default; -v logs the bring-up's steps, -vv each slave and state; RUST_LOG
+/// chooses for itself; the library prints nothing of its own.
+#[test]
+fn the_log_says_as_much_as_asked() {
+    let seg = ["--device", "EK1100", "--device", "EL2004"];
+    let run = |pre: &[&str], env: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_ferrocat"));
+        c.args(pre).arg("scan").args(seg).env_remove("RUST_LOG");
+        if let Some(v) = env {
+            c.env("RUST_LOG", v);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success());
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    assert_eq!(run(&[], None), "", "nothing logged by default on a healthy segment");
+    let v = run(&["-v"], None);
+    assert!(v.contains("INFO") && v.contains("2 slave(s) answer") && !v.contains("DEBUG"), "{v}");
+    let vv = run(&["-vv"], None);
+    assert!(vv.contains("DEBUG slave 1 (EL2004) in INIT") && vv.contains("device emulation"), "{vv}");
+    let env = run(&[], Some("ferrocat_master=debug"));
+    assert!(env.contains("DEBUG slave 0 (EK1100)"), "{env}");
+    assert_eq!(run(&["-q"], None), "");
+}

@@ -167,7 +167,7 @@ impl<I: Io> Master<I> {
         }
         if mbx.header.mailbox_type == MailboxType::COE {
             if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {
-                self.events.push(MasterEvent::Emergency {
+                self.push_event(MasterEvent::Emergency {
                     position,
                     name,
                     error_code: e.error_code,
@@ -253,7 +253,9 @@ impl<I: Io> Master<I> {
     }
 
     fn abort(&self, position: u16, index: u16, subindex: u8, code: ferrocat_wire::coe::AbortCode) -> MasterError {
-        MasterError::Abort { position, name: self.name_of(position), index, subindex, code }
+        let e = MasterError::Abort { position, name: self.name_of(position), index, subindex, code };
+        tracing::debug!("{e}");
+        e
     }
 
     /// The name of the slave at `position`, for an error (empty if there is none).

@@ -376,6 +376,11 @@ impl<I: Io> Master<I> {
                 .collect(),
         };
         let sync0_start = if targets.is_empty() { None } else { Some(self.start_sync(&targets, cfg)?) };
+        tracing::info!(
+            "DC set up: reference slave {reference}, static drift compensation {frames} frames, {}, SYNC0 on {} slave(s)",
+            if converged { "converged" } else { "not converged" },
+            targets.len()
+        );
         Ok(DcReport {
             reference: reference as u16,
             static_frames: frames,

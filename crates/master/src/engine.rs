@@ -520,6 +520,7 @@ impl<I: Io> Engine<I> {
                     }
                     if self.slots[s].tries > self.retries {
                         self.stats.lost += 1;
+                        tracing::debug!("no answer after {} tries", self.retries + 1);
                         self.slots.iter_mut().for_each(|x| x.busy = false);
                         let p = &pdus[self.slots[s].first];
                         return Err(MasterError::Timeout {

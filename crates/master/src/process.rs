@@ -62,7 +62,7 @@ impl<I: Io> Master<I> {
         let now = self.engine.ring;
         let before = std::mem::replace(&mut self.cyc.ring, now);
         if now != before && before != RingState::Unknown && now != RingState::Unknown {
-            self.events.push(crate::MasterEvent::Ring { state: now });
+            self.push_event(crate::MasterEvent::Ring { state: now });
         }
         if now != before {
             self.ring_changed(before);
@@ -232,6 +232,7 @@ impl<I: Io> Master<I> {
             }
             Err(MasterError::Timeout { .. }) => {
                 self.cyc.stats.lost_frames += 1;
+                tracing::debug!("cyclic frame lost ({} so far)", self.cyc.stats.lost_frames);
                 0
             }
             Err(e) => return Err(e),

@@ -145,6 +145,13 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// Records an event for the application (`events`) and logs it (`tracing`, info): the
+    /// application is told through `events`, the log is for whoever runs it.
+    pub(crate) fn push_event(&mut self, e: MasterEvent) {
+        tracing::info!("{e}");
+        self.events.push(e);
+    }
+
     pub fn slave(&self, position: u16) -> Result<&Slave> {
         self.slaves.get(position as usize).ok_or_else(|| {
             MasterError::Config(match self.slaves.len() {
@@ -173,6 +180,7 @@ impl<I: Io> Master<I> {
         if count == 0 {
             return Err(MasterError::NoSlaves);
         }
+        tracing::info!("{count} slave(s) answer; to INIT, station addresses from {STATION_BASE:#06x}");
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [0x11, 0])?;
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0600 }, &mut [0u8; 256])?;
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0800 }, &mut [0u8; 128])?;
@@ -196,6 +204,15 @@ impl<I: Io> Master<I> {
         let images = self.read_all_sii(&stations)?;
         for (pos, img) in images.into_iter().enumerate() {
             let slave = self.read_slave(pos as u16, stations[pos], img)?;
+            tracing::debug!(
+                "slave {pos} ({}): vendor {:#010x} product {:#010x} revision {:#010x}, station {:#06x}{}",
+                slave.name,
+                slave.vendor_id,
+                slave.product_code,
+                slave.revision,
+                slave.station,
+                if slave.device_emulation { ", device emulation" } else { "" }
+            );
             self.slaves.push(slave);
         }
         self.engine.directory = self
@@ -328,6 +345,7 @@ impl<I: Io> Master<I> {
         for s in &mut self.slaves {
             s.state = AlState::Op;
         }
+        tracing::info!("every slave in OP");
         Ok(())
     }
 

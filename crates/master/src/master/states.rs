@@ -113,6 +113,7 @@ impl<I: Io> Master<I> {
             let error = self.slaves[position as usize].al_error(status, code);
             if status.state() == Some(state) && !error {
                 self.slaves[position as usize].state = state;
+                tracing::debug!("slave {position} ({name}) in {}", state.name());
                 return Ok(());
             }
             // An ESC whose configuration area failed to load (a wrong checksum or no EEPROM,
@@ -142,6 +143,12 @@ impl<I: Io> Master<I> {
                         &mut ack.to_le_bytes(),
                     );
                 }
+                tracing::debug!(
+                    "slave {position} ({name}) did not reach {}: AL status {:#06x}{}",
+                    state.name(),
+                    status.0,
+                    code_text(code)
+                );
                 return Err(MasterError::State {
                     position,
                     name,
@@ -191,7 +198,7 @@ impl<I: Io> Master<I> {
             if wkc == 0 {
                 if self.slaves[k].health != crate::slave::Health::Lost {
                     self.slaves[k].health = crate::slave::Health::Lost;
-                    self.events.push(MasterEvent::Lost { position: pos, name });
+                    self.push_event(MasterEvent::Lost { position: pos, name });
                 }
                 down += 1;
                 continue;
@@ -202,17 +209,23 @@ impl<I: Io> Master<I> {
             if status.state() == Some(AlState::Op) && !error {
                 if self.slaves[k].health != crate::slave::Health::Operational {
                     self.slaves[k].health = crate::slave::Health::Operational;
-                    self.events.push(MasterEvent::Recovered { position: pos, name });
+                    self.push_event(MasterEvent::Recovered { position: pos, name });
                 }
                 continue;
             }
             down += 1;
             if self.slaves[k].health == crate::slave::Health::Operational {
-                self.events.push(MasterEvent::LeftOp { position: pos, name, status, code });
+                self.push_event(MasterEvent::LeftOp { position: pos, name, status, code });
             }
             self.slaves[k].health = crate::slave::Health::Recovering;
             // One step towards OP.
             if error {
+                tracing::warn!(
+                    "slave {pos} ({}) in {} with an error{}: acknowledged, on its way back to OP",
+                    self.slaves[k].name,
+                    status.state().map_or("an unknown state", |s| s.name()),
+                    code_text(code)
+                );
                 let ack = status.state_bits() as u16 | AlStatus::ERROR;
                 self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut ack.to_le_bytes())?;
                 continue;
