@@ -657,6 +657,8 @@ mod tests {
                 walk(s, format!("{path} {}", s.get_name()), missing);
             }
         }
+        // clap's own consistency checks first (a short flag given twice, a global clash).
+        super::Cli::command().debug_assert();
         let mut missing = Vec::new();
         walk(&super::Cli::command(), "ferrocat".into(), &mut missing);
         assert!(missing.is_empty(), "{} without help:\n{}", missing.len(), missing.join("\n"));
