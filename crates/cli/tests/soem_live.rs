@@ -352,13 +352,14 @@ fn soem_sdo_transfers_come_through_frame_loss() {
 /// finds the slave lost, recovers it (its identity read again from the EEPROM at a temporary
 /// address), reconfigures it and brings it back to OP. Then SOEM writes a station alias into
 /// its EEPROM as its eepromtool does (word 4 and the checksum word 7); after the second power
-/// cycle the ESC has taken it into 0x0012.
+/// cycle the ESC has taken it into 0x0012. The second cycle comes 9.5 s after the first, so that
+/// the alias is written before it on a loaded machine too (4.5 s were once too few).
 #[test]
 fn soem_recovers_a_power_cycled_slave_and_its_new_alias_loads() {
     let net = VethPair::new("pc");
     let toml = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
                 [[event]]\nat_ms = 2500\npower_off = 1\n[[event]]\nat_ms = 2800\npower_on = 1\n\
-                [[event]]\nat_ms = 7000\npower_off = 1\n[[event]]\nat_ms = 7300\npower_on = 1\n";
+                [[event]]\nat_ms = 12000\npower_off = 1\n[[event]]\nat_ms = 12300\npower_on = 1\n";
     let sim = ReportingSim::start(&net, "power", toml, &[]);
     let r = soem_script(&net, "soem_recovery.py", &["2", "0x0BAD"]);
     let rep = sim.report();
