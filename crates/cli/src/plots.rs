@@ -124,78 +124,52 @@ fn write_both(stem: &Path, title: &str, x: &str, y: &str, series: &[Series], pan
         PathBuf::from(name)
     };
     let svg = with(".svg");
-    let area = SVGBackend::new(&svg, SIZE).into_drawing_area();
-    if panels { draw_panels(area, title, x, y, series) } else { draw(area, title, x, y, series) }
+    draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x, y, series, panels)
         .with_context(|| format!("writing {}", svg.display()))?;
     let png = with(".png");
-    let area = BitMapBackend::new(&png, SIZE).into_drawing_area();
-    if panels { draw_panels(area, title, x, y, series) } else { draw(area, title, x, y, series) }
+    draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x, y, series, panels)
         .with_context(|| format!("writing {}", png.display()))
 }
 
+/// The chart: every series on one plot, or (`panels`) each on its own plot, stacked, on its
+/// own y range and the common x range; the legend in its own column right of them.
 fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     title: &str,
     x_desc: &str,
     y_desc: &str,
     series: &[Series],
+    panels: bool,
 ) -> anyhow::Result<()> {
-    let ((x0, x1), (y0, y1)) = ranges(series);
-    root.fill(&WHITE).map_err(err)?;
-    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
-    let (plot, key) = root.split_horizontally(SIZE.0 - LEGEND_W);
-    let mut chart = ChartBuilder::on(&plot)
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .draw()
-        .map_err(err)?;
-    for (k, s) in series.iter().enumerate() {
-        let pts = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite());
-        chart.draw_series(LineSeries::new(pts, style_of(k, s))).map_err(err)?;
-    }
-    legend(&key, series, 20)?;
-    root.present().map_err(err)?;
-    Ok(())
-}
-
-fn draw_panels<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
-    title: &str,
-    x_desc: &str,
-    y_desc: &str,
-    series: &[Series],
-) -> anyhow::Result<()> {
-    let ((x0, x1), _) = ranges(series);
+    let ((x0, x1), y_all) = ranges(series);
     root.fill(&WHITE).map_err(err)?;
     let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
     let (plots, key) = root.split_horizontally(SIZE.0 - LEGEND_W);
-    let n = series.len().max(1);
-    for (k, (s, area)) in series.iter().zip(plots.split_evenly((n, 1))).enumerate() {
-        let (_, (y0, y1)) = ranges(std::slice::from_ref(s));
-        let last = k + 1 == n;
+    let indexed: Vec<(usize, &Series)> = series.iter().enumerate().collect();
+    let groups: Vec<&[(usize, &Series)]> = if panels { indexed.chunks(1).collect() } else { vec![&indexed[..]] };
+    let n = groups.len().max(1);
+    for (g, (group, area)) in groups.iter().zip(plots.split_evenly((n, 1))).enumerate() {
+        let (y0, y1) = if panels { ranges(std::slice::from_ref(group[0].1)).1 } else { y_all };
+        let last = g + 1 == n;
         let mut chart = ChartBuilder::on(&area)
-            .margin(4)
+            .margin(if panels { 4 } else { 10 })
             .x_label_area_size(if last { 35 } else { 0 })
             .y_label_area_size(70)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(err)?;
         let mut mesh = chart.configure_mesh();
-        mesh.y_desc(y_desc).y_labels(4).x_label_formatter(&|v| tick(*v)).y_label_formatter(&|v| tick(*v));
+        mesh.y_desc(y_desc).x_label_formatter(&|v| tick(*v)).y_label_formatter(&|v| tick(*v));
+        if panels {
+            mesh.y_labels(4);
+        }
         if last {
             mesh.x_desc(x_desc);
         }
         mesh.draw().map_err(err)?;
-        let pts = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite());
-        chart.draw_series(LineSeries::new(pts, style_of(k, s))).map_err(err)?;
+        for &(k, s) in group.iter() {
+            let pts = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite());
+            chart.draw_series(LineSeries::new(pts, style_of(k, s))).map_err(err)?;
+        }
     }
     legend(&key, series, 20)?;
     root.present().map_err(err)?;
@@ -255,7 +229,7 @@ mod tests {
             (0..7).map(|k| Series::new(format!("m{k}"), (0..100).map(|x| (x as f64, k as f64)).collect())).collect();
         let (w, h) = SIZE;
         let mut buf = vec![0u8; (w * h * 3) as usize];
-        draw(BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(), "t", "x", "y", &series).unwrap();
+        draw(BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(), "t", "x", "y", &series, false).unwrap();
         let count = |c: RGBColor, xs: std::ops::Range<u32>| {
             (0..h)
                 .flat_map(|y| xs.clone().map(move |x| ((y * w + x) * 3) as usize))

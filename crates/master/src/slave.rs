@@ -176,10 +176,6 @@ impl Slave {
     pub fn al_error(&self, status: AlStatus, code: AlStatusCode) -> bool {
         status.error() && !(self.device_emulation && code == AlStatusCode::NO_ERROR)
     }
-    /// Whether AL status shows `state` reached without an error (see [`Slave::al_error`]).
-    pub fn al_reached(&self, status: AlStatus, code: AlStatusCode, state: AlState) -> bool {
-        status.state() == Some(state) && !self.al_error(status, code)
-    }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {
         self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
