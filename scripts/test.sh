@@ -85,6 +85,14 @@ if cargo clippy --version >/dev/null 2>&1; then
 else
   echo "SKIPPED: cargo clippy — this toolchain has no clippy component"
 fi
+# An application on a real NIC compiles no simulator: the master depends on the wire, link and
+# ESI crates only (docs/architecture.md).
+log "layering: what ferrocat-master compiles in"
+deps=$(cargo tree -p ferrocat-master -e normal --prefix none --format '{p}' | cut -d' ' -f1 | sort -u)
+for banned in ferrocat-segment ferrocat-esc ferrocat-capture ferrocat-lab rand rand_chacha rand_distr; do
+  if grep -qx "$banned" <<<"$deps"; then echo "ferrocat-master depends on $banned"; exit 1; fi
+done
+echo "ferrocat-master depends on: $(grep '^ferrocat-' <<<"$deps" | grep -vx ferrocat-master | tr '\n' ' ')(and $(grep -vc '^ferrocat-' <<<"$deps") outside crates)"
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 log "cargo package (every crate packs: licences, metadata, versions of the path dependencies)"

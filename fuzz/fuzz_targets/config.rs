@@ -8,7 +8,7 @@
 //! experiment. Errors are expected; a panic, a hang or a wrong delay is the fault. Files the text names (EEPROM dumps, ESI files, a scenario's
 //! segment) are left out: the `sii`, `esi` and `device` targets take their bytes.
 use ferrocat_lab::scenario::{Experiment, Scenario};
-use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use libfuzzer_sys::fuzz_target;

@@ -15,7 +15,8 @@
 //! terminal (an ET1200) on port 1 with the drive behind its port 0, which the master latches
 //! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
 //! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
-use ferrocat_master::io::{HostModel, Io, Tamper, VirtualIo};
+use ferrocat_master::io::Io;
+use ferrocat_segment::{HostModel, Tamper, VirtualIo};
 use ferrocat_master::{DcConfig, EoePing, Master};
 use ferrocat_segment::{Event, SegmentConfig};
 use ferrocat_wire::eoe::IpParameters;

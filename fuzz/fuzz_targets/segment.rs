@@ -21,7 +21,7 @@
 //! header and all, which may lie about the length); flag bit 2 sends the frame from the
 //! secondary port. Built this way the fuzzer spends its time
 //! in the ESCs, not in guessing the frame format, which the `frame` target covers.
-use ferrocat_master::io::{HostModel, VirtualIo};
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::{MasterPort, Segment, SegmentConfig};
 use ferrocat_wire::Frame;

@@ -23,8 +23,8 @@ fn progress(unit: &'static str) -> impl Fn(usize, usize) + Sync {
     }
 }
 
-pub fn host(name: &str) -> anyhow::Result<ferrocat_master::io::HostModel> {
-    use ferrocat_master::io::HostModel;
+pub fn host(name: &str) -> anyhow::Result<ferrocat_segment::HostModel> {
+    use ferrocat_segment::HostModel;
     HostModel::preset(name)
         .ok_or_else(|| anyhow::anyhow!("unknown host model {name:?} (known: {})", HostModel::PRESETS.join(", ")))
 }

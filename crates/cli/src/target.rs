@@ -7,8 +7,9 @@ use std::time::Duration;
 use anyhow::{bail, Context};
 use clap::Args;
 use ferrocat_capture::{CaptureWriter, Format};
-use ferrocat_master::io::{HostModel, Io, RawIo, UdpIo, VirtualIo};
+use ferrocat_master::io::{Io, RawIo, UdpIo};
 use ferrocat_master::Master;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 #[derive(Args, Debug, Clone)]
 pub struct Target {
@@ -164,12 +165,6 @@ impl Io for CliIo {
     fn is_virtual(&self) -> bool {
         self.io().is_virtual()
     }
-    fn segment(&self) -> Option<&ferrocat_segment::Segment> {
-        self.io().segment()
-    }
-    fn segment_mut(&mut self) -> Option<&mut ferrocat_segment::Segment> {
-        self.io_mut().segment_mut()
-    }
     fn timer_resolution_ns(&self) -> u64 {
         self.io().timer_resolution_ns()
     }
@@ -178,6 +173,22 @@ impl Io for CliIo {
     }
     fn last_tx_secondary_ns(&mut self) -> Option<u64> {
         self.io_mut().last_tx_secondary_ns()
+    }
+}
+
+/// The lab reads the true clocks of the embedded segment; a real link has none.
+impl ferrocat_lab::World for CliIo {
+    fn segment(&self) -> Option<&ferrocat_segment::Segment> {
+        match &self.world {
+            World::Virtual(v) => Some(&v.seg),
+            _ => None,
+        }
+    }
+    fn segment_mut(&mut self) -> Option<&mut ferrocat_segment::Segment> {
+        match &mut self.world {
+            World::Virtual(v) => Some(&mut v.seg),
+            _ => None,
+        }
     }
 }
 

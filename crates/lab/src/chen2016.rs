@@ -3,10 +3,11 @@
 //! share of the cycle) and the process-data cycles that DC-synchronous slaves lost or consumed
 //! twice, for 500, 250, 100 and 50 µs cycles.
 use ferrocat_esc::{SyncApp, SyncMode};
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Nominal};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use rayon::prelude::*;
 use serde::Serialize;
 

@@ -6,14 +6,15 @@
 //! repeated set-points, following errors. On a real network (any `Io`) only what the master can
 //! see is reported: following errors from 0x60F4 when mapped, late and repeated set-points from
 //! the drives' 0x1C32:0C and 0x1C32:0B when they have them; the rest is `None`.
+use crate::World;
 use ferrocat_esc::Cia402Drive;
 use ferrocat_master::calibrate::GpioCalibration;
 use ferrocat_master::cia402::{map_for_csp, Axis, Goal};
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
 use ferrocat_master::sync::{ClockSync, Coupling};
 use ferrocat_master::trajectory::{Limits, Move};
 use ferrocat_master::{DcConfig, Master, MasterEvent, SyncState};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::cia402::{index as ix, Mode, State};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -120,7 +121,7 @@ pub struct TracePoint {
     pub error_ns: f64,
 }
 
-struct Rig<I: Io> {
+struct Rig<I: World> {
     m: Master<I>,
     sync: Box<dyn ClockSync>,
     st: SyncState,
@@ -128,7 +129,7 @@ struct Rig<I: Io> {
     next: u64,
 }
 
-impl<I: Io> Rig<I> {
+impl<I: World> Rig<I> {
     fn step(&mut self) -> anyhow::Result<()> {
         self.exchange()?;
         self.wait();
@@ -157,7 +158,7 @@ impl<I: Io> Rig<I> {
 /// Brings the segment up with DC and the drives' SYNC0 half a cycle after the cycle grid,
 /// prepares `method`, and aligns the master's first cycle with the grid. The drives are the
 /// slaves with a controlword and a statusword in their image (after `map_for_csp`).
-fn rig<I: Io>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Result<(Rig<I>, Vec<u16>)> {
+fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Result<(Rig<I>, Vec<u16>)> {
     let cycle_ns = cycle_us * 1000;
     m.scan()?;
     m.configure()?;
@@ -223,7 +224,7 @@ pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
 /// Makes the GPIO calibration of a method, where the world has a GPIO to calibrate with.
 type Calibrate<'a, I> = &'a dyn Fn(&mut Master<I>, &str, usize) -> Option<GpioCalibration>;
 
-fn run_one<I: Io>(
+fn run_one<I: World>(
     m: Master<I>,
     o: &Options,
     cycle_us: u64,
@@ -429,7 +430,7 @@ fn run_one<I: Io>(
 
 /// The true master–reference error now (simulator only): master − reference clock, or, where
 /// the master follows, the reference's time off the cycle grid.
-fn true_error_ns<I: Io>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Option<f64> {
+fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Option<f64> {
     if !mfr {
         return crate::clock_error_ns(m, 0).map(|e| e as f64);
     }
@@ -442,7 +443,7 @@ fn true_error_ns<I: Io>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Option<f
 
 /// Increments per revolution from 0x608F (encoder increments / motor revolutions), or the
 /// model's 131 072 when the drive does not say.
-fn increments_per_rev<I: Io>(m: &mut Master<I>, d: u16) -> f64 {
+fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16) -> f64 {
     let u32_of = |v: Vec<u8>| v.get(..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
     let inc = m.sdo_read(d, 0x608F, 1).ok().and_then(u32_of).unwrap_or(0);
     let revs = m.sdo_read(d, 0x608F, 2).ok().and_then(u32_of).unwrap_or(0);
@@ -455,7 +456,7 @@ fn increments_per_rev<I: Io>(m: &mut Master<I>, d: u16) -> f64 {
 
 /// Sum over the drives of 0x1C32:0C (cycle time too small: late) and 0x1C32:0B (SM event
 /// missed: repeated), when every drive has both.
-fn sync_counters<I: Io>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u64)> {
+fn sync_counters<I: World>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u64)> {
     let mut sum = (0u64, 0u64);
     for &d in drives {
         let late = m.sdo_read(d, 0x1C32, 0x0C).ok()?;
@@ -488,7 +489,10 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
 
 /// The same runs one after the other on masters `open` makes (a real network: the drives are
 /// whatever the segment holds).
-pub fn run_with<I: Io>(o: &Options, open: &mut dyn FnMut() -> anyhow::Result<Master<I>>) -> anyhow::Result<Vec<Row>> {
+pub fn run_with<I: World>(
+    o: &Options,
+    open: &mut dyn FnMut() -> anyhow::Result<Master<I>>,
+) -> anyhow::Result<Vec<Row>> {
     let mut rows = Vec::new();
     for &c in &o.cycles_us {
         for name in &o.methods {

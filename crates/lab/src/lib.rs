@@ -9,11 +9,14 @@ pub mod robustness;
 pub mod sampler;
 pub mod scenario;
 pub mod stats;
+mod world;
 
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+pub use world::World;
+
 use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi, Steering};
 use ferrocat_master::{DcConfig, DcReport, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 /// The methods the master–slave error tables compare: those where the reference follows the
 /// master, and ferrocat in both couplings.
@@ -66,7 +69,7 @@ pub fn segment(
 
 /// `init_dc` on `m` and `method` made for it, in the order [`segment`] describes; with the
 /// DC initialisation's report.
-pub fn init_with_method<I: Io>(
+pub fn init_with_method<I: World>(
     m: &mut Master<I>,
     dc: &DcConfig,
     method: &str,
@@ -94,7 +97,7 @@ pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> a
 
 /// Tells a master for `method` what the ESCs' closed-port loop-back takes, where the method is
 /// one of ferrocat's (in virtual time or against `ferrocat sim` on a real interface alike).
-pub fn tell_loop_back<I: Io>(m: &mut Master<I>, method: &str) {
+pub fn tell_loop_back<I: World>(m: &mut Master<I>, method: &str) {
     if CALIBRATED.contains(&method) {
         m.closed_port_loop_ns = loop_back_ns();
     }
@@ -170,7 +173,7 @@ pub fn calibration(
 }
 
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.
-pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
+pub fn dc_slaves<I: World>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
     let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_system_time).map(|(k, _)| k).collect();
     anyhow::ensure!(!dc.is_empty(), "the segment has no slave with distributed clocks");
     Ok(dc)
@@ -179,7 +182,7 @@ pub fn dc_slaves<I: Io>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
 /// The master's clock minus the system time of the slave at position `k` now (Park 2020's
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
-pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
+pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
     let t = m.engine.io.now_ns();
     let master = m.master_system_time() as u32;
     let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
@@ -188,7 +191,7 @@ pub fn clock_error_ns<I: Io>(m: &mut Master<I>, k: usize) -> Option<i64> {
 }
 
 /// The segment node of the slave at position `k`, by its station address.
-pub fn node_of<I: Io>(m: &Master<I>, k: usize) -> Option<usize> {
+pub fn node_of<I: World>(m: &Master<I>, k: usize) -> Option<usize> {
     let station = m.slaves.get(k)?.station;
     m.engine.io.segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
 }
@@ -201,7 +204,7 @@ pub fn next_wake(next: u64, cycle_ns: u64, c: &ferrocat_master::sync::Correction
 
 /// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the
 /// one ferrocat's own method takes.
-pub fn method<I: Io>(
+pub fn method<I: World>(
     name: &str,
     m: &mut Master<I>,
     cycle_ns: u64,

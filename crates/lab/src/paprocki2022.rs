@@ -1,9 +1,10 @@
 //! Paprocki & Erwiński 2022, Table 2: how simultaneously two drives see SYNC0 — the difference
 //! of their SYNC0 instants (true time, which the simulator knows) for the same system time, over
 //! 1000 cycles at 1000 and 500 µs, for each clock-sync method.
-use ferrocat_master::io::{HostModel, Io};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
 use ferrocat_master::DcConfig;
+use ferrocat_segment::HostModel;
 use ferrocat_segment::SegmentConfig;
 use rayon::prelude::*;
 use serde::Serialize;

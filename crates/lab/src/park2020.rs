@@ -1,8 +1,9 @@
 //! Park et al. 2020, Table 1: the master–reference and master–last-slave synchronisation
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
-use ferrocat_master::io::{HostModel, Io};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
+use ferrocat_segment::HostModel;
 use rayon::prelude::*;
 use serde::Serialize;
 

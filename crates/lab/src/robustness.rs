@@ -10,9 +10,10 @@
 //! the control's is the disturbance's own effect, free of the level's slow wander that a band
 //! drawn over the window before cannot foresee (a stock kernel's software stamps leave the line
 //! tens of ns of phase error that moves over seconds).
-use ferrocat_master::io::{HostModel, Io};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
+use ferrocat_segment::HostModel;
 use rayon::prelude::*;
 use serde::Serialize;
 

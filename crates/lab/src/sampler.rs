@@ -5,11 +5,12 @@
 //! runs at its crystal's rate in between, so looking right after each frame would see only
 //! one point of that sawtooth. The segment fills in the slaves' true times at the instant
 //! exactly, however that cycle's frames fall around it (`Segment::watch`).
+use crate::World;
 use std::collections::VecDeque;
 
-use ferrocat_master::io::{Io, VirtualIo};
 use ferrocat_master::sync::ClockSync;
 use ferrocat_master::Master;
+use ferrocat_segment::VirtualIo;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -33,7 +34,7 @@ pub struct Sample {
 }
 
 impl Sampler {
-    pub fn new<I: Io>(m: &Master<I>, positions: &[usize], seed: u64) -> Self {
+    pub fn new<I: World>(m: &Master<I>, positions: &[usize], seed: u64) -> Self {
         Sampler {
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5A3F_1E00),
             nodes: positions.iter().map(|&k| crate::node_of(m, k)).collect(),

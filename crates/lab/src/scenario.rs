@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 use ferrocat_segment::SegmentConfig;
 use serde::Deserialize;
 

@@ -2,7 +2,7 @@
 //! repeats process data in DC-synchronous slaves; Chen's method, SOEM's PI and ferrocat's do not
 //! at 500, 250 and 100 µs on Chen's 10 µs timer (Chen's now and then at 100 µs).
 use ferrocat_lab::chen2016::{run, Options};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 
 #[test]
 fn only_a_master_that_follows_the_reference_keeps_every_cycle() {

@@ -3,9 +3,10 @@
 //! servo and for the Nanotec drive as its ESI file describes it.
 use ferrocat_esc::{Cia402Drive, Switches};
 use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master, MasterEvent};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::cia402::{error_code, index as ix, Mode, State};
 
 const CYCLE_NS: u64 = 1_000_000;

@@ -2,7 +2,7 @@
 //! SYNC0 instants agree within 100 ns and no set-point is late or repeated at 1 ms and 250 µs;
 //! on a stock kernel's host model at 250 µs the same counters are not zero.
 use ferrocat_lab::demo::{run, Options};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 
 #[test]
 fn ferrocat_keeps_the_drives_together_and_a_stock_host_shows_late_setpoints() {

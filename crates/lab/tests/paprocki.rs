@@ -1,7 +1,7 @@
 //! The Paprocki 2022 experiment, shortened: two DC slaves see SYNC0 within tens of ns of each
 //! other under every method, and the difference is measured, not assumed.
 use ferrocat_lab::paprocki2022::{run, Options};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 
 #[test]
 fn two_slaves_see_sync0_together() {

@@ -1,7 +1,7 @@
 //! The Park 2020 experiment, shortened, under the host models: the comparison the issue asks
 //! for, on one seed for every method (paired).
 use ferrocat_lab::park2020::{run, Options, Row};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 
 fn table(host: HostModel) -> Vec<Row> {
     let o = Options { rounds: 2, settle_s: 2.0, samples: 2_000, ..Options::quick(host) };

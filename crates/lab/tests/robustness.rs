@@ -2,7 +2,7 @@
 //! the reference's crystal or of the first follower's, and a 3-cycle overrun of the master, on
 //! one seed.
 use ferrocat_lab::robustness::{run, Options, CONTROL, FOLLOWER_DRIFT_STEP, SCENARIOS};
-use ferrocat_master::io::HostModel;
+use ferrocat_segment::HostModel;
 
 #[test]
 fn every_method_survives_every_disturbance_and_ferrocat_recovers() {

@@ -1,8 +1,9 @@
 //! The lab looks at the clocks at every phase of the cycle, at the same instants for every
 //! method, and sees what a clock steered once per frame does in between.
 use ferrocat_lab::sampler::{Sample, Sampler};
-use ferrocat_master::io::{HostModel, Io};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
+use ferrocat_segment::HostModel;
 
 const CYCLE_NS: u64 = 1_000_000;
 

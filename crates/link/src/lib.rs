@@ -1,9 +1,12 @@
 //! Linux links for EtherCAT: an AF_PACKET raw socket bound to one interface, CLOCK_MONOTONIC,
 //! and what a real-time cyclic task needs (absolute sleeps, SCHED_FIFO, locked memory, a pinned
-//! CPU). Shared by the live segment and the master.
+//! CPU), and the [`Io`] trait through which the master meets its world. Shared by the live
+//! segment and the master.
 mod tap;
+mod world;
 
 pub use tap::Tap;
+pub use world::Io;
 
 use std::io;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};

@@ -1,8 +1,8 @@
 //! The ferrocat EtherCAT master.
 //!
-//! One codebase for two worlds: [`io::VirtualIo`] runs the master in virtual time against the
-//! in-process segment with a model of the host (fast, deterministic), [`io::RawIo`] in real time
-//! on a network interface. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
+//! The master runs on any world behind the [`io::Io`] trait: [`io::RawIo`] in real time on a
+//! network interface, [`io::UdpIo`] over UDP, or (from the `ferrocat-segment` crate, which this
+//! one does not depend on) the simulated segment in virtual time. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
 //! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
 pub mod calibrate;
 pub mod cia402;

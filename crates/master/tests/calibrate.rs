@@ -1,10 +1,11 @@
 //! The GPIO calibration against the simulator's true clocks: it finds what half the software
 //! stamps' asymmetry does to ferrocat's master clock, and taking it out removes it.
 use ferrocat_master::calibrate::GpioCalibration;
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Correction, Coupling, Ferrocat};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 const CYCLE_NS: u64 = 1_000_000;
 

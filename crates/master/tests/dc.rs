@@ -1,7 +1,8 @@
 //! DC initialisation in virtual time, judged by the true clocks the simulator knows.
-use ferrocat_master::io::{HostModel, Io, Stamps, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, Stamps, VirtualIo};
 
 fn segment() -> Master<VirtualIo> {
     segment_on(HostModel::pc_rt())

@@ -1,9 +1,9 @@
 //! Propagation delays the master computes, against the true ones the simulator knows, on
 //! topologies where existing masters go wrong: trees through a junction, non-DC slaves between
 //! DC slaves, a slave entered on a port other than 0, long cables.
-use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::{Address, Command};
 
 /// The closed-port loop-back of the simulated ESCs (docs/segment-model.md), which a master

@@ -1,9 +1,9 @@
 //! EoE between the master's client and the simulated drive's endpoint, in virtual time: IP
 //! parameters, frames in fragments both ways, ping, and frames met during other exchanges.
 use ferrocat_esc::{Cia402Drive, EoeServer};
-use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::{EoePing, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::eoe::IpParameters;
 use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
 use ferrocat_wire::inet::{ArpRepr, ARP_REPLY, ARP_REQUEST, ETHERTYPE_ARP};

@@ -1,8 +1,8 @@
 //! FoE between the master's client and the simulated drive's file server, in virtual time.
 use ferrocat_esc::{Cia402Drive, FoeServer};
-use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::foe::max_data_len;
 
 const DRIVE: u16 = 1;

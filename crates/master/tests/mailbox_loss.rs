@@ -1,9 +1,9 @@
 //! Mailbox exchanges through a segment that loses frames anywhere along it: a read lost after
 //! the slave handed its message over is asked for again (the mailbox repeat), and a request
 //! written again after its frame was lost on the way back is taken once.
-use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 const DRIVE: u16 = 1;
 

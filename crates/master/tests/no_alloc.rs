@@ -3,9 +3,10 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 struct Counting;
 static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);

@@ -1,9 +1,10 @@
 //! Faults during cyclic operation: 1 % frame loss, a slave power-cycled, a link pulled and
 //! restored. The exchange keeps running, each event is reported once naming the slave, and the
 //! slaves come back to OP without restarting the master.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::{Health, Master, MasterEvent};
 use ferrocat_segment::{Event, SegmentConfig};
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::register::AlState;
 
 #[test]
@@ -66,7 +67,7 @@ fn loss_power_cycle_and_link_pull() {
 /// the request of SAFEOP is dropped.
 #[test]
 fn a_frame_lost_while_starting_is_no_event() {
-    use ferrocat_master::io::Tamper;
+    use ferrocat_segment::Tamper;
     use ferrocat_wire::{Address, Command, Frame};
     let cfg: SegmentConfig = toml::from_str(
         "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\

@@ -4,10 +4,11 @@
 //! counter when a cable in the ring is pulled; and the split ring's far half keeps its clocks
 //! by holding over instead of taking a reference time a master round trip old, together behind
 //! its own first clock.
-use ferrocat_master::io::{HostModel, Io, Tamper, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_master::{RingState, SplitRingClocks};
 use ferrocat_segment::{Event, SegmentConfig};
+use ferrocat_segment::{HostModel, Tamper, VirtualIo};
 
 const DEVICES: &str = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
     [[device]]\nbuiltin = 'EK1100'\nparent = 0\nsync_unit = true\n[[device]]\nbuiltin = 'EL2004'\n";

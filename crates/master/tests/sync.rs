@@ -1,9 +1,10 @@
 //! The cyclic synchronisation methods in virtual time, on the same segment and seed (paired),
 //! judged by the true clocks the simulator knows.
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Chen2016, ClockSync, Conventional, Coupling, Ferrocat, Park2020, SoemPi, Steering};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 
 const CYCLE_NS: u64 = 1_000_000;
 
@@ -126,7 +127,7 @@ fn reference_follows_master_methods_side_by_side() {
         }
         // The other slaves follow the reference.
         assert!((ours.last_mean - ours.ref_mean).abs() < 100.0, "{} {}", ours.last_mean, ours.ref_mean);
-        if host.stamps == ferrocat_master::io::Stamps::Hardware {
+        if host.stamps == ferrocat_segment::Stamps::Hardware {
             // What is left is the reference's sawtooth between two offsets (its 40 ppm over
             // half a cycle: 20 ns), sampled at one phase of the cycle.
             assert!(ours.ref_mean.abs() <= 50.0, "with hardware timestamps: {}", ours.ref_mean);
@@ -428,7 +429,7 @@ fn probes_give_the_reference_an_offset_that_holds_until_the_next_frame() {
 /// wake-up, the half cycle they may fill would run into it).
 #[test]
 fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
-    use ferrocat_master::io::Latency;
+    use ferrocat_segment::Latency;
     let host = HostModel { name: "late-wake", wake: Latency::fixed(600_000.0), ..HostModel::pc_rt() };
     let mut m = segment(host);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
@@ -457,7 +458,7 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
 /// probes wanted would fill several cycles; they stop where one more could overrun the cycle.
 #[test]
 fn probes_end_within_the_cycle_on_a_slow_receive_path() {
-    use ferrocat_master::io::{Latency, Stamps};
+    use ferrocat_segment::{Latency, Stamps};
     let host = HostModel {
         name: "slow-receive",
         send: Latency::fixed(10_000.0),

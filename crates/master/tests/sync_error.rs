@@ -3,9 +3,10 @@
 //! error (0x001A), one missed cycle does not, a limit of 0 (0x10F1:02 by SDO, or the segment
 //! file) turns the reaction off; the master reports the drive once and brings it back to OP.
 use ferrocat_esc::Cia402Drive;
-use ferrocat_master::io::{HostModel, Io, VirtualIo};
+use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master, MasterEvent};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::register::AlStatusCode;
 use ferrocat_wire::{Address, Command};
 
@@ -63,7 +64,7 @@ fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent
 }
 
 fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
-    m.engine.io.segment().unwrap().nodes[1].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
+    m.engine.io.seg.nodes[1].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
 }
 
 #[test]
@@ -115,7 +116,7 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     next += 4 * CYCLE_NS;
     m.engine.io.sleep_until(next);
     assert!(m.cycle().unwrap() < m.expected_wkc);
-    let seg = m.engine.io.segment().unwrap();
+    let seg = &m.engine.io.seg;
     assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
     bring_up(&mut m, &[], &[1]);
     let mut next = m.engine.io.now_ns();
@@ -169,7 +170,7 @@ fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
     assert!((3_000_000..5_000_000).contains(&after), "seen {after} ns after SYNC0 stopped");
     // It cannot come back without SYNC0: the master reports it once.
     assert_eq!(text.len(), 1, "{text:#?}");
-    assert_eq!(m.engine.io.segment().unwrap().nodes[1].esc.sync_errors, 1);
+    assert_eq!(m.engine.io.seg.nodes[1].esc.sync_errors, 1);
 }
 
 #[test]

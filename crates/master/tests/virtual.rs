@@ -1,8 +1,8 @@
 //! The master in virtual time against the in-process segment.
 use ferrocat_esc::DigitalIo;
-use ferrocat_master::io::{HostModel, VirtualIo};
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::register::AlState;
 
 fn master(toml: &str, host: HostModel) -> Master<VirtualIo> {
@@ -308,7 +308,8 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
 /// stamp, taken at the hand-over, does not — as on real hardware.
 #[test]
 fn back_to_back_frames_queue_at_the_nic_and_only_its_stamps_see_it() {
-    use ferrocat_master::io::{Io, Latency, Stamps};
+    use ferrocat_master::io::Io;
+    use ferrocat_segment::{Latency, Stamps};
     use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
     use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
     let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };

@@ -4,16 +4,22 @@ pub mod bench;
 mod builtin;
 mod config;
 pub mod files;
+pub mod host;
 pub mod live;
 pub mod od_build;
 mod segment;
+mod tamper;
 pub mod timing;
+mod virtual_io;
 mod watch;
 
 pub use config::{
     load_device, DeviceSource, DeviceToml, EventToml, PortToml, SecondaryToml, SegmentConfig, SegmentError,
 };
+pub use host::{HostModel, Latency, Stamps};
 pub use segment::{Event, MasterPort, Node, Peer, SecondaryLink, Segment, SegmentStats};
+pub use tamper::Tamper;
+pub use virtual_io::VirtualIo;
 pub use watch::Watch;
 
 /// The names `builtin = …` accepts in a segment file.

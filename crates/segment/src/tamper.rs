@@ -1,8 +1,6 @@
 //! A world whose received frames pass through a hook first: a faulty or hostile device, or a
 //! corrupting link, for tests and fuzzing.
-use ferrocat_segment::Segment;
-
-use super::Io;
+use ferrocat_link::Io;
 
 /// `inner` with `hook(frame, len, on_secondary)` applied to every frame received: it may
 /// change the bytes and returns the length to deliver (shorter: cut), or `None` to drop the
@@ -43,12 +41,6 @@ impl<I: Io, F: FnMut(&mut [u8], usize, bool) -> Option<usize>> Io for Tamper<I, 
     }
     fn is_virtual(&self) -> bool {
         self.inner.is_virtual()
-    }
-    fn segment(&self) -> Option<&Segment> {
-        self.inner.segment()
-    }
-    fn segment_mut(&mut self) -> Option<&mut Segment> {
-        self.inner.segment_mut()
     }
     fn timer_resolution_ns(&self) -> u64 {
         self.inner.timer_resolution_ns()
