@@ -179,6 +179,14 @@ enum Command {
         /// during the run (one fragment each way between cycles, per slave).
         #[arg(long)]
         eoe_tap: Vec<String>,
+        /// With --dc: the clock-sync method the master runs each cycle, in the cyclic frame
+        /// (docs/clock-sync.md); `none` only distributes the reference's time.
+        #[arg(long, default_value = "ferrocat", requires = "dc",
+              value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
+        sync: String,
+        /// Print the summary as one JSON object on standard output instead of text.
+        #[arg(long)]
+        json: bool,
     },
     /// CiA402 drives with DC on the embedded virtual segment: a synchronised move of every axis
     /// per clock-sync method and cycle time; the master–slave error, SYNC0 simultaneity,
@@ -608,8 +616,16 @@ fn main() -> ExitCode {
                 no_gpio_calibration,
             })
         }
-        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames, eoe_tap } => {
-            master_cmd::run(&target, seconds, cycle_us, dc.then_some(dc_static_frames), max_rate, &eoe_tap)
+        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames, eoe_tap, sync, json } => {
+            let run = master_cmd::RunOptions {
+                seconds,
+                cycle_us,
+                dc: dc.then_some((dc_static_frames, sync.as_str())),
+                max_rate,
+                eoe_taps: &eoe_tap,
+                json,
+            };
+            master_cmd::run(&target, &run)
         }
     };
     match result {

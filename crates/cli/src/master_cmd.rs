@@ -4,7 +4,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{bail, Context};
-use ferrocat_master::Master;
+use ferrocat_master::sync::{ClockSync, Coupling, SyncMethod};
+use ferrocat_master::{Master, SyncState};
 use serde_json::json;
 
 use crate::outln;
@@ -375,15 +376,29 @@ fn cpu_ns() -> u64 {
     t(u.ru_utime) + t(u.ru_stime)
 }
 
-pub fn run(
-    t: &Target,
-    seconds: f64,
-    cycle_us: u64,
-    dc_static_frames: Option<u32>,
-    max_rate: bool,
-    eoe_taps: &[String],
-) -> anyhow::Result<ExitCode> {
-    let dc = dc_static_frames.is_some();
+/// What `ferrocat run` was asked for.
+pub struct RunOptions<'a> {
+    pub seconds: f64,
+    pub cycle_us: u64,
+    /// With DC: the static drift compensation's frames at most, and the clock-sync preset.
+    pub dc: Option<(u32, &'a str)>,
+    pub max_rate: bool,
+    pub eoe_taps: &'a [String],
+    pub json: bool,
+}
+
+/// A method's lock state and filtered offset, in words.
+fn lock_text(method: &dyn ClockSync, st: &SyncState) -> String {
+    match st.lock.offset_ns() {
+        Some(o) => format!("{}: {}, offset {o} ns", method.name(), st.lock.state()),
+        None => format!("{}: {}", method.name(), st.lock.state()),
+    }
+}
+
+pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
+    let RunOptions { seconds, cycle_us, max_rate, eoe_taps, json, .. } = *o;
+    let dc = o.dc.is_some();
+    let dc_static_frames = o.dc.map(|(frames, _)| frames);
     if !(0.0..1e6).contains(&seconds) {
         bail!("--seconds {seconds}: give 0 (until SIGINT or SIGTERM) or a time below 1 000 000 s");
     }
@@ -410,6 +425,7 @@ pub fn run(
     };
     m.scan()?;
     m.configure()?;
+    let mut sync: Option<(Box<dyn ClockSync>, SyncState)> = None;
     if dc {
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
         let cfg = ferrocat_master::DcConfig {
@@ -417,7 +433,11 @@ pub fn run(
             max_frames: dc_static_frames.unwrap_or(15_000),
             ..Default::default()
         };
-        let r = m.init_dc(&cfg)?;
+        let name = o.dc.map_or("ferrocat", |(_, name)| name);
+        let method = SyncMethod::preset(name, Coupling::ReferenceFollowsMaster)
+            .with_context(|| format!("--sync {name}: not a method ({})", SyncMethod::PRESETS.join(", ")))?;
+        let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;
+        sync = Some((s, st));
         eprintln!(
             "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on {}",
             r.reference,
@@ -461,9 +481,23 @@ pub fn run(
     let mut next = start;
     let mut report = start + 1_000_000_000;
     let mut shown = m.events.len();
+    let mut next_period = period;
     while m.engine.io.now_ns() < end && !stop.load(Ordering::Relaxed) {
-        next += period;
-        m.cycle()?;
+        next += next_period;
+        next_period = match sync.as_mut() {
+            Some((method, st)) => {
+                let (_, c) = m.cycle_sync(method.as_mut(), st)?;
+                if max_rate {
+                    0
+                } else {
+                    c.next_period_ns.unwrap_or(period)
+                }
+            }
+            None => {
+                m.cycle()?;
+                period
+            }
+        };
         for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
@@ -473,8 +507,9 @@ pub fn run(
         shown = m.events.len();
         if m.engine.io.now_ns() >= report {
             let s = m.cycle_stats();
+            let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
             eprintln!(
-                "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} us  round trip {:.1} us (max {:.1})",
+                "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} us  round trip {:.1} us (max {:.1}){lock}",
                 (m.engine.io.now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
@@ -514,13 +549,40 @@ pub fn run(
         (false, 1) => format!("1 cycle of {cycle_us} us"),
         (false, n) => format!("{n} cycles of {cycle_us} us"),
     };
-    outln!(
-        "{cycles} (mean period {mean_period_us:.1} us); {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
-        s.wkc_errors,
-        s.max_jitter_ns as f64 / 1000.0,
-        s.max_round_trip_ns as f64 / 1000.0,
-        m.engine.stats.lost
-    );
+    let clock_sync = sync.as_ref().map(|(method, st)| {
+        serde_json::json!({
+            "method": method.name(),
+            "lock": st.lock.state().name(),
+            "offset_ns": st.lock.offset_ns(),
+            "frames_lost": st.lost,
+        })
+    });
+    if json {
+        outln!(
+            "{}",
+            serde_json::json!({
+                "cycles": s.cycles,
+                "cycle_us": if max_rate { None } else { Some(cycle_us) },
+                "mean_period_us": mean_period_us,
+                "wkc_errors": s.wkc_errors,
+                "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,
+                "max_round_trip_us": s.max_round_trip_ns as f64 / 1000.0,
+                "frames_lost": m.engine.stats.lost,
+                "clock_sync": clock_sync,
+            })
+        );
+    } else {
+        outln!(
+            "{cycles} (mean period {mean_period_us:.1} us); {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
+            s.wkc_errors,
+            s.max_jitter_ns as f64 / 1000.0,
+            s.max_round_trip_ns as f64 / 1000.0,
+            m.engine.stats.lost
+        );
+        if let Some((method, st)) = &sync {
+            outln!("clock sync {}", lock_text(&**method, st));
+        }
+    }
     if m.engine.io.has_secondary() {
         let ring = match m.engine.ring {
             ferrocat_master::RingState::Intact => "intact",

@@ -200,6 +200,8 @@ fn ring_run(tag: &str, clocks: &str) -> (std::process::Output, std::process::Out
     let run = ferrocat_in(&net.master_ns)
         .args(["run", "--iface", &net.master_if, "--secondary-iface", &master_red])
         .args(["--seconds", "8", "--cycle-us", "1000", "--dc", "--dc-static-frames", "2000"])
+        // The ring's own handling of the clocks, with no method correcting them.
+        .args(["--sync", "none"])
         .args(["--split-ring-clocks", clocks])
         .output()
         .unwrap();
@@ -267,6 +269,8 @@ fn scan_and_run_ring(net: &VethPair, ring: RingSim, seconds: &str) -> (serde_jso
     let run = ferrocat_in(&net.master_ns)
         .args(["run", "--iface", &net.master_if, "--secondary-iface", &master_red])
         .args(["--seconds", seconds, "--cycle-us", "1000", "--dc", "--dc-static-frames", "2000"])
+        // The ring's own handling of the clocks, with no method correcting them.
+        .args(["--sync", "none"])
         .output()
         .unwrap();
     let out = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));

@@ -13,7 +13,7 @@ mod world;
 
 pub use world::World;
 
-use ferrocat_master::sync::{Chen2016, ClockSync, Coupling, Ferrocat, Nominal, Park2020, SoemPi, Steering};
+use ferrocat_master::sync::{ClockSync, Coupling, SyncMethod};
 use ferrocat_master::{DcConfig, DcReport, Master};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -67,8 +67,26 @@ pub fn segment(
     Ok((m, sync, report))
 }
 
-/// `init_dc` on `m` and `method` made for it, in the order [`segment`] describes; with the
-/// DC initialisation's report.
+/// The method named `name` (a [`SyncMethod::PRESETS`] name) as the master's configuration;
+/// `coupling` is the one the plain ferrocat variants take.
+pub fn sync_method(name: &str, coupling: Coupling) -> anyhow::Result<SyncMethod> {
+    SyncMethod::preset(name, coupling)
+        .ok_or_else(|| anyhow::anyhow!("unknown method {name:?} (known: {})", SyncMethod::PRESETS.join(", ")))
+}
+
+/// The method named `name` made on `m`, whose DC is initialised already (see
+/// [`Master::make_clock_sync`]); `coupling` as [`sync_method`] takes it.
+pub fn method<I: World>(
+    name: &str,
+    m: &mut Master<I>,
+    cycle_ns: u64,
+    coupling: Coupling,
+) -> anyhow::Result<Box<dyn ClockSync>> {
+    Ok(m.make_clock_sync(&sync_method(name, coupling)?, cycle_ns)?)
+}
+
+/// `init_dc` on `m` and `method` made for it, in the order the master owns
+/// ([`Master::start_clock_sync`]); with the DC initialisation's report.
 pub fn init_with_method<I: World>(
     m: &mut Master<I>,
     dc: &DcConfig,
@@ -76,14 +94,9 @@ pub fn init_with_method<I: World>(
     cycle_ns: u64,
     coupling: Coupling,
 ) -> anyhow::Result<(Box<dyn ClockSync>, DcReport)> {
-    if method.starts_with("ferrocat") {
-        let mut sync = self::method(method, m, cycle_ns, coupling)?;
-        let report = m.init_dc_with(dc, Some(sync.as_mut()))?;
-        Ok((sync, report))
-    } else {
-        let report = m.init_dc(dc)?;
-        Ok((self::method(method, m, cycle_ns, coupling)?, report))
-    }
+    let config = sync_method(method, coupling)?;
+    let (sync, report, _) = m.start_clock_sync(dc, &config, cycle_ns)?;
+    Ok((sync, report))
 }
 
 /// A master on `cfg` in virtual time on `host`, for `method`: ferrocat's own methods compute
@@ -200,51 +213,6 @@ pub fn node_of<I: World>(m: &Master<I>, k: usize) -> Option<usize> {
 /// reference asked for.
 pub fn next_wake(next: u64, cycle_ns: u64, c: &ferrocat_master::sync::Correction) -> u64 {
     next.wrapping_add(c.next_period_ns.unwrap_or(cycle_ns))
-}
-
-/// A method by name, prepared on `m` (Park's delay measurement runs here); `coupling` is the
-/// one ferrocat's own method takes.
-pub fn method<I: World>(
-    name: &str,
-    m: &mut Master<I>,
-    cycle_ns: u64,
-    coupling: Coupling,
-) -> anyhow::Result<Box<dyn ClockSync>> {
-    Ok(match name {
-        "none" => Box::new(Nominal { cycle_ns }),
-        "conventional" => Box::new(ferrocat_master::sync::Conventional),
-        // Eq. 3 averaged over 1000 round trips, as published.
-        "park2020" => Box::new(Park2020::new(m.park_delay(1000)?)),
-        // N = 100 timestamp differences per speed update; the host's timer resolution.
-        "chen2016" => Box::new(Chen2016::new(cycle_ns, 100, m.engine.io.timer_resolution_ns())),
-        "pi" => Box::new(SoemPi::new(cycle_ns, 0)),
-        // A follower's crystal for the flywheel where the segment has a 64-bit follower
-        // (sync/flywheel.rs); without one, the same as the direct line.
-        "ferrocat" => Box::new(Ferrocat::new(coupling, cycle_ns).with_flywheel()),
-        // ferrocat with the master following the reference whatever the experiment's coupling.
-        "ferrocat-mfr" => Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel()),
-        // ferrocat's earlier reference-follows-master design: its time into the reference's
-        // time control loop (0x0910) rather than the reference's offset.
-        FERROCAT_TCL => {
-            let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns);
-            f.steering = Steering::TimeControlLoop;
-            Box::new(f)
-        }
-        dense if FERROCAT_DENSE.contains(&dense) => {
-            let coupling = if dense == FERROCAT_DENSE[0] { coupling } else { Coupling::MasterFollowsReference };
-            Box::new(Ferrocat::dense(coupling, cycle_ns))
-        }
-        direct if FERROCAT_DIRECT.contains(&direct) => {
-            let coupling = if direct == FERROCAT_DIRECT[0] { coupling } else { Coupling::MasterFollowsReference };
-            Box::new(Ferrocat::new(coupling, cycle_ns))
-        }
-        other => anyhow::bail!(
-            "unknown method {other:?} (known: {}, {FERROCAT_TCL}, {}, {})",
-            METHODS.join(", "),
-            FERROCAT_DENSE.join(", "),
-            FERROCAT_DIRECT.join(", ")
-        ),
-    })
 }
 
 #[cfg(test)]

@@ -490,6 +490,8 @@ pub struct SyncState {
     pub probes_cut: u64,
     /// Cable redundancy: the ring's state `loop_ns` was measured for.
     pub ring: crate::engine::RingState,
+    /// The method's lock state, from the offset each answered frame measures.
+    pub lock: crate::sync::Lock,
 }
 
 /// The latest receive time of the other active ports less the entry port's (across the 32-bit
@@ -531,6 +533,47 @@ impl<I: Io> Master<I> {
             .iter()
             .position(|s| s.station == st)
             .ok_or_else(|| MasterError::Config("reference clock gone".into()))
+    }
+
+    /// Starts clock synchronisation with `method` for a cycle of `cycle_ns`: the DC
+    /// initialisation (`cfg`) and the method, in the order the method needs. ferrocat's own is
+    /// made first, so that one steering the reference's offset does so from the static drift
+    /// compensation on; the others after it, as published (Park 2020's delay is measured over
+    /// its round trips then). Returns the running method, the DC initialisation's report, and
+    /// the state to pass to each [`Master::cycle_sync`] or [`Master::sync_step`].
+    pub fn start_clock_sync(
+        &mut self,
+        cfg: &DcConfig,
+        method: &crate::sync::SyncMethod,
+        cycle_ns: u64,
+    ) -> Result<(Box<dyn crate::sync::ClockSync>, DcReport, SyncState)> {
+        let resolution_ns = self.engine.io.timer_resolution_ns();
+        let (sync, report) = if method.is_ferrocat() {
+            let mut sync = method.build(cycle_ns, 0, resolution_ns);
+            let report = self.init_dc_with(cfg, Some(sync.as_mut()))?;
+            (sync, report)
+        } else {
+            let report = self.init_dc(cfg)?;
+            (self.make_clock_sync(method, cycle_ns)?, report)
+        };
+        tracing::info!(method = sync.name(), cycle_ns, "clock sync started");
+        let st = self.sync_state()?;
+        Ok((sync, report, st))
+    }
+
+    /// `method` made for a cycle of `cycle_ns` on a master whose DC is initialised already
+    /// (Park 2020's delay is measured here, over its round trips). [`Master::start_clock_sync`]
+    /// does the DC initialisation and this in the order the method needs.
+    pub fn make_clock_sync(
+        &mut self,
+        method: &crate::sync::SyncMethod,
+        cycle_ns: u64,
+    ) -> Result<Box<dyn crate::sync::ClockSync>> {
+        let park_delay_ns = match *method {
+            crate::sync::SyncMethod::Park2020 { round_trips, .. } => self.park_delay(round_trips)?,
+            _ => 0,
+        };
+        Ok(method.build(cycle_ns, park_delay_ns, self.engine.io.timer_resolution_ns()))
     }
 
     /// A fresh state for cyclic synchronisation, with the reference's loop time.
@@ -705,6 +748,11 @@ impl<I: Io> Master<I> {
             st.lost += 1;
             None
         };
+        let before = st.lock.state();
+        let now = st.lock.observe(sample.as_ref().and_then(|s| sync.offset_ns(s)), sample.is_none());
+        if now != before {
+            tracing::info!(method = sync.name(), offset_ns = st.lock.offset_ns(), "clock sync {before} -> {now}");
+        }
         let c = sync.update(sample.as_ref());
         if c.shift_offsets_ns != 0 {
             // A method that gives the reference its offset moves the reference itself.

@@ -2,16 +2,20 @@
 //! behind one small interface, as linuxptp's servos do: each cycle the master hands a
 //! [`ClockSync`] what its DC frame measured and carries out the [`Correction`] it returns.
 mod chen2016;
+mod config;
 mod conventional;
 mod ferrocat;
 mod flywheel;
+mod lock;
 mod park2020;
 mod pi;
 
 pub use chen2016::Chen2016;
+pub use config::{FerrocatSettings, SyncMethod};
 pub use conventional::{Conventional, Nominal};
 pub use ferrocat::{Ferrocat, Steering, DENSE_FIT_WINDOW, FIT_WINDOW};
 pub use flywheel::speed_deviation;
+pub use lock::{Lock, LockState, LockThresholds};
 pub use park2020::Park2020;
 pub use pi::SoemPi;
 
@@ -154,6 +158,18 @@ pub trait ClockSync {
     /// Whether the cycle's frame should also read a follower's clock ([`Sample::follower`]).
     fn reads_follower_clock(&self) -> bool {
         false
+    }
+    /// The master's offset to the reference that `sample` measures, ns: the reference's time
+    /// at the frame's passage less what the method believed it (its
+    /// [`ClockSync::reference_belief_ns`] at the frame's build plus the one-way lead), as
+    /// linuxptp's "master offset". Asked before [`ClockSync::update`] takes the sample. `None`
+    /// where the method keeps no estimate of the reference's time to compare.
+    fn offset_ns(&self, sample: &Sample) -> Option<i64> {
+        if self.coupling() == Coupling::MasterFollowsReference && self.master_time(sample.built_ns).is_none() {
+            return None;
+        }
+        let believed = self.reference_belief_ns(sample.built_ns).wrapping_add_signed(sample.lead_ns());
+        Some(sample.reference_ns.wrapping_sub(believed) as i64)
     }
     /// Takes one cycle's sample (`None`: the frame was lost).
     fn update(&mut self, sample: Option<&Sample>) -> Correction;

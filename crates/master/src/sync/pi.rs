@@ -17,6 +17,19 @@ impl SoemPi {
     }
 }
 
+impl SoemPi {
+    /// The reference's time modulo the cycle less the shift, in (−cycle/2, cycle/2].
+    fn phase_error_ns(&self, s: &Sample) -> i64 {
+        let c = self.cycle_ns as i64;
+        let delta = (s.reference_ns.wrapping_sub(self.shift_ns as u64) % self.cycle_ns) as i64;
+        if delta > c / 2 {
+            delta - c
+        } else {
+            delta
+        }
+    }
+}
+
 impl ClockSync for SoemPi {
     fn name(&self) -> &'static str {
         "pi"
@@ -24,13 +37,15 @@ impl ClockSync for SoemPi {
     fn coupling(&self) -> Coupling {
         Coupling::MasterFollowsReference
     }
+    /// The phase error the loop works on: where in the reference's cycle the frame passed it,
+    /// less the aimed shift.
+    fn offset_ns(&self, s: &Sample) -> Option<i64> {
+        Some(self.phase_error_ns(s))
+    }
     fn update(&mut self, s: Option<&Sample>) -> Correction {
         let c = self.cycle_ns as i64;
         let Some(s) = s else { return Correction { shift_offsets_ns: 0, next_period_ns: Some(self.cycle_ns) } };
-        let mut delta = (s.reference_ns.wrapping_sub(self.shift_ns as u64) % self.cycle_ns) as i64;
-        if delta > c / 2 {
-            delta -= c;
-        }
+        let delta = self.phase_error_ns(s);
         self.integral = self.integral.saturating_add(delta.signum());
         let period = c.saturating_sub(delta / 100).saturating_sub(self.integral / 20);
         Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1) as u64) }

@@ -1,0 +1,160 @@
+//! The lock state of a running clock-sync method, in the manner of linuxptp's servo states:
+//! from the master's offset to the reference that each cycle's frame measures.
+
+/// How far along a method is, from its measured offset to the reference.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LockState {
+    /// No offset measured yet, the last [`LockThresholds::lost_cycles`] frames all lost, or a
+    /// method that keeps no estimate of the reference's time to compare (`chen2016`).
+    #[default]
+    Unlocked,
+    /// Offsets measured, but not yet [`LockThresholds::lock_cycles`] in a row within
+    /// [`LockThresholds::lock_ns`].
+    Locking,
+    /// The filtered offset has stayed within [`LockThresholds::lock_ns`] for
+    /// [`LockThresholds::lock_cycles`] answered frames in a row, and not since left
+    /// [`LockThresholds::unlock_ns`].
+    Locked,
+}
+
+impl LockState {
+    /// The state in lower case, as logs and JSON give it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LockState::Unlocked => "unlocked",
+            LockState::Locking => "locking",
+            LockState::Locked => "locked",
+        }
+    }
+}
+
+impl std::fmt::Display for LockState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// When a method counts as locked. The offset compared is the median of the last
+/// 15 measured offsets, so that one late frame neither locks nor unlocks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LockThresholds {
+    /// Lock within this |offset|, ns (default 1 000).
+    pub lock_ns: u64,
+    /// Leave lock beyond this |offset|, ns (default 4 000).
+    pub unlock_ns: u64,
+    /// Answered frames in a row within `lock_ns` to lock (default 100).
+    pub lock_cycles: u32,
+    /// Frames lost in a row that unlock (default 100).
+    pub lost_cycles: u32,
+}
+
+impl Default for LockThresholds {
+    fn default() -> Self {
+        LockThresholds { lock_ns: 1_000, unlock_ns: 4_000, lock_cycles: 100, lost_cycles: 100 }
+    }
+}
+
+/// Offsets the median is taken over.
+const FILTER_LEN: usize = 15;
+
+/// Follows a method's offsets and says its [`LockState`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Lock {
+    /// When to lock and unlock.
+    pub thresholds: LockThresholds,
+    state: LockState,
+    recent: [i64; FILTER_LEN],
+    filled: usize,
+    next: usize,
+    within: u32,
+    lost_in_row: u32,
+    offset_ns: Option<i64>,
+}
+
+impl Lock {
+    /// The state now.
+    pub fn state(&self) -> LockState {
+        self.state
+    }
+
+    /// The filtered offset (median of the last 15), ns: the reference's time
+    /// less the method's estimate of it; `None` before the first.
+    pub fn offset_ns(&self) -> Option<i64> {
+        self.offset_ns
+    }
+
+    /// Takes one cycle's measured offset (`None`: the frame was lost, or the method keeps no
+    /// estimate to compare) and returns the state after it.
+    pub fn observe(&mut self, offset_ns: Option<i64>, frame_lost: bool) -> LockState {
+        let t = self.thresholds;
+        if frame_lost {
+            self.lost_in_row = self.lost_in_row.saturating_add(1);
+            if self.lost_in_row >= t.lost_cycles.max(1) {
+                self.state = LockState::Unlocked;
+                self.within = 0;
+            }
+            return self.state;
+        }
+        self.lost_in_row = 0;
+        let Some(offset) = offset_ns else {
+            self.state = LockState::Unlocked;
+            return self.state;
+        };
+        self.recent[self.next] = offset;
+        self.next = (self.next + 1) % FILTER_LEN;
+        self.filled = (self.filled + 1).min(FILTER_LEN);
+        let mut window = self.recent;
+        let window = &mut window[..self.filled];
+        window.sort_unstable();
+        let median = window[window.len() / 2];
+        self.offset_ns = Some(median);
+        let size = median.unsigned_abs();
+        self.within = if size <= t.lock_ns { self.within.saturating_add(1) } else { 0 };
+        self.state = match self.state {
+            LockState::Locked if size <= t.unlock_ns => LockState::Locked,
+            _ if self.within >= t.lock_cycles.max(1) => LockState::Locked,
+            _ => LockState::Locking,
+        };
+        self.state
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(lock: &mut Lock, offsets: impl IntoIterator<Item = i64>) -> LockState {
+        offsets.into_iter().map(|o| lock.observe(Some(o), false)).last().unwrap_or_default()
+    }
+
+    #[test]
+    fn locks_after_enough_cycles_within_and_unlocks_with_hysteresis() {
+        let mut lock = Lock::default();
+        assert_eq!(lock.state(), LockState::Unlocked);
+        assert_eq!(run(&mut lock, [50_000; 20]), LockState::Locking);
+        // The median needs 8 of 15 within before it is; then 100 in a row.
+        assert_eq!(run(&mut lock, [300; 106]), LockState::Locking);
+        assert_eq!(run(&mut lock, [300; 1]), LockState::Locked);
+        // Between lock_ns and unlock_ns: still locked.
+        assert_eq!(run(&mut lock, [3_000; 30]), LockState::Locked);
+        // One outlier does not move the median.
+        assert_eq!(run(&mut lock, [-90_000; 1]), LockState::Locked);
+        assert_eq!(run(&mut lock, [9_000; 8]), LockState::Locking);
+        assert_eq!(lock.offset_ns(), Some(9_000));
+    }
+
+    #[test]
+    fn lost_frames_unlock_only_after_enough_in_a_row() {
+        let mut lock = Lock::default();
+        run(&mut lock, [0; 200]);
+        assert_eq!(lock.state(), LockState::Locked);
+        for _ in 0..99 {
+            lock.observe(None, true);
+        }
+        assert_eq!(lock.state(), LockState::Locked);
+        assert_eq!(lock.observe(None, true), LockState::Unlocked);
+        assert_eq!(lock.observe(Some(0), false), LockState::Locking);
+        // A method without an estimate stays unlocked.
+        assert_eq!(lock.observe(None, false), LockState::Unlocked);
+    }
+}
