@@ -123,15 +123,7 @@ pub fn loop_back_ns() -> u32 {
 }
 
 /// Methods that take out what a calibration measured (`ClockSync::take_error`).
-pub const CALIBRATED: [&str; 7] = [
-    "ferrocat",
-    "ferrocat-mfr",
-    "ferrocat-tcl",
-    "ferrocat-dense",
-    "ferrocat-mfr-dense",
-    "ferrocat-direct",
-    "ferrocat-mfr-direct",
-];
+pub const CALIBRATED: [&str; 7] = SyncMethod::FERROCAT_PRESETS;
 
 /// `a` then `b`, for method lists built from others (`C` must be their lengths' sum).
 pub(crate) const fn concat_names<const A: usize, const B: usize, const C: usize>(

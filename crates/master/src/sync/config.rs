@@ -78,12 +78,18 @@ impl Default for FerrocatSettings {
 impl SyncMethod {
     /// The named presets: the papers' methods as published, the baselines, and ferrocat's
     /// variants.
-    pub const PRESETS: [&'static str; 12] = [
-        "none",
-        "conventional",
-        "park2020",
-        "chen2016",
-        "pi",
+    pub const PRESETS: [&'static str; 12] = {
+        let mut all = ["none", "conventional", "park2020", "chen2016", "pi", "", "", "", "", "", "", ""];
+        let mut k = 0;
+        while k < Self::FERROCAT_PRESETS.len() {
+            all[5 + k] = Self::FERROCAT_PRESETS[k];
+            k += 1;
+        }
+        all
+    };
+
+    /// The presets of ferrocat's own method.
+    pub const FERROCAT_PRESETS: [&'static str; 7] = [
         "ferrocat",
         "ferrocat-mfr",
         "ferrocat-tcl",
@@ -180,6 +186,7 @@ mod tests {
             assert!(built.name().starts_with(family), "{name} built {}", built.name());
             assert_eq!(built.coupling(), m.coupling(), "{name}");
         }
+        assert!(SyncMethod::PRESETS.iter().all(|p| !p.is_empty()));
         assert_eq!(SyncMethod::preset("Ferrocat", Coupling::ReferenceFollowsMaster), None);
         assert_eq!(SyncMethod::default(), SyncMethod::preset("ferrocat", Coupling::ReferenceFollowsMaster).unwrap());
     }
