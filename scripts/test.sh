@@ -95,6 +95,8 @@ done
 echo "ferrocat-master depends on: $(grep '^ferrocat-' <<<"$deps" | grep -vx ferrocat-master | tr '\n' ' ')(and $(grep -vc '^ferrocat-' <<<"$deps") outside crates)"
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
+log "doctests (nextest runs none)"
+cargo test --doc --workspace --quiet
 log "cargo package (every crate packs: licences, metadata, versions of the path dependencies)"
 cargo package --workspace --no-verify --quiet
 

@@ -1,5 +1,26 @@
 //! The ferrocat EtherCAT master.
 //!
+//! ```no_run
+//! use ferrocat_master::{io::RawIo, Master};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut master = Master::new(RawIo::open("eth0")?);
+//! master.bring_up()?; // scan, configure, and every slave to OP
+//! let light = master.output(1, "Output")?; // an entry by slave position and name
+//! let mut next = master.now_ns();
+//! for k in 0..1_000u64 {
+//!     master.set(light, (k / 100) & 1);
+//!     master.cycle()?; // one exchange of the whole process image
+//!     next += 1_000_000;
+//!     master.sleep_until(next);
+//! }
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! Complete programs are in `examples/`: `scan`, `cyclic_io`, `dc_sync` (a clock-sync method
+//! and its lock state), `two_axes_csp` (two CiA402 drives in CSP with DC) and `sdo`.
+//!
 //! The master runs on any world behind the [`io::Io`] trait: [`io::RawIo`] in real time on a
 //! network interface, [`io::UdpIo`] over UDP, or (from the `ferrocat-segment` crate, which this
 //! one does not depend on) the simulated segment in virtual time. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),

@@ -357,6 +357,17 @@ impl<I: Io> Master<I> {
         Some(r.position)
     }
 
+    /// The world's clock now, ns (CLOCK_MONOTONIC on a real link).
+    pub fn now_ns(&mut self) -> u64 {
+        self.engine.io.now_ns()
+    }
+
+    /// Sleeps until `t_ns` of [`Master::now_ns`]'s clock (absolute, so that a cyclic loop
+    /// keeps its period however long each cycle took).
+    pub fn sleep_until(&mut self, t_ns: u64) {
+        self.engine.io.sleep_until(t_ns)
+    }
+
     /// Scan, configure, start: the whole bring-up.
     pub fn bring_up(&mut self) -> Result<()> {
         self.scan()?;

@@ -1,0 +1,71 @@
+//! The master's examples (crates/master/examples), each a complete program on a raw
+//! interface, run unmodified against `ferrocat sim` over a veth pair, so that none can rot.
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use common::{Sim, VethPair};
+
+/// The examples, built with the profile this test was built with.
+fn examples_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    // target/<profile>/deps/<this test>
+    let profile_dir = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
+    let release = profile_dir.file_name().is_some_and(|n| n == "release");
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut build = Command::new(cargo);
+    build.args(["build", "--quiet", "-p", "ferrocat-master", "--examples"]);
+    if release {
+        build.arg("--release");
+    }
+    let status = build.current_dir(env!("CARGO_MANIFEST_DIR")).status().expect("cargo, to build the examples");
+    assert!(status.success(), "building the examples failed");
+    profile_dir.join("examples")
+}
+
+fn run(net: &VethPair, dir: &std::path::Path, example: &str, args: &[&str]) -> String {
+    let out = VethPair::cmd(&net.master_ns, dir.join(example).to_str().unwrap())
+        .arg(&net.master_if)
+        .args(args)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    println!("--- {example} {}\n{stdout}", args.join(" "));
+    assert!(out.status.success(), "{example}: {stdout}{}", String::from_utf8_lossy(&out.stderr));
+    stdout
+}
+
+#[test]
+fn every_example_runs_against_the_simulator() {
+    let dir = examples_dir();
+    let net = VethPair::new("ex");
+    let devices = ["EK1100", "EL2004", "EL1004", "SERVO", "SERVO"];
+    let args: Vec<&str> = devices.iter().flat_map(|d| ["--device", d]).collect();
+    let sim = Sim::start(&net, &args);
+
+    let out = run(&net, &dir, "scan", &[]);
+    assert!(out.starts_with("5 slaves on "), "{out}");
+    assert_eq!(out.lines().filter(|l| l.contains("EK1100") || l.contains("EL2004")).count(), 2, "{out}");
+
+    let out = run(&net, &dir, "cyclic_io", &["500"]);
+    assert!(out.contains("writing '") && out.contains("of slave 1"), "the EL2004's first output: {out}");
+    assert!(out.contains("500 cycles"), "{out}");
+
+    let out = run(&net, &dir, "sdo", &["3"]);
+    assert!(out.contains("device name: ferrocat simulated CiA402 servo drive"), "{out}");
+    assert!(out.contains("0x6060 mode of operation: 8"), "{out}");
+
+    let out = run(&net, &dir, "dc_sync", &["ferrocat", "4"]);
+    // Software stamps on a loaded machine: locked at some report, not necessarily every one.
+    assert!(out.lines().any(|l| l.starts_with("t = ") && l.contains(" locked ")), "{out}");
+
+    let out = run(&net, &dir, "two_axes_csp", &["3", "4"]);
+    let moved: Vec<i64> =
+        out.lines().filter_map(|l| l.split("moved ").nth(1)?.split(' ').next()?.parse().ok()).collect();
+    assert_eq!(moved.len(), 2, "{out}");
+    for m in moved {
+        assert!((m - 65_536).abs() < 2_000, "an axis moved {m} increments of 65 536: {out}");
+    }
+    sim.stop();
+}

@@ -1,0 +1,48 @@
+//! Brings a segment to OP and exchanges process data every millisecond, naming the entries it
+//! uses: a running light on the first output entry, the first input entry read back.
+//!
+//!     cargo run --example cyclic_io -- eth0 [CYCLES]
+use ferrocat_master::io::RawIo;
+use ferrocat_master::Master;
+
+const CYCLE_NS: u64 = 1_000_000;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let iface = args.next().ok_or("usage: cyclic_io INTERFACE [CYCLES]")?;
+    let cycles: u64 = args.next().map_or(Ok(2_000), |n| n.parse())?;
+    let mut master = Master::new(RawIo::open(&iface)?);
+    master.bring_up()?;
+    // Entries by name, as the slaves' EEPROMs (or CoE) name them.
+    let find = |outputs: bool| {
+        master.slaves.iter().find_map(|s| {
+            let list = if outputs { &s.outputs } else { &s.inputs };
+            list.first().map(|e| (s.position, e.name.clone()))
+        })
+    };
+    let (out_slave, out_name) = find(true).ok_or("no slave has outputs")?;
+    let input = find(false);
+    let light = master.output(out_slave, &out_name)?;
+    println!("writing '{out_name}' of slave {out_slave}");
+    let mut next = master.now_ns();
+    let mut last_input = None;
+    let mut short = 0;
+    for k in 0..cycles {
+        master.set(light, (k / 100) & 1);
+        let wkc = master.cycle()?;
+        if wkc != master.expected_wkc {
+            short += 1;
+            eprintln!("cycle {k}: working counter {wkc}, expected {}", master.expected_wkc);
+        }
+        if let Some((pos, name)) = &input {
+            last_input = Some((name.clone(), master.get(master.input(*pos, name)?)));
+        }
+        next += CYCLE_NS;
+        master.sleep_until(next);
+    }
+    println!("{cycles} cycles, {short} with a working counter short");
+    if let Some((name, value)) = last_input {
+        println!("input '{name}' = {value}");
+    }
+    Ok(())
+}

@@ -1,0 +1,26 @@
+//! Lists the slaves on a network interface, as `slaveinfo` does.
+//!
+//!     cargo run --example scan -- eth0
+use ferrocat_master::io::RawIo;
+use ferrocat_master::Master;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let iface = std::env::args().nth(1).ok_or("usage: scan INTERFACE")?;
+    let mut master = Master::new(RawIo::open(&iface)?);
+    // Counts the slaves, gives them station addresses and reads their EEPROMs.
+    master.scan()?;
+    println!("{} slaves on {iface}", master.slaves.len());
+    for s in &master.slaves {
+        println!(
+            "{:3}  {:<12} vendor {:#010x} product {:#010x} rev {:#010x}  station {:#06x}{}",
+            s.position,
+            s.name,
+            s.vendor_id,
+            s.product_code,
+            s.revision,
+            s.station,
+            if s.has_dc { "  DC" } else { "" }
+        );
+    }
+    Ok(())
+}
