@@ -80,7 +80,7 @@ fn check_ring_delays(ring: &Master<VirtualIo>, cfg: &SegmentConfig, text: &str) 
 /// unit's time is taken as its port 0's, which is exact where it is entered on port 0; one before
 /// the reference has no delay (clamped to 0).
 fn check_delays(m: &Master<VirtualIo>, text: &str) {
-    let visits = m.engine.io.seg.last_visits();
+    let visits = m.io().seg.last_visits();
     if visits.len() != m.slaves.len() {
         return;
     }

@@ -78,24 +78,24 @@ fuzz_target!(|data: &[u8]| {
     }
     // A ring: its cable pulled now, and cycles enough for the far reference to be kept.
     let cycles = if ring {
-        let now = m.engine.io.now_ns();
+        let now = m.io_mut().now_ns();
         let event = if split_first {
             (now + 50_000_000, Event::LinkUp { node: 2, port: 0 })
         } else {
             (now, Event::LinkDown { node: 2, port: 0 })
         };
-        m.engine.io.inner.seg.schedule(event.0, event.1);
+        m.io_mut().inner.seg.schedule(event.0, event.1);
         200
     } else {
         20
     };
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     for _ in 0..cycles {
         let _ = m.cycle();
         let _ = m.dc_monitor();
         if ring {
             next += 1_000_000;
-            m.engine.io.sleep_until(next);
+            m.io_mut().sleep_until(next);
         }
     }
     let _ = m.supervise();

@@ -124,7 +124,7 @@ fn prepared(stage: u8) -> (Segment, u64) {
     if stage >= 4 {
         m.start().expect("OP");
     }
-    let mut io = m.engine.io;
+    let mut io = m.into_io();
     let t_ns = ferrocat_master::io::Io::now_ns(&mut io);
     (io.seg, t_ns)
 }

@@ -213,7 +213,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let (mut sync, _) =
         ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
-    let start = m.engine.io.now_ns();
+    let start = m.io_mut().now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
     let mut clock = Vec::new();
@@ -223,8 +223,8 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     while next < to_ns {
         // A master that follows the reference wakes when it says.
         next = ferrocat_lab::next_wake(next, cycle_ns, &c);
-        m.engine.io.sleep_until(next);
-        let now = m.engine.io.now_ns();
+        m.io_mut().sleep_until(next);
+        let now = m.io_mut().now_ns();
         if now >= from_ns && probes_from.is_none() {
             probes_from = Some(st.probes);
         }
@@ -233,7 +233,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
         }
         c = m.sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
-        if m.engine.io.now_ns() + 2 * cycle_ns >= from_ns {
+        if m.io_mut().now_ns() + 2 * cycle_ns >= from_ns {
             let own = m.master_system_time();
             let ahead = own.wrapping_add(cycle_ns);
             if let (Some(a), Some(b)) = (sync.master_time(own), sync.master_time(ahead)) {

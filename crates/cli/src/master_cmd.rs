@@ -38,11 +38,11 @@ pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
     } else {
         outln!("{}", crate::count(m.slaves.len(), "slave", "found"));
         use ferrocat_master::io::Io;
-        if m.engine.io.has_secondary() {
+        if m.io_mut().has_secondary() {
             let far = m.split_latch.as_ref().and_then(|l| l.far_reference);
             outln!(
                 "{}",
-                match (m.engine.ring, far) {
+                match (m.ring_state(), far) {
                     (ferrocat_master::RingState::Intact, _) => "Ring intact: every slave on one pass".to_string(),
                     (ferrocat_master::RingState::Broken, Some(f)) => format!(
                         "Ring broken: the slaves behind the break answer from the secondary port; \
@@ -415,13 +415,13 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
-    if !m.engine.io.is_virtual() {
+    if !m.io_mut().is_virtual() {
         crate::target::go_real_time();
     }
-    eprintln!("timestamps: {}", m.engine.io.timestamps());
+    eprintln!("timestamps: {}", m.io_mut().timestamps());
     let t_start = {
         use ferrocat_master::io::Io;
-        m.engine.io.now_ns()
+        m.io_mut().now_ns()
     };
     m.scan()?;
     m.configure()?;
@@ -468,7 +468,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     let t_op = {
         use ferrocat_master::io::Io;
-        m.engine.io.now_ns()
+        m.io_mut().now_ns()
     };
     eprintln!("bring-up to OP: {:.1} ms", (t_op - t_start) as f64 / 1e6);
     let period = if max_rate { 0 } else { cycle_us * 1000 };
@@ -476,13 +476,13 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     m.reset_cycle_stats();
     let cpu0 = cpu_ns();
     use ferrocat_master::io::Io;
-    let start = m.engine.io.now_ns();
+    let start = m.io_mut().now_ns();
     let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
     let mut report = start + 1_000_000_000;
     let mut shown = m.events.len();
     let mut next_period = period;
-    while m.engine.io.now_ns() < end && !stop.load(Ordering::Relaxed) {
+    while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         next += next_period;
         next_period = match sync.as_mut() {
             Some((method, st)) => {
@@ -501,16 +501,17 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
+        let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
         for e in &m.events[shown..] {
-            eprintln!("t={:7.3} s  {e}", (m.engine.io.now_ns() - start) as f64 * 1e-9);
+            eprintln!("t={t_s:7.3} s  {e}");
         }
         shown = m.events.len();
-        if m.engine.io.now_ns() >= report {
+        if m.io_mut().now_ns() >= report {
             let s = m.cycle_stats();
             let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
             eprintln!(
                 "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} us  round trip {:.1} us (max {:.1}){lock}",
-                (m.engine.io.now_ns() - start) as f64 * 1e-9,
+                (m.io_mut().now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
                 m.expected_wkc,
@@ -522,7 +523,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             report += 1_000_000_000;
         }
         if !max_rate {
-            m.engine.io.sleep_until(next);
+            m.io_mut().sleep_until(next);
         }
     }
     let cpu = cpu_ns() - cpu0;
@@ -532,7 +533,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     if dc {
         eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc_monitor()?);
     }
-    let wall = m.engine.io.now_ns() - start;
+    let wall = m.io_mut().now_ns() - start;
     let s = m.cycle_stats();
     eprintln!(
         "cyclic rate {:.0} cycles/s; master CPU time {:.2} us per cycle",
@@ -567,7 +568,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wkc_errors": s.wkc_errors,
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,
                 "max_round_trip_us": s.max_round_trip_ns as f64 / 1000.0,
-                "frames_lost": m.engine.stats.lost,
+                "frames_lost": m.frame_stats().lost,
                 "clock_sync": clock_sync,
             })
         );
@@ -577,20 +578,20 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             s.wkc_errors,
             s.max_jitter_ns as f64 / 1000.0,
             s.max_round_trip_ns as f64 / 1000.0,
-            m.engine.stats.lost
+            m.frame_stats().lost
         );
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
         }
     }
-    if m.engine.io.has_secondary() {
-        let ring = match m.engine.ring {
+    if m.io_mut().has_secondary() {
+        let ring = match m.ring_state() {
             ferrocat_master::RingState::Intact => "intact",
             ferrocat_master::RingState::Broken => "broken",
             ferrocat_master::RingState::Line => "open (no answer on the secondary port)",
             ferrocat_master::RingState::Unknown => "unknown",
         };
-        outln!("ring {ring} at the end; {} frames sent round the far half again", m.engine.stats.resent);
+        outln!("ring {ring} at the end; {} frames sent round the far half again", m.frame_stats().resent);
     }
     finish(m)?;
     Ok(ExitCode::SUCCESS)

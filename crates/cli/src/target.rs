@@ -239,7 +239,7 @@ impl Target {
             None => None,
         };
         let mut m = Master::new(CliIo { world, capture });
-        m.engine.split_ring_clocks = self.split_ring_clocks.into();
+        m.set_split_ring_clocks(self.split_ring_clocks.into());
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
@@ -265,7 +265,7 @@ pub fn check_iface(iface: &str, force: bool) -> anyhow::Result<()> {
 
 /// Flushes the pcap file, if any.
 pub fn finish(m: Master<CliIo>) -> anyhow::Result<()> {
-    if let Some(c) = m.engine.io.capture {
+    if let Some(c) = m.into_io().capture {
         use std::io::Write;
         c.into_inner().flush()?;
     }

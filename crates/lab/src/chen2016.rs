@@ -119,7 +119,7 @@ fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> 
     m.configure()?;
     let dc_synchronous = |k: usize| {
         crate::node_of(&m, k)
-            .and_then(|n| m.engine.io.seg.nodes[n].esc.app().as_any().downcast_ref::<SyncApp>())
+            .and_then(|n| m.io().seg.nodes[n].esc.app().as_any().downcast_ref::<SyncApp>())
             .is_some_and(|a| a.mode == SyncMode::DcSynchronous)
     };
     let synced: Vec<u16> = (0..m.slaves.len()).filter(|&k| dc_synchronous(k)).map(|k| k as u16).collect();
@@ -132,7 +132,7 @@ fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> 
     );
     let reference = crate::dc_slaves(&m)?[0];
     let reference_ppm = crate::node_of(&m, reference)
-        .and_then(|n| m.engine.io.seg.nodes[n].esc.dc.as_ref())
+        .and_then(|n| m.io().seg.nodes[n].esc.dc.as_ref())
         .map_or(0.0, |dc| dc.drift_ppb as f64 / 1000.0);
     Ok((m, synced, Setup { reference_ppm, counted_slaves }))
 }
@@ -171,14 +171,14 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<(Setup, Row
     // than the passage put every frame a lead — 27 µs on rtx-10us — into the cycle, and
     // chen2016 lost data at 100 µs where the paper lost none.)
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.engine.io.start_cycles(cycle_ns);
+    m.io_mut().start_cycles(cycle_ns);
     let mut probe = Nominal { cycle_ns };
-    let sent = m.engine.io.now_ns();
+    let sent = m.io_mut().now_ns();
     m.sync_step(&mut probe, &mut st)?;
     let r0 = st.reference_ns.unwrap_or(0);
     // The reference read r0 one lead after `sent`; a send at sent + d passes at r0 + d.
     let mut next = sent + 2 * cycle_ns - r0 % cycle_ns;
-    m.engine.io.sleep_until(next);
+    m.io_mut().sleep_until(next);
     for a in apps(&mut m, &setup.counted_slaves) {
         a.reset_counts();
     }
@@ -211,7 +211,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<(Setup, Row
         }
         slot += ((period + cycle_ns / 2) / cycle_ns).max(1);
         next += period;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     let (lost, repeated) =
         apps(&mut m, &setup.counted_slaves).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
@@ -247,8 +247,7 @@ fn spread_ns(n: i128, sum: i128, sq: i128) -> f64 {
 /// The applications of the slaves at `positions`.
 fn apps<'m>(m: &'m mut Master<VirtualIo>, positions: &[u16]) -> Vec<&'m mut SyncApp> {
     let nodes: Vec<usize> = positions.iter().filter_map(|&k| crate::node_of(m, k as usize)).collect();
-    m.engine
-        .io
+    m.io_mut()
         .seg
         .nodes
         .iter_mut()

@@ -146,12 +146,12 @@ impl<I: World> Rig<I> {
 
     /// Until the next cycle is due.
     fn wait(&mut self) {
-        self.m.engine.io.sleep_until(self.next);
+        self.m.io_mut().sleep_until(self.next);
     }
 
     /// The simulated drive at `k`, when the world is the in-process simulator.
     fn drive(&self, k: u16) -> Option<&Cia402Drive> {
-        self.m.engine.io.segment()?.nodes.get(k as usize)?.esc.app().as_any().downcast_ref::<Cia402Drive>()
+        self.m.io().segment()?.nodes.get(k as usize)?.esc.app().as_any().downcast_ref::<Cia402Drive>()
     }
 }
 
@@ -191,11 +191,11 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
     // The master's cycles on the grid: SYNC0 half a cycle after each frame leaves.
     let grid = report.sync0_start.unwrap_or(0).wrapping_sub(shift as u64);
     let sys = m.master_system_time();
-    let now = m.engine.io.now_ns();
+    let now = m.io_mut().now_ns();
     // The first SYNC0 is still in the future: the phase is taken signed.
     let phase = (sys as i128 - grid as i128).rem_euclid(cycle_ns as i128) as u64;
     let next = now + (cycle_ns - phase);
-    m.engine.io.sleep_until(next);
+    m.io_mut().sleep_until(next);
     Ok((Rig { m, sync, st, cycle_ns, next }, drives))
 }
 
@@ -294,8 +294,8 @@ fn run_one<I: World>(
     let dwell_s = 0.1;
     let move_s = there.duration_s() + back.duration_s() + 2.0 * dwell_s;
     let cycles = (move_s * 1e9 / cycle_ns as f64).ceil() as u64;
-    let simulated = r.m.engine.io.segment().is_some();
-    if let Some(seg) = r.m.engine.io.segment_mut() {
+    let simulated = r.m.io().segment().is_some();
+    if let Some(seg) = r.m.io_mut().segment_mut() {
         for &d in &drives {
             if let Some(dr) = seg.nodes[d as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>() {
                 dr.reset_stats();
@@ -335,7 +335,7 @@ fn run_one<I: World>(
                 *fe = Some(fe.unwrap_or(0.0).max(f.unsigned_abs() as f64));
             }
         }
-        if let Some(seg) = r.m.engine.io.segment() {
+        if let Some(seg) = r.m.io().segment() {
             sync0.sample(seg, &drives);
         }
         if k % trace_every == 0 {
@@ -434,8 +434,8 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
     if !mfr {
         return crate::clock_error_ns(m, 0).map(|e| e as f64);
     }
-    let now = m.engine.io.now_ns();
-    let rsys = m.engine.io.segment()?.nodes.first()?.esc.dc.as_ref()?.system_at(now);
+    let now = m.io_mut().now_ns();
+    let rsys = m.io().segment()?.nodes.first()?.esc.dc.as_ref()?.system_at(now);
     let c = cycle_ns as i64;
     let ph = (rsys % cycle_ns) as i64;
     Some((if ph > c / 2 { ph - c } else { ph }) as f64)

@@ -169,11 +169,11 @@ pub fn calibration(
     reference: usize,
     pulses: usize,
 ) -> Option<ferrocat_master::calibrate::GpioCalibration> {
-    let gpio = m.engine.io.host.gpio?;
+    let gpio = m.io_mut().host.gpio?;
     if !CALIBRATED.contains(&method) {
         return None;
     }
-    m.engine.io.gpio_wire = Some((node_of(m, reference)?, 0));
+    m.io_mut().gpio_wire = Some((node_of(m, reference)?, 0));
     Some(ferrocat_master::calibrate::GpioCalibration::new(reference as u16, gpio.mean_ns.round() as u64, pulses))
 }
 
@@ -188,9 +188,9 @@ pub fn dc_slaves<I: World>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     let master = m.master_system_time() as u32;
-    let node = &m.engine.io.segment()?.nodes[node_of(m, k)?];
+    let node = &m.io().segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)
 }
@@ -198,7 +198,7 @@ pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
 /// The segment node of the slave at position `k`, by its station address.
 pub fn node_of<I: World>(m: &Master<I>, k: usize) -> Option<usize> {
     let station = m.slaves.get(k)?.station;
-    m.engine.io.segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
+    m.io().segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
 }
 
 /// The next wake-up after `next`: one nominal cycle, or the period a master that follows the

@@ -87,21 +87,21 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let (mut sync, _) = crate::init_with_method(&mut m, &dc_cfg, name, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut sync0 = crate::stats::Sync0Stats::default();
     let mut k = 0u64;
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.engine.io.start_cycles(cycle_ns);
+    m.io_mut().start_cycles(cycle_ns);
     while (sync0.diffs.n as usize) < o.samples {
         m.cycle()?;
         let c = m.sync_step(sync.as_mut(), &mut st)?;
         next += c.next_period_ns.unwrap_or(cycle_ns);
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         k += 1;
         anyhow::ensure!(k < settle + 100 * o.samples as u64, "SYNC0 pulses stopped");
         if k >= settle {
             // The two drives' pulses for the same system time.
-            sync0.sample(&m.engine.io.seg, &nodes);
+            sync0.sample(&m.io().seg, &nodes);
         }
     }
     let (mean, sd, min, max, _) = sync0.figures();

@@ -123,7 +123,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let mut st = m.sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
     let total = settle + opts.samples * opts.sample_every;
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut r = Round::default();
     if keep {
         r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
@@ -158,11 +158,11 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         }
     };
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.engine.io.start_cycles(opts.cycle_ns);
+    m.io_mut().start_cycles(opts.cycle_ns);
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         if k % opts.sample_every == 0 {
             sampler.arm(&mut m, next, opts.cycle_ns, k);
         }

@@ -164,7 +164,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     let settle = (o.settle_s * per_s) as u64;
     let window = (o.band_window_s * per_s) as u64;
     let after = (o.after_s * per_s) as u64;
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut before, mut late) = (Moments::default(), Moments::default());
     // From the band window on: the control's pairing checks the window is the same.
     let mut errors = Vec::with_capacity((window + after) as usize);
@@ -206,7 +206,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         }
     };
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.engine.io.start_cycles(o.cycle_ns);
+    m.io_mut().start_cycles(o.cycle_ns);
     for k in 0..settle + after {
         if k + window == settle {
             probes_window = st.probes;
@@ -216,24 +216,24 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
             events0 = sync.line_events();
             lost0 = st.lost;
             make_ups0 = st.make_ups;
-            let now = m.engine.io.now_ns();
+            let now = m.io_mut().now_ns();
             match scenario {
-                "loss-1pct" => m.engine.io.seg.loss_probability = 0.01,
+                "loss-1pct" => m.io_mut().seg.loss_probability = 0.01,
                 "drift-step-50ppm" => {
-                    m.engine.io.seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
+                    m.io_mut().seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
                 }
                 FOLLOWER_DRIFT_STEP => {
                     let Some(&follower) = dc.get(1) else { anyhow::bail!("{FOLLOWER_DRIFT_STEP} needs two DC slaves") };
                     let node = crate::node_of(&m, follower).unwrap_or(0);
-                    m.engine.io.seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
+                    m.io_mut().seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
                 }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
                 RING_CABLE_PULLED => {
-                    let Some(ring) = m.engine.io.seg.secondary() else {
+                    let Some(ring) = m.io().seg.secondary() else {
                         anyhow::bail!("{RING_CABLE_PULLED} needs a ring segment (one with [secondary])")
                     };
-                    m.engine.io.seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
+                    m.io_mut().seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
                 }
                 CONTROL => {}
                 other => anyhow::bail!("unknown scenario {other:?} (known: {})", KNOWN.join(", ")),
@@ -241,7 +241,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         }
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, o.cycle_ns, &c);
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         sampler.arm(&mut m, next, o.cycle_ns, k);
         c = m.sync_step(sync.as_mut(), &mut st)?;
         if let Some(cal) =

@@ -45,7 +45,7 @@ impl Sampler {
     /// Arms sample `tag` at an instant drawn uniformly over `[start_ns, start_ns + span_ns)`.
     pub fn arm(&mut self, m: &mut Master<VirtualIo>, start_ns: u64, span_ns: u64, tag: u64) {
         let at = start_ns + self.rng.gen_range(0..span_ns.max(1));
-        m.engine.io.seg.watch(at);
+        m.io_mut().seg.watch(at);
         self.armed.push_back((tag, at, None));
     }
 
@@ -59,7 +59,7 @@ impl Sampler {
             *master = Some(master_at(m, sync, *at));
         }
         let mut out = Vec::new();
-        while let Some(w) = m.engine.io.seg.watched() {
+        while let Some(w) = m.io_mut().seg.watched() {
             out.extend(self.sample(m, sync, w));
         }
         out
@@ -68,7 +68,7 @@ impl Sampler {
     /// Every sample still armed, read from the clocks as they stand (the end of a run).
     pub fn rest(&mut self, m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> Vec<Sample> {
         let mut out = self.after_cycle(m, sync);
-        while let Some(w) = m.engine.io.seg.watched_now() {
+        while let Some(w) = m.io_mut().seg.watched_now() {
             out.extend(self.sample(m, sync, w));
         }
         out

@@ -35,13 +35,13 @@ fn master(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) -> Master<
 fn cycles(m: &mut Master<VirtualIo>, n: u64) {
     for _ in 0..n {
         m.cycle().unwrap();
-        let now = m.engine.io.now_ns();
-        m.engine.io.sleep_until(now + CYCLE_NS);
+        let now = m.io_mut().now_ns();
+        m.io_mut().sleep_until(now + CYCLE_NS);
     }
 }
 
 fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
-    m.engine.io.seg.nodes[DRIVE as usize].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
+    m.io().seg.nodes[DRIVE as usize].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
 }
 
 /// Writes `cw`, runs a few cycles, returns the state the statusword reports.
@@ -150,7 +150,7 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
 }
 
 fn drive_mut(m: &mut Master<VirtualIo>) -> &mut Cia402Drive {
-    m.engine.io.seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
+    m.io_mut().seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
 }
 
 /// 500 cycles of position set-points from `p0`: up to `v` (increments/s) over 100 ms, then at
@@ -238,9 +238,9 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
             break;
         }
     }
-    let (w0, t0) = (drive(&m).velocity_increments(), m.engine.io.now_ns());
+    let (w0, t0) = (drive(&m).velocity_increments(), m.io_mut().now_ns());
     cycles(&mut m, 100);
-    let dt = (m.engine.io.now_ns() - t0) as f64 * 1e-9;
+    let dt = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
     let d = drive(&m);
     let p = d.motor;
     let accel = (d.velocity_increments() - w0) / per_rev * std::f64::consts::TAU / dt;

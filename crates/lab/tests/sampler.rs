@@ -19,12 +19,12 @@ fn run(method: &str) -> Vec<(u64, Sample)> {
     let dc = ferrocat_lab::dc_slaves(&m).unwrap();
     let mut st = m.sync_state().unwrap();
     let mut sampler = Sampler::new(&m, &dc, 1);
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut starts = Vec::new();
     let mut out = Vec::new();
     for k in 0..2_000 {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         sampler.arm(&mut m, next, CYCLE_NS, k);
         starts.push(next);
         m.sync_step(sync.as_mut(), &mut st).unwrap();

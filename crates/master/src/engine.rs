@@ -57,10 +57,10 @@ pub enum RingState {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum SplitRingClocks {
     /// The far half follows its first slave with a system time, which the master chooses
-    /// ([`Engine::far_reference`]): the FRMW of the second pass reads that slave's time instead
+    /// (`Engine::far_reference`): the FRMW of the second pass reads that slave's time instead
     /// of carrying the reference's, a whole master round trip old, and the far half keeps
     /// together. The master keeps that slave on the reference's time through its offset
-    /// ([`crate::far_clock`]).
+    /// (`far_clock.rs`).
     #[default]
     FarReference,
     /// As [`SplitRingClocks::FarReference`], the far reference held over at its last rate

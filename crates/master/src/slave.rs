@@ -5,20 +5,26 @@ use ferrocat_wire::sii::{SiiInfo, SmEntry};
 /// A mapped process-data entry and where it sits in the process image.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Mapped {
+    /// The object's index.
     pub index: u16,
+    /// The object's subindex.
     pub subindex: u8,
+    /// Its size in bits.
     pub bits: u8,
+    /// Its name, from the PDO entry's name in CoE, the SII or the ESI.
     pub name: String,
     /// Bit offset in the whole process image.
     pub image_bit: u32,
 }
 
+/// Where a slave's mailbox lies, and what it speaks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MailboxConfig {
     /// Master → slave (SM0): start, length.
     pub out: (u16, u16),
     /// Slave → master (SM1): start, length.
     pub inp: (u16, u16),
+    /// The mailbox protocols the SII names (`sii::mailbox_protocol` bits).
     pub protocols: u16,
 }
 
@@ -42,37 +48,54 @@ impl MailboxConfig {
     }
 }
 
+/// Everything the master knows of one slave, from the scan on.
 #[derive(Debug, Clone)]
 pub struct Slave {
+    /// Position on the segment, from 0.
     pub position: u16,
+    /// The configured station address the master gave it (0x1001 + position).
     pub station: u16,
+    /// The station alias from 0x0012 (0: none).
     pub alias: u16,
     /// The first string of the SII (what SOEM calls the name), e.g. "EL2004".
     pub name: String,
     /// The general category's name string.
     pub description: String,
+    /// Identity from the SII (words 0x08–0x0F).
     pub vendor_id: u32,
+    /// The product code.
     pub product_code: u32,
+    /// The revision number.
     pub revision: u32,
+    /// The serial number.
     pub serial: u32,
+    /// The ESC's type (0x0000).
     pub esc_type: u8,
+    /// FMMUs (0x0004) and SyncManagers (0x0005) the ESC has.
     pub fmmu_count: u8,
+    /// SyncManagers the ESC has.
     pub sm_count: u8,
+    /// ESC features supported (0x0008).
     pub features: u16,
     /// Device emulation (ESC configuration 0x0141 bit 0): the ESC copies AL control into AL
     /// status itself, the error-indication bit included, and the status code stays 0. Real
     /// EK1100, EL1004 and EL2004 run so.
     pub device_emulation: bool,
+    /// What the SII says: strings, general category, FMMUs, SyncManagers, PDOs.
     pub sii: SiiInfo,
+    /// DL status (0x0110) at the scan.
     pub dl_status: DlStatus,
     /// The SII interface's status 0x0502, read at the scan where DL status bit 0 (PDI
     /// operational) was clear (0 otherwise): bits 11–12 say why the ESC did not load the
     /// EEPROM's configuration area.
     pub eeprom_status: u16,
+    /// Ports 0–3 with a link and an open loop, at the scan.
     pub active_ports: [bool; 4],
     /// Ports the ESC has (0x0007: two bits per port, 00 for none).
     pub port_descriptor: u8,
+    /// The port the frame enters by (the one towards the master).
     pub entry_port: u8,
+    /// The slave this one hangs on (its position), none for the first.
     pub parent: Option<u16>,
     /// Port of the parent this slave hangs on.
     pub parent_port: u8,
@@ -82,15 +105,18 @@ pub struct Slave {
     /// An ET1200 with its SYNC and latch units off has receive times only (found at the latch:
     /// 0x0918 reads with WKC 0), like the real EL1004 and EL2828.
     pub has_system_time: bool,
+    /// The DC unit's times are 64 bits wide (0x0008 bit 3).
     pub dc_64bit: bool,
     /// Receive times of ports 0–3 (local time, low 32 bits) and at the processing unit.
     pub receive_times: [u32; 4],
+    /// Receive time at the processing unit (0x0918), local time.
     pub receive_time_epu: u64,
     /// Which way a positive speed counter difference (0x0932) moves this ESC's clock, where
     /// the master measured it (`Master::measure_speed_direction`): true if it slows it.
     pub speed_diff_slows: Option<bool>,
     /// Propagation delay from the reference clock (the first DC slave), in ns.
     pub delay_ns: u32,
+    /// The standard mailbox, where the slave has one.
     pub mailbox: Option<MailboxConfig>,
     pub(crate) mbx_counter: u8,
     /// The counter of the last message taken from the slave's send mailbox; after a repeat
@@ -99,13 +125,19 @@ pub struct Slave {
     pub(crate) mbx_repeated: Option<u8>,
     /// Mailbox repeat requests made (reads lost after the slave handed its message over).
     pub mbx_repeats: u64,
+    /// The output entries mapped, in image order.
     pub outputs: Vec<Mapped>,
+    /// The input entries mapped, in image order.
     pub inputs: Vec<Mapped>,
+    /// The SyncManager (number, settings) of the outputs.
     pub out_sm: Option<(u8, SmEntry)>,
+    /// The SyncManager (number, settings) of the inputs.
     pub in_sm: Option<(u8, SmEntry)>,
     /// Byte offset and length of this slave's outputs and inputs in the process image.
     pub out_area: (u32, u32),
+    /// Byte offset and length of this slave's inputs in the process image.
     pub in_area: (u32, u32),
+    /// The AL state last seen.
     pub state: AlState,
     /// Operation: answering and in OP, or being brought back.
     pub health: Health,
@@ -118,6 +150,7 @@ pub struct Slave {
 /// Where a slave stands during cyclic operation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Health {
+    /// Answering, and in OP.
     #[default]
     Operational,
     /// Not answering at its station address (powered off, link lost).
@@ -127,12 +160,15 @@ pub enum Health {
 }
 
 impl Slave {
+    /// Bits of outputs mapped.
     pub fn output_bits(&self) -> u32 {
         self.outputs.iter().map(|m| m.bits as u32).sum()
     }
+    /// Bits of inputs mapped.
     pub fn input_bits(&self) -> u32 {
         self.inputs.iter().map(|m| m.bits as u32).sum()
     }
+    /// Whether the slave speaks CoE.
     pub fn has_coe(&self) -> bool {
         self.has_protocol(ferrocat_wire::sii::mailbox_protocol::COE)
     }

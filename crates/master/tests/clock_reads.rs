@@ -97,19 +97,19 @@ fn mean_error<I: Simulated>(io: I) -> f64 {
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut c = Correction::default();
     let mut sum = 0.0;
     for k in 0..4_000 {
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         c = m.sync_step(&mut sync, &mut st).unwrap();
         if k >= 2_000 {
             // The world's time first, then the master's clock at that same reading.
-            let t = m.engine.io.now_ns();
+            let t = m.io_mut().now_ns();
             let own = m.master_system_time_at(t);
             let master = sync.master_time(own).unwrap_or(own);
-            let seg = m.engine.io.segment();
+            let seg = m.io().segment();
             let reference = seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
             sum += master.wrapping_sub(reference) as i64 as f64;
         }

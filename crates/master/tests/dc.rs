@@ -26,7 +26,7 @@ fn segment_on(host: HostModel) -> Master<VirtualIo> {
 /// The spread of the slaves' true system times at one true instant (32-bit ones compared on
 /// their low 32 bits); slaves with receive times only have no system time to compare.
 fn spread_ns(m: &Master<VirtualIo>, t: u64) -> i64 {
-    let times: Vec<u32> = m.engine.io.seg.system_times_at(t).iter().map(|&x| x as u32).collect();
+    let times: Vec<u32> = m.io().seg.system_times_at(t).iter().map(|&x| x as u32).collect();
     let r = times[0];
     let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(r) as i32 as i64).collect();
     d.iter().max().unwrap() - d.iter().min().unwrap()
@@ -38,7 +38,7 @@ fn init_dc_converges_and_starts_sync0_together() {
     m.bring_up().unwrap();
     let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), ..DcConfig::default() };
     let r = m.init_dc(&cfg).unwrap();
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     println!("{r:?}; true spread {} ns", spread_ns(&m, t));
     assert!(r.converged && r.static_frames < cfg.max_frames, "{r:?}");
     assert!(r.max_difference_ns <= 50);
@@ -51,9 +51,9 @@ fn init_dc_converges_and_starts_sync0_together() {
     for k in 0..1000 {
         m.cycle().unwrap();
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         if k > 200 {
-            let now = m.engine.io.now_ns();
+            let now = m.io_mut().now_ns();
             worst = worst.max(spread_ns(&m, now));
         }
     }
@@ -62,7 +62,7 @@ fn init_dc_converges_and_starts_sync0_together() {
     // SYNC0 on all six: their pulses for the same system time within 100 ns of each other.
     let start = r.sync0_start.unwrap();
     let last: Vec<(u64, u64)> =
-        m.engine.io.seg.nodes.iter().map(|n| *n.esc.sync0_log.pulses.back().expect("pulses")).collect();
+        m.io().seg.nodes.iter().map(|n| *n.esc.sync0_log.pulses.back().expect("pulses")).collect();
     assert!(last.iter().all(|(sys, _)| (sys.wrapping_sub(start) as u32) % 1_000_000 == 0), "on the grid: {last:?}");
     let same: Vec<u64> = last.iter().filter(|(s, _)| *s as u32 == last[0].0 as u32).map(|(_, t)| *t).collect();
     assert_eq!(same.len(), 6, "{last:?}");
@@ -81,18 +81,18 @@ fn every_offset_moves_in_one_frame() {
     m.bring_up().unwrap();
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let read_offsets = |m: &Master<VirtualIo>| -> Vec<u64> {
-        m.engine.io.seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.offset)).collect()
+        m.io().seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.offset)).collect()
     };
     let offsets = read_offsets(&m);
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     let spread = spread_ns(&m, t);
-    let frames = m.engine.stats.frames_sent;
+    let frames = m.frame_stats().frames_sent;
     m.shift_offsets(-5_000).unwrap();
-    assert_eq!(m.engine.stats.frames_sent - frames, 2, "one frame to read, one to write");
+    assert_eq!(m.frame_stats().frames_sent - frames, 2, "one frame to read, one to write");
     let moved: Vec<i64> =
         read_offsets(&m).iter().zip(&offsets).map(|(new, old)| (new.wrapping_sub(*old) as u32) as i32 as i64).collect();
     assert_eq!(moved, [-5_000; 6]);
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     assert!(spread_ns(&m, t).abs_diff(spread) <= 20, "spread {spread} ns before, {} after", spread_ns(&m, t));
 }
 
@@ -106,8 +106,8 @@ fn init_dc_starts_sync1_after_sync0() {
     let r = m.init_dc(&cfg).unwrap();
     let start = r.sync0_start.unwrap();
     // 50 ms after the first pulse (the start is `start_delay_ns` ahead).
-    let t = m.engine.io.now_ns() + cfg.start_delay_ns + 50_000_000;
-    for (k, n) in m.engine.io.seg.nodes.iter().enumerate() {
+    let t = m.io_mut().now_ns() + cfg.start_delay_ns + 50_000_000;
+    for (k, n) in m.io().seg.nodes.iter().enumerate() {
         let dc = n.esc.dc.as_ref().unwrap();
         // Differences on the low 32 bits: the same for 32- and 64-bit DCs.
         let after = (dc.next_sync1_register(t) as u32).wrapping_sub(start as u32) as u64;
@@ -128,9 +128,9 @@ fn the_references_offset_gives_it_the_masters_time_at_the_latch() {
         // No static drift compensation to speak of: the reference free-runs from the latch.
         let cfg = DcConfig { max_frames: 1, sync0_slaves: Some(vec![]), ..DcConfig::default() };
         m.init_dc(&cfg).unwrap();
-        let t = m.engine.io.now_ns();
+        let t = m.io_mut().now_ns();
         let master = m.master_system_time();
-        let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+        let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let error = master.wrapping_sub(reference) as i64;
         println!("{}: master − reference just after DC initialisation {error} ns", host.name);
         // What one frame's stamps leave: software stamps are taken early on the way out and
@@ -198,13 +198,13 @@ proptest::proptest! {
         }
         let r = m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
         proptest::prop_assert!(r.converged && r.max_difference_ns <= 50, "{r:?}");
-        let mut next = m.engine.io.now_ns();
+        let mut next = m.io_mut().now_ns();
         for _ in 0..300 {
             m.cycle().unwrap();
             next += 1_000_000;
-            m.engine.io.sleep_until(next);
+            m.io_mut().sleep_until(next);
         }
-        let t = m.engine.io.now_ns();
+        let t = m.io_mut().now_ns();
         let spread = spread_ns(&m, t);
         proptest::prop_assert!(spread <= 100, "true spread {spread} ns");
     }
@@ -218,23 +218,23 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
     m.init_dc(&DcConfig::default()).unwrap();
     let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, 1_000_000);
     let mut st = m.sync_state().unwrap();
-    let frames0 = m.engine.io.seg.stats.frames;
-    let mut next = m.engine.io.now_ns();
+    let frames0 = m.io().seg.stats.frames;
+    let mut next = m.io_mut().now_ns();
     for _ in 0..200 {
         let (wkc, c) = m.cycle_sync(&mut sync, &mut st).unwrap();
         assert!(wkc > 0, "the process data answered");
         next += c.next_period_ns.expect("the master follows: a period every cycle");
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     // One frame per cycle, and the probes of the line while it was young.
-    assert_eq!(m.engine.io.seg.stats.frames - frames0 - st.probes, 200, "one frame per cycle");
+    assert_eq!(m.io().seg.stats.frames - frames0 - st.probes, 200, "one frame per cycle");
     assert!(st.probes > 0 && st.probes_lost == 0, "{st:?}");
     assert_eq!((st.cycle, st.lost), (200, 0));
     // The master's clock, its line through the reference's times, within 1 µs of the reference.
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     let own = m.master_system_time();
     let mine = ferrocat_master::sync::ClockSync::master_time(&sync, own).expect("a line after 200 samples");
-    let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+    let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
     let e = mine.wrapping_sub(reference) as i64;
     println!("master − reference after 200 one-frame cycles: {e} ns");
     assert!(e.abs() < 1_000, "{e}");
@@ -263,8 +263,8 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     let monitored: Vec<u16> = m.dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
     assert_eq!(monitored, [0, 3]);
     // The slave behind the terminals follows the reference.
-    let t = m.engine.io.now_ns();
-    let nodes = &m.engine.io.seg.nodes;
+    let t = m.io_mut().now_ns();
+    let nodes = &m.io().seg.nodes;
     let (a, b) = (nodes[0].esc.dc.as_ref().unwrap().system_at(t), nodes[3].esc.dc.as_ref().unwrap().system_at(t));
     assert!((a as i64 - b as i64).abs() <= 100, "reference {a}, last slave {b}");
     // SYNC0 asked of such a terminal: an error that says why, not a working-counter error.

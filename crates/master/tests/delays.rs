@@ -39,7 +39,7 @@ fn scan(name: &str, toml: &str, loop_ns: u32, bound_ns: i64, prepare: fn(&mut Ma
     m.scan().unwrap();
     // The last frame of the scan visited every slave; any frame does: delays are fixed.
     // Visits are in processing order, which is the order of positions.
-    let visits = m.engine.io.seg.last_visits().to_vec();
+    let visits = m.io().seg.last_visits().to_vec();
     assert_eq!(visits.len(), m.slaves.len());
     let epu = |k: usize| visits[k].1.epu_ns;
     // The reference is the first slave with a system time; a slave with receive times only
@@ -161,7 +161,7 @@ fn ip_cores_left_in_reverse_latch_mode() {
          [[device]]\nname = 'r'\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'b'\nparent_port = 1\nport = 1\n\
          [[device]]\nbuiltin = 'SERVO'\nparent = 'r'\nparent_port = 0\n";
     let m = check_prepared("reverse mode", toml, 10, |m| {
-        m.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [1]).unwrap();
+        m.datagram(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [1]).unwrap();
     });
     assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 0, 0, 0, 1]);
 }
@@ -173,16 +173,16 @@ fn synchronises(mut m: Master<VirtualIo>) {
     m.bring_up().unwrap();
     let r = m.init_dc(&ferrocat_master::DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut worst = 0i64;
     for k in 0..1000 {
         m.cycle().unwrap();
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         if k > 200 {
-            let t = m.engine.io.now_ns();
+            let t = m.io_mut().now_ns();
             // Slaves with receive times only (ET1200 terminals) have no system time to compare.
-            let times: Vec<u32> = m.engine.io.seg.system_times_at(t).iter().map(|&x| x as u32).collect();
+            let times: Vec<u32> = m.io().seg.system_times_at(t).iter().map(|&x| x as u32).collect();
             let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(times[0]) as i32 as i64).collect();
             worst = worst.max(d.iter().max().unwrap() - d.iter().min().unwrap());
         }

@@ -25,7 +25,7 @@ fn master() -> Master<VirtualIo> {
 }
 
 fn endpoint(m: &Master<VirtualIo>) -> &EoeServer {
-    let app = m.engine.io.seg.nodes[DRIVE as usize].esc.app();
+    let app = m.io().seg.nodes[DRIVE as usize].esc.app();
     app.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.eoe.as_ref().expect("the drive serves EoE")
 }
 

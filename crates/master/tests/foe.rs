@@ -18,7 +18,7 @@ fn master(drive_keys: &str) -> Master<VirtualIo> {
 }
 
 fn server(m: &Master<VirtualIo>) -> &FoeServer {
-    let app = m.engine.io.seg.nodes[DRIVE as usize].esc.app();
+    let app = m.io().seg.nodes[DRIVE as usize].esc.app();
     app.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.foe.as_ref().expect("the drive serves FoE")
 }
 
@@ -106,7 +106,7 @@ fn needs_shared_akd_eeprom_takes_firmware_in_boot() {
     assert!(e.contains("protocol not supported"), "CoE in BOOT: {e}");
     let firmware = file(10_000);
     m.foe_write(akd_at, "akd.i00", 0, &firmware).unwrap();
-    let s = m.engine.io.seg.nodes[akd_at as usize].esc.app();
+    let s = m.io().seg.nodes[akd_at as usize].esc.app();
     let files = &s.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.foe.as_ref().unwrap().files;
     assert_eq!(files.get(&b"akd.i00"[..]), Some(&firmware));
     m.leave_bootstrap(akd_at).unwrap();

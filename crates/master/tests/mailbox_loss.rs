@@ -35,7 +35,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         m.foe_write(DRIVE, "f.bin", 0, &file).unwrap();
         assert_eq!(m.foe_read(DRIVE, "f.bin", 0, 1 << 20).unwrap(), file, "seed {seed}");
         repeats += m.slave(DRIVE).unwrap().mbx_repeats;
-        duplicates += m.engine.io.seg.nodes[DRIVE as usize].esc.mbx_duplicates;
+        duplicates += m.io().seg.nodes[DRIVE as usize].esc.mbx_duplicates;
         // Through INIT and configured again (SM1's activate written with the repeat bit
         // clear, whatever the last repeat left): the firmware takes that as its start, not as
         // a repeat request, and no old reply comes back.
@@ -46,7 +46,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
             assert_eq!(m.sdo_read(DRIVE, 0x607A, 0).unwrap(), (-k).to_le_bytes(), "seed {seed} after INIT, {k}");
         }
         // Every repeat the firmware made was one the master asked for.
-        let answered = m.engine.io.seg.nodes[DRIVE as usize].esc.mbx_repeats;
+        let answered = m.io().seg.nodes[DRIVE as usize].esc.mbx_repeats;
         assert_eq!(answered, m.slave(DRIVE).unwrap().mbx_repeats, "seed {seed}: repeats answered and asked for");
     }
     println!("mailbox repeats {repeats}, requests written twice and dropped {duplicates}");

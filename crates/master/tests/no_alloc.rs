@@ -40,14 +40,14 @@ fn ten_thousand_cycles_allocate_nothing() {
     let out = m.output(1, "Output").unwrap();
     let inp = m.input(2, "Input").unwrap();
     let period = 1_000_000;
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
         for k in 0..cycles {
             m.set(out, k & 1);
             let _ = m.get(inp);
             m.cycle().unwrap();
             next += period;
-            m.engine.io.sleep_until(next);
+            m.io_mut().sleep_until(next);
         }
     };
     run(&mut m, 200);
@@ -61,9 +61,9 @@ fn ten_thousand_cycles_allocate_nothing() {
     // reference kept on the reference's time, once the split is known (in the same test: the
     // counter is the process's).
     let (mut m, mut next) = ring("");
-    m.engine.io.seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
+    m.io_mut().seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
     run_cycles(&mut m, &mut next, 3_000);
-    assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
+    assert_eq!(m.ring_state(), ferrocat_master::RingState::Broken);
     let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
     let moved = m.far_reference_offset_ns();
     println!("ring split: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns");
@@ -83,7 +83,7 @@ fn ten_thousand_cycles_allocate_nothing() {
         "ring split from the start: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns"
     );
     assert!(moved.is_some_and(|ns| ns != 0), "the far reference is being kept");
-    assert_eq!(m.engine.ring, ferrocat_master::RingState::Broken);
+    assert_eq!(m.ring_state(), ferrocat_master::RingState::Broken);
     assert_eq!(allocations, 0);
 }
 
@@ -98,7 +98,7 @@ fn ring(events: &str) -> (Master<VirtualIo>, u64) {
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
     m.bring_up().unwrap();
     m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
-    let now = m.engine.io.now_ns();
+    let now = m.io_mut().now_ns();
     (m, now)
 }
 
@@ -107,7 +107,7 @@ fn run_cycles(m: &mut Master<VirtualIo>, next: &mut u64, cycles: u64) {
     for _ in 0..cycles {
         m.cycle().unwrap();
         *next += 1_000_000;
-        m.engine.io.sleep_until(*next);
+        m.io_mut().sleep_until(*next);
     }
 }
 

@@ -17,24 +17,25 @@ fn loss_power_cycle_and_link_pull() {
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 8));
     // Bring-up on a lossy segment: the engine retries non-cyclic frames.
     m.bring_up().unwrap();
-    let t0 = m.engine.io.now_ns();
+    let t0 = m.io_mut().now_ns();
     let s = 1_000_000_000;
-    m.engine.io.seg.schedule(t0 + s, Event::PowerOff { node: 1 });
-    m.engine.io.seg.schedule(t0 + s + s / 2, Event::PowerOn { node: 1 });
-    m.engine.io.seg.schedule(t0 + 3 * s, Event::LinkDown { node: 2, port: 1 });
-    m.engine.io.seg.schedule(t0 + 3 * s + s / 2, Event::LinkUp { node: 2, port: 1 });
+    m.io_mut().seg.schedule(t0 + s, Event::PowerOff { node: 1 });
+    m.io_mut().seg.schedule(t0 + s + s / 2, Event::PowerOn { node: 1 });
+    m.io_mut().seg.schedule(t0 + 3 * s, Event::LinkDown { node: 2, port: 1 });
+    m.io_mut().seg.schedule(t0 + 3 * s + s / 2, Event::LinkUp { node: 2, port: 1 });
     let out = m.output(3, "Output").unwrap();
     let mut next = t0;
     let mut reported = 0;
     for k in 0..6000u64 {
         m.set(out, k & 1);
         m.cycle().unwrap();
+        let t_s = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
         for e in &m.events[reported..] {
-            println!("{:7.3} s  {e}", (m.engine.io.now_ns() - t0) as f64 * 1e-9);
+            println!("{t_s:7.3} s  {e}");
         }
         reported = m.events.len();
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     let st = m.cycle_stats();
     println!("{} cycles, {} lost frames, {} short working counters", st.cycles, st.lost_frames, st.wkc_errors);
@@ -100,10 +101,10 @@ fn a_frame_lost_while_starting_is_no_event() {
     m.bring_up().unwrap();
     assert_eq!(stage.get(), 2, "a cyclic frame was lost while starting");
     assert!(m.cycle_stats().lost_frames >= 1);
-    let t0 = m.engine.io.now_ns();
+    let t0 = m.io_mut().now_ns();
     for k in 1..=100u64 {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc);
-        m.engine.io.sleep_until(t0 + k * 1_000_000);
+        m.io_mut().sleep_until(t0 + k * 1_000_000);
     }
     assert!(m.events.is_empty(), "{:?}", m.events);
     assert!(m.slaves.iter().all(|s| s.health == Health::Operational && s.state == AlState::Op));

@@ -25,7 +25,7 @@ fn the_ring_port_is_found_and_the_delays_are_a_lines() {
     line.scan().unwrap();
     let mut ring = master(&format!("{DEVICES}{RING}"), HostModel::ideal());
     ring.scan().unwrap();
-    assert_eq!(ring.engine.ring, RingState::Intact);
+    assert_eq!(ring.ring_state(), RingState::Intact);
     assert_eq!(ring.ring_port, Some((2, 2)), "the second coupler's X2 OUT");
     assert_eq!(line.ring_port, None);
     let delays =
@@ -46,21 +46,21 @@ fn the_ring_port_is_found_and_the_delays_are_a_lines() {
 /// the second coupler's true system time less the first's.
 fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<VirtualIo>, Vec<i64>) {
     let mut m = master(&format!("{DEVICES}{RING}"), HostModel::pc_rt());
-    m.engine.split_ring_clocks = clocks;
+    m.set_split_ring_clocks(clocks);
     m.bring_up().unwrap();
     let r = m.init_dc(&DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let t0 = m.engine.io.now_ns();
-    m.engine.io.seg.schedule(t0 + break_after * 1_000_000, Event::LinkDown { node: 2, port: 0 });
+    let t0 = m.io_mut().now_ns();
+    m.io_mut().seg.schedule(t0 + break_after * 1_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut after = Vec::new();
     let mut next = t0;
     for k in 0..cycles {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}: the whole ring's working counter");
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         if k > break_after {
-            let now = m.engine.io.now_ns();
-            let t = m.engine.io.seg.system_times_at(now);
+            let now = m.io_mut().now_ns();
+            let t = m.io().seg.system_times_at(now);
             after.push(t[1].wrapping_sub(t[0]) as i64);
         }
     }
@@ -70,8 +70,8 @@ fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<
 #[test]
 fn process_data_goes_on_across_a_pulled_ring_cable() {
     let (m, _) = run_split(SplitRingClocks::HoldOver, 400, 200);
-    assert_eq!(m.engine.ring, RingState::Broken);
-    assert!(m.engine.stats.resent >= 198, "{:?}", m.engine.stats);
+    assert_eq!(m.ring_state(), RingState::Broken);
+    assert!(m.frame_stats().resent >= 198, "{:?}", m.frame_stats());
     // The far half's terminal still takes its outputs: its SyncManager saw every cycle.
     let stats = m.cycle_stats();
     assert_eq!(stats.wkc_errors, 0, "{stats:?}");
@@ -113,17 +113,17 @@ fn ferrocat_across_a_break(host: HostModel) -> [(f64, f64); 2] {
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
-    m.engine.io.seg.schedule(next + 4_000_000_000, Event::LinkDown { node: 2, port: 0 });
+    let mut next = m.io_mut().now_ns();
+    m.io_mut().seg.schedule(next + 4_000_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut errs = [(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
     for k in 0..8000u64 {
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         m.sync_step(&mut sync, &mut st).unwrap();
         if k % 4000 >= 2000 {
-            let t = m.engine.io.now_ns();
+            let t = m.io_mut().now_ns();
             let master = m.master_system_time();
-            let clocks = m.engine.io.seg.system_times_at(t);
+            let clocks = m.io().seg.system_times_at(t);
             let half = &mut errs[(k / 4000) as usize];
             half.0.push(master.wrapping_sub(clocks[0]) as i64 as f64);
             half.1.push(master.wrapping_sub(clocks[1]) as i64 as f64);
@@ -159,13 +159,13 @@ fn a_ring_broken_at_start_up_comes_up_whole() {
     let mut m = master(&format!("{DEVICES}{RING}{BROKEN_FROM_START}"), HostModel::pc_rt());
     m.bring_up().unwrap();
     assert_eq!(m.slaves.len(), 4);
-    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_state(), RingState::Broken);
     assert_eq!(m.ring_port, None);
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     for _ in 0..100 {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc);
         next += 1_000_000;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     assert_eq!(m.expected_wkc, 4, "both EL2004s written");
 }
@@ -191,7 +191,7 @@ fn a_late_first_probe_does_not_hide_the_far_half_of_a_broken_ring() {
     m.scan().unwrap();
     assert_eq!(lost.get(), 1, "the first probe's answer was held back");
     assert_eq!(m.slaves.len(), 4);
-    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_state(), RingState::Broken);
 }
 
 /// The ring `toml` under `host`, in OP with DC, `events` scheduled (ns after that), then one
@@ -219,20 +219,20 @@ fn cycle_ring_every(
     mut each: impl FnMut(u64, &[u64]),
 ) -> Master<VirtualIo> {
     let mut m = master(toml, host);
-    m.engine.split_ring_clocks = clocks;
+    m.set_split_ring_clocks(clocks);
     m.bring_up().unwrap();
     assert!(m.init_dc(&DcConfig::default()).unwrap().converged);
-    let t0 = m.engine.io.now_ns();
+    let t0 = m.io_mut().now_ns();
     for (at, event) in events {
-        m.engine.io.seg.schedule(t0 + at, event.clone());
+        m.io_mut().seg.schedule(t0 + at, event.clone());
     }
     let mut next = t0;
     for k in 0..cycles {
         assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
         next += cycle_ns;
-        m.engine.io.sleep_until(next);
-        let now = m.engine.io.now_ns();
-        each(k, &m.engine.io.seg.system_times_at(now));
+        m.io_mut().sleep_until(next);
+        let now = m.io_mut().now_ns();
+        each(k, &m.io().seg.system_times_at(now));
     }
     m
 }
@@ -260,7 +260,7 @@ fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
             closed = closed.max(apart);
         }
     });
-    assert_eq!(m.engine.ring, RingState::Intact);
+    assert_eq!(m.ring_state(), RingState::Intact);
     (split, closed)
 }
 
@@ -297,7 +297,7 @@ fn far_reference_error(clocks: SplitRingClocks, host: HostModel, split_s: u64) -
             }
         }
     });
-    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_state(), RingState::Broken);
     (worst, m.far_reference_offset_ns().unwrap_or(0))
 }
 
@@ -358,7 +358,7 @@ fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
         },
     );
     println!("15 ms cycles: far coupler − reference worst {worst} ns over the last 20 s");
-    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_state(), RingState::Broken);
     assert!(worst < 500, "{worst}");
 }
 
@@ -375,7 +375,7 @@ fn wiring(m: &Master<VirtualIo>) -> Wiring {
 /// master takes for its processing unit's (as `delays.rs` does).
 fn far_pass_truth(m: &mut Master<VirtualIo>, far_ref: usize) -> Vec<Option<i64>> {
     m.cycle().unwrap();
-    let visits = m.engine.io.seg.last_visits();
+    let visits = m.io().seg.last_visits();
     let first_far = m.split_latch.as_ref().expect("a split ring").first_far;
     assert!(visits.iter().all(|(n, _)| *n >= first_far), "the far half's pass: {visits:?}");
     let at = |n: usize| {
@@ -418,7 +418,7 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
             *w = (*w).max(e);
         }
     });
-    assert_eq!(m.engine.ring, RingState::Broken);
+    assert_eq!(m.ring_state(), RingState::Broken);
     let latch = m.split_latch.as_ref().expect("the latch saw the split");
     assert_eq!((latch.first_far, latch.root, latch.root_port, latch.far_reference), (2, 2, 2, Some(2)));
     let far = wiring(&m);
@@ -497,7 +497,7 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
             "seed {seed}: closed after a split from the start: far coupler − reference worst {transient} ns over \
              the 2 s after, {after} ns over the next second"
         );
-        assert_eq!(m.engine.ring, RingState::Intact);
+        assert_eq!(m.ring_state(), RingState::Intact);
         assert_eq!(m.split_latch, None);
         assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
         assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
@@ -586,7 +586,7 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         let split_bound = if host.name == "nic-hwts" { 100 } else { 400 };
         assert!(worst[0] < split_bound && worst[1] < 1_000 && worst[2] < 50, "{worst:?}");
         // Closed again: the intact ring's tree and delays.
-        assert_eq!(m.engine.ring, RingState::Intact);
+        assert_eq!(m.ring_state(), RingState::Intact);
         assert_wiring_as_intact(&wiring(&m), &whole);
     }
 }
@@ -646,7 +646,7 @@ fn a_ring_with_a_device_cabled_the_wrong_way_round_is_refused_by_name() {
     // Cabled the right way round (its port 1 back to the master), it is a ring like any other.
     let mut m = master(&toml.replace("port = 1\n[secondary]", "[secondary]"), HostModel::pc_rt());
     m.scan().unwrap();
-    assert_eq!((m.slaves.len(), m.engine.ring, m.ring_port), (4, RingState::Intact, Some((3, 1))));
+    assert_eq!((m.slaves.len(), m.ring_state(), m.ring_port), (4, RingState::Intact, Some((3, 1))));
 }
 
 #[test]
@@ -677,7 +677,7 @@ fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
         wiring(&m),
         wiring(&intact)
     );
-    assert_eq!(m.engine.ring, RingState::Intact);
+    assert_eq!(m.ring_state(), RingState::Intact);
     assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
     assert!(m.relatched.is_empty(), "{:?}", m.relatched);
     assert!(worst < 100, "{worst} ns");

@@ -41,9 +41,9 @@ fn segment_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
 
 /// True error of slave `k`'s system time against the master's clock now (ns, low 32 bits).
 fn true_error(m: &mut Master<VirtualIo>, k: usize) -> i64 {
-    let t = m.engine.io.now_ns();
+    let t = m.io_mut().now_ns();
     let master = m.master_system_time() as u32;
-    let slave = m.engine.io.seg.nodes[k].esc.dc.as_ref().unwrap().system_at(t) as u32;
+    let slave = m.io().seg.nodes[k].esc.dc.as_ref().unwrap().system_at(t) as u32;
     slave.wrapping_sub(master) as i32 as i64
 }
 
@@ -61,11 +61,11 @@ fn run_rfm(host: HostModel, make: impl FnOnce(&mut Master<VirtualIo>) -> Box<dyn
     let mut m = segment(host);
     let mut sync = make(&mut m);
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut r, mut l) = (Vec::new(), Vec::new());
     for k in 0..cycles {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         m.sync_step(sync.as_mut(), &mut st).unwrap();
         if k >= cycles / 2 && k % 2 == 0 {
             r.push(true_error(&mut m, 0) as f64);
@@ -141,15 +141,15 @@ fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64, seed: u64) ->
     let mut m = segment_seeded(HostModel::pc_rt(), seed);
     let mut sync = make();
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut phases = Vec::new();
     for k in 0..cycles {
         let c = m.sync_step(sync.as_mut(), &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         if k >= cycles / 2 {
-            let t = m.engine.io.now_ns();
-            let reft = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+            let t = m.io_mut().now_ns();
+            let reft = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
             let mut p = (reft % CYCLE_NS) as f64;
             if p > CYCLE_NS as f64 / 2.0 {
                 p -= CYCLE_NS as f64;
@@ -211,11 +211,11 @@ fn rfm_start(steer_from_init: bool, cycles: u64) -> (i64, i64, ferrocat_master::
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
     let report = if steer_from_init { m.init_dc_with(&dc, Some(&mut sync)) } else { m.init_dc(&dc) }.unwrap();
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut spread, mut master) = (0i64, 0i64);
     for _ in 0..cycles {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         m.sync_step(&mut sync, &mut st).unwrap();
         let r = true_error(&mut m, 0);
         master = master.max(r.abs());
@@ -258,7 +258,7 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
     };
     sync.probing = probing;
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (step_at, cycles) = (12000, 13000);
     let (mut before, mut after, mut probes_before) = (Vec::new(), Vec::new(), 0);
     let mut settled_from = 0;
@@ -267,16 +267,16 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
             settled_from = st.probes;
         }
         if k == step_at {
-            let now = m.engine.io.now_ns();
-            m.engine.io.seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
+            let now = m.io_mut().now_ns();
+            m.io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
             probes_before = st.probes;
         }
         let c = m.sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.engine.io.sleep_until(next);
-        let t = m.engine.io.now_ns();
+        m.io_mut().sleep_until(next);
+        let t = m.io_mut().now_ns();
         let own = m.master_system_time();
-        let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+        let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let e = sync.master_time(own).unwrap().wrapping_sub(reference) as i64 as f64;
         if k >= step_at {
             after.push(e);
@@ -333,16 +333,16 @@ fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
     sync.make_up = make_up;
     m.cyclic_timeout_ns = CYCLE_NS / 4;
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut prev, mut lost_before, mut jumps): (Option<i64>, u64, Vec<f64>) = (None, 0, Vec::new());
     for k in 0..3_000 {
         next += CYCLE_NS;
         if k % 50 == 25 {
             let down = ferrocat_segment::Event::LinkDown { node: 0, port: 0 };
-            m.engine.io.seg.schedule(next, down);
-            m.engine.io.seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
+            m.io_mut().seg.schedule(next, down);
+            m.io_mut().seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
         }
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         // Just before the frame the reference has run on its crystal longest since its offset.
         let e = true_error(&mut m, 0);
         if let Some(p) = prev.filter(|_| st.lost > lost_before) {
@@ -379,15 +379,15 @@ fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
     sync.probes_steer = probes_steer;
     sync.centre_followers = false;
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut probed, mut quiet) = (Vec::new(), Vec::new());
     for k in 0..30_000 {
         let probes_before = st.probes;
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         m.sync_step(&mut sync, &mut st).unwrap();
         // Just before the next cycle's frame is built.
-        m.engine.io.sleep_until(next + CYCLE_NS - 1_000);
+        m.io_mut().sleep_until(next + CYCLE_NS - 1_000);
         let e = true_error(&mut m, 0) as f64;
         if k >= 2_000 {
             if st.probes > probes_before {
@@ -435,17 +435,17 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.centre_followers = false;
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let (mut latest_ns, mut probed) = (i64::MIN, 0);
     for _ in 0..300 {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         let probes_before = st.probes;
         m.sync_step(&mut sync, &mut st).unwrap();
         if st.probes > probes_before {
             probed += 1;
             // How far past the next cycle's due time this one ended (negative: before it).
-            latest_ns = latest_ns.max(m.engine.io.now_ns() as i64 - (next + CYCLE_NS) as i64);
+            latest_ns = latest_ns.max(m.io_mut().now_ns() as i64 - (next + CYCLE_NS) as i64);
         }
     }
     println!("{probed} cycles probed ({} probes), the latest ended {latest_ns} ns after the next was due", st.probes);
@@ -473,19 +473,19 @@ fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     // Only the cycle's frame and its probes: no writes of the followers' delays between them.
     sync.centre_followers = false;
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut longest_ns = 0;
     for _ in 0..200 {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         // When the cycle really began: late if the one before overran.
-        let began = m.engine.io.now_ns();
+        let began = m.io_mut().now_ns();
         let probes_before = st.probes;
         m.sync_step(&mut sync, &mut st).unwrap();
         // A cycle whose own writes (an offset shift to every slave) took it past its end has
         // no room for probes; those that probed must have ended within a period.
         if st.probes > probes_before {
-            longest_ns = longest_ns.max(m.engine.io.now_ns() - began);
+            longest_ns = longest_ns.max(m.io_mut().now_ns() - began);
         }
     }
     assert!(st.probes > 0, "the young line probes");
@@ -512,15 +512,15 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
     // direct line in use then never sees).
     m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let steps = [(12_000, 1), (32_000, 0)];
     let mut before = [Vec::new(), Vec::new()];
     let mut after = [Vec::new(), Vec::new()];
     for k in 0..33_000 {
         for (i, &(at, node)) in steps.iter().enumerate() {
             if k == at {
-                let now = m.engine.io.now_ns();
-                m.engine.io.seg.schedule(now, ferrocat_segment::Event::DriftStep { node, delta_ppb: 50_000 });
+                let now = m.io_mut().now_ns();
+                m.io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node, delta_ppb: 50_000 });
             }
             let e_slot = if k >= at && k < at + 1_000 {
                 Some(&mut after[i])
@@ -530,15 +530,15 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
                 None
             };
             if let Some(v) = e_slot {
-                let t = m.engine.io.now_ns();
+                let t = m.io_mut().now_ns();
                 let own = m.master_system_time();
-                let reference = m.engine.io.seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
+                let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
                 v.push(sync.master_time(own).map_or(0.0, |e| e.wrapping_sub(reference) as i64 as f64));
             }
         }
         let c = m.sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     [0, 1].map(|i| {
         let mean = before[i].iter().sum::<f64>() / before[i].len() as f64;
@@ -603,13 +603,13 @@ fn flywheel_eps_line(host: HostModel, coupling: Coupling, cycles: u64) -> (f64, 
     let mut m = segment(host);
     let mut sync = Ferrocat::new(coupling, CYCLE_NS).with_flywheel();
     let mut st = m.sync_state().unwrap();
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     let mut pts = Vec::new();
     let (mut last, mut first) = (None, None);
     for _ in 0..cycles {
         let c = m.sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         let e = sync.flywheel_eps();
         if e != last {
             let (reference_ns, eps_ns) = e.unwrap();

@@ -24,11 +24,11 @@ fn in_op(extra: &str, setup: &[(u16, u8, Vec<u8>)], sync0: &[u16]) -> (Master<Vi
         toml::from_str(&format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n{extra}")).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
     bring_up(&mut m, setup, sync0);
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     for _ in 0..100 {
         m.cycle().unwrap();
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     (m, next)
 }
@@ -54,17 +54,17 @@ fn bring_up(m: &mut Master<VirtualIo>, setup: &[(u16, u8, Vec<u8>)], sync0: &[u1
 fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent> {
     let before = m.events.len();
     next += missed * CYCLE_NS;
-    m.engine.io.sleep_until(next);
+    m.io_mut().sleep_until(next);
     for _ in 0..2000 {
         m.cycle().unwrap();
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
     }
     m.events[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
 }
 
 fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
-    m.engine.io.seg.nodes[1].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
+    m.io().seg.nodes[1].esc.app().as_any().downcast_ref::<Cia402Drive>().unwrap()
 }
 
 #[test]
@@ -72,7 +72,7 @@ fn three_cycles_without_process_data_are_a_sync_error_one_is_not() {
     let (mut m, next) = servo_in_op("", &[]);
     let events = gap(&mut m, next, 1);
     assert!(events.is_empty(), "one missed cycle: {events:?}");
-    let next = m.engine.io.now_ns() + 1;
+    let next = m.io_mut().now_ns() + 1;
     let events = gap(&mut m, next, 3);
     let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
     assert!(
@@ -100,7 +100,7 @@ fn a_limit_of_zero_turns_the_reaction_off() {
     // the outputs' SM events wear it down), not ten.
     let (mut m, next) = servo_in_op("sync_error_limit = 9\n", &[]);
     assert!(gap(&mut m, next, 3).is_empty());
-    let next = m.engine.io.now_ns() + 1;
+    let next = m.io_mut().now_ns() + 1;
     assert_eq!(gap(&mut m, next, 10).len(), 2);
 }
 
@@ -114,15 +114,15 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     let (mut m, mut next) = servo_in_op("", &[]);
     m.supervise_on_wkc = false;
     next += 4 * CYCLE_NS;
-    m.engine.io.sleep_until(next);
+    m.io_mut().sleep_until(next);
     assert!(m.cycle().unwrap() < m.expected_wkc);
-    let seg = &m.engine.io.seg;
+    let seg = &m.io().seg;
     assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
     bring_up(&mut m, &[], &[1]);
-    let mut next = m.engine.io.now_ns();
+    let mut next = m.io_mut().now_ns();
     for _ in 0..100 {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         assert_eq!(m.cycle().unwrap(), m.expected_wkc);
     }
 }
@@ -137,9 +137,9 @@ fn supervision_reads_every_al_status_in_one_frame() {
         &[],
     );
     assert_eq!(m.slaves.len(), 5);
-    let before = m.engine.stats.frames_sent;
+    let before = m.frame_stats().frames_sent;
     assert_eq!(m.supervise().unwrap(), 0);
-    assert_eq!(m.engine.stats.frames_sent - before, 1);
+    assert_eq!(m.frame_stats().frames_sent - before, 1);
 }
 
 #[test]
@@ -148,16 +148,16 @@ fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
     // after the SSC's SYNC0 watchdog (1 ms cycle: 3 ms) the drive leaves OP with 0x002C.
     let (mut m, mut next) = servo_in_op("", &[]);
     let st = m.slaves[1].station;
-    m.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0]).unwrap();
-    let t0 = m.engine.io.now_ns();
+    m.datagram(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0]).unwrap();
+    let t0 = m.io_mut().now_ns();
     let before = m.events.len();
     let mut left_after_ns = None;
     for _ in 0..20 {
         next += CYCLE_NS;
-        m.engine.io.sleep_until(next);
+        m.io_mut().sleep_until(next);
         m.cycle().unwrap();
         if left_after_ns.is_none() && m.events.len() > before {
-            left_after_ns = Some(m.engine.io.now_ns() - t0);
+            left_after_ns = Some(m.io_mut().now_ns() - t0);
         }
     }
     let text: Vec<String> = m.events[before..].iter().map(|e| e.to_string()).collect();
@@ -170,7 +170,7 @@ fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
     assert!((3_000_000..5_000_000).contains(&after), "seen {after} ns after SYNC0 stopped");
     // It cannot come back without SYNC0: the master reports it once.
     assert_eq!(text.len(), 1, "{text:#?}");
-    assert_eq!(m.engine.io.seg.nodes[1].esc.sync_errors, 1);
+    assert_eq!(m.io().seg.nodes[1].esc.sync_errors, 1);
 }
 
 #[test]

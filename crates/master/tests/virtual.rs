@@ -48,11 +48,11 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     let hb = ferrocat_master::Handle { bit: b.image_bit, bits: b.bits };
     m.set(hb, 1);
     for _ in 0..10 {
-        let now = ferrocat_master::io::Io::now_ns(&mut m.engine.io);
-        ferrocat_master::io::Io::sleep_until(&mut m.engine.io, now + 1_000_000);
+        let now = ferrocat_master::io::Io::now_ns(m.io_mut());
+        ferrocat_master::io::Io::sleep_until(m.io_mut(), now + 1_000_000);
         assert_eq!(m.cycle().unwrap(), 4);
     }
-    let outs: Vec<Vec<u8>> = m.engine.io.seg.nodes[1..]
+    let outs: Vec<Vec<u8>> = m.io().seg.nodes[1..]
         .iter()
         .map(|n| n.esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone())
         .collect();
@@ -107,8 +107,8 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     let target = m.slaves[0].outputs[0].clone();
     m.set(ferrocat_master::Handle { bit: target.image_bit, bits: target.bits }, 4242);
     for _ in 0..5 {
-        let now = ferrocat_master::io::Io::now_ns(&mut m.engine.io);
-        ferrocat_master::io::Io::sleep_until(&mut m.engine.io, now + 1_000_000);
+        let now = ferrocat_master::io::Io::now_ns(m.io_mut());
+        ferrocat_master::io::Io::sleep_until(m.io_mut(), now + 1_000_000);
         m.cycle().unwrap();
     }
     assert_eq!(m.sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
@@ -125,7 +125,7 @@ fn needs_shared_emergencies_reach_the_application() {
     assert_eq!(m.poll_mailboxes().unwrap(), 0, "nothing waiting");
     let e = ferrocat_wire::coe::Emergency { error_code: 0x8611, error_register: 0x20, data: [1, 2, 3, 4, 5] };
     // The Nanotec is a CiA402 drive: its CoE device queues the message.
-    let dev = m.engine.io.seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>().unwrap();
+    let dev = m.io_mut().seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>().unwrap();
     dev.coe.emergency(e);
     // The ESC delivers it to SM1 with the next frame; the application's poll finds it.
     m.poll_mailboxes().unwrap();
@@ -145,7 +145,7 @@ fn inputs_come_back_and_esi_describes_a_bare_slave() {
         HostModel::pc_rt(),
     );
     m.bring_up().unwrap();
-    let io = m.engine.io.seg.nodes[1].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap();
+    let io = m.io_mut().seg.nodes[1].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap();
     io.inputs = vec![0b0101];
     for _ in 0..3 {
         m.cycle().unwrap();
@@ -199,7 +199,7 @@ fn esi_describes_a_slave_whose_sii_does_not() {
     let h = m.output(1, "Out 2").unwrap();
     m.set(h, 1);
     m.cycle().unwrap();
-    let io = m.engine.io.seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap();
+    let io = m.io().seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap();
     assert_eq!(io.outputs, [0b10]);
 }
 
@@ -213,25 +213,27 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
     assert_eq!((m.slaves[0].alias, m.slaves[1].alias), (0, 0x0777));
     let mut d = [0u8; 2];
     let fprd_alias = ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 };
-    assert_eq!(m.engine.one(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(), 0, "alias not yet enabled");
+    assert_eq!(m.datagram(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(), 0, "alias not yet enabled");
     assert_eq!(m.enable_alias(1).unwrap(), 0x0777);
     assert_eq!(
-        m.engine
-            .one(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 }, &mut d)
+        m.datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 }, &mut d)
             .unwrap(),
         1
     );
     assert_eq!(u16::from_le_bytes(d), 0x1002, "the alias reaches the slave with station address 0x1002");
     assert!(m.enable_alias(0).unwrap_err().to_string().contains("no station alias"));
     let e = m
-        .engine
-        .expect(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x4242, ado: 0x0130 }, &mut d, 1)
+        .expect_datagram(
+            ferrocat_wire::Command::FPRD,
+            ferrocat_wire::Address::Device { adp: 0x4242, ado: 0x0130 },
+            &mut d,
+            1,
+        )
         .unwrap_err()
         .to_string();
     assert!(e.contains("FPRD 0x4242:0x0130") && e.contains("station address or alias 0x4242"), "{e}");
     let e = m
-        .engine
-        .expect(ferrocat_wire::Command::BRD, ferrocat_wire::Address::Device { adp: 0, ado: 0x0130 }, &mut d, 5)
+        .expect_datagram(ferrocat_wire::Command::BRD, ferrocat_wire::Address::Device { adp: 0, ado: 0x0130 }, &mut d, 5)
         .unwrap_err()
         .to_string();
     assert!(e.contains("2 of 5 expected answers"), "{e}");
@@ -266,10 +268,10 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     m.scan().unwrap();
     assert_eq!(m.slaves[1].alias, 0, "the register keeps its power-on value");
     assert!(m.slaves[1].eeprom_problem().is_none());
-    let t = m.engine.io.now_ns();
-    m.engine.io.seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
-    m.engine.io.seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
-    m.engine.io.sleep_until(t + 3_000_000);
+    let t = m.io_mut().now_ns();
+    m.io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
+    m.io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
+    m.io_mut().sleep_until(t + 3_000_000);
     m.scan().unwrap();
     assert_eq!(m.slaves[1].alias, 0x0BAD);
     assert_eq!(m.enable_alias(1).unwrap(), 0x0BAD);
@@ -296,11 +298,11 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     assert!(problem.contains("checksum"), "{problem}");
     assert_eq!(m.slaves[1].eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
     assert!(m.slaves[0].eeprom_problem().is_none());
-    let t0 = m.engine.io.now_ns();
+    let t0 = m.io_mut().now_ns();
     let e = m.bring_up().unwrap_err().to_string();
     println!("{e}");
     assert!(e.contains("slave 1 (EL2004)") && e.contains("checksum"), "{e}");
-    assert!(m.engine.io.now_ns() - t0 < m.state_timeout_ns / 10, "not after the state timeout");
+    assert!(m.io_mut().now_ns() - t0 < m.state_timeout_ns / 10, "not after the state timeout");
 }
 
 /// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the

@@ -4,7 +4,7 @@ use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
 use ferrocat_wire::sii::SiiInfo;
 use ferrocat_wire::{Address, Command};
 
-use crate::engine::{Engine, Pdu, SlaveTag};
+use crate::engine::{Engine, EngineStats, Pdu, RingState, SlaveTag, SplitRingClocks};
 use crate::error::{code_text, MasterError, Result};
 use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
@@ -68,7 +68,7 @@ impl std::fmt::Display for MasterEvent {
 
 #[derive(Debug)]
 pub struct Master<I: Io> {
-    pub engine: Engine<I>,
+    pub(crate) engine: Engine<I>,
     pub slaves: Vec<Slave>,
     /// The process image: all outputs, then all inputs.
     pub image: Vec<u8>,
@@ -355,6 +355,49 @@ impl<I: Io> Master<I> {
         let r = self.slaves.iter().find(|s| s.has_system_time)?;
         self.dc_reference = Some(r.station);
         Some(r.position)
+    }
+
+    /// The world the master runs on.
+    pub fn io(&self) -> &I {
+        &self.engine.io
+    }
+
+    /// The world the master runs on, to change (a simulator's faults, a recording's file).
+    pub fn io_mut(&mut self) -> &mut I {
+        &mut self.engine.io
+    }
+
+    /// The world back, the master done with.
+    pub fn into_io(self) -> I {
+        self.engine.io
+    }
+
+    /// Counts of the frames sent, received, lost, late and retried so far.
+    pub fn frame_stats(&self) -> EngineStats {
+        self.engine.stats
+    }
+
+    /// What the master's two ports show of a ring (cable redundancy).
+    pub fn ring_state(&self) -> RingState {
+        self.engine.ring
+    }
+
+    /// On a broken ring, how the far half gets its clock.
+    pub fn set_split_ring_clocks(&mut self, clocks: SplitRingClocks) {
+        self.engine.split_ring_clocks = clocks;
+    }
+
+    /// One datagram as given, sent now and waited for with the engine's retries; returns its
+    /// working counter. For registers the master has no call for (SOEM's `ec_FPRD` and
+    /// kin); writing to registers the master manages can break what it keeps.
+    pub fn datagram(&mut self, cmd: Command, address: Address, data: &mut [u8]) -> Result<u16> {
+        self.engine.one(cmd, address, data)
+    }
+
+    /// [`Master::datagram`] that must reach `expected` slaves: a shortfall is an error naming
+    /// the datagram and the slave it was meant for.
+    pub fn expect_datagram(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
+        self.engine.expect(cmd, address, data, expected)
     }
 
     /// The world's clock now, ns (CLOCK_MONOTONIC on a real link).

@@ -10,7 +10,7 @@ use crate::trimmed::TrimmedWindow;
 /// link has them); a trimmed mean over a short window rejects the outliers of a busy host
 /// without the settling time of a long average.
 /// - Master follows reference: a least-squares line through (master time at passage,
-///   reference time) gives offset and rate ([`LineFit`]: its window grows to 16 384 points
+///   reference time) gives offset and rate (`LineFit`: its window grows to 16 384 points
 ///   while the points agree with it, leaves single outliers out, and restarts when a CUSUM
 ///   of its innovations sees the rate or phase change); the master's clock is that line
 ///   (its estimate of the reference's time), and the next period puts the frame at
