@@ -15,6 +15,7 @@ const LATCH0_POS: u16 = 0x09B0;
 const LATCH0_CONTROL: u16 = 0x09A8;
 
 #[derive(Debug, Clone)]
+/// A calibration of the master's clock against a slave's LATCH0 input, pulsed by a host output (a GPIO) whose latency is known.
 pub struct GpioCalibration {
     /// Position of the slave whose LATCH0 input the output drives.
     pub slave: u16,
@@ -28,6 +29,7 @@ pub struct GpioCalibration {
 }
 
 impl GpioCalibration {
+    /// A calibration of the LATCH0 input of `slave`, the output's latency `output_latency_ns`, over `pulses` pulses (at least 1).
     pub fn new(slave: u16, output_latency_ns: u64, pulses: usize) -> Self {
         let pulses = pulses.max(1);
         GpioCalibration {

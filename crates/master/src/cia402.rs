@@ -14,7 +14,9 @@ use crate::process::Handle;
 pub enum Goal {
     /// Switch on disabled, power off.
     Disabled,
+    /// Operation enabled: the drive follows its set-points.
     OperationEnabled,
+    /// Quick stop active: the drive brakes on its quick-stop ramp.
     QuickStop,
 }
 
@@ -37,7 +39,9 @@ struct Handles {
 }
 
 #[derive(Debug, Clone)]
+/// One CiA402 axis: its process-data handles and the driver's state machine.
 pub struct Axis {
+    /// The slave's position on the segment.
     pub position: u16,
     h: Handles,
     goal: Goal,
@@ -99,6 +103,7 @@ impl Axis {
         })
     }
 
+    /// Where the driver should take the drive; [`Axis::update`] walks it there.
     pub fn set_goal(&mut self, goal: Goal) {
         self.goal = goal;
     }
@@ -133,6 +138,7 @@ impl Axis {
         Ok(())
     }
 
+    /// The drive's state from its last statusword, if it had one.
     pub fn state(&self) -> Option<State> {
         self.state
     }
@@ -142,10 +148,12 @@ impl Axis {
     pub fn statusword<I: Io>(&self, m: &Master<I>) -> u16 {
         m.get(self.h.statusword) as u16
     }
+    /// Writes the controlword as given (the driver writes it in [`Axis::update`]).
     pub fn write_controlword<I: Io>(&self, m: &mut Master<I>, cw: u16) {
         m.set(self.h.controlword, cw as u64);
     }
 
+    /// The mode the drive says it runs (0x6061), where mapped.
     pub fn mode_display<I: Io>(&self, m: &Master<I>) -> Option<Mode> {
         self.h.mode_display.and_then(|h| Mode::from_code(m.get(h) as u8 as i8))
     }
@@ -155,15 +163,19 @@ impl Axis {
         self.state == Some(State::OperationEnabled) && self.mode_display(m).is_none_or(|d| d == self.mode)
     }
 
+    /// Position actual value (0x6064), where mapped.
     pub fn position_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
         self.h.position_actual.map(|h| signed(m.get(h), h.bits) as i32)
     }
+    /// Velocity actual value (0x606C), where mapped.
     pub fn velocity_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
         self.h.velocity_actual.map(|h| signed(m.get(h), h.bits) as i32)
     }
+    /// Torque actual value (0x6077, per mille of rated), where mapped.
     pub fn torque_actual<I: Io>(&self, m: &Master<I>) -> Option<i16> {
         self.h.torque_actual.map(|h| signed(m.get(h), h.bits) as i16)
     }
+    /// Following error actual value (0x60F4), where mapped.
     pub fn following_error<I: Io>(&self, m: &Master<I>) -> Option<i32> {
         self.h.following_error.map(|h| signed(m.get(h), h.bits) as i32)
     }
@@ -175,11 +187,13 @@ impl Axis {
             m.set(h, pos as u32 as u64);
         }
     }
+    /// Sets the target velocity (0x60FF), where mapped.
     pub fn set_target_velocity<I: Io>(&self, m: &mut Master<I>, vel: i32) {
         if let Some(h) = self.h.target_velocity {
             m.set(h, vel as u32 as u64);
         }
     }
+    /// Sets the target torque (0x6071, per mille of rated), where mapped.
     pub fn set_target_torque<I: Io>(&self, m: &mut Master<I>, per_mille: i16) {
         if let Some(h) = self.h.target_torque {
             m.set(h, per_mille as u16 as u64);

@@ -11,20 +11,30 @@ use crate::master::{Master, MasterEvent};
 /// An object's description from SDO information.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ObjectInfo {
+    /// The object's index.
     pub index: u16,
+    /// Its data type (an index of the object dictionary's type area).
     pub data_type: u16,
+    /// Its highest subindex.
     pub max_subindex: u8,
+    /// Its object code (7 VAR, 8 ARRAY, 9 RECORD).
     pub object_code: u8,
+    /// Its name.
     pub name: String,
 }
 
 /// An entry's description from SDO information.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EntryInfo {
+    /// The entry's subindex.
     pub subindex: u8,
+    /// Its data type.
     pub data_type: u16,
+    /// Its size in bits.
     pub bit_length: u16,
+    /// Its access bits (read and write per state, mappable).
     pub access: u16,
+    /// Its name.
     pub name: String,
 }
 
@@ -306,6 +316,7 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// Reads an object by SDO upload (expedited, normal or segmented, as the slave answers).
     pub fn sdo_read(&mut self, position: u16, index: u16, subindex: u8) -> Result<Vec<u8>> {
         self.sdo_upload(position, index, subindex, false)
     }
@@ -376,6 +387,7 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// Writes an object by SDO download (expedited up to 4 bytes, normal when it fits the mailbox, segmented beyond).
     pub fn sdo_write(&mut self, position: u16, index: u16, subindex: u8, data: &[u8]) -> Result<()> {
         self.sdo_download(position, index, subindex, false, data)
     }
@@ -424,6 +436,7 @@ impl<I: Io> Master<I> {
         Ok(data.chunks_exact(2).skip(1).map(|c| u16::from_le_bytes([c[0], c[1]])).collect())
     }
 
+    /// An object's description by SDO information.
     pub fn object_info(&mut self, position: u16, index: u16) -> Result<ObjectInfo> {
         let h = InfoHeader {
             opcode: InfoOpcode::GET_OBJECT_DESCRIPTION_REQUEST,
@@ -451,6 +464,7 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// An entry's description by SDO information.
     pub fn entry_info(&mut self, position: u16, index: u16, subindex: u8) -> Result<EntryInfo> {
         let h = InfoHeader {
             opcode: InfoOpcode::GET_ENTRY_DESCRIPTION_REQUEST,

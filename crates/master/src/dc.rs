@@ -146,17 +146,21 @@ impl SyncPdus {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
+/// How the DC initialisation runs ([`Master::init_dc`]).
 pub struct DcConfig {
     /// Static drift compensation stops when every |0x092C| stays at or below this…
     pub converged_ns: u32,
     /// …for this many checks in a row (one check every `check_every` frames)…
     pub stable_checks: u32,
+    /// Frames between checks of 0x092C (default 250).
     pub check_every: u32,
     /// …or after this many frames at the most (the ETG example: 15 000).
     pub max_frames: u32,
     /// SYNC0 cycle and shift; SYNC1 delay after SYNC0 (0: no SYNC1).
     pub sync0_cycle_ns: u32,
+    /// SYNC0's shift after the cycle's start, ns (default 0).
     pub sync0_shift_ns: i32,
+    /// SYNC1's delay after SYNC0, ns (default 0: no SYNC1).
     pub sync1_ns: u32,
     /// The first SYNC0 this far after the reference's present time, rounded to the cycle.
     pub start_delay_ns: u64,
@@ -181,18 +185,23 @@ impl Default for DcConfig {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
+/// What the DC initialisation did.
 pub struct DcReport {
+    /// Position of the reference clock.
     pub reference: u16,
+    /// Frames of static drift compensation sent.
     pub static_frames: u32,
     /// How long the static drift compensation took.
     pub static_ns: u64,
     /// Whether the reference followed the master through it (`init_dc_with`).
     pub reference_steered: bool,
+    /// Whether every |0x092C| came within `converged_ns`.
     pub converged: bool,
     /// Largest |0x092C| at the end of the static drift compensation.
     pub max_difference_ns: u32,
     /// System time of the first SYNC0, and the slaves it was started on.
     pub sync0_start: Option<u64>,
+    /// The slaves SYNC0 was started on.
     pub sync0_slaves: Vec<u16>,
 }
 
@@ -468,9 +477,11 @@ impl<I: Io> Master<I> {
 /// State of cyclic synchronisation kept by the master between steps.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SyncState {
+    /// Cycles stepped.
     pub cycle: u64,
     /// Time the frame spends behind the reference (from the latched receive times).
     pub loop_ns: u64,
+    /// Cycle frames lost.
     pub lost: u64,
     /// The reference's time from the last answered step's FRMW (a 32-bit reference's unwrapped
     /// onto 64 bits, counting its wraps from the first).
@@ -481,12 +492,14 @@ pub struct SyncState {
     pub no_probes: bool,
     /// Probe frames sent, and those lost.
     pub probes: u64,
+    /// Probe frames lost.
     pub probes_lost: u64,
     /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`](crate::sync::ClockSync::makes_up_lost_frames)).
     pub make_ups: u64,
     /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
     /// probes stopped early so as not to make the next cycle late.
     pub probe_mean_ns: u64,
+    /// Cycles whose probes stopped early so as not to make the next cycle late.
     pub probes_cut: u64,
     /// Cable redundancy: the ring's state `loop_ns` was measured for.
     pub ring: crate::engine::RingState,

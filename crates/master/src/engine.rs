@@ -25,13 +25,17 @@ impl<'a> Pdu<'a> {
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// Counts of the frames the master sent and what became of them.
 pub struct EngineStats {
+    /// Frames sent.
     pub frames_sent: u64,
+    /// Frames received.
     pub frames_received: u64,
     /// Frames never answered, even after retries.
     pub lost: u64,
     /// Replies that came after their frame had been given up or answered.
     pub late: u64,
+    /// Frames sent again after a timeout.
     pub retries: u64,
     /// Cable redundancy: frames sent round the second half of a broken ring again.
     pub resent: u64,

@@ -32,6 +32,7 @@ pub struct EoeLink {
     trying: Option<Vec<u8>>,
     /// Frames dropped because the inbox was full, and fragments that did not fit.
     pub dropped: u64,
+    /// Fragments that did not fit the frame being put together.
     pub fragment_errors: u64,
 }
 
@@ -45,9 +46,13 @@ impl EoeLink {
 /// Who pings: the master's address on the EoE network, and the slave's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct EoePing {
+    /// The master's MAC address on the EoE network.
     pub from_mac: [u8; 6],
+    /// The master's IPv4 address.
     pub from_ip: [u8; 4],
+    /// The slave's MAC address.
     pub to_mac: [u8; 6],
+    /// The slave's IPv4 address.
     pub to_ip: [u8; 4],
 }
 

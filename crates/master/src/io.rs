@@ -18,6 +18,7 @@ pub struct RawIo {
 }
 
 impl RawIo {
+    /// A raw socket on the interface `iface` (needs root or CAP_NET_RAW).
     pub fn open(iface: &str) -> std::io::Result<Self> {
         Ok(RawIo {
             sock: ferrocat_link::RawSocket::open(iface)?,

@@ -1,3 +1,4 @@
+#![deny(missing_docs)]
 //! The ferrocat EtherCAT master.
 //!
 //! ```no_run

@@ -20,22 +20,31 @@ const MAX_PDUS: usize = MAX_CHUNKS + 4;
 /// Where an entry sits in the image: bit offset and width.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Handle {
+    /// Bit offset in the whole image.
     pub bit: u32,
+    /// Width in bits.
     pub bits: u8,
 }
 
 /// Statistics of the cyclic exchange.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CycleStats {
+    /// Cycles run.
     pub cycles: u64,
+    /// Cycles whose working counter fell short.
     pub wkc_errors: u64,
+    /// The last cycle's working counter.
     pub last_wkc: u16,
     /// Time between the starts of the last two cycles, and the largest deviation from the
     /// nominal period seen (when `nominal_period_ns` is set).
     pub last_period_ns: u64,
+    /// The period the jitter is measured against, ns (0: none).
     pub nominal_period_ns: u64,
+    /// The largest deviation of a period from the nominal, ns.
     pub max_jitter_ns: u64,
+    /// The last cycle's round trip, ns.
     pub last_round_trip_ns: u64,
+    /// The largest round trip, ns.
     pub max_round_trip_ns: u64,
     /// Cyclic frames that never came back.
     pub lost_frames: u64,
@@ -82,6 +91,7 @@ impl<I: Io> Master<I> {
             .ok_or_else(|| MasterError::slave(position, &s.name, format!("no output named '{name}'")))
     }
 
+    /// The handle of an input entry of slave `position` by its name (first match).
     pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.slave(position)?;
         s.inputs
@@ -117,6 +127,7 @@ impl<I: Io> Master<I> {
         v
     }
 
+    /// The cyclic exchange's statistics so far.
     pub fn cycle_stats(&self) -> CycleStats {
         self.cyc.stats
     }

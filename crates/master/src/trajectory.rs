@@ -5,8 +5,11 @@
 /// Velocity, acceleration and jerk limits of one axis (units per s, s², s³).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
+    /// Velocity limit (units/s).
     pub velocity: f64,
+    /// Acceleration limit (units/s²).
     pub acceleration: f64,
+    /// Jerk limit (units/s³).
     pub jerk: f64,
 }
 
@@ -15,8 +18,11 @@ pub struct Limits {
 pub struct SCurve {
     /// Jerk phase, constant-acceleration phase and cruise durations (s).
     pub t_jerk: f64,
+    /// See `t_jerk`.
     pub t_acc: f64,
+    /// See `t_jerk`.
     pub t_cruise: f64,
+    /// The jerk of the normalised profile (1/s³).
     pub jerk: f64,
 }
 
@@ -48,6 +54,7 @@ impl SCurve {
         SCurve { t_jerk: tj, t_acc: ta, t_cruise: 0.0, jerk: j }
     }
 
+    /// The profile's whole duration, s.
     pub fn duration_s(&self) -> f64 {
         4.0 * self.t_jerk + 2.0 * self.t_acc + self.t_cruise
     }
@@ -86,8 +93,11 @@ impl SCurve {
 /// A synchronised move of N axes from `from` to `to`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Move {
+    /// Each axis's start.
     pub from: Vec<f64>,
+    /// Each axis's end.
     pub to: Vec<f64>,
+    /// The normalised profile every axis follows.
     pub profile: SCurve,
 }
 
@@ -111,6 +121,7 @@ impl Move {
         Move { from: from.to_vec(), to: to.to_vec(), profile }
     }
 
+    /// The move's duration, s.
     pub fn duration_s(&self) -> f64 {
         self.profile.duration_s()
     }

@@ -26,15 +26,48 @@ pub const STATION_BASE: u16 = 0x1001;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum MasterEvent {
     /// The slave left OP (its AL status and code).
-    LeftOp { position: u16, name: String, status: AlStatus, code: AlStatusCode },
+    LeftOp {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// AL status read.
+        status: AlStatus,
+        /// AL status code read.
+        code: AlStatusCode,
+    },
     /// The slave stopped answering (link lost or powered off).
-    Lost { position: u16, name: String },
+    Lost {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+    },
     /// The slave is back in OP.
-    Recovered { position: u16, name: String },
+    Recovered {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+    },
     /// A CoE emergency.
-    Emergency { position: u16, name: String, error_code: u16, error_register: u8, data: [u8; 5] },
+    Emergency {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The emergency error code.
+        error_code: u16,
+        /// The error register (0x1001).
+        error_register: u8,
+        /// The manufacturer-specific bytes.
+        data: [u8; 5],
+    },
     /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
-    Ring { state: crate::engine::RingState },
+    Ring {
+        /// The ring's state now.
+        state: crate::engine::RingState,
+    },
 }
 
 impl std::fmt::Display for MasterEvent {
@@ -67,16 +100,21 @@ impl std::fmt::Display for MasterEvent {
 }
 
 #[derive(Debug)]
+/// An EtherCAT master on the world `I`: its slaves, its process image, its events.
 pub struct Master<I: Io> {
     pub(crate) engine: Engine<I>,
+    /// The slaves found by the scan, by position.
     pub slaves: Vec<Slave>,
     /// The process image: all outputs, then all inputs.
     pub image: Vec<u8>,
+    /// Bytes of outputs in the image.
     pub out_bytes: u32,
+    /// Bytes of inputs in the image.
     pub in_bytes: u32,
     /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
     /// with inputs.
     pub expected_wkc: u16,
+    /// What happened during cyclic operation, in order (see [`Master::supervise`]).
     pub events: Vec<MasterEvent>,
     /// How long a state transition may take before it is an error.
     pub state_timeout_ns: u64,
@@ -117,6 +155,7 @@ pub struct Master<I: Io> {
 }
 
 impl<I: Io> Master<I> {
+    /// A master on `io`, knowing no slave yet.
     pub fn new(io: I) -> Self {
         Master {
             engine: Engine::new(io),
@@ -152,6 +191,7 @@ impl<I: Io> Master<I> {
         self.events.push(e);
     }
 
+    /// The slave at `position`, or an error saying how many there are.
     pub fn slave(&self, position: u16) -> Result<&Slave> {
         self.slaves.get(position as usize).ok_or_else(|| {
             MasterError::Config(match self.slaves.len() {

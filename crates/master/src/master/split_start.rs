@@ -39,6 +39,7 @@ pub struct SplitLatch {
     pub first_far: usize,
     /// The far half's root (the slave the secondary's cable reaches) and its entry port.
     pub root: usize,
+    /// The port of the far root the secondary's cable comes in by.
     pub root_port: u8,
     /// The far reference (the far half's first slave with a system time), if any.
     pub far_reference: Option<usize>,

@@ -6,8 +6,11 @@ use super::{ClockSync, Correction, Coupling, Sample, MAX_CYCLE_NS};
 /// truncation error carried over (Algorithm 1).
 #[derive(Debug)]
 pub struct Chen2016 {
+    /// The nominal cycle, ns.
     pub nominal_ns: u64,
+    /// Timestamp differences per speed update.
     pub n: u32,
+    /// The host timer's resolution, ns.
     pub resolution_ns: u64,
     ideal_ns: f64,
     prev: Option<(u64, u64)>,
@@ -17,6 +20,7 @@ pub struct Chen2016 {
 }
 
 impl Chen2016 {
+    /// Chen 2016 on a cycle of `nominal_ns`, `n` differences per update, a timer of `resolution_ns`.
     pub fn new(nominal_ns: u64, n: u32, resolution_ns: u64) -> Self {
         let nominal_ns = nominal_ns.clamp(1, MAX_CYCLE_NS);
         Chen2016 {

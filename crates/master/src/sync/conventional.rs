@@ -21,6 +21,7 @@ impl ClockSync for Conventional {
 /// Chen 2016's Table 2).
 #[derive(Debug)]
 pub struct Nominal {
+    /// The cycle kept, ns.
     pub cycle_ns: u64,
 }
 

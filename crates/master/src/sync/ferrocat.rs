@@ -33,10 +33,13 @@ use crate::trimmed::TrimmedWindow;
 ///   at the instant the frame passes; a late send is a sample off by its lateness.
 #[derive(Debug)]
 pub struct Ferrocat {
+    /// Who follows whom.
     pub coupling: Coupling,
     /// How the reference is made to follow (reference-follows-master only).
     pub steering: Steering,
+    /// The cycle, ns.
     pub cycle_ns: u64,
+    /// Where in the cycle the frame should pass the reference, ns.
     pub phase_ns: u64,
     /// Reference follows master: the master's time goes to the reference every this many
     /// cycles (default 1). Fewer, further-apart samples should carry less of the host's send
@@ -337,6 +340,7 @@ pub const DENSE_FIT_WINDOW: usize = 65_536;
 const SCORE_GAP_DIVISOR: u64 = 4;
 
 impl Ferrocat {
+    /// ferrocat's method with `coupling` on a cycle of `cycle_ns`, its line through the reference's own points (see [`Ferrocat::with_flywheel`]).
     pub fn new(coupling: Coupling, cycle_ns: u64) -> Self {
         let cycle_ns = cycle_ns.clamp(1, MAX_CYCLE_NS);
         Ferrocat {

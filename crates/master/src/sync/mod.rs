@@ -42,6 +42,7 @@ pub struct Sample {
     /// When the frame left and when its reply began to arrive, if the link stamps them;
     /// otherwise `tx_ns` is `None` and `rx_ns` is when the master had the reply.
     pub tx_ns: Option<u64>,
+    /// See `tx_ns`.
     pub rx_ns: u64,
     /// The reference's system time as the frame passed it (the FRMW reply; a 32-bit
     /// reference's unwrapped onto 64 bits).
@@ -76,6 +77,7 @@ pub struct FollowerClock {
     /// Speed counter start (0x0930) and difference (0x0932): the rate the loop applied since
     /// its last sample (esc-spec §3.5).
     pub speed_start: u16,
+    /// See `speed_start`.
     pub speed_diff: i16,
     /// Which way a positive speed counter difference moves this ESC's clock, where the master
     /// measured it at the DC initialisation (true: it slows it).
@@ -126,8 +128,11 @@ impl LineEvents {
     }
 }
 
+/// A clock-synchronisation method, as linuxptp's servos: each cycle the master hands it what the frame measured and carries out the [`Correction`] it returns.
 pub trait ClockSync {
+    /// The method's name (a [`SyncMethod::PRESETS`] family).
     fn name(&self) -> &'static str;
+    /// Who follows whom under it.
     fn coupling(&self) -> Coupling;
     /// Reference-follows-master: the time to write into the reference's 0x0910 for a frame
     /// built at `built_ns`.

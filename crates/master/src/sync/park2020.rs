@@ -6,14 +6,18 @@ use super::{ClockSync, Correction, Coupling, Sample};
 /// subtracted from every slave's offset (eq. 5).
 #[derive(Debug)]
 pub struct Park2020 {
+    /// The master–reference delay of eq. 3, ns.
     pub delay_ns: i64,
+    /// The EMA weight of eq. 4.
     pub alpha: f64,
+    /// How often the bias is corrected, ns.
     pub period_ns: u64,
     ema_ns: Option<f64>,
     last_ns: Option<u64>,
 }
 
 impl Park2020 {
+    /// Park 2020 with the delay `delay_ns` ([`Park2020::delay_from`]), α = 0.25, every 100 ms.
     pub fn new(delay_ns: i64) -> Self {
         Park2020 { delay_ns, alpha: 0.25, period_ns: 100_000_000, ema_ns: None, last_ns: None }
     }

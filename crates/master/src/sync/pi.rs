@@ -6,12 +6,15 @@ use super::{ClockSync, Correction, Coupling, Sample, MAX_CYCLE_NS};
 /// running sum/20.
 #[derive(Debug)]
 pub struct SoemPi {
+    /// The cycle, ns.
     pub cycle_ns: u64,
+    /// Where in the reference's cycle the master aims, ns.
     pub shift_ns: i64,
     integral: i64,
 }
 
 impl SoemPi {
+    /// SOEM's loop on a cycle of `cycle_ns`, aiming `shift_ns` into the reference's cycle.
     pub fn new(cycle_ns: u64, shift_ns: i64) -> Self {
         SoemPi { cycle_ns: cycle_ns.clamp(2, MAX_CYCLE_NS), shift_ns, integral: 0 }
     }
