@@ -11,8 +11,8 @@ use crate::sync::ClockSync;
 use crate::{Master, MasterError, Result};
 
 /// Latch0 positive-edge time, and latch0 control (0: both edges latched continuously).
-const LATCH0_POS: u16 = 0x09B0;
-const LATCH0_CONTROL: u16 = 0x09A8;
+const LATCH0_POS: u16 = ferrocat_wire::register::addr::DC_LATCH0_POSITIVE;
+const LATCH0_CONTROL: u16 = ferrocat_wire::register::addr::DC_LATCH0_CONTROL;
 
 #[derive(Debug, Clone)]
 /// A calibration of the master's clock against a slave's LATCH0 input, pulsed by a host output (a GPIO) whose latency is known.

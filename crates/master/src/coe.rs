@@ -38,6 +38,11 @@ pub struct EntryInfo {
     pub name: String,
 }
 
+/// SM1 (the slave's send mailbox): its activate byte, where the master toggles the repeat
+/// request (bit 1), and its PDI control byte, where the slave acknowledges it (bit 1).
+const SM1_ACTIVATE: u16 = ferrocat_wire::register::addr::sm(1) + 6;
+const SM1_PDI_CONTROL: u16 = ferrocat_wire::register::addr::sm(1) + 7;
+
 /// How long the master waits for a slave to acknowledge a mailbox repeat request before it
 /// polls on (a firmware answers it within its mailbox response time).
 const REPEAT_ACK_WAIT_NS: u64 = 50_000_000;
@@ -202,7 +207,7 @@ impl<I: Io> Master<I> {
     fn mbx_repeat(&mut self, position: u16) -> Result<()> {
         let st = self.slave(position)?.station;
         let mut reg = [0u8; 2];
-        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x080E }, &mut reg)? != 1 {
+        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut reg)? != 1 {
             return Ok(());
         }
         // A slave whose acknowledge does not follow its request does not repeat.
@@ -210,7 +215,7 @@ impl<I: Io> Master<I> {
             return Ok(());
         }
         let request = reg[0] ^ 0x02;
-        if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x080E }, &mut [request])? != 1 {
+        if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut [request])? != 1 {
             return Ok(());
         }
         let slave = &mut self.slaves[position as usize];
@@ -219,7 +224,7 @@ impl<I: Io> Master<I> {
         let deadline = self.engine.io.now_ns() + REPEAT_ACK_WAIT_NS.min(self.mailbox_timeout_ns);
         loop {
             let mut ack = [0u8];
-            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x080F }, &mut ack)? == 1
+            if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: SM1_PDI_CONTROL }, &mut ack)? == 1
                 && (ack[0] ^ request) & 0x02 == 0
             {
                 return Ok(());

@@ -1,6 +1,7 @@
 //! Distributed-clock initialisation: delays and offsets written, the time control loops reset,
 //! static drift compensation until every slave has converged, SYNC0/SYNC1 started on the cycle
 //! grid, and a sync monitor (esc-spec §3.4).
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDifference};
 use ferrocat_wire::{Address, Command};
 
@@ -47,7 +48,7 @@ pub(crate) struct SyncPdus {
 }
 
 /// A follower's 0x0910 (system time) to 0x0933 (speed counter difference) in one read.
-const FOLLOWER_CLOCK_LEN: usize = 0x0934 - 0x0910;
+const FOLLOWER_CLOCK_LEN: usize = (addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH - addr::DC_SYSTEM_TIME) as usize;
 
 /// What the sync frame does to the reference before its FRMW.
 #[derive(Debug)]
@@ -89,19 +90,23 @@ impl SyncPdus {
         let at = |ado| Address::Device { adp: station, ado };
         let n = 3 + self.follower.is_some() as usize;
         let clock = match self.follower {
-            Some((f, _)) => Pdu::new(Command::FPRD, Address::Device { adp: f, ado: 0x0910 }, &mut self.clock),
+            Some((f, _)) => {
+                Pdu::new(Command::FPRD, Address::Device { adp: f, ado: addr::DC_SYSTEM_TIME }, &mut self.clock)
+            }
             None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []),
         };
         let pdus = [
             match &mut self.first {
-                FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(0x0910), w),
-                FirstPdu::Offset { data, len, write } => {
-                    Pdu::new(if *write { Command::FPRW } else { Command::FPRD }, at(0x0920), &mut data[..*len])
-                }
+                FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(addr::DC_SYSTEM_TIME), w),
+                FirstPdu::Offset { data, len, write } => Pdu::new(
+                    if *write { Command::FPRW } else { Command::FPRD },
+                    at(addr::DC_SYSTEM_TIME_OFFSET),
+                    &mut data[..*len],
+                ),
                 FirstPdu::Nop => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
             },
-            Pdu::new(Command::FRMW, at(0x0910), &mut self.frmw),
-            Pdu::new(Command::FPRD, at(0x092C), &mut self.diff),
+            Pdu::new(Command::FRMW, at(addr::DC_SYSTEM_TIME), &mut self.frmw),
+            Pdu::new(Command::FPRD, at(addr::DC_SYSTEM_TIME_DIFFERENCE), &mut self.diff),
             clock,
         ];
         (pdus, n)
@@ -286,15 +291,29 @@ impl<I: Io> Master<I> {
             let n = if s.dc_64bit { 8 } else { 4 };
             d[..8].copy_from_slice(&offset.to_le_bytes());
             let (st, delay) = (s.station, s.delay_ns);
-            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0920 }, &mut d[..n], 1)?;
-            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0928 }, &mut delay.to_le_bytes(), 1)?;
+            self.engine.expect(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET },
+                &mut d[..n],
+                1,
+            )?;
+            self.engine.expect(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DELAY },
+                &mut delay.to_le_bytes(),
+                1,
+            )?;
         }
         // 5. Reset the time control loops: filter depth first, then the speed counter start.
         let dc_count = self.slaves.iter().filter(|s| s.has_system_time).count() as u16;
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0934 }, &mut [4])?;
+        self.engine.one(
+            Command::BWR,
+            Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH },
+            &mut [4],
+        )?;
         self.engine.expect(
             Command::BWR,
-            Address::Device { adp: 0, ado: 0x0930 },
+            Address::Device { adp: 0, ado: addr::DC_SPEED_COUNTER_START },
             &mut 0x1000u16.to_le_bytes(),
             dc_count,
         )?;
@@ -335,7 +354,11 @@ impl<I: Io> Master<I> {
                 None => {
                     let mut t = [0u8; 8];
                     self.engine.split_passes = None;
-                    self.engine.one(Command::FRMW, Address::Device { adp: ref_station, ado: 0x0910 }, &mut t)?;
+                    self.engine.one(
+                        Command::FRMW,
+                        Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
+                        &mut t,
+                    )?;
                     let passes = self.engine.split_passes.take();
                     self.keep_far_reference(passes)?;
                 }
@@ -417,12 +440,22 @@ impl<I: Io> Master<I> {
         // Stop first: a restart with 0x0981 still set is a classic cause of "no sync" errors.
         for &p in targets {
             let st = self.slave(p)?.station;
-            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0], 1)?;
-            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: 0x0980 }, &mut [0], 1)?;
+            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: addr::DC_ACTIVATION }, &mut [0], 1)?;
+            self.engine.expect(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_CYCLIC_UNIT_CONTROL },
+                &mut [0],
+                1,
+            )?;
         }
         let ref_station = self.dc_reference.ok_or_else(|| MasterError::Config("no reference clock".into()))?;
         let mut now = [0u8; 8];
-        self.engine.expect(Command::FPRD, Address::Device { adp: ref_station, ado: 0x0910 }, &mut now, 1)?;
+        self.engine.expect(
+            Command::FPRD,
+            Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
+            &mut now,
+            1,
+        )?;
         let now = u64::from_le_bytes(now);
         let start = ((now + cfg.start_delay_ns) / cycle + 1) * cycle;
         let start = (start as i128 + cfg.sync0_shift_ns as i128).max(0) as u64;
@@ -434,12 +467,12 @@ impl<I: Io> Master<I> {
             let fp = |m: &mut Self, ado: u16, d: &mut [u8]| {
                 m.engine.expect(Command::FPWR, Address::Device { adp: st, ado }, d, 1)
             };
-            fp(self, 0x09A0, &mut (cfg.sync0_cycle_ns).to_le_bytes())?;
-            fp(self, 0x09A4, &mut cfg.sync1_ns.to_le_bytes())?;
+            fp(self, addr::DC_SYNC0_CYCLE_TIME, &mut (cfg.sync0_cycle_ns).to_le_bytes())?;
+            fp(self, addr::DC_SYNC1_CYCLE_TIME, &mut cfg.sync1_ns.to_le_bytes())?;
             let mut s = start.to_le_bytes();
-            fp(self, 0x0990, &mut s[..if wide { 8 } else { 4 }])?;
+            fp(self, addr::DC_START_TIME, &mut s[..if wide { 8 } else { 4 }])?;
             let a = act::CYCLIC_OPERATION | act::SYNC0 | if cfg.sync1_ns > 0 { act::SYNC1 } else { 0 };
-            fp(self, 0x0981, &mut [a])?;
+            fp(self, addr::DC_ACTIVATION, &mut [a])?;
         }
         Ok(start)
     }
@@ -453,7 +486,9 @@ impl<I: Io> Master<I> {
             let mut p: Vec<Pdu<'_>> = dc
                 .iter()
                 .zip(bufs.iter_mut())
-                .map(|(&(_, st), b)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x092C }, b))
+                .map(|(&(_, st), b)| {
+                    Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, b)
+                })
                 .collect();
             // A slave that did not answer read zero: not "synchronised".
             self.engine.expect_each(&mut p, 1)?;
@@ -469,7 +504,7 @@ impl<I: Io> Master<I> {
     /// bound of the largest), as IgH's monitor reads it.
     pub fn dc_monitor(&mut self) -> Result<u32> {
         let mut d = [0u8; 4];
-        self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0x092C }, &mut d)?;
+        self.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, &mut d)?;
         Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
     }
 }
@@ -616,9 +651,9 @@ impl<I: Io> Master<I> {
         }
         let r = self.reference_index()?;
         let st = self.slaves[r].station;
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut [0u8; 4])?;
         let mut dl = [0u8; 2];
-        self.fprd(st, 0x0110, &mut dl)?;
+        self.fprd(st, addr::DL_STATUS, &mut dl)?;
         let times = self.port_receive_times(st)?;
         let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
         let view = crate::topology::PortView {
@@ -648,7 +683,11 @@ impl<I: Io> Master<I> {
         let mut trips = Vec::with_capacity(n as usize);
         for _ in 0..n {
             let t0 = self.engine.io.now_ns();
-            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+            self.engine.one(
+                Command::BWR,
+                Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 },
+                &mut [0u8; 4],
+            )?;
             let t1 = self.engine.io.now_ns();
             let times = self.port_receive_times(st)?;
             // Eq. 3's t_p1 − t_p0 is the time the frame spends behind the reference: on a line
@@ -854,8 +893,10 @@ impl<I: Io> Master<I> {
             }
             None => Command::FPRD,
         };
-        let mut pdus =
-            [Pdu::new(offset_cmd, at(0x0920), &mut offset[..n]), Pdu::new(Command::FPRD, at(0x0910), &mut time[..n])];
+        let mut pdus = [
+            Pdu::new(offset_cmd, at(addr::DC_SYSTEM_TIME_OFFSET), &mut offset[..n]),
+            Pdu::new(Command::FPRD, at(addr::DC_SYSTEM_TIME), &mut time[..n]),
+        ];
         let pdus = if steer { &mut pdus[..] } else { &mut pdus[1..] };
         let frame_bytes = frame_bytes(pdus);
         let sent = self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok();
@@ -918,7 +959,7 @@ impl<I: Io> Master<I> {
                 continue;
             }
             let (st, delay) = (s.station, (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32);
-            self.fpwr(st, 0x0928, &delay.to_le_bytes())?;
+            self.fpwr(st, addr::DC_SYSTEM_TIME_DELAY, &delay.to_le_bytes())?;
         }
         Ok(())
     }
@@ -971,7 +1012,9 @@ impl<I: Io> Master<I> {
             let mut pdus: Vec<Pdu<'_>> = clocks
                 .iter()
                 .zip(offsets.iter_mut())
-                .map(|(&(st, n), o)| Pdu::new(cmd, Address::Device { adp: st, ado: 0x0920 }, &mut o[..n]))
+                .map(|(&(st, n), o)| {
+                    Pdu::new(cmd, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET }, &mut o[..n])
+                })
                 .collect();
             self.engine.expect_each(&mut pdus, 1)?;
         }
@@ -983,9 +1026,9 @@ impl<I: Io> Master<I> {
         let wide = self.slaves.iter().find(|s| s.station == st).is_some_and(|s| s.dc_64bit);
         let n = if wide { 8 } else { 4 };
         let mut d = [0u8; 8];
-        self.fprd(st, 0x0920, &mut d[..n])?;
+        self.fprd(st, addr::DC_SYSTEM_TIME_OFFSET, &mut d[..n])?;
         let v = u64::from_le_bytes(d).wrapping_add_signed(shift_ns);
-        self.fpwr(st, 0x0920, &v.to_le_bytes()[..n])
+        self.fpwr(st, addr::DC_SYSTEM_TIME_OFFSET, &v.to_le_bytes()[..n])
     }
 }
 

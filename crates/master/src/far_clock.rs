@@ -23,6 +23,7 @@ use crate::error::Result;
 use crate::io::Io;
 use crate::line_fit::{Fate, LineFit};
 use crate::Master;
+use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
 /// The level at the break is taken from a line through this much of the samples after it
@@ -304,12 +305,17 @@ impl<I: Io> Master<I> {
             let before = match known {
                 Some(v) => v,
                 None => {
-                    self.fprd(station, 0x0920, &mut d[..len])?;
+                    self.fprd(station, addr::DC_SYSTEM_TIME_OFFSET, &mut d[..len])?;
                     u64::from_le_bytes(d)
                 }
             };
             let mut w = before.wrapping_add_signed(delta_ns).to_le_bytes();
-            self.engine.expect(Command::FPRW, Address::Device { adp: station, ado: 0x0920 }, &mut w[..len], 3)?;
+            self.engine.expect(
+                Command::FPRW,
+                Address::Device { adp: station, ado: addr::DC_SYSTEM_TIME_OFFSET },
+                &mut w[..len],
+                3,
+            )?;
             w[len..].fill(0);
             let replaced = u64::from_le_bytes(w);
             let mask = if wide { u64::MAX } else { u32::MAX as u64 };
@@ -317,7 +323,12 @@ impl<I: Io> Master<I> {
             if replaced != before & mask {
                 now = replaced.wrapping_add_signed(delta_ns) & mask;
                 let mut w = now.to_le_bytes();
-                self.engine.expect(Command::FPWR, Address::Device { adp: station, ado: 0x0920 }, &mut w[..len], 1)?;
+                self.engine.expect(
+                    Command::FPWR,
+                    Address::Device { adp: station, ado: addr::DC_SYSTEM_TIME_OFFSET },
+                    &mut w[..len],
+                    1,
+                )?;
             }
             Ok(now)
         })();

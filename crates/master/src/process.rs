@@ -2,6 +2,7 @@
 //! over frames with slices of the image itself, and statistics are plain counters.
 use ferrocat_wire::datagram::{HEADER_LEN, WKC_LEN};
 use ferrocat_wire::frame::MAX_PDU_LEN;
+use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
 use crate::engine::Pdu;
@@ -213,7 +214,9 @@ impl<I: Io> Master<I> {
                 return x;
             }
             match (reference, frmw.take()) {
-                (Some(st), Some(f)) => Pdu::new(Command::FRMW, Address::Device { adp: st, ado: 0x0910 }, f),
+                (Some(st), Some(f)) => {
+                    Pdu::new(Command::FRMW, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME }, f)
+                }
                 _ => Pdu::new(
                     Command::NOP,
                     Address::Device { adp: 0, ado: 0 },

@@ -1,4 +1,5 @@
 //! How the slaves are wired and the propagation delays between them (esc-spec §3.6).
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::PortDescriptor;
 use ferrocat_wire::{Address, Command};
 
@@ -139,14 +140,14 @@ impl<I: Io> Master<I> {
     /// Returns the loop control to restore with [`Master::reopen_port`].
     fn close_port(&mut self, station: u16, port: u8) -> Result<u8> {
         let mut loop_control = [0u8; 1];
-        self.fprd(station, 0x0101, &mut loop_control)?;
-        self.fpwr(station, 0x0101, &[loop_control[0] | 3 << (2 * port)])?;
+        self.fprd(station, addr::LOOP_CONTROL, &mut loop_control)?;
+        self.fpwr(station, addr::LOOP_CONTROL, &[loop_control[0] | 3 << (2 * port)])?;
         self.engine.expect_secondary(false);
         Ok(loop_control[0])
     }
 
     fn reopen_port(&mut self, station: u16, loop_control: u8) -> Result<()> {
-        self.fpwr(station, 0x0101, &[loop_control])?;
+        self.fpwr(station, addr::LOOP_CONTROL, &[loop_control])?;
         self.engine.expect_secondary(true);
         Ok(())
     }
@@ -203,7 +204,8 @@ impl<I: Io> Master<I> {
         let latched = loop {
             let built_ns = self.master_system_time();
             let mut latch = [0u8; 4];
-            let mut pdus = [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch)];
+            let mut pdus =
+                [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut latch)];
             let bytes = crate::dc::frame_bytes(&pdus);
             tries -= 1;
             match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
@@ -224,7 +226,11 @@ impl<I: Io> Master<I> {
             let st = self.slaves[k].station;
             let times = self.port_receive_times(st)?;
             let mut epu = [0u8; 8];
-            let answered = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, &mut epu)? == 1;
+            let answered = self.engine.one(
+                Command::FPRD,
+                Address::Device { adp: st, ado: addr::DC_RECEIVE_TIME_EPU },
+                &mut epu,
+            )? == 1;
             let s = &mut self.slaves[k];
             s.receive_times = times;
             // Without a system time (WKC 0) the processing unit's receive time is port 0's, as

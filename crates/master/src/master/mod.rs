@@ -1,5 +1,6 @@
 //! Bring-up: finding the slaves, reading what they are, configuring mailboxes and process data,
 //! and walking them through the AL states.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
 use ferrocat_wire::sii::SiiInfo;
 use ferrocat_wire::{Address, Command};
@@ -221,13 +222,18 @@ impl<I: Io> Master<I> {
             return Err(MasterError::NoSlaves);
         }
         tracing::info!("{count} slave(s) answer; to INIT, station addresses from {STATION_BASE:#06x}");
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [0x11, 0])?;
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0600 }, &mut [0u8; 256])?;
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0800 }, &mut [0u8; 128])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut [0x11, 0])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::FMMU0 }, &mut [0u8; 256])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::SM0 }, &mut [0u8; 128])?;
         self.slaves.clear();
         for pos in 0..count {
             let station = STATION_BASE + pos;
-            self.engine.expect(Command::APWR, Address::position(pos, 0x0010), &mut station.to_le_bytes(), 1)?;
+            self.engine.expect(
+                Command::APWR,
+                Address::position(pos, addr::STATION_ADDRESS),
+                &mut station.to_le_bytes(),
+                1,
+            )?;
         }
         // On an intact ring a slave the primary's frames pass without processing (entered by a
         // port other than 0, whose port 0 leads on round the ring) answers only the
@@ -274,7 +280,7 @@ impl<I: Io> Master<I> {
     /// The receive times of ports 0–3 (0x0900–0x090F) of the slave at `station`.
     pub(crate) fn port_receive_times(&mut self, station: u16) -> Result<[u32; 4]> {
         let mut t = [0u8; 16];
-        self.fprd(station, 0x0900, &mut t)?;
+        self.fprd(station, addr::DC_RECEIVE_TIME_PORT0, &mut t)?;
         Ok(port_times(&t))
     }
 
@@ -286,10 +292,10 @@ impl<I: Io> Master<I> {
     fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
         let (mut id, mut alias, mut dl, mut pdi, mut sii_status) = ([0u8; 10], [0u8; 2], [0u8; 2], [0u8; 2], [0u8; 2]);
         let mut p = [
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0000 }, &mut id),
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0012 }, &mut alias),
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0110 }, &mut dl),
-            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: 0x0140 }, &mut pdi),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::TYPE }, &mut id),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::STATION_ALIAS }, &mut alias),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::DL_STATUS }, &mut dl),
+            Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::PDI_CONTROL }, &mut pdi),
         ];
         self.engine.transact(&mut p)?;
         if p.iter().any(|x| x.wkc != 1) {
@@ -304,7 +310,7 @@ impl<I: Io> Master<I> {
         if !dl_status.pdi_operational() {
             // An unconfigured ESC: the SII status says why (read only then, so that a healthy
             // segment's bring-up is the same frames as ever).
-            self.fprd(station, 0x0502, &mut sii_status)?;
+            self.fprd(station, addr::SII_CONTROL, &mut sii_status)?;
         }
         let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
         let h = sii.header;
@@ -363,13 +369,17 @@ impl<I: Io> Master<I> {
     pub fn start(&mut self) -> Result<()> {
         self.request_state_all(AlState::SafeOp)?;
         self.cycle()?;
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [AlState::Op as u8, 0])?;
+        self.engine.one(
+            Command::BWR,
+            Address::Device { adp: 0, ado: addr::AL_CONTROL },
+            &mut [AlState::Op as u8, 0],
+        )?;
         let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
         loop {
             let now = self.engine.io.now_ns();
             self.cycle()?;
             let mut d = [0u8; 2];
-            let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0x0130 }, &mut d)?;
+            let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::AL_STATUS }, &mut d)?;
             if wkc as usize == self.slaves.len() && d[0] & 0x1F == AlState::Op as u8 {
                 // BRD ORs every slave's state: all OP and no error flag.
                 break;

@@ -16,6 +16,7 @@
 //! a pause before T keeps apart. Every time is then S's, and is carried into the first
 //! latch's frame by the processing unit's (or port 0's) time in each: the offsets stay those
 //! of one frame for every slave, and the geometry (times within one ESC) is exact.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
 use super::Master;
@@ -47,7 +48,11 @@ impl<I: Io> Master<I> {
     /// would give the frame before the write.
     pub(super) fn forwarding_latch_mode(&mut self) -> Result<()> {
         if self.slaves.iter().any(|s| s.has_dc && s.esc_type == IP_CORE) {
-            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [0])?;
+            self.engine.one(
+                Command::BWR,
+                Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_LATCH_MODE },
+                &mut [0],
+            )?;
         }
         Ok(())
     }
@@ -75,7 +80,7 @@ impl<I: Io> Master<I> {
 
     fn relatch_round(&mut self, chunk: &[usize], replaced: &mut Vec<usize>) -> Result<()> {
         for _ in 0..ATTEMPTS {
-            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0; 4])?;
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut [0; 4])?;
             let s = self.read_receive_times(chunk, true)?;
             let resume_ns = self.engine.io.now_ns() + PAUSE_NS;
             self.engine.io.sleep_until(resume_ns);
@@ -122,14 +127,14 @@ impl<I: Io> Master<I> {
         let mut epu_at = Vec::with_capacity(chunk.len());
         for ((&k, p), e) in chunk.iter().zip(&mut ports).zip(&mut epus) {
             let st = self.slaves[k].station;
-            pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0900 }, p));
+            pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_RECEIVE_TIME_PORT0 }, p));
             epu_at.push(self.slaves[k].has_system_time.then_some(pdus.len()));
             if self.slaves[k].has_system_time {
-                pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0918 }, e));
+                pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_RECEIVE_TIME_EPU }, e));
             }
         }
         if write {
-            pdus.push(Pdu::new(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut latch));
+            pdus.push(Pdu::new(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut latch));
         }
         self.engine.transact(&mut pdus)?;
         if let Some(p) = pdus.iter().find(|p| p.cmd == Command::FPRD && p.wkc != 1) {

@@ -1,4 +1,5 @@
 //! Mailboxes, process-data mapping (CoE or SII), SyncManagers, FMMUs and the process image.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{AlState, Fmmu, SyncManager};
 use ferrocat_wire::sii::SmEntry;
 
@@ -190,7 +191,7 @@ impl<I: Io> Master<I> {
                     pdi_control: 0,
                 }
             };
-            writes.push((0x0800 + 8 * n as u16, smr.to_bytes().to_vec()));
+            writes.push((addr::sm(n), smr.to_bytes().to_vec()));
             if area.1 > 0 {
                 let f = Fmmu {
                     logical_start: area.0,
@@ -202,7 +203,7 @@ impl<I: Io> Master<I> {
                     fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
                     active: true,
                 };
-                writes.push((0x0600 + 16 * fmmu, f.to_bytes().to_vec()));
+                writes.push((addr::fmmu(fmmu as u8), f.to_bytes().to_vec()));
                 fmmu += 1;
             }
         }
@@ -224,6 +225,6 @@ impl<I: Io> Master<I> {
         both[..8].copy_from_slice(&sm0.to_bytes());
         both[8..].copy_from_slice(&sm1.to_bytes());
         let st = s.station;
-        self.fpwr(st, 0x0800, &both)
+        self.fpwr(st, addr::SM0, &both)
     }
 }

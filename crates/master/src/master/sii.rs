@@ -1,4 +1,5 @@
 //! The slaves' SII EEPROMs: read, all slaves' at once, or written.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::sii::{SiiHeader, SiiInfo, CATEGORY_HEADER_LEN, HEADER_LEN as SII_HEADER};
 use ferrocat_wire::{Address, Command};
 
@@ -12,7 +13,7 @@ impl<I: Io> Master<I> {
     /// each status-and-data read in another, so the time does not grow with the slave count.
     pub(super) fn read_all_sii(&mut self, stations: &[u16]) -> Result<Vec<Vec<u8>>> {
         let n = stations.len();
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0500 }, &mut [0])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::SII_CONFIG }, &mut [0])?;
         let mut imgs: Vec<Vec<u8>> = vec![Vec::with_capacity(2048); n];
         let mut done = vec![false; n];
         let mut ctl = vec![[0u8; 2]; n];
@@ -20,11 +21,14 @@ impl<I: Io> Master<I> {
             let mut p: Vec<Pdu<'_>> = stations
                 .iter()
                 .zip(ctl.iter_mut())
-                .map(|(&st, c)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: 0x0502 }, c))
+                .map(|(&st, c)| Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::SII_CONTROL }, c))
                 .collect();
             self.engine.transact(&mut p)?;
         }
-        let eight: Vec<bool> = ctl.iter().map(|c| u16::from_le_bytes(*c) & 0x0040 != 0).collect();
+        let eight: Vec<bool> = ctl
+            .iter()
+            .map(|c| u16::from_le_bytes(*c) & ferrocat_wire::register::SiiControl::READ_8_BYTES != 0)
+            .collect();
         let deadline = self.engine.io.now_ns() + 10_000_000_000;
         // The shortest read seen so far, command to data: real EEPROMs take ≈ 0.7 ms a read
         // (docs/esc-model.md), so after the first round the master sleeps most of that before
@@ -44,7 +48,9 @@ impl<I: Io> Master<I> {
                 let mut p: Vec<Pdu<'_>> = active
                     .iter()
                     .zip(cmds.iter_mut())
-                    .map(|(&k, c)| Pdu::new(Command::FPWR, Address::Device { adp: stations[k], ado: 0x0502 }, c))
+                    .map(|(&k, c)| {
+                        Pdu::new(Command::FPWR, Address::Device { adp: stations[k], ado: addr::SII_CONTROL }, c)
+                    })
                     .collect();
                 self.engine.transact(&mut p)?;
             }
@@ -60,7 +66,9 @@ impl<I: Io> Master<I> {
                     let mut p: Vec<Pdu<'_>> = pending
                         .iter()
                         .zip(regs.iter_mut())
-                        .map(|(&k, r)| Pdu::new(Command::FPRD, Address::Device { adp: stations[k], ado: 0x0502 }, r))
+                        .map(|(&k, r)| {
+                            Pdu::new(Command::FPRD, Address::Device { adp: stations[k], ado: addr::SII_CONTROL }, r)
+                        })
                         .collect();
                     self.engine.transact(&mut p)?;
                 }
@@ -125,7 +133,7 @@ impl<I: Io> Master<I> {
             let s = self.slave(position)?;
             (s.station, s.sii.to_image())
         };
-        self.fpwr(st, 0x0500, &[0])?;
+        self.fpwr(st, addr::SII_CONFIG, &[0])?;
         let mut written = 0;
         for (w, pair) in image.chunks(2).enumerate() {
             let v = u16::from_le_bytes([pair[0], *pair.get(1).unwrap_or(&0xFF)]);
@@ -134,15 +142,15 @@ impl<I: Io> Master<I> {
                 continue;
             }
             // The data first, then "write" with write enable and the word address.
-            self.fpwr(st, 0x0508, &v.to_le_bytes())?;
+            self.fpwr(st, addr::SII_DATA, &v.to_le_bytes())?;
             let mut cmd = [0u8; 6];
             cmd[0..2].copy_from_slice(&0x0201u16.to_le_bytes());
             cmd[2..6].copy_from_slice(&(w as u32).to_le_bytes());
-            self.fpwr(st, 0x0502, &cmd)?;
+            self.fpwr(st, addr::SII_CONTROL, &cmd)?;
             let deadline = self.engine.io.now_ns() + 100_000_000;
             loop {
                 let mut ctl = [0u8; 2];
-                self.fprd(st, 0x0502, &mut ctl)?;
+                self.fprd(st, addr::SII_CONTROL, &mut ctl)?;
                 let c = u16::from_le_bytes(ctl);
                 if c & 0x8000 == 0 {
                     if c & 0x6000 != 0 {

@@ -9,6 +9,7 @@
 //! clock at the reference's rate, so the deviation it applies equals that difference, and its
 //! sign says the direction. (Only where the reference runs free meanwhile: a reference steered
 //! by its offset runs at the master's rate, and so then do the followers.)
+use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
 use super::Master;
@@ -46,7 +47,7 @@ impl<I: Io> Master<I> {
     pub(crate) fn measure_speed_direction(&mut self, rates: &CrystalRates) -> Result<()> {
         for &(k, ppm) in &rates.0 {
             let mut speed = [0u8; 4];
-            self.fprd(self.slaves[k].station, 0x0930, &mut speed)?;
+            self.fprd(self.slaves[k].station, addr::DC_SPEED_COUNTER_START, &mut speed)?;
             let (scs, scd) = (u16::from_le_bytes([speed[0], speed[1]]), i16::from_le_bytes([speed[2], speed[3]]));
             let applied_ppm = crate::sync::speed_deviation(scs, scd) * 1e6;
             // Converged, the loop applies the crystal's difference: (1 + f)·(1 ∓ d) = 1.
@@ -59,7 +60,7 @@ impl<I: Io> Master<I> {
 
     /// Every 64-bit DC slave's processing-unit receive time (0x0918) of one latching frame.
     fn epu_times(&mut self) -> Result<Vec<Option<u64>>> {
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0900 }, &mut [0u8; 4])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut [0u8; 4])?;
         let mut times = Vec::with_capacity(self.slaves.len());
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
@@ -71,7 +72,7 @@ impl<I: Io> Master<I> {
             let station = s.station;
             let ok = self
                 .engine
-                .one(Command::FPRD, Address::Device { adp: station, ado: 0x0918 }, &mut t)
+                .one(Command::FPRD, Address::Device { adp: station, ado: addr::DC_RECEIVE_TIME_EPU }, &mut t)
                 .is_ok_and(|w| w == 1);
             times.push(ok.then(|| u64::from_le_bytes(t)));
         }

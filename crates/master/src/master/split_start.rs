@@ -16,6 +16,7 @@
 //! it opens the ring itself and latches the far half again from the reference, as a line whose
 //! end is the port the secondary's cable comes in by, and writes its delays before any clock
 //! goes round.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::DlStatus;
 use ferrocat_wire::{Address, Command};
 
@@ -128,7 +129,7 @@ impl<I: Io> Master<I> {
         if self.split_latch.is_none() {
             return Ok(());
         }
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO_CLOSE])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::LOOP_CONTROL }, &mut [AUTO_CLOSE])?;
         let now = self.engine.io.now_ns();
         if let Some(l) = self.split_latch.as_mut() {
             l.watch_next_ns = Some(now);
@@ -162,12 +163,12 @@ impl<I: Io> Master<I> {
         if !back {
             return Ok(());
         }
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::LOOP_CONTROL }, &mut [AUTO])?;
         self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
         if self.engine.ring == RingState::Intact {
             self.rejoin_far_half()
         } else {
-            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0101 }, &mut [AUTO_CLOSE])?;
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::LOOP_CONTROL }, &mut [AUTO_CLOSE])?;
             Ok(())
         }
     }
@@ -189,7 +190,7 @@ impl<I: Io> Master<I> {
                 let station = self.slaves.get(first + i).map_or(0, |s| s.station);
                 Pdu::new(
                     Command::FPRD,
-                    Address::Device { adp: station, ado: 0x0110 },
+                    Address::Device { adp: station, ado: addr::DL_STATUS },
                     bufs.next().map_or(&mut [][..], |b| &mut b[..]),
                 )
             });
@@ -244,7 +245,7 @@ impl<I: Io> Master<I> {
             let s = &self.slaves[k];
             if s.has_system_time {
                 let (st, delay) = (s.station, s.delay_ns);
-                self.fpwr(st, 0x0928, &delay.to_le_bytes())?;
+                self.fpwr(st, addr::DC_SYSTEM_TIME_DELAY, &delay.to_le_bytes())?;
             }
         }
         let st = self.slaves[l.root].station;

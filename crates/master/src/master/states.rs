@@ -1,4 +1,5 @@
 //! Walking the slaves through the AL states, and bringing fallen ones back during operation.
+use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
 use ferrocat_wire::{Address, Command};
 
@@ -10,7 +11,7 @@ use crate::io::Io;
 impl<I: Io> Master<I> {
     /// Requests `state` from every slave and waits until all are there.
     pub fn request_state_all(&mut self, state: AlState) -> Result<()> {
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &mut [state as u8, 0])?;
+        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut [state as u8, 0])?;
         self.wait_state_all(state)
     }
 
@@ -22,7 +23,8 @@ impl<I: Io> Master<I> {
         let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
         loop {
             let mut control = [state as u8, 0];
-            let wkc = self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut control)?;
+            let wkc =
+                self.engine.one(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, &mut control)?;
             if wkc == 1 || self.engine.io.now_ns() > deadline {
                 break;
             }
@@ -54,11 +56,11 @@ impl<I: Io> Master<I> {
             ));
         }
         let mut dl = [0u8; 4];
-        self.fprd(st, 0x0100, &mut dl)?;
+        self.fprd(st, addr::DL_CONTROL, &mut dl)?;
         dl[3] |= 0x01;
-        self.fpwr(st, 0x0100, &dl)?;
+        self.fpwr(st, addr::DL_CONTROL, &dl)?;
         let mut check = [0u8; 2];
-        self.engine.expect(Command::FPRD, Address::Device { adp: alias, ado: 0x0010 }, &mut check, 1)?;
+        self.engine.expect(Command::FPRD, Address::Device { adp: alias, ado: addr::STATION_ADDRESS }, &mut check, 1)?;
         Ok(alias)
     }
 
@@ -70,7 +72,7 @@ impl<I: Io> Master<I> {
             let mut p: Vec<Pdu<'_>> = stations
                 .iter()
                 .zip(bufs.iter_mut())
-                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, b))
+                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, b))
                 .collect();
             self.engine.transact(&mut p)?;
         }
@@ -91,8 +93,8 @@ impl<I: Io> Master<I> {
     fn eeprom_problem_now(&mut self, position: u16) -> Result<Option<String>> {
         let st = self.slave(position)?.station;
         let (mut dl, mut sii) = ([0u8; 2], [0u8; 2]);
-        self.fprd(st, 0x0110, &mut dl)?;
-        self.fprd(st, 0x0502, &mut sii)?;
+        self.fprd(st, addr::DL_STATUS, &mut dl)?;
+        self.fprd(st, addr::SII_CONTROL, &mut sii)?;
         let s = &mut self.slaves[position as usize];
         (s.dl_status, s.eeprom_status) = (DlStatus(u16::from_le_bytes(dl)), u16::from_le_bytes(sii));
         Ok(s.eeprom_problem())
@@ -107,7 +109,7 @@ impl<I: Io> Master<I> {
         let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
         loop {
             let mut d = [0u8; 6];
-            self.fprd(st, 0x0130, &mut d)?;
+            self.fprd(st, addr::AL_STATUS, &mut d)?;
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
             let error = self.slaves[position as usize].al_error(status, code);
@@ -139,7 +141,7 @@ impl<I: Io> Master<I> {
                     let ack = status.state_bits() as u16 | AlStatus::ERROR;
                     let _ = self.engine.one(
                         Command::FPWR,
-                        Address::Device { adp: st, ado: 0x0120 },
+                        Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut ack.to_le_bytes(),
                     );
                 }
@@ -178,7 +180,9 @@ impl<I: Io> Master<I> {
             let mut pdus: Vec<Pdu<'_>> = watched
                 .iter()
                 .zip(status.iter_mut())
-                .map(|(&k, d)| Pdu::new(Command::FPRD, Address::Device { adp: self.slaves[k].station, ado: 0x0130 }, d))
+                .map(|(&k, d)| {
+                    Pdu::new(Command::FPRD, Address::Device { adp: self.slaves[k].station, ado: addr::AL_STATUS }, d)
+                })
                 .collect();
             self.engine.transact(&mut pdus)?;
             pdus.iter().map(|p| p.wkc).collect()
@@ -190,9 +194,15 @@ impl<I: Io> Master<I> {
             if wkc == 0 {
                 // Powered off and on again it has lost its station address: give it back.
                 let mut a = [0u8; 2];
-                if self.engine.one(Command::APRD, Address::position(pos, 0x0010), &mut a)? == 1 && a == [0, 0] {
-                    self.engine.one(Command::APWR, Address::position(pos, 0x0010), &mut st.to_le_bytes())?;
-                    wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: 0x0130 }, &mut d)?;
+                if self.engine.one(Command::APRD, Address::position(pos, addr::STATION_ADDRESS), &mut a)? == 1
+                    && a == [0, 0]
+                {
+                    self.engine.one(
+                        Command::APWR,
+                        Address::position(pos, addr::STATION_ADDRESS),
+                        &mut st.to_le_bytes(),
+                    )?;
+                    wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: addr::AL_STATUS }, &mut d)?;
                 }
             }
             if wkc == 0 {
@@ -227,7 +237,11 @@ impl<I: Io> Master<I> {
                     code_text(code)
                 );
                 let ack = status.state_bits() as u16 | AlStatus::ERROR;
-                self.engine.one(Command::FPWR, Address::Device { adp: st, ado: 0x0120 }, &mut ack.to_le_bytes())?;
+                self.engine.one(
+                    Command::FPWR,
+                    Address::Device { adp: st, ado: addr::AL_CONTROL },
+                    &mut ack.to_le_bytes(),
+                )?;
                 continue;
             }
             match status.state() {
@@ -235,7 +249,7 @@ impl<I: Io> Master<I> {
                     self.write_mailbox_config(pos)?;
                     self.engine.one(
                         Command::FPWR,
-                        Address::Device { adp: st, ado: 0x0120 },
+                        Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::PreOp as u8, 0],
                     )?;
                 }
@@ -250,14 +264,14 @@ impl<I: Io> Master<I> {
                     self.write_process_config(pos)?;
                     self.engine.one(
                         Command::FPWR,
-                        Address::Device { adp: st, ado: 0x0120 },
+                        Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::SafeOp as u8, 0],
                     )?;
                 }
                 Some(AlState::SafeOp) | Some(AlState::Op) => {
                     self.engine.one(
                         Command::FPWR,
-                        Address::Device { adp: st, ado: 0x0120 },
+                        Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::Op as u8, 0],
                     )?;
                 }
