@@ -45,6 +45,9 @@ fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
 pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool) -> anyhow::Result<ExitCode> {
     let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
     let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    for w in &file.warnings {
+        eprintln!("warning: {}: {w}", path.display());
+    }
     if file.devices.is_empty() {
         bail!("{}: the file describes no device (no Descriptions/Devices/Device)", path.display());
     }
@@ -92,6 +95,21 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
                 "tx_pdos": d.tx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "sm": p.sm, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
                 "dc_op_modes": d.dc_op_modes.iter().map(|m| json!({"name": m.name, "assign_activate": m.assign_activate, "cycle_time_sync0_ns": m.cycle_time_sync0_ns, "shift_time_sync0_ns": m.shift_time_sync0_ns})).collect::<Vec<_>>(),
                 "objects": d.dictionary.as_ref().map(|x| x.objects.len()).unwrap_or(0),
+                "slots": d.slots.as_ref().map(|s| json!({
+                    "slot_index_increment": s.slot_index_increment, "slot_pdo_increment": s.slot_pdo_increment,
+                    "slot_group_index_increment": s.slot_group_index_increment, "slot_group_pdo_increment": s.slot_group_pdo_increment,
+                    "slots": s.slots.iter().map(|x| json!({
+                        "name": x.name, "min_instances": x.min_instances, "max_instances": x.max_instances,
+                        "slot_group": x.slot_group, "module_idents": x.module_idents, "default_module": x.default_module,
+                        "module_classes": x.module_classes,
+                    })).collect::<Vec<_>>(),
+                })),
+                "modules": modules_of(&file, d).iter().map(|m| json!({
+                    "ident": m.ident, "type": m.type_name, "name": m.name, "class": m.class,
+                    "rx_pdos": m.rx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
+                    "tx_pdos": m.tx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
+                })).collect::<Vec<_>>(),
+                "warnings": file.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
             })
         );
     } else if sii_out.is_none() {
@@ -142,6 +160,67 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
         if let Some(dict) = &d.dictionary {
             outln!("  object dictionary: {} objects", dict.objects.len());
         }
+        if let Some(slots) = &d.slots {
+            outln!(
+                "  slots: object index + {:#x} and PDO index + {:#x} per slot{}",
+                slots.slot_index_increment,
+                slots.slot_pdo_increment,
+                if slots.slot_group_index_increment + slots.slot_group_pdo_increment > 0 {
+                    format!(
+                        "; + {:#x} and + {:#x} per slot group",
+                        slots.slot_group_index_increment, slots.slot_group_pdo_increment
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            for s in &slots.slots {
+                let idents = s
+                    .module_idents
+                    .iter()
+                    .map(|&i| {
+                        if Some(i) == s.default_module {
+                            format!("{i:#010x} (default)")
+                        } else {
+                            format!("{i:#010x}")
+                        }
+                    })
+                    .chain(s.module_classes.iter().map(|c| format!("class {c}")))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                outln!("  SLOT {:?} ×{}–{}: {idents}", s.name, s.min_instances, s.max_instances);
+            }
+            for m in modules_of(&file, d) {
+                outln!(
+                    "  MODULE {:#010x} {} {:?}{}",
+                    m.ident,
+                    m.type_name,
+                    m.name,
+                    m.class.as_ref().map(|c| format!(" class {c}")).unwrap_or_default()
+                );
+                for (kind, pdos) in [("RxPDO", &m.rx_pdos), ("TxPDO", &m.tx_pdos)] {
+                    for p in pdos {
+                        outln!("         {kind} {:#06x} {:?} ({} bits)", p.index, p.name, p.bit_len());
+                    }
+                }
+            }
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The modules that fit `d`'s slots: by ident, or by class; all of the file's where a slot
+/// names neither.
+fn modules_of<'a>(file: &'a EsiFile, d: &Device) -> Vec<&'a ferrocat_esi::ModuleDesc> {
+    let Some(slots) = &d.slots else { return Vec::new() };
+    file.modules
+        .iter()
+        .filter(|m| {
+            slots.slots.iter().any(|s| {
+                s.module_idents.contains(&m.ident)
+                    || m.class.as_ref().is_some_and(|c| s.module_classes.contains(c))
+                    || (s.module_idents.is_empty() && s.module_classes.is_empty())
+            })
+        })
+        .collect()
 }

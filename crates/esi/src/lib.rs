@@ -6,10 +6,12 @@
 //! this description would carry. Every error names the line and column in the XML.
 mod build;
 mod dictionary;
+mod modular;
 mod parse;
 
 pub use build::coe_data_type;
 pub use dictionary::{Access, DataType, Dictionary, Object, SubObject};
+pub use modular::{Depend, ModuleDesc, SlotDesc, Slots};
 pub use parse::parse_number;
 
 /// An error in an ESI file, with its 1-based line and column.
@@ -26,6 +28,11 @@ pub struct EsiFile {
     pub vendor_id: u32,
     pub vendor_name: String,
     pub devices: Vec<Device>,
+    /// The modules of modular devices (`<Descriptions><Modules>`).
+    pub modules: Vec<ModuleDesc>,
+    /// What the file does that ETG.2000 does not allow but vendors' tools accept, each read
+    /// as the message says.
+    pub warnings: Vec<EsiError>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
@@ -52,6 +59,8 @@ pub struct Device {
     /// E-Bus current in mA (negative: supplied).
     pub ebus_current_ma: i16,
     pub dictionary: Option<Dictionary>,
+    /// Where modules plug in, for a modular device.
+    pub slots: Option<Slots>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -84,6 +93,8 @@ pub struct SmDesc {
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PdoDesc {
     pub index: u16,
+    /// Whether the index moves with a module's slot.
+    pub index_depends: Depend,
     pub name: String,
     /// SyncManager the PDO is assigned to by default, if any.
     pub sm: Option<u8>,
@@ -101,6 +112,8 @@ impl PdoDesc {
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PdoEntryDesc {
     pub index: u16,
+    /// Whether the index moves with a module's slot.
+    pub index_depends: Depend,
     pub subindex: u8,
     pub bit_len: u8,
     pub name: String,
@@ -152,6 +165,11 @@ impl EsiFile {
     /// Parses the text of an ESI file.
     pub fn parse(xml: &str) -> Result<EsiFile, EsiError> {
         parse::parse_file(xml)
+    }
+
+    /// The module with `ident`.
+    pub fn module(&self, ident: u32) -> Option<&ModuleDesc> {
+        self.modules.iter().find(|m| m.ident == ident)
     }
 
     /// The device with `product_code` (and `revision`, if given).

@@ -7,6 +7,19 @@ use crate::*;
 
 pub(crate) type R<T> = Result<T, EsiError>;
 
+thread_local! {
+    /// What the file under parse does that vendors' tools accept but ETG.2000 does not. The
+    /// readers are free functions over nodes; the one parse running on this thread collects
+    /// here and [`parse_file`] hands them to the caller.
+    static WARNINGS: std::cell::RefCell<Vec<EsiError>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Notes a deviation the reader accepted, at `node`.
+pub(crate) fn warn(node: Node<'_, '_>, message: impl Into<String>) {
+    let w = err(node, message);
+    WARNINGS.with(|ws| ws.borrow_mut().push(w));
+}
+
 pub(crate) fn err(node: Node<'_, '_>, message: impl Into<String>) -> EsiError {
     let p = node.document().text_pos_at(node.range().start);
     EsiError { line: p.row, column: p.col, message: message.into() }
@@ -73,9 +86,17 @@ pub(crate) fn flag(node: Node<'_, '_>, attr: &str) -> bool {
     matches!(node.attribute(attr).map(str::trim), Some("1") | Some("true"))
 }
 
-/// Hex text (e.g. `<ConfigData>05060B0E</ConfigData>`) as bytes.
+/// Hex text (e.g. `<ConfigData>05060B0E</ConfigData>`) as bytes. An odd number of digits,
+/// which vendors' tools read as a value missing its leading zero (`<DefaultData>2`), is read
+/// so, with a warning.
 pub(crate) fn hex_bytes(node: Node<'_, '_>, s: &str) -> R<Vec<u8>> {
-    ferrocat_wire::hex::decode(s).map_err(|e| err(node, e.to_string()))
+    match ferrocat_wire::hex::decode(s) {
+        Err(ferrocat_wire::hex::HexError::OddLength(n)) => {
+            warn(node, format!("hex data of odd length {n} ('{s}'): read as '0{s}'"));
+            ferrocat_wire::hex::decode(&format!("0{s}")).map_err(|e| err(node, e.to_string()))
+        }
+        r => r.map_err(|e| err(node, e.to_string())),
+    }
 }
 
 /// The English `<Name>` (LcId 1033), else the first one.
@@ -89,6 +110,13 @@ pub(crate) fn name_of(node: Node<'_, '_>) -> String {
 }
 
 pub(crate) fn parse_file(xml: &str) -> R<EsiFile> {
+    WARNINGS.with(|ws| ws.borrow_mut().clear());
+    let mut file = parse_document(xml)?;
+    file.warnings = WARNINGS.with(|ws| std::mem::take(&mut *ws.borrow_mut()));
+    Ok(file)
+}
+
+fn parse_document(xml: &str) -> R<EsiFile> {
     let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
     let doc = Document::parse_with_options(xml, opts).map_err(|e| {
         let p = e.pos();
@@ -106,11 +134,15 @@ pub(crate) fn parse_file(xml: &str) -> R<EsiFile> {
     } else {
         u32::try_from(vendor_id).map_err(|_| err(vendor, "vendor Id out of range"))?
     };
-    let devices_node = child(root, "Descriptions")
-        .and_then(|d| child(d, "Devices"))
-        .ok_or_else(|| err(root, "no <Descriptions><Devices>"))?;
+    let descriptions = child(root, "Descriptions");
+    let devices_node =
+        descriptions.and_then(|d| child(d, "Devices")).ok_or_else(|| err(root, "no <Descriptions><Devices>"))?;
     let devices = children(devices_node, "Device").map(parse_device).collect::<R<Vec<_>>>()?;
-    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices })
+    let modules = match descriptions.and_then(|d| child(d, "Modules")) {
+        Some(m) => children(m, "Module").map(parse_module).collect::<R<Vec<_>>>()?,
+        None => Vec::new(),
+    };
+    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new() })
 }
 
 fn parse_device(d: Node<'_, '_>) -> R<Device> {
@@ -221,15 +253,85 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
             bootstrap: hex("BootStrap")?,
         });
     }
+    if let Some(slots) = child(d, "Slots") {
+        dev.slots = Some(parse_slots(slots)?);
+    }
     if let Some(el) = child(d, "Info").and_then(|i| child(i, "Electrical")) {
         dev.ebus_current_ma = child_number(el, "EBusCurrent")?.unwrap_or(0);
     }
     Ok(dev)
 }
 
+/// Whether an `<Index>` moves with the slot (`DependOnSlot`, `DependOnSlotGroup`).
+fn depends(parent: Node<'_, '_>) -> Depend {
+    match child(parent, "Index") {
+        Some(i) if flag(i, "DependOnSlot") => Depend::Slot,
+        Some(i) if flag(i, "DependOnSlotGroup") => Depend::SlotGroup,
+        _ => Depend::None,
+    }
+}
+
+fn parse_slots(s: Node<'_, '_>) -> R<Slots> {
+    let mut out = Slots {
+        slot_index_increment: attr_number(s, "SlotIndexIncrement")?.unwrap_or(0),
+        slot_pdo_increment: attr_number(s, "SlotPdoIncrement")?.unwrap_or(0),
+        slot_group_index_increment: attr_number(s, "SlotGroupIndexIncrement")?.unwrap_or(0),
+        slot_group_pdo_increment: attr_number(s, "SlotGroupPdoIncrement")?.unwrap_or(0),
+        slots: Vec::new(),
+    };
+    for slot in children(s, "Slot") {
+        let mut d = SlotDesc {
+            line: line_of(slot),
+            name: name_of(slot),
+            min_instances: attr_number(slot, "MinInstances")?.unwrap_or(1),
+            max_instances: attr_number(slot, "MaxInstances")?.unwrap_or(1),
+            slot_group: attr_number(slot, "SlotGroup")?,
+            ..Default::default()
+        };
+        for m in children(slot, "ModuleIdent") {
+            let ident = number::<i64>(m, text(m), "<ModuleIdent>")? as u32;
+            if flag(m, "Default") {
+                d.default_module = Some(ident);
+            }
+            d.module_idents.push(ident);
+        }
+        for c in children(slot, "ModuleClass") {
+            if let Some(class) = child_text(c, "Class") {
+                d.module_classes.push(class);
+            }
+        }
+        if d.max_instances < d.min_instances {
+            return Err(err(slot, format!("MaxInstances {} below MinInstances {}", d.max_instances, d.min_instances)));
+        }
+        out.slots.push(d);
+    }
+    Ok(out)
+}
+
+fn parse_module(m: Node<'_, '_>) -> R<ModuleDesc> {
+    let ty = child(m, "Type").ok_or_else(|| err(m, "<Module> lacks <Type>"))?;
+    let ident = attr_number::<i64>(ty, "ModuleIdent")?.ok_or_else(|| err(ty, "<Type> lacks ModuleIdent"))?;
+    let mut module = ModuleDesc {
+        line: line_of(m),
+        ident: ident as u32,
+        type_name: text(ty).to_string(),
+        name: name_of(m),
+        class: ty.attribute("ModuleClass").map(str::to_string),
+        ..Default::default()
+    };
+    for p in children(m, "RxPdo") {
+        module.rx_pdos.push(parse_pdo(p)?);
+    }
+    for p in children(m, "TxPdo") {
+        module.tx_pdos.push(parse_pdo(p)?);
+    }
+    Ok(module)
+}
+
 fn parse_pdo(p: Node<'_, '_>) -> R<PdoDesc> {
     let mut pdo = PdoDesc {
         index: req_child_number(p, "Index")?,
+        index_depends: depends(p),
         name: name_of(p),
         sm: attr_number(p, "Sm")?,
         fixed: flag(p, "Fixed"),
@@ -240,6 +342,7 @@ fn parse_pdo(p: Node<'_, '_>) -> R<PdoDesc> {
         let index: u16 = req_child_number(e, "Index")?;
         pdo.entries.push(PdoEntryDesc {
             index,
+            index_depends: depends(e),
             // Padding entries (index 0) usually omit the subindex.
             subindex: child_number(e, "SubIndex")?.unwrap_or(0),
             bit_len: req_child_number(e, "BitLen")?,

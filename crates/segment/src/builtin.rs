@@ -66,12 +66,14 @@ fn coe_mailbox(pdo_config: bool) -> Option<ferrocat_esi::MailboxDesc> {
 fn bits(index: u16, n: u8, sm: u8, name: &str) -> Vec<PdoDesc> {
     (0..n)
         .map(|k| PdoDesc {
+            index_depends: Default::default(),
             index: index + k as u16,
             name: format!("Channel {}", k + 1),
             sm: Some(sm),
             fixed: true,
             mandatory: true,
             entries: vec![PdoEntryDesc {
+                index_depends: Default::default(),
                 index: if index >= 0x1A00 { 0x6000 } else { 0x7000 } + 0x10 * k as u16,
                 subindex: 1,
                 bit_len: 1,
@@ -128,6 +130,7 @@ pub fn device(name: &str) -> Option<Device> {
 /// PDOs, enough for CSP, CSV and CST without remapping. Vendor 0 is ETG's "no vendor".
 fn servo() -> Device {
     let entry = |index: u16, bit_len: u8, name: &str, data_type: &str| PdoEntryDesc {
+        index_depends: Default::default(),
         index,
         subindex: 0,
         bit_len,
@@ -135,6 +138,7 @@ fn servo() -> Device {
         data_type: data_type.into(),
     };
     let pdo = |index: u16, sm: u8, entries: Vec<PdoEntryDesc>| PdoDesc {
+        index_depends: Default::default(),
         index,
         name: if sm == 2 { "Outputs" } else { "Inputs" }.into(),
         sm: Some(sm),
@@ -209,6 +213,7 @@ fn servo() -> Device {
 /// 2-bit limits, TxPDO state and toggle, a 16-bit value).
 fn lan9252_evb() -> Device {
     let entry = |index: u16, subindex: u8, bit_len: u8, name: String, data_type: &str| PdoEntryDesc {
+        index_depends: Default::default(),
         index,
         subindex,
         bit_len,
@@ -222,6 +227,7 @@ fn lan9252_evb() -> Device {
         v
     };
     let pdo = |index: u16, name: &str, sm: u8, entries: Vec<PdoEntryDesc>| PdoDesc {
+        index_depends: Default::default(),
         index,
         name: name.into(),
         sm: Some(sm),

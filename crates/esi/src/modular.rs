@@ -1,0 +1,113 @@
+//! The Modular Device Profile in ESI (ETG.2000 §"Slots", ETG.5001): a device whose process
+//! data and objects come per slot from the modules plugged into it. A module's PDO and object
+//! indices marked `DependOnSlot` (or `DependOnSlotGroup`) move by the slot's (or its group's)
+//! increment for each slot before it.
+use crate::{PdoDesc, PdoEntryDesc};
+
+/// Whether an index moves with the slot a module sits in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Depend {
+    /// A fixed index.
+    #[default]
+    None,
+    /// `DependOnSlot`: plus the slot number times the slot increment.
+    Slot,
+    /// `DependOnSlotGroup`: plus the slot group number times the group increment.
+    SlotGroup,
+}
+
+/// A device's `<Slots>`: where modules plug in, and how their indices move.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Slots {
+    /// Object index increment per slot (`SlotIndexIncrement`, e.g. 0x10 or 0x800).
+    pub slot_index_increment: u16,
+    /// PDO index increment per slot (`SlotPdoIncrement`).
+    pub slot_pdo_increment: u16,
+    /// Object index increment per slot group (`SlotGroupIndexIncrement`).
+    pub slot_group_index_increment: u16,
+    /// PDO index increment per slot group (`SlotGroupPdoIncrement`).
+    pub slot_group_pdo_increment: u16,
+    /// The slots in order; a slot with `max_instances` above 1 stands for that many.
+    pub slots: Vec<SlotDesc>,
+}
+
+/// One `<Slot>` of a modular device.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct SlotDesc {
+    /// Line of the `<Slot>` element.
+    pub line: u32,
+    /// Its name.
+    pub name: String,
+    /// How many instances of this slot the device has at least.
+    pub min_instances: u16,
+    /// How many at most.
+    pub max_instances: u16,
+    /// The slot group it belongs to (`SlotGroup` attribute), if any.
+    pub slot_group: Option<u16>,
+    /// The modules that fit, by ident (`<ModuleIdent>`).
+    pub module_idents: Vec<u32>,
+    /// The module plugged by default (`<ModuleIdent Default="1">`), if any.
+    pub default_module: Option<u32>,
+    /// The module classes that fit (`<ModuleClass><Class>`).
+    pub module_classes: Vec<String>,
+}
+
+/// One `<Module>` of a file's `<Modules>`.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ModuleDesc {
+    /// Line of the `<Module>` element.
+    pub line: u32,
+    /// Its ident (`<Type ModuleIdent>`), what 0xF030 and 0xF050 list.
+    pub ident: u32,
+    /// The `<Type>` text.
+    pub type_name: String,
+    /// The English `<Name>`, or the first.
+    pub name: String,
+    /// Its class (`ModuleClass`), if given.
+    pub class: Option<String>,
+    /// Its PDOs, indices as written (see [`ModuleDesc::pdos_in_slot`]).
+    pub rx_pdos: Vec<PdoDesc>,
+    /// Its input PDOs.
+    pub tx_pdos: Vec<PdoDesc>,
+}
+
+impl ModuleDesc {
+    /// The module's output and input PDOs as plugged into slot `slot` (from 0) of group
+    /// `group`, their indices moved by `slots`' increments where they depend on it.
+    pub fn pdos_in_slot(&self, slots: &Slots, slot: u16, group: u16) -> (Vec<PdoDesc>, Vec<PdoDesc>) {
+        let moved = |pdos: &[PdoDesc]| pdos.iter().map(|p| moved_pdo(p, slots, slot, group)).collect();
+        (moved(&self.rx_pdos), moved(&self.tx_pdos))
+    }
+}
+
+fn shift(index: u16, depend: Depend, slot_step: u16, group_step: u16, slot: u16, group: u16) -> u16 {
+    match depend {
+        Depend::None => index,
+        Depend::Slot => index.wrapping_add(slot_step.wrapping_mul(slot)),
+        Depend::SlotGroup => index.wrapping_add(group_step.wrapping_mul(group)),
+    }
+}
+
+fn moved_pdo(p: &PdoDesc, s: &Slots, slot: u16, group: u16) -> PdoDesc {
+    PdoDesc {
+        index: shift(p.index, p.index_depends, s.slot_pdo_increment, s.slot_group_pdo_increment, slot, group),
+        index_depends: Depend::None,
+        entries: p
+            .entries
+            .iter()
+            .map(|e| PdoEntryDesc {
+                index: shift(
+                    e.index,
+                    e.index_depends,
+                    s.slot_index_increment,
+                    s.slot_group_index_increment,
+                    slot,
+                    group,
+                ),
+                index_depends: Depend::None,
+                ..e.clone()
+            })
+            .collect(),
+        ..p.clone()
+    }
+}

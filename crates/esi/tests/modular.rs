@@ -1,0 +1,83 @@
+//! Modular devices in ESI: slots, modules and the index arithmetic of `DependOnSlot`, on the
+//! project's own test file and on a vendor's.
+use ferrocat_esi::{Depend, EsiFile};
+
+fn own() -> EsiFile {
+    let xml = include_str!("data/ferrocat_modular.xml");
+    EsiFile::parse(xml).unwrap()
+}
+
+#[test]
+fn slots_and_modules_of_a_modular_io_head_and_a_two_axis_drive() {
+    let f = own();
+    assert_eq!(f.modules.len(), 5);
+    let head = &f.devices[0];
+    let slots = head.slots.as_ref().expect("the I/O head has slots");
+    assert_eq!((slots.slot_index_increment, slots.slot_pdo_increment), (0x10, 1));
+    assert_eq!(slots.slots.len(), 1);
+    let s = &slots.slots[0];
+    assert_eq!((s.min_instances, s.max_instances, s.name.as_str()), (1, 8, "Terminal"));
+    assert_eq!(s.module_idents, [0x801, 0x802, 0x803]);
+    assert_eq!(s.default_module, Some(0x801));
+    let drive = &f.devices[1];
+    let axes = drive.slots.as_ref().unwrap();
+    assert_eq!((axes.slot_index_increment, axes.slot_pdo_increment), (0x800, 0x10));
+    assert_eq!(axes.slots[0].default_module, Some(0x9010));
+    let csv = f.module(0x9020).unwrap();
+    assert_eq!((csv.type_name.as_str(), csv.class.as_deref()), ("FC-AXIS-CSV", Some("Axis")));
+    assert_eq!(csv.rx_pdos[0].index_depends, Depend::Slot);
+    assert_eq!(csv.rx_pdos[0].entries[1].index_depends, Depend::Slot);
+}
+
+#[test]
+fn a_module_in_slot_n_moves_its_indices_by_n_increments() {
+    let f = own();
+    let axes = f.devices[1].slots.as_ref().unwrap();
+    let csp = f.module(0x9010).unwrap();
+    // Axis 0 as written; axis 1 at 0x6000 + 0x800 (CiA402's second axis), PDOs 0x10 on.
+    let (rx0, tx0) = csp.pdos_in_slot(axes, 0, 0);
+    assert_eq!(rx0[0].index, 0x1600);
+    assert_eq!(rx0[0].entries.iter().map(|e| e.index).collect::<Vec<_>>(), [0x6040, 0x607A]);
+    assert_eq!(tx0[0].entries[1].index, 0x6064);
+    let (rx1, tx1) = csp.pdos_in_slot(axes, 1, 0);
+    assert_eq!((rx1[0].index, tx1[0].index), (0x1610, 0x1A10));
+    assert_eq!(rx1[0].entries.iter().map(|e| e.index).collect::<Vec<_>>(), [0x6840, 0x687A]);
+    assert_eq!(tx1[0].entries.iter().map(|e| e.index).collect::<Vec<_>>(), [0x6841, 0x6864]);
+    assert!(rx1[0].entries.iter().all(|e| e.index_depends == Depend::None), "resolved");
+    // A padding entry (index 0, no DependOnSlot) stays 0 in any slot.
+    let head = f.devices[0].slots.as_ref().unwrap();
+    let (rx, _) = f.module(0x801).unwrap().pdos_in_slot(head, 3, 0);
+    assert_eq!((rx[0].index, rx[0].entries[0].index, rx[0].entries[1].index), (0x1603, 0x7030, 0));
+}
+
+#[test]
+fn an_odd_length_default_is_read_with_a_warning_naming_line_and_column() {
+    let f = own();
+    let obj = f.devices[0].dictionary.as_ref().unwrap().objects.iter().find(|o| o.index == 0xF000).unwrap();
+    assert_eq!(obj.default_data.as_deref(), Some(&[0x02][..]));
+    assert_eq!(f.warnings.len(), 1, "{:?}", f.warnings);
+    let w = f.warnings[0].to_string();
+    let line =
+        include_str!("data/ferrocat_modular.xml").lines().position(|l| l.contains("<DefaultData>2")).unwrap() + 1;
+    assert!(w.starts_with(&format!("line {line}, column ")), "{w}");
+    assert!(w.contains("odd length 1") && w.contains("read as '02'"), "{w}");
+    // A second parse starts with no warnings of the first.
+    assert_eq!(EsiFile::parse(include_str!("data/ferrocat_modular.xml")).unwrap().warnings.len(), 1);
+}
+
+#[test]
+fn needs_shared_weidmueller_slots_and_modules() {
+    let path = ferrocat_testdata::shared("esi/Weidmueller_UR20_FBC.xml");
+    let f = EsiFile::parse(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let slots = f.devices[0].slots.as_ref().expect("the UR20 coupler has slots");
+    assert_eq!((slots.slot_index_increment, slots.slot_pdo_increment), (16, 1));
+    assert_eq!((slots.slots[0].min_instances, slots.slots[0].max_instances), (1, 64));
+    assert_eq!(slots.slots[0].module_classes.len(), 8);
+    assert_eq!(f.modules.len(), 2);
+    let m = &f.modules[0];
+    assert_eq!((m.ident, m.type_name.as_str()), (0x001F_7E40, "UR20-4DI-4DO-PN-FSOE-V2"));
+    // In the third slot its output PDO and entries move by 2 and 2 × 16.
+    let (rx, _) = m.pdos_in_slot(slots, 2, 0);
+    assert_eq!(rx[0].index, 0x1602);
+    assert_eq!(rx[0].entries[0].index, 0x7020);
+}
