@@ -6,7 +6,8 @@ const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferro
 
 #[test]
 fn esi_lists_slots_and_modules_and_warns_with_line_and_column() {
-    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["esi", FILE, "--device", "1", "--json"]).output().unwrap();
+    let out =
+        Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["esi", FILE, "--device", "1", "--json"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["slots"]["slot_index_increment"], 0x800);
@@ -15,7 +16,10 @@ fn esi_lists_slots_and_modules_and_warns_with_line_and_column() {
     let types: Vec<&str> = v["modules"].as_array().unwrap().iter().map(|m| m["type"].as_str().unwrap()).collect();
     assert_eq!(types, ["FC-AXIS-CSP", "FC-AXIS-CSV"], "only the modules that fit the drive's slots");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("warning: ") && stderr.contains("odd length 1") && stderr.contains(", column "), "{stderr}");
+    assert!(
+        stderr.contains("warning: ") && stderr.contains("odd length 1") && stderr.contains(", column "),
+        "{stderr}"
+    );
     assert_eq!(v["warnings"].as_array().unwrap().len(), 1);
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["esi", FILE, "--device", "0"]).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
