@@ -95,8 +95,9 @@ enum Command {
         #[arg(long, value_name = "SEG.toml")]
         config: Option<PathBuf>,
         /// A device of a line segment, in order from the master: EEPROM dump, ESI file with
-        /// `:PRODUCT`, or a built-in name (EK1100, EL1004, EL2004, SERVO, LAN9252-EVB).
-        #[arg(long, value_name = "FILE[:PRODUCT]")]
+        /// `:PRODUCT` (a modular device's modules after it: `:MODULE,MODULE…` by ident), or a
+        /// built-in name (EK1100, EL1004, EL2004, SERVO, LAN9252-EVB).
+        #[arg(long, value_name = "FILE[:PRODUCT[:MODULES]]")]
         device: Vec<String>,
         /// Network interface to serve (AF_PACKET raw socket; needs CAP_NET_RAW).
         #[arg(long)]

@@ -35,8 +35,9 @@ pub struct Target {
     /// Use the embedded virtual segment described by this file.
     #[arg(long, value_name = "SEG.toml")]
     pub config: Option<PathBuf>,
-    /// Use an embedded virtual line of these devices (EEPROM dump, ESI:PRODUCT, or built-in name).
-    #[arg(long, value_name = "FILE[:PRODUCT]")]
+    /// Use an embedded virtual line of these devices (EEPROM dump, ESI:PRODUCT, a modular
+    /// device's ESI:PRODUCT:MODULE,MODULE…, or built-in name).
+    #[arg(long, value_name = "FILE[:PRODUCT[:MODULES]]")]
     pub device: Vec<String>,
     /// Seed of the virtual segment.
     #[arg(long)]

@@ -26,3 +26,23 @@ fn esi_lists_slots_and_modules_and_warns_with_line_and_column() {
     assert!(text.contains("SLOT \"Terminal\" ×1–8: 0x00000801 (default), 0x00000802, 0x00000803"), "{text}");
     assert_eq!(text.matches("  MODULE ").count(), 3, "{text}");
 }
+
+#[test]
+fn device_args_choose_the_modules_of_a_modular_device() {
+    let run = |device: &str| {
+        Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(["run", "--device", device, "--seconds", "0.1", "--json"])
+            .output()
+            .unwrap()
+    };
+    let out = run(&format!("{FILE}:#x00010002:#x9010,#x9020"));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["wkc_errors"], 0, "{v}");
+    let out = run(&format!("{FILE}:#x00010002:#x9010,#x0801"));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("slot 1 (Axis): module FC-DO4 (0x00000801) does not fit it"), "{err}");
+    let out = run(&format!("{FILE}:#x00010002:#x9010,banana"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("'banana' in '#x9010,banana' is not a module ident"));
+}

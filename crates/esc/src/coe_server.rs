@@ -466,7 +466,21 @@ fn sdo_len(s: &Sdo<'_>) -> usize {
 }
 
 impl Application for CoeDevice {
-    fn check_transition(&mut self, _pdi: &mut Pdi<'_>, _from: AlState, _to: AlState) -> Result<(), AlStatusCode> {
+    fn check_transition(&mut self, _pdi: &mut Pdi<'_>, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
+        // A modular device (ETG.5001) refuses SAFEOP while the modules the master configured
+        // (0xF030, once written) are not those detected (0xF050).
+        if from == AlState::PreOp && to == AlState::SafeOp {
+            let list = |index| -> Option<Vec<u8>> {
+                let o = self.od.get(index)?;
+                let n = *o.entry(0)?.value.first()?;
+                Some((1..=n).flat_map(|k| o.entry(k).map_or(vec![], |e| e.value.clone())).collect())
+            };
+            if let (Some(configured), Some(detected)) = (list(0xF030), list(0xF050)) {
+                if !configured.is_empty() && configured != detected {
+                    return Err(AlStatusCode::MODULE_IDENT_LIST_MISMATCH);
+                }
+            }
+        }
         Ok(())
     }
     fn process_data_bytes(&self, outputs: bool) -> Option<u16> {

@@ -61,6 +61,9 @@ pub struct Device {
     pub dictionary: Option<Dictionary>,
     /// Where modules plug in, for a modular device.
     pub slots: Option<Slots>,
+    /// The modules plugged, slot by slot (their idents), in a device made by
+    /// [`Device::plugged`]; empty otherwise.
+    pub modules: Vec<u32>,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -179,10 +182,73 @@ impl EsiFile {
 }
 
 impl Device {
+    /// The modules a modular device has by default: each slot's default module, as many
+    /// times as the slot's minimum; `None` where a slot needs a module and names no default.
+    pub fn default_modules(&self) -> Option<Vec<u32>> {
+        let slots = self.slots.as_ref()?;
+        let mut out = Vec::new();
+        for s in &slots.slots {
+            if s.min_instances > 0 {
+                out.extend(std::iter::repeat_n(s.default_module?, s.min_instances as usize));
+            }
+        }
+        Some(out)
+    }
+
+    /// This modular device with `idents` plugged into its slots in order (a slot of up to N
+    /// instances takes up to N modules): each module's PDOs added at the indices of its slot
+    /// (ETG.5001's `DependOnSlot` arithmetic, [`ModuleDesc::pdos_in_slot`]). The error says
+    /// which slot refused which module, or how many modules the slots take.
+    pub fn plugged(&self, modules: &[ModuleDesc], idents: &[u32]) -> Result<Device, String> {
+        let slots = self.slots.as_ref().ok_or_else(|| format!("{} has no slots", self.type_name))?;
+        let (min, max): (usize, usize) =
+            slots.slots.iter().fold((0, 0), |(a, b), s| (a + s.min_instances as usize, b + s.max_instances as usize));
+        if idents.len() < min || idents.len() > max {
+            return Err(format!("{} takes {min} to {max} modules, {} given", self.type_name, idents.len()));
+        }
+        let mut dev = self.clone();
+        dev.modules = idents.to_vec();
+        // Slot instances in order: every slot its minimum, the modules beyond the minima to the
+        // first slots with room.
+        let mut extra = idents.len() - min;
+        let mut plan = Vec::new();
+        for s in &slots.slots {
+            let more = extra.min((s.max_instances - s.min_instances) as usize);
+            extra -= more;
+            plan.extend(std::iter::repeat_n(s, s.min_instances as usize + more));
+        }
+        for (n, (&ident, slot)) in idents.iter().zip(plan).enumerate() {
+            let m = modules
+                .iter()
+                .find(|m| m.ident == ident)
+                .ok_or_else(|| format!("slot {n}: no module with ident {ident:#010x} in the file"))?;
+            let fits = slot.module_idents.contains(&ident)
+                || m.class.as_ref().is_some_and(|c| slot.module_classes.contains(c))
+                || (slot.module_idents.is_empty() && slot.module_classes.is_empty());
+            if !fits {
+                return Err(format!(
+                    "slot {n} ({}): module {} ({ident:#010x}) does not fit it",
+                    slot.name, m.type_name
+                ));
+            }
+            let group = slot.slot_group.unwrap_or(0);
+            let (rx, tx) = m.pdos_in_slot(slots, n as u16, group);
+            dev.rx_pdos.extend(rx);
+            dev.tx_pdos.extend(tx);
+        }
+        Ok(dev)
+    }
+
     /// The SII image this description implies, filled to the EEPROM size with 0xFF.
     pub fn to_sii(&self, vendor_id: u32) -> Result<Vec<u8>, ferrocat_wire::Error> {
-        let info = self.sii_info(vendor_id);
-        info.to_image_sized(build::eeprom_size(self, &info))
+        let mut info = self.sii_info(vendor_id);
+        let size = build::eeprom_size(self, &info);
+        // Without an <Eeprom><ByteSize>, word 0x3E says the EEPROM the image is built for (in
+        // KiBit minus one), so that a master reading as far as it says reads every category.
+        if info.header.eeprom_size_bytes() < size {
+            info.header.eeprom_size = ((size as u64 * 8 / 1024).max(1) - 1).min(u16::MAX as u64) as u16;
+        }
+        info.to_image_sized(size)
     }
 
     /// The owned SII description this device implies.

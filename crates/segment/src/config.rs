@@ -103,7 +103,14 @@ const MAX_DRIFT_PPM: f64 = 1000.0;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DeviceSource {
     Eeprom(PathBuf),
-    Esi { path: PathBuf, product: Option<u32>, revision: Option<u32> },
+    /// An ESI file's device; a modular one with `modules` plugged (their idents, slot by
+    /// slot; `None`: the slots' defaults).
+    Esi {
+        path: PathBuf,
+        product: Option<u32>,
+        revision: Option<u32>,
+        modules: Option<Vec<u32>>,
+    },
     Builtin(String),
 }
 
@@ -122,10 +129,13 @@ pub enum NodeRef {
     Name(String),
 }
 
+/// A number in a segment file: an integer, or text (`"#x1A00"`, `"0x1A00"`, decimal).
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(untagged)]
 pub enum Number {
+    /// A TOML integer.
     Int(i64),
+    /// A number as text.
     Text(String),
 }
 
@@ -161,6 +171,8 @@ pub struct DeviceToml {
     pub esi: Option<PathBuf>,
     pub product: Option<Number>,
     pub revision: Option<Number>,
+    /// A modular ESI device's modules, by ident, slot by slot (default: each slot's default).
+    pub modules: Option<Vec<Number>>,
     pub builtin: Option<String>,
     /// "et1100" (default), "lan9252", "esc20" (32-bit DC) or "nodc".
     pub esc: Option<String>,
@@ -325,9 +337,32 @@ impl SegmentConfig {
         let mut cfg = SegmentConfig::default();
         for a in args {
             let mut d = DeviceToml::default();
+            // FILE.xml:PRODUCT:MODULE,MODULE… — the modules of a modular device, by ident.
+            let (a, modules) = match a.rsplit_once(':') {
+                Some((head, list))
+                    if head.rsplit_once(':').is_some_and(|(f, p)| {
+                        (f.ends_with(".xml") || f.ends_with(".XML")) && ferrocat_esi::parse_number(p).is_some()
+                    }) =>
+                {
+                    (head, Some(list))
+                }
+                _ => (a.as_str(), None),
+            };
+            if let Some(list) = modules {
+                let idents = list
+                    .split(',')
+                    .map(|m| {
+                        ferrocat_esi::parse_number(m)
+                            .and_then(|v| u32::try_from(v).ok())
+                            .map(|_| Number::Text(m.trim().into()))
+                            .ok_or_else(|| device_err("--device", format!("'{m}' in '{list}' is not a module ident")))
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                d.modules = Some(idents);
+            }
             let (file, product) = match a.rsplit_once(':') {
                 Some((f, p)) if !f.is_empty() && ferrocat_esi::parse_number(p).is_some() => (f, Some(p)),
-                _ => (a.as_str(), None),
+                _ => (a, None),
             };
             if file.ends_with(".xml") || file.ends_with(".XML") {
                 d.esi = Some(file.into());
@@ -368,6 +403,15 @@ impl SegmentConfig {
                     .revision
                     .as_ref()
                     .map(|n| n.get().ok_or_else(|| device_err(&place, "revision: not a 32-bit number")))
+                    .transpose()?,
+                modules: d
+                    .modules
+                    .as_ref()
+                    .map(|ms| {
+                        ms.iter()
+                            .map(|n| n.get().ok_or_else(|| device_err(&place, "modules: not 32-bit numbers")))
+                            .collect::<Result<Vec<_>, _>>()
+                    })
                     .transpose()?,
             }),
             (None, None, Some(b)) => Ok(DeviceSource::Builtin(b.clone())),
@@ -498,7 +542,13 @@ impl SegmentConfig {
                 .then(ferrocat_esc::EoeServer::default);
             // The dictionary is built once, for CoE devices only.
             let od = coe.then(|| match &esi_dev {
-                Some(dev) => crate::od_build::from_esi(dev, &info),
+                Some(dev) => {
+                    let mut od = crate::od_build::from_esi(dev, &info);
+                    if dev.slots.is_some() {
+                        crate::od_build::add_module_lists(&mut od, &dev.modules);
+                    }
+                    od
+                }
                 None => crate::od_build::from_sii(&info),
             });
             let drive = od.as_ref().is_some_and(|od| d.app.is_some() || is_drive(&info, od));
@@ -820,7 +870,7 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
             let name = info.string(1).unwrap_or_else(|| format!("{:#010x}", info.header.product_code));
             Ok((img, name, None))
         }
-        DeviceSource::Esi { path, product, revision } => {
+        DeviceSource::Esi { path, product, revision, modules } => {
             let xml = read_esi(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
             let f =
                 EsiFile::parse(&xml).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
@@ -845,10 +895,25 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
                     })
                 }
             };
-            let img = dev
-                .to_sii(f.vendor_id)
-                .map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
-            Ok((img, dev.type_name.clone(), Some(dev.clone())))
+            let parse_err = |message: String| SegmentError::Parse { path: path.clone(), message };
+            let dev = match (&dev.slots, modules) {
+                (None, Some(_)) => return Err(parse_err(format!("{} has no slots for modules", dev.type_name))),
+                (None, None) => dev.clone(),
+                (Some(_), chosen) => {
+                    let idents = match chosen {
+                        Some(m) => m.clone(),
+                        None => dev.default_modules().ok_or_else(|| {
+                            parse_err(format!(
+                                "{}: a slot needs a module and names no default: give them (FILE:PRODUCT:MODULE,…)",
+                                dev.type_name
+                            ))
+                        })?,
+                    };
+                    dev.plugged(&f.modules, &idents).map_err(parse_err)?
+                }
+            };
+            let img = dev.to_sii(f.vendor_id).map_err(|e| parse_err(e.to_string()))?;
+            Ok((img, dev.type_name.clone(), Some(dev)))
         }
         DeviceSource::Builtin(name) => {
             let dev = crate::builtin::device(name).ok_or_else(|| {

@@ -14,7 +14,7 @@ mod virtual_io;
 mod watch;
 
 pub use config::{
-    load_device, DeviceSource, DeviceToml, EventToml, PortToml, SecondaryToml, SegmentConfig, SegmentError,
+    load_device, DeviceSource, DeviceToml, EventToml, Number, PortToml, SecondaryToml, SegmentConfig, SegmentError,
 };
 pub use host::{HostModel, Latency, Stamps};
 pub use segment::{Event, MasterPort, Node, Peer, SecondaryLink, Segment, SegmentStats};

@@ -244,3 +244,46 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
     }
     od
 }
+
+/// The Modular Device Profile's module lists (ETG.5001): 0xF030, the configured module idents
+/// the master writes in PREOP (empty until it does), and 0xF050, the modules detected, slot by
+/// slot. A device refuses SAFEOP while a configured list differs from the detected one
+/// (`CoeDevice::check_transition`).
+pub fn add_module_lists(od: &mut ObjectDictionary, plugged: &[u32]) {
+    let entries = |access: Access, values: &[u32]| {
+        values
+            .iter()
+            .enumerate()
+            .map(|(k, v)| Entry {
+                subindex: k as u8 + 1,
+                name: format!("Module {}", k + 1),
+                data_type: dt::UDINT,
+                bit_len: 32,
+                bit_offset: 0,
+                access,
+                value: v.to_le_bytes().to_vec(),
+            })
+            .collect::<Vec<_>>()
+    };
+    let preop = Access { write_preop_only: true, ..Access::RW };
+    let mut configured = Object::list(
+        0xF030,
+        "Configured module ident list",
+        ObjectCode::Array,
+        dt::UDINT,
+        preop,
+        entries(preop, &vec![0; plugged.len()]),
+    );
+    if let Some(sub0) = configured.entry_mut(0) {
+        sub0.value = vec![0];
+    }
+    od.insert(configured);
+    od.insert(Object::list(
+        0xF050,
+        "Detected module ident list",
+        ObjectCode::Array,
+        dt::UDINT,
+        Access::RO,
+        entries(Access::RO, plugged),
+    ));
+}

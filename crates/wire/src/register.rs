@@ -267,6 +267,7 @@ impl AlStatusCode {
     pub const SM_WATCHDOG: Self = Self(0x001B);
     pub const INVALID_OUTPUT_CONFIG: Self = Self(0x001D);
     pub const INVALID_INPUT_CONFIG: Self = Self(0x001E);
+    pub const MODULE_IDENT_LIST_MISMATCH: Self = Self(0x0070);
     pub const FATAL_SYNC_ERROR: Self = Self(0x002C);
     pub const INVALID_DC_SYNC_CONFIG: Self = Self(0x0030);
 

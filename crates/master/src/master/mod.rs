@@ -11,6 +11,7 @@ use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
 
 mod delays;
+mod modules;
 mod next_frame_latch;
 mod process_data;
 mod sii;

@@ -1,0 +1,78 @@
+//! Modular devices end to end in virtual time: the simulator plugs an ESI device's modules into
+//! its slots (PDOs at each slot's indices, 0xF050), the master configures and checks them
+//! (0xF030), and a device told other modules refuses SAFEOP with AL status code 0x0070.
+use ferrocat_master::Master;
+use ferrocat_segment::{DeviceToml, HostModel, Number, SegmentConfig, VirtualIo};
+use ferrocat_wire::register::AlState;
+
+const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_modular.xml");
+
+fn drive(modules: Option<&[&str]>) -> Master<VirtualIo> {
+    let dev = DeviceToml {
+        esi: Some(FILE.into()),
+        product: Some(Number::Text("#x00010002".into())),
+        modules: modules.map(|m| m.iter().map(|s| Number::Text(s.to_string())).collect()),
+        ..Default::default()
+    };
+    let cfg = SegmentConfig { devices: vec![dev], ..SegmentConfig::default() };
+    Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1))
+}
+
+fn indices(entries: &[ferrocat_master::Mapped]) -> Vec<u16> {
+    entries.iter().filter(|e| e.index != 0).map(|e| e.index).collect()
+}
+
+#[test]
+fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
+    let mut m = drive(None);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9010]);
+    // Axis 1's objects 0x800 above axis 0's (CiA402's multi-axis layout).
+    assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
+    assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
+    m.configure_modules(0, &[0x9010, 0x9010]).unwrap();
+    m.start().unwrap();
+    assert_eq!(m.slaves[0].state, AlState::Op);
+}
+
+#[test]
+fn chosen_modules_are_plugged_in_order() {
+    let mut m = drive(Some(&["#x9010", "#x9020"]));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9020]);
+    assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x68FF]);
+    assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x686C]);
+}
+
+#[test]
+fn other_modules_configured_are_an_error_naming_the_slot_and_the_slave_refuses_safeop() {
+    let mut m = drive(None);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    let e = m.configure_modules(0, &[0x9010, 0x9020]).unwrap_err().to_string();
+    assert!(e.contains("slot 1: module 0x00009020 configured, 0x00009010 detected"), "{e}");
+    // Told so, the slave keeps to PREOP.
+    let e = m.request_state(0, AlState::SafeOp).unwrap_err().to_string();
+    assert!(e.contains("0x0070"), "{e}");
+    // Told the right modules, it goes on.
+    m.configure_modules(0, &[0x9010, 0x9010]).unwrap();
+}
+
+#[test]
+fn a_slot_that_refuses_a_module_or_a_count_out_of_range_is_a_build_error() {
+    let build = |modules: &[&str]| {
+        let dev = DeviceToml {
+            esi: Some(FILE.into()),
+            product: Some(Number::Text("#x00010002".into())),
+            modules: Some(modules.iter().map(|s| Number::Text(s.to_string())).collect()),
+            ..Default::default()
+        };
+        SegmentConfig { devices: vec![dev], ..SegmentConfig::default() }.build().unwrap_err().to_string()
+    };
+    let e = build(&["#x9010"]);
+    assert!(e.contains("takes 2 to 2 modules, 1 given"), "{e}");
+    let e = build(&["#x9010", "#x0801"]);
+    assert!(e.contains("slot 1 (Axis): module FC-DO4 (0x00000801) does not fit it"), "{e}");
+}
