@@ -28,7 +28,7 @@ for round in $(seq 1 "$ROUNDS"); do
     sim=$!
     sleep 0.5
     case $master in
-      ferrocat) line=$(ip netns exec "$m" "$bin" run --iface "fcm${id}a" --dc --dc-static-frames 0 --max-rate --seconds "$SECONDS_EACH" 2>&1 | tr '\n' ' ') ;;
+      ferrocat) line=$(ip netns exec "$m" "$bin" run --iface "fcm${id}a" --dc --sync none --dc-static-frames 0 --max-rate --seconds "$SECONDS_EACH" 2>&1 | tr '\n' ' ') ;;
       ethercrab) line=$(ip netns exec "$m" target/release/examples/ethercrab_bench "fcm${id}a" "$SECONDS_EACH") ;;
       soem) line=$(ip netns exec "$m" .venv/bin/python crates/cli/tests/python/soem_bench.py "fcm${id}a" "$SECONDS_EACH") ;;
     esac

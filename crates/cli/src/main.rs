@@ -17,6 +17,7 @@ mod report;
 mod sii;
 mod sim;
 mod target;
+mod timing_stats;
 
 #[derive(Parser)]
 #[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]

@@ -10,6 +10,7 @@ use serde_json::json;
 
 use crate::outln;
 use crate::target::{finish, CliIo, Target};
+use crate::timing_stats::Histogram;
 
 pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
@@ -482,7 +483,13 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let mut report = start + 1_000_000_000;
     let mut shown = m.events.len();
     let mut next_period = period;
+    // The loop's quality: how late each wake-up came, how far each period strayed from the
+    // one planned, and the cycles whose work ran past the next cycle's start.
+    let (mut wake_late, mut jitter) = (Histogram::default(), Histogram::default());
+    let mut overruns = 0u64;
+    let mut last_wake: Option<u64> = None;
     while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
+        let planned_period = next_period;
         next += next_period;
         next_period = match sync.as_mut() {
             Some((method, st)) => {
@@ -523,7 +530,16 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             report += 1_000_000_000;
         }
         if !max_rate {
+            if m.io_mut().now_ns() > next {
+                overruns += 1;
+            }
             m.io_mut().sleep_until(next);
+            let woke = m.io_mut().now_ns();
+            wake_late.add(woke.saturating_sub(next));
+            if let Some(prev) = last_wake {
+                jitter.add((woke - prev).abs_diff(planned_period));
+            }
+            last_wake = Some(woke);
         }
     }
     let cpu = cpu_ns() - cpu0;
@@ -569,6 +585,9 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,
                 "max_round_trip_us": s.max_round_trip_ns as f64 / 1000.0,
                 "frames_lost": m.frame_stats().lost,
+                "overruns": overruns,
+                "wake_latency": wake_late.to_json(),
+                "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
             })
         );
@@ -580,6 +599,14 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             s.max_round_trip_ns as f64 / 1000.0,
             m.frame_stats().lost
         );
+        if !max_rate {
+            outln!(
+                "wake-up latency {}; period jitter {}; {} overruns",
+                wake_late.summary(),
+                jitter.summary(),
+                overruns
+            );
+        }
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
         }

@@ -7,10 +7,13 @@ use std::process::{Command, Stdio};
 
 use common::{python, RingSim, Sim, VethPair};
 
-/// A count from `run`'s summary line: the `;`-separated part that ends with `suffix` or
-/// starts with it.
+/// A count from `run`'s summary line (its first line of output): the `;`-separated part that
+/// ends with `suffix` or starts with it.
 fn summary_field(summary: &str, suffix: &str) -> u64 {
     summary
+        .lines()
+        .next()
+        .unwrap_or_default()
         .split(';')
         .find_map(|p| p.trim().strip_suffix(suffix).or_else(|| p.trim().strip_prefix(suffix)))
         .and_then(|n| n.trim().parse().ok())

@@ -47,6 +47,18 @@ fn run_without_dc_has_no_clock_sync() {
     assert!(out.status.success());
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["clock_sync"], serde_json::Value::Null);
+    // The loop's quality, as cyclictest reports it: one wake-up per cycle, one period fewer.
+    let cycles = r["cycles"].as_u64().unwrap();
+    for (key, n) in [("wake_latency", cycles), ("period_jitter", cycles - 1)] {
+        let h = &r[key];
+        assert_eq!(h["count"], n, "{key}: {h}");
+        let buckets: u64 = h["histogram"].as_array().unwrap().iter().map(|b| b[1].as_u64().unwrap()).sum();
+        assert_eq!(buckets, n, "{key}: {h}");
+        let (p50, p99, max) =
+            (h["p50_us"].as_f64().unwrap(), h["p99_us"].as_f64().unwrap(), h["max_us"].as_f64().unwrap());
+        assert!(p50 <= p99 && p99 <= max, "{key}: {h}");
+    }
+    assert!(r["overruns"].is_u64());
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
         .args(["run", "--device", "EK1100", "--sync", "pi"])
         .output()

@@ -11,6 +11,23 @@ pub use world::Io;
 use std::io;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 
+/// How much longer than asked a receive timeout already set may be and still be kept: an
+/// eighth of the time asked, between 10 and 50 µs.
+pub fn timeout_slack_ns(want_ns: u64) -> u64 {
+    (want_ns / 8).clamp(10_000, 50_000)
+}
+
+/// The receive timeout to set for a wait of `want_ns`, where `current_ns` is set (0: none);
+/// `None`: keep the current one. A new one is set half the slack above the wait, so that the
+/// next waits of a cyclic loop, a little shorter or longer, keep it.
+fn timeout_to_set(current_ns: u64, want_ns: u64) -> Option<u64> {
+    let want_ns = want_ns.clamp(1_000, 1_000_000_000);
+    if current_ns >= want_ns && current_ns - want_ns <= timeout_slack_ns(want_ns) {
+        return None;
+    }
+    Some(want_ns + timeout_slack_ns(want_ns) / 2)
+}
+
 /// CLOCK_MONOTONIC in ns.
 pub fn monotonic_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
@@ -200,12 +217,13 @@ impl RawSocket {
         check(r, "SO_TIMESTAMPING").map(|_| self.flags = f)
     }
 
-    /// Sets the receive timeout (at least 1 µs, rounded to 10 µs; the kernel rounds to its tick).
+    /// Sets the receive timeout to about `ns` (at least 1 µs; the kernel rounds to its tick).
+    /// A timeout already set that is no shorter and at most [`timeout_slack_ns`] longer is
+    /// kept: a cyclic receive asks nearly the same each time, and setting it again was a
+    /// system call in most cycles. A receive that times out may so return up to that slack
+    /// late, only when no frame came.
     pub fn set_timeout_ns(&self, ns: u64) -> io::Result<()> {
-        let ns = ns.clamp(1_000, 1_000_000_000) / 10_000 * 10_000 + 10_000;
-        if ns == self.timeout_ns.get() {
-            return Ok(());
-        }
+        let Some(ns) = timeout_to_set(self.timeout_ns.get(), ns) else { return Ok(()) };
         self.timeout_ns.set(ns);
         let tv = libc::timeval {
             tv_sec: (ns / 1_000_000_000) as libc::time_t,
@@ -455,6 +473,25 @@ pub fn routable_addresses(iface: &str) -> io::Result<Vec<String>> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_cyclic_wait_keeps_its_timeout_and_a_longer_or_much_shorter_one_sets_it() {
+        use super::{timeout_slack_ns, timeout_to_set};
+        // 1 ms asked: set 1.025 ms; the next waits, some µs shorter or longer, keep it.
+        let set = timeout_to_set(0, 1_000_000).unwrap();
+        assert_eq!(set, 1_025_000);
+        for want in [1_000_000, 998_000, 980_000, 1_020_000] {
+            assert_eq!(timeout_to_set(set, want), None, "{want}");
+        }
+        // Longer than set: it would return early, so set it.
+        assert!(timeout_to_set(set, 1_030_000).is_some());
+        // Far shorter: kept, it could return up to 1 ms late; set it.
+        assert_eq!(timeout_to_set(set, 200_000), Some(212_500));
+        // The slack never lets a receive run more than 50 µs late, nor less than 10 µs.
+        assert_eq!(timeout_slack_ns(100_000_000), 50_000);
+        assert_eq!(timeout_slack_ns(20_000), 10_000);
+        assert_eq!(timeout_to_set(0, 0), Some(6_000));
+    }
+
     use super::*;
 
     /// A realtime reading converted with the offset lands where monotonic readings around it
