@@ -213,14 +213,5 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
 /// names neither.
 fn modules_of<'a>(file: &'a EsiFile, d: &Device) -> Vec<&'a ferrocat_esi::ModuleDesc> {
     let Some(slots) = &d.slots else { return Vec::new() };
-    file.modules
-        .iter()
-        .filter(|m| {
-            slots.slots.iter().any(|s| {
-                s.module_idents.contains(&m.ident)
-                    || m.class.as_ref().is_some_and(|c| s.module_classes.contains(c))
-                    || (s.module_idents.is_empty() && s.module_classes.is_empty())
-            })
-        })
-        .collect()
+    file.modules.iter().filter(|m| slots.slots.iter().any(|s| s.fits(m))).collect()
 }

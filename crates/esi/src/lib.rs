@@ -222,10 +222,7 @@ impl Device {
                 .iter()
                 .find(|m| m.ident == ident)
                 .ok_or_else(|| format!("slot {n}: no module with ident {ident:#010x} in the file"))?;
-            let fits = slot.module_idents.contains(&ident)
-                || m.class.as_ref().is_some_and(|c| slot.module_classes.contains(c))
-                || (slot.module_idents.is_empty() && slot.module_classes.is_empty());
-            if !fits {
+            if !slot.fits(m) {
                 return Err(format!(
                     "slot {n} ({}): module {} ({ident:#010x}) does not fit it",
                     slot.name, m.type_name

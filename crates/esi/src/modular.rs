@@ -52,6 +52,16 @@ pub struct SlotDesc {
     pub module_classes: Vec<String>,
 }
 
+impl SlotDesc {
+    /// Whether `module` may be plugged here: the slot names its ident or its class, or names
+    /// neither (any module).
+    pub fn fits(&self, module: &ModuleDesc) -> bool {
+        self.module_idents.contains(&module.ident)
+            || module.class.as_ref().is_some_and(|c| self.module_classes.contains(c))
+            || (self.module_idents.is_empty() && self.module_classes.is_empty())
+    }
+}
+
 /// One `<Module>` of a file's `<Modules>`.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ModuleDesc {
