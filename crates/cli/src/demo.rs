@@ -69,18 +69,25 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let r0 = &rows[0];
+    let mut modes: Vec<String> = r0.axes.iter().map(|x| x.mode.to_uppercase()).collect();
+    modes.dedup();
+    modes.sort();
+    modes.dedup();
+    let modes = modes.join("/");
     match &a.iface {
         None => outln!(
-            "ferrocat demo — {} × {} behind EK1100, EL2004, EL1004; host {}, seed {}; every axis moves out and back together ({:.2} s, CSP)",
+            "ferrocat demo — {} × {} behind EK1100, EL2004, EL1004 ({} axes); host {}, seed {}; every axis moves out and back together ({:.2} s, {modes})",
             o.drives,
             o.drive,
+            r0.axes.len(),
             o.host.name,
             o.seed,
             r0.move_s
         ),
         Some(i) => outln!(
-            "ferrocat demo on {i} — {} drives; every axis moves out and back together ({:.2} s, CSP); — marks what only a simulator can measure",
+            "ferrocat demo on {i} — {} drives, {} axes; every axis moves out and back together ({:.2} s, {modes}); — marks what only a simulator can measure",
             r0.drives,
+            r0.axes.len(),
             r0.move_s
         ),
     }
@@ -138,8 +145,8 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
                 opt(r.late_setpoints.map(|v| v as f64), 0),
                 opt(r.repeated_setpoints.map(|v| v as f64), 0),
                 opt(r.max_following_error, 0),
-                r.drives_enabled,
-                r.drives,
+                r.axes.iter().filter(|x| x.enabled).count(),
+                r.axes.len(),
                 match (r.processing_mean_us, r.processing_max_us) {
                     (Some(m), Some(x)) => format!("{m:.1}/{x:.1}"),
                     _ => "—".into(),
@@ -155,9 +162,13 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
             calibrated.join(", ")
         );
     }
-    outln!("Following error per axis (increments, largest |demand − actual|):");
+    let labels: Vec<String> = r0.axes.iter().map(axis_label).collect();
+    outln!(
+        "Following error per axis (increments, largest |demand − actual|; csv: the move's set-point − the shaft's travel, or the image's position): {}",
+        labels.join("  ")
+    );
     for r in &rows {
-        let fe: Vec<String> = r.following_error.iter().map(|f| opt(*f, 0)).collect();
+        let fe: Vec<String> = r.axes.iter().map(|x| opt(x.following_error, 0)).collect();
         outln!("{:>4}µs  {:<12} {}", r.cycle_us, r.method, fe.join("  "));
     }
     for r in rows.iter().filter(|r| r.late_setpoints.unwrap_or(0) + r.repeated_setpoints.unwrap_or(0) > 0) {
@@ -179,6 +190,19 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
     }
     outln!("Plots and CSV in {}", a.out.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// "slave 4" for a one-axis drive's axis, "slave 4 axis 1 (csv)" past the first, the mode where
+/// it is not CSP.
+fn axis_label(x: &ferrocat_lab::demo::AxisRow) -> String {
+    let mut s = format!("slave {}", x.slave);
+    if x.axis > 0 {
+        s += &format!(" axis {}", x.axis);
+    }
+    if x.mode != "csp" {
+        s += &format!(" ({})", x.mode);
+    }
+    s
 }
 
 /// A figure, or "—" where it was not measured.
@@ -205,10 +229,10 @@ fn write_outputs(dir: &Path, o: &Options, rows: &[Row]) -> anyhow::Result<()> {
         let of_cycle: Vec<&Row> = rows.iter().filter(|r| r.cycle_us == c).collect();
         if let Some(r) = of_cycle.iter().find(|r| r.method == "ferrocat").or(of_cycle.first()) {
             let mut series = Vec::new();
-            for i in 0..r.drives {
+            for (i, x) in r.axes.iter().enumerate() {
                 let pts = |f: &dyn Fn(&TracePoint) -> f64| r.trace.iter().map(|p| (p.t_s, f(p))).collect();
-                series.push(Series::new(format!("axis {} set-point", i + 1), pts(&|p| p.setpoint_rev[i])));
-                let mut actual = Series::new(format!("axis {} actual", i + 1), pts(&|p| p.actual_rev[i]));
+                series.push(Series::new(format!("{} set-point", axis_label(x)), pts(&|p| p.setpoint_rev[i])));
+                let mut actual = Series::new(format!("{} actual", axis_label(x)), pts(&|p| p.actual_rev[i]));
                 actual.wide = true;
                 series.push(actual);
             }

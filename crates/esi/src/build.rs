@@ -106,6 +106,12 @@ pub(crate) fn sii_info(dev: &Device, vendor_id: u32) -> SiiInfo {
             h.eeprom_size = ((n as u64 * 8 / 1024).max(1) - 1).min(u16::MAX as u64) as u16;
         }
     }
+    if dev.eeprom.as_ref().is_none_or(|e| e.config_data.is_empty()) && !dev.dc_op_modes.is_empty() {
+        // No ConfigData, but DC operation modes: the ESC configuration byte (0x0141) with the
+        // SYNC out and latch units on (bits 2 and 3), without which an ET1100 has no system
+        // time. A builder's default where the file is silent, not a vendor's value.
+        h.pdi_control = 0x0C00;
+    }
     for sm in &dev.sync_managers {
         match sm.kind {
             SmKind::MailboxOut => {

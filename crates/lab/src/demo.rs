@@ -93,8 +93,11 @@ pub struct Row {
     /// Largest |position demand − actual| of each axis (increments) and over all.
     pub following_error: Vec<Option<f64>>,
     pub max_following_error: Option<f64>,
-    /// Drives in operation enabled at the end of the move (as their statuswords say).
+    /// Drives with every axis in operation enabled at the end of the move (as their
+    /// statuswords say).
     pub drives_enabled: usize,
+    /// Every axis of every drive, in segment order.
+    pub axes: Vec<AxisRow>,
     /// Times a drive left OP during the run (a sync error, where a drive supervises its SM
     /// synchronisation, after three cycles without set-points), each brought back by the master.
     pub left_op: usize,
@@ -109,6 +112,24 @@ pub struct Row {
     /// Every `trace_every`-th cycle: time (s), per axis set-point and actual (rev), error (ns).
     #[serde(skip)]
     pub trace: Vec<TracePoint>,
+}
+
+/// One axis's figures.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct AxisRow {
+    /// The drive's position on the segment.
+    pub slave: u16,
+    /// The axis on that drive (0 the first; its objects n × 0x800 above the first's).
+    pub axis: u8,
+    /// "csp", or "csv" for an axis whose image has a target velocity but no target position.
+    pub mode: String,
+    /// Operation enabled at the end of the move.
+    pub enabled: bool,
+    /// Largest |position demand − actual| (increments): the drive's own in CSP; in CSV the
+    /// move's set-point minus the shaft's travel (simulator), or minus the position actual value
+    /// the image returned (a real drive: it includes the cycle or two the value takes to come
+    /// back; none where the image has no position actual value).
+    pub following_error: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -170,8 +191,10 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
         map_for_csp(&mut m, k)?;
         // What an integrator sets up in PREOP: a torque limit and a following-error window the
         // move needs (a vendor's defaults may be far tighter), where the drive has the objects.
-        let _ = m.sdo_write(k, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes());
-        let _ = m.sdo_write(k, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes());
+        for a in Axis::all(&m, k)? {
+            let _ = m.sdo_write(k, a.index(ix::MAX_TORQUE), 0, &3000u16.to_le_bytes());
+            let _ = m.sdo_write(k, a.index(ix::FOLLOWING_ERROR_WINDOW), 0, &13_107u32.to_le_bytes());
+        }
         drives.push(k);
     }
     anyhow::ensure!(!drives.is_empty(), "no CiA402 drive on the segment (no slave maps 0x6040 and 0x6041)");
@@ -249,10 +272,23 @@ fn run_one<I: World>(
         }
         r.wait();
     }
-    let mut axes: Vec<Axis> = drives.iter().map(|&d| Axis::new(&r.m, d)).collect::<Result<_, _>>()?;
+    let mut axes: Vec<Axis> = Vec::new();
+    for &d in &drives {
+        axes.extend(Axis::all(&r.m, d)?);
+    }
+    // Position where the image carries a target position, else velocity.
+    let mut csv = Vec::with_capacity(axes.len());
     for a in &mut axes {
-        a.set_mode(&mut r.m, Mode::CyclicSyncPosition)?;
+        let velocity = !a.has_target_position();
+        anyhow::ensure!(
+            a.has_target_position() || a.has_target_velocity(),
+            "slave {} axis {}: neither a target position nor a target velocity in the process image",
+            a.position,
+            a.axis
+        );
+        a.set_mode(&mut r.m, if velocity { Mode::CyclicSyncVelocity } else { Mode::CyclicSyncPosition })?;
         a.set_goal(Goal::OperationEnabled);
+        csv.push(velocity);
     }
     // Enabling, with the clock sync running meanwhile.
     for k in 0.. {
@@ -268,10 +304,10 @@ fn run_one<I: World>(
         anyhow::ensure!(k < 5_000, "drives not enabled: {:?}", axes.iter().map(|a| a.state()).collect::<Vec<_>>());
     }
     let mut per_rev = Vec::new();
-    for &d in &drives {
-        per_rev.push(match r.drive(d) {
-            Some(dr) => dr.motor.increments_per_rev,
-            None => increments_per_rev(&mut r.m, d),
+    for a in &axes {
+        per_rev.push(match r.drive(a.position) {
+            Some(dr) => dr.axes()[a.axis as usize].motor.increments_per_rev,
+            None => increments_per_rev(&mut r.m, a.position, a.index(0x608F)),
         });
     }
     let start: Vec<f64> = axes.iter().map(|a| a.position_actual(&r.m).unwrap_or(0) as f64).collect();
@@ -308,20 +344,36 @@ fn run_one<I: World>(
     let mut err_max = 0.0f64;
     let mut sync0 = crate::stats::Sync0Stats::default();
     let mut fe_image: Vec<Option<f64>> = vec![None; axes.len()];
+    // A CSV axis in the simulator: the move measured from where each shaft stood at its start
+    // (the image may carry no position actual value at all).
+    let shaft = |r: &Rig<I>, a: &Axis| r.drive(a.position).map(|dr| dr.axes()[a.axis as usize].position_increments());
+    let shaft0: Vec<Option<f64>> = axes.iter().map(|a| shaft(&r, a)).collect();
+    let mut fe_csv: Vec<Option<f64>> = vec![None; axes.len()];
     let mut sp = vec![0.0; axes.len()];
+    let mut sp_next = vec![0.0; axes.len()];
+    let cycle_s = cycle_ns as f64 * 1e-9;
+    let at = |t: f64, out: &mut [f64]| {
+        let t_back = t - there.duration_s() - dwell_s;
+        if t_back < 0.0 {
+            there.positions(t, out);
+        } else {
+            back.positions(t_back, out);
+        }
+    };
     let mut trace = Vec::new();
     let trace_every = (1_000_000 / cycle_ns).max(1);
     for k in 0..cycles {
         // One set-point per SYNC0: cycle k's is the profile at k cycles on the SYNC0 grid.
-        let t = k as f64 * cycle_ns as f64 * 1e-9;
-        let t_back = t - there.duration_s() - dwell_s;
-        if t_back < 0.0 {
-            there.positions(t, &mut sp);
-        } else {
-            back.positions(t_back, &mut sp);
-        }
-        for (a, p) in axes.iter().zip(&sp) {
-            a.set_target_position(&mut r.m, p.round() as i64 as i32);
+        let t = k as f64 * cycle_s;
+        at(t, &mut sp);
+        at(t + cycle_s, &mut sp_next);
+        for (i, a) in axes.iter().enumerate() {
+            if csv[i] {
+                // CSV: the slope to the next cycle's set-point (increments/s).
+                a.set_target_velocity(&mut r.m, ((sp_next[i] - sp[i]) / cycle_s).round() as i32);
+            } else {
+                a.set_target_position(&mut r.m, sp[i].round() as i64 as i32);
+            }
         }
         let e = true_error_ns(&mut r.m, mfr, cycle_ns);
         if let Some(e) = e {
@@ -329,10 +381,21 @@ fn run_one<I: World>(
             err_max = err_max.max(e.abs());
         }
         r.step()?;
-        for (a, fe) in axes.iter_mut().zip(&mut fe_image) {
+        for (i, (a, fe)) in axes.iter_mut().zip(&mut fe_image).enumerate() {
             a.update(&mut r.m);
-            if let Some(f) = a.following_error(&r.m) {
-                *fe = Some(fe.unwrap_or(0.0).max(f.unsigned_abs() as f64));
+            let f = if csv[i] {
+                a.position_actual(&r.m).map(|p| (sp[i] - p as f64).abs())
+            } else {
+                a.following_error(&r.m).map(|f| f.unsigned_abs() as f64)
+            };
+            if let Some(f) = f {
+                *fe = Some(fe.unwrap_or(0.0).max(f));
+            }
+        }
+        for (i, a) in axes.iter().enumerate().filter(|(i, _)| csv[*i]) {
+            if let (Some(now), Some(s0)) = (shaft(&r, a), shaft0[i]) {
+                let e = ((sp[i] - start[i]) - (now - s0)).abs();
+                fe_csv[i] = Some(fe_csv[i].unwrap_or(0.0).max(e));
             }
         }
         if let Some(seg) = r.m.io().segment() {
@@ -346,9 +409,13 @@ fn run_one<I: World>(
                 following_error: Vec::new(),
                 error_ns: e.unwrap_or(f64::NAN),
             };
-            for (i, (&d, a)) in drives.iter().zip(&axes).enumerate() {
-                let (pos, fe) = match r.drive(d) {
-                    Some(dr) => (dr.position_increments(), dr.following_error_increments()),
+            for (i, a) in axes.iter().enumerate() {
+                let (pos, fe) = match r.drive(a.position).map(|dr| &dr.axes()[a.axis as usize]) {
+                    Some(ax) if csv[i] => {
+                        let moved = ax.position_increments() - shaft0[i].unwrap_or(0.0);
+                        (start[i] + moved, sp[i] - start[i] - moved)
+                    }
+                    Some(ax) => (ax.position_increments(), ax.following_error_increments()),
                     None => (
                         a.position_actual(&r.m).unwrap_or(0) as f64,
                         a.following_error(&r.m).map_or(f64::NAN, |f| f as f64),
@@ -381,12 +448,28 @@ fn run_one<I: World>(
             _ => (None, None),
         },
     };
-    let following_error: Vec<Option<f64>> = match &stats {
-        Some(st) => st.iter().map(|s| Some(s.max_following_error)).collect(),
-        None => fe_image,
-    };
+    let following_error: Vec<Option<f64>> = axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| match r.drive(a.position) {
+            Some(dr) if !csv[i] => Some(dr.axes()[a.axis as usize].max_following_error()),
+            Some(_) => fe_csv[i],
+            None => fe_image[i],
+        })
+        .collect();
     let n_proc: u64 = stats.iter().flatten().map(|s| s.processing_count).sum();
-    let enabled = axes.iter().filter(|a| a.state() == Some(State::OperationEnabled)).count();
+    let axis_rows: Vec<AxisRow> = axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| AxisRow {
+            slave: a.position,
+            axis: a.axis,
+            mode: if csv[i] { "csv" } else { "csp" }.into(),
+            enabled: a.state() == Some(State::OperationEnabled),
+            following_error: following_error[i],
+        })
+        .collect();
+    let enabled = drives.iter().filter(|&&d| axis_rows.iter().filter(|a| a.slave == d).all(|a| a.enabled)).count();
     let left_op = r.m.events[events0..]
         .iter()
         .filter(|e| matches!(e, MasterEvent::LeftOp { position, .. } if drives.contains(position)))
@@ -415,6 +498,7 @@ fn run_one<I: World>(
         max_following_error: following_error.iter().flatten().copied().reduce(f64::max),
         following_error,
         drives_enabled: enabled,
+        axes: axis_rows,
         left_op,
         drives: drives.len(),
         processing_mean_us: (n_proc > 0)
@@ -443,10 +527,10 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
 
 /// Increments per revolution from 0x608F (encoder increments / motor revolutions), or the
 /// model's 131 072 when the drive does not say.
-fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16) -> f64 {
+fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16, index: u16) -> f64 {
     let u32_of = |v: Vec<u8>| v.get(..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-    let inc = m.sdo_read(d, 0x608F, 1).ok().and_then(u32_of).unwrap_or(0);
-    let revs = m.sdo_read(d, 0x608F, 2).ok().and_then(u32_of).unwrap_or(0);
+    let inc = m.sdo_read(d, index, 1).ok().and_then(u32_of).unwrap_or(0);
+    let revs = m.sdo_read(d, index, 2).ok().and_then(u32_of).unwrap_or(0);
     if inc > 0 && revs > 0 {
         inc as f64 / revs as f64
     } else {

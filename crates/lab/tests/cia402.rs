@@ -173,7 +173,7 @@ fn follow_ramp(m: &mut Master<VirtualIo>, a: &mut Axis, p0: f64, v: f64) -> Vec<
 fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     let mut m = master(drive_toml, prepare);
     let mut a = Axis::new(&m, DRIVE).unwrap();
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     // CSP: enable without a jump, then 2 rev/s for half a second.
     a.set_mode(&mut m, Mode::CyclicSyncPosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
@@ -242,7 +242,7 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     cycles(&mut m, 100);
     let dt = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
     let d = drive(&m);
-    let p = d.motor;
+    let p = *d.motor();
     let accel = (d.velocity_increments() - w0) / per_rev * std::f64::consts::TAU / dt;
     // a = (T − Coulomb − viscous·ω) / J at about 5 rev/s.
     let w = w0 / per_rev * std::f64::consts::TAU;
@@ -313,7 +313,7 @@ fn the_builtin_servo_runs_profile_position() {
     a.set_mode(&mut m, Mode::ProfilePosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     // 3 rev/s, 30 rev/s² both ways; 2 revolutions from here.
     m.sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((3.0 * per_rev) as u32).to_le_bytes()).unwrap();
     for i in [ix::PROFILE_ACCELERATION, ix::PROFILE_DECELERATION] {
@@ -366,7 +366,7 @@ fn enabled_in(mode: Mode) -> (Master<VirtualIo>, Axis, f64) {
     a.set_mode(&mut m, mode).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     (m, a, per_rev)
 }
 
@@ -620,7 +620,7 @@ fn homing_with(drive_toml: &str, switch_rps: f64, zero_rps: f64, acc_rps2: f64) 
     a.set_mode(&mut m, Mode::Homing).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
     m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 1, &u32le(switch_rps)).unwrap();
     m.sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &u32le(zero_rps)).unwrap();
@@ -831,7 +831,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
     assert_eq!(drive(&m).mode(), Some(Mode::InterpolatedPosition));
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     let p0 = a.position_actual(&m).unwrap() as f64;
     let actual0 = drive(&m).position_increments();
     drive_mut(&mut m).reset_stats();
@@ -878,7 +878,7 @@ fn ip_servo(period_ns: u64) -> (Master<VirtualIo>, Axis, f64) {
     a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-    let per_rev = drive(&m).motor.increments_per_rev;
+    let per_rev = drive(&m).motor().increments_per_rev;
     (m, a, per_rev)
 }
 

@@ -2,6 +2,9 @@
 //! application wants it (operation enabled, disabled, quick stop) one controlword per cycle,
 //! resets faults, switches modes, and starts cyclic synchronous or interpolated position without
 //! a jump (the target follows the actual position until operation is enabled).
+//!
+//! A drive with several axes carries axis n's objects n × 0x800 above the first's (axis B's
+//! controlword at 0x6840, CiA 402-2): [`Axis::all`] finds every axis a slave maps.
 use ferrocat_wire::cia402::{control, index as ix, Command, Mode, State};
 
 use crate::error::{MasterError, Result};
@@ -43,6 +46,8 @@ struct Handles {
 pub struct Axis {
     /// The slave's position on the segment.
     pub position: u16,
+    /// The axis on that slave: 0 for the first, n for the one whose objects sit n × 0x800 higher.
+    pub axis: u8,
     h: Handles,
     goal: Goal,
     mode: Mode,
@@ -56,29 +61,65 @@ pub struct Axis {
     pub faults: u64,
 }
 
+/// Axes a drive may have (CiA 402-2: eight, 0x800 of the profile area each).
+pub const MAX_AXES: u8 = 8;
+
+/// How far axis `axis`'s objects sit above the first axis's.
+pub fn axis_offset(axis: u8) -> u16 {
+    axis as u16 * 0x800
+}
+
 fn signed(v: u64, bits: u8) -> i64 {
     let shift = 64 - bits as u32;
     ((v << shift) as i64) >> shift
 }
 
 impl Axis {
-    /// The drive at `position`, whose process image must hold at least the controlword and the
-    /// statusword.
+    /// The drive at `position` (its first axis), whose process image must hold at least the
+    /// controlword and the statusword.
     pub fn new<I: Io>(m: &Master<I>, position: u16) -> Result<Self> {
+        Self::on_axis(m, position, 0)
+    }
+
+    /// Every axis of the drive at `position` whose controlword and statusword are in the
+    /// process image, the first axis always (an error where it lacks them).
+    pub fn all<I: Io>(m: &Master<I>, position: u16) -> Result<Vec<Self>> {
         let s = m.slave(position)?;
+        let mapped = |axis: u8| {
+            let at = axis_offset(axis);
+            s.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at)
+                && s.inputs.iter().any(|e| e.index == ix::STATUSWORD + at)
+        };
+        let mut axes = vec![Self::new(m, position)?];
+        for axis in (1..MAX_AXES).filter(|&n| mapped(n)) {
+            axes.push(Self::on_axis(m, position, axis)?);
+        }
+        Ok(axes)
+    }
+
+    /// Axis `axis` (0 the first; fewer than [`MAX_AXES`]) of the drive at `position`.
+    pub fn on_axis<I: Io>(m: &Master<I>, position: u16, axis: u8) -> Result<Self> {
+        let s = m.slave(position)?;
+        if axis >= MAX_AXES {
+            return Err(MasterError::slave(position, &s.name, format!("axis {axis}: a drive has at most {MAX_AXES}")));
+        }
+        let at = axis_offset(axis);
         let find_sub = |outputs: bool, index: u16, sub: Option<u8>| {
             let list = if outputs { &s.outputs } else { &s.inputs };
             list.iter()
-                .find(|e| e.index == index && sub.is_none_or(|k| e.subindex == k))
+                .find(|e| e.index == index + at && sub.is_none_or(|k| e.subindex == k))
                 .map(|e| Handle { bit: e.image_bit, bits: e.bits })
         };
         let find = |outputs: bool, index: u16| find_sub(outputs, index, None);
         let need = |h: Option<Handle>, what: &str| {
-            h.ok_or_else(|| MasterError::slave(position, &s.name, format!("no {what} in the process image")))
+            h.ok_or_else(|| {
+                let axis = if axis > 0 { format!("axis {axis}'s ") } else { String::new() };
+                MasterError::slave(position, &s.name, format!("no {axis}{what} in the process image"))
+            })
         };
         let h = Handles {
-            controlword: need(find(true, ix::CONTROLWORD), "controlword (0x6040)")?,
-            statusword: need(find(false, ix::STATUSWORD), "statusword (0x6041)")?,
+            controlword: need(find(true, ix::CONTROLWORD), &format!("controlword ({:#06x})", ix::CONTROLWORD + at))?,
+            statusword: need(find(false, ix::STATUSWORD), &format!("statusword ({:#06x})", ix::STATUSWORD + at))?,
             mode: find(true, ix::MODES_OF_OPERATION),
             mode_display: find(false, ix::MODES_OF_OPERATION_DISPLAY),
             target_position: find(true, ix::TARGET_POSITION),
@@ -92,6 +133,7 @@ impl Axis {
         };
         Ok(Axis {
             position,
+            axis,
             h,
             goal: Goal::Disabled,
             mode: Mode::CyclicSyncPosition,
@@ -101,6 +143,21 @@ impl Axis {
             cycles_in_state: 0,
             faults: 0,
         })
+    }
+
+    /// Whether the target position (0x607A) or interpolated position's set-point is in the
+    /// process image: the axis can run CSP (or IP).
+    pub fn has_target_position(&self) -> bool {
+        self.h.target_position.is_some() || self.h.ip_setpoint.is_some()
+    }
+    /// Whether the target velocity (0x60FF) is in the process image: the axis can run CSV.
+    pub fn has_target_velocity(&self) -> bool {
+        self.h.target_velocity.is_some()
+    }
+
+    /// A profile object's index for this axis (`ix::CONTROLWORD` is 0x6840 on axis 1).
+    pub fn index(&self, profile_index: u16) -> u16 {
+        profile_index + axis_offset(self.axis)
     }
 
     /// Where the driver should take the drive; [`Axis::update`] walks it there.
@@ -114,7 +171,7 @@ impl Axis {
         self.mode = mode;
         match self.h.mode {
             Some(h) => m.set(h, mode.code() as u8 as u64),
-            None => m.sdo_write(self.position, ix::MODES_OF_OPERATION, 0, &[mode.code() as u8])?,
+            None => m.sdo_write(self.position, self.index(ix::MODES_OF_OPERATION), 0, &[mode.code() as u8])?,
         }
         Ok(())
     }
@@ -133,8 +190,8 @@ impl Axis {
         let (value, index) = interpolation_period(period_ns).ok_or_else(|| {
             MasterError::Config(format!("an interpolation period of {period_ns} ns is no u8 × 10^n s (0x60C2)"))
         })?;
-        m.sdo_write(self.position, ix::INTERPOLATION_TIME_PERIOD, 1, &[value])?;
-        m.sdo_write(self.position, ix::INTERPOLATION_TIME_PERIOD, 2, &[index as u8])?;
+        m.sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
+        m.sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
         Ok(())
     }
 
@@ -267,42 +324,54 @@ fn interpolation_period(period_ns: u64) -> Option<(u8, i8)> {
     })
 }
 
-/// Makes sure the drive at `position` (in PREOP) carries a target position and a position
-/// actual value in its process image. Where the present assignment lacks one, a PDO its SII (or
-/// ESI) offers is assigned: one that also holds the controlword (statusword) replaces the
-/// assignment — fixed PDOs often repeat it, and a second copy would override the first — else
-/// the first with the object is added. A vendor's default assignment often holds only the
-/// controlword and statusword (the Nanotec C5-E's does) or an interpolated set-point (the AKD's).
+/// Makes sure every axis of the drive at `position` (in PREOP) carries a target position and a
+/// position actual value in its process image. Where the present assignment lacks one, a PDO
+/// its SII (or ESI) offers is assigned: on a one-axis drive, one that also holds the
+/// controlword (statusword) replaces the assignment — fixed PDOs often repeat it, and a second
+/// copy would override the first — else (and always on a drive with several axes, whose other
+/// axes' PDOs must stay) the first with the object is added. A vendor's default assignment
+/// often holds only the controlword and statusword (the Nanotec C5-E's does) or an
+/// interpolated set-point (the AKD's).
 pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
+    let axes: Vec<u16> = {
+        let s = m.slave(position)?;
+        (0..MAX_AXES)
+            .map(axis_offset)
+            .filter(|&at| at == 0 || s.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at))
+            .collect()
+    };
     let sides =
         [(true, ix::TARGET_POSITION, ix::CONTROLWORD, 0x1C12u16), (false, ix::POSITION_ACTUAL, ix::STATUSWORD, 0x1C13)];
-    for (outputs, object, word, assign) in sides {
-        let s = m.slave(position)?;
-        let mapped = if outputs { &s.outputs } else { &s.inputs };
-        if mapped.iter().any(|e| e.index == object) {
-            continue;
+    for &at in &axes {
+        for (outputs, object, word, assign) in sides {
+            let (object, word) = (object + at, word + at);
+            let s = m.slave(position)?;
+            let mapped = if outputs { &s.outputs } else { &s.inputs };
+            if mapped.iter().any(|e| e.index == object) {
+                continue;
+            }
+            let offered = if outputs { s.sii.rx_pdos() } else { s.sii.tx_pdos() };
+            let has = |p: &ferrocat_wire::sii::Pdo, i: u16| p.entries.iter().any(|e| e.index == i);
+            let whole = offered.iter().find(|p| axes.len() == 1 && has(p, object) && has(p, word)).map(|p| p.index);
+            let Some(pdo) = whole.or_else(|| offered.iter().find(|p| has(p, object)).map(|p| p.index)) else {
+                continue;
+            };
+            let pdos = if whole.is_some() {
+                vec![pdo]
+            } else {
+                let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+                let mut pdos = Vec::with_capacity(n as usize + 1);
+                for k in 1..=n {
+                    let v = m.sdo_read(position, assign, k)?;
+                    pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
+                }
+                if !pdos.contains(&pdo) {
+                    pdos.push(pdo);
+                }
+                pdos
+            };
+            m.remap(position, outputs, &pdos)?;
         }
-        let offered = if outputs { s.sii.rx_pdos() } else { s.sii.tx_pdos() };
-        let has = |p: &ferrocat_wire::sii::Pdo, i: u16| p.entries.iter().any(|e| e.index == i);
-        let whole = offered.iter().find(|p| has(p, object) && has(p, word)).map(|p| p.index);
-        let Some(pdo) = whole.or_else(|| offered.iter().find(|p| has(p, object)).map(|p| p.index)) else {
-            continue;
-        };
-        let pdos = if whole.is_some() {
-            vec![pdo]
-        } else {
-            let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
-            let mut pdos = Vec::with_capacity(n as usize + 1);
-            for k in 1..=n {
-                let v = m.sdo_read(position, assign, k)?;
-                pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
-            }
-            if !pdos.contains(&pdo) {
-                pdos.push(pdo);
-            }
-            pdos
-        };
-        m.remap(position, outputs, &pdos)?;
     }
     Ok(())
 }

@@ -76,3 +76,49 @@ fn a_slot_that_refuses_a_module_or_a_count_out_of_range_is_a_build_error() {
     let e = build(&["#x9010", "#x0801"]);
     assert!(e.contains("slot 1 (Axis): module FC-DO4 (0x00000801) does not fit it"), "{e}");
 }
+
+/// The simulated drive behind slave 0.
+fn sim(m: &Master<VirtualIo>) -> &ferrocat_esc::Cia402Drive {
+    m.io().seg.nodes[0].esc.app().as_any().downcast_ref().unwrap()
+}
+
+/// Two axes on one slave are two state machines: the driver finds both, enabling the second
+/// leaves the first disabled, and a fault on the second (its error code at 0x683F) leaves the
+/// first alone.
+#[test]
+fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
+    use ferrocat_master::cia402::{drive_to_goal, Axis, Goal};
+    use ferrocat_wire::cia402::{error_code, State};
+    let mut m = drive(None);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    m.start().unwrap();
+    let mut axes = Axis::all(&m, 0).unwrap();
+    assert_eq!(axes.iter().map(|a| (a.axis, a.index(0x6040))).collect::<Vec<_>>(), [(0, 0x6040), (1, 0x6840)]);
+    assert_eq!(sim(&m).axes().len(), 2);
+    axes[1].set_goal(Goal::OperationEnabled);
+    drive_to_goal(&mut m, &mut axes[1..], 1_000_000, 200).unwrap();
+    let s = sim(&m);
+    assert_eq!((s.axes()[0].state(), s.axes()[1].state()), (State::SwitchOnDisabled, State::OperationEnabled));
+    m.cycle().unwrap();
+    assert_eq!(axes[0].update(&mut m), Some(State::SwitchOnDisabled));
+    m.io_mut().seg.nodes[0]
+        .esc
+        .app_mut()
+        .as_any_mut()
+        .downcast_mut::<ferrocat_esc::Cia402Drive>()
+        .unwrap()
+        .inject_axis_fault(1, error_code::OVERCURRENT);
+    for _ in 0..20 {
+        m.cycle().unwrap();
+    }
+    assert_eq!(axes[1].update(&mut m), Some(State::Fault));
+    assert_eq!(axes[0].update(&mut m), Some(State::SwitchOnDisabled));
+    let code = |m: &mut Master<VirtualIo>, index| {
+        u16::from_le_bytes(m.sdo_read(0, index, 0).unwrap()[..2].try_into().unwrap())
+    };
+    assert_eq!((code(&mut m, 0x603F), code(&mut m, 0x683F)), (0, error_code::OVERCURRENT));
+    // Past the last axis a drive may have, the driver says so.
+    let e = Axis::on_axis(&m, 0, 8).unwrap_err().to_string();
+    assert!(e.contains("at most 8"), "{e}");
+}

@@ -118,12 +118,13 @@ struct Feedback {
     following_error: i32,
 }
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Pending {
     at_ns: u64,
     /// When the outputs were taken (SYNC0 or the SM event).
     taken_ns: u64,
-    feedback: Feedback,
+    /// Per axis.
+    feedback: Vec<Feedback>,
 }
 
 /// One straight piece of the CSP demand: from `from` at `t0_ns` to `to` one period later.
@@ -206,14 +207,38 @@ impl PositionDemand {
     }
 }
 
+/// A CiA402 drive: one CoE device, one firmware cycle (SYNC0 or the SM event takes the outputs
+/// of every axis, one processing time later the inputs of every axis are published), and one
+/// or more axes.
 #[derive(Debug)]
 pub struct Cia402Drive {
     pub coe: CoeDevice,
-    pub motor: MotorParams,
     /// `None`: Paprocki 2022's figures for the SYNC0 cycle the drive runs at.
     pub processing: Option<ProcessingTime>,
     pub stats: DriveStats,
     rng: ChaCha8Rng,
+    axes: Vec<DriveAxis>,
+    op: bool,
+    dc: bool,
+    written: u64,
+    taken: u64,
+    pending: Option<Pending>,
+    last_sync0_ns: Option<u64>,
+    cycle_ns: u64,
+    active_processing: ProcessingTime,
+    /// The SM-synchronisation supervision in DC mode, where the dictionary has the SSC's 0x10F1
+    /// (its limit 0x10F1:02).
+    monitor: SmSyncMonitor,
+}
+
+/// One axis of a drive. Axis n's profile objects sit n × 0x800 above the first axis's (axis B's
+/// controlword at 0x6840: CiA 402-2's multi-axis offset, as e.g. the STOBER SC6 manual lists
+/// it), so that each axis runs its own state machine, mode and motor.
+#[derive(Debug)]
+pub struct DriveAxis {
+    pub motor: MotorParams,
+    /// Added to every profile index: n × 0x800 for axis n.
+    base: u16,
     state: State,
     mode: Option<Mode>,
     mech: Mechanics,
@@ -228,17 +253,9 @@ pub struct Cia402Drive {
     ip_active: bool,
     /// Interpolated position halted: the demand ramps down from where halt found it.
     ip_halting: bool,
-    op: bool,
-    dc: bool,
-    written: u64,
-    taken: u64,
-    pending: Option<Pending>,
-    last_sync0_ns: Option<u64>,
-    cycle_ns: u64,
     prev_cw: u16,
     fault_code: u16,
     following_since_ns: Option<u64>,
-    active_processing: ProcessingTime,
     /// Controlword bit 4 as last seen (profile position takes a set-point on its rising edge,
     /// homing starts on it).
     pp_bit: bool,
@@ -258,9 +275,18 @@ pub struct Cia402Drive {
     switches: Switches,
     /// A limit switch stopping motion toward it, outside homing.
     limit_stop: Option<LimitStop>,
-    /// The SM-synchronisation supervision in DC mode, where the dictionary has the SSC's 0x10F1
-    /// (its limit 0x10F1:02).
-    monitor: SmSyncMonitor,
+    /// Largest |position demand − actual| (increments) since the last reset.
+    max_following_error: f64,
+}
+
+/// What one axis's part of a firmware cycle needs.
+#[derive(Debug, Clone, Copy)]
+struct Cycle {
+    feedback: Feedback,
+    /// When the outputs were taken (SYNC0 or the SM event).
+    taken_ns: u64,
+    now: u64,
+    cycle_ns: u64,
 }
 
 /// A limit switch the shaft stands on stops motion toward it: a ramp at the quick-stop
@@ -277,36 +303,33 @@ struct LimitStop {
 }
 
 impl Cia402Drive {
-    /// A drive over `od` (the profile objects it lacks are added); `seed` draws its starting
-    /// position and processing times.
+    /// A drive over `od` with one axis per profile found in it (the objects each axis lacks
+    /// are added); `seed` draws the shafts' starting positions and the processing times.
     pub fn new(mut od: ObjectDictionary, sm_count: u8, seed: u64) -> Self {
         let pt = ProcessingTime::paprocki2022(1_000_000);
-        objects::complete_profile(&mut od, pt.max_ns as u32);
-        let mut motor = MotorParams::default();
-        let (inc, revs) = (get_unsigned(&od, 0x608F, 1), get_unsigned(&od, 0x608F, 2));
-        if inc > 0 && revs > 0 {
-            motor.increments_per_rev = inc as f64 / revs as f64;
-        }
+        let bases = objects::axis_bases(&od);
+        objects::complete_profile(&mut od, &bases, pt.max_ns as u32);
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC1A4_0200);
-        // Wherever the shaft happens to stand at power-on: a CSP start must not jump to 0.
-        let start_rev = rand::Rng::gen_range(&mut rng, -4.0..4.0);
-        let mut mech = Mechanics::default();
-        mech.pos_rad = start_rev * std::f64::consts::TAU;
+        let axes = bases
+            .iter()
+            .map(|&base| {
+                // The first axis draws from the drive's stream (its figures stay as they were
+                // with one axis); each other axis from a stream of its own.
+                let start_rev = if base == 0 {
+                    rand::Rng::gen_range(&mut rng, -4.0..4.0)
+                } else {
+                    let mut own = ChaCha8Rng::seed_from_u64(seed ^ 0xC1A4_0200 ^ ((base as u64) << 32));
+                    rand::Rng::gen_range(&mut own, -4.0..4.0)
+                };
+                DriveAxis::new(&od, base, start_rev)
+            })
+            .collect();
         let mut d = Cia402Drive {
             coe: CoeDevice::new(od, sm_count, Box::new(crate::PassiveLogic)),
-            motor,
             processing: None,
             stats: DriveStats::default(),
             rng,
-            state: State::SwitchOnDisabled,
-            mode: None,
-            mech,
-            model_ns: None,
-            demand: PositionDemand::default(),
-            ramp: None,
-            after_ramp: None,
-            ip_active: false,
-            ip_halting: false,
+            axes,
             op: false,
             dc: false,
             written: 0,
@@ -314,28 +337,23 @@ impl Cia402Drive {
             pending: None,
             last_sync0_ns: None,
             cycle_ns: 1_000_000,
-            prev_cw: 0,
-            fault_code: 0,
-            following_since_ns: None,
             active_processing: pt,
-            pp_bit: false,
-            pv: 0.0,
-            pv_in_window_since: None,
-            pv_still_since: None,
-            pv_flags: (false, false),
-            offset: 0.0,
-            homing: homing::Homing::default(),
-            switches: Switches::default(),
-            limit_stop: None,
             monitor: SmSyncMonitor::default(),
         };
-        d.demand = PositionDemand::hold(d.mech.position_increments(&d.motor));
-        d.write_feedback(d.feedback());
+        d.write_feedback();
         d
     }
 
+    /// The drive's axes, the first at the profile's own indices.
+    pub fn axes(&self) -> &[DriveAxis] {
+        &self.axes
+    }
+    pub fn axes_mut(&mut self) -> &mut [DriveAxis] {
+        &mut self.axes
+    }
+    /// The first axis's state (every drive has one).
     pub fn state(&self) -> State {
-        self.state
+        self.axes[0].state
     }
     /// Gives the drive the ETG.1020 error settings (0x10F1) with this sync error counter
     /// limit, as the Slave Stack Code does: the SM-synchronisation supervision in DC mode.
@@ -345,6 +363,165 @@ impl Cia402Drive {
     /// The supervision's counter and flag, as the last OP left them.
     pub fn sync_monitor(&self) -> SmSyncMonitor {
         self.monitor
+    }
+    /// The first axis's mode.
+    pub fn mode(&self) -> Option<Mode> {
+        self.axes[0].mode
+    }
+    /// The first axis's motor.
+    pub fn motor(&self) -> &MotorParams {
+        &self.axes[0].motor
+    }
+    /// The first axis's shaft position (increments).
+    pub fn position_increments(&self) -> f64 {
+        self.axes[0].position_increments()
+    }
+    /// The first axis's shaft velocity (increments/s).
+    pub fn velocity_increments(&self) -> f64 {
+        self.axes[0].velocity_increments()
+    }
+    /// The first axis's position demand minus actual (increments).
+    pub fn following_error_increments(&self) -> f64 {
+        self.axes[0].following_error_increments()
+    }
+    /// The first axis's torque (N·m).
+    pub fn torque_nm(&self) -> f64 {
+        self.axes[0].torque_nm()
+    }
+    /// Whether the drive takes its set-points on SYNC0 (decided on entering OP).
+    pub fn dc_synchronous(&self) -> bool {
+        self.dc
+    }
+
+    /// Starts the statistics afresh.
+    pub fn reset_stats(&mut self) {
+        self.stats = DriveStats::default();
+        for a in &mut self.axes {
+            a.max_following_error = 0.0;
+        }
+    }
+
+    /// Puts limit and home switches on the first axis's shaft.
+    pub fn set_switches(&mut self, switches: Switches) {
+        self.axes[0].switches = switches;
+    }
+
+    /// A fault raised by the device itself (over-current, under-voltage …) on the first axis:
+    /// fault reaction, then FAULT, with an emergency message.
+    pub fn inject_fault(&mut self, code: u16) {
+        self.inject_axis_fault(0, code);
+    }
+
+    /// As [`Cia402Drive::inject_fault`], on axis `axis` (ignored where the drive has no such
+    /// axis).
+    pub fn inject_axis_fault(&mut self, axis: usize, code: u16) {
+        if let Some(a) = self.axes.get_mut(axis) {
+            a.enter_fault(&mut self.coe, code);
+        }
+    }
+
+    fn feedback(&self) -> Vec<Feedback> {
+        self.axes.iter().map(DriveAxis::feedback).collect()
+    }
+
+    fn write_feedback(&mut self) {
+        for a in &self.axes {
+            a.write_feedback(&mut self.coe.od, a.feedback());
+        }
+        self.write_counters();
+    }
+
+    fn write_counters(&mut self) {
+        let od = &mut self.coe.od;
+        set(od, 0x1C32, 0x0B, self.stats.repeated_setpoints.min(u16::MAX as u64) as i64);
+        set(od, 0x1C32, 0x0C, self.stats.late_setpoints.min(u16::MAX as u64) as i64);
+    }
+
+    fn advance(&mut self, now: u64) {
+        for a in &mut self.axes {
+            a.advance(&mut self.coe, &mut self.stats, now);
+        }
+    }
+
+    /// The application's work for one cycle, every axis, then the inputs published.
+    fn complete(&mut self, pdi: &mut Pdi<'_>, feedback: Vec<Feedback>, taken_ns: u64) {
+        let now = pdi.now_ns();
+        for (a, feedback) in self.axes.iter_mut().zip(feedback) {
+            let cycle = Cycle { feedback, taken_ns, now, cycle_ns: self.cycle_ns };
+            a.complete(&mut self.coe, &mut self.stats, cycle);
+        }
+        self.write_counters();
+        self.coe.publish_inputs(pdi);
+    }
+
+    /// SYNC0 or an SM event: take the newest outputs, latch the feedback, start processing.
+    fn take(&mut self, pdi: &mut Pdi<'_>) {
+        let now = pdi.now_ns();
+        if let Some(p) = self.pending.take() {
+            self.stats.overruns += 1;
+            self.complete(pdi, p.feedback, p.taken_ns);
+        }
+        self.advance(now);
+        if let Some((_, sm)) = pdi.process_data_sm(true, self.coe.sm_count) {
+            let buf = pdi.read(sm.start, sm.length as usize).to_vec();
+            self.coe.copy_outputs(&buf);
+        }
+        let t = self.active_processing.draw(&mut self.rng);
+        let s = &mut self.stats;
+        s.processing_count += 1;
+        s.processing_sum_ns += t as f64;
+        s.processing_sum_sq_ns += (t as f64).powi(2);
+        s.processing_min_ns = if s.processing_count == 1 { t } else { s.processing_min_ns.min(t) };
+        s.processing_max_ns = s.processing_max_ns.max(t);
+        self.pending = Some(Pending { at_ns: now + t, taken_ns: now, feedback: self.feedback() });
+    }
+}
+
+impl DriveAxis {
+    fn new(od: &ObjectDictionary, base: u16, start_rev: f64) -> Self {
+        let mut motor = MotorParams::default();
+        let (inc, revs) = (get_unsigned(od, base + 0x608F, 1), get_unsigned(od, base + 0x608F, 2));
+        if inc > 0 && revs > 0 {
+            motor.increments_per_rev = inc as f64 / revs as f64;
+        }
+        // Wherever the shaft happens to stand at power-on: a CSP start must not jump to 0.
+        let mut mech = Mechanics::default();
+        mech.pos_rad = start_rev * std::f64::consts::TAU;
+        let demand = PositionDemand::hold(mech.position_increments(&motor));
+        DriveAxis {
+            motor,
+            base,
+            state: State::SwitchOnDisabled,
+            mode: None,
+            mech,
+            model_ns: None,
+            demand,
+            ramp: None,
+            after_ramp: None,
+            ip_active: false,
+            ip_halting: false,
+            prev_cw: 0,
+            fault_code: 0,
+            following_since_ns: None,
+            pp_bit: false,
+            pv: 0.0,
+            pv_in_window_since: None,
+            pv_still_since: None,
+            pv_flags: (false, false),
+            offset: 0.0,
+            homing: homing::Homing::default(),
+            switches: Switches::default(),
+            limit_stop: None,
+            max_following_error: 0.0,
+        }
+    }
+
+    /// The offset of this axis's objects above the profile's (0 for the first axis).
+    pub fn object_offset(&self) -> u16 {
+        self.base
+    }
+    pub fn state(&self) -> State {
+        self.state
     }
     pub fn mode(&self) -> Option<Mode> {
         self.mode
@@ -365,38 +542,35 @@ impl Cia402Drive {
     pub fn torque_nm(&self) -> f64 {
         self.mech.torque_nm
     }
-    /// Whether the drive takes its set-points on SYNC0 (decided on entering OP).
-    pub fn dc_synchronous(&self) -> bool {
-        self.dc
+    /// Largest |position demand − actual| (increments) in a position mode, operation enabled,
+    /// since the drive's statistics were last reset.
+    pub fn max_following_error(&self) -> f64 {
+        self.max_following_error
     }
-
-    /// Starts the statistics afresh.
-    pub fn reset_stats(&mut self) {
-        self.stats = DriveStats::default();
-    }
-
     /// Puts limit and home switches on the shaft (homing methods 1–14 and 17–30 use them, a
     /// limit switch stops motion toward it in the other modes; 0x60FD reports them).
     pub fn set_switches(&mut self, switches: Switches) {
         self.switches = switches;
     }
 
-    /// A fault raised by the device itself (over-current, under-voltage …): fault reaction,
-    /// then FAULT, with an emergency message.
-    pub fn inject_fault(&mut self, code: u16) {
-        self.enter_fault(code);
+    /// Leaving OP takes the power away (the set-points stopped): switch on disabled.
+    fn power_lost(&mut self) {
+        if !matches!(self.state, State::Fault | State::FaultReactionActive) {
+            self.state = State::SwitchOnDisabled;
+        }
+        (self.ramp, self.after_ramp) = (None, None);
     }
 
-    fn enter_fault(&mut self, code: u16) {
+    fn enter_fault(&mut self, coe: &mut CoeDevice, code: u16) {
         if matches!(self.state, State::Fault | State::FaultReactionActive) {
             return;
         }
         self.fault_code = code;
-        self.coe.emergency(Emergency { error_code: code, error_register: 0x01, data: [0; 5] });
+        coe.emergency(Emergency { error_code: code, error_register: 0x01, data: [0; 5] });
         self.after_ramp = None;
         let powered = matches!(self.state, State::OperationEnabled | State::QuickStopActive);
         // 0x605E: 0 coasts (the power stage off at once), the others brake first.
-        match self.stop_deceleration(get(&self.coe.od, ix::FAULT_REACTION_OPTION, 0)) {
+        match self.stop_deceleration(&coe.od, get(&coe.od, self.base + ix::FAULT_REACTION_OPTION, 0)) {
             Some(dec) if powered => {
                 self.state = State::FaultReactionActive;
                 self.brake(dec);
@@ -418,9 +592,8 @@ impl Cia402Drive {
     /// function), 1 and 5 at the profile deceleration (0x6084), 3, 4, 7 and 8 at the current
     /// (or voltage) limit — infinite: the most torque against the motion until the shaft stands
     /// — 2, 6 and manufacturer codes at the quick-stop deceleration (0x6085).
-    fn stop_deceleration(&self, option: i64) -> Option<f64> {
-        let od = &self.coe.od;
-        let dec = |index| get_unsigned(od, index, 0).max(1) as f64;
+    fn stop_deceleration(&self, od: &ObjectDictionary, option: i64) -> Option<f64> {
+        let dec = |index| get_unsigned(od, self.base + index, 0).max(1) as f64;
         match option {
             0 => None,
             1 | 5 => Some(dec(ix::PROFILE_DECELERATION)),
@@ -433,15 +606,14 @@ impl Cia402Drive {
     /// deceleration, 3 and 4 at the current (voltage) limit — the most torque the drive may
     /// give (0x6072) over the inertia, a ramp the loops follow, so the drive stays enabled and
     /// holds where it stops — 1 and any other code at the profile deceleration.
-    fn halt_deceleration(&self) -> f64 {
-        let od = &self.coe.od;
-        match get(od, ix::HALT_OPTION, 0) {
-            2 => get_unsigned(od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64,
+    fn halt_deceleration(&self, od: &ObjectDictionary) -> f64 {
+        match get(od, self.base + ix::HALT_OPTION, 0) {
+            2 => get_unsigned(od, self.base + ix::QUICK_STOP_DECELERATION, 0).max(1) as f64,
             3 | 4 => {
                 let per_rad = self.motor.increments_per_rev / std::f64::consts::TAU;
-                (self.max_torque_nm() / self.motor.inertia_kg_m2 * per_rad).max(1.0)
+                (self.max_torque_nm(od) / self.motor.inertia_kg_m2 * per_rad).max(1.0)
             }
-            _ => get_unsigned(od, ix::PROFILE_DECELERATION, 0).max(1) as f64,
+            _ => get_unsigned(od, self.base + ix::PROFILE_DECELERATION, 0).max(1) as f64,
         }
     }
 
@@ -470,51 +642,53 @@ impl Cia402Drive {
             }
     }
 
-    fn max_torque_nm(&self) -> f64 {
-        let pm = get_unsigned(&self.coe.od, ix::MAX_TORQUE, 0);
+    fn max_torque_nm(&self, od: &ObjectDictionary) -> f64 {
+        let pm = get_unsigned(od, self.base + ix::MAX_TORQUE, 0);
         let pm = if pm == 0 { 3000 } else { pm };
         pm as f64 / 1000.0 * self.motor.rated_torque_nm
     }
 
     /// Runs the control loops up to `t_ns`.
-    fn advance(&mut self, t_ns: u64) {
+    fn advance(&mut self, coe: &mut CoeDevice, stats: &mut DriveStats, t_ns: u64) {
         let Some(mut at) = self.model_ns else {
             self.model_ns = Some(t_ns);
             return;
         };
         let loop_ns = self.motor.loop_ns.max(1_000);
         let dt = loop_ns as f64 * 1e-9;
-        let max_torque = self.max_torque_nm();
-        let window = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_WINDOW, 0);
-        let timeout_ns = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_TIMEOUT, 0) * 1_000_000;
+        let od = &coe.od;
+        let max_torque = self.max_torque_nm(od);
+        let window = get_unsigned(od, self.base + ix::FOLLOWING_ERROR_WINDOW, 0);
+        let timeout_ns = get_unsigned(od, self.base + ix::FOLLOWING_ERROR_TIMEOUT, 0) * 1_000_000;
         while at + loop_ns <= t_ns {
             at += loop_ns;
             self.demand.promote(at);
-            let demand = self.step_demand(at, dt);
-            let demand = self.limit_guard(demand, dt);
+            let demand = self.step_demand(&coe.od, at, dt);
+            let demand = self.limit_guard(&coe.od, demand, dt);
             let before_rad = self.mech.pos_rad;
             self.mech.step(&self.motor, demand, max_torque, dt);
             if let Some(home_rad) = self.homing.track(before_rad, self.mech.pos_rad, &self.switches) {
                 // The home position (an index pulse or a switch's edge) reads the home offset.
                 let home = home_rad * self.motor.increments_per_rev / std::f64::consts::TAU;
-                self.offset = get(&self.coe.od, ix::HOME_OFFSET, 0) as f64 - home;
+                self.offset = get(&coe.od, self.base + ix::HOME_OFFSET, 0) as f64 - home;
             }
             if let Some((v, _)) = self.ramp {
                 if v == 0.0 && self.mech.vel_rad_s.abs() < 0.05 {
                     self.ramp = None;
-                    self.ramp_finished();
+                    self.ramp_finished(&coe.od);
                 }
             }
             if self.position_controlled() {
                 let (d, _) = self.demand.at(at);
                 let fe = (d - self.mech.position_increments(&self.motor)).abs();
-                self.stats.max_following_error = self.stats.max_following_error.max(fe);
+                self.max_following_error = self.max_following_error.max(fe);
+                stats.max_following_error = stats.max_following_error.max(fe);
                 // Window 0xFFFFFFFF switches the check off (the profile's convention).
                 if window != 0xFFFF_FFFF && fe > window as f64 {
                     let since = *self.following_since_ns.get_or_insert(at);
                     if at - since >= timeout_ns {
                         self.following_since_ns = None;
-                        self.enter_fault(error_code::FOLLOWING_ERROR);
+                        self.enter_fault(coe, error_code::FOLLOWING_ERROR);
                     }
                 } else {
                     self.following_since_ns = None;
@@ -528,8 +702,8 @@ impl Cia402Drive {
         self.model_ns = Some(at);
     }
 
-    fn step_demand(&mut self, at: u64, dt: f64) -> Demand {
-        let max_torque = self.max_torque_nm();
+    fn step_demand(&mut self, od: &ObjectDictionary, at: u64, dt: f64) -> Demand {
+        let max_torque = self.max_torque_nm(od);
         if let Some((v, dec)) = self.ramp.as_mut() {
             if dec.is_infinite() {
                 // At the current limit: the most torque against the motion, no velocity loop
@@ -545,14 +719,13 @@ impl Cia402Drive {
         if self.state != State::OperationEnabled {
             return Demand::Off;
         }
-        let od = &self.coe.od;
-        let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+        let halt = get_unsigned(od, self.base + ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
         match self.mode {
             // Halt in interpolated position: from the demand's position and velocity as halt
             // found them, down at 0x605D's deceleration, then held; released, the set-points
             // are approached from there (`queue_set_point` from the demand).
             Some(Mode::InterpolatedPosition) if halt => {
-                let dec = self.halt_deceleration();
+                let dec = self.halt_deceleration(od);
                 let d = &mut self.demand;
                 if !self.ip_halting {
                     self.ip_halting = true;
@@ -572,7 +745,7 @@ impl Cia402Drive {
             Some(Mode::ProfilePosition) => {
                 // Halt stops the move as 0x605D says and keeps its target: released, the
                 // move goes on to it.
-                let halt_dec = if halt { self.halt_deceleration() } else { 0.0 };
+                let halt_dec = if halt { self.halt_deceleration(od) } else { 0.0 };
                 let d = &mut self.demand;
                 if let Some(target) = d.pp_target {
                     let (vmax, acc, dec) = d.pp_limits;
@@ -604,13 +777,17 @@ impl Cia402Drive {
             }
             Some(Mode::ProfileVelocity) => {
                 // The target (or zero while halted), reached along the profile's ramps.
-                let target = if halt { 0.0 } else { get(od, ix::TARGET_VELOCITY, 0) as f64 };
+                let target = if halt { 0.0 } else { get(od, self.base + ix::TARGET_VELOCITY, 0) as f64 };
                 let rising = target.abs() > self.pv.abs() && target * self.pv >= 0.0;
                 let rate = if halt {
-                    self.halt_deceleration()
+                    self.halt_deceleration(od)
                 } else {
-                    get_unsigned(od, if rising { ix::PROFILE_ACCELERATION } else { ix::PROFILE_DECELERATION }, 0).max(1)
-                        as f64
+                    get_unsigned(
+                        od,
+                        self.base + if rising { ix::PROFILE_ACCELERATION } else { ix::PROFILE_DECELERATION },
+                        0,
+                    )
+                    .max(1) as f64
                 };
                 self.pv += (target - self.pv).clamp(-rate * dt, rate * dt);
                 Demand::Velocity(self.pv)
@@ -620,16 +797,16 @@ impl Cia402Drive {
                 let (pos, vel, acc) = self.demand.segment(at).at(at);
                 Demand::Position { pos, vel, acc }
             }
-            Some(Mode::CyclicSyncVelocity) => Demand::Velocity(get(od, ix::TARGET_VELOCITY, 0) as f64),
+            Some(Mode::CyclicSyncVelocity) => Demand::Velocity(get(od, self.base + ix::TARGET_VELOCITY, 0) as f64),
             Some(Mode::CyclicSyncTorque) => {
-                Demand::Torque(get(od, ix::TARGET_TORQUE, 0) as f64 / 1000.0 * self.motor.rated_torque_nm)
+                Demand::Torque(get(od, self.base + ix::TARGET_TORQUE, 0) as f64 / 1000.0 * self.motor.rated_torque_nm)
             }
             _ => Demand::Off,
         }
     }
 
     /// The demand, unless a limit switch blocks it (see [`LimitStop`]).
-    fn limit_guard(&mut self, demand: Demand, dt: f64) -> Demand {
+    fn limit_guard(&mut self, od: &ObjectDictionary, demand: Demand, dt: f64) -> Demand {
         let rad = self.mech.pos_rad;
         let neg = self.switches.active(homing::Switch::NegativeLimit, rad);
         let pos = self.switches.active(homing::Switch::PositiveLimit, rad);
@@ -651,7 +828,7 @@ impl Cia402Drive {
             self.limit_stop = None;
             return demand;
         }
-        let dec = get_unsigned(&self.coe.od, ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
+        let dec = get_unsigned(od, self.base + ix::QUICK_STOP_DECELERATION, 0).max(1) as f64;
         let vel = self.mech.velocity_increments(&self.motor);
         let s = self.limit_stop.get_or_insert(LimitStop { vel, hold: None });
         if s.hold.is_none() {
@@ -671,7 +848,7 @@ impl Cia402Drive {
         Demand::Position { pos: s.hold.unwrap_or(here), vel: 0.0, acc: 0.0 }
     }
 
-    fn ramp_finished(&mut self) {
+    fn ramp_finished(&mut self, od: &ObjectDictionary) {
         if let Some(next) = self.after_ramp.take() {
             self.state = next;
             return;
@@ -679,7 +856,7 @@ impl Cia402Drive {
         match self.state {
             State::FaultReactionActive => self.state = State::Fault,
             // Option codes 0–4: then switch on disabled; 5–8: stay in quick stop active.
-            State::QuickStopActive if !(5..=8).contains(&get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) => {
+            State::QuickStopActive if !(5..=8).contains(&get(od, self.base + ix::QUICK_STOP_OPTION, 0)) => {
                 self.state = State::SwitchOnDisabled;
             }
             _ => {}
@@ -687,7 +864,7 @@ impl Cia402Drive {
     }
 
     /// The device-control state machine, on a controlword the application took.
-    fn control(&mut self, cw: u16) {
+    fn control(&mut self, od: &ObjectDictionary, cw: u16) {
         use State::*;
         let reset_edge = cw & control::FAULT_RESET != 0 && self.prev_cw & control::FAULT_RESET == 0;
         self.prev_cw = cw;
@@ -702,7 +879,7 @@ impl Cia402Drive {
                 }
                 Command::QuickStop => {
                     (self.ramp, self.after_ramp) = (None, None);
-                    self.state = self.quick_stop();
+                    self.state = self.quick_stop(od);
                 }
                 _ => {}
             }
@@ -719,12 +896,12 @@ impl Cia402Drive {
             (ReadyToSwitchOn, Command::SwitchOn) => SwitchedOn,
             // Transitions 3 and 4 in one step, as most drives allow.
             (ReadyToSwitchOn | SwitchedOn, Command::EnableOperation) => OperationEnabled,
-            (OperationEnabled, Command::Shutdown) => self.stop_then(ix::SHUTDOWN_OPTION, ReadyToSwitchOn),
+            (OperationEnabled, Command::Shutdown) => self.stop_then(od, ix::SHUTDOWN_OPTION, ReadyToSwitchOn),
             (SwitchedOn, Command::Shutdown) => ReadyToSwitchOn,
-            (OperationEnabled, Command::SwitchOn) => self.stop_then(ix::DISABLE_OPERATION_OPTION, SwitchedOn),
-            (OperationEnabled, Command::QuickStop) => self.quick_stop(),
+            (OperationEnabled, Command::SwitchOn) => self.stop_then(od, ix::DISABLE_OPERATION_OPTION, SwitchedOn),
+            (OperationEnabled, Command::QuickStop) => self.quick_stop(od),
             (QuickStopActive, Command::EnableOperation)
-                if (5..=8).contains(&get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) && self.ramp.is_none() =>
+                if (5..=8).contains(&get(od, self.base + ix::QUICK_STOP_OPTION, 0)) && self.ramp.is_none() =>
             {
                 OperationEnabled
             }
@@ -747,11 +924,11 @@ impl Cia402Drive {
     /// Transitions 5 and 8 (disable operation, shutdown) by their option code (0x605C, 0x605B):
     /// 1 brakes at the profile deceleration first, operation staying enabled until the shaft
     /// stands; 0 (and any other) takes the power away at once and the shaft coasts.
-    fn stop_then(&mut self, option: u16, next: State) -> State {
-        if get(&self.coe.od, option, 0) != 1 {
+    fn stop_then(&mut self, od: &ObjectDictionary, option: u16, next: State) -> State {
+        if get(od, self.base + option, 0) != 1 {
             return next;
         }
-        let dec = get_unsigned(&self.coe.od, ix::PROFILE_DECELERATION, 0).max(1) as f64;
+        let dec = get_unsigned(od, self.base + ix::PROFILE_DECELERATION, 0).max(1) as f64;
         self.brake(dec);
         self.after_ramp = Some(next);
         State::OperationEnabled
@@ -759,8 +936,8 @@ impl Cia402Drive {
 
     /// Transition 11 by 0x605A: a ramp then quick stop active, or (option 0) switch on disabled
     /// at once, the shaft coasting.
-    fn quick_stop(&mut self) -> State {
-        match self.stop_deceleration(get(&self.coe.od, ix::QUICK_STOP_OPTION, 0)) {
+    fn quick_stop(&mut self, od: &ObjectDictionary) -> State {
+        match self.stop_deceleration(od, get(od, self.base + ix::QUICK_STOP_OPTION, 0)) {
             Some(dec) => {
                 self.brake(dec);
                 State::QuickStopActive
@@ -770,24 +947,24 @@ impl Cia402Drive {
     }
 
     /// The interpolation period 0x60C2 gives (value × 10^index s), else the SYNC0 cycle.
-    fn interpolation_period_ns(&self) -> u64 {
-        let od = &self.coe.od;
-        let value = get_unsigned(od, ix::INTERPOLATION_TIME_PERIOD, 1);
-        let index = get(od, ix::INTERPOLATION_TIME_PERIOD, 2);
+    fn interpolation_period_ns(&self, od: &ObjectDictionary, cycle_ns: u64) -> u64 {
+        let value = get_unsigned(od, self.base + ix::INTERPOLATION_TIME_PERIOD, 1);
+        let index = get(od, self.base + ix::INTERPOLATION_TIME_PERIOD, 2);
         if value == 0 || !(-9..=0).contains(&index) {
-            return self.cycle_ns.max(1);
+            return cycle_ns.max(1);
         }
         value * 10u64.pow((9 + index) as u32)
     }
 
-    /// The application's work for one cycle: state machine, mode, new targets, inputs.
-    fn complete(&mut self, pdi: &mut Pdi<'_>, feedback: Feedback, taken_ns: u64) {
-        let now = pdi.now_ns();
-        self.advance(now);
-        let od = &self.coe.od;
-        let cw = get_unsigned(od, ix::CONTROLWORD, 0) as u16;
-        let mode_req = Mode::from_code(get(od, ix::MODES_OF_OPERATION, 0) as i8).filter(|m| objects::MODES.contains(m));
-        self.control(cw);
+    /// The axis's part of the application's cycle: state machine, mode, new targets, inputs.
+    fn complete(&mut self, coe: &mut CoeDevice, stats: &mut DriveStats, cycle: Cycle) {
+        let Cycle { feedback, taken_ns, now, cycle_ns } = cycle;
+        self.advance(coe, stats, now);
+        let od = &coe.od;
+        let cw = get_unsigned(od, self.base + ix::CONTROLWORD, 0) as u16;
+        let mode_req = Mode::from_code(get(od, self.base + ix::MODES_OF_OPERATION, 0) as i8)
+            .filter(|m| objects::MODES.contains(m));
+        self.control(od, cw);
         if mode_req.is_some() && mode_req != self.mode {
             self.mode = mode_req;
             self.demand = PositionDemand::hold(self.mech.position_increments(&self.motor));
@@ -806,8 +983,8 @@ impl Cia402Drive {
         if self.state == State::OperationEnabled && !braking {
             match self.mode {
                 Some(Mode::CyclicSyncPosition) => {
-                    let target = get(&self.coe.od, ix::TARGET_POSITION, 0) as i32;
-                    let period = self.cycle_ns.max(1);
+                    let target = get(od, self.base + ix::TARGET_POSITION, 0) as i32;
+                    let period = cycle_ns.max(1);
                     self.queue_set_point(target, taken_ns + period, period, false);
                 }
                 // Linear interpolation (0x60C0 = 0) over the period 0x60C2 gives, starting one
@@ -816,25 +993,28 @@ impl Cia402Drive {
                 // bit 4 clear (or halt) the set-points are ignored and the demand stops at the
                 // last one.
                 Some(Mode::InterpolatedPosition) if self.ip_active => {
-                    let target = get(&self.coe.od, ix::INTERPOLATION_DATA, 1) as i32;
-                    self.queue_set_point(target, taken_ns + self.cycle_ns.max(1), self.interpolation_period_ns(), true);
+                    let target = get(od, self.base + ix::INTERPOLATION_DATA, 1) as i32;
+                    self.queue_set_point(
+                        target,
+                        taken_ns + cycle_ns.max(1),
+                        self.interpolation_period_ns(od, cycle_ns),
+                        true,
+                    );
                 }
                 Some(Mode::ProfilePosition) if bit4_rising => {
-                    let od = &self.coe.od;
-                    let target = get(od, ix::TARGET_POSITION, 0) as f64;
+                    let target = get(od, self.base + ix::TARGET_POSITION, 0) as f64;
                     let base = if cw & control::RELATIVE != 0 { self.demand.now.to } else { -self.offset };
-                    let lim = |i| get_unsigned(od, i, 0).max(1) as f64;
+                    let lim = |i| get_unsigned(od, self.base + i, 0).max(1) as f64;
                     self.demand.pp_target = Some(base + target);
                     self.demand.pp_limits =
                         (lim(ix::PROFILE_VELOCITY), lim(ix::PROFILE_ACCELERATION), lim(ix::PROFILE_DECELERATION));
                 }
-                Some(Mode::Homing) => self.homing_control(cw, bit4_rising),
+                Some(Mode::Homing) => self.homing_control(od, cw, bit4_rising),
                 _ => {}
             }
         }
-        self.watch_velocity(feedback.vel, now);
-        self.write_feedback(feedback);
-        self.coe.publish_inputs(pdi);
+        self.watch_velocity(od, feedback.vel, now);
+        self.write_feedback(&mut coe.od, feedback);
     }
 
     /// Queues a 32-bit position set-point (on the user's scale, unwrapped around the last one)
@@ -847,19 +1027,18 @@ impl Cia402Drive {
 
     /// Profile velocity's two conditions, each of which must hold for its time (0x606E,
     /// 0x6070): the velocity within the window of the target, and below the threshold.
-    fn watch_velocity(&mut self, vel: i32, now: u64) {
-        let od = &self.coe.od;
-        let halt = get_unsigned(od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
-        let target = if halt { 0 } else { get(od, ix::TARGET_VELOCITY, 0) };
-        let within = (vel as i64 - target).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_WINDOW, 0);
-        let still = (vel as i64).unsigned_abs() <= get_unsigned(od, ix::VELOCITY_THRESHOLD, 0);
+    fn watch_velocity(&mut self, od: &ObjectDictionary, vel: i32, now: u64) {
+        let halt = get_unsigned(od, self.base + ix::CONTROLWORD, 0) as u16 & control::HALT != 0;
+        let target = if halt { 0 } else { get(od, self.base + ix::TARGET_VELOCITY, 0) };
+        let within = (vel as i64 - target).unsigned_abs() <= get_unsigned(od, self.base + ix::VELOCITY_WINDOW, 0);
+        let still = (vel as i64).unsigned_abs() <= get_unsigned(od, self.base + ix::VELOCITY_THRESHOLD, 0);
         self.pv_in_window_since = within.then(|| self.pv_in_window_since.unwrap_or(now));
         self.pv_still_since = still.then(|| self.pv_still_since.unwrap_or(now));
         self.pv_flags = (
             self.pv_in_window_since
-                .is_some_and(|t| now - t >= get_unsigned(od, ix::VELOCITY_WINDOW_TIME, 0) * 1_000_000),
+                .is_some_and(|t| now - t >= get_unsigned(od, self.base + ix::VELOCITY_WINDOW_TIME, 0) * 1_000_000),
             self.pv_still_since
-                .is_some_and(|t| now - t >= get_unsigned(od, ix::VELOCITY_THRESHOLD_TIME, 0) * 1_000_000),
+                .is_some_and(|t| now - t >= get_unsigned(od, self.base + ix::VELOCITY_THRESHOLD_TIME, 0) * 1_000_000),
         );
     }
 
@@ -873,9 +1052,8 @@ impl Cia402Drive {
 
     /// Homing mode's controlword: bit 4 rising starts the method, falling interrupts it, halt
     /// (bit 8) stops it.
-    fn homing_control(&mut self, cw: u16, rising: bool) {
+    fn homing_control(&mut self, od: &ObjectDictionary, cw: u16, rising: bool) {
         use homing::Phase;
-        let od = &self.coe.od;
         let running = matches!(self.homing.phase, Phase::Searching { .. } | Phase::Stopping);
         if running && (cw & control::HOMING_START == 0 || cw & control::HALT != 0) {
             self.homing.phase = Phase::Interrupted;
@@ -884,13 +1062,13 @@ impl Cia402Drive {
         if !rising || cw & control::HALT != 0 {
             return;
         }
-        self.homing.acc = get_unsigned(od, ix::HOMING_ACCELERATION, 0).max(1) as f64;
-        self.homing.switch_speed = get_unsigned(od, ix::HOMING_SPEEDS, 1).max(1) as f64;
-        self.homing.zero_speed = get_unsigned(od, ix::HOMING_SPEEDS, 2).max(1) as f64;
-        self.homing.phase = match homing::start(get(od, ix::HOMING_METHOD, 0)) {
+        self.homing.acc = get_unsigned(od, self.base + ix::HOMING_ACCELERATION, 0).max(1) as f64;
+        self.homing.switch_speed = get_unsigned(od, self.base + ix::HOMING_SPEEDS, 1).max(1) as f64;
+        self.homing.zero_speed = get_unsigned(od, self.base + ix::HOMING_SPEEDS, 2).max(1) as f64;
+        self.homing.phase = match homing::start(get(od, self.base + ix::HOMING_METHOD, 0)) {
             homing::Start::Here => {
                 let here = self.mech.position_increments(&self.motor);
-                self.offset = get(od, ix::HOME_OFFSET, 0) as f64 - here;
+                self.offset = get(od, self.base + ix::HOME_OFFSET, 0) as f64 - here;
                 Phase::Attained
             }
             homing::Start::Index(dir) => Phase::Searching { dir },
@@ -900,7 +1078,7 @@ impl Cia402Drive {
         };
     }
 
-    fn write_feedback(&mut self, f: Feedback) {
+    fn write_feedback(&self, od: &mut ObjectDictionary, f: Feedback) {
         let mut sw = self.state.statusword_bits() | status::REMOTE;
         if matches!(
             self.state,
@@ -915,7 +1093,7 @@ impl Cia402Drive {
         if (self.mech.limited || self.limit_stop.is_some()) && self.state == State::OperationEnabled {
             sw |= status::INTERNAL_LIMIT;
         }
-        let window = get_unsigned(&self.coe.od, ix::FOLLOWING_ERROR_WINDOW, 0);
+        let window = get_unsigned(od, self.base + ix::FOLLOWING_ERROR_WINDOW, 0);
         match (self.state, self.mode) {
             (State::OperationEnabled, Some(Mode::CyclicSyncPosition)) => {
                 sw |= status::OP_SPECIFIC_12;
@@ -947,7 +1125,7 @@ impl Cia402Drive {
                     sw |= status::OP_SPECIFIC_12;
                 }
                 // Target reached, or halted and standing.
-                let halted = get_unsigned(&self.coe.od, ix::CONTROLWORD, 0) as u16 & control::HALT != 0
+                let halted = get_unsigned(od, self.base + ix::CONTROLWORD, 0) as u16 & control::HALT != 0
                     && self.demand.pp_vel == 0.0;
                 if (self.demand.pp_target.is_none() || halted) && f.following_error.unsigned_abs() < 100 {
                     sw |= status::TARGET_REACHED;
@@ -976,40 +1154,15 @@ impl Cia402Drive {
             }
             _ => {}
         }
-        let od = &mut self.coe.od;
-        set(od, ix::STATUSWORD, 0, sw as i64);
-        set(od, ix::MODES_OF_OPERATION_DISPLAY, 0, self.mode.map_or(0, |m| m.code()) as i64);
-        set(od, ix::POSITION_ACTUAL, 0, f.pos as i64);
-        set(od, ix::POSITION_ACTUAL_INTERNAL, 0, f.pos as i64);
-        set(od, ix::VELOCITY_ACTUAL, 0, f.vel as i64);
-        set(od, ix::TORQUE_ACTUAL, 0, f.torque as i64);
-        set(od, ix::FOLLOWING_ERROR_ACTUAL, 0, f.following_error as i64);
-        set(od, ix::ERROR_CODE, 0, self.fault_code as i64);
-        set(od, ix::DIGITAL_INPUTS, 0, self.switches.inputs(self.mech.pos_rad) as i64);
-        set(od, 0x1C32, 0x0B, self.stats.repeated_setpoints.min(u16::MAX as u64) as i64);
-        set(od, 0x1C32, 0x0C, self.stats.late_setpoints.min(u16::MAX as u64) as i64);
-    }
-
-    /// SYNC0 or an SM event: take the newest outputs, latch the feedback, start processing.
-    fn take(&mut self, pdi: &mut Pdi<'_>) {
-        let now = pdi.now_ns();
-        if let Some(p) = self.pending.take() {
-            self.stats.overruns += 1;
-            self.complete(pdi, p.feedback, p.taken_ns);
-        }
-        self.advance(now);
-        if let Some((_, sm)) = pdi.process_data_sm(true, self.coe.sm_count) {
-            let buf = pdi.read(sm.start, sm.length as usize).to_vec();
-            self.coe.copy_outputs(&buf);
-        }
-        let t = self.active_processing.draw(&mut self.rng);
-        let s = &mut self.stats;
-        s.processing_count += 1;
-        s.processing_sum_ns += t as f64;
-        s.processing_sum_sq_ns += (t as f64).powi(2);
-        s.processing_min_ns = if s.processing_count == 1 { t } else { s.processing_min_ns.min(t) };
-        s.processing_max_ns = s.processing_max_ns.max(t);
-        self.pending = Some(Pending { at_ns: now + t, taken_ns: now, feedback: self.feedback() });
+        set(od, self.base + ix::STATUSWORD, 0, sw as i64);
+        set(od, self.base + ix::MODES_OF_OPERATION_DISPLAY, 0, self.mode.map_or(0, |m| m.code()) as i64);
+        set(od, self.base + ix::POSITION_ACTUAL, 0, f.pos as i64);
+        set(od, self.base + ix::POSITION_ACTUAL_INTERNAL, 0, f.pos as i64);
+        set(od, self.base + ix::VELOCITY_ACTUAL, 0, f.vel as i64);
+        set(od, self.base + ix::TORQUE_ACTUAL, 0, f.torque as i64);
+        set(od, self.base + ix::FOLLOWING_ERROR_ACTUAL, 0, f.following_error as i64);
+        set(od, self.base + ix::ERROR_CODE, 0, self.fault_code as i64);
+        set(od, self.base + ix::DIGITAL_INPUTS, 0, self.switches.inputs(self.mech.pos_rad) as i64);
     }
 }
 
@@ -1045,21 +1198,21 @@ impl Application for Cia402Drive {
             self.monitor.on = self.coe.od.get(0x10F1).is_some();
             self.monitor.limit = get_unsigned(&self.coe.od, 0x10F1, 2).min(u16::MAX as u64) as u16;
             self.monitor.restart();
-            self.model_ns = Some(pdi.now_ns());
+            for a in &mut self.axes {
+                a.model_ns = Some(pdi.now_ns());
+            }
             self.last_sync0_ns = None;
             self.taken = self.written;
         }
         if was_op && !self.op {
             // Leaving OP takes the power away (the set-points stopped): switch on disabled.
             self.pending = None;
-            if !matches!(self.state, State::Fault | State::FaultReactionActive) {
-                self.state = State::SwitchOnDisabled;
+            for a in &mut self.axes {
+                a.power_lost();
             }
-            (self.ramp, self.after_ramp) = (None, None);
         }
         self.coe.state_changed(pdi, state);
-        let f = self.feedback();
-        self.write_feedback(f);
+        self.write_feedback();
         self.coe.publish_inputs(pdi);
     }
     fn outputs_written(&mut self, pdi: &mut Pdi<'_>, sm: u8) {
@@ -1113,7 +1266,7 @@ impl Application for Cia402Drive {
         self.coe.pending_mailbox()
     }
     fn next_event_ns(&self) -> Option<u64> {
-        self.pending.map(|p| p.at_ns)
+        self.pending.as_ref().map(|p| p.at_ns)
     }
     fn tick(&mut self, pdi: &mut Pdi<'_>) {
         if let Some(p) = self.pending.take() {

@@ -67,8 +67,33 @@ fn sync_parameters(index: u16, name: &str, min_cycle_ns: u32, calc_copy_ns: u32)
     o
 }
 
-/// Adds the profile's objects that `od` lacks, with the model's defaults.
-pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
+/// Axes at most (CiA 402-2 gives each of up to eight axes its 0x800 of the profile area).
+pub const MAX_AXES: u16 = 8;
+
+/// The object offsets of the axes `od` has: the first axis always, and axis n (n × 0x800)
+/// where its controlword and statusword are.
+pub fn axis_bases(od: &ObjectDictionary) -> Vec<u16> {
+    (0..MAX_AXES)
+        .map(|n| n * 0x800)
+        .filter(|&b| b == 0 || (od.get(ix::CONTROLWORD + b).is_some() && od.get(ix::STATUSWORD + b).is_some()))
+        .collect()
+}
+
+/// Adds the profile's objects that `od` lacks, for every axis at `bases`, with the model's
+/// defaults.
+pub fn complete_profile(od: &mut ObjectDictionary, bases: &[u16], max_processing_ns: u32) {
+    for &base in bases {
+        complete_axis(od, base);
+    }
+    for (index, name) in [(0x1C32, "SM output parameter"), (0x1C33, "SM input parameter")] {
+        if od.get(index).is_none() {
+            od.insert(sync_parameters(index, name, 125_000, max_processing_ns));
+        }
+    }
+}
+
+/// The profile's objects for the axis whose objects sit `base` above the first axis's.
+fn complete_axis(od: &mut ObjectDictionary, base: u16) {
     let supported: u32 = MODES.iter().map(|m| m.supported_bit()).sum();
     // The option codes' defaults are the profile's (CiA 402-2): shutdown coasts, disable
     // operation and the quick stop brake (profile and quick-stop deceleration), a fault at the
@@ -114,11 +139,12 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         (ix::DIGITAL_INPUTS, "Digital inputs", dt::UDINT, 32, access(false, false, true), 0),
     ];
     for (index, name, ty, bits, acc, v) in vars {
+        let index = index + base;
         if od.get(index).is_none() {
             od.insert(Object::var(index, name, ty, bits, acc, v.to_le_bytes()[..bits as usize / 8].to_vec()));
         }
     }
-    if od.get(ix::HOMING_SPEEDS).is_none() {
+    if od.get(ix::HOMING_SPEEDS + base).is_none() {
         let speed = |sub: u8, name: &str, v: u32| Entry {
             subindex: sub,
             name: name.into(),
@@ -130,7 +156,7 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         };
         // 1 rev/s looking for a switch, 0.25 rev/s for the index pulse.
         od.insert(Object::list(
-            ix::HOMING_SPEEDS,
+            ix::HOMING_SPEEDS + base,
             "Homing speeds",
             ObjectCode::Array,
             dt::UDINT,
@@ -147,9 +173,9 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
         access: acc,
         value: v.to_le_bytes()[..bits as usize / 8].to_vec(),
     };
-    if od.get(ix::INTERPOLATION_DATA).is_none() {
+    if od.get(ix::INTERPOLATION_DATA + base).is_none() {
         od.insert(Object::list(
-            ix::INTERPOLATION_DATA,
+            ix::INTERPOLATION_DATA + base,
             "Interpolation data record",
             ObjectCode::Array,
             dt::DINT,
@@ -157,10 +183,10 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
             vec![sub(1, "1st set-point", dt::DINT, 32, access(true, true, false), 0)],
         ));
     }
-    if od.get(ix::INTERPOLATION_TIME_PERIOD).is_none() {
+    if od.get(ix::INTERPOLATION_TIME_PERIOD + base).is_none() {
         // 1 ms (1 × 10⁻³ s) until the master says its cycle.
         od.insert(Object::list(
-            ix::INTERPOLATION_TIME_PERIOD,
+            ix::INTERPOLATION_TIME_PERIOD + base,
             "Interpolation time period",
             ObjectCode::Record,
             0x0080,
@@ -171,20 +197,15 @@ pub fn complete_profile(od: &mut ObjectDictionary, max_processing_ns: u32) {
             ],
         ));
     }
-    if od.get(ix::SUPPORTED_DRIVE_MODES).is_none() {
+    if od.get(ix::SUPPORTED_DRIVE_MODES + base).is_none() {
         od.insert(Object::var(
-            ix::SUPPORTED_DRIVE_MODES,
+            ix::SUPPORTED_DRIVE_MODES + base,
             "Supported drive modes",
             dt::UDINT,
             32,
             Access::RO,
             supported.to_le_bytes().to_vec(),
         ));
-    }
-    for (index, name) in [(0x1C32, "SM output parameter"), (0x1C33, "SM input parameter")] {
-        if od.get(index).is_none() {
-            od.insert(sync_parameters(index, name, 125_000, max_processing_ns));
-        }
     }
 }
 
