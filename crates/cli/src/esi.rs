@@ -27,26 +27,41 @@ fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
             .and_then(|v| u32::try_from(v).ok())
             .with_context(|| format!("--device {sel}: '{s}' is not a number"))
     };
-    let product = num(p)?;
     let revision = r.map(num).transpose()?;
-    // Without a revision, take the newest.
+    // A product code, else a device's type name (any case).
+    let code = num(p).ok();
+    let matches = |d: &Device| code.map_or(d.type_name.eq_ignore_ascii_case(p), |c| d.product_code == c);
+    let what = code.map_or(format!("type {p}"), |c| format!("product code {c:#010x}"));
+    // Without a revision, the newest; of equal ones the first in the file.
     file.devices
         .iter()
-        .filter(|d| d.product_code == product && revision.is_none_or(|r| d.revision == r))
-        .max_by_key(|d| d.revision)
+        .filter(|d| matches(d) && revision.is_none_or(|r| d.revision == r))
+        .reduce(|best, d| if d.revision > best.revision { d } else { best })
         .with_context(|| {
-            format!(
-                "no device with product code {product:#010x}{}",
-                revision.map(|r| format!(" revision {r:#010x}")).unwrap_or_default()
-            )
+            format!("no device with {what}{}", revision.map(|r| format!(" revision {r:#010x}")).unwrap_or_default())
         })
 }
 
-pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool) -> anyhow::Result<ExitCode> {
+pub fn run(
+    path: &Path,
+    device: Option<&str>,
+    sii_out: Option<&Path>,
+    json: bool,
+    strict: bool,
+) -> anyhow::Result<ExitCode> {
     let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
     let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    let level = if strict { "error" } else { "warning" };
     for w in &file.warnings {
-        eprintln!("warning: {}: {w}", path.display());
+        eprintln!("{level}: {}: {w}", path.display());
+    }
+    if strict && !file.warnings.is_empty() {
+        bail!(
+            "{}: {} deviation{} from ETG.2000 that vendors' tools accept (--strict refuses them)",
+            path.display(),
+            file.warnings.len(),
+            if file.warnings.len() == 1 { "" } else { "s" }
+        );
     }
     if file.devices.is_empty() {
         bail!("{}: the file describes no device (no Descriptions/Devices/Device)", path.display());
@@ -108,7 +123,10 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
                     "ident": m.ident, "type": m.type_name, "name": m.name, "class": m.class,
                     "rx_pdos": m.rx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
                     "tx_pdos": m.tx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
+                    "objects": m.dictionary.as_ref().map_or(0, |d| d.objects.len()),
+                    "init_cmds": m.init_cmds.iter().map(init_cmd_json).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
+                "init_cmds": d.init_cmds.iter().map(init_cmd_json).collect::<Vec<_>>(),
                 "warnings": file.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
             })
         );
@@ -203,10 +221,32 @@ pub fn run(path: &Path, device: Option<&str>, sii_out: Option<&Path>, json: bool
                         outln!("         {kind} {:#06x} {:?} ({} bits)", p.index, p.name, p.bit_len());
                     }
                 }
+                if let Some(n) = m.dictionary.as_ref().map(|d| d.objects.len()).filter(|&n| n > 0) {
+                    outln!("         {n} objects");
+                }
+                for c in &m.init_cmds {
+                    outln!("         {}", init_cmd_text(c));
+                }
             }
+        }
+        for c in &d.init_cmds {
+            outln!("  {}", init_cmd_text(c));
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// "INIT PS 0x8000:03 ← 0x5552… (Name …)"; a slot-dependent index marked "+slot".
+fn init_cmd_text(c: &ferrocat_esi::InitCmd) -> String {
+    let hex: String = c.data.iter().map(|b| format!("{b:02x}")).collect();
+    let slot = if c.index_depends == ferrocat_esi::Depend::None { "" } else { " +slot" };
+    let ca = if c.complete_access { " (complete access)" } else { "" };
+    format!("INIT {} {:#06x}:{:02x}{slot} ← {hex}{ca} {:?}", c.transitions.join(","), c.index, c.subindex, c.comment)
+}
+
+fn init_cmd_json(c: &ferrocat_esi::InitCmd) -> serde_json::Value {
+    json!({"transitions": c.transitions, "index": c.index, "depends_on_slot": c.index_depends != ferrocat_esi::Depend::None,
+        "subindex": c.subindex, "data": c.data, "complete_access": c.complete_access, "comment": c.comment})
 }
 
 /// The modules that fit `d`'s slots: by ident, or by class; all of the file's where a slot

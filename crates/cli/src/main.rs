@@ -80,7 +80,8 @@ enum Command {
     Esi {
         /// The ESI XML file.
         file: PathBuf,
-        /// Device to show or build: its position in the listing (0-based) or `#xPRODUCT[:#xREVISION]`.
+        /// Device to show or build: its position in the listing (0-based), `#xPRODUCT[:#xREVISION]`,
+        /// or its type name (any case).
         #[arg(long)]
         device: Option<String>,
         /// Write the device's SII EEPROM image to this file.
@@ -89,6 +90,11 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// Refuse a file that deviates from ETG.2000 where vendors' tools accept it (odd-length
+        /// hex, `0x` numbers, `True`, a keyword's case, duplicates, missing names or data types);
+        /// without it such files are read, each deviation a warning with line and column.
+        #[arg(long)]
+        strict: bool,
     },
     /// Serve a virtual segment on a network interface (raw socket) or over UDP, until SIGINT/SIGTERM.
     Sim {
@@ -540,7 +546,9 @@ fn main() -> ExitCode {
             EepromCmd::Write { position, file, target } => master_cmd::sii_write(&target, position, &file),
             EepromCmd::Alias { position, alias, target } => master_cmd::sii_alias(&target, position, &alias),
         },
-        Command::Esi { file, device, sii, json } => esi::run(&file, device.as_deref(), sii.as_deref(), json),
+        Command::Esi { file, device, sii, json, strict } => {
+            esi::run(&file, device.as_deref(), sii.as_deref(), json, strict)
+        }
         Command::Sim { bench: true, json, .. } => sim::bench(json),
         Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, eoe_tap, .. } => {
             sim::run(sim::SimArgs {

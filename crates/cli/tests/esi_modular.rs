@@ -46,3 +46,38 @@ fn device_args_choose_the_modules_of_a_modular_device() {
     let out = run(&format!("{FILE}:#x00010002:#x9010,banana"));
     assert!(String::from_utf8_lossy(&out.stderr).contains("'banana' in '#x9010,banana' is not a module ident"));
 }
+
+/// `--strict` refuses what vendors' tools accept, naming every deviation; without it the file
+/// is read. Devices are chosen by type name as well as by product code.
+#[test]
+fn esi_strict_refuses_deviations_and_devices_go_by_type_name() {
+    let lenient = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_lenient.xml");
+    let esi = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_ferrocat")).arg("esi").args(args).output().unwrap();
+    let out = esi(&[lenient, "--strict"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("error: ").count(), 16, "15 deviations and the verdict:\n{stderr}");
+    assert!(stderr.contains("15 deviations from ETG.2000") && stderr.contains("line 16, column 9"), "{stderr}");
+    let out = esi(&[lenient]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(String::from_utf8_lossy(&out.stderr).matches("warning: ").count(), 15);
+    // By type name, any case, in `ferrocat esi` and in --device.
+    let out = esi(&[FILE, "--device", "fc-2axis", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["product_code"], 0x10002, "{v}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", &format!("{FILE}:FC-2AXIS"), "--seconds", "0.1", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", &format!("{FILE}:FC-3AXIS"), "--seconds", "0.1"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && stderr.contains("no device of type FC-3AXIS (the file has: FC-IOHEAD 0x10001, FC-2AXIS 0x10002)"),
+        "{stderr}"
+    );
+}

@@ -2,7 +2,7 @@
 //! record and array types expanded into their subindices.
 use roxmltree::Node;
 
-use crate::parse::{child, child_number, child_text, children, err, hex_bytes, name_of, number, text, R};
+use crate::parse::{child, child_number, child_text, children, err, hex_bytes, name_of, number, text, warn, R};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Access {
@@ -56,6 +56,8 @@ pub struct SubObject {
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Object {
     pub index: u16,
+    /// Whether the index moves with the slot, in a module's dictionary.
+    pub index_depends: crate::Depend,
     pub name: String,
     pub type_name: String,
     pub bit_size: u32,
@@ -107,8 +109,12 @@ pub(crate) fn parse_dictionary(dict: Node<'_, '_>) -> R<Dictionary> {
                     access: access_of(s),
                 });
             }
+            let name = child_text(t, "Name").unwrap_or_default();
+            if d.data_types.iter().any(|o| o.name == name) {
+                warn(t, format!("data type {name} is defined again: the first is the one used"));
+            }
             d.data_types.push(DataType {
-                name: child_text(t, "Name").unwrap_or_default(),
+                name,
                 base_type: child_text(t, "BaseType"),
                 bit_size: child_number(t, "BitSize")?.unwrap_or(0),
                 array,
@@ -119,6 +125,10 @@ pub(crate) fn parse_dictionary(dict: Node<'_, '_>) -> R<Dictionary> {
     if let Some(objs) = child(dict, "Objects") {
         for o in children(objs, "Object") {
             let obj = parse_object(&d, o)?;
+            if d.objects.iter().any(|x| x.index == obj.index) {
+                warn(o, format!("object {:#06x} ({}) is defined again: the first kept", obj.index, obj.name));
+                continue;
+            }
             d.objects.push(obj);
         }
     }
@@ -139,6 +149,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
     };
     let mut obj = Object {
         index,
+        index_depends: crate::parse::depends(o),
         name: name_of(o),
         bit_size: child_number(o, "BitSize")?.unwrap_or(0),
         access,

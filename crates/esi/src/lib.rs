@@ -64,6 +64,28 @@ pub struct Device {
     /// The modules plugged, slot by slot (their idents), in a device made by
     /// [`Device::plugged`]; empty otherwise.
     pub modules: Vec<u32>,
+    /// The CoE commands a master sends at state transitions (`<Mailbox><CoE><InitCmd>`), with
+    /// the plugged modules' after the device's own in a device made by [`Device::plugged`].
+    pub init_cmds: Vec<InitCmd>,
+}
+
+/// A CoE SDO download a master sends at a state transition (`<InitCmd>`, ETG.2000).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct InitCmd {
+    /// Line of the `<InitCmd>` element.
+    pub line: u32,
+    /// The transitions it belongs to, as written: "IP" (INIT → PREOP), "PS" (PREOP → SAFEOP),
+    /// "SO" (SAFEOP → OP), and the others of ETG.2000.
+    pub transitions: Vec<String>,
+    pub index: u16,
+    /// Whether the index moves with the slot its module is plugged into.
+    pub index_depends: Depend,
+    pub subindex: u8,
+    /// The bytes written, as the file gives them (little-endian for numbers).
+    pub data: Vec<u8>,
+    /// Written with complete access (subindex 0 onward in one transfer).
+    pub complete_access: bool,
+    pub comment: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -232,6 +254,22 @@ impl Device {
             let (rx, tx) = m.pdos_in_slot(slots, n as u16, group);
             dev.rx_pdos.extend(rx);
             dev.tx_pdos.extend(tx);
+            dev.init_cmds.extend(m.init_cmds_in_slot(slots, n as u16, group));
+            let objects = m.objects_in_slot(slots, n as u16, group);
+            if !objects.is_empty() {
+                let dict = dev.dictionary.get_or_insert_with(Dictionary::default);
+                for t in m.dictionary.iter().flat_map(|d| &d.data_types) {
+                    if dict.data_type(&t.name).is_none() {
+                        dict.data_types.push(t.clone());
+                    }
+                }
+                // An index the device (or an earlier slot) has already keeps its first object.
+                for o in objects {
+                    if dict.object(o.index).is_none() {
+                        dict.objects.push(o);
+                    }
+                }
+            }
         }
         Ok(dev)
     }

@@ -2,7 +2,7 @@
 //! data and objects come per slot from the modules plugged into it. A module's PDO and object
 //! indices marked `DependOnSlot` (or `DependOnSlotGroup`) move by the slot's (or its group's)
 //! increment for each slot before it.
-use crate::{PdoDesc, PdoEntryDesc};
+use crate::{Dictionary, InitCmd, Object, PdoDesc, PdoEntryDesc};
 
 /// Whether an index moves with the slot a module sits in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -79,6 +79,10 @@ pub struct ModuleDesc {
     pub rx_pdos: Vec<PdoDesc>,
     /// Its input PDOs.
     pub tx_pdos: Vec<PdoDesc>,
+    /// Its objects (`<Profile><Dictionary>`), indices as written.
+    pub dictionary: Option<Dictionary>,
+    /// Its CoE init commands, indices as written.
+    pub init_cmds: Vec<InitCmd>,
 }
 
 impl ModuleDesc {
@@ -87,6 +91,48 @@ impl ModuleDesc {
     pub fn pdos_in_slot(&self, slots: &Slots, slot: u16, group: u16) -> (Vec<PdoDesc>, Vec<PdoDesc>) {
         let moved = |pdos: &[PdoDesc]| pdos.iter().map(|p| moved_pdo(p, slots, slot, group)).collect();
         (moved(&self.rx_pdos), moved(&self.tx_pdos))
+    }
+}
+
+impl ModuleDesc {
+    /// The module's objects as plugged into slot `slot` of group `group` (see
+    /// [`ModuleDesc::pdos_in_slot`]; objects move by the index increments).
+    pub fn objects_in_slot(&self, slots: &Slots, slot: u16, group: u16) -> Vec<Object> {
+        let objects = self.dictionary.as_ref().map_or(&[][..], |d| &d.objects[..]);
+        objects
+            .iter()
+            .map(|o| Object {
+                index: shift(
+                    o.index,
+                    o.index_depends,
+                    slots.slot_index_increment,
+                    slots.slot_group_index_increment,
+                    slot,
+                    group,
+                ),
+                index_depends: Depend::None,
+                ..o.clone()
+            })
+            .collect()
+    }
+
+    /// The module's init commands as plugged into slot `slot` of group `group`.
+    pub fn init_cmds_in_slot(&self, slots: &Slots, slot: u16, group: u16) -> Vec<InitCmd> {
+        self.init_cmds
+            .iter()
+            .map(|c| InitCmd {
+                index: shift(
+                    c.index,
+                    c.index_depends,
+                    slots.slot_index_increment,
+                    slots.slot_group_index_increment,
+                    slot,
+                    group,
+                ),
+                index_depends: Depend::None,
+                ..c.clone()
+            })
+            .collect()
     }
 }
 

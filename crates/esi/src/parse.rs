@@ -62,9 +62,25 @@ pub fn parse_number(s: &str) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
-/// A number that must fit `T`; `what` names it in the error.
+/// ETG.2000's HexDecValue: `#x` and hex digits, or decimal digits (with a sign where a field
+/// takes negative values).
+fn canonical_number(s: &str) -> bool {
+    match s.strip_prefix("#x") {
+        Some(h) => !h.is_empty() && h.bytes().all(|b| b.is_ascii_hexdigit()),
+        None => {
+            let d = s.strip_prefix('-').unwrap_or(s);
+            !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())
+        }
+    }
+}
+
+/// A number that must fit `T`; `what` names it in the error. `0x…`, `#X…`, a `+` sign and
+/// surrounding whitespace, which vendors' tools accept, are read with a warning.
 pub(crate) fn number<T: TryFrom<i64>>(node: Node<'_, '_>, s: &str, what: &str) -> R<T> {
-    let v = parse_number(s).ok_or_else(|| err(node, format!("{what}: '{s}' is not a number")))?;
+    let v = parse_number(s).ok_or_else(|| err(node, format!("{what}: '{}' is not a number", s.trim())))?;
+    if !canonical_number(s) {
+        warn(node, format!("{what}: '{s}' is not ETG.2000's form (#x… or decimal): read as {v}"));
+    }
     T::try_from(v).map_err(|_| err(node, format!("{what}: {v} is out of range")))
 }
 
@@ -75,15 +91,60 @@ pub(crate) fn attr_number<T: TryFrom<i64>>(node: Node<'_, '_>, attr: &str) -> R<
 }
 
 pub(crate) fn child_number<T: TryFrom<i64>>(node: Node<'_, '_>, name: &'static str) -> R<Option<T>> {
-    child(node, name).map(|c| number(c, text(c), &format!("<{name}>"))).transpose()
+    child(node, name).map(|c| number(c, c.text().unwrap_or(""), &format!("<{name}>"))).transpose()
 }
 
 pub(crate) fn req_child_number<T: TryFrom<i64>>(node: Node<'_, '_>, name: &'static str) -> R<T> {
     child_number(node, name)?.ok_or_else(|| err(node, format!("<{}> lacks <{name}>", node.tag_name().name())))
 }
 
+/// An xs:boolean attribute (absent: false). `True`, `TRUE` and the like, which vendors' tools
+/// accept, are read with a warning; anything else is read as false, with a warning.
 pub(crate) fn flag(node: Node<'_, '_>, attr: &str) -> bool {
-    matches!(node.attribute(attr).map(str::trim), Some("1") | Some("true"))
+    let Some(raw) = node.attribute(attr) else { return false };
+    match raw.trim() {
+        "1" | "true" => true,
+        "0" | "false" => false,
+        other => {
+            let v = match other.to_ascii_lowercase().as_str() {
+                "1" | "true" => Some(true),
+                "0" | "false" => Some(false),
+                _ => None,
+            };
+            let read = v.unwrap_or(false);
+            let why = if v.is_some() { "xs:boolean is lower case" } else { "not a boolean" };
+            warn(node, format!("attribute {attr}=\"{raw}\" of <{}>: {why}; read as {read}", node.tag_name().name()));
+            read
+        }
+    }
+}
+
+/// An attribute that files write as a number or as a boolean (`<Sm Enable="1">` or `"true"`).
+pub(crate) fn number_or_flag(node: Node<'_, '_>, attr: &str) -> R<bool> {
+    match node.attribute(attr).map(str::trim) {
+        Some(s) if parse_number(s).is_some() => Ok(attr_number::<i64>(node, attr)?.unwrap_or(0) != 0),
+        _ => Ok(flag(node, attr)),
+    }
+}
+
+/// An element's text that should be one of `known` (case and all): matched regardless of case,
+/// with a warning where only the case differs; `None` (with a warning) where nothing matches.
+pub(crate) fn keyword<'k>(node: Node<'_, '_>, known: &[&'k str]) -> Option<&'k str> {
+    let t = text(node);
+    if let Some(k) = known.iter().find(|k| **k == t) {
+        return Some(k);
+    }
+    let what = node.tag_name().name();
+    match known.iter().find(|k| k.eq_ignore_ascii_case(t)) {
+        Some(k) => {
+            warn(node, format!("<{what}>{t}</{what}>: read as {k} (the schema's spelling)"));
+            Some(k)
+        }
+        None => {
+            warn(node, format!("<{what}>{t}</{what}>: not one of {}", known.join(", ")));
+            None
+        }
+    }
 }
 
 /// Hex text (e.g. `<ConfigData>05060B0E</ConfigData>`) as bytes. An odd number of digits,
@@ -113,6 +174,8 @@ pub(crate) fn parse_file(xml: &str) -> R<EsiFile> {
     WARNINGS.with(|ws| ws.borrow_mut().clear());
     let mut file = parse_document(xml)?;
     file.warnings = WARNINGS.with(|ws| std::mem::take(&mut *ws.borrow_mut()));
+    // In file order, whatever order the readers met them in.
+    file.warnings.sort_by_key(|w| (w.line, w.column));
     Ok(file)
 }
 
@@ -137,11 +200,34 @@ fn parse_document(xml: &str) -> R<EsiFile> {
     let descriptions = child(root, "Descriptions");
     let devices_node =
         descriptions.and_then(|d| child(d, "Devices")).ok_or_else(|| err(root, "no <Descriptions><Devices>"))?;
-    let devices = children(devices_node, "Device").map(parse_device).collect::<R<Vec<_>>>()?;
-    let modules = match descriptions.and_then(|d| child(d, "Modules")) {
-        Some(m) => children(m, "Module").map(parse_module).collect::<R<Vec<_>>>()?,
-        None => Vec::new(),
-    };
+    let mut devices: Vec<Device> = Vec::new();
+    for d in children(devices_node, "Device") {
+        let dev = parse_device(d)?;
+        if let Some(first) = devices.iter().find(|o| (o.product_code, o.revision) == (dev.product_code, dev.revision)) {
+            warn(
+                d,
+                format!(
+                    "device {} repeats product code {:#x} revision {:#x} of {} (line {}): both kept, the first is the one FILE:PRODUCT picks",
+                    dev.type_name, dev.product_code, dev.revision, first.type_name, first.line
+                ),
+            );
+        }
+        devices.push(dev);
+    }
+    let mut modules: Vec<ModuleDesc> = Vec::new();
+    for m in descriptions.and_then(|d| child(d, "Modules")).into_iter().flat_map(|m| children(m, "Module")) {
+        let module = parse_module(m)?;
+        if let Some(first) = modules.iter().find(|o| o.ident == module.ident) {
+            warn(
+                m,
+                format!(
+                    "module {} repeats ident {:#010x} of {} (line {}): the first is the one plugged",
+                    module.type_name, module.ident, first.type_name, first.line
+                ),
+            );
+        }
+        modules.push(module);
+    }
     Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new() })
 }
 
@@ -156,6 +242,9 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
             u32::try_from(v).map_err(|_| err(ty, format!("{what} {v} out of range")))
         }
     };
+    if child(d, "Name").is_none() {
+        warn(d, format!("device {} has no <Name>: named by its type", text(ty)));
+    }
     let mut dev = Device {
         line: line_of(d),
         type_name: text(ty).to_string(),
@@ -173,33 +262,37 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
         }
     }
     for f in children(d, "Fmmu") {
-        dev.fmmus.push(match text(f) {
-            "Outputs" => FmmuKind::Outputs,
-            "Inputs" => FmmuKind::Inputs,
-            "MBoxState" => FmmuKind::MailboxState,
-            other => FmmuKind::Other(other.to_string()),
+        dev.fmmus.push(match keyword(f, &["Outputs", "Inputs", "MBoxState"]) {
+            Some("Outputs") => FmmuKind::Outputs,
+            Some("Inputs") => FmmuKind::Inputs,
+            Some(_) => FmmuKind::MailboxState,
+            None => FmmuKind::Other(text(f).to_string()),
         });
     }
     for sm in children(d, "Sm") {
         dev.sync_managers.push(SmDesc {
             kind: match text(sm) {
-                "MBoxOut" => SmKind::MailboxOut,
-                "MBoxIn" => SmKind::MailboxIn,
-                "Outputs" => SmKind::Outputs,
-                "Inputs" => SmKind::Inputs,
-                _ => SmKind::Unused,
+                // An unnamed SyncManager is one the device does not use.
+                "" => SmKind::Unused,
+                _ => match keyword(sm, &["MBoxOut", "MBoxIn", "Outputs", "Inputs"]) {
+                    Some("MBoxOut") => SmKind::MailboxOut,
+                    Some("MBoxIn") => SmKind::MailboxIn,
+                    Some("Outputs") => SmKind::Outputs,
+                    Some("Inputs") => SmKind::Inputs,
+                    _ => SmKind::Unused,
+                },
             },
             start: attr_number(sm, "StartAddress")?.ok_or_else(|| err(sm, "<Sm> lacks StartAddress"))?,
             default_size: attr_number(sm, "DefaultSize")?,
             control: attr_number(sm, "ControlByte")?.unwrap_or(0),
-            enable: attr_number::<i64>(sm, "Enable")?.unwrap_or(0) != 0 || flag(sm, "Enable"),
+            enable: number_or_flag(sm, "Enable")?,
         });
     }
     for p in children(d, "RxPdo") {
-        dev.rx_pdos.push(parse_pdo(p)?);
+        push_pdo(&mut dev.rx_pdos, p)?;
     }
     for p in children(d, "TxPdo") {
-        dev.tx_pdos.push(parse_pdo(p)?);
+        push_pdo(&mut dev.tx_pdos, p)?;
     }
     if let Some(m) = child(d, "Mailbox") {
         dev.mailbox = Some(MailboxDesc {
@@ -217,6 +310,7 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
             voe: child(m, "VoE").is_some(),
         });
     }
+    dev.init_cmds = init_cmds(d)?;
     if let Some(dc) = child(d, "Dc") {
         for m in children(dc, "OpMode") {
             let cyc = |name| -> R<(u32, Option<i16>)> {
@@ -263,7 +357,7 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
 }
 
 /// Whether an `<Index>` moves with the slot (`DependOnSlot`, `DependOnSlotGroup`).
-fn depends(parent: Node<'_, '_>) -> Depend {
+pub(crate) fn depends(parent: Node<'_, '_>) -> Depend {
     match child(parent, "Index") {
         Some(i) if flag(i, "DependOnSlot") => Depend::Slot,
         Some(i) if flag(i, "DependOnSlotGroup") => Depend::SlotGroup,
@@ -320,15 +414,60 @@ fn parse_module(m: Node<'_, '_>) -> R<ModuleDesc> {
         ..Default::default()
     };
     for p in children(m, "RxPdo") {
-        module.rx_pdos.push(parse_pdo(p)?);
+        push_pdo(&mut module.rx_pdos, p)?;
     }
     for p in children(m, "TxPdo") {
-        module.tx_pdos.push(parse_pdo(p)?);
+        push_pdo(&mut module.tx_pdos, p)?;
+    }
+    module.init_cmds = init_cmds(m)?;
+    if let Some(dict) = child(m, "Profile").and_then(|p| child(p, "Dictionary")) {
+        module.dictionary = Some(parse_dictionary(dict)?);
     }
     Ok(module)
 }
 
+/// The `<Mailbox><CoE><InitCmd>`s of a device or module.
+fn init_cmds(owner: Node<'_, '_>) -> R<Vec<InitCmd>> {
+    let Some(coe) = child(owner, "Mailbox").and_then(|m| child(m, "CoE")) else { return Ok(Vec::new()) };
+    children(coe, "InitCmd")
+        .map(|c| {
+            let index = child(c, "Index").ok_or_else(|| err(c, "<InitCmd> lacks <Index>"))?;
+            let transitions: Vec<String> = children(c, "Transition").map(|t| text(t).to_string()).collect();
+            if transitions.is_empty() {
+                return Err(err(c, "<InitCmd> lacks <Transition>"));
+            }
+            Ok(InitCmd {
+                line: line_of(c),
+                transitions,
+                index: number(index, index.text().unwrap_or(""), "<InitCmd><Index>")?,
+                index_depends: depends(c),
+                subindex: child_number(c, "SubIndex")?.unwrap_or(0),
+                data: match child(c, "Data") {
+                    Some(d) => hex_bytes(d, text(d))?,
+                    None => Vec::new(),
+                },
+                complete_access: flag(c, "CompleteAccess"),
+                comment: child_text(c, "Comment").unwrap_or_default(),
+            })
+        })
+        .collect()
+}
+
+/// Adds the PDO at `p`, unless one with its index is there already (a warning; the first kept).
+fn push_pdo(pdos: &mut Vec<PdoDesc>, p: Node<'_, '_>) -> R<()> {
+    let pdo = parse_pdo(p)?;
+    if pdos.iter().any(|o| o.index == pdo.index) {
+        warn(p, format!("PDO {:#06x} ({}) is there already: the first kept", pdo.index, pdo.name));
+    } else {
+        pdos.push(pdo);
+    }
+    Ok(())
+}
+
 fn parse_pdo(p: Node<'_, '_>) -> R<PdoDesc> {
+    if child(p, "Name").is_none() {
+        warn(p, format!("<{}> has no <Name>", p.tag_name().name()));
+    }
     let mut pdo = PdoDesc {
         index: req_child_number(p, "Index")?,
         index_depends: depends(p),
@@ -340,6 +479,9 @@ fn parse_pdo(p: Node<'_, '_>) -> R<PdoDesc> {
     };
     for e in children(p, "Entry") {
         let index: u16 = req_child_number(e, "Index")?;
+        if index != 0 && child(e, "DataType").is_none() {
+            warn(e, format!("entry {index:#06x} has no <DataType>: read by its <BitLen>"));
+        }
         pdo.entries.push(PdoEntryDesc {
             index,
             index_depends: depends(e),

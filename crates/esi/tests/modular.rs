@@ -80,4 +80,27 @@ fn needs_shared_weidmueller_slots_and_modules() {
     let (rx, _) = m.pdos_in_slot(slots, 2, 0);
     assert_eq!(rx[0].index, 0x1602);
     assert_eq!(rx[0].entries[0].index, 0x7020);
+    // Its init commands (PS: name and module id at 0x8000 + 16 per slot) and its objects move
+    // the same way; the coupler's own command stays at 0xF810.
+    assert_eq!(m.init_cmds.len(), 2);
+    assert_eq!(
+        (m.init_cmds[1].index, m.init_cmds[1].subindex, &m.init_cmds[1].data[..]),
+        (0x8000, 0x0A, &[0x00, 0x1F, 0x7E, 0x40][..])
+    );
+    assert_eq!(m.init_cmds[1].transitions, ["PS"]);
+    let cmds = m.init_cmds_in_slot(slots, 2, 0);
+    assert_eq!((cmds[0].index, cmds[1].index), (0x8020, 0x8020));
+    assert_eq!(m.dictionary.as_ref().unwrap().objects.len(), 11);
+    let coupler = &f.devices[0];
+    assert_eq!(coupler.init_cmds.iter().map(|c| (c.index, c.subindex)).collect::<Vec<_>>(), [(0xF810, 1)]);
+    let plugged = coupler.plugged(&f.modules, &[0x001F_7E40, 0x0020_6E40]).unwrap();
+    let at: Vec<u16> = plugged.init_cmds.iter().map(|c| c.index).collect();
+    assert_eq!(at, [0xF810, 0x8000, 0x8000, 0x8010, 0x8010]);
+    let dict = plugged.dictionary.as_ref().unwrap();
+    for (slot, module) in [(0u16, &f.modules[0]), (1, &f.modules[1])] {
+        for o in &module.dictionary.as_ref().unwrap().objects {
+            let at = if o.index_depends == Depend::Slot { o.index + 16 * slot } else { o.index };
+            assert!(dict.object(at).is_some(), "slot {slot}: object {:#06x} at {at:#06x}", o.index);
+        }
+    }
 }

@@ -28,6 +28,9 @@ fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
     m.scan().unwrap();
     m.configure().unwrap();
     assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9010]);
+    // 0xF000: the index distance between modules and how many the slots take at most.
+    assert_eq!(m.sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
+    assert_eq!(m.sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
     // Axis 1's objects 0x800 above axis 0's (CiA402's multi-axis layout).
     assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
     assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
@@ -121,4 +124,53 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
     // Past the last axis a drive may have, the driver says so.
     let e = Axis::on_axis(&m, 0, 8).unwrap_err().to_string();
     assert!(e.contains("at most 8"), "{e}");
+}
+
+/// A module's objects sit at its slot's indices in the simulated device, and with the ESI
+/// description in `Master::esi` the master sends its init commands (each at its slot's index)
+/// in PREOP before SAFEOP; one the device aborts is an error naming the command.
+#[test]
+fn module_objects_and_init_commands_follow_the_slot() {
+    use ferrocat_esi::EsiFile;
+    let file = EsiFile::parse(&std::fs::read_to_string(FILE).unwrap()).unwrap();
+    let dev = file.devices.iter().find(|d| d.product_code == 0x10002).unwrap();
+    let plugged = dev.plugged(&file.modules, &[0x9010, 0x9010]).unwrap();
+    let cmds: Vec<(u16, &str)> = plugged.init_cmds.iter().map(|c| (c.index, c.comment.as_str())).collect();
+    assert_eq!(
+        cmds,
+        [
+            (0x6060, "Modes of operation: CSP"),
+            (0x2000, "Gear ratio"),
+            (0x6860, "Modes of operation: CSP"),
+            (0x2800, "Gear ratio")
+        ]
+    );
+    let read_u32 = |m: &mut Master<VirtualIo>, index| {
+        let v = m.sdo_read(0, index, 0).unwrap();
+        let mut b = [0u8; 4];
+        b[..v.len().min(4)].copy_from_slice(&v[..v.len().min(4)]);
+        u32::from_le_bytes(b)
+    };
+    // Without the description: the module objects with their defaults, nothing sent.
+    let mut m = drive(None);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (1, 1));
+    assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (0, 0));
+    // With it: every command at its slot's index.
+    let mut m = drive(None);
+    m.esi.push((file.vendor_id, plugged.clone()));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (10, 10));
+    assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (8, 8));
+    m.start().unwrap();
+    // A command to an object the device lacks.
+    let mut bad = plugged;
+    bad.init_cmds[3].index = 0x2F00;
+    let mut m = drive(None);
+    m.esi.push((file.vendor_id, bad));
+    m.scan().unwrap();
+    let e = m.configure().unwrap_err().to_string();
+    assert!(e.contains("ESI init command PS 0x2f00:00 (\"Gear ratio\", line "), "{e}");
 }

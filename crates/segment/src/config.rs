@@ -107,11 +107,18 @@ pub enum DeviceSource {
     /// slot; `None`: the slots' defaults).
     Esi {
         path: PathBuf,
-        product: Option<u32>,
+        product: Option<Product>,
         revision: Option<u32>,
         modules: Option<Vec<u32>>,
     },
     Builtin(String),
+}
+
+/// Which device of an ESI file: by product code, or by its `<Type>` name (any case).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Product {
+    Code(u32),
+    Name(String),
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -337,16 +344,16 @@ impl SegmentConfig {
         let mut cfg = SegmentConfig::default();
         for a in args {
             let mut d = DeviceToml::default();
-            // FILE.xml:PRODUCT:MODULE,MODULE… — the modules of a modular device, by ident.
-            let (a, modules) = match a.rsplit_once(':') {
-                Some((head, list))
-                    if head.rsplit_once(':').is_some_and(|(f, p)| {
-                        (f.ends_with(".xml") || f.ends_with(".XML")) && ferrocat_esi::parse_number(p).is_some()
-                    }) =>
-                {
-                    (head, Some(list))
-                }
-                _ => (a.as_str(), None),
+            // FILE.xml[:PRODUCT[:MODULE,MODULE…]]: PRODUCT a product code or a type name, the
+            // modules of a modular device by ident.
+            let at = a.to_ascii_lowercase().find(".xml:").map(|k| k + 4);
+            let (file, rest) = match at {
+                Some(k) => (&a[..k], Some(&a[k + 1..])),
+                None => (a.as_str(), None),
+            };
+            let (product, modules) = match rest.map(|r| r.split_once(':').map_or((r, None), |(p, m)| (p, Some(m)))) {
+                Some((p, m)) => (Some(p), m),
+                None => (None, None),
             };
             if let Some(list) = modules {
                 let idents = list
@@ -360,10 +367,9 @@ impl SegmentConfig {
                     .collect::<Result<Vec<_>, _>>()?;
                 d.modules = Some(idents);
             }
-            let (file, product) = match a.rsplit_once(':') {
-                Some((f, p)) if !f.is_empty() && ferrocat_esi::parse_number(p).is_some() => (f, Some(p)),
-                _ => (a, None),
-            };
+            if let Some(p) = product.filter(|p| p.trim().is_empty()) {
+                return Err(device_err("--device", format!("{a}: no product after the file ('{p}')")));
+            }
             if file.ends_with(".xml") || file.ends_with(".XML") {
                 d.esi = Some(file.into());
                 d.product = product.map(|p| Number::Text(p.into()));
@@ -397,7 +403,15 @@ impl SegmentConfig {
                 product: d
                     .product
                     .as_ref()
-                    .map(|n| n.get().ok_or_else(|| device_err(&place, "product: not a 32-bit number")))
+                    .map(|n| match (n.get(), n) {
+                        (Some(code), _) => Ok(Product::Code(code)),
+                        (None, Number::Text(name))
+                            if !name.trim().is_empty() && ferrocat_esi::parse_number(name).is_none() =>
+                        {
+                            Ok(Product::Name(name.trim().to_string()))
+                        }
+                        _ => Err(device_err(&place, "product: neither a 32-bit number nor a device's type name")),
+                    })
                     .transpose()?,
                 revision: d
                     .revision
@@ -544,8 +558,8 @@ impl SegmentConfig {
             let od = coe.then(|| match &esi_dev {
                 Some(dev) => {
                     let mut od = crate::od_build::from_esi(dev, &info);
-                    if dev.slots.is_some() {
-                        crate::od_build::add_module_lists(&mut od, &dev.modules);
+                    if let Some(slots) = &dev.slots {
+                        crate::od_build::add_module_lists(&mut od, slots, &dev.modules);
                     }
                     od
                 }
@@ -878,11 +892,27 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
                 Some(p) => f
                     .devices
                     .iter()
-                    .filter(|d| d.product_code == *p && revision.is_none_or(|r| d.revision == r))
-                    .max_by_key(|d| d.revision)
+                    .filter(|d| match p {
+                        Product::Code(c) => d.product_code == *c,
+                        Product::Name(n) => d.type_name.eq_ignore_ascii_case(n),
+                    })
+                    .filter(|d| revision.is_none_or(|r| d.revision == r))
+                    // The newest revision; of equal ones the first in the file.
+                    .reduce(|best, d| if d.revision > best.revision { d } else { best })
                     .ok_or_else(|| SegmentError::Parse {
                         path: path.clone(),
-                        message: format!("no device with product code {p:#x}"),
+                        message: format!(
+                            "no device {} (the file has: {})",
+                            match p {
+                                Product::Code(c) => format!("with product code {c:#x}"),
+                                Product::Name(n) => format!("of type {n}"),
+                            },
+                            f.devices
+                                .iter()
+                                .map(|d| format!("{} {:#x}", d.type_name, d.product_code))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
                     })?,
                 None if f.devices.len() == 1 => &f.devices[0],
                 None => {

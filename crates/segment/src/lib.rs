@@ -14,7 +14,8 @@ mod virtual_io;
 mod watch;
 
 pub use config::{
-    load_device, DeviceSource, DeviceToml, EventToml, Number, PortToml, SecondaryToml, SegmentConfig, SegmentError,
+    load_device, DeviceSource, DeviceToml, EventToml, Number, PortToml, Product, SecondaryToml, SegmentConfig,
+    SegmentError,
 };
 pub use host::{HostModel, Latency, Stamps};
 pub use segment::{Event, MasterPort, Node, Peer, SecondaryLink, Segment, SegmentStats};

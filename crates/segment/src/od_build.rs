@@ -245,11 +245,35 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
     od
 }
 
-/// The Modular Device Profile's module lists (ETG.5001): 0xF030, the configured module idents
-/// the master writes in PREOP (empty until it does), and 0xF050, the modules detected, slot by
-/// slot. A device refuses SAFEOP while a configured list differs from the detected one
+/// The Modular Device Profile's objects (ETG.5001): 0xF000 (the object index distance between
+/// modules and their greatest number, unless the ESI defines it), 0xF030, the configured module
+/// idents the master writes in PREOP (empty until it does), and 0xF050, the modules detected,
+/// slot by slot. A device refuses SAFEOP while a configured list differs from the detected one
 /// (`CoeDevice::check_transition`).
-pub fn add_module_lists(od: &mut ObjectDictionary, plugged: &[u32]) {
+pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, plugged: &[u32]) {
+    if od.get(0xF000).is_none() {
+        let max: u32 = slots.slots.iter().map(|s| s.max_instances as u32).sum();
+        let sub = |subindex: u8, name: &str, v: u16| Entry {
+            subindex,
+            name: name.into(),
+            data_type: dt::UINT,
+            bit_len: 16,
+            bit_offset: 0,
+            access: Access::RO,
+            value: v.to_le_bytes().to_vec(),
+        };
+        od.insert(Object::list(
+            0xF000,
+            "Modular device profile",
+            ObjectCode::Record,
+            dt::UINT,
+            Access::RO,
+            vec![
+                sub(1, "Index distance", slots.slot_index_increment),
+                sub(2, "Maximum number of modules", max.min(u16::MAX as u32) as u16),
+            ],
+        ));
+    }
     let entries = |access: Access, values: &[u32]| {
         values
             .iter()

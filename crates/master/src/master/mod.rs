@@ -11,6 +11,7 @@ use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
 
 mod delays;
+mod init_cmds;
 mod modules;
 mod next_frame_latch;
 mod process_data;
@@ -369,6 +370,11 @@ impl<I: Io> Master<I> {
     /// SM watchdog want outputs before OP).
     pub fn start(&mut self) -> Result<()> {
         self.request_state_all(AlState::SafeOp)?;
+        for k in 0..self.slaves.len() as u16 {
+            if self.slaves[k as usize].has_coe() {
+                self.run_init_commands(k, "SO")?;
+            }
+        }
         self.cycle()?;
         self.engine.one(
             Command::BWR,

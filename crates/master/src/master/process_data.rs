@@ -17,6 +17,10 @@ impl<I: Io> Master<I> {
         }
         self.request_state_all(AlState::PreOp)?;
         for k in 0..self.slaves.len() as u16 {
+            if self.slaves[k as usize].has_coe() {
+                self.run_init_commands(k, "IP")?;
+                self.run_init_commands(k, "PS")?;
+            }
             self.read_mapping(k)?;
         }
         self.layout()
@@ -30,14 +34,7 @@ impl<I: Io> Master<I> {
         let out_sm =
             sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_OUTPUTS).map(|(i, s)| (i as u8, *s));
         let in_sm = sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_INPUTS).map(|(i, s)| (i as u8, *s));
-        let esi_dev = {
-            let s = &self.slaves[k];
-            self.esi
-                .iter()
-                .filter(|(v, d)| *v == s.vendor_id && d.product_code == s.product_code)
-                .max_by_key(|(_, d)| (d.revision == s.revision, d.revision))
-                .map(|(_, d)| d.clone())
-        };
+        let esi_dev = self.esi_description(position).cloned();
         let sii_has_mapping = {
             let sii = &self.slaves[k].sii;
             sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
