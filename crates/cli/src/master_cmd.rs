@@ -589,6 +589,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
+                "slaves": slave_events(&m.events, m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
             })
         );
     } else {
@@ -622,4 +623,18 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     finish(m)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// What happened to the slaves over a run: how often one left OP or stopped answering, how
+/// often the master brought one back, and how many are in OP at the end.
+fn slave_events(events: &[ferrocat_master::MasterEvent], in_op: usize, of: usize) -> serde_json::Value {
+    use ferrocat_master::MasterEvent as E;
+    let count = |f: fn(&E) -> bool| events.iter().filter(|e| f(e)).count();
+    serde_json::json!({
+        "left_op": count(|e| matches!(e, E::LeftOp { .. })),
+        "lost": count(|e| matches!(e, E::Lost { .. })),
+        "recovered": count(|e| matches!(e, E::Recovered { .. })),
+        "in_op_at_end": in_op,
+        "count": of,
+    })
 }

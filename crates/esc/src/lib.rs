@@ -23,7 +23,7 @@ pub use al::AlMachine;
 pub use app::{Application, DigitalIo, NoApplication, Pdi, SyncApp, SyncMode};
 pub use coe_server::{CoeDevice, DeviceLogic, Mapped, PassiveLogic};
 pub use config::{DcWidth, EscConfig, ReceiveLatch};
-pub use drive::{Cia402Drive, DriveStats, MotorParams, ProcessingTime, Switches};
+pub use drive::{Cia402Drive, DriveAxis, DriveStats, MotorParams, ProcessingTime, Switches};
 pub use eoe_server::EoeServer;
 pub use esc::{Esc, FrameTiming, LinkState, MailboxResponse, SyncLog};
 pub use foe_server::FoeServer;

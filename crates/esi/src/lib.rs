@@ -205,14 +205,21 @@ impl EsiFile {
 
 impl Device {
     /// The modules a modular device has by default: each slot's default module, as many
-    /// times as the slot's minimum; `None` where a slot needs a module and names no default.
+    /// times as the slot's minimum and at least once; `None` where a slot needs a module and
+    /// names no default.
     pub fn default_modules(&self) -> Option<Vec<u32>> {
         let slots = self.slots.as_ref()?;
         let mut out = Vec::new();
         for s in &slots.slots {
-            if s.min_instances > 0 {
-                out.extend(std::iter::repeat_n(s.default_module?, s.min_instances as usize));
-            }
+            // A slot's default module is plugged (ETG.2000: `Default` marks the module plugged
+            // by default), at least once even where the slot may stay empty (MinInstances 0,
+            // as a drive's optional axes write it).
+            let n = match s.default_module {
+                Some(_) => s.min_instances.max(1),
+                None if s.min_instances > 0 => return None,
+                None => 0,
+            };
+            out.extend(std::iter::repeat_n(s.default_module.unwrap_or(0), n as usize));
         }
         Some(out)
     }

@@ -104,3 +104,34 @@ fn needs_shared_weidmueller_slots_and_modules() {
         }
     }
 }
+
+/// A drive whose axes are optional slots (MinInstances 0, one per axis, each naming a default)
+/// has every default plugged, in slot order; a slot that needs a module and names none has no
+/// default set.
+#[test]
+fn optional_slots_with_a_default_module_get_it() {
+    let xml = include_str!("data/ferrocat_modular.xml").replace(
+        r#"<Slot MinInstances="2" MaxInstances="2">
+            <Name>Axis</Name>
+            <ModuleIdent Default="1">#x00009010</ModuleIdent>
+            <ModuleIdent>#x00009020</ModuleIdent>
+          </Slot>"#,
+        r#"<Slot MinInstances="0" MaxInstances="1"><Name>Axis A</Name>
+            <ModuleIdent Default="1">#x00009010</ModuleIdent><ModuleIdent>#x00009020</ModuleIdent></Slot>
+          <Slot MinInstances="0" MaxInstances="1"><Name>Axis B</Name>
+            <ModuleIdent>#x00009010</ModuleIdent><ModuleIdent Default="1">#x00009020</ModuleIdent></Slot>"#,
+    );
+    let f = EsiFile::parse(&xml).unwrap();
+    let drive = f.devices.iter().find(|d| d.type_name == "FC-2AXIS").unwrap();
+    assert_eq!(drive.slots.as_ref().unwrap().slots.len(), 2, "the replacement took");
+    let defaults = drive.default_modules().unwrap();
+    assert_eq!(defaults, [0x9010, 0x9020]);
+    let plugged = drive.plugged(&f.modules, &defaults).unwrap();
+    let rx: Vec<u16> = plugged.rx_pdos.iter().map(|p| p.index).collect();
+    assert_eq!(rx, [0x1600, 0x1611], "axis B's CSV PDO at slot 1's PDO index");
+    // The I/O head's slot needs a module and has a default; without it, no default set.
+    let head =
+        xml.replace(r#"<ModuleIdent Default="1">#x00000801</ModuleIdent>"#, "<ModuleIdent>#x00000801</ModuleIdent>");
+    let f = EsiFile::parse(&head).unwrap();
+    assert_eq!(f.devices[0].default_modules(), None);
+}

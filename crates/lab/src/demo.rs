@@ -306,7 +306,7 @@ fn run_one<I: World>(
     let mut per_rev = Vec::new();
     for a in &axes {
         per_rev.push(match r.drive(a.position) {
-            Some(dr) => dr.axes()[a.axis as usize].motor.increments_per_rev,
+            Some(dr) => sim_axis(dr, a).map_or(131_072.0, |x| x.motor.increments_per_rev),
             None => increments_per_rev(&mut r.m, a.position, a.index(0x608F)),
         });
     }
@@ -346,7 +346,8 @@ fn run_one<I: World>(
     let mut fe_image: Vec<Option<f64>> = vec![None; axes.len()];
     // A CSV axis in the simulator: the move measured from where each shaft stood at its start
     // (the image may carry no position actual value at all).
-    let shaft = |r: &Rig<I>, a: &Axis| r.drive(a.position).map(|dr| dr.axes()[a.axis as usize].position_increments());
+    let shaft =
+        |r: &Rig<I>, a: &Axis| r.drive(a.position).and_then(|dr| sim_axis(dr, a)).map(|x| x.position_increments());
     let shaft0: Vec<Option<f64>> = axes.iter().map(|a| shaft(&r, a)).collect();
     let mut fe_csv: Vec<Option<f64>> = vec![None; axes.len()];
     let mut sp = vec![0.0; axes.len()];
@@ -410,7 +411,7 @@ fn run_one<I: World>(
                 error_ns: e.unwrap_or(f64::NAN),
             };
             for (i, a) in axes.iter().enumerate() {
-                let (pos, fe) = match r.drive(a.position).map(|dr| &dr.axes()[a.axis as usize]) {
+                let (pos, fe) = match r.drive(a.position).and_then(|dr| sim_axis(dr, a)) {
                     Some(ax) if csv[i] => {
                         let moved = ax.position_increments() - shaft0[i].unwrap_or(0.0);
                         (start[i] + moved, sp[i] - start[i] - moved)
@@ -452,7 +453,7 @@ fn run_one<I: World>(
         .iter()
         .enumerate()
         .map(|(i, a)| match r.drive(a.position) {
-            Some(dr) if !csv[i] => Some(dr.axes()[a.axis as usize].max_following_error()),
+            Some(dr) if !csv[i] => sim_axis(dr, a).map(|x| x.max_following_error()),
             Some(_) => fe_csv[i],
             None => fe_image[i],
         })
@@ -510,6 +511,11 @@ fn run_one<I: World>(
         frames_lost: r.st.lost - lost0,
         trace,
     })
+}
+
+/// The simulated axis the driver's `a` drives: the one whose objects sit where `a`'s do.
+fn sim_axis<'d>(dr: &'d Cia402Drive, a: &Axis) -> Option<&'d ferrocat_esc::DriveAxis> {
+    dr.axes().iter().find(|x| x.object_offset() == ferrocat_master::cia402::axis_offset(a.axis))
 }
 
 /// The true master–reference error now (simulator only): master − reference clock, or, where

@@ -41,7 +41,7 @@ pub(crate) struct SyncPdus {
     first: FirstPdu,
     pub(crate) frmw: [u8; 8],
     diff: [u8; 4],
-    /// A follower whose clock the frame reads ([`crate::sync::ClockSync::reads_follower_clock`]):
+    /// A follower whose clock the frame reads ([`crate::sync::CyclePlan::read_follower_clock`]):
     /// its station and which way its speed counter turns, where measured; and its 0x0910–0x0933.
     follower: Option<(u16, Option<bool>)>,
     clock: [u8; FOLLOWER_CLOCK_LEN],
@@ -322,15 +322,16 @@ impl<I: Io> Master<I> {
         //     Not where the method steers the reference's offset from here on: the followers
         //     then converge on the master's rate, not the reference crystal's (that method's
         //     offsets work the loops hard enough for its own trial to tell the direction).
-        let measure = sync.as_ref().is_some_and(|s| s.reads_follower_clock() && !s.steers_reference_offset());
+        let measure =
+            sync.as_ref().map(|s| s.plan(0)).is_some_and(|p| p.read_follower_clock && !p.steer_reference_offset);
         let crystal_rates = match measure {
             true => Some(self.measure_crystal_rates(reference)?),
             false => None,
         };
         // 6. Static drift compensation, until converged (checked, not a fixed count).
         let ref_station = self.slaves[reference].station;
-        // (`steers_reference_offset` implies the reference follows the master.)
-        let mut steer = match sync.filter(|s| s.steers_reference_offset()) {
+        // (`steer_reference_offset` implies the reference follows the master.)
+        let mut steer = match sync.filter(|s| s.plan(0).steer_reference_offset) {
             Some(sync) => {
                 self.dc_reference = Some(ref_station);
                 Some((sync, SyncState { no_probes: true, ..self.sync_state()? }))
@@ -529,7 +530,7 @@ pub struct SyncState {
     pub probes: u64,
     /// Probe frames lost.
     pub probes_lost: u64,
-    /// Frames that made up for a lost cycle's frame ([`ClockSync::makes_up_lost_frames`](crate::sync::ClockSync::makes_up_lost_frames)).
+    /// Frames that made up for a lost cycle's frame ([`CyclePlan::make_up_lost_frames`](crate::sync::CyclePlan::make_up_lost_frames)).
     pub make_ups: u64,
     /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
     /// probes stopped early so as not to make the next cycle late.
@@ -733,13 +734,14 @@ impl<I: Io> Master<I> {
         let built_ns = self.master_system_time();
         let rfm = sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster;
         let wide = self.slaves[r].dc_64bit;
-        let first = if rfm && sync.steers_reference_offset() {
+        let plan = sync.plan(st.cycle);
+        let first = if rfm && plan.steer_reference_offset {
             let len = if wide { 8 } else { 4 };
             match sync.reference_offset(built_ns, None) {
                 Some(v) => FirstPdu::Offset { data: v.to_le_bytes(), len, write: true },
                 None => FirstPdu::Offset { data: [0; 8], len, write: false },
             }
-        } else if rfm && sync.writes_reference_time(st.cycle) {
+        } else if rfm && plan.write_reference_time {
             FirstPdu::Time(sync.reference_time(built_ns).to_le_bytes())
         } else {
             FirstPdu::Nop
@@ -748,8 +750,8 @@ impl<I: Io> Master<I> {
         // the reference's side of a broken ring: behind the break the clocks follow another
         // reference, moved by their offsets, and the frame reaches them a pass later.
         let near = self.first_far_position().unwrap_or(self.slaves.len());
-        let follower = sync
-            .reads_follower_clock()
+        let follower = plan
+            .read_follower_clock
             .then(|| self.slaves[..near].iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
             .flatten()
             .map(|s| (s.station, s.speed_diff_slows));
@@ -806,20 +808,22 @@ impl<I: Io> Master<I> {
             tracing::info!(method = sync.name(), offset_ns = st.lock.offset_ns(), "clock sync {before} -> {now}");
         }
         let c = sync.update(sample.as_ref());
+        // What follows the frame, as the method plans it with the frame's sample taken.
+        let plan = sync.plan(st.cycle);
         if c.shift_offsets_ns != 0 {
             // A method that gives the reference its offset moves the reference itself.
-            let skip = if sync.steers_reference_offset() { Some(p.station) } else { None };
+            let skip = if plan.steer_reference_offset { Some(p.station) } else { None };
             self.shift_offsets_but(c.shift_offsets_ns, skip)?;
         }
         if let Some(bias) = sync.follower_delay_bias_ns() {
             self.bias_follower_delays(bias, p.station)?;
         }
-        if !answered.sync && sync.makes_up_lost_frames() && !st.no_probes {
+        if !answered.sync && plan.make_up_lost_frames && !st.no_probes {
             st.make_ups += 1;
-            self.probe(sync, st, p.station, wide, ProbeOffset::GiveUntilNextCycle)?;
+            self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), ProbeOffset::GiveUntilNextCycle)?;
         }
-        let probes = if st.no_probes { 0 } else { sync.probes_wanted() };
-        let window_ns = sync.probe_window_ns();
+        let probes = if st.no_probes { 0 } else { plan.probes };
+        let window_ns = plan.probe_window_ns;
         // The window counts from the cycle's planned start where the caller slept to one (a
         // target less than a window before the frame's build): a cycle that woke late has
         // that much less of it.
@@ -834,7 +838,7 @@ impl<I: Io> Master<I> {
         // Before the first probe, the cycle so far from the frame's build (at least its
         // exchange) stands for one.
         let mut first_guess_ns = None;
-        let steer = sync.probes_give_offset();
+        let steer = plan.probes_give_offset;
         for k in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
@@ -854,7 +858,7 @@ impl<I: Io> Master<I> {
             let start_ns = self.engine.io.now_ns();
             st.probes += 1;
             let offset = if steer { ProbeOffset::GiveFor { holds_ns } } else { ProbeOffset::Read };
-            self.probe(sync, st, p.station, wide, offset)?;
+            self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset)?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
             st.probe_mean_ns =
@@ -871,14 +875,12 @@ impl<I: Io> Master<I> {
         &mut self,
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
-        station: u16,
-        wide: bool,
+        (station, wide, steer): (u16, bool, bool),
         give: ProbeOffset,
     ) -> Result<()> {
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
-        let steer = sync.steers_reference_offset();
         let built_ns = self.master_system_time();
         let given = match give {
             _ if !steer => None,

@@ -225,14 +225,29 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
     for (i, o) in from_sii(info).objects {
         od.objects.entry(i).or_insert(o);
     }
-    // The assignment the ESI defines by default (PDOs with an Sm attribute).
+    // The assignment the ESI defines by default (PDOs with an Sm attribute); a modular device's
+    // is the plugged modules' whatever its dictionary's default says, as its firmware fills it
+    // from the modules it detects.
     for (assign, pdos) in [(0x1C12u16, &dev.rx_pdos), (0x1C13, &dev.tx_pdos)] {
         let default: Vec<u16> = pdos.iter().filter(|p| p.sm.is_some()).map(|p| p.index).collect();
         if let Some(o) = od.objects.get_mut(&assign) {
             let has_default = o.entry(0).and_then(|e| e.value.first()).is_some_and(|&n| n > 0);
-            if !has_default && !default.is_empty() {
+            if (!has_default || dev.slots.is_some()) && !default.is_empty() {
                 for (k, idx) in default.iter().enumerate() {
-                    if let Some(e) = o.entry_mut(k as u8 + 1) {
+                    let sub = k as u8 + 1;
+                    if o.entry(sub).is_none() {
+                        // More PDOs than the dictionary's object has room for: it grows.
+                        o.entries.push(Entry {
+                            subindex: sub,
+                            name: format!("PDO {sub}"),
+                            data_type: dt::UINT,
+                            bit_len: 16,
+                            bit_offset: 16 * sub as u32,
+                            access: rw_preop(),
+                            value: vec![0; 2],
+                        });
+                    }
+                    if let Some(e) = o.entry_mut(sub) {
                         e.value = idx.to_le_bytes().to_vec();
                     }
                 }

@@ -1,6 +1,6 @@
 //! ferrocat's own method (design and measurements: docs/clock-sync.md).
 use super::flywheel::Flywheel;
-use super::{ClockSync, Correction, Coupling, LineEvents, Sample, MAX_CYCLE_NS};
+use super::{ClockSync, Correction, Coupling, CyclePlan, LineEvents, Sample, MAX_CYCLE_NS};
 use crate::line_fit::{Fate, FrozenLine, LineFit};
 use crate::rtt_weight::RttWeight;
 use crate::trimmed::TrimmedWindow;
@@ -737,6 +737,28 @@ impl Ferrocat {
     }
 }
 
+impl Ferrocat {
+    /// Reference-follows-master, steering the reference's System_Time_Offset.
+    fn steers_reference_offset(&self) -> bool {
+        self.coupling == Coupling::ReferenceFollowsMaster && self.steering == Steering::Offset
+    }
+
+    /// How many probes the line wants after this cycle's frame.
+    fn probes_wanted(&self) -> u32 {
+        let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
+        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
+        let half_cycle = uncertain || self.probe_every_cycle;
+        if !self.probing || !self.keeps_line() || !(half_cycle || self.fit.suspicion() >= PROBE_SUSPICION) {
+            return 0;
+        }
+        // A probe costs about a round trip and the send before it: twice the lead. One probe's
+        // worth of the budget is kept as slack for a late reply.
+        let cost_ns = lead.saturating_mul(2).max(1) as u64;
+        let budget_ns = if half_cycle { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
+        (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
+    }
+}
+
 impl ClockSync for Ferrocat {
     fn name(&self) -> &'static str {
         "ferrocat"
@@ -748,8 +770,19 @@ impl ClockSync for Ferrocat {
         let feedback = if self.error_feedback { self.last_send_error_ns } else { 0 };
         built_ns.wrapping_add_signed(self.lead_ns.unwrap_or(0).wrapping_sub(feedback))
     }
-    fn writes_reference_time(&self, cycle: u64) -> bool {
-        cycle % self.write_every.max(1) == 0
+    fn plan(&self, cycle: u64) -> CyclePlan {
+        let steer = self.steers_reference_offset();
+        CyclePlan {
+            write_reference_time: cycle % self.write_every.max(1) == 0,
+            steer_reference_offset: steer,
+            read_follower_clock: self.flywheel.is_some() && self.keeps_line(),
+            probes: self.probes_wanted(),
+            probe_window_ns: self.cycle_ns,
+            probes_give_offset: self.probes_steer && steer,
+            // Steering by offset, a lost frame leaves the reference on its crystal's rate for
+            // two cycles instead of one: twice the sawtooth.
+            make_up_lost_frames: self.make_up && steer,
+        }
     }
     fn update(&mut self, s: Option<&Sample>) -> Correction {
         let Some(s) = s else {
@@ -792,9 +825,6 @@ impl ClockSync for Ferrocat {
         self.held_back += hold;
         self.planned(Correction { shift_offsets_ns: 0, next_period_ns: Some(period.max(1.0) as u64) })
     }
-    fn steers_reference_offset(&self) -> bool {
-        self.coupling == Coupling::ReferenceFollowsMaster && self.steering == Steering::Offset
-    }
     fn reference_offset(&mut self, built_ns: u64, holds_ns: Option<u64>) -> Option<u64> {
         // Until the next frame gives it another offset the reference runs at its own crystal's
         // rate; aiming its time at the master's halfway through that span centres the
@@ -829,32 +859,10 @@ impl ClockSync for Ferrocat {
             _ => self.master_time(host_ns).unwrap_or(host_ns),
         }
     }
-    fn reads_follower_clock(&self) -> bool {
-        self.flywheel.is_some() && self.keeps_line()
-    }
-    fn probes_wanted(&self) -> u32 {
-        let (Some(sd), Some(lead)) = (self.fit.sd_ahead_ns(self.cycle_ns), self.lead_ns) else { return 0 };
-        let uncertain = sd > self.fit.scale_ns() * PROBE_TARGET_SCALES;
-        let half_cycle = uncertain || self.probe_every_cycle;
-        if !self.probing || !self.keeps_line() || !(half_cycle || self.fit.suspicion() >= PROBE_SUSPICION) {
-            return 0;
-        }
-        // A probe costs about a round trip and the send before it: twice the lead. One probe's
-        // worth of the budget is kept as slack for a late reply.
-        let cost_ns = lead.saturating_mul(2).max(1) as u64;
-        let budget_ns = if half_cycle { self.cycle_ns / 2 } else { self.cycle_ns / 4 };
-        (budget_ns / cost_ns).saturating_sub(1).min(MAX_PROBES) as u32
-    }
-    fn probe_window_ns(&self) -> u64 {
-        self.cycle_ns
-    }
     fn probe(&mut self, s: &Sample) {
         if let Some(y) = self.line_point(s) {
             self.fit_passage(s, y);
         }
-    }
-    fn probes_give_offset(&self) -> bool {
-        self.probes_steer && self.steers_reference_offset()
     }
     fn line_events(&self) -> Option<LineEvents> {
         // With a flywheel the estimate is two lines, the crystal's and ε's: a step of either
@@ -864,11 +872,6 @@ impl ClockSync for Ferrocat {
             restarts: self.fit.restarts + eps.restarts,
             false_alarms: self.fit.false_alarms + eps.false_alarms,
         })
-    }
-    fn makes_up_lost_frames(&self) -> bool {
-        // Steering by offset, a lost frame leaves the reference on its crystal's rate for two
-        // cycles instead of one: twice the sawtooth.
-        self.make_up && self.steers_reference_offset()
     }
     fn follower_delay_bias_ns(&mut self) -> Option<i64> {
         if !self.steers_reference_offset() || !self.centre_followers {

@@ -63,7 +63,7 @@ pub struct Sample {
     /// slaves take at their next SYNC0; 0 for a frame without.
     pub data_ns: u64,
     /// A follower's clock as the same frame found it, where the method asks for one
-    /// ([`ClockSync::reads_follower_clock`]).
+    /// ([`CyclePlan::read_follower_clock`]).
     pub follower: Option<FollowerClock>,
 }
 
@@ -128,6 +128,47 @@ impl LineEvents {
     }
 }
 
+/// What a method wants of a cycle's frames, as one value ([`ClockSync::plan`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CyclePlan {
+    /// Reference-follows-master: the cycle's frame carries the master's time into the
+    /// reference's 0x0910 ([`ClockSync::reference_time`]).
+    pub write_reference_time: bool,
+    /// Reference-follows-master: the method steers the reference through its
+    /// System_Time_Offset (0x0920) instead of its time control loop; its frames then read the
+    /// offset, or replace it with what [`ClockSync::reference_offset`] returns.
+    pub steer_reference_offset: bool,
+    /// The cycle's frame also reads a follower's clock ([`Sample::follower`]).
+    pub read_follower_clock: bool,
+    /// Probe frames after the cycle's: each only reads the reference's time (and offset), and
+    /// its sample goes to [`ClockSync::probe`].
+    pub probes: u32,
+    /// How long after the cycle's frame was built its probes must have ended (ns): the next
+    /// cycle's frame is due then. None starts that, at twice the probes' mean duration so far,
+    /// would not end in time.
+    pub probe_window_ns: u64,
+    /// Offset steering: probe frames give the reference its offset too, not only read it.
+    pub probes_give_offset: bool,
+    /// A lost cycle's frame is made up at once by a frame that gives the reference its offset
+    /// and reads its time (a probe's sample).
+    pub make_up_lost_frames: bool,
+}
+
+impl Default for CyclePlan {
+    /// The conventional cycle: the master's time into the reference's 0x0910, nothing else.
+    fn default() -> Self {
+        CyclePlan {
+            write_reference_time: true,
+            steer_reference_offset: false,
+            read_follower_clock: false,
+            probes: 0,
+            probe_window_ns: 0,
+            probes_give_offset: false,
+            make_up_lost_frames: false,
+        }
+    }
+}
+
 /// A clock-synchronisation method, as linuxptp's servos: each cycle the master hands it what the frame measured and carries out the [`Correction`] it returns.
 pub trait ClockSync {
     /// The method's name (a [`SyncMethod::PRESETS`] family).
@@ -139,30 +180,18 @@ pub trait ClockSync {
     fn reference_time(&mut self, built_ns: u64) -> u64 {
         built_ns
     }
-    /// Reference-follows-master: whether cycle `cycle`'s frame carries the master's time.
-    fn writes_reference_time(&self, _cycle: u64) -> bool {
-        true
-    }
-    /// Reference-follows-master: whether the method steers the reference through its
-    /// System_Time_Offset (0x0920) instead of its time control loop; its frames then read
-    /// the offset, or replace it with what [`ClockSync::reference_offset`] returns.
-    fn steers_reference_offset(&self) -> bool {
-        false
+    /// What the method wants of cycle `cycle`'s frames. The master asks when it builds the
+    /// cycle's frame, and again once [`ClockSync::update`] has taken the frame's sample, for
+    /// what follows the frame (the probes, a lost frame made up, the offsets shifted): the
+    /// sample may change that part.
+    fn plan(&self, _cycle: u64) -> CyclePlan {
+        CyclePlan::default()
     }
     /// The offset to give the reference in the frame built at `built_ns`, which stands for
     /// `holds_ns` after the frame's passage, until the next frame gives another (`None`: until
     /// the next cycle's frame); `None`: read it only.
     fn reference_offset(&mut self, _built_ns: u64, _holds_ns: Option<u64>) -> Option<u64> {
         None
-    }
-    /// Offset steering: whether probe frames give the reference its offset too
-    /// ([`ClockSync::reference_offset`]), not only read it.
-    fn probes_give_offset(&self) -> bool {
-        false
-    }
-    /// Whether the cycle's frame should also read a follower's clock ([`Sample::follower`]).
-    fn reads_follower_clock(&self) -> bool {
-        false
     }
     /// The master's offset to the reference that `sample` measures, ns: the reference's time
     /// at the frame's passage less what the method believed it (its
@@ -197,24 +226,8 @@ pub trait ClockSync {
     fn take_error(&mut self, _error_ns: i64) -> bool {
         false
     }
-    /// How many probe frames the method wants after this cycle's: each only reads the
-    /// reference's time (and offset), and its sample goes to [`ClockSync::probe`].
-    fn probes_wanted(&self) -> u32 {
-        0
-    }
-    /// How long after the cycle's frame was built its probes must have ended (ns): the next
-    /// cycle's frame is due then. None starts that, at twice the probes' mean duration so far,
-    /// would not end in time.
-    fn probe_window_ns(&self) -> u64 {
-        0
-    }
     /// Takes a probe frame's sample.
     fn probe(&mut self, _sample: &Sample) {}
-    /// Whether a lost cycle's frame is made up at once by a frame that gives the reference
-    /// its offset ([`ClockSync::reference_offset`]) and reads its time (a probe's sample).
-    fn makes_up_lost_frames(&self) -> bool {
-        false
-    }
     /// What the method's line has been through so far; `None`: it keeps no line.
     fn line_events(&self) -> Option<LineEvents> {
         None

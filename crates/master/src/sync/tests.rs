@@ -57,7 +57,7 @@ proptest! {
         for m in methods.iter_mut() {
             for (k, s) in samples.iter().enumerate() {
                 let _ = m.reference_time(built);
-                let _ = m.writes_reference_time(k as u64);
+                let _ = m.plan(k as u64);
                 let _ = m.reference_offset(built, None);
                 let c = m.update(if k % 7 == 3 { None } else { Some(s) });
                 if let Some(p) = c.next_period_ns {
