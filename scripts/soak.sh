@@ -46,6 +46,9 @@ while kill -0 "$run" 2>/dev/null; do
   sleep 1
 done
 wait "$run" || { echo "ferrocat run failed:"; tail -20 "$work/run.log"; exit 1; }
+# What the slaves did, by kind of event (the run's stderr has one line each).
+echo "events by slave and kind (most frequent first):"
+grep -oE 's  .*' "$work/run.log" | sed -E 's/^s  //; s/ at [0-9.]+ s//' | cut -c1-100 | sort | uniq -c | sort -rn | head -8 || true
 kill -TERM "$sim"; wait "$sim" 2>/dev/null || true
 python3 - "$work/run.json" "$rss_start" "${last:-0}" "$SOAK_SECONDS" "$LOSS" <<'PY'
 import json, sys
@@ -57,7 +60,10 @@ print(f"  slaves: left OP {s['left_op']}, stopped answering {s['lost']}, brought
 cs = r.get("clock_sync") or {}
 print(f"  clock sync {cs.get('method')}: {cs.get('lock')}, offset {cs.get('offset_ns')} ns")
 print(f"  resident memory: {start} KiB after 10 s, {end} KiB at the end ({end - start:+d} KiB)")
-ok = s["in_op_at_end"] == s["count"] and end <= start
-print("  PASS" if ok else "  FAIL: " + ("a slave not in OP at the end; " if s["in_op_at_end"] != s["count"] else "") + ("memory grew" if end > start else ""))
+# The allocator's own noise is a few pages; anything the run keeps per cycle or per event shows
+# as hundreds of KiB over ten minutes.
+grew = end - start > 64
+ok = s["in_op_at_end"] == s["count"] and not grew
+print("  PASS" if ok else "  FAIL: " + ("a slave not in OP at the end; " if s["in_op_at_end"] != s["count"] else "") + ("memory grew by more than 64 KiB" if grew else ""))
 sys.exit(0 if ok else 1)
 PY

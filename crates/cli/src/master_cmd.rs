@@ -481,7 +481,12 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
     let mut report = start + 1_000_000_000;
-    let mut shown = m.events.len();
+    // The events are taken as they come (a long run would otherwise keep every one) and
+    // counted for the summary.
+    let mut tally = SlaveTally::default();
+    for e in m.take_events() {
+        tally.count(&e);
+    }
     let mut next_period = period;
     // The loop's quality: how late each wake-up came, how far each period strayed from the
     // one planned, and the cycles whose work ran past the next cycle's start.
@@ -509,10 +514,10 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             b.step(&mut m)?;
         }
         let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
-        for e in &m.events[shown..] {
+        for e in m.take_events() {
             eprintln!("t={t_s:7.3} s  {e}");
+            tally.count(&e);
         }
-        shown = m.events.len();
         if m.io_mut().now_ns() >= report {
             let s = m.cycle_stats();
             let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
@@ -589,7 +594,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
-                "slaves": slave_events(&m.events, m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
+                "slaves": tally.to_json(m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
             })
         );
     } else {
@@ -626,15 +631,33 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
 }
 
 /// What happened to the slaves over a run: how often one left OP or stopped answering, how
-/// often the master brought one back, and how many are in OP at the end.
-fn slave_events(events: &[ferrocat_master::MasterEvent], in_op: usize, of: usize) -> serde_json::Value {
-    use ferrocat_master::MasterEvent as E;
-    let count = |f: fn(&E) -> bool| events.iter().filter(|e| f(e)).count();
-    serde_json::json!({
-        "left_op": count(|e| matches!(e, E::LeftOp { .. })),
-        "lost": count(|e| matches!(e, E::Lost { .. })),
-        "recovered": count(|e| matches!(e, E::Recovered { .. })),
-        "in_op_at_end": in_op,
-        "count": of,
-    })
+/// often the master brought one back.
+#[derive(Debug, Default)]
+struct SlaveTally {
+    left_op: u64,
+    lost: u64,
+    recovered: u64,
+}
+
+impl SlaveTally {
+    fn count(&mut self, e: &ferrocat_master::MasterEvent) {
+        use ferrocat_master::MasterEvent as E;
+        match e {
+            E::LeftOp { .. } => self.left_op += 1,
+            E::Lost { .. } => self.lost += 1,
+            E::Recovered { .. } => self.recovered += 1,
+            _ => {}
+        }
+    }
+
+    /// With how many of `of` slaves are in OP at the end.
+    fn to_json(&self, in_op: usize, of: usize) -> serde_json::Value {
+        serde_json::json!({
+            "left_op": self.left_op,
+            "lost": self.lost,
+            "recovered": self.recovered,
+            "in_op_at_end": in_op,
+            "count": of,
+        })
+    }
 }

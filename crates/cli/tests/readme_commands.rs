@@ -1,6 +1,6 @@
-//! The README's list of commands is what `--help` says: every subcommand it names exists, and
-//! every option it shows is one the subcommand takes, and every subcommand `--help` lists is
-//! in the README.
+//! The command lists are what `--help` says: every subcommand docs/cli.md and the README's tour
+//! name exists, every option they show is one the subcommand takes, and every subcommand
+//! `--help` lists is in docs/cli.md.
 use std::process::Command;
 
 fn help(path: &[&str]) -> String {
@@ -25,11 +25,16 @@ fn subcommands(page: &str) -> Vec<String> {
         .unwrap_or_default()
 }
 
-#[test]
-fn the_readmes_command_list_matches_help() {
-    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md")).unwrap();
-    let block = readme.split("## The `ferrocat` command").nth(1).unwrap().split("```sh").nth(1).unwrap();
-    let block = block.split("```").next().unwrap();
+/// The first ```sh block after `heading` in the file at `path` (from the repository's root).
+fn block(path: &str, heading: &str) -> String {
+    let text = std::fs::read_to_string(format!("{}/../../{path}", env!("CARGO_MANIFEST_DIR"))).unwrap();
+    let after = text.split(heading).nth(1).unwrap_or_else(|| panic!("{path}: no {heading:?}"));
+    after.split("```sh").nth(1).unwrap().split("```").next().unwrap().to_string()
+}
+
+/// Every line of `block` names a subcommand that exists and only options it takes; the
+/// subcommands named.
+fn check(block: &str, place: &str) -> std::collections::BTreeSet<String> {
     let mut named = std::collections::BTreeSet::new();
     for line in block.lines().filter(|l| !l.trim().is_empty()) {
         let cmd = line.split('#').next().unwrap();
@@ -52,12 +57,21 @@ fn the_readmes_command_list_matches_help() {
             let flag = flag.trim_end_matches('…').trim_end_matches(',');
             assert!(
                 pages.iter().any(|p| p.contains(&format!("{flag} ")) || p.contains(&format!("{flag}\n"))),
-                "README: `{line}`: {flag} is not in `ferrocat {} --help`",
+                "{place}: `{line}`: {flag} is not in `ferrocat {} --help`",
                 path.join(" ")
             );
         }
     }
+    named
+}
+
+#[test]
+fn the_command_lists_match_help() {
+    // docs/cli.md lists every subcommand; the README's tour only real ones and real options.
+    let named = check(&block("docs/cli.md", "## Every subcommand"), "docs/cli.md");
     for sub in subcommands(&help(&[])) {
-        assert!(named.contains(&sub), "`ferrocat {sub}` is in --help but not in the README's list");
+        assert!(named.contains(&sub), "`ferrocat {sub}` is in --help but not in docs/cli.md's list");
     }
+    let toured = check(&block("README.md", "## A tour"), "README.md");
+    assert!(toured.len() >= 8, "the tour shows {toured:?}");
 }

@@ -5,31 +5,16 @@ use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDifference};
 use ferrocat_wire::{Address, Command};
 
-use crate::engine::{Pdu, SplitRingClocks};
+use crate::engine::{frame_bytes, Pdu, SplitRingClocks};
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
+use crate::sync::SyncState;
 
 /// Nanoseconds from 1970-01-01 to 2000-01-01, the epoch of DC system time.
 const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
 /// The 8-byte preamble and start-of-frame delimiter at 100 Mbit/s.
 const PREAMBLE_NS: u64 = 8 * 80;
-
-/// A frame's bytes on the wire: Ethernet and EtherCAT headers, each datagram's header, data
-/// and WKC, padded to Ethernet's minimum; then FCS and preamble.
-pub(crate) fn frame_bytes(pdus: &[Pdu<'_>]) -> u64 {
-    let payload: usize = 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>();
-    payload.max(60) as u64 + 4 + 8
-}
-
-/// From a frame's head (its first preamble bit) to the end of its first `pdus` datagrams, in
-/// bytes: preamble, Ethernet and EtherCAT headers, each datagram's header, data and WKC.
-pub(crate) fn bytes_through(pdus: &[Pdu<'_>]) -> u64 {
-    if pdus.is_empty() {
-        return 0;
-    }
-    (8 + 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>()) as u64
-}
 
 /// The clock-synchronisation datagrams of one cycle and their buffers.
 #[derive(Debug)]
@@ -508,39 +493,6 @@ impl<I: Io> Master<I> {
         self.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, &mut d)?;
         Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
     }
-}
-
-/// State of cyclic synchronisation kept by the master between steps.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SyncState {
-    /// Cycles stepped.
-    pub cycle: u64,
-    /// Time the frame spends behind the reference (from the latched receive times).
-    pub loop_ns: u64,
-    /// Cycle frames lost.
-    pub lost: u64,
-    /// The reference's time from the last answered step's FRMW (a 32-bit reference's unwrapped
-    /// onto 64 bits, counting its wraps from the first).
-    pub reference_ns: Option<u64>,
-    /// The reference's System_Time_Offset as last read (unwrapped likewise).
-    pub reference_offset_ns: Option<u64>,
-    /// No probe frames (the static drift compensation, whose frames are back to back anyway).
-    pub no_probes: bool,
-    /// Probe frames sent, and those lost.
-    pub probes: u64,
-    /// Probe frames lost.
-    pub probes_lost: u64,
-    /// Frames that made up for a lost cycle's frame ([`CyclePlan::make_up_lost_frames`](crate::sync::CyclePlan::make_up_lost_frames)).
-    pub make_ups: u64,
-    /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
-    /// probes stopped early so as not to make the next cycle late.
-    pub probe_mean_ns: u64,
-    /// Cycles whose probes stopped early so as not to make the next cycle late.
-    pub probes_cut: u64,
-    /// Cable redundancy: the ring's state `loop_ns` was measured for.
-    pub ring: crate::engine::RingState,
-    /// The method's lock state, from the offset each answered frame measures.
-    pub lock: crate::sync::Lock,
 }
 
 /// The latest receive time of the other active ports less the entry port's (across the 32-bit

@@ -637,3 +637,19 @@ pub fn describe(cmd: Command, address: Address, len: usize) -> String {
         Address::Logical(a) => format!("{cmd} logical {a:#010x} ({len} bytes)"),
     }
 }
+
+/// A frame's bytes on the wire: Ethernet and EtherCAT headers, each datagram's header, data
+/// and WKC, padded to Ethernet's minimum; then FCS and preamble.
+pub(crate) fn frame_bytes(pdus: &[Pdu<'_>]) -> u64 {
+    let payload: usize = 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>();
+    payload.max(60) as u64 + 4 + 8
+}
+
+/// From a frame's head (its first preamble bit) to the end of its first `pdus` datagrams, in
+/// bytes: preamble, Ethernet and EtherCAT headers, each datagram's header, data and WKC.
+pub(crate) fn bytes_through(pdus: &[Pdu<'_>]) -> u64 {
+    if pdus.is_empty() {
+        return 0;
+    }
+    (8 + 16 + pdus.iter().map(|p| 12 + p.data.len()).sum::<usize>()) as u64
+}

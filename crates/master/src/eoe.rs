@@ -4,7 +4,7 @@
 //! the slave's inbox whichever exchange met them, so that no frame is lost to an SDO transfer.
 use std::collections::VecDeque;
 
-use ferrocat_wire::eoe::{self, frame_type, EoeHeader, EoeResult, IpParameters, Reassembler};
+use ferrocat_wire::eoe::{self, frame_type, EoeHeader, EoeResult, IpParameters};
 use ferrocat_wire::ethernet::{EthernetRepr, Ipv4Repr, ETHERTYPE_IPV4};
 use ferrocat_wire::inet::{IcmpEcho, IP_PROTO_ICMP};
 use ferrocat_wire::mailbox::MailboxType;
@@ -18,30 +18,7 @@ use crate::master::Master;
 /// counted) beyond this. The same bound holds frames queued for the slave by [`Master::eoe_queue`].
 pub const INBOX_FRAMES: usize = 64;
 
-/// A slave's EoE receive side: the frame being put together and the frames waiting.
-#[derive(Debug, Clone, Default)]
-pub struct EoeLink {
-    reassembler: Reassembler,
-    inbox: VecDeque<Vec<u8>>,
-    /// The next frame number the master sends (4 bits).
-    frame_number: u8,
-    /// Frames queued by `eoe_queue`, each as its fragments still to go (EoE header and
-    /// data), and the next fragment as a mailbox message once a write of it was tried (its
-    /// counter kept for the next try).
-    outbox: VecDeque<VecDeque<Vec<u8>>>,
-    trying: Option<Vec<u8>>,
-    /// Frames dropped because the inbox was full, and fragments that did not fit.
-    pub dropped: u64,
-    /// Fragments that did not fit the frame being put together.
-    pub fragment_errors: u64,
-}
-
-impl EoeLink {
-    /// Whether frames queued by `eoe_queue` are still going out.
-    pub fn sending(&self) -> bool {
-        !self.outbox.is_empty() || self.trying.is_some()
-    }
-}
+pub use crate::eoe_link::EoeLink;
 
 /// Who pings: the master's address on the EoE network, and the slave's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

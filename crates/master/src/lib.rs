@@ -29,9 +29,11 @@
 pub mod calibrate;
 pub mod cia402;
 mod coe;
+mod cycle_state;
 mod dc;
 mod engine;
 mod eoe;
+mod eoe_link;
 mod error;
 mod far_clock;
 mod foe;
@@ -47,11 +49,13 @@ pub mod trajectory;
 mod trimmed;
 
 pub use coe::{EntryInfo, ObjectInfo};
-pub use dc::{DcConfig, DcReport, SyncState};
+pub use cycle_state::CycleStats;
+pub use dc::{DcConfig, DcReport};
 pub(crate) use engine::SplitPasses;
 pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{EoeLink, EoePing, INBOX_FRAMES};
 pub use error::{MasterError, Result};
 pub use master::{Master, MasterEvent, SplitLatch, STATION_BASE};
-pub use process::{CycleStats, Handle};
+pub use process::Handle;
 pub use slave::{Health, MailboxConfig, Mapped, Slave};
+pub use sync::SyncState;

@@ -5,6 +5,7 @@ use ferrocat_wire::frame::MAX_PDU_LEN;
 use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
+use crate::cycle_state::{CycleState, CycleStats};
 use crate::engine::Pdu;
 use crate::error::{MasterError, Result};
 use crate::io::Io;
@@ -25,41 +26,6 @@ pub struct Handle {
     pub bit: u32,
     /// Width in bits.
     pub bits: u8,
-}
-
-/// Statistics of the cyclic exchange.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct CycleStats {
-    /// Cycles run.
-    pub cycles: u64,
-    /// Cycles whose working counter fell short.
-    pub wkc_errors: u64,
-    /// The last cycle's working counter.
-    pub last_wkc: u16,
-    /// Time between the starts of the last two cycles, and the largest deviation from the
-    /// nominal period seen (when `nominal_period_ns` is set).
-    pub last_period_ns: u64,
-    /// The period the jitter is measured against, ns (0: none).
-    pub nominal_period_ns: u64,
-    /// The largest deviation of a period from the nominal, ns.
-    pub max_jitter_ns: u64,
-    /// The last cycle's round trip, ns.
-    pub last_round_trip_ns: u64,
-    /// The largest round trip, ns.
-    pub max_round_trip_ns: u64,
-    /// Cyclic frames that never came back.
-    pub lost_frames: u64,
-}
-
-#[derive(Debug, Default)]
-pub(crate) struct CycleState {
-    pub stats: CycleStats,
-    last_start: Option<u64>,
-    /// The ring's state last reported (cable redundancy).
-    ring: crate::engine::RingState,
-    /// Slaves the last supervision found out of OP: supervised every cycle until all are back,
-    /// since a slave in SAFEOP may answer its process data in full.
-    pub recovering: bool,
 }
 
 impl<I: Io> Master<I> {
@@ -225,8 +191,8 @@ impl<I: Io> Master<I> {
             }
         });
         drop(extra);
-        let frame_bytes = crate::dc::frame_bytes(&pdus[..n]);
-        let data_bytes = crate::dc::bytes_through(&pdus[..chunks]);
+        let frame_bytes = crate::engine::frame_bytes(&pdus[..n]);
+        let data_bytes = crate::engine::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
         let passes = engine.split_passes.take();

@@ -144,7 +144,7 @@ pub struct Slave {
     /// The PDO assignment the application chose (written again after a power cycle).
     pub(crate) assignment: [Option<Vec<u16>>; 2],
     /// EoE frames from the slave, put together and waiting.
-    pub(crate) eoe: crate::eoe::EoeLink,
+    pub(crate) eoe: crate::eoe_link::EoeLink,
 }
 
 /// Where a slave stands during cyclic operation.

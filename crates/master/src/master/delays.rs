@@ -206,12 +206,12 @@ impl<I: Io> Master<I> {
             let mut latch = [0u8; 4];
             let mut pdus =
                 [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut latch)];
-            let bytes = crate::dc::frame_bytes(&pdus);
+            let bytes = crate::engine::frame_bytes(&pdus);
             tries -= 1;
             match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
                 Ok(()) => {
                     passes = self.engine.split_passes.take();
-                    break Ok(self.stamped_sample(&crate::dc::SyncState::default(), built_ns, bytes));
+                    break Ok(self.stamped_sample(&crate::sync::SyncState::default(), built_ns, bytes));
                 }
                 Err(MasterError::Timeout { .. }) if tries > 0 => continue,
                 Err(e) => break Err(e),

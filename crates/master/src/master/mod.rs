@@ -11,6 +11,7 @@ use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
 
 mod delays;
+mod far_steer;
 mod init_cmds;
 mod modules;
 mod next_frame_latch;
@@ -117,13 +118,14 @@ pub struct Master<I: Io> {
     /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
     /// with inputs.
     pub expected_wkc: u16,
-    /// What happened during cyclic operation, in order (see [`Master::supervise`]).
+    /// What happened during cyclic operation, in order (see [`Master::supervise`]). Kept until
+    /// taken: a loop that runs for long takes them now and then ([`Master::take_events`]).
     pub events: Vec<MasterEvent>,
     /// How long a state transition may take before it is an error.
     pub state_timeout_ns: u64,
     /// How long an SDO may take.
     pub mailbox_timeout_ns: u64,
-    pub(crate) cyc: crate::process::CycleState,
+    pub(crate) cyc: crate::cycle_state::CycleState,
     /// How long a cyclic frame may take before it counts as lost.
     pub cyclic_timeout_ns: u64,
     /// Check the slaves after a cycle with a short working counter.
@@ -189,6 +191,12 @@ impl<I: Io> Master<I> {
 
     /// Records an event for the application (`events`) and logs it (`tracing`, info): the
     /// application is told through `events`, the log is for whoever runs it.
+    /// The events so far, in order, leaving none: what a long-running loop calls now and then
+    /// so that [`Master::events`](Master) does not grow for as long as the master runs.
+    pub fn take_events(&mut self) -> Vec<MasterEvent> {
+        std::mem::take(&mut self.events)
+    }
+
     pub(crate) fn push_event(&mut self, e: MasterEvent) {
         tracing::info!("{e}");
         self.events.push(e);

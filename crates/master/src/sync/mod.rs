@@ -9,6 +9,7 @@ mod flywheel;
 mod lock;
 mod park2020;
 mod pi;
+mod state;
 
 pub use chen2016::Chen2016;
 pub use config::{FerrocatSettings, SyncMethod};
@@ -18,6 +19,7 @@ pub use flywheel::speed_deviation;
 pub use lock::{Lock, LockState, LockThresholds};
 pub use park2020::Park2020;
 pub use pi::SoemPi;
+pub use state::SyncState;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
 pub const MAX_CYCLE_NS: u64 = u32::MAX as u64;

@@ -1,0 +1,34 @@
+//! What the master keeps of cyclic synchronisation between steps.
+
+/// State of cyclic synchronisation kept by the master between steps.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SyncState {
+    /// Cycles stepped.
+    pub cycle: u64,
+    /// Time the frame spends behind the reference (from the latched receive times).
+    pub loop_ns: u64,
+    /// Cycle frames lost.
+    pub lost: u64,
+    /// The reference's time from the last answered step's FRMW (a 32-bit reference's unwrapped
+    /// onto 64 bits, counting its wraps from the first).
+    pub reference_ns: Option<u64>,
+    /// The reference's System_Time_Offset as last read (unwrapped likewise).
+    pub reference_offset_ns: Option<u64>,
+    /// No probe frames (the static drift compensation, whose frames are back to back anyway).
+    pub no_probes: bool,
+    /// Probe frames sent, and those lost.
+    pub probes: u64,
+    /// Probe frames lost.
+    pub probes_lost: u64,
+    /// Frames that made up for a lost cycle's frame ([`CyclePlan::make_up_lost_frames`](super::CyclePlan::make_up_lost_frames)).
+    pub make_ups: u64,
+    /// How long a probe has taken on average (ns of the host's clock), and the cycles whose
+    /// probes stopped early so as not to make the next cycle late.
+    pub probe_mean_ns: u64,
+    /// Cycles whose probes stopped early so as not to make the next cycle late.
+    pub probes_cut: u64,
+    /// Cable redundancy: the ring's state `loop_ns` was measured for.
+    pub ring: crate::engine::RingState,
+    /// The method's lock state, from the offset each answered frame measures.
+    pub lock: crate::sync::Lock,
+}

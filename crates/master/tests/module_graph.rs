@@ -1,0 +1,125 @@
+//! The master's modules depend on one another without a cycle: each top-level module's
+//! `crate::` paths (outside comments and test code, root re-exports resolved through lib.rs)
+//! form an acyclic graph. A module that both uses `master` and is used by it would tie the
+//! two together again; types the master keeps live in leaf modules instead (`cycle_state`,
+//! `eoe_link`, `sync::SyncState`, `far_clock`), and the clients (CoE, FoE, EoE, DC, process
+//! data, CiA402) build on `master` from outside.
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+fn sources(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            sources(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The code of a file: test modules and comments left out.
+fn code(text: &str) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.trim_start().starts_with("#[cfg(test)]") {
+            break;
+        }
+        let line = line.split("//").next().unwrap_or("");
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+/// The modules named by `crate::…` paths in `code`; capitalised names through `reexports`.
+fn targets(code: &str, reexports: &BTreeMap<String, String>) -> BTreeSet<String> {
+    let mut found = BTreeSet::new();
+    let mut rest = code;
+    while let Some(at) = rest.find("crate::") {
+        rest = &rest[at + "crate::".len()..];
+        let names: Vec<&str> = if let Some(group) = rest.strip_prefix('{') {
+            group.split('}').next().unwrap_or("").split(',').map(str::trim).collect()
+        } else {
+            vec![rest]
+        };
+        for n in names {
+            let ident: String = n.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            if ident.is_empty() {
+                continue;
+            }
+            match ident.chars().next() {
+                Some(c) if c.is_uppercase() => {
+                    if let Some(m) = reexports.get(&ident) {
+                        found.insert(m.clone());
+                    }
+                }
+                _ => {
+                    found.insert(ident);
+                }
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_masters_modules_form_no_cycle() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
+    // `pub use module::{A, B};` and `pub use module::A;` at the crate root.
+    let mut reexports = BTreeMap::new();
+    for line in lib.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
+        let Some((module, names)) = line.trim_end_matches(';').split_once("::") else { continue };
+        for n in names.trim_matches(|c| c == '{' || c == '}').split(',') {
+            reexports.insert(n.trim().to_string(), module.to_string());
+        }
+    }
+    let mut files = Vec::new();
+    sources(&src, &mut files);
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in &files {
+        let rel = f.strip_prefix(&src).unwrap();
+        if rel == Path::new("lib.rs") || rel.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let top = rel.components().next().unwrap().as_os_str().to_string_lossy().trim_end_matches(".rs").to_string();
+        let deps = targets(&code(&std::fs::read_to_string(f).unwrap()), &reexports);
+        graph.entry(top.clone()).or_default().extend(deps.into_iter().filter(|d| *d != top));
+    }
+    for (m, deps) in &graph {
+        println!("{m} → {}", deps.iter().cloned().collect::<Vec<_>>().join(", "));
+    }
+    assert!(graph["master"].contains("engine") && graph["coe"].contains("master"), "the graph was read: {graph:?}");
+    // Depth-first search for a back edge.
+    fn visit(
+        m: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(i) = path.iter().position(|p| p == m) {
+            let mut cycle = path[i..].to_vec();
+            cycle.push(m.to_string());
+            return Some(cycle);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_string());
+        for d in graph.get(m).into_iter().flatten() {
+            if let Some(c) = visit(d, graph, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m.to_string());
+        None
+    }
+    let mut done = BTreeSet::new();
+    for m in graph.keys() {
+        if let Some(cycle) = visit(m, &graph, &mut Vec::new(), &mut done) {
+            panic!("module cycle: {}", cycle.join(" → "));
+        }
+    }
+}
