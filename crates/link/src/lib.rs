@@ -45,6 +45,8 @@ pub struct RawSocket {
     flags: libc::c_uint,
     /// The receive timeout last set, so that an unchanged one costs no system call.
     timeout_ns: std::cell::Cell<u64>,
+    /// Transmit stamps the kernel owes: one per frame sent while it stamps transmissions.
+    stamps_pending: std::cell::Cell<u32>,
 }
 
 /// Which timestamps the kernel gives this socket.
@@ -194,7 +196,14 @@ impl RawSocket {
                 ),
                 "SO_RCVTIMEO",
             )?;
-            Ok(RawSocket { fd, ifindex, stamps, flags, timeout_ns: std::cell::Cell::new(0) })
+            Ok(RawSocket {
+                fd,
+                ifindex,
+                stamps,
+                flags,
+                timeout_ns: std::cell::Cell::new(0),
+                stamps_pending: std::cell::Cell::new(0),
+            })
         }
     }
 
@@ -319,13 +328,24 @@ impl RawSocket {
     pub fn tx_timestamp(&self) -> Option<u64> {
         // Every frame sent queues a stamp, whether or not anyone reads it: the newest is the
         // last frame's; older ones are drained (reading only the first gave a stamp hundreds
-        // of frames stale after a bring-up, found by `lab live`).
+        // of frames stale after a bring-up, found by `lab live`). The frames sent say how many
+        // are queued, so that the read that would find the queue empty is not made: one system
+        // call per cycle. A stamp that never comes (the queue found empty after one that did)
+        // is given up.
         let mut b = [0u8; 64];
         let mut newest = None;
-        for _ in 0..4096 {
+        while self.stamps_pending.get() > 0 {
             match self.recvmsg(&mut b, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT) {
-                Ok(Some((_, t))) => newest = t.or(newest),
-                _ => break,
+                Ok(Some((_, t))) => {
+                    newest = t.or(newest);
+                    self.stamps_pending.set(self.stamps_pending.get() - 1);
+                }
+                _ => {
+                    if newest.is_some() {
+                        self.stamps_pending.set(0);
+                    }
+                    break;
+                }
             }
         }
         newest
@@ -362,6 +382,11 @@ impl RawSocket {
                 std::mem::size_of::<libc::sockaddr_ll>() as u32,
             );
             check(n as libc::c_int, "send")?;
+        }
+        if self.stamps != Timestamps::None {
+            // The kernel queues one transmit stamp for the frame (bounded: a stamp read or
+            // given up for each one counted).
+            self.stamps_pending.set(self.stamps_pending.get().saturating_add(1).min(4096));
         }
         Ok(())
     }
