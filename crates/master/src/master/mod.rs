@@ -308,6 +308,13 @@ impl<I: Io> Master<I> {
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::PDI_CONTROL }, &mut pdi),
         ];
         self.engine.transact(&mut p)?;
+        // A ring's second pass back after the frame was given up (a stalled host): asked again.
+        for _ in 0..self.engine.retries {
+            if !(self.engine.io.has_secondary() && p.iter().any(|x| x.wkc != 1)) {
+                break;
+            }
+            self.engine.transact(&mut p)?;
+        }
         if p.iter().any(|x| x.wkc != 1) {
             return Err(MasterError::Wkc {
                 what: format!("identity of slave {pos}"),
