@@ -307,22 +307,16 @@ impl<I: Io> Master<I> {
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::DL_STATUS }, &mut dl),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::PDI_CONTROL }, &mut pdi),
         ];
-        self.engine.transact(&mut p)?;
-        // A ring's second pass back after the frame was given up (a stalled host): asked again.
-        for _ in 0..self.engine.retries {
-            if !(self.engine.io.has_secondary() && p.iter().any(|x| x.wkc != 1)) {
-                break;
-            }
-            self.engine.transact(&mut p)?;
-        }
-        if p.iter().any(|x| x.wkc != 1) {
-            return Err(MasterError::Wkc {
+        // Every read must reach the one slave (on a ring asked again when short: `expect_each`).
+        self.engine.expect_each(&mut p, 1).map_err(|e| match e {
+            MasterError::Wkc { got, .. } => MasterError::Wkc {
                 what: format!("identity of slave {pos}"),
                 expected: 1,
-                got: 0,
+                got,
                 slaves: format!(" (station {station:#06x})"),
-            });
-        }
+            },
+            e => e,
+        })?;
         let dl_status = DlStatus(u16::from_le_bytes(dl));
         if !dl_status.pdi_operational() {
             // An unconfigured ESC: the SII status says why (read only then, so that a healthy
