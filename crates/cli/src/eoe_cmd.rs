@@ -179,14 +179,14 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             }
             let mut m = preop_with(&target, position, &params)?;
             eprintln!("set the IP parameters of slave {position}");
-            show(&m.eoe_get_ip(position)?, false);
+            show(&m.eoe().get_ip(position)?, false);
             finish(m)?;
         }
         EoeCmd::GetIp { position, json, target } => {
             let mut m = target.master()?;
             m.scan()?;
             m.configure()?;
-            show(&m.eoe_get_ip(position)?, json);
+            show(&m.eoe().get_ip(position)?, json);
             finish(m)?;
         }
         EoeCmd::Ping { position, params, count, size, timeout_ms, from, from_mac, target } => {
@@ -195,7 +195,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
                 bail!("--size {size}: at most 1 472 bytes fit one Ethernet frame");
             }
             let mut m = preop_with(&target, position, &params)?;
-            let p = m.eoe_get_ip(position)?;
+            let p = m.eoe().get_ip(position)?;
             let (Some(to_mac), Some(to_ip)) = (p.mac, p.ip) else {
                 bail!("slave {position} has no MAC or IP address: give --ip (and --mac)");
             };
@@ -209,7 +209,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             outln!("PING {to} over EoE (slave {position}) from {}: {size} data bytes", Ipv4Addr::from(from_ip));
             let mut rtts = Vec::new();
             for seq in 0..count {
-                match m.eoe_ping(position, &ping, seq, size, timeout_ms.saturating_mul(1_000_000))? {
+                match m.eoe().ping(position, &ping, seq, size, timeout_ms.saturating_mul(1_000_000))? {
                     Some(ns) => {
                         outln!("{} bytes from {to}: seq={seq} time={:.3} ms", size + 8, ns as f64 / 1e6);
                         rtts.push(ns);
@@ -252,7 +252,7 @@ fn preop_with(
     m.configure()?;
     if params.given() {
         let p = params.to_params(m.slave(position)?.station)?;
-        m.eoe_set_ip(position, &p)?;
+        m.eoe().set_ip(position, &p)?;
     }
     Ok(m)
 }
@@ -318,12 +318,12 @@ impl TapBridge {
         while let Some(n) = self.tap.try_read(&mut self.buf)? {
             moved = true;
             // A frame with no EoE form, or one more than the queue holds, is dropped.
-            match m.eoe_queue(self.position, &self.buf[..n]) {
+            match m.eoe().queue(self.position, &self.buf[..n]) {
                 Ok(true) => self.to_slave += 1,
                 Ok(false) | Err(_) => self.refused += 1,
             }
         }
-        if let Some(f) = m.eoe_pump(self.position)? {
+        if let Some(f) = m.eoe().pump(self.position)? {
             moved = true;
             if self.tap.write(&f).with_context(|| format!("writing to {}", self.tap.name()))? {
                 self.to_host += 1;

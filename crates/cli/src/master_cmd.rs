@@ -248,17 +248,17 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
     match action {
         SdoAction::Read { object, complete, ty } => {
             let (i, s) = parse_object(&object)?;
-            let v = m.sdo_upload(position, i, s, complete)?;
+            let v = m.coe().sdo_upload(position, i, s, complete)?;
             outln!("{}", show(&v, ty)?);
         }
         SdoAction::Write { object, value, complete, ty } => {
             let (i, s) = parse_object(&object)?;
             let bytes = encode(&value, ty)?;
-            m.sdo_download(position, i, s, complete, &bytes)?;
+            m.coe().sdo_download(position, i, s, complete, &bytes)?;
         }
         SdoAction::List => {
-            for index in m.od_list(position)? {
-                let o = m.object_info(position, index)?;
+            for index in m.coe().od_list(position)? {
+                let o = m.coe().object_info(position, index)?;
                 outln!(
                     "{index:#06x} {:<40} type {:#06x} max sub {} code {}",
                     o.name,
@@ -306,11 +306,11 @@ pub fn foe(
     match action {
         FoeAction::Write { file } => {
             let data = data.unwrap_or_default();
-            m.foe_write(position, name, password, &data)?;
+            m.foe().write(position, name, password, &data)?;
             eprintln!("wrote {} ({} bytes) to slave {position} as '{name}'", file.display(), data.len());
         }
         FoeAction::Read { file, max_bytes } => {
-            let data = m.foe_read(position, name, password, max_bytes)?;
+            let data = m.foe().read(position, name, password, max_bytes)?;
             std::fs::write(&file, &data).with_context(|| format!("writing {}", file.display()))?;
             eprintln!("read '{name}' ({} bytes) from slave {position} into {}", data.len(), file.display());
         }

@@ -192,8 +192,8 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
         // What an integrator sets up in PREOP: a torque limit and a following-error window the
         // move needs (a vendor's defaults may be far tighter), where the drive has the objects.
         for a in Axis::all(&m, k)? {
-            let _ = m.sdo_write(k, a.index(ix::MAX_TORQUE), 0, &3000u16.to_le_bytes());
-            let _ = m.sdo_write(k, a.index(ix::FOLLOWING_ERROR_WINDOW), 0, &13_107u32.to_le_bytes());
+            let _ = m.coe().sdo_write(k, a.index(ix::MAX_TORQUE), 0, &3000u16.to_le_bytes());
+            let _ = m.coe().sdo_write(k, a.index(ix::FOLLOWING_ERROR_WINDOW), 0, &13_107u32.to_le_bytes());
         }
         drives.push(k);
     }
@@ -535,8 +535,8 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
 /// model's 131 072 when the drive does not say.
 fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16, index: u16) -> f64 {
     let u32_of = |v: Vec<u8>| v.get(..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-    let inc = m.sdo_read(d, index, 1).ok().and_then(u32_of).unwrap_or(0);
-    let revs = m.sdo_read(d, index, 2).ok().and_then(u32_of).unwrap_or(0);
+    let inc = m.coe().sdo_read(d, index, 1).ok().and_then(u32_of).unwrap_or(0);
+    let revs = m.coe().sdo_read(d, index, 2).ok().and_then(u32_of).unwrap_or(0);
     if inc > 0 && revs > 0 {
         inc as f64 / revs as f64
     } else {
@@ -549,8 +549,8 @@ fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16, index: u16) -> f64 {
 fn sync_counters<I: World>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u64)> {
     let mut sum = (0u64, 0u64);
     for &d in drives {
-        let late = m.sdo_read(d, 0x1C32, 0x0C).ok()?;
-        let missed = m.sdo_read(d, 0x1C32, 0x0B).ok()?;
+        let late = m.coe().sdo_read(d, 0x1C32, 0x0C).ok()?;
+        let missed = m.coe().sdo_read(d, 0x1C32, 0x0B).ok()?;
         sum.0 += u16::from_le_bytes([*late.first()?, *late.get(1)?]) as u64;
         sum.1 += u16::from_le_bytes([*missed.first()?, *missed.get(1)?]) as u64;
     }

@@ -171,7 +171,7 @@ impl Axis {
         self.mode = mode;
         match self.h.mode {
             Some(h) => m.set(h, mode.code() as u8 as u64),
-            None => m.sdo_write(self.position, self.index(ix::MODES_OF_OPERATION), 0, &[mode.code() as u8])?,
+            None => m.coe().sdo_write(self.position, self.index(ix::MODES_OF_OPERATION), 0, &[mode.code() as u8])?,
         }
         Ok(())
     }
@@ -190,8 +190,8 @@ impl Axis {
         let (value, index) = interpolation_period(period_ns).ok_or_else(|| {
             MasterError::Config(format!("an interpolation period of {period_ns} ns is no u8 × 10^n s (0x60C2)"))
         })?;
-        m.sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
-        m.sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
+        m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
+        m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
         Ok(())
     }
 
@@ -359,10 +359,10 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
             let pdos = if whole.is_some() {
                 vec![pdo]
             } else {
-                let n = m.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+                let n = m.coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
                 let mut pdos = Vec::with_capacity(n as usize + 1);
                 for k in 1..=n {
-                    let v = m.sdo_read(position, assign, k)?;
+                    let v = m.coe().sdo_read(position, assign, k)?;
                     pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
                 }
                 if !pdos.contains(&pdo) {

@@ -9,14 +9,12 @@ use ferrocat_wire::ethernet::{EthernetRepr, Ipv4Repr, ETHERTYPE_IPV4};
 use ferrocat_wire::inet::{IcmpEcho, IP_PROTO_ICMP};
 use ferrocat_wire::mailbox::MailboxType;
 
-use crate::coe::Polled;
 use crate::error::{MasterError, Result};
 use crate::io::Io;
+use crate::mailbox::{Mailboxes, Polled};
 use crate::master::Master;
 
-/// Frames kept per slave until the application takes them; older ones are dropped (and
-/// counted) beyond this. The same bound holds frames queued for the slave by [`Master::eoe_queue`].
-pub const INBOX_FRAMES: usize = 64;
+pub use crate::eoe_link::INBOX_FRAMES;
 
 pub use crate::eoe_link::EoeLink;
 
@@ -33,36 +31,28 @@ pub struct EoePing {
     pub to_ip: [u8; 4],
 }
 
-impl<I: Io> Master<I> {
-    /// Takes an EoE message met while reading a mailbox if it is a fragment: `true` if taken.
-    pub(crate) fn eoe_take_fragment(&mut self, position: u16, payload: &[u8]) -> bool {
-        let Ok(h) = EoeHeader::parse(payload) else { return false };
-        if h.frame_type != frame_type::FRAGMENT {
-            return false;
-        }
-        let link = &mut self.slaves[position as usize].eoe;
-        match link.reassembler.push(&h, &payload[eoe::HEADER_LEN..]) {
-            Ok(Some(r)) => {
-                if link.inbox.len() == INBOX_FRAMES {
-                    link.inbox.pop_front();
-                    link.dropped += 1;
-                }
-                link.inbox.push_back(r.frame.to_vec());
-            }
-            Ok(None) => {}
-            Err(_) => link.fragment_errors += 1,
-        }
-        true
-    }
+/// The EoE client of one master (see [`Master::eoe`](crate::Master::eoe)): it borrows the master's engine and
+/// slave list for as long as it is used.
+pub struct Eoe<'a, I: Io> {
+    pub(crate) mbx: Mailboxes<'a, I>,
+}
 
+impl<I: Io> Master<I> {
+    /// The EoE client: a slave's IP parameters, Ethernet frames to and from it, ping.
+    pub fn eoe(&mut self) -> Eoe<'_, I> {
+        Eoe { mbx: self.mailboxes() }
+    }
+}
+
+impl<I: Io> Eoe<'_, I> {
     /// Sends an EoE request and returns the service data after the header of the first EoE
     /// message of `response` type (fragments met meanwhile go to the inbox).
-    fn eoe_request(&mut self, position: u16, request: u8, body: &[u8], response: u8) -> Result<(EoeHeader, Vec<u8>)> {
+    fn request(&mut self, position: u16, request: u8, body: &[u8], response: u8) -> Result<(EoeHeader, Vec<u8>)> {
         let mut msg = EoeHeader::new(request, 0).to_bytes().to_vec();
         msg.extend_from_slice(body);
-        self.mbx_write(position, MailboxType::EOE, &msg)?;
+        self.mbx.write(position, MailboxType::EOE, &msg)?;
         loop {
-            let reply = self.mbx_read(position, MailboxType::EOE)?;
+            let reply = self.mbx.read(position, MailboxType::EOE)?;
             let h = EoeHeader::parse(&reply)?;
             if h.frame_type == response {
                 return Ok((h, reply[eoe::HEADER_LEN..].to_vec()));
@@ -70,35 +60,36 @@ impl<I: Io> Master<I> {
         }
     }
 
-    fn eoe_result(&self, position: u16, what: &str, result: EoeResult) -> Result<()> {
+    fn result(&self, position: u16, what: &str, result: EoeResult) -> Result<()> {
         if result == EoeResult::SUCCESS {
             return Ok(());
         }
-        Err(MasterError::slave(position, &self.name_of(position), format!("EoE {what}: {result}")))
+        Err(MasterError::slave(position, &self.mbx.name_of(position), format!("EoE {what}: {result}")))
     }
 
     /// Sets the slave's IP parameters (those given; the others it keeps).
-    pub fn eoe_set_ip(&mut self, position: u16, params: &IpParameters) -> Result<()> {
+    pub fn set_ip(&mut self, position: u16, params: &IpParameters) -> Result<()> {
         let mut body = [0u8; eoe::IP_PARAMETERS_LEN];
         params.emit(&mut body)?;
-        let (h, _) = self.eoe_request(position, frame_type::SET_IP_REQUEST, &body, frame_type::SET_IP_RESPONSE)?;
-        self.eoe_result(position, "Set IP Parameter", h.result())
+        let (h, _) = self.request(position, frame_type::SET_IP_REQUEST, &body, frame_type::SET_IP_RESPONSE)?;
+        self.result(position, "Set IP Parameter", h.result())
     }
 
     /// The slave's IP parameters as it reports them.
-    pub fn eoe_get_ip(&mut self, position: u16) -> Result<IpParameters> {
-        let (h, body) = self.eoe_request(position, frame_type::GET_IP_REQUEST, &[], frame_type::GET_IP_RESPONSE)?;
-        self.eoe_result(position, "Get IP Parameter", h.result())?;
-        IpParameters::parse(&body)
-            .map_err(|e| MasterError::slave(position, &self.name_of(position), format!("EoE Get IP Parameter: {e}")))
+    pub fn get_ip(&mut self, position: u16) -> Result<IpParameters> {
+        let (h, body) = self.request(position, frame_type::GET_IP_REQUEST, &[], frame_type::GET_IP_RESPONSE)?;
+        self.result(position, "Get IP Parameter", h.result())?;
+        IpParameters::parse(&body).map_err(|e| {
+            MasterError::slave(position, &self.mbx.name_of(position), format!("EoE Get IP Parameter: {e}"))
+        })
     }
 
     /// The frame cut into fragments for the slave's receive mailbox, under the next frame
     /// number.
-    fn eoe_cut(&mut self, position: u16, frame: &[u8]) -> Result<Vec<Vec<u8>>> {
-        let (_, name, m) = self.mailbox_of(position, MailboxType::EOE)?;
+    fn cut(&mut self, position: u16, frame: &[u8]) -> Result<Vec<Vec<u8>>> {
+        let (_, name, m) = self.mbx.mailbox_of(position, MailboxType::EOE)?;
         let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
-        let link = &mut self.slaves[position as usize].eoe;
+        let link = &mut self.mbx.slaves[position as usize].eoe;
         let msgs = eoe::fragment_messages(frame, max_len, link.frame_number).ok_or_else(|| {
             MasterError::slave(
                 position,
@@ -116,69 +107,69 @@ impl<I: Io> Master<I> {
     }
 
     /// Sends one Ethernet frame to the slave, in as many fragments as its mailbox needs.
-    /// Refused while frames queued for [`eoe_pump`](Self::eoe_pump) are still going out (the
+    /// Refused while frames queued for [`pump`](Self::pump) are still going out (the
     /// fragments of two frames would interleave).
-    pub fn eoe_send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
-        if self.slave(position)?.eoe.sending() {
-            let name = self.name_of(position);
-            return Err(MasterError::slave(position, &name, "EoE: frames queued for eoe_pump are still going out"));
+    pub fn send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
+        if self.mbx.slave(position)?.eoe.sending() {
+            let name = self.mbx.name_of(position);
+            return Err(MasterError::slave(position, &name, "EoE: frames queued for pump are still going out"));
         }
-        for msg in self.eoe_cut(position, frame)? {
-            self.mbx_write(position, MailboxType::EOE, &msg)?;
+        for msg in self.cut(position, frame)? {
+            self.mbx.write(position, MailboxType::EOE, &msg)?;
         }
         Ok(())
     }
 
     /// The next Ethernet frame from the slave, waiting up to `timeout_ns` for one; `None` if
     /// none came.
-    pub fn eoe_receive(&mut self, position: u16, timeout_ns: u64) -> Result<Option<Vec<u8>>> {
-        self.mailbox_of(position, MailboxType::EOE)?;
-        let deadline = self.engine.io.now_ns().saturating_add(timeout_ns);
+    pub fn receive(&mut self, position: u16, timeout_ns: u64) -> Result<Option<Vec<u8>>> {
+        self.mbx.mailbox_of(position, MailboxType::EOE)?;
+        let deadline = self.mbx.engine.io.now_ns().saturating_add(timeout_ns);
         loop {
-            if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {
+            if let Some(f) = self.mbx.slaves[position as usize].eoe.inbox.pop_front() {
                 return Ok(Some(f));
             }
             // Anything but a fragment here is an answer nobody waits for: dropped.
-            let polled = self.mbx_poll(position)?;
-            let now = self.engine.io.now_ns();
+            let polled = self.mbx.poll(position)?;
+            let now = self.mbx.engine.io.now_ns();
             if now > deadline {
-                return Ok(self.slaves[position as usize].eoe.inbox.pop_front());
+                return Ok(self.mbx.slaves[position as usize].eoe.inbox.pop_front());
             }
             if let Polled::Empty = polled {
-                self.engine.io.sleep_until((now + 50_000).min(deadline.saturating_add(1)));
+                self.mbx.engine.io.sleep_until((now + 50_000).min(deadline.saturating_add(1)));
             }
         }
     }
 
-    /// Queues one Ethernet frame for the slave, cut into fragments, for [`eoe_pump`](Self::eoe_pump)
+    /// Queues one Ethernet frame for the slave, cut into fragments, for [`pump`](Self::pump)
     /// to send between cycles. `false` (and counted as dropped) where 64 frames are already
     /// waiting; an error where the frame has no EoE form.
-    pub fn eoe_queue(&mut self, position: u16, frame: &[u8]) -> Result<bool> {
-        self.mailbox_of(position, MailboxType::EOE)?;
-        if self.slaves[position as usize].eoe.outbox.len() >= INBOX_FRAMES {
-            self.slaves[position as usize].eoe.dropped += 1;
+    pub fn queue(&mut self, position: u16, frame: &[u8]) -> Result<bool> {
+        self.mbx.mailbox_of(position, MailboxType::EOE)?;
+        if self.mbx.slaves[position as usize].eoe.outbox.len() >= INBOX_FRAMES {
+            self.mbx.slaves[position as usize].eoe.dropped += 1;
             return Ok(false);
         }
-        let msgs = self.eoe_cut(position, frame)?;
-        self.slaves[position as usize].eoe.outbox.push_back(msgs.into());
+        let msgs = self.cut(position, frame)?;
+        self.mbx.slaves[position as usize].eoe.outbox.push_back(msgs.into());
         Ok(true)
     }
 
     /// One step of EoE traffic that never waits, for a cyclic loop: at most one fragment
     /// written (where the slave's receive mailbox is free) and one read of its send mailbox.
     /// Returns a frame from the slave if one is complete.
-    pub fn eoe_pump(&mut self, position: u16) -> Result<Option<Vec<u8>>> {
-        self.mailbox_of(position, MailboxType::EOE)?;
-        let link = &mut self.slaves[position as usize].eoe;
+    pub fn pump(&mut self, position: u16) -> Result<Option<Vec<u8>>> {
+        self.mbx.mailbox_of(position, MailboxType::EOE)?;
+        let link = &mut self.mbx.slaves[position as usize].eoe;
         if link.trying.is_none() {
             if let Some(msg) = link.outbox.front_mut().and_then(VecDeque::pop_front) {
-                let buf = self.mbx_message(position, MailboxType::EOE, &msg)?;
-                self.slaves[position as usize].eoe.trying = Some(buf);
+                let buf = self.mbx.message(position, MailboxType::EOE, &msg)?;
+                self.mbx.slaves[position as usize].eoe.trying = Some(buf);
             }
         }
-        if let Some(mut buf) = self.slaves[position as usize].eoe.trying.take() {
-            let written = self.mbx_try_write(position, &mut buf)?;
-            let link = &mut self.slaves[position as usize].eoe;
+        if let Some(mut buf) = self.mbx.slaves[position as usize].eoe.trying.take() {
+            let written = self.mbx.try_write(position, &mut buf)?;
+            let link = &mut self.mbx.slaves[position as usize].eoe;
             if !written {
                 link.trying = Some(buf);
             } else if link.outbox.front().is_some_and(VecDeque::is_empty) {
@@ -186,22 +177,17 @@ impl<I: Io> Master<I> {
                 link.outbox.pop_front();
             }
         }
-        if let Some(f) = self.slaves[position as usize].eoe.inbox.pop_front() {
+        if let Some(f) = self.mbx.slaves[position as usize].eoe.inbox.pop_front() {
             return Ok(Some(f));
         }
-        self.mbx_poll(position)?;
-        Ok(self.slaves[position as usize].eoe.inbox.pop_front())
-    }
-
-    /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
-    pub fn eoe_link(&self, position: u16) -> Result<&EoeLink> {
-        Ok(&self.slave(position)?.eoe)
+        self.mbx.poll(position)?;
+        Ok(self.mbx.slaves[position as usize].eoe.inbox.pop_front())
     }
 
     /// Sends an ICMP echo request with `data_len` bytes of data to the slave and waits up to
     /// `timeout_ns` for its reply: the round trip in ns, or `None`. Other frames that arrive
     /// meanwhile are dropped.
-    pub fn eoe_ping(
+    pub fn ping(
         &mut self,
         position: u16,
         p: &EoePing,
@@ -211,16 +197,23 @@ impl<I: Io> Master<I> {
     ) -> Result<Option<u64>> {
         let data: Vec<u8> = (0..data_len).map(|i| i as u8).collect();
         let frame = p.echo_request(seq, &data)?;
-        let t0 = self.engine.io.now_ns();
-        self.eoe_send(position, &frame)?;
+        let t0 = self.mbx.engine.io.now_ns();
+        self.send(position, &frame)?;
         let deadline = t0.saturating_add(timeout_ns);
         loop {
-            let now = self.engine.io.now_ns();
-            let Some(f) = self.eoe_receive(position, deadline.saturating_sub(now))? else { return Ok(None) };
+            let now = self.mbx.engine.io.now_ns();
+            let Some(f) = self.receive(position, deadline.saturating_sub(now))? else { return Ok(None) };
             if p.is_echo_reply(&f, seq, &data) {
-                return Ok(Some(self.engine.io.now_ns() - t0));
+                return Ok(Some(self.mbx.engine.io.now_ns() - t0));
             }
         }
+    }
+}
+
+impl<I: Io> Master<I> {
+    /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
+    pub fn eoe_link(&self, position: u16) -> Result<&EoeLink> {
+        Ok(&self.slave(position)?.eoe)
     }
 }
 

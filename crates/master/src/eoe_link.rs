@@ -3,6 +3,10 @@ use std::collections::VecDeque;
 
 use ferrocat_wire::eoe::Reassembler;
 
+/// Frames kept per slave until the application takes them; older ones are dropped (and
+/// counted) beyond this. The same bound holds frames queued for the slave by [`Eoe::queue`](crate::Eoe::queue).
+pub const INBOX_FRAMES: usize = 64;
+
 /// A slave's EoE receive side: the frame being put together and the frames waiting.
 #[derive(Debug, Clone, Default)]
 pub struct EoeLink {
@@ -10,7 +14,7 @@ pub struct EoeLink {
     pub(crate) inbox: VecDeque<Vec<u8>>,
     /// The next frame number the master sends (4 bits).
     pub(crate) frame_number: u8,
-    /// Frames queued by `eoe_queue`, each as its fragments still to go (EoE header and
+    /// Frames queued by `Eoe::queue`, each as its fragments still to go (EoE header and
     /// data), and the next fragment as a mailbox message once a write of it was tried (its
     /// counter kept for the next try).
     pub(crate) outbox: VecDeque<VecDeque<Vec<u8>>>,
@@ -22,7 +26,7 @@ pub struct EoeLink {
 }
 
 impl EoeLink {
-    /// Whether frames queued by `eoe_queue` are still going out.
+    /// Whether frames queued by `Eoe::queue` are still going out.
     pub fn sending(&self) -> bool {
         !self.outbox.is_empty() || self.trying.is_some()
     }

@@ -1,11 +1,12 @@
 //! The FoE client: files to and from a slave's mailbox (firmware, parameter sets), packet by
 //! packet, each acknowledged (ETG.1000.6 §5.7).
-use ferrocat_wire::foe::{max_data_len, Foe};
+use ferrocat_wire::foe::{self as wire, max_data_len};
 use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::AlState;
 
 use crate::error::{MasterError, Result};
 use crate::io::Io;
+use crate::mailbox::Mailboxes;
 use crate::master::Master;
 use crate::slave::MailboxConfig;
 
@@ -43,22 +44,37 @@ impl<I: Io> Master<I> {
         left?;
         self.write_mailbox_config(position)
     }
+}
 
-    fn foe_error(&self, position: u16, what: String) -> MasterError {
-        MasterError::slave(position, &self.name_of(position), what)
+/// The FoE client of one master (see [`Master::foe`](crate::Master::foe)): it borrows the master's engine and
+/// slave list for as long as it is used.
+pub struct Foe<'a, I: Io> {
+    pub(crate) mbx: Mailboxes<'a, I>,
+}
+
+impl<I: Io> Master<I> {
+    /// The FoE client: files to and from a slave (see also [`Master::enter_bootstrap`]).
+    pub fn foe(&mut self) -> Foe<'_, I> {
+        Foe { mbx: self.mailboxes() }
+    }
+}
+
+impl<I: Io> Foe<'_, I> {
+    fn error(&self, position: u16, what: String) -> MasterError {
+        MasterError::slave(position, &self.mbx.name_of(position), what)
     }
 
-    fn foe_exchange(&mut self, position: u16, msg: Foe<'_>) -> Result<Vec<u8>> {
+    fn exchange(&mut self, position: u16, msg: wire::Foe<'_>) -> Result<Vec<u8>> {
         let mut b = vec![0u8; msg.len()];
         msg.emit(&mut b)?;
-        self.mbx_write(position, MailboxType::FOE, &b)?;
-        self.mbx_read(position, MailboxType::FOE)
+        self.mbx.write(position, MailboxType::FOE, &b)?;
+        self.mbx.read(position, MailboxType::FOE)
     }
 
     /// What an FoE reply that is not the one expected means, as an error.
-    fn foe_unexpected(&self, position: u16, file: &str, reply: &[u8], expected: &str) -> MasterError {
-        let what = match Foe::parse(reply) {
-            Ok(Foe::Error { code, text }) => {
+    fn unexpected(&self, position: u16, file: &str, reply: &[u8], expected: &str) -> MasterError {
+        let what = match wire::Foe::parse(reply) {
+            Ok(wire::Foe::Error { code, text }) => {
                 let text = String::from_utf8_lossy(text);
                 let text = text.trim_end_matches('\0');
                 if text.is_empty() || Some(text) == code.name() {
@@ -70,20 +86,20 @@ impl<I: Io> Master<I> {
             Ok(other) => format!("FoE '{file}': {other:?} where {expected} was expected"),
             Err(e) => format!("FoE '{file}': reply does not decode: {e}"),
         };
-        self.foe_error(position, what)
+        self.error(position, what)
     }
 
     /// Writes `data` as file `file` to the slave at `position` (in a state with a mailbox:
-    /// PREOP and above, or BOOT for firmware — see [`enter_bootstrap`](Self::enter_bootstrap)).
-    pub fn foe_write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<()> {
-        let (_, _, m) = self.mailbox_of(position, MailboxType::FOE)?;
+    /// PREOP and above, or BOOT for firmware — see [`Master::enter_bootstrap`]).
+    pub fn write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<()> {
+        let (_, _, m) = self.mbx.mailbox_of(position, MailboxType::FOE)?;
         let max = max_data_len(m.out.1 as usize);
         if max == 0 {
-            return Err(self.foe_error(position, format!("FoE: a {}-byte mailbox carries no data", m.out.1)));
+            return Err(self.error(position, format!("FoE: a {}-byte mailbox carries no data", m.out.1)));
         }
-        let reply = self.foe_exchange(position, Foe::WriteRequest { password, file_name: file.as_bytes() })?;
-        if Foe::parse(&reply).ok() != Some(Foe::Ack { packet: 0 }) {
-            return Err(self.foe_unexpected(position, file, &reply, "the acknowledge of packet 0"));
+        let reply = self.exchange(position, wire::Foe::WriteRequest { password, file_name: file.as_bytes() })?;
+        if wire::Foe::parse(&reply).ok() != Some(wire::Foe::Ack { packet: 0 }) {
+            return Err(self.unexpected(position, file, &reply, "the acknowledge of packet 0"));
         }
         // Full packets, then a short one (empty where the file fills the last).
         let mut sent = 0;
@@ -92,24 +108,17 @@ impl<I: Io> Master<I> {
             let chunk = &data[sent..(sent + max).min(data.len())];
             packet = packet.wrapping_add(1);
             let mut busy = 0;
-            let mut reply = self.foe_exchange(position, Foe::Data { packet, data: chunk })?;
+            let mut reply = self.exchange(position, wire::Foe::Data { packet, data: chunk })?;
             // Busy: the same packet again once the slave is ready.
-            while let Ok(Foe::Busy { .. }) = Foe::parse(&reply) {
+            while let Ok(wire::Foe::Busy { .. }) = wire::Foe::parse(&reply) {
                 busy += 1;
                 if busy > MAX_BUSY {
-                    return Err(
-                        self.foe_error(position, format!("FoE '{file}': busy {MAX_BUSY} times at packet {packet}"))
-                    );
+                    return Err(self.error(position, format!("FoE '{file}': busy {MAX_BUSY} times at packet {packet}")));
                 }
-                reply = self.foe_exchange(position, Foe::Data { packet, data: chunk })?;
+                reply = self.exchange(position, wire::Foe::Data { packet, data: chunk })?;
             }
-            if Foe::parse(&reply).ok() != Some(Foe::Ack { packet }) {
-                return Err(self.foe_unexpected(
-                    position,
-                    file,
-                    &reply,
-                    &format!("the acknowledge of packet {packet}"),
-                ));
+            if wire::Foe::parse(&reply).ok() != Some(wire::Foe::Ack { packet }) {
+                return Err(self.unexpected(position, file, &reply, &format!("the acknowledge of packet {packet}")));
             }
             sent += chunk.len();
             if chunk.len() < max {
@@ -120,36 +129,36 @@ impl<I: Io> Master<I> {
 
     /// Reads file `file` from the slave at `position`. `max_bytes` bounds what is kept: a
     /// slave sending more is an error (the transfer is aborted), not a truncated file.
-    pub fn foe_read(&mut self, position: u16, file: &str, password: u32, max_bytes: usize) -> Result<Vec<u8>> {
-        let (_, _, m) = self.mailbox_of(position, MailboxType::FOE)?;
+    pub fn read(&mut self, position: u16, file: &str, password: u32, max_bytes: usize) -> Result<Vec<u8>> {
+        let (_, _, m) = self.mbx.mailbox_of(position, MailboxType::FOE)?;
         let max = max_data_len(m.inp.1 as usize);
         let mut data = Vec::new();
         let mut expect = 1u32;
-        let mut reply = self.foe_exchange(position, Foe::ReadRequest { password, file_name: file.as_bytes() })?;
+        let mut reply = self.exchange(position, wire::Foe::ReadRequest { password, file_name: file.as_bytes() })?;
         loop {
-            let (packet, chunk) = match Foe::parse(&reply) {
-                Ok(Foe::Data { packet, data }) if packet == expect => (packet, data),
-                _ => return Err(self.foe_unexpected(position, file, &reply, &format!("data packet {expect}"))),
+            let (packet, chunk) = match wire::Foe::parse(&reply) {
+                Ok(wire::Foe::Data { packet, data }) if packet == expect => (packet, data),
+                _ => return Err(self.unexpected(position, file, &reply, &format!("data packet {expect}"))),
             };
             if data.len() + chunk.len() > max_bytes {
                 // Tell the slave to stop; its answer (none) is not awaited.
-                let abort = Foe::Error { code: ferrocat_wire::foe::FoeErrorCode::DISK_FULL, text: b"" };
+                let abort = wire::Foe::Error { code: wire::FoeErrorCode::DISK_FULL, text: b"" };
                 let mut b = vec![0u8; abort.len()];
                 abort.emit(&mut b)?;
-                self.mbx_write(position, MailboxType::FOE, &b)?;
-                return Err(self.foe_error(position, format!("FoE '{file}': longer than {max_bytes} bytes")));
+                self.mbx.write(position, MailboxType::FOE, &b)?;
+                return Err(self.error(position, format!("FoE '{file}': longer than {max_bytes} bytes")));
             }
             data.extend_from_slice(chunk);
             let last = chunk.len() < max;
-            let ack = Foe::Ack { packet };
+            let ack = wire::Foe::Ack { packet };
             if last {
                 let mut b = vec![0u8; ack.len()];
                 ack.emit(&mut b)?;
-                self.mbx_write(position, MailboxType::FOE, &b)?;
+                self.mbx.write(position, MailboxType::FOE, &b)?;
                 return Ok(data);
             }
             expect = expect.wrapping_add(1);
-            reply = self.foe_exchange(position, ack)?;
+            reply = self.exchange(position, ack)?;
         }
     }
 }

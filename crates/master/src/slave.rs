@@ -217,3 +217,13 @@ impl Slave {
         self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
     }
 }
+
+/// The slave at `position` in `slaves`, or an error saying how many there are.
+pub(crate) fn slave_at(slaves: &[Slave], position: u16) -> crate::error::Result<&Slave> {
+    slaves.get(position as usize).ok_or_else(|| {
+        crate::error::MasterError::Config(match slaves.len() {
+            0 => format!("no slave at position {position}: the segment has none"),
+            n => format!("no slave at position {position} (positions count from 0: 0 to {})", n - 1),
+        })
+    })
+}

@@ -26,14 +26,14 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         let mut m = master(seed, 0.05);
         for k in 0..150u32 {
             // Expedited both ways, and a segmented upload (the device name, 0x1008).
-            m.sdo_write(DRIVE, 0x607A, 0, &(k as i32).to_le_bytes()).unwrap();
-            assert_eq!(m.sdo_read(DRIVE, 0x607A, 0).unwrap(), (k as i32).to_le_bytes(), "seed {seed}, {k}");
-            assert_eq!(m.sdo_read(DRIVE, 0x1018, 1).unwrap().len(), 4);
+            m.coe().sdo_write(DRIVE, 0x607A, 0, &(k as i32).to_le_bytes()).unwrap();
+            assert_eq!(m.coe().sdo_read(DRIVE, 0x607A, 0).unwrap(), (k as i32).to_le_bytes(), "seed {seed}, {k}");
+            assert_eq!(m.coe().sdo_read(DRIVE, 0x1018, 1).unwrap().len(), 4);
         }
-        let name = m.sdo_read(DRIVE, 0x1008, 0).unwrap();
+        let name = m.coe().sdo_read(DRIVE, 0x1008, 0).unwrap();
         assert!(!name.is_empty());
-        m.foe_write(DRIVE, "f.bin", 0, &file).unwrap();
-        assert_eq!(m.foe_read(DRIVE, "f.bin", 0, 1 << 20).unwrap(), file, "seed {seed}");
+        m.foe().write(DRIVE, "f.bin", 0, &file).unwrap();
+        assert_eq!(m.foe().read(DRIVE, "f.bin", 0, 1 << 20).unwrap(), file, "seed {seed}");
         repeats += m.slave(DRIVE).unwrap().mbx_repeats;
         duplicates += m.io().seg.nodes[DRIVE as usize].esc.mbx_duplicates;
         // Through INIT and configured again (SM1's activate written with the repeat bit
@@ -42,8 +42,8 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         m.request_state_all(ferrocat_wire::register::AlState::Init).unwrap();
         m.configure().unwrap();
         for k in 0..20i32 {
-            m.sdo_write(DRIVE, 0x607A, 0, &(-k).to_le_bytes()).unwrap();
-            assert_eq!(m.sdo_read(DRIVE, 0x607A, 0).unwrap(), (-k).to_le_bytes(), "seed {seed} after INIT, {k}");
+            m.coe().sdo_write(DRIVE, 0x607A, 0, &(-k).to_le_bytes()).unwrap();
+            assert_eq!(m.coe().sdo_read(DRIVE, 0x607A, 0).unwrap(), (-k).to_le_bytes(), "seed {seed} after INIT, {k}");
         }
         // Every repeat the firmware made was one the master asked for.
         let answered = m.io().seg.nodes[DRIVE as usize].esc.mbx_repeats;

@@ -29,8 +29,8 @@ fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
     m.configure().unwrap();
     assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9010]);
     // 0xF000: the index distance between modules and how many the slots take at most.
-    assert_eq!(m.sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
-    assert_eq!(m.sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
+    assert_eq!(m.coe().sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
+    assert_eq!(m.coe().sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
     // Axis 1's objects 0x800 above axis 0's (CiA402's multi-axis layout).
     assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
     assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
@@ -118,7 +118,7 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
     assert_eq!(axes[1].update(&mut m), Some(State::Fault));
     assert_eq!(axes[0].update(&mut m), Some(State::SwitchOnDisabled));
     let code = |m: &mut Master<VirtualIo>, index| {
-        u16::from_le_bytes(m.sdo_read(0, index, 0).unwrap()[..2].try_into().unwrap())
+        u16::from_le_bytes(m.coe().sdo_read(0, index, 0).unwrap()[..2].try_into().unwrap())
     };
     assert_eq!((code(&mut m, 0x603F), code(&mut m, 0x683F)), (0, error_code::OVERCURRENT));
     // Past the last axis a drive may have, the driver says so.
@@ -146,7 +146,7 @@ fn module_objects_and_init_commands_follow_the_slot() {
         ]
     );
     let read_u32 = |m: &mut Master<VirtualIo>, index| {
-        let v = m.sdo_read(0, index, 0).unwrap();
+        let v = m.coe().sdo_read(0, index, 0).unwrap();
         let mut b = [0u8; 4];
         b[..v.len().min(4)].copy_from_slice(&v[..v.len().min(4)]);
         u32::from_le_bytes(b)

@@ -2,8 +2,9 @@
 //! `crate::` paths (outside comments and test code, root re-exports resolved through lib.rs)
 //! form an acyclic graph. A module that both uses `master` and is used by it would tie the
 //! two together again; types the master keeps live in leaf modules instead (`cycle_state`,
-//! `eoe_link`, `sync::SyncState`, `far_clock`), and the clients (CoE, FoE, EoE, DC, process
-//! data, CiA402) build on `master` from outside.
+//! `eoe_link`, `event`, `sync::SyncState`, `far_clock`), the mailbox layer borrows the engine
+//! and the slave list without knowing the master (`mailbox`), and the clients (CoE, FoE, EoE,
+//! DC, process data, CiA402) build on `master` from outside.
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 

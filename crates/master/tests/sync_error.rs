@@ -38,7 +38,7 @@ fn bring_up(m: &mut Master<VirtualIo>, setup: &[(u16, u8, Vec<u8>)], sync0: &[u1
     m.scan().unwrap();
     m.configure().unwrap();
     for (index, sub, data) in setup {
-        m.sdo_write(1, *index, *sub, data).unwrap();
+        m.coe().sdo_write(1, *index, *sub, data).unwrap();
     }
     m.init_dc(&DcConfig {
         sync0_cycle_ns: CYCLE_NS as u32,

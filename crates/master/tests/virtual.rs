@@ -74,30 +74,30 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     assert_eq!(m.slaves[0].name, "C5-E-2-21");
     m.configure().unwrap();
     // Expedited, normal (a name of more than 4 bytes), segmented (≈1 KiB), complete access.
-    assert_eq!(m.sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
-    let name = m.sdo_read(0, 0x1008, 0).unwrap();
+    assert_eq!(m.coe().sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
+    let name = m.coe().sdo_read(0, 0x1008, 0).unwrap();
     assert!(name.len() > 4, "{name:?}");
-    let big = m.sdo_upload(0, 0x2701, 0, true).unwrap();
+    let big = m.coe().sdo_upload(0, 0x2701, 0, true).unwrap();
     assert!(big.len() > 1000);
     // A long string into the drive's customer storage (segmented download), and back
     // (segmented upload).
     let text = "ferrocat writes a long string through a 128-byte mailbox, segment by segment. ".repeat(12);
     let mut pattern = big.clone();
     pattern[2..2 + text.len()].copy_from_slice(text.as_bytes());
-    m.sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
-    let back = m.sdo_upload(0, 0x2701, 0, true).unwrap();
+    m.coe().sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
+    let back = m.coe().sdo_upload(0, 0x2701, 0, true).unwrap();
     assert_eq!(&back[2..2 + text.len()], text.as_bytes());
     assert_eq!(back, pattern);
-    assert_eq!(m.sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
-    m.sdo_write(0, 0x6060, 0, &[8]).unwrap();
-    assert_eq!(m.sdo_read(0, 0x6060, 0).unwrap(), [8]);
+    assert_eq!(m.coe().sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
+    m.coe().sdo_write(0, 0x6060, 0, &[8]).unwrap();
+    assert_eq!(m.coe().sdo_read(0, 0x6060, 0).unwrap(), [8]);
     // Aborts by name.
-    let e = m.sdo_read(0, 0x1234, 0).unwrap_err().to_string();
+    let e = m.coe().sdo_read(0, 0x1234, 0).unwrap_err().to_string();
     assert!(e.contains("does not exist"), "{e}");
     // SDO information.
-    let list = m.od_list(0).unwrap();
+    let list = m.coe().od_list(0).unwrap();
     assert!(list.len() > 150 && list.contains(&0x6040));
-    assert_eq!(m.object_info(0, 0x1018).unwrap().max_subindex, 4);
+    assert_eq!(m.coe().object_info(0, 0x1018).unwrap().max_subindex, 4);
     // Remapping: 0x1601 (target position, profile velocity) instead of 0x1600.
     let before = m.out_bytes;
     m.remap(0, true, &[0x1601]).unwrap();
@@ -111,7 +111,7 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
         ferrocat_master::io::Io::sleep_until(m.io_mut(), now + 1_000_000);
         m.cycle().unwrap();
     }
-    assert_eq!(m.sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
+    assert_eq!(m.coe().sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
 }
 
 #[test]
@@ -134,7 +134,7 @@ fn needs_shared_emergencies_reach_the_application() {
         m.events.iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
     assert_eq!(got, ["slave 0 (C5-E-2-21): emergency 0x8611, error register 0x20, data [01, 02, 03, 04, 05]"]);
     // And an SDO still works afterwards.
-    assert_eq!(m.sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
+    assert_eq!(m.coe().sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
 }
 
 #[test]

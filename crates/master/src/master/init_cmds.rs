@@ -26,7 +26,7 @@ impl<I: Io> Master<I> {
             None => return Ok(0),
         };
         for c in &cmds {
-            self.sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
+            self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
                 let name = self.slaves[position as usize].name.clone();
                 MasterError::slave(
                     position,

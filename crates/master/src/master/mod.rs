@@ -1,12 +1,12 @@
 //! Bring-up: finding the slaves, reading what they are, configuring mailboxes and process data,
 //! and walking them through the AL states.
 use ferrocat_wire::register::addr;
-use ferrocat_wire::register::{AlState, AlStatus, AlStatusCode, DlStatus};
+use ferrocat_wire::register::{AlState, DlStatus};
 use ferrocat_wire::sii::SiiInfo;
 use ferrocat_wire::{Address, Command};
 
 use crate::engine::{Engine, EngineStats, Pdu, RingState, SlaveTag, SplitRingClocks};
-use crate::error::{code_text, MasterError, Result};
+use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::slave::{MailboxConfig, Slave};
 
@@ -21,87 +21,11 @@ mod speed_direction;
 mod split_start;
 mod states;
 
+use crate::event::MasterEvent;
 pub use split_start::SplitLatch;
 
 /// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).
 pub const STATION_BASE: u16 = 0x1001;
-
-/// Something that happened to a slave during operation, reported once.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum MasterEvent {
-    /// The slave left OP (its AL status and code).
-    LeftOp {
-        /// Position on the segment.
-        position: u16,
-        /// Name from the SII.
-        name: String,
-        /// AL status read.
-        status: AlStatus,
-        /// AL status code read.
-        code: AlStatusCode,
-    },
-    /// The slave stopped answering (link lost or powered off).
-    Lost {
-        /// Position on the segment.
-        position: u16,
-        /// Name from the SII.
-        name: String,
-    },
-    /// The slave is back in OP.
-    Recovered {
-        /// Position on the segment.
-        position: u16,
-        /// Name from the SII.
-        name: String,
-    },
-    /// A CoE emergency.
-    Emergency {
-        /// Position on the segment.
-        position: u16,
-        /// Name from the SII.
-        name: String,
-        /// The emergency error code.
-        error_code: u16,
-        /// The error register (0x1001).
-        error_register: u8,
-        /// The manufacturer-specific bytes.
-        data: [u8; 5],
-    },
-    /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
-    Ring {
-        /// The ring's state now.
-        state: crate::engine::RingState,
-    },
-}
-
-impl std::fmt::Display for MasterEvent {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            MasterEvent::LeftOp { position, name, status, code } => {
-                let st = status.state().map(|s| s.name()).unwrap_or("?");
-                write!(
-                    f,
-                    "slave {position} ({name}) left OP: now {st}{}{}",
-                    if status.error() { " with an error" } else { "" },
-                    code_text(*code)
-                )
-            }
-            MasterEvent::Lost { position, name } => write!(f, "slave {position} ({name}) is not answering"),
-            MasterEvent::Recovered { position, name } => write!(f, "slave {position} ({name}) is back in OP"),
-            MasterEvent::Emergency { position, name, error_code, error_register, data } => {
-                write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
-            }
-            MasterEvent::Ring { state } => f.write_str(match state {
-                crate::engine::RingState::Broken => {
-                    "ring broken: the slaves behind the break are served from the secondary port"
-                }
-                crate::engine::RingState::Intact => "ring closed again",
-                crate::engine::RingState::Line => "ring open: nothing answers on the secondary port",
-                crate::engine::RingState::Unknown => "ring state unknown",
-            }),
-        }
-    }
-}
 
 #[derive(Debug)]
 /// An EtherCAT master on the world `I`: its slaves, its process image, its events.
@@ -189,14 +113,14 @@ impl<I: Io> Master<I> {
         }
     }
 
-    /// Records an event for the application (`events`) and logs it (`tracing`, info): the
-    /// application is told through `events`, the log is for whoever runs it.
     /// The events so far, in order, leaving none: what a long-running loop calls now and then
     /// so that [`Master::events`](Master) does not grow for as long as the master runs.
     pub fn take_events(&mut self) -> Vec<MasterEvent> {
         std::mem::take(&mut self.events)
     }
 
+    /// Records an event for the application (`events`) and logs it (`tracing`, info): the
+    /// application is told through `events`, the log is for whoever runs it.
     pub(crate) fn push_event(&mut self, e: MasterEvent) {
         tracing::info!("{e}");
         self.events.push(e);
@@ -204,12 +128,22 @@ impl<I: Io> Master<I> {
 
     /// The slave at `position`, or an error saying how many there are.
     pub fn slave(&self, position: u16) -> Result<&Slave> {
-        self.slaves.get(position as usize).ok_or_else(|| {
-            MasterError::Config(match self.slaves.len() {
-                0 => format!("no slave at position {position}: the segment has none"),
-                n => format!("no slave at position {position} (positions count from 0: 0 to {})", n - 1),
-            })
-        })
+        crate::slave::slave_at(&self.slaves, position)
+    }
+
+    pub(crate) fn mailboxes(&mut self) -> crate::mailbox::Mailboxes<'_, I> {
+        crate::mailbox::Mailboxes {
+            engine: &mut self.engine,
+            slaves: &mut self.slaves,
+            events: &mut self.events,
+            timeout_ns: self.mailbox_timeout_ns,
+        }
+    }
+
+    /// Reads every CoE slave's send mailbox once: emergencies waiting there become events.
+    /// Returns how many messages were read.
+    pub fn poll_mailboxes(&mut self) -> Result<usize> {
+        self.mailboxes().poll_all()
     }
 
     /// Finds the slaves and reads everything about them: count, station addresses, identity

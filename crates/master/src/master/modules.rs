@@ -12,10 +12,10 @@ const DETECTED: u16 = 0xF050;
 impl<I: Io> Master<I> {
     /// The modules slave `position` (in PREOP) carries, slot by slot, from its 0xF050.
     pub fn detected_modules(&mut self, position: u16) -> Result<Vec<u32>> {
-        let n = *self.sdo_read(position, DETECTED, 0)?.first().unwrap_or(&0);
+        let n = *self.coe().sdo_read(position, DETECTED, 0)?.first().unwrap_or(&0);
         (1..=n)
             .map(|k| {
-                let v = self.sdo_read(position, DETECTED, k)?;
+                let v = self.coe().sdo_read(position, DETECTED, k)?;
                 let b: [u8; 4] = v.get(..4).and_then(|b| b.try_into().ok()).ok_or_else(|| {
                     let name = self.slaves[position as usize].name.clone();
                     MasterError::slave(position, &name, format!("0xF050:{k:02x} is {} bytes, not 4", v.len()))
@@ -33,11 +33,11 @@ impl<I: Io> Master<I> {
         let name = self.slave(position)?.name.clone();
         let count = u8::try_from(idents.len())
             .map_err(|_| MasterError::slave(position, &name, format!("{} modules: 0xF030 holds 255", idents.len())))?;
-        self.sdo_write(position, CONFIGURED, 0, &[0])?;
+        self.coe().sdo_write(position, CONFIGURED, 0, &[0])?;
         for (k, ident) in idents.iter().enumerate() {
-            self.sdo_write(position, CONFIGURED, k as u8 + 1, &ident.to_le_bytes())?;
+            self.coe().sdo_write(position, CONFIGURED, k as u8 + 1, &ident.to_le_bytes())?;
         }
-        self.sdo_write(position, CONFIGURED, 0, &[count])?;
+        self.coe().sdo_write(position, CONFIGURED, 0, &[count])?;
         let detected = self.detected_modules(position)?;
         let slots = idents.len().max(detected.len());
         let shown = |v: Option<&u32>| v.map_or("none".to_string(), |m| format!("{m:#010x}"));

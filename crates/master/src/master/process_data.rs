@@ -84,13 +84,13 @@ impl<I: Io> Master<I> {
 
     pub(super) fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
         let mut v = Vec::new();
-        let n = self.sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+        let n = self.coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
         for k in 1..=n {
-            let p = self.sdo_read(position, assign, k)?;
+            let p = self.coe().sdo_read(position, assign, k)?;
             let pdo = u16::from_le_bytes([p[0], *p.get(1).unwrap_or(&0)]);
-            let m = self.sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
+            let m = self.coe().sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
             for j in 1..=m {
-                let e = self.sdo_read(position, pdo, j)?;
+                let e = self.coe().sdo_read(position, pdo, j)?;
                 if e.len() < 4 {
                     continue;
                 }
@@ -122,11 +122,11 @@ impl<I: Io> Master<I> {
 
     pub(super) fn write_assignment(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
         let assign = if outputs { 0x1C12 } else { 0x1C13 };
-        self.sdo_write(position, assign, 0, &[0])?;
+        self.coe().sdo_write(position, assign, 0, &[0])?;
         for (k, p) in pdos.iter().enumerate() {
-            self.sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
+            self.coe().sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
         }
-        self.sdo_write(position, assign, 0, &[pdos.len() as u8])
+        self.coe().sdo_write(position, assign, 0, &[pdos.len() as u8])
     }
 
     /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and

@@ -1,0 +1,80 @@
+//! What the master reports to the application during operation.
+use crate::error::code_text;
+use ferrocat_wire::register::{AlStatus, AlStatusCode};
+
+/// Something that happened to a slave during operation, reported once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// The slave left OP (its AL status and code).
+    LeftOp {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// AL status read.
+        status: AlStatus,
+        /// AL status code read.
+        code: AlStatusCode,
+    },
+    /// The slave stopped answering (link lost or powered off).
+    Lost {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+    },
+    /// The slave is back in OP.
+    Recovered {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+    },
+    /// A CoE emergency.
+    Emergency {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The emergency error code.
+        error_code: u16,
+        /// The error register (0x1001).
+        error_register: u8,
+        /// The manufacturer-specific bytes.
+        data: [u8; 5],
+    },
+    /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
+    Ring {
+        /// The ring's state now.
+        state: crate::engine::RingState,
+    },
+}
+
+impl std::fmt::Display for MasterEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MasterEvent::LeftOp { position, name, status, code } => {
+                let st = status.state().map(|s| s.name()).unwrap_or("?");
+                write!(
+                    f,
+                    "slave {position} ({name}) left OP: now {st}{}{}",
+                    if status.error() { " with an error" } else { "" },
+                    code_text(*code)
+                )
+            }
+            MasterEvent::Lost { position, name } => write!(f, "slave {position} ({name}) is not answering"),
+            MasterEvent::Recovered { position, name } => write!(f, "slave {position} ({name}) is back in OP"),
+            MasterEvent::Emergency { position, name, error_code, error_register, data } => {
+                write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
+            }
+            MasterEvent::Ring { state } => f.write_str(match state {
+                crate::engine::RingState::Broken => {
+                    "ring broken: the slaves behind the break are served from the secondary port"
+                }
+                crate::engine::RingState::Intact => "ring closed again",
+                crate::engine::RingState::Line => "ring open: nothing answers on the secondary port",
+                crate::engine::RingState::Unknown => "ring state unknown",
+            }),
+        }
+    }
+}
