@@ -28,6 +28,7 @@ pub struct LiveArgs {
     pub settle_s: f64,
     pub seconds: f64,
     pub seed: u64,
+    pub io: crate::target::IoPath,
     pub json: bool,
 }
 
@@ -203,7 +204,7 @@ impl ClockPiece {
 }
 
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
-    let target = crate::target::Target::on_iface(iface, false);
+    let target = crate::target::Target { io: a.io, ..crate::target::Target::on_iface(iface, false) };
     let mut m = target.master()?;
     // The simulator's ESCs, as in the virtual lab: ferrocat's methods are told their loop-back.
     ferrocat_lab::tell_loop_back(&mut m, method);
@@ -515,8 +516,16 @@ mod tests {
 
     #[test]
     fn one_stall_rules_the_rms_and_not_the_median_error() {
-        let a =
-            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let a = LiveArgs {
+            methods: vec![],
+            slaves: 1,
+            cycle_us: 1000,
+            settle_s: 0.0,
+            seconds: 1.0,
+            seed: 1,
+            io: crate::target::IoPath::Auto,
+            json: false,
+        };
         let log = std::env::temp_dir().join(format!("ferrocat-live-median-{}.csv", std::process::id()));
         // Master − reference: +100, −200, +300 ns and one 50 µs stall.
         let lines: String = [100i64, -200, 300, 50_000]
@@ -547,8 +556,16 @@ mod tests {
 
     #[test]
     fn a_method_without_a_master_clock_reports_its_phase_only() {
-        let a =
-            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let a = LiveArgs {
+            methods: vec![],
+            slaves: 1,
+            cycle_us: 1000,
+            settle_s: 0.0,
+            seconds: 1.0,
+            seed: 1,
+            io: crate::target::IoPath::Auto,
+            json: false,
+        };
         let log = std::env::temp_dir().join(format!("ferrocat-live-phase-{}.csv", std::process::id()));
         std::fs::write(
             &log,
@@ -581,8 +598,16 @@ mod tests {
 
     #[test]
     fn a_master_that_follows_the_reference_is_measured_on_its_own_line() {
-        let a =
-            LiveArgs { methods: vec![], slaves: 1, cycle_us: 1000, settle_s: 0.0, seconds: 1.0, seed: 1, json: false };
+        let a = LiveArgs {
+            methods: vec![],
+            slaves: 1,
+            cycle_us: 1000,
+            settle_s: 0.0,
+            seconds: 1.0,
+            seed: 1,
+            io: crate::target::IoPath::Auto,
+            json: false,
+        };
         let log = std::env::temp_dir().join(format!("ferrocat-live-unit-{}.csv", std::process::id()));
         // Monotonic 1 000 000 ns is own 5 001 000 000; the slave reads 7 000 000 000 + 500 then.
         std::fs::write(&log, "t,s0\n900000,1\n1000000,7000000500\n2000000,7001000600\n").unwrap();

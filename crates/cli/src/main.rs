@@ -307,6 +307,9 @@ enum LabCmd {
         /// Seed of the simulator's random draws (crystals, latencies): the same seed gives the same segment.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// How the master's frames move (as `run --io`).
+        #[arg(long, value_enum, default_value = "auto")]
+        io: target::IoPath,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -571,7 +574,7 @@ fn main() -> ExitCode {
                 LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
                 LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
                 LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
-                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, json } => {
+                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, json } => {
                     lab_live::run(lab_live::LiveArgs {
                         methods: method,
                         slaves,
@@ -579,6 +582,7 @@ fn main() -> ExitCode {
                         settle_s,
                         seconds,
                         seed,
+                        io,
                         json,
                     })
                 }

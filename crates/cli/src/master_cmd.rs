@@ -419,7 +419,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     if !m.io_mut().is_virtual() {
         crate::target::go_real_time();
     }
-    eprintln!("timestamps: {}", m.io_mut().timestamps());
+    eprintln!("timestamps: {}; frames through {}", m.io_mut().timestamps(), m.io_mut().path());
     let t_start = {
         use ferrocat_master::io::Io;
         m.io_mut().now_ns()

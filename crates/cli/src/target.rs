@@ -32,6 +32,12 @@ pub struct Target {
     /// Send even on an interface that has an IPv4 or a global IPv6 address.
     #[arg(long, requires = "iface")]
     pub force: bool,
+    /// With --iface: how frames move. io_uring sends a cycle's frames and waits for the answer
+    /// in one system call; socket makes a sendto per frame, a recvmsg per answer and a read of
+    /// the transmit stamp; auto takes io_uring where the kernel allows it (a cable-redundant
+    /// pair always uses socket calls).
+    #[arg(long, value_enum, default_value = "auto", requires = "iface")]
+    pub io: IoPath,
     /// Use the embedded virtual segment described by this file.
     #[arg(long, value_name = "SEG.toml")]
     pub config: Option<PathBuf>,
@@ -48,6 +54,24 @@ pub struct Target {
     /// Write every frame sent and received to this pcapng file.
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
+}
+
+/// [`ferrocat_master::io::LinkPath`] on the command line.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IoPath {
+    Auto,
+    Uring,
+    Socket,
+}
+
+impl From<IoPath> for ferrocat_master::io::LinkPath {
+    fn from(p: IoPath) -> Self {
+        match p {
+            IoPath::Auto => Self::Auto,
+            IoPath::Uring => Self::Uring,
+            IoPath::Socket => Self::Socket,
+        }
+    }
 }
 
 /// [`ferrocat_master::SplitRingClocks`] on the command line.
@@ -107,6 +131,14 @@ impl CliIo {
             World::Virtual(_) => "exact virtual time",
             World::Raw(r) => r.timestamps(),
             World::Udp(_) => "no kernel timestamps (UDP)",
+        }
+    }
+    /// How frames move, in words.
+    pub fn path(&self) -> &'static str {
+        match &self.world {
+            World::Virtual(_) => "the embedded virtual segment",
+            World::Raw(r) => r.path(),
+            World::Udp(_) => "UDP socket calls",
         }
     }
 }
@@ -202,6 +234,7 @@ impl Target {
             split_ring_clocks: SplitClocks::FarReference,
             udp: None,
             force,
+            io: IoPath::Auto,
             config: None,
             device: Vec::new(),
             seed: None,
@@ -223,7 +256,9 @@ impl Target {
                     Some(sec) => World::Raw(
                         RawIo::open_redundant(iface, sec).with_context(|| format!("opening {iface} and {sec}"))?,
                     ),
-                    None => World::Raw(RawIo::open(iface).with_context(|| format!("opening {iface}"))?),
+                    None => World::Raw(
+                        RawIo::open_with(iface, self.io.into()).with_context(|| format!("opening {iface}"))?,
+                    ),
                 }
             }
             (None, true) => {

@@ -3,9 +3,11 @@
 //! CPU), and the [`Io`] trait through which the master meets its world. Shared by the live
 //! segment and the master.
 mod tap;
+mod uring;
 mod world;
 
 pub use tap::Tap;
+pub use uring::UringSocket;
 pub use world::Io;
 
 use std::io;
@@ -87,6 +89,31 @@ fn realtime_ns() -> i128 {
     // SAFETY: clock_gettime writes into the timespec we own.
     unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut r) };
     r.tv_sec as i128 * 1_000_000_000 + r.tv_nsec as i128
+}
+
+/// The kernel's timestamp in a received message's control data (the NIC's where there is one),
+/// as CLOCK_MONOTONIC ns.
+///
+/// # Safety
+/// `msg` is a header a completed `recvmsg` filled: its control pointer and length describe
+/// control data the kernel wrote.
+unsafe fn stamp_of(msg: &libc::msghdr) -> Option<u64> {
+    let mut stamp = None;
+    let mut c = libc::CMSG_FIRSTHDR(msg);
+    while !c.is_null() {
+        if (*c).cmsg_level == libc::SOL_SOCKET && (*c).cmsg_type == libc::SO_TIMESTAMPING {
+            let ts = libc::CMSG_DATA(c) as *const libc::timespec;
+            let sw = std::ptr::read_unaligned(ts);
+            let hw = std::ptr::read_unaligned(ts.add(2));
+            let pick = if hw.tv_sec != 0 || hw.tv_nsec != 0 { hw } else { sw };
+            if pick.tv_sec != 0 || pick.tv_nsec != 0 {
+                let real = pick.tv_sec as i128 * 1_000_000_000 + pick.tv_nsec as i128;
+                stamp = Some((real - realtime_offset_ns()).max(0) as u64);
+            }
+        }
+        c = libc::CMSG_NXTHDR(msg, c);
+    }
+    stamp
 }
 
 #[repr(C)]
@@ -277,21 +304,7 @@ impl RawSocket {
                     _ => Err(e),
                 };
             }
-            let mut stamp = None;
-            let mut c = libc::CMSG_FIRSTHDR(&msg);
-            while !c.is_null() {
-                if (*c).cmsg_level == libc::SOL_SOCKET && (*c).cmsg_type == libc::SO_TIMESTAMPING {
-                    let ts = libc::CMSG_DATA(c) as *const libc::timespec;
-                    let sw = std::ptr::read_unaligned(ts);
-                    let hw = std::ptr::read_unaligned(ts.add(2));
-                    let pick = if hw.tv_sec != 0 || hw.tv_nsec != 0 { hw } else { sw };
-                    if pick.tv_sec != 0 || pick.tv_nsec != 0 {
-                        let real = pick.tv_sec as i128 * 1_000_000_000 + pick.tv_nsec as i128;
-                        stamp = Some((real - realtime_offset_ns()).max(0) as u64);
-                    }
-                }
-                c = libc::CMSG_NXTHDR(&msg, c);
-            }
+            let stamp = stamp_of(&msg);
             Ok(Some((n as usize, stamp)))
         }
     }

@@ -3,11 +3,32 @@
 //! [`Io`] trait.
 pub use ferrocat_link::Io;
 
+/// How a [`RawIo`] moves its frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinkPath {
+    /// io_uring where the kernel allows it, else the socket calls (and a log line says why).
+    #[default]
+    Auto,
+    /// io_uring: the frames sent leave with the wait for the answer, one system call per
+    /// exchange; an error where it is not available.
+    Uring,
+    /// The socket calls: a `sendto` per frame and a `recvmsg` per answer, and a read of the
+    /// transmit stamp.
+    Socket,
+}
+
+#[derive(Debug)]
+enum Port {
+    Socket(ferrocat_link::RawSocket),
+    Uring(Box<ferrocat_link::UringSocket>),
+}
+
 /// Real time on a network interface through an AF_PACKET raw socket, with kernel (or NIC)
-/// timestamps where available.
+/// timestamps where available, driven through io_uring where the kernel allows it
+/// ([`LinkPath`]). On io_uring a frame sent leaves with the next receive or sleep.
 #[derive(Debug)]
 pub struct RawIo {
-    sock: ferrocat_link::RawSocket,
+    port: Port,
     /// The second port of a ring (cable redundancy).
     secondary: Option<ferrocat_link::RawSocket>,
     last_rx_secondary: bool,
@@ -18,28 +39,55 @@ pub struct RawIo {
 }
 
 impl RawIo {
-    /// A raw socket on the interface `iface` (needs root or CAP_NET_RAW).
+    /// A raw socket on the interface `iface` (needs root or CAP_NET_RAW), on io_uring where
+    /// the kernel allows it.
     pub fn open(iface: &str) -> std::io::Result<Self> {
-        Ok(RawIo {
-            sock: ferrocat_link::RawSocket::open(iface)?,
-            secondary: None,
-            last_rx_secondary: false,
-            tx_stamps: [None; 2],
-            wake_target_ns: None,
-        })
+        Self::open_with(iface, LinkPath::Auto)
+    }
+
+    /// A raw socket on `iface`, moving frames by `path`.
+    pub fn open_with(iface: &str, path: LinkPath) -> std::io::Result<Self> {
+        let sock = ferrocat_link::RawSocket::open(iface)?;
+        let port = match path {
+            LinkPath::Socket => Port::Socket(sock),
+            LinkPath::Uring => Port::Uring(Box::new(ferrocat_link::UringSocket::new(sock).map_err(|(e, _)| e)?)),
+            LinkPath::Auto => match ferrocat_link::UringSocket::new(sock) {
+                Ok(u) => Port::Uring(Box::new(u)),
+                Err((e, sock)) => {
+                    tracing::info!("{iface}: io_uring not available ({e}); socket calls instead");
+                    Port::Socket(sock)
+                }
+            },
+        };
+        Ok(RawIo { port, secondary: None, last_rx_secondary: false, tx_stamps: [None; 2], wake_target_ns: None })
     }
 
     /// Both ports of a ring: the line starts at `primary`, its far end comes back to
-    /// `secondary`.
+    /// `secondary` (socket calls: the two ports are waited on together).
     pub fn open_redundant(primary: &str, secondary: &str) -> std::io::Result<Self> {
-        let mut io = RawIo::open(primary)?;
+        let mut io = RawIo::open_with(primary, LinkPath::Socket)?;
         io.secondary = Some(ferrocat_link::RawSocket::open(secondary)?);
         Ok(io)
     }
 
+    fn sock(&self) -> &ferrocat_link::RawSocket {
+        match &self.port {
+            Port::Socket(s) => s,
+            Port::Uring(u) => u.socket(),
+        }
+    }
+
     /// Which timestamps are in use, in words.
     pub fn timestamps(&self) -> &'static str {
-        self.sock.timestamps().describe()
+        self.sock().timestamps().describe()
+    }
+
+    /// How frames move: "io_uring" or "socket calls".
+    pub fn path(&self) -> &'static str {
+        match self.port {
+            Port::Socket(_) => "socket calls",
+            Port::Uring(_) => "io_uring",
+        }
     }
 }
 
@@ -49,25 +97,34 @@ impl Io for RawIo {
     }
     fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
         self.tx_stamps[0] = None;
-        self.sock.send(frame)
+        match &mut self.port {
+            Port::Socket(s) => s.send(frame),
+            Port::Uring(u) => u.send(frame),
+        }
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
+        let sock = match &mut self.port {
+            Port::Uring(u) => {
+                return Ok(u.recv(buf, deadline_ns)?.map(|(n, t)| (n, t.unwrap_or_else(ferrocat_link::monotonic_ns))))
+            }
+            Port::Socket(s) => &*s,
+        };
         loop {
             let now = ferrocat_link::monotonic_ns();
             if now >= deadline_ns {
                 return Ok(None);
             }
             let Some(sec) = &self.secondary else {
-                self.sock.set_timeout_ns(deadline_ns - now)?;
-                if let Some((n, stamp)) = self.sock.recv_stamped(buf)? {
+                sock.set_timeout_ns(deadline_ns - now)?;
+                if let Some((n, stamp)) = sock.recv_stamped(buf)? {
                     return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
                 }
                 continue;
             };
-            let ready = ferrocat_link::RawSocket::wait_readable(&[&self.sock, sec], deadline_ns - now)?;
-            for (k, sock) in [&self.sock, sec].into_iter().enumerate() {
+            let ready = ferrocat_link::RawSocket::wait_readable(&[sock, sec], deadline_ns - now)?;
+            for (k, s) in [sock, sec].into_iter().enumerate() {
                 if ready[k] {
-                    if let Some((n, stamp)) = sock.try_recv_stamped(buf)? {
+                    if let Some((n, stamp)) = s.try_recv_stamped(buf)? {
                         self.last_rx_secondary = k == 1;
                         return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
                     }
@@ -89,6 +146,12 @@ impl Io for RawIo {
         self.last_rx_secondary
     }
     fn sleep_until(&mut self, t_ns: u64) {
+        if let Port::Uring(u) = &mut self.port {
+            // Frames sent leave before the sleep, not after it.
+            if let Err(e) = u.flush() {
+                tracing::warn!("sending before a sleep: {e}");
+            }
+        }
         self.wake_target_ns = Some(t_ns);
         ferrocat_link::sleep_until_ns(t_ns);
     }
@@ -96,7 +159,11 @@ impl Io for RawIo {
         self.wake_target_ns
     }
     fn last_tx_ns(&mut self) -> Option<u64> {
-        if let Some(t) = self.sock.tx_timestamp() {
+        let t = match &mut self.port {
+            Port::Socket(s) => s.tx_timestamp(),
+            Port::Uring(u) => u.tx_timestamp(),
+        };
+        if let Some(t) = t {
             self.tx_stamps[0] = Some(t);
         }
         self.tx_stamps[0]
