@@ -514,9 +514,9 @@ mod tests {
         assert_eq!((p.lost, p.repeated), (1, 1));
     }
 
-    #[test]
-    fn one_stall_rules_the_rms_and_not_the_median_error() {
-        let a = LiveArgs {
+    /// One slave, 1 ms, 1 s: the arguments the analysis tests share.
+    fn one_second() -> LiveArgs {
+        LiveArgs {
             methods: vec![],
             slaves: 1,
             cycle_us: 1000,
@@ -525,7 +525,12 @@ mod tests {
             seed: 1,
             io: crate::target::IoPath::Auto,
             json: false,
-        };
+        }
+    }
+
+    #[test]
+    fn one_stall_rules_the_rms_and_not_the_median_error() {
+        let a = one_second();
         let log = std::env::temp_dir().join(format!("ferrocat-live-median-{}.csv", std::process::id()));
         // Master − reference: +100, −200, +300 ns and one 50 µs stall.
         let lines: String = [100i64, -200, 300, 50_000]
@@ -556,16 +561,7 @@ mod tests {
 
     #[test]
     fn a_method_without_a_master_clock_reports_its_phase_only() {
-        let a = LiveArgs {
-            methods: vec![],
-            slaves: 1,
-            cycle_us: 1000,
-            settle_s: 0.0,
-            seconds: 1.0,
-            seed: 1,
-            io: crate::target::IoPath::Auto,
-            json: false,
-        };
+        let a = one_second();
         let log = std::env::temp_dir().join(format!("ferrocat-live-phase-{}.csv", std::process::id()));
         std::fs::write(
             &log,
@@ -598,16 +594,7 @@ mod tests {
 
     #[test]
     fn a_master_that_follows_the_reference_is_measured_on_its_own_line() {
-        let a = LiveArgs {
-            methods: vec![],
-            slaves: 1,
-            cycle_us: 1000,
-            settle_s: 0.0,
-            seconds: 1.0,
-            seed: 1,
-            io: crate::target::IoPath::Auto,
-            json: false,
-        };
+        let a = one_second();
         let log = std::env::temp_dir().join(format!("ferrocat-live-unit-{}.csv", std::process::id()));
         // Monotonic 1 000 000 ns is own 5 001 000 000; the slave reads 7 000 000 000 + 500 then.
         std::fs::write(&log, "t,s0\n900000,1\n1000000,7000000500\n2000000,7001000600\n").unwrap();
