@@ -36,12 +36,12 @@ fn exercise(seg: ferrocat_segment::Segment) {
     let dc = DcConfig { max_frames: 300, ..DcConfig::default() };
     let _ = m.init_dc(&dc);
     let _ = m.start();
-    if let Ok(list) = m.od_list(1) {
+    if let Ok(list) = m.coe().od_list(1) {
         for index in list.into_iter().take(64) {
-            if let Ok(info) = m.object_info(1, index) {
+            if let Ok(info) = m.coe().object_info(1, index) {
                 for sub in 0..=info.max_subindex.min(8) {
-                    let _ = m.entry_info(1, index, sub);
-                    let _ = m.sdo_read(1, index, sub);
+                    let _ = m.coe().entry_info(1, index, sub);
+                    let _ = m.coe().sdo_read(1, index, sub);
                 }
             }
         }

@@ -101,29 +101,29 @@ fuzz_target!(|data: &[u8]| {
     let _ = m.supervise();
     // The drive's position: the last, or before the reversed terminal behind which it hangs.
     let drive = m.slaves.iter().position(|s| s.name == "SERVO").unwrap_or(3) as u16;
-    if let Ok(list) = m.od_list(drive) {
+    if let Ok(list) = m.coe().od_list(drive) {
         for index in list.into_iter().take(16) {
-            let _ = m.object_info(drive, index);
-            let _ = m.sdo_read(drive, index, 0);
+            let _ = m.coe().object_info(drive, index);
+            let _ = m.coe().sdo_read(drive, index, 0);
         }
     }
-    let _ = m.sdo_write(drive, 0x6060, 0, &[8]);
+    let _ = m.coe().sdo_write(drive, 0x6060, 0, &[8]);
     // EoE with the drive: its address set and read, a ping, and the pump between cycles.
     let params = IpParameters { mac: Some([2, 0, 0, 0, 0, 2]), ip: Some([10, 0, 0, 2]), ..Default::default() };
-    let _ = m.eoe_set_ip(drive, &params);
-    let _ = m.eoe_get_ip(drive);
+    let _ = m.eoe().set_ip(drive, &params);
+    let _ = m.eoe().get_ip(drive);
     let p = EoePing {
         from_mac: [2, 0, 0, 0, 0, 1],
         from_ip: [10, 0, 0, 1],
         to_mac: [2, 0, 0, 0, 0, 2],
         to_ip: [10, 0, 0, 2],
     };
-    let _ = m.eoe_ping(drive, &p, 1, 200, 5_000_000);
+    let _ = m.eoe().ping(drive, &p, 1, 200, 5_000_000);
     if let Ok(frame) = p.echo_request(2, &[7; 300]) {
-        let _ = m.eoe_queue(drive, &frame);
+        let _ = m.eoe().queue(drive, &frame);
         for _ in 0..20 {
             let _ = m.cycle();
-            let _ = m.eoe_pump(drive);
+            let _ = m.eoe().pump(drive);
         }
     }
 });
