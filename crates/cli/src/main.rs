@@ -314,7 +314,7 @@ enum LabCmd {
         #[arg(long)]
         json: bool,
     },
-    /// Run the experiment a scenario file names (docs/clock-sync.md, scenarios/).
+    /// Run the experiment a scenario file names (docs/lab.md, scenarios/).
     Run {
         /// The scenario file (TOML; scenarios/ holds the papers' set-ups).
         scenario: PathBuf,

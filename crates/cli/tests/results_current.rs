@@ -55,7 +55,7 @@ fn render() -> String {
         "# Current results\n\n\
          Written by `scripts/results.sh`; `crates/cli/tests/results_current.rs` fails when the code \
          gives other figures than these. Every run is deterministic: seed 1, the quick variants. \
-         The reference docs (clock-sync.md, cia402.md) explain the experiments and quote from here; \
+         docs/lab.md explains the experiments and docs/clock-sync.md and docs/cia402.md the methods; \
          the papers' own figures stand beside ours there.\n\n",
     );
     let park = run(&["lab", "park2020", "--quick"]);

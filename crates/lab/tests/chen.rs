@@ -19,7 +19,7 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
             }
         } else if r.method == "chen2016" && r.cycle_us == 100 {
             // Chen's method at 100 µs loses a cycle now and then on some host draws: 37 in
-            // 600 000 over a minute (docs/clock-sync.md), 2 and 2 repeated in these 40 000
+            // 600 000 over a minute (docs/lab.md), 2 and 2 repeated in these 40 000
             // with seed 3, none with seed 1.
             assert!(r.lost + r.repeated <= 8, "{r:?}");
             assert!(r.jitter_width_pct < 70.0, "{r:?}");

@@ -158,8 +158,8 @@ fn wandering_couplers(host: HostModel) -> Options {
 /// Three couplers whose crystals random-walk by 50 ppb/√s (a plain crystal: a few), seeds
 /// 1–4 of one round each after 30 s of settling: ferrocat's line takes the shorter window that
 /// foretells the cycles' points best. Reference MRMS, mean of the four seeds, `ferrocat` /
-/// `ferrocat-mfr`: 16 / 19 ns; with the whole window only 58 / 56 ns (docs/clock-sync.md,
-/// robustness chapter, oscillator wander).
+/// `ferrocat-mfr`: 16 / 19 ns; with the whole window only 58 / 56 ns (docs/lab.md,
+/// park2020, wandering crystals).
 #[test]
 fn wandering_crystals_shorten_ferrocats_line() {
     let o = Options {

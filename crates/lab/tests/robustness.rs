@@ -42,7 +42,7 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         let before_rms = (r.before_mean_ns.powi(2) + r.before_sd_ns.powi(2)).sqrt();
         // The error over the last half is back about where it was: its RMS exceeds the RMS
         // before by less than half the band (under lasting loss it leaves the band now and
-        // then: `outside_pct` is reported, docs/clock-sync.md).
+        // then: `outside_pct` is reported, docs/lab.md).
         assert!(r.after_rms_ns < before_rms + r.band_ns / 2.0, "{r:?}");
         if r.scenario != "loss-1pct" {
             let rec = r.recovery_ms.unwrap_or_else(|| panic!("ferrocat did not recover: {r:?}"));
@@ -66,7 +66,7 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
         }
         if r.scenario == "drift-step-50ppm" {
             // The crystal step: back within 100 ms (probing the reference while the line is
-            // uncertain; docs/clock-sync.md, Robustness), having probed it.
+            // uncertain; docs/lab.md, robustness), having probed it.
             assert!(r.recovery_ms.is_some_and(|ms| ms < 100.0) && r.probes_after > 0, "{r:?}");
             // And no longer than that from where it would have been undisturbed; the step
             // moved it hundreds of ns from there first.
@@ -74,7 +74,7 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
             assert!(r.peak_vs_control_ns.is_some_and(|ns| ns > 200.0), "{r:?}");
             if r.method == "ferrocat" {
                 // Followers kept on the middle of the reference's sawtooth: every slave back
-                // within 100 ns of it within 100 ms too (docs/clock-sync.md, Robustness).
+                // within 100 ns of it within 100 ms too (docs/lab.md, robustness).
                 assert!(r.relock_ms.is_some_and(|ms| ms < 100.0), "{r:?}");
             }
         }
@@ -83,7 +83,7 @@ fn every_method_survives_every_disturbance_and_ferrocat_recovers() {
     // about where it was before. (Not "back in the band within a second": conventional and
     // park2020 leave their band on 1–2 % of samples with or without a disturbance, the host's
     // late sends in the reference's time control loop, so their last exit is wherever the
-    // host's last outlier fell — on seed 1 at 7.2 s in every scenario; docs/clock-sync.md.)
+    // host's last outlier fell — on seed 1 at 7.2 s in every scenario; docs/lab.md.)
     for r in &rows {
         let before_rms = (r.before_mean_ns.powi(2) + r.before_sd_ns.powi(2)).sqrt();
         assert!(r.after_rms_ns < 1.1 * before_rms + 50.0, "{r:?}");

@@ -102,7 +102,7 @@ pub struct Ferrocat {
     /// Whether to probe every cycle, in half of it, however certain the line: many times the
     /// frames, for a line of many more points that shows a change sooner and holds the
     /// reference closer (`Ferrocat::dense`, which also widens the window for those points;
-    /// `ferrocat-dense` in the lab; docs/clock-sync.md, "Dense probing").
+    /// `ferrocat-dense` in the lab; docs/clock-sync.md, "Probing").
     pub probe_every_cycle: bool,
     /// Offset steering: whether to bias the followers' delay registers so that they sit in the
     /// middle of the reference's sawtooth instead of on its top.
@@ -278,7 +278,7 @@ const PLAN_MOVED_RUN: u32 = 16;
 /// The half round trips' centre is a trimmed mean over this many. A cycle's probes come in a
 /// burst and share the centre; over 64 (two cycles of bursts) its error was a burst's own and
 /// counted in the change test once per point, which took it for a change of the line (a false
-/// restart 4.2 s after a crystal step, pc-rt seed 2; docs/clock-sync.md).
+/// restart 4.2 s after a crystal step, pc-rt seed 2).
 const CENTRE_WINDOW: usize = 1024;
 
 /// The mean of every value so far, and once there are `2^LONG_SHIFT` of them an exponential
@@ -321,7 +321,7 @@ const PROBE_SUSPICION: f64 = 0.25;
 /// at a crystal step knows the phase to about 2σ/√n after n points, so the points per cycle
 /// set how soon it is back: with a quarter cycle (5 probes on beaglebone-rt, σ ≈ 500 ns) it
 /// was still ≈ 30 ns off 100 ms after a 50 ppm step, which on top of the reference's ±42 ns
-/// sawtooth then left the 100 ns band in 3 of 10 realisations (docs/clock-sync.md).
+/// sawtooth then left the 100 ns band in 3 of 10 realisations (docs/clock-sync.md, "Probing").
 const MAX_PROBES: u64 = 32;
 /// The smallest change of the followers' delay bias worth a write (ns), and the shortest
 /// line (in cycles of master time) whose rate it is taken from.
@@ -332,7 +332,7 @@ const DELAY_BIAS_MIN_SPAN_CYCLES: u64 = 32;
 pub const FIT_WINDOW: usize = 16_384;
 /// The window of a line probed every cycle (the fit's largest): at 14–32 points per 1 ms cycle
 /// it spans 2–5 s, where 16 384 points spanned one and let a stock kernel's stamps move the
-/// level by tens of ns over seconds (docs/clock-sync.md, "Dense probing").
+/// level by tens of ns over seconds (docs/clock-sync.md, "Probing").
 pub const DENSE_FIT_WINDOW: usize = 65_536;
 /// The line's shorter windows are scored on points this fraction of a cycle or more after the
 /// one before: the cycle's frames, not the probes of a burst, whose stamps share the host's
@@ -467,7 +467,7 @@ impl Ferrocat {
     /// flywheel's (its point is the one for the crystal's line). A cycle's probes come in a burst whose stamps share the host's state: scored
     /// as independent points they made the evidence many times what it was (on this machine's
     /// kernel, robust noise scale ≈ 30 ns: a hand-over every second or so, by 8–207 ns each;
-    /// docs/clock-sync.md).
+    /// docs/clock-sync.md, "What we tried and why not").
     fn contest_point(&mut self, x: u64, y: u64, frame: bool) -> (i64, bool) {
         let fly = self.flywheel_at(x);
         let fly_sd = self.fit.sd_ahead_ns(self.cycle_ns);
