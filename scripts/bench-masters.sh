@@ -7,10 +7,12 @@
 # is pinned to CPU 0 and every master to CPU 1, so that the three get the same conditions; they
 # take turns for ROUNDS rounds (load on the machine changes over time) and medians are printed.
 # Needs root and scripts/test.sh's .venv (pysoem); without perf the system-call column is "-".
+# SIM_IO (socket) chooses the simulator's frame path, the same for every master.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECONDS_EACH="${SECONDS_EACH:-3}"
 ROUNDS="${ROUNDS:-5}"
+SIM_IO="${SIM_IO:-socket}"   # how the simulator moves frames: socket, uring or auto
 cargo build -q --release -p ferrocat --example ethercrab_bench
 cargo build -q --release -p ferrocat
 bin=target/release/ferrocat
@@ -28,7 +30,7 @@ devices=(--device EK1100)
 for k in $(seq 1 15); do if (( k % 2 )); then devices+=(--device EL1004); else devices+=(--device EL2004); fi; done
 for round in $(seq 1 "$ROUNDS"); do
   for master in ferrocat ethercrab soem; do
-    ip netns exec "$s" taskset -c 0 "$bin" sim "${devices[@]}" --iface "fcm${id}b" >/dev/null 2>&1 &
+    ip netns exec "$s" taskset -c 0 "$bin" sim "${devices[@]}" --iface "fcm${id}b" --io "$SIM_IO" >/dev/null 2>&1 &
     sim=$!
     sleep 0.5
     case $master in

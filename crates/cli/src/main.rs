@@ -131,6 +131,13 @@ enum Command {
         /// then answers for it.
         #[arg(long, requires = "iface")]
         eoe_tap: Vec<String>,
+        /// With --iface: how frames move. socket makes a recvmsg, a sendto and a read of the
+        /// transmit stamp per frame; io_uring answers a frame and waits for the next in one
+        /// system call, but answered every master measured here more slowly
+        /// (docs/benchmarks.md); auto takes io_uring where the kernel allows it. A ring's two
+        /// ports always use socket calls.
+        #[arg(long, value_enum, default_value = "socket", requires = "iface")]
+        io: target::IoPath,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
         #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
         bench: bool,
@@ -553,7 +560,7 @@ fn main() -> ExitCode {
             esi::run(&file, device.as_deref(), sii.as_deref(), json, strict)
         }
         Command::Sim { bench: true, json, .. } => sim::bench(json),
-        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, eoe_tap, .. } => {
+        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, eoe_tap, io, .. } => {
             sim::run(sim::SimArgs {
                 config,
                 devices: device,
@@ -564,6 +571,7 @@ fn main() -> ExitCode {
                 clock_log,
                 seed,
                 eoe_taps: eoe_tap,
+                io,
             })
         }
         Command::Lab { experiment } => {

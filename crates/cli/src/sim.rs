@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use ferrocat_esc::DigitalIo;
-use ferrocat_segment::live::{serve_raw, serve_udp, RawSocket, ServeStats};
+use ferrocat_segment::live::{serve_raw, serve_udp, serve_uring, RawSocket, ServeStats, UringSocket};
 use ferrocat_segment::{Segment, SegmentConfig};
 use serde_json::json;
 
@@ -21,6 +21,8 @@ pub struct SimArgs {
     pub seed: Option<u64>,
     /// DEVICE:TAP bridges of EoE endpoints to the host.
     pub eoe_taps: Vec<String>,
+    /// How frames move on `iface` (a ring's two ports always use socket calls).
+    pub io: crate::target::IoPath,
 }
 
 /// `--eoe-tap DEVICE:TAP`: the device's EoE endpoint bridged to a new TAP interface.
@@ -251,7 +253,24 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                 ),
                 _ => eprintln!("ferrocat sim: {} slaves ({}) on {iface}", names.len(), names.join(", ")),
             }
-            let stats = serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, a.clock_log.is_some(), &mut taps)?;
+            use crate::target::IoPath;
+            let log = a.clock_log.is_some();
+            let stats = match (secondary, a.io) {
+                (None, IoPath::Uring | IoPath::Auto) => match UringSocket::new(sock) {
+                    Ok(mut u) => {
+                        eprintln!("ferrocat sim: frames through io_uring");
+                        serve_uring(&mut seg, &mut u, &stop, log, &mut taps)?
+                    }
+                    Err((e, _)) if a.io == IoPath::Uring => {
+                        return Err(anyhow::Error::new(e).context(format!("io_uring on {iface}")))
+                    }
+                    Err((e, sock)) => {
+                        eprintln!("ferrocat sim: io_uring not available ({e}); socket calls instead");
+                        serve_raw(&mut seg, &sock, None, &stop, log, &mut taps)?
+                    }
+                },
+                (secondary, _) => serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, log, &mut taps)?,
+            };
             for t in &taps {
                 eprintln!(
                     "ferrocat sim: device {}'s EoE bridged to {}: {} frames to the host, {} from it, {} dropped",

@@ -143,25 +143,28 @@ fn run_to_op_and_tshark_decodes_every_frame() {
     println!("{} frames sent by ferrocat, none flagged by tshark", frames.len());
 }
 
-/// Both ways of moving frames run a segment in OP: io_uring (one system call per exchange)
-/// and the socket calls, each named on stderr.
+/// Both ways of moving frames run a segment in OP, on the master's side and on the
+/// simulator's (io_uring: one system call per exchange), each named on stderr.
 #[test]
 fn run_on_io_uring_and_on_socket_calls() {
     let net = VethPair::new("io");
-    let sim = Sim::start(&net, &["--device", "EK1100", "--device", "EL2004", "--device", "EL1004"]);
-    for (io, named) in [("uring", "frames through io_uring"), ("socket", "frames through socket calls")] {
+    for (sim_io, io, named) in
+        [("socket", "uring", "frames through io_uring"), ("uring", "socket", "frames through socket calls")]
+    {
+        let sim = Sim::start(&net, &["--device", "EK1100", "--device", "EL2004", "--device", "EL1004", "--io", sim_io]);
         let run = ferrocat_in(&net.master_ns)
             .args(["run", "--iface", &net.master_if, "--io", io, "--dc", "--seconds", "0.5", "--cycle-us", "1000"])
             .output()
             .unwrap();
+        let said = sim.stop();
         let (out, err) = (String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
-        assert!(run.status.success(), "--io {io}: {err}");
+        assert!(run.status.success(), "--io {io} against sim --io {sim_io}: {err}");
         assert!(err.contains(named), "--io {io}: {err}");
+        assert_eq!(said.contains("frames through io_uring"), sim_io == "uring", "sim --io {sim_io}: {said}");
         let (errors, lost) = (summary_field(&out, " working-counter errors"), summary_field(&out, "frames lost "));
         assert!(errors.saturating_sub(lost) < 10 && lost < 25, "--io {io}: {errors} short cycles, {lost} lost: {out}");
-        println!("--io {io}: {errors} short cycles, {lost} lost");
+        println!("--io {io} against sim --io {sim_io}: {errors} short cycles, {lost} lost");
     }
-    sim.stop();
 }
 
 #[test]

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use crate::{MasterPort, Segment};
 
-pub use ferrocat_link::{monotonic_ns, RawSocket};
+pub use ferrocat_link::{monotonic_ns, RawSocket, UringSocket};
 
 /// Counters of a live run.
 #[derive(Debug, Clone, Default)]
@@ -211,43 +211,127 @@ pub fn serve_raw(
             }
             got
         };
-        for t in taps.iter_mut() {
-            t.exchange(seg, &mut tap_buf)?;
-        }
+        exchange_taps(seg, taps, &mut tap_buf)?;
         let Some((from, (n, stamp))) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
             continue;
         };
-        stats.frames_in_secondary += (from == MasterPort::Secondary) as u64;
-        let start = monotonic_ns();
-        let arrived = stamp.map_or(start, |s| s.clamp(t0, start));
-        // A ring's two ports take different ways through the segment.
-        let way = 2 * n + (from == MasterPort::Secondary) as usize;
-        let entry = place.entry_ns(way, arrived - t0, start - t0);
-        if let Some((to, back)) = handle(seg, from, &mut buf[..n], entry, &mut stats) {
-            let sock = match to {
-                MasterPort::Primary => sock,
-                MasterPort::Secondary => secondary.unwrap_or(sock),
-            };
-            sock.send(&buf[..n])?;
-            stats.frames_out += 1;
-            stats.frames_out_secondary += (to == MasterPort::Secondary) as u64;
-            let sent = monotonic_ns();
-            stats.record(sent - start);
-            // The answer reaches the other end partway through the send call: its kernel
-            // transmit stamp says when (the call's return, without one).
-            let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(start, sent));
-            // The trip from the frame's departure: a wait for the link is not part of it.
-            place.answered(way, back.saturating_sub(seg.last_departure_ns()), left - start);
-        }
-        for t in taps.iter_mut() {
-            t.exchange(seg, &mut tap_buf)?;
-        }
-        if let Some(log) = stats.clock_log.as_mut() {
-            log.push(t0 + place.last_ns);
-            log.extend(seg.nodes.iter().map(|n| n.esc.dc.as_ref().map_or(u64::MAX, |d| d.system_at(place.last_ns))));
-        }
+        let Some(fr) = take_frame(seg, &mut place, &mut stats, &mut buf, from, n, stamp, t0) else {
+            exchange_taps(seg, taps, &mut tap_buf)?;
+            log_clock(seg, &place, &mut stats, t0);
+            continue;
+        };
+        let sock = match fr.to {
+            MasterPort::Primary => sock,
+            MasterPort::Secondary => secondary.unwrap_or(sock),
+        };
+        sock.send(&buf[..n])?;
+        let sent = monotonic_ns();
+        // The answer reaches the other end partway through the send call: its kernel
+        // transmit stamp says when (the call's return, without one).
+        let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(fr.start, sent));
+        fr.answered(seg, &mut place, &mut stats, left);
+        exchange_taps(seg, taps, &mut tap_buf)?;
+        log_clock(seg, &place, &mut stats, t0);
     }
+    Ok(stats)
+}
+
+/// A frame the segment answered, waiting for its answer to leave.
+struct Answer {
+    to: MasterPort,
+    way: usize,
+    /// When the answer is back at the segment's first port, segment time.
+    back_ns: u64,
+    /// CLOCK_MONOTONIC when its processing began.
+    start: u64,
+}
+
+impl Answer {
+    /// The answer left at `left` (CLOCK_MONOTONIC): the placement learns how long answering
+    /// took.
+    fn answered(&self, seg: &Segment, place: &mut Placement, stats: &mut ServeStats, left: u64) {
+        stats.frames_out += 1;
+        stats.frames_out_secondary += (self.to == MasterPort::Secondary) as u64;
+        stats.record(left.saturating_sub(self.start));
+        // The trip from the frame's departure: a wait for the link is not part of it.
+        place.answered(self.way, self.back_ns.saturating_sub(seg.last_departure_ns()), left.saturating_sub(self.start));
+    }
+}
+
+/// Runs a frame that came in on `from` with its receive stamp through the segment, placed in
+/// segment time; the answer, if any, is in `buf[..n]`.
+#[allow(clippy::too_many_arguments)]
+fn take_frame(
+    seg: &mut Segment,
+    place: &mut Placement,
+    stats: &mut ServeStats,
+    buf: &mut [u8],
+    from: MasterPort,
+    n: usize,
+    stamp: Option<u64>,
+    t0: u64,
+) -> Option<Answer> {
+    stats.frames_in_secondary += (from == MasterPort::Secondary) as u64;
+    let start = monotonic_ns();
+    let arrived = stamp.map_or(start, |s| s.clamp(t0, start));
+    // A ring's two ports take different ways through the segment.
+    let way = 2 * n + (from == MasterPort::Secondary) as usize;
+    let entry = place.entry_ns(way, arrived - t0, start - t0);
+    let (to, back_ns) = handle(seg, from, &mut buf[..n], entry, stats)?;
+    Some(Answer { to, way, back_ns, start })
+}
+
+fn exchange_taps(seg: &mut Segment, taps: &mut [EoeTap], buf: &mut [u8]) -> io::Result<()> {
+    for t in taps.iter_mut() {
+        t.exchange(seg, buf)?;
+    }
+    Ok(())
+}
+
+fn log_clock(seg: &Segment, place: &Placement, stats: &mut ServeStats, t0: u64) {
+    if let Some(log) = stats.clock_log.as_mut() {
+        log.push(t0 + place.last_ns);
+        log.extend(seg.nodes.iter().map(|n| n.esc.dc.as_ref().map_or(u64::MAX, |d| d.system_at(place.last_ns))));
+    }
+}
+
+/// [`serve_raw`] on one port through io_uring: an answer is queued and leaves with the wait
+/// for the next frame, one system call per frame; its transmit stamp, read in the same call,
+/// is learned from before the next frame is placed.
+pub fn serve_uring(
+    seg: &mut Segment,
+    sock: &mut UringSocket,
+    stop: &AtomicBool,
+    log_clocks: bool,
+    taps: &mut [EoeTap],
+) -> io::Result<ServeStats> {
+    let mut tap_buf = vec![0u8; 65536];
+    let t0 = monotonic_ns();
+    let mut buf = vec![0u8; 9216];
+    let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
+    let mut place = Placement::default();
+    let mut pending: Option<(Answer, u64)> = None;
+    while !stop.load(Ordering::Relaxed) {
+        let got = sock.recv(&mut buf, monotonic_ns() + 50_000_000)?;
+        if let Some((a, queued)) = pending.take() {
+            // Without a stamp, the answer left when the wait that sent it began.
+            let left = sock.tx_timestamp().map_or(queued, |t| t.max(a.start));
+            a.answered(seg, &mut place, &mut stats, left);
+        }
+        exchange_taps(seg, taps, &mut tap_buf)?;
+        let Some((n, stamp)) = got else {
+            seg.advance_to(place.idle(monotonic_ns() - t0));
+            continue;
+        };
+        if let Some(a) = take_frame(seg, &mut place, &mut stats, &mut buf, MasterPort::Primary, n, stamp, t0) {
+            sock.send(&buf[..n])?;
+            pending = Some((a, monotonic_ns()));
+        }
+        exchange_taps(seg, taps, &mut tap_buf)?;
+        log_clock(seg, &place, &mut stats, t0);
+    }
+    sock.flush()?;
     Ok(stats)
 }
 

@@ -93,6 +93,8 @@ pub fn python() -> PathBuf {
 /// `ferrocat sim` serving `segment_if` in its namespace; stopped with SIGTERM on drop.
 pub struct Sim {
     child: Child,
+    /// What the simulator says after it is ready (its statistics on exit).
+    said: Option<std::thread::JoinHandle<String>>,
 }
 
 impl Sim {
@@ -100,7 +102,7 @@ impl Sim {
         let mut c = VethPair::cmd(&net.segment_ns, env!("CARGO_BIN_EXE_ferrocat"));
         c.arg("sim").args(args).args(["--iface", &net.segment_if]).stdout(Stdio::null()).stderr(Stdio::piped());
         // Owned by the guard at once, so that it is stopped even if it never gets ready.
-        let mut sim = Sim { child: c.spawn().unwrap() };
+        let mut sim = Sim { child: c.spawn().unwrap(), said: None };
         // Ready once it has bound its socket and said so.
         let mut err = sim.child.stderr.take().unwrap();
         let t0 = Instant::now();
@@ -117,22 +119,25 @@ impl Sim {
             seen.extend_from_slice(&b[..n]);
         }
         // Keep what the simulator says (its statistics on exit) for failure messages.
-        std::thread::spawn(move || {
-            let mut rest = String::new();
+        sim.said = Some(std::thread::spawn(move || {
+            let mut rest = String::from_utf8_lossy(&seen).into_owned();
             let _ = err.read_to_string(&mut rest);
             if !rest.trim().is_empty() {
                 eprintln!("ferrocat sim said: {}", rest.trim());
             }
-        });
+            rest
+        }));
         sim
     }
 
-    /// Stops the simulator with SIGTERM and waits for it to exit cleanly.
-    pub fn stop(mut self) {
+    /// Stops the simulator with SIGTERM, waits for it to exit cleanly and returns what it said
+    /// on stderr.
+    pub fn stop(mut self) -> String {
         let pid = self.child.id().to_string();
         Command::new("kill").args(["-TERM", &pid]).status().unwrap();
         let status = self.child.wait().unwrap();
         assert!(status.success(), "ferrocat sim exited with {status}");
+        self.said.take().and_then(|h| h.join().ok()).unwrap_or_default()
     }
 }
 
