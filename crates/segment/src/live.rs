@@ -177,11 +177,7 @@ pub fn serve_raw(
     log_clocks: bool,
     taps: &mut [EoeTap],
 ) -> io::Result<ServeStats> {
-    let mut tap_buf = vec![0u8; 65536];
-    let t0 = monotonic_ns();
-    let mut buf = vec![0u8; 9216];
-    let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
-    let mut place = Placement::default();
+    let Server { mut tap_buf, t0, mut buf, mut stats, mut place } = Server::new(log_clocks);
     let socks: Vec<&RawSocket> = [Some(sock), secondary].into_iter().flatten().collect();
     // With one port, a blocking receive (its timeout lets the segment's time move on); with
     // two, a poll of both, then whatever each has queued.
@@ -235,6 +231,27 @@ pub fn serve_raw(
         log_clock(seg, &place, &mut stats, t0);
     }
     Ok(stats)
+}
+
+/// What serving keeps: buffers, the start instant, the counters and the placement.
+struct Server {
+    tap_buf: Vec<u8>,
+    t0: u64,
+    buf: Vec<u8>,
+    stats: ServeStats,
+    place: Placement,
+}
+
+impl Server {
+    fn new(log_clocks: bool) -> Self {
+        Server {
+            tap_buf: vec![0u8; 65536],
+            t0: monotonic_ns(),
+            buf: vec![0u8; 9216],
+            stats: ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() },
+            place: Placement::default(),
+        }
+    }
 }
 
 /// A frame the segment answered, waiting for its answer to leave.
@@ -306,11 +323,7 @@ pub fn serve_uring(
     log_clocks: bool,
     taps: &mut [EoeTap],
 ) -> io::Result<ServeStats> {
-    let mut tap_buf = vec![0u8; 65536];
-    let t0 = monotonic_ns();
-    let mut buf = vec![0u8; 9216];
-    let mut stats = ServeStats { clock_log: log_clocks.then(|| Vec::with_capacity(1 << 20)), ..Default::default() };
-    let mut place = Placement::default();
+    let Server { mut tap_buf, t0, mut buf, mut stats, mut place } = Server::new(log_clocks);
     let mut pending: Option<(Answer, u64)> = None;
     while !stop.load(Ordering::Relaxed) {
         let got = sock.recv(&mut buf, monotonic_ns() + 50_000_000)?;
