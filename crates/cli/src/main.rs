@@ -366,6 +366,10 @@ struct LabArgs {
     /// park2020, robustness: ferrocat without its GPIO calibration of the stamps' asymmetry.
     #[arg(long)]
     no_gpio_calibration: bool,
+    /// paprocki2022: leave the second drive's propagation delay uncompensated (its
+    /// System_Time_Delay 0), a candidate for the paper's constant ≈ 0.8 µs.
+    #[arg(long)]
+    uncompensated_drive_delay: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
@@ -403,6 +407,7 @@ impl LabArgs {
             cycle_us: (!self.cycle_us.is_empty()).then_some(CycleUs::Many(self.cycle_us)),
             rounds: self.rounds,
             gpio_calibration: self.no_gpio_calibration.then_some(false),
+            drive_delay_compensated: self.uncompensated_drive_delay.then_some(false),
             ..Scenario::default()
         };
         // The flags checked on their own first, so that an error names the flag, not the file.

@@ -20,8 +20,12 @@ pub struct Options {
     pub seed: u64,
     pub host: HostModel,
     /// A segment of one's own instead of a coupler and two DC slaves: the first two DC slaves
-    /// after the reference stand for the drives.
+    /// after the reference stand for the drives, or the only two, the reference first.
     pub segment: Option<SegmentConfig>,
+    /// Whether the second drive keeps the propagation delay the DC initialisation wrote. Off,
+    /// its System_Time_Delay is 0 from the cycles on, as under a master that does not
+    /// compensate the delay to it: one candidate for the paper's constant ≈ 0.8 µs.
+    pub drive_delay_compensated: bool,
 }
 
 impl Options {
@@ -34,6 +38,7 @@ impl Options {
             seed: 1,
             host,
             segment: None,
+            drive_delay_compensated: true,
         }
     }
 }
@@ -75,8 +80,13 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let mut m = crate::master(cfg, o.host, o.seed, name)?;
     m.bring_up()?;
     let dc = crate::dc_slaves(&m)?;
-    anyhow::ensure!(dc.len() >= 3, "two drives need a reference and two more DC slaves; the segment has {}", dc.len());
-    let drives = [dc[1], dc[2]];
+    // The paper's line is the master and two drives, the first the reference; the default
+    // segment puts a coupler before them, whose clock is then the reference.
+    let drives = match dc.len() {
+        2 => [dc[0], dc[1]],
+        n if n >= 3 => [dc[1], dc[2]],
+        n => anyhow::bail!("two drives need two DC slaves; the segment has {n}"),
+    };
     let nodes = drives.map(|k| crate::node_of(&m, k).unwrap_or(k) as u16);
     let dc_cfg = DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
@@ -85,6 +95,13 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         ..DcConfig::default()
     };
     let (mut sync, _) = crate::init_with_method(&mut m, &dc_cfg, name, cycle_ns, Coupling::ReferenceFollowsMaster)?;
+    if !o.drive_delay_compensated {
+        // The delay register as a master that never wrote it leaves it: the drive's loop then
+        // steers its time onto the reference's as it arrives, one hop late.
+        if let Some(d) = m.io_mut().seg.nodes[nodes[1] as usize].esc.dc.as_mut() {
+            d.delay = 0;
+        }
+    }
     let mut st = m.sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
     let mut next = m.io_mut().now_ns();

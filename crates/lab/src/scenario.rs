@@ -88,6 +88,9 @@ pub struct Scenario {
     /// robustness: whether each method also runs undisturbed, the control every disturbed run
     /// is compared with (default true).
     pub control: Option<bool>,
+    /// paprocki2022: whether the second drive's propagation delay is compensated (default
+    /// true; false tests the paper's ≈ 0.8 µs against a delay its master left out).
+    pub drive_delay_compensated: Option<bool>,
     #[serde(skip)]
     pub path: PathBuf,
 }
@@ -108,7 +111,7 @@ impl Scenario {
             ($($k:ident),*) => { $( if over.$k.is_some() { self.$k = over.$k; } )* };
         }
         take!(experiment, host, seed, segment, methods, cycle_us, slaves, settle_s, duration_s, samples);
-        take!(sample_every, rounds, reference_ppm, disturbances, gpio_calibration, control);
+        take!(sample_every, rounds, reference_ppm, disturbances, gpio_calibration, control, drive_delay_compensated);
         self
     }
 
@@ -167,6 +170,7 @@ impl Scenario {
         applies("disturbances", self.disturbances.is_some(), &[Robustness])?;
         applies("gpio_calibration", self.gpio_calibration.is_some(), &[Park2020, Robustness])?;
         applies("control", self.control.is_some(), &[Robustness])?;
+        applies("drive_delay_compensated", self.drive_delay_compensated.is_some(), &[Paprocki2022])?;
         if self.segment.is_some() && (self.slaves.is_some() || self.reference_ppm.is_some()) {
             let key = if self.slaves.is_some() { "slaves" } else { "reference_ppm" };
             return Err(self.err(key, "describes the default segment; with `segment` set it has no meaning"));
@@ -268,6 +272,7 @@ impl Scenario {
                 if let Some(n) = self.samples {
                     o.samples = n as usize;
                 }
+                o.drive_delay_compensated = self.drive_delay_compensated.unwrap_or(true);
                 o.seed = self.seed.unwrap_or(o.seed);
                 Plan::Paprocki2022(o)
             }
