@@ -17,8 +17,11 @@ use crate::{stamp_of, RawSocket};
 /// Frames that may be queued or in flight at once (each with its buffer); a cycle sends a
 /// handful.
 const TX_SLOTS: usize = 32;
-/// Longest frame: an Ethernet frame without FCS, with a VLAN tag.
+/// Longest frame sent: an Ethernet frame without FCS, with a VLAN tag.
 const FRAME_LEN: usize = 1522;
+/// Room for a frame received: a longer one (jumbo, not EtherCAT) is dropped and counted, never
+/// handed on cut short.
+const RX_LEN: usize = 9216;
 /// Room for the SO_TIMESTAMPING control message (three timespecs) and others.
 const CONTROL_LEN: usize = 256;
 
@@ -32,14 +35,14 @@ struct Msg {
     iov: libc::iovec,
     addr: libc::sockaddr_ll,
     control: [u64; CONTROL_LEN / 8],
-    data: [u8; FRAME_LEN],
+    data: [u8; RX_LEN],
 }
 
 impl Msg {
     fn new() -> Box<Msg> {
         // SAFETY: every field is plain data for which all-zero bytes are a valid value.
         let mut m: Box<Msg> = Box::new(unsafe { std::mem::zeroed() });
-        m.iov = libc::iovec { iov_base: m.data.as_mut_ptr() as *mut libc::c_void, iov_len: FRAME_LEN };
+        m.iov = libc::iovec { iov_base: m.data.as_mut_ptr() as *mut libc::c_void, iov_len: RX_LEN };
         m.hdr.msg_iov = &mut m.iov;
         m.hdr.msg_iovlen = 1;
         m
@@ -47,7 +50,7 @@ impl Msg {
 
     /// Ready for a receive: whole buffer, control room, no address.
     fn arm_recv(&mut self) -> *mut libc::msghdr {
-        self.iov.iov_len = FRAME_LEN;
+        self.iov.iov_len = RX_LEN;
         self.hdr.msg_name = std::ptr::null_mut();
         self.hdr.msg_namelen = 0;
         self.hdr.msg_control = self.control.as_mut_ptr() as *mut libc::c_void;
@@ -75,8 +78,9 @@ pub struct UringSocket {
     rx: Box<Msg>,
     /// The receive is queued or in flight.
     rx_armed: bool,
-    /// A completed receive not yet taken: its length (or error) and stamp.
-    rx_done: Option<(i32, Option<u64>)>,
+    /// A completed receive not yet taken: its length (or error), stamp, and whether it was
+    /// longer than the buffer.
+    rx_done: Option<(i32, Option<u64>, bool)>,
     err: Box<Msg>,
     err_armed: bool,
     /// The newest transmit stamp read through the ring since the last send.
@@ -85,6 +89,8 @@ pub struct UringSocket {
     unsubmitted: usize,
     /// The first send error met, returned by the next call.
     send_error: Option<io::Error>,
+    /// Frames received longer than the receive buffer, dropped.
+    truncated: u64,
 }
 
 impl std::fmt::Debug for UringSocket {
@@ -126,12 +132,18 @@ impl UringSocket {
             tx_stamp: None,
             unsubmitted: 0,
             send_error: None,
+            truncated: 0,
         })
     }
 
     /// The socket underneath.
     pub fn socket(&self) -> &RawSocket {
         &self.sock
+    }
+
+    /// Frames received longer than 9 216 bytes (not EtherCAT): dropped, not handed on cut short.
+    pub fn truncated_frames(&self) -> u64 {
+        self.truncated
     }
 
     fn push(&mut self, e: &squeue::Entry) -> io::Result<()> {
@@ -220,7 +232,7 @@ impl UringSocket {
                     self.rx_armed = false;
                     // SAFETY: the completed receive filled the header and control it was given.
                     let stamp = if res >= 0 { unsafe { stamp_of(&self.rx.hdr) } } else { None };
-                    self.rx_done = Some((res, stamp));
+                    self.rx_done = Some((res, stamp, self.rx.hdr.msg_flags & libc::MSG_TRUNC != 0));
                 }
                 ERR_TAG => {
                     self.err_armed = false;
@@ -253,18 +265,24 @@ impl UringSocket {
             if let Some(e) = self.send_error.take() {
                 return Err(io::Error::new(e.kind(), format!("send: {e}")));
             }
-            if let Some((res, stamp)) = self.rx_done.take() {
-                self.arm_rx()?;
-                if res < 0 {
-                    let e = io::Error::from_raw_os_error(-res);
-                    if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted) {
-                        continue;
+            if let Some((res, stamp, cut)) = self.rx_done.take() {
+                // Copied out before the receive is armed again: arming may submit it.
+                let got = match res {
+                    ..0 => Err(io::Error::from_raw_os_error(-res)),
+                    n if cut || n as usize > buf.len() => Ok(None),
+                    n => {
+                        buf[..n as usize].copy_from_slice(&self.rx.data[..n as usize]);
+                        Ok(Some((n as usize, stamp)))
                     }
-                    return Err(e);
+                };
+                self.arm_rx()?;
+                match got {
+                    Ok(Some(frame)) => return Ok(Some(frame)),
+                    Ok(None) => self.truncated += 1,
+                    Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted) => {}
+                    Err(e) => return Err(e),
                 }
-                let n = (res as usize).min(buf.len());
-                buf[..n].copy_from_slice(&self.rx.data[..n]);
-                return Ok(Some((n, stamp)));
+                continue;
             }
             self.arm_rx()?;
             let now = crate::monotonic_ns();
