@@ -610,6 +610,18 @@ impl SegmentConfig {
                 }
                 (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),
                 (None | Some("io"), _) => Box::new(DigitalIo::new(config.sm_count)),
+                // The synchronised applications have no mailbox: on a device whose SII names CoE
+                // the master's first SDO would meet "protocol not supported", as no real device
+                // of that SII answers.
+                (Some(a @ ("sm" | "dc" | "free-run")), Some(_)) => {
+                    return Err(device_err(
+                        &place,
+                        format!(
+                            "app = \"{a}\" has no CoE server, and this device's SII names CoE: for its SYNC0 \
+                             give sync_unit = true instead"
+                        ),
+                    ))
+                }
                 (Some("sm"), _) => sync(SyncMode::SmSynchronous),
                 (Some("dc"), _) => sync(SyncMode::DcSynchronous),
                 (Some("free-run"), _) => {

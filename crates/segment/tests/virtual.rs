@@ -145,6 +145,10 @@ fn builtin_devices_and_bad_descriptions() {
             "device 0: limit and home switches need a CiA402 drive",
         ),
         (
+            "[[device]]\nbuiltin = 'LAN9252-EVB'\napp = 'dc'\n",
+            "device 0: app = \"dc\" has no CoE server, and this device's SII names CoE",
+        ),
+        (
             "[[device]]\nbuiltin = 'EL2004'\nsync_error_limit = 4\n",
             "device 0: sync_error_limit needs app = \"dc\" or a CiA402 drive",
         ),
