@@ -43,6 +43,51 @@ pub fn run(plan: Plan, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCod
     Ok(code)
 }
 
+/// The experiment's set-up model fitted afresh from the presets, every step printed.
+pub fn fit(plan: Plan, json: bool) -> anyhow::Result<ExitCode> {
+    match plan {
+        Plan::Park2020(o) => {
+            let steps = park2020::fit(&o, park2020::SetupModel::current(), 8)?;
+            if json {
+                outln!("{}", serde_json::json!({ "experiment": "park2020", "seed": o.seed, "steps": steps }));
+                return Ok(ExitCode::SUCCESS);
+            }
+            outln!(
+                "Park 2020 set-up model fitted on Table 1's 2-slave rows (GPI view), {} rounds of {} samples after {} s, seed {}",
+                o.rounds,
+                o.samples,
+                o.settle_s,
+                o.seed
+            );
+            outln!(
+                "{:>4} {:>12} {:>12} {:>14}   {:>17} {:>17} {:>17}",
+                "step",
+                "send µs",
+                "receive µs",
+                "GPI spread µs",
+                "conv GMEAN err µs",
+                "park GMEAN err µs",
+                "conv spread err µs"
+            );
+            for (k, s) in steps.iter().enumerate() {
+                outln!(
+                    "{k:>4} {:>12.3} {:>12.3} {:>14.3}   {:>+17.3} {:>+17.3} {:>+17.3}",
+                    s.model.send_mean_ns / 1e3,
+                    s.model.recv_mean_ns / 1e3,
+                    s.model.gpi_master_detect_sd_ns / 1e3,
+                    s.conventional_gmean_error_us,
+                    s.park2020_gmean_error_us,
+                    s.conventional_spread_error_us
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Plan::Chen2016(_) | Plan::Paprocki2022(_) | Plan::Robustness(_) => {
+            anyhow::bail!("--fit: only park2020 has a set-up model fitted on its paper's table")
+        }
+    }
+}
+
 fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
     let host = o.host;
     let rows = park2020::run(&o, &progress("rounds"))?;
@@ -86,8 +131,13 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
         write_report(dir, "park2020.md", &md)?;
     }
     if json {
+        let (model, figures) = match park2020::paper_setup(&o) {
+            Ok(m) => (Some(m), Some(park2020::compare(&rows))),
+            Err(_) => (None, None),
+        };
         let v = serde_json::json!({ "experiment": "park2020", "seed": o.seed, "rounds": o.rounds,
-            "settle_s": o.settle_s, "samples": o.samples, "rows": rows });
+            "settle_s": o.settle_s, "samples": o.samples, "rows": rows,
+            "setup_model": model, "paper_comparison": figures });
         outln!("{v}");
         return Ok(ExitCode::SUCCESS);
     }
@@ -159,7 +209,36 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
             r.gpi_last_mrms_us
         );
     }
+    match park2020::paper_setup(&o) {
+        Ok(model) => {
+            let m = model;
+            outln!(
+                "Table 1 against the set-up model (send path {:.2} µs, receive path {:.2} µs, GPI detection spread {:.2} µs; \
+                 docs/lab.md), as the GPI measurement reports it:",
+                m.send_mean_ns / 1e3,
+                m.recv_mean_ns / 1e3,
+                m.gpi_master_detect_sd_ns / 1e3
+            );
+            print_figures(&park2020::compare(&rows), "µs");
+        }
+        Err(why) => outln!("Table 1 is compared only on the paper's set-up model: {why}."),
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A paper's figures beside the set-up model's, and which miss their bands.
+fn print_figures(figures: &[ferrocat_lab::fit::Figure], unit: &str) {
+    outln!("{}", ferrocat_lab::fit::Figure::header(unit));
+    for f in figures {
+        outln!("{}", f.line());
+    }
+    let misses: Vec<&str> = figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect();
+    outln!(
+        "{} of {} figures within their bands{}",
+        figures.len() - misses.len(),
+        figures.len(),
+        if misses.is_empty() { String::new() } else { format!("; missing: {}", misses.join("; ")) }
+    );
 }
 
 /// Park 2020 Figures 8–11 for the first round of every (slaves, method).

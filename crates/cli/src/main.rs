@@ -370,6 +370,10 @@ struct LabArgs {
     /// System_Time_Delay 0), a candidate for the paper's constant ≈ 0.8 µs.
     #[arg(long)]
     uncompensated_drive_delay: bool,
+    /// park2020, chen2016: fit the paper's set-up model on the part of its table it is fitted
+    /// on, from the presets, and print every step instead of the table (docs/lab.md).
+    #[arg(long)]
+    fit: bool,
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
@@ -415,6 +419,10 @@ impl LabArgs {
             Scenario { experiment: Some(e), ..over.clone() }.plan(None, self.quick)?;
         }
         let plan = base.overlay(over).plan(experiment, self.quick)?;
+        if self.fit {
+            anyhow::ensure!(self.out.is_none(), "--fit prints the fit; it writes no report (--out)");
+            return lab::fit(plan, self.json);
+        }
         lab::run(plan, self.json, self.out.as_deref())
     }
 }

@@ -2,6 +2,7 @@
 //! random realisation (same seed), the error taken from the true clocks the simulator knows.
 pub mod chen2016;
 pub mod demo;
+pub mod fit;
 pub mod gpi;
 pub mod paprocki2022;
 pub mod park2020;

@@ -32,6 +32,8 @@ pub struct Options {
     /// ferrocat's methods calibrate their stamps' asymmetry through the host's GPIO into the
     /// reference's LATCH0 input where the host model has one (`crate::calibration`).
     pub gpio_calibration: bool,
+    /// The GPI measurement whose view of the errors the `gpi_*` figures give (§IV-B).
+    pub gpi: crate::gpi::GpiSetup,
 }
 
 impl Options {
@@ -49,6 +51,7 @@ impl Options {
             host,
             segment: None,
             gpio_calibration: true,
+            gpi: crate::gpi::GpiSetup::park2020(),
         }
     }
 
@@ -131,8 +134,8 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let mut last_violation: Option<u64> = None;
     let reference = dc[0];
     // One GPI rig per slave measured, as in the paper's set-up.
-    let mut gpi_ref = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed);
-    let mut gpi_last = crate::gpi::Gpi::new(crate::gpi::GpiSetup::park2020(), seed ^ 0x1A57);
+    let mut gpi_ref = crate::gpi::Gpi::new(opts.gpi, seed);
+    let mut gpi_last = crate::gpi::Gpi::new(opts.gpi, seed ^ 0x1A57);
     let mut c = Correction::default();
     let pulses = crate::calibration_pulses(settle);
     let mut calibration =
@@ -244,4 +247,159 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
         }
     }
     Ok(rows)
+}
+
+/// Park 2020's set-up as the lab models it: the BeagleBone's host paths and the GPI
+/// measurement's spread are the three parameters fitted on the paper's 2-slave rows
+/// ([`fit`]); everything else is named in docs/lab.md with its source.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SetupModel {
+    /// The master's clock read (IgH's application time, which the FPWR to 0x0910 carries) to
+    /// the frame's first bit on the wire, mean, ns.
+    pub send_mean_ns: f64,
+    /// The frame's last bit in to the master's clock read that ends eq. 3's round trip, mean, ns.
+    pub recv_mean_ns: f64,
+    /// The spread of the master's GPI detection latency (edge to interrupt), ns.
+    pub gpi_master_detect_sd_ns: f64,
+}
+
+impl SetupModel {
+    /// The model the `beaglebone-rt` host and [`crate::gpi::GpiSetup::park2020`] hold.
+    pub fn current() -> Self {
+        let (h, g) = (HostModel::beaglebone_rt(), crate::gpi::GpiSetup::park2020());
+        SetupModel {
+            send_mean_ns: h.send.mean_ns,
+            recv_mean_ns: h.recv.mean_ns,
+            gpi_master_detect_sd_ns: g.master_detect.sd_ns,
+        }
+    }
+
+    /// `base` with this model's paths: each path's spread and floor keep their distance below
+    /// the mean.
+    pub fn host(&self, base: HostModel) -> HostModel {
+        let mut h = base;
+        for (l, mean) in [(&mut h.send, self.send_mean_ns), (&mut h.recv, self.recv_mean_ns)] {
+            l.min_ns = (l.min_ns + mean - l.mean_ns).max(0.0);
+            l.mean_ns = mean;
+        }
+        h
+    }
+
+    pub fn gpi(&self, base: crate::gpi::GpiSetup) -> crate::gpi::GpiSetup {
+        crate::gpi::GpiSetup {
+            master_detect: crate::gpi::Latency { sd_ns: self.gpi_master_detect_sd_ns, ..base.master_detect },
+            ..base
+        }
+    }
+}
+
+/// The set-up model `o` runs on, if it is the paper's set-up: Table 1 compares with it only
+/// there (the BeagleBone's host model, the line of slaves, a 1 ms cycle sampled every 2 ms).
+pub fn paper_setup(o: &Options) -> Result<SetupModel, String> {
+    let model = SetupModel::current();
+    if o.host != model.host(HostModel::beaglebone_rt()) {
+        return Err(format!("the host is {}, not the fitted beaglebone-rt", o.host.name));
+    }
+    if o.gpi != model.gpi(crate::gpi::GpiSetup::park2020()) {
+        return Err("the GPI measurement is not the fitted one".into());
+    }
+    if o.segment.is_some() {
+        return Err("a segment file replaces the paper's line of slaves".into());
+    }
+    if (o.cycle_ns, o.sample_every) != (1_000_000, 2) {
+        return Err("the cycle is not the paper's 1 ms, sampled every 2 ms".into());
+    }
+    Ok(model)
+}
+
+/// The spread a row's GMEAN and MRMS leave: √(MRMS² − GMEAN²).
+pub fn spread(gmean: f64, mrms: f64) -> f64 {
+    (mrms * mrms - gmean * gmean).max(0.0).sqrt()
+}
+
+/// One step of [`fit`]: the model, and the errors against the paper's 2-slave rows it left (µs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FitStep {
+    pub model: SetupModel,
+    pub conventional_gmean_error_us: f64,
+    pub park2020_gmean_error_us: f64,
+    pub conventional_spread_error_us: f64,
+}
+
+/// The set-up model fitted on Table 1's 2-slave rows as the GPI measurement reports them,
+/// starting from `start`, on `base`'s run lengths and seed (its slaves, methods, host and GPI
+/// replaced). Three figures set the three parameters, each through the mechanism that makes
+/// it:
+/// - conventional's GMEAN is the send path (the reference takes the application time when
+///   the frame passes it);
+/// - park2020's GMEAN is half the send path less half the receive path (eq. 3 halves the
+///   round trip, whose two host paths differ), so the receive path follows from it;
+/// - conventional's spread √(MRMS² − GMEAN²) is almost all the master's GPI detection.
+///
+/// Each step moves the parameters by those relations' slopes and runs again; it stops when
+/// every error is under 20 ns, or after `steps`.
+pub fn fit(base: &Options, start: SetupModel, steps: usize) -> anyhow::Result<Vec<FitStep>> {
+    let paper = |method: &str| PAPER.iter().find(|p| p.0 == 2 && p.1 == method).copied();
+    let (Some(conv), Some(park)) = (paper("conventional"), paper("park2020")) else {
+        anyhow::bail!("Table 1 has no 2-slave rows")
+    };
+    let mut model = start;
+    let mut trace = Vec::new();
+    for _ in 0..steps.max(1) {
+        let o = Options {
+            slaves: vec![2],
+            methods: vec!["conventional".into(), "park2020".into()],
+            host: model.host(HostModel::beaglebone_rt()),
+            gpi: model.gpi(crate::gpi::GpiSetup::park2020()),
+            segment: None,
+            ..base.clone()
+        };
+        let rows = run(&o, &|_, _| {})?;
+        let row = |m: &str| rows.iter().find(|r| r.method == m).ok_or_else(|| anyhow::anyhow!("no {m} row"));
+        let (c, p) = (row("conventional")?, row("park2020")?);
+        let e_c = c.gpi_ref_gmean_us - conv.2;
+        let e_p = p.gpi_ref_gmean_us - park.2;
+        let (s_model, s_paper) = (spread(c.gpi_ref_gmean_us, c.gpi_ref_mrms_us), spread(conv.2, conv.3));
+        trace.push(FitStep {
+            model,
+            conventional_gmean_error_us: e_c,
+            park2020_gmean_error_us: e_p,
+            conventional_spread_error_us: s_model - s_paper,
+        });
+        if [e_c, e_p, s_model - s_paper].iter().all(|e| e.abs() < 0.02) {
+            break;
+        }
+        // conventional ≈ send + c₁, park2020 ≈ (send − recv)/2 + c₂.
+        let d_send = -e_c * 1e3;
+        let d_recv = d_send + 2.0 * e_p * 1e3;
+        let sd = model.gpi_master_detect_sd_ns;
+        let sd2 = sd * sd + (s_paper * s_paper - s_model * s_model) * 1e6;
+        model = SetupModel {
+            send_mean_ns: model.send_mean_ns + d_send,
+            recv_mean_ns: (model.recv_mean_ns + d_recv).max(0.0),
+            gpi_master_detect_sd_ns: sd2.max(0.0).sqrt(),
+        };
+    }
+    Ok(trace)
+}
+
+/// Every published figure of Table 1 beside the same figure as the GPI measurement reports it
+/// on `rows`: the 2-slave rows are the fitted part, the 6-slave rows the predicted one.
+pub fn compare(rows: &[Row]) -> Vec<crate::fit::Figure> {
+    use crate::fit::{Band, Figure, Part};
+    let mut out = Vec::new();
+    for &(n, method, rg, rm, lg, lm) in &PAPER {
+        let Some(r) = rows.iter().find(|r| r.slaves == n && r.method == method) else { continue };
+        let part = if n == 2 { Part::Fit } else { Part::Prediction };
+        let band = Band::for_part(part);
+        for (what, paper, model) in [
+            ("ref GMEAN", rg, r.gpi_ref_gmean_us),
+            ("ref MRMS", rm, r.gpi_ref_mrms_us),
+            ("last GMEAN", lg, r.gpi_last_gmean_us),
+            ("last MRMS", lm, r.gpi_last_mrms_us),
+        ] {
+            out.push(Figure::new(format!("{n} slaves, {method}, {what}"), "µs", part, band, paper, model));
+        }
+    }
+    out
 }

@@ -628,15 +628,16 @@ impl<I: Io> Master<I> {
         loop_of(&s.receive_times, s.active_ports, s.entry_port)
     }
 
-    /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master,
-    /// then the reference's receive times. Returns the averaged delay.
+    /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master from
+    /// its send call's return to its arrival, then the reference's receive times. Returns the
+    /// averaged delay.
     pub fn park_delay(&mut self, n: u32) -> Result<i64> {
         let r = self.reference_index()?;
         let (st, active, entry) = (self.slaves[r].station, self.slaves[r].active_ports, self.slaves[r].entry_port);
         let mut trips = Vec::with_capacity(n as usize);
         for _ in 0..n {
-            let t0 = self.engine.io.now_ns();
-            self.engine.one(
+            // Eq. 3's t_p0^m is taken "immediately after sending", t_p1^m once it is back.
+            let (_, t0) = self.engine.one_timed(
                 Command::BWR,
                 Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 },
                 &mut [0u8; 4],

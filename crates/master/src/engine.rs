@@ -137,6 +137,9 @@ struct Slot {
 #[derive(Debug)]
 pub struct Engine<I: Io> {
     pub io: I,
+    /// When the last send call returned (master clock), kept only while
+    /// [`Engine::one_timed`] asks for it.
+    send_returned_ns: Option<u64>,
     pub timeout_ns: u64,
     pub retries: u32,
     pub stats: EngineStats,
@@ -193,6 +196,7 @@ impl<I: Io> Engine<I> {
     pub fn new(io: I) -> Self {
         Engine {
             io,
+            send_returned_ns: None,
             timeout_ns: 20_000_000,
             retries: 3,
             stats: EngineStats::default(),
@@ -328,6 +332,9 @@ impl<I: Io> Engine<I> {
         slot.resent = false;
         slot.sent_ns = now;
         self.io.send(&slot.buf[..slot.len])?;
+        if self.send_returned_ns.is_some() {
+            self.send_returned_ns = Some(self.io.now_ns());
+        }
         self.stats.frames_sent += 1;
         if self.io.has_secondary() {
             // Its stamp now, before the probe and other frames follow (a ring's two passes
@@ -545,6 +552,15 @@ impl<I: Io> Engine<I> {
         let mut p = [Pdu::new(cmd, address, data)];
         self.transact(&mut p)?;
         Ok(p[0].wkc)
+    }
+
+    /// [`Engine::one`], and when its (last) send call returned, master clock: Park 2020's
+    /// eq. 3 starts its round trip "immediately after sending".
+    pub fn one_timed(&mut self, cmd: Command, address: Address, data: &mut [u8]) -> Result<(u16, u64)> {
+        self.send_returned_ns = Some(0);
+        let wkc = self.one(cmd, address, data);
+        let sent = self.send_returned_ns.take().unwrap_or(0);
+        Ok((wkc?, sent))
     }
 
     /// One datagram that must reach `expected` slaves.

@@ -148,25 +148,26 @@ impl HostModel {
         }
     }
 
-    /// The BeagleBone Green of Park 2020 (AM335x, RT kernel 4.9). Its send delay is the one
-    /// free parameter, set so that `conventional`'s master–reference bias comes out at the
-    /// paper's 10.6 µs. The bias is the send delay plus the wire to the reference (the master
-    /// link, 0.5 µs in the segment model), less what the reference's time control loop makes
-    /// of this much send jitter (measured: about −0.6 µs), so the send delay's mean is 10.7 µs.
+    /// The BeagleBone Green of Park 2020 (AM335x, RT kernel 4.9, IgH). The send and receive
+    /// paths' means are fitted on Table 1's 2-slave rows (`ferrocat lab park2020 --fit`,
+    /// docs/lab.md): the send path, from the master's clock read to the frame's first bit on
+    /// the wire, sets `conventional`'s bias; the receive path, from the frame's last bit to the
+    /// master's clock read, sets with it `park2020`'s (eq. 3 halves a round trip whose host
+    /// paths differ). Spreads, outliers and stamps are assumed, not fitted.
     pub fn beaglebone_rt() -> Self {
         HostModel {
             name: "beaglebone-rt",
             send: Latency {
-                mean_ns: 10_700.0,
+                mean_ns: 10_010.0,
                 sd_ns: 2_500.0,
-                min_ns: 5_000.0,
+                min_ns: 4_310.0,
                 outlier_p: 0.002,
                 outlier_ns: 40_000.0,
             },
             recv: Latency {
-                mean_ns: 12_000.0,
+                mean_ns: 12_160.0,
                 sd_ns: 3_000.0,
-                min_ns: 6_000.0,
+                min_ns: 6_160.0,
                 outlier_p: 0.002,
                 outlier_ns: 40_000.0,
             },
