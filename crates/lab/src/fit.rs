@@ -97,7 +97,7 @@ impl Figure {
             "{:<34} {:<10} {:>9} {:>9} {:>9} {:>9}  {:<7} {}",
             "figure",
             "part",
-            format!("paper {unit}"),
+            if unit.is_empty() { "paper".to_string() } else { format!("paper {unit}") },
             "model",
             "error",
             "error %",

@@ -1,6 +1,7 @@
 //! The Chen 2016 experiment, shortened: a master that does not follow the reference loses and
 //! repeats process data in DC-synchronous slaves; Chen's method, SOEM's PI and ferrocat's do not
-//! at 500, 250 and 100 µs on Chen's 10 µs timer (Chen's now and then at 100 µs).
+//! at 500 and 250 µs on Chen's 10 µs timer, and at 100 µs only where a late wake-up passes the
+//! SYNC0 (ferrocat then repeats a cycle rather than lose one).
 use ferrocat_lab::chen2016::{run, Options};
 use ferrocat_segment::HostModel;
 
@@ -17,17 +18,18 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
             if r.cycle_us == 250 {
                 assert!(r.lost > 0 && r.repeated > 0, "{r:?}");
             }
-        } else if r.method == "chen2016" && r.cycle_us == 100 {
-            // Chen's method at 100 µs loses a cycle now and then on some host draws: 37 in
-            // 600 000 over a minute (docs/lab.md), 2 and 2 repeated in these 40 000
-            // with seed 3, none with seed 1.
-            assert!(r.lost + r.repeated <= 8, "{r:?}");
-            assert!(r.jitter_width_pct < 70.0, "{r:?}");
+        } else if r.cycle_us == 100 {
+            // The fitted host's late wake-ups (0.1 %, up to 49 µs) with the send and the 10 µs
+            // timer step can pass the SYNC0 half a cycle on: the data of that cycle is lost,
+            // except to ferrocat, which holds the next frame back (a repeated cycle instead).
+            if r.method == "ferrocat" {
+                assert_eq!(r.lost, 0, "{r:?}");
+            }
+            assert!(r.lost + r.repeated <= r.cycles / 1000, "{r:?}");
+            assert!(r.jitter_width_pct < 80.0, "{r:?}");
         } else {
             assert_eq!((r.lost, r.repeated), (0, 0), "{r:?}");
-            // At 100 µs the 10 µs timer's steps and the host's wake-ups are half the cycle (the
-            // paper's width there: 64 %).
-            assert!(r.jitter_width_pct < if r.cycle_us == 100 { 70.0 } else { 50.0 }, "{r:?}");
+            assert!(r.jitter_width_pct < 50.0, "{r:?}");
         }
     }
     // The width is two extremes; the spread of every cycle is where the methods differ: on the
@@ -41,7 +43,7 @@ fn only_a_master_that_follows_the_reference_keeps_every_cycle() {
 
 #[test]
 fn at_50_us_ferrocat_holds_a_frame_back_after_a_late_one_and_loses_none() {
-    // The host's rare late wake-ups and sends (0.1 % each, up to 30 and 20 µs) pass the SYNC0
+    // The host's rare late wake-ups and sends (0.1 % each, up to 49 and 20 µs) pass the SYNC0
     // half a 50 µs cycle after the frame's target: the others lose the next frame's data,
     // ferrocat holds that frame back one cycle, so the slaves repeat one cycle and lose none.
     let o = Options {
@@ -118,4 +120,35 @@ fn the_table_names_its_reference_crystal_and_the_slaves_it_counts() {
     // The experiment's own segment: +40 ppm, both outputs counted.
     let s = setup(&Options::quick(HostModel::rtx_10us())).unwrap();
     assert_eq!((s.reference_ppm, s.counted_slaves), (40.0, vec![1, 2]));
+}
+
+#[test]
+fn the_rtx_model_is_the_fit_of_the_500us_rows_latest_frame() {
+    use ferrocat_lab::chen2016::{fit, SetupModel};
+    // The preset is the fit's fixed point: its first step is within 0.5 µs.
+    let steps = fit(1, SetupModel::current(), 3).unwrap();
+    assert_eq!(steps.len(), 1, "{steps:?}");
+    // From 30 µs (a PC's RT kernel) the fit comes back to it.
+    let steps = fit(1, SetupModel { wake_outlier_ns: 30_000.0 }, 6).unwrap();
+    let m = steps.last().unwrap();
+    assert!(m.late_500us_error_us.abs() < 0.5 && steps.len() < 6, "{steps:?}");
+    assert!((m.model.wake_outlier_ns - SetupModel::current().wake_outlier_ns).abs() < 1_000.0, "{steps:?}");
+}
+
+#[test]
+fn table_2_fitted_on_one_figure_predicts_the_jitter_but_not_the_loss_at_100us() {
+    use ferrocat_lab::chen2016::{compare, model_rows, paper_setup};
+    assert!(paper_setup(&Options::quick(HostModel::rtx_10us())).is_ok());
+    assert!(paper_setup(&Options::quick(HostModel::pc_rt())).is_err());
+    let figures = compare(&model_rows(HostModel::rtx_10us(), 1).unwrap());
+    for f in &figures {
+        println!("{}", f.line());
+    }
+    assert_eq!(figures.len(), 12);
+    let misses: Vec<&str> = figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect();
+    assert_eq!(misses, ["100 µs, cycles lost (ppm)"]);
+    // The model's latest frame at 100 µs passes the SYNC0 half a cycle on, where the paper's
+    // (49.96 µs) stayed short of it: the lost cycles follow from that.
+    let late_100 = figures.iter().find(|f| f.name == "100 µs, latest frame").unwrap();
+    assert!(late_100.model > 50.0 && late_100.paper < 50.0, "{late_100:?}");
 }
