@@ -475,8 +475,10 @@ fn paprocki2022(o: ferrocat_lab::paprocki2022::Options, json: bool, out: Option<
         }
     }
     if json {
-        let v =
-            serde_json::json!({ "experiment": "paprocki2022", "seed": o.seed, "settle_s": o.settle_s, "rows": rows });
+        let compared = ferrocat_lab::paprocki2022::compared_method(&rows);
+        let figures = compared.map(|m| ferrocat_lab::paprocki2022::compare(&rows, m));
+        let v = serde_json::json!({ "experiment": "paprocki2022", "seed": o.seed, "settle_s": o.settle_s, "rows": rows,
+            "compared_method": compared, "paper_comparison": figures });
         outln!("{v}");
         return Ok(ExitCode::SUCCESS);
     }
@@ -512,6 +514,13 @@ fn paprocki2022(o: ferrocat_lab::paprocki2022::Options, json: bool, out: Option<
             r.min_ns,
             r.sd_ns
         );
+    }
+    if let Some(m) = ferrocat_lab::paprocki2022::compared_method(&rows) {
+        outln!(
+            "Table 2 beside this run's {m} rows (the paper's set-up model: scenarios/paprocki2022-uncompensated.toml; \
+             nothing fitted; docs/lab.md):"
+        );
+        print_figures(&ferrocat_lab::paprocki2022::compare(&rows, m), "ns");
     }
     Ok(ExitCode::SUCCESS)
 }

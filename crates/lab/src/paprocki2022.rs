@@ -142,3 +142,30 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
         .map(|(c, name)| run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}")))
         .collect()
 }
+
+/// The row Table 2 is compared on: `none`, which leaves the slaves' clocks to their DC after the
+/// initialisation, as any master does for the drives among themselves; else the first method.
+pub fn compared_method(rows: &[Row]) -> Option<&str> {
+    rows.iter().find(|r| r.method == "none").or(rows.first()).map(|r| r.method.as_str())
+}
+
+/// Every published figure of Table 2 beside `method`'s row. Nothing of the set-up model is
+/// fitted (docs/lab.md): every figure is a prediction, and its band is ±30 % alone (the ±0.5 µs
+/// floor of µs-sized figures would hold any of these ns).
+pub fn compare(rows: &[Row], method: &str) -> Vec<crate::fit::Figure> {
+    use crate::fit::{Band, Figure, Part};
+    let band = Band { share: Band::PREDICTION_US.share, floor: None };
+    let mut out = Vec::new();
+    for &(cycle, mean, max, min, sd) in &PAPER {
+        let Some(r) = rows.iter().find(|r| r.cycle_us == cycle && r.method == method) else { continue };
+        for (what, paper, model) in [
+            ("mean", mean, r.mean_ns),
+            ("max", max, r.max_ns as f64),
+            ("min", min, r.min_ns as f64),
+            ("sd", sd, r.sd_ns),
+        ] {
+            out.push(Figure::new(format!("{cycle} µs, {what}"), "ns", Part::Prediction, band, paper, model));
+        }
+    }
+    out
+}
