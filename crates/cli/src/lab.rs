@@ -147,6 +147,9 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
              master–last-slave errors, `fig10-*` and `fig11-*` their mean and RMS up to each sample; CSV in \
              `park2020.csv`.\n",
         );
+        if park2020::paper_setup(&o).is_ok() {
+            md.push_str(&figures_md("Table 1 against the set-up model (GPI view)", &park2020::compare(&rows)));
+        }
         write_report(dir, "park2020.md", &md)?;
     }
     if json {
@@ -245,6 +248,28 @@ fn park2020(o: Options, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCo
     Ok(ExitCode::SUCCESS)
 }
 
+/// A paper's figures beside the set-up model's as a Markdown section, for `--out` reports.
+fn figures_md(title: &str, figures: &[ferrocat_lab::fit::Figure]) -> String {
+    let mut md = format!(
+        "\n## {title}\n\n| figure | part | paper | model | error | error % | band | within |\n|---|---|---|---|---|---|---|---|\n"
+    );
+    for f in figures {
+        let part = f.part.as_str();
+        let pct = f.error_pct.map(|p| format!("{p:+.1}")).unwrap_or_else(|| "—".into());
+        md.push_str(&format!(
+            "| {} | {part} | {:.2} {u} | {:.2} {u} | {:+.2} {u} | {pct} | ±{:.2} {u} | {} |\n",
+            f.name,
+            f.paper,
+            f.model,
+            f.error,
+            f.band.tolerance(f.paper),
+            if f.within { "yes" } else { "**no**" },
+            u = f.unit
+        ));
+    }
+    md
+}
+
 /// A paper's figures beside the set-up model's, and which miss their bands.
 fn print_figures(figures: &[ferrocat_lab::fit::Figure], unit: &str) {
     outln!("{}", ferrocat_lab::fit::Figure::header(unit));
@@ -299,13 +324,14 @@ fn chen2016(o: ferrocat_lab::chen2016::Options, json: bool, out: Option<&Path>) 
     use ferrocat_lab::chen2016::{run, Table, PAPER};
     let host = o.host;
     let Table { setup, rows } = run(&o, &progress("runs"))?;
-    if let Some(dir) = out {
-        chen_outputs(dir, &o, &setup, &rows)?;
-    }
     let model = match ferrocat_lab::chen2016::paper_setup(&o) {
         Ok(m) => Ok((m, ferrocat_lab::chen2016::model_rows(o.host, o.seed)?)),
         Err(why) => Err(why),
     };
+    if let Some(dir) = out {
+        let figures = model.as_ref().ok().map(|(_, m)| ferrocat_lab::chen2016::compare(m));
+        chen_outputs(dir, &o, &setup, &rows, figures.as_deref())?;
+    }
     if json {
         let (setup_model, model_rows, figures) = match &model {
             Ok((m, rows)) => (Some(m), Some(rows), Some(ferrocat_lab::chen2016::compare(rows))),
@@ -385,6 +411,7 @@ fn chen_outputs(
     o: &ferrocat_lab::chen2016::Options,
     setup: &ferrocat_lab::chen2016::Setup,
     rows: &[ferrocat_lab::chen2016::Row],
+    figures: Option<&[ferrocat_lab::fit::Figure]>,
 ) -> anyhow::Result<()> {
     use crate::plots::{panel_chart, Series};
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -427,6 +454,12 @@ fn chen_outputs(
         )?;
     }
     md.push_str("\nFigure 12: `fig12-jitter-*` (the reference's timestamps against the master's cycle grid) and `fig12-period-*` (the master's period, its speed relative to the reference); CSV in `chen2016.csv`.\n");
+    if let Some(f) = figures {
+        md.push_str(&figures_md(
+            "Table 2 against the set-up model (chen2016, medians of 5 seeds; reference − grid: the paper's Min. is the earliest frame and its Max. the latest, signs reversed)",
+            f,
+        ));
+    }
     write_report(dir, "chen2016.md", &md)
 }
 
@@ -450,6 +483,10 @@ fn paprocki2022(o: ferrocat_lab::paprocki2022::Options, json: bool, out: Option<
                 "| {} | {} | {:.1} | {} | {} | {:.1} | {p} |\n",
                 r.cycle_us, r.method, r.mean_ns, r.max_ns, r.min_ns, r.sd_ns
             ));
+        }
+        if let Some(m) = ferrocat_lab::paprocki2022::compared_method(&rows) {
+            let title = format!("Table 2 beside this run's {m} rows");
+            md.push_str(&figures_md(&title, &ferrocat_lab::paprocki2022::compare(&rows, m)));
         }
         write_report(dir, "paprocki2022.md", &md)?;
         write_report(dir, "paprocki2022.csv", &crate::report::csv_of(&rows))?;

@@ -27,6 +27,7 @@ fn every_experiment_writes_csv_figures_and_a_report() {
     run(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--out", &d("park")]);
     let park = dir.join("park");
     has(&park, "park2020.md", "| 2 | conventional |");
+    has(&park, "park2020.md", "| 2 slaves, park2020, ref GMEAN | fit |");
     has(&park, "park2020.csv", "slaves,method");
     for f in ["fig8-2slaves-park2020.svg", "fig9-2slaves-ferrocat.svg", "fig10-2slaves-conventional.svg"] {
         has(&park, f, "<svg");
@@ -38,12 +39,14 @@ fn every_experiment_writes_csv_figures_and_a_report() {
     run(&["lab", "chen2016", "--quick", "--cycle-us", "500", "--out", &d("chen")]);
     let chen = dir.join("chen");
     has(&chen, "chen2016.md", "| 500 | chen2016 |");
+    has(&chen, "chen2016.md", "| 500 µs, latest frame | fit |");
     has(&chen, "chen2016.csv", "500,pi,");
     has(&chen, "fig12-jitter-500us.svg", "<svg");
     has(&chen, "fig12-period-500us.svg", "chen2016");
     figures::assert_chart_png(&chen.join("fig12-jitter-500us.png"));
     run(&["lab", "paprocki2022", "--out", &d("pap")]);
     has(&dir.join("pap"), "paprocki2022.md", "| 1000 | ferrocat |");
+    has(&dir.join("pap"), "paprocki2022.md", "| 1000 µs, mean | prediction |");
     has(&dir.join("pap"), "paprocki2022.csv", "cycle_us,method");
     has(&dir.join("pap"), "table2-sync0-1000us.svg", "ferrocat");
     figures::assert_chart_png(&dir.join("pap").join("table2-sync0-500us.png"));
@@ -72,4 +75,30 @@ fn the_robustness_table_splits_into_columns() {
         assert_eq!(control, r[recovery] == "—", "{r:?}");
         assert!(!control || r[relock] == "—", "{r:?}");
     }
+}
+
+/// `--json` carries the paper's figures beside the set-up model's; `--fit` prints the fit, and
+/// only where the experiment has a fitted model.
+#[test]
+fn the_papers_figures_and_the_fit_are_in_json() {
+    let json = |args: &[&str]| -> serde_json::Value {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let v = json(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--json"]);
+    let figures = v["paper_comparison"].as_array().unwrap();
+    // The 2-slave rows of conventional and park2020, four figures each, all fitted.
+    assert_eq!(figures.len(), 8, "{v}");
+    assert!(figures.iter().all(|f| f["part"] == "fit" && f["within"].is_boolean()), "{v}");
+    assert!(v["setup_model"]["send_mean_ns"].as_f64().is_some_and(|x| x > 0.0), "{v}");
+    // On another host there is no model to compare with.
+    let v = json(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1", "--host", "pc-rt", "--json"]);
+    assert!(v["paper_comparison"].is_null() && v["setup_model"].is_null(), "{v}");
+    // The preset is the fit's fixed point: one step.
+    let v = json(&["lab", "park2020", "--quick", "--fit", "--json"]);
+    assert_eq!(v["steps"].as_array().map(Vec::len), Some(1), "{v}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["lab", "robustness", "--fit"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("park2020 and chen2016"), "{err}");
 }

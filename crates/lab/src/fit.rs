@@ -12,6 +12,15 @@ pub enum Part {
     Prediction,
 }
 
+impl Part {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Part::Fit => "fit",
+            Part::Prediction => "prediction",
+        }
+    }
+}
+
 /// The band a figure must fall in: a share of the paper's figure, and a floor in the figure's
 /// own unit for figures near zero (where a share of them means nothing).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -79,10 +88,7 @@ impl Figure {
         format!(
             "{:<34} {:<10} {:>9.2} {:>9.2} {:>+9.2} {pct}  ±{:<6.2} {}",
             self.name,
-            match self.part {
-                Part::Fit => "fit",
-                Part::Prediction => "prediction",
-            },
+            self.part.as_str(),
             self.paper,
             self.model,
             self.error,
