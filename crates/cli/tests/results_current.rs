@@ -1,6 +1,6 @@
 //! docs/results.md is what the code produces now: the headline experiments in their quick
 //! variants on seed 1 (`ferrocat lab park2020|chen2016|paprocki2022|robustness --quick`,
-//! `ferrocat demo`), rendered as tables. The simulations are deterministic, so a figure that
+//! `ferrocat demo`) and the papers' figures beside the set-up models, rendered as tables. The simulations are deterministic, so a figure that
 //! changes without the file fails this test; `scripts/results.sh` writes the file anew
 //! (`FERROCAT_WRITE_RESULTS=1`).
 use std::fmt::Write as _;
@@ -143,6 +143,41 @@ fn render() -> String {
                 r["samples"].to_string(),
             ]
         }),
+    );
+    let unc = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenarios/paprocki2022-uncompensated.toml");
+    let pap_model = run(&["lab", "run", unc]);
+    let _ = writeln!(
+        out,
+        "## The papers' figures beside the set-up models
+
+Every published figure beside the model's: Park's Table 1 \
+         (`lab park2020 --quick`, GPI view; fitted on the 2-slave rows), Chen's Table 2 (`lab chen2016 --quick`, \
+         chen2016, medians of 5 seeds of 120 000 cycles; fitted on the 500 µs latest frame), Paprocki's Table 2 \
+         (`lab run scenarios/paprocki2022-uncompensated.toml`, the `none` rows; nothing fitted). Bands: fitted \
+         ±20 % or ±0.3 µs, predicted ±30 % or ±0.5 µs, Paprocki's ns ±30 % alone (docs/lab.md).\n"
+    );
+    table(
+        &mut out,
+        &["paper", "figure", "part", "paper's", "model", "error", "band", "within"],
+        [("Park 2020", &park), ("Chen 2016", &chen), ("Paprocki 2022", &pap_model)].into_iter().flat_map(
+            |(paper, v)| {
+                v["paper_comparison"].as_array().cloned().unwrap_or_default().into_iter().map(move |c| {
+                    let unit = c["unit"].as_str().unwrap_or("").to_string();
+                    let tol = c["band"]["share"].as_f64().unwrap_or(0.0) * c["paper"].as_f64().unwrap_or(0.0).abs();
+                    let tol = tol.max(c["band"]["floor"].as_f64().unwrap_or(0.0));
+                    vec![
+                        paper.to_string(),
+                        c["name"].as_str().unwrap_or("?").into(),
+                        c["part"].as_str().unwrap_or("?").into(),
+                        format!("{} {unit}", f(&c["paper"], 2)),
+                        format!("{} {unit}", f(&c["model"], 2)),
+                        format!("{} {unit}", f(&c["error"], 2)),
+                        format!("±{tol:.2} {unit}"),
+                        if c["within"] == true { "yes".into() } else { "**no**".into() },
+                    ]
+                })
+            },
+        ),
     );
     let rob = run(&["lab", "robustness", "--quick"]);
     let _ = writeln!(
