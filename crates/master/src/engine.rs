@@ -555,7 +555,8 @@ impl<I: Io> Engine<I> {
     }
 
     /// [`Engine::one`], and when its (last) send call returned, master clock: Park 2020's
-    /// eq. 3 starts its round trip "immediately after sending".
+    /// eq. 3 starts its round trip "immediately after sending". A link that queues its sends
+    /// (io_uring) returns before the frame leaves, with the wait that follows.
     pub fn one_timed(&mut self, cmd: Command, address: Address, data: &mut [u8]) -> Result<(u16, u64)> {
         self.send_returned_ns = Some(0);
         let wkc = self.one(cmd, address, data);
