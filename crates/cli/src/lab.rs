@@ -262,7 +262,7 @@ fn figures_md(title: &str, figures: &[ferrocat_lab::fit::Figure]) -> String {
             f.paper,
             f.model,
             f.error,
-            f.band.tolerance(f.paper),
+            f.tolerance,
             if f.within { "yes" } else { "**no**" },
             u = f.unit
         ));
@@ -276,7 +276,7 @@ fn print_figures(figures: &[ferrocat_lab::fit::Figure], unit: &str) {
     for f in figures {
         outln!("{}", f.line());
     }
-    let misses: Vec<&str> = figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect();
+    let misses = ferrocat_lab::fit::misses(figures);
     outln!(
         "{} of {} figures within their bands{}",
         figures.len() - misses.len(),

@@ -163,8 +163,6 @@ Every published figure beside the model's: Park's Table 1 \
             |(paper, v)| {
                 v["paper_comparison"].as_array().cloned().unwrap_or_default().into_iter().map(move |c| {
                     let unit = c["unit"].as_str().unwrap_or("").to_string();
-                    let tol = c["band"]["share"].as_f64().unwrap_or(0.0) * c["paper"].as_f64().unwrap_or(0.0).abs();
-                    let tol = tol.max(c["band"]["floor"].as_f64().unwrap_or(0.0));
                     vec![
                         paper.to_string(),
                         c["name"].as_str().unwrap_or("?").into(),
@@ -172,7 +170,7 @@ Every published figure beside the model's: Park's Table 1 \
                         format!("{} {unit}", f(&c["paper"], 2)),
                         format!("{} {unit}", f(&c["model"], 2)),
                         format!("{} {unit}", f(&c["error"], 2)),
-                        format!("±{tol:.2} {unit}"),
+                        format!("±{} {unit}", f(&c["tolerance"], 2)),
                         if c["within"] == true { "yes".into() } else { "**no**".into() },
                     ]
                 })

@@ -63,12 +63,15 @@ pub struct Figure {
     /// (model − paper) / |paper|, in per cent (None where the paper's figure is 0).
     pub error_pct: Option<f64>,
     pub band: Band,
+    /// How far from the paper's figure the band reaches ([`Band::tolerance`]).
+    pub tolerance: f64,
     pub within: bool,
 }
 
 impl Figure {
     pub fn new(name: impl Into<String>, unit: &'static str, part: Part, band: Band, paper: f64, model: f64) -> Self {
         let error = model - paper;
+        let tolerance = band.tolerance(paper);
         Figure {
             name: name.into(),
             unit,
@@ -78,7 +81,8 @@ impl Figure {
             error,
             error_pct: (paper != 0.0).then(|| error / paper.abs() * 100.0),
             band,
-            within: error.abs() <= band.tolerance(paper),
+            tolerance,
+            within: error.abs() <= tolerance,
         }
     }
 
@@ -92,7 +96,7 @@ impl Figure {
             self.paper,
             self.model,
             self.error,
-            self.band.tolerance(self.paper),
+            self.tolerance,
             if self.within { "within" } else { "MISSES" }
         )
     }
@@ -111,6 +115,11 @@ impl Figure {
             "target"
         )
     }
+}
+
+/// The names of the figures outside their bands, in order.
+pub fn misses(figures: &[Figure]) -> Vec<&str> {
+    figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect()
 }
 
 #[cfg(test)]

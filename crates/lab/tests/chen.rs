@@ -145,7 +145,7 @@ fn table_2_fitted_on_one_figure_predicts_the_jitter_but_not_the_loss_at_100us() 
         println!("{}", f.line());
     }
     assert_eq!(figures.len(), 12);
-    let misses: Vec<&str> = figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect();
+    let misses = ferrocat_lab::fit::misses(&figures);
     assert_eq!(misses, ["100 µs, cycles lost (ppm)"]);
     // The model's latest frame at 100 µs passes the SYNC0 half a cycle on, where the paper's
     // (49.96 µs) stayed short of it: the lost cycles follow from that.

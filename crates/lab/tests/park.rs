@@ -224,7 +224,7 @@ fn table_1_fitted_on_two_slaves_predicts_six_but_for_park2020s_gmean() {
     for f in &figures {
         println!("{}", f.line());
     }
-    let misses: Vec<&str> = figures.iter().filter(|f| !f.within).map(|f| f.name.as_str()).collect();
+    let misses = ferrocat_lab::fit::misses(&figures);
     assert_eq!(misses, ["6 slaves, park2020, ref GMEAN", "6 slaves, park2020, last GMEAN"]);
     // The model keeps the 2-slave bias where the paper's went below zero (docs/lab.md).
     for f in figures.iter().filter(|f| !f.within) {
