@@ -7,12 +7,14 @@
 # is pinned to CPU 0 and every master to CPU 1, so that the three get the same conditions; they
 # take turns for ROUNDS rounds (load on the machine changes over time) and medians are printed.
 # Needs root and scripts/test.sh's .venv (pysoem); without perf the system-call column is "-".
-# SIM_IO (socket) chooses the simulator's frame path, the same for every master.
+# ferrocat runs twice: on a packet ring (`--io ring`, spinning for the answer: the path for a
+# dedicated core) and on its default path (`--io auto`, io_uring, sleeping for the answer).
+# SIM_IO (ring) chooses the simulator's frame path, the same for every master.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECONDS_EACH="${SECONDS_EACH:-3}"
 ROUNDS="${ROUNDS:-5}"
-SIM_IO="${SIM_IO:-socket}"   # how the simulator moves frames: socket, uring or auto
+SIM_IO="${SIM_IO:-ring}"   # how the simulator moves frames: ring, socket, uring or auto
 cargo build -q --release -p ferrocat --example ethercrab_bench
 cargo build -q --release -p ferrocat
 bin=target/release/ferrocat
@@ -20,8 +22,18 @@ id=$$; m=fcmm$id; s=fcms$id
 out=$(mktemp)
 perf=false
 if command -v perf >/dev/null && perf stat -e raw_syscalls:sys_enter true >/dev/null 2>&1; then perf=true; fi
-cleanup() { ip netns del "$m" 2>/dev/null || true; ip netns del "$s" 2>/dev/null || true; rm -f "$out" "$out.perf"; }
+sim=""
+rt_runtime=$(cat /proc/sys/kernel/sched_rt_runtime_us)
+cleanup() {
+  if [ -n "$sim" ]; then kill -TERM "$sim" 2>/dev/null || true; fi
+  echo "$rt_runtime" > /proc/sys/kernel/sched_rt_runtime_us || true
+  ip netns del "$m" 2>/dev/null || true; ip netns del "$s" 2>/dev/null || true; rm -f "$out" "$out.perf"
+}
 trap cleanup EXIT
+# A simulator or master that spins for its frames (--io ring) runs SCHED_FIFO without a pause
+# at these rates: the kernel's RT throttling (sched_rt_runtime_us) would stop it for ~50 ms
+# each second, which the masters see as lost frames. Off for the run, restored on exit.
+echo -1 > /proc/sys/kernel/sched_rt_runtime_us
 ip netns add "$m"; ip netns add "$s"
 ip link add "fcm${id}a" type veth peer name "fcm${id}b"
 ip link set "fcm${id}a" netns "$m"; ip link set "fcm${id}b" netns "$s"
@@ -29,12 +41,13 @@ ip -n "$m" link set "fcm${id}a" up; ip -n "$s" link set "fcm${id}b" up
 devices=(--device EK1100)
 for k in $(seq 1 15); do if (( k % 2 )); then devices+=(--device EL1004); else devices+=(--device EL2004); fi; done
 for round in $(seq 1 "$ROUNDS"); do
-  for master in ferrocat ethercrab soem; do
+  for master in ferrocat-ring ferrocat ethercrab soem; do
     ip netns exec "$s" taskset -c 0 "$bin" sim "${devices[@]}" --iface "fcm${id}b" --io "$SIM_IO" >/dev/null 2>&1 &
     sim=$!
     sleep 0.5
     case $master in
-      ferrocat) cmd=("$bin" run --iface "fcm${id}a" --dc --sync none --dc-static-frames 0 --max-rate --seconds "$SECONDS_EACH") ;;
+      ferrocat-ring) cmd=("$bin" run --iface "fcm${id}a" --io ring --dc --sync none --dc-static-frames 0 --max-rate --seconds "$SECONDS_EACH") ;;
+      ferrocat) cmd=("$bin" run --iface "fcm${id}a" --io auto --dc --sync none --dc-static-frames 0 --max-rate --seconds "$SECONDS_EACH") ;;
       ethercrab) cmd=(target/release/examples/ethercrab_bench "fcm${id}a" "$SECONDS_EACH") ;;
       soem) cmd=(.venv/bin/python crates/cli/tests/python/soem_bench.py "fcm${id}a" "$SECONDS_EACH") ;;
     esac
@@ -56,7 +69,7 @@ for round in $(seq 1 "$ROUNDS"); do
 done
 echo
 echo "medians over $ROUNDS rounds (16 slaves, one LRW + FRMW frame per cycle):"
-for master in ferrocat ethercrab soem; do
+for master in ferrocat-ring ferrocat ethercrab soem; do
   med() { grep "^$master " "$out" | awk -v c="$1" '{print $c}' | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
-  printf "  %-10s start to OP %8s ms   %8s cycles/s   %7s us CPU per cycle   %6s system calls per cycle\n" "$master" "$(med 2)" "$(med 3)" "$(med 4)" "$(med 5)"
+  printf "  %-13s start to OP %8s ms   %8s cycles/s   %7s us CPU per cycle   %6s system calls per cycle\n" "$master" "$(med 2)" "$(med 3)" "$(med 4)" "$(med 5)"
 done

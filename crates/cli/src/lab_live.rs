@@ -29,6 +29,8 @@ pub struct LiveArgs {
     pub seconds: f64,
     pub seed: u64,
     pub io: crate::target::IoPath,
+    /// With `io` ring: how long a receive spins before it sleeps, µs.
+    pub spin_us: u64,
     pub json: bool,
 }
 
@@ -204,7 +206,8 @@ impl ClockPiece {
 }
 
 fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterRun> {
-    let target = crate::target::Target { io: a.io, ..crate::target::Target::on_iface(iface, false) };
+    let target =
+        crate::target::Target { io: a.io, spin_us: a.spin_us, ..crate::target::Target::on_iface(iface, false) };
     let mut m = target.master()?;
     // The simulator's ESCs, as in the virtual lab: ferrocat's methods are told their loop-back.
     ferrocat_lab::tell_loop_back(&mut m, method);
@@ -524,6 +527,7 @@ mod tests {
             seconds: 1.0,
             seed: 1,
             io: crate::target::IoPath::Auto,
+            spin_us: 200,
             json: false,
         }
     }

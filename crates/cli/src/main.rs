@@ -134,10 +134,13 @@ enum Command {
         /// With --iface: how frames move. socket makes a recvmsg, a sendto and a read of the
         /// transmit stamp per frame; io_uring answers a frame and waits for the next in one
         /// system call, but answered every master measured here more slowly
-        /// (docs/benchmarks.md); auto takes io_uring where the kernel allows it. A ring's two
-        /// ports always use socket calls.
+        /// (docs/benchmarks.md); ring maps a PACKET_MMAP receive ring and spins on it (--spin-us)
+        /// before it sleeps, holding its CPU; auto takes io_uring where the kernel allows it. A ring's two ports always use socket calls.
         #[arg(long, value_enum, default_value = "socket", requires = "iface")]
         io: target::IoPath,
+        /// With --io ring: how long a receive spins on the ring before it sleeps, in µs.
+        #[arg(long, value_name = "US", default_value_t = 200, requires = "iface")]
+        spin_us: u64,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
         #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
         bench: bool,
@@ -317,6 +320,9 @@ enum LabCmd {
         /// How the master's frames move (as `run --io`).
         #[arg(long, value_enum, default_value = "auto")]
         io: target::IoPath,
+        /// With --io ring: how long a receive spins before it sleeps, in µs (as `run --spin-us`).
+        #[arg(long, value_name = "US", default_value_t = 200)]
+        spin_us: u64,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -573,20 +579,32 @@ fn main() -> ExitCode {
             esi::run(&file, device.as_deref(), sii.as_deref(), json, strict)
         }
         Command::Sim { bench: true, json, .. } => sim::bench(json),
-        Command::Sim { config, device, iface, secondary_iface, udp, report, clock_log, seed, eoe_tap, io, .. } => {
-            sim::run(sim::SimArgs {
-                config,
-                devices: device,
-                iface,
-                secondary_iface,
-                udp,
-                report,
-                clock_log,
-                seed,
-                eoe_taps: eoe_tap,
-                io,
-            })
-        }
+        Command::Sim {
+            config,
+            device,
+            iface,
+            secondary_iface,
+            udp,
+            report,
+            clock_log,
+            seed,
+            eoe_tap,
+            io,
+            spin_us,
+            ..
+        } => sim::run(sim::SimArgs {
+            config,
+            devices: device,
+            iface,
+            secondary_iface,
+            udp,
+            report,
+            clock_log,
+            seed,
+            eoe_taps: eoe_tap,
+            io,
+            spin_us,
+        }),
         Command::Lab { experiment } => {
             use ferrocat_lab::scenario::Experiment;
             match experiment {
@@ -595,7 +613,7 @@ fn main() -> ExitCode {
                 LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
                 LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
                 LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
-                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, json } => {
+                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, spin_us, json } => {
                     lab_live::run(lab_live::LiveArgs {
                         methods: method,
                         slaves,
@@ -604,6 +622,7 @@ fn main() -> ExitCode {
                         seconds,
                         seed,
                         io,
+                        spin_us,
                         json,
                     })
                 }

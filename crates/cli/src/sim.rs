@@ -6,7 +6,9 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use ferrocat_esc::DigitalIo;
-use ferrocat_segment::live::{serve_raw, serve_udp, serve_uring, RawSocket, ServeStats, UringSocket};
+use ferrocat_segment::live::{
+    serve_raw, serve_ring, serve_udp, serve_uring, RawSocket, RingSocket, ServeStats, UringSocket,
+};
 use ferrocat_segment::{Segment, SegmentConfig};
 use serde_json::json;
 
@@ -23,6 +25,8 @@ pub struct SimArgs {
     pub eoe_taps: Vec<String>,
     /// How frames move on `iface` (a ring's two ports always use socket calls).
     pub io: crate::target::IoPath,
+    /// With `io` ring: how long a receive spins before it sleeps, µs.
+    pub spin_us: u64,
 }
 
 /// `--eoe-tap DEVICE:TAP`: the device's EoE endpoint bridged to a new TAP interface.
@@ -269,6 +273,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                         serve_raw(&mut seg, &sock, None, &stop, log, &mut taps)?
                     }
                 },
+                (None, IoPath::Ring) => {
+                    let mut r = RingSocket::new(sock, a.spin_us.saturating_mul(1000))
+                        .with_context(|| format!("a packet ring on {iface}"))?;
+                    eprintln!("ferrocat sim: frames through a packet ring (spinning {} us before sleeping)", a.spin_us);
+                    serve_ring(&mut seg, &mut r, &stop, log, &mut taps)?
+                }
                 (secondary, _) => serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, log, &mut taps)?,
             };
             for t in &taps {

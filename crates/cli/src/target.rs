@@ -34,10 +34,16 @@ pub struct Target {
     pub force: bool,
     /// With --iface: how frames move. io_uring sends a cycle's frames and waits for the answer
     /// in one system call; socket makes a sendto per frame, a recvmsg per answer and a read of
-    /// the transmit stamp; auto takes io_uring where the kernel allows it (a cable-redundant
-    /// pair always uses socket calls).
+    /// the transmit stamp; ring maps a PACKET_MMAP receive ring and spins on it for the answer
+    /// (--spin-us) before it sleeps, a sendto per frame and no call to receive, holding the CPU
+    /// while it spins (for a core of the master's own); auto takes io_uring where the kernel
+    /// allows it (a cable-redundant pair always uses socket calls).
     #[arg(long, value_enum, default_value = "auto", requires = "iface")]
     pub io: IoPath,
+    /// With --io ring: how long a receive spins on the ring before it sleeps, in µs. The spin
+    /// holds the CPU; an answer that comes within it costs no system call.
+    #[arg(long, value_name = "US", default_value_t = 200, requires = "iface")]
+    pub spin_us: u64,
     /// Use the embedded virtual segment described by this file.
     #[arg(long, value_name = "SEG.toml")]
     pub config: Option<PathBuf>,
@@ -62,14 +68,18 @@ pub enum IoPath {
     Auto,
     Uring,
     Socket,
+    Ring,
 }
 
-impl From<IoPath> for ferrocat_master::io::LinkPath {
-    fn from(p: IoPath) -> Self {
-        match p {
-            IoPath::Auto => Self::Auto,
-            IoPath::Uring => Self::Uring,
-            IoPath::Socket => Self::Socket,
+impl IoPath {
+    /// The master's link path, a ring spinning `spin_us` in each receive.
+    pub fn link_path(self, spin_us: u64) -> ferrocat_master::io::LinkPath {
+        use ferrocat_master::io::LinkPath;
+        match self {
+            IoPath::Auto => LinkPath::Auto,
+            IoPath::Uring => LinkPath::Uring,
+            IoPath::Socket => LinkPath::Socket,
+            IoPath::Ring => LinkPath::Ring { spin_ns: spin_us.saturating_mul(1000) },
         }
     }
 }
@@ -235,6 +245,7 @@ impl Target {
             udp: None,
             force,
             io: IoPath::Auto,
+            spin_us: 200,
             config: None,
             device: Vec::new(),
             seed: None,
@@ -257,7 +268,7 @@ impl Target {
                         RawIo::open_redundant(iface, sec).with_context(|| format!("opening {iface} and {sec}"))?,
                     ),
                     None => World::Raw(
-                        RawIo::open_with(iface, self.io.into()).with_context(|| format!("opening {iface}"))?,
+                        RawIo::open_with(iface, self.io.link_path(self.spin_us)).with_context(|| format!("opening {iface}"))?,
                     ),
                 }
             }

@@ -143,14 +143,18 @@ fn run_to_op_and_tshark_decodes_every_frame() {
     println!("{} frames sent by ferrocat, none flagged by tshark", frames.len());
 }
 
-/// Both ways of moving frames run a segment in OP, on the master's side and on the
-/// simulator's (io_uring: one system call per exchange), each named on stderr.
+/// Every way of moving frames runs a segment in OP with DC (which needs the transmit stamps),
+/// on the master's side and on the simulator's, each named on stderr: io_uring (one system
+/// call per exchange), socket calls, and a packet ring (one call per frame sent, receives met
+/// on the ring).
 #[test]
-fn run_on_io_uring_and_on_socket_calls() {
+fn run_on_each_frame_path() {
     let net = VethPair::new("io");
-    for (sim_io, io, named) in
-        [("socket", "uring", "frames through io_uring"), ("uring", "socket", "frames through socket calls")]
-    {
+    for (sim_io, io, named, sim_named) in [
+        ("socket", "uring", "frames through io_uring", "frames through"),
+        ("uring", "socket", "frames through socket calls", "frames through io_uring"),
+        ("ring", "ring", "frames through a packet ring", "frames through a packet ring"),
+    ] {
         let sim = Sim::start(&net, &["--device", "EK1100", "--device", "EL2004", "--device", "EL1004", "--io", sim_io]);
         let run = ferrocat_in(&net.master_ns)
             .args(["run", "--iface", &net.master_if, "--io", io, "--dc", "--seconds", "0.5", "--cycle-us", "1000"])
@@ -160,11 +164,34 @@ fn run_on_io_uring_and_on_socket_calls() {
         let (out, err) = (String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
         assert!(run.status.success(), "--io {io} against sim --io {sim_io}: {err}");
         assert!(err.contains(named), "--io {io}: {err}");
-        assert_eq!(said.contains("frames through io_uring"), sim_io == "uring", "sim --io {sim_io}: {said}");
+        assert_eq!(said.contains(sim_named), sim_io != "socket", "sim --io {sim_io}: {said}");
+        assert!(err.contains("DC: reference slave 0"), "--io {io}: no DC: {err}");
         let (errors, lost) = (summary_field(&out, " working-counter errors"), summary_field(&out, "frames lost "));
         assert!(errors.saturating_sub(lost) < 10 && lost < 25, "--io {io}: {errors} short cycles, {lost} lost: {out}");
         println!("--io {io} against sim --io {sim_io}: {errors} short cycles, {lost} lost");
     }
+}
+
+/// A simulator spinning on its ring whose interface goes away stops with an error, rather
+/// than spin on a socket that will never have a frame again.
+#[test]
+fn a_ring_whose_interface_goes_away_ends_with_an_error() {
+    let net = VethPair::new("rg");
+    let sim = Sim::start(&net, &["--device", "EK1100", "--io", "ring"]);
+    let t0 = std::time::Instant::now();
+    Command::new("ip").args(["netns", "exec", &net.master_ns, "ip", "link", "del", &net.master_if]).status().unwrap();
+    let (status, said) = sim.wait_exit(std::time::Duration::from_secs(10));
+    assert!(status.is_some_and(|s| !s.success()), "sim still running or succeeded after its interface went: {said}");
+    assert!(
+        said.contains("error: receive: ")
+            && ["Network is down", "the interface is gone", "No such device"].iter().any(|m| said.contains(m)),
+        "{said}"
+    );
+    println!(
+        "sim ended {:.2} s after its interface went: {}",
+        t0.elapsed().as_secs_f64(),
+        said.lines().last().unwrap_or("")
+    );
 }
 
 #[test]

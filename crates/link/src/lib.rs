@@ -2,10 +2,12 @@
 //! and what a real-time cyclic task needs (absolute sleeps, SCHED_FIFO, locked memory, a pinned
 //! CPU), and the [`Io`] trait through which the master meets its world. Shared by the live
 //! segment and the master.
+mod ring;
 mod tap;
 mod uring;
 mod world;
 
+pub use ring::{RingSocket, DEFAULT_SPIN_NS as DEFAULT_RING_SPIN_NS};
 pub use tap::Tap;
 pub use uring::UringSocket;
 pub use world::Io;
@@ -276,6 +278,35 @@ impl RawSocket {
             )
         };
         check(r, "SO_RCVTIMEO").map(|_| ())
+    }
+
+    /// The socket's pending error (SO_ERROR), cleared by reading it.
+    pub fn take_error(&self) -> io::Result<Option<io::Error>> {
+        let mut e: libc::c_int = 0;
+        let mut len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
+        // SAFETY: getsockopt writes at most `len` bytes into the int we own.
+        let r = unsafe {
+            libc::getsockopt(
+                self.fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_ERROR,
+                &mut e as *mut _ as *mut libc::c_void,
+                &mut len,
+            )
+        };
+        check(r, "SO_ERROR")?;
+        Ok((e != 0).then(|| io::Error::from_raw_os_error(e)))
+    }
+
+    /// Whether the socket is still bound to its interface (the kernel unbinds it when the
+    /// interface is removed).
+    pub fn still_bound(&self) -> io::Result<bool> {
+        // SAFETY: getsockname writes at most `len` bytes into the address we own.
+        let mut sll: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+        let mut len = std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t;
+        let r = unsafe { libc::getsockname(self.fd.as_raw_fd(), &mut sll as *mut _ as *mut libc::sockaddr, &mut len) };
+        check(r, "getsockname")?;
+        Ok(sll.sll_ifindex == self.ifindex)
     }
 
     /// Which timestamps this socket gets.

@@ -165,6 +165,10 @@ impl UringSocket {
         if frame.len() > FRAME_LEN {
             return Err(io::Error::new(io::ErrorKind::InvalidInput, format!("frame of {} bytes", frame.len())));
         }
+        if self.tx_busy.iter().all(|b| *b) {
+            // Sends that completed and were not reaped yet (a caller that never receives here).
+            self.reap();
+        }
         let slot = match self.tx_busy.iter().position(|b| !b) {
             Some(s) => s,
             None => {

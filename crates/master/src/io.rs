@@ -15,12 +15,21 @@ pub enum LinkPath {
     /// The socket calls: a `sendto` per frame and a `recvmsg` per answer, and a read of the
     /// transmit stamp.
     Socket,
+    /// A PACKET_MMAP receive ring: a receive spins on the ring for up to `spin_ns` before it
+    /// sleeps, so that an answer met within the spin costs no system call; frames go out
+    /// with `sendto`. The spin holds the CPU: for a core of the master's own. An error where
+    /// the kernel refuses the ring.
+    Ring {
+        /// How long a receive spins before it sleeps, ns.
+        spin_ns: u64,
+    },
 }
 
 #[derive(Debug)]
 enum Port {
     Socket(ferrocat_link::RawSocket),
     Uring(Box<ferrocat_link::UringSocket>),
+    Ring(Box<ferrocat_link::RingSocket>),
 }
 
 /// Real time on a network interface through an AF_PACKET raw socket, with kernel (or NIC)
@@ -50,6 +59,7 @@ impl RawIo {
         let sock = ferrocat_link::RawSocket::open(iface)?;
         let port = match path {
             LinkPath::Socket => Port::Socket(sock),
+            LinkPath::Ring { spin_ns } => Port::Ring(Box::new(ferrocat_link::RingSocket::new(sock, spin_ns)?)),
             LinkPath::Uring => Port::Uring(Box::new(ferrocat_link::UringSocket::new(sock).map_err(|(e, _)| e)?)),
             LinkPath::Auto => match ferrocat_link::UringSocket::new(sock) {
                 Ok(u) => Port::Uring(Box::new(u)),
@@ -74,6 +84,7 @@ impl RawIo {
         match &self.port {
             Port::Socket(s) => s,
             Port::Uring(u) => u.socket(),
+            Port::Ring(r) => r.socket(),
         }
     }
 
@@ -82,11 +93,20 @@ impl RawIo {
         self.sock().timestamps().describe()
     }
 
-    /// How frames move: "io_uring" or "socket calls".
+    /// How frames move: "io_uring", "socket calls" or "a packet ring".
     pub fn path(&self) -> &'static str {
         match self.port {
             Port::Socket(_) => "socket calls",
             Port::Uring(_) => "io_uring",
+            Port::Ring(_) => "a packet ring",
+        }
+    }
+
+    /// Receives that found no frame within their spin and slept (on a packet ring only).
+    pub fn ring_sleeps(&self) -> Option<u64> {
+        match &self.port {
+            Port::Ring(r) => Some(r.sleeps()),
+            _ => None,
         }
     }
 }
@@ -100,12 +120,16 @@ impl Io for RawIo {
         match &mut self.port {
             Port::Socket(s) => s.send(frame),
             Port::Uring(u) => u.send(frame),
+            Port::Ring(r) => r.send(frame),
         }
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
         let sock = match &mut self.port {
             Port::Uring(u) => {
                 return Ok(u.recv(buf, deadline_ns)?.map(|(n, t)| (n, t.unwrap_or_else(ferrocat_link::monotonic_ns))))
+            }
+            Port::Ring(r) => {
+                return Ok(r.recv(buf, deadline_ns)?.map(|(n, t)| (n, t.unwrap_or_else(ferrocat_link::monotonic_ns))))
             }
             Port::Socket(s) => &*s,
         };
@@ -162,6 +186,7 @@ impl Io for RawIo {
         let t = match &mut self.port {
             Port::Socket(s) => s.tx_timestamp(),
             Port::Uring(u) => u.tx_timestamp(),
+            Port::Ring(r) => r.tx_timestamp(),
         };
         if let Some(t) = t {
             self.tx_stamps[0] = Some(t);

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use crate::{MasterPort, Segment};
 
-pub use ferrocat_link::{monotonic_ns, RawSocket, UringSocket};
+pub use ferrocat_link::{monotonic_ns, RawSocket, RingSocket, UringSocket};
 
 /// Counters of a live run.
 #[derive(Debug, Clone, Default)]
@@ -345,6 +345,36 @@ pub fn serve_uring(
         log_clock(seg, &place, &mut stats, t0);
     }
     sock.flush()?;
+    Ok(stats)
+}
+
+/// [`serve_raw`] on one port with a PACKET_MMAP receive ring: each frame is met on the ring
+/// (spinning for the socket's spin time before sleeping), and its answer sent and its
+/// transmit stamp read as on the socket calls.
+pub fn serve_ring(
+    seg: &mut Segment,
+    sock: &mut RingSocket,
+    stop: &AtomicBool,
+    log_clocks: bool,
+    taps: &mut [EoeTap],
+) -> io::Result<ServeStats> {
+    let Server { mut tap_buf, t0, mut buf, mut stats, mut place } = Server::new(log_clocks);
+    while !stop.load(Ordering::Relaxed) {
+        let got = sock.recv(&mut buf, monotonic_ns() + 50_000_000)?;
+        exchange_taps(seg, taps, &mut tap_buf)?;
+        let Some((n, stamp)) = got else {
+            seg.advance_to(place.idle(monotonic_ns() - t0));
+            continue;
+        };
+        if let Some(a) = take_frame(seg, &mut place, &mut stats, &mut buf, MasterPort::Primary, n, stamp, t0) {
+            sock.send(&buf[..n])?;
+            let sent = monotonic_ns();
+            let left = sock.tx_timestamp().map_or(sent, |t| t.clamp(a.start, sent));
+            a.answered(seg, &mut place, &mut stats, left);
+        }
+        exchange_taps(seg, taps, &mut tap_buf)?;
+        log_clock(seg, &place, &mut stats, t0);
+    }
     Ok(stats)
 }
 

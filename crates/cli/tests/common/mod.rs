@@ -141,6 +141,21 @@ impl Sim {
     }
 }
 
+impl Sim {
+    /// Waits up to `timeout` for the simulator to exit by itself: its status (`None` if it is
+    /// still running) and what it said.
+    pub fn wait_exit(mut self, timeout: Duration) -> (Option<std::process::ExitStatus>, String) {
+        let t0 = Instant::now();
+        while t0.elapsed() < timeout {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return (Some(status), self.said.take().and_then(|h| h.join().ok()).unwrap_or_default());
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        (None, String::new())
+    }
+}
+
 impl Drop for Sim {
     fn drop(&mut self) {
         // SIGTERM first, so that the simulator reports its statistics.

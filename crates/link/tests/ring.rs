@@ -1,0 +1,104 @@
+//! The packet ring on a veth pair in two namespaces this test makes and removes (root).
+use std::process::Command;
+
+use ferrocat_link::{enter_netns, monotonic_ns, RawSocket, RingSocket};
+
+fn ip(args: &[&str]) {
+    let out = Command::new("ip").args(args).output().expect("the ip command (iproute2) is needed");
+    assert!(out.status.success(), "ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+}
+
+struct Pair {
+    ns: [String; 2],
+    ifs: [String; 2],
+}
+
+impl Pair {
+    fn new(tag: &str) -> Self {
+        let id = std::process::id() % 100_000;
+        let p = Pair {
+            ns: [format!("fcl{tag}{id}a"), format!("fcl{tag}{id}b")],
+            ifs: [format!("fcl{tag}{id}a"), format!("fcl{tag}{id}b")],
+        };
+        for ns in &p.ns {
+            let _ = Command::new("ip").args(["netns", "del", ns]).output();
+            ip(&["netns", "add", ns]);
+        }
+        ip(&["link", "add", &p.ifs[0], "type", "veth", "peer", "name", &p.ifs[1]]);
+        for k in 0..2 {
+            ip(&["link", "set", &p.ifs[k], "netns", &p.ns[k]]);
+            // Room for a frame longer than a ring slot.
+            ip(&["-n", &p.ns[k], "link", "set", &p.ifs[k], "mtu", "9000", "up"]);
+        }
+        p
+    }
+
+    /// A socket on side `k`, opened from inside its namespace (on a thread of its own, which
+    /// the namespace change is confined to).
+    fn open(&self, k: usize) -> RawSocket {
+        let (ns, ifc) = (self.ns[k].clone(), self.ifs[k].clone());
+        std::thread::spawn(move || {
+            enter_netns(&ns).unwrap();
+            RawSocket::open(&ifc).unwrap()
+        })
+        .join()
+        .unwrap()
+    }
+}
+
+impl Drop for Pair {
+    fn drop(&mut self) {
+        for ns in &self.ns {
+            let _ = Command::new("ip").args(["netns", "del", ns]).output();
+        }
+    }
+}
+
+fn frame(len: usize, tag: u8) -> Vec<u8> {
+    let mut f = vec![tag; len];
+    f[..6].fill(0xFF);
+    f[6..12].copy_from_slice(&[2, 0, 0, 0, 0, 1]);
+    f[12..14].copy_from_slice(&0x88A4u16.to_be_bytes());
+    f
+}
+
+#[test]
+fn frames_and_stamps_cross_the_ring_and_a_frame_too_long_is_counted_not_cut() {
+    let pair = Pair::new("r");
+    let mut ring = RingSocket::new(pair.open(0), 50_000).expect("a packet ring on a veth");
+    let plain = pair.open(1);
+    plain.set_timeout_ns(500_000_000).unwrap();
+    let mut buf = vec![0u8; 9216];
+
+    // Sent: the other end gets the same bytes, and the transmit stamp lies between the send
+    // call and the other end's receive stamp.
+    for (len, tag) in [(60, 1u8), (1514, 2), (60, 3)] {
+        let before = monotonic_ns();
+        ring.send(&frame(len, tag)).unwrap();
+        let (n, rx) = plain.recv_stamped(&mut buf).unwrap().expect("the frame sent through the ring");
+        assert_eq!(&buf[..n], &frame(len, tag)[..], "{len} bytes");
+        let tx = ring.tx_timestamp().expect("a transmit stamp");
+        let rx = rx.expect("a receive stamp");
+        assert!(before <= tx && tx <= rx, "send at {before}, stamped {tx}, received {rx}");
+    }
+
+    // Received through the ring: a frame longer than a slot is dropped and counted;
+    // the frames around it arrive whole, in order, with stamps from their send.
+    let t0 = monotonic_ns();
+    for (len, tag) in [(60, 6u8), (4000, 7), (1514, 8)] {
+        plain.send(&frame(len, tag)).unwrap();
+    }
+    for (len, tag) in [(60, 6u8), (1514, 8)] {
+        let (n, stamp) = ring.recv(&mut buf, monotonic_ns() + 500_000_000).unwrap().expect("a frame");
+        assert_eq!(&buf[..n], &frame(len, tag)[..], "{len} bytes");
+        let stamp = stamp.expect("a receive stamp");
+        assert!(t0 <= stamp && stamp <= monotonic_ns(), "stamp {stamp} outside the exchange from {t0}");
+    }
+    assert_eq!(ring.truncated_frames(), 1);
+
+    // Nothing more comes: the receive returns at its deadline, having slept after its spin.
+    let deadline = monotonic_ns() + 20_000_000;
+    assert!(ring.recv(&mut buf, deadline).unwrap().is_none());
+    assert!(monotonic_ns() >= deadline);
+    assert!(ring.sleeps() >= 1);
+}
