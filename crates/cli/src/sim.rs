@@ -276,7 +276,11 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                 (None, IoPath::Ring) => {
                     let mut r = RingSocket::new(sock, a.spin_us.saturating_mul(1000))
                         .with_context(|| format!("a packet ring on {iface}"))?;
-                    eprintln!("ferrocat sim: frames through a packet ring (spinning {} us before sleeping)", a.spin_us);
+                    let send = if r.sends_through_io_uring() { "" } else { ", sending with sendto" };
+                    eprintln!(
+                        "ferrocat sim: frames through a packet ring (spinning {} us before sleeping{send})",
+                        a.spin_us
+                    );
                     serve_ring(&mut seg, &mut r, &stop, log, &mut taps)?
                 }
                 (secondary, _) => serve_raw(&mut seg, &sock, secondary.as_ref(), &stop, log, &mut taps)?,

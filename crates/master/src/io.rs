@@ -93,12 +93,14 @@ impl RawIo {
         self.sock().timestamps().describe()
     }
 
-    /// How frames move: "io_uring", "socket calls" or "a packet ring".
+    /// How frames move: "io_uring", "socket calls", "a packet ring" (sending through
+    /// io_uring) or "a packet ring, sending with sendto" (io_uring refused).
     pub fn path(&self) -> &'static str {
-        match self.port {
+        match &self.port {
             Port::Socket(_) => "socket calls",
             Port::Uring(_) => "io_uring",
-            Port::Ring(_) => "a packet ring",
+            Port::Ring(r) if r.sends_through_io_uring() => "a packet ring",
+            Port::Ring(_) => "a packet ring, sending with sendto (io_uring not available)",
         }
     }
 
