@@ -182,6 +182,9 @@ impl RingSocket {
         self.tx_stamp = None;
         match &mut self.tx {
             Tx::Uring(u) => {
+                // The last send's completions, its stamp's read among them: until it is taken,
+                // this frame's read could not be linked behind it.
+                u.reap();
                 u.send(frame)?;
                 u.flush()
             }

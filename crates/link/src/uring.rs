@@ -229,7 +229,7 @@ impl UringSocket {
     }
 
     /// Takes the completions there are.
-    fn reap(&mut self) {
+    pub(crate) fn reap(&mut self) {
         while let Some((tag, res)) = self.ring.completion().next().map(|c| (c.user_data(), c.result())) {
             match tag {
                 RX_TAG => {
