@@ -31,6 +31,8 @@ pub struct LiveArgs {
     pub io: crate::target::IoPath,
     /// With `io` ring: how long a receive spins before it sleeps, µs.
     pub spin_us: u64,
+    /// How the simulator's frames move.
+    pub sim_io: crate::target::IoPath,
     pub json: bool,
 }
 
@@ -130,7 +132,7 @@ impl Drop for Veth {
 struct Sim(Child);
 
 impl Sim {
-    fn start(v: &Veth, slaves: usize, seed: u64, log: &Path) -> anyhow::Result<Sim> {
+    fn start(v: &Veth, slaves: usize, seed: u64, log: &Path, io: crate::target::IoPath) -> anyhow::Result<Sim> {
         let exe = std::env::current_exe().context("finding this executable")?;
         let mut c = Command::new("ip");
         c.args(["netns", "exec", &v.sim_ns]).arg(exe).arg("sim");
@@ -138,6 +140,13 @@ impl Sim {
             c.args(["--device", "EK1100"]);
         }
         c.args(["--seed", &seed.to_string(), "--iface", &v.sim_if, "--clock-log"]).arg(log);
+        let io = match io {
+            crate::target::IoPath::Auto => "auto",
+            crate::target::IoPath::Uring => "uring",
+            crate::target::IoPath::Socket => "socket",
+            crate::target::IoPath::Ring => "ring",
+        };
+        c.args(["--io", io]);
         let mut sim = Sim(c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().context("starting ferrocat sim")?);
         let mut err = sim.0.stderr.take().context("sim stderr")?;
         let (t0, mut seen, mut b) = (Instant::now(), Vec::new(), [0u8; 256]);
@@ -407,7 +416,7 @@ pub fn run(a: LiveArgs) -> anyhow::Result<ExitCode> {
     let mut rows = Vec::new();
     for method in &a.methods {
         let log: PathBuf = std::env::temp_dir().join(format!("ferrocat-live-{}-{method}.csv", std::process::id()));
-        let sim = Sim::start(&veth, a.slaves, a.seed, &log)?;
+        let sim = Sim::start(&veth, a.slaves, a.seed, &log, a.sim_io)?;
         let run = run_master(&veth.master_if, &a, method).with_context(|| format!("method {method}"));
         sim.stop()?;
         let row = errors(&log, &run?, method, &a);
@@ -528,6 +537,7 @@ mod tests {
             seed: 1,
             io: crate::target::IoPath::Auto,
             spin_us: 200,
+            sim_io: crate::target::IoPath::Socket,
             json: false,
         }
     }

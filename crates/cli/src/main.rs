@@ -323,6 +323,9 @@ enum LabCmd {
         /// With --io ring: how long a receive spins before it sleeps, in µs (as `run --spin-us`).
         #[arg(long, value_name = "US", default_value_t = 200)]
         spin_us: u64,
+        /// How the simulator's frames move (as `sim --io`).
+        #[arg(long, value_enum, default_value = "socket")]
+        sim_io: target::IoPath,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -613,7 +616,7 @@ fn main() -> ExitCode {
                 LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
                 LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
                 LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
-                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, spin_us, json } => {
+                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, spin_us, sim_io, json } => {
                     lab_live::run(lab_live::LiveArgs {
                         methods: method,
                         slaves,
@@ -623,6 +626,7 @@ fn main() -> ExitCode {
                         seed,
                         io,
                         spin_us,
+                        sim_io,
                         json,
                     })
                 }
