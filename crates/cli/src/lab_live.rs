@@ -536,7 +536,7 @@ mod tests {
             seconds: 1.0,
             seed: 1,
             io: crate::target::IoPath::Auto,
-            spin_us: 200,
+            spin_us: ferrocat_link::DEFAULT_RING_SPIN_NS / 1000,
             sim_io: crate::target::IoPath::Socket,
             json: false,
         }

@@ -139,7 +139,7 @@ enum Command {
         #[arg(long, value_enum, default_value = "socket", requires = "iface")]
         io: target::IoPath,
         /// With --io ring: how long a receive spins on the ring before it sleeps, in µs.
-        #[arg(long, value_name = "US", default_value_t = 200, requires = "iface")]
+        #[arg(long, value_name = "US", default_value_t = ferrocat_link::DEFAULT_RING_SPIN_NS / 1000, requires = "iface")]
         spin_us: u64,
         /// Instead of serving: measure virtual-time speed (6/64/256 slaves) and exit.
         #[arg(long, conflicts_with_all = ["config", "device", "iface", "secondary_iface", "udp", "report", "clock_log"])]
@@ -321,7 +321,7 @@ enum LabCmd {
         #[arg(long, value_enum, default_value = "auto")]
         io: target::IoPath,
         /// With --io ring: how long a receive spins before it sleeps, in µs (as `run --spin-us`).
-        #[arg(long, value_name = "US", default_value_t = 200)]
+        #[arg(long, value_name = "US", default_value_t = ferrocat_link::DEFAULT_RING_SPIN_NS / 1000)]
         spin_us: u64,
         /// How the simulator's frames move (as `sim --io`).
         #[arg(long, value_enum, default_value = "socket")]

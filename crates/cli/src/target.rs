@@ -42,7 +42,7 @@ pub struct Target {
     pub io: IoPath,
     /// With --io ring: how long a receive spins on the ring before it sleeps, in µs. The spin
     /// holds the CPU; an answer that comes within it costs no system call.
-    #[arg(long, value_name = "US", default_value_t = 200, requires = "iface")]
+    #[arg(long, value_name = "US", default_value_t = ferrocat_link::DEFAULT_RING_SPIN_NS / 1000, requires = "iface")]
     pub spin_us: u64,
     /// Use the embedded virtual segment described by this file.
     #[arg(long, value_name = "SEG.toml")]
@@ -245,7 +245,7 @@ impl Target {
             udp: None,
             force,
             io: IoPath::Auto,
-            spin_us: 200,
+            spin_us: ferrocat_link::DEFAULT_RING_SPIN_NS / 1000,
             config: None,
             device: Vec::new(),
             seed: None,

@@ -30,7 +30,8 @@ const BLOCKS: usize = 4;
 /// TPACKET_V2 (linux/if_packet.h `enum tpacket_versions`).
 const TPACKET_V2: libc::c_int = 1;
 
-/// How long a receive spins on the ring before it sleeps, unless told otherwise: longer than
+/// How long a receive spins on the ring before it sleeps, unless told otherwise (the command
+/// line's `--spin-us` default): longer than
 /// an exchange with a short line takes, so that a cycle's answer is met awake.
 pub const DEFAULT_SPIN_NS: u64 = 200_000;
 
@@ -148,11 +149,6 @@ impl RingSocket {
     /// Whether frames leave through io_uring (else through `sendto`).
     pub fn sends_through_io_uring(&self) -> bool {
         matches!(self.tx, Tx::Uring(_))
-    }
-
-    /// How long a receive spins before it sleeps, ns.
-    pub fn spin_ns(&self) -> u64 {
-        self.spin_ns
     }
 
     /// Frames received longer than a ring slot holds (not EtherCAT): dropped, not handed on cut

@@ -103,14 +103,6 @@ impl RawIo {
             Port::Ring(_) => "a packet ring, sending with sendto (io_uring not available)",
         }
     }
-
-    /// Receives that found no frame within their spin and slept (on a packet ring only).
-    pub fn ring_sleeps(&self) -> Option<u64> {
-        match &self.port {
-            Port::Ring(r) => Some(r.sleeps()),
-            _ => None,
-        }
-    }
 }
 
 impl Io for RawIo {
