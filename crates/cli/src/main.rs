@@ -189,6 +189,11 @@ enum Command {
         /// --cycle-us.
         #[arg(long)]
         max_rate: bool,
+        /// How long a cyclic frame's answer is waited for before the frame counts as lost (µs,
+        /// 10 to 1 000 000). Default: ¾ of --cycle-us, at most 1 000 (1 000 with --max-rate),
+        /// so that a lost frame does not make the next cycle late.
+        #[arg(long, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
+        frame_timeout_us: Option<u64>,
         /// With --dc: at most this many frames of static drift compensation (it stops earlier
         /// once converged).
         #[arg(long, default_value_t = 15_000, requires = "dc")]
@@ -674,12 +679,24 @@ fn main() -> ExitCode {
                 no_gpio_calibration,
             })
         }
-        Command::Run { target, seconds, cycle_us, dc, max_rate, dc_static_frames, eoe_tap, sync, json } => {
+        Command::Run {
+            target,
+            seconds,
+            cycle_us,
+            dc,
+            max_rate,
+            frame_timeout_us,
+            dc_static_frames,
+            eoe_tap,
+            sync,
+            json,
+        } => {
             let run = master_cmd::RunOptions {
                 seconds,
                 cycle_us,
                 dc: dc.then_some((dc_static_frames, sync.as_str())),
                 max_rate,
+                frame_timeout_us,
                 eoe_taps: &eoe_tap,
                 json,
             };

@@ -384,8 +384,21 @@ pub struct RunOptions<'a> {
     /// With DC: the static drift compensation's frames at most, and the clock-sync preset.
     pub dc: Option<(u32, &'a str)>,
     pub max_rate: bool,
+    /// The cyclic frames' timeout; `None`: [`frame_timeout_us`]'s default.
+    pub frame_timeout_us: Option<u64>,
     pub eoe_taps: &'a [String],
     pub json: bool,
+}
+
+/// The cyclic frames' timeout unless told: ¾ of the cycle, so that the wait for a lost frame
+/// ends before the next cycle is due, and at most the library's 1 ms.
+pub fn frame_timeout_us(cycle_us: u64, max_rate: bool) -> u64 {
+    const MAX_US: u64 = 1000;
+    if max_rate {
+        MAX_US
+    } else {
+        (cycle_us * 3 / 4).clamp(1, MAX_US)
+    }
 }
 
 /// A method's lock state and filtered offset, in words.
@@ -398,6 +411,7 @@ fn lock_text(method: &dyn ClockSync, st: &SyncState) -> String {
 
 pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let RunOptions { seconds, cycle_us, max_rate, eoe_taps, json, .. } = *o;
+    let frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate));
     let dc = o.dc.is_some();
     let dc_static_frames = o.dc.map(|(frames, _)| frames);
     if !(0.0..1e6).contains(&seconds) {
@@ -416,6 +430,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
+    m.cyclic_timeout_ns = frame_timeout_us * 1000;
     if !m.io_mut().is_virtual() {
         crate::target::go_real_time();
     }
@@ -585,6 +600,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             serde_json::json!({
                 "cycles": s.cycles,
                 "cycle_us": if max_rate { None } else { Some(cycle_us) },
+                "frame_timeout_us": frame_timeout_us,
                 "mean_period_us": mean_period_us,
                 "wkc_errors": s.wkc_errors,
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,

@@ -33,8 +33,8 @@ pub struct Target {
     #[arg(long, requires = "iface")]
     pub force: bool,
     /// With --iface: how frames move. io_uring sends a cycle's frames and waits for the answer
-    /// in one system call; socket makes a sendto per frame, a recvmsg per answer and a read of
-    /// the transmit stamp; ring maps a PACKET_MMAP receive ring and spins on it for the answer
+    /// in one system call; socket makes a sendto per frame, a read of the transmit stamp, a
+    /// ppoll until the answer and a recvmsg of it; ring maps a PACKET_MMAP receive ring and spins on it for the answer
     /// (--spin-us) before it sleeps, a sendto per frame and no call to receive, holding the CPU
     /// while it spins (for a core of the master's own); auto takes io_uring where the kernel
     /// allows it (a cable-redundant pair always uses socket calls).

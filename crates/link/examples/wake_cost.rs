@@ -4,7 +4,8 @@
 //! scheduler's tick, as a frame's is, has a timer programmed for it). Two threads on two CPUs
 //! exchange datagrams over a UNIX socket pair: the answerer spins on its socket, holds each
 //! question for `answer_us` (the simulator's time per frame, 14 µs with 16 slaves) and
-//! answers; the asker asks and waits. docs/benchmarks.md quotes it.
+//! answers; the asker asks and waits. Last, what a timer sleep costs (as a cyclic loop sleeps
+//! to its next cycle). docs/benchmarks.md quotes it.
 //!
 //! `cargo run --release -p ferrocat-link --example wake_cost [answer_us] [exchanges] [rounds]`
 //! (defaults 14, 10000, 5; real-time priority and pinning where permitted).
@@ -142,6 +143,22 @@ fn ask(fd: &OwnedFd, wait: Wait, exchanges: u64) -> io::Result<(f64, f64)> {
     Ok(((monotonic_ns() - wall0) as f64 / n / 1e3, (thread_cpu_ns() - cpu0) as f64 / n / 1e3))
 }
 
+/// `n` sleeps of `sleep_ns` each (`clock_nanosleep`, as a cyclic loop sleeps to its next cycle):
+/// the median overshoot and the CPU per sleep, both in µs.
+fn sleep_cost(n: u64, sleep_ns: u64) -> (f64, f64) {
+    let ts = libc::timespec { tv_sec: 0, tv_nsec: sleep_ns as libc::c_long };
+    let cpu0 = thread_cpu_ns();
+    let mut late: Vec<f64> = (0..n)
+        .map(|_| {
+            let t = monotonic_ns();
+            // SAFETY: a relative sleep reading the timespec we own; no remainder wanted.
+            unsafe { libc::clock_nanosleep(libc::CLOCK_MONOTONIC, 0, &ts, std::ptr::null_mut()) };
+            (monotonic_ns() - t).saturating_sub(sleep_ns) as f64 / 1e3
+        })
+        .collect();
+    (median(&mut late), (thread_cpu_ns() - cpu0) as f64 / n as f64 / 1e3)
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -182,11 +199,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     send(&asker_fd, b"q")?;
     answering.join().map_err(|_| "the answering thread panicked")??;
+    let (late_us, sleep_cpu_us) = sleep_cost(exchanges, 100_000);
     println!("an answer {answer_us} us after each question; {exchanges} exchanges a round, {rounds} rounds alternating (medians of the rounds)");
     println!("{:<42} {:>18} {:>21}", "the asker waits by", "wall per exchange", "its CPU per exchange");
     for (i, w) in Wait::ALL.iter().enumerate() {
         let (wall, cpu) = (median(&mut results[i].0), median(&mut results[i].1));
         println!("{:<42} {:>15.2} us {:>18.2} us", w.name(), wall, cpu);
     }
+    println!(
+        "a sleep of 100 us (clock_nanosleep), {exchanges} times: {late_us:.2} us late (median), {sleep_cpu_us:.2} us of CPU each"
+    );
     Ok(())
 }

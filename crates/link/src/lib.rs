@@ -32,6 +32,35 @@ fn timeout_to_set(current_ns: u64, want_ns: u64) -> Option<u64> {
     Some(want_ns + timeout_slack_ns(want_ns) / 2)
 }
 
+/// Sockets [`RawSocket::wait_readable_into`] waits on at most: a ring's two ports and room.
+pub const WAIT_SOCKETS: usize = 4;
+
+/// Whether `fd` has something to read, or an error to report, within `timeout_ns`; waited
+/// for in `ppoll` (to the microsecond, unlike a blocking receive's timeout, which runs on the
+/// scheduler's tick).
+pub fn wait_fd_readable(fd: std::os::fd::BorrowedFd<'_>, timeout_ns: u64) -> io::Result<bool> {
+    let mut fds = [libc::pollfd { fd: fd.as_raw_fd(), events: libc::POLLIN, revents: 0 }];
+    poll_in(&mut fds, timeout_ns)?;
+    Ok(fds[0].revents & (libc::POLLIN | libc::POLLERR | libc::POLLHUP) != 0)
+}
+
+/// `ppoll` of `fds` for up to `timeout_ns`; an interrupted wait ends with nothing ready.
+fn poll_in(fds: &mut [libc::pollfd], timeout_ns: u64) -> io::Result<()> {
+    let ts = libc::timespec {
+        tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: ppoll reads and writes the pollfds of the slice we are lent, of its length, and
+    // reads the timespec; no signal mask.
+    let r = unsafe { libc::ppoll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, &ts, std::ptr::null()) };
+    if r < 0 {
+        let e = io::Error::last_os_error();
+        fds.iter_mut().for_each(|f| f.revents = 0);
+        return if e.kind() == io::ErrorKind::Interrupted { Ok(()) } else { Err(e) };
+    }
+    Ok(())
+}
+
 /// CLOCK_MONOTONIC in ns.
 pub fn monotonic_ns() -> u64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
@@ -350,22 +379,51 @@ impl RawSocket {
         self.recvmsg(buf, libc::MSG_DONTWAIT)
     }
 
-    /// Waits up to `timeout_ns` until one of `socks` has a frame; says which have.
+    /// Waits up to `timeout_ns` until one of `socks` has a frame, or an error or a transmit
+    /// stamp to read; says which have.
     pub fn wait_readable(socks: &[&RawSocket], timeout_ns: u64) -> io::Result<Vec<bool>> {
-        let mut fds: Vec<libc::pollfd> =
-            socks.iter().map(|s| libc::pollfd { fd: s.fd.as_raw_fd(), events: libc::POLLIN, revents: 0 }).collect();
-        let ts = libc::timespec {
-            tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
-            tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
-        };
-        // SAFETY: ppoll reads and writes the pollfd array we own, of the length we pass, and
-        // reads the timespec; no signal mask.
-        let r = unsafe { libc::ppoll(fds.as_mut_ptr(), fds.len() as libc::nfds_t, &ts, std::ptr::null()) };
-        if r < 0 {
-            let e = io::Error::last_os_error();
-            return if e.kind() == io::ErrorKind::Interrupted { Ok(vec![false; socks.len()]) } else { Err(e) };
+        let mut ready = vec![false; socks.len()];
+        Self::wait_readable_into(socks, timeout_ns, &mut ready)?;
+        Ok(ready)
+    }
+
+    /// [`wait_readable`](Self::wait_readable) without allocating, for a cyclic receive: at
+    /// most [`WAIT_SOCKETS`] sockets, `ready` as long as `socks`. The timeout is kept to the
+    /// microsecond (`ppoll`), unlike a blocking receive's, which runs on the scheduler's tick.
+    pub fn wait_readable_into(socks: &[&RawSocket], timeout_ns: u64, ready: &mut [bool]) -> io::Result<()> {
+        if socks.len() > WAIT_SOCKETS || ready.len() != socks.len() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "waiting on {} sockets with room for {} answers (at most {WAIT_SOCKETS})",
+                    socks.len(),
+                    ready.len()
+                ),
+            ));
         }
-        Ok(fds.iter().map(|f| f.revents & libc::POLLIN != 0).collect())
+        let mut fds = [libc::pollfd { fd: -1, events: 0, revents: 0 }; WAIT_SOCKETS];
+        for (f, s) in fds.iter_mut().zip(socks) {
+            *f = libc::pollfd { fd: s.fd.as_raw_fd(), events: libc::POLLIN, revents: 0 };
+        }
+        let fds = &mut fds[..socks.len()];
+        poll_in(fds, timeout_ns)?;
+        for (r, f) in ready.iter_mut().zip(fds.iter()) {
+            *r = f.revents & (libc::POLLIN | libc::POLLERR | libc::POLLHUP) != 0;
+        }
+        Ok(())
+    }
+
+    /// Reads the whole error queue without waiting: the newest transmit stamp in it, if any.
+    /// Stamps nobody counted (a queue not read for a while) keep every wait on the socket from
+    /// sleeping (the queue makes it ready), so a caller that found nothing after a wait drains it.
+    pub fn drain_error_queue(&self) -> Option<u64> {
+        let mut b = [0u8; 64];
+        let mut newest = None;
+        while let Ok(Some((_, t))) = self.recvmsg(&mut b, libc::MSG_ERRQUEUE | libc::MSG_DONTWAIT) {
+            newest = t.or(newest);
+        }
+        self.stamps_pending.set(0);
+        newest
     }
 
     /// The kernel's transmit timestamp of the last frame sent, if it has arrived.

@@ -127,25 +127,38 @@ impl Io for RawIo {
             }
             Port::Socket(s) => &*s,
         };
+        // Waited for in `ppoll`, to the deadline's microsecond: a blocking receive's timeout
+        // (SO_RCVTIMEO) runs on the scheduler's tick, and would give a lost frame up 4-7 ms
+        // after a 1 ms deadline on a 250 Hz kernel (docs/benchmarks.md).
+        let socks: &[&ferrocat_link::RawSocket] = match &self.secondary {
+            Some(sec) => &[sock, sec],
+            None => &[sock],
+        };
         loop {
             let now = ferrocat_link::monotonic_ns();
             if now >= deadline_ns {
                 return Ok(None);
             }
-            let Some(sec) = &self.secondary else {
-                sock.set_timeout_ns(deadline_ns - now)?;
-                if let Some((n, stamp)) = sock.recv_stamped(buf)? {
+            // Transmit stamps queued would end the wait at once: taken first, and kept for
+            // `last_tx_ns`.
+            for (k, s) in socks.iter().enumerate() {
+                if let Some(t) = s.tx_timestamp() {
+                    self.tx_stamps[k] = Some(t);
+                }
+            }
+            let ready = &mut [false; 2][..socks.len()];
+            ferrocat_link::RawSocket::wait_readable_into(socks, deadline_ns - now, ready)?;
+            for (k, s) in socks.iter().enumerate() {
+                if !ready[k] {
+                    continue;
+                }
+                // An error (the interface gone) is returned by the read.
+                if let Some((n, stamp)) = s.try_recv_stamped(buf)? {
+                    self.last_rx_secondary = k == 1;
                     return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
                 }
-                continue;
-            };
-            let ready = ferrocat_link::RawSocket::wait_readable(&[sock, sec], deadline_ns - now)?;
-            for (k, s) in [sock, sec].into_iter().enumerate() {
-                if ready[k] {
-                    if let Some((n, stamp)) = s.try_recv_stamped(buf)? {
-                        self.last_rx_secondary = k == 1;
-                        return Ok(Some((n, stamp.unwrap_or_else(ferrocat_link::monotonic_ns))));
-                    }
+                if let Some(t) = s.drain_error_queue() {
+                    self.tx_stamps[k] = Some(t);
                 }
             }
         }
@@ -207,6 +220,8 @@ impl UdpIo {
     pub fn open(target: &str) -> std::io::Result<Self> {
         let sock = std::net::UdpSocket::bind("0.0.0.0:0")?;
         sock.connect(target)?;
+        // Receives wait in `ppoll` (see `recv`), then take what came without blocking.
+        sock.set_nonblocking(true)?;
         Ok(UdpIo { sock, wake_target_ns: None })
     }
 }
@@ -222,19 +237,29 @@ impl Io for UdpIo {
         self.sock.send(&frame[off..]).map(|_| ())
     }
     fn recv(&mut self, buf: &mut [u8], deadline_ns: u64) -> std::io::Result<Option<(usize, u64)>> {
-        let now = ferrocat_link::monotonic_ns();
-        if now >= deadline_ns || buf.len() < 15 {
+        if buf.len() < 15 {
             return Ok(None);
         }
-        self.sock.set_read_timeout(Some(std::time::Duration::from_nanos((deadline_ns - now).max(1_000))))?;
-        match self.sock.recv(&mut buf[14..]) {
-            Ok(n) => {
-                buf[..12].fill(0xFF);
-                buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
-                Ok(Some((14 + n, ferrocat_link::monotonic_ns())))
+        // Waited for in `ppoll`, to the deadline's microsecond (a read timeout runs on the
+        // scheduler's tick).
+        use std::os::fd::AsFd;
+        loop {
+            let now = ferrocat_link::monotonic_ns();
+            if now >= deadline_ns {
+                return Ok(None);
             }
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => Ok(None),
-            Err(e) => Err(e),
+            if !ferrocat_link::wait_fd_readable(self.sock.as_fd(), deadline_ns - now)? {
+                continue;
+            }
+            match self.sock.recv(&mut buf[14..]) {
+                Ok(n) => {
+                    buf[..12].fill(0xFF);
+                    buf[12..14].copy_from_slice(&ferrocat_wire::ETHERTYPE_ETHERCAT.to_be_bytes());
+                    return Ok(Some((14 + n, ferrocat_link::monotonic_ns())));
+                }
+                Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted) => {}
+                Err(e) => return Err(e),
+            }
         }
     }
     fn sleep_until(&mut self, t_ns: u64) {

@@ -200,6 +200,7 @@ impl<I: Io> Master<I> {
             (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
             _ => crate::dc::SyncAnswers::NONE,
         };
+        let lost = matches!(r, Err(MasterError::Timeout { .. }));
         let wkc = match r {
             Ok(()) => {
                 if reference.is_some() && !with_sync {
@@ -237,10 +238,11 @@ impl<I: Io> Master<I> {
         if short {
             st.wkc_errors += 1;
         }
-        // A short cycle: find out why (a lost frame alone changes nothing); and until every
-        // fallen slave is back, since one acknowledged in SAFEOP answers its process data in
-        // full (its outputs given back) and would stay there.
-        if (short || self.cyc.recovering) && self.supervise_on_wkc {
+        // A cycle answered short: find out why (a frame lost says nothing of the slaves, and
+        // a read after it would cost the cycle a second wait); and until every fallen slave is
+        // back, since one acknowledged in SAFEOP answers its process data in full (its outputs
+        // given back) and would stay there.
+        if ((short && !lost) || self.cyc.recovering) && self.supervise_on_wkc {
             self.supervise()?;
         }
         Ok((wkc, correction))

@@ -50,7 +50,9 @@ pub struct Master<I: Io> {
     /// How long an SDO may take.
     pub mailbox_timeout_ns: u64,
     pub(crate) cyc: crate::cycle_state::CycleState,
-    /// How long a cyclic frame may take before it counts as lost.
+    /// How long a cyclic frame may take before it counts as lost (default 1 ms). A cyclic
+    /// application sets it below its cycle, ¾ of it as `ferrocat run` does: a wait for a lost
+    /// frame past the next cycle's start makes that cycle late.
     pub cyclic_timeout_ns: u64,
     /// Check the slaves after a cycle with a short working counter.
     pub supervise_on_wkc: bool,

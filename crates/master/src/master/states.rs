@@ -184,7 +184,17 @@ impl<I: Io> Master<I> {
                     Pdu::new(Command::FPRD, Address::Device { adp: self.slaves[k].station, ado: addr::AL_STATUS }, d)
                 })
                 .collect();
-            self.engine.transact(&mut pdus)?;
+            // Within a cycle's frame timeout and not sent again: lost, as the cyclic frame may
+            // have been, it is asked again after the next short cycle instead of holding the
+            // cyclic loop for the acyclic timeout (20 ms) and its retries.
+            match self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns) {
+                Ok(()) => {}
+                Err(crate::MasterError::Timeout { .. }) => {
+                    tracing::debug!("supervision's status read lost: asked again after the next short cycle");
+                    return Ok(self.slaves.iter().filter(|s| s.health != crate::slave::Health::Operational).count());
+                }
+                Err(e) => return Err(e),
+            }
             pdus.iter().map(|p| p.wkc).collect()
         };
         let mut down = 0;
