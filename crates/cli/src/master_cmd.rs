@@ -506,7 +506,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // The loop's quality: how late each wake-up came, how far each period strayed from the
     // one planned, and the cycles whose work ran past the next cycle's start.
     let (mut wake_late, mut jitter) = (Histogram::default(), Histogram::default());
-    let mut overruns = 0u64;
+    let (mut overruns, mut skipped) = (0u64, 0u64);
     let mut last_wake: Option<u64> = None;
     while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
@@ -550,8 +550,17 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             report += 1_000_000_000;
         }
         if !max_rate {
-            if m.io_mut().now_ns() > next {
+            let now = m.io_mut().now_ns();
+            if now > next {
                 overruns += 1;
+                // A whole cycle or more behind (a stall): the cycles missed are skipped, on the
+                // same grid, rather than run back to back; a cycle that fills its period (DC
+                // probes) never caught up, and every cycle after one stall counted late.
+                if next_period > 0 && now - next >= next_period {
+                    let missed = (now - next) / next_period;
+                    next += missed * next_period;
+                    skipped += missed;
+                }
             }
             m.io_mut().sleep_until(next);
             let woke = m.io_mut().now_ns();
@@ -607,6 +616,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "max_round_trip_us": s.max_round_trip_ns as f64 / 1000.0,
                 "frames_lost": m.frame_stats().lost,
                 "overruns": overruns,
+                "cycles_skipped": skipped,
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
@@ -623,10 +633,11 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         );
         if !max_rate {
             outln!(
-                "wake-up latency {}; period jitter {}; {} overruns",
+                "wake-up latency {}; period jitter {}; {} overruns, {} cycles skipped",
                 wake_late.summary(),
                 jitter.summary(),
-                overruns
+                overruns,
+                skipped
             );
         }
         if let Some((method, st)) = &sync {

@@ -2,16 +2,16 @@
 //! simulated: the same seed loses the same frames, and a wait is exactly as long as it is.
 use std::process::Command;
 
-/// The summary of a 1 s run at 1 ms cycles on a segment that loses 5 % of its frames.
-fn run_losing_frames(extra: &[&str]) -> serde_json::Value {
-    let seg = std::env::temp_dir().join(format!("ferrocat-timeout-{}-{}.toml", std::process::id(), extra.len()));
-    std::fs::write(
-        &seg,
-        "seed = 3\nloss_probability = 0.05\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n",
-    )
-    .unwrap();
+const EL2004_LINE: &str = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n";
+
+/// The summary of a run of `seconds` at 1 ms cycles on `devices`, losing 5 % of the frames.
+fn run_losing_frames(devices: &str, seconds: &str, extra: &[&str]) -> serde_json::Value {
+    static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let k = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let seg = std::env::temp_dir().join(format!("ferrocat-timeout-{}-{k}.toml", std::process::id()));
+    std::fs::write(&seg, format!("seed = 3\nloss_probability = 0.05\n{devices}")).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-        .args(["run", "--config", seg.to_str().unwrap(), "--cycle-us", "1000", "--seconds", "1", "--json"])
+        .args(["run", "--config", seg.to_str().unwrap(), "--cycle-us", "1000", "--seconds", seconds, "--json"])
         .args(extra)
         .output()
         .unwrap();
@@ -24,8 +24,8 @@ fn run_losing_frames(extra: &[&str]) -> serde_json::Value {
 /// not the next one; waited for a whole cycle (the library's 1 ms), every loss is an overrun.
 #[test]
 fn a_lost_frame_does_not_make_the_next_cycle_late() {
-    let default = run_losing_frames(&[]);
-    let whole_cycle = run_losing_frames(&["--frame-timeout-us", "1000"]);
+    let default = run_losing_frames(EL2004_LINE, "1", &[]);
+    let whole_cycle = run_losing_frames(EL2004_LINE, "1", &["--frame-timeout-us", "1000"]);
     println!("default: {default}\n--frame-timeout-us 1000: {whole_cycle}");
     assert_eq!(default["frame_timeout_us"], 750);
     assert_eq!(whole_cycle["frame_timeout_us"], 1000);
@@ -34,6 +34,20 @@ fn a_lost_frame_does_not_make_the_next_cycle_late() {
     assert_eq!(default["overruns"], 0, "{default}");
     assert_eq!(whole_cycle["frames_lost"], lost, "same seed, same losses: {whole_cycle}");
     assert_eq!(whole_cycle["overruns"], lost, "{whole_cycle}");
+}
+
+/// A wait longer than the cycle (a 3 ms timeout at 1 ms cycles, each lost frame a stall of
+/// three cycles): the cycles it missed are skipped on the same grid, not run back to back,
+/// so that one stall makes one cycle late, not a run of them.
+#[test]
+fn a_stall_longer_than_a_cycle_skips_the_cycles_it_missed() {
+    let r = run_losing_frames(EL2004_LINE, "1", &["--frame-timeout-us", "3000"]);
+    println!("{r}");
+    let lost = r["frames_lost"].as_u64().unwrap();
+    assert!(lost >= 20, "{r}");
+    assert_eq!(r["overruns"], lost, "{r}");
+    assert_eq!(r["cycles_skipped"], 2 * lost, "{r}");
+    assert_eq!(r["cycles"].as_u64().unwrap() + 2 * lost, 1000, "every cycle of the second run or skipped: {r}");
 }
 
 #[test]
