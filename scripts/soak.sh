@@ -55,7 +55,7 @@ import json, sys
 r = json.load(open(sys.argv[1])); start, end = int(sys.argv[2]), int(sys.argv[3])
 s = r["slaves"]
 print(f"soak: {sys.argv[4]} s at {r['cycle_us']} us, the simulator losing {float(sys.argv[5]) * 100:g} % of frames")
-print(f"  cycles {r['cycles']}, frames lost {r['frames_lost']}, overruns {r['overruns']}, working-counter errors {r['wkc_errors']}")
+print(f"  cycles {r['cycles']} (skipped after stalls {r['cycles_skipped']}), frames lost {r['frames_lost']}, overruns {r['overruns']}, working-counter errors {r['wkc_errors']}")
 print(f"  slaves: left OP {s['left_op']}, stopped answering {s['lost']}, brought back {s['recovered']}, in OP at the end {s['in_op_at_end']}/{s['count']}")
 cs = r.get("clock_sync") or {}
 print(f"  clock sync {cs.get('method')}: {cs.get('lock')}, offset {cs.get('offset_ns')} ns")
