@@ -41,11 +41,15 @@ pub const WAIT_SOCKETS: usize = 4;
 pub fn wait_fd_readable(fd: std::os::fd::BorrowedFd<'_>, timeout_ns: u64) -> io::Result<bool> {
     let mut fds = [libc::pollfd { fd: fd.as_raw_fd(), events: libc::POLLIN, revents: 0 }];
     poll_in(&mut fds, timeout_ns)?;
-    Ok(fds[0].revents & (libc::POLLIN | libc::POLLERR | libc::POLLHUP) != 0)
+    Ok(fds[0].revents & READY != 0)
 }
 
-/// `ppoll` of `fds` for up to `timeout_ns`; an interrupted wait ends with nothing ready.
-fn poll_in(fds: &mut [libc::pollfd], timeout_ns: u64) -> io::Result<()> {
+/// What makes a socket worth a read after `ppoll`: a frame, or an error or stamp to take.
+const READY: libc::c_short = libc::POLLIN | libc::POLLERR | libc::POLLHUP;
+
+/// `ppoll` of `fds` for up to `timeout_ns`: how many are ready, 0 when the time ran out or a
+/// signal ended the wait (nothing ready then).
+pub(crate) fn poll_in(fds: &mut [libc::pollfd], timeout_ns: u64) -> io::Result<usize> {
     let ts = libc::timespec {
         tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
         tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
@@ -56,9 +60,9 @@ fn poll_in(fds: &mut [libc::pollfd], timeout_ns: u64) -> io::Result<()> {
     if r < 0 {
         let e = io::Error::last_os_error();
         fds.iter_mut().for_each(|f| f.revents = 0);
-        return if e.kind() == io::ErrorKind::Interrupted { Ok(()) } else { Err(e) };
+        return if e.kind() == io::ErrorKind::Interrupted { Ok(0) } else { Err(e) };
     }
-    Ok(())
+    Ok(r as usize)
 }
 
 /// CLOCK_MONOTONIC in ns.
@@ -408,7 +412,7 @@ impl RawSocket {
         let fds = &mut fds[..socks.len()];
         poll_in(fds, timeout_ns)?;
         for (r, f) in ready.iter_mut().zip(fds.iter()) {
-            *r = f.revents & (libc::POLLIN | libc::POLLERR | libc::POLLHUP) != 0;
+            *r = f.revents & READY != 0;
         }
         Ok(())
     }

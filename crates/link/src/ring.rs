@@ -227,18 +227,8 @@ impl RingSocket {
             self.tx_timestamp();
         }
         let mut fd = libc::pollfd { fd: self.socket().fd.as_raw_fd(), events: libc::POLLIN, revents: 0 };
-        let ts = libc::timespec {
-            tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
-            tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
-        };
-        // SAFETY: ppoll reads and writes the one pollfd we own and reads the timespec; no
-        // signal mask.
-        let r = unsafe { libc::ppoll(&mut fd, 1, &ts, std::ptr::null()) };
-        if r < 0 {
-            let e = io::Error::last_os_error();
-            return if e.kind() == io::ErrorKind::Interrupted { Ok(()) } else { Err(e) };
-        }
-        if r == 0 && !self.socket().still_bound()? {
+        let ready = crate::poll_in(std::slice::from_mut(&mut fd), timeout_ns)?;
+        if ready == 0 && !self.socket().still_bound()? {
             // The interface went away while its error was taken by another read.
             return Err(io::Error::new(io::ErrorKind::NotConnected, "receive: the interface is gone"));
         }
