@@ -140,13 +140,8 @@ impl Sim {
             c.args(["--device", "EK1100"]);
         }
         c.args(["--seed", &seed.to_string(), "--iface", &v.sim_if, "--clock-log"]).arg(log);
-        let io = match io {
-            crate::target::IoPath::Auto => "auto",
-            crate::target::IoPath::Uring => "uring",
-            crate::target::IoPath::Socket => "socket",
-            crate::target::IoPath::Ring => "ring",
-        };
-        c.args(["--io", io]);
+        let io = clap::ValueEnum::to_possible_value(&io).context("the frame path's name")?;
+        c.args(["--io", io.get_name()]);
         let mut sim = Sim(c.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().context("starting ferrocat sim")?);
         let mut err = sim.0.stderr.take().context("sim stderr")?;
         let (t0, mut seen, mut b) = (Instant::now(), Vec::new(), [0u8; 256]);
