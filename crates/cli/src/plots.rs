@@ -127,8 +127,23 @@ fn write_both(stem: &Path, title: &str, x: &str, y: &str, series: &[Series], pan
     draw(SVGBackend::new(&svg, SIZE).into_drawing_area(), title, x, y, series, panels)
         .with_context(|| format!("writing {}", svg.display()))?;
     let png = with(".png");
-    draw(BitMapBackend::new(&png, SIZE).into_drawing_area(), title, x, y, series, panels)
-        .with_context(|| format!("writing {}", png.display()))
+    let mut rgb = vec![0u8; SIZE.0 as usize * SIZE.1 as usize * 3];
+    draw(BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area(), title, x, y, series, panels)
+        .with_context(|| format!("drawing {}", png.display()))?;
+    write_png(&png, &rgb).with_context(|| format!("writing {}", png.display()))
+}
+
+/// An RGB buffer of `SIZE` as a PNG file, through the `png` crate: plotters' own encoder goes
+/// through the `image` crate and its JPEG, BMP and GIF codecs, a tenth of the binary's build.
+fn write_png(path: &Path, rgb: &[u8]) -> anyhow::Result<()> {
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, SIZE.0, SIZE.1);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut w = enc.write_header()?;
+    w.write_image_data(rgb)?;
+    w.finish()?;
+    Ok(())
 }
 
 /// The chart: every series on one plot, or (`panels`) each on its own plot, stacked, on its

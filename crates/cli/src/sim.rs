@@ -417,12 +417,13 @@ pub fn rtt(iface: &str, frames: u32, slaves: u16, force: bool) -> anyhow::Result
         anyhow::bail!("no slave answered any of {frames} frame(s) on {iface}");
     }
     println!(
-        "{frames} {}, {lost} unanswered ({unprocessed} back unprocessed); round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        "{frames} {}, {lost} unanswered ({unprocessed} back unprocessed); round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us, min {:.1} us",
         if frames == 1 { "frame" } else { "frames" },
         q(0.5),
         q(0.9),
         q(0.99),
-        q(1.0)
+        q(1.0),
+        q(0.0)
     );
     Ok(if lost == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }

@@ -1,7 +1,11 @@
 //! `ferrocat lab live`, briefly: the master in real time on a veth pair it makes, `ferrocat sim`
 //! on the other end logging the true slave clocks; the errors and the cyclic frames' phase on
 //! the reference's cycle come from that log (root).
+mod common;
+
 use std::process::Command;
+
+use common::{ReportingSim, VethPair};
 
 #[test]
 fn lab_live_measures_the_true_clock_errors_on_this_kernel() {
@@ -66,19 +70,23 @@ fn lab_live_measures_the_true_clock_errors_on_this_kernel() {
 
 /// The simulator on its packet ring meets each frame awake and would be ready before the frame
 /// could have gone round the segment; it holds the answer until then, so that the master's
-/// round trip is the segment's and the clock lands where the trip's middle says (2.7–3.0 µs
-/// off in `lab live` when it answered at once; 0.07–0.08 µs held, on a quiet machine).
+/// round trip is never shorter than the segment's. Asserted as that bound, which load can only
+/// make later, on a segment whose master link is 150 µs each way (the ring simulator answers in
+/// tens of µs unheld); the clock figure it buys is `lab live`'s (docs/benchmarks.md).
 #[test]
 fn a_simulator_that_meets_frames_awake_answers_no_sooner_than_its_segment() {
-    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-        .args(["lab", "live", "--seconds", "1", "--settle-s", "0.5", "--json", "--method", "ferrocat"])
-        .args(["--sim-io", "ring"])
+    let net = VethPair::new("hd");
+    let toml = "master_link_ns = 150000\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n";
+    let sim = ReportingSim::start(&net, "hold", toml, &["--io", "ring"]);
+    let o = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["rtt", "--iface", &net.master_if, "--frames", "200", "--slaves", "2"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let r = &v["rows"][0];
-    let mean = r["ref_mean_us"].as_f64().unwrap();
-    println!("master − reference with the simulator on its ring: mean {mean:.3} µs");
-    assert!(mean.abs() < 1.5, "{r}");
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    let report = sim.report();
+    assert!(o.status.success(), "{out}{}", String::from_utf8_lossy(&o.stderr));
+    let min_us: f64 = out.rsplit("min ").next().and_then(|r| r.trim().strip_suffix("us")).unwrap().trim().parse().unwrap();
+    println!("{out}");
+    assert!(min_us >= 300.0, "an answer came back {min_us} us after its send, within the segment's 300 us: {out}");
+    assert!(report["frames_out"].as_u64().unwrap() >= 200, "{report}");
 }
