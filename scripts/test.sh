@@ -89,10 +89,15 @@ fi
 # ESI crates only (docs/architecture.md).
 log "layering: what ferrocat-master compiles in"
 deps=$(cargo tree -p ferrocat-master -e normal --prefix none --format '{p}' | cut -d' ' -f1 | sort -u)
-for banned in ferrocat-segment ferrocat-esc ferrocat-capture ferrocat-lab rand rand_chacha rand_distr; do
+for banned in ferrocat-segment ferrocat-sim ferrocat-esc ferrocat-capture ferrocat-lab rand rand_chacha rand_distr roxmltree; do
   if grep -qx "$banned" <<<"$deps"; then echo "ferrocat-master depends on $banned"; exit 1; fi
 done
 echo "ferrocat-master depends on: $(grep '^ferrocat-' <<<"$deps" | grep -vx ferrocat-master | tr '\n' ' ')(and $(grep -vc '^ferrocat-' <<<"$deps") outside crates)"
+# The simulated segment is deterministic and compiles no socket: serving it live is ferrocat-sim's.
+segdeps=$(cargo tree -p ferrocat-segment -e normal --prefix none --format '{p}' | cut -d' ' -f1 | sort -u)
+for banned in ferrocat-link io-uring; do
+  if grep -qx "$banned" <<<"$segdeps"; then echo "ferrocat-segment depends on $banned"; exit 1; fi
+done
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 log "doctests (nextest runs none)"

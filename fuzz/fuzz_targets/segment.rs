@@ -129,7 +129,7 @@ fn prepared(stage: u8) -> (Segment, u64) {
     (io.seg, t_ns)
 }
 
-/// What the live server does with a frame off the wire (segment/src/live.rs), and what must
+/// What the live server does with a frame off the wire (sim/src/serve.rs), and what must
 /// hold of the answer.
 fn send(seg: &mut Segment, port: MasterPort, frame: &mut [u8], t_ns: &mut u64) {
     let before = match Frame::parse(frame) {

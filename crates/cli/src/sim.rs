@@ -6,10 +6,10 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use ferrocat_esc::DigitalIo;
-use ferrocat_segment::live::{
+use ferrocat_segment::{Segment, SegmentConfig};
+use ferrocat_sim::serve::{
     serve_raw, serve_ring, serve_udp, serve_uring, RawSocket, RingSocket, ServeStats, UringSocket,
 };
-use ferrocat_segment::{Segment, SegmentConfig};
 use serde_json::json;
 
 pub struct SimArgs {
@@ -30,7 +30,7 @@ pub struct SimArgs {
 }
 
 /// `--eoe-tap DEVICE:TAP`: the device's EoE endpoint bridged to a new TAP interface.
-fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_segment::live::EoeTap> {
+fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_sim::serve::EoeTap> {
     let (dev, name) = spec.split_once(':').with_context(|| format!("--eoe-tap '{spec}': give DEVICE:TAP"))?;
     let node: usize = dev.parse().with_context(|| format!("--eoe-tap '{spec}': '{dev}' is not a device position"))?;
     let n = seg.nodes.get_mut(node).with_context(|| format!("--eoe-tap '{spec}': no device {node}"))?;
@@ -39,7 +39,7 @@ fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_segment::li
     }
     let tap = ferrocat_link::Tap::open(name)
         .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
-    Ok(ferrocat_segment::live::EoeTap { node, tap, to_host: 0, from_host: 0, dropped: 0 })
+    Ok(ferrocat_sim::serve::EoeTap { node, tap, to_host: 0, from_host: 0, dropped: 0 })
 }
 
 /// Builds the segment a command describes with `--config` or `--device`.
@@ -151,11 +151,11 @@ fn sorted_walls_s(repeats: usize, mut run: impl FnMut()) -> Vec<f64> {
 /// runs `REPEATS` times on, and the median run is reported (one short run swings by ±25 % on a
 /// shared VM).
 pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
-    use ferrocat_segment::bench::{CyclicBench, TclBench};
+    use ferrocat_sim::bench::{CyclicBench, TclBench};
     const REPEATS: usize = 7;
     let mut rows = Vec::new();
     for (slaves, cycle_us, sim_s) in [(6usize, 1000u64, 60.0f64), (64, 1000, 10.0), (256, 100, 1.0)] {
-        let mut b = CyclicBench::new(slaves, cycle_us * 1000, 1);
+        let mut b = CyclicBench::new(slaves, cycle_us * 1000, 1)?;
         let cycles = (sim_s * 1e6 / cycle_us as f64) as u64;
         let walls = sorted_walls_s(REPEATS, || b.run(cycles));
         let wall = walls[REPEATS / 2];
@@ -352,7 +352,7 @@ fn write_clock_log(p: &Path, seg: &Segment, log: &[u64]) -> std::io::Result<()> 
 
 /// `ferrocat rtt`: round trips of an LRW + FRMW frame through whatever answers on `iface`.
 pub fn rtt(iface: &str, frames: u32, slaves: u16, force: bool) -> anyhow::Result<ExitCode> {
-    use ferrocat_segment::live::{monotonic_ns, RawSocket};
+    use ferrocat_sim::serve::{monotonic_ns, RawSocket};
     use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
     use ferrocat_wire::{Address, Command, DatagramHeader, Frame, FrameWriter};
     /// Frames in a row that no slave answers before the measurement stops.

@@ -4,15 +4,22 @@
 //! FMMUs, PDOs with their entries, DC op-modes, mailbox protocols, EEPROM settings and the CoE
 //! object dictionary. [`Device::to_sii`] builds the SII EEPROM image a device programmed from
 //! this description would carry. Every error names the line and column in the XML.
+//!
+//! The reader is the `xml` feature (on by default, with roxmltree); without it the crate is
+//! the descriptions alone, which is what the master compiles.
 mod build;
 mod dictionary;
+#[cfg(feature = "xml")]
+mod dictionary_xml;
 mod modular;
+mod number;
+#[cfg(feature = "xml")]
 mod parse;
 
 pub use build::coe_data_type;
 pub use dictionary::{Access, DataType, Dictionary, Object, SubObject};
 pub use modular::{Depend, ModuleDesc, SlotDesc, Slots};
-pub use parse::parse_number;
+pub use number::parse_number;
 
 /// An error in an ESI file, with its 1-based line and column.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -187,7 +194,8 @@ pub struct EepromDesc {
 }
 
 impl EsiFile {
-    /// Parses the text of an ESI file.
+    /// Parses the text of an ESI file (the `xml` feature, on by default).
+    #[cfg(feature = "xml")]
     pub fn parse(xml: &str) -> Result<EsiFile, EsiError> {
         parse::parse_file(xml)
     }

@@ -2,7 +2,7 @@
 //! points at it.
 use roxmltree::{Document, Node};
 
-use crate::dictionary::parse_dictionary;
+use crate::dictionary_xml::parse_dictionary;
 use crate::*;
 
 pub(crate) type R<T> = Result<T, EsiError>;
@@ -43,23 +43,6 @@ pub(crate) fn text<'a>(node: Node<'a, '_>) -> &'a str {
 
 pub(crate) fn child_text(node: Node<'_, '_>, name: &'static str) -> Option<String> {
     child(node, name).map(|c| text(c).to_string())
-}
-
-/// ESI numbers: `#x1A00` (hex), `0x1A00`, or decimal with an optional sign.
-pub fn parse_number(s: &str) -> Option<i64> {
-    let s = s.trim();
-    let (neg, body) = match s.strip_prefix('-') {
-        Some(b) => (true, b),
-        None => (false, s),
-    };
-    let v = if let Some(h) =
-        body.strip_prefix("#x").or_else(|| body.strip_prefix("0x")).or_else(|| body.strip_prefix("#X"))
-    {
-        i64::from_str_radix(h, 16).ok()?
-    } else {
-        body.parse::<i64>().ok()?
-    };
-    Some(if neg { -v } else { v })
 }
 
 /// ETG.2000's HexDecValue: `#x` and hex digits, or decimal digits (with a sign where a field

@@ -1,16 +1,15 @@
 //! Linux links for EtherCAT: an AF_PACKET raw socket bound to one interface, CLOCK_MONOTONIC,
 //! and what a real-time cyclic task needs (absolute sleeps, SCHED_FIFO, locked memory, a pinned
-//! CPU), and the [`Io`] trait through which the master meets its world. Shared by the live
+//! CPU), and the [`Io`] trait (from `ferrocat-io`, re-exported) through which the master meets its world. Shared by the live
 //! segment and the master.
 mod ring;
 mod tap;
 mod uring;
-mod world;
 
+pub use ferrocat_io::Io;
 pub use ring::{RingSocket, DEFAULT_SPIN_NS as DEFAULT_RING_SPIN_NS};
 pub use tap::Tap;
 pub use uring::UringSocket;
-pub use world::Io;
 
 use std::io;
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};

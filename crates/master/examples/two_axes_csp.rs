@@ -2,11 +2,10 @@
 //! together by one revolution's worth of increments along a smooth profile.
 //!
 //!     cargo run --example two_axes_csp -- eth0 AXIS0 AXIS1
-use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
+use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal, Mode};
 use ferrocat_master::io::RawIo;
 use ferrocat_master::sync::SyncMethod;
 use ferrocat_master::{DcConfig, Master};
-use ferrocat_wire::cia402::Mode;
 
 const CYCLE_NS: u64 = 1_000_000;
 const MOVE: i32 = 1 << 16;

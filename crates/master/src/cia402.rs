@@ -5,7 +5,9 @@
 //!
 //! A drive with several axes carries axis n's objects n × 0x800 above the first's (axis B's
 //! controlword at 0x6840, CiA 402-2): [`Axis::all`] finds every axis a slave maps.
-use ferrocat_wire::cia402::{control, index as ix, Command, Mode, State};
+use ferrocat_wire::cia402::{control, index as ix, Command};
+/// The CiA402 operation modes and states the driver takes and reports.
+pub use ferrocat_wire::cia402::{Mode, State};
 
 use crate::error::{MasterError, Result};
 use crate::io::Io;

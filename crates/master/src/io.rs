@@ -1,7 +1,7 @@
 //! The links the master runs on in real time: a raw socket on a network interface, or
 //! EtherCAT over UDP. Anything else (the virtual segment, a recording) plugs in through the
 //! [`Io`] trait.
-pub use ferrocat_link::Io;
+pub use ferrocat_io::Io;
 
 /// How a [`RawIo`] moves its frames.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -58,6 +58,15 @@ pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};
 pub use error::{MasterError, Result};
 pub use event::MasterEvent;
+/// The ESI descriptions the master takes ([`Master::esi`]); the reader with the `esi-xml`
+/// feature.
+pub use ferrocat_esi as esi;
+/// The wire crate whole, for what the re-exports below do not name.
+pub use ferrocat_wire as wire;
+pub use ferrocat_wire::coe::AbortCode;
+pub use ferrocat_wire::register::{AlState, AlStatusCode, DlStatus};
+pub use ferrocat_wire::sii::SiiInfo;
+pub use ferrocat_wire::{Address, Command};
 pub use foe::Foe;
 pub use master::{Master, SplitLatch, STATION_BASE};
 pub use process::Handle;

@@ -1,11 +1,9 @@
 //! A virtual EtherCAT segment: simulated ESCs in any topology, with exact wire timing,
 //! oscillators and injectable faults, run in virtual time (deterministic for a seed).
-pub mod bench;
 mod builtin;
 mod config;
 pub mod files;
 pub mod host;
-pub mod live;
 pub mod od_build;
 mod segment;
 mod tamper;

@@ -1,6 +1,6 @@
 //! A world whose received frames pass through a hook first: a faulty or hostile device, or a
 //! corrupting link, for tests and fuzzing.
-use ferrocat_link::Io;
+use ferrocat_io::Io;
 
 /// `inner` with `hook(frame, len, on_secondary)` applied to every frame received: it may
 /// change the bytes and returns the length to deliver (shorter: cut), or `None` to drop the

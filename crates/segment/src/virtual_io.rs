@@ -1,6 +1,6 @@
 //! The virtual world a master runs in: the in-process segment, a virtual clock and a model of
 //! the host, behind the master's [`Io`] trait.
-use ferrocat_link::Io;
+use ferrocat_io::Io;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

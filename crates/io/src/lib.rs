@@ -1,5 +1,7 @@
-//! The master's view of the world: its clock and its frames. A real network interface, the
-//! virtual segment, a recording or a faulty link all plug into the master through this one trait.
+#![deny(missing_docs)]
+//! The master's view of the world: its clock and its frames. A real network interface
+//! (`ferrocat-link`), the virtual segment (`ferrocat-segment`), a recording or a faulty link all
+//! plug into the master through this one trait, which compiles nothing else.
 
 /// Time and frames. All times are ns of the world's clock (CLOCK_MONOTONIC in real time).
 pub trait Io {

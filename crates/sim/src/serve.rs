@@ -6,7 +6,7 @@ use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::{MasterPort, Segment};
+use ferrocat_segment::{MasterPort, Segment};
 
 pub use ferrocat_link::{monotonic_ns, RawSocket, RingSocket, UringSocket};
 

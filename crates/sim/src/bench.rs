@@ -5,9 +5,9 @@ use ferrocat_wire::ethernet::{EthernetRepr, BROADCAST};
 use ferrocat_wire::register::{Fmmu, SyncManager};
 use ferrocat_wire::{Address, Command, DatagramHeader, FrameWriter};
 
-use crate::{Segment, SegmentConfig};
 use ferrocat_esc::dc::DcUnit;
 use ferrocat_esc::DcWidth;
+use ferrocat_segment::{Segment, SegmentConfig};
 
 /// A segment of `slaves` devices, configured and in OP, with the cyclic frame ready.
 #[derive(Debug)]
@@ -20,18 +20,30 @@ pub struct CyclicBench {
     pub lost: u64,
 }
 
-fn single(seg: &mut Segment, t: &mut u64, cmd: Command, address: Address, data: &[u8]) {
+/// Why a workload could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// The segment of that size does not build.
+    #[error("the benchmark's segment: {0}")]
+    Segment(#[from] ferrocat_segment::SegmentError),
+    /// A frame does not fit (a process image larger than one frame carries).
+    #[error("the benchmark's frame: {0}")]
+    Frame(#[from] ferrocat_wire::Error),
+}
+
+fn single(seg: &mut Segment, t: &mut u64, cmd: Command, address: Address, data: &[u8]) -> Result<(), BenchError> {
     let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
     let mut buf = [0u8; 1514];
-    let mut w = FrameWriter::new(&mut buf, &eth).expect("buffer");
-    w.push(&DatagramHeader::new(cmd, 0, address, data.len() as u16), data, 0).expect("datagram fits");
-    let n = w.finish().expect("frame");
+    let mut w = FrameWriter::new(&mut buf, &eth)?;
+    w.push(&DatagramHeader::new(cmd, 0, address, data.len() as u16), data, 0)?;
+    let n = w.finish()?;
     let back = seg.exchange(&mut buf[..n], *t).unwrap_or(*t + 100_000);
     *t = back + 1_000;
+    Ok(())
 }
 
 impl CyclicBench {
-    pub fn new(slaves: usize, cycle_ns: u64, seed: u64) -> Self {
+    pub fn new(slaves: usize, cycle_ns: u64, seed: u64) -> Result<Self, BenchError> {
         // Every terminal's SYNC unit on, so that each ESC has a system time and takes a time
         // control loop sample per cycle (the terminals as their SII has them, SYNC and latch
         // units off, have receive times only and would take none).
@@ -40,12 +52,15 @@ impl CyclicBench {
             toml += if k % 2 == 1 { "[[device]]\nbuiltin = 'EL1004'\n" } else { "[[device]]\nbuiltin = 'EL2004'\n" };
             toml += "sync_unit = true\n";
         }
-        let cfg: SegmentConfig = toml::from_str(&toml).expect("bench segment");
-        let mut seg = cfg.build().expect("bench segment builds");
+        let cfg: SegmentConfig = toml::from_str(&toml).map_err(|e| ferrocat_segment::SegmentError::Parse {
+            path: "(the benchmark's segment)".into(),
+            message: e.to_string(),
+        })?;
+        let mut seg = cfg.build()?;
         let mut t = 1_000_000;
         let mut bit = 0u32;
         for pos in 0..slaves as u16 {
-            single(&mut seg, &mut t, Command::APWR, Address::position(pos, 0x0010), &(0x1001 + pos).to_le_bytes());
+            single(&mut seg, &mut t, Command::APWR, Address::position(pos, 0x0010), &(0x1001 + pos).to_le_bytes())?;
         }
         for k in 1..slaves as u16 {
             let station = 0x1001 + k;
@@ -59,7 +74,7 @@ impl CyclicBench {
                 activate: 1,
                 pdi_control: 0,
             };
-            single(&mut seg, &mut t, Command::FPWR, Address::Device { adp: station, ado: 0x0800 }, &sm.to_bytes());
+            single(&mut seg, &mut t, Command::FPWR, Address::Device { adp: station, ado: 0x0800 }, &sm.to_bytes())?;
             let f = Fmmu {
                 logical_start: bit / 8,
                 length: 1,
@@ -70,30 +85,28 @@ impl CyclicBench {
                 fmmu_type: if outputs { Fmmu::WRITE } else { Fmmu::READ },
                 active: true,
             };
-            single(&mut seg, &mut t, Command::FPWR, Address::Device { adp: station, ado: 0x0600 }, &f.to_bytes());
+            single(&mut seg, &mut t, Command::FPWR, Address::Device { adp: station, ado: 0x0600 }, &f.to_bytes())?;
             bit += 4;
         }
         for state in [2u8, 4, 8] {
-            single(&mut seg, &mut t, Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &[state, 0]);
+            single(&mut seg, &mut t, Command::BWR, Address::Device { adp: 0, ado: 0x0120 }, &[state, 0])?;
         }
         let image = bit.div_ceil(8) as u16;
         let eth = EthernetRepr { dst: BROADCAST, src: [0x10; 6], vlan_tci: None, ethertype: 0 };
         let mut frame = vec![0u8; 1514];
-        let mut w = FrameWriter::new(&mut frame, &eth).expect("buffer");
+        let mut w = FrameWriter::new(&mut frame, &eth)?;
         w.push_chained(
             &DatagramHeader::new(Command::LRW, 1, Address::Logical(0), image),
             &vec![0x5A; image as usize],
             0,
-        )
-        .expect("LRW fits");
+        )?;
         w.push_chained(
             &DatagramHeader::new(Command::FRMW, 2, Address::Device { adp: 0x1001, ado: 0x0910 }, 8),
             &[0; 8],
             0,
-        )
-        .expect("FRMW fits");
-        let len = w.finish().expect("frame");
-        CyclicBench { seg, frame, len, t_ns: t.div_ceil(cycle_ns) * cycle_ns, cycle_ns, lost: 0 }
+        )?;
+        let len = w.finish()?;
+        Ok(CyclicBench { seg, frame, len, t_ns: t.div_ceil(cycle_ns) * cycle_ns, cycle_ns, lost: 0 })
     }
 
     /// Runs `cycles` cycles of virtual time.

@@ -7,7 +7,7 @@ fn main() {
         _ => vec![(6usize, 1_000_000u64, 20_000u64), (64, 1_000_000, 20_000), (256, 100_000, 20_000)],
     };
     for (n, cyc, cycles) in sizes {
-        let mut b = ferrocat_segment::bench::CyclicBench::new(n, cyc, 1);
+        let mut b = ferrocat_sim::bench::CyclicBench::new(n, cyc, 1).expect("the benchmark segment builds");
         let t0 = std::time::Instant::now();
         b.run(cycles);
         let wall = t0.elapsed().as_secs_f64();
