@@ -5,7 +5,7 @@ mod common;
 use std::path::PathBuf;
 use std::process::Command;
 
-use common::{Sim, VethPair};
+use common::{ReportingSim, Sim, VethPair};
 
 /// The examples, built with the profile this test was built with.
 fn examples_dir() -> PathBuf {
@@ -75,4 +75,40 @@ fn every_example_runs_against_the_simulator() {
         assert!((m - 65_536).abs() < 2_000, "an axis moved {m} increments of 65 536: {out}");
     }
     sim.stop();
+}
+
+/// Ctrl-C ends a cyclic example's loop, not the program: it steps the slaves down to INIT on the
+/// way out and exits cleanly, as a machine's program must.
+#[test]
+fn a_cyclic_example_stopped_by_ctrl_c_leaves_every_slave_in_init() {
+    let dir = examples_dir();
+    let net = VethPair::new("ec");
+    let toml = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n";
+    let sim = ReportingSim::start(&net, "ctrlc", toml, &[]);
+    let mut child = VethPair::cmd(&net.master_ns, dir.join("cyclic_io").to_str().unwrap())
+        .args([&net.master_if, "600000"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // In OP and cycling once it has said which output it writes.
+    let mut out = child.stdout.take().unwrap();
+    let mut seen = Vec::new();
+    let mut b = [0u8; 256];
+    use std::io::Read;
+    while !String::from_utf8_lossy(&seen).contains("writing '") {
+        let n = out.read(&mut b).unwrap();
+        assert!(n > 0, "cyclic_io ended before it cycled: {}", String::from_utf8_lossy(&seen));
+        seen.extend_from_slice(&b[..n]);
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    out.read_to_end(&mut seen).unwrap();
+    let status = child.wait().unwrap();
+    let said = String::from_utf8_lossy(&seen).into_owned();
+    assert!(status.success(), "cyclic_io after SIGINT: {status}: {said}");
+    let done: u64 = said.lines().find_map(|l| l.split(" cycles,").next()?.parse().ok()).unwrap();
+    assert!(done > 0 && done < 600_000, "{said}");
+    let report = sim.report();
+    let states: Vec<&str> = report["devices"].as_array().unwrap().iter().map(|n| n["al_state"].as_str().unwrap()).collect();
+    assert_eq!(states, ["INIT"; 3], "{report}");
 }

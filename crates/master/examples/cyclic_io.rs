@@ -2,12 +2,24 @@
 //! uses: a running light on the first output entry, the first input entry read back.
 //!
 //!     cargo run --example cyclic_io -- eth0 [CYCLES]
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use ferrocat_master::io::RawIo;
 use ferrocat_master::Master;
+use tracing_subscriber::EnvFilter;
 
 const CYCLE_NS: u64 = 1_000_000;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // The master's events and warnings on stderr (RUST_LOG=debug for each step).
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    // Ctrl-C or SIGTERM ends the loop, not the program: the slaves are stepped down first.
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
     let mut args = std::env::args().skip(1);
     let iface = args.next().ok_or("usage: cyclic_io INTERFACE [CYCLES]")?;
     let cycles: u64 = args.next().map_or(Ok(2_000), |n| n.parse())?;
@@ -28,8 +40,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("writing '{out_name}' of slave {out_slave}");
     let mut next = master.now_ns();
     let mut last_input = None;
-    let mut short = 0;
+    let (mut short, mut done) = (0, 0);
     for k in 0..cycles {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         master.set(light, (k / 100) & 1);
         let wkc = master.cycle()?;
         if wkc != master.expected_wkc {
@@ -39,10 +54,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if let Some((pos, name)) = &input {
             last_input = Some((name.clone(), master.get(master.input(*pos, name)?)));
         }
+        done += 1;
         next += CYCLE_NS;
         master.sleep_until(next);
     }
-    println!("{cycles} cycles, {short} with a working counter short");
+    master.shut_down()?;
+    println!("{done} cycles, {short} with a working counter short");
     if let Some((name, value)) = last_input {
         println!("input '{name}' = {value}");
     }

@@ -3,13 +3,25 @@
 //!     cargo run --example dc_sync -- eth0 [METHOD] [SECONDS]
 //!
 //! METHOD is one of `SyncMethod::PRESETS` (default `ferrocat`).
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use ferrocat_master::io::RawIo;
 use ferrocat_master::sync::{Coupling, SyncMethod};
 use ferrocat_master::{DcConfig, Master};
+use tracing_subscriber::EnvFilter;
 
 const CYCLE_NS: u64 = 1_000_000;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // The master's events and warnings on stderr (RUST_LOG=debug for each step).
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    // Ctrl-C or SIGTERM ends the loop, not the program: the slaves are stepped down first.
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
     let mut args = std::env::args().skip(1);
     let iface = args.next().ok_or("usage: dc_sync INTERFACE [METHOD] [SECONDS]")?;
     let name = args.next().unwrap_or_else(|| "ferrocat".into());
@@ -28,6 +40,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     master.start()?;
     let mut next = master.now_ns();
     for k in 1..=seconds * 1_000 {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         // Process data and the clock-sync datagrams in one frame.
         let (_, correction) = master.cycle_sync(sync.as_mut(), &mut state)?;
         if k % 500 == 0 {
@@ -37,6 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         next += correction.next_period_ns.unwrap_or(CYCLE_NS);
         master.sleep_until(next);
     }
+    master.shut_down()?;
     println!("lock state: {}", state.lock.state());
     Ok(())
 }

@@ -3,8 +3,12 @@
 //!     cargo run --example scan -- eth0
 use ferrocat_master::io::RawIo;
 use ferrocat_master::Master;
+use tracing_subscriber::EnvFilter;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // The master's events and warnings on stderr (RUST_LOG=debug for each step).
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
     let iface = std::env::args().nth(1).ok_or("usage: scan INTERFACE")?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // Counts the slaves, gives them station addresses and reads their EEPROMs.

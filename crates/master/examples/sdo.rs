@@ -4,8 +4,12 @@
 //!     cargo run --example sdo -- eth0 POSITION
 use ferrocat_master::io::RawIo;
 use ferrocat_master::Master;
+use tracing_subscriber::EnvFilter;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // The master's events and warnings on stderr (RUST_LOG=debug for each step).
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
     let mut args = std::env::args().skip(1);
     let (iface, position) = match (args.next(), args.next()) {
         (Some(i), Some(p)) => (i, p.parse::<u16>()?),

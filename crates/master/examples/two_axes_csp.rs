@@ -2,15 +2,27 @@
 //! together by one revolution's worth of increments along a smooth profile.
 //!
 //!     cargo run --example two_axes_csp -- eth0 AXIS0 AXIS1
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal, Mode};
 use ferrocat_master::io::RawIo;
 use ferrocat_master::sync::SyncMethod;
 use ferrocat_master::{DcConfig, Master};
+use tracing_subscriber::EnvFilter;
 
 const CYCLE_NS: u64 = 1_000_000;
 const MOVE: i32 = 1 << 16;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // The master's events and warnings on stderr (RUST_LOG=debug for each step).
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    // Ctrl-C or SIGTERM ends the loop, not the program: the slaves are stepped down first.
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop))?;
+    }
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [iface, a, b] = &args[..] else { return Err("usage: two_axes_csp INTERFACE AXIS0 AXIS1".into()) };
     let positions = [a.parse::<u16>()?, b.parse::<u16>()?];
@@ -36,6 +48,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let steps = 1_000;
     let mut next = master.now_ns();
     for k in 0..=steps + 200 {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         // A cosine ramp from 0 to MOVE over `steps` cycles, then holding still.
         let s = (k.min(steps) as f64 / steps as f64 * std::f64::consts::PI).cos();
         for (axis, &from) in axes.iter_mut().zip(&start) {
@@ -46,6 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         next += CYCLE_NS;
         master.sleep_until(next);
     }
+    master.shut_down()?;
     for (axis, &from) in axes.iter().zip(&start) {
         let moved = axis.position_actual(&master).unwrap_or(from).wrapping_sub(from);
         println!("axis at slave {}: moved {moved} increments, {:?}", axis.position, axis.state());

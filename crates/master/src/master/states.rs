@@ -15,6 +15,14 @@ impl<I: Io> Master<I> {
         self.wait_state_all(state)
     }
 
+    /// Steps every slave down for a clean stop, as a program on its way out does: SAFEOP first,
+    /// where outputs take their safe state while inputs still come, then INIT, where process
+    /// data and mailboxes stop. Each step waits until every slave is there.
+    pub fn shut_down(&mut self) -> Result<()> {
+        self.request_state_all(AlState::SafeOp)?;
+        self.request_state_all(AlState::Init)
+    }
+
     /// Requests `state` from one slave and waits for it. A slave whose firmware has not yet
     /// read the last AL control write refuses the next (no working counter): the request is
     /// repeated until it is taken or the state timeout passes.
