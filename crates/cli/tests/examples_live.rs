@@ -109,6 +109,7 @@ fn a_cyclic_example_stopped_by_ctrl_c_leaves_every_slave_in_init() {
     let done: u64 = said.lines().find_map(|l| l.split(" cycles,").next()?.parse().ok()).unwrap();
     assert!(done > 0 && done < 600_000, "{said}");
     let report = sim.report();
-    let states: Vec<&str> = report["devices"].as_array().unwrap().iter().map(|n| n["al_state"].as_str().unwrap()).collect();
+    let states: Vec<&str> =
+        report["devices"].as_array().unwrap().iter().map(|n| n["al_state"].as_str().unwrap()).collect();
     assert_eq!(states, ["INIT"; 3], "{report}");
 }

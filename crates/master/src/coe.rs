@@ -3,7 +3,7 @@
 use ferrocat_wire::coe::{self, CoeHeader, CoeMessage, CoeService, InfoHeader, InfoOpcode, Sdo, SdoInfo};
 use ferrocat_wire::mailbox::MailboxType;
 
-use crate::error::{MasterError, Result};
+use crate::error::{MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::mailbox::Mailboxes;
 use crate::master::Master;
@@ -87,7 +87,8 @@ impl<I: Io> Coe<'_, I> {
         let reply =
             self.sdo_exchange(position, Sdo::UploadRequest { index, subindex, complete_access, reserved: [0; 4] })?;
         let name = self.mbx.slave(position)?.name.clone();
-        let unexpected = |m: &CoeMessage<'_>| MasterError::slave(position, &name, format!("unexpected reply {m:?}"));
+        let unexpected =
+            |m: &CoeMessage<'_>| MasterError::of(position, &name, SlaveError::UnexpectedReply(format!("{m:?}")));
         let (_, msg) = coe::parse(&reply)?;
         match msg {
             CoeMessage::Sdo(Sdo::UploadExpeditedResponse { size, data, .. }) => {
@@ -103,7 +104,7 @@ impl<I: Io> Coe<'_, I> {
                     match m {
                         CoeMessage::Sdo(s @ Sdo::UploadSegmentResponse { toggle: t, last, .. }) => {
                             if t != toggle {
-                                return Err(MasterError::slave(position, &name, "segment toggle bit out of step"));
+                                return Err(MasterError::of(position, &name, SlaveError::ToggleOutOfStep));
                             }
                             all.extend_from_slice(s.segment_data().unwrap_or(&[]));
                             toggle = !toggle;
@@ -148,7 +149,7 @@ impl<I: Io> Coe<'_, I> {
                 CoeMessage::Sdo(Sdo::DownloadResponse { .. })
                 | CoeMessage::Sdo(Sdo::DownloadSegmentResponse { .. }) => Ok(()),
                 CoeMessage::Sdo(Sdo::Abort { code, .. }) => Err(me.abort(position, index, subindex, code)),
-                other => Err(MasterError::slave(position, &name, format!("unexpected reply {other:?}"))),
+                other => Err(MasterError::of(position, &name, SlaveError::UnexpectedReply(format!("{other:?}")))),
             }
         };
         if data.len() <= 4 && !data.is_empty() {
@@ -220,7 +221,7 @@ impl<I: Io> Coe<'_, I> {
                 CoeMessage::Information(i) => i.header().fragments_left,
                 other => {
                     let name = self.mbx.slave(position)?.name.clone();
-                    return Err(MasterError::slave(position, &name, format!("unexpected reply {other:?}")));
+                    return Err(MasterError::of(position, &name, SlaveError::UnexpectedReply(format!("{other:?}"))));
                 }
             };
             parts.push(r);
@@ -269,7 +270,11 @@ impl<I: Io> Coe<'_, I> {
                 object_code,
                 name: String::from_utf8_lossy(name).into_owned(),
             }),
-            other => Err(MasterError::Config(format!("unexpected SDO information reply {other:?}"))),
+            other => Err(MasterError::of(
+                position,
+                &self.mbx.name_of(position),
+                SlaveError::UnexpectedReply(format!("to SDO information: {other:?}")),
+            )),
         }
     }
 
@@ -298,7 +303,11 @@ impl<I: Io> Coe<'_, I> {
                 access: object_access,
                 name: String::from_utf8_lossy(rest).into_owned(),
             }),
-            other => Err(MasterError::Config(format!("unexpected SDO information reply {other:?}"))),
+            other => Err(MasterError::of(
+                position,
+                &self.mbx.name_of(position),
+                SlaveError::UnexpectedReply(format!("to SDO information: {other:?}")),
+            )),
         }
     }
 }

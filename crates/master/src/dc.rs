@@ -6,7 +6,7 @@ use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDi
 use ferrocat_wire::{Address, Command};
 
 use crate::engine::{frame_bytes, Pdu, SplitRingClocks};
-use crate::error::{MasterError, Result};
+use crate::error::{DcError, MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
 use crate::sync::SyncState;
@@ -238,7 +238,7 @@ impl<I: Io> Master<I> {
     /// relearn (docs/clock-sync.md, lock time).
     pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
         if !self.slaves.iter().any(|s| s.has_dc) {
-            return Err(MasterError::Config("no slave has a distributed clock".into()));
+            return Err(DcError::NoDcSlave.into());
         }
         // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
         //    when the latching frame passed the reference, from its stamps (half its round
@@ -249,11 +249,7 @@ impl<I: Io> Master<I> {
             None => self.master_system_time(),
         };
         // The reference: the first slave whose system time answers (the latch found out).
-        let reference = self
-            .slaves
-            .iter()
-            .position(|s| s.has_system_time)
-            .ok_or_else(|| MasterError::Config("no slave has a DC system time (receive times only)".into()))?;
+        let reference = self.slaves.iter().position(|s| s.has_system_time).ok_or(DcError::NoSystemTime)?;
         // 4. Offsets, including each slave's delay: all local copies equal the reference's,
         //    and the reference's equals the master's time at the latch.
         let r_ref = self.slaves[reference].receive_time_epu;
@@ -276,13 +272,13 @@ impl<I: Io> Master<I> {
             let n = if s.dc_64bit { 8 } else { 4 };
             d[..8].copy_from_slice(&offset.to_le_bytes());
             let (st, delay) = (s.station, s.delay_ns);
-            self.engine.expect(
+            self.engine.expect_wkc(
                 Command::FPWR,
                 Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET },
                 &mut d[..n],
                 1,
             )?;
-            self.engine.expect(
+            self.engine.expect_wkc(
                 Command::FPWR,
                 Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DELAY },
                 &mut delay.to_le_bytes(),
@@ -296,7 +292,7 @@ impl<I: Io> Master<I> {
             Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH },
             &mut [4],
         )?;
-        self.engine.expect(
+        self.engine.expect_wkc(
             Command::BWR,
             Address::Device { adp: 0, ado: addr::DC_SPEED_COUNTER_START },
             &mut 0x1000u16.to_le_bytes(),
@@ -416,27 +412,28 @@ impl<I: Io> Master<I> {
         for &p in targets {
             let s = self.slave(p)?;
             if !s.has_system_time {
-                return Err(MasterError::slave(
-                    p,
-                    &s.name,
-                    "has receive times only (no DC system time): no SYNC0 there",
-                ));
+                return Err(MasterError::of(p, &s.name, crate::error::SlaveError::NoSystemTime));
             }
         }
         // Stop first: a restart with 0x0981 still set is a classic cause of "no sync" errors.
         for &p in targets {
             let st = self.slave(p)?.station;
-            self.engine.expect(Command::FPWR, Address::Device { adp: st, ado: addr::DC_ACTIVATION }, &mut [0], 1)?;
-            self.engine.expect(
+            self.engine.expect_wkc(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_ACTIVATION },
+                &mut [0],
+                1,
+            )?;
+            self.engine.expect_wkc(
                 Command::FPWR,
                 Address::Device { adp: st, ado: addr::DC_CYCLIC_UNIT_CONTROL },
                 &mut [0],
                 1,
             )?;
         }
-        let ref_station = self.dc_reference.ok_or_else(|| MasterError::Config("no reference clock".into()))?;
+        let ref_station = self.dc_reference.ok_or(DcError::NoReference)?;
         let mut now = [0u8; 8];
-        self.engine.expect(
+        self.engine.expect_wkc(
             Command::FPRD,
             Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
             &mut now,
@@ -451,7 +448,7 @@ impl<I: Io> Master<I> {
                 (s.station, s.dc_64bit)
             };
             let fp = |m: &mut Self, ado: u16, d: &mut [u8]| {
-                m.engine.expect(Command::FPWR, Address::Device { adp: st, ado }, d, 1)
+                m.engine.expect_wkc(Command::FPWR, Address::Device { adp: st, ado }, d, 1)
             };
             fp(self, addr::DC_SYNC0_CYCLE_TIME, &mut (cfg.sync0_cycle_ns).to_le_bytes())?;
             fp(self, addr::DC_SYNC1_CYCLE_TIME, &mut cfg.sync1_ns.to_le_bytes())?;
@@ -477,7 +474,7 @@ impl<I: Io> Master<I> {
                 })
                 .collect();
             // A slave that did not answer read zero: not "synchronised".
-            self.engine.expect_each(&mut p, 1)?;
+            self.engine.expect_wkc_each(&mut p, 1)?;
         }
         Ok(dc
             .iter()
@@ -528,12 +525,8 @@ enum ProbeOffset {
 
 impl<I: Io> Master<I> {
     fn reference_index(&self) -> Result<usize> {
-        let st =
-            self.dc_reference.ok_or_else(|| MasterError::Config("no reference clock: run init_dc first".into()))?;
-        self.slaves
-            .iter()
-            .position(|s| s.station == st)
-            .ok_or_else(|| MasterError::Config("reference clock gone".into()))
+        let st = self.dc_reference.ok_or(DcError::NoReference)?;
+        self.slaves.iter().position(|s| s.station == st).ok_or(DcError::ReferenceGone.into())
     }
 
     /// Starts clock synchronisation with `method` for a cycle of `cycle_ns`: the DC
@@ -971,7 +964,7 @@ impl<I: Io> Master<I> {
                     Pdu::new(cmd, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET }, &mut o[..n])
                 })
                 .collect();
-            self.engine.expect_each(&mut pdus, 1)?;
+            self.engine.expect_wkc_each(&mut pdus, 1)?;
         }
         Ok(())
     }

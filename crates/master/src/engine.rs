@@ -565,12 +565,12 @@ impl<I: Io> Engine<I> {
     }
 
     /// One datagram that must reach `expected` slaves.
-    pub fn expect(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
-        self.expect_each(&mut [Pdu::new(cmd, address, data)], expected)
+    pub fn expect_wkc(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
+        self.expect_wkc_each(&mut [Pdu::new(cmd, address, data)], expected)
     }
 
     /// All `pdus` (in as few frames as fit), each of which must reach `expected` slaves.
-    pub fn expect_each(&mut self, pdus: &mut [Pdu<'_>], expected: u16) -> Result<()> {
+    pub fn expect_wkc_each(&mut self, pdus: &mut [Pdu<'_>], expected: u16) -> Result<()> {
         self.transact(pdus)?;
         // On a ring, a short count can be a second pass that came back after the frame was
         // given up (a stalled host): reads are asked again, as often as a frame is retried.

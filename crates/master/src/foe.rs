@@ -23,7 +23,8 @@ impl<I: Io> Master<I> {
             let s = self.slave(position)?;
             (MailboxConfig::bootstrap(&s.sii.header), s.name.clone())
         };
-        let boot = boot.ok_or_else(|| MasterError::slave(position, &name, "its SII gives no bootstrap mailbox"))?;
+        let boot =
+            boot.ok_or_else(|| MasterError::of(position, &name, crate::error::SlaveError::NoBootstrapMailbox))?;
         self.request_state(position, AlState::Init)?;
         self.slaves[position as usize].mailbox = Some(boot);
         let entered =

@@ -56,7 +56,7 @@ pub use dc::{DcConfig, DcReport};
 pub(crate) use engine::SplitPasses;
 pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};
-pub use error::{MasterError, Result};
+pub use error::{DcError, MasterError, Result, SlaveError, SlaveRef};
 pub use event::MasterEvent;
 /// The ESI descriptions the master takes ([`Master::esi`]); the reader with the `esi-xml`
 /// feature.

@@ -10,7 +10,7 @@ use ferrocat_wire::{Address, Command};
 
 use crate::engine::Engine;
 use crate::eoe_link::INBOX_FRAMES;
-use crate::error::{MasterError, Result};
+use crate::error::{MasterError, Result, SlaveError};
 use crate::event::MasterEvent;
 use crate::io::Io;
 use crate::slave::{slave_at, Slave};
@@ -69,7 +69,7 @@ impl<I: Io> Mailboxes<'_, I> {
     ) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let (st, name, m) = self.mailbox_any(position)?;
         if !self.slave(position)?.has_protocol(protocol.sii_protocol()) {
-            return Err(MasterError::slave(position, &name, format!("does not support {}", protocol.name())));
+            return Err(MasterError::of(position, &name, SlaveError::Unsupported(protocol)));
         }
         Ok((st, name, m))
     }
@@ -77,7 +77,7 @@ impl<I: Io> Mailboxes<'_, I> {
     /// The slave's station address, name and mailbox, whatever protocols it speaks.
     fn mailbox_any(&self, position: u16) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let s = self.slave(position)?;
-        let m = s.mailbox.clone().ok_or_else(|| MasterError::slave(position, &s.name, "has no mailbox"))?;
+        let m = s.mailbox.clone().ok_or_else(|| MasterError::of(position, &s.name, SlaveError::NoMailbox))?;
         Ok((s.station, s.name.clone(), m))
     }
 
@@ -90,7 +90,7 @@ impl<I: Io> Mailboxes<'_, I> {
                 return Ok(());
             }
             if self.engine.io.now_ns() > deadline {
-                return Err(MasterError::slave(position, &self.name_of(position), "mailbox stays full"));
+                return Err(MasterError::of(position, &self.name_of(position), SlaveError::MailboxFull));
             }
             let now = self.engine.io.now_ns();
             self.engine.io.sleep_until(now + 100_000);
@@ -102,10 +102,10 @@ impl<I: Io> Mailboxes<'_, I> {
         let (_, name, m) = self.mailbox_of(position, mailbox_type)?;
         let mut buf = vec![0u8; m.out.1 as usize];
         if 6 + payload.len() > buf.len() {
-            return Err(MasterError::slave(
+            return Err(MasterError::of(
                 position,
                 &name,
-                format!("request of {} bytes exceeds the {}-byte mailbox", payload.len(), buf.len()),
+                SlaveError::RequestTooLong { len: payload.len(), mailbox: buf.len() },
             ));
         }
         let c = next_counter(self.slaves[position as usize].mbx_counter);
@@ -134,7 +134,7 @@ impl<I: Io> Mailboxes<'_, I> {
                 }
             }
             if self.engine.io.now_ns() > deadline {
-                return Err(MasterError::slave(position, &name, "no mailbox reply (timeout)"));
+                return Err(MasterError::of(position, &name, SlaveError::NoReply));
             }
             let now = self.engine.io.now_ns();
             self.engine.io.sleep_until(now + 50_000);
@@ -154,8 +154,7 @@ impl<I: Io> Mailboxes<'_, I> {
             }
             return Ok(Polled::Empty);
         }
-        let mbx =
-            Mailbox::parse(&buf).map_err(|e| MasterError::slave(position, &name, format!("mailbox reply: {e}")))?;
+        let mbx = Mailbox::parse(&buf).map_err(|e| MasterError::of(position, &name, SlaveError::MalformedReply(e)))?;
         // After a repeat request the slave may put back a message that had reached us (the
         // lost frame had not got there): the same counter as the last one taken is that one.
         let counter = mbx.header.counter;
@@ -166,8 +165,8 @@ impl<I: Io> Mailboxes<'_, I> {
         slave.mbx_in_counter = counter;
         if mbx.header.mailbox_type == MailboxType::ERR {
             let code = MailboxErrorCode::parse(mbx.payload)
-                .map_err(|e| MasterError::slave(position, &name, format!("mailbox error reply: {e}")))?;
-            return Err(MasterError::slave(position, &name, code.to_string()));
+                .map_err(|e| MasterError::of(position, &name, SlaveError::MalformedErrorReply(e)))?;
+            return Err(MasterError::of(position, &name, SlaveError::MailboxError(code)));
         }
         if mbx.header.mailbox_type == MailboxType::COE {
             if let Ok((_, CoeMessage::Emergency(e))) = coe::parse(mbx.payload) {

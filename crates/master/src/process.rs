@@ -55,7 +55,7 @@ impl<I: Io> Master<I> {
             .iter()
             .find(|m| m.name == name)
             .map(|m| Handle { bit: m.image_bit, bits: m.bits })
-            .ok_or_else(|| MasterError::slave(position, &s.name, format!("no output named '{name}'")))
+            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoOutput(name.into())))
     }
 
     /// The handle of an input entry of slave `position` by its name (first match).
@@ -65,7 +65,7 @@ impl<I: Io> Master<I> {
             .iter()
             .find(|m| m.name == name)
             .map(|m| Handle { bit: m.image_bit, bits: m.bits })
-            .ok_or_else(|| MasterError::slave(position, &s.name, format!("no input named '{name}'")))
+            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoInput(name.into())))
     }
 
     /// Writes `value` (its low `bits` bits) into the image.

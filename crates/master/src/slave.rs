@@ -220,10 +220,5 @@ impl Slave {
 
 /// The slave at `position` in `slaves`, or an error saying how many there are.
 pub(crate) fn slave_at(slaves: &[Slave], position: u16) -> crate::error::Result<&Slave> {
-    slaves.get(position as usize).ok_or_else(|| {
-        crate::error::MasterError::Config(match slaves.len() {
-            0 => format!("no slave at position {position}: the segment has none"),
-            n => format!("no slave at position {position} (positions count from 0: 0 to {})", n - 1),
-        })
-    })
+    slaves.get(position as usize).ok_or(crate::error::MasterError::NoSuchSlave { position, count: slaves.len() })
 }

@@ -112,7 +112,7 @@ impl<I: Io> Master<I> {
                 }
             };
             let mut w = before.wrapping_add_signed(delta_ns).to_le_bytes();
-            self.engine.expect(
+            self.engine.expect_wkc(
                 Command::FPRW,
                 Address::Device { adp: station, ado: addr::DC_SYSTEM_TIME_OFFSET },
                 &mut w[..len],
@@ -125,7 +125,7 @@ impl<I: Io> Master<I> {
             if replaced != before & mask {
                 now = replaced.wrapping_add_signed(delta_ns) & mask;
                 let mut w = now.to_le_bytes();
-                self.engine.expect(
+                self.engine.expect_wkc(
                     Command::FPWR,
                     Address::Device { adp: station, ado: addr::DC_SYSTEM_TIME_OFFSET },
                     &mut w[..len],

@@ -174,7 +174,7 @@ impl<I: Io> Master<I> {
         self.slaves.clear();
         for pos in 0..count {
             let station = STATION_BASE + pos;
-            self.engine.expect(
+            self.engine.expect_wkc(
                 Command::APWR,
                 Address::position(pos, addr::STATION_ADDRESS),
                 &mut station.to_le_bytes(),
@@ -220,7 +220,7 @@ impl<I: Io> Master<I> {
     }
 
     pub(crate) fn fprd(&mut self, station: u16, ado: u16, out: &mut [u8]) -> Result<()> {
-        self.engine.expect(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
+        self.engine.expect_wkc(Command::FPRD, Address::Device { adp: station, ado }, out, 1)
     }
 
     /// The receive times of ports 0–3 (0x0900–0x090F) of the slave at `station`.
@@ -232,7 +232,7 @@ impl<I: Io> Master<I> {
 
     pub(crate) fn fpwr(&mut self, station: u16, ado: u16, data: &[u8]) -> Result<()> {
         let mut d = data.to_vec();
-        self.engine.expect(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
+        self.engine.expect_wkc(Command::FPWR, Address::Device { adp: station, ado }, &mut d, 1)
     }
 
     fn read_slave(&mut self, pos: u16, station: u16, sii_bytes: Vec<u8>) -> Result<Slave> {
@@ -243,8 +243,8 @@ impl<I: Io> Master<I> {
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::DL_STATUS }, &mut dl),
             Pdu::new(Command::FPRD, Address::Device { adp: station, ado: addr::PDI_CONTROL }, &mut pdi),
         ];
-        // Every read must reach the one slave (on a ring asked again when short: `expect_each`).
-        self.engine.expect_each(&mut p, 1).map_err(|e| match e {
+        // Every read must reach the one slave (on a ring asked again when short: `expect_wkc_each`).
+        self.engine.expect_wkc_each(&mut p, 1).map_err(|e| match e {
             MasterError::Wkc { got, .. } => MasterError::Wkc {
                 what: format!("identity of slave {pos}"),
                 expected: 1,
@@ -259,7 +259,8 @@ impl<I: Io> Master<I> {
             // segment's bring-up is the same frames as ever).
             self.fprd(station, addr::SII_CONTROL, &mut sii_status)?;
         }
-        let sii = SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::slave(pos, "?", format!("SII: {e}")))?;
+        let sii =
+            SiiInfo::from_image(&sii_bytes).map_err(|e| MasterError::of(pos, "?", crate::error::SlaveError::Sii(e)))?;
         let h = sii.header;
         let features = u16::from_le_bytes([id[8], id[9]]);
         let mailbox = MailboxConfig::standard(&h);
@@ -399,7 +400,7 @@ impl<I: Io> Master<I> {
     /// [`Master::datagram`] that must reach `expected` slaves: a shortfall is an error naming
     /// the datagram and the slave it was meant for.
     pub fn expect_datagram(&mut self, cmd: Command, address: Address, data: &mut [u8], expected: u16) -> Result<()> {
-        self.engine.expect(cmd, address, data, expected)
+        self.engine.expect_wkc(cmd, address, data, expected)
     }
 
     /// The world's clock now, ns (CLOCK_MONOTONIC on a real link).

@@ -5,7 +5,7 @@ use ferrocat_wire::{Address, Command};
 
 use super::Master;
 use crate::engine::Pdu;
-use crate::error::{MasterError, Result};
+use crate::error::{MasterError, Result, SlaveError};
 use crate::io::Io;
 
 impl<I: Io> Master<I> {
@@ -155,10 +155,10 @@ impl<I: Io> Master<I> {
                 if c & 0x8000 == 0 {
                     if c & 0x6000 != 0 {
                         let name = self.slaves[position as usize].name.clone();
-                        return Err(MasterError::slave(
+                        return Err(MasterError::of(
                             position,
                             &name,
-                            format!("EEPROM write of word {w:#x} failed (status {c:#06x})"),
+                            SlaveError::EepromWrite { word: w as u32, status: c },
                         ));
                     }
                     break;

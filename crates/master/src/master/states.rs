@@ -5,7 +5,7 @@ use ferrocat_wire::{Address, Command};
 
 use super::{Master, MasterEvent};
 use crate::engine::Pdu;
-use crate::error::{code_text, MasterError, Result};
+use crate::error::{code_text, MasterError, Result, SlaveError};
 use crate::io::Io;
 
 impl<I: Io> Master<I> {
@@ -50,25 +50,26 @@ impl<I: Io> Master<I> {
             (s.station, s.alias, s.name.clone())
         };
         if alias == 0 {
-            return Err(MasterError::slave(position, &name, "has no station alias"));
+            return Err(MasterError::of(position, &name, SlaveError::NoAlias));
         }
         if self
             .slaves
             .iter()
             .any(|s| s.position != position && (s.alias == alias && s.alias != 0 || s.station == alias))
         {
-            return Err(MasterError::slave(
-                position,
-                &name,
-                format!("alias {alias:#06x} is not unique on this segment"),
-            ));
+            return Err(MasterError::of(position, &name, SlaveError::AliasNotUnique(alias)));
         }
         let mut dl = [0u8; 4];
         self.fprd(st, addr::DL_CONTROL, &mut dl)?;
         dl[3] |= 0x01;
         self.fpwr(st, addr::DL_CONTROL, &dl)?;
         let mut check = [0u8; 2];
-        self.engine.expect(Command::FPRD, Address::Device { adp: alias, ado: addr::STATION_ADDRESS }, &mut check, 1)?;
+        self.engine.expect_wkc(
+            Command::FPRD,
+            Address::Device { adp: alias, ado: addr::STATION_ADDRESS },
+            &mut check,
+            1,
+        )?;
         Ok(alias)
     }
 

@@ -1,0 +1,41 @@
+//! Errors carry their context as values: the slave, what it lacks or did, the position asked
+//! for, why DC cannot run; and their text reads as before.
+use ferrocat_master::{DcConfig, DcError, Master, MasterError, SlaveError, SlaveRef};
+use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
+
+fn scanned(toml: &str) -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(toml).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
+    m.scan().unwrap();
+    m
+}
+
+#[test]
+fn errors_name_the_slave_and_what_as_values() {
+    let mut m = scanned("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n");
+    // An SDO of a terminal without a mailbox.
+    let e = m.coe().sdo_read(1, 0x1008, 0).unwrap_err();
+    match &e {
+        MasterError::Slave { slave: SlaveRef { position: 1, name }, error: SlaveError::NoMailbox } => {
+            assert_eq!(name, "EL2004")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.to_string(), "slave 1 (EL2004): has no mailbox");
+    // A position past the last slave.
+    let e = m.slave(5).unwrap_err();
+    assert!(matches!(e, MasterError::NoSuchSlave { position: 5, count: 2 }), "{e:?}");
+    assert_eq!(e.to_string(), "no slave at position 5 (positions count from 0: 0 to 1)");
+    // An entry the slave does not have.
+    let e = m.configure().and_then(|_| m.output(1, "no such entry")).unwrap_err();
+    assert!(matches!(&e, MasterError::Slave { error: SlaveError::NoOutput(n), .. } if n == "no such entry"), "{e:?}");
+}
+
+#[test]
+fn dc_on_a_segment_without_clocks_says_why() {
+    // An EL2004's ESC latches receive times but keeps no system time: no reference.
+    let mut m = scanned("seed = 1\n[[device]]\nbuiltin = 'EL2004'\n");
+    let e = m.init_dc(&DcConfig::default()).unwrap_err();
+    assert!(matches!(e, MasterError::Dc(DcError::NoSystemTime)), "{e:?}");
+    assert_eq!(e.to_string(), "no slave has a DC system time (receive times only)");
+}
