@@ -184,7 +184,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
         }
         EoeCmd::GetIp { position, json, target } => {
             let mut m = target.master()?;
-            m.scan()?;
+            target.scan(&mut m)?;
             m.configure()?;
             show(&m.eoe().get_ip(position)?, json);
             finish(m)?;
@@ -248,7 +248,7 @@ fn preop_with(
     params: &ParamArgs,
 ) -> anyhow::Result<ferrocat_master::Master<crate::target::CliIo>> {
     let mut m = target.master()?;
-    m.scan()?;
+    target.scan(&mut m)?;
     m.configure()?;
     if params.given() {
         let p = params.to_params(m.slave(position)?.station)?;

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod demo;
+mod eni;
 mod eoe_cmd;
 mod esi;
 mod lab;
@@ -96,11 +97,31 @@ enum Command {
         #[arg(long)]
         strict: bool,
     },
+    /// Show what an ENI file (ETG.2100, as TwinCAT or EC-Engineer export it) describes: its
+    /// slaves, their identities, process data, mailboxes, init commands and DC, the cyclic
+    /// frames and the process image.
+    Eni {
+        /// The ENI XML file.
+        file: PathBuf,
+        /// Print the whole description as JSON instead of a summary.
+        #[arg(long)]
+        json: bool,
+        /// Refuse a file that departs from ETG.2100 where configuration tools accept it (`0x`
+        /// numbers, white space, odd-length hex, `True`, unknown transitions or states, an
+        /// 8-bit encoding); without it such files are read, each departure a warning with line
+        /// and column.
+        #[arg(long)]
+        strict: bool,
+    },
     /// Serve a virtual segment on a network interface (raw socket) or over UDP, until SIGINT/SIGTERM.
     Sim {
         /// Segment description (TOML).
-        #[arg(long, value_name = "SEG.toml")]
+        #[arg(long, value_name = "SEG.toml", conflicts_with = "eni")]
         config: Option<PathBuf>,
+        /// Serve the slaves an ENI file describes, in its order, each with the identity,
+        /// SyncManagers, PDOs, mailbox and DC the file gives it.
+        #[arg(long, value_name = "FILE", conflicts_with = "device")]
+        eni: Option<PathBuf>,
         /// A device of a line segment, in order from the master: EEPROM dump, ESI file with
         /// `:PRODUCT` (a modular device's modules after it: `:MODULE,MODULE…` by ident), or a
         /// built-in name (EK1100, EL1004, EL2004, SERVO, LAN9252-EVB).
@@ -583,12 +604,14 @@ fn main() -> ExitCode {
             EepromCmd::Write { position, file, target } => master_cmd::sii_write(&target, position, &file),
             EepromCmd::Alias { position, alias, target } => master_cmd::sii_alias(&target, position, &alias),
         },
+        Command::Eni { file, json, strict } => eni::run(&file, json, strict),
         Command::Esi { file, device, sii, json, strict } => {
             esi::run(&file, device.as_deref(), sii.as_deref(), json, strict)
         }
         Command::Sim { bench: true, json, .. } => sim::bench(json),
         Command::Sim {
             config,
+            eni,
             device,
             iface,
             secondary_iface,
@@ -602,6 +625,7 @@ fn main() -> ExitCode {
             ..
         } => sim::run(sim::SimArgs {
             config,
+            eni,
             devices: device,
             iface,
             secondary_iface,

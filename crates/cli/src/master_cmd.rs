@@ -14,7 +14,7 @@ use crate::timing_stats::Histogram;
 
 pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     // A ring split from the start: the secondary's cable comes in at the far half's root.
     let split_root = m.split_latch.as_ref().map(|l| (l.root as u16, l.root_port));
     if json {
@@ -243,7 +243,7 @@ pub enum SdoAction {
 
 pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     m.configure()?;
     match action {
         SdoAction::Read { object, complete, ty } => {
@@ -297,7 +297,7 @@ pub fn foe(
         FoeAction::Read { .. } => None,
     };
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     if boot {
         m.enter_bootstrap(position)?;
     } else {
@@ -324,7 +324,7 @@ pub fn foe(
 
 pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     let img = m.slave(position)?.sii.to_image();
     match out {
         Some(p) => {
@@ -345,7 +345,7 @@ pub fn sii_write(t: &Target, position: u16, file: &std::path::Path) -> anyhow::R
     let img = crate::sii::load(file)?;
     ferrocat_wire::sii::SiiInfo::from_image(&img).with_context(|| format!("{}: not an SII image", file.display()))?;
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     let words = m.sii_write(position, &img)?;
     eprintln!("wrote {words} words to slave {position}'s EEPROM");
     finish(m)?;
@@ -357,7 +357,7 @@ pub fn sii_alias(t: &Target, position: u16, alias: &str) -> anyhow::Result<ExitC
         .and_then(|v| u16::try_from(v).ok())
         .with_context(|| format!("alias '{alias}' is not a 16-bit number"))?;
     let mut m = t.master()?;
-    m.scan()?;
+    t.scan(&mut m)?;
     let words = m.sii_set_alias(position, value)?;
     let name = &m.slaves[position as usize].name;
     eprintln!(
@@ -439,7 +439,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         use ferrocat_master::io::Io;
         m.io_mut().now_ns()
     };
-    m.scan()?;
+    t.scan(&mut m)?;
     m.configure()?;
     let mut sync: Option<(Box<dyn ClockSync>, SyncState)> = None;
     if dc {

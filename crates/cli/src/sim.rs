@@ -14,6 +14,8 @@ use serde_json::json;
 
 pub struct SimArgs {
     pub config: Option<PathBuf>,
+    /// An ENI file whose slaves to serve.
+    pub eni: Option<PathBuf>,
     pub devices: Vec<String>,
     pub iface: Option<String>,
     pub secondary_iface: Option<String>,
@@ -205,7 +207,16 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
-    let mut cfg = segment_config(a.config.as_deref(), &a.devices, a.seed)?;
+    let mut cfg = match &a.eni {
+        Some(path) => {
+            // Its warnings, once, as `ferrocat eni` shows them.
+            crate::eni::read(path, false)?;
+            let mut cfg = SegmentConfig::from_eni(path)?;
+            cfg.seed = a.seed.unwrap_or(0);
+            cfg
+        }
+        None => segment_config(a.config.as_deref(), &a.devices, a.seed)?,
+    };
     // A second interface closes the segment into a ring: at the last device's free port
     // unless the description says where.
     if a.secondary_iface.is_some() && cfg.secondary.is_none() {

@@ -1,7 +1,7 @@
 //! Where a master command talks to: a real interface, or the embedded virtual segment.
 use std::fs::File;
 use std::io::BufWriter;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{bail, Context};
@@ -60,6 +60,15 @@ pub struct Target {
     /// Write every frame sent and received to this pcapng file.
     #[arg(long, value_name = "FILE")]
     pub pcap: Option<PathBuf>,
+    /// The expected network, as an ENI file (ETG.2100) describes it: after the scan, before any
+    /// slave leaves INIT, every slave's identity is compared with the file's and any difference
+    /// (missing, extra, swapped, another device or revision) is an error. Without --iface,
+    /// --udp, --config or --device, the embedded virtual segment is the file's network.
+    #[arg(long, value_name = "FILE")]
+    pub eni: Option<PathBuf>,
+    /// With --eni: report the differences and go on.
+    #[arg(long, requires = "eni")]
+    pub allow_mismatch: bool,
 }
 
 /// [`ferrocat_master::io::LinkPath`] on the command line.
@@ -251,6 +260,8 @@ impl Target {
             seed: None,
             esi: Vec::new(),
             pcap: None,
+            eni: None,
+            allow_mismatch: false,
         }
     }
 
@@ -276,7 +287,13 @@ impl Target {
                 let seg = crate::sim::segment_from(self.config.as_deref(), &self.device, self.seed)?;
                 World::Virtual(Box::new(VirtualIo::new(seg, HostModel::pc_rt(), self.seed.unwrap_or(0))))
             }
-            _ => bail!("give --iface IF, --udp ADDR:PORT, or --config SEG.toml / --device FILE for the embedded virtual segment"),
+            (None, false) if self.eni.is_some() => {
+                let path = self.eni.as_deref().unwrap_or(Path::new(""));
+                let mut cfg = ferrocat_segment::SegmentConfig::from_eni(path)?;
+                cfg.seed = self.seed.unwrap_or(0);
+                World::Virtual(Box::new(VirtualIo::new(cfg.build()?, HostModel::pc_rt(), self.seed.unwrap_or(0))))
+            }
+            _ => bail!("give --iface IF, --udp ADDR:PORT, or --config SEG.toml / --device FILE / --eni FILE for the embedded virtual segment"),
         };
         let capture = match &self.pcap {
             Some(p) => {
@@ -293,6 +310,17 @@ impl Target {
             m.esi.extend(file.devices.into_iter().map(|d| (file.vendor_id, d)));
         }
         Ok(m)
+    }
+
+    /// Scans, and with --eni compares the network found with the file's before any slave
+    /// leaves INIT.
+    pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
+        let eni = self.eni.as_deref().map(|p| crate::eni::read(p, false).map(|e| (p, e))).transpose()?;
+        m.scan()?;
+        if let Some((path, eni)) = eni {
+            crate::eni::check(path, &eni, &m.slaves, self.allow_mismatch)?;
+        }
+        Ok(())
     }
 }
 

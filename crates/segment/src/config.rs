@@ -112,6 +112,11 @@ pub enum DeviceSource {
         modules: Option<Vec<u32>>,
     },
     Builtin(String),
+    /// The slave at position `slave` (from 0) of an ENI file, as the file describes it.
+    Eni {
+        path: PathBuf,
+        slave: usize,
+    },
 }
 
 /// Which device of an ESI file: by product code, or by its `<Type>` name (any case).
@@ -181,6 +186,9 @@ pub struct DeviceToml {
     /// A modular ESI device's modules, by ident, slot by slot (default: each slot's default).
     pub modules: Option<Vec<Number>>,
     pub builtin: Option<String>,
+    /// An ENI file (ETG.2100) whose slave at position `eni_slave` (default 0) this device is.
+    pub eni: Option<PathBuf>,
+    pub eni_slave: Option<usize>,
     /// "et1100" (default), "lan9252", "esc20" (32-bit DC) or "nodc".
     pub esc: Option<String>,
     pub drift_ppm: Option<f64>,
@@ -396,6 +404,12 @@ impl SegmentConfig {
 
     fn source(&self, i: usize, d: &DeviceToml) -> Result<DeviceSource, SegmentError> {
         let place = format!("device {i}");
+        if let Some(p) = &d.eni {
+            if d.eeprom.is_some() || d.esi.is_some() || d.builtin.is_some() {
+                return Err(device_err(place, "give exactly one of eeprom, esi, builtin, eni"));
+            }
+            return Ok(DeviceSource::Eni { path: self.resolve(p), slave: d.eni_slave.unwrap_or(0) });
+        }
         match (&d.eeprom, &d.esi, &d.builtin) {
             (Some(p), None, None) => Ok(DeviceSource::Eeprom(self.resolve(p))),
             (None, Some(p), None) => Ok(DeviceSource::Esi {
@@ -429,8 +443,33 @@ impl SegmentConfig {
                     .transpose()?,
             }),
             (None, None, Some(b)) => Ok(DeviceSource::Builtin(b.clone())),
-            _ => Err(device_err(place, "give exactly one of eeprom, esi, builtin")),
+            _ => Err(device_err(place, "give exactly one of eeprom, esi, builtin, eni")),
         }
+    }
+
+    /// The segment an ENI file describes: each of its slaves a device as the file describes it,
+    /// in its order, each after the slave its `<PreviousPort>` names (on that slave's next free
+    /// port: the file's port letters are its tool's names, whose ESC port numbers depend on the
+    /// device).
+    pub fn from_eni(path: &Path) -> Result<Self, SegmentError> {
+        let eni = read_eni(path)?;
+        if eni.slaves.is_empty() {
+            return Err(SegmentError::Parse { path: path.into(), message: "the file describes no slave".into() });
+        }
+        let mut cfg = SegmentConfig::default();
+        for (k, s) in eni.slaves.iter().enumerate() {
+            let parent = s
+                .previous_port
+                .and_then(|(_, station)| eni.slaves[..k].iter().position(|p| p.station == Some(station)))
+                .filter(|&p| p + 1 != k);
+            cfg.devices.push(DeviceToml {
+                eni: Some(path.into()),
+                eni_slave: Some(k),
+                parent: parent.map(NodeRef::Index),
+                ..DeviceToml::default()
+            });
+        }
+        Ok(cfg)
     }
 
     /// Builds the segment: loads every device, wires the topology, draws oscillators.
@@ -488,6 +527,14 @@ impl SegmentConfig {
                     ))
                 }
             };
+            // An ENI names no ESC: its process RAM grows to hold the SyncManagers the file places
+            // (the EtherCAT IP core offers up to 60 KB; an ET1100 has 8).
+            if matches!(src, DeviceSource::Eni { .. }) && d.esc.is_none() {
+                let need = info.sync_managers().iter().map(|s| s.start as usize + s.length as usize).max().unwrap_or(0);
+                if need > config.memory_len() {
+                    config.ram_kb = (need - 0x1000).div_ceil(1024).min(60) as u8;
+                }
+            }
             // The ports the SII uses; a port the ESC has but the SII leaves unused keeps the
             // preset's "not configured" (01) where it has one (the LAN9252's third port).
             let preset = config.port_descriptor;
@@ -863,6 +910,7 @@ fn describe(src: &DeviceSource) -> String {
         DeviceSource::Eeprom(p) => p.display().to_string(),
         DeviceSource::Esi { path, .. } => path.display().to_string(),
         DeviceSource::Builtin(b) => format!("builtin {b}"),
+        DeviceSource::Eni { path, slave } => format!("{} slave {slave}", path.display()),
     }
 }
 
@@ -882,6 +930,13 @@ fn port_kinds(info: &SiiInfo) -> [Option<PortKind>; 4] {
         k[0] = Some(PortKind::Mii);
     }
     k
+}
+
+/// An ENI file, read leniently (its warnings are the reader's to show: `ferrocat eni`).
+fn read_eni(path: &Path) -> Result<ferrocat_machine::eni::Eni, SegmentError> {
+    let bytes = std::fs::read(path).map_err(|reason| SegmentError::Io { path: path.into(), reason })?;
+    ferrocat_machine::eni::Eni::parse(&bytes)
+        .map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })
 }
 
 /// Loads the SII image of a device and a default name for it.
@@ -968,6 +1023,22 @@ pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferroc
                 .to_sii(crate::builtin::vendor_id(name))
                 .map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
             Ok((img, dev.type_name.clone(), Some(dev)))
+        }
+        DeviceSource::Eni { path, slave } => {
+            let eni = read_eni(path)?;
+            let s = eni.slaves.get(*slave).ok_or_else(|| SegmentError::Parse {
+                path: path.clone(),
+                message: format!("no slave at position {slave} (the file has {})", eni.slaves.len()),
+            })?;
+            let dev = s.to_device();
+            let mut img = dev
+                .to_sii(s.identity.vendor_id)
+                .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("slave {slave}: {e}") })?;
+            // The serial number the tool scanned (SII word 0x0E, outside the header's CRC).
+            if let Some(b) = img.get_mut(0x1C..0x20) {
+                b.copy_from_slice(&s.identity.serial.to_le_bytes());
+            }
+            Ok((img, s.name.clone(), Some(dev)))
         }
     }
 }

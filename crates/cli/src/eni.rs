@@ -1,0 +1,149 @@
+//! `ferrocat eni`: what an ENI file describes, and the check of a scanned network against it.
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use ferrocat_machine::eni::{Eni, Target};
+use ferrocat_machine::{Found, Identity, Mismatch};
+
+use crate::outln;
+
+/// Reads an ENI file, printing its warnings on stderr; `strict` refuses a file with any.
+pub fn read(path: &Path, strict: bool) -> anyhow::Result<Eni> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let eni = Eni::parse(&bytes).with_context(|| format!("{}", path.display()))?;
+    let level = if strict { "error" } else { "warning" };
+    for w in &eni.warnings {
+        eprintln!("{level}: {}: {w}", path.display());
+    }
+    if strict && !eni.warnings.is_empty() {
+        bail!(
+            "{}: {} departure{} from ETG.2100 that configuration tools accept (--strict refuses them)",
+            path.display(),
+            eni.warnings.len(),
+            if eni.warnings.len() == 1 { "" } else { "s" }
+        );
+    }
+    Ok(eni)
+}
+
+fn target_text(t: &Target) -> String {
+    match t {
+        Target::Device { adp, ado } => format!("{adp:#06x}:{ado:#06x}"),
+        Target::Logical(a) => format!("{a:#010x}"),
+    }
+}
+
+/// `ferrocat eni FILE`.
+pub fn run(path: &Path, json: bool, strict: bool) -> anyhow::Result<ExitCode> {
+    let eni = read(path, strict)?;
+    if json {
+        outln!("{}", serde_json::to_string(&eni)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!(
+        "{}: master '{}', {} slave{}, {} cyclic task{}",
+        path.display(),
+        eni.master.name,
+        eni.slaves.len(),
+        if eni.slaves.len() == 1 { "" } else { "s" },
+        eni.cyclic.len(),
+        if eni.cyclic.len() == 1 { "" } else { "s" }
+    );
+    outln!("pos  station  {:<24} {:<54} outputs  inputs  mailbox  init  DC", "name", "identity");
+    for (k, s) in eni.slaves.iter().enumerate() {
+        let bits = |r: Option<ferrocat_machine::eni::BitRange>| r.map_or("-".into(), |r| format!("{} b", r.length));
+        outln!(
+            "{k:3}  {:<7}  {:<24} {:<54} {:<8} {:<7} {:<8} {:<5} {}",
+            s.station.map_or("-".into(), |a| a.to_string()),
+            s.name,
+            s.identity.to_string(),
+            bits(s.process_data.send),
+            bits(s.process_data.recv),
+            s.mailbox.as_ref().map_or("-".into(), |m| m.protocols.join(",")),
+            s.init_cmds.len() + s.mailbox.as_ref().map_or(0, |m| m.coe_init_cmds.len()),
+            match s.dc {
+                Some(dc) if dc.reference_clock => format!("reference, SYNC0 {} ns", dc.cycle_time0_ns),
+                Some(dc) if dc.cycle_time0_ns > 0 => format!("SYNC0 {} ns", dc.cycle_time0_ns),
+                Some(_) => "yes".into(),
+                None => "-".into(),
+            }
+        );
+    }
+    for (t, c) in eni.cyclic.iter().enumerate() {
+        outln!(
+            "cyclic task {t}{}: {} frame{}",
+            c.cycle_time_us.map_or(String::new(), |us| format!(" every {us} us")),
+            c.frames.len(),
+            if c.frames.len() == 1 { "" } else { "s" }
+        );
+        for (f, frame) in c.frames.iter().enumerate() {
+            for d in &frame.cmds {
+                outln!(
+                    "  frame {f}: {:<4} {:<13} {:>4} B  working counter {:<4} image offset {}",
+                    d.command.name().unwrap_or("?"),
+                    target_text(&d.target),
+                    d.data_length,
+                    d.cnt.map_or("-".into(), |c| c.to_string()),
+                    d.input_offs.map_or("-".into(), |o| o.to_string())
+                );
+            }
+        }
+    }
+    let pi = &eni.process_image;
+    outln!(
+        "process image: inputs {} B ({} variables), outputs {} B ({} variables)",
+        pi.inputs.byte_size,
+        pi.inputs.variables.len(),
+        pi.outputs.byte_size,
+        pi.outputs.variables.len()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The scanned slaves as the comparison takes them.
+pub fn found(slaves: &[ferrocat_master::Slave]) -> Vec<Found> {
+    slaves
+        .iter()
+        .map(|s| Found {
+            position: s.position,
+            name: s.name.clone(),
+            identity: Identity {
+                vendor_id: s.vendor_id,
+                product_code: s.product_code,
+                revision: s.revision,
+                serial: s.serial,
+            },
+            alias: s.alias,
+        })
+        .collect()
+}
+
+/// Compares the scanned network with the ENI's: every difference on stderr; an error naming
+/// them unless `allow_mismatch`.
+pub fn check(path: &Path, eni: &Eni, slaves: &[ferrocat_master::Slave], allow_mismatch: bool) -> anyhow::Result<()> {
+    let diffs: Vec<Mismatch> = ferrocat_machine::compare(&eni.expected(), &found(slaves));
+    if diffs.is_empty() {
+        eprintln!("network as {} describes it: {} slaves", path.display(), slaves.len());
+        return Ok(());
+    }
+    let list: Vec<String> = diffs.iter().map(|d| format!("  {d}")).collect();
+    if allow_mismatch {
+        eprintln!(
+            "warning: the network differs from {} (--allow-mismatch: going on):\n{}",
+            path.display(),
+            list.join("\n")
+        );
+        return Ok(());
+    }
+    bail!(
+        "the network differs from {} in {} place{} (found {} slaves, expected {}); nothing went past INIT \
+         (--allow-mismatch goes on regardless):\n{}",
+        path.display(),
+        diffs.len(),
+        if diffs.len() == 1 { "" } else { "s" },
+        slaves.len(),
+        eni.slaves.len(),
+        list.join("\n")
+    )
+}
