@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use ferrocat_machine::eni::{Eni, Target};
-use ferrocat_machine::{Found, Identity, Mismatch};
+use ferrocat_machine::{Expected, Found, Identity, Machine, Mismatch};
 
 use crate::outln;
 
@@ -119,10 +119,39 @@ pub fn found(slaves: &[ferrocat_master::Slave]) -> Vec<Found> {
         .collect()
 }
 
-/// Compares the scanned network with the ENI's: every difference on stderr; an error naming
-/// them unless `allow_mismatch`.
-pub fn check(path: &Path, eni: &Eni, slaves: &[ferrocat_master::Slave], allow_mismatch: bool) -> anyhow::Result<()> {
-    let diffs: Vec<Mismatch> = ferrocat_machine::compare(&eni.expected(), &found(slaves));
+/// The machine description of the slaves found; a slave that one of the ESI files describes
+/// (by product code and revision) gets it as its `device`, so that a simulator can serve it.
+pub fn machine_from_scan(slaves: &[ferrocat_master::Slave], esi: &[std::path::PathBuf]) -> anyhow::Result<Machine> {
+    let mut m = Machine::from_found(None, &found(slaves));
+    for path in esi {
+        let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
+        let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+        for (d, s) in m.slaves.iter_mut().zip(slaves) {
+            let described = file.vendor_id == s.vendor_id
+                && file.devices.iter().any(|x| x.product_code == s.product_code && x.revision == s.revision);
+            if d.device.is_none() && described {
+                d.device = Some(format!("{}:#x{:x}", path.display(), s.product_code));
+            }
+        }
+    }
+    Ok(m)
+}
+
+/// Reads a machine description (TOML).
+pub fn read_machine(path: &Path) -> anyhow::Result<Machine> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Machine::parse(&text).with_context(|| format!("{}", path.display()))
+}
+
+/// Compares the scanned network with the one `path` describes (`expected`): the differences on
+/// stderr; an error naming them unless `allow_mismatch`.
+pub fn check(
+    path: &Path,
+    expected: &[Expected],
+    slaves: &[ferrocat_master::Slave],
+    allow_mismatch: bool,
+) -> anyhow::Result<()> {
+    let diffs: Vec<Mismatch> = ferrocat_machine::compare(expected, &found(slaves));
     if diffs.is_empty() {
         eprintln!("network as {} describes it: {} slaves", path.display(), slaves.len());
         return Ok(());
@@ -143,7 +172,7 @@ pub fn check(path: &Path, eni: &Eni, slaves: &[ferrocat_master::Slave], allow_mi
         diffs.len(),
         if diffs.len() == 1 { "" } else { "s" },
         slaves.len(),
-        eni.slaves.len(),
+        expected.len(),
         list.join("\n")
     )
 }

@@ -120,8 +120,11 @@ enum Command {
         config: Option<PathBuf>,
         /// Serve the slaves an ENI file describes, in its order, each with the identity,
         /// SyncManagers, PDOs, mailbox and DC the file gives it.
-        #[arg(long, value_name = "FILE", conflicts_with = "device")]
+        #[arg(long, value_name = "FILE", conflicts_with_all = ["device", "machine"])]
         eni: Option<PathBuf>,
+        /// Serve the slaves a machine description names, each its `device`.
+        #[arg(long, value_name = "FILE", conflicts_with_all = ["device", "config"])]
+        machine: Option<PathBuf>,
         /// A device of a line segment, in order from the master: EEPROM dump, ESI file with
         /// `:PRODUCT` (a modular device's modules after it: `:MODULE,MODULE…` by ident), or a
         /// built-in name (EK1100, EL1004, EL2004, SERVO, LAN9252-EVB).
@@ -176,6 +179,10 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// Write a machine description of the network found (TOML, docs/machine.md) to this
+        /// file: every slave's name, identity and alias, to edit and give to `--machine`.
+        #[arg(long, value_name = "FILE")]
+        write_machine: Option<PathBuf>,
     },
     /// Read, write or list CoE objects of a slave.
     Sdo {
@@ -612,6 +619,7 @@ fn main() -> ExitCode {
         Command::Sim {
             config,
             eni,
+            machine,
             device,
             iface,
             secondary_iface,
@@ -626,6 +634,7 @@ fn main() -> ExitCode {
         } => sim::run(sim::SimArgs {
             config,
             eni,
+            machine,
             devices: device,
             iface,
             secondary_iface,
@@ -668,7 +677,7 @@ fn main() -> ExitCode {
             Ok(ExitCode::SUCCESS)
         }
         Command::Manpages { dir } => manpages::write_all(&dir),
-        Command::Scan { target, json } => master_cmd::scan(&target, json),
+        Command::Scan { target, json, write_machine } => master_cmd::scan(&target, json, write_machine.as_deref()),
         Command::Sdo { action } => match action {
             SdoCmd::Read { position, object, complete, ty, target } => {
                 master_cmd::sdo(&target, position, master_cmd::SdoAction::Read { object, complete, ty })

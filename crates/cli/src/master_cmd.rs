@@ -12,9 +12,17 @@ use crate::outln;
 use crate::target::{finish, CliIo, Target};
 use crate::timing_stats::Histogram;
 
-pub fn scan(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
+pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
+    if let Some(out) = write_machine.filter(|p| p.exists()) {
+        bail!("{} exists: a machine description is not overwritten (remove it, or give another name)", out.display());
+    }
     let mut m = t.master()?;
     t.scan(&mut m)?;
+    if let Some(out) = write_machine {
+        let text = crate::eni::machine_from_scan(&m.slaves, &t.esi)?.to_toml();
+        std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+        eprintln!("wrote {} ({} slaves): edit it, then give it to --machine", out.display(), m.slaves.len());
+    }
     // A ring split from the start: the secondary's cable comes in at the far half's root.
     let split_root = m.split_latch.as_ref().map(|l| (l.root as u16, l.root_port));
     if json {

@@ -16,6 +16,8 @@ pub struct SimArgs {
     pub config: Option<PathBuf>,
     /// An ENI file whose slaves to serve.
     pub eni: Option<PathBuf>,
+    /// A machine description whose slaves' devices to serve.
+    pub machine: Option<PathBuf>,
     pub devices: Vec<String>,
     pub iface: Option<String>,
     pub secondary_iface: Option<String>,
@@ -42,6 +44,33 @@ fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_sim::serve:
     let tap = ferrocat_link::Tap::open(name)
         .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
     Ok(ferrocat_sim::serve::EoeTap { node, tap, to_host: 0, from_host: 0, dropped: 0 })
+}
+
+/// The segment a machine description describes: each slave's `device` (as `--device` takes
+/// it, paths from the description's folder), in order.
+pub fn machine_segment(path: &Path, seed: Option<u64>) -> anyhow::Result<SegmentConfig> {
+    let m = crate::eni::read_machine(path)?;
+    if m.slaves.is_empty() {
+        bail!("{}: the description names no slave", path.display());
+    }
+    let devices = m
+        .slaves
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            s.device.clone().with_context(|| {
+                format!(
+                    "{}: slave {k} ('{}') has no `device = …` to simulate (an ESI file with :PRODUCT, an EEPROM dump or a built-in name)",
+                    path.display(),
+                    s.name
+                )
+            })
+        })
+        .collect::<anyhow::Result<Vec<String>>>()?;
+    let mut cfg = SegmentConfig::from_device_args(&devices).with_context(|| format!("{}", path.display()))?;
+    cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    cfg.seed = seed.unwrap_or(0);
+    Ok(cfg)
 }
 
 /// Builds the segment a command describes with `--config` or `--device`.
@@ -207,15 +236,16 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
 }
 
 pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
-    let mut cfg = match &a.eni {
-        Some(path) => {
+    let mut cfg = match (&a.eni, &a.machine) {
+        (None, Some(path)) => machine_segment(path, a.seed)?,
+        (Some(path), _) => {
             // Its warnings, once, as `ferrocat eni` shows them.
             crate::eni::read(path, false)?;
             let mut cfg = SegmentConfig::from_eni(path)?;
             cfg.seed = a.seed.unwrap_or(0);
             cfg
         }
-        None => segment_config(a.config.as_deref(), &a.devices, a.seed)?,
+        (None, None) => segment_config(a.config.as_deref(), &a.devices, a.seed)?,
     };
     // A second interface closes the segment into a ring: at the last device's free port
     // unless the description says where.

@@ -64,10 +64,15 @@ pub struct Target {
     /// slave leaves INIT, every slave's identity is compared with the file's and any difference
     /// (missing, extra, swapped, another device or revision) is an error. Without --iface,
     /// --udp, --config or --device, the embedded virtual segment is the file's network.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "machine")]
     pub eni: Option<PathBuf>,
-    /// With --eni: report the differences and go on.
-    #[arg(long, requires = "eni")]
+    /// The expected network, as a ferrocat machine description (TOML, docs/machine.md)
+    /// describes it: checked as with --eni. Without --iface, --udp, --config or --device, the
+    /// embedded virtual segment serves each slave's `device`.
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
+    /// With --eni or --machine: report the differences and go on.
+    #[arg(long)]
     pub allow_mismatch: bool,
 }
 
@@ -261,6 +266,7 @@ impl Target {
             esi: Vec::new(),
             pcap: None,
             eni: None,
+            machine: None,
             allow_mismatch: false,
         }
     }
@@ -293,7 +299,12 @@ impl Target {
                 cfg.seed = self.seed.unwrap_or(0);
                 World::Virtual(Box::new(VirtualIo::new(cfg.build()?, HostModel::pc_rt(), self.seed.unwrap_or(0))))
             }
-            _ => bail!("give --iface IF, --udp ADDR:PORT, or --config SEG.toml / --device FILE / --eni FILE for the embedded virtual segment"),
+            (None, false) if self.machine.is_some() => {
+                let path = self.machine.as_deref().unwrap_or(Path::new(""));
+                let cfg = crate::sim::machine_segment(path, self.seed)?;
+                World::Virtual(Box::new(VirtualIo::new(cfg.build()?, HostModel::pc_rt(), self.seed.unwrap_or(0))))
+            }
+            _ => bail!("give --iface IF, --udp ADDR:PORT, or --config SEG.toml / --device FILE / --eni FILE / --machine FILE for the embedded virtual segment"),
         };
         let capture = match &self.pcap {
             Some(p) => {
@@ -312,13 +323,20 @@ impl Target {
         Ok(m)
     }
 
-    /// Scans, and with --eni compares the network found with the file's before any slave
-    /// leaves INIT.
+    /// Scans, and with --eni or --machine compares the network found with the file's before
+    /// any slave leaves INIT.
     pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
-        let eni = self.eni.as_deref().map(|p| crate::eni::read(p, false).map(|e| (p, e))).transpose()?;
+        let expected = match (&self.eni, &self.machine) {
+            (Some(p), _) => Some((p, crate::eni::read(p, false)?.expected())),
+            (None, Some(p)) => Some((p, crate::eni::read_machine(p)?.expected())),
+            (None, None) => None,
+        };
+        if self.allow_mismatch && expected.is_none() {
+            bail!("--allow-mismatch goes with --eni or --machine");
+        }
         m.scan()?;
-        if let Some((path, eni)) = eni {
-            crate::eni::check(path, &eni, &m.slaves, self.allow_mismatch)?;
+        if let Some((path, expected)) = expected {
+            crate::eni::check(path, &expected, &m.slaves, self.allow_mismatch)?;
         }
         Ok(())
     }

@@ -38,3 +38,28 @@ fn needs_shared_twincat_enis_run_against_their_simulation() {
         run_against_its_own_simulation(&format!("e{k}"), &ferrocat_testdata::shared(&format!("eni/{name}")));
     }
 }
+
+#[test]
+fn a_machine_description_runs_against_its_simulation() {
+    let net = VethPair::new("md");
+    let path = std::env::temp_dir().join(format!("ferrocat-machine-live-{}.toml", std::process::id()));
+    std::fs::write(
+        &path,
+        "[[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044C2C52\nrevision = 0x120000\ndevice = \"EK1100\"\n\
+         [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\ndevice = \"SERVO\"\n",
+    )
+    .unwrap();
+    let p = path.to_str().unwrap();
+    let sim = Sim::start(&net, &["--machine", p]);
+    let o = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--iface", &net.master_if, "--machine", p, "--seconds", "1", "--json"])
+        .output()
+        .unwrap();
+    sim.stop();
+    std::fs::remove_file(&path).ok();
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success() && err.contains("describes it: 2 slaves"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["slaves"]["in_op_at_end"], 2, "{v}");
+    assert_eq!(v["wkc_errors"], v["frames_lost"], "{v}");
+}

@@ -6,6 +6,8 @@
 //!   configuration tools export them: the master's and every slave's settings, init commands,
 //!   the cyclic frames and the process image. Read leniently, each departure from the schema a
 //!   [`Warning`] naming line and column; [`eni::Eni::parse_strict`] refuses them.
+//! - [`description`]: ferrocat's own machine description, a TOML file a person reads and edits
+//!   ([`Machine`]), written from a scan to start from.
 //! - [`compare`]: the expected slaves against the scanned ones (ETG.1500 item 302), every
 //!   difference named: missing, extra, swapped, another device, another revision, serial
 //!   number or alias.
@@ -13,10 +15,12 @@
 //! The crate reads files and compares identities; it drives no network. The master applies what
 //! it describes.
 pub mod compare;
+pub mod description;
 pub mod eni;
 mod text;
 
-pub use compare::{compare, Expected, Found, Identity, Mismatch};
+pub use compare::{compare, Expected, Found, Identity, Mismatch, RevisionCheck};
+pub use description::{DescriptionError, Machine, SlaveDesc};
 
 /// A file's place, 1-based: where an error or a warning points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]

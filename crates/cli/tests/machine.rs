@@ -1,0 +1,84 @@
+//! ferrocat's own machine description on the command line, on the embedded virtual segment:
+//! written from a scan, edited, run alone, and checked against other segments.
+use std::path::PathBuf;
+use std::process::Command;
+
+fn ferrocat(args: &[&str]) -> (bool, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn temp(tag: &str) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("ferrocat-machine-{tag}-{}.toml", std::process::id()));
+    std::fs::remove_file(&p).ok();
+    p
+}
+
+#[test]
+fn scan_writes_a_description_that_runs_once_it_names_its_devices() {
+    let path = temp("scan");
+    let p = path.to_str().unwrap();
+    let line = ["--device", "EK1100", "--device", "EL2004", "--device", "EL1004"];
+    let (ok, _, err) = ferrocat(&[&["scan", "--write-machine", p][..], &line].concat());
+    assert!(ok && err.contains("(3 slaves): edit it"), "{err}");
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert_eq!(text.matches("[[slave]]").count(), 3, "{text}");
+    assert!(text.contains("name = \"EL2004\"\nvendor = 0x2\nproduct = 0x07d43052\nrevision = 0x00100000"), "{text}");
+    // Never over an existing file: it may hold the user's edits.
+    let (ok, _, err) = ferrocat(&[&["scan", "--write-machine", p][..], &line].concat());
+    assert!(!ok && err.contains("exists: a machine description is not overwritten"), "{err}");
+    // As written it describes the network, but names nothing to simulate.
+    let (ok, _, err) = ferrocat(&[&["scan", "--machine", p][..], &line].concat());
+    assert!(ok && err.contains("describes it: 3 slaves"), "{err}");
+    let (ok, _, err) = ferrocat(&["run", "--machine", p, "--seconds", "0.2"]);
+    assert!(!ok && err.contains("slave 0 ('EK1100') has no `device = …` to simulate"), "{err}");
+    // Named by the user, each with its device: the description alone runs.
+    let edited = text
+        .replacen("name = \"EK1100\"\n", "name = \"coupler\"\ndevice = \"EK1100\"\n", 1)
+        .replacen("name = \"EL2004\"\n", "name = \"lamps\"\ndevice = \"EL2004\"\n", 1)
+        .replacen("name = \"EL1004\"\n", "name = \"buttons\"\ndevice = \"EL1004\"\n", 1);
+    std::fs::write(&path, &edited).unwrap();
+    let (ok, out, err) = ferrocat(&["run", "--machine", p, "--seconds", "0.3", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["wkc_errors"], 0, "{v}");
+    // Another network: the user's names in the error.
+    let other = ["--device", "EK1100", "--device", "EL1004", "--device", "EL1004"];
+    let (ok, _, err) = ferrocat(&[&["run", "--machine", p, "--seconds", "0.2"][..], &other].concat());
+    assert!(!ok && err.contains("position 1: expected 'lamps'") && err.contains("found 'EL1004'"), "{err}");
+    let (ok, _, err) =
+        ferrocat(&["run", "--machine", p, "--device", "EK1100", "--device", "EL1004", "--seconds", "0.2"]);
+    assert!(!ok && err.contains("position 1: 'lamps'") && err.contains("missing"), "{err}");
+    std::fs::remove_file(&path).ok();
+}
+
+#[test]
+fn revision_ranges_optional_slaves_and_bad_files() {
+    let path = temp("rules");
+    let p = path.to_str().unwrap();
+    std::fs::write(
+        &path,
+        "name = \"rules\"\n[[slave]]\nvendor = 2\nproduct = 0x044C2C52\nrevision = \"any\"\n\
+         [[slave]]\nname = \"lamps\"\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x100000\n\
+         [[slave]]\nname = \"spare\"\nvendor = 2\nproduct = 0x03EC3052\noptional = true\n",
+    )
+    .unwrap();
+    let (ok, _, err) = ferrocat(&["scan", "--machine", p, "--device", "EK1100", "--device", "EL2004"]);
+    assert!(ok, "the optional slave may be absent: {err}");
+    let (ok, _, err) =
+        ferrocat(&["scan", "--machine", p, "--device", "EK1100", "--device", "EL2004", "--device", "EL2004"]);
+    assert!(!ok && err.contains("position 2: expected 'spare'"), "{err}");
+    std::fs::write(&path, "[[slave]]\nvendor = 2\nproduct = 3\nrevisoin = 1\n").unwrap();
+    let (ok, _, err) = ferrocat(&["scan", "--machine", p, "--device", "EK1100"]);
+    assert!(
+        !ok && err.contains(p) && err.contains("line 4, column 1") && err.contains("unknown field `revisoin`"),
+        "{err}"
+    );
+    let (ok, _, err) = ferrocat(&["scan", "--device", "EK1100", "--allow-mismatch"]);
+    assert!(!ok && err.contains("--allow-mismatch goes with --eni or --machine"), "{err}");
+    std::fs::remove_file(&path).ok();
+}

@@ -1,0 +1,312 @@
+//! ferrocat's own machine description: one TOML file a person reads and edits, naming the slaves
+//! a machine expects and how strictly each is checked. `ferrocat scan --write-machine FILE`
+//! writes one from the network it finds, so that nobody starts from an empty file.
+//!
+//! ```toml
+//! name = "press line 3"
+//!
+//! [[slave]]
+//! name = "coupler"
+//! vendor = 0x2
+//! product = 0x044C2C52
+//! revision = 0x00120000            # exactly; or revision_min/revision_max, or "any"
+//! device = "EK1100"                # what a simulator serves here (as --device takes it)
+//!
+//! [[slave]]
+//! name = "axis X"
+//! vendor = 0x0
+//! product = 0x402
+//! revision = "any"
+//! serial = 1234                    # checked where given
+//! alias = 0x10                     # checked where given
+//! optional = true                  # may be absent
+//! ```
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::compare::{Expected, Found, Identity, RevisionCheck};
+use crate::Place;
+
+/// An error in a machine description: where, and what.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{place}: {message}")]
+pub struct DescriptionError {
+    /// Where.
+    pub place: Place,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// A machine: the slaves it expects, in network order.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Machine {
+    /// What the machine is called, where given.
+    pub name: Option<String>,
+    /// The slaves, position 0 first.
+    pub slaves: Vec<SlaveDesc>,
+}
+
+/// A slave the machine expects.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SlaveDesc {
+    /// The name the user gives it (default: `slave N`).
+    pub name: String,
+    /// Vendor, product, and the serial number where one is required.
+    pub identity: Identity,
+    /// Which revisions pass.
+    pub revision: RevisionCheck,
+    /// The serial number is checked.
+    pub check_serial: bool,
+    /// The station alias it must have, where given.
+    pub alias: Option<u16>,
+    /// It may be absent.
+    pub optional: bool,
+    /// What a simulator serves in its place: an EEPROM dump, `ESI.xml:PRODUCT`, or a built-in
+    /// name, as `ferrocat sim --device` takes them.
+    pub device: Option<String>,
+}
+
+/// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Number {
+    Int(i64),
+    Text(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Raw {
+    name: Option<String>,
+    #[serde(default, rename = "slave")]
+    slaves: Vec<RawSlave>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSlave {
+    name: Option<String>,
+    vendor: Spanned<Number>,
+    product: Spanned<Number>,
+    revision: Option<Spanned<Number>>,
+    revision_min: Option<Spanned<Number>>,
+    revision_max: Option<Spanned<Number>>,
+    serial: Option<Spanned<Number>>,
+    alias: Option<Spanned<Number>>,
+    #[serde(default)]
+    optional: bool,
+    device: Option<String>,
+}
+
+/// Line and column of a byte offset in `text`.
+fn place_at(text: &str, offset: usize) -> Place {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() as u32 + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) as u32 + 1;
+    Place { line, column }
+}
+
+impl Machine {
+    /// Reads a description.
+    pub fn parse(text: &str) -> Result<Machine, DescriptionError> {
+        let raw: Raw = toml::from_str(text).map_err(|e| DescriptionError {
+            place: e.span().map_or(Place { line: 1, column: 1 }, |s| place_at(text, s.start)),
+            message: e.message().to_string(),
+        })?;
+        let err =
+            |s: &std::ops::Range<usize>, message: String| DescriptionError { place: place_at(text, s.start), message };
+        let num = |n: &Spanned<Number>, key: &str, max: u64| -> Result<u32, DescriptionError> {
+            let v = match n.get_ref() {
+                Number::Int(v) => u64::try_from(*v).ok(),
+                Number::Text(t) if t.trim() == "any" => None,
+                Number::Text(t) => ferrocat_esi::parse_number(t).and_then(|v| u64::try_from(v).ok()),
+            };
+            match v {
+                Some(v) if v <= max => Ok(v as u32),
+                Some(v) => Err(err(&n.span(), format!("{key} = {v}: more than {max:#x}"))),
+                None => Err(err(&n.span(), format!("{key}: not a number"))),
+            }
+        };
+        let mut slaves = Vec::with_capacity(raw.slaves.len());
+        for (k, s) in raw.slaves.iter().enumerate() {
+            if k > u16::MAX as usize {
+                return Err(err(&s.vendor.span(), "more than 65 536 slaves".into()));
+            }
+            let any = |n: &Option<Spanned<Number>>| matches!(n.as_ref().map(|n| n.get_ref()), Some(Number::Text(t)) if t.trim() == "any");
+            let revision = match (&s.revision, &s.revision_min, &s.revision_max) {
+                (Some(_), _, _) if any(&s.revision) => {
+                    if let Some(m) = s.revision_min.as_ref().or(s.revision_max.as_ref()) {
+                        return Err(err(&m.span(), "revision = \"any\" takes no revision_min or revision_max".into()));
+                    }
+                    (RevisionCheck::Any, 0)
+                }
+                (Some(r), None, None) => {
+                    let r = num(r, "revision", u32::MAX as u64)?;
+                    (RevisionCheck::Exact, r)
+                }
+                (Some(r), _, _) => {
+                    return Err(err(&r.span(), "give revision, or revision_min and revision_max, not both".into()))
+                }
+                (None, None, None) => (RevisionCheck::Any, 0),
+                (None, min, max) => {
+                    let min = min.as_ref().map(|m| num(m, "revision_min", u32::MAX as u64)).transpose()?.unwrap_or(0);
+                    let max =
+                        max.as_ref().map(|m| num(m, "revision_max", u32::MAX as u64)).transpose()?.unwrap_or(u32::MAX);
+                    if min > max {
+                        let at = s.revision_min.as_ref().map(|m| m.span()).unwrap_or_default();
+                        return Err(err(&at, format!("revision_min {min:#x} is above revision_max {max:#x}")));
+                    }
+                    (RevisionCheck::Range { min, max }, min)
+                }
+            };
+            let serial = s.serial.as_ref().map(|n| num(n, "serial", u32::MAX as u64)).transpose()?;
+            slaves.push(SlaveDesc {
+                name: s.name.clone().unwrap_or_else(|| format!("slave {k}")),
+                identity: Identity {
+                    vendor_id: num(&s.vendor, "vendor", u32::MAX as u64)?,
+                    product_code: num(&s.product, "product", u32::MAX as u64)?,
+                    revision: revision.1,
+                    serial: serial.unwrap_or(0),
+                },
+                revision: revision.0,
+                check_serial: serial.is_some(),
+                alias: s.alias.as_ref().map(|n| num(n, "alias", u16::MAX as u64).map(|v| v as u16)).transpose()?,
+                optional: s.optional,
+                device: s.device.clone(),
+            });
+        }
+        Ok(Machine { name: raw.name, slaves })
+    }
+
+    /// The slaves as the comparison takes them.
+    pub fn expected(&self) -> Vec<Expected> {
+        self.slaves
+            .iter()
+            .enumerate()
+            .map(|(k, s)| Expected {
+                position: k as u16,
+                name: s.name.clone(),
+                identity: s.identity,
+                revision: s.revision,
+                check_serial: s.check_serial,
+                alias: s.alias,
+                optional: s.optional,
+            })
+            .collect()
+    }
+
+    /// The description of a network as found: every slave by its SII name, its identity with
+    /// the revision exactly, its alias where it has one; no serial number (a replaced unit of
+    /// the same type would fail).
+    pub fn from_found(name: Option<String>, found: &[Found]) -> Machine {
+        let slaves = found
+            .iter()
+            .map(|f| SlaveDesc {
+                name: f.name.clone(),
+                identity: Identity { serial: 0, ..f.identity },
+                revision: RevisionCheck::Exact,
+                check_serial: false,
+                alias: (f.alias != 0).then_some(f.alias),
+                optional: false,
+                device: None,
+            })
+            .collect();
+        Machine { name, slaves }
+    }
+
+    /// The description as TOML that [`Machine::parse`] reads back, with a comment for each
+    /// key a person may want to change.
+    pub fn to_toml(&self) -> String {
+        let quote = |s: &str| toml::Value::String(s.to_string()).to_string();
+        let mut out = String::from(
+            "# A ferrocat machine description (docs/machine.md): the slaves this machine expects, in\n\
+             # network order. `ferrocat run --machine FILE` checks the network against it before any\n\
+             # slave leaves INIT.\n",
+        );
+        if let Some(n) = &self.name {
+            out += &format!("name = {}\n", quote(n));
+        }
+        for s in &self.slaves {
+            out += "\n[[slave]]\n";
+            out += &format!("name = {}\n", quote(&s.name));
+            out += &format!("vendor = {:#x}\n", s.identity.vendor_id);
+            out += &format!("product = {:#010x}\n", s.identity.product_code);
+            match s.revision {
+                RevisionCheck::Exact => {
+                    out += &format!(
+                        "revision = {:#010x}    # exactly; or revision_min/revision_max, or \"any\"\n",
+                        s.identity.revision
+                    )
+                }
+                RevisionCheck::Any => out += "revision = \"any\"\n",
+                RevisionCheck::Range { min, max } => {
+                    out += &format!("revision_min = {min:#010x}\nrevision_max = {max:#010x}\n");
+                }
+            }
+            if s.check_serial {
+                out += &format!("serial = {}\n", s.identity.serial);
+            }
+            if let Some(a) = s.alias {
+                out += &format!("alias = {a:#06x}\n");
+            }
+            if s.optional {
+                out += "optional = true\n";
+            }
+            if let Some(d) = &s.device {
+                out += &format!("device = {}\n", quote(d));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_description_reads_writes_and_reads_back() {
+        let text = "name = \"line 3\"\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
+        let m = Machine::parse(text).unwrap();
+        assert_eq!(m.name.as_deref(), Some("line 3"));
+        assert_eq!(
+            m.slaves[0].identity,
+            Identity { vendor_id: 2, product_code: 0x044C2C52, revision: 0x120000, serial: 0 }
+        );
+        assert_eq!(m.slaves[0].revision, RevisionCheck::Exact);
+        assert_eq!(m.slaves[0].device.as_deref(), Some("EK1100"));
+        let s1 = &m.slaves[1];
+        assert_eq!(s1.name, "slave 1");
+        assert_eq!(s1.revision, RevisionCheck::Range { min: 0x100000, max: 0x110000 });
+        assert!(s1.check_serial && s1.identity.serial == 7 && s1.alias == Some(0x10) && s1.optional);
+        assert_eq!(m.slaves[2].revision, RevisionCheck::Any);
+        assert_eq!(Machine::parse(&m.to_toml()).unwrap(), m);
+        let e = m.expected();
+        assert_eq!((e[1].position, e[1].alias, e[1].optional), (1, Some(0x10), true));
+    }
+
+    #[test]
+    fn bad_descriptions_name_their_place() {
+        let cases = [
+            ("[[slave]]\nvendor = 2\nproduct = 3\nrevison = 1\n", (4, 1), "unknown field `revison`"),
+            ("[[slave]]\nvendor = 2\n", (1, 1), "missing field `product`"),
+            ("[[slave]]\nvendor = \"two\"\nproduct = 3\n", (2, 10), "vendor: not a number"),
+            ("[[slave]]\nvendor = 0x100000000\nproduct = 3\n", (2, 10), "more than 0xffffffff"),
+            ("[[slave]]\nvendor = -1\nproduct = 3\n", (2, 10), "vendor: not a number"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nalias = 0x10000\n", (4, 9), "alias = 65536: more than 0xffff"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nrevision = 1\nrevision_min = 1\n", (4, 12), "not both"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nrevision_min = 5\nrevision_max = 4\n", (4, 16), "above revision_max"),
+            (
+                "[[slave]]\nvendor = 2\nproduct = 3\nrevision = \"any\"\nrevision_max = 4\n",
+                (5, 16),
+                "takes no revision_min",
+            ),
+            ("name = [\n", (2, 1), "invalid array"),
+        ];
+        for (text, (line, column), want) in cases {
+            let e = Machine::parse(text).unwrap_err();
+            assert_eq!((e.place.line, e.place.column), (line, column), "{text}: {e}");
+            assert!(e.message.contains(want), "{text}: {e}");
+        }
+    }
+}
