@@ -101,6 +101,12 @@ pub fn run(path: &Path, json: bool, strict: bool) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// [`read`] without its warnings (for a second look at a file already read).
+pub fn read_quietly(path: &Path) -> anyhow::Result<Eni> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Eni::parse(&bytes).with_context(|| format!("{}", path.display()))
+}
+
 /// The scanned slaves as the comparison takes them.
 pub fn found(slaves: &[ferrocat_master::Slave]) -> Vec<Found> {
     slaves
@@ -175,4 +181,102 @@ pub fn check(
         expected.len(),
         list.join("\n")
     )
+}
+
+/// The master's plan for an ENI: its station addresses, each slave's FMMU and process-data
+/// SyncManager writes (its register init commands for PREOP → SAFEOP and SAFEOP → OP, the
+/// mailbox's SyncManagers left to the master), its CoE init commands for INIT → PREOP and
+/// PREOP → SAFEOP, where its entries start, and the cyclic frames of every task.
+pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
+    use ferrocat_machine::eni::Transition;
+    use ferrocat_master::plan::{Plan, PlanDatagram, PlanSdo};
+    use ferrocat_master::{AlState, Command};
+    let any = |ts: &[Transition], wanted: &[(AlState, AlState)]| ts.iter().any(|t| wanted.contains(&(t.from, t.to)));
+    let (ip, ps, so) =
+        ((AlState::Init, AlState::PreOp), (AlState::PreOp, AlState::SafeOp), (AlState::SafeOp, AlState::Op));
+    let address = |t: &Target| match *t {
+        Target::Device { adp, ado } => ferrocat_master::Address::Device { adp, ado },
+        Target::Logical(a) => ferrocat_master::Address::Logical(a),
+    };
+    let stations: Vec<u16> = eni.slaves.iter().filter_map(|s| s.station).collect();
+    let registers = eni
+        .slaves
+        .iter()
+        .map(|s| {
+            s.init_cmds
+                .iter()
+                .filter(|c| matches!(c.command, Command::APWR | Command::FPWR) && any(&c.transitions, &[ps, so]))
+                .filter_map(|c| match c.target {
+                    Target::Device { ado, .. } => Some((ado, c.data.clone())),
+                    Target::Logical(_) => None,
+                })
+                .filter(|(ado, _)| {
+                    let fmmu = (0x0600..0x0700).contains(ado);
+                    // SM0 and SM1 of a slave with a mailbox are its mailbox: the master's.
+                    let sm = (0x0800..0x0880).contains(ado) && !(s.mailbox.is_some() && *ado < 0x0810);
+                    fmmu || sm
+                })
+                .collect()
+        })
+        .collect();
+    let sdos = eni
+        .slaves
+        .iter()
+        .map(|s| {
+            s.mailbox
+                .iter()
+                .flat_map(|m| &m.coe_init_cmds)
+                .filter(|c| c.ccs == 1 && any(&c.transitions, &[ip, ps]))
+                .map(|c| PlanSdo {
+                    index: c.index,
+                    subindex: c.subindex,
+                    complete_access: c.complete_access,
+                    data: c.data.clone(),
+                    comment: c.comment.clone(),
+                })
+                .collect()
+        })
+        .collect();
+    let frames = eni
+        .cyclic
+        .iter()
+        .flat_map(|c| &c.frames)
+        .map(|f| {
+            f.cmds
+                .iter()
+                .map(|d| PlanDatagram {
+                    command: d.command,
+                    address: address(&d.target),
+                    length: d.data_length,
+                    output_offset: d.output_offs,
+                    input_offset: d.input_offs,
+                    expected_wkc: d.cnt,
+                })
+                .collect()
+        })
+        .collect();
+    // Without a <ProcessImage>, images as large as the frames they mirror.
+    let reach = |pick: fn(&ferrocat_machine::eni::CyclicCmd) -> Option<u32>| {
+        eni.cyclic
+            .iter()
+            .flat_map(|c| &c.frames)
+            .flat_map(|f| &f.cmds)
+            .filter_map(|d| pick(d).map(|o| o + 12 + d.data_length as u32))
+            .max()
+            .unwrap_or(0)
+    };
+    let size = |given: u32, reach: u32| if given > 0 { given } else { reach };
+    Plan {
+        stations: if stations.len() == eni.slaves.len() { stations } else { Vec::new() },
+        registers,
+        sdos,
+        entries_at: eni
+            .slaves
+            .iter()
+            .map(|s| (s.process_data.send.map(|r| r.start), s.process_data.recv.map(|r| r.start)))
+            .collect(),
+        frames,
+        output_bytes: size(eni.process_image.outputs.byte_size, reach(|d| d.output_offs)),
+        input_bytes: size(eni.process_image.inputs.byte_size, reach(|d| d.input_offs)),
+    }
 }

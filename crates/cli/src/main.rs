@@ -19,6 +19,7 @@ mod sii;
 mod sim;
 mod target;
 mod timing_stats;
+mod values;
 
 #[derive(Parser)]
 #[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]
@@ -235,6 +236,15 @@ enum Command {
         #[arg(long, default_value = "ferrocat", requires = "dc",
               value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
         sync: String,
+        /// NAME=VALUE (repeatable): write this output before OP and hold it. NAME is a
+        /// variable of the ENI's process image (with --eni) or POS:ENTRY, a slave's position
+        /// and one of its entries; VALUE decimal or 0x hex, negative in two's complement.
+        #[arg(long, value_name = "NAME=VALUE")]
+        set: Vec<String>,
+        /// NAME (repeatable): print this input's (or output's) value at the end, and in --json
+        /// under `values`; named as --set names them.
+        #[arg(long, value_name = "NAME")]
+        show: Vec<String>,
         /// Print the summary as one JSON object on standard output instead of text.
         #[arg(long)]
         json: bool,
@@ -722,9 +732,13 @@ fn main() -> ExitCode {
             dc_static_frames,
             eoe_tap,
             sync,
+            set,
+            show,
             json,
         } => {
             let run = master_cmd::RunOptions {
+                set: &set,
+                show: &show,
                 seconds,
                 cycle_us,
                 dc: dc.then_some((dc_static_frames, sync.as_str())),

@@ -395,6 +395,9 @@ pub struct RunOptions<'a> {
     /// The cyclic frames' timeout; `None`: [`frame_timeout_us`]'s default.
     pub frame_timeout_us: Option<u64>,
     pub eoe_taps: &'a [String],
+    /// Outputs to write before OP (`NAME=VALUE`), and values to show at the end.
+    pub set: &'a [String],
+    pub show: &'a [String],
     pub json: bool,
 }
 
@@ -483,6 +486,20 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             );
         }
     }
+    let eni = t.eni.as_deref().map(crate::eni::read_quietly).transpose()?;
+    for spec in o.set {
+        let (h, v) = crate::values::assignment(&m, eni.as_ref(), spec)?;
+        m.set(h, v);
+    }
+    let shown = o
+        .show
+        .iter()
+        .map(|n| {
+            crate::values::handle(&m, eni.as_ref(), n, false)
+                .map(|h| (n.as_str(), h))
+                .with_context(|| format!("--show '{n}'"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     m.start()?;
     let mut bridges = Vec::new();
     for &(pos, name) in &eoe_taps {
@@ -629,6 +646,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
                 "slaves": tally.to_json(m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
+                "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
             })
         );
     } else {
@@ -650,6 +668,10 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
+        }
+        for (n, h) in &shown {
+            let v = m.get(*h);
+            outln!("{n} = {v} ({v:#x})");
         }
     }
     if m.io_mut().has_secondary() {

@@ -315,6 +315,10 @@ impl Target {
         };
         let mut m = Master::new(CliIo { world, capture });
         m.set_split_ring_clocks(self.split_ring_clocks.into());
+        // An ENI's own layout: its station addresses, FMMUs, SyncManagers and cyclic frames.
+        if let Some(p) = &self.eni {
+            m.set_plan(crate::eni::plan(&crate::eni::read(p, false)?)).with_context(|| format!("{}", p.display()))?;
+        }
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
@@ -327,7 +331,7 @@ impl Target {
     /// any slave leaves INIT.
     pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
         let expected = match (&self.eni, &self.machine) {
-            (Some(p), _) => Some((p, crate::eni::read(p, false)?.expected())),
+            (Some(p), _) => Some((p, crate::eni::read_quietly(p)?.expected())),
             (None, Some(p)) => Some((p, crate::eni::read_machine(p)?.expected())),
             (None, None) => None,
         };

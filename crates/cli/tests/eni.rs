@@ -39,14 +39,14 @@ fn eni_shows_a_file_and_strict_refuses_departures() {
     assert!(ok, "{err}");
     assert!(out.contains("master 'ferrocat test master', 3 slaves, 1 cyclic task"), "{out}");
     assert!(out.contains("Term 2 (EL2008)") && out.contains("Drive \u{b5}"), "{out}");
-    assert!(out.contains("frame 0: LRW  0x01000000       7 B  working counter 5"), "{out}");
+    assert!(out.contains("frame 0: LRW  0x01000000      13 B  working counter 5"), "{out}");
     assert_eq!(err.matches("warning: ").count(), 10, "{err}");
     assert!(err.contains("line 64, column") && err.contains("ProductCode: '0x7d83052' read as 131608658"), "{err}");
     let (ok, out, _) = ferrocat(&["eni", f.to_str().unwrap(), "--json"]);
     assert!(ok);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["slaves"][2]["identity"]["vendor_id"], 0xA8F);
-    assert_eq!(v["slaves"][1]["init_cmds"][1]["transitions"][0], "PI");
+    assert_eq!(v["slaves"][1]["init_cmds"][2]["transitions"][0], "PI");
     assert_eq!(v["cyclic"][0]["frames"][0]["cmds"][0]["command"], "LRW");
     assert_eq!(v["warnings"].as_array().unwrap().len(), 10);
     let (ok, _, err) = ferrocat(&["eni", f.to_str().unwrap(), "--strict"]);
@@ -64,6 +64,70 @@ fn run_with_an_eni_alone_runs_its_machine_on_the_virtual_segment() {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["wkc_errors"], 0, "{v}");
     assert!(v["cycles"].as_u64().unwrap() >= 400, "{v}");
+}
+
+/// The master follows the ENI's layout: its FMMUs, its cyclic frames at their logical
+/// addresses, and an image that mirrors the frames. A drive's controlword written at the
+/// ENI's offset reaches that drive, and its statusword lands at the ENI's offset: 0x240
+/// (switch on disabled) with the controlword 0, 0x231 (ready to switch on) with 6.
+fn statuswords(eni: &std::path::Path, sets: &[&str], shows: &[&str], extra: &[&str]) -> serde_json::Value {
+    let mut args = vec!["run", "--eni", eni.to_str().unwrap(), "--seconds", "0.3", "--json"];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    for s in shows {
+        args.extend(["--show", s]);
+    }
+    args.extend(extra);
+    let (ok, out, err) = ferrocat(&args);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["wkc_errors"], 0, "{v}");
+    v["values"].clone()
+}
+
+#[test]
+fn the_process_image_is_the_eni_s() {
+    let f = lenient();
+    for (cw, sw) in [(0, 0x240), (6, 0x231)] {
+        let set = format!("Drive \u{b5}.Outputs.Controlword={cw}");
+        let v = statuswords(
+            &f,
+            &[&set, "Term 2 (EL2008).Channel 1.Output=1"],
+            &["Drive \u{b5}.Inputs.Statusword", "Term 2 (EL2008).Channel 1.Output"],
+            &[],
+        );
+        assert_eq!(v["Drive \u{b5}.Inputs.Statusword"], sw, "{v}");
+        assert_eq!(v["Term 2 (EL2008).Channel 1.Output"], 1, "{v}");
+    }
+    // With clock synchronisation behind the ENI's frame.
+    let v = statuswords(&f, &["Drive \u{b5}.Outputs.Controlword=6"], &["Drive \u{b5}.Inputs.Statusword"], &["--dc"]);
+    assert_eq!(v["Drive \u{b5}.Inputs.Statusword"], 0x231, "{v}");
+    // Names that are not the image's.
+    let (ok, _, err) = ferrocat(&["run", "--eni", f.to_str().unwrap(), "--set", "Drive \u{b5}.Inputs.Statusword=1"]);
+    assert!(!ok && err.contains("is an input: it cannot be set"), "{err}");
+    let (ok, _, err) = ferrocat(&["run", "--eni", f.to_str().unwrap(), "--set", "nothing=1"]);
+    assert!(!ok && err.contains("give POS:ENTRY"), "{err}");
+    let (ok, _, err) = ferrocat(&["run", "--eni", f.to_str().unwrap(), "--set", "Term 2 (EL2008).Channel 1.Output=2"]);
+    assert!(!ok && err.contains("2 does not fit 1 bits"), "{err}");
+}
+
+#[test]
+fn needs_shared_each_drive_of_a_twincat_eni_at_its_own_offsets() {
+    let f = ferrocat_testdata::shared("eni/test_eni.xml");
+    let v = statuswords(
+        &f,
+        &["WheelRearLeft.Outputs.Control word=6", "WheelFrontRight.Outputs.Control word=6"],
+        &[
+            "WheelRearLeft.Inputs.Status word",
+            "WheelRearRight.Inputs.Status word",
+            "WheelFrontRight.Inputs.Status word",
+        ],
+        &[],
+    );
+    assert_eq!(v["WheelRearLeft.Inputs.Status word"], 0x231, "{v}");
+    assert_eq!(v["WheelRearRight.Inputs.Status word"], 0x240, "{v}");
+    assert_eq!(v["WheelFrontRight.Inputs.Status word"], 0x231, "{v}");
 }
 
 #[test]

@@ -97,8 +97,8 @@ fn every_tolerated_departure_is_read_with_a_warning_and_strict_refuses() {
     assert!(has(64, "ProductCode: '0x7d83052' read as 131608658"), "{lines:?}");
     assert!(has(66, "RevisionNo: ' 1179648 ' read as 1179648"), "{lines:?}");
     assert!(has(82, "Fixed: 'True' read as true"), "{lines:?}");
-    assert!(has(110, "transition 'XY'"), "{lines:?}");
-    assert!(has(116, "odd number of hex digits"), "{lines:?}");
+    assert!(has(118, "transition 'XY'"), "{lines:?}");
+    assert!(has(124, "odd number of hex digits"), "{lines:?}");
     assert!(lines.iter().any(|(_, m)| m.contains("ReferenceClock: 'TRUE'")), "{lines:?}");
     assert!(lines.iter().any(|(_, m)| m.contains("ShiftTime: '+250000' read as 250000")), "{lines:?}");
     assert!(lines.iter().any(|(_, m)| m.contains("state 'RUNNING'")), "{lines:?}");
@@ -110,9 +110,9 @@ fn every_tolerated_departure_is_read_with_a_warning_and_strict_refuses() {
         (Some(0xFFFF), 0x07D8_3052, 0x0012_0000)
     );
     assert!(el2008.process_data.rx_pdos[0].fixed);
-    assert_eq!(el2008.init_cmds[1].transitions, [Transition::parse("PI").unwrap()]);
-    assert_eq!(el2008.init_cmds[1].data, [0, 0]);
-    let v = el2008.init_cmds[1].validate.as_ref().unwrap();
+    assert_eq!(el2008.init_cmds[2].transitions, [Transition::parse("PI").unwrap()]);
+    assert_eq!(el2008.init_cmds[2].data, [0, 0]);
+    let v = el2008.init_cmds[2].validate.as_ref().unwrap();
     assert_eq!((v.data.as_slice(), v.mask.as_deref(), v.timeout_ms), (&[1u8, 0][..], Some(&[0x0F, 0][..]), Some(5000)));
     let drive = &e.slaves[2];
     assert_eq!(drive.name, "Drive \u{b5}");
@@ -147,9 +147,9 @@ fn encoding_free(bytes: &[u8]) -> String {
 fn bad_files_are_refused_with_their_place() {
     let cases: &[(&str, &str, &str)] = &[
         ("<Cmd>12</Cmd>", "<Cmd>99</Cmd>", "command 99 is no EtherCAT command"),
-        ("<DataLength>7</DataLength>", "<DataLength>1487</DataLength>", "more than a datagram carries"),
+        ("<DataLength>13</DataLength>", "<DataLength>1487</DataLength>", "more than a datagram carries"),
         (
-            "<InputOffs>35</InputOffs>",
+            "<InputOffs>41</InputOffs>",
             "<InputOffs>60</InputOffs>",
             "InputOffs 60: the datagram's 14 bytes end past the image's 64 bytes",
         ),

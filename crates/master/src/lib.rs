@@ -42,6 +42,7 @@ pub mod io;
 mod line_fit;
 mod mailbox;
 mod master;
+pub mod plan;
 mod process;
 mod rtt_weight;
 mod slave;

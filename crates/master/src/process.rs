@@ -143,6 +143,9 @@ impl<I: Io> Master<I> {
             }
         }
         self.cyc.last_start = Some(start);
+        if self.plan.is_some() {
+            return self.cycle_plan(sync);
+        }
         let mut sync = sync;
         let mut sp = match sync.as_mut() {
             Some((m, st)) => Some(self.sync_begin(&mut **m, st)?),
@@ -228,6 +231,103 @@ impl<I: Io> Master<I> {
             _ => None,
         };
         self.note_ring(passes)?;
+        self.finish_cycle(start, wkc, lost)?;
+        Ok((wkc, correction))
+    }
+
+    /// The plan's frames, one after the other: each datagram's data from the output image, its
+    /// answer into the input image, its working counter added to the cycle's. A clock-sync
+    /// method's datagrams ride behind the first frame's, as they ride behind the image's LRW
+    /// without a plan.
+    fn cycle_plan(
+        &mut self,
+        sync: Option<(&mut dyn crate::sync::ClockSync, &mut crate::SyncState)>,
+    ) -> Result<(u16, Option<crate::sync::Correction>)> {
+        use crate::plan::{Plan, MAX_PLAN_DATAGRAMS};
+        let start = self.cyc.last_start.unwrap_or_else(|| self.engine.io.now_ns());
+        let mut sync = sync;
+        let mut sp = match sync.as_mut() {
+            Some((m, st)) => Some(self.sync_begin(&mut **m, st)?),
+            None => None,
+        };
+        let mut nop: [u8; 0] = [];
+        let Master { image, engine, cyclic_timeout_ns, plan, out_bytes, .. } = self;
+        let Some((plan, buffers)) = plan.as_mut() else { return Ok((0, None)) };
+        let (out_len, timeout) = (*out_bytes as usize, *cyclic_timeout_ns);
+        let (mut wkc, mut lost) = (0u16, false);
+        let mut timing = None;
+        let mut extra = sp.as_mut().map(|p| {
+            let (pdus, n) = p.pdus(&mut nop);
+            pdus.into_iter().take(n)
+        });
+        for (f, (datagrams, bufs)) in plan.frames.iter().zip(buffers.frames.iter_mut()).enumerate() {
+            for (d, b) in datagrams.iter().zip(bufs.iter_mut()) {
+                let len = b.len();
+                match d.output_offset {
+                    Some(o) => b.copy_from_slice(&image[Plan::data_at(o)..Plan::data_at(o) + len]),
+                    None => b.fill(0),
+                }
+            }
+            let own = datagrams.len().min(MAX_PLAN_DATAGRAMS);
+            let mut behind = if f == 0 { extra.take() } else { None };
+            let n = own + behind.as_ref().map_or(0, |x| x.len());
+            let mut parts = bufs.iter_mut();
+            let mut pdus: [Pdu<'_>; MAX_PLAN_DATAGRAMS + 4] =
+                std::array::from_fn(|k| match (datagrams.get(k).filter(|_| k < own), parts.next()) {
+                    (Some(d), Some(b)) => Pdu::new(d.command, d.address, b),
+                    _ => match behind.as_mut().and_then(|x| x.next()) {
+                        Some(p) => p,
+                        None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []),
+                    },
+                });
+            let r = engine.transact_once(&mut pdus[..n], timeout);
+            if f == 0 {
+                let answered = match (&r, n > own) {
+                    (Ok(()), true) => crate::dc::SyncPdus::answered(&pdus[own..n]),
+                    _ => crate::dc::SyncAnswers::NONE,
+                };
+                let bytes = (crate::engine::frame_bytes(&pdus[..n]), crate::engine::bytes_through(&pdus[..own]));
+                timing = Some((bytes, answered));
+            }
+            match r {
+                Ok(()) => {}
+                Err(MasterError::Timeout { .. }) => {
+                    lost = true;
+                    continue;
+                }
+                Err(e) => return Err(e),
+            }
+            for (d, p) in datagrams.iter().zip(&pdus[..own]) {
+                if let Some(o) = d.input_offset {
+                    let at = out_len + Plan::data_at(o);
+                    image[at..at + p.data.len()].copy_from_slice(p.data);
+                }
+                if d.expected_wkc.is_some() {
+                    wkc = wkc.saturating_add(p.wkc);
+                }
+            }
+        }
+        drop(extra);
+        if lost {
+            self.cyc.stats.lost_frames += 1;
+        }
+        let correction = match (sync, sp, timing) {
+            (Some((m, st)), Some(p), Some(((frame_bytes, data_bytes), answered))) => {
+                if answered.sync {
+                    self.dc_time = u64::from_le_bytes(p.frmw);
+                }
+                Some(self.sync_end(m, st, &p, answered, frame_bytes, data_bytes)?)
+            }
+            _ => None,
+        };
+        let passes = self.engine.split_passes.take();
+        self.note_ring(passes)?;
+        self.finish_cycle(start, wkc, lost)?;
+        Ok((wkc, correction))
+    }
+
+    /// A cycle's statistics, and the slaves checked after a cycle answered short.
+    fn finish_cycle(&mut self, start: u64, wkc: u16, lost: bool) -> Result<()> {
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;
@@ -245,6 +345,6 @@ impl<I: Io> Master<I> {
         if ((short && !lost) || self.cyc.recovering) && self.supervise_on_wkc {
             self.supervise()?;
         }
-        Ok((wkc, correction))
+        Ok(())
     }
 }

@@ -85,6 +85,76 @@ fn ten_thousand_cycles_allocate_nothing() {
     assert!(moved.is_some_and(|ns| ns != 0), "the far reference is being kept");
     assert_eq!(m.ring_state(), ferrocat_master::RingState::Broken);
     assert_eq!(allocations, 0);
+
+    // A plan from outside (an ENI's layout): its FMMUs at logical 0x01000000, one LRW in an
+    // image that mirrors the frame.
+    let mut m = planned();
+    let out = m.output(1, "Output").unwrap();
+    let mut next = m.io_mut().now_ns();
+    let mut cycles = |m: &mut Master<VirtualIo>, n: u64| {
+        for k in 0..n {
+            m.set(out, k & 1);
+            m.cycle().unwrap();
+            next += 1_000_000;
+            m.io_mut().sleep_until(next);
+        }
+    };
+    cycles(&mut m, 200);
+    let allocations = counted(|| cycles(&mut m, 10_000));
+    println!("a plan's frames: 10 000 cycles, {allocations} allocations, expected WKC {}", m.expected_wkc);
+    assert_eq!((m.cycle_stats().wkc_errors, m.expected_wkc), (0, 3));
+    assert_eq!(allocations, 0);
+}
+
+/// An EK1100, an EL2004 and an EL1004 in OP on a plan: the EL2004's outputs at logical
+/// 0x01000000, the EL1004's inputs at 0x01000001, one LRW of both with the working counter 3.
+fn planned() -> Master<VirtualIo> {
+    use ferrocat_master::plan::{Plan, PlanDatagram};
+    use ferrocat_wire::register::{Fmmu, SyncManager};
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n",
+    )
+    .unwrap();
+    let fmmu = |logical_start, physical_start, fmmu_type| {
+        let f = Fmmu {
+            logical_start,
+            length: 1,
+            logical_start_bit: 0,
+            logical_stop_bit: 3,
+            physical_start,
+            physical_start_bit: 0,
+            fmmu_type,
+            active: true,
+        };
+        (0x0600, f.to_bytes().to_vec())
+    };
+    let sm = |start, control| {
+        let s = SyncManager { start, length: 1, control, status: 0, activate: 1, pdi_control: 0 };
+        (0x0800, s.to_bytes().to_vec())
+    };
+    let plan = Plan {
+        registers: vec![
+            vec![],
+            vec![sm(0x0F00, 0x44), fmmu(0x0100_0000, 0x0F00, Fmmu::WRITE)],
+            vec![sm(0x1000, 0x00), fmmu(0x0100_0001, 0x1000, Fmmu::READ)],
+        ],
+        entries_at: vec![(None, None), (Some(26 * 8), None), (None, Some(27 * 8))],
+        frames: vec![vec![PlanDatagram {
+            command: ferrocat_wire::Command::LRW,
+            address: ferrocat_wire::Address::Logical(0x0100_0000),
+            length: 2,
+            output_offset: Some(16),
+            input_offset: Some(16),
+            expected_wkc: Some(3),
+        }]],
+        output_bytes: 32,
+        input_bytes: 32,
+        ..Plan::default()
+    };
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.set_plan(plan).unwrap();
+    m.bring_up().unwrap();
+    m
 }
 
 /// Two couplers with an output terminal each as a ring, `events` in its file, in OP with DC

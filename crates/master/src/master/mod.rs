@@ -83,6 +83,8 @@ pub struct Master<I: Io> {
     /// Positions whose receive times the last latch took from a second latch: controllers whose
     /// ports 1–3 take the frame after the write, where the first did not fit (`next_frame_latch.rs`).
     pub relatched: Vec<usize>,
+    /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
+    pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
 }
 
 impl<I: Io> Master<I> {
@@ -112,7 +114,23 @@ impl<I: Io> Master<I> {
             far_steer: None,
             split_latch: None,
             relatched: Vec::new(),
+            plan: None,
         }
+    }
+
+    /// Follows `plan` instead of laying the process image out itself: its station addresses at
+    /// the next [`Master::scan`], its FMMU and SyncManager registers at [`Master::layout`], its
+    /// cyclic frames at every [`Master::cycle`] ([`crate::plan`]). Set it before the scan.
+    pub fn set_plan(&mut self, plan: crate::plan::Plan) -> Result<()> {
+        plan.validate()?;
+        let buffers = crate::plan::PlanBuffers::for_plan(&plan);
+        self.plan = Some((plan, buffers));
+        Ok(())
+    }
+
+    /// The plan the master follows, if one was set.
+    pub fn plan(&self) -> Option<&crate::plan::Plan> {
+        self.plan.as_ref().map(|(p, _)| p)
     }
 
     /// The events so far, in order, leaving none: what a long-running loop calls now and then
@@ -172,8 +190,10 @@ impl<I: Io> Master<I> {
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::FMMU0 }, &mut [0u8; 256])?;
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::SM0 }, &mut [0u8; 128])?;
         self.slaves.clear();
+        let planned = |pos: u16| self.plan.as_ref().and_then(|(p, _)| p.stations.get(pos as usize).copied());
+        let stations: Vec<u16> = (0..count).map(|p| planned(p).unwrap_or(STATION_BASE + p)).collect();
         for pos in 0..count {
-            let station = STATION_BASE + pos;
+            let station = stations[pos as usize];
             self.engine.expect_wkc(
                 Command::APWR,
                 Address::position(pos, addr::STATION_ADDRESS),
@@ -192,7 +212,6 @@ impl<I: Io> Master<I> {
                 self.engine.backward_wkc
             )));
         }
-        let stations: Vec<u16> = (0..count).map(|p| STATION_BASE + p).collect();
         let images = self.read_all_sii(&stations)?;
         for (pos, img) in images.into_iter().enumerate() {
             let slave = self.read_slave(pos as u16, stations[pos], img)?;

@@ -21,9 +21,29 @@ impl<I: Io> Master<I> {
                 self.run_init_commands(k, "IP")?;
                 self.run_init_commands(k, "PS")?;
             }
+            self.run_plan_sdos(k)?;
             self.read_mapping(k)?;
         }
         self.layout()
+    }
+
+    /// The plan's SDO downloads for the slave at `position`, if a plan gives any.
+    fn run_plan_sdos(&mut self, position: u16) -> Result<()> {
+        let sdos = match &self.plan {
+            Some((p, _)) => p.sdos.get(position as usize).cloned().unwrap_or_default(),
+            None => return Ok(()),
+        };
+        for c in &sdos {
+            self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
+                let name = self.slaves[position as usize].name.clone();
+                crate::error::MasterError::slave(
+                    position,
+                    &name,
+                    format!("plan SDO {:#06x}:{:02x} ({}): {e}", c.index, c.subindex, c.comment),
+                )
+            })?;
+        }
+        Ok(())
     }
 
     /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects)
@@ -130,8 +150,11 @@ impl<I: Io> Master<I> {
     }
 
     /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
-    /// writes the SyncManagers and FMMUs.
+    /// writes the SyncManagers and FMMUs; with a plan ([`Master::set_plan`]), as the plan says.
     pub fn layout(&mut self) -> Result<()> {
+        if self.plan.is_some() {
+            return self.layout_by_plan();
+        }
         let mut out = 0u32;
         for s in &mut self.slaves {
             let bytes = s.output_bits().div_ceil(8);
@@ -164,6 +187,41 @@ impl<I: Io> Master<I> {
             let has_in = s.in_area.1 > 0;
             self.expected_wkc += 2 * has_out as u16 + has_in as u16;
             self.write_process_config(k as u16)?;
+        }
+        Ok(())
+    }
+
+    /// The plan's layout: the output image, then the input image, each entry from its slave's
+    /// first bit on; the plan's registers written to each slave.
+    fn layout_by_plan(&mut self) -> Result<()> {
+        let Some((plan, _)) = &self.plan else { return Ok(()) };
+        let (out_bytes, in_bytes) = (plan.output_bytes, plan.input_bytes);
+        let entries_at = plan.entries_at.clone();
+        let registers = plan.registers.clone();
+        self.expected_wkc = plan.expected_wkc();
+        self.out_bytes = out_bytes;
+        self.in_bytes = in_bytes;
+        self.image = vec![0; (out_bytes + in_bytes) as usize];
+        for (k, s) in self.slaves.iter_mut().enumerate() {
+            let (out_at, in_at) = entries_at.get(k).copied().unwrap_or((None, None));
+            let mut bit = out_at.unwrap_or(0);
+            for m in &mut s.outputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            let mut bit = out_bytes * 8 + in_at.unwrap_or(0);
+            for m in &mut s.inputs {
+                m.image_bit = bit;
+                bit += m.bits as u32;
+            }
+            s.out_area = (out_at.unwrap_or(0) / 8, s.output_bits().div_ceil(8));
+            s.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.input_bits().div_ceil(8));
+        }
+        for (k, writes) in registers.iter().enumerate().take(self.slaves.len()) {
+            let st = self.slaves[k].station;
+            for (ado, data) in writes {
+                self.fpwr(st, *ado, data)?;
+            }
         }
         Ok(())
     }
