@@ -109,3 +109,41 @@ fn a_frame_lost_while_starting_is_no_event() {
     assert!(m.events.is_empty(), "{:?}", m.events);
     assert!(m.slaves.iter().all(|s| s.health == Health::Operational && s.state == AlState::Op));
 }
+
+/// A program on its way out steps the slaves down even while the master is bringing a drive
+/// back from a synchronisation error: shut_down leaves it where it is, acknowledges the error
+/// with its requests, and every slave ends in INIT.
+#[test]
+fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
+    let cfg: SegmentConfig =
+        toml::from_str("seed = 2\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n").unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 2));
+    m.scan().unwrap();
+    m.configure().unwrap();
+    let dc = ferrocat_master::DcConfig { sync0_cycle_ns: 1_000_000, ..Default::default() };
+    m.init_dc(&dc).unwrap();
+    m.start().unwrap();
+    let mut next = m.io_mut().now_ns();
+    let mut left = false;
+    for k in 0..400u64 {
+        m.cycle().unwrap();
+        // Two stalls of 20 ms: the drive misses its outputs and leaves OP with 0x001A.
+        next += if k == 100 || k == 300 { 20_000_000 } else { 1_000_000 };
+        m.io_mut().sleep_until(next);
+        left |= m.take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
+        if k > 300 && m.slaves[1].state != AlState::Op {
+            break;
+        }
+    }
+    assert!(left, "the stall took the drive out of OP");
+    m.shut_down().unwrap();
+    for k in 0..2u16 {
+        let mut al = [0u8; 2];
+        let station = m.slaves[k as usize].station;
+        m.datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: station, ado: 0x0130 }, &mut al)
+            .unwrap();
+        // The state bits (an EK1100 in device emulation copies AL control, the request's
+        // acknowledge bit included, into its status).
+        assert_eq!(al[0] & 0x0F, 0x01, "slave {k}: AL status {:#04x}", al[0]);
+    }
+}

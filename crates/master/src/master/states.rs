@@ -18,9 +18,22 @@ impl<I: Io> Master<I> {
     /// Steps every slave down for a clean stop, as a program on its way out does: SAFEOP first,
     /// where outputs take their safe state while inputs still come, then INIT, where process
     /// data and mailboxes stop. Each step waits until every slave is there.
+    ///
+    /// Slaves on their way back to OP after an error are left where they are (the master stops
+    /// bringing them back), each request acknowledges an error with it (AL control bit 4), and a
+    /// slave that misses the broadcast request (an error met on the way) is asked on its own.
     pub fn shut_down(&mut self) -> Result<()> {
-        self.request_state_all(AlState::SafeOp)?;
-        self.request_state_all(AlState::Init)
+        self.cyc.recovering = false;
+        for state in [AlState::SafeOp, AlState::Init] {
+            let mut request = [state as u8 | 0x10, 0];
+            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut request)?;
+            for k in 0..self.slaves.len() as u16 {
+                if self.wait_state(k, state).is_err() {
+                    self.request_state(k, state)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Requests `state` from one slave and waits for it. A slave whose firmware has not yet
