@@ -582,6 +582,14 @@ enum EepromCmd {
         position: u16,
         /// The image to program (raw binary, Intel HEX or hex text).
         file: PathBuf,
+        /// Program an image of another device (vendor or product code) than the slave's; without
+        /// it such an image is refused before anything is written.
+        #[arg(long)]
+        overwrite_identity: bool,
+        /// Where the EEPROM's contents as they were go before anything is written (default:
+        /// sii-backup-slavePOS.bin in this folder, numbered where one exists).
+        #[arg(long, value_name = "FILE")]
+        backup: Option<PathBuf>,
         #[command(flatten)]
         target: target::Target,
     },
@@ -618,7 +626,9 @@ fn main() -> ExitCode {
         }
         Command::Sii { action: Some(action), .. } => match action {
             EepromCmd::Read { position, out, target } => master_cmd::sii_read(&target, position, out.as_deref()),
-            EepromCmd::Write { position, file, target } => master_cmd::sii_write(&target, position, &file),
+            EepromCmd::Write { position, file, overwrite_identity, backup, target } => {
+                master_cmd::sii_write(&target, position, &file, overwrite_identity, backup.as_deref())
+            }
             EepromCmd::Alias { position, alias, target } => master_cmd::sii_alias(&target, position, &alias),
         },
         Command::Eni { file, json, strict } => eni::run(&file, json, strict),

@@ -349,13 +349,72 @@ pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> any
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn sii_write(t: &Target, position: u16, file: &std::path::Path) -> anyhow::Result<ExitCode> {
+/// `sii write`: refused before anything is written where the image is of another device
+/// (unless `overwrite_identity`) or larger than the slave's EEPROM; the EEPROM as it was saved
+/// first; read back and compared after.
+pub fn sii_write(
+    t: &Target,
+    position: u16,
+    file: &std::path::Path,
+    overwrite_identity: bool,
+    backup: Option<&std::path::Path>,
+) -> anyhow::Result<ExitCode> {
     let img = crate::sii::load(file)?;
-    ferrocat_wire::sii::SiiInfo::from_image(&img).with_context(|| format!("{}: not an SII image", file.display()))?;
+    let info = ferrocat_wire::sii::SiiInfo::from_image(&img)
+        .with_context(|| format!("{}: not an SII image", file.display()))?;
+    if let Some(b) = backup.filter(|b| b.exists()) {
+        bail!("--backup {}: exists; a backup is not overwritten", b.display());
+    }
     let mut m = t.master()?;
     t.scan(&mut m)?;
+    let s = m.slave(position)?;
+    let (h, mine) = (&info.header, &s.sii.header);
+    if (h.vendor_id, h.product_code) != (s.vendor_id, s.product_code) && !overwrite_identity {
+        bail!(
+            "{} is vendor {:#x} product {:#x} ({}); slave {position} is vendor {:#x} product {:#x} ({}): nothing written \
+             (--overwrite-identity programs it anyway)",
+            file.display(),
+            h.vendor_id,
+            h.product_code,
+            info.string(1).unwrap_or_else(|| "no name".into()),
+            s.vendor_id,
+            s.product_code,
+            s.name
+        );
+    }
+    let data_len = img.iter().rposition(|b| *b != 0xFF).map_or(0, |i| i + 1);
+    if data_len > mine.eeprom_size_bytes() {
+        bail!(
+            "{} holds {data_len} bytes of data; slave {position}'s EEPROM holds {} (its SII word 0x3E): nothing written",
+            file.display(),
+            mine.eeprom_size_bytes()
+        );
+    }
+    let before = s.sii.to_image();
+    let backup = match backup {
+        Some(b) => b.to_path_buf(),
+        None => (0..)
+            .map(|k| match k {
+                0 => std::path::PathBuf::from(format!("sii-backup-slave{position}.bin")),
+                k => std::path::PathBuf::from(format!("sii-backup-slave{position}.{k}.bin")),
+            })
+            .find(|p| !p.exists())
+            .unwrap_or_default(),
+    };
+    std::fs::write(&backup, &before).with_context(|| format!("writing the backup {}", backup.display()))?;
+    eprintln!("slave {position}'s EEPROM as it was ({} bytes) is in {}", before.len(), backup.display());
     let words = m.sii_write(position, &img)?;
-    eprintln!("wrote {words} words to slave {position}'s EEPROM");
+    // Read back (the master reloads and reads the SII after writing) and compared.
+    let after = m.slave(position)?.sii.to_image();
+    let used = data_len.min(after.len());
+    if let Some(at) = (0..used).find(|&k| after.get(k) != img.get(k)) {
+        bail!(
+            "slave {position}'s EEPROM reads back other than {} from byte {at:#x}: the old contents are in {}",
+            file.display(),
+            backup.display()
+        );
+    }
+    eprintln!("wrote {words} words to slave {position}'s EEPROM and read them back");
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }

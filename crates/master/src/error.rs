@@ -70,6 +70,14 @@ pub enum SlaveError {
         /// The SII control/status register after the write.
         status: u16,
     },
+    /// An image with more data than the EEPROM holds (its SII word 0x3E): nothing written.
+    #[error("the image holds {image} bytes of data, its EEPROM {eeprom} (SII word 0x3E): nothing written")]
+    EepromTooSmall {
+        /// Bytes of the image up to its last byte that is not 0xFF.
+        image: usize,
+        /// The EEPROM's bytes.
+        eeprom: usize,
+    },
     /// No output entry of that name in its process data.
     #[error("no output named '{0}'")]
     NoOutput(String),

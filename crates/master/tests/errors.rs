@@ -39,3 +39,21 @@ fn dc_on_a_segment_without_clocks_says_why() {
     assert!(matches!(e, MasterError::Dc(DcError::NoSystemTime)), "{e:?}");
     assert_eq!(e.to_string(), "no slave has a DC system time (receive times only)");
 }
+
+#[test]
+fn an_image_with_more_data_than_the_eeprom_is_refused_before_any_write() {
+    let mut m = scanned("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n");
+    let mut img = m.slaves[0].sii.to_image();
+    let size = m.slaves[0].sii.header.eeprom_size_bytes();
+    img.resize(size + 2, 0xFF);
+    img[size] = 0;
+    match m.sii_write(0, &img).unwrap_err() {
+        MasterError::Slave { error: SlaveError::EepromTooSmall { image, eeprom }, .. } => {
+            assert_eq!((image, eeprom), (size + 1, size))
+        }
+        other => panic!("{other:?}"),
+    }
+    // Padding (0xFF) past the end is no data: the image is written up to the EEPROM's end.
+    img[size] = 0xFF;
+    m.sii_write(0, &img).unwrap();
+}

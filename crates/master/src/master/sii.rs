@@ -129,10 +129,22 @@ impl<I: Io> Master<I> {
                 image[14]
             )));
         }
-        let (st, current) = {
+        let (st, current, capacity) = {
             let s = self.slave(position)?;
-            (s.station, s.sii.to_image())
+            (s.station, s.sii.to_image(), s.sii.header.eeprom_size_bytes())
         };
+        // Nothing past the EEPROM's end (its own word 0x3E): a write there fails half-way,
+        // the slave left with part of another image.
+        let data_len = image.iter().rposition(|b| *b != 0xFF).map_or(0, |i| i + 1);
+        if data_len > capacity {
+            let name = self.slaves[position as usize].name.clone();
+            return Err(MasterError::of(
+                position,
+                &name,
+                SlaveError::EepromTooSmall { image: data_len, eeprom: capacity },
+            ));
+        }
+        let image = &image[..image.len().min(capacity)];
         self.fpwr(st, addr::SII_CONFIG, &[0])?;
         let mut written = 0;
         for (w, pair) in image.chunks(2).enumerate() {
