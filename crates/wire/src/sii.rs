@@ -137,76 +137,118 @@ impl Default for SiiHeader {
     }
 }
 
+/// Where each field of the SII header lies, as 16-bit word addresses (ETG.2010, the SII's
+/// first 64 words); a 32-bit field takes its word and the next.
+mod header_word {
+    pub const PDI_CONTROL: usize = 0x00;
+    pub const PDI_CONFIG: usize = 0x01;
+    pub const SYNC_IMPULSE_LEN: usize = 0x02;
+    pub const PDI_CONFIG2: usize = 0x03;
+    pub const STATION_ALIAS: usize = 0x04;
+    pub const RESERVED_05: usize = 0x05;
+    pub const CHECKSUM: usize = 0x07;
+    pub const VENDOR_ID: usize = 0x08;
+    pub const PRODUCT_CODE: usize = 0x0A;
+    pub const REVISION: usize = 0x0C;
+    pub const SERIAL: usize = 0x0E;
+    pub const EXECUTION_DELAY: usize = 0x10;
+    pub const PORT0_DELAY: usize = 0x11;
+    pub const PORT1_DELAY: usize = 0x12;
+    pub const RESERVED_13: usize = 0x13;
+    pub const BOOTSTRAP_RX_OFFSET: usize = 0x14;
+    pub const BOOTSTRAP_RX_SIZE: usize = 0x15;
+    pub const BOOTSTRAP_TX_OFFSET: usize = 0x16;
+    pub const BOOTSTRAP_TX_SIZE: usize = 0x17;
+    pub const MAILBOX_RX_OFFSET: usize = 0x18;
+    pub const MAILBOX_RX_SIZE: usize = 0x19;
+    pub const MAILBOX_TX_OFFSET: usize = 0x1A;
+    pub const MAILBOX_TX_SIZE: usize = 0x1B;
+    pub const MAILBOX_PROTOCOLS: usize = 0x1C;
+    pub const RESERVED_1D: core::ops::Range<usize> = 0x1D..0x3E;
+    pub const EEPROM_SIZE: usize = 0x3E;
+    pub const VERSION: usize = 0x3F;
+}
+
 impl SiiHeader {
     pub fn parse(buf: &[u8]) -> Result<Self> {
+        use header_word as f;
         need(buf, 0, HEADER_LEN, "SII header")?;
         let w = |i: usize| u16::from_le_bytes([buf[2 * i], buf[2 * i + 1]]);
         let d = |i: usize| w(i) as u32 | (w(i + 1) as u32) << 16;
         let mut reserved_1d = [0u16; 33];
-        for (k, r) in reserved_1d.iter_mut().enumerate() {
-            *r = w(0x1D + k);
+        for (r, i) in reserved_1d.iter_mut().zip(f::RESERVED_1D) {
+            *r = w(i);
         }
         Ok(SiiHeader {
-            pdi_control: w(0),
-            pdi_config: w(1),
-            sync_impulse_len: w(2),
-            pdi_config2: w(3),
-            station_alias: w(4),
-            reserved_05: [w(5), w(6)],
-            checksum: w(7),
-            vendor_id: d(8),
-            product_code: d(0xA),
-            revision: d(0xC),
-            serial: d(0xE),
-            execution_delay: w(0x10),
-            port0_delay: w(0x11),
-            port1_delay: w(0x12),
-            reserved_13: w(0x13),
-            bootstrap_rx_offset: w(0x14),
-            bootstrap_rx_size: w(0x15),
-            bootstrap_tx_offset: w(0x16),
-            bootstrap_tx_size: w(0x17),
-            mailbox_rx_offset: w(0x18),
-            mailbox_rx_size: w(0x19),
-            mailbox_tx_offset: w(0x1A),
-            mailbox_tx_size: w(0x1B),
-            mailbox_protocols: w(0x1C),
+            pdi_control: w(f::PDI_CONTROL),
+            pdi_config: w(f::PDI_CONFIG),
+            sync_impulse_len: w(f::SYNC_IMPULSE_LEN),
+            pdi_config2: w(f::PDI_CONFIG2),
+            station_alias: w(f::STATION_ALIAS),
+            reserved_05: [w(f::RESERVED_05), w(f::RESERVED_05 + 1)],
+            checksum: w(f::CHECKSUM),
+            vendor_id: d(f::VENDOR_ID),
+            product_code: d(f::PRODUCT_CODE),
+            revision: d(f::REVISION),
+            serial: d(f::SERIAL),
+            execution_delay: w(f::EXECUTION_DELAY),
+            port0_delay: w(f::PORT0_DELAY),
+            port1_delay: w(f::PORT1_DELAY),
+            reserved_13: w(f::RESERVED_13),
+            bootstrap_rx_offset: w(f::BOOTSTRAP_RX_OFFSET),
+            bootstrap_rx_size: w(f::BOOTSTRAP_RX_SIZE),
+            bootstrap_tx_offset: w(f::BOOTSTRAP_TX_OFFSET),
+            bootstrap_tx_size: w(f::BOOTSTRAP_TX_SIZE),
+            mailbox_rx_offset: w(f::MAILBOX_RX_OFFSET),
+            mailbox_rx_size: w(f::MAILBOX_RX_SIZE),
+            mailbox_tx_offset: w(f::MAILBOX_TX_OFFSET),
+            mailbox_tx_size: w(f::MAILBOX_TX_SIZE),
+            mailbox_protocols: w(f::MAILBOX_PROTOCOLS),
             reserved_1d,
-            eeprom_size: w(0x3E),
-            version: w(0x3F),
+            eeprom_size: w(f::EEPROM_SIZE),
+            version: w(f::VERSION),
         })
     }
 
     pub fn to_bytes(&self) -> [u8; HEADER_LEN] {
-        let mut words = [0u16; 64];
-        words[0] = self.pdi_control;
-        words[1] = self.pdi_config;
-        words[2] = self.sync_impulse_len;
-        words[3] = self.pdi_config2;
-        words[4] = self.station_alias;
-        words[5] = self.reserved_05[0];
-        words[6] = self.reserved_05[1];
-        words[7] = self.checksum;
-        for (i, v) in [self.vendor_id, self.product_code, self.revision, self.serial].into_iter().enumerate() {
-            words[8 + 2 * i] = v as u16;
-            words[9 + 2 * i] = (v >> 16) as u16;
+        use header_word as f;
+        let mut words = [0u16; HEADER_LEN / 2];
+        let mut put = |i: usize, v: u16| words[i] = v;
+        put(f::PDI_CONTROL, self.pdi_control);
+        put(f::PDI_CONFIG, self.pdi_config);
+        put(f::SYNC_IMPULSE_LEN, self.sync_impulse_len);
+        put(f::PDI_CONFIG2, self.pdi_config2);
+        put(f::STATION_ALIAS, self.station_alias);
+        put(f::RESERVED_05, self.reserved_05[0]);
+        put(f::RESERVED_05 + 1, self.reserved_05[1]);
+        put(f::CHECKSUM, self.checksum);
+        for (at, v) in [
+            (f::VENDOR_ID, self.vendor_id),
+            (f::PRODUCT_CODE, self.product_code),
+            (f::REVISION, self.revision),
+            (f::SERIAL, self.serial),
+        ] {
+            put(at, v as u16);
+            put(at + 1, (v >> 16) as u16);
         }
-        words[0x10] = self.execution_delay;
-        words[0x11] = self.port0_delay;
-        words[0x12] = self.port1_delay;
-        words[0x13] = self.reserved_13;
-        words[0x14] = self.bootstrap_rx_offset;
-        words[0x15] = self.bootstrap_rx_size;
-        words[0x16] = self.bootstrap_tx_offset;
-        words[0x17] = self.bootstrap_tx_size;
-        words[0x18] = self.mailbox_rx_offset;
-        words[0x19] = self.mailbox_rx_size;
-        words[0x1A] = self.mailbox_tx_offset;
-        words[0x1B] = self.mailbox_tx_size;
-        words[0x1C] = self.mailbox_protocols;
-        words[0x1D..0x3E].copy_from_slice(&self.reserved_1d);
-        words[0x3E] = self.eeprom_size;
-        words[0x3F] = self.version;
+        put(f::EXECUTION_DELAY, self.execution_delay);
+        put(f::PORT0_DELAY, self.port0_delay);
+        put(f::PORT1_DELAY, self.port1_delay);
+        put(f::RESERVED_13, self.reserved_13);
+        put(f::BOOTSTRAP_RX_OFFSET, self.bootstrap_rx_offset);
+        put(f::BOOTSTRAP_RX_SIZE, self.bootstrap_rx_size);
+        put(f::BOOTSTRAP_TX_OFFSET, self.bootstrap_tx_offset);
+        put(f::BOOTSTRAP_TX_SIZE, self.bootstrap_tx_size);
+        put(f::MAILBOX_RX_OFFSET, self.mailbox_rx_offset);
+        put(f::MAILBOX_RX_SIZE, self.mailbox_rx_size);
+        put(f::MAILBOX_TX_OFFSET, self.mailbox_tx_offset);
+        put(f::MAILBOX_TX_SIZE, self.mailbox_tx_size);
+        put(f::MAILBOX_PROTOCOLS, self.mailbox_protocols);
+        for (i, v) in f::RESERVED_1D.zip(self.reserved_1d) {
+            put(i, v);
+        }
+        put(f::EEPROM_SIZE, self.eeprom_size);
+        put(f::VERSION, self.version);
         let mut b = [0u8; HEADER_LEN];
         for (i, w) in words.iter().enumerate() {
             b[2 * i..2 * i + 2].copy_from_slice(&w.to_le_bytes());
@@ -434,57 +476,89 @@ pub struct General {
     pub reserved_20: [u8; 12],
 }
 
+/// Where each field of the general category lies (ETG.2010 Table 5), in bytes.
+mod general_field {
+    use core::ops::Range;
+    pub const GROUP_IDX: usize = 0;
+    pub const IMAGE_IDX: usize = 1;
+    pub const ORDER_IDX: usize = 2;
+    pub const NAME_IDX: usize = 3;
+    pub const RESERVED_4: usize = 4;
+    pub const COE_DETAILS: usize = 5;
+    pub const FOE_DETAILS: usize = 6;
+    pub const EOE_DETAILS: usize = 7;
+    pub const SOE_CHANNELS: usize = 8;
+    pub const DS402_CHANNELS: usize = 9;
+    pub const SYSMAN_CLASS: usize = 10;
+    pub const FLAGS: usize = 11;
+    pub const CURRENT_ON_EBUS: Range<usize> = 12..14;
+    pub const GROUP_IDX_DUP: usize = 14;
+    pub const RESERVED_15: usize = 15;
+    pub const PHYSICAL_PORTS: Range<usize> = 16..18;
+    pub const PHYSICAL_MEMORY_ADDRESS: Range<usize> = 18..20;
+    pub const RESERVED_20: Range<usize> = 20..32;
+}
+
+/// The little-endian 16 bits at `at` of a record whose length was checked.
+fn le16(d: &[u8], at: core::ops::Range<usize>) -> u16 {
+    u16::from_le_bytes([d[at.start], d[at.start + 1]])
+}
+
 impl General {
     pub const LEN: usize = 32;
 
     pub fn parse(d: &[u8]) -> Result<Self> {
+        use general_field as f;
         need(d, 0, Self::LEN, "SII general category")?;
         let mut reserved_20 = [0; 12];
-        reserved_20.copy_from_slice(&d[20..32]);
+        reserved_20.copy_from_slice(&d[f::RESERVED_20]);
         Ok(General {
-            group_idx: d[0],
-            image_idx: d[1],
-            order_idx: d[2],
-            name_idx: d[3],
-            reserved_4: d[4],
-            coe_details: d[5],
-            foe_details: d[6],
-            eoe_details: d[7],
-            soe_channels: d[8],
-            ds402_channels: d[9],
-            sysman_class: d[10],
-            flags: d[11],
-            current_on_ebus_ma: i16::from_le_bytes([d[12], d[13]]),
-            group_idx_dup: d[14],
-            reserved_15: d[15],
-            physical_ports: u16::from_le_bytes([d[16], d[17]]),
-            physical_memory_address: u16::from_le_bytes([d[18], d[19]]),
+            group_idx: d[f::GROUP_IDX],
+            image_idx: d[f::IMAGE_IDX],
+            order_idx: d[f::ORDER_IDX],
+            name_idx: d[f::NAME_IDX],
+            reserved_4: d[f::RESERVED_4],
+            coe_details: d[f::COE_DETAILS],
+            foe_details: d[f::FOE_DETAILS],
+            eoe_details: d[f::EOE_DETAILS],
+            soe_channels: d[f::SOE_CHANNELS],
+            ds402_channels: d[f::DS402_CHANNELS],
+            sysman_class: d[f::SYSMAN_CLASS],
+            flags: d[f::FLAGS],
+            current_on_ebus_ma: le16(d, f::CURRENT_ON_EBUS) as i16,
+            group_idx_dup: d[f::GROUP_IDX_DUP],
+            reserved_15: d[f::RESERVED_15],
+            physical_ports: le16(d, f::PHYSICAL_PORTS),
+            physical_memory_address: le16(d, f::PHYSICAL_MEMORY_ADDRESS),
             reserved_20,
         })
     }
 
     pub fn to_bytes(&self) -> [u8; 32] {
+        use general_field as f;
         let mut d = [0u8; 32];
-        d[..12].copy_from_slice(&[
-            self.group_idx,
-            self.image_idx,
-            self.order_idx,
-            self.name_idx,
-            self.reserved_4,
-            self.coe_details,
-            self.foe_details,
-            self.eoe_details,
-            self.soe_channels,
-            self.ds402_channels,
-            self.sysman_class,
-            self.flags,
-        ]);
-        d[12..14].copy_from_slice(&self.current_on_ebus_ma.to_le_bytes());
-        d[14] = self.group_idx_dup;
-        d[15] = self.reserved_15;
-        d[16..18].copy_from_slice(&self.physical_ports.to_le_bytes());
-        d[18..20].copy_from_slice(&self.physical_memory_address.to_le_bytes());
-        d[20..].copy_from_slice(&self.reserved_20);
+        for (at, v) in [
+            (f::GROUP_IDX, self.group_idx),
+            (f::IMAGE_IDX, self.image_idx),
+            (f::ORDER_IDX, self.order_idx),
+            (f::NAME_IDX, self.name_idx),
+            (f::RESERVED_4, self.reserved_4),
+            (f::COE_DETAILS, self.coe_details),
+            (f::FOE_DETAILS, self.foe_details),
+            (f::EOE_DETAILS, self.eoe_details),
+            (f::SOE_CHANNELS, self.soe_channels),
+            (f::DS402_CHANNELS, self.ds402_channels),
+            (f::SYSMAN_CLASS, self.sysman_class),
+            (f::FLAGS, self.flags),
+            (f::GROUP_IDX_DUP, self.group_idx_dup),
+            (f::RESERVED_15, self.reserved_15),
+        ] {
+            d[at] = v;
+        }
+        d[f::CURRENT_ON_EBUS].copy_from_slice(&self.current_on_ebus_ma.to_le_bytes());
+        d[f::PHYSICAL_PORTS].copy_from_slice(&self.physical_ports.to_le_bytes());
+        d[f::PHYSICAL_MEMORY_ADDRESS].copy_from_slice(&self.physical_memory_address.to_le_bytes());
+        d[f::RESERVED_20].copy_from_slice(&self.reserved_20);
         d
     }
 }
@@ -519,22 +593,68 @@ impl SmEntry {
     pub const TYPE_INPUTS: u8 = 4;
 
     pub fn parse(d: &[u8]) -> Result<Self> {
+        use sm_field as f;
         need(d, 0, Self::LEN, "SII SyncManager entry")?;
         Ok(SmEntry {
-            start: u16::from_le_bytes([d[0], d[1]]),
-            length: u16::from_le_bytes([d[2], d[3]]),
-            control: d[4],
-            status: d[5],
-            enable: d[6],
-            sm_type: d[7],
+            start: le16(d, f::START),
+            length: le16(d, f::LENGTH),
+            control: d[f::CONTROL],
+            status: d[f::STATUS],
+            enable: d[f::ENABLE],
+            sm_type: d[f::TYPE],
         })
     }
 
     pub fn to_bytes(&self) -> [u8; 8] {
-        let s = self.start.to_le_bytes();
-        let l = self.length.to_le_bytes();
-        [s[0], s[1], l[0], l[1], self.control, self.status, self.enable, self.sm_type]
+        use sm_field as f;
+        let mut d = [0u8; 8];
+        d[f::START].copy_from_slice(&self.start.to_le_bytes());
+        d[f::LENGTH].copy_from_slice(&self.length.to_le_bytes());
+        (d[f::CONTROL], d[f::STATUS], d[f::ENABLE], d[f::TYPE]) = (self.control, self.status, self.enable, self.sm_type);
+        d
     }
+}
+
+/// Where each field of a SyncManager entry (category 41) lies, in bytes.
+mod sm_field {
+    use core::ops::Range;
+    pub const START: Range<usize> = 0..2;
+    pub const LENGTH: Range<usize> = 2..4;
+    pub const CONTROL: usize = 4;
+    pub const STATUS: usize = 5;
+    pub const ENABLE: usize = 6;
+    pub const TYPE: usize = 7;
+}
+
+/// Where each field of a PDO header and of a PDO entry (categories 50, 51) lies, in bytes.
+mod pdo_field {
+    use core::ops::Range;
+    pub const INDEX: Range<usize> = 0..2;
+    pub const FLAGS: Range<usize> = 6..8;
+    /// Header.
+    pub const ENTRY_COUNT: usize = 2;
+    pub const SYNC_MANAGER: usize = 3;
+    pub const SYNCHRONIZATION: usize = 4;
+    pub const HEADER_NAME_IDX: usize = 5;
+    /// Entry.
+    pub const SUBINDEX: usize = 2;
+    pub const ENTRY_NAME_IDX: usize = 3;
+    pub const DATA_TYPE: usize = 4;
+    pub const BIT_LEN: usize = 5;
+}
+
+/// Where each field of a DC operation mode (category 60) lies, in bytes.
+mod dc_field {
+    use core::ops::Range;
+    pub const CYCLE_TIME0: usize = 0;
+    pub const SHIFT_TIME0: usize = 4;
+    pub const SHIFT_TIME1: usize = 8;
+    pub const SYNC1_CYCLE_FACTOR: usize = 12;
+    pub const ASSIGN_ACTIVATE: usize = 14;
+    pub const SYNC0_CYCLE_FACTOR: usize = 16;
+    pub const NAME_IDX: usize = 18;
+    pub const DESC_IDX: usize = 19;
+    pub const RESERVED: Range<usize> = 20..24;
 }
 
 /// Iterates fixed-size records of a category (a trailing partial record is padding).
@@ -567,40 +687,50 @@ pub struct PdoEntry {
 impl PdoEntry {
     pub const LEN: usize = 8;
     pub fn parse(d: &[u8]) -> Result<Self> {
+        use pdo_field as f;
         need(d, 0, Self::LEN, "SII PDO entry")?;
         Ok(PdoEntry {
-            index: u16::from_le_bytes([d[0], d[1]]),
-            subindex: d[2],
-            name_idx: d[3],
-            data_type: d[4],
-            bit_len: d[5],
-            flags: u16::from_le_bytes([d[6], d[7]]),
+            index: le16(d, f::INDEX),
+            subindex: d[f::SUBINDEX],
+            name_idx: d[f::ENTRY_NAME_IDX],
+            data_type: d[f::DATA_TYPE],
+            bit_len: d[f::BIT_LEN],
+            flags: le16(d, f::FLAGS),
         })
     }
     pub fn to_bytes(&self) -> [u8; 8] {
-        let i = self.index.to_le_bytes();
-        let f = self.flags.to_le_bytes();
-        [i[0], i[1], self.subindex, self.name_idx, self.data_type, self.bit_len, f[0], f[1]]
+        use pdo_field as f;
+        let mut d = [0u8; 8];
+        d[f::INDEX].copy_from_slice(&self.index.to_le_bytes());
+        d[f::FLAGS].copy_from_slice(&self.flags.to_le_bytes());
+        (d[f::SUBINDEX], d[f::ENTRY_NAME_IDX], d[f::DATA_TYPE], d[f::BIT_LEN]) =
+            (self.subindex, self.name_idx, self.data_type, self.bit_len);
+        d
     }
 }
 
 impl PdoHeader {
     pub const LEN: usize = 8;
     pub fn parse(d: &[u8]) -> Result<Self> {
+        use pdo_field as f;
         need(d, 0, Self::LEN, "SII PDO header")?;
         Ok(PdoHeader {
-            index: u16::from_le_bytes([d[0], d[1]]),
-            entry_count: d[2],
-            sync_manager: d[3],
-            synchronization: d[4],
-            name_idx: d[5],
-            flags: u16::from_le_bytes([d[6], d[7]]),
+            index: le16(d, f::INDEX),
+            entry_count: d[f::ENTRY_COUNT],
+            sync_manager: d[f::SYNC_MANAGER],
+            synchronization: d[f::SYNCHRONIZATION],
+            name_idx: d[f::HEADER_NAME_IDX],
+            flags: le16(d, f::FLAGS),
         })
     }
     pub fn to_bytes(&self) -> [u8; 8] {
-        let i = self.index.to_le_bytes();
-        let f = self.flags.to_le_bytes();
-        [i[0], i[1], self.entry_count, self.sync_manager, self.synchronization, self.name_idx, f[0], f[1]]
+        use pdo_field as f;
+        let mut d = [0u8; 8];
+        d[f::INDEX].copy_from_slice(&self.index.to_le_bytes());
+        d[f::FLAGS].copy_from_slice(&self.flags.to_le_bytes());
+        (d[f::ENTRY_COUNT], d[f::SYNC_MANAGER], d[f::SYNCHRONIZATION], d[f::HEADER_NAME_IDX]) =
+            (self.entry_count, self.sync_manager, self.synchronization, self.name_idx);
+        d
     }
 }
 
@@ -662,30 +792,35 @@ pub struct DcOpMode {
 impl DcOpMode {
     pub const LEN: usize = 24;
     pub fn parse(d: &[u8]) -> Result<Self> {
+        use dc_field as f;
         need(d, 0, Self::LEN, "SII DC op-mode")?;
+        let mut reserved = [0u8; 4];
+        reserved.copy_from_slice(&d[f::RESERVED]);
         Ok(DcOpMode {
-            cycle_time0: u32_at(d, 0, "")?,
-            shift_time0: u32_at(d, 4, "")? as i32,
-            shift_time1: u32_at(d, 8, "")? as i32,
-            sync1_cycle_factor: u16_at(d, 12, "")? as i16,
-            assign_activate: u16_at(d, 14, "")?,
-            sync0_cycle_factor: u16_at(d, 16, "")? as i16,
-            name_idx: d[18],
-            desc_idx: d[19],
-            reserved: [d[20], d[21], d[22], d[23]],
+            cycle_time0: u32_at(d, f::CYCLE_TIME0, "")?,
+            shift_time0: u32_at(d, f::SHIFT_TIME0, "")? as i32,
+            shift_time1: u32_at(d, f::SHIFT_TIME1, "")? as i32,
+            sync1_cycle_factor: u16_at(d, f::SYNC1_CYCLE_FACTOR, "")? as i16,
+            assign_activate: u16_at(d, f::ASSIGN_ACTIVATE, "")?,
+            sync0_cycle_factor: u16_at(d, f::SYNC0_CYCLE_FACTOR, "")? as i16,
+            name_idx: d[f::NAME_IDX],
+            desc_idx: d[f::DESC_IDX],
+            reserved,
         })
     }
     pub fn to_bytes(&self) -> [u8; 24] {
+        use dc_field as f;
         let mut d = [0u8; 24];
-        d[0..4].copy_from_slice(&self.cycle_time0.to_le_bytes());
-        d[4..8].copy_from_slice(&self.shift_time0.to_le_bytes());
-        d[8..12].copy_from_slice(&self.shift_time1.to_le_bytes());
-        d[12..14].copy_from_slice(&self.sync1_cycle_factor.to_le_bytes());
-        d[14..16].copy_from_slice(&self.assign_activate.to_le_bytes());
-        d[16..18].copy_from_slice(&self.sync0_cycle_factor.to_le_bytes());
-        d[18] = self.name_idx;
-        d[19] = self.desc_idx;
-        d[20..24].copy_from_slice(&self.reserved);
+        let mut put = |at: usize, b: &[u8]| d[at..at + b.len()].copy_from_slice(b);
+        put(f::CYCLE_TIME0, &self.cycle_time0.to_le_bytes());
+        put(f::SHIFT_TIME0, &self.shift_time0.to_le_bytes());
+        put(f::SHIFT_TIME1, &self.shift_time1.to_le_bytes());
+        put(f::SYNC1_CYCLE_FACTOR, &self.sync1_cycle_factor.to_le_bytes());
+        put(f::ASSIGN_ACTIVATE, &self.assign_activate.to_le_bytes());
+        put(f::SYNC0_CYCLE_FACTOR, &self.sync0_cycle_factor.to_le_bytes());
+        put(f::NAME_IDX, &[self.name_idx]);
+        put(f::DESC_IDX, &[self.desc_idx]);
+        put(f::RESERVED.start, &self.reserved);
         d
     }
 }
