@@ -236,6 +236,13 @@ enum Command {
         #[arg(long, default_value = "ferrocat", requires = "dc",
               value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
         sync: String,
+        /// How often each slave's error counters (0x0300–0x0313) are read while cyclic, ms; the
+        /// mailboxes are polled for emergencies between. Both only in a cycle's spare time.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=3_600_000))]
+        counters_period_ms: u64,
+        /// No diagnosis while cyclic (error counters, emergencies).
+        #[arg(long)]
+        no_diagnosis: bool,
         /// NAME=VALUE (repeatable): write this output before OP and hold it. NAME is a
         /// variable of the ENI's process image (with --eni) or POS:ENTRY, a slave's position
         /// and one of its entries; VALUE decimal or 0x hex, negative in two's complement.
@@ -744,9 +751,12 @@ fn main() -> ExitCode {
             sync,
             set,
             show,
+            counters_period_ms,
+            no_diagnosis,
             json,
         } => {
             let run = master_cmd::RunOptions {
+                diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
                 set: &set,
                 show: &show,
                 seconds,

@@ -454,6 +454,8 @@ pub struct RunOptions<'a> {
     /// The cyclic frames' timeout; `None`: [`frame_timeout_us`]'s default.
     pub frame_timeout_us: Option<u64>,
     pub eoe_taps: &'a [String],
+    /// How often each slave's error counters are read while cyclic, ms (`None`: no diagnosis).
+    pub diagnosis_ms: Option<u64>,
     /// Outputs to write before OP (`NAME=VALUE`), and values to show at the end.
     pub set: &'a [String],
     pub show: &'a [String],
@@ -612,6 +614,11 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
+        // Diagnosis in the cycle's spare time, none in its last quarter: error counters, one
+        // slave a datagram, every `diagnosis_ms`; emergencies from the mailboxes between.
+        if let (Some(ms), false) = (o.diagnosis_ms, max_rate) {
+            m.diagnose(next.saturating_sub(next_period / 4), ms * 1_000_000)?;
+        }
         let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
         for e in m.take_events() {
             eprintln!("t={t_s:7.3} s  {e}");
@@ -706,6 +713,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "clock_sync": clock_sync,
                 "slaves": tally.to_json(m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
                 "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
+                "diagnosis": diagnosis_json(&m, &tally, o.diagnosis_ms),
             })
         );
     } else {
@@ -732,6 +740,17 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             let v = m.get(*h);
             outln!("{n} = {v} ({v:#x})");
         }
+        if o.diagnosis_ms.is_some() {
+            let d = m.diagnosis_stats();
+            outln!(
+                "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies",
+                d.counter_reads,
+                d.mailbox_polls,
+                d.given_up,
+                d.counters_grown,
+                tally.emergencies
+            );
+        }
     }
     if m.io_mut().has_secondary() {
         let ring = match m.ring_state() {
@@ -746,6 +765,45 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The summary's `diagnosis`: what was read, and each slave's error counters that are not 0.
+fn diagnosis_json(
+    m: &ferrocat_master::Master<crate::target::CliIo>,
+    tally: &SlaveTally,
+    period_ms: Option<u64>,
+) -> serde_json::Value {
+    let Some(ms) = period_ms else { return serde_json::Value::Null };
+    let d = m.diagnosis_stats();
+    let counters: Vec<serde_json::Value> = m
+        .error_counters()
+        .iter()
+        .enumerate()
+        .filter_map(|(k, c)| {
+            let c = c.as_ref()?;
+            let nonzero: serde_json::Map<String, serde_json::Value> = c
+                .each()
+                .filter(|(_, _, v)| *v > 0)
+                .map(|(kind, port, v)| {
+                    (
+                        port.map_or(kind.name().to_string(), |p| format!("port {p} {}", kind.name())),
+                        serde_json::json!(v),
+                    )
+                })
+                .collect();
+            (!nonzero.is_empty())
+                .then(|| serde_json::json!({"position": k, "name": m.slaves[k].name, "counters": nonzero}))
+        })
+        .collect();
+    serde_json::json!({
+        "counters_period_ms": ms,
+        "counter_reads": d.counter_reads,
+        "mailbox_polls": d.mailbox_polls,
+        "given_up": d.given_up,
+        "counters_grown": d.counters_grown,
+        "emergencies": tally.emergencies,
+        "error_counters": counters,
+    })
+}
+
 /// What happened to the slaves over a run: how often one left OP or stopped answering, how
 /// often the master brought one back.
 #[derive(Debug, Default)]
@@ -753,6 +811,7 @@ struct SlaveTally {
     left_op: u64,
     lost: u64,
     recovered: u64,
+    emergencies: u64,
 }
 
 impl SlaveTally {
@@ -762,6 +821,7 @@ impl SlaveTally {
             E::LeftOp { .. } => self.left_op += 1,
             E::Lost { .. } => self.lost += 1,
             E::Recovered { .. } => self.recovered += 1,
+            E::Emergency { .. } => self.emergencies += 1,
             _ => {}
         }
     }

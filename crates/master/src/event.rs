@@ -43,6 +43,21 @@ pub enum MasterEvent {
         /// The manufacturer-specific bytes.
         data: [u8; 5],
     },
+    /// One of the slave's error counters (0x0300–0x0313) grew since diagnosis last read it.
+    ErrorCounters {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// Which counter.
+        kind: ferrocat_wire::register::ErrorCounterKind,
+        /// Its port, for a port's counter.
+        port: Option<u8>,
+        /// By how much.
+        grown: u8,
+        /// Its value now (it stops at 255).
+        total: u8,
+    },
     /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
     Ring {
         /// The ring's state now.
@@ -65,7 +80,15 @@ impl std::fmt::Display for MasterEvent {
             MasterEvent::Lost { position, name } => write!(f, "slave {position} ({name}) is not answering"),
             MasterEvent::Recovered { position, name } => write!(f, "slave {position} ({name}) is back in OP"),
             MasterEvent::Emergency { position, name, error_code, error_register, data } => {
-                write!(f, "slave {position} ({name}): emergency {error_code:#06x}, error register {error_register:#04x}, data {data:02x?}")
+                write!(
+                    f,
+                    "slave {position} ({name}): emergency {error_code:#06x} ({}), error register {error_register:#04x}, data {data:02x?}",
+                    ferrocat_wire::coe::emergency_text(*error_code)
+                )
+            }
+            MasterEvent::ErrorCounters { position, name, kind, port, grown, total } => {
+                let port = port.map_or(String::new(), |p| format!("port {p} "));
+                write!(f, "slave {position} ({name}): {port}{} +{grown} (now {total})", kind.name())
             }
             MasterEvent::Ring { state } => f.write_str(match state {
                 crate::engine::RingState::Broken => {

@@ -57,3 +57,17 @@ fn an_image_with_more_data_than_the_eeprom_is_refused_before_any_write() {
     img[size] = 0xFF;
     m.sii_write(0, &img).unwrap();
 }
+
+#[test]
+fn diagnosis_stays_within_its_deadline() {
+    let mut m = scanned("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n");
+    m.configure().unwrap();
+    let now = m.now_ns();
+    // Less than two round trips left: nothing sent.
+    assert_eq!(m.diagnose(now + 60_000, 1_000_000).unwrap(), 0);
+    // Time enough: the counters (due at once) and one mailbox.
+    assert_eq!(m.diagnose(now + 10_000_000, 1_000_000).unwrap(), 2);
+    let s = m.diagnosis_stats();
+    assert_eq!((s.counter_reads, s.mailbox_polls), (1, 1));
+    assert!(m.error_counters()[0].is_some() && m.error_counters()[1].is_none());
+}

@@ -132,7 +132,10 @@ fn needs_shared_emergencies_reach_the_application() {
     m.poll_mailboxes().unwrap();
     let got: Vec<_> =
         m.events.iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
-    assert_eq!(got, ["slave 0 (C5-E-2-21): emergency 0x8611, error register 0x20, data [01, 02, 03, 04, 05]"]);
+    assert_eq!(
+        got,
+        ["slave 0 (C5-E-2-21): emergency 0x8611 (following error), error register 0x20, data [01, 02, 03, 04, 05]"]
+    );
     // And an SDO still works afterwards.
     assert_eq!(m.coe().sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
 }

@@ -303,6 +303,17 @@ pub struct EventToml {
     pub power_on: Option<NodeRef>,
     /// A device's crystal changes frequency by `ppm` (a temperature step).
     pub drift_step: Option<DriftStepToml>,
+    /// A CiA402 drive faults by itself, with an emergency of `code`.
+    pub drive_fault: Option<DriveFaultToml>,
+}
+
+/// A drive's own fault, in an event.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DriveFaultToml {
+    pub device: NodeRef,
+    /// The emergency error code (CiA 301/402), e.g. 0x2310 for over-current.
+    pub code: Number,
 }
 
 /// A device's oscillator step, in an event.
@@ -861,9 +872,20 @@ impl SegmentConfig {
             let ppm = in_range(&place, "drift_step.ppm", d.ppm, -MAX_DRIFT_PPM..=MAX_DRIFT_PPM)?;
             kinds.push(Event::DriftStep { node: node(&d.device)?, delta_ppb: (ppm * 1000.0).round() as i64 });
         }
+        if let Some(f) = &e.drive_fault {
+            let code = f
+                .code
+                .get()
+                .and_then(|c| u16::try_from(c).ok())
+                .ok_or_else(|| device_err(&place, "drive_fault.code: not a 16-bit number"))?;
+            kinds.push(Event::DriveFault { node: node(&f.device)?, code });
+        }
         match (kinds.pop(), kinds.is_empty()) {
             (Some(ev), true) => Ok(((at_ms * 1e6).round() as u64, ev)),
-            _ => Err(device_err(place, "give exactly one of link_down, link_up, power_off, power_on, drift_step")),
+            _ => Err(device_err(
+                place,
+                "give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault",
+            )),
         }
     }
 }

@@ -91,6 +91,12 @@ pub enum Event {
         node: usize,
         delta_ppb: i64,
     },
+    /// A CiA402 drive's first axis faults by itself (over-current, under-voltage …): its fault
+    /// reaction, FAULT, and an emergency with `code`. Nothing happens on another device.
+    DriveFault {
+        node: usize,
+        code: u16,
+    },
 }
 
 /// Counters of what the segment did.
@@ -335,6 +341,12 @@ impl Segment {
                 n.drift_ppb = n.drift_ppb.saturating_add(delta_ppb).clamp(-1_000_000, 1_000_000);
                 if let Some(dc) = n.esc.dc.as_mut() {
                     dc.set_drift_ppb(t, n.drift_ppb);
+                }
+            }
+            Event::DriveFault { node, code } => {
+                if let Some(d) = self.nodes[node].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>()
+                {
+                    d.inject_fault(code);
                 }
             }
         }

@@ -364,6 +364,72 @@ impl<'a> Sdo<'a> {
     }
 }
 
+/// An emergency error code in words: the code itself where it is a well-known one, else its
+/// class. Codes and classes from CiA 301 (the emergency error codes table), the drive codes
+/// from CiA 402 (IEC 61800-7-201's error codes), 0xA000/0xA001 from ETG.1000.6 (the EtherCAT
+/// state machine's transitions).
+pub fn emergency_text(code: u16) -> &'static str {
+    let exact = match code {
+        0x0000 => Some("no error (error reset)"),
+        0x2310 => Some("continuous over-current"),
+        0x2320 => Some("short circuit or earth leakage"),
+        0x3210 => Some("DC link over-voltage"),
+        0x3220 => Some("DC link under-voltage"),
+        0x4310 => Some("drive over-temperature"),
+        0x5530 => Some("EEPROM or flash error"),
+        0x7121 => Some("motor blocked"),
+        0x7305 => Some("incremental sensor 1 fault"),
+        0x8110 => Some("communication: overrun, objects lost"),
+        0x8130 => Some("life guard or heartbeat error"),
+        0x8210 => Some("PDO not processed: length error"),
+        0x8220 => Some("PDO length exceeded"),
+        0x8611 => Some("following error"),
+        0x8612 => Some("reference limit"),
+        0xA000 => Some("transition PREOP to SAFEOP failed"),
+        0xA001 => Some("transition SAFEOP to OP failed"),
+        _ => None,
+    };
+    if let Some(t) = exact {
+        return t;
+    }
+    match code >> 8 {
+        0x10 => "generic error",
+        0x21 => "current, input side",
+        0x22 => "current inside the device",
+        0x23 => "current, output side",
+        0x31 => "mains voltage",
+        0x32 => "voltage inside the device",
+        0x33 => "output voltage",
+        0x41 => "ambient temperature",
+        0x42 => "device temperature",
+        0x61 => "internal software",
+        0x62 => "user software",
+        0x63 => "data set",
+        0x81 => "communication",
+        0x82 => "protocol error",
+        0x83 => "torque control",
+        0x84 => "velocity speed controller",
+        0x85 => "position controller",
+        0x86 => "positioning controller",
+        0x87 => "sync controller",
+        0xFF => "device specific",
+        _ => match code >> 12 {
+            0x1 => "generic error",
+            0x2 => "current",
+            0x3 => "voltage",
+            0x4 => "temperature",
+            0x5 => "device hardware",
+            0x6 => "device software",
+            0x7 => "additional modules",
+            0x8 => "monitoring",
+            0x9 => "external error",
+            0xA => "EtherCAT state machine",
+            0xF => "additional functions",
+            _ => "unknown class",
+        },
+    }
+}
+
 /// A CoE emergency (service 1): error code, error register, 5 manufacturer bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Emergency {
@@ -610,6 +676,17 @@ pub fn parse(payload: &[u8]) -> Result<(CoeHeader, CoeMessage<'_>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn emergency_codes_in_words_exact_then_by_class() {
+        assert_eq!(emergency_text(0x8611), "following error");
+        assert_eq!(emergency_text(0x2310), "continuous over-current");
+        assert_eq!(emergency_text(0x2311), "current, output side");
+        assert_eq!(emergency_text(0x4999), "temperature");
+        assert_eq!(emergency_text(0xFF42), "device specific");
+        assert_eq!(emergency_text(0xA001), "transition SAFEOP to OP failed");
+        assert_eq!(emergency_text(0xB000), "unknown class");
+    }
 
     fn rt(sdo: Sdo<'_>) {
         let mut buf = [0u8; 64];

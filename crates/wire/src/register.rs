@@ -549,6 +549,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn error_counters_by_port_and_kind() {
+        let mut b = [0u8; ErrorCounters::LEN];
+        (b[0], b[1], b[2], b[9], b[12], b[13], b[19]) = (1, 2, 3, 4, 5, 6, 7);
+        let c = ErrorCounters::parse(&b).unwrap();
+        assert_eq!((c.invalid_frames, c.rx_errors), ([1, 3, 0, 0], [2, 0, 0, 0]));
+        assert_eq!((c.forwarded_errors, c.processing_unit, c.pdi, c.lost_links), ([0, 4, 0, 0], 5, 6, [0, 0, 0, 7]));
+        let nonzero: Vec<_> = c.each().filter(|x| x.2 > 0).map(|(k, p, v)| (k.name(), p, v)).collect();
+        assert_eq!(
+            nonzero,
+            [
+                ("invalid frames", Some(0), 1),
+                ("receive errors", Some(0), 2),
+                ("invalid frames", Some(1), 3),
+                ("frames marked bad upstream", Some(1), 4),
+                ("links lost", Some(3), 7),
+                ("processing unit errors", None, 5),
+                ("PDI errors", None, 6),
+            ]
+        );
+        assert!(ErrorCounters::parse(&b[..19]).is_err());
+    }
+
+    #[test]
     fn fmmu_and_sm_round_trip() {
         let f = Fmmu {
             logical_start: 0x10000,
@@ -586,5 +609,90 @@ mod tests {
             let d = SystemTimeDifference::from_ns(v);
             assert_eq!(d.as_ns(), v.clamp(-0x7FFF_FFFF, 0x7FFF_FFFF));
         }
+    }
+}
+
+/// The error counters of an ESC, registers 0x0300–0x0313 (ET1100 datasheet, section II,
+/// "Error counters"): per port, frames received invalid (0x0300 + 2·port) and physical-layer
+/// receive errors (0x0301 + 2·port), frames that came in already marked bad by a slave before
+/// (0x0308 + port), frames the processing unit found wrong (0x030C), PDI errors (0x030D) and
+/// links lost (0x0310 + port). Each counts up to 255 and stays there; a write clears it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ErrorCounters {
+    pub invalid_frames: [u8; 4],
+    pub rx_errors: [u8; 4],
+    pub forwarded_errors: [u8; 4],
+    pub processing_unit: u8,
+    pub pdi: u8,
+    pub lost_links: [u8; 4],
+}
+
+/// Where each counter lies, in bytes from 0x0300.
+mod error_counter_field {
+    use core::ops::Range;
+    /// Invalid frame and RX error counters, interleaved by port.
+    pub const PORTS: Range<usize> = 0..8;
+    pub const FORWARDED: Range<usize> = 8..12;
+    pub const PROCESSING_UNIT: usize = 12;
+    pub const PDI: usize = 13;
+    pub const LOST_LINKS: Range<usize> = 16..20;
+}
+
+/// One kind of error counter, for a report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorCounterKind {
+    InvalidFrames,
+    RxErrors,
+    ForwardedErrors,
+    LostLinks,
+    ProcessingUnit,
+    Pdi,
+}
+
+impl ErrorCounterKind {
+    /// In words.
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorCounterKind::InvalidFrames => "invalid frames",
+            ErrorCounterKind::RxErrors => "receive errors",
+            ErrorCounterKind::ForwardedErrors => "frames marked bad upstream",
+            ErrorCounterKind::LostLinks => "links lost",
+            ErrorCounterKind::ProcessingUnit => "processing unit errors",
+            ErrorCounterKind::Pdi => "PDI errors",
+        }
+    }
+}
+
+impl ErrorCounters {
+    /// Bytes read from 0x0300.
+    pub const LEN: usize = 20;
+
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        use error_counter_field as f;
+        need(b, 0, Self::LEN, "error counters")?;
+        let mut c = ErrorCounters { processing_unit: b[f::PROCESSING_UNIT], pdi: b[f::PDI], ..Default::default() };
+        for p in 0..4 {
+            c.invalid_frames[p] = b[f::PORTS.start + 2 * p];
+            c.rx_errors[p] = b[f::PORTS.start + 2 * p + 1];
+            c.forwarded_errors[p] = b[f::FORWARDED.start + p];
+            c.lost_links[p] = b[f::LOST_LINKS.start + p];
+        }
+        Ok(c)
+    }
+
+    /// Every counter with its port (`None` for the ESC's own), in register order.
+    pub fn each(&self) -> impl Iterator<Item = (ErrorCounterKind, Option<u8>, u8)> + '_ {
+        use ErrorCounterKind as K;
+        (0..4u8)
+            .flat_map(move |p| {
+                let i = p as usize;
+                [
+                    (K::InvalidFrames, Some(p), self.invalid_frames[i]),
+                    (K::RxErrors, Some(p), self.rx_errors[i]),
+                    (K::ForwardedErrors, Some(p), self.forwarded_errors[i]),
+                    (K::LostLinks, Some(p), self.lost_links[i]),
+                ]
+            })
+            .chain([(K::ProcessingUnit, None, self.processing_unit), (K::Pdi, None, self.pdi)])
     }
 }

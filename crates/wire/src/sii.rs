@@ -610,7 +610,8 @@ impl SmEntry {
         let mut d = [0u8; 8];
         d[f::START].copy_from_slice(&self.start.to_le_bytes());
         d[f::LENGTH].copy_from_slice(&self.length.to_le_bytes());
-        (d[f::CONTROL], d[f::STATUS], d[f::ENABLE], d[f::TYPE]) = (self.control, self.status, self.enable, self.sm_type);
+        (d[f::CONTROL], d[f::STATUS], d[f::ENABLE], d[f::TYPE]) =
+            (self.control, self.status, self.enable, self.sm_type);
         d
     }
 }

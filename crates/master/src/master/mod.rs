@@ -85,6 +85,8 @@ pub struct Master<I: Io> {
     pub relatched: Vec<usize>,
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
+    /// Diagnosis while cyclic ([`Master::diagnose`]).
+    pub(crate) diagnosis: crate::diagnosis::Diagnosis,
 }
 
 impl<I: Io> Master<I> {
@@ -115,6 +117,7 @@ impl<I: Io> Master<I> {
             split_latch: None,
             relatched: Vec::new(),
             plan: None,
+            diagnosis: Default::default(),
         }
     }
 
