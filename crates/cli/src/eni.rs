@@ -255,6 +255,20 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
                 .collect()
         })
         .collect();
+    // Each task's frames every as many base cycles as its cycle is a multiple of the fastest
+    // task's (a task that gives no cycle: every cycle).
+    let fastest = eni.cyclic.iter().filter_map(|c| c.cycle_time_us).filter(|&t| t > 0).min();
+    let frame_every = eni
+        .cyclic
+        .iter()
+        .flat_map(|c| {
+            let every = match (c.cycle_time_us, fastest) {
+                (Some(t), Some(f)) if t > 0 => ((t + f / 2) / f).max(1),
+                _ => 1,
+            };
+            std::iter::repeat_n(every, c.frames.len())
+        })
+        .collect();
     // Without a <ProcessImage>, images as large as the frames they mirror.
     let reach = |pick: fn(&ferrocat_machine::eni::CyclicCmd) -> Option<u32>| {
         eni.cyclic
@@ -276,6 +290,7 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
             .map(|s| (s.process_data.send.map(|r| r.start), s.process_data.recv.map(|r| r.start)))
             .collect(),
         frames,
+        frame_every,
         output_bytes: size(eni.process_image.outputs.byte_size, reach(|d| d.output_offs)),
         input_bytes: size(eni.process_image.inputs.byte_size, reach(|d| d.input_offs)),
     }

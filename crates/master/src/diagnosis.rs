@@ -4,33 +4,11 @@
 use ferrocat_wire::register::{addr, ErrorCounters};
 use ferrocat_wire::{Address, Command};
 
+use crate::diagnosis_state::DiagnosisStats;
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
 use crate::MasterEvent;
-
-/// What diagnosis did so far.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct DiagnosisStats {
-    /// Error-counter reads.
-    pub counter_reads: u64,
-    /// Mailbox polls.
-    pub mailbox_polls: u64,
-    /// Reads and polls given up at the spare time's end (the answer came too late).
-    pub given_up: u64,
-    /// Counters that grew (each reported as an event).
-    pub counters_grown: u64,
-}
-
-/// Diagnosis's state: the counters last read, whose turn it is, when the next round is due.
-#[derive(Debug, Default)]
-pub(crate) struct Diagnosis {
-    counters: Vec<Option<ErrorCounters>>,
-    next_counters: usize,
-    next_mailbox: usize,
-    round_due_ns: u64,
-    pub stats: DiagnosisStats,
-}
 
 /// A datagram of diagnosis is started only where twice this, or twice the last cyclic round
 /// trip, is left before the deadline.

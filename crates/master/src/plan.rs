@@ -30,8 +30,12 @@ pub struct Plan {
     /// By position: the first bit of the slave's outputs in the output image and of its inputs
     /// in the input image, where it has them; its entries follow one another from there.
     pub entries_at: Vec<(Option<u32>, Option<u32>)>,
-    /// The cyclic frames, sent one after the other each cycle.
+    /// The cyclic frames, sent one after the other in the cycles they are due.
     pub frames: Vec<Vec<PlanDatagram>>,
+    /// By frame: every how many cycles it is sent (a process-data group's cycle, as a
+    /// multiple of the base cycle; missing or 0: every cycle). The first frame due in a cycle
+    /// carries the clock-sync method's datagrams: the fastest group's should be every cycle.
+    pub frame_every: Vec<u32>,
     /// Bytes of the output image.
     pub output_bytes: u32,
     /// Bytes of the input image.
@@ -108,19 +112,53 @@ impl Plan {
     pub fn expected_wkc(&self) -> u16 {
         self.frames.iter().flatten().filter_map(|d| d.expected_wkc).fold(0u16, u16::saturating_add)
     }
+
+    /// Every how many cycles frame `f` is sent.
+    pub fn every(&self, f: usize) -> u64 {
+        self.frame_every.get(f).copied().unwrap_or(1).max(1) as u64
+    }
+
+    /// Whether frame `f` is sent in cycle `cycle` (counted from 0).
+    pub(crate) fn due(&self, f: usize, cycle: u64) -> bool {
+        cycle % self.every(f) == 0
+    }
+}
+
+/// What became of one of a plan's frames (a process-data group's) so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameStats {
+    /// Cycles it was sent in.
+    pub sent: u64,
+    /// Of those, the ones it was lost in.
+    pub lost: u64,
+    /// Of those answered, the ones with a working counter short of its datagrams' expected.
+    pub short: u64,
+    /// Its working counter the last time it was answered.
+    pub last_wkc: u16,
+    /// The working counter it should come back with.
+    pub expected_wkc: u16,
 }
 
 /// A plan's buffers for one cycle: one per datagram, made when the plan is set, so that the
-/// exchange does not allocate.
+/// exchange does not allocate; and each frame's statistics.
 #[derive(Debug, Default)]
 pub(crate) struct PlanBuffers {
     pub frames: Vec<Vec<Vec<u8>>>,
+    pub stats: Vec<FrameStats>,
 }
 
 impl PlanBuffers {
     pub fn for_plan(plan: &Plan) -> Self {
         PlanBuffers {
             frames: plan.frames.iter().map(|f| f.iter().map(|d| vec![0u8; d.length as usize]).collect()).collect(),
+            stats: plan
+                .frames
+                .iter()
+                .map(|f| FrameStats {
+                    expected_wkc: f.iter().filter_map(|d| d.expected_wkc).fold(0u16, u16::saturating_add),
+                    ..FrameStats::default()
+                })
+                .collect(),
         }
     }
 }

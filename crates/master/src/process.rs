@@ -231,7 +231,8 @@ impl<I: Io> Master<I> {
             _ => None,
         };
         self.note_ring(passes)?;
-        self.finish_cycle(start, wkc, lost)?;
+        let expected = self.expected_wkc;
+        self.finish_cycle(start, wkc, expected, lost)?;
         Ok((wkc, correction))
     }
 
@@ -251,16 +252,24 @@ impl<I: Io> Master<I> {
             None => None,
         };
         let mut nop: [u8; 0] = [];
+        let cycle = self.cyc.stats.cycles;
         let Master { image, engine, cyclic_timeout_ns, plan, out_bytes, .. } = self;
         let Some((plan, buffers)) = plan.as_mut() else { return Ok((0, None)) };
         let (out_len, timeout) = (*out_bytes as usize, *cyclic_timeout_ns);
-        let (mut wkc, mut lost) = (0u16, false);
+        let (mut wkc, mut expected, mut lost) = (0u16, 0u16, false);
         let mut timing = None;
         let mut extra = sp.as_mut().map(|p| {
             let (pdus, n) = p.pdus(&mut nop);
             pdus.into_iter().take(n)
         });
+        let mut first = true;
         for (f, (datagrams, bufs)) in plan.frames.iter().zip(buffers.frames.iter_mut()).enumerate() {
+            if !plan.due(f, cycle) {
+                continue;
+            }
+            let fs = &mut buffers.stats[f];
+            fs.sent += 1;
+            expected = expected.saturating_add(fs.expected_wkc);
             for (d, b) in datagrams.iter().zip(bufs.iter_mut()) {
                 let len = b.len();
                 match d.output_offset {
@@ -269,7 +278,8 @@ impl<I: Io> Master<I> {
                 }
             }
             let own = datagrams.len().min(MAX_PLAN_DATAGRAMS);
-            let mut behind = if f == 0 { extra.take() } else { None };
+            // The clock-sync method's datagrams ride behind the first frame due.
+            let mut behind = if first { extra.take() } else { None };
             let n = own + behind.as_ref().map_or(0, |x| x.len());
             let mut parts = bufs.iter_mut();
             let mut pdus: [Pdu<'_>; MAX_PLAN_DATAGRAMS + 4] =
@@ -281,7 +291,7 @@ impl<I: Io> Master<I> {
                     },
                 });
             let r = engine.transact_once(&mut pdus[..n], timeout);
-            if f == 0 {
+            if std::mem::take(&mut first) {
                 let answered = match (&r, n > own) {
                     (Ok(()), true) => crate::dc::SyncPdus::answered(&pdus[own..n]),
                     _ => crate::dc::SyncAnswers::NONE,
@@ -289,23 +299,29 @@ impl<I: Io> Master<I> {
                 let bytes = (crate::engine::frame_bytes(&pdus[..n]), crate::engine::bytes_through(&pdus[..own]));
                 timing = Some((bytes, answered));
             }
+            let fs = &mut buffers.stats[f];
             match r {
                 Ok(()) => {}
                 Err(MasterError::Timeout { .. }) => {
                     lost = true;
+                    fs.lost += 1;
                     continue;
                 }
                 Err(e) => return Err(e),
             }
+            let mut frame_wkc = 0u16;
             for (d, p) in datagrams.iter().zip(&pdus[..own]) {
                 if let Some(o) = d.input_offset {
                     let at = out_len + Plan::data_at(o);
                     image[at..at + p.data.len()].copy_from_slice(p.data);
                 }
                 if d.expected_wkc.is_some() {
-                    wkc = wkc.saturating_add(p.wkc);
+                    frame_wkc = frame_wkc.saturating_add(p.wkc);
                 }
             }
+            fs.last_wkc = frame_wkc;
+            fs.short += (frame_wkc != fs.expected_wkc) as u64;
+            wkc = wkc.saturating_add(frame_wkc);
         }
         drop(extra);
         if lost {
@@ -322,19 +338,25 @@ impl<I: Io> Master<I> {
         };
         let passes = self.engine.split_passes.take();
         self.note_ring(passes)?;
-        self.finish_cycle(start, wkc, lost)?;
+        self.finish_cycle(start, wkc, expected, lost)?;
         Ok((wkc, correction))
     }
 
+    /// Each of the plan's frames' statistics (a process-data group's), in the plan's order;
+    /// empty without a plan.
+    pub fn plan_frame_stats(&self) -> Vec<crate::plan::FrameStats> {
+        self.plan.as_ref().map_or(Vec::new(), |(_, b)| b.stats.clone())
+    }
+
     /// A cycle's statistics, and the slaves checked after a cycle answered short.
-    fn finish_cycle(&mut self, start: u64, wkc: u16, lost: bool) -> Result<()> {
+    fn finish_cycle(&mut self, start: u64, wkc: u16, expected: u16, lost: bool) -> Result<()> {
         let end = self.engine.io.now_ns();
         let st = &mut self.cyc.stats;
         st.cycles += 1;
         st.last_wkc = wkc;
         st.last_round_trip_ns = end - start;
         st.max_round_trip_ns = st.max_round_trip_ns.max(end - start);
-        let short = wkc != self.expected_wkc;
+        let short = wkc != expected;
         if short {
             st.wkc_errors += 1;
         }

@@ -86,7 +86,7 @@ pub struct Master<I: Io> {
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
     /// Diagnosis while cyclic ([`Master::diagnose`]).
-    pub(crate) diagnosis: crate::diagnosis::Diagnosis,
+    pub(crate) diagnosis: crate::diagnosis_state::Diagnosis,
 }
 
 impl<I: Io> Master<I> {

@@ -217,52 +217,26 @@ impl<I: Io> Master<I> {
             s.out_area = (out_at.unwrap_or(0) / 8, s.output_bits().div_ceil(8));
             s.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.input_bits().div_ceil(8));
         }
-        for (k, writes) in registers.iter().enumerate().take(self.slaves.len()) {
-            let st = self.slaves[k].station;
-            for (ado, data) in writes {
-                self.fpwr(st, *ado, data)?;
-            }
+        for k in 0..registers.len().min(self.slaves.len()) {
+            self.write_process_config(k as u16)?;
         }
         Ok(())
     }
 
-    /// Writes the SyncManagers and FMMUs of one slave's process data, from its layout.
+    /// Writes the SyncManagers and FMMUs of one slave's process data, from its layout or the
+    /// plan's registers (at the layout, and when the slave is brought back after a fall).
     pub(crate) fn write_process_config(&mut self, position: u16) -> Result<()> {
+        if let Some((plan, _)) = &self.plan {
+            let writes = plan.registers.get(position as usize).cloned().unwrap_or_default();
+            let st = self.slaves[position as usize].station;
+            for (ado, data) in &writes {
+                self.fpwr(st, *ado, data)?;
+            }
+            return Ok(());
+        }
         let s = &self.slaves[position as usize];
         let st = s.station;
-        let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
-        let mut fmmu = 0u16;
-        for (area, sm, write) in [(s.out_area, s.out_sm, true), (s.in_area, s.in_sm, false)] {
-            let Some((n, e)) = sm else { continue };
-            let smr = if area.1 == 0 {
-                SyncManager::default()
-            } else {
-                SyncManager {
-                    start: e.start,
-                    length: area.1 as u16,
-                    control: e.control,
-                    status: 0,
-                    activate: 1,
-                    pdi_control: 0,
-                }
-            };
-            writes.push((addr::sm(n), smr.to_bytes().to_vec()));
-            if area.1 > 0 {
-                let f = Fmmu {
-                    logical_start: area.0,
-                    length: area.1 as u16,
-                    logical_start_bit: 0,
-                    logical_stop_bit: 7,
-                    physical_start: e.start,
-                    physical_start_bit: 0,
-                    fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
-                    active: true,
-                };
-                writes.push((addr::fmmu(fmmu as u8), f.to_bytes().to_vec()));
-                fmmu += 1;
-            }
-        }
-        for (a, d) in writes {
+        for (a, d) in process_registers(s, s.out_area.0, s.in_area.0) {
             self.fpwr(st, a, &d)?;
         }
         Ok(())
@@ -282,4 +256,45 @@ impl<I: Io> Master<I> {
         let st = s.station;
         self.fpwr(st, addr::SM0, &both)
     }
+}
+
+/// The SyncManager and FMMU registers of a slave's process data, its outputs at logical address
+/// `out_logical` and its inputs at `in_logical`: each SyncManager as long as its data, one FMMU
+/// per direction that has data.
+pub(crate) fn process_registers(s: &crate::slave::Slave, out_logical: u32, in_logical: u32) -> Vec<(u16, Vec<u8>)> {
+    let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
+    let mut fmmu = 0u16;
+    let out_bytes = s.output_bits().div_ceil(8);
+    let in_bytes = s.input_bits().div_ceil(8);
+    for (area, sm, write) in [((out_logical, out_bytes), s.out_sm, true), ((in_logical, in_bytes), s.in_sm, false)] {
+        let Some((n, e)) = sm else { continue };
+        let smr = if area.1 == 0 {
+            SyncManager::default()
+        } else {
+            SyncManager {
+                start: e.start,
+                length: area.1 as u16,
+                control: e.control,
+                status: 0,
+                activate: 1,
+                pdi_control: 0,
+            }
+        };
+        writes.push((addr::sm(n), smr.to_bytes().to_vec()));
+        if area.1 > 0 {
+            let f = Fmmu {
+                logical_start: area.0,
+                length: area.1 as u16,
+                logical_start_bit: 0,
+                logical_stop_bit: 7,
+                physical_start: e.start,
+                physical_start_bit: 0,
+                fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
+                active: true,
+            };
+            writes.push((addr::fmmu(fmmu as u8), f.to_bytes().to_vec()));
+            fmmu += 1;
+        }
+    }
+    writes
 }
