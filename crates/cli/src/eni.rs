@@ -291,6 +291,12 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
             .collect(),
         frames,
         frame_every,
+        frame_names: eni
+            .cyclic
+            .iter()
+            .enumerate()
+            .flat_map(|(t, c)| (0..c.frames.len()).map(move |f| format!("task {t} frame {f}")))
+            .collect(),
         output_bytes: size(eni.process_image.outputs.byte_size, reach(|d| d.output_offs)),
         input_bytes: size(eni.process_image.inputs.byte_size, reach(|d| d.input_offs)),
     }

@@ -714,6 +714,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "slaves": tally.to_json(m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
                 "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
                 "diagnosis": diagnosis_json(&m, &tally, o.diagnosis_ms),
+                "groups": groups_json(&m),
             })
         );
     } else {
@@ -740,6 +741,22 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             let v = m.get(*h);
             outln!("{n} = {v} ({v:#x})");
         }
+        if let Some(plan) = m.plan() {
+            for (f, s) in m.plan_frame_stats().iter().enumerate() {
+                let name = plan.frame_names.get(f).cloned().unwrap_or_else(|| format!("frame {f}"));
+                let every = match plan.every(f) {
+                    1 => String::from("every cycle"),
+                    n => format!("every {n} cycles"),
+                };
+                outln!(
+                    "{name} ({every}): {} sent, {} lost, {} with a working counter short of {}",
+                    s.sent,
+                    s.lost,
+                    s.short,
+                    s.expected_wkc
+                );
+            }
+        }
         if o.diagnosis_ms.is_some() {
             let d = m.diagnosis_stats();
             outln!(
@@ -763,6 +780,26 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     finish(m)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The summary's `groups`: each frame of a plan (a process-data group's, an ENI's), or null.
+fn groups_json(m: &ferrocat_master::Master<crate::target::CliIo>) -> serde_json::Value {
+    let Some(plan) = m.plan() else { return serde_json::Value::Null };
+    m.plan_frame_stats()
+        .iter()
+        .enumerate()
+        .map(|(f, s)| {
+            serde_json::json!({
+                "name": plan.frame_names.get(f).cloned().unwrap_or_else(|| format!("frame {f}")),
+                "every": plan.every(f),
+                "sent": s.sent,
+                "lost": s.lost,
+                "short": s.short,
+                "expected_wkc": s.expected_wkc,
+                "last_wkc": s.last_wkc,
+            })
+        })
+        .collect()
 }
 
 /// The summary's `diagnosis`: what was read, and each slave's error counters that are not 0.

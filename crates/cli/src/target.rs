@@ -315,6 +315,16 @@ impl Target {
         };
         let mut m = Master::new(CliIo { world, capture });
         m.set_split_ring_clocks(self.split_ring_clocks.into());
+        // A machine description's process-data groups.
+        if let Some(p) = &self.machine {
+            let groups = crate::eni::read_machine(p)?.groups;
+            m.set_groups(
+                groups
+                    .into_iter()
+                    .map(|g| ferrocat_master::Group { name: g.name, positions: g.positions, every: g.every })
+                    .collect(),
+            );
+        }
         // An ENI's own layout: its station addresses, FMMUs, SyncManagers and cyclic frames.
         if let Some(p) = &self.eni {
             m.set_plan(crate::eni::plan(&crate::eni::read(p, false)?)).with_context(|| format!("{}", p.display()))?;

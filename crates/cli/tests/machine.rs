@@ -82,3 +82,33 @@ fn revision_ranges_optional_slaves_and_bad_files() {
     assert!(!ok && err.contains("--allow-mismatch goes with --eni or --machine"), "{err}");
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn groups_of_a_description_run_at_their_own_rates() {
+    let path = temp("groups");
+    std::fs::write(
+        &path,
+        "[[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044C2C52\ndevice = \"EK1100\"\n\
+         [[slave]]\nname = \"lamps\"\nvendor = 2\nproduct = 0x07D43052\ndevice = \"EL2004\"\n\
+         [[slave]]\nname = \"buttons\"\nvendor = 2\nproduct = 0x03EC3052\ndevice = \"EL1004\"\n\
+         [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\ndevice = \"SERVO\"\n\
+         [[group]]\nname = \"io\"\nslaves = [\"lamps\", \"buttons\"]\nevery = 4\n\
+         [[group]]\nname = \"motion\"\nslaves = [\"axis\"]\n",
+    )
+    .unwrap();
+    let p = path.to_str().unwrap();
+    let (ok, out, err) = ferrocat(&["run", "--machine", p, "--seconds", "1", "--dc", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let groups = v["groups"].as_array().unwrap();
+    let names: Vec<&str> = groups.iter().map(|g| g["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["motion", "io"], "the fastest first: {v}");
+    let (motion, io) = (&groups[0], &groups[1]);
+    assert_eq!((motion["every"].as_u64(), io["every"].as_u64()), (Some(1), Some(4)));
+    let (m, i) = (motion["sent"].as_u64().unwrap(), io["sent"].as_u64().unwrap());
+    assert!(m >= 1000 && i * 4 >= m - 4 && i * 4 <= m + 4, "{v}");
+    assert!(groups.iter().all(|g| g["short"] == 0 && g["lost"] == 0), "{v}");
+    assert_eq!((motion["expected_wkc"].as_u64(), io["expected_wkc"].as_u64()), (Some(3), Some(3)));
+    assert_eq!(v["clock_sync"]["lock"], "locked", "{v}");
+    std::fs::remove_file(&path).ok();
+}

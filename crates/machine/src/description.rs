@@ -37,13 +37,27 @@ pub struct DescriptionError {
     pub message: String,
 }
 
-/// A machine: the slaves it expects, in network order.
+/// A machine: the slaves it expects, in network order, and its process-data groups.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Machine {
     /// What the machine is called, where given.
     pub name: Option<String>,
     /// The slaves, position 0 first.
     pub slaves: Vec<SlaveDesc>,
+    /// Process-data groups, each with its own frame and rate.
+    pub groups: Vec<GroupDesc>,
+}
+
+/// A process-data group: its slaves' process data in a frame of their own, every `every`
+/// base cycles.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GroupDesc {
+    /// Its name.
+    pub name: String,
+    /// Its slaves, by position.
+    pub positions: Vec<u16>,
+    /// Every how many base cycles its frame is sent.
+    pub every: u32,
 }
 
 /// A slave the machine expects.
@@ -80,6 +94,24 @@ struct Raw {
     name: Option<String>,
     #[serde(default, rename = "slave")]
     slaves: Vec<RawSlave>,
+    #[serde(default, rename = "group")]
+    groups: Vec<RawGroup>,
+}
+
+/// A slave of a group: its name in the description, or its position.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum SlaveRef {
+    Position(i64),
+    Name(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGroup {
+    name: Spanned<String>,
+    slaves: Vec<Spanned<SlaveRef>>,
+    every: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -175,7 +207,36 @@ impl Machine {
                 device: s.device.clone(),
             });
         }
-        Ok(Machine { name: raw.name, slaves })
+        let mut groups = Vec::new();
+        for g in &raw.groups {
+            let every = match &g.every {
+                Some(e) if (1..=1_000_000).contains(e.get_ref()) => *e.get_ref() as u32,
+                Some(e) => return Err(err(&e.span(), format!("every = {}: give 1 to 1 000 000 cycles", e.get_ref()))),
+                None => 1,
+            };
+            let mut positions = Vec::new();
+            for r in &g.slaves {
+                let p = match r.get_ref() {
+                    SlaveRef::Position(p) if (0..slaves.len() as i64).contains(p) => *p as u16,
+                    SlaveRef::Position(p) => {
+                        return Err(err(
+                            &r.span(),
+                            format!("slave {p}: the description has slaves 0 to {}", slaves.len() as i64 - 1),
+                        ))
+                    }
+                    SlaveRef::Name(n) => match slaves.iter().position(|s| &s.name == n) {
+                        Some(p) => p as u16,
+                        None => return Err(err(&r.span(), format!("no slave named '{n}'"))),
+                    },
+                };
+                if let Some(other) = groups.iter().find(|o: &&GroupDesc| o.positions.contains(&p)) {
+                    return Err(err(&r.span(), format!("slave {p} is in group '{}' already", other.name)));
+                }
+                positions.push(p);
+            }
+            groups.push(GroupDesc { name: g.name.get_ref().clone(), positions, every });
+        }
+        Ok(Machine { name: raw.name, slaves, groups })
     }
 
     /// The slaves as the comparison takes them.
@@ -211,7 +272,7 @@ impl Machine {
                 device: None,
             })
             .collect();
-        Machine { name, slaves }
+        Machine { name, slaves, groups: Vec::new() }
     }
 
     /// The description as TOML that [`Machine::parse`] reads back, with a comment for each
@@ -256,6 +317,15 @@ impl Machine {
                 out += &format!("device = {}\n", quote(d));
             }
         }
+        for g in &self.groups {
+            let names: Vec<String> = g.positions.iter().map(|&p| quote(&self.slaves[p as usize].name)).collect();
+            out += &format!(
+                "\n[[group]]\nname = {}\nslaves = [{}]\nevery = {}\n",
+                quote(&g.name),
+                names.join(", "),
+                g.every
+            );
+        }
         out
     }
 }
@@ -266,7 +336,7 @@ mod tests {
 
     #[test]
     fn a_description_reads_writes_and_reads_back() {
-        let text = "name = \"line 3\"\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
+        let text = "name = \"line 3\"\n[[group]]\nname = \"slow\"\nslaves = [\"coupler\", 2]\nevery = 10\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
         let m = Machine::parse(text).unwrap();
         assert_eq!(m.name.as_deref(), Some("line 3"));
         assert_eq!(
@@ -280,6 +350,7 @@ mod tests {
         assert_eq!(s1.revision, RevisionCheck::Range { min: 0x100000, max: 0x110000 });
         assert!(s1.check_serial && s1.identity.serial == 7 && s1.alias == Some(0x10) && s1.optional);
         assert_eq!(m.slaves[2].revision, RevisionCheck::Any);
+        assert_eq!(m.groups, [GroupDesc { name: "slow".into(), positions: vec![0, 2], every: 10 }]);
         assert_eq!(Machine::parse(&m.to_toml()).unwrap(), m);
         let e = m.expected();
         assert_eq!((e[1].position, e[1].alias, e[1].optional), (1, Some(0x10), true));
@@ -302,6 +373,10 @@ mod tests {
                 "takes no revision_min",
             ),
             ("name = [\n", (2, 1), "invalid array"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [\"x\"]\n", (6, 11), "no slave named 'x'"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [3]\n", (6, 11), "slave 3: the description has slaves 0 to 0"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\nevery = 0\n", (7, 9), "every = 0"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\n[[group]]\nname = \"h\"\nslaves = [0]\n", (9, 11), "slave 0 is in group 'g' already"),
         ];
         for (text, (line, column), want) in cases {
             let e = Machine::parse(text).unwrap_err();

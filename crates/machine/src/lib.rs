@@ -20,7 +20,7 @@ pub mod eni;
 mod text;
 
 pub use compare::{compare, Expected, Found, Identity, Mismatch, RevisionCheck};
-pub use description::{DescriptionError, Machine, SlaveDesc};
+pub use description::{DescriptionError, GroupDesc, Machine, SlaveDesc};
 
 /// A file's place, 1-based: where an error or a warning points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]

@@ -72,7 +72,7 @@ pub use ferrocat_wire::register::{AlState, AlStatusCode, DlStatus};
 pub use ferrocat_wire::sii::SiiInfo;
 pub use ferrocat_wire::{Address, Command};
 pub use foe::Foe;
-pub use master::{Master, SplitLatch, STATION_BASE};
+pub use master::{Group, Master, SplitLatch, STATION_BASE};
 pub use process::Handle;
 pub use slave::{Health, MailboxConfig, Mapped, Slave};
 pub use sync::SyncState;

@@ -36,6 +36,8 @@ pub struct Plan {
     /// multiple of the base cycle; missing or 0: every cycle). The first frame due in a cycle
     /// carries the clock-sync method's datagrams: the fastest group's should be every cycle.
     pub frame_every: Vec<u32>,
+    /// By frame: a name for statistics (a group's, a task's), where given.
+    pub frame_names: Vec<String>,
     /// Bytes of the output image.
     pub output_bytes: u32,
     /// Bytes of the input image.

@@ -12,6 +12,7 @@ use crate::slave::{MailboxConfig, Slave};
 
 mod delays;
 mod far_steer;
+mod groups;
 mod init_cmds;
 mod modules;
 mod next_frame_latch;
@@ -22,6 +23,7 @@ mod split_start;
 mod states;
 
 use crate::event::MasterEvent;
+pub use groups::Group;
 pub use split_start::SplitLatch;
 
 /// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).
@@ -85,6 +87,8 @@ pub struct Master<I: Io> {
     pub relatched: Vec<usize>,
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
+    /// Process-data groups ([`Master::set_groups`]).
+    pub(crate) groups: Vec<groups::Group>,
     /// Diagnosis while cyclic ([`Master::diagnose`]).
     pub(crate) diagnosis: crate::diagnosis_state::Diagnosis,
 }
@@ -117,6 +121,7 @@ impl<I: Io> Master<I> {
             split_latch: None,
             relatched: Vec::new(),
             plan: None,
+            groups: Vec::new(),
             diagnosis: Default::default(),
         }
     }

@@ -1,0 +1,92 @@
+//! Process-data groups on the virtual segment: each group's frame at its own rate with its own
+//! working-counter check, outputs and inputs through it, the clock sync behind the fastest.
+use ferrocat_esc::DigitalIo;
+use ferrocat_master::io::Io;
+use ferrocat_master::{Group, Master};
+use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
+
+fn segment() -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 4\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
+         [[device]]\nbuiltin = 'SERVO'\n",
+    )
+    .unwrap();
+    Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 4))
+}
+
+#[test]
+fn groups_run_at_their_own_rates_with_their_own_checks() {
+    let mut m = segment();
+    m.set_groups(vec![
+        Group { name: "inputs".into(), positions: vec![2], every: 4 },
+        Group { name: "fast".into(), positions: vec![1, 3], every: 1 },
+    ]);
+    m.bring_up().unwrap();
+    let out = m.output(1, "Output").unwrap();
+    let inp = m.input(2, "Input").unwrap();
+    m.io_mut().seg.nodes[2].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap().inputs = vec![0b0101];
+    m.reset_cycle_stats();
+    let before = m.plan_frame_stats();
+    let mut next = m.io_mut().now_ns();
+    for k in 0..400u64 {
+        m.set(out, k & 1);
+        m.cycle().unwrap();
+        next += 1_000_000;
+        m.io_mut().sleep_until(next);
+    }
+    let plan = m.plan().unwrap();
+    // The fastest first; the slave in no group (the coupler, without process data) adds none.
+    assert_eq!(plan.frame_names, ["fast", "inputs"]);
+    assert_eq!(plan.frame_every, [1, 4]);
+    let stats = m.plan_frame_stats();
+    let sent: Vec<u64> = stats.iter().zip(&before).map(|(a, b)| a.sent - b.sent).collect();
+    assert_eq!(sent, [400, 100]);
+    // The EL2004 writes (2) and the servo reads and writes (3); the EL1004 reads (1).
+    assert_eq!(stats.iter().map(|s| (s.expected_wkc, s.short)).collect::<Vec<_>>(), [(5, 0), (1, 0)]);
+    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    // The EL1004's four inputs (its entries one bit each) through the slow group's frame.
+    assert_eq!(m.get(ferrocat_master::Handle { bits: 4, ..inp }), 0b0101);
+    let el2004 = m.io_mut().seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone();
+    assert_eq!(el2004, [1], "the last cycle's output (399 & 1)");
+}
+
+#[test]
+fn a_group_the_frames_cannot_carry_is_refused() {
+    let mut m = segment();
+    m.set_groups(vec![Group { name: "never".into(), positions: vec![1], every: 0 }]);
+    m.scan().unwrap();
+    let e = m.configure().unwrap_err().to_string();
+    assert!(e.contains("group never: every 0 cycles"), "{e}");
+    let mut m = segment();
+    m.set_groups(vec![
+        Group { name: "a".into(), positions: vec![1], every: 1 },
+        Group { name: "b".into(), positions: vec![1, 9], every: 2 },
+    ]);
+    m.scan().unwrap();
+    let e = m.configure().unwrap_err().to_string();
+    assert!(e.contains("slave 1 is in groups a and b") || e.contains("no slave at position 9"), "{e}");
+}
+
+#[test]
+fn the_clock_sync_rides_with_the_fastest_group() {
+    let mut m = segment();
+    m.set_groups(vec![
+        Group { name: "slow".into(), positions: vec![1, 2], every: 10 },
+        Group { name: "axis".into(), positions: vec![3], every: 1 },
+    ]);
+    m.scan().unwrap();
+    m.configure().unwrap();
+    let dc = ferrocat_master::DcConfig { sync0_cycle_ns: 1_000_000, ..Default::default() };
+    let (mut sync, _, mut state) =
+        m.start_clock_sync(&dc, &ferrocat_master::sync::SyncMethod::default(), 1_000_000).unwrap();
+    m.start().unwrap();
+    let mut next = m.io_mut().now_ns();
+    for _ in 0..3000 {
+        let (_, c) = m.cycle_sync(sync.as_mut(), &mut state).unwrap();
+        next += c.next_period_ns.unwrap_or(1_000_000);
+        m.io_mut().sleep_until(next);
+    }
+    assert_eq!(state.lock.state().name(), "locked", "{:?}", state.lock.offset_ns());
+    assert!(m.plan_frame_stats().iter().all(|s| s.short == 0), "{:?}", m.plan_frame_stats());
+    assert_eq!(m.slaves[3].state, ferrocat_wire::register::AlState::Op);
+}
