@@ -248,6 +248,12 @@ enum Command {
         /// and one of its entries; VALUE decimal or 0x hex, negative in two's complement.
         #[arg(long, value_name = "NAME=VALUE")]
         set: Vec<String>,
+        /// FROM=TO (repeatable): after every cycle copy FROM (an input, named as --set names
+        /// outputs) into the output TO, which the next cycle sends (slave-to-slave
+        /// communication through the master), besides an ENI's CopyInfos and a machine
+        /// description's [[copy]].
+        #[arg(long, value_name = "FROM=TO")]
+        copy: Vec<String>,
         /// NAME (repeatable): print this input's (or output's) value at the end, and in --json
         /// under `values`; named as --set names them.
         #[arg(long, value_name = "NAME")]
@@ -751,6 +757,7 @@ fn main() -> ExitCode {
             sync,
             set,
             show,
+            copy,
             counters_period_ms,
             no_diagnosis,
             json,
@@ -759,6 +766,7 @@ fn main() -> ExitCode {
                 diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
                 set: &set,
                 show: &show,
+                copy: &copy,
                 seconds,
                 cycle_us,
                 dc: dc.then_some((dc_static_frames, sync.as_str())),

@@ -459,6 +459,8 @@ pub struct RunOptions<'a> {
     /// Outputs to write before OP (`NAME=VALUE`), and values to show at the end.
     pub set: &'a [String],
     pub show: &'a [String],
+    /// Slave-to-slave copies (`FROM=TO`) besides a description's.
+    pub copy: &'a [String],
     pub json: bool,
 }
 
@@ -561,6 +563,15 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 .with_context(|| format!("--show '{n}'"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let copies = crate::values::copies(&m, eni.as_ref(), t.machine.as_deref(), o.copy)?;
+    if !copies.is_empty() {
+        eprintln!(
+            "{} slave-to-slave cop{} after every cycle",
+            copies.len(),
+            if copies.len() == 1 { "y" } else { "ies" }
+        );
+    }
+    m.set_copies(copies)?;
     m.start()?;
     let mut bridges = Vec::new();
     for &(pos, name) in &eoe_taps {

@@ -55,3 +55,56 @@ pub fn assignment<I: Io>(m: &Master<I>, eni: Option<&Eni>, spec: &str) -> anyhow
     }
     Ok((h, v as u64))
 }
+
+/// Every slave-to-slave copy a run makes: an ENI's `CopyInfos` (by bit, split into pieces of at
+/// most 64 bits), a machine description's `[[copy]]` (its slaves by name or position), and
+/// `--copy FROM=TO` (named as `--set` names them).
+pub fn copies<I: Io>(
+    m: &Master<I>,
+    eni: Option<&Eni>,
+    machine: Option<&std::path::Path>,
+    flags: &[String],
+) -> anyhow::Result<Vec<(Handle, Handle)>> {
+    let mut out = Vec::new();
+    if let Some(e) = eni {
+        for c in e.cyclic.iter().flat_map(|c| &c.frames).flat_map(|f| &f.cmds).flat_map(|d| &d.copies) {
+            let mut done = 0;
+            while done < c.bits {
+                let bits = (c.bits - done).min(64) as u8;
+                out.push((
+                    Handle { bit: m.out_bytes * 8 + c.src_bit + done, bits },
+                    Handle { bit: c.dst_bit + done, bits },
+                ));
+                done += bits as u32;
+            }
+        }
+    }
+    let mut named: Vec<(String, String, String)> = Vec::new();
+    if let Some(path) = machine {
+        let d = crate::eni::read_machine(path)?;
+        // A slave by its name in the description, as its position.
+        let by_position = |end: &str| match end.split_once(':') {
+            Some((slave, entry)) => match d.slaves.iter().position(|s| s.name == slave.trim()) {
+                Some(p) => format!("{p}:{entry}"),
+                None => end.to_string(),
+            },
+            None => end.to_string(),
+        };
+        for (from, to) in &d.copies {
+            named.push((by_position(from), by_position(to), format!("{}: [[copy]] {from} -> {to}", path.display())));
+        }
+    }
+    for f in flags {
+        let (from, to) = f.split_once('=').with_context(|| format!("--copy '{f}': give FROM=TO"))?;
+        named.push((from.trim().into(), to.trim().into(), format!("--copy '{f}'")));
+    }
+    for (from, to, what) in named {
+        let src = handle(m, eni, &from, false).with_context(|| what.clone())?;
+        let dst = handle(m, eni, &to, true).with_context(|| what.clone())?;
+        if src.bits != dst.bits {
+            bail!("{what}: {} bits into {} bits", src.bits, dst.bits);
+        }
+        out.push((src, dst));
+    }
+    Ok(out)
+}

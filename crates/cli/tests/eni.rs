@@ -89,16 +89,19 @@ fn statuswords(eni: &std::path::Path, sets: &[&str], shows: &[&str], extra: &[&s
 #[test]
 fn the_process_image_is_the_eni_s() {
     let f = lenient();
-    for (cw, sw) in [(0, 0x240), (6, 0x231)] {
+    // The file's CopyInfo copies the statusword's bit 0 (ready to switch on) into the EL2008's
+    // first output after every cycle, whatever --set wrote there.
+    for (cw, sw, copied) in [(0, 0x240, 0), (6, 0x231, 1)] {
         let set = format!("Drive \u{b5}.Outputs.Controlword={cw}");
+        let el2008 = format!("Term 2 (EL2008).Channel 1.Output={}", 1 - copied);
         let v = statuswords(
             &f,
-            &[&set, "Term 2 (EL2008).Channel 1.Output=1"],
+            &[&set, &el2008],
             &["Drive \u{b5}.Inputs.Statusword", "Term 2 (EL2008).Channel 1.Output"],
             &[],
         );
         assert_eq!(v["Drive \u{b5}.Inputs.Statusword"], sw, "{v}");
-        assert_eq!(v["Term 2 (EL2008).Channel 1.Output"], 1, "{v}");
+        assert_eq!(v["Term 2 (EL2008).Channel 1.Output"], copied, "{v}");
     }
     // With clock synchronisation behind the ENI's frame.
     let v = statuswords(&f, &["Drive \u{b5}.Outputs.Controlword=6"], &["Drive \u{b5}.Inputs.Statusword"], &["--dc"]);

@@ -93,11 +93,25 @@ fn groups_of_a_description_run_at_their_own_rates() {
          [[slave]]\nname = \"buttons\"\nvendor = 2\nproduct = 0x03EC3052\ndevice = \"EL1004\"\n\
          [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\ndevice = \"SERVO\"\n\
          [[group]]\nname = \"io\"\nslaves = [\"lamps\", \"buttons\"]\nevery = 4\n\
-         [[group]]\nname = \"motion\"\nslaves = [\"axis\"]\n",
+         [[group]]\nname = \"motion\"\nslaves = [\"axis\"]\n\
+         [[copy]]\nfrom = \"buttons:Input\"\nto = \"lamps:Output\"\n",
     )
     .unwrap();
     let p = path.to_str().unwrap();
-    let (ok, out, err) = ferrocat(&["run", "--machine", p, "--seconds", "1", "--dc", "--json"]);
+    // The copy from the buttons (0 in the simulator) overwrites what --set wrote to the lamps.
+    let (ok, out, err) = ferrocat(&[
+        "run",
+        "--machine",
+        p,
+        "--seconds",
+        "1",
+        "--dc",
+        "--json",
+        "--set",
+        "1:Output=1",
+        "--show",
+        "1:Output",
+    ]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let groups = v["groups"].as_array().unwrap();
@@ -110,5 +124,7 @@ fn groups_of_a_description_run_at_their_own_rates() {
     assert!(groups.iter().all(|g| g["short"] == 0 && g["lost"] == 0), "{v}");
     assert_eq!((motion["expected_wkc"].as_u64(), io["expected_wkc"].as_u64()), (Some(3), Some(3)));
     assert_eq!(v["clock_sync"]["lock"], "locked", "{v}");
+    assert!(err.contains("1 slave-to-slave copy after every cycle"), "{err}");
+    assert_eq!(v["values"]["1:Output"], 0, "{v}");
     std::fs::remove_file(&path).ok();
 }

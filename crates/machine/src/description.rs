@@ -46,6 +46,9 @@ pub struct Machine {
     pub slaves: Vec<SlaveDesc>,
     /// Process-data groups, each with its own frame and rate.
     pub groups: Vec<GroupDesc>,
+    /// Slave-to-slave copies through the master: (from, to), each `SLAVE:ENTRY` with the slave
+    /// by its name in the description or its position.
+    pub copies: Vec<(String, String)>,
 }
 
 /// A process-data group: its slaves' process data in a frame of their own, every `every`
@@ -96,6 +99,15 @@ struct Raw {
     slaves: Vec<RawSlave>,
     #[serde(default, rename = "group")]
     groups: Vec<RawGroup>,
+    #[serde(default, rename = "copy")]
+    copies: Vec<RawCopy>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCopy {
+    from: Spanned<String>,
+    to: Spanned<String>,
 }
 
 /// A slave of a group: its name in the description, or its position.
@@ -236,7 +248,23 @@ impl Machine {
             }
             groups.push(GroupDesc { name: g.name.get_ref().clone(), positions, every });
         }
-        Ok(Machine { name: raw.name, slaves, groups })
+        let mut copies = Vec::new();
+        for c in &raw.copies {
+            for end in [&c.from, &c.to] {
+                let slave = end.get_ref().split_once(':').map(|(s, _)| s.trim());
+                let known = slave.is_some_and(|s| {
+                    slaves.iter().any(|d| d.name == s) || s.parse::<usize>().is_ok_and(|p| p < slaves.len())
+                });
+                if !known {
+                    return Err(err(
+                        &end.span(),
+                        format!("'{}': give SLAVE:ENTRY, the slave by its name or position", end.get_ref()),
+                    ));
+                }
+            }
+            copies.push((c.from.get_ref().clone(), c.to.get_ref().clone()));
+        }
+        Ok(Machine { name: raw.name, slaves, groups, copies })
     }
 
     /// The slaves as the comparison takes them.
@@ -272,7 +300,7 @@ impl Machine {
                 device: None,
             })
             .collect();
-        Machine { name, slaves, groups: Vec::new() }
+        Machine { name, slaves, groups: Vec::new(), copies: Vec::new() }
     }
 
     /// The description as TOML that [`Machine::parse`] reads back, with a comment for each
@@ -326,6 +354,9 @@ impl Machine {
                 g.every
             );
         }
+        for (from, to) in &self.copies {
+            out += &format!("\n[[copy]]\nfrom = {}\nto = {}\n", quote(from), quote(to));
+        }
         out
     }
 }
@@ -336,7 +367,7 @@ mod tests {
 
     #[test]
     fn a_description_reads_writes_and_reads_back() {
-        let text = "name = \"line 3\"\n[[group]]\nname = \"slow\"\nslaves = [\"coupler\", 2]\nevery = 10\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
+        let text = "name = \"line 3\"\n[[copy]]\nfrom = \"slave 1:Input\"\nto = \"coupler:Output\"\n[[group]]\nname = \"slow\"\nslaves = [\"coupler\", 2]\nevery = 10\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
         let m = Machine::parse(text).unwrap();
         assert_eq!(m.name.as_deref(), Some("line 3"));
         assert_eq!(
@@ -351,6 +382,7 @@ mod tests {
         assert!(s1.check_serial && s1.identity.serial == 7 && s1.alias == Some(0x10) && s1.optional);
         assert_eq!(m.slaves[2].revision, RevisionCheck::Any);
         assert_eq!(m.groups, [GroupDesc { name: "slow".into(), positions: vec![0, 2], every: 10 }]);
+        assert_eq!(m.copies, [("slave 1:Input".to_string(), "coupler:Output".to_string())]);
         assert_eq!(Machine::parse(&m.to_toml()).unwrap(), m);
         let e = m.expected();
         assert_eq!((e[1].position, e[1].alias, e[1].optional), (1, Some(0x10), true));
@@ -374,6 +406,7 @@ mod tests {
             ),
             ("name = [\n", (2, 1), "invalid array"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [\"x\"]\n", (6, 11), "no slave named 'x'"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[copy]]\nfrom = \"0:a\"\nto = \"x:b\"\n", (6, 6), "'x:b': give SLAVE:ENTRY"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [3]\n", (6, 11), "slave 3: the description has slaves 0 to 0"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\nevery = 0\n", (7, 9), "every = 0"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\n[[group]]\nname = \"h\"\nslaves = [0]\n", (9, 11), "slave 0 is in group 'g' already"),

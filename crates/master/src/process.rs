@@ -94,6 +94,42 @@ impl<I: Io> Master<I> {
         v
     }
 
+    /// Slave-to-slave communication through the master (ETG.1500 item 1201): after every
+    /// cycle, each `from`'s value (an input) is written into `to` (an output), which the next
+    /// cycle sends, so that it reaches its slave one cycle after it was read. Each pair the
+    /// same width, at most 64 bits, within the image (after the layout).
+    pub fn set_copies(&mut self, copies: Vec<(Handle, Handle)>) -> Result<()> {
+        let bits = self.image.len() as u64 * 8;
+        for (k, (from, to)) in copies.iter().enumerate() {
+            if from.bits != to.bits || from.bits == 0 || from.bits > 64 {
+                return Err(MasterError::Config(format!(
+                    "copy {k}: {} bits into {} bits: a copy takes 1 to 64 bits into as many",
+                    from.bits, to.bits
+                )));
+            }
+            if [from, to].iter().any(|h| h.bit as u64 + h.bits as u64 > bits) {
+                return Err(MasterError::Config(format!(
+                    "copy {k}: bits {}..{} into {}..{} of a {}-bit image",
+                    from.bit,
+                    from.bit + from.bits as u32,
+                    to.bit,
+                    to.bit + to.bits as u32,
+                    bits
+                )));
+            }
+        }
+        self.copies = copies;
+        Ok(())
+    }
+
+    fn apply_copies(&mut self) {
+        for k in 0..self.copies.len() {
+            let (from, to) = self.copies[k];
+            let v = self.get(from);
+            self.set(to, v);
+        }
+    }
+
     /// The cyclic exchange's statistics so far.
     pub fn cycle_stats(&self) -> CycleStats {
         self.cyc.stats
@@ -232,6 +268,7 @@ impl<I: Io> Master<I> {
         };
         self.note_ring(passes)?;
         let expected = self.expected_wkc;
+        self.apply_copies();
         self.finish_cycle(start, wkc, expected, lost)?;
         Ok((wkc, correction))
     }
@@ -338,6 +375,7 @@ impl<I: Io> Master<I> {
         };
         let passes = self.engine.split_passes.take();
         self.note_ring(passes)?;
+        self.apply_copies();
         self.finish_cycle(start, wkc, expected, lost)?;
         Ok((wkc, correction))
     }

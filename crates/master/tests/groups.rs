@@ -90,3 +90,30 @@ fn the_clock_sync_rides_with_the_fastest_group() {
     assert!(m.plan_frame_stats().iter().all(|s| s.short == 0), "{:?}", m.plan_frame_stats());
     assert_eq!(m.slaves[3].state, ferrocat_wire::register::AlState::Op);
 }
+
+/// Slave-to-slave through the master: an input copied into an output after each cycle reaches
+/// its slave with the next cycle's frame, one cycle after it was read.
+#[test]
+fn a_copy_reaches_the_other_slave_one_cycle_later() {
+    let mut m = segment();
+    m.bring_up().unwrap();
+    let from = ferrocat_master::Handle { bits: 4, ..m.input(2, "Input").unwrap() };
+    let to = ferrocat_master::Handle { bits: 4, ..m.output(1, "Output").unwrap() };
+    m.set_copies(vec![(from, to)]).unwrap();
+    let terminal = |m: &mut Master<VirtualIo>| {
+        m.io_mut().seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone()
+    };
+    m.cycle().unwrap();
+    m.io_mut().seg.nodes[2].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap().inputs = vec![0b0110];
+    // The cycle that reads the inputs sends the outputs copied the cycle before.
+    m.cycle().unwrap();
+    assert_eq!(m.get(from), 0b0110);
+    assert_eq!(terminal(&mut m), [0]);
+    m.cycle().unwrap();
+    assert_eq!(terminal(&mut m), [0b0110]);
+    // A copy of other widths, or past the image, is refused.
+    let wide = ferrocat_master::Handle { bits: 8, ..to };
+    assert!(m.set_copies(vec![(from, wide)]).unwrap_err().to_string().contains("4 bits into 8 bits"));
+    let past = ferrocat_master::Handle { bit: 1 << 20, ..to };
+    assert!(m.set_copies(vec![(from, past)]).unwrap_err().to_string().contains("of a"));
+}

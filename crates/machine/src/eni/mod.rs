@@ -366,6 +366,20 @@ pub struct CyclicCmd {
     pub input_offs: Option<u32>,
     /// Where it sits in the output image, likewise.
     pub output_offs: Option<u32>,
+    /// Slave-to-slave copies made once its frame is back (`<CopyInfos>`).
+    pub copies: Vec<CopyInfo>,
+}
+
+/// `<CopyInfo>`: bits of the input image copied into the output image, for the next cycle to
+/// send (slave-to-slave communication through the master).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct CopyInfo {
+    /// First bit in the input image.
+    pub src_bit: u32,
+    /// First bit in the output image.
+    pub dst_bit: u32,
+    /// Bits.
+    pub bits: u32,
 }
 
 /// `<ProcessImage>`.

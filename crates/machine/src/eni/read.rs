@@ -538,8 +538,30 @@ impl Reader {
                 _ => self.warn(s, format!("state '{t}' is none of INIT, PREOP, BOOT, SAFEOP, OP: left out")),
             }
         }
+        let mut copies = Vec::new();
+        if let Some(ci) = child(d, "CopyInfos") {
+            for c in children(ci, "CopyInfo") {
+                let copy = CopyInfo {
+                    src_bit: self.req_number(c, "SrcBitOffs")?,
+                    dst_bit: self.req_number(c, "DstBitOffs")?,
+                    bits: self.req_number(c, "BitSize")?,
+                };
+                for (at, area, what) in
+                    [(copy.src_bit, &image.inputs, "SrcBitOffs"), (copy.dst_bit, &image.outputs, "DstBitOffs")]
+                {
+                    if at as u64 + copy.bits as u64 > area.byte_size as u64 * 8 {
+                        return Err(err(
+                            c,
+                            format!("{what} {at}: {} bits end past the image's {} bytes", copy.bits, area.byte_size),
+                        ));
+                    }
+                }
+                copies.push(copy);
+            }
+        }
         let cmd = CyclicCmd {
             place: place(d),
+            copies,
             states,
             comment: self.child_text(d, "Comment").unwrap_or_default(),
             command,

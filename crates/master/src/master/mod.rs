@@ -87,6 +87,8 @@ pub struct Master<I: Io> {
     pub relatched: Vec<usize>,
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
+    /// Slave-to-slave copies within the image ([`Master::set_copies`]).
+    pub(crate) copies: Vec<(crate::process::Handle, crate::process::Handle)>,
     /// Process-data groups ([`Master::set_groups`]).
     pub(crate) groups: Vec<groups::Group>,
     /// Diagnosis while cyclic ([`Master::diagnose`]).
@@ -121,6 +123,7 @@ impl<I: Io> Master<I> {
             split_latch: None,
             relatched: Vec::new(),
             plan: None,
+            copies: Vec::new(),
             groups: Vec::new(),
             diagnosis: Default::default(),
         }
