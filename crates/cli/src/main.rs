@@ -251,7 +251,7 @@ enum Command {
         /// FROM=TO (repeatable): after every cycle copy FROM (an input, named as --set names
         /// outputs) into the output TO, which the next cycle sends (slave-to-slave
         /// communication through the master), besides an ENI's CopyInfos and a machine
-        /// description's [[copy]].
+        /// description's `[[copy]]` tables.
         #[arg(long, value_name = "FROM=TO")]
         copy: Vec<String>,
         /// NAME (repeatable): print this input's (or output's) value at the end, and in --json

@@ -8,7 +8,7 @@
 //!   [`Warning`] naming line and column; [`eni::Eni::parse_strict`] refuses them.
 //! - [`description`]: ferrocat's own machine description, a TOML file a person reads and edits
 //!   ([`Machine`]), written from a scan to start from.
-//! - [`compare`]: the expected slaves against the scanned ones (ETG.1500 item 302), every
+//! - [`mod@compare`]: the expected slaves against the scanned ones (ETG.1500 item 302), every
 //!   difference named: missing, extra, swapped, another device, another revision, serial
 //!   number or alias.
 //!

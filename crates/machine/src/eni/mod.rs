@@ -444,7 +444,7 @@ impl Eni {
         }
     }
 
-    /// The identities the slaves must have, in order, for [`crate::compare`]: vendor, product
+    /// The identities the slaves must have, in order, for [`crate::compare()`]: vendor, product
     /// and revision exactly. Not the serial number: an ENI holds what its tool scanned, and a
     /// unit replaced by another of the same type would differ.
     pub fn expected(&self) -> Vec<crate::Expected> {
