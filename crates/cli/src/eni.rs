@@ -205,17 +205,21 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
         .map(|s| {
             s.init_cmds
                 .iter()
-                .filter(|c| matches!(c.command, Command::APWR | Command::FPWR) && any(&c.transitions, &[ps, so]))
+                .filter(|c| matches!(c.command, Command::APWR | Command::FPWR))
                 .filter_map(|c| match c.target {
-                    Target::Device { ado, .. } => Some((ado, c.data.clone())),
+                    Target::Device { ado, .. } => Some((ado, c.data.clone(), &c.transitions)),
                     Target::Logical(_) => None,
                 })
-                .filter(|(ado, _)| {
+                .filter(|(ado, _, ts)| {
                     let fmmu = (0x0600..0x0700).contains(ado);
                     // SM0 and SM1 of a slave with a mailbox are its mailbox: the master's.
                     let sm = (0x0800..0x0880).contains(ado) && !(s.mailbox.is_some() && *ado < 0x0810);
-                    fmmu || sm
+                    // The watchdog divider and times (0x0400, 0x0410, 0x0420), set by TwinCAT
+                    // at INIT → PREOP.
+                    let watchdog = (0x0400..0x0430).contains(ado);
+                    ((fmmu || sm) && any(ts, &[ps, so])) || (watchdog && any(ts, &[ip, ps]))
                 })
+                .map(|(ado, data, _)| (ado, data))
                 .collect()
         })
         .collect();
@@ -299,5 +303,23 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
             .collect(),
         output_bytes: size(eni.process_image.outputs.byte_size, reach(|d| d.output_offs)),
         input_bytes: size(eni.process_image.inputs.byte_size, reach(|d| d.input_offs)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn needs_shared_twincat_s_watchdog_fmmus_and_sms_make_the_plan() {
+        let path = ferrocat_testdata::shared("eni/test_eni.xml");
+        let eni = ferrocat_machine::eni::Eni::parse(&std::fs::read(path).unwrap()).unwrap();
+        let plan = super::plan(&eni);
+        // A drive: its watchdog divider and SM watchdog, its process data's SMs and FMMUs; not
+        // its mailbox's SMs.
+        let drive: Vec<u16> = plan.registers[1].iter().map(|(ado, _)| *ado).collect();
+        assert!(drive.contains(&0x0400) && drive.contains(&0x0420), "{drive:#06x?}");
+        assert!(drive.iter().any(|a| (0x0600..0x0700).contains(a)), "{drive:#06x?}");
+        assert!(drive.iter().all(|a| !(0x0800..0x0810).contains(a)), "{drive:#06x?}");
+        assert_eq!(plan.stations, [1001, 1002, 1003, 1004, 1005]);
+        assert_eq!(plan.frames[0].len(), 6);
     }
 }

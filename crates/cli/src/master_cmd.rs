@@ -515,6 +515,13 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     };
     t.scan(&mut m)?;
     m.configure()?;
+    // Nothing to exchange: no frame would go out, and the summary would count none.
+    if m.image.is_empty() && !dc {
+        bail!(
+            "no slave maps process data ({}): nothing to exchange cyclically (--dc runs the clock distribution alone)",
+            crate::count(m.slaves.len(), "slave", "found")
+        );
+    }
     let mut sync: Option<(Box<dyn ClockSync>, SyncState)> = None;
     if dc {
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.

@@ -62,3 +62,22 @@ fn the_frame_timeout_is_bounded() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+/// A segment without process data has nothing to run: said so, and no summary of cycles that
+/// never were (it once reported 0 cycles with a mean period of 2 s and exited 0).
+#[test]
+fn a_segment_without_process_data_is_refused() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", "EK1100", "--seconds", "0.2", "--json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("no slave maps process data (1 slave found)"), "{err}");
+    assert!(out.stdout.is_empty());
+    // With DC there is a frame each cycle: the reference's time distributed.
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", "EK1100", "--seconds", "0.2", "--json", "--dc", "--sync", "none"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
