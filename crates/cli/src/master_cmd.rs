@@ -656,6 +656,11 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 s.last_round_trip_ns as f64 / 1000.0,
                 s.max_round_trip_ns as f64 / 1000.0
             );
+            // The values asked for with --show, at the report's rate.
+            if !shown.is_empty() {
+                let values: Vec<String> = shown.iter().map(|(n, h)| format!("{n} = {}", m.get(*h))).collect();
+                eprintln!("          {}", values.join("; "));
+            }
             report += 1_000_000_000;
         }
         if !max_rate {

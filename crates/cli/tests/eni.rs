@@ -103,6 +103,19 @@ fn the_process_image_is_the_eni_s() {
         assert_eq!(v["Drive \u{b5}.Inputs.Statusword"], sw, "{v}");
         assert_eq!(v["Term 2 (EL2008).Channel 1.Output"], copied, "{v}");
     }
+    // Shown every second while it runs, too.
+    let (ok, _, err) = ferrocat(&[
+        "run",
+        "--eni",
+        f.to_str().unwrap(),
+        "--seconds",
+        "1.5",
+        "--set",
+        "Drive \u{b5}.Outputs.Controlword=6",
+        "--show",
+        "Drive \u{b5}.Inputs.Statusword",
+    ]);
+    assert!(ok && err.contains("          Drive \u{b5}.Inputs.Statusword = 561"), "{err}");
     // With clock synchronisation behind the ENI's frame.
     let v = statuswords(&f, &["Drive \u{b5}.Outputs.Controlword=6"], &["Drive \u{b5}.Inputs.Statusword"], &["--dc"]);
     assert_eq!(v["Drive \u{b5}.Inputs.Statusword"], 0x231, "{v}");
