@@ -19,14 +19,7 @@ const MAX_CHUNKS: usize = 8;
 /// follower's clock where the method reads one).
 const MAX_PDUS: usize = MAX_CHUNKS + 4;
 
-/// Where an entry sits in the image: bit offset and width.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Handle {
-    /// Bit offset in the whole image.
-    pub bit: u32,
-    /// Width in bits.
-    pub bits: u8,
-}
+pub use crate::handle::Handle;
 
 impl<I: Io> Master<I> {
     /// After a cyclic frame (`passes`: its two passes round a broken ring, if it made them):

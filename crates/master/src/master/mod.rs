@@ -88,7 +88,7 @@ pub struct Master<I: Io> {
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
     /// Slave-to-slave copies within the image ([`Master::set_copies`]).
-    pub(crate) copies: Vec<(crate::process::Handle, crate::process::Handle)>,
+    pub(crate) copies: Vec<(crate::handle::Handle, crate::handle::Handle)>,
     /// Process-data groups ([`Master::set_groups`]).
     pub(crate) groups: Vec<groups::Group>,
     /// Diagnosis while cyclic ([`Master::diagnose`]).
