@@ -23,6 +23,16 @@ impl Pair {
         for ns in &p.ns {
             let _ = Command::new("ip").args(["netns", "del", ns]).output();
             ip(&["netns", "add", ns]);
+            // No IPv6 on the pair: the kernel's own router solicitations and MLD reports,
+            // sent a moment after a link comes up, would reach a socket that takes every
+            // frame (once, in CI, one came where the test waits for silence). A kernel
+            // without IPv6 has nothing to turn off.
+            for conf in ["default", "all"] {
+                let _ = Command::new("ip")
+                    .args(["netns", "exec", ns, "sh", "-c"])
+                    .arg(format!("echo 1 > /proc/sys/net/ipv6/conf/{conf}/disable_ipv6"))
+                    .output();
+            }
         }
         ip(&["link", "add", &p.ifs[0], "type", "veth", "peer", "name", &p.ifs[1]]);
         for k in 0..2 {
