@@ -101,12 +101,6 @@ pub fn run(path: &Path, json: bool, strict: bool) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// [`read`] without its warnings (for a second look at a file already read).
-pub fn read_quietly(path: &Path) -> anyhow::Result<Eni> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    Eni::parse(&bytes).with_context(|| format!("{}", path.display()))
-}
-
 /// The scanned slaves as the comparison takes them.
 pub fn found(slaves: &[ferrocat_master::Slave]) -> Vec<Found> {
     slaves

@@ -556,21 +556,19 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             );
         }
     }
-    let eni = t.eni.as_deref().map(crate::eni::read_quietly).transpose()?;
+    let eni = t.eni_file()?;
     for spec in o.set {
-        let (h, v) = crate::values::assignment(&m, eni.as_ref(), spec)?;
+        let (h, v) = crate::values::assignment(&m, eni, spec)?;
         m.set(h, v);
     }
     let shown = o
         .show
         .iter()
         .map(|n| {
-            crate::values::handle(&m, eni.as_ref(), n, false)
-                .map(|h| (n.as_str(), h))
-                .with_context(|| format!("--show '{n}'"))
+            crate::values::handle(&m, eni, n, false).map(|h| (n.as_str(), h)).with_context(|| format!("--show '{n}'"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let copies = crate::values::copies(&m, eni.as_ref(), t.machine.as_deref(), o.copy)?;
+    let copies = crate::values::copies(&m, eni, t.machine_file()?, o.copy)?;
     if !copies.is_empty() {
         eprintln!(
             "{} slave-to-slave cop{} after every cycle",

@@ -74,6 +74,11 @@ pub struct Target {
     /// With --eni or --machine: report the differences and go on.
     #[arg(long)]
     pub allow_mismatch: bool,
+    /// The --eni file and the --machine description, read once, by whichever step asks first.
+    #[arg(skip)]
+    pub(crate) loaded_eni: std::cell::OnceCell<ferrocat_machine::eni::Eni>,
+    #[arg(skip)]
+    pub(crate) loaded_machine: std::cell::OnceCell<ferrocat_machine::Machine>,
 }
 
 /// [`ferrocat_master::io::LinkPath`] on the command line.
@@ -268,6 +273,8 @@ impl Target {
             eni: None,
             machine: None,
             allow_mismatch: false,
+            loaded_eni: Default::default(),
+            loaded_machine: Default::default(),
         }
     }
 
@@ -316,18 +323,21 @@ impl Target {
         let mut m = Master::new(CliIo { world, capture });
         m.set_split_ring_clocks(self.split_ring_clocks.into());
         // A machine description's process-data groups.
-        if let Some(p) = &self.machine {
-            let groups = crate::eni::read_machine(p)?.groups;
+        if let Some(d) = self.machine_file()? {
             m.set_groups(
-                groups
-                    .into_iter()
-                    .map(|g| ferrocat_master::Group { name: g.name, positions: g.positions, every: g.every })
+                d.groups
+                    .iter()
+                    .map(|g| ferrocat_master::Group {
+                        name: g.name.clone(),
+                        positions: g.positions.clone(),
+                        every: g.every,
+                    })
                     .collect(),
             );
         }
         // An ENI's own layout: its station addresses, FMMUs, SyncManagers and cyclic frames.
-        if let Some(p) = &self.eni {
-            m.set_plan(crate::eni::plan(&crate::eni::read(p, false)?)).with_context(|| format!("{}", p.display()))?;
+        if let (Some(eni), Some(p)) = (self.eni_file()?, &self.eni) {
+            m.set_plan(crate::eni::plan(eni)).with_context(|| format!("{}", p.display()))?;
         }
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
@@ -337,13 +347,31 @@ impl Target {
         Ok(m)
     }
 
+    /// The --eni file, read (its warnings shown) once.
+    pub fn eni_file(&self) -> anyhow::Result<Option<&ferrocat_machine::eni::Eni>> {
+        let Some(p) = &self.eni else { return Ok(None) };
+        if self.loaded_eni.get().is_none() {
+            let _ = self.loaded_eni.set(crate::eni::read(p, false)?);
+        }
+        Ok(self.loaded_eni.get())
+    }
+
+    /// The --machine description, read once.
+    pub fn machine_file(&self) -> anyhow::Result<Option<&ferrocat_machine::Machine>> {
+        let Some(p) = &self.machine else { return Ok(None) };
+        if self.loaded_machine.get().is_none() {
+            let _ = self.loaded_machine.set(crate::eni::read_machine(p)?);
+        }
+        Ok(self.loaded_machine.get())
+    }
+
     /// Scans, and with --eni or --machine compares the network found with the file's before
     /// any slave leaves INIT.
     pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
-        let expected = match (&self.eni, &self.machine) {
-            (Some(p), _) => Some((p, crate::eni::read_quietly(p)?.expected())),
-            (None, Some(p)) => Some((p, crate::eni::read_machine(p)?.expected())),
-            (None, None) => None,
+        let expected = match (self.eni_file()?, self.machine_file()?, &self.eni, &self.machine) {
+            (Some(e), _, Some(p), _) => Some((p, e.expected())),
+            (None, Some(d), _, Some(p)) => Some((p, d.expected())),
+            _ => None,
         };
         if self.allow_mismatch && expected.is_none() {
             bail!("--allow-mismatch goes with --eni or --machine");

@@ -62,7 +62,7 @@ pub fn assignment<I: Io>(m: &Master<I>, eni: Option<&Eni>, spec: &str) -> anyhow
 pub fn copies<I: Io>(
     m: &Master<I>,
     eni: Option<&Eni>,
-    machine: Option<&std::path::Path>,
+    machine: Option<&ferrocat_machine::Machine>,
     flags: &[String],
 ) -> anyhow::Result<Vec<(Handle, Handle)>> {
     let mut out = Vec::new();
@@ -80,8 +80,7 @@ pub fn copies<I: Io>(
         }
     }
     let mut named: Vec<(String, String, String)> = Vec::new();
-    if let Some(path) = machine {
-        let d = crate::eni::read_machine(path)?;
+    if let Some(d) = machine {
         // A slave by its name in the description, as its position.
         let by_position = |end: &str| match end.split_once(':') {
             Some((slave, entry)) => match d.slaves.iter().position(|s| s.name == slave.trim()) {
@@ -91,7 +90,7 @@ pub fn copies<I: Io>(
             None => end.to_string(),
         };
         for (from, to) in &d.copies {
-            named.push((by_position(from), by_position(to), format!("{}: [[copy]] {from} -> {to}", path.display())));
+            named.push((by_position(from), by_position(to), format!("[[copy]] {from} -> {to}")));
         }
     }
     for f in flags {
