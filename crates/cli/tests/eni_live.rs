@@ -21,8 +21,9 @@ fn run_against_its_own_simulation(tag: &str, eni: &std::path::Path) {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let slaves = &v["slaves"];
     assert_eq!(slaves["in_op_at_end"], slaves["count"], "{v}");
-    // Frames a loaded host loses count as short cycles; none came back short.
-    assert_eq!(v["wkc_errors"], v["frames_lost"], "{v}");
+    // Frames a loaded host loses count as short cycles; none came back short. `frames_lost`
+    // also counts diagnosis's datagrams given up at their deadline, which are no cycle's.
+    assert!(v["wkc_errors"].as_u64() <= v["frames_lost"].as_u64(), "{v}");
     println!("{}: {v}", eni.display());
 }
 
@@ -61,5 +62,5 @@ fn a_machine_description_runs_against_its_simulation() {
     assert!(o.status.success() && err.contains("describes it: 2 slaves"), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["slaves"]["in_op_at_end"], 2, "{v}");
-    assert_eq!(v["wkc_errors"], v["frames_lost"], "{v}");
+    assert!(v["wkc_errors"].as_u64() <= v["frames_lost"].as_u64(), "{v}");
 }
