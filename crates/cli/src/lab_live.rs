@@ -33,6 +33,8 @@ pub struct LiveArgs {
     pub spin_us: u64,
     /// How the simulator's frames move.
     pub sim_io: crate::target::IoPath,
+    /// ferrocat's probing per cycle on average, µs (`None`: unbudgeted).
+    pub probe_budget_us: Option<u64>,
     pub json: bool,
 }
 
@@ -221,6 +223,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let (mut sync, _) =
         ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
+    st.probe_budget_ns = a.probe_budget_us.map(|us| us * 1000);
     let start = m.io_mut().now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
@@ -533,6 +536,7 @@ mod tests {
             io: crate::target::IoPath::Auto,
             spin_us: ferrocat_link::DEFAULT_RING_SPIN_NS / 1000,
             sim_io: crate::target::IoPath::Socket,
+            probe_budget_us: None,
             json: false,
         }
     }

@@ -236,6 +236,16 @@ enum Command {
         #[arg(long, default_value = "ferrocat", requires = "dc",
               value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
         sync: String,
+        /// With --dc: where SYNC0 falls after each cycle's frame leaves the master (µs, below
+        /// --cycle-us). Default: half the cycle, so that a frame up to half a cycle late still
+        /// reaches the slaves before their SYNC0.
+        #[arg(long, requires = "dc")]
+        sync0_shift_us: Option<u64>,
+        /// With --dc: how long the clock sync's probe frames may take per cycle on average (µs;
+        /// 0: no probes). Default: half the loop's own CPU time per cycle, measured over its
+        /// first 0.2 s (at least 200 cycles), which run without probes.
+        #[arg(long, requires = "dc")]
+        probe_budget_us: Option<u64>,
         /// How often each slave's error counters (0x0300–0x0313) are read while cyclic, ms; the
         /// mailboxes are polled for emergencies between. Both only in a cycle's spare time.
         #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=3_600_000))]
@@ -382,6 +392,10 @@ enum LabCmd {
         /// How the simulator's frames move (as `sim --io`).
         #[arg(long, value_enum, default_value = "socket")]
         sim_io: target::IoPath,
+        /// How long ferrocat's probe frames may take per cycle on average (µs, as `run
+        /// --probe-budget-us`). Default: as many as the method wants within the cycle.
+        #[arg(long)]
+        probe_budget_us: Option<u64>,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -687,20 +701,31 @@ fn main() -> ExitCode {
                 LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
                 LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
                 LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
-                LabCmd::Live { method, slaves, cycle_us, settle_s, seconds, seed, io, spin_us, sim_io, json } => {
-                    lab_live::run(lab_live::LiveArgs {
-                        methods: method,
-                        slaves,
-                        cycle_us,
-                        settle_s,
-                        seconds,
-                        seed,
-                        io,
-                        spin_us,
-                        sim_io,
-                        json,
-                    })
-                }
+                LabCmd::Live {
+                    method,
+                    slaves,
+                    cycle_us,
+                    settle_s,
+                    seconds,
+                    seed,
+                    io,
+                    spin_us,
+                    sim_io,
+                    probe_budget_us,
+                    json,
+                } => lab_live::run(lab_live::LiveArgs {
+                    methods: method,
+                    slaves,
+                    cycle_us,
+                    settle_s,
+                    seconds,
+                    seed,
+                    io,
+                    spin_us,
+                    sim_io,
+                    probe_budget_us,
+                    json,
+                }),
             }
         }
         Command::Rtt { iface, frames, slaves, force } => sim::rtt(&iface, frames, slaves, force),
@@ -755,6 +780,8 @@ fn main() -> ExitCode {
             dc_static_frames,
             eoe_tap,
             sync,
+            sync0_shift_us,
+            probe_budget_us,
             set,
             show,
             copy,
@@ -769,7 +796,12 @@ fn main() -> ExitCode {
                 copy: &copy,
                 seconds,
                 cycle_us,
-                dc: dc.then_some((dc_static_frames, sync.as_str())),
+                dc: dc.then_some(master_cmd::DcOptions {
+                    static_frames: dc_static_frames,
+                    sync: sync.as_str(),
+                    sync0_shift_us,
+                    probe_budget_us,
+                }),
                 max_rate,
                 frame_timeout_us,
                 eoe_taps: &eoe_tap,

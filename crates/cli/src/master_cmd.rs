@@ -448,8 +448,8 @@ fn cpu_ns() -> u64 {
 pub struct RunOptions<'a> {
     pub seconds: f64,
     pub cycle_us: u64,
-    /// With DC: the static drift compensation's frames at most, and the clock-sync preset.
-    pub dc: Option<(u32, &'a str)>,
+    /// With DC: how the clocks are brought together and kept so.
+    pub dc: Option<DcOptions<'a>>,
     pub max_rate: bool,
     /// The cyclic frames' timeout; `None`: [`frame_timeout_us`]'s default.
     pub frame_timeout_us: Option<u64>,
@@ -462,6 +462,47 @@ pub struct RunOptions<'a> {
     /// Slave-to-slave copies (`FROM=TO`) besides a description's.
     pub copy: &'a [String],
     pub json: bool,
+}
+
+/// Where the cyclic frames passed the reference on the DC cycle, as time after the SYNC0
+/// before: a frame aimed the shift before SYNC0 passes `cycle − shift` after the one before.
+/// One that passed near either end came close to reaching a DC-synchronous slave in the
+/// wrong SYNC0 interval, and two such intervals without outputs take a drive out of OP
+/// (0x001A).
+struct Sync0Passage {
+    sync0_phase_ns: u64,
+    after_sync0: Histogram,
+}
+
+impl Sync0Passage {
+    /// SYNC0 at `sync0_phase_ns` modulo the cycle, in system time.
+    fn new(sync0_phase_ns: u64) -> Self {
+        Sync0Passage { sync0_phase_ns, after_sync0: Histogram::default() }
+    }
+
+    /// A frame that passed the reference when its system time read `at_ns`.
+    fn add(&mut self, at_ns: u64, cycle_ns: u64) {
+        let d = (at_ns as i128 - self.sync0_phase_ns as i128).rem_euclid(cycle_ns.max(1) as i128) as u64;
+        self.after_sync0.add(d);
+    }
+}
+
+/// `ferrocat run --dc`'s settings.
+pub struct DcOptions<'a> {
+    /// The static drift compensation's frames at most.
+    pub static_frames: u32,
+    /// The clock-sync preset.
+    pub sync: &'a str,
+    /// SYNC0 after the frame leaves, µs (`None`: half the cycle).
+    pub sync0_shift_us: Option<u64>,
+    /// Probing's time per cycle, µs (`None`: from the loop's measured cost).
+    pub probe_budget_us: Option<u64>,
+}
+
+/// The cycles at the start of a run that measure the loop's own cost, without probes: 0.2 s,
+/// at least 200.
+fn measuring_cycles(cycle_us: u64) -> u64 {
+    (200_000 / cycle_us.max(1)).max(200)
 }
 
 /// The cyclic frames' timeout unless told: ¾ of the cycle, so that the wait for a lost frame
@@ -487,7 +528,10 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let RunOptions { seconds, cycle_us, max_rate, eoe_taps, json, .. } = *o;
     let frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate));
     let dc = o.dc.is_some();
-    let dc_static_frames = o.dc.map(|(frames, _)| frames);
+    let sync0_shift_us = o.dc.as_ref().map(|d| d.sync0_shift_us.unwrap_or(cycle_us / 2));
+    if let Some(shift) = sync0_shift_us.filter(|&s| s >= cycle_us) {
+        bail!("--sync0-shift-us {shift}: give a shift below the cycle ({cycle_us} us)");
+    }
     if !(0.0..1e6).contains(&seconds) {
         bail!("--seconds {seconds}: give 0 (until SIGINT or SIGTERM) or a time below 1 000 000 s");
     }
@@ -523,18 +567,22 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         );
     }
     let mut sync: Option<(Box<dyn ClockSync>, SyncState)> = None;
-    if dc {
+    // Where the master's cycles start on the DC cycle's grid, with DC.
+    let mut grid_ns = None;
+    if let (Some(d), Some(shift_us)) = (&o.dc, sync0_shift_us) {
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
         let cfg = ferrocat_master::DcConfig {
             sync0_cycle_ns: (cycle_us * 1000).min(u32::MAX as u64) as u32,
-            max_frames: dc_static_frames.unwrap_or(15_000),
+            sync0_shift_ns: (shift_us * 1000) as i32,
+            max_frames: d.static_frames,
             ..Default::default()
         };
-        let name = o.dc.map_or("ferrocat", |(_, name)| name);
+        let name = d.sync;
         let method = SyncMethod::preset(name, Coupling::ReferenceFollowsMaster)
             .with_context(|| format!("--sync {name}: not a method ({})", SyncMethod::PRESETS.join(", ")))?;
         let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;
         sync = Some((s, st));
+        grid_ns = r.sync0_start.map(|t| t.wrapping_sub(shift_us * 1000));
         eprintln!(
             "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on {}",
             r.reference,
@@ -592,8 +640,16 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let period = if max_rate { 0 } else { cycle_us * 1000 };
     m.set_period_ns(period);
     m.reset_cycle_stats();
-    let cpu0 = cpu_ns();
     use ferrocat_master::io::Io;
+    // Each frame leaves the shift before SYNC0 (the master-following methods then keep that
+    // phase themselves): a frame leaving at a random phase could pass the slaves at their SYNC0,
+    // and with a host's jitter reach them in one SYNC0 interval or the next, which a drive's
+    // SM-synchronisation supervision takes for missed outputs (0x001A).
+    if let Some(grid) = grid_ns.filter(|_| !max_rate) {
+        let first = m.next_on_grid_ns(grid, cycle_us * 1000);
+        m.io_mut().sleep_until(first);
+    }
+    let cpu0 = cpu_ns();
     let start = m.io_mut().now_ns();
     let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
@@ -609,13 +665,43 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // one planned, and the cycles whose work ran past the next cycle's start.
     let (mut wake_late, mut jitter) = (Histogram::default(), Histogram::default());
     let (mut overruns, mut skipped) = (0u64, 0u64);
+    // Where each answered frame passed the reference, after its cycle's start on the DC grid;
+    // SYNC0 comes the shift after that start.
+    let mut passage = grid_ns.zip(sync0_shift_us).map(|(grid, shift_us)| Sync0Passage::new(grid + shift_us * 1000));
     let mut last_wake: Option<u64> = None;
+    // Probing waits until the loop's own cost is known, unless its budget was given.
+    let probe_budget_us = o.dc.as_ref().and_then(|d| d.probe_budget_us);
+    let mut measuring = None;
+    if let Some((_, st)) = sync.as_mut() {
+        match probe_budget_us {
+            Some(us) => st.probe_budget_ns = Some(us * 1000),
+            None if !max_rate => {
+                st.no_probes = true;
+                measuring = Some(measuring_cycles(cycle_us));
+            }
+            None => {}
+        }
+        st.no_probes |= probe_budget_us == Some(0);
+    }
     while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
         next += next_period;
         next_period = match sync.as_mut() {
             Some((method, st)) => {
+                let (lost_before, lock_before) = (st.lost, st.lock.state());
                 let (_, c) = m.cycle_sync(method.as_mut(), st)?;
+                if st.lock.state() != lock_before {
+                    eprintln!(
+                        "t={:7.3} s  clock sync {lock_before} -> {} (offset {} ns; {} frames lost so far)",
+                        (m.io_mut().now_ns() - start) as f64 * 1e-9,
+                        st.lock.state(),
+                        st.lock.offset_ns().unwrap_or(0),
+                        st.lost
+                    );
+                }
+                if let (Some(p), Some(at), false) = (passage.as_mut(), st.reference_ns, st.lost > lost_before) {
+                    p.add(at, cycle_us * 1000);
+                }
                 if max_rate {
                     0
                 } else {
@@ -627,6 +713,22 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 period
             }
         };
+        if let (Some(n), Some((_, st))) = (measuring, sync.as_mut()) {
+            if m.cycle_stats().cycles >= n {
+                measuring = None;
+                let cpu_per_cycle_ns = (cpu_ns() - cpu0) / n;
+                st.probe_budget_ns = Some(cpu_per_cycle_ns / 2);
+                st.no_probes = false;
+                eprintln!(
+                    "host: the loop took {:.1} us of CPU a cycle over its first {n} cycles ({:.1} % of a core at {cycle_us} us); \
+                     wake-ups late by {}; clock-sync probes get {:.1} us a cycle",
+                    cpu_per_cycle_ns as f64 / 1e3,
+                    cpu_per_cycle_ns as f64 / (cycle_us * 10) as f64,
+                    wake_late.summary(),
+                    cpu_per_cycle_ns as f64 / 2e3
+                );
+            }
+        }
         for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
@@ -713,6 +815,16 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "lock": st.lock.state().name(),
             "offset_ns": st.lock.offset_ns(),
             "frames_lost": st.lost,
+            "lock_changes": st.lock.changes(),
+            "locked_after_s": st.lock.first_locked_cycle().map(|c| c as f64 * cycle_us as f64 * 1e-6),
+            "probes": st.probes,
+            "probes_lost": st.probes_lost,
+            "probes_cut": st.probes_cut,
+            "probe_mean_us": st.probe_mean_ns as f64 / 1000.0,
+            "probes_unfunded": st.probes_unfunded,
+            "probe_budget_us": st.probe_budget_ns.map(|b| b as f64 / 1000.0),
+            "sync0_shift_us": sync0_shift_us,
+            "passage_after_sync0": passage.as_ref().map(|p| p.after_sync0.to_json()),
         })
     });
     if json {
@@ -757,6 +869,15 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
+        }
+        if let (Some(p), Some(shift_us)) = (&passage, sync0_shift_us) {
+            let h = &p.after_sync0;
+            if let (Some(min), Some(p50), Some(max)) = (h.min_us(), h.quantile_us(0.5), h.max_us()) {
+                outln!(
+                    "frames passed the reference {min:.0} to {max:.0} us after a SYNC0 (p50 {p50:.0} us; aimed at {} us)",
+                    cycle_us - shift_us
+                );
+            }
         }
         for (n, h) in &shown {
             let v = m.get(*h);

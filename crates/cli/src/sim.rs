@@ -155,6 +155,19 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
         "busy_ns_per_frame": stats.busy_ns.checked_div(stats.frames_out).unwrap_or(0),
         "busy_ns_median": stats.busy_quantile_ns(0.5),
         "busy_ns_p99": stats.busy_quantile_ns(0.99),
+        "taken_late": stats.taken_late,
+        "max_wait_ns": stats.max_wait_ns,
+        "sync_errors": stats.sync_errors.iter().map(|e| json!({
+            "at_s": e.at_ns as f64 * 1e-9,
+            "device": e.node,
+            "al_status_code": e.code,
+            "side": match e.side {
+                ferrocat_sim::serve::SyncErrorSide::NoFrames { .. } => "no frames",
+                ferrocat_sim::serve::SyncErrorSide::Simulator { .. } => "simulator",
+                ferrocat_sim::serve::SyncErrorSide::Phase { .. } => "phase",
+            },
+            "why": e.side.to_string(),
+        })).collect::<Vec<_>>(),
         "devices": devices,
     })
 }
@@ -355,6 +368,24 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
             "ferrocat sim: time per frame (receive to send) median {:.1} us, p99 {:.1} us",
             m as f64 / 1000.0,
             p99 as f64 / 1000.0
+        );
+    }
+    if stats.frames_in > 0 {
+        eprintln!(
+            "ferrocat sim: {}taken more than {} us after arriving (longest wait {:.0} us)",
+            crate::count(stats.taken_late as usize, "frame", ""),
+            ferrocat_sim::serve::SHARED_WAIT_NS / 1000,
+            stats.max_wait_ns as f64 / 1e3
+        );
+    }
+    for e in &stats.sync_errors {
+        eprintln!(
+            "ferrocat sim: t={:.3} s device {} ({}) left OP with 0x{:04x}: {}",
+            e.at_ns as f64 * 1e-9,
+            e.node,
+            seg.nodes.get(e.node).map_or("?", |n| n.name.as_str()),
+            e.code,
+            e.side
         );
     }
     if let Some(p) = a.report {

@@ -6,17 +6,18 @@ use serde_json::{json, Value};
 const FINE: usize = 1_000;
 const COARSE: usize = 900;
 
-/// A histogram of durations in ns, with the exact maximum.
+/// A histogram of durations in ns, with the exact minimum and maximum.
 #[derive(Debug, Clone)]
 pub struct Histogram {
     counts: Vec<u64>,
     n: u64,
+    min_ns: u64,
     max_ns: u64,
 }
 
 impl Default for Histogram {
     fn default() -> Self {
-        Histogram { counts: vec![0; FINE + COARSE + 1], n: 0, max_ns: 0 }
+        Histogram { counts: vec![0; FINE + COARSE + 1], n: 0, min_ns: u64::MAX, max_ns: 0 }
     }
 }
 
@@ -27,7 +28,18 @@ impl Histogram {
         let k = if us < FINE { us } else { (FINE + (us - FINE) / 10).min(FINE + COARSE) };
         self.counts[k] += 1;
         self.n += 1;
+        self.min_ns = self.min_ns.min(ns);
         self.max_ns = self.max_ns.max(ns);
+    }
+
+    /// The smallest duration counted, µs.
+    pub fn min_us(&self) -> Option<f64> {
+        (self.n > 0).then(|| self.min_ns as f64 / 1e3)
+    }
+
+    /// The largest duration counted, µs.
+    pub fn max_us(&self) -> Option<f64> {
+        (self.n > 0).then(|| self.max_ns as f64 / 1e3)
     }
 
     /// The lower edge of bucket `k`, µs.
@@ -80,6 +92,7 @@ impl Histogram {
             "count": self.n,
             "p50_us": self.quantile_us(0.5),
             "p99_us": self.quantile_us(0.99),
+            "min_us": (self.n > 0).then(|| self.min_ns as f64 / 1e3),
             "max_us": (self.n > 0).then(|| self.max_ns as f64 / 1e3),
             "histogram": buckets,
         })
@@ -102,6 +115,7 @@ mod tests {
         assert_eq!(h.quantile_us(0.99), Some(100.0));
         assert_eq!(h.quantile_us(1.0), Some(4_321.0));
         assert_eq!(h.to_json()["count"], 101);
+        assert_eq!(h.min_us(), Some(0.5));
         assert_eq!(h.to_json()["histogram"][100], serde_json::json!([4_320, 1]));
         // Beyond 10 ms: the last bucket, the maximum exact.
         h.add(60_000_000_000);

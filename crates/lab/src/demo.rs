@@ -213,11 +213,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
     let st = m.sync_state()?;
     // The master's cycles on the grid: SYNC0 half a cycle after each frame leaves.
     let grid = report.sync0_start.unwrap_or(0).wrapping_sub(shift as u64);
-    let sys = m.master_system_time();
-    let now = m.io_mut().now_ns();
-    // The first SYNC0 is still in the future: the phase is taken signed.
-    let phase = (sys as i128 - grid as i128).rem_euclid(cycle_ns as i128) as u64;
-    let next = now + (cycle_ns - phase);
+    let next = m.next_on_grid_ns(grid, cycle_ns);
     m.io_mut().sleep_until(next);
     Ok((Rig { m, sync, st, cycle_ns, next }, drives))
 }

@@ -208,6 +208,20 @@ impl<I: Io> Master<I> {
         self.master_system_time_at(now)
     }
 
+    /// The world's clock (`Io::now_ns`) at the first instant after now at which the master's
+    /// system time is `grid_ns` modulo `cycle_ns`: where to start cycling so that each cycle's
+    /// frame leaves on that phase of the DC cycle (for example half a cycle before SYNC0, with
+    /// `grid_ns` = [`DcReport::sync0_start`] less the shift). Where the reference follows the
+    /// master, its SYNC0 stays on the master's clock, so the phase holds; where the master
+    /// follows, its method keeps it.
+    pub fn next_on_grid_ns(&mut self, grid_ns: u64, cycle_ns: u64) -> u64 {
+        let now = self.engine.io.now_ns();
+        let sys = self.master_system_time_at(now);
+        // The grid may lie ahead (the first SYNC0 still to come): the phase taken signed.
+        let phase = (sys as i128 - grid_ns as i128).rem_euclid(cycle_ns.max(1) as i128) as u64;
+        now + (cycle_ns - phase)
+    }
+
     /// The master's clock as DC system time when the world's clock reads `t_ns`.
     pub fn master_system_time_at(&mut self, t_ns: u64) -> u64 {
         if self.epoch_offset_ns.is_none() {
@@ -770,6 +784,9 @@ impl<I: Io> Master<I> {
         }
         let probes = if st.no_probes { 0 } else { plan.probes };
         let window_ns = plan.probe_window_ns;
+        if let Some(b) = st.probe_budget_ns {
+            st.probe_credit_ns = st.probe_credit_ns.saturating_add(b).min(window_ns);
+        }
         // The window counts from the cycle's planned start where the caller slept to one (a
         // target less than a window before the frame's build): a cycle that woke late has
         // that much less of it.
@@ -797,6 +814,10 @@ impl<I: Io> Master<I> {
                 st.probes_cut += 1;
                 break;
             }
+            if st.probe_budget_ns.is_some() && st.probe_credit_ns < expected_ns {
+                st.probes_unfunded += u64::from(probes - k);
+                break;
+            }
             // An offset given stands until the next probe's passage, about one probe later,
             // or, after the last, until the next cycle's frame.
             let next_follows = k + 1 < probes && fits(elapsed_ns.saturating_add(expected_ns));
@@ -807,6 +828,7 @@ impl<I: Io> Master<I> {
             self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset)?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
+            st.probe_credit_ns = st.probe_credit_ns.saturating_sub(took_ns);
             st.probe_mean_ns =
                 if st.probe_mean_ns == 0 { took_ns } else { st.probe_mean_ns - st.probe_mean_ns / 16 + took_ns / 16 };
         }

@@ -227,6 +227,7 @@ impl<I: Io> Master<I> {
         let data_bytes = crate::engine::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
+        let exchanged = engine.io.now_ns();
         let passes = engine.split_passes.take();
         let answered = match (r.is_ok(), with_sync) {
             (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
@@ -262,7 +263,7 @@ impl<I: Io> Master<I> {
         self.note_ring(passes)?;
         let expected = self.expected_wkc;
         self.apply_copies();
-        self.finish_cycle(start, wkc, expected, lost)?;
+        self.finish_cycle(start, exchanged, wkc, expected, lost)?;
         Ok((wkc, correction))
     }
 
@@ -354,6 +355,7 @@ impl<I: Io> Master<I> {
             wkc = wkc.saturating_add(frame_wkc);
         }
         drop(extra);
+        let exchanged = engine.io.now_ns();
         if lost {
             self.cyc.stats.lost_frames += 1;
         }
@@ -369,7 +371,7 @@ impl<I: Io> Master<I> {
         let passes = self.engine.split_passes.take();
         self.note_ring(passes)?;
         self.apply_copies();
-        self.finish_cycle(start, wkc, expected, lost)?;
+        self.finish_cycle(start, exchanged, wkc, expected, lost)?;
         Ok((wkc, correction))
     }
 
@@ -380,13 +382,14 @@ impl<I: Io> Master<I> {
     }
 
     /// A cycle's statistics, and the slaves checked after a cycle answered short.
-    fn finish_cycle(&mut self, start: u64, wkc: u16, expected: u16, lost: bool) -> Result<()> {
-        let end = self.engine.io.now_ns();
+    fn finish_cycle(&mut self, start: u64, exchanged: u64, wkc: u16, expected: u16, lost: bool) -> Result<()> {
         let st = &mut self.cyc.stats;
         st.cycles += 1;
         st.last_wkc = wkc;
-        st.last_round_trip_ns = end - start;
-        st.max_round_trip_ns = st.max_round_trip_ns.max(end - start);
+        // The cycle's frames alone: a method's probes after them are not their round trip.
+        let trip = exchanged.saturating_sub(start);
+        st.last_round_trip_ns = trip;
+        st.max_round_trip_ns = st.max_round_trip_ns.max(trip);
         let short = wkc != expected;
         if short {
             st.wkc_errors += 1;

@@ -30,6 +30,68 @@ pub struct ServeStats {
     /// every node's true system time then (`u64::MAX` without DC), `1 + nodes` values a row —
     /// what `ferrocat lab live` compares the master's clock with.
     pub clock_log: Option<Vec<u64>>,
+    /// Frames taken more than [`SHARED_WAIT_NS`] after they arrived (this thread woke late),
+    /// and the longest such wait, ns.
+    pub taken_late: u64,
+    pub max_wait_ns: u64,
+    /// Every time a device's application left OP with a sync error (the first 100), with what
+    /// the simulator saw before it.
+    pub sync_errors: Vec<SyncErrorCause>,
+    /// Each device's sync errors counted so far.
+    sync_errors_seen: Vec<u64>,
+    /// The last frames that carried process data: when they arrived and when their trip began,
+    /// segment time.
+    recent: std::collections::VecDeque<(u64, u64)>,
+}
+
+/// How long after its arrival the simulator may take a frame and still place the frame's trip
+/// in the middle of its answer (as a cable whose length changes frame by frame). Beyond it
+/// (this thread preempted, or woken late), the trip is placed this long's half after the
+/// arrival and the rest of the wait goes on the way back: a slave's SYNC0 does not wait for a
+/// late simulator, and frames that arrived a cycle apart must reach it a cycle apart.
+pub const SHARED_WAIT_NS: u64 = 100_000;
+
+/// Who a sync error is down to, from what the simulator saw of the frames before it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyncErrorSide {
+    /// No frame with process data arrived for this long (ns): the master sent none, or the
+    /// host held them (the master's own wake-up figures tell which).
+    NoFrames { gap_ns: u64 },
+    /// The frames arrived but the simulator took one this long (ns) after its arrival: its
+    /// trip was placed late.
+    Simulator { wait_ns: u64 },
+    /// The frames arrived in time and were taken in time: they reached the slave on the wrong
+    /// side of its SYNC0 (the master's cycle phase against SYNC0).
+    Phase { gap_ns: u64 },
+}
+
+/// A device's application that left OP with a sync error (0x001A, 0x002C).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncErrorCause {
+    /// Segment time it was seen at, ns from the start of serving.
+    pub at_ns: u64,
+    pub node: usize,
+    pub code: u16,
+    pub side: SyncErrorSide,
+}
+
+impl std::fmt::Display for SyncErrorSide {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let us = |ns: u64| ns as f64 / 1e3;
+        match *self {
+            SyncErrorSide::NoFrames { gap_ns } => {
+                write!(f, "no frame with process data arrived for {:.0} us (the master's side or the host's)", us(gap_ns))
+            }
+            SyncErrorSide::Simulator { wait_ns } => {
+                write!(f, "the simulator took a frame {:.0} us after it arrived (the simulator's side)", us(wait_ns))
+            }
+            SyncErrorSide::Phase { gap_ns } => write!(
+                f,
+                "frames arrived at most {:.0} us apart and were taken in time: they met the slave on the wrong side of its SYNC0 (the master's cycle phase)",
+                us(gap_ns)
+            ),
+        }
+    }
 }
 
 impl ServeStats {
@@ -37,6 +99,61 @@ impl ServeStats {
         self.busy_ns += ns;
         if self.busy_samples_ns.len() < 100_000 {
             self.busy_samples_ns.push(ns.min(u32::MAX as u64) as u32);
+        }
+    }
+
+    /// A frame that arrived at `arrived_ns` (segment time) was taken `wait_ns` later and its
+    /// trip placed at `entry_ns`; `outputs`: it carried process data.
+    fn took(&mut self, arrived_ns: u64, wait_ns: u64, entry_ns: u64, outputs: bool) {
+        self.max_wait_ns = self.max_wait_ns.max(wait_ns);
+        self.taken_late += (wait_ns > SHARED_WAIT_NS) as u64;
+        if outputs {
+            if self.recent.len() == 8 {
+                self.recent.pop_front();
+            }
+            self.recent.push_back((arrived_ns, entry_ns));
+        }
+    }
+
+    /// Whether a device's application left OP with a sync error since last asked; if so, what
+    /// the frames before it say of the cause.
+    fn check_sync_errors(&mut self, seg: &Segment) {
+        if self.sync_errors_seen.len() != seg.nodes.len() {
+            self.sync_errors_seen = seg.nodes.iter().map(|n| n.esc.sync_errors).collect();
+        }
+        let now = seg.now_ns();
+        for (node, n) in seg.nodes.iter().enumerate() {
+            if n.esc.sync_errors == self.sync_errors_seen[node] {
+                continue;
+            }
+            self.sync_errors_seen[node] = n.esc.sync_errors;
+            if self.sync_errors.len() < 100 {
+                let cycle_ns = u32::from_le_bytes(n.esc.peek(0x09A0, 4).try_into().unwrap_or_default()) as u64;
+                let side = self.side(now, cycle_ns.max(1));
+                self.sync_errors.push(SyncErrorCause { at_ns: now, node, code: n.esc.al.code.0, side });
+            }
+        }
+    }
+
+    /// The cause of a sync error seen at `now_ns` on a slave with a `cycle_ns` SYNC0.
+    fn side(&self, now_ns: u64, cycle_ns: u64) -> SyncErrorSide {
+        // The supervision trips after two SYNC0 intervals or more without outputs.
+        let window = now_ns.saturating_sub(4 * cycle_ns);
+        let mut gap_ns = 0u64;
+        let mut last = None;
+        let mut wait_ns = 0u64;
+        for &(arrived, entry) in self.recent.iter().filter(|(a, _)| *a >= window) {
+            gap_ns = gap_ns.max(arrived.saturating_sub(last.unwrap_or(window)));
+            wait_ns = wait_ns.max(entry.saturating_sub(arrived));
+            last = Some(arrived);
+        }
+        gap_ns = gap_ns.max(now_ns.saturating_sub(last.unwrap_or(window)));
+        if gap_ns >= 2 * cycle_ns {
+            SyncErrorSide::NoFrames { gap_ns }
+        } else if wait_ns >= cycle_ns / 4 {
+            SyncErrorSide::Simulator { wait_ns }
+        } else {
+            SyncErrorSide::Phase { gap_ns }
         }
     }
 
@@ -104,7 +221,7 @@ impl Placement {
     /// that arrived at `arrived_ns` and is handled from `start_ns` on enters the segment.
     fn entry_ns(&mut self, way: usize, arrived_ns: u64, start_ns: u64) -> u64 {
         let finish = self.finish_ns.get(&way).copied().or(self.finish_any_ns).unwrap_or(0);
-        let answer = start_ns.saturating_sub(arrived_ns) + finish;
+        let answer = start_ns.saturating_sub(arrived_ns).min(SHARED_WAIT_NS) + finish;
         let trip = self.trip_ns.get(&way).copied().unwrap_or(0);
         self.last_ns = self.last_ns.max(arrived_ns + answer.saturating_sub(trip) / 2);
         self.last_ns
@@ -210,6 +327,7 @@ pub fn serve_raw(
         exchange_taps(seg, taps, &mut tap_buf)?;
         let Some((from, (n, stamp))) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
+            stats.check_sync_errors(seg);
             continue;
         };
         let Some(fr) = take_frame(seg, &mut place, &mut stats, &mut buf, from, n, stamp, t0) else {
@@ -316,9 +434,20 @@ fn take_frame(
     // A ring's two ports take different ways through the segment.
     let way = 2 * n + (from == MasterPort::Secondary) as usize;
     let entry = place.entry_ns(way, arrived - t0, start - t0);
-    let (to, back_ns) = handle(seg, from, &mut buf[..n], entry, stats)?;
+    stats.took(arrived - t0, start - arrived, entry, carries_process_data(&buf[..n]));
+    let answer = handle(seg, from, &mut buf[..n], entry, stats);
+    stats.check_sync_errors(seg);
+    let (to, back_ns) = answer?;
     let trip = back_ns.saturating_sub(seg.last_departure_ns());
     Some(Answer { to, way, back_ns, start, not_before: arrived + trip })
+}
+
+/// Whether the frame carries a logical datagram (process data).
+fn carries_process_data(frame: &[u8]) -> bool {
+    match ferrocat_wire::Frame::parse(frame) {
+        Ok(Some(f)) => f.pdu.datagrams().any(|d| d.header().command.is_logical()),
+        _ => false,
+    }
 }
 
 fn exchange_taps(seg: &mut Segment, taps: &mut [EoeTap], buf: &mut [u8]) -> io::Result<()> {
@@ -357,6 +486,7 @@ pub fn serve_uring(
         exchange_taps(seg, taps, &mut tap_buf)?;
         let Some((n, stamp)) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
+            stats.check_sync_errors(seg);
             continue;
         };
         if let Some(a) = take_frame(seg, &mut place, &mut stats, &mut buf, MasterPort::Primary, n, stamp, t0) {
@@ -387,6 +517,7 @@ pub fn serve_ring(
         exchange_taps(seg, taps, &mut tap_buf)?;
         let Some((n, stamp)) = got else {
             seg.advance_to(place.idle(monotonic_ns() - t0));
+            stats.check_sync_errors(seg);
             continue;
         };
         if let Some(a) = take_frame(seg, &mut place, &mut stats, &mut buf, MasterPort::Primary, n, stamp, t0) {

@@ -69,6 +69,10 @@ pub struct Lock {
     within: u32,
     lost_in_row: u32,
     offset_ns: Option<i64>,
+    /// Cycles observed, changes of state, and the cycle that first locked (counted from 1).
+    observed: u64,
+    changes: u64,
+    first_locked: Option<u64>,
 }
 
 impl Lock {
@@ -83,9 +87,30 @@ impl Lock {
         self.offset_ns
     }
 
+    /// Changes of state so far: a lock that holds changes twice (unlocked, locking, locked).
+    pub fn changes(&self) -> u64 {
+        self.changes
+    }
+
+    /// The cycle (counted from 1, lost frames too) that first locked.
+    pub fn first_locked_cycle(&self) -> Option<u64> {
+        self.first_locked
+    }
+
     /// Takes one cycle's measured offset (`None`: the frame was lost, or the method keeps no
     /// estimate to compare) and returns the state after it.
     pub fn observe(&mut self, offset_ns: Option<i64>, frame_lost: bool) -> LockState {
+        let before = self.state;
+        self.observed += 1;
+        let after = self.step(offset_ns, frame_lost);
+        self.changes += (after != before) as u64;
+        if after == LockState::Locked && self.first_locked.is_none() {
+            self.first_locked = Some(self.observed);
+        }
+        after
+    }
+
+    fn step(&mut self, offset_ns: Option<i64>, frame_lost: bool) -> LockState {
         let t = self.thresholds;
         if frame_lost {
             self.lost_in_row = self.lost_in_row.saturating_add(1);

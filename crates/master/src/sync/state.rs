@@ -27,6 +27,15 @@ pub struct SyncState {
     pub probe_mean_ns: u64,
     /// Cycles whose probes stopped early so as not to make the next cycle late.
     pub probes_cut: u64,
+    /// Probing's budget: how long probes may take per cycle on average (ns of the host's
+    /// clock; `None`: as long as the method's window allows, every cycle). A host whose every
+    /// frame costs tens of µs of CPU spends its cycles on probes otherwise (`ferrocat run` sets
+    /// it from the loop's own cost, docs/clock-sync.md, "Probing").
+    pub probe_budget_ns: Option<u64>,
+    /// The budget saved up and not yet spent, at most one window.
+    pub probe_credit_ns: u64,
+    /// Probes the method wanted and the budget did not allow.
+    pub probes_unfunded: u64,
     /// Cable redundancy: the ring's state `loop_ns` was measured for.
     pub ring: crate::engine::RingState,
     /// The method's lock state, from the offset each answered frame measures.
