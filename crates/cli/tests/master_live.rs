@@ -720,3 +720,35 @@ fn needs_shared_real_eeprom_dumps_reach_op_with_dc_under_device_emulation() {
         );
     }
 }
+
+/// `run --dc` with a DC-synchronous drive, as a user meets it: ferrocat's method, either
+/// coupling, keeps the drive in OP for 5 s, or where it leaves OP the simulator finds that no frame with process data came
+/// for two SYNC0 cycles (the host held the master: its wake-up figures show it), never that the
+/// frames met the drive at its SYNC0 (the master's phase) nor that the simulator took them late.
+#[test]
+fn run_dc_keeps_a_dc_synchronous_drive_in_op() {
+    let net = VethPair::new("dcop");
+    let toml = "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n";
+    for method in ["ferrocat", "ferrocat-mfr"] {
+        let sim = common::ReportingSim::start(&net, "dcop", toml, &[]);
+        let run = ferrocat_in(&net.master_ns)
+            .args(["run", "--iface", &net.master_if, "--dc", "--sync", method, "--seconds", "5", "--json"])
+            .output()
+            .unwrap();
+        let rep = sim.report();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "{method}: {err}");
+        let r: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+        let errors = rep["sync_errors"].as_array().unwrap();
+        println!(
+            "{method}: left OP {}, wake-up max {} us, the simulator's sync errors {errors:?}",
+            r["slaves"]["left_op"], r["wake_latency"]["max_us"]
+        );
+        // The run's end leaves the drive without outputs: one "no frames" there at least.
+        assert!(!errors.is_empty(), "{method}: the drive left OP when the master stopped: {rep}");
+        for e in errors {
+            assert_eq!(e["side"], "no frames", "{method}: {e}; run: {r}");
+        }
+        assert!(r["clock_sync"]["passage_after_sync0"]["count"].as_u64().unwrap() > 4000, "{method}: {r}");
+    }
+}

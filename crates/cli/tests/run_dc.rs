@@ -65,3 +65,41 @@ fn run_without_dc_has_no_clock_sync() {
         .unwrap();
     assert!(!out.status.success(), "--sync needs --dc");
 }
+
+/// The p50 of where the frames passed the reference after a SYNC0, µs.
+fn passage_p50_us(r: &serde_json::Value) -> f64 {
+    r["clock_sync"]["passage_after_sync0"]["p50_us"].as_f64().unwrap_or_else(|| panic!("{r}"))
+}
+
+#[test]
+fn run_dc_sends_each_frame_the_shift_before_sync0_and_the_servo_stays_in_op() {
+    let run_servo = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(["run", "--device", "EK1100", "--device", "EL2004", "--device", "SERVO", "--dc", "--json"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    // Every method, the reference following the master or the master following: the frames
+    // pass the slaves about half a cycle before SYNC0 (a lead after the cycle's start), and
+    // the DC-synchronous servo never misses its outputs.
+    for method in ["none", "conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"] {
+        let r = run_servo(&["--sync", method, "--seconds", "1.5"]);
+        let p50 = passage_p50_us(&r);
+        assert!((450.0..=550.0).contains(&p50), "{method}: frames passed {p50} us after SYNC0: {r}");
+        assert_eq!(r["slaves"]["left_op"], 0, "{method}: {r}");
+        assert_eq!(r["clock_sync"]["sync0_shift_us"], 500, "{method}");
+    }
+    // The shift moves SYNC0, not the frames: 200 µs after each frame's cycle start.
+    let r = run_servo(&["--seconds", "1", "--sync0-shift-us", "200"]);
+    let p50 = passage_p50_us(&r);
+    assert!((800.0..=850.0).contains(&p50), "frames passed {p50} us after SYNC0: {r}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", "EK1100", "--dc", "--sync0-shift-us", "1000"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("below the cycle"), "a shift of a whole cycle is refused");
+}

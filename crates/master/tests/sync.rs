@@ -644,3 +644,37 @@ fn the_flywheels_eps_is_a_straight_line() {
         assert!((ppm - 85.0).abs() < 0.05, "{ppm} ppm");
     }
 }
+
+/// ferrocat's probes over `cycles` cycles on a stock kernel, within `budget_ns` a cycle
+/// (`None`: no budget); the sync state at the end.
+fn probes_in_budget(budget_ns: Option<u64>, cycles: u64) -> ferrocat_master::SyncState {
+    let mut m = segment(HostModel::pc_stock());
+    let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
+    let mut st = m.sync_state().unwrap();
+    st.probe_budget_ns = budget_ns;
+    let mut next = m.io_mut().now_ns();
+    for _ in 0..cycles {
+        next += CYCLE_NS;
+        m.io_mut().sleep_until(next);
+        m.sync_step(&mut sync, &mut st).unwrap();
+    }
+    st
+}
+
+#[test]
+fn probing_keeps_to_its_budget_on_average() {
+    const CYCLES: u64 = 3000;
+    let free = probes_in_budget(None, CYCLES);
+    let budget_ns = 20_000;
+    let held = probes_in_budget(Some(budget_ns), CYCLES);
+    println!(
+        "no budget: {} probes (mean {} ns); {budget_ns} ns a cycle: {} probes, {} not funded",
+        free.probes, free.probe_mean_ns, held.probes, held.probes_unfunded
+    );
+    assert_eq!(free.probes_unfunded, 0);
+    assert!(held.probes > 0 && held.probes_unfunded > 0, "{held:?}");
+    // The time spent probing: at most the budget of every cycle, and one window saved up.
+    let spent_ns = held.probes * held.probe_mean_ns;
+    assert!(spent_ns <= budget_ns * CYCLES + CYCLE_NS, "{spent_ns} ns probing for {} ns of budget", budget_ns * CYCLES);
+    assert!(held.probes < free.probes, "the budget bound: {} against {}", held.probes, free.probes);
+}

@@ -570,7 +570,49 @@ pub fn serve_udp(seg: &mut Segment, sock: &UdpSocket, stop: &AtomicBool) -> io::
 
 #[cfg(test)]
 mod tests {
-    use super::Placement;
+    use super::{Placement, ServeStats, SyncErrorSide, SHARED_WAIT_NS};
+
+    const MS: u64 = 1_000_000;
+
+    /// Frames with process data arriving at `arrivals` (ms), each taken `wait_ns` later.
+    fn seen(arrivals: &[u64], wait_ns: u64) -> ServeStats {
+        let mut s = ServeStats::default();
+        for &a in arrivals {
+            s.took(a * MS, wait_ns, a * MS + wait_ns.min(SHARED_WAIT_NS) / 2, true);
+        }
+        s
+    }
+
+    #[test]
+    fn a_sync_error_is_put_down_to_the_side_that_held_the_frames() {
+        // Frames every ms until 10, none after: the master's side (or its host's).
+        let s = seen(&[7, 8, 9, 10], 20_000);
+        assert_eq!(s.side(13 * MS, MS), SyncErrorSide::NoFrames { gap_ns: 3 * MS });
+        // Every ms, but taken 600 µs late: placed at most 50 µs after arriving, so the
+        // simulator's wait shows only where it exceeds a quarter cycle of placement.
+        let s = seen(&[10, 11, 12, 13], 600_000);
+        assert_eq!(s.side(13 * MS + 500_000, MS), SyncErrorSide::Phase { gap_ns: MS });
+        assert_eq!(s.taken_late, 4);
+        assert_eq!(s.max_wait_ns, 600_000);
+        // A frame whose trip was placed 400 µs after its arrival: the simulator's.
+        let mut s = seen(&[10, 11, 12], 20_000);
+        s.took(13 * MS, 400_000, 13 * MS + 400_000, true);
+        assert_eq!(s.side(13 * MS + 500_000, MS), SyncErrorSide::Simulator { wait_ns: 400_000 });
+        // Frames without process data do not count as the slave's outputs.
+        let mut s = seen(&[7, 8], 20_000);
+        s.took(9 * MS, 20_000, 9 * MS, false);
+        s.took(10 * MS, 20_000, 10 * MS, false);
+        assert!(matches!(s.side(10 * MS + 500_000, MS), SyncErrorSide::NoFrames { .. }));
+    }
+
+    #[test]
+    fn a_late_wake_up_is_shared_with_the_way_in_only_up_to_its_bound() {
+        let mut p = Placement::default();
+        // Taken 50 µs after arriving: half of it before the trip.
+        assert_eq!(p.entry_ns(0, 1_000_000, 1_050_000), 1_025_000);
+        // Taken 5 ms after arriving: the trip begins at most half the bound after the arrival.
+        assert_eq!(p.entry_ns(0, 2_000_000, 7_000_000), 2_000_000 + SHARED_WAIT_NS / 2);
+    }
 
     #[test]
     fn a_frames_trip_sits_in_the_middle_of_the_simulators_answer() {

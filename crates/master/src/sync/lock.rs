@@ -153,6 +153,21 @@ mod tests {
     }
 
     #[test]
+    fn counts_its_changes_and_the_cycle_it_first_locked_at() {
+        let mut lock = Lock::default();
+        assert_eq!((lock.changes(), lock.first_locked_cycle()), (0, None));
+        run(&mut lock, [50_000; 20]);
+        assert_eq!((lock.changes(), lock.first_locked_cycle()), (1, None), "unlocked -> locking");
+        // The median within after 8 of 15, locked 100 cycles later: cycle 20 + 7 + 100.
+        run(&mut lock, [0; 200]);
+        assert_eq!((lock.changes(), lock.first_locked_cycle()), (2, Some(127)));
+        // Out and back: two more changes; the first lock stays where it was.
+        run(&mut lock, [10_000; 20]);
+        run(&mut lock, [0; 200]);
+        assert_eq!((lock.changes(), lock.first_locked_cycle()), (4, Some(127)));
+    }
+
+    #[test]
     fn locks_after_enough_cycles_within_and_unlocks_with_hysteresis() {
         let mut lock = Lock::default();
         assert_eq!(lock.state(), LockState::Unlocked);
