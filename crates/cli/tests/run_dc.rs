@@ -3,8 +3,13 @@
 use std::process::Command;
 
 fn run(args: &[&str]) -> serde_json::Value {
+    run_on("EL1004", args)
+}
+
+/// `run --dc --json` on an EK1100, an EL2004 and `third`.
+fn run_on(third: &str, args: &[&str]) -> serde_json::Value {
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-        .args(["run", "--device", "EK1100", "--device", "EL2004", "--device", "EL1004", "--dc", "--json"])
+        .args(["run", "--device", "EK1100", "--device", "EL2004", "--device", third, "--dc", "--json"])
         .args(args)
         .output()
         .unwrap();
@@ -73,15 +78,7 @@ fn passage_p50_us(r: &serde_json::Value) -> f64 {
 
 #[test]
 fn run_dc_sends_each_frame_the_shift_before_sync0_and_the_servo_stays_in_op() {
-    let run_servo = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
-            .args(["run", "--device", "EK1100", "--device", "EL2004", "--device", "SERVO", "--dc", "--json"])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
-    };
+    let run_servo = |args: &[&str]| run_on("SERVO", args);
     // Every method, the reference following the master or the master following: the frames
     // pass the slaves about half a cycle before SYNC0 (a lead after the cycle's start), and
     // the DC-synchronous servo never misses its outputs.
