@@ -220,7 +220,10 @@ enum Command {
         max_rate: bool,
         /// How long a cyclic frame's answer is waited for before the frame counts as lost (µs,
         /// 10 to 1 000 000). Default: ¾ of --cycle-us, at most 1 000 (1 000 with --max-rate),
-        /// so that a lost frame does not make the next cycle late.
+        /// so that a lost frame does not make the next cycle late; on a segment whose round trip
+        /// (16 broadcasts before the run) leaves less room than that, the round trip and half
+        /// the cycle's rest (twice the round trip with --max-rate). A round trip above 80 % of
+        /// the cycle is warned of.
         #[arg(long, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
         frame_timeout_us: Option<u64>,
         /// With --dc: at most this many frames of static drift compensation (it stops earlier
@@ -236,9 +239,11 @@ enum Command {
         #[arg(long, default_value = "ferrocat", requires = "dc",
               value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
         sync: String,
-        /// With --dc: where SYNC0 falls after each cycle's frame leaves the master (µs, below
-        /// --cycle-us). Default: half the cycle, so that a frame up to half a cycle late still
-        /// reaches the slaves before their SYNC0.
+        /// With --dc: where SYNC0 falls after each cycle's start (µs, below --cycle-us).
+        /// Default: half a cycle after the frame passes the reference (for SOEM's PI and
+        /// ferrocat-mfr, which aim that passage at the cycle's start, half the cycle; for the
+        /// others, which send on it, half the cycle and half the segment's round trip), so that
+        /// a frame up to half a cycle late still reaches the slaves before their SYNC0.
         #[arg(long, requires = "dc")]
         sync0_shift_us: Option<u64>,
         /// With --dc: how long the clock sync's probe frames may take per cycle on average (µs;

@@ -487,6 +487,32 @@ impl Sync0Passage {
     }
 }
 
+/// Where SYNC0 falls in the master's cycle.
+#[derive(Debug, Clone, Copy)]
+struct Sync0Plan {
+    /// SYNC0 after the cycle's start on the grid, ns.
+    shift_ns: u64,
+    /// Where the frames should pass the reference, after the SYNC0 before, ns.
+    aimed_ns: u64,
+}
+
+impl Sync0Plan {
+    /// SYNC0 half a cycle from the frame's passage of the reference unless `shift_us` says
+    /// where: a method that steers the master's phase aims the passage at the grid itself; the
+    /// others send the frame on the grid, and it passes half the segment's round trip later (measured now, the median of 16): on a segment whose master link is long,
+    /// SYNC0 half a cycle after the departure would come soon after the passage.
+    fn new(method: &SyncMethod, cycle_ns: u64, round_trip_ns: u64, shift_us: Option<u64>) -> Self {
+        // SOEM's PI loop and ferrocat following the reference aim the passage (at phase 0);
+        // the others send on the grid (chen2016 and `none` from their first frame on).
+        let aims_passage = matches!(method, SyncMethod::Pi { .. })
+            || (method.is_ferrocat() && method.coupling() == Coupling::MasterFollowsReference);
+        let lead_ns = if aims_passage { 0 } else { round_trip_ns / 2 };
+        let shift_ns = shift_us.map_or((cycle_ns / 2 + lead_ns) % cycle_ns, |us| us * 1000);
+        let aimed_ns = (lead_ns as i128 - shift_ns as i128).rem_euclid(cycle_ns as i128) as u64;
+        Sync0Plan { shift_ns, aimed_ns }
+    }
+}
+
 /// `ferrocat run --dc`'s settings.
 pub struct DcOptions<'a> {
     /// The static drift compensation's frames at most.
@@ -506,13 +532,16 @@ fn measuring_cycles(cycle_us: u64) -> u64 {
 }
 
 /// The cyclic frames' timeout unless told: ¾ of the cycle, so that the wait for a lost frame
-/// ends before the next cycle is due, and at most the library's 1 ms.
-pub fn frame_timeout_us(cycle_us: u64, max_rate: bool) -> u64 {
+/// ends before the next cycle is due, and at most the library's 1 ms; on a segment whose round
+/// trip (`round_trip_us`, once measured) leaves less than that room, the round trip and half
+/// of what the cycle has left after it, so that a frame a little slower than usual is not lost.
+pub fn frame_timeout_us(cycle_us: u64, max_rate: bool, round_trip_us: Option<u64>) -> u64 {
     const MAX_US: u64 = 1000;
-    if max_rate {
-        MAX_US
-    } else {
-        (cycle_us * 3 / 4).clamp(1, MAX_US)
+    let usual = if max_rate { MAX_US } else { (cycle_us * 3 / 4).clamp(1, MAX_US) };
+    match round_trip_us {
+        Some(rtt) if max_rate => usual.max(2 * rtt),
+        Some(rtt) => usual.max(rtt + cycle_us.saturating_sub(rtt) / 2),
+        None => usual,
     }
 }
 
@@ -526,10 +555,9 @@ fn lock_text(method: &dyn ClockSync, st: &SyncState) -> String {
 
 pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let RunOptions { seconds, cycle_us, max_rate, eoe_taps, json, .. } = *o;
-    let frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate));
+    let mut frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate, None));
     let dc = o.dc.is_some();
-    let sync0_shift_us = o.dc.as_ref().map(|d| d.sync0_shift_us.unwrap_or(cycle_us / 2));
-    if let Some(shift) = sync0_shift_us.filter(|&s| s >= cycle_us) {
+    if let Some(shift) = o.dc.as_ref().and_then(|d| d.sync0_shift_us).filter(|&s| s >= cycle_us) {
         bail!("--sync0-shift-us {shift}: give a shift below the cycle ({cycle_us} us)");
     }
     if !(0.0..1e6).contains(&seconds) {
@@ -566,23 +594,41 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             crate::count(m.slaves.len(), "slave", "found")
         );
     }
+    // The segment's round trip, for the frame timeout and SYNC0's place.
+    let round_trip_ns = (m.median_round_trip_ns(16)?).max(0) as u64;
+    let round_trip_us = round_trip_ns.div_ceil(1000);
+    if o.frame_timeout_us.is_none() {
+        frame_timeout_us = self::frame_timeout_us(cycle_us, max_rate, Some(round_trip_us));
+        m.cyclic_timeout_ns = frame_timeout_us * 1000;
+    }
+    if !max_rate && round_trip_us * 10 > cycle_us * 8 {
+        tracing::warn!(
+            "the segment's round trip ({round_trip_us} us) is {} % of the {cycle_us} us cycle: a frame more than \
+             {} us late counts as lost, and the next cycle starts late; a longer cycle gives it room",
+            round_trip_us * 100 / cycle_us.max(1),
+            frame_timeout_us.saturating_sub(round_trip_us)
+        );
+    }
     let mut sync: Option<(Box<dyn ClockSync>, SyncState)> = None;
-    // Where the master's cycles start on the DC cycle's grid, with DC.
+    // Where the master's cycles start on the DC cycle's grid, and SYNC0 on it, with DC.
     let mut grid_ns = None;
-    if let (Some(d), Some(shift_us)) = (&o.dc, sync0_shift_us) {
-        // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
-        let cfg = ferrocat_master::DcConfig {
-            sync0_cycle_ns: (cycle_us * 1000).min(u32::MAX as u64) as u32,
-            sync0_shift_ns: (shift_us * 1000) as i32,
-            max_frames: d.static_frames,
-            ..Default::default()
-        };
+    let mut sync0 = None;
+    if let Some(d) = &o.dc {
         let name = d.sync;
         let method = SyncMethod::preset(name, Coupling::ReferenceFollowsMaster)
             .with_context(|| format!("--sync {name}: not a method ({})", SyncMethod::PRESETS.join(", ")))?;
+        let plan = Sync0Plan::new(&method, cycle_us * 1000, round_trip_ns, d.sync0_shift_us);
+        // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
+        let cfg = ferrocat_master::DcConfig {
+            sync0_cycle_ns: (cycle_us * 1000).min(u32::MAX as u64) as u32,
+            sync0_shift_ns: plan.shift_ns as i32,
+            max_frames: d.static_frames,
+            ..Default::default()
+        };
         let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;
         sync = Some((s, st));
-        grid_ns = r.sync0_start.map(|t| t.wrapping_sub(shift_us * 1000));
+        grid_ns = r.sync0_start.map(|t| t.wrapping_sub(plan.shift_ns));
+        sync0 = Some(plan);
         eprintln!(
             "DC: reference slave {}; static drift compensation {} frames, {} (max |0x092C| {} ns); SYNC0 on {}",
             r.reference,
@@ -667,7 +713,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let (mut overruns, mut skipped) = (0u64, 0u64);
     // Where each answered frame passed the reference, after its cycle's start on the DC grid;
     // SYNC0 comes the shift after that start.
-    let mut passage = grid_ns.zip(sync0_shift_us).map(|(grid, shift_us)| Sync0Passage::new(grid + shift_us * 1000));
+    let mut passage = grid_ns.zip(sync0).map(|(grid, plan)| Sync0Passage::new(grid + plan.shift_ns));
     let mut last_wake: Option<u64> = None;
     // Probing waits until the loop's own cost is known, unless its budget was given.
     let probe_budget_us = o.dc.as_ref().and_then(|d| d.probe_budget_us);
@@ -823,7 +869,8 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "probe_mean_us": st.probe_mean_ns as f64 / 1000.0,
             "probes_unfunded": st.probes_unfunded,
             "probe_budget_us": st.probe_budget_ns.map(|b| b as f64 / 1000.0),
-            "sync0_shift_us": sync0_shift_us,
+            "sync0_shift_us": sync0.map(|p| p.shift_ns as f64 / 1e3),
+            "passage_aimed_us": sync0.map(|p| p.aimed_ns as f64 / 1e3),
             "passage_after_sync0": passage.as_ref().map(|p| p.after_sync0.to_json()),
         })
     });
@@ -834,6 +881,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "cycles": s.cycles,
                 "cycle_us": if max_rate { None } else { Some(cycle_us) },
                 "frame_timeout_us": frame_timeout_us,
+                "segment_round_trip_us": round_trip_ns as f64 / 1000.0,
                 "mean_period_us": mean_period_us,
                 "wkc_errors": s.wkc_errors,
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,
@@ -870,12 +918,12 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
         }
-        if let (Some(p), Some(shift_us)) = (&passage, sync0_shift_us) {
+        if let (Some(p), Some(plan)) = (&passage, sync0) {
             let h = &p.after_sync0;
             if let (Some(min), Some(p50), Some(max)) = (h.min_us(), h.quantile_us(0.5), h.max_us()) {
                 outln!(
-                    "frames passed the reference {min:.0} to {max:.0} us after a SYNC0 (p50 {p50:.0} us; aimed at {} us)",
-                    cycle_us - shift_us
+                    "frames passed the reference {min:.0} to {max:.0} us after a SYNC0 (p50 {p50:.0} us; aimed at {:.0} us)",
+                    plan.aimed_ns as f64 / 1e3
                 );
             }
         }

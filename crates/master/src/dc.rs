@@ -5,6 +5,7 @@ use ferrocat_wire::register::addr;
 use ferrocat_wire::register::{dc_activation as act, PortDescriptor, SystemTimeDifference};
 use ferrocat_wire::{Address, Command};
 
+use crate::dc_writes::{Rider, Riders, MAX_RIDERS};
 use crate::engine::{frame_bytes, Pdu, SplitRingClocks};
 use crate::error::{DcError, MasterError, Result};
 use crate::io::Io;
@@ -13,6 +14,14 @@ use crate::sync::SyncState;
 
 /// Nanoseconds from 1970-01-01 to 2000-01-01, the epoch of DC system time.
 const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
+/// What a frame of the sync datagrams alone leaves for riders: four headers and working
+/// counters, the reference's time or offset, the FRMW, 0x092C and a follower's clock.
+pub(crate) const SYNC_ROOM_BYTES: usize =
+    ferrocat_wire::frame::MAX_PDU_LEN - 4 * NOP_LEN - 8 - 8 - 4 - FOLLOWER_CLOCK_LEN;
+
+/// A NOP datagram without data in the follower's place, where riders follow.
+const NOP_LEN: usize = ferrocat_wire::datagram::HEADER_LEN + ferrocat_wire::datagram::WKC_LEN;
+
 /// The 8-byte preamble and start-of-frame delimiter at 100 Mbit/s.
 const PREAMBLE_NS: u64 = 8 * 80;
 
@@ -30,7 +39,14 @@ pub(crate) struct SyncPdus {
     /// its station and which way its speed counter turns, where measured; and its 0x0910–0x0933.
     follower: Option<(u16, Option<bool>)>,
     clock: [u8; FOLLOWER_CLOCK_LEN],
+    /// The method's writes riding on this frame ([`crate::dc_writes`]), and whether writes
+    /// wait that could not ride (too many, or no room in the frame).
+    riders: Riders,
+    stuck: bool,
 }
+
+/// The sync datagrams, a follower's clock and the riders at most.
+pub(crate) const MAX_SYNC_PDUS: usize = 4 + MAX_RIDERS;
 
 /// A follower's 0x0910 (system time) to 0x0933 (speed counter difference) in one read.
 const FOLLOWER_CLOCK_LEN: usize = (addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH - addr::DC_SYSTEM_TIME) as usize;
@@ -60,40 +76,56 @@ pub(crate) struct SyncAnswers {
     pub(crate) offset: bool,
     /// The follower's clock, where the frame read one.
     pub(crate) follower: bool,
+    /// Every rider, where the frame carried some.
+    pub(crate) riders: bool,
 }
 
 impl SyncAnswers {
     /// A frame that did not come back.
-    pub(crate) const NONE: SyncAnswers = SyncAnswers { sync: false, offset: false, follower: false };
+    pub(crate) const NONE: SyncAnswers = SyncAnswers { sync: false, offset: false, follower: false, riders: false };
 }
 
 impl SyncPdus {
-    /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference, and
-    /// an FPRD of a follower's clock where one is read: the datagrams and how many there are.
-    pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> ([Pdu<'a>; 4], usize) {
+    /// [FPWR 0x0910 | FPRD/FPRW 0x0920 | NOP, FRMW 0x0910, FPRD 0x092C] on the reference, an
+    /// FPRD of a follower's clock where one is read (a NOP in its place where riders follow),
+    /// and the riders: the datagrams and how many there are.
+    pub(crate) fn pdus<'a>(&'a mut self, nop: &'a mut [u8; 0]) -> ([Pdu<'a>; MAX_SYNC_PDUS], usize) {
         let station = self.station;
         let at = |ado| Address::Device { adp: station, ado };
-        let n = 3 + self.follower.is_some() as usize;
-        let clock = match self.follower {
+        let riders = self.riders.count;
+        let n = if riders > 0 { 4 + riders } else { 3 + self.follower.is_some() as usize };
+        let nop_pdu = || Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []);
+        let mut clock = Some(match self.follower {
             Some((f, _)) => {
                 Pdu::new(Command::FPRD, Address::Device { adp: f, ado: addr::DC_SYSTEM_TIME }, &mut self.clock)
             }
-            None => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, &mut []),
-        };
-        let pdus = [
-            match &mut self.first {
-                FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(addr::DC_SYSTEM_TIME), w),
-                FirstPdu::Offset { data, len, write } => Pdu::new(
-                    if *write { Command::FPRW } else { Command::FPRD },
-                    at(addr::DC_SYSTEM_TIME_OFFSET),
-                    &mut data[..*len],
-                ),
-                FirstPdu::Nop => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
-            },
-            Pdu::new(Command::FRMW, at(addr::DC_SYSTEM_TIME), &mut self.frmw),
-            Pdu::new(Command::FPRD, at(addr::DC_SYSTEM_TIME_DIFFERENCE), &mut self.diff),
-            clock,
-        ];
+            None => nop_pdu(),
+        });
+        let mut first = Some(match &mut self.first {
+            FirstPdu::Time(w) => Pdu::new(Command::FPWR, at(addr::DC_SYSTEM_TIME), w),
+            FirstPdu::Offset { data, len, write } => Pdu::new(
+                if *write { Command::FPRW } else { Command::FPRD },
+                at(addr::DC_SYSTEM_TIME_OFFSET),
+                &mut data[..*len],
+            ),
+            FirstPdu::Nop => Pdu::new(Command::NOP, Address::Device { adp: 0, ado: 0 }, nop),
+        });
+        let mut frmw = Some(Pdu::new(Command::FRMW, at(addr::DC_SYSTEM_TIME), &mut self.frmw));
+        let mut diff = Some(Pdu::new(Command::FPRD, at(addr::DC_SYSTEM_TIME_DIFFERENCE), &mut self.diff));
+        let mut rest = self.riders.list.iter_mut().take(riders).map(|r| {
+            let cmd = if r.write { Command::FPWR } else { Command::FPRD };
+            Pdu::new(cmd, Address::Device { adp: r.station, ado: r.ado }, &mut r.data[..r.len as usize])
+        });
+        let pdus = std::array::from_fn(|k| {
+            let taken = match k {
+                0 => first.take(),
+                1 => frmw.take(),
+                2 => diff.take(),
+                3 => clock.take(),
+                _ => rest.next(),
+            };
+            taken.unwrap_or_else(nop_pdu)
+        });
         (pdus, n)
     }
 
@@ -123,7 +155,8 @@ impl SyncPdus {
             Command::FPRW => p.wkc == 3,
             _ => false,
         });
-        SyncAnswers { sync, offset, follower }
+        let riders = pdus.len() > 4 && pdus[4..].iter().all(|p| p.wkc == 1);
+        SyncAnswers { sync, offset, follower, riders }
     }
 
     /// The reference's offset the frame read, if it carried a read.
@@ -671,7 +704,7 @@ impl<I: Io> Master<I> {
         sync: &mut dyn crate::sync::ClockSync,
         st: &mut SyncState,
     ) -> Result<crate::sync::Correction> {
-        let mut p = self.sync_begin(sync, st)?;
+        let mut p = self.sync_begin(sync, st, SYNC_ROOM_BYTES)?;
         let mut nop: [u8; 0] = [];
         let (mut pdus, n) = p.pdus(&mut nop);
         let pdus = &mut pdus[..n];
@@ -688,7 +721,13 @@ impl<I: Io> Master<I> {
     }
 
     /// The sync datagrams of this cycle, built now (the master's time goes into them).
-    pub(crate) fn sync_begin(&mut self, sync: &mut dyn crate::sync::ClockSync, st: &mut SyncState) -> Result<SyncPdus> {
+    /// `room_bytes`: what the frame the sync datagrams go in has left for riders.
+    pub(crate) fn sync_begin(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut SyncState,
+        room_bytes: usize,
+    ) -> Result<SyncPdus> {
         let r = self.reference_index()?;
         st.cycle += 1;
         let built_ns = self.master_system_time();
@@ -715,6 +754,11 @@ impl<I: Io> Master<I> {
             .then(|| self.slaves[..near].iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
             .flatten()
             .map(|s| (s.station, s.speed_diff_slows));
+        let (riders, stuck) = match self.riders() {
+            Some(r) if r.wire_len() + NOP_LEN <= room_bytes => (r, false),
+            Some(_) => (Riders::default(), true),
+            None => (Riders::default(), self.dc_writes.pending()),
+        };
         Ok(SyncPdus {
             station: self.slaves[r].station,
             wide,
@@ -724,7 +768,113 @@ impl<I: Io> Master<I> {
             diff: [0; 4],
             follower,
             clock: [0; FOLLOWER_CLOCK_LEN],
+            riders,
+            stuck,
         })
+    }
+
+    /// The datagrams the waiting writes need on this frame: the offsets read for a shift, or
+    /// written shifted; the followers' delays with the bias. `None` with nothing waiting, or
+    /// more than ride on one frame.
+    fn riders(&self) -> Option<Riders> {
+        let w = &self.dc_writes;
+        if !w.pending() {
+            return None;
+        }
+        let mut riders = Riders::default();
+        if let Some(shift) = &w.shift {
+            match &shift.read {
+                None => {
+                    riders.reads_offsets = true;
+                    for s in self.slaves.iter().filter(|s| s.has_system_time && shift.skip != Some(s.station)) {
+                        let len = if s.dc_64bit { 8 } else { 4 };
+                        let r = Rider { station: s.station, ado: addr::DC_SYSTEM_TIME_OFFSET, len, ..Rider::default() };
+                        if !riders.push(r) {
+                            return None;
+                        }
+                    }
+                }
+                Some(read) => {
+                    riders.writes_offsets = true;
+                    for &(station, offset, len) in &read[..shift.count] {
+                        let data = offset.wrapping_add_signed(shift.shift_ns).to_le_bytes();
+                        let r = Rider { write: true, station, ado: addr::DC_SYSTEM_TIME_OFFSET, data, len };
+                        if !riders.push(r) {
+                            return None;
+                        }
+                    }
+                }
+            }
+        }
+        if let Some((bias_ns, reference)) = w.bias {
+            riders.writes_bias = true;
+            for s in self.slaves.iter().filter(|s| s.has_system_time && s.station != reference) {
+                let delay = (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32;
+                let mut data = [0u8; 8];
+                data[..4].copy_from_slice(&delay.to_le_bytes());
+                let r = Rider { write: true, station: s.station, ado: addr::DC_SYSTEM_TIME_DELAY, data, len: 4 };
+                if !riders.push(r) {
+                    return None;
+                }
+            }
+        }
+        Some(riders)
+    }
+
+    /// What the riders of an answered frame did: offsets read are kept for the write, writes
+    /// done are no longer waiting. Riders not all answered are sent again with the next frame.
+    fn riders_answered(&mut self, riders: &Riders, answered: bool) {
+        if riders.count == 0 {
+            return;
+        }
+        let w = &mut self.dc_writes;
+        if !answered {
+            w.retried += 1;
+            return;
+        }
+        w.rode += riders.count as u64;
+        if riders.reads_offsets {
+            if let Some(shift) = w.shift.as_mut() {
+                let mut read = [(0u16, 0u64, 0u8); MAX_RIDERS];
+                for (slot, r) in read.iter_mut().zip(&riders.list[..riders.count]) {
+                    let mut b = [0u8; 8];
+                    b[..r.len as usize].copy_from_slice(&r.data[..r.len as usize]);
+                    *slot = (r.station, u64::from_le_bytes(b), r.len);
+                }
+                shift.read = Some(read);
+                shift.count = riders.count;
+            }
+        }
+        if riders.writes_offsets {
+            w.shift = None;
+        }
+        if riders.writes_bias {
+            w.bias = None;
+        }
+    }
+
+    /// Whether the cycle has room, before its period ends, for two more frames as long as its
+    /// own: without a period (a caller that paces itself), always.
+    fn room_for_frames(&mut self) -> bool {
+        let (Some(start), period) = (self.engine.io.wake_target_ns(), self.cyc.stats.nominal_period_ns) else {
+            return true;
+        };
+        if period == 0 {
+            return true;
+        }
+        let now = self.engine.io.now_ns();
+        now + 2 * self.cyc.stats.last_round_trip_ns <= start + period
+    }
+
+    /// The writes still waiting, each in frames of its own.
+    fn flush_dc_writes(&mut self) -> Result<()> {
+        if let Some(shift) = self.dc_writes.shift.take() {
+            self.shift_offsets_but(shift.shift_ns, shift.skip)?;
+        }
+        if let Some((bias, reference)) = self.dc_writes.bias.take() {
+            self.bias_follower_delays(bias, reference)?;
+        }
+        Ok(())
     }
 
     /// The sample of an answered (or lost) sync frame to the method, and its correction done.
@@ -768,17 +918,24 @@ impl<I: Io> Master<I> {
             tracing::info!(method = sync.name(), offset_ns = st.lock.offset_ns(), "clock sync {before} -> {now}");
         }
         let c = sync.update(sample.as_ref());
+        self.riders_answered(&p.riders, answered.riders);
         // What follows the frame, as the method plans it with the frame's sample taken.
         let plan = sync.plan(st.cycle);
+        // Writes go in frames of their own where the cycle has room for them, else on the next
+        // cyclic frames; what cannot ride goes now, late or not.
+        let room = self.room_for_frames();
         if c.shift_offsets_ns != 0 {
             // A method that gives the reference its offset moves the reference itself.
             let skip = if plan.steer_reference_offset { Some(p.station) } else { None };
-            self.shift_offsets_but(c.shift_offsets_ns, skip)?;
+            self.dc_writes.add_shift(c.shift_offsets_ns, skip);
         }
         if let Some(bias) = sync.follower_delay_bias_ns() {
-            self.bias_follower_delays(bias, p.station)?;
+            self.dc_writes.bias = Some((bias, p.station));
         }
-        if !answered.sync && plan.make_up_lost_frames && !st.no_probes {
+        if self.dc_writes.pending() && (room || p.stuck) {
+            self.flush_dc_writes()?;
+        }
+        if !answered.sync && plan.make_up_lost_frames && !st.no_probes && room {
             st.make_ups += 1;
             self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), ProbeOffset::GiveUntilNextCycle)?;
         }

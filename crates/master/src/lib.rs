@@ -31,6 +31,7 @@ pub mod cia402;
 mod coe;
 mod cycle_state;
 mod dc;
+mod dc_writes;
 mod diagnosis;
 mod diagnosis_state;
 mod engine;

@@ -15,9 +15,9 @@ use crate::master::Master;
 const CHUNK: usize = MAX_PDU_LEN - HEADER_LEN - WKC_LEN;
 /// Up to this many frames per cycle (8 × 1486 bytes of process image).
 const MAX_CHUNKS: usize = 8;
-/// The image's LRWs and, with DC distribution, one FRMW or the sync datagrams (three, and a
-/// follower's clock where the method reads one).
-const MAX_PDUS: usize = MAX_CHUNKS + 4;
+/// The image's LRWs and, with DC distribution, one FRMW or the sync datagrams (three, a
+/// follower's clock where the method reads one, and the method's writes riding on the frame).
+const MAX_PDUS: usize = MAX_CHUNKS + crate::dc::MAX_SYNC_PDUS;
 
 pub use crate::handle::Handle;
 
@@ -176,8 +176,15 @@ impl<I: Io> Master<I> {
             return self.cycle_plan(sync);
         }
         let mut sync = sync;
+        // The sync datagrams follow the image's last chunk in its frame.
+        let last_chunk = match self.image.len() % CHUNK {
+            0 if self.image.is_empty() => 0,
+            0 => CHUNK,
+            r => r,
+        };
+        let room = crate::dc::SYNC_ROOM_BYTES.saturating_sub(last_chunk + HEADER_LEN + WKC_LEN);
         let mut sp = match sync.as_mut() {
-            Some((m, st)) => Some(self.sync_begin(&mut **m, st)?),
+            Some((m, st)) => Some(self.sync_begin(&mut **m, st, room)?),
             None => None,
         };
         if self.image.is_empty() && self.dc_reference.is_none() {
@@ -278,8 +285,9 @@ impl<I: Io> Master<I> {
         use crate::plan::{Plan, MAX_PLAN_DATAGRAMS};
         let start = self.cyc.last_start.unwrap_or_else(|| self.engine.io.now_ns());
         let mut sync = sync;
+        let room = self.plan_room_bytes();
         let mut sp = match sync.as_mut() {
-            Some((m, st)) => Some(self.sync_begin(&mut **m, st)?),
+            Some((m, st)) => Some(self.sync_begin(&mut **m, st, room)?),
             None => None,
         };
         let mut nop: [u8; 0] = [];
@@ -313,7 +321,7 @@ impl<I: Io> Master<I> {
             let mut behind = if first { extra.take() } else { None };
             let n = own + behind.as_ref().map_or(0, |x| x.len());
             let mut parts = bufs.iter_mut();
-            let mut pdus: [Pdu<'_>; MAX_PLAN_DATAGRAMS + 4] =
+            let mut pdus: [Pdu<'_>; MAX_PLAN_DATAGRAMS + crate::dc::MAX_SYNC_PDUS] =
                 std::array::from_fn(|k| match (datagrams.get(k).filter(|_| k < own), parts.next()) {
                     (Some(d), Some(b)) => Pdu::new(d.command, d.address, b),
                     _ => match behind.as_mut().and_then(|x| x.next()) {
@@ -379,6 +387,17 @@ impl<I: Io> Master<I> {
     /// empty without a plan.
     pub fn plan_frame_stats(&self) -> Vec<crate::plan::FrameStats> {
         self.plan.as_ref().map_or(Vec::new(), |(_, b)| b.stats.clone())
+    }
+
+    /// What the first frame of the plan due this cycle leaves for the sync datagrams' riders.
+    fn plan_room_bytes(&self) -> usize {
+        let Some((plan, buffers)) = self.plan.as_ref() else { return 0 };
+        let cycle = self.cyc.stats.cycles;
+        let due = (0..plan.frames.len()).find(|&f| plan.due(f, cycle));
+        let used: usize = due
+            .map(|f| buffers.frames[f].iter().map(|b| HEADER_LEN + b.len() + WKC_LEN).sum())
+            .unwrap_or(ferrocat_wire::frame::MAX_PDU_LEN);
+        crate::dc::SYNC_ROOM_BYTES.saturating_sub(used)
     }
 
     /// A cycle's statistics, and the slaves checked after a cycle answered short.

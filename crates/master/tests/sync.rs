@@ -678,3 +678,56 @@ fn probing_keeps_to_its_budget_on_average() {
     assert!(spent_ns <= budget_ns * CYCLES + CYCLE_NS, "{spent_ns} ns probing for {} ns of budget", budget_ns * CYCLES);
     assert!(held.probes < free.probes, "the budget bound: {} against {}", held.probes, free.probes);
 }
+
+/// Park's method over 1 500 cycles of 1 ms on a segment whose master link makes the round trip
+/// most of the cycle, through `cycle_sync` (the image's LRW with the sync datagrams), the
+/// loop's period told to the master (`period_ns`, 0: none); the cycles whose work ran past
+/// their period, and how far the corrections moved the last clock's System_Time_Offset (ns).
+fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
+    let cfg: SegmentConfig = toml::from_str(
+        "seed = 5\nmaster_link_ns = 300000\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 40.0\n\
+         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
+         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 20.0\nesc = 'et1100'\nsync_unit = true\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
+    m.bring_up().unwrap();
+    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    let d = m.park_delay(100).unwrap();
+    let mut sync = Park2020::new(d);
+    m.start().unwrap();
+    let offset_before = u64::from_le_bytes(m.io().seg.nodes[2].esc.peek(0x0920, 8).try_into().unwrap());
+    m.set_period_ns(period_ns);
+    let mut st = m.sync_state().unwrap();
+    let mut next = m.io_mut().now_ns();
+    let mut late = 0;
+    for _ in 0..1500 {
+        next += CYCLE_NS;
+        m.io_mut().sleep_until(next);
+        m.cycle_sync(&mut sync, &mut st).unwrap();
+        late += (m.io_mut().now_ns() > next + CYCLE_NS) as u32;
+    }
+    // How far Park's corrections moved the last clock's offset, from the simulator's register.
+    let offset =
+        |m: &Master<VirtualIo>| u64::from_le_bytes(m.io().seg.nodes[2].esc.peek(0x0920, 8).try_into().unwrap());
+    (late, offset(&m).wrapping_sub(offset_before) as i64)
+}
+
+#[test]
+fn on_a_slow_segment_the_methods_writes_ride_on_the_cyclic_frames() {
+    // Park's correction every 100 ms reads and writes every offset: two more frames of ≈ 620 µs
+    // each, a late cycle each time, where the master knows no period to fit them in.
+    let (late_alone, moved_alone) = park_on_a_slow_segment(0);
+    // Told the period, the master sees no room for them and sends them on the next cyclic
+    // frames instead: the offsets read on one, written shifted on the next.
+    let (late_riding, moved_riding) = park_on_a_slow_segment(CYCLE_NS);
+    println!(
+        "late cycles {late_alone} in frames of their own, {late_riding} riding; the offset moved {moved_alone} and {moved_riding} ns"
+    );
+    assert!(late_alone >= 10, "{late_alone} late cycles with frames of their own");
+    assert_eq!(late_riding, 0);
+    // The corrections land either way, the same way and about as far (a frame or two later
+    // riding, so not to the ns).
+    assert!(moved_alone.signum() == moved_riding.signum() && moved_alone != 0, "{moved_alone} and {moved_riding} ns");
+    assert!((moved_alone - moved_riding).abs() * 4 < moved_alone.abs(), "{moved_alone} and {moved_riding} ns");
+}

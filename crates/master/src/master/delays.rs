@@ -166,8 +166,9 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    /// The median round trip of `n` two-byte broadcasts, by the link's stamps.
-    fn median_round_trip_ns(&mut self, n: usize) -> Result<i64> {
+    /// The segment's round trip: the median of `n` two-byte broadcasts (BRD 0x0000), by the
+    /// link's stamps (ns).
+    pub fn median_round_trip_ns(&mut self, n: usize) -> Result<i64> {
         let mut trips = Vec::with_capacity(n);
         for _ in 0..n.max(1) {
             let built = self.engine.io.now_ns();

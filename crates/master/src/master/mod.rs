@@ -85,6 +85,8 @@ pub struct Master<I: Io> {
     /// Positions whose receive times the last latch took from a second latch: controllers whose
     /// ports 1–3 take the frame after the write, where the first did not fit (`next_frame_latch.rs`).
     pub relatched: Vec<usize>,
+    /// A clock-sync method's writes waiting to ride on the cyclic frames.
+    pub(crate) dc_writes: crate::dc_writes::DcWrites,
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
     pub(crate) plan: Option<(crate::plan::Plan, crate::plan::PlanBuffers)>,
     /// Slave-to-slave copies within the image ([`Master::set_copies`]).
@@ -122,6 +124,7 @@ impl<I: Io> Master<I> {
             far_steer: None,
             split_latch: None,
             relatched: Vec::new(),
+            dc_writes: Default::default(),
             plan: None,
             copies: Vec::new(),
             groups: Vec::new(),
