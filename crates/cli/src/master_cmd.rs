@@ -719,9 +719,12 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let probe_budget_us = o.dc.as_ref().and_then(|d| d.probe_budget_us);
     let mut measuring = None;
     if let Some((_, st)) = sync.as_mut() {
+        // A virtual segment's host is a model: its CPU is not the loop's, and a budget from it
+        // would make the run depend on the machine that simulates it.
+        let virtual_host = m.io_mut().is_virtual();
         match probe_budget_us {
             Some(us) => st.probe_budget_ns = Some(us * 1000),
-            None if !max_rate => {
+            None if !max_rate && !virtual_host => {
                 st.no_probes = true;
                 measuring = Some(measuring_cycles(cycle_us));
             }

@@ -937,7 +937,14 @@ impl<I: Io> Master<I> {
         }
         if !answered.sync && plan.make_up_lost_frames && !st.no_probes && room {
             st.make_ups += 1;
-            self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), ProbeOffset::GiveUntilNextCycle)?;
+            let timeout_ns = self.cyclic_timeout_ns;
+            self.probe(
+                sync,
+                st,
+                (p.station, wide, plan.steer_reference_offset),
+                ProbeOffset::GiveUntilNextCycle,
+                timeout_ns,
+            )?;
         }
         let probes = if st.no_probes { 0 } else { plan.probes };
         let window_ns = plan.probe_window_ns;
@@ -982,7 +989,16 @@ impl<I: Io> Master<I> {
             let start_ns = self.engine.io.now_ns();
             st.probes += 1;
             let offset = if steer { ProbeOffset::GiveFor { holds_ns } } else { ProbeOffset::Read };
-            self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset)?;
+            // Where the loop's period is known, a probe still unanswered at the window's end
+            // is given up there rather than at the cyclic timeout, which would make the next
+            // cycle late. An offset it gave may or may not be in force then: the next cycle's
+            // frame reads the one in force with its own, and gives the next.
+            let timeout_ns = if self.cyc.stats.nominal_period_ns > 0 {
+                self.cyclic_timeout_ns.min(window_ns.saturating_sub(elapsed_ns))
+            } else {
+                self.cyclic_timeout_ns
+            };
+            self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset, timeout_ns)?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
             st.probe_credit_ns = st.probe_credit_ns.saturating_sub(took_ns);
@@ -1002,6 +1018,7 @@ impl<I: Io> Master<I> {
         st: &mut SyncState,
         (station, wide, steer): (u16, bool, bool),
         give: ProbeOffset,
+        timeout_ns: u64,
     ) -> Result<()> {
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
@@ -1026,7 +1043,7 @@ impl<I: Io> Master<I> {
         ];
         let pdus = if steer { &mut pdus[..] } else { &mut pdus[1..] };
         let frame_bytes = frame_bytes(pdus);
-        let sent = self.engine.transact_once(pdus, self.cyclic_timeout_ns).is_ok();
+        let sent = self.engine.transact_once(pdus, timeout_ns).is_ok();
         // An FPRW counts 3 (read and write).
         let answered = sent && pdus.iter().all(|p| p.wkc == if p.cmd == Command::FPRW { 3 } else { 1 });
         if !answered {
