@@ -865,6 +865,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "offset_ns": st.lock.offset_ns(),
             "frames_lost": st.lost,
             "lock_changes": st.lock.changes(),
+            "lock_left_out": st.lock.left_out(),
             "locked_after_s": st.lock.first_locked_cycle().map(|c| c as f64 * cycle_us as f64 * 1e-6),
             "probes": st.probes,
             "probes_lost": st.probes_lost,

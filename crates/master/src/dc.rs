@@ -913,7 +913,13 @@ impl<I: Io> Master<I> {
             None
         };
         let before = st.lock.state();
-        let now = st.lock.observe(sample.as_ref().and_then(|s| sync.offset_ns(s)), sample.is_none());
+        let now = match sample.as_ref() {
+            Some(s) => {
+                let trip_ns = s.rx_ns.wrapping_sub(s.tx_ns.unwrap_or(s.built_ns)) as i64;
+                st.lock.observe_frame(sync.offset_ns(s), trip_ns)
+            }
+            None => st.lock.observe(None, true),
+        };
         if now != before {
             tracing::info!(method = sync.name(), offset_ns = st.lock.offset_ns(), "clock sync {before} -> {now}");
         }

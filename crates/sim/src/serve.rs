@@ -137,23 +137,30 @@ impl ServeStats {
 
     /// The cause of a sync error seen at `now_ns` on a slave with a `cycle_ns` SYNC0.
     fn side(&self, now_ns: u64, cycle_ns: u64) -> SyncErrorSide {
-        // The supervision trips after two SYNC0 intervals or more without outputs.
+        // The supervision trips after two SYNC0 intervals or more without outputs. The gaps
+        // between the frames' arrivals are the master's (or its host's); those between their
+        // trips through the segment add the simulator's placement.
         let window = now_ns.saturating_sub(4 * cycle_ns);
-        let mut gap_ns = 0u64;
-        let mut last = None;
-        let mut wait_ns = 0u64;
+        let (mut arrival_gap, mut entry_gap, mut wait_ns) = (0u64, 0u64, 0u64);
+        let mut last: Option<(u64, u64)> = None;
         for &(arrived, entry) in self.recent.iter().filter(|(a, _)| *a >= window) {
-            gap_ns = gap_ns.max(arrived.saturating_sub(last.unwrap_or(window)));
+            let (a0, e0) = last.unwrap_or((window, window));
+            arrival_gap = arrival_gap.max(arrived.saturating_sub(a0));
+            entry_gap = entry_gap.max(entry.saturating_sub(e0));
             wait_ns = wait_ns.max(entry.saturating_sub(arrived));
-            last = Some(arrived);
+            last = Some((arrived, entry));
         }
-        gap_ns = gap_ns.max(now_ns.saturating_sub(last.unwrap_or(window)));
-        if gap_ns >= 2 * cycle_ns {
-            SyncErrorSide::NoFrames { gap_ns }
-        } else if wait_ns >= cycle_ns / 4 {
+        let (a0, e0) = last.unwrap_or((window, window));
+        arrival_gap = arrival_gap.max(now_ns.saturating_sub(a0));
+        entry_gap = entry_gap.max(now_ns.saturating_sub(e0));
+        // Within a quarter cycle of two, the master's gap is the cause, whatever the placement
+        // added to it.
+        if arrival_gap * 4 >= 7 * cycle_ns {
+            SyncErrorSide::NoFrames { gap_ns: arrival_gap }
+        } else if entry_gap >= 2 * cycle_ns || wait_ns >= cycle_ns / 4 {
             SyncErrorSide::Simulator { wait_ns }
         } else {
-            SyncErrorSide::Phase { gap_ns }
+            SyncErrorSide::Phase { gap_ns: arrival_gap }
         }
     }
 
@@ -598,6 +605,10 @@ mod tests {
         let mut s = seen(&[10, 11, 12], 20_000);
         s.took(13 * MS, 400_000, 13 * MS + 400_000, true);
         assert_eq!(s.side(13 * MS + 500_000, MS), SyncErrorSide::Simulator { wait_ns: 400_000 });
+        // 1.8 ms without a frame, the next placed 50 µs after it arrived: the master's gap.
+        let mut s = seen(&[7, 8, 9], 20_000);
+        s.took(10_800_000, 100_000, 10_850_000, true);
+        assert_eq!(s.side(10_900_000, MS), SyncErrorSide::NoFrames { gap_ns: 1_800_000 });
         // Frames without process data do not count as the slave's outputs.
         let mut s = seen(&[7, 8], 20_000);
         s.took(9 * MS, 20_000, 9 * MS, false);

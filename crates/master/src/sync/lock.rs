@@ -73,6 +73,44 @@ pub struct Lock {
     observed: u64,
     changes: u64,
     first_locked: Option<u64>,
+    trips: TripScreen,
+}
+
+/// Which frames' offsets to leave out: a frame whose round trip is far above the usual one was
+/// held on its way (a host stall, a simulator late to answer), and the offset it measures is off
+/// by about half the excess, whatever the clocks did. A stall of a few ms holds several frames
+/// in a row, enough to move the median.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct TripScreen {
+    /// The usual round trip and its spread (running means over about 64 frames, ns).
+    centre_ns: i64,
+    spread_ns: i64,
+    n: u64,
+    left_out: u64,
+}
+
+/// Round trips learned before any is left out.
+const TRIP_WARM_UP: u64 = 32;
+/// Left out beyond the usual round trip by this many spreads, and by at least `TRIP_MIN_NS`.
+const TRIP_SPREADS: i64 = 6;
+const TRIP_MIN_NS: i64 = 10_000;
+
+impl TripScreen {
+    /// Whether a frame with round trip `trip_ns` measures the clocks; learns from it.
+    fn measures(&mut self, trip_ns: i64) -> bool {
+        if self.n == 0 {
+            self.centre_ns = trip_ns;
+        }
+        let dev = trip_ns - self.centre_ns;
+        let ok = self.n < TRIP_WARM_UP || dev <= (TRIP_SPREADS * self.spread_ns).max(TRIP_MIN_NS);
+        // Learned with the deviation capped, so that a stall does not become the usual.
+        let capped = dev.clamp(-4 * self.spread_ns.max(1_000), 4 * self.spread_ns.max(1_000));
+        self.centre_ns += capped / 64;
+        self.spread_ns += (capped.abs() - self.spread_ns) / 64;
+        self.n += 1;
+        self.left_out += !ok as u64;
+        ok
+    }
 }
 
 impl Lock {
@@ -95,6 +133,21 @@ impl Lock {
     /// The cycle (counted from 1, lost frames too) that first locked.
     pub fn first_locked_cycle(&self) -> Option<u64> {
         self.first_locked
+    }
+
+    /// Frames whose offsets were left out for their round trip ([`Lock::observe_frame`]).
+    pub fn left_out(&self) -> u64 {
+        self.trips.left_out
+    }
+
+    /// [`Lock::observe`] for a frame answered with round trip `trip_ns`: a frame held far
+    /// longer than usual on its way is left out (it neither counts towards a lock nor against
+    /// one).
+    pub fn observe_frame(&mut self, offset_ns: Option<i64>, trip_ns: i64) -> LockState {
+        if !self.trips.measures(trip_ns) {
+            return self.state;
+        }
+        self.observe(offset_ns, false)
     }
 
     /// Takes one cycle's measured offset (`None`: the frame was lost, or the method keeps no
@@ -150,6 +203,26 @@ mod tests {
 
     fn run(lock: &mut Lock, offsets: impl IntoIterator<Item = i64>) -> LockState {
         offsets.into_iter().map(|o| lock.observe(Some(o), false)).last().unwrap_or_default()
+    }
+
+    #[test]
+    fn a_frame_held_far_longer_than_usual_is_left_out() {
+        let mut lock = Lock::default();
+        // 40 µs round trips within ±2 µs, the offsets within: locked after 100.
+        for k in 0..200 {
+            lock.observe_frame(Some(100), 40_000 + (k % 5) * 1_000 - 2_000);
+        }
+        assert_eq!(lock.state(), LockState::Locked);
+        // A stall: ten frames in a row held 2 ms, their offsets 1 ms off: left out, still locked.
+        for _ in 0..10 {
+            assert_eq!(lock.observe_frame(Some(-1_000_000), 2_040_000), LockState::Locked);
+        }
+        assert_eq!(lock.left_out(), 10);
+        // The same offsets from frames with the usual round trip unlock.
+        for _ in 0..10 {
+            lock.observe_frame(Some(-1_000_000), 40_000);
+        }
+        assert_eq!(lock.state(), LockState::Locking);
     }
 
     #[test]
