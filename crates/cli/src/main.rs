@@ -20,6 +20,7 @@ mod sim;
 mod target;
 mod timing_stats;
 mod values;
+mod words;
 
 #[derive(Parser)]
 #[command(name = "ferrocat", version, about = "EtherCAT master, virtual segment and clock-synchronisation lab")]

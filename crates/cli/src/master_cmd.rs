@@ -340,8 +340,13 @@ pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> any
             eprintln!("wrote {} bytes of slave {position}'s SII to {}", img.len(), p.display());
         }
         None => {
+            // As xxd and hexdump -C show it: byte offsets, 16 bytes a line, and the printable
+            // bytes (SII word N is at byte 2N).
             for (k, c) in img.chunks(16).enumerate() {
-                outln!("{:04x}: {}", k * 8, c.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "));
+                let bytes: Vec<String> = c.iter().map(|b| format!("{b:02x}")).collect();
+                let text: String =
+                    c.iter().map(|&b| if b.is_ascii_graphic() || b == b' ' { b as char } else { '.' }).collect();
+                outln!("{:08x}: {:<47}  {text}", k * 16, bytes.join(" "));
             }
         }
     }

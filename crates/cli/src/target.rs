@@ -367,6 +367,15 @@ impl Target {
 
     /// Scans, and with --eni or --machine compares the network found with the file's before
     /// any slave leaves INIT.
+    /// Where the frames go, for messages.
+    pub fn place(&self) -> crate::words::Place<'_> {
+        match (&self.udp, &self.iface) {
+            (Some(a), _) => crate::words::Place::Udp(a),
+            (None, Some(i)) if self.config.is_none() && self.device.is_empty() => crate::words::Place::Iface(i),
+            _ => crate::words::Place::Virtual,
+        }
+    }
+
     pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
         let expected = match (self.eni_file()?, self.machine_file()?, &self.eni, &self.machine) {
             (Some(e), _, Some(p), _) => Some((p, e.expected())),
@@ -376,7 +385,7 @@ impl Target {
         if self.allow_mismatch && expected.is_none() {
             bail!("--allow-mismatch goes with --eni or --machine");
         }
-        m.scan()?;
+        m.scan().map_err(|e| crate::words::first_contact(self.place(), e.into()))?;
         if let Some((path, expected)) = expected {
             crate::eni::check(path, &expected, &m.slaves, self.allow_mismatch)?;
         }

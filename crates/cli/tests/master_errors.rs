@@ -279,6 +279,35 @@ fn error_texts_say_it_once_in_the_users_terms() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// EtherCAT over UDP to an address where nothing listens: said in those words, the address
+/// named, by every command's first frames.
+#[test]
+fn a_udp_address_where_nothing_listens_is_named() {
+    // A port just closed on loopback: the kernel refuses datagrams to it.
+    let port = std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let addr = format!("127.0.0.1:{port}");
+    for args in [vec!["scan"], vec!["sdo", "read", "1", "0x1018:1"], vec!["run", "--seconds", "1"]] {
+        let mut all = args.clone();
+        all.extend(["--udp", addr.as_str()]);
+        let (ok, _, err) = ferrocat(&all);
+        assert!(!ok && err.lines().filter(|l| l.contains("error")).count() == 1, "{args:?}: {err}");
+        assert!(err.contains(&format!("nothing listens at {addr} (UDP; connection refused)")), "{args:?}: {err}");
+    }
+}
+
+/// `sii read` without --out dumps the EEPROM as xxd does: byte offsets, 16 bytes a line, the
+/// printable bytes beside them.
+#[test]
+fn sii_read_dumps_byte_offsets() {
+    let (ok, out, err) = ferrocat(&["sii", "read", "0", "--device", "EK1100"]);
+    assert!(ok, "{err}");
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(lines[0].starts_with("00000000: ") && lines[1].starts_with("00000010: "), "{out}");
+    // Word 0x08 (byte 0x10) holds the vendor ID, Beckhoff's 2; word 0x0A the product code.
+    assert!(lines[1].starts_with("00000010: 02 00 00 00 52 2c 4c 04"), "EK1100 is 0x044C2C52: {out}");
+    assert!(lines.iter().all(|l| l.len() <= 10 + 47 + 2 + 16), "{out}");
+}
+
 /// A coupler's negative E-Bus current is explained: it is what the coupler supplies.
 #[test]
 fn the_ebus_current_says_which_way_it_flows() {

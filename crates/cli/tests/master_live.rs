@@ -276,6 +276,18 @@ fn a_segment_that_answers_nothing_is_one_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.lines().count() == 1, "{err}");
     assert!(err.contains("no answer") && !err.contains("panicked"), "{err}");
+    assert!(err.contains(&format!("no slave answered on {}: is the segment connected", net.master_if)), "{err}");
+    // The interface down: said so, with how to bring it up, by every command's first frames.
+    VethPair::cmd(&net.master_ns, "ip").args(["link", "set", &net.master_if, "down"]).status().unwrap();
+    for args in [vec!["scan"], vec!["sdo", "read", "1", "0x1018:1"], vec!["run", "--seconds", "1"]] {
+        let out = ferrocat_in(&net.master_ns).args(&args).args(["--iface", &net.master_if]).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.lines().filter(|l| l.contains("error")).count() == 1, "{args:?}: {err}");
+        assert!(
+            err.contains(&format!("{0} is down: bring it up (ip link set {0} up)", net.master_if)),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 #[test]
