@@ -836,13 +836,13 @@ impl<I: Io> Master<I> {
         if riders.reads_offsets {
             if let Some(shift) = w.shift.as_mut() {
                 let mut read = [(0u16, 0u64, 0u8); MAX_RIDERS];
-                for (slot, r) in read.iter_mut().zip(&riders.list[..riders.count]) {
-                    let mut b = [0u8; 8];
-                    b[..r.len as usize].copy_from_slice(&r.data[..r.len as usize]);
-                    *slot = (r.station, u64::from_le_bytes(b), r.len);
+                let mut count = 0;
+                for (slot, r) in read.iter_mut().zip(riders.offsets_read()) {
+                    *slot = r;
+                    count += 1;
                 }
                 shift.read = Some(read);
-                shift.count = riders.count;
+                shift.count = count;
             }
         }
         if riders.writes_offsets {

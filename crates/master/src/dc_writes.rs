@@ -82,9 +82,60 @@ impl Riders {
         true
     }
 
+    /// The offsets the riders read for a shift, as answered: (station, value, width in bytes).
+    /// Only those: a frame may carry the followers' delay bias beside them.
+    pub(crate) fn offsets_read(&self) -> impl Iterator<Item = (u16, u64, u8)> + '_ {
+        use ferrocat_wire::register::addr;
+        self.list[..self.count].iter().filter(|r| !r.write && r.ado == addr::DC_SYSTEM_TIME_OFFSET).map(|r| {
+            let mut b = [0u8; 8];
+            b[..r.len as usize].copy_from_slice(&r.data[..r.len as usize]);
+            (r.station, u64::from_le_bytes(b), r.len)
+        })
+    }
+
     /// Bytes on the wire: a datagram header, the data and a working counter each.
     pub(crate) fn wire_len(&self) -> usize {
         use ferrocat_wire::datagram::{HEADER_LEN, WKC_LEN};
         self.list[..self.count].iter().map(|r| HEADER_LEN + r.len as usize + WKC_LEN).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ferrocat_wire::register::addr;
+
+    #[test]
+    fn the_offsets_read_are_the_offset_reads_alone() {
+        let mut r = Riders::default();
+        let read = |station, v: u32| Rider {
+            station,
+            ado: addr::DC_SYSTEM_TIME_OFFSET,
+            data: (v as u64).to_le_bytes(),
+            len: 4,
+            ..Rider::default()
+        };
+        assert!(r.push(read(0x1001, 7)) && r.push(read(0x1002, 9)));
+        // The followers' delay bias on the same frame.
+        let bias = Rider { write: true, station: 0x1002, ado: addr::DC_SYSTEM_TIME_DELAY, len: 4, ..Rider::default() };
+        assert!(r.push(bias));
+        assert_eq!(r.offsets_read().collect::<Vec<_>>(), [(0x1001, 7, 4), (0x1002, 9, 4)]);
+        assert_eq!(r.wire_len(), 3 * (10 + 4 + 2));
+        // Full at MAX_RIDERS.
+        while r.push(bias) {}
+        assert_eq!(r.count, MAX_RIDERS);
+    }
+
+    #[test]
+    fn shifts_add_up_until_written() {
+        let mut w = DcWrites::default();
+        assert!(!w.pending());
+        w.add_shift(100, Some(0x1001));
+        w.add_shift(-30, Some(0x1001));
+        assert_eq!(w.shift.map(|s| s.shift_ns), Some(70));
+        // Another reference skipped: a fresh shift.
+        w.add_shift(5, None);
+        assert_eq!(w.shift.map(|s| (s.shift_ns, s.skip)), Some((5, None)));
+        assert!(w.pending());
     }
 }
