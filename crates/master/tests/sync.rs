@@ -679,11 +679,9 @@ fn probing_keeps_to_its_budget_on_average() {
     assert!(held.probes < free.probes, "the budget bound: {} against {}", held.probes, free.probes);
 }
 
-/// Park's method over 1 500 cycles of 1 ms on a segment whose master link makes the round trip
-/// most of the cycle, through `cycle_sync` (the image's LRW with the sync datagrams), the
-/// loop's period told to the master (`period_ns`, 0: none); the cycles whose work ran past
-/// their period, and how far the corrections moved the last clock's System_Time_Offset (ns).
-fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
+/// Three slaves brought up behind a master link of 300 µs each way: a round trip of about
+/// 620 µs, most of a 1 ms cycle.
+fn slow_segment() -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(
         "seed = 5\nmaster_link_ns = 300000\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 40.0\n\
          [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
@@ -692,6 +690,15 @@ fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
     m.bring_up().unwrap();
+    m
+}
+
+/// Park's method over 1 500 cycles of 1 ms on a segment whose master link makes the round trip
+/// most of the cycle, through `cycle_sync` (the image's LRW with the sync datagrams), the
+/// loop's period told to the master (`period_ns`, 0: none); the cycles whose work ran past
+/// their period, and how far the corrections moved the last clock's System_Time_Offset (ns).
+fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
+    let mut m = slow_segment();
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let d = m.park_delay(100).unwrap();
     let mut sync = Park2020::new(d);
@@ -737,14 +744,7 @@ fn on_a_slow_segment_the_methods_writes_ride_on_the_cyclic_frames() {
 /// within 1 µs of the master's. (A shift and a bias on one frame: `dc_writes`' unit tests.)
 #[test]
 fn on_a_slow_segment_ferrocats_writes_ride_too() {
-    let cfg: SegmentConfig = toml::from_str(
-        "seed = 5\nmaster_link_ns = 300000\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = 40.0\n\
-         [[device]]\nbuiltin = 'EL2004'\ndrift_ppm = -45.0\nesc = 'et1100'\nsync_unit = true\n\
-         [[device]]\nbuiltin = 'EL1004'\ndrift_ppm = 20.0\nesc = 'et1100'\nsync_unit = true\n",
-    )
-    .unwrap();
-    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
-    m.bring_up().unwrap();
+    let mut m = slow_segment();
     let method = ferrocat_master::sync::SyncMethod::default();
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
     let (mut sync, _, mut st) = m.start_clock_sync(&dc, &method, CYCLE_NS).unwrap();
