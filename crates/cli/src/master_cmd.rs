@@ -863,12 +863,29 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         (false, 1) => format!("1 cycle of {cycle_us} us"),
         (false, n) => format!("{n} cycles of {cycle_us} us"),
     };
+    // Where the simulator knows the truth: the reference's true time less the method's belief
+    // of it now, for a method that keeps one (the reference following the master, or a master
+    // clock of its own).
+    let true_offset_ns = match (&sync, m.dc_reference) {
+        (Some((method, _)), Some(station)) => {
+            let t = m.io_mut().now_ns();
+            let own = m.master_system_time_at(t);
+            let keeps_clock =
+                method.coupling() == Coupling::ReferenceFollowsMaster || method.master_time(own).is_some();
+            m.io_mut()
+                .true_system_time(station, t)
+                .filter(|_| keeps_clock)
+                .map(|truth| truth.wrapping_sub(method.reference_belief_ns(own)) as i64)
+        }
+        _ => None,
+    };
     let clock_sync = sync.as_ref().map(|(method, st)| {
         serde_json::json!({
             "method": method.name(),
             "lock": st.lock.state().name(),
             "offset_ns": st.lock.offset_ns(),
             "frames_lost": st.lost,
+            "true_offset_ns": true_offset_ns,
             "lock_changes": st.lock.changes(),
             "lock_left_out": st.lock.left_out(),
             "locked_after_s": st.lock.first_locked_cycle().map(|c| c as f64 * cycle_us as f64 * 1e-6),
@@ -926,6 +943,9 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         if let Some((method, st)) = &sync {
             outln!("clock sync {}", lock_text(&**method, st));
+        }
+        if let Some(o) = true_offset_ns {
+            outln!("true offset at the end (from the virtual segment): {o} ns");
         }
         if let (Some(p), Some(plan)) = (&passage, sync0) {
             let h = &p.after_sync0;

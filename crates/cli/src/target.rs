@@ -154,6 +154,13 @@ impl CliIo {
     pub fn is_virtual(&self) -> bool {
         matches!(self.world, World::Virtual(_))
     }
+    /// On the embedded virtual segment, the true system time of the slave at `station` when
+    /// the world's clock reads `t_ns`: what only the simulator knows.
+    pub fn true_system_time(&self, station: u16, t_ns: u64) -> Option<u64> {
+        let World::Virtual(v) = &self.world else { return None };
+        let node = v.seg.nodes.iter().find(|n| n.esc.station_address() == station)?;
+        Some(node.esc.dc.as_ref()?.system_at(t_ns))
+    }
     /// Which timestamps the link gives, in words.
     pub fn timestamps(&self) -> &'static str {
         match &self.world {

@@ -25,6 +25,16 @@ fn run_dc_runs_ferrocat_by_default_and_reports_it_locked() {
     assert_eq!(r["clock_sync"]["lock"], "locked");
     assert!(r["clock_sync"]["offset_ns"].as_i64().unwrap().abs() <= 1_000, "{r}");
     assert_eq!(r["cycles"], 2000);
+    // The truth beside the estimate, from the virtual segment: within 1 µs, though not the
+    // estimate (the host model's send/receive asymmetry, which no round trip sees).
+    assert!(r["clock_sync"]["true_offset_ns"].as_i64().unwrap().abs() < 1_000, "{r}");
+    // The conventional method's lag shows in the truth as in its estimate; the PI loop keeps
+    // no clock to compare.
+    let r = run(&["--seconds", "1", "--sync", "conventional"]);
+    let truth = r["clock_sync"]["true_offset_ns"].as_i64().unwrap();
+    assert!((-8_000..-2_000).contains(&truth), "{r}");
+    let r = run(&["--seconds", "0.5", "--sync", "pi"]);
+    assert_eq!(r["clock_sync"]["true_offset_ns"], serde_json::Value::Null, "{r}");
 }
 
 #[test]
