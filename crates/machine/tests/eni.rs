@@ -157,6 +157,10 @@ fn bad_files_are_refused_with_their_place() {
         ("<VendorId>2</VendorId>", "", "<Info> has no <VendorId>"),
         ("<ProductCode>72100946</ProductCode>", "<ProductCode>4294967296</ProductCode>", "out of range"),
         ("<Data>e903</Data>", "<Data>e9g3</Data>", "is not hex data"),
+        // A character of more than one byte where a digit should be (found by the fuzzer: it
+        // split the text inside the character and panicked).
+        ("<DataMask>0f00</DataMask>", "<DataMask>0f\u{2014}0</DataMask>", "DataMask: '0f\u{2014}0' is not hex data"),
+        ("<Data>e903</Data>", "<Data>+e903</Data>", "is not hex data"),
         (
             "<Destination>ffffffffffff</Destination>",
             "<Destination>ffff</Destination>",

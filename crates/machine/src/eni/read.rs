@@ -172,6 +172,10 @@ impl Reader {
     /// Hex bytes (`0400`); odd length is read with a leading zero and a warning.
     fn hex(&mut self, node: Node<'_, '_>, what: &str) -> R<Vec<u8>> {
         let s: String = raw_text(node).split_whitespace().collect();
+        // Digits are ASCII: anything else is no hex data, and byte pairs below need ASCII.
+        if !s.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Err(err(node, format!("{what}: '{s}' is not hex data")));
+        }
         let s = if s.len() % 2 == 1 {
             self.warn(node, format!("{what}: odd number of hex digits, read with a leading 0"));
             format!("0{s}")
