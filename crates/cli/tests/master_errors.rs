@@ -211,7 +211,10 @@ fn run_bounds_its_cycle_and_sums_up_when_interrupted() {
     let o = child.wait_with_output().unwrap();
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{out}{err}");
-    assert!(err.contains("stopped by a signal after") && out.contains("cycles of 1000 us (mean period"), "{out}{err}");
+    // However soon the signal came: "1 cycle of" was seen once in a loaded CI run, the signal
+    // right after the bring-up.
+    let summed = out.contains(" cycles of 1000 us (mean period") || out.contains("1 cycle of 1000 us (mean period");
+    assert!(err.contains("stopped by a signal after") && summed, "{out}{err}");
 }
 
 /// Slave positions count from 0 in every command and output: `scan` as text and JSON, `sdo`,
