@@ -106,15 +106,15 @@ pub fn found(slaves: &[ferrocat_master::Slave]) -> Vec<Found> {
     slaves
         .iter()
         .map(|s| Found {
-            position: s.position,
-            name: s.name.clone(),
+            position: s.position(),
+            name: s.name().to_string(),
             identity: Identity {
-                vendor_id: s.vendor_id,
-                product_code: s.product_code,
-                revision: s.revision,
-                serial: s.serial,
+                vendor_id: s.identity().vendor_id,
+                product_code: s.identity().product_code,
+                revision: s.identity().revision,
+                serial: s.identity().serial,
             },
-            alias: s.alias,
+            alias: s.alias(),
         })
         .collect()
 }
@@ -127,10 +127,13 @@ pub fn machine_from_scan(slaves: &[ferrocat_master::Slave], esi: &[std::path::Pa
         let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
         let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
         for (d, s) in m.slaves.iter_mut().zip(slaves) {
-            let described = file.vendor_id == s.vendor_id
-                && file.devices.iter().any(|x| x.product_code == s.product_code && x.revision == s.revision);
+            let described = file.vendor_id == s.identity().vendor_id
+                && file
+                    .devices
+                    .iter()
+                    .any(|x| x.product_code == s.identity().product_code && x.revision == s.identity().revision);
             if d.device.is_none() && described {
-                d.device = Some(format!("{}:#x{:x}", path.display(), s.product_code));
+                d.device = Some(format!("{}:#x{:x}", path.display(), s.identity().product_code));
             }
         }
     }

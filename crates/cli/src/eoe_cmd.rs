@@ -251,7 +251,7 @@ fn preop_with(
     target.scan(&mut m)?;
     m.configure()?;
     if params.given() {
-        let p = params.to_params(m.slave(position)?.station)?;
+        let p = params.to_params(m.slave(position)?.station())?;
         m.eoe().set_ip(position, &p)?;
     }
     Ok(m)

@@ -19,36 +19,36 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
     let mut m = t.master()?;
     t.scan(&mut m)?;
     if let Some(out) = write_machine {
-        let text = crate::eni::machine_from_scan(&m.slaves, &t.esi)?.to_toml();
+        let text = crate::eni::machine_from_scan(m.slaves(), &t.esi)?.to_toml();
         std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
-        eprintln!("wrote {} ({} slaves): edit it, then give it to --machine", out.display(), m.slaves.len());
+        eprintln!("wrote {} ({} slaves): edit it, then give it to --machine", out.display(), m.slaves().len());
     }
     // A ring split from the start: the secondary's cable comes in at the far half's root.
-    let split_root = m.split_latch.as_ref().map(|l| (l.root as u16, l.root_port));
+    let split_root = m.split_latch().map(|l| (l.root as u16, l.root_port));
     if json {
         let v: Vec<_> = m
-            .slaves
+            .slaves()
             .iter()
             .map(|s| {
                 json!({
-                    "position": s.position, "station_address": s.station, "alias": s.alias,
-                    "name": s.name, "description": s.description,
-                    "vendor_id": s.vendor_id, "product_code": s.product_code, "revision": s.revision, "serial": s.serial,
-                    "esc_type": s.esc_type, "fmmus": s.fmmu_count, "sync_managers": s.sm_count,
-                    "has_dc": s.has_dc, "system_time": s.has_system_time, "dc_64bit": s.dc_64bit, "delay_ns": s.delay_ns,
-                    "parent": s.parent, "parent_port": s.parent_port, "entry_port": s.entry_port,
-                    "active_ports": s.active_ports, "eeprom_loaded": s.dl_status.pdi_operational(), "relatched": m.relatched.contains(&(s.position as usize)),
-                    "ring_port": m.ring_port.or(split_root).filter(|r| r.0 == s.position).map(|r| r.1),
-                    "mailbox": s.mailbox.as_ref().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
+                    "position": s.position(), "station_address": s.station(), "alias": s.alias(),
+                    "name": s.name(), "description": s.description(),
+                    "vendor_id": s.identity().vendor_id, "product_code": s.identity().product_code, "revision": s.identity().revision, "serial": s.identity().serial,
+                    "esc_type": s.esc().kind, "fmmus": s.esc().fmmu_count, "sync_managers": s.esc().sm_count,
+                    "has_dc": s.dc().supported, "system_time": s.dc().has_system_time, "dc_64bit": s.dc().is_64bit, "delay_ns": s.dc().delay_ns,
+                    "parent": s.ports().parent, "parent_port": s.ports().parent_port, "entry_port": s.ports().entry,
+                    "active_ports": s.ports().active, "eeprom_loaded": s.ports().dl_status.pdi_operational(), "relatched": m.relatched().contains(&(s.position() as usize)),
+                    "ring_port": m.ring_port().or(split_root).filter(|r| r.0 == s.position()).map(|r| r.1),
+                    "mailbox": s.mailbox().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
             })
             .collect();
         outln!("{}", serde_json::Value::Array(v));
     } else {
-        outln!("{}", crate::count(m.slaves.len(), "slave", "found"));
+        outln!("{}", crate::count(m.slaves().len(), "slave", "found"));
         use ferrocat_master::io::Io;
         if m.io_mut().has_secondary() {
-            let far = m.split_latch.as_ref().and_then(|l| l.far_reference);
+            let far = m.split_latch().and_then(|l| l.far_reference);
             outln!(
                 "{}",
                 match (m.ring_state(), far) {
@@ -64,35 +64,40 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
                 }
             );
         }
-        for s in &m.slaves {
+        for s in m.slaves() {
             outln!("");
-            outln!("Slave {}: {} ({})", s.position, s.name, s.description);
-            outln!(" Configured address: {:04x}  alias {}", s.station, s.alias);
+            outln!("Slave {}: {} ({})", s.position(), s.name(), s.description());
+            outln!(" Configured address: {:04x}  alias {}", s.station(), s.alias());
             outln!(
                 " Man: {:08x} ID: {:08x} Rev: {:08x} Serial: {:08x}",
-                s.vendor_id,
-                s.product_code,
-                s.revision,
-                s.serial
+                s.identity().vendor_id,
+                s.identity().product_code,
+                s.identity().revision,
+                s.identity().serial
             );
-            outln!(" ESC type {:#04x}, {} FMMUs, {} SMs", s.esc_type, s.fmmu_count, s.sm_count);
-            outln!(" Has DC: {}  Delay: {}[ns]  Activeports: {}", s.has_dc as u8, s.delay_ns, s.active_ports_text());
+            outln!(" ESC type {:#04x}, {} FMMUs, {} SMs", s.esc().kind, s.esc().fmmu_count, s.esc().sm_count);
+            outln!(
+                " Has DC: {}  Delay: {}[ns]  Activeports: {}",
+                s.dc().supported as u8,
+                s.dc().delay_ns,
+                s.active_ports_text()
+            );
             if let Some(problem) = s.eeprom_problem() {
                 outln!(" {problem}");
             }
-            if s.has_dc && !s.has_system_time {
+            if s.dc().supported && !s.dc().has_system_time {
                 outln!(" DC: receive times only (no system time)");
             }
-            if s.entry_port != 0 {
-                outln!(" Entered on port {}", s.entry_port);
+            if s.ports().entry != 0 {
+                outln!(" Entered on port {}", s.ports().entry);
             }
-            if m.relatched.contains(&(s.position as usize)) {
+            if m.relatched().contains(&(s.position() as usize)) {
                 outln!(" DC: latched again (its ports 1–3 take the frame after the write to 0x0900)");
             }
-            if let Some((_, port)) = m.ring_port.or(split_root).filter(|r| r.0 == s.position) {
+            if let Some((_, port)) = m.ring_port().or(split_root).filter(|r| r.0 == s.position()) {
                 outln!(" Ring: port {port} leads back to the master's secondary port");
             }
-            if let Some(mb) = &s.mailbox {
+            if let Some(mb) = &s.mailbox() {
                 outln!(
                     " MBX out {:#06x}/{} in {:#06x}/{} protocols {:#04x}",
                     mb.out.0,
@@ -102,23 +107,23 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
                     mb.protocols
                 );
             }
-            for (k, sm) in s.sii.sync_managers().iter().enumerate() {
+            for (k, sm) in s.sii().sync_managers().iter().enumerate() {
                 outln!(" SM{k} A:{:04x} L:{:4} C:{:02x} Type:{}", sm.start, sm.length, sm.control, sm.sm_type);
             }
         }
         outln!("");
         outln!("Topology:");
         fn tree(m: &Master<CliIo>, parent: Option<u16>, depth: usize) {
-            for s in m.slaves.iter().filter(|s| s.parent == parent) {
+            for s in m.slaves().iter().filter(|s| s.ports().parent == parent) {
                 outln!(
                     "{}{} {} (port {} of its parent, {} ns)",
                     "  ".repeat(depth + 1),
-                    s.position,
-                    s.name,
-                    s.parent_port,
-                    s.delay_ns
+                    s.position(),
+                    s.name(),
+                    s.ports().parent_port,
+                    s.dc().delay_ns
                 );
-                tree(m, Some(s.position), depth + 1);
+                tree(m, Some(s.position()), depth + 1);
             }
         }
         tree(&m, None, 0);
@@ -333,7 +338,7 @@ pub fn foe(
 pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
     t.scan(&mut m)?;
-    let img = m.slave(position)?.sii.to_image();
+    let img = m.slave(position)?.sii().to_image();
     match out {
         Some(p) => {
             std::fs::write(p, &img).with_context(|| format!("writing {}", p.display()))?;
@@ -373,8 +378,8 @@ pub fn sii_write(
     let mut m = t.master()?;
     t.scan(&mut m)?;
     let s = m.slave(position)?;
-    let (h, mine) = (&info.header, &s.sii.header);
-    if (h.vendor_id, h.product_code) != (s.vendor_id, s.product_code) && !overwrite_identity {
+    let (h, mine) = (&info.header, &s.sii().header);
+    if (h.vendor_id, h.product_code) != (s.identity().vendor_id, s.identity().product_code) && !overwrite_identity {
         bail!(
             "{} is vendor {:#x} product {:#x} ({}); slave {position} is vendor {:#x} product {:#x} ({}): nothing written \
              (--overwrite-identity programs it anyway)",
@@ -382,9 +387,9 @@ pub fn sii_write(
             h.vendor_id,
             h.product_code,
             info.string(1).unwrap_or_else(|| "no name".into()),
-            s.vendor_id,
-            s.product_code,
-            s.name
+            s.identity().vendor_id,
+            s.identity().product_code,
+            s.name()
         );
     }
     let data_len = img.iter().rposition(|b| *b != 0xFF).map_or(0, |i| i + 1);
@@ -395,7 +400,7 @@ pub fn sii_write(
             mine.eeprom_size_bytes()
         );
     }
-    let before = s.sii.to_image();
+    let before = s.sii().to_image();
     let backup = match backup {
         Some(b) => b.to_path_buf(),
         None => (0..)
@@ -410,7 +415,7 @@ pub fn sii_write(
     eprintln!("slave {position}'s EEPROM as it was ({} bytes) is in {}", before.len(), backup.display());
     let words = m.sii_write(position, &img)?;
     // Read back (the master reloads and reads the SII after writing) and compared.
-    let after = m.slave(position)?.sii.to_image();
+    let after = m.slave(position)?.sii().to_image();
     let used = data_len.min(after.len());
     if let Some(at) = (0..used).find(|&k| after.get(k) != img.get(k)) {
         bail!(
@@ -431,7 +436,7 @@ pub fn sii_alias(t: &Target, position: u16, alias: &str) -> anyhow::Result<ExitC
     let mut m = t.master()?;
     t.scan(&mut m)?;
     let words = m.sii_set_alias(position, value)?;
-    let name = &m.slaves[position as usize].name;
+    let name = &m.slaves()[position as usize].name();
     eprintln!(
         "slave {position} ({name}): alias {value:#06x} in its EEPROM ({words} words written); \
          its ESC takes it at the next power-on"
@@ -581,7 +586,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
-    m.cyclic_timeout_ns = frame_timeout_us * 1000;
+    m.settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
     if !m.io_mut().is_virtual() {
         crate::target::go_real_time();
     }
@@ -593,10 +598,10 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     t.scan(&mut m)?;
     m.configure()?;
     // Nothing to exchange: no frame would go out, and the summary would count none.
-    if m.image.is_empty() && !dc {
+    if m.image().is_empty() && !dc {
         bail!(
             "no slave maps process data ({}): nothing to exchange cyclically (--dc runs the clock distribution alone)",
-            crate::count(m.slaves.len(), "slave", "found")
+            crate::count(m.slaves().len(), "slave", "found")
         );
     }
     // The segment's round trip, for the frame timeout and SYNC0's place.
@@ -604,7 +609,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let round_trip_us = round_trip_ns.div_ceil(1000);
     if o.frame_timeout_us.is_none() {
         frame_timeout_us = self::frame_timeout_us(cycle_us, max_rate, Some(round_trip_us));
-        m.cyclic_timeout_ns = frame_timeout_us * 1000;
+        m.settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
     }
     if !max_rate && round_trip_us * 10 > cycle_us * 8 {
         tracing::warn!(
@@ -646,7 +651,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 many => format!("slaves {}", many.iter().map(|p| p.to_string()).collect::<Vec<_>>().join(", ")),
             }
         );
-        if let Some((l, lag)) = m.split_latch.as_ref().and_then(|l| Some((l, l.far_lag_ns()?))) {
+        if let Some((l, lag)) = m.split_latch().and_then(|l| Some((l, l.far_lag_ns()?))) {
             eprintln!(
                 "DC: ring split from the start: the far half (from slave {}) latched {:.1} µs after the reference, \
                  its clocks set for that instant",
@@ -804,7 +809,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 (m.io_mut().now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
-                m.expected_wkc,
+                m.expected_wkc(),
                 crate::count(s.wkc_errors as usize, "error", "").trim_end(),
                 s.max_jitter_ns as f64 / 1000.0,
                 s.last_round_trip_ns as f64 / 1000.0,
@@ -866,7 +871,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // Where the simulator knows the truth: the reference's true time less the method's belief
     // of it now, for a method that keeps one (the reference following the master, or a master
     // clock of its own).
-    let true_offset_ns = match (&sync, m.dc_reference) {
+    let true_offset_ns = match (&sync, m.dc_reference()) {
         (Some((method, _)), Some(station)) => {
             let t = m.io_mut().now_ns();
             let own = m.master_system_time_at(t);
@@ -918,7 +923,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
-                "slaves": tally.to_json(m.slaves.iter().filter(|s| s.state == ferrocat_wire::register::AlState::Op).count(), m.slaves.len()),
+                "slaves": tally.to_json(m.slaves().iter().filter(|s| s.state() == ferrocat_wire::register::AlState::Op).count(), m.slaves().len()),
                 "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
                 "diagnosis": diagnosis_json(&m, &tally, o.diagnosis_ms),
                 "groups": groups_json(&m),
@@ -1046,7 +1051,7 @@ fn diagnosis_json(
                 })
                 .collect();
             (!nonzero.is_empty())
-                .then(|| serde_json::json!({"position": k, "name": m.slaves[k].name, "counters": nonzero}))
+                .then(|| serde_json::json!({"position": k, "name": m.slaves()[k].name(), "counters": nonzero}))
         })
         .collect();
     serde_json::json!({

@@ -349,7 +349,9 @@ impl Target {
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
-            m.esi.extend(file.devices.into_iter().map(|d| (file.vendor_id, d)));
+            for d in file.devices {
+                m.add_esi(file.vendor_id, d);
+            }
         }
         Ok(m)
     }
@@ -394,7 +396,7 @@ impl Target {
         }
         m.scan().map_err(|e| crate::words::first_contact(self.place(), e.into()))?;
         if let Some((path, expected)) = expected {
-            crate::eni::check(path, &expected, &m.slaves, self.allow_mismatch)?;
+            crate::eni::check(path, &expected, m.slaves(), self.allow_mismatch)?;
         }
         Ok(())
     }

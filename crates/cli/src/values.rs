@@ -12,7 +12,7 @@ pub fn handle<I: Io>(m: &Master<I>, eni: Option<&Eni>, name: &str, output: bool)
         let pi = &e.process_image;
         let found = pi.outputs.variables.iter().find(|v| v.name == name).map(|v| (v, 0)).or_else(|| {
             (!output)
-                .then(|| pi.inputs.variables.iter().find(|v| v.name == name).map(|v| (v, m.out_bytes * 8)))
+                .then(|| pi.inputs.variables.iter().find(|v| v.name == name).map(|v| (v, m.image_bytes().0 * 8)))
                 .flatten()
         });
         if let Some((v, base)) = found {
@@ -20,7 +20,7 @@ pub fn handle<I: Io>(m: &Master<I>, eni: Option<&Eni>, name: &str, output: bool)
                 bail!("'{name}' has {} bits: values of at most 64 bits are read and written", v.bit_size);
             }
             let h = Handle { bit: base + v.bit_offs, bits: v.bit_size as u8 };
-            if (h.bit as u64 + h.bits as u64).div_ceil(8) > m.image.len() as u64 {
+            if (h.bit as u64 + h.bits as u64).div_ceil(8) > m.image().len() as u64 {
                 bail!("'{name}' lies past the process image (a variable no cyclic frame carries)");
             }
             return Ok(h);
@@ -72,7 +72,7 @@ pub fn copies<I: Io>(
             while done < c.bits {
                 let bits = (c.bits - done).min(64) as u8;
                 out.push((
-                    Handle { bit: m.out_bytes * 8 + c.src_bit + done, bits },
+                    Handle { bit: m.image_bytes().0 * 8 + c.src_bit + done, bits },
                     Handle { bit: c.dst_bit + done, bits },
                 ));
                 done += bits as u32;

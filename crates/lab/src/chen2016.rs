@@ -122,9 +122,10 @@ fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> 
             .and_then(|n| m.io().seg.nodes[n].esc.app().as_any().downcast_ref::<SyncApp>())
             .is_some_and(|a| a.mode == SyncMode::DcSynchronous)
     };
-    let synced: Vec<u16> = (0..m.slaves.len()).filter(|&k| dc_synchronous(k)).map(|k| k as u16).collect();
+    let synced: Vec<u16> = (0..m.slaves().len()).filter(|&k| dc_synchronous(k)).map(|k| k as u16).collect();
     anyhow::ensure!(!synced.is_empty(), "the segment has no DC-synchronous slave (app = \"dc\")");
-    let counted_slaves: Vec<u16> = synced.iter().copied().filter(|&k| m.slaves[k as usize].output_bits() > 0).collect();
+    let counted_slaves: Vec<u16> =
+        synced.iter().copied().filter(|&k| m.slaves()[k as usize].output_bits() > 0).collect();
     anyhow::ensure!(
         !counted_slaves.is_empty(),
         "no DC-synchronous slave (app = \"dc\") of the segment has process-data outputs (slaves {synced:?} have \

@@ -184,7 +184,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
     m.scan()?;
     m.configure()?;
     let mut drives = Vec::new();
-    for k in 0..m.slaves.len() as u16 {
+    for k in 0..m.slaves().len() as u16 {
         if Axis::new(&m, k).is_err() {
             continue;
         }
@@ -251,7 +251,7 @@ fn run_one<I: World>(
     calibrate: Calibrate<'_, I>,
 ) -> anyhow::Result<Row> {
     let (mut r, drives) = rig(m, cycle_us, method)?;
-    let events0 = r.m.events.len();
+    let events0 = r.m.events().len();
     let cycle_ns = r.cycle_ns;
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
     let settle_cycles = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
@@ -467,7 +467,7 @@ fn run_one<I: World>(
         })
         .collect();
     let enabled = drives.iter().filter(|&&d| axis_rows.iter().filter(|a| a.slave == d).all(|a| a.enabled)).count();
-    let left_op = r.m.events[events0..]
+    let left_op = r.m.events()[events0..]
         .iter()
         .filter(|e| matches!(e, MasterEvent::LeftOp { position, .. } if drives.contains(position)))
         .count();

@@ -113,7 +113,7 @@ pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> a
 /// one of ferrocat's (in virtual time or against `ferrocat sim` on a real interface alike).
 pub fn tell_loop_back<I: World>(m: &mut Master<I>, method: &str) {
     if CALIBRATED.contains(&method) {
-        m.closed_port_loop_ns = loop_back_ns();
+        m.settings_mut().closed_port_loop_ns = loop_back_ns();
     }
 }
 
@@ -180,7 +180,8 @@ pub fn calibration(
 
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.
 pub fn dc_slaves<I: World>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
-    let dc: Vec<usize> = m.slaves.iter().enumerate().filter(|(_, s)| s.has_system_time).map(|(k, _)| k).collect();
+    let dc: Vec<usize> =
+        m.slaves().iter().enumerate().filter(|(_, s)| s.dc().has_system_time).map(|(k, _)| k).collect();
     anyhow::ensure!(!dc.is_empty(), "the segment has no slave with distributed clocks");
     Ok(dc)
 }
@@ -198,7 +199,7 @@ pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
 
 /// The segment node of the slave at position `k`, by its station address.
 pub fn node_of<I: World>(m: &Master<I>, k: usize) -> Option<usize> {
-    let station = m.slaves.get(k)?.station;
+    let station = m.slaves().get(k)?.station();
     m.io().segment()?.nodes.iter().position(|n| n.esc.station_address() == station)
 }
 

@@ -155,7 +155,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     // The master waits a quarter of the cycle for its frame (SOEM's examples wait 2 ms, IgH
     // until the next cycle): what is not back by then is lost, and a method may still make up
     // for it before the next cycle.
-    m.cyclic_timeout_ns = o.cycle_ns / 4;
+    m.settings_mut().cyclic_timeout_ns = o.cycle_ns / 4;
     let dc = crate::dc_slaves(&m)?;
     let reference = dc[0];
     let reference_node = crate::node_of(&m, reference).unwrap_or(0);

@@ -108,7 +108,7 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     assert_eq!(command(&mut m, &a, 0x0F), Some(OperationEnabled), "16");
     // 13, 14: a blocked axis (its torque limit below friction) behind a target beyond the
     // following-error window for longer than the window's timeout.
-    m.events.clear();
+    m.take_events();
     m.coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &1u16.to_le_bytes()).unwrap();
     m.coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes()).unwrap();
     let p = a.position_actual(&m).unwrap();
@@ -130,9 +130,9 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     assert_eq!(u16::from_le_bytes([code[0], code[1]]), error_code::FOLLOWING_ERROR);
     m.poll_mailboxes().unwrap();
     assert!(
-        m.events.iter().any(|e| matches!(e, MasterEvent::Emergency { error_code: 0x8611, .. })),
+        m.events().iter().any(|e| matches!(e, MasterEvent::Emergency { error_code: 0x8611, .. })),
         "an emergency: {:?}",
-        m.events
+        m.events()
     );
     m.coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes()).unwrap();
     // Faults ignore everything but a rising edge of bit 7 (15).
@@ -354,7 +354,10 @@ fn needs_shared_akd_eeprom_walks_every_transition() {
     walk_every_transition(&format!("eeprom = '{}'", p.display()), &|m| {
         map_for_csp(m, DRIVE).unwrap();
         let s = m.slave(DRIVE).unwrap();
-        assert!(s.outputs.iter().any(|e| e.index == 0x607A) && s.inputs.iter().any(|e| e.index == 0x6064));
+        assert!(
+            s.mapping().outputs.iter().any(|e| e.index == 0x607A)
+                && s.mapping().inputs.iter().any(|e| e.index == 0x6064)
+        );
     });
 }
 
@@ -822,8 +825,11 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     let p = ferrocat_testdata::shared("captures/eeprom/akd.hex");
     let mut m = master(&format!("eeprom = '{}'", p.display()), &|_| {});
     let s = m.slave(DRIVE).unwrap();
-    assert!(s.outputs.iter().any(|e| (e.index, e.subindex) == (ix::INTERPOLATION_DATA, 1)), "the default PDOs");
-    assert!(!s.outputs.iter().any(|e| e.index == ix::TARGET_POSITION));
+    assert!(
+        s.mapping().outputs.iter().any(|e| (e.index, e.subindex) == (ix::INTERPOLATION_DATA, 1)),
+        "the default PDOs"
+    );
+    assert!(!s.mapping().outputs.iter().any(|e| e.index == ix::TARGET_POSITION));
     let mut a = Axis::new(&m, DRIVE).unwrap();
     a.set_interpolation_period(&mut m, CYCLE_NS).unwrap();
     assert_eq!(m.coe().sdo_read(DRIVE, ix::INTERPOLATION_TIME_PERIOD, 2).unwrap(), [(-3i8) as u8]);

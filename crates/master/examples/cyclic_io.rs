@@ -25,13 +25,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cycles: u64 = args.next().map_or(Ok(2_000), |n| n.parse())?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
     master.bring_up()?;
     // Entries by name, as the slaves' EEPROMs (or CoE) name them.
     let find = |outputs: bool| {
-        master.slaves.iter().find_map(|s| {
-            let list = if outputs { &s.outputs } else { &s.inputs };
-            list.first().map(|e| (s.position, e.name.clone()))
+        master.slaves().iter().find_map(|s| {
+            let list = if outputs { &s.mapping().outputs } else { &s.mapping().inputs };
+            list.first().map(|e| (s.position(), e.name.clone()))
         })
     };
     let (out_slave, out_name) = find(true).ok_or("no slave has outputs")?;
@@ -47,9 +47,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         master.set(light, (k / 100) & 1);
         let wkc = master.cycle()?;
-        if wkc != master.expected_wkc {
+        if wkc != master.expected_wkc() {
             short += 1;
-            eprintln!("cycle {k}: working counter {wkc}, expected {}", master.expected_wkc);
+            eprintln!("cycle {k}: working counter {wkc}, expected {}", master.expected_wkc());
         }
         if let Some((pos, name)) = &input {
             last_input = Some((name.clone(), master.get(master.input(*pos, name)?)));

@@ -30,7 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok_or_else(|| format!("unknown method {name}; known: {}", SyncMethod::PRESETS.join(", ")))?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
     master.scan()?;
     master.configure()?;
     // In PREOP: delays, offsets, static drift compensation, SYNC0 every cycle; then the method.

@@ -13,17 +13,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut master = Master::new(RawIo::open(&iface)?);
     // Counts the slaves, gives them station addresses and reads their EEPROMs.
     master.scan()?;
-    println!("{} slaves on {iface}", master.slaves.len());
-    for s in &master.slaves {
+    println!("{} slaves on {iface}", master.slaves().len());
+    for s in master.slaves() {
         println!(
             "{:3}  {:<12} vendor {:#010x} product {:#010x} rev {:#010x}  station {:#06x}{}",
-            s.position,
-            s.name,
-            s.vendor_id,
-            s.product_code,
-            s.revision,
-            s.station,
-            if s.has_dc { "  DC" } else { "" }
+            s.position(),
+            s.name(),
+            s.identity().vendor_id,
+            s.identity().product_code,
+            s.identity().revision,
+            s.station(),
+            if s.dc().supported { "  DC" } else { "" }
         );
     }
     Ok(())

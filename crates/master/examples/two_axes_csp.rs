@@ -28,7 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let positions = [a.parse::<u16>()?, b.parse::<u16>()?];
     let mut master = Master::new(RawIo::open(iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
     master.scan()?;
     master.configure()?;
     for &p in &positions {

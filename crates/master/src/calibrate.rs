@@ -54,14 +54,14 @@ impl GpioCalibration {
             return Ok(None);
         }
         let s = m.slave(self.slave)?;
-        if !s.has_system_time {
+        if !s.dc.has_system_time {
             return Err(MasterError::slave(
                 self.slave,
                 &s.name,
                 "has no DC system time to latch the calibration pulse",
             ));
         }
-        let (station, wide) = (s.station, s.dc_64bit);
+        let (station, wide) = (s.station, s.dc.is_64bit);
         if !self.armed {
             m.fpwr(station, LATCH0_CONTROL, &[0])?;
             m.engine.io.set_gpio(false)?;

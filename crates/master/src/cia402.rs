@@ -89,8 +89,8 @@ impl Axis {
         let s = m.slave(position)?;
         let mapped = |axis: u8| {
             let at = axis_offset(axis);
-            s.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at)
-                && s.inputs.iter().any(|e| e.index == ix::STATUSWORD + at)
+            s.mapping.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at)
+                && s.mapping.inputs.iter().any(|e| e.index == ix::STATUSWORD + at)
         };
         let mut axes = vec![Self::new(m, position)?];
         for axis in (1..MAX_AXES).filter(|&n| mapped(n)) {
@@ -107,7 +107,7 @@ impl Axis {
         }
         let at = axis_offset(axis);
         let find_sub = |outputs: bool, index: u16, sub: Option<u8>| {
-            let list = if outputs { &s.outputs } else { &s.inputs };
+            let list = if outputs { &s.mapping.outputs } else { &s.mapping.inputs };
             list.iter()
                 .find(|e| e.index == index + at && sub.is_none_or(|k| e.subindex == k))
                 .map(|e| Handle { bit: e.image_bit, bits: e.bits })
@@ -339,7 +339,7 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
         let s = m.slave(position)?;
         (0..MAX_AXES)
             .map(axis_offset)
-            .filter(|&at| at == 0 || s.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at))
+            .filter(|&at| at == 0 || s.mapping.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at))
             .collect()
     };
     let sides =
@@ -348,7 +348,7 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
         for (outputs, object, word, assign) in sides {
             let (object, word) = (object + at, word + at);
             let s = m.slave(position)?;
-            let mapped = if outputs { &s.outputs } else { &s.inputs };
+            let mapped = if outputs { &s.mapping.outputs } else { &s.mapping.inputs };
             if mapped.iter().any(|e| e.index == object) {
                 continue;
             }

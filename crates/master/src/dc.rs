@@ -284,7 +284,7 @@ impl<I: Io> Master<I> {
     /// cyclic operation then starts without the rate change every follower would have to
     /// relearn (docs/clock-sync.md, lock time).
     pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
-        if !self.slaves.iter().any(|s| s.has_dc) {
+        if !self.slaves.iter().any(|s| s.dc.supported) {
             return Err(DcError::NoDcSlave.into());
         }
         // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
@@ -296,29 +296,29 @@ impl<I: Io> Master<I> {
             None => self.master_system_time(),
         };
         // The reference: the first slave whose system time answers (the latch found out).
-        let reference = self.slaves.iter().position(|s| s.has_system_time).ok_or(DcError::NoSystemTime)?;
+        let reference = self.slaves.iter().position(|s| s.dc.has_system_time).ok_or(DcError::NoSystemTime)?;
         // 4. Offsets, including each slave's delay: all local copies equal the reference's,
         //    and the reference's equals the master's time at the latch.
-        let r_ref = self.slaves[reference].receive_time_epu;
+        let r_ref = self.slaves[reference].dc.receive_time_epu;
         let offset_ref = t_master.wrapping_sub(r_ref);
         // A ring split from the start: the far half latched on the second pass, this much
         // later, and its delays are from its own reference (master/split_start.rs).
         let far_lag = self.split_latch.as_ref().and_then(|l| Some((l.first_far, l.far_lag_ns()?)));
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if !s.has_system_time {
+            if !s.dc.has_system_time {
                 continue;
             }
             let lag = far_lag.filter(|&(f, _)| k >= f).map_or(0, |(_, lag)| lag);
             let offset = r_ref
                 .wrapping_add(offset_ref)
-                .wrapping_sub(s.receive_time_epu)
-                .wrapping_add(s.delay_ns as u64)
+                .wrapping_sub(s.dc.receive_time_epu)
+                .wrapping_add(s.dc.delay_ns as u64)
                 .wrapping_add_signed(lag);
             let mut d = [0u8; 12];
-            let n = if s.dc_64bit { 8 } else { 4 };
+            let n = if s.dc.is_64bit { 8 } else { 4 };
             d[..8].copy_from_slice(&offset.to_le_bytes());
-            let (st, delay) = (s.station, s.delay_ns);
+            let (st, delay) = (s.station, s.dc.delay_ns);
             self.engine.expect_wkc(
                 Command::FPWR,
                 Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET },
@@ -333,7 +333,7 @@ impl<I: Io> Master<I> {
             )?;
         }
         // 5. Reset the time control loops: filter depth first, then the speed counter start.
-        let dc_count = self.slaves.iter().filter(|s| s.has_system_time).count() as u16;
+        let dc_count = self.slaves.iter().filter(|s| s.dc.has_system_time).count() as u16;
         self.engine.one(
             Command::BWR,
             Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH },
@@ -432,7 +432,7 @@ impl<I: Io> Master<I> {
             None => self
                 .slaves
                 .iter()
-                .filter(|s| s.has_system_time && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
+                .filter(|s| s.dc.has_system_time && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
                 .map(|s| s.position)
                 .collect(),
         };
@@ -458,7 +458,7 @@ impl<I: Io> Master<I> {
         let cycle = cfg.sync0_cycle_ns.max(1) as u64;
         for &p in targets {
             let s = self.slave(p)?;
-            if !s.has_system_time {
+            if !s.dc.has_system_time {
                 return Err(MasterError::of(p, &s.name, crate::error::SlaveError::NoSystemTime));
             }
         }
@@ -492,7 +492,7 @@ impl<I: Io> Master<I> {
         for &p in targets {
             let (st, wide) = {
                 let s = self.slave(p)?;
-                (s.station, s.dc_64bit)
+                (s.station, s.dc.is_64bit)
             };
             let fp = |m: &mut Self, ado: u16, d: &mut [u8]| {
                 m.engine.expect_wkc(Command::FPWR, Address::Device { adp: st, ado }, d, 1)
@@ -510,7 +510,7 @@ impl<I: Io> Master<I> {
     /// Every DC slave's filtered system time difference (0x092C), signed.
     pub fn dc_differences(&mut self) -> Result<Vec<(u16, i64)>> {
         let dc: Vec<(u16, u16)> =
-            self.slaves.iter().filter(|s| s.has_system_time).map(|s| (s.position, s.station)).collect();
+            self.slaves.iter().filter(|s| s.dc.has_system_time).map(|s| (s.position, s.station)).collect();
         let mut bufs = vec![[0u8; 4]; dc.len()];
         {
             let mut p: Vec<Pdu<'_>> = dc
@@ -650,22 +650,22 @@ impl<I: Io> Master<I> {
         let times = self.port_receive_times(st)?;
         let dl = ferrocat_wire::register::DlStatus(u16::from_le_bytes(dl));
         let view = crate::topology::PortView {
-            entry_port: self.slaves[r].entry_port,
+            entry_port: self.slaves[r].ports.entry,
             active_ports: [0, 1, 2, 3].map(|p| dl.port_active(p)),
-            present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(self.slaves[r].port_descriptor).can_link(p)),
+            present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(self.slaves[r].ports.descriptor).can_link(p)),
             receive_times: Some(times),
             epu_time: None,
         };
         // The port that lost its link now loops the frame back after the last latched return,
         // where on the ring it latched one: its loop-back belongs to the loop.
-        let loops = view.loops_after_last_event() * self.closed_port_loop_ns as i64;
+        let loops = view.loops_after_last_event() * self.settings.closed_port_loop_ns as i64;
         Ok(loop_of(&times, view.active_ports, view.entry_port) + loops.max(0) as u64)
     }
 
     /// How long a frame spends behind slave `k` before it passes it again on its way back.
     pub(crate) fn loop_ns_of(&self, k: usize) -> u64 {
         let s = &self.slaves[k];
-        loop_of(&s.receive_times, s.active_ports, s.entry_port)
+        loop_of(&s.dc.receive_times, s.ports.active, s.ports.entry)
     }
 
     /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master from
@@ -673,7 +673,7 @@ impl<I: Io> Master<I> {
     /// averaged delay.
     pub fn park_delay(&mut self, n: u32) -> Result<i64> {
         let r = self.reference_index()?;
-        let (st, active, entry) = (self.slaves[r].station, self.slaves[r].active_ports, self.slaves[r].entry_port);
+        let (st, active, entry) = (self.slaves[r].station, self.slaves[r].ports.active, self.slaves[r].ports.entry);
         let mut trips = Vec::with_capacity(n as usize);
         for _ in 0..n {
             // Eq. 3's t_p0^m is taken "immediately after sending", t_p1^m once it is back.
@@ -709,7 +709,7 @@ impl<I: Io> Master<I> {
         let (mut pdus, n) = p.pdus(&mut nop);
         let pdus = &mut pdus[..n];
         let frame_bytes = frame_bytes(pdus);
-        let res = self.engine.transact_once(pdus, self.cyclic_timeout_ns);
+        let res = self.engine.transact_once(pdus, self.settings.cyclic_timeout_ns);
         let passes = self.engine.split_passes.take();
         let answered = match res {
             Ok(()) => SyncPdus::answered(pdus),
@@ -732,7 +732,7 @@ impl<I: Io> Master<I> {
         st.cycle += 1;
         let built_ns = self.master_system_time();
         let rfm = sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster;
-        let wide = self.slaves[r].dc_64bit;
+        let wide = self.slaves[r].dc.is_64bit;
         let plan = sync.plan(st.cycle);
         let first = if rfm && plan.steer_reference_offset {
             let len = if wide { 8 } else { 4 };
@@ -751,9 +751,9 @@ impl<I: Io> Master<I> {
         let near = self.first_far_position().unwrap_or(self.slaves.len());
         let follower = plan
             .read_follower_clock
-            .then(|| self.slaves[..near].iter().skip(r + 1).find(|s| s.has_system_time && s.dc_64bit))
+            .then(|| self.slaves[..near].iter().skip(r + 1).find(|s| s.dc.has_system_time && s.dc.is_64bit))
             .flatten()
-            .map(|s| (s.station, s.speed_diff_slows));
+            .map(|s| (s.station, s.dc.speed_diff_slows));
         let (riders, stuck) = match self.riders() {
             Some(r) if r.wire_len() + NOP_LEN <= room_bytes => (r, false),
             Some(_) => (Riders::default(), true),
@@ -786,8 +786,8 @@ impl<I: Io> Master<I> {
             match &shift.read {
                 None => {
                     riders.reads_offsets = true;
-                    for s in self.slaves.iter().filter(|s| s.has_system_time && shift.skip != Some(s.station)) {
-                        let len = if s.dc_64bit { 8 } else { 4 };
+                    for s in self.slaves.iter().filter(|s| s.dc.has_system_time && shift.skip != Some(s.station)) {
+                        let len = if s.dc.is_64bit { 8 } else { 4 };
                         let r = Rider { station: s.station, ado: addr::DC_SYSTEM_TIME_OFFSET, len, ..Rider::default() };
                         if !riders.push(r) {
                             return None;
@@ -808,8 +808,8 @@ impl<I: Io> Master<I> {
         }
         if let Some((bias_ns, reference)) = w.bias {
             riders.writes_bias = true;
-            for s in self.slaves.iter().filter(|s| s.has_system_time && s.station != reference) {
-                let delay = (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32;
+            for s in self.slaves.iter().filter(|s| s.dc.has_system_time && s.station != reference) {
+                let delay = (s.dc.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32;
                 let mut data = [0u8; 8];
                 data[..4].copy_from_slice(&delay.to_le_bytes());
                 let r = Rider { write: true, station: s.station, ado: addr::DC_SYSTEM_TIME_DELAY, data, len: 4 };
@@ -943,7 +943,7 @@ impl<I: Io> Master<I> {
         }
         if !answered.sync && plan.make_up_lost_frames && !st.no_probes && room {
             st.make_ups += 1;
-            let timeout_ns = self.cyclic_timeout_ns;
+            let timeout_ns = self.settings.cyclic_timeout_ns;
             self.probe(
                 sync,
                 st,
@@ -1000,9 +1000,9 @@ impl<I: Io> Master<I> {
             // cycle late. An offset it gave may or may not be in force then: the next cycle's
             // frame reads the one in force with its own, and gives the next.
             let timeout_ns = if self.cyc.stats.nominal_period_ns > 0 {
-                self.cyclic_timeout_ns.min(window_ns.saturating_sub(elapsed_ns))
+                self.settings.cyclic_timeout_ns.min(window_ns.saturating_sub(elapsed_ns))
             } else {
-                self.cyclic_timeout_ns
+                self.settings.cyclic_timeout_ns
             };
             self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset, timeout_ns)?;
             // Mean over about 16 probes.
@@ -1105,10 +1105,10 @@ impl<I: Io> Master<I> {
     fn bias_follower_delays(&mut self, bias_ns: i64, reference: u16) -> Result<()> {
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if !s.has_system_time || s.station == reference {
+            if !s.dc.has_system_time || s.station == reference {
                 continue;
             }
-            let (st, delay) = (s.station, (s.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32);
+            let (st, delay) = (s.station, (s.dc.delay_ns as i64 + bias_ns).clamp(0, u32::MAX as i64) as u32);
             self.fpwr(st, addr::DC_SYSTEM_TIME_DELAY, &delay.to_le_bytes())?;
         }
         Ok(())
@@ -1133,7 +1133,7 @@ impl<I: Io> Master<I> {
             );
             if follows && far > 0 && far < n {
                 self.engine.far_reference =
-                    (n - far..n).find(|&k| self.slaves[k].has_system_time).map(|k| self.slaves[k].station);
+                    (n - far..n).find(|&k| self.slaves[k].dc.has_system_time).map(|k| self.slaves[k].station);
             }
         } else if now != RingState::Broken {
             self.engine.far_reference = None;
@@ -1145,8 +1145,8 @@ impl<I: Io> Master<I> {
         let clocks: Vec<(u16, usize)> = self
             .slaves
             .iter()
-            .filter(|s| s.has_system_time && skip != Some(s.station))
-            .map(|s| (s.station, if s.dc_64bit { 8 } else { 4 }))
+            .filter(|s| s.dc.has_system_time && skip != Some(s.station))
+            .map(|s| (s.station, if s.dc.is_64bit { 8 } else { 4 }))
             .collect();
         // Every offset read in one frame and written in one: each ESC takes a write at the end
         // of the frame, so the clocks move nanoseconds apart. A read and a write per slave, a
@@ -1173,7 +1173,7 @@ impl<I: Io> Master<I> {
 
     /// Adds `shift_ns` to the System_Time_Offset of the slave at station `st`.
     pub(crate) fn shift_offset(&mut self, st: u16, shift_ns: i64) -> Result<()> {
-        let wide = self.slaves.iter().find(|s| s.station == st).is_some_and(|s| s.dc_64bit);
+        let wide = self.slaves.iter().find(|s| s.station == st).is_some_and(|s| s.dc.is_64bit);
         let n = if wide { 8 } else { 4 };
         let mut d = [0u8; 8];
         self.fprd(st, addr::DC_SYSTEM_TIME_OFFSET, &mut d[..n])?;

@@ -49,6 +49,7 @@ mod master;
 pub mod plan;
 mod process;
 mod rtt_weight;
+mod settings;
 mod slave;
 pub mod sync;
 mod topology;
@@ -64,7 +65,7 @@ pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};
 pub use error::{DcError, MasterError, Result, SlaveError, SlaveRef};
 pub use event::MasterEvent;
-/// The ESI descriptions the master takes ([`Master::esi`]); the reader with the `esi-xml`
+/// The ESI descriptions the master takes ([`Master::add_esi`]); the reader with the `esi-xml`
 /// feature.
 pub use ferrocat_esi as esi;
 /// The wire crate whole, for what the re-exports below do not name.
@@ -76,5 +77,6 @@ pub use ferrocat_wire::{Address, Command};
 pub use foe::Foe;
 pub use handle::Handle;
 pub use master::{Group, Master, SplitLatch, STATION_BASE};
-pub use slave::{Health, MailboxConfig, Mapped, Slave};
+pub use settings::Settings;
+pub use slave::{DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Slave};
 pub use sync::SyncState;

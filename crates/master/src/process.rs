@@ -44,7 +44,8 @@ impl<I: Io> Master<I> {
     /// The handle of an output entry of slave `position` by its name (first match).
     pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.slave(position)?;
-        s.outputs
+        s.mapping
+            .outputs
             .iter()
             .find(|m| m.name == name)
             .map(|m| Handle { bit: m.image_bit, bits: m.bits })
@@ -54,7 +55,8 @@ impl<I: Io> Master<I> {
     /// The handle of an input entry of slave `position` by its name (first match).
     pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.slave(position)?;
-        s.inputs
+        s.mapping
+            .inputs
             .iter()
             .find(|m| m.name == name)
             .map(|m| Handle { bit: m.image_bit, bits: m.bits })
@@ -200,7 +202,8 @@ impl<I: Io> Master<I> {
         }
         let mut empty: [[u8; 0]; MAX_PDUS] = [[]; MAX_PDUS];
         let mut nop: [u8; 0] = [];
-        let Master { image, frmw, engine, dc_reference, cyclic_timeout_ns, .. } = self;
+        let cyclic_timeout_ns = self.settings.cyclic_timeout_ns;
+        let Master { image, frmw, engine, dc_reference, .. } = self;
         let mut parts = image.chunks_mut(CHUNK);
         let mut e = empty.iter_mut();
         let mut frmw = Some(&mut frmw[..]);
@@ -233,7 +236,7 @@ impl<I: Io> Master<I> {
         let frame_bytes = crate::engine::frame_bytes(&pdus[..n]);
         let data_bytes = crate::engine::bytes_through(&pdus[..chunks]);
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
-        let r = engine.transact_once(&mut pdus[..n], *cyclic_timeout_ns);
+        let r = engine.transact_once(&mut pdus[..n], cyclic_timeout_ns);
         let exchanged = engine.io.now_ns();
         let passes = engine.split_passes.take();
         let answered = match (r.is_ok(), with_sync) {
@@ -292,9 +295,9 @@ impl<I: Io> Master<I> {
         };
         let mut nop: [u8; 0] = [];
         let cycle = self.cyc.stats.cycles;
-        let Master { image, engine, cyclic_timeout_ns, plan, out_bytes, .. } = self;
+        let Master { image, engine, settings, plan, out_bytes, .. } = self;
         let Some((plan, buffers)) = plan.as_mut() else { return Ok((0, None)) };
-        let (out_len, timeout) = (*out_bytes as usize, *cyclic_timeout_ns);
+        let (out_len, timeout) = (*out_bytes as usize, settings.cyclic_timeout_ns);
         let (mut wkc, mut expected, mut lost) = (0u16, 0u16, false);
         let mut timing = None;
         let mut extra = sp.as_mut().map(|p| {
@@ -417,7 +420,7 @@ impl<I: Io> Master<I> {
         // a read after it would cost the cycle a second wait); and until every fallen slave is
         // back, since one acknowledged in SAFEOP answers its process data in full (its outputs
         // given back) and would stay there.
-        if ((short && !lost) || self.cyc.recovering) && self.supervise_on_wkc {
+        if ((short && !lost) || self.cyc.recovering) && self.settings.supervise_on_wkc {
             self.supervise()?;
         }
         Ok(())

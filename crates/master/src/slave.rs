@@ -48,32 +48,58 @@ impl MailboxConfig {
     }
 }
 
-/// Everything the master knows of one slave, from the scan on.
+/// Everything the master knows of one slave, from the scan on, grouped by what it describes:
+/// identity, controller, ports, DC unit, mailbox and process data. The master fills it in;
+/// an application reads it through the accessors.
 #[derive(Debug, Clone)]
 pub struct Slave {
-    /// Position on the segment, from 0.
-    pub position: u16,
-    /// The configured station address the master gave it (0x1001 + position).
-    pub station: u16,
-    /// The station alias from 0x0012 (0: none).
-    pub alias: u16,
-    /// The first string of the SII (what SOEM calls the name), e.g. "EL2004".
-    pub name: String,
-    /// The general category's name string.
-    pub description: String,
-    /// Identity from the SII (words 0x08–0x0F).
+    pub(crate) position: u16,
+    pub(crate) station: u16,
+    pub(crate) alias: u16,
+    pub(crate) name: String,
+    pub(crate) description: String,
+    pub(crate) identity: Identity,
+    pub(crate) esc: EscInfo,
+    pub(crate) sii: SiiInfo,
+    pub(crate) ports: Ports,
+    pub(crate) dc: DcInfo,
+    pub(crate) mailbox: Option<MailboxConfig>,
+    pub(crate) mbx_counter: u8,
+    /// The counter of the last message taken from the slave's send mailbox; after a repeat
+    /// request, the counter then (a message with it again is the one already taken).
+    pub(crate) mbx_in_counter: u8,
+    pub(crate) mbx_repeated: Option<u8>,
+    pub(crate) mbx_repeats: u64,
+    pub(crate) mapping: Mapping,
+    pub(crate) state: AlState,
+    pub(crate) health: Health,
+    /// The PDO assignment the application chose (written again after a power cycle).
+    pub(crate) assignment: [Option<Vec<u16>>; 2],
+    /// EoE frames from the slave, put together and waiting.
+    pub(crate) eoe: crate::eoe_link::EoeLink,
+}
+
+/// Who a slave is: the SII's identity (words 0x08–0x0F).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Identity {
+    /// The vendor's ETG number.
     pub vendor_id: u32,
     /// The product code.
     pub product_code: u32,
     /// The revision number.
     pub revision: u32,
-    /// The serial number.
+    /// The serial number (0 where the vendor writes none).
     pub serial: u32,
+}
+
+/// What a slave's controller (ESC) has, read at the scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EscInfo {
     /// The ESC's type (0x0000).
-    pub esc_type: u8,
-    /// FMMUs (0x0004) and SyncManagers (0x0005) the ESC has.
+    pub kind: u8,
+    /// FMMUs the ESC has (0x0004).
     pub fmmu_count: u8,
-    /// SyncManagers the ESC has.
+    /// SyncManagers the ESC has (0x0005).
     pub sm_count: u8,
     /// ESC features supported (0x0008).
     pub features: u16,
@@ -81,33 +107,41 @@ pub struct Slave {
     /// status itself, the error-indication bit included, and the status code stays 0. Real
     /// EK1100, EL1004 and EL2004 run so.
     pub device_emulation: bool,
-    /// What the SII says: strings, general category, FMMUs, SyncManagers, PDOs.
-    pub sii: SiiInfo,
-    /// DL status (0x0110) at the scan.
-    pub dl_status: DlStatus,
     /// The SII interface's status 0x0502, read at the scan where DL status bit 0 (PDI
     /// operational) was clear (0 otherwise): bits 11–12 say why the ESC did not load the
     /// EEPROM's configuration area.
     pub eeprom_status: u16,
+}
+
+/// Where a slave sits: its ports, and the neighbour towards the master.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ports {
+    /// DL status (0x0110) at the scan.
+    pub dl_status: DlStatus,
     /// Ports 0–3 with a link and an open loop, at the scan.
-    pub active_ports: [bool; 4],
+    pub active: [bool; 4],
     /// Ports the ESC has (0x0007: two bits per port, 00 for none).
-    pub port_descriptor: u8,
+    pub descriptor: u8,
     /// The port the frame enters by (the one towards the master).
-    pub entry_port: u8,
+    pub entry: u8,
     /// The slave this one hangs on (its position), none for the first.
     pub parent: Option<u16>,
     /// Port of the parent this slave hangs on.
     pub parent_port: u8,
+}
+
+/// A slave's distributed-clock unit, as the master found and measured it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DcInfo {
     /// Distributed clocks (0x0008 bit 2): at least the receive times 0x0900–0x090F.
-    pub has_dc: bool,
+    pub supported: bool,
     /// The DC unit's system time (0x0910–0x09FF) answers: a clock that can be synchronised.
     /// An ET1200 with its SYNC and latch units off has receive times only (found at the latch:
     /// 0x0918 reads with WKC 0), like the real EL1004 and EL2828.
     pub has_system_time: bool,
     /// The DC unit's times are 64 bits wide (0x0008 bit 3).
-    pub dc_64bit: bool,
-    /// Receive times of ports 0–3 (local time, low 32 bits) and at the processing unit.
+    pub is_64bit: bool,
+    /// Receive times of ports 0–3 (local time, low 32 bits), from the delay measurement.
     pub receive_times: [u32; 4],
     /// Receive time at the processing unit (0x0918), local time.
     pub receive_time_epu: u64,
@@ -116,15 +150,12 @@ pub struct Slave {
     pub speed_diff_slows: Option<bool>,
     /// Propagation delay from the reference clock (the first DC slave), in ns.
     pub delay_ns: u32,
-    /// The standard mailbox, where the slave has one.
-    pub mailbox: Option<MailboxConfig>,
-    pub(crate) mbx_counter: u8,
-    /// The counter of the last message taken from the slave's send mailbox; after a repeat
-    /// request, the counter then (a message with it again is the one already taken).
-    pub(crate) mbx_in_counter: u8,
-    pub(crate) mbx_repeated: Option<u8>,
-    /// Mailbox repeat requests made (reads lost after the slave handed its message over).
-    pub mbx_repeats: u64,
+}
+
+/// A slave's process data: the entries mapped, their SyncManagers and where they lie in the
+/// process image.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Mapping {
     /// The output entries mapped, in image order.
     pub outputs: Vec<Mapped>,
     /// The input entries mapped, in image order.
@@ -133,18 +164,10 @@ pub struct Slave {
     pub out_sm: Option<(u8, SmEntry)>,
     /// The SyncManager (number, settings) of the inputs.
     pub in_sm: Option<(u8, SmEntry)>,
-    /// Byte offset and length of this slave's outputs and inputs in the process image.
+    /// Byte offset and length of this slave's outputs in the process image.
     pub out_area: (u32, u32),
     /// Byte offset and length of this slave's inputs in the process image.
     pub in_area: (u32, u32),
-    /// The AL state last seen.
-    pub state: AlState,
-    /// Operation: answering and in OP, or being brought back.
-    pub health: Health,
-    /// The PDO assignment the application chose (written again after a power cycle).
-    pub(crate) assignment: [Option<Vec<u16>>; 2],
-    /// EoE frames from the slave, put together and waiting.
-    pub(crate) eoe: crate::eoe_link::EoeLink,
 }
 
 /// Where a slave stands during cyclic operation.
@@ -160,13 +183,73 @@ pub enum Health {
 }
 
 impl Slave {
+    /// Position on the segment, from 0.
+    pub fn position(&self) -> u16 {
+        self.position
+    }
+    /// The configured station address the master gave it (0x1001 + position).
+    pub fn station(&self) -> u16 {
+        self.station
+    }
+    /// The station alias from 0x0012 (0: none).
+    pub fn alias(&self) -> u16 {
+        self.alias
+    }
+    /// The first string of the SII (what SOEM calls the name), e.g. "EL2004".
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// The general category's name string.
+    pub fn description(&self) -> &str {
+        &self.description
+    }
+    /// Identity from the SII.
+    pub fn identity(&self) -> Identity {
+        self.identity
+    }
+    /// What the controller has.
+    pub fn esc(&self) -> EscInfo {
+        self.esc
+    }
+    /// What the SII says: strings, general category, FMMUs, SyncManagers, PDOs.
+    pub fn sii(&self) -> &SiiInfo {
+        &self.sii
+    }
+    /// Its ports and its place in the topology.
+    pub fn ports(&self) -> Ports {
+        self.ports
+    }
+    /// Its DC unit.
+    pub fn dc(&self) -> DcInfo {
+        self.dc
+    }
+    /// The standard mailbox, where the slave has one.
+    pub fn mailbox(&self) -> Option<&MailboxConfig> {
+        self.mailbox.as_ref()
+    }
+    /// Mailbox repeat requests made (reads lost after the slave handed its message over).
+    pub fn mailbox_repeats(&self) -> u64 {
+        self.mbx_repeats
+    }
+    /// Its process data: entries, SyncManagers, image areas.
+    pub fn mapping(&self) -> &Mapping {
+        &self.mapping
+    }
+    /// The AL state last seen.
+    pub fn state(&self) -> AlState {
+        self.state
+    }
+    /// Operation: answering and in OP, or being brought back.
+    pub fn health(&self) -> Health {
+        self.health
+    }
     /// Bits of outputs mapped.
     pub fn output_bits(&self) -> u32 {
-        self.outputs.iter().map(|m| m.bits as u32).sum()
+        self.mapping.outputs.iter().map(|m| m.bits as u32).sum()
     }
     /// Bits of inputs mapped.
     pub fn input_bits(&self) -> u32 {
-        self.inputs.iter().map(|m| m.bits as u32).sum()
+        self.mapping.inputs.iter().map(|m| m.bits as u32).sum()
     }
     /// Whether the slave speaks CoE.
     pub fn has_coe(&self) -> bool {
@@ -180,10 +263,10 @@ impl Slave {
     /// because the EEPROM's configuration area did not load. Such a slave stays in INIT.
     pub fn eeprom_problem(&self) -> Option<String> {
         use ferrocat_wire::register::SiiControl;
-        if self.dl_status.pdi_operational() {
+        if self.ports.dl_status.pdi_operational() {
             return None;
         }
-        let sii_status = self.eeprom_status;
+        let sii_status = self.esc.eeprom_status;
         let why = if sii_status & SiiControl::CHECKSUM_ERROR != 0 {
             "the checksum of its EEPROM's configuration area (word 7) is wrong"
         } else if sii_status & SiiControl::ACK_ERROR != 0 {
@@ -202,19 +285,19 @@ impl Slave {
     /// bit 0 clear with a checksum error or no EEPROM acknowledge), not merely not yet.
     pub fn eeprom_failed(&self) -> bool {
         use ferrocat_wire::register::SiiControl;
-        !self.dl_status.pdi_operational()
-            && self.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
+        !self.ports.dl_status.pdi_operational()
+            && self.esc.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
     }
     /// Whether AL status reports an error the master must deal with. Under device emulation
     /// the error-indication bit only mirrors the acknowledge bit the master wrote (real
     /// EK1100, EL1004 and EL2004 read back 0x0011 with code 0 after a write of 0x0011), so it
     /// is an error only with a status code.
     pub fn al_error(&self, status: AlStatus, code: AlStatusCode) -> bool {
-        status.error() && !(self.device_emulation && code == AlStatusCode::NO_ERROR)
+        status.error() && !(self.esc.device_emulation && code == AlStatusCode::NO_ERROR)
     }
     /// Active ports as SOEM prints them: "1.1.0.0".
     pub fn active_ports_text(&self) -> String {
-        self.active_ports.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
+        self.ports.active.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
     }
 }
 

@@ -42,7 +42,7 @@ fn init_dc_converges_and_starts_sync0_together() {
     println!("{r:?}; true spread {} ns", spread_ns(&m, t));
     assert!(r.converged && r.static_frames < cfg.max_frames, "{r:?}");
     assert!(r.max_difference_ns <= 50);
-    assert_eq!(m.dc_reference, Some(0x1001));
+    assert_eq!(m.dc_reference(), Some(0x1001));
     // One second of 1 ms cycles with the FRMW: every slave's true system time within 100 ns of
     // the others (the target of the clock issues). What is left is mostly the delay estimate's
     // forward/return asymmetry, which 0x092C cannot see.
@@ -188,11 +188,11 @@ proptest::proptest! {
         let baseline: Vec<u32> = {
             let mut m = powered_at(&[0; 6]);
             m.scan().unwrap();
-            m.slaves.iter().map(|s| s.delay_ns).collect()
+            m.slaves().iter().map(|s| s.dc().delay_ns).collect()
         };
         let mut m = powered_at(&local0);
         m.bring_up().unwrap();
-        let delays: Vec<u32> = m.slaves.iter().map(|s| s.delay_ns).collect();
+        let delays: Vec<u32> = m.slaves().iter().map(|s| s.dc().delay_ns).collect();
         for (d, b) in delays.iter().zip(&baseline) {
             proptest::prop_assert!((*d as i64 - *b as i64).abs() <= 10, "{delays:?} against {baseline:?}");
         }
@@ -256,9 +256,9 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     m.bring_up().unwrap();
     let r = m.init_dc(&DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let flags: Vec<(bool, bool)> = m.slaves.iter().map(|s| (s.has_dc, s.has_system_time)).collect();
+    let flags: Vec<(bool, bool)> = m.slaves().iter().map(|s| (s.dc().supported, s.dc().has_system_time)).collect();
     assert_eq!(flags, [(true, true), (true, false), (true, false), (true, true)]);
-    let delays: Vec<u32> = m.slaves.iter().map(|s| s.delay_ns).collect();
+    let delays: Vec<u32> = m.slaves().iter().map(|s| s.dc().delay_ns).collect();
     assert!(delays[0] == 0 && delays.windows(2).all(|w| w[0] < w[1]), "{delays:?}");
     let monitored: Vec<u16> = m.dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
     assert_eq!(monitored, [0, 3]);

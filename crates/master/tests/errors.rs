@@ -43,8 +43,8 @@ fn dc_on_a_segment_without_clocks_says_why() {
 #[test]
 fn an_image_with_more_data_than_the_eeprom_is_refused_before_any_write() {
     let mut m = scanned("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n");
-    let mut img = m.slaves[0].sii.to_image();
-    let size = m.slaves[0].sii.header.eeprom_size_bytes();
+    let mut img = m.slaves()[0].sii().to_image();
+    let size = m.slaves()[0].sii().header.eeprom_size_bytes();
     img.resize(size + 2, 0xFF);
     img[size] = 0;
     match m.sii_write(0, &img).unwrap_err() {

@@ -30,7 +30,7 @@ fn file(n: usize) -> Vec<u8> {
 #[test]
 fn files_of_every_length_go_there_and_back() {
     let mut m = master("");
-    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox.as_ref().unwrap().out.1 as usize);
+    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox().unwrap().out.1 as usize);
     assert!(packet > 0);
     // Empty, shorter than a packet, exactly one and three packets (an empty packet ends those),
     // and a few packets and a bit.
@@ -77,7 +77,7 @@ fn a_password_or_busy_on_a_device_without_foe_is_refused() {
 fn a_slave_busy_erasing_its_flash_gets_the_first_packet_again() {
     // The drive answers busy five times to the first data packet of every write.
     let mut m = master("foe_busy = 5");
-    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox.as_ref().unwrap().out.1 as usize);
+    let packet = max_data_len(m.slave(DRIVE).unwrap().mailbox().unwrap().out.1 as usize);
     for n in [1, 3 * packet + 5] {
         let name = format!("fw-{n}.bin");
         m.foe().write(DRIVE, &name, 0, &file(n)).unwrap();
@@ -98,9 +98,9 @@ fn needs_shared_akd_eeprom_takes_firmware_in_boot() {
     let akd = ferrocat_testdata::shared("captures/eeprom/akd.hex");
     let mut m = master(&format!("[[device]]\neeprom = '{}'\n", akd.display()));
     let akd_at = 2;
-    let standard = m.slave(akd_at).unwrap().mailbox.clone().unwrap();
+    let standard = m.slave(akd_at).unwrap().mailbox().cloned().unwrap();
     m.enter_bootstrap(akd_at).unwrap();
-    let boot = m.slave(akd_at).unwrap().mailbox.clone().unwrap();
+    let boot = m.slave(akd_at).unwrap().mailbox().cloned().unwrap();
     assert_eq!((boot.out, boot.inp), ((0x1800, 1024), (0x1C00, 1024)));
     let e = m.coe().sdo_read(akd_at, 0x1018, 1).unwrap_err().to_string();
     assert!(e.contains("protocol not supported"), "CoE in BOOT: {e}");
@@ -110,7 +110,7 @@ fn needs_shared_akd_eeprom_takes_firmware_in_boot() {
     let files = &s.as_any().downcast_ref::<Cia402Drive>().unwrap().coe.foe.as_ref().unwrap().files;
     assert_eq!(files.get(&b"akd.i00"[..]), Some(&firmware));
     m.leave_bootstrap(akd_at).unwrap();
-    assert_eq!(m.slave(akd_at).unwrap().mailbox, Some(standard));
+    assert_eq!(m.slave(akd_at).unwrap().mailbox(), Some(&standard));
     m.request_state(akd_at, AlState::PreOp).unwrap();
     assert_eq!(m.coe().sdo_read(akd_at, 0x1018, 1).unwrap(), 0x6Au32.to_le_bytes(), "CoE in PREOP again");
     // No bootstrap mailbox in the servo's SII.

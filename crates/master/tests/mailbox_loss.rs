@@ -34,7 +34,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         assert!(!name.is_empty());
         m.foe().write(DRIVE, "f.bin", 0, &file).unwrap();
         assert_eq!(m.foe().read(DRIVE, "f.bin", 0, 1 << 20).unwrap(), file, "seed {seed}");
-        repeats += m.slave(DRIVE).unwrap().mbx_repeats;
+        repeats += m.slave(DRIVE).unwrap().mailbox_repeats();
         duplicates += m.io().seg.nodes[DRIVE as usize].esc.mbx_duplicates;
         // Through INIT and configured again (SM1's activate written with the repeat bit
         // clear, whatever the last repeat left): the firmware takes that as its start, not as
@@ -47,7 +47,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         }
         // Every repeat the firmware made was one the master asked for.
         let answered = m.io().seg.nodes[DRIVE as usize].esc.mbx_repeats;
-        assert_eq!(answered, m.slave(DRIVE).unwrap().mbx_repeats, "seed {seed}: repeats answered and asked for");
+        assert_eq!(answered, m.slave(DRIVE).unwrap().mailbox_repeats(), "seed {seed}: repeats answered and asked for");
     }
     println!("mailbox repeats {repeats}, requests written twice and dropped {duplicates}");
     // Both paths ran: without them a lost read times out and a doubled request answers twice.

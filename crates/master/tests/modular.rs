@@ -32,11 +32,11 @@ fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
     assert_eq!(m.coe().sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
     assert_eq!(m.coe().sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
     // Axis 1's objects 0x800 above axis 0's (CiA402's multi-axis layout).
-    assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
-    assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
+    assert_eq!(indices(&m.slaves()[0].mapping().outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
+    assert_eq!(indices(&m.slaves()[0].mapping().inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
     m.configure_modules(0, &[0x9010, 0x9010]).unwrap();
     m.start().unwrap();
-    assert_eq!(m.slaves[0].state, AlState::Op);
+    assert_eq!(m.slaves()[0].state(), AlState::Op);
 }
 
 #[test]
@@ -45,8 +45,8 @@ fn chosen_modules_are_plugged_in_order() {
     m.scan().unwrap();
     m.configure().unwrap();
     assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9020]);
-    assert_eq!(indices(&m.slaves[0].outputs), [0x6040, 0x607A, 0x6840, 0x68FF]);
-    assert_eq!(indices(&m.slaves[0].inputs), [0x6041, 0x6064, 0x6841, 0x686C]);
+    assert_eq!(indices(&m.slaves()[0].mapping().outputs), [0x6040, 0x607A, 0x6840, 0x68FF]);
+    assert_eq!(indices(&m.slaves()[0].mapping().inputs), [0x6041, 0x6064, 0x6841, 0x686C]);
 }
 
 #[test]
@@ -159,7 +159,7 @@ fn module_objects_and_init_commands_follow_the_slot() {
     assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (0, 0));
     // With it: every command at its slot's index.
     let mut m = drive(None);
-    m.esi.push((file.vendor_id, plugged.clone()));
+    m.add_esi(file.vendor_id, plugged.clone());
     m.scan().unwrap();
     m.configure().unwrap();
     assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (10, 10));
@@ -169,7 +169,7 @@ fn module_objects_and_init_commands_follow_the_slot() {
     let mut bad = plugged;
     bad.init_cmds[3].index = 0x2F00;
     let mut m = drive(None);
-    m.esi.push((file.vendor_id, bad));
+    m.add_esi(file.vendor_id, bad);
     m.scan().unwrap();
     let e = m.configure().unwrap_err().to_string();
     assert!(e.contains("ESI init command PS 0x2f00:00 (\"Gear ratio\", line "), "{e}");

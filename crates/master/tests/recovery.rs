@@ -30,10 +30,10 @@ fn loss_power_cycle_and_link_pull() {
         m.set(out, k & 1);
         m.cycle().unwrap();
         let t_s = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
-        for e in &m.events[reported..] {
+        for e in &m.events()[reported..] {
             println!("{t_s:7.3} s  {e}");
         }
-        reported = m.events.len();
+        reported = m.events().len();
         next += 1_000_000;
         m.io_mut().sleep_until(next);
     }
@@ -44,7 +44,7 @@ fn loss_power_cycle_and_link_pull() {
     // the terminals behind it (an E-Bus line), so 1, 2 and 3 go and come back; the pulled link
     // cuts off 3 alone. A single lost frame is no event.
     let named: Vec<String> =
-        m.events.iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
+        m.events().iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
     let count = |needle: &str| named.iter().filter(|e| e.contains(needle)).count();
     assert_eq!(count("slave 1 (EL2004) is not answering"), 1, "{named:#?}");
     assert_eq!(count("slave 1 (EL2004) is back in OP"), 1, "{named:#?}");
@@ -57,9 +57,9 @@ fn loss_power_cycle_and_link_pull() {
         named.iter().all(|e| e.contains("slave 1") || e.contains("slave 2") || e.contains("slave 3")),
         "{named:#?}"
     );
-    assert!(m.slaves.iter().all(|s| s.health == Health::Operational));
+    assert!(m.slaves().iter().all(|s| s.health() == Health::Operational));
     // And the outputs flow again to the slave that was cut off.
-    assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+    assert_eq!(m.cycle().unwrap(), m.expected_wkc());
 }
 
 /// A cyclic frame lost while `start` walks the slaves from SAFEOP to OP: the short cycle
@@ -103,11 +103,11 @@ fn a_frame_lost_while_starting_is_no_event() {
     assert!(m.cycle_stats().lost_frames >= 1);
     let t0 = m.io_mut().now_ns();
     for k in 1..=100u64 {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc());
         m.io_mut().sleep_until(t0 + k * 1_000_000);
     }
-    assert!(m.events.is_empty(), "{:?}", m.events);
-    assert!(m.slaves.iter().all(|s| s.health == Health::Operational && s.state == AlState::Op));
+    assert!(m.events().is_empty(), "{:?}", m.events());
+    assert!(m.slaves().iter().all(|s| s.health() == Health::Operational && s.state() == AlState::Op));
 }
 
 /// A program on its way out steps the slaves down even while the master is bringing a drive
@@ -131,7 +131,7 @@ fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
         next += if k == 100 || k == 300 { 20_000_000 } else { 1_000_000 };
         m.io_mut().sleep_until(next);
         left |= m.take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
-        if k > 300 && m.slaves[1].state != AlState::Op {
+        if k > 300 && m.slaves()[1].state() != AlState::Op {
             break;
         }
     }
@@ -139,7 +139,7 @@ fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
     m.shut_down().unwrap();
     for k in 0..2u16 {
         let mut al = [0u8; 2];
-        let station = m.slaves[k as usize].station;
+        let station = m.slaves()[k as usize].station();
         m.datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: station, ado: 0x0130 }, &mut al)
             .unwrap();
         // The state bits (an EK1100 in device emulation copies AL control, the request's

@@ -26,19 +26,20 @@ fn the_ring_port_is_found_and_the_delays_are_a_lines() {
     let mut ring = master(&format!("{DEVICES}{RING}"), HostModel::ideal());
     ring.scan().unwrap();
     assert_eq!(ring.ring_state(), RingState::Intact);
-    assert_eq!(ring.ring_port, Some((2, 2)), "the second coupler's X2 OUT");
-    assert_eq!(line.ring_port, None);
-    let delays =
-        |m: &Master<VirtualIo>| m.slaves.iter().map(|s| (s.parent, s.parent_port, s.delay_ns)).collect::<Vec<_>>();
+    assert_eq!(ring.ring_port(), Some((2, 2)), "the second coupler's X2 OUT");
+    assert_eq!(line.ring_port(), None);
+    let delays = |m: &Master<VirtualIo>| {
+        m.slaves().iter().map(|s| (s.ports().parent, s.ports().parent_port, s.dc().delay_ns)).collect::<Vec<_>>()
+    };
     println!("ring {:?}\nline {:?}", delays(&ring), delays(&line));
     assert_eq!(delays(&ring), delays(&line));
     // And they are the true ones: the second coupler's processing unit 805 ns after the first's
     // (E-Bus out and back through the EL2004 and the coupler, then 100BASE-TX).
-    assert_eq!(ring.slaves[2].delay_ns, 805);
+    assert_eq!(ring.slaves()[2].dc().delay_ns, 805);
     // On the line the frame loops at the closed port (20 ns), goes back to the first coupler
     // (420 ns of 100BASE-TX), through it (65 ns) and to the master (500 ns); on the ring it
     // leaves by that port for the secondary (500 ns): back 505 ns sooner.
-    assert_eq!(ring.ring_shortening_ns, 505);
+    assert_eq!(ring.ring_shortening_ns(), 505);
 }
 
 /// Brings the ring to OP with DC and runs `cycles` 1 ms cycles; the cable between the couplers
@@ -55,7 +56,7 @@ fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<
     let mut after = Vec::new();
     let mut next = t0;
     for k in 0..cycles {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}: the whole ring's working counter");
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc(), "cycle {k}: the whole ring's working counter");
         next += 1_000_000;
         m.io_mut().sleep_until(next);
         if k > break_after {
@@ -76,7 +77,7 @@ fn process_data_goes_on_across_a_pulled_ring_cable() {
     let stats = m.cycle_stats();
     assert_eq!(stats.wkc_errors, 0, "{stats:?}");
     // Said once.
-    let said: Vec<String> = m.events.iter().map(|e| e.to_string()).collect();
+    let said: Vec<String> = m.events().iter().map(|e| e.to_string()).collect();
     assert_eq!(said, ["ring broken: the slaves behind the break are served from the secondary port"]);
 }
 
@@ -108,7 +109,7 @@ fn ferrocat_across_a_break(host: HostModel) -> [(f64, f64); 2] {
     use ferrocat_master::sync::{Coupling, Ferrocat};
     let mut m = master(&format!("{DEVICES}{RING}"), host);
     // A closed port's loop-back, as the lab tells the master (ferrocat_lab::loop_back_ns).
-    m.closed_port_loop_ns = 20;
+    m.settings_mut().closed_port_loop_ns = 20;
     m.bring_up().unwrap();
     m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
@@ -158,16 +159,16 @@ const BROKEN_FROM_START: &str = "[[event]]\nat_ms = 0\nlink_down = { device = 2,
 fn a_ring_broken_at_start_up_comes_up_whole() {
     let mut m = master(&format!("{DEVICES}{RING}{BROKEN_FROM_START}"), HostModel::pc_rt());
     m.bring_up().unwrap();
-    assert_eq!(m.slaves.len(), 4);
+    assert_eq!(m.slaves().len(), 4);
     assert_eq!(m.ring_state(), RingState::Broken);
-    assert_eq!(m.ring_port, None);
+    assert_eq!(m.ring_port(), None);
     let mut next = m.io_mut().now_ns();
     for _ in 0..100 {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc());
         next += 1_000_000;
         m.io_mut().sleep_until(next);
     }
-    assert_eq!(m.expected_wkc, 4, "both EL2004s written");
+    assert_eq!(m.expected_wkc(), 4, "both EL2004s written");
 }
 
 /// A ring broken at start-up whose first probe comes back too late: the scan's count does not
@@ -190,7 +191,7 @@ fn a_late_first_probe_does_not_hide_the_far_half_of_a_broken_ring() {
     let mut m = Master::new(Tamper { inner: VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5), hook });
     m.scan().unwrap();
     assert_eq!(lost.get(), 1, "the first probe's answer was held back");
-    assert_eq!(m.slaves.len(), 4);
+    assert_eq!(m.slaves().len(), 4);
     assert_eq!(m.ring_state(), RingState::Broken);
 }
 
@@ -228,7 +229,7 @@ fn cycle_ring_every(
     }
     let mut next = t0;
     for k in 0..cycles {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc, "cycle {k}");
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc(), "cycle {k}");
         next += cycle_ns;
         m.io_mut().sleep_until(next);
         let now = m.io_mut().now_ns();
@@ -366,7 +367,7 @@ fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
 type Wiring = Vec<(Option<u16>, u8, u32)>;
 
 fn wiring(m: &Master<VirtualIo>) -> Wiring {
-    m.slaves.iter().map(|s| (s.parent, s.parent_port, s.delay_ns)).collect()
+    m.slaves().iter().map(|s| (s.ports().parent, s.ports().parent_port, s.dc().delay_ns)).collect()
 }
 
 /// The true delays behind a split ring's break, from one more cycle: each far slave's
@@ -376,15 +377,15 @@ fn wiring(m: &Master<VirtualIo>) -> Wiring {
 fn far_pass_truth(m: &mut Master<VirtualIo>, far_ref: usize) -> Vec<Option<i64>> {
     m.cycle().unwrap();
     let visits = m.io().seg.last_visits();
-    let first_far = m.split_latch.as_ref().expect("a split ring").first_far;
+    let first_far = m.split_latch().expect("a split ring").first_far;
     assert!(visits.iter().all(|(n, _)| *n >= first_far), "the far half's pass: {visits:?}");
     let at = |n: usize| {
         let (_, t) = visits.iter().find(|(k, _)| *k == n)?;
-        let clock = m.slaves[n].has_system_time;
+        let clock = m.slaves()[n].dc().has_system_time;
         Some(if clock { t.epu_ns } else { t.port_ns[0]? } as i64)
     };
     let r = at(far_ref).expect("the far reference on the far pass");
-    (0..m.slaves.len()).map(|n| at(n).map(|e| e - r)).collect()
+    (0..m.slaves().len()).map(|n| at(n).map(|e| e - r)).collect()
 }
 
 /// The intact ring's tree (parents and ports) and delays to within the receive times' 10 ns
@@ -419,7 +420,7 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
         }
     });
     assert_eq!(m.ring_state(), RingState::Broken);
-    let latch = m.split_latch.as_ref().expect("the latch saw the split");
+    let latch = m.split_latch().expect("the latch saw the split");
     assert_eq!((latch.first_far, latch.root, latch.root_port, latch.far_reference), (2, 2, 2, Some(2)));
     let far = wiring(&m);
     assert_eq!(far[2].0, None, "the far coupler is the far tree's root");
@@ -430,7 +431,7 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
 fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
     let mut intact = master(&format!("{DEVICES}{RING}"), HostModel::ideal());
     intact.scan().unwrap();
-    let intact_apart = intact.slaves[3].delay_ns as i64 - intact.slaves[2].delay_ns as i64;
+    let intact_apart = intact.slaves()[3].dc().delay_ns as i64 - intact.slaves()[2].dc().delay_ns as i64;
     let worst = |v: &[i64]| *v.iter().max().unwrap();
     for (host, seed) in
         [HostModel::nic_hwts(), HostModel::pc_rt()].into_iter().flat_map(|h| (5..=8).map(move |s| (h, s)))
@@ -498,8 +499,8 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
              the 2 s after, {after} ns over the next second"
         );
         assert_eq!(m.ring_state(), RingState::Intact);
-        assert_eq!(m.split_latch, None);
-        assert_eq!((m.ring_port, m.ring_shortening_ns), (intact.ring_port, intact.ring_shortening_ns));
+        assert_eq!(m.split_latch(), None);
+        assert_eq!((m.ring_port(), m.ring_shortening_ns()), (intact.ring_port(), intact.ring_shortening_ns()));
         assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
         // Split from the start, the far coupler never followed the reference: the master kept
         // it by its offset, and its own loop takes up its crystal's whole offset once the
@@ -541,7 +542,7 @@ fn three_couplers_split_from_the_start(
     let mut again = master(&toml, host);
     again.bring_up().unwrap();
     again.init_dc(&DcConfig::default()).unwrap();
-    let l = again.split_latch.as_ref().unwrap();
+    let l = again.split_latch().unwrap();
     assert_eq!((l.first_far, l.root, l.root_port, l.far_reference), (2, 4, 2, Some(2)));
     let split = wiring(&again);
     let truth = far_pass_truth(&mut again, 2);
@@ -617,9 +618,9 @@ fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
     });
     let mut m = m;
     let split = wiring(&m);
-    let l = m.split_latch.as_ref().expect("the latch saw the split");
+    let l = m.split_latch().expect("the latch saw the split");
     assert_eq!((l.first_far, l.root, l.root_port), (3, 4, 1), "entered on the last drive's port 1");
-    assert_eq!(m.slaves.iter().map(|s| s.entry_port).collect::<Vec<_>>(), [0, 0, 0, 1, 1]);
+    assert_eq!(m.slaves().iter().map(|s| s.ports().entry).collect::<Vec<_>>(), [0, 0, 0, 1, 1]);
     let truth = far_pass_truth(&mut m, 3);
     println!(
         "intact {whole:?}\nsplit {split:?}\ntrue on the far pass {truth:?}\nworst |far drives − reference| over the \
@@ -646,7 +647,7 @@ fn a_ring_with_a_device_cabled_the_wrong_way_round_is_refused_by_name() {
     // Cabled the right way round (its port 1 back to the master), it is a ring like any other.
     let mut m = master(&toml.replace("port = 1\n[secondary]", "[secondary]"), HostModel::pc_rt());
     m.scan().unwrap();
-    assert_eq!((m.slaves.len(), m.ring_state(), m.ring_port), (4, RingState::Intact, Some((3, 1))));
+    assert_eq!((m.slaves().len(), m.ring_state(), m.ring_port()), (4, RingState::Intact, Some((3, 1))));
 }
 
 #[test]
@@ -679,6 +680,6 @@ fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
     );
     assert_eq!(m.ring_state(), RingState::Intact);
     assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
-    assert!(m.relatched.is_empty(), "{:?}", m.relatched);
+    assert!(m.relatched().is_empty(), "{:?}", m.relatched());
     assert!(worst < 100, "{worst} ns");
 }

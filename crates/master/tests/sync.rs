@@ -331,7 +331,7 @@ fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
     let mut m = segment(HostModel::pc_rt());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.make_up = make_up;
-    m.cyclic_timeout_ns = CYCLE_NS / 4;
+    m.settings_mut().cyclic_timeout_ns = CYCLE_NS / 4;
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
     let (mut prev, mut lost_before, mut jumps): (Option<i64>, u64, Vec<f64>) = (None, 0, Vec::new());
@@ -580,7 +580,7 @@ fn the_speed_counters_direction_is_measured_at_the_dc_initialisation() {
     let report =
         m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut fly)).unwrap();
     assert!(report.converged);
-    let measured: Vec<_> = m.slaves.iter().map(|s| s.speed_diff_slows).collect();
+    let measured: Vec<_> = m.slaves().iter().map(|s| s.dc().speed_diff_slows).collect();
     assert_eq!(measured, [None, Some(true), Some(true), Some(true)]);
     // Plain ferrocat reads no follower; the flywheel steering the reference's offset during
     // the compensation has its followers converge on the master's rate, and finds the
@@ -592,7 +592,7 @@ fn the_speed_counters_direction_is_measured_at_the_dc_initialisation() {
         let mut sync = sync;
         let mut m = brought_up(HostModel::pc_rt());
         m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
-        assert!(m.slaves.iter().all(|s| s.speed_diff_slows.is_none()));
+        assert!(m.slaves().iter().all(|s| s.dc().speed_diff_slows.is_none()));
     }
 }
 

@@ -52,7 +52,7 @@ fn bring_up(m: &mut Master<VirtualIo>, setup: &[(u16, u8, Vec<u8>)], sync0: &[u1
 
 /// Skips `missed` cycles, then cycles 2 000 times; the events that came.
 fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent> {
-    let before = m.events.len();
+    let before = m.events().len();
     next += missed * CYCLE_NS;
     m.io_mut().sleep_until(next);
     for _ in 0..2000 {
@@ -60,7 +60,7 @@ fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent
         next += CYCLE_NS;
         m.io_mut().sleep_until(next);
     }
-    m.events[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
+    m.events()[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
 }
 
 fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
@@ -82,7 +82,7 @@ fn three_cycles_without_process_data_are_a_sync_error_one_is_not() {
     assert!(text[0].contains("SAFEOP with an error"), "{text:#?}");
     assert_eq!(text.len(), 2, "left OP once, back once: {text:#?}");
     assert!(text[1].contains("slave 1") && text[1].contains("back in OP"), "{text:#?}");
-    assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+    assert_eq!(m.cycle().unwrap(), m.expected_wkc());
     // Back in OP the supervision starts afresh.
     assert!(!drive(&m).sync_monitor().sync_error);
 }
@@ -112,10 +112,10 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     // deactivated, every cycle short, until the deactivation was undone for the SyncManagers
     // it had been done to rather than for those enabled at the acknowledge).
     let (mut m, mut next) = servo_in_op("", &[]);
-    m.supervise_on_wkc = false;
+    m.settings_mut().supervise_on_wkc = false;
     next += 4 * CYCLE_NS;
     m.io_mut().sleep_until(next);
-    assert!(m.cycle().unwrap() < m.expected_wkc);
+    assert!(m.cycle().unwrap() < m.expected_wkc());
     let seg = &m.io().seg;
     assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
     bring_up(&mut m, &[], &[1]);
@@ -123,7 +123,7 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     for _ in 0..100 {
         next += CYCLE_NS;
         m.io_mut().sleep_until(next);
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc);
+        assert_eq!(m.cycle().unwrap(), m.expected_wkc());
     }
 }
 
@@ -136,7 +136,7 @@ fn supervision_reads_every_al_status_in_one_frame() {
         "[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n[[device]]\nbuiltin = 'EL1004'\n",
         &[],
     );
-    assert_eq!(m.slaves.len(), 5);
+    assert_eq!(m.slaves().len(), 5);
     let before = m.frame_stats().frames_sent;
     assert_eq!(m.supervise().unwrap(), 0);
     assert_eq!(m.frame_stats().frames_sent - before, 1);
@@ -147,22 +147,22 @@ fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
     // The master deactivates the drive's SYNC0 unit (0x0981 = 0) in OP and goes on cycling:
     // after the SSC's SYNC0 watchdog (1 ms cycle: 3 ms) the drive leaves OP with 0x002C.
     let (mut m, mut next) = servo_in_op("", &[]);
-    let st = m.slaves[1].station;
+    let st = m.slaves()[1].station();
     m.datagram(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0]).unwrap();
     let t0 = m.io_mut().now_ns();
-    let before = m.events.len();
+    let before = m.events().len();
     let mut left_after_ns = None;
     for _ in 0..20 {
         next += CYCLE_NS;
         m.io_mut().sleep_until(next);
         m.cycle().unwrap();
-        if left_after_ns.is_none() && m.events.len() > before {
+        if left_after_ns.is_none() && m.events().len() > before {
             left_after_ns = Some(m.io_mut().now_ns() - t0);
         }
     }
-    let text: Vec<String> = m.events[before..].iter().map(|e| e.to_string()).collect();
+    let text: Vec<String> = m.events()[before..].iter().map(|e| e.to_string()).collect();
     assert!(
-        matches!(m.events.get(before), Some(MasterEvent::LeftOp { position: 1, code, .. }) if *code == AlStatusCode::FATAL_SYNC_ERROR),
+        matches!(m.events().get(before), Some(MasterEvent::LeftOp { position: 1, code, .. }) if *code == AlStatusCode::FATAL_SYNC_ERROR),
         "{text:#?}"
     );
     let after = left_after_ns.unwrap();

@@ -30,21 +30,21 @@ fn real_io_segment() -> String {
 fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     let mut m = master(&real_io_segment(), HostModel::pc_rt());
     m.bring_up().unwrap();
-    let names: Vec<_> = m.slaves.iter().map(|s| s.name.as_str()).collect();
+    let names: Vec<_> = m.slaves().iter().map(|s| s.name()).collect();
     assert_eq!(names, ["EK1100", "EL2004", "EL2004"]);
     assert_eq!(
-        m.slaves.iter().map(|s| s.delay_ns).collect::<Vec<_>>(),
+        m.slaves().iter().map(|s| s.dc().delay_ns).collect::<Vec<_>>(),
         [0, 145, 300],
         "SOEM on the real hardware: 0, 144, 299"
     );
-    assert_eq!(m.slaves.iter().map(|s| s.parent).collect::<Vec<_>>(), [None, Some(0), Some(1)]);
-    assert_eq!(m.slaves.iter().map(|s| s.active_ports_text()).collect::<Vec<_>>(), ["1.1.0.0", "1.1.0.0", "1.0.0.0"]);
-    assert!(m.slaves.iter().all(|s| s.state == AlState::Op));
-    assert_eq!(m.expected_wkc, 4);
+    assert_eq!(m.slaves().iter().map(|s| s.ports().parent).collect::<Vec<_>>(), [None, Some(0), Some(1)]);
+    assert_eq!(m.slaves().iter().map(|s| s.active_ports_text()).collect::<Vec<_>>(), ["1.1.0.0", "1.1.0.0", "1.0.0.0"]);
+    assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
+    assert_eq!(m.expected_wkc(), 4);
     // Outputs by entry name: channel 1 of the first terminal, channel 4 of the second.
     let a = m.output(1, "Output").unwrap();
     m.set(a, 1);
-    let b = m.slaves[2].outputs[3].clone();
+    let b = m.slaves()[2].mapping().outputs[3].clone();
     let hb = ferrocat_master::Handle { bit: b.image_bit, bits: b.bits };
     m.set(hb, 1);
     for _ in 0..10 {
@@ -60,9 +60,12 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     assert_eq!(m.cycle_stats().wkc_errors, 0);
     // A group of two goes back to SAFEOP and returns to OP; the coupler stays in OP.
     m.request_state_group(&[1, 2], AlState::SafeOp).unwrap();
-    assert_eq!(m.slaves.iter().map(|s| s.state).collect::<Vec<_>>(), [AlState::Op, AlState::SafeOp, AlState::SafeOp]);
+    assert_eq!(
+        m.slaves().iter().map(|s| s.state()).collect::<Vec<_>>(),
+        [AlState::Op, AlState::SafeOp, AlState::SafeOp]
+    );
     m.request_state_group(&[1, 2], AlState::Op).unwrap();
-    assert!(m.slaves.iter().all(|s| s.state == AlState::Op));
+    assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
 }
 
 #[test]
@@ -71,7 +74,7 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     let toml = format!("seed = 2\n[[device]]\nesi = '{}'\nproduct = 0x4F\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n", esi.display());
     let mut m = master(&toml, HostModel::pc_rt());
     m.scan().unwrap();
-    assert_eq!(m.slaves[0].name, "C5-E-2-21");
+    assert_eq!(m.slaves()[0].name(), "C5-E-2-21");
     m.configure().unwrap();
     // Expedited, normal (a name of more than 4 bytes), segmented (≈1 KiB), complete access.
     assert_eq!(m.coe().sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
@@ -99,12 +102,12 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     assert!(list.len() > 150 && list.contains(&0x6040));
     assert_eq!(m.coe().object_info(0, 0x1018).unwrap().max_subindex, 4);
     // Remapping: 0x1601 (target position, profile velocity) instead of 0x1600.
-    let before = m.out_bytes;
+    let before = m.image_bytes().0;
     m.remap(0, true, &[0x1601]).unwrap();
-    assert_ne!(m.out_bytes, before);
-    assert_eq!(m.slaves[0].outputs.iter().map(|e| e.index).collect::<Vec<_>>(), [0x607A, 0x6081]);
+    assert_ne!(m.image_bytes().0, before);
+    assert_eq!(m.slaves()[0].mapping().outputs.iter().map(|e| e.index).collect::<Vec<_>>(), [0x607A, 0x6081]);
     m.start().unwrap();
-    let target = m.slaves[0].outputs[0].clone();
+    let target = m.slaves()[0].mapping().outputs[0].clone();
     m.set(ferrocat_master::Handle { bit: target.image_bit, bits: target.bits }, 4242);
     for _ in 0..5 {
         let now = ferrocat_master::io::Io::now_ns(m.io_mut());
@@ -131,7 +134,7 @@ fn needs_shared_emergencies_reach_the_application() {
     m.poll_mailboxes().unwrap();
     m.poll_mailboxes().unwrap();
     let got: Vec<_> =
-        m.events.iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
+        m.events().iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
     assert_eq!(
         got,
         ["slave 0 (C5-E-2-21): emergency 0x8611 (following error), error register 0x20, data [01, 02, 03, 04, 05]"]
@@ -153,8 +156,12 @@ fn inputs_come_back_and_esi_describes_a_bare_slave() {
     for _ in 0..3 {
         m.cycle().unwrap();
     }
-    let bits: Vec<u64> =
-        m.slaves[1].inputs.iter().map(|e| m.get(ferrocat_master::Handle { bit: e.image_bit, bits: e.bits })).collect();
+    let bits: Vec<u64> = m.slaves()[1]
+        .mapping()
+        .inputs
+        .iter()
+        .map(|e| m.get(ferrocat_master::Handle { bit: e.image_bit, bits: e.bits }))
+        .collect();
     assert_eq!(bits, [1, 0, 1, 0]);
     assert_eq!(m.get(m.input(1, "Input").unwrap()), 1);
 }
@@ -190,15 +197,17 @@ fn esi_describes_a_slave_whose_sii_does_not() {
     );
     let mut m = master(&toml, HostModel::ideal());
     m.bring_up().unwrap();
-    assert!(m.slaves[1].outputs.is_empty(), "the SII alone says nothing");
+    assert!(m.slaves()[1].mapping().outputs.is_empty(), "the SII alone says nothing");
     // The same bring-up with the ESI: two outputs, in OP, reaching the terminal.
     let mut m = master(&toml, HostModel::ideal());
     let f = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(&full).unwrap()).unwrap();
-    m.esi.extend(f.devices.into_iter().map(|d| (f.vendor_id, d)));
+    for d in f.devices {
+        m.add_esi(f.vendor_id, d);
+    }
     m.bring_up().unwrap();
     std::fs::remove_file(&bare).ok();
     std::fs::remove_file(&full).ok();
-    assert_eq!(m.slaves[1].outputs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["Out 1", "Out 2"]);
+    assert_eq!(m.slaves()[1].mapping().outputs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["Out 1", "Out 2"]);
     let h = m.output(1, "Out 2").unwrap();
     m.set(h, 1);
     m.cycle().unwrap();
@@ -213,7 +222,7 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
         HostModel::ideal(),
     );
     m.scan().unwrap();
-    assert_eq!((m.slaves[0].alias, m.slaves[1].alias), (0, 0x0777));
+    assert_eq!((m.slaves()[0].alias(), m.slaves()[1].alias()), (0, 0x0777));
     let mut d = [0u8; 2];
     let fprd_alias = ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 };
     assert_eq!(m.datagram(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(), 0, "alias not yet enabled");
@@ -245,7 +254,7 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
 #[test]
 fn sii_write_programs_only_changed_words_and_reads_back() {
     let mut m = coupler_and_output_scanned();
-    let mut info = m.slaves[1].sii.clone();
+    let mut info = m.slaves()[1].sii().clone();
     assert_eq!(info.header.station_alias, 0);
     info.header.station_alias = 0x0321;
     let mut image = info.to_image();
@@ -254,10 +263,10 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     image[14] = ferrocat_wire::sii::header_crc(&image);
     // The alias word and the header CRC word differ; nothing else.
     assert_eq!(m.sii_write(1, &image).unwrap(), 2);
-    assert_eq!(m.slaves[1].sii.header.station_alias, 0x0321);
+    assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321);
     m.scan().unwrap();
-    assert_eq!(m.slaves[1].sii.header.station_alias, 0x0321, "what a new scan reads from the EEPROM");
-    assert_eq!(m.slaves[1].name, "EL2004");
+    assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321, "what a new scan reads from the EEPROM");
+    assert_eq!(m.slaves()[1].name(), "EL2004");
     assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
 
@@ -269,14 +278,14 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     let mut m = coupler_and_output_scanned();
     assert_eq!(m.sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
     m.scan().unwrap();
-    assert_eq!(m.slaves[1].alias, 0, "the register keeps its power-on value");
-    assert!(m.slaves[1].eeprom_problem().is_none());
+    assert_eq!(m.slaves()[1].alias(), 0, "the register keeps its power-on value");
+    assert!(m.slaves()[1].eeprom_problem().is_none());
     let t = m.io_mut().now_ns();
     m.io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
     m.io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
     m.io_mut().sleep_until(t + 3_000_000);
     m.scan().unwrap();
-    assert_eq!(m.slaves[1].alias, 0x0BAD);
+    assert_eq!(m.slaves()[1].alias(), 0x0BAD);
     assert_eq!(m.enable_alias(1).unwrap(), 0x0BAD);
     m.bring_up().unwrap();
 }
@@ -287,7 +296,7 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
 fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     use ferrocat_master::io::Io;
     let m = coupler_and_output_scanned();
-    let mut image = m.slaves[1].sii.to_image();
+    let mut image = m.slaves()[1].sii().to_image();
     image[8] ^= 0x01;
     let path = std::env::temp_dir().join(format!("ferrocat-badcrc-{}.bin", std::process::id()));
     std::fs::write(&path, &image).unwrap();
@@ -297,15 +306,15 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     );
     std::fs::remove_file(&path).unwrap();
     m.scan().unwrap();
-    let problem = m.slaves[1].eeprom_problem().expect("an unconfigured ESC");
+    let problem = m.slaves()[1].eeprom_problem().expect("an unconfigured ESC");
     assert!(problem.contains("checksum"), "{problem}");
-    assert_eq!(m.slaves[1].eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
-    assert!(m.slaves[0].eeprom_problem().is_none());
+    assert_eq!(m.slaves()[1].esc().eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
+    assert!(m.slaves()[0].eeprom_problem().is_none());
     let t0 = m.io_mut().now_ns();
     let e = m.bring_up().unwrap_err().to_string();
     println!("{e}");
     assert!(e.contains("slave 1 (EL2004)") && e.contains("checksum"), "{e}");
-    assert!(m.io_mut().now_ns() - t0 < m.state_timeout_ns / 10, "not after the state timeout");
+    assert!(m.io_mut().now_ns() - t0 < m.settings().state_timeout_ns / 10, "not after the state timeout");
 }
 
 /// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the

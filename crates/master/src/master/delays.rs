@@ -37,8 +37,8 @@ impl<I: Io> Master<I> {
             };
             if let Some(links) = links {
                 for (s, l) in self.slaves.iter_mut().zip(links) {
-                    s.parent = l.map(|l| l.parent as u16);
-                    s.parent_port = l.map_or(0, |l| l.port);
+                    s.ports.parent = l.map(|l| l.parent as u16);
+                    s.ports.parent_port = l.map_or(0, |l| l.port);
                 }
                 return true;
             }
@@ -50,7 +50,7 @@ impl<I: Io> Master<I> {
     /// SOEM's inference: every entry on port 0, the processing order a pre-order walk.
     pub(super) fn count_ports_topology(&mut self) {
         let count = self.slaves.len();
-        let topo: Vec<i32> = self.slaves.iter().map(|s| s.active_ports.iter().filter(|&&a| a).count() as i32).collect();
+        let topo: Vec<i32> = self.slaves.iter().map(|s| s.ports.active.iter().filter(|&&a| a).count() as i32).collect();
         for i in 1..count {
             let mut c = 0i32;
             let mut j = i - 1;
@@ -62,7 +62,7 @@ impl<I: Io> Master<I> {
                     _ => {}
                 }
                 if (c >= 0 && topo[j] > 1) || j == 0 {
-                    self.slaves[i].parent = Some(j as u16);
+                    self.slaves[i].ports.parent = Some(j as u16);
                     break;
                 }
                 j -= 1;
@@ -70,16 +70,16 @@ impl<I: Io> Master<I> {
         }
         // A child hangs on its parent's next active port, in processing order after the entry.
         for p in 0..count {
-            let children: Vec<usize> = (0..count).filter(|&c| self.slaves[c].parent == Some(p as u16)).collect();
-            let mut port = self.slaves[p].entry_port;
+            let children: Vec<usize> = (0..count).filter(|&c| self.slaves[c].ports.parent == Some(p as u16)).collect();
+            let mut port = self.slaves[p].ports.entry;
             for c in children {
                 for _ in 0..4 {
                     port = [3, 2, 0, 1][port as usize];
-                    if self.slaves[p].active_ports[port as usize] && port != self.slaves[p].entry_port {
+                    if self.slaves[p].ports.active[port as usize] && port != self.slaves[p].ports.entry {
                         break;
                     }
                 }
-                self.slaves[c].parent_port = port;
+                self.slaves[c].ports.parent_port = port;
             }
         }
     }
@@ -101,7 +101,7 @@ impl<I: Io> Master<I> {
         let n = self.slaves.len() as u16;
         for k in (0..self.slaves.len()).rev() {
             for port in [3u8, 1, 2] {
-                if !self.slaves[k].active_ports[port as usize] {
+                if !self.slaves[k].ports.active[port as usize] {
                     continue;
                 }
                 let st = self.slaves[k].station;
@@ -112,7 +112,7 @@ impl<I: Io> Master<I> {
                 self.reopen_port(st, loop_control)?;
                 if turned {
                     self.ring_port = Some((k as u16, port));
-                    self.slaves[k].active_ports[port as usize] = false;
+                    self.slaves[k].ports.active[port as usize] = false;
                     return self.measure_ring_shortening(st, port, SHORTENING_TRIPS);
                 }
             }
@@ -193,7 +193,7 @@ impl<I: Io> Master<I> {
     pub(crate) fn latch_and_measure_delays(&mut self) -> Result<Option<crate::sync::Sample>> {
         self.split_latch = None;
         self.relatched.clear();
-        if !self.slaves.iter().any(|s| s.has_dc) {
+        if !self.slaves.iter().any(|s| s.dc.supported) {
             return Ok(None);
         }
         self.forwarding_latch_mode()?;
@@ -221,7 +221,7 @@ impl<I: Io> Master<I> {
         self.reopen_ring_port(ring)?;
         let mut stamps = latched?;
         for k in 0..self.slaves.len() {
-            if !self.slaves[k].has_dc {
+            if !self.slaves[k].dc.supported {
                 continue;
             }
             let st = self.slaves[k].station;
@@ -233,12 +233,12 @@ impl<I: Io> Master<I> {
                 &mut epu,
             )? == 1;
             let s = &mut self.slaves[k];
-            s.receive_times = times;
+            s.dc.receive_times = times;
             // Without a system time (WKC 0) the processing unit's receive time is port 0's, as
             // 0x0918's low word is where it exists (esc-spec §3.3).
-            s.has_system_time = answered;
-            s.receive_time_epu = if answered { u64::from_le_bytes(epu) } else { s.receive_times[0] as u64 };
-            s.entry_port = super::next_frame_latch::entry_by_times(s.receive_times, s.active_ports, s.entry_port);
+            s.dc.has_system_time = answered;
+            s.dc.receive_time_epu = if answered { u64::from_le_bytes(epu) } else { s.dc.receive_times[0] as u64 };
+            s.ports.entry = super::next_frame_latch::entry_by_times(s.dc.receive_times, s.ports.active, s.ports.entry);
         }
         let inferred = self.topology();
         // An ET1200, ESC20 or IP core entered elsewhere than on port 0 may have taken a later
@@ -250,7 +250,7 @@ impl<I: Io> Master<I> {
         // than on port 0 (by its times, or with port 0 closed, where nothing else can be) is
         // latched again too (an EL1004 entered on port 1 as the last slave fits the only tree
         // there is, with a later frame's time at port 1: its delay came out 0 for 230 ns).
-        let reversed = next_frame.iter().any(|&k| self.slaves[k].entry_port != 0 || !self.slaves[k].active_ports[0]);
+        let reversed = next_frame.iter().any(|&k| self.slaves[k].ports.entry != 0 || !self.slaves[k].ports.active[0]);
         if !next_frame.is_empty() && (!inferred || reversed || far.is_some_and(|f| next_frame.iter().any(|&k| k >= f)))
         {
             let ring = self.close_ring_port()?;
@@ -264,22 +264,23 @@ impl<I: Io> Master<I> {
         // its way; parents before children, whatever the processing order.
         let mut entry_at: Vec<Option<i64>> = vec![None; self.slaves.len()];
         for k in self.tree_order() {
-            if !self.slaves[k].has_dc {
+            if !self.slaves[k].dc.supported {
                 continue;
             }
             // Behind non-DC slaves (which latch no receive times), measure from the nearest DC
             // ancestor: the round trip it sees on the port toward them holds their hops both ways
             // and this slave's own loop.
-            let (mut via, mut port) = (self.slaves[k].parent.map(|p| p as usize), self.slaves[k].parent_port);
+            let (mut via, mut port) =
+                (self.slaves[k].ports.parent.map(|p| p as usize), self.slaves[k].ports.parent_port);
             // Closed ports the frame loops through on its way out, less those on its way back,
             // that no latch separates: the child's after its last event, each non-DC slave's on
             // the way (one loop-back each, `closed_port_loop_ns`).
             let mut loops = -view[k].loops_after_last_event();
-            while let Some(v) = via.filter(|&v| !self.slaves[v].has_dc) {
+            while let Some(v) = via.filter(|&v| !self.slaves[v].dc.supported) {
                 loops += view[v].loops_between(view[v].before(port), port)
                     - view[v].loops_between(port, view[v].after(port));
-                port = self.slaves[v].parent_port;
-                via = self.slaves[v].parent.map(|p| p as usize);
+                port = self.slaves[v].ports.parent_port;
+                via = self.slaves[v].ports.parent.map(|p| p as usize);
             }
             entry_at[k] = Some(match via.and_then(|v| Some((v, entry_at[v]?))) {
                 Some((v, at)) => {
@@ -291,7 +292,7 @@ impl<I: Io> Master<I> {
                     // latch: half of it would otherwise count as delay).
                     let back = view[v].between(view[v].entry_port, port).unwrap_or(0);
                     let behind = back - left - view[k].span_ns().unwrap_or(0);
-                    let hop = (behind + loops * self.closed_port_loop_ns as i64) / 2;
+                    let hop = (behind + loops * self.settings.closed_port_loop_ns as i64) / 2;
                     at + left + hop
                 }
                 None => 0,
@@ -304,21 +305,22 @@ impl<I: Io> Master<I> {
             .iter()
             .zip(&entry_at)
             .map(|(s, at)| {
-                let since_entry = (s.receive_time_epu as u32).wrapping_sub(s.receive_times[s.entry_port as usize]);
+                let since_entry =
+                    (s.dc.receive_time_epu as u32).wrapping_sub(s.dc.receive_times[s.ports.entry as usize]);
                 Some((*at)? + since_entry as i32 as i64)
             })
             .collect();
-        let reference = self.slaves.iter().position(|s| s.has_system_time);
+        let reference = self.slaves.iter().position(|s| s.dc.has_system_time);
         let at_reference = reference.and_then(|r| epu_at[r]).unwrap_or(0);
         // A split ring's far half is its own tree: delays from its own first clock.
         let first_far = self.first_far_position().filter(|&f| reference.is_some_and(|r| r < f));
         let n = self.slaves.len();
-        let far_reference = first_far.and_then(|f| (f..n).find(|&k| self.slaves[k].has_system_time));
+        let far_reference = first_far.and_then(|f| (f..n).find(|&k| self.slaves[k].dc.has_system_time));
         let at_far_reference = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
         for (k, (s, at)) in self.slaves.iter_mut().zip(&epu_at).enumerate() {
-            if s.has_dc {
+            if s.dc.supported {
                 let from = if first_far.is_some_and(|f| k >= f) { at_far_reference } else { at_reference };
-                s.delay_ns = at.map_or(0, |t| t - from).clamp(0, u32::MAX as i64) as u32;
+                s.dc.delay_ns = at.map_or(0, |t| t - from).clamp(0, u32::MAX as i64) as u32;
             }
         }
         self.split_latch = first_far.map(|f| self.split_latch_of(&view, &epu_at, reference, f, passes));
@@ -333,11 +335,11 @@ impl<I: Io> Master<I> {
         self.slaves
             .iter()
             .map(|s| crate::topology::PortView {
-                entry_port: s.entry_port,
-                active_ports: s.active_ports,
-                present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(s.port_descriptor).can_link(p)),
-                receive_times: s.has_dc.then_some(s.receive_times),
-                epu_time: s.has_dc.then_some(s.receive_time_epu as u32),
+                entry_port: s.ports.entry,
+                active_ports: s.ports.active,
+                present_ports: [0, 1, 2, 3].map(|p| PortDescriptor(s.ports.descriptor).can_link(p)),
+                receive_times: s.dc.supported.then_some(s.dc.receive_times),
+                epu_time: s.dc.supported.then_some(s.dc.receive_time_epu as u32),
             })
             .collect()
     }
@@ -345,14 +347,14 @@ impl<I: Io> Master<I> {
     /// Positions with every parent before its children (breadth first from the first slave).
     pub(super) fn tree_order(&self) -> Vec<usize> {
         let n = self.slaves.len();
-        let mut order: Vec<usize> = (0..n).filter(|&k| self.slaves[k].parent.is_none()).collect();
+        let mut order: Vec<usize> = (0..n).filter(|&k| self.slaves[k].ports.parent.is_none()).collect();
         let mut seen = vec![false; n];
         let mut i = 0;
         while i < order.len() {
             let p = order[i];
             seen[p] = true;
             for (c, s) in self.slaves.iter().enumerate() {
-                if !seen[c] && s.parent == Some(p as u16) {
+                if !seen[c] && s.ports.parent == Some(p as u16) {
                     seen[c] = true;
                     order.push(c);
                 }

@@ -28,12 +28,12 @@ impl<I: Io> Master<I> {
         // each other one took.
         let n = self.slaves.len();
         let far = (self.engine.far_half_slaves as usize).min(n);
-        let clocks = self.slaves[n - far..].iter().filter(|s| s.has_system_time).count();
+        let clocks = self.slaves[n - far..].iter().filter(|s| s.dc.has_system_time).count();
         let Some(k) = self.slaves.iter().position(|s| s.station == station) else { return Ok(()) };
         if p.far_wkc as usize != clocks {
             return Ok(());
         }
-        let wide = p.len >= 8 && self.slaves[k].dc_64bit;
+        let wide = p.len >= 8 && self.slaves[k].dc.is_64bit;
         let (x, diff) = measured_difference_ns(&p, wide);
         if self.far_steer.as_ref().is_none_or(|f| f.station != station) {
             // Split from the start: the level is the latch's geometry, not the break's.
@@ -86,7 +86,7 @@ impl<I: Io> Master<I> {
         let limit = ((f.clock.drift() * since_ns).abs() + STEP_NS).max(STEP_NS);
         let delta = -aim.clamp(-limit, limit).round() as i64;
         f.last_move_ns = Some(x);
-        let wide_offset = self.slaves[k].dc_64bit;
+        let wide_offset = self.slaves[k].dc.is_64bit;
         if delta != 0 && self.move_far_offset(station, wide_offset, delta).is_ok() {
             if let Some(f) = self.far_steer.as_mut() {
                 f.clock.applied(delta);

@@ -12,8 +12,8 @@ impl<I: Io> Master<I> {
         let s = self.slaves.get(position as usize)?;
         self.esi
             .iter()
-            .filter(|(v, d)| *v == s.vendor_id && d.product_code == s.product_code)
-            .max_by_key(|(_, d)| (d.revision == s.revision, d.revision))
+            .filter(|(v, d)| *v == s.identity.vendor_id && d.product_code == s.identity.product_code)
+            .max_by_key(|(_, d)| (d.revision == s.identity.revision, d.revision))
             .map(|(_, d)| d)
     }
 

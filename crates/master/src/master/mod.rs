@@ -8,7 +8,7 @@ use ferrocat_wire::{Address, Command};
 use crate::engine::{Engine, EngineStats, Pdu, RingState, SlaveTag, SplitRingClocks};
 use crate::error::{MasterError, Result};
 use crate::io::Io;
-use crate::slave::{MailboxConfig, Slave};
+use crate::slave::{DcInfo, EscInfo, Identity, MailboxConfig, Ports, Slave};
 
 mod delays;
 mod far_steer;
@@ -23,6 +23,7 @@ mod split_start;
 mod states;
 
 use crate::event::MasterEvent;
+use crate::settings::Settings;
 pub use groups::Group;
 pub use split_start::SplitLatch;
 
@@ -33,58 +34,46 @@ pub const STATION_BASE: u16 = 0x1001;
 /// An EtherCAT master on the world `I`: its slaves, its process image, its events.
 pub struct Master<I: Io> {
     pub(crate) engine: Engine<I>,
+    pub(crate) settings: Settings,
     /// The slaves found by the scan, by position.
-    pub slaves: Vec<Slave>,
+    pub(crate) slaves: Vec<Slave>,
     /// The process image: all outputs, then all inputs.
-    pub image: Vec<u8>,
+    pub(crate) image: Vec<u8>,
     /// Bytes of outputs in the image.
-    pub out_bytes: u32,
+    pub(crate) out_bytes: u32,
     /// Bytes of inputs in the image.
-    pub in_bytes: u32,
+    pub(crate) in_bytes: u32,
     /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
     /// with inputs.
-    pub expected_wkc: u16,
+    pub(crate) expected_wkc: u16,
     /// What happened during cyclic operation, in order (see [`Master::supervise`]). Kept until
     /// taken: a loop that runs for long takes them now and then ([`Master::take_events`]).
-    pub events: Vec<MasterEvent>,
-    /// How long a state transition may take before it is an error.
-    pub state_timeout_ns: u64,
-    /// How long an SDO may take.
-    pub mailbox_timeout_ns: u64,
+    pub(crate) events: Vec<MasterEvent>,
     pub(crate) cyc: crate::cycle_state::CycleState,
-    /// How long a cyclic frame may take before it counts as lost (default 1 ms). A cyclic
-    /// application sets it below its cycle, ¾ of it as `ferrocat run` does: a wait for a lost
-    /// frame past the next cycle's start makes that cycle late.
-    pub cyclic_timeout_ns: u64,
-    /// Check the slaves after a cycle with a short working counter.
-    pub supervise_on_wkc: bool,
     /// Device descriptions from ESI files: the PDO mapping of slaves whose CoE and SII do not
     /// give one (vendor, device).
-    pub esi: Vec<(u32, ferrocat_esi::Device)>,
+    pub(crate) esi: Vec<(u32, ferrocat_esi::Device)>,
     /// Station address of the reference clock when the cycle distributes it (FRMW of 0x0910).
-    pub dc_reference: Option<u16>,
+    pub(crate) dc_reference: Option<u16>,
     /// The reference clock's system time as the last cycle's FRMW read it.
-    pub dc_time: u64,
+    pub(crate) dc_time: u64,
     pub(crate) frmw: [u8; 8],
     /// Master clock → DC system time (ns since 2000), fixed at first use.
     pub(crate) epoch_offset_ns: Option<u64>,
-    /// What a closed port's loop-back adds to a frame's way, for the delay computation (0:
-    /// assume nothing, as SOEM, IgH and ethercrab do). See `measure_delays`.
-    pub closed_port_loop_ns: u32,
     /// Cable redundancy: the port (slave position, port) by which an intact ring's frames
     /// leave for the master's secondary port — a link, but no branch of the tree.
-    pub ring_port: Option<(u16, u8)>,
+    pub(crate) ring_port: Option<(u16, u8)>,
     /// On an intact ring, how much sooner a frame is back than on the line the ring's port
     /// makes when closed (measured by `find_ring_port`; 0 otherwise).
-    pub ring_shortening_ns: i64,
+    pub(crate) ring_shortening_ns: i64,
     /// A split ring's far reference being kept on the reference's time (`far_clock.rs`).
     pub(crate) far_steer: Option<crate::far_clock::FarSteer>,
     /// The last latch of the receive times found the ring split: the far half's delays are
     /// from its own reference (`split_start.rs`).
-    pub split_latch: Option<SplitLatch>,
+    pub(crate) split_latch: Option<SplitLatch>,
     /// Positions whose receive times the last latch took from a second latch: controllers whose
     /// ports 1–3 take the frame after the write, where the first did not fit (`next_frame_latch.rs`).
-    pub relatched: Vec<usize>,
+    pub(crate) relatched: Vec<usize>,
     /// A clock-sync method's writes waiting to ride on the cyclic frames.
     pub(crate) dc_writes: crate::dc_writes::DcWrites,
     /// A process-data plan from outside ([`Master::set_plan`]) and its buffers.
@@ -102,23 +91,19 @@ impl<I: Io> Master<I> {
     pub fn new(io: I) -> Self {
         Master {
             engine: Engine::new(io),
+            settings: Settings::default(),
             slaves: Vec::new(),
             image: Vec::new(),
             out_bytes: 0,
             in_bytes: 0,
             expected_wkc: 0,
             events: Vec::new(),
-            state_timeout_ns: 10_000_000_000,
-            mailbox_timeout_ns: 2_000_000_000,
             cyc: Default::default(),
-            cyclic_timeout_ns: 1_000_000,
-            supervise_on_wkc: true,
             esi: Vec::new(),
             dc_reference: None,
             dc_time: 0,
             frmw: [0; 8],
             epoch_offset_ns: None,
-            closed_port_loop_ns: 0,
             ring_port: None,
             ring_shortening_ns: 0,
             far_steer: None,
@@ -165,12 +150,88 @@ impl<I: Io> Master<I> {
         crate::slave::slave_at(&self.slaves, position)
     }
 
+    /// The slaves found by the scan, by position.
+    pub fn slaves(&self) -> &[Slave] {
+        &self.slaves
+    }
+
+    /// What the master waits for and does on its own.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The settings, to change: they hold from the next exchange on.
+    pub fn settings_mut(&mut self) -> &mut Settings {
+        &mut self.settings
+    }
+
+    /// The process image: all outputs, then all inputs.
+    pub fn image(&self) -> &[u8] {
+        &self.image
+    }
+
+    /// Bytes of outputs and of inputs in the image.
+    pub fn image_bytes(&self) -> (u32, u32) {
+        (self.out_bytes, self.in_bytes)
+    }
+
+    /// The LRW working counter a complete cycle gives: 2 per slave with outputs, 1 per slave
+    /// with inputs.
+    pub fn expected_wkc(&self) -> u16 {
+        self.expected_wkc
+    }
+
+    /// What happened during cyclic operation, in order (see [`Master::supervise`]), until
+    /// taken ([`Master::take_events`]).
+    pub fn events(&self) -> &[MasterEvent] {
+        &self.events
+    }
+
+    /// Adds an ESI device description (`vendor`, device): the PDO mapping of slaves of that
+    /// vendor and product whose CoE and SII give none, and their modules and init commands.
+    pub fn add_esi(&mut self, vendor_id: u32, device: ferrocat_esi::Device) {
+        self.esi.push((vendor_id, device));
+    }
+
+    /// Station address of the reference clock when the cycle distributes it (FRMW of 0x0910).
+    pub fn dc_reference(&self) -> Option<u16> {
+        self.dc_reference
+    }
+
+    /// The reference clock's system time as the last cycle's FRMW read it, in ns since 2000.
+    pub fn dc_time(&self) -> u64 {
+        self.dc_time
+    }
+
+    /// Cable redundancy: the port (slave position, port) by which an intact ring's frames
+    /// leave for the master's secondary port — a link, but no branch of the tree.
+    pub fn ring_port(&self) -> Option<(u16, u8)> {
+        self.ring_port
+    }
+
+    /// On an intact ring, how much sooner a frame is back than on the line the ring's port
+    /// makes when closed, in ns (0 otherwise).
+    pub fn ring_shortening_ns(&self) -> i64 {
+        self.ring_shortening_ns
+    }
+
+    /// Where the last latch of the receive times found the ring split, if it did.
+    pub fn split_latch(&self) -> Option<&SplitLatch> {
+        self.split_latch.as_ref()
+    }
+
+    /// Positions whose receive times the last latch took from a second latch: controllers
+    /// whose ports 1–3 take the frame after the write.
+    pub fn relatched(&self) -> &[usize] {
+        &self.relatched
+    }
+
     pub(crate) fn mailboxes(&mut self) -> crate::mailbox::Mailboxes<'_, I> {
         crate::mailbox::Mailboxes {
             engine: &mut self.engine,
             slaves: &mut self.slaves,
             events: &mut self.events,
-            timeout_ns: self.mailbox_timeout_ns,
+            timeout_ns: self.settings.mailbox_timeout_ns,
         }
     }
 
@@ -232,11 +293,11 @@ impl<I: Io> Master<I> {
             tracing::debug!(
                 "slave {pos} ({}): vendor {:#010x} product {:#010x} revision {:#010x}, station {:#06x}{}",
                 slave.name,
-                slave.vendor_id,
-                slave.product_code,
-                slave.revision,
+                slave.identity.vendor_id,
+                slave.identity.product_code,
+                slave.identity.revision,
                 slave.station,
-                if slave.device_emulation { ", device emulation" } else { "" }
+                if slave.esc.device_emulation { ", device emulation" } else { "" }
             );
             self.slaves.push(slave);
         }
@@ -303,40 +364,40 @@ impl<I: Io> Master<I> {
             alias: u16::from_le_bytes(alias),
             name: sii.string(1).unwrap_or_else(|| format!("{:#010x}", h.product_code)),
             description: sii.name().unwrap_or_default(),
-            vendor_id: h.vendor_id,
-            product_code: h.product_code,
-            revision: h.revision,
-            serial: h.serial,
-            esc_type: id[0],
-            fmmu_count: id[4],
-            sm_count: id[5],
-            features,
-            device_emulation: pdi[1] & 0x01 != 0,
-            dl_status,
-            eeprom_status: u16::from_le_bytes(sii_status),
-            active_ports: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
-            port_descriptor: id[7],
-            entry_port: 0,
-            parent: None,
-            parent_port: 0,
-            has_dc: features & 0x04 != 0,
-            has_system_time: features & 0x04 != 0,
-            dc_64bit: features & 0x08 != 0,
-            receive_times: [0; 4],
-            receive_time_epu: 0,
-            speed_diff_slows: None,
-            delay_ns: 0,
+            identity: Identity {
+                vendor_id: h.vendor_id,
+                product_code: h.product_code,
+                revision: h.revision,
+                serial: h.serial,
+            },
+            esc: EscInfo {
+                kind: id[0],
+                fmmu_count: id[4],
+                sm_count: id[5],
+                features,
+                device_emulation: pdi[1] & 0x01 != 0,
+                eeprom_status: u16::from_le_bytes(sii_status),
+            },
+            ports: Ports {
+                dl_status,
+                active: [0, 1, 2, 3].map(|p| dl_status.port_active(p)),
+                descriptor: id[7],
+                entry: 0,
+                parent: None,
+                parent_port: 0,
+            },
+            dc: DcInfo {
+                supported: features & 0x04 != 0,
+                has_system_time: features & 0x04 != 0,
+                is_64bit: features & 0x08 != 0,
+                ..Default::default()
+            },
             mailbox,
             mbx_counter: 0,
             mbx_in_counter: 0,
             mbx_repeated: None,
             mbx_repeats: 0,
-            outputs: Vec::new(),
-            inputs: Vec::new(),
-            out_sm: None,
-            in_sm: None,
-            out_area: (0, 0),
-            in_area: (0, 0),
+            mapping: Default::default(),
             state: AlState::Init,
             health: Default::default(),
             assignment: [None, None],
@@ -360,7 +421,7 @@ impl<I: Io> Master<I> {
             Address::Device { adp: 0, ado: addr::AL_CONTROL },
             &mut [AlState::Op as u8, 0],
         )?;
-        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        let deadline = self.engine.io.now_ns() + self.settings.state_timeout_ns;
         loop {
             let now = self.engine.io.now_ns();
             self.cycle()?;
@@ -388,7 +449,7 @@ impl<I: Io> Master<I> {
     /// Adds an FRMW of the reference clock's system time (the first DC slave) to every cyclic
     /// frame, as SOEM and ethercrab do; returns the reference's position.
     pub fn distribute_dc(&mut self) -> Option<u16> {
-        let r = self.slaves.iter().find(|s| s.has_system_time)?;
+        let r = self.slaves.iter().find(|s| s.dc.has_system_time)?;
         self.dc_reference = Some(r.station);
         Some(r.position)
     }

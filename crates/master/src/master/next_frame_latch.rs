@@ -47,7 +47,7 @@ impl<I: Io> Master<I> {
     /// a master before may have changed): in reverse mode the ports after the processing unit
     /// would give the frame before the write.
     pub(super) fn forwarding_latch_mode(&mut self) -> Result<()> {
-        if self.slaves.iter().any(|s| s.has_dc && s.esc_type == IP_CORE) {
+        if self.slaves.iter().any(|s| s.dc.supported && s.esc.kind == IP_CORE) {
             self.engine.one(
                 Command::BWR,
                 Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_LATCH_MODE },
@@ -63,7 +63,7 @@ impl<I: Io> Master<I> {
         (0..self.slaves.len())
             .filter(|&k| {
                 let s = &self.slaves[k];
-                s.has_dc && NEXT_FRAME_TYPES.contains(&s.esc_type) && s.active_ports[1..].iter().any(|&a| a)
+                s.dc.supported && NEXT_FRAME_TYPES.contains(&s.esc.kind) && s.ports.active[1..].iter().any(|&a| a)
             })
             .collect()
     }
@@ -89,7 +89,7 @@ impl<I: Io> Master<I> {
             let merged: Vec<Merged> = chunk
                 .iter()
                 .enumerate()
-                .map(|(i, &k)| as_written_by_s(&s[i], &t[i], &u[i], self.slaves[k].active_ports))
+                .map(|(i, &k)| as_written_by_s(&s[i], &t[i], &u[i], self.slaves[k].ports.active))
                 .collect();
             if merged.contains(&Merged::Ambiguous) {
                 continue;
@@ -102,12 +102,12 @@ impl<I: Io> Master<I> {
                 // S's times into the first latch's frame, by the processing unit's time in
                 // each (port 0's without a system time: 0x0918's low word where it exists).
                 let (first, in_s) = match t[i].epu {
-                    Some(epu) if sl.has_system_time => (sl.receive_time_epu as u32, epu),
-                    _ => (sl.receive_times[0], times[0]),
+                    Some(epu) if sl.dc.has_system_time => (sl.dc.receive_time_epu as u32, epu),
+                    _ => (sl.dc.receive_times[0], times[0]),
                 };
                 let shift = first.wrapping_sub(in_s);
-                sl.receive_times = times.map(|x| x.wrapping_add(shift));
-                sl.entry_port = entry_by_times(sl.receive_times, sl.active_ports, sl.entry_port);
+                sl.dc.receive_times = times.map(|x| x.wrapping_add(shift));
+                sl.ports.entry = entry_by_times(sl.dc.receive_times, sl.ports.active, sl.ports.entry);
                 replaced.push(k);
             }
             return Ok(());
@@ -128,8 +128,8 @@ impl<I: Io> Master<I> {
         for ((&k, p), e) in chunk.iter().zip(&mut ports).zip(&mut epus) {
             let st = self.slaves[k].station;
             pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_RECEIVE_TIME_PORT0 }, p));
-            epu_at.push(self.slaves[k].has_system_time.then_some(pdus.len()));
-            if self.slaves[k].has_system_time {
+            epu_at.push(self.slaves[k].dc.has_system_time.then_some(pdus.len()));
+            if self.slaves[k].dc.has_system_time {
                 pdus.push(Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_RECEIVE_TIME_EPU }, e));
             }
         }

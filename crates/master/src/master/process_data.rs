@@ -95,10 +95,10 @@ impl<I: Io> Master<I> {
             (from(sii.rx_pdos(), out_sm), from(sii.tx_pdos(), in_sm))
         };
         let s = &mut self.slaves[k];
-        s.outputs = outputs;
-        s.inputs = inputs;
-        s.out_sm = out_sm;
-        s.in_sm = in_sm;
+        s.mapping.outputs = outputs;
+        s.mapping.inputs = inputs;
+        s.mapping.out_sm = out_sm;
+        s.mapping.in_sm = in_sm;
         Ok(())
     }
 
@@ -162,13 +162,13 @@ impl<I: Io> Master<I> {
         let mut out = 0u32;
         for s in &mut self.slaves {
             let bytes = s.output_bits().div_ceil(8);
-            s.out_area = (out, bytes);
+            s.mapping.out_area = (out, bytes);
             out += bytes;
         }
         let mut inp = out;
         for s in &mut self.slaves {
             let bytes = s.input_bits().div_ceil(8);
-            s.in_area = (inp, bytes);
+            s.mapping.in_area = (inp, bytes);
             inp += bytes;
         }
         self.out_bytes = out;
@@ -177,18 +177,18 @@ impl<I: Io> Master<I> {
         self.expected_wkc = 0;
         for k in 0..self.slaves.len() {
             let s = &mut self.slaves[k];
-            let mut bit = s.out_area.0 * 8;
-            for m in &mut s.outputs {
+            let mut bit = s.mapping.out_area.0 * 8;
+            for m in &mut s.mapping.outputs {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
-            let mut bit = s.in_area.0 * 8;
-            for m in &mut s.inputs {
+            let mut bit = s.mapping.in_area.0 * 8;
+            for m in &mut s.mapping.inputs {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
-            let has_out = s.out_area.1 > 0;
-            let has_in = s.in_area.1 > 0;
+            let has_out = s.mapping.out_area.1 > 0;
+            let has_in = s.mapping.in_area.1 > 0;
             self.expected_wkc += 2 * has_out as u16 + has_in as u16;
             self.write_process_config(k as u16)?;
         }
@@ -209,17 +209,17 @@ impl<I: Io> Master<I> {
         for (k, s) in self.slaves.iter_mut().enumerate() {
             let (out_at, in_at) = entries_at.get(k).copied().unwrap_or((None, None));
             let mut bit = out_at.unwrap_or(0);
-            for m in &mut s.outputs {
+            for m in &mut s.mapping.outputs {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
             let mut bit = out_bytes * 8 + in_at.unwrap_or(0);
-            for m in &mut s.inputs {
+            for m in &mut s.mapping.inputs {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
-            s.out_area = (out_at.unwrap_or(0) / 8, s.output_bits().div_ceil(8));
-            s.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.input_bits().div_ceil(8));
+            s.mapping.out_area = (out_at.unwrap_or(0) / 8, s.output_bits().div_ceil(8));
+            s.mapping.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.input_bits().div_ceil(8));
         }
         for k in 0..registers.len().min(self.slaves.len()) {
             self.write_process_config(k as u16)?;
@@ -240,7 +240,7 @@ impl<I: Io> Master<I> {
         }
         let s = &self.slaves[position as usize];
         let st = s.station;
-        for (a, d) in process_registers(s, s.out_area.0, s.in_area.0) {
+        for (a, d) in process_registers(s, s.mapping.out_area.0, s.mapping.in_area.0) {
             self.fpwr(st, a, &d)?;
         }
         Ok(())
@@ -270,7 +270,9 @@ pub(crate) fn process_registers(s: &crate::slave::Slave, out_logical: u32, in_lo
     let mut fmmu = 0u16;
     let out_bytes = s.output_bits().div_ceil(8);
     let in_bytes = s.input_bits().div_ceil(8);
-    for (area, sm, write) in [((out_logical, out_bytes), s.out_sm, true), ((in_logical, in_bytes), s.in_sm, false)] {
+    for (area, sm, write) in
+        [((out_logical, out_bytes), s.mapping.out_sm, true), ((in_logical, in_bytes), s.mapping.in_sm, false)]
+    {
         let Some((n, e)) = sm else { continue };
         let smr = if area.1 == 0 {
             SyncManager::default()

@@ -53,7 +53,7 @@ impl<I: Io> Master<I> {
             // Converged, the loop applies the crystal's difference: (1 + f)·(1 ∓ d) = 1.
             let ratio = applied_ppm.abs() / ppm.abs();
             let plain = ppm.abs() >= MIN_DIFFERENCE_PPM && (1.0 / SCALE_TOLERANCE..=SCALE_TOLERANCE).contains(&ratio);
-            self.slaves[k].speed_diff_slows = plain.then_some(applied_ppm * ppm > 0.0);
+            self.slaves[k].dc.speed_diff_slows = plain.then_some(applied_ppm * ppm > 0.0);
         }
         Ok(())
     }
@@ -64,7 +64,7 @@ impl<I: Io> Master<I> {
         let mut times = Vec::with_capacity(self.slaves.len());
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if !(s.has_system_time && s.dc_64bit) {
+            if !(s.dc.has_system_time && s.dc.is_64bit) {
                 times.push(None);
                 continue;
             }

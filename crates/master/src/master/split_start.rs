@@ -81,16 +81,16 @@ impl<I: Io> Master<I> {
         // The frame's way in and out of each half, less the loops behind the reference and
         // behind the far root (a closed port's loop-back after the last latch counted).
         let way_back = |k: usize| {
-            view[k].span_ns().unwrap_or(0) + view[k].loops_after_last_event() * self.closed_port_loop_ns as i64
+            view[k].span_ns().unwrap_or(0) + view[k].loops_after_last_event() * self.settings.closed_port_loop_ns as i64
         };
         let near = reference.map_or(0, way_back);
-        let root = (first_far..n).find(|&k| self.slaves[k].parent.is_none()).unwrap_or(first_far);
-        let far_reference = (first_far..n).find(|&k| self.slaves[k].has_system_time);
+        let root = (first_far..n).find(|&k| self.slaves[k].ports.parent.is_none()).unwrap_or(first_far);
+        let far_reference = (first_far..n).find(|&k| self.slaves[k].dc.has_system_time);
         let far_at = far_reference.and_then(|r| epu_at[r]).unwrap_or(0);
         SplitLatch {
             first_far,
             root,
-            root_port: self.slaves[root].entry_port,
+            root_port: self.slaves[root].ports.entry,
             far_reference,
             anchor_ns: (near - way_back(root)) / 2 + far_at,
             passes,
@@ -111,7 +111,7 @@ impl<I: Io> Master<I> {
     pub(crate) fn shift_far_half(&mut self, shift_ns: i64, last: Option<u16>) -> bool {
         let first_far = self.split_latch.as_ref().map_or(self.slaves.len(), |l| l.first_far);
         for k in first_far..self.slaves.len() {
-            let (clock, st) = (self.slaves[k].has_system_time, self.slaves[k].station);
+            let (clock, st) = (self.slaves[k].dc.has_system_time, self.slaves[k].station);
             if clock && Some(st) != last {
                 let _ = self.shift_offset(st, shift_ns);
             }
@@ -155,7 +155,7 @@ impl<I: Io> Master<I> {
         // A frame lost is tried again at the next look.
         let mut back = false;
         let read = self.each_dl_status(true, |s, d, answered| {
-            back |= answered && (0..4u8).any(|p| d.physical_link(p) && !s.active_ports[p as usize]);
+            back |= answered && (0..4u8).any(|p| d.physical_link(p) && !s.ports.active[p as usize]);
         });
         if read.is_err() {
             return Ok(());
@@ -195,7 +195,7 @@ impl<I: Io> Master<I> {
                 )
             });
             if cyclic {
-                self.engine.transact_once(&mut pdus[..count], self.cyclic_timeout_ns)?;
+                self.engine.transact_once(&mut pdus[..count], self.settings.cyclic_timeout_ns)?;
             } else {
                 self.engine.transact(&mut pdus[..count])?;
             }
@@ -224,8 +224,8 @@ impl<I: Io> Master<I> {
         let mut unanswered = None;
         self.each_dl_status(false, |s, d, answered| {
             if answered {
-                s.dl_status = d;
-                s.active_ports = [0, 1, 2, 3].map(|p| d.port_active(p));
+                s.ports.dl_status = d;
+                s.ports.active = [0, 1, 2, 3].map(|p| d.port_active(p));
             } else {
                 unanswered = unanswered.or(Some(s.position));
             }
@@ -239,12 +239,12 @@ impl<I: Io> Master<I> {
             });
         }
         self.ring_port = Some((l.root as u16, l.root_port));
-        self.slaves[l.root].active_ports[l.root_port as usize] = false;
+        self.slaves[l.root].ports.active[l.root_port as usize] = false;
         self.latch_and_measure_delays()?;
         for k in l.first_far..self.slaves.len() {
             let s = &self.slaves[k];
-            if s.has_system_time {
-                let (st, delay) = (s.station, s.delay_ns);
+            if s.dc.has_system_time {
+                let (st, delay) = (s.station, s.dc.delay_ns);
                 self.fpwr(st, addr::DC_SYSTEM_TIME_DELAY, &delay.to_le_bytes())?;
             }
         }

@@ -41,7 +41,7 @@ impl<I: Io> Master<I> {
     /// repeated until it is taken or the state timeout passes.
     pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
         let st = self.slave(position)?.station;
-        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        let deadline = self.engine.io.now_ns() + self.settings.state_timeout_ns;
         loop {
             let mut control = [state as u8, 0];
             let wkc =
@@ -118,7 +118,7 @@ impl<I: Io> Master<I> {
         self.fprd(st, addr::DL_STATUS, &mut dl)?;
         self.fprd(st, addr::SII_CONTROL, &mut sii)?;
         let s = &mut self.slaves[position as usize];
-        (s.dl_status, s.eeprom_status) = (DlStatus(u16::from_le_bytes(dl)), u16::from_le_bytes(sii));
+        (s.ports.dl_status, s.esc.eeprom_status) = (DlStatus(u16::from_le_bytes(dl)), u16::from_le_bytes(sii));
         Ok(s.eeprom_problem())
     }
 
@@ -128,7 +128,7 @@ impl<I: Io> Master<I> {
             let s = self.slave(position)?;
             (s.station, s.name.clone())
         };
-        let deadline = self.engine.io.now_ns() + self.state_timeout_ns;
+        let deadline = self.engine.io.now_ns() + self.settings.state_timeout_ns;
         loop {
             let mut d = [0u8; 6];
             self.fprd(st, addr::AL_STATUS, &mut d)?;
@@ -209,7 +209,7 @@ impl<I: Io> Master<I> {
             // Within a cycle's frame timeout and not sent again: lost, as the cyclic frame may
             // have been, it is asked again after the next short cycle instead of holding the
             // cyclic loop for the acyclic timeout (20 ms) and its retries.
-            match self.engine.transact_once(&mut pdus, self.cyclic_timeout_ns) {
+            match self.engine.transact_once(&mut pdus, self.settings.cyclic_timeout_ns) {
                 Ok(()) => {}
                 Err(crate::MasterError::Timeout { .. }) => {
                     tracing::debug!("supervision's status read lost: asked again after the next short cycle");
