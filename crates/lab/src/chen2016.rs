@@ -158,7 +158,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<(Setup, Row
     let mut sync: Box<dyn ClockSync> = if name == "ferrocat" {
         // ferrocat knows the SYNC0 its frames serve, and holds a frame back after a late one.
         let mut f = Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel();
-        f.sync0_phase_ns = Some(cycle_ns / 2);
+        f.set_sync0_phase_ns(Some(cycle_ns / 2));
         Box::new(f)
     } else {
         crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?

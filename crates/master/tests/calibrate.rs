@@ -79,7 +79,7 @@ fn the_calibration_finds_and_removes_the_stamps_asymmetry() {
         // the 10 ns latch apart), and taking it out leaves the master on the reference.
         assert!((found as f64 - during).abs() < 30.0, "{coupling:?}: found {found}, true {during:.0}");
         assert!(after.abs() < 0.2 * before.abs(), "{coupling:?}: calibrated {after:.0} ns");
-        assert_eq!(sync.calibration_ns, -found);
+        assert_eq!(sync.calibration_ns(), -found);
     }
 }
 

@@ -1,7 +1,10 @@
 //! The cyclic synchronisation methods in virtual time, on the same segment and seed (paired),
 //! judged by the true clocks the simulator knows.
 use ferrocat_master::io::Io;
-use ferrocat_master::sync::{Chen2016, ClockSync, Conventional, Coupling, Ferrocat, Park2020, SoemPi, Steering};
+use ferrocat_master::sync::{
+    Chen2016, ClockSync, Conventional, Coupling, Ferrocat, FollowerDelays, LostFrames, Park2020, ProbeFrames, Probing,
+    SoemPi, Steering,
+};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -95,8 +98,8 @@ fn reference_follows_master_methods_side_by_side() {
         let tcl = run_rfm(
             host,
             |_| {
-                let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
-                f.steering = Steering::TimeControlLoop;
+                let f =
+                    Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS).with_steering(Steering::TimeControlLoop);
                 Box::new(f)
             },
             4000,
@@ -256,7 +259,9 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
     } else {
         Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS)
     };
-    sync.probing = probing;
+    if !probing {
+        sync.options_mut().probing = Probing::Off;
+    }
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
     let (step_at, cycles) = (12000, 13000);
@@ -330,7 +335,7 @@ fn probing_while_the_estimate_is_uncertain_recovers_from_a_crystal_step_sooner()
 fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
     let mut m = segment(HostModel::pc_rt());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
-    sync.make_up = make_up;
+    sync.options_mut().lost_frames = if make_up { LostFrames::MakeUp } else { LostFrames::Wait };
     m.settings_mut().cyclic_timeout_ns = CYCLE_NS / 4;
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
@@ -376,8 +381,8 @@ fn a_lost_frame_is_made_up_at_once_when_the_reference_follows_by_its_offset() {
 fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
     let mut m = segment(HostModel::pc_rt());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
-    sync.probes_steer = probes_steer;
-    sync.centre_followers = false;
+    sync.options_mut().probes = if probes_steer { ProbeFrames::Steer } else { ProbeFrames::ReadOnly };
+    sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
     let (mut probed, mut quiet) = (Vec::new(), Vec::new());
@@ -433,7 +438,7 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     let host = HostModel { name: "late-wake", wake: Latency::fixed(600_000.0), ..HostModel::pc_rt() };
     let mut m = segment(host);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
-    sync.centre_followers = false;
+    sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
     let (mut latest_ns, mut probed) = (i64::MIN, 0);
@@ -471,7 +476,7 @@ fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     let mut m = segment(host);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     // Only the cycle's frame and its probes: no writes of the followers' delays between them.
-    sync.centre_followers = false;
+    sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.sync_state().unwrap();
     let mut next = m.io_mut().now_ns();
     let mut longest_ns = 0;

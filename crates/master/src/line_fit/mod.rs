@@ -238,10 +238,6 @@ impl LineFit {
         self.points.len()
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
     /// The noise scale learned (ns; 0 before the second point).
     pub fn scale_ns(&self) -> f64 {
         self.scale_ns
@@ -429,6 +425,7 @@ impl LineFit {
     }
 
     /// Points in the line in use (the window's, or the shorter window's chosen).
+    #[cfg(test)]
     pub fn len_in_use(&self) -> usize {
         self.in_use().0.n as usize
     }

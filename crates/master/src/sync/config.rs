@@ -163,7 +163,7 @@ impl SyncMethod {
             SyncMethod::Ferrocat(f) => {
                 let mut s =
                     if f.dense { Ferrocat::dense(f.coupling, cycle_ns) } else { Ferrocat::new(f.coupling, cycle_ns) };
-                s.steering = f.steering;
+                s = s.with_steering(f.steering);
                 if f.flywheel && !f.dense {
                     s = s.with_flywheel();
                 }

@@ -14,7 +14,10 @@ mod state;
 pub use chen2016::Chen2016;
 pub use config::{FerrocatSettings, SyncMethod};
 pub use conventional::{Conventional, Nominal};
-pub use ferrocat::{Ferrocat, Steering, DENSE_FIT_WINDOW, FIT_WINDOW};
+pub use ferrocat::{
+    Ferrocat, FollowerDelays, LostFrames, Options as FerrocatOptions, ProbeFrames, Probing, Steering, DENSE_FIT_WINDOW,
+    FIT_WINDOW,
+};
 pub use flywheel::speed_deviation;
 pub use lock::{Lock, LockState, LockThresholds};
 pub use park2020::Park2020;

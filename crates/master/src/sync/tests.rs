@@ -43,14 +43,12 @@ proptest! {
             Box::new(SoemPi::new(cycle_ns, samples[0].difference_ns)),
             Box::new(Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns)),
             Box::new({
-                let mut f = Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns);
-                f.steering = Steering::TimeControlLoop;
-                f
+                Ferrocat::new(Coupling::ReferenceFollowsMaster, cycle_ns).with_steering(Steering::TimeControlLoop)
             }),
             Box::new(Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns)),
             Box::new({
                 let mut f = Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns);
-                f.sync0_phase_ns = Some(built);
+                f.set_sync0_phase_ns(Some(built));
                 f
             }),
         ];
