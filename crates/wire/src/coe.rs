@@ -8,6 +8,54 @@ use crate::{Error, Result};
 pub const HEADER_LEN: usize = 2;
 /// Bytes of an SDO initiate frame after the CoE header: command, index, subindex, 4 data bytes.
 pub const SDO_HEADER_LEN: usize = 8;
+
+/// Where each field lies, in bytes after the CoE header, as smoltcp's `mod field` says it once
+/// (ETG.1000.6 §5.6.2).
+mod field {
+    pub type Field = core::ops::Range<usize>;
+
+    /// An SDO frame: the command byte, then (initiate and abort) index, subindex and four
+    /// bytes of data, size or abort code; a segment's data follow the command byte.
+    pub mod sdo {
+        use super::Field;
+        pub const COMMAND: usize = 0;
+        pub const INDEX: usize = 1;
+        pub const SUBINDEX: usize = 3;
+        pub const DATA: Field = 4..8;
+        pub const SEGMENT: usize = 1;
+        /// A segment's data bytes at least (padded).
+        pub const SEGMENT_MIN_LEN: usize = 7;
+    }
+
+    /// An emergency (CiA 301 EMCY in CoE).
+    pub mod emergency {
+        use super::Field;
+        pub const ERROR_CODE: usize = 0;
+        pub const ERROR_REGISTER: usize = 2;
+        pub const DATA: Field = 3..8;
+    }
+
+    /// The SDO information header, and the bodies after it.
+    pub mod info {
+        pub const OPCODE: usize = 0;
+        pub const RESERVED: usize = 1;
+        pub const FRAGMENTS_LEFT: usize = 2;
+        /// Object and entry descriptions: index, then …
+        pub const INDEX: usize = 0;
+        /// … an object's data type, highest subindex, object code and name …
+        pub const OBJECT_DATA_TYPE: usize = 2;
+        pub const MAX_SUBINDEX: usize = 4;
+        pub const OBJECT_CODE: usize = 5;
+        pub const OBJECT_NAME: usize = 6;
+        /// … or an entry's subindex, value info, data type, bit length, access and the rest.
+        pub const ENTRY_SUBINDEX: usize = 2;
+        pub const VALUE_INFO: usize = 3;
+        pub const ENTRY_DATA_TYPE: usize = 4;
+        pub const BIT_LENGTH: usize = 6;
+        pub const OBJECT_ACCESS: usize = 8;
+        pub const ENTRY_REST: usize = 10;
+    }
+}
 /// Bytes before segment data: CoE header and the command byte.
 pub const SEGMENT_HEADER_LEN: usize = 3;
 
@@ -185,15 +233,16 @@ impl<'a> Sdo<'a> {
     /// Parses `body` (everything after the CoE header up to the mailbox length). Whether it is a
     /// request or a response follows from the CoE service.
     pub fn parse(service: CoeService, body: &'a [u8]) -> Result<Self> {
-        let cmd = u8_at(body, 0, "SDO command")?;
+        use field::sdo;
+        let cmd = u8_at(body, sdo::COMMAND, "SDO command")?;
         let cs = cmd >> CS_SHIFT;
         let toggle = cmd & TOGGLE != 0;
         if cs == 4 {
             need(body, 0, SDO_HEADER_LEN, "SDO abort")?;
             return Ok(Sdo::Abort {
-                index: u16_at(body, 1, "")?,
-                subindex: body[3],
-                code: AbortCode(u32_at(body, 4, "")?),
+                index: u16_at(body, sdo::INDEX, "")?,
+                subindex: body[sdo::SUBINDEX],
+                code: AbortCode(u32_at(body, sdo::DATA.start, "")?),
             });
         }
         let request = match service {
@@ -202,27 +251,27 @@ impl<'a> Sdo<'a> {
             other => return Err(Error::BadValue { what: "CoE service for SDO", offset: 0, value: other.0 as u32 }),
         };
         let seven = |b: &[u8]| -> Result<[u8; 7]> {
-            let s = slice_at(b, 1, 7, "SDO segment reserved bytes")?;
+            let s = slice_at(b, sdo::SEGMENT, sdo::SEGMENT_MIN_LEN, "SDO segment reserved bytes")?;
             let mut r = [0; 7];
             r.copy_from_slice(s);
             Ok(r)
         };
         match (request, cs) {
             (true, 0) | (false, 0) => {
-                let segment = slice_at(body, 1, body.len().saturating_sub(1), "SDO segment")?;
-                if segment.len() < 7 {
+                let segment = slice_at(body, sdo::SEGMENT, body.len().saturating_sub(sdo::SEGMENT), "SDO segment")?;
+                if segment.len() < sdo::SEGMENT_MIN_LEN {
                     return Err(Error::Truncated {
                         what: "SDO segment (7 bytes minimum)",
-                        offset: 1,
-                        needed: 7,
+                        offset: sdo::SEGMENT,
+                        needed: sdo::SEGMENT_MIN_LEN,
                         available: segment.len(),
                     });
                 }
                 let unused = unused_of(cmd);
-                if segment.len() > 7 && unused != 0 {
+                if segment.len() > sdo::SEGMENT_MIN_LEN && unused != 0 {
                     return Err(Error::BadValue {
                         what: "SDO segment unused-byte count",
-                        offset: 0,
+                        offset: sdo::COMMAND,
                         value: unused as u32,
                     });
                 }
@@ -237,11 +286,11 @@ impl<'a> Sdo<'a> {
             (true, 3) => Ok(Sdo::UploadSegmentRequest { toggle, reserved: seven(body)? }),
             (true, 1) | (false, 2) => {
                 need(body, 0, SDO_HEADER_LEN, "SDO initiate")?;
-                let index = u16_at(body, 1, "")?;
-                let subindex = body[3];
+                let index = u16_at(body, sdo::INDEX, "")?;
+                let subindex = body[sdo::SUBINDEX];
                 let complete_access = cmd & COMPLETE_ACCESS != 0;
                 let mut four = [0; 4];
-                four.copy_from_slice(&body[4..8]);
+                four.copy_from_slice(&body[sdo::DATA]);
                 if cmd & EXPEDITED != 0 {
                     // Initiate frames count unused bytes in bits 3:2 (segments use 3:1).
                     let size = (cmd & SIZE_INDICATED != 0).then(|| 4 - ((cmd >> 2) & 3));
@@ -262,18 +311,18 @@ impl<'a> Sdo<'a> {
             }
             (true, 2) | (false, 3) => {
                 need(body, 0, SDO_HEADER_LEN, "SDO initiate")?;
-                let index = u16_at(body, 1, "")?;
-                let subindex = body[3];
+                let index = u16_at(body, sdo::INDEX, "")?;
+                let subindex = body[sdo::SUBINDEX];
                 let complete_access = cmd & COMPLETE_ACCESS != 0;
                 let mut reserved = [0; 4];
-                reserved.copy_from_slice(&body[4..8]);
+                reserved.copy_from_slice(&body[sdo::DATA]);
                 Ok(if request {
                     Sdo::UploadRequest { index, subindex, complete_access, reserved }
                 } else {
                     Sdo::DownloadResponse { index, subindex, complete_access, reserved }
                 })
             }
-            _ => Err(Error::BadValue { what: "SDO command specifier", offset: 0, value: cmd as u32 }),
+            _ => Err(Error::BadValue { what: "SDO command specifier", offset: sdo::COMMAND, value: cmd as u32 }),
         }
     }
 
@@ -302,8 +351,13 @@ impl<'a> Sdo<'a> {
     /// Writes the frame (after the CoE header) into `out`; returns its length.
     pub fn emit(&self, out: &mut [u8]) -> Result<usize> {
         let initiate = |out: &mut [u8], cmd: u8, index: u16, sub: u8, four: [u8; 4], rest: &[u8]| -> Result<usize> {
-            let i = index.to_le_bytes();
-            put(out, 0, &[cmd, i[0], i[1], sub, four[0], four[1], four[2], four[3]], "SDO frame")?;
+            use field::sdo;
+            let mut head = [0u8; SDO_HEADER_LEN];
+            head[sdo::COMMAND] = cmd;
+            head[sdo::INDEX..sdo::SUBINDEX].copy_from_slice(&index.to_le_bytes());
+            head[sdo::SUBINDEX] = sub;
+            head[sdo::DATA].copy_from_slice(&four);
+            put(out, 0, &head, "SDO frame")?;
             put(out, SDO_HEADER_LEN, rest, "SDO data")?;
             Ok(SDO_HEADER_LEN + rest.len())
         };
@@ -442,14 +496,18 @@ impl Emergency {
     pub const LEN: usize = 8;
     pub fn parse(body: &[u8]) -> Result<Self> {
         need(body, 0, Self::LEN, "CoE emergency")?;
+        use field::emergency as f;
         let mut data = [0; 5];
-        data.copy_from_slice(&body[3..8]);
-        Ok(Emergency { error_code: u16_at(body, 0, "")?, error_register: body[2], data })
+        data.copy_from_slice(&body[f::DATA]);
+        Ok(Emergency { error_code: u16_at(body, f::ERROR_CODE, "")?, error_register: body[f::ERROR_REGISTER], data })
     }
     pub fn to_bytes(&self) -> [u8; 8] {
-        let e = self.error_code.to_le_bytes();
-        let d = self.data;
-        [e[0], e[1], self.error_register, d[0], d[1], d[2], d[3], d[4]]
+        use field::emergency as f;
+        let mut b = [0u8; Self::LEN];
+        b[f::ERROR_CODE..f::ERROR_REGISTER].copy_from_slice(&self.error_code.to_le_bytes());
+        b[f::ERROR_REGISTER] = self.error_register;
+        b[f::DATA].copy_from_slice(&self.data);
+        b
     }
 }
 
@@ -480,16 +538,21 @@ impl InfoHeader {
     pub const LEN: usize = 4;
     pub fn parse(b: &[u8]) -> Result<Self> {
         need(b, 0, Self::LEN, "SDO information header")?;
+        use field::info;
         Ok(InfoHeader {
-            opcode: InfoOpcode(b[0] & 0x7F),
-            incomplete: b[0] & 0x80 != 0,
-            reserved: b[1],
-            fragments_left: u16_at(b, 2, "")?,
+            opcode: InfoOpcode(b[info::OPCODE] & 0x7F),
+            incomplete: b[info::OPCODE] & 0x80 != 0,
+            reserved: b[info::RESERVED],
+            fragments_left: u16_at(b, info::FRAGMENTS_LEFT, "")?,
         })
     }
     pub fn to_bytes(&self) -> [u8; 4] {
-        let f = self.fragments_left.to_le_bytes();
-        [self.opcode.0 | if self.incomplete { 0x80 } else { 0 }, self.reserved, f[0], f[1]]
+        use field::info;
+        let mut b = [0u8; Self::LEN];
+        b[info::OPCODE] = self.opcode.0 | if self.incomplete { 0x80 } else { 0 };
+        b[info::RESERVED] = self.reserved;
+        b[info::FRAGMENTS_LEFT..].copy_from_slice(&self.fragments_left.to_le_bytes());
+        b
     }
 }
 
@@ -546,6 +609,7 @@ impl<'a> SdoInfo<'a> {
         let header = InfoHeader::parse(body)?;
         let b = &body[InfoHeader::LEN..];
         let sh = |e: Error| e.shifted(InfoHeader::LEN);
+        use field::info as f;
         Ok(match header.opcode {
             InfoOpcode::GET_OD_LIST_REQUEST => {
                 SdoInfo::OdListRequest { header, list_type: u16_at(b, 0, "OD list type").map_err(sh)? }
@@ -555,31 +619,36 @@ impl<'a> SdoInfo<'a> {
                 SdoInfo::ObjectDescriptionRequest { header, index: u16_at(b, 0, "object index").map_err(sh)? }
             }
             InfoOpcode::GET_OBJECT_DESCRIPTION_RESPONSE => {
-                need(b, 0, 6, "object description").map_err(sh)?;
+                need(b, 0, f::OBJECT_NAME, "object description").map_err(sh)?;
                 SdoInfo::ObjectDescriptionResponse {
                     header,
-                    index: u16_at(b, 0, "")?,
-                    data_type: u16_at(b, 2, "")?,
-                    max_subindex: b[4],
-                    object_code: b[5],
-                    name: &b[6..],
+                    index: u16_at(b, f::INDEX, "")?,
+                    data_type: u16_at(b, f::OBJECT_DATA_TYPE, "")?,
+                    max_subindex: b[f::MAX_SUBINDEX],
+                    object_code: b[f::OBJECT_CODE],
+                    name: &b[f::OBJECT_NAME..],
                 }
             }
             InfoOpcode::GET_ENTRY_DESCRIPTION_REQUEST => {
-                need(b, 0, 4, "entry description request").map_err(sh)?;
-                SdoInfo::EntryDescriptionRequest { header, index: u16_at(b, 0, "")?, subindex: b[2], value_info: b[3] }
+                need(b, 0, f::VALUE_INFO + 1, "entry description request").map_err(sh)?;
+                SdoInfo::EntryDescriptionRequest {
+                    header,
+                    index: u16_at(b, f::INDEX, "")?,
+                    subindex: b[f::ENTRY_SUBINDEX],
+                    value_info: b[f::VALUE_INFO],
+                }
             }
             InfoOpcode::GET_ENTRY_DESCRIPTION_RESPONSE => {
-                need(b, 0, 10, "entry description").map_err(sh)?;
+                need(b, 0, f::ENTRY_REST, "entry description").map_err(sh)?;
                 SdoInfo::EntryDescriptionResponse {
                     header,
-                    index: u16_at(b, 0, "")?,
-                    subindex: b[2],
-                    value_info: b[3],
-                    data_type: u16_at(b, 4, "")?,
-                    bit_length: u16_at(b, 6, "")?,
-                    object_access: u16_at(b, 8, "")?,
-                    rest: &b[10..],
+                    index: u16_at(b, f::INDEX, "")?,
+                    subindex: b[f::ENTRY_SUBINDEX],
+                    value_info: b[f::VALUE_INFO],
+                    data_type: u16_at(b, f::ENTRY_DATA_TYPE, "")?,
+                    bit_length: u16_at(b, f::BIT_LENGTH, "")?,
+                    object_access: u16_at(b, f::OBJECT_ACCESS, "")?,
+                    rest: &b[f::ENTRY_REST..],
                 }
             }
             InfoOpcode::ERROR_REQUEST => {

@@ -12,6 +12,54 @@ pub const UDP_PORT_ETHERCAT: u16 = 0x88A4;
 pub const MIN_FRAME_LEN: usize = 60;
 pub const BROADCAST: [u8; 6] = [0xFF; 6];
 
+/// Where each header field lies, in bytes, as smoltcp's `mod field` says it once.
+mod field {
+    pub type Field = core::ops::Range<usize>;
+
+    /// Ethernet II, with the 802.1Q tag where the outer EtherType says so.
+    pub mod eth {
+        use super::Field;
+        pub const DESTINATION: Field = 0..6;
+        pub const SOURCE: Field = 6..12;
+        pub const ETHERTYPE: Field = 12..14;
+        pub const HEADER_LEN: usize = 14;
+        pub const VLAN_TCI: Field = 14..16;
+        pub const VLAN_ETHERTYPE: Field = 16..18;
+        pub const VLAN_HEADER_LEN: usize = 18;
+    }
+
+    /// IPv4 (RFC 791), without its options.
+    pub mod ipv4 {
+        use super::Field;
+        pub const VERSION_IHL: usize = 0;
+        pub const DSCP_ECN: usize = 1;
+        pub const TOTAL_LEN: Field = 2..4;
+        pub const IDENT: Field = 4..6;
+        pub const FLAGS_FRAGMENT: Field = 6..8;
+        pub const TTL: usize = 8;
+        pub const PROTOCOL: usize = 9;
+        pub const CHECKSUM: Field = 10..12;
+        pub const SOURCE: Field = 12..16;
+        pub const DESTINATION: Field = 16..20;
+        pub const HEADER_LEN: usize = 20;
+    }
+
+    /// UDP (RFC 768).
+    pub mod udp {
+        use super::Field;
+        pub const SOURCE_PORT: Field = 0..2;
+        pub const DESTINATION_PORT: Field = 2..4;
+        pub const LENGTH: Field = 4..6;
+        pub const CHECKSUM: Field = 6..8;
+        pub const HEADER_LEN: usize = 8;
+    }
+}
+
+/// A big-endian u16 at `f` of a buffer already checked to hold it.
+fn be16(buf: &[u8], f: field::Field) -> u16 {
+    u16::from_be_bytes([buf[f.start], buf[f.start + 1]])
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct EthernetRepr {
     pub dst: [u8; 6],
@@ -24,27 +72,28 @@ pub struct EthernetRepr {
 
 impl EthernetRepr {
     pub fn parse(buf: &[u8]) -> Result<(Self, usize)> {
-        need(buf, 0, 14, "Ethernet header")?;
+        use field::eth;
+        need(buf, 0, eth::HEADER_LEN, "Ethernet header")?;
         let mut dst = [0; 6];
         let mut src = [0; 6];
-        dst.copy_from_slice(&buf[0..6]);
-        src.copy_from_slice(&buf[6..12]);
-        let outer = u16::from_be_bytes([buf[12], buf[13]]);
+        dst.copy_from_slice(&buf[eth::DESTINATION]);
+        src.copy_from_slice(&buf[eth::SOURCE]);
+        let outer = be16(buf, eth::ETHERTYPE);
         if outer == ETHERTYPE_VLAN {
-            need(buf, 14, 4, "802.1Q VLAN tag")?;
-            let tci = u16::from_be_bytes([buf[14], buf[15]]);
-            let ethertype = u16::from_be_bytes([buf[16], buf[17]]);
-            Ok((EthernetRepr { dst, src, vlan_tci: Some(tci), ethertype }, 18))
+            need(buf, eth::HEADER_LEN, eth::VLAN_HEADER_LEN - eth::HEADER_LEN, "802.1Q VLAN tag")?;
+            let tci = be16(buf, eth::VLAN_TCI);
+            let ethertype = be16(buf, eth::VLAN_ETHERTYPE);
+            Ok((EthernetRepr { dst, src, vlan_tci: Some(tci), ethertype }, eth::VLAN_HEADER_LEN))
         } else {
-            Ok((EthernetRepr { dst, src, vlan_tci: None, ethertype: outer }, 14))
+            Ok((EthernetRepr { dst, src, vlan_tci: None, ethertype: outer }, eth::HEADER_LEN))
         }
     }
 
     pub fn header_len(&self) -> usize {
         if self.vlan_tci.is_some() {
-            18
+            field::eth::VLAN_HEADER_LEN
         } else {
-            14
+            field::eth::HEADER_LEN
         }
     }
 
@@ -53,15 +102,16 @@ impl EthernetRepr {
         if out.len() < n {
             return Err(Error::BufferTooSmall { what: "Ethernet header", needed: n, available: out.len() });
         }
-        out[0..6].copy_from_slice(&self.dst);
-        out[6..12].copy_from_slice(&self.src);
+        use field::eth;
+        out[eth::DESTINATION].copy_from_slice(&self.dst);
+        out[eth::SOURCE].copy_from_slice(&self.src);
         match self.vlan_tci {
             Some(tci) => {
-                out[12..14].copy_from_slice(&ETHERTYPE_VLAN.to_be_bytes());
-                out[14..16].copy_from_slice(&tci.to_be_bytes());
-                out[16..18].copy_from_slice(&self.ethertype.to_be_bytes());
+                out[eth::ETHERTYPE].copy_from_slice(&ETHERTYPE_VLAN.to_be_bytes());
+                out[eth::VLAN_TCI].copy_from_slice(&tci.to_be_bytes());
+                out[eth::VLAN_ETHERTYPE].copy_from_slice(&self.ethertype.to_be_bytes());
             }
-            None => out[12..14].copy_from_slice(&self.ethertype.to_be_bytes()),
+            None => out[eth::ETHERTYPE].copy_from_slice(&self.ethertype.to_be_bytes()),
         }
         Ok(n)
     }
@@ -117,34 +167,43 @@ impl Ipv4Repr {
     }
 
     pub fn header_len(&self) -> usize {
-        20 + self.options_len as usize
+        field::ipv4::HEADER_LEN + self.options_len as usize
     }
 
     pub fn parse(buf: &[u8]) -> Result<(Self, usize)> {
-        need(buf, 0, 20, "IPv4 header")?;
-        let version = buf[0] >> 4;
+        use field::ipv4;
+        need(buf, 0, ipv4::HEADER_LEN, "IPv4 header")?;
+        let version = buf[ipv4::VERSION_IHL] >> 4;
         if version != 4 {
-            return Err(Error::BadValue { what: "IPv4 version", offset: 0, value: version as u32 });
+            return Err(Error::BadValue { what: "IPv4 version", offset: ipv4::VERSION_IHL, value: version as u32 });
         }
-        let ihl = (buf[0] & 0x0F) as usize * 4;
-        if ihl < 20 {
-            return Err(Error::BadLength { what: "IPv4 header length (IHL)", offset: 0, claimed: ihl, limit: 60 });
+        let ihl = (buf[ipv4::VERSION_IHL] & 0x0F) as usize * 4;
+        if ihl < ipv4::HEADER_LEN {
+            return Err(Error::BadLength {
+                what: "IPv4 header length (IHL)",
+                offset: ipv4::VERSION_IHL,
+                claimed: ihl,
+                limit: 60,
+            });
         }
-        let opts = slice_at(buf, 20, ihl - 20, "IPv4 options")?;
+        let opts = slice_at(buf, ipv4::HEADER_LEN, ihl - ipv4::HEADER_LEN, "IPv4 options")?;
         let mut options = [0; 40];
         options[..opts.len()].copy_from_slice(opts);
-        let be = |o: usize| u16::from_be_bytes([buf[o], buf[o + 1]]);
+        let mut src = [0; 4];
+        let mut dst = [0; 4];
+        src.copy_from_slice(&buf[ipv4::SOURCE]);
+        dst.copy_from_slice(&buf[ipv4::DESTINATION]);
         Ok((
             Ipv4Repr {
-                dscp_ecn: buf[1],
-                total_len: be(2),
-                ident: be(4),
-                flags_fragment: be(6),
-                ttl: buf[8],
-                protocol: buf[9],
-                checksum: be(10),
-                src: [buf[12], buf[13], buf[14], buf[15]],
-                dst: [buf[16], buf[17], buf[18], buf[19]],
+                dscp_ecn: buf[ipv4::DSCP_ECN],
+                total_len: be16(buf, ipv4::TOTAL_LEN),
+                ident: be16(buf, ipv4::IDENT),
+                flags_fragment: be16(buf, ipv4::FLAGS_FRAGMENT),
+                ttl: buf[ipv4::TTL],
+                protocol: buf[ipv4::PROTOCOL],
+                checksum: be16(buf, ipv4::CHECKSUM),
+                src,
+                dst,
                 options,
                 options_len: opts.len() as u8,
             },
@@ -153,17 +212,18 @@ impl Ipv4Repr {
     }
 
     fn write_header(&self, out: &mut [u8], checksum: u16) {
-        out[0] = 0x40 | (self.header_len() / 4) as u8;
-        out[1] = self.dscp_ecn;
-        out[2..4].copy_from_slice(&self.total_len.to_be_bytes());
-        out[4..6].copy_from_slice(&self.ident.to_be_bytes());
-        out[6..8].copy_from_slice(&self.flags_fragment.to_be_bytes());
-        out[8] = self.ttl;
-        out[9] = self.protocol;
-        out[10..12].copy_from_slice(&checksum.to_be_bytes());
-        out[12..16].copy_from_slice(&self.src);
-        out[16..20].copy_from_slice(&self.dst);
-        out[20..self.header_len()].copy_from_slice(self.options());
+        use field::ipv4;
+        out[ipv4::VERSION_IHL] = 0x40 | (self.header_len() / 4) as u8;
+        out[ipv4::DSCP_ECN] = self.dscp_ecn;
+        out[ipv4::TOTAL_LEN].copy_from_slice(&self.total_len.to_be_bytes());
+        out[ipv4::IDENT].copy_from_slice(&self.ident.to_be_bytes());
+        out[ipv4::FLAGS_FRAGMENT].copy_from_slice(&self.flags_fragment.to_be_bytes());
+        out[ipv4::TTL] = self.ttl;
+        out[ipv4::PROTOCOL] = self.protocol;
+        out[ipv4::CHECKSUM].copy_from_slice(&checksum.to_be_bytes());
+        out[ipv4::SOURCE].copy_from_slice(&self.src);
+        out[ipv4::DESTINATION].copy_from_slice(&self.dst);
+        out[ipv4::HEADER_LEN..self.header_len()].copy_from_slice(self.options());
     }
 
     /// RFC 791 header checksum over this header with a zero checksum field.
@@ -193,27 +253,33 @@ pub struct UdpRepr {
 
 impl UdpRepr {
     pub fn parse(buf: &[u8]) -> Result<Self> {
-        need(buf, 0, 8, "UDP header")?;
-        let be = |o: usize| u16::from_be_bytes([buf[o], buf[o + 1]]);
-        Ok(UdpRepr { src_port: be(0), dst_port: be(2), length: be(4), checksum: be(6) })
+        use field::udp;
+        need(buf, 0, udp::HEADER_LEN, "UDP header")?;
+        Ok(UdpRepr {
+            src_port: be16(buf, udp::SOURCE_PORT),
+            dst_port: be16(buf, udp::DESTINATION_PORT),
+            length: be16(buf, udp::LENGTH),
+            checksum: be16(buf, udp::CHECKSUM),
+        })
     }
 
     pub fn emit(&self, out: &mut [u8]) -> Result<usize> {
-        let mut hdr = [0u8; 8];
-        hdr[0..2].copy_from_slice(&self.src_port.to_be_bytes());
-        hdr[2..4].copy_from_slice(&self.dst_port.to_be_bytes());
-        hdr[4..6].copy_from_slice(&self.length.to_be_bytes());
-        hdr[6..8].copy_from_slice(&self.checksum.to_be_bytes());
+        use field::udp;
+        let mut hdr = [0u8; udp::HEADER_LEN];
+        hdr[udp::SOURCE_PORT].copy_from_slice(&self.src_port.to_be_bytes());
+        hdr[udp::DESTINATION_PORT].copy_from_slice(&self.dst_port.to_be_bytes());
+        hdr[udp::LENGTH].copy_from_slice(&self.length.to_be_bytes());
+        hdr[udp::CHECKSUM].copy_from_slice(&self.checksum.to_be_bytes());
         put(out, 0, &hdr, "UDP header")?;
-        Ok(8)
+        Ok(udp::HEADER_LEN)
     }
 }
 
 /// Reads the EtherType after an optional VLAN tag without building a repr (fast path filter).
 pub fn ethertype_of(buf: &[u8]) -> Result<u16> {
-    let outer = u16_at(buf, 12, "EtherType").map(u16::swap_bytes)?;
+    let outer = u16_at(buf, field::eth::ETHERTYPE.start, "EtherType").map(u16::swap_bytes)?;
     if outer == ETHERTYPE_VLAN {
-        u16_at(buf, 16, "inner EtherType").map(u16::swap_bytes)
+        u16_at(buf, field::eth::VLAN_ETHERTYPE.start, "inner EtherType").map(u16::swap_bytes)
     } else {
         Ok(outer)
     }

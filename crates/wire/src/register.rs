@@ -365,6 +365,39 @@ pub struct Fmmu {
     pub active: bool,
 }
 
+/// Where each field of an FMMU (0x0600 + 16·n) and a SyncManager (0x0800 + 8·n) lies, in
+/// bytes, as smoltcp's `mod field` says it once (ESC datasheet section II, 0x0600 and 0x0800).
+mod field {
+    pub type Field = core::ops::Range<usize>;
+
+    pub mod fmmu {
+        use super::Field;
+        pub const LOGICAL_START: Field = 0..4;
+        pub const LENGTH: Field = 4..6;
+        pub const LOGICAL_START_BIT: usize = 6;
+        pub const LOGICAL_STOP_BIT: usize = 7;
+        pub const PHYSICAL_START: Field = 8..10;
+        pub const PHYSICAL_START_BIT: usize = 10;
+        pub const TYPE: usize = 11;
+        pub const ACTIVATE: usize = 12;
+    }
+
+    pub mod sm {
+        use super::Field;
+        pub const START: Field = 0..2;
+        pub const LENGTH: Field = 2..4;
+        pub const CONTROL: usize = 4;
+        pub const STATUS: usize = 5;
+        pub const ACTIVATE: usize = 6;
+        pub const PDI_CONTROL: usize = 7;
+    }
+}
+
+/// A little-endian u16 at `f` of a buffer already checked to hold it.
+fn le16(buf: &[u8], f: field::Field) -> u16 {
+    u16::from_le_bytes([buf[f.start], buf[f.start + 1]])
+}
+
 impl Fmmu {
     pub const LEN: usize = 16;
     pub const READ: u8 = 1;
@@ -372,28 +405,32 @@ impl Fmmu {
 
     pub fn parse(buf: &[u8]) -> Result<Self> {
         need(buf, 0, Self::LEN, "FMMU")?;
+        use field::fmmu as f;
+        let mut start = [0u8; 4];
+        start.copy_from_slice(&buf[f::LOGICAL_START]);
         Ok(Fmmu {
-            logical_start: u32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]),
-            length: u16::from_le_bytes([buf[4], buf[5]]),
-            logical_start_bit: buf[6],
-            logical_stop_bit: buf[7],
-            physical_start: u16::from_le_bytes([buf[8], buf[9]]),
-            physical_start_bit: buf[10],
-            fmmu_type: buf[11],
-            active: buf[12] & 1 != 0,
+            logical_start: u32::from_le_bytes(start),
+            length: le16(buf, f::LENGTH),
+            logical_start_bit: buf[f::LOGICAL_START_BIT],
+            logical_stop_bit: buf[f::LOGICAL_STOP_BIT],
+            physical_start: le16(buf, f::PHYSICAL_START),
+            physical_start_bit: buf[f::PHYSICAL_START_BIT],
+            fmmu_type: buf[f::TYPE],
+            active: buf[f::ACTIVATE] & 1 != 0,
         })
     }
 
     pub fn to_bytes(&self) -> [u8; 16] {
-        let mut b = [0u8; 16];
-        b[0..4].copy_from_slice(&self.logical_start.to_le_bytes());
-        b[4..6].copy_from_slice(&self.length.to_le_bytes());
-        b[6] = self.logical_start_bit;
-        b[7] = self.logical_stop_bit;
-        b[8..10].copy_from_slice(&self.physical_start.to_le_bytes());
-        b[10] = self.physical_start_bit;
-        b[11] = self.fmmu_type;
-        b[12] = self.active as u8;
+        use field::fmmu as f;
+        let mut b = [0u8; Self::LEN];
+        b[f::LOGICAL_START].copy_from_slice(&self.logical_start.to_le_bytes());
+        b[f::LENGTH].copy_from_slice(&self.length.to_le_bytes());
+        b[f::LOGICAL_START_BIT] = self.logical_start_bit;
+        b[f::LOGICAL_STOP_BIT] = self.logical_stop_bit;
+        b[f::PHYSICAL_START].copy_from_slice(&self.physical_start.to_le_bytes());
+        b[f::PHYSICAL_START_BIT] = self.physical_start_bit;
+        b[f::TYPE] = self.fmmu_type;
+        b[f::ACTIVATE] = self.active as u8;
         b
     }
 
@@ -433,20 +470,27 @@ impl SyncManager {
 
     pub fn parse(buf: &[u8]) -> Result<Self> {
         need(buf, 0, Self::LEN, "SyncManager")?;
+        use field::sm;
         Ok(SyncManager {
-            start: u16::from_le_bytes([buf[0], buf[1]]),
-            length: u16::from_le_bytes([buf[2], buf[3]]),
-            control: buf[4],
-            status: buf[5],
-            activate: buf[6],
-            pdi_control: buf[7],
+            start: le16(buf, sm::START),
+            length: le16(buf, sm::LENGTH),
+            control: buf[sm::CONTROL],
+            status: buf[sm::STATUS],
+            activate: buf[sm::ACTIVATE],
+            pdi_control: buf[sm::PDI_CONTROL],
         })
     }
 
     pub fn to_bytes(&self) -> [u8; 8] {
-        let s = self.start.to_le_bytes();
-        let l = self.length.to_le_bytes();
-        [s[0], s[1], l[0], l[1], self.control, self.status, self.activate, self.pdi_control]
+        use field::sm;
+        let mut b = [0u8; Self::LEN];
+        b[sm::START].copy_from_slice(&self.start.to_le_bytes());
+        b[sm::LENGTH].copy_from_slice(&self.length.to_le_bytes());
+        b[sm::CONTROL] = self.control;
+        b[sm::STATUS] = self.status;
+        b[sm::ACTIVATE] = self.activate;
+        b[sm::PDI_CONTROL] = self.pdi_control;
+        b
     }
 
     pub fn emit(&self, out: &mut [u8]) -> Result<()> {
