@@ -58,7 +58,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<ExitCode> {
         Some(iface) => {
             let target = crate::target::Target::on_iface(iface, a.force);
             crate::target::go_real_time();
-            run_with(&o, &mut || target.master())?
+            run_with(&o, &mut || target.master().map_err(|e| ferrocat_lab::LabError::Open(format!("{e:#}").into())))?
         }
     };
     write_outputs(&a.out, &o, &rows)?;

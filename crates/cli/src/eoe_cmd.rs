@@ -302,6 +302,7 @@ pub struct TapBridge {
     to_host: u64,
     host_down: u64,
     refused: u64,
+    unanswered: u64,
 }
 
 impl TapBridge {
@@ -309,7 +310,16 @@ impl TapBridge {
     pub fn open(position: u16, name: &str) -> anyhow::Result<Self> {
         let tap = ferrocat_link::Tap::open(name)
             .with_context(|| format!("creating TAP interface '{name}' (needs CAP_NET_ADMIN)"))?;
-        Ok(TapBridge { position, tap, buf: vec![0u8; 65536], to_slave: 0, to_host: 0, host_down: 0, refused: 0 })
+        Ok(TapBridge {
+            position,
+            tap,
+            buf: vec![0u8; 65536],
+            to_slave: 0,
+            to_host: 0,
+            host_down: 0,
+            refused: 0,
+            unanswered: 0,
+        })
     }
 
     /// One step; whether anything moved or is still on its way.
@@ -323,7 +333,16 @@ impl TapBridge {
                 Ok(false) | Err(_) => self.refused += 1,
             }
         }
-        if let Some(f) = m.eoe().pump(self.position)? {
+        // A mailbox datagram that went unanswered through its retries (a stalled host, a lost
+        // frame) is tried again at the next step: the cyclic run goes on.
+        let pumped = match m.eoe().pump(self.position) {
+            Err(ferrocat_master::MasterError::Timeout { .. }) => {
+                self.unanswered += 1;
+                None
+            }
+            r => r?,
+        };
+        if let Some(f) = pumped {
             moved = true;
             if self.tap.write(&f).with_context(|| format!("writing to {}", self.tap.name()))? {
                 self.to_host += 1;
@@ -337,7 +356,7 @@ impl TapBridge {
     pub fn summary(&self, m: &ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {
         let link = m.eoe_link(self.position)?;
         Ok(format!(
-            "EoE bridge of slave {} to {}: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit",
+            "EoE bridge of slave {} to {}: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit, {} mailbox datagrams unanswered (tried again)",
             self.position,
             self.tap.name(),
             self.to_slave,
@@ -345,7 +364,8 @@ impl TapBridge {
             self.to_host,
             self.host_down,
             link.dropped,
-            link.fragment_errors
+            link.fragment_errors,
+            self.unanswered
         ))
     }
 }

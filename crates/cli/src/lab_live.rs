@@ -223,7 +223,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let (mut sync, _) =
         ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.sync_state()?;
-    st.probe_budget_ns = a.probe_budget_us.map(|us| us * 1000);
+    st.probing.budget_ns = a.probe_budget_us.map(|us| us * 1000);
     let start = m.io_mut().now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
@@ -237,7 +237,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
         m.io_mut().sleep_until(next);
         let now = m.io_mut().now_ns();
         if now >= from_ns && probes_from.is_none() {
-            probes_from = Some(st.probes);
+            probes_from = Some(st.probing.sent);
         }
         if (from_ns..to_ns).contains(&now) {
             cycle_starts.push(now);
@@ -256,7 +256,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let epoch_offset_ns = m.epoch_offset_ns().context("the master's clock was never read")?;
     // A method that keeps no clock of its own leaves the master's.
     let clock = (!clock.is_empty()).then_some(clock);
-    let probes = st.probes - probes_from.unwrap_or(st.probes);
+    let probes = st.probing.sent - probes_from.unwrap_or(st.probing.sent);
     Ok(MasterRun { epoch_offset_ns, clock, from_ns, to_ns, cycles, lost: st.lost, probes, cycle_starts })
 }
 

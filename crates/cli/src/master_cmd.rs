@@ -596,7 +596,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         m.io_mut().now_ns()
     };
     t.scan(&mut m)?;
-    m.configure()?;
+    t.configure(&mut m)?;
     // Nothing to exchange: no frame would go out, and the summary would count none.
     if m.image().is_empty() && !dc {
         bail!(
@@ -733,14 +733,14 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         // would make the run depend on the machine that simulates it.
         let virtual_host = m.io_mut().is_virtual();
         match probe_budget_us {
-            Some(us) => st.probe_budget_ns = Some(us * 1000),
+            Some(us) => st.probing.budget_ns = Some(us * 1000),
             None if !max_rate && !virtual_host => {
-                st.no_probes = true;
+                st.probing.off = true;
                 measuring = Some(measuring_cycles(cycle_us));
             }
             None => {}
         }
-        st.no_probes |= probe_budget_us == Some(0);
+        st.probing.off |= probe_budget_us == Some(0);
     }
     while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
@@ -776,8 +776,8 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             if m.cycle_stats().cycles >= n {
                 measuring = None;
                 let cpu_per_cycle_ns = (cpu_ns() - cpu0) / n;
-                st.probe_budget_ns = Some(cpu_per_cycle_ns / 2);
-                st.no_probes = false;
+                st.probing.budget_ns = Some(cpu_per_cycle_ns / 2);
+                st.probing.off = false;
                 eprintln!(
                     "host: the loop took {:.1} us of CPU a cycle over its first {n} cycles ({:.1} % of a core at {cycle_us} us); \
                      wake-ups late by {}; clock-sync probes get {:.1} us a cycle",
@@ -894,12 +894,12 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "lock_changes": st.lock.changes(),
             "lock_left_out": st.lock.left_out(),
             "locked_after_s": st.lock.first_locked_cycle().map(|c| c as f64 * cycle_us as f64 * 1e-6),
-            "probes": st.probes,
-            "probes_lost": st.probes_lost,
-            "probes_cut": st.probes_cut,
-            "probe_mean_us": st.probe_mean_ns as f64 / 1000.0,
-            "probes_unfunded": st.probes_unfunded,
-            "probe_budget_us": st.probe_budget_ns.map(|b| b as f64 / 1000.0),
+            "probes": st.probing.sent,
+            "probes_lost": st.probing.lost,
+            "probes_cut": st.probing.cut,
+            "probe_mean_us": st.probing.mean_ns as f64 / 1000.0,
+            "probes_unfunded": st.probing.unfunded,
+            "probe_budget_us": st.probing.budget_ns.map(|b| b as f64 / 1000.0),
             "sync0_shift_us": sync0.map(|p| p.shift_ns as f64 / 1e3),
             "passage_aimed_us": sync0.map(|p| p.aimed_ns as f64 / 1e3),
             "passage_after_sync0": passage.as_ref().map(|p| p.after_sync0.to_json()),
@@ -984,12 +984,14 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         if o.diagnosis_ms.is_some() {
             let d = m.diagnosis_stats();
             outln!(
-                "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies",
+                "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies; {} sync-error flag reads, {} found set",
                 d.counter_reads,
                 d.mailbox_polls,
                 d.given_up,
                 d.counters_grown,
-                tally.emergencies
+                tally.emergencies,
+                d.sync_flag_reads,
+                d.sync_errors
             );
         }
     }
@@ -1061,6 +1063,14 @@ fn diagnosis_json(
         "given_up": d.given_up,
         "counters_grown": d.counters_grown,
         "emergencies": tally.emergencies,
+        "sync_flag_reads": d.sync_flag_reads,
+        "sync_errors": d.sync_errors,
+        "sync_error_flags": m
+            .sync_error_flags()
+            .iter()
+            .enumerate()
+            .filter_map(|(k, f)| f.map(|set| serde_json::json!({"position": k, "set": set})))
+            .collect::<Vec<_>>(),
         "error_counters": counters,
     })
 }

@@ -385,6 +385,29 @@ impl Target {
         }
     }
 
+    /// The master's configuration to PREOP, and a machine description's PDO assignments
+    /// (`rx_pdos`, `tx_pdos`) in place of the slaves' own.
+    pub fn configure(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
+        m.configure()?;
+        let (Some(d), Some(path)) = (self.machine_file()?, &self.machine) else { return Ok(()) };
+        let found = m.slaves().len();
+        for (k, s) in d.slaves.iter().enumerate().filter(|(k, _)| *k < found) {
+            for (outputs, pdos) in [(true, &s.rx_pdos), (false, &s.tx_pdos)] {
+                if let Some(pdos) = pdos {
+                    m.remap(k as u16, outputs, pdos).with_context(|| {
+                        format!(
+                            "{}: slave {k} ({})'s {}",
+                            path.display(),
+                            s.name,
+                            if outputs { "rx_pdos" } else { "tx_pdos" }
+                        )
+                    })?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     pub fn scan(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
         let expected = match (self.eni_file()?, self.machine_file()?, &self.eni, &self.machine) {
             (Some(e), _, Some(p), _) => Some((p, e.expected())),
@@ -397,6 +420,16 @@ impl Target {
         m.scan().map_err(|e| crate::words::first_contact(self.place(), e.into()))?;
         if let Some((path, expected)) = expected {
             crate::eni::check(path, &expected, m.slaves(), self.allow_mismatch)?;
+        }
+        // A machine description's process-data watchdogs, before any output SM is enabled.
+        if let (Some(d), Some(path)) = (self.machine_file()?, &self.machine) {
+            let found = m.slaves().len();
+            for (k, s) in d.slaves.iter().enumerate().filter(|(k, _)| *k < found) {
+                if let Some(us) = s.watchdog_us {
+                    m.set_process_data_watchdog(k as u16, us as u64 * 1000)
+                        .with_context(|| format!("{}: slave {k} ({})'s watchdog_us", path.display(), s.name))?;
+                }
+            }
         }
         Ok(())
     }

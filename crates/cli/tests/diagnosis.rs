@@ -39,3 +39,22 @@ fn error_counters_and_emergencies_reach_the_user_while_cyclic() {
     assert!(v["diagnosis"].is_null(), "{v}");
     assert!(!err.contains("emergency") && !err.contains("invalid frames"), "{err}");
 }
+
+#[test]
+fn the_sync_error_flag_of_a_drive_with_sync0_is_read_while_cyclic() {
+    let path = std::env::temp_dir().join(format!("ferrocat-diagnosis-sync-{}.toml", std::process::id()));
+    std::fs::write(&path, "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--config", path.to_str().unwrap(), "--dc", "--seconds", "1", "--json"])
+        .args(["--counters-period-ms", "100"])
+        .output()
+        .unwrap();
+    std::fs::remove_file(&path).ok();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let d = &v["diagnosis"];
+    // A read every 100 ms of the one slave with SYNC0, the drive; its flag clear throughout.
+    assert!(d["sync_flag_reads"].as_u64().unwrap() >= 5, "{d}");
+    assert_eq!(d["sync_errors"], 0, "{d}");
+    assert_eq!(d["sync_error_flags"], serde_json::json!([{"position": 1, "set": false}]), "{d}");
+}

@@ -128,3 +128,55 @@ fn groups_of_a_description_run_at_their_own_rates() {
     assert_eq!(v["values"]["1:Output"], 0, "{v}");
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn a_description_sets_a_slaves_process_data_watchdog() {
+    let path = temp("watchdog");
+    let p = path.to_str().unwrap();
+    let servo = "[[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044c2c52\ndevice = \"EK1100\"\n\
+                 [[slave]]\nname = \"board\"\nvendor = 9\nproduct = 0x9252\ndevice = \"LAN9252-EVB\"\n";
+    let run = |watchdog: &str| {
+        std::fs::write(&path, format!("{servo}{watchdog}")).unwrap();
+        ferrocat(&["run", "--machine", p, "--seconds", "0.3", "--cycle-us", "1000", "--json"])
+    };
+    // The ESC's default (100 ms): 1 ms cycles never let it expire.
+    let (ok, out, err) = run("");
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["slaves"]["left_op"], 0, "{v}");
+    // 100 µs, shorter than the 1 ms between the bring-up's frames: the board's watchdog (its
+    // output SM triggers it) expires before OP, and the board says so.
+    let (ok, _, err) = run("watchdog_us = 100\n");
+    assert!(!ok && err.contains("slave 1 (LAN9252-EVB-HBI) did not reach OP") && err.contains("0x001b"), "{err}");
+    // Not a multiple of 100 µs: refused at its line.
+    std::fs::write(&path, format!("{servo}watchdog_us = 150\n")).unwrap();
+    let (ok, _, err) = ferrocat(&["run", "--machine", p, "--seconds", "0.2"]);
+    assert!(!ok && err.contains("line 11") && err.contains("in steps of 100"), "{err}");
+    std::fs::remove_file(&path).ok();
+}
+
+#[test]
+fn a_description_assigns_a_slaves_pdos() {
+    let path = temp("pdos");
+    let p = path.to_str().unwrap();
+    let servo = "[[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\ndevice = \"SERVO\"\n";
+    let show = |assignment: &str| {
+        std::fs::write(&path, format!("{servo}{assignment}")).unwrap();
+        ferrocat(&["run", "--machine", p, "--seconds", "0.1", "--show", "0:Statusword", "--json"])
+    };
+    // The drive's own assignment (0x1A00) maps its statusword; so does naming it.
+    for own in ["", "tx_pdos = [0x1A00]\n"] {
+        let (ok, out, err) = show(own);
+        assert!(ok, "{own}: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert!(v["values"]["0:Statusword"].is_number(), "{v}");
+        assert_eq!(v["wkc_errors"], 0, "{v}");
+    }
+    // No TxPDO assigned: no inputs, and no statusword to show.
+    let (ok, _, err) = show("tx_pdos = []\n");
+    assert!(!ok && err.contains("Statusword"), "{err}");
+    // A PDO the drive does not have: its abort, naming the description's slave and key.
+    let (ok, _, err) = show("rx_pdos = [0x1601]\n");
+    assert!(!ok && err.contains("slave 0 (axis)'s rx_pdos") && err.contains("0x06020000"), "{err}");
+    std::fs::remove_file(&path).ok();
+}

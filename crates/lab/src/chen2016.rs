@@ -2,6 +2,7 @@
 //! jitter of the reference's timestamps against the master's cycle grid (min, max, width as a
 //! share of the cycle) and the process-data cycles that DC-synchronous slaves lost or consumed
 //! twice, for 500, 250, 100 and 50 µs cycles.
+use crate::LabError;
 use ferrocat_esc::{SyncApp, SyncMode};
 use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Nominal};
@@ -104,7 +105,7 @@ pub struct Setup {
 }
 
 /// The segment brought up and configured, with the slaves that take SYNC0 and those that count.
-fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> {
+fn prepare(o: &Options) -> crate::Result<(Master<VirtualIo>, Vec<u16>, Setup)> {
     let toml = format!(
         "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\ndrift_ppm = {}\n\
          [[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n[[device]]\nbuiltin = 'EL2004'\napp = 'dc'\n",
@@ -123,14 +124,14 @@ fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> 
             .is_some_and(|a| a.mode == SyncMode::DcSynchronous)
     };
     let synced: Vec<u16> = (0..m.slaves().len()).filter(|&k| dc_synchronous(k)).map(|k| k as u16).collect();
-    anyhow::ensure!(!synced.is_empty(), "the segment has no DC-synchronous slave (app = \"dc\")");
+    if synced.is_empty() {
+        return Err(LabError::NoDcSynchronousSlave);
+    }
     let counted_slaves: Vec<u16> =
         synced.iter().copied().filter(|&k| m.slaves()[k as usize].output_bits() > 0).collect();
-    anyhow::ensure!(
-        !counted_slaves.is_empty(),
-        "no DC-synchronous slave (app = \"dc\") of the segment has process-data outputs (slaves {synced:?} have \
-         none): there would be no cycle to lose or repeat"
-    );
+    if counted_slaves.is_empty() {
+        return Err(LabError::NoSynchronousOutputs(synced));
+    }
     let reference = crate::dc_slaves(&m)?[0];
     let reference_ppm = crate::node_of(&m, reference)
         .and_then(|n| m.io().seg.nodes[n].esc.dc.as_ref())
@@ -139,11 +140,11 @@ fn prepare(o: &Options) -> anyhow::Result<(Master<VirtualIo>, Vec<u16>, Setup)> 
 }
 
 /// The table's [`Setup`], without running it.
-pub fn setup(o: &Options) -> anyhow::Result<Setup> {
+pub fn setup(o: &Options) -> crate::Result<Setup> {
     Ok(prepare(o)?.2)
 }
 
-fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<(Setup, Row)> {
+fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)> {
     let cycle_ns = cycle_us * 1000;
     let (mut m, synced, setup) = prepare(o)?;
     // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
@@ -265,18 +266,18 @@ pub struct Table {
     pub rows: Vec<Row>,
 }
 
-pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Table> {
+pub fn run(o: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> crate::Result<Table> {
     let jobs: Vec<(u64, String)> =
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let runs: Vec<(Setup, Row)> = jobs
         .par_iter()
         .map(|(c, name)| {
-            let r = run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"));
+            let r = run_one(o, *c, name).map_err(|e| e.in_run(format!("{c} µs, {name}")));
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, jobs.len());
             r
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::Result<_>>()?;
     // Every run brought the same segment up on the same seed: one set-up for the table.
     let setup = match runs.first() {
         Some((s, _)) => s.clone(),
@@ -349,7 +350,7 @@ pub struct ModelRow {
 }
 
 /// `chen2016` on `host` at the paper's cycle times, seeds `seed` to `seed + MODEL_SEEDS − 1`.
-pub fn model_rows(host: HostModel, seed: u64) -> anyhow::Result<Vec<ModelRow>> {
+pub fn model_rows(host: HostModel, seed: u64) -> crate::Result<Vec<ModelRow>> {
     let jobs: Vec<(u64, u64)> = PAPER.iter().flat_map(|p| (0..MODEL_SEEDS).map(move |i| (p.0, i))).collect();
     let rows: Vec<Row> = jobs
         .par_iter()
@@ -362,9 +363,9 @@ pub fn model_rows(host: HostModel, seed: u64) -> anyhow::Result<Vec<ModelRow>> {
                 ..Options::full(host)
             };
             let mut t = run(&o, &|_, _| {})?;
-            t.rows.pop().ok_or_else(|| anyhow::anyhow!("{cycle_us} µs: no row"))
+            t.rows.pop().ok_or_else(|| LabError::MissingRow(format!("{cycle_us} µs: no row")))
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::Result<_>>()?;
     let median = |v: Vec<f64>| crate::stats::median(&v);
     let range = |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     Ok(PAPER
@@ -396,7 +397,7 @@ pub struct FitStep {
 /// The late wake-ups' size fitted on the 500 µs row's latest frame (the paper's 56.00 µs, in
 /// its reading): a late wake-up delays that cycle's frame by as much, so each step moves the
 /// parameter by the error; it stops under 0.5 µs (a tenth of the runs' spread), or after `steps`.
-pub fn fit(seed: u64, start: SetupModel, steps: usize) -> anyhow::Result<Vec<FitStep>> {
+pub fn fit(seed: u64, start: SetupModel, steps: usize) -> crate::Result<Vec<FitStep>> {
     let paper_late_us = -PAPER[0].2;
     let mut model = start;
     let mut trace = Vec::new();

@@ -6,6 +6,7 @@
 //! repeated set-points, following errors. On a real network (any `Io`) only what the master can
 //! see is reported: following errors from 0x60F4 when mapped, late and repeated set-points from
 //! the drives' 0x1C32:0C and 0x1C32:0B when they have them; the rest is `None`.
+use crate::LabError;
 use crate::World;
 use ferrocat_esc::Cia402Drive;
 use ferrocat_master::calibrate::GpioCalibration;
@@ -151,14 +152,14 @@ struct Rig<I: World> {
 }
 
 impl<I: World> Rig<I> {
-    fn step(&mut self) -> anyhow::Result<()> {
+    fn step(&mut self) -> crate::Result<()> {
         self.exchange()?;
         self.wait();
         Ok(())
     }
 
     /// The cycle's frames and the clock sync's correction.
-    fn exchange(&mut self) -> anyhow::Result<()> {
+    fn exchange(&mut self) -> crate::Result<()> {
         self.m.cycle()?;
         let c = self.m.sync_step(self.sync.as_mut(), &mut self.st)?;
         self.next += c.next_period_ns.unwrap_or(self.cycle_ns);
@@ -179,7 +180,7 @@ impl<I: World> Rig<I> {
 /// Brings the segment up with DC and the drives' SYNC0 half a cycle after the cycle grid,
 /// prepares `method`, and aligns the master's first cycle with the grid. The drives are the
 /// slaves with a controlword and a statusword in their image (after `map_for_csp`).
-fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Result<(Rig<I>, Vec<u16>)> {
+fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result<(Rig<I>, Vec<u16>)> {
     let cycle_ns = cycle_us * 1000;
     m.scan()?;
     m.configure()?;
@@ -197,7 +198,9 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
         }
         drives.push(k);
     }
-    anyhow::ensure!(!drives.is_empty(), "no CiA402 drive on the segment (no slave maps 0x6040 and 0x6041)");
+    if drives.is_empty() {
+        return Err(LabError::NoDrive);
+    }
     let shift = (cycle_ns / 2) as i32;
     let report = m.init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
@@ -219,7 +222,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> anyhow::Resul
 }
 
 /// The segment of the demo: EK1100, EL2004, EL1004, then the drives (`--device` syntax).
-pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
+pub fn segment_config(o: &Options) -> crate::Result<SegmentConfig> {
     let mut cfg: SegmentConfig = toml::from_str(&format!(
         "seed = {}\ndrift_spread_ppm = 50.0\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
          [[device]]\nbuiltin = 'EL1004'\n",
@@ -233,7 +236,7 @@ pub fn segment_config(o: &Options) -> anyhow::Result<SegmentConfig> {
     if node.esc.app().as_any().is::<ferrocat_esc::DigitalIo>()
         || node.esc.app().as_any().is::<ferrocat_esc::NoApplication>()
     {
-        anyhow::bail!("--drive {}: {} has no CoE mailbox in its SII, so it is no CiA402 drive", o.drive, node.name);
+        return Err(LabError::NotADrive { drive: o.drive.clone(), name: node.name.clone() });
     }
     drive.app = Some("cia402".into());
     cfg.devices.extend(std::iter::repeat_n(drive, o.drives));
@@ -249,7 +252,7 @@ fn run_one<I: World>(
     cycle_us: u64,
     method: &str,
     calibrate: Calibrate<'_, I>,
-) -> anyhow::Result<Row> {
+) -> crate::Result<Row> {
     let (mut r, drives) = rig(m, cycle_us, method)?;
     let events0 = r.m.events().len();
     let cycle_ns = r.cycle_ns;
@@ -276,12 +279,9 @@ fn run_one<I: World>(
     let mut csv = Vec::with_capacity(axes.len());
     for a in &mut axes {
         let velocity = !a.has_target_position();
-        anyhow::ensure!(
-            a.has_target_position() || a.has_target_velocity(),
-            "slave {} axis {}: neither a target position nor a target velocity in the process image",
-            a.position,
-            a.axis
-        );
+        if !(a.has_target_position() || a.has_target_velocity()) {
+            return Err(LabError::NoTarget { position: a.position, axis: a.axis });
+        }
         a.set_mode(&mut r.m, if velocity { Mode::CyclicSyncVelocity } else { Mode::CyclicSyncPosition })?;
         a.set_goal(Goal::OperationEnabled);
         csv.push(velocity);
@@ -297,7 +297,9 @@ fn run_one<I: World>(
         if ready {
             break;
         }
-        anyhow::ensure!(k < 5_000, "drives not enabled: {:?}", axes.iter().map(|a| a.state()).collect::<Vec<_>>());
+        if k >= 5_000 {
+            return Err(LabError::DrivesNotEnabled(axes.iter().map(|a| a.state()).collect()));
+        }
     }
     let mut per_rev = Vec::new();
     for a in &axes {
@@ -554,8 +556,10 @@ fn sync_counters<I: World>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u6
 }
 
 /// Every (cycle, method) run on the embedded virtual segment, in parallel; the same seed for all.
-pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
-    anyhow::ensure!(o.drives >= 1, "at least one drive");
+pub fn run(o: &Options) -> crate::Result<Vec<Row>> {
+    if o.drives < 1 {
+        return Err(LabError::NoDrives);
+    }
     let cfg = segment_config(o)?;
     let jobs: Vec<(u64, String)> =
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
@@ -568,22 +572,19 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
                 let reference = *crate::dc_slaves(m).ok()?.first()?;
                 crate::calibration(m, method, reference, pulses)
             };
-            run_one(m, o, *c, name, &calibrate).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))
+            run_one(m, o, *c, name, &calibrate).map_err(|e| e.in_run(format!("{c} µs, {name}")))
         })
         .collect()
 }
 
 /// The same runs one after the other on masters `open` makes (a real network: the drives are
 /// whatever the segment holds).
-pub fn run_with<I: World>(
-    o: &Options,
-    open: &mut dyn FnMut() -> anyhow::Result<Master<I>>,
-) -> anyhow::Result<Vec<Row>> {
+pub fn run_with<I: World>(o: &Options, open: &mut dyn FnMut() -> crate::Result<Master<I>>) -> crate::Result<Vec<Row>> {
     let mut rows = Vec::new();
     for &c in &o.cycles_us {
         for name in &o.methods {
             let m = open()?;
-            rows.push(run_one(m, o, c, name, &|_, _, _| None).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}"))?);
+            rows.push(run_one(m, o, c, name, &|_, _, _| None).map_err(|e| e.in_run(format!("{c} µs, {name}")))?);
         }
     }
     Ok(rows)

@@ -2,6 +2,7 @@
 //! random realisation (same seed), the error taken from the true clocks the simulator knows.
 pub mod chen2016;
 pub mod demo;
+mod error;
 pub mod fit;
 pub mod gpi;
 pub mod paprocki2022;
@@ -12,6 +13,7 @@ pub mod scenario;
 pub mod stats;
 mod world;
 
+pub use error::{LabError, Result, SettingOrigin};
 pub use world::World;
 
 use ferrocat_master::sync::{ClockSync, Coupling, SyncMethod};
@@ -60,7 +62,7 @@ pub fn segment(
     method: &str,
     cycle_ns: u64,
     coupling: Coupling,
-) -> anyhow::Result<(Master<VirtualIo>, Box<dyn ClockSync>, DcReport)> {
+) -> crate::Result<(Master<VirtualIo>, Box<dyn ClockSync>, DcReport)> {
     let mut m = master(SegmentConfig { seed, ..cfg.clone() }, host, seed, method)?;
     m.bring_up()?;
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
@@ -70,9 +72,9 @@ pub fn segment(
 
 /// The method named `name` (a [`SyncMethod::PRESETS`] name) as the master's configuration;
 /// `coupling` is the one the plain ferrocat variants take.
-pub fn sync_method(name: &str, coupling: Coupling) -> anyhow::Result<SyncMethod> {
+pub fn sync_method(name: &str, coupling: Coupling) -> crate::Result<SyncMethod> {
     SyncMethod::preset(name, coupling)
-        .ok_or_else(|| anyhow::anyhow!("unknown method {name:?} (known: {})", SyncMethod::PRESETS.join(", ")))
+        .ok_or_else(|| LabError::UnknownMethod { name: name.into(), known: SyncMethod::PRESETS.join(", ") })
 }
 
 /// The method named `name` made on `m`, whose DC is initialised already (see
@@ -82,7 +84,7 @@ pub fn method<I: World>(
     m: &mut Master<I>,
     cycle_ns: u64,
     coupling: Coupling,
-) -> anyhow::Result<Box<dyn ClockSync>> {
+) -> crate::Result<Box<dyn ClockSync>> {
     Ok(m.make_clock_sync(&sync_method(name, coupling)?, cycle_ns)?)
 }
 
@@ -94,7 +96,7 @@ pub fn init_with_method<I: World>(
     method: &str,
     cycle_ns: u64,
     coupling: Coupling,
-) -> anyhow::Result<(Box<dyn ClockSync>, DcReport)> {
+) -> crate::Result<(Box<dyn ClockSync>, DcReport)> {
     let config = sync_method(method, coupling)?;
     let (sync, report, _) = m.start_clock_sync(dc, &config, cycle_ns)?;
     Ok((sync, report))
@@ -103,7 +105,7 @@ pub fn init_with_method<I: World>(
 /// A master on `cfg` in virtual time on `host`, for `method`: ferrocat's own methods compute
 /// the delays knowing the ESCs' closed-port loop-back (`loop_back_ns`), the papers' and the
 /// baselines' as SOEM and IgH do.
-pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> anyhow::Result<Master<VirtualIo>> {
+pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> crate::Result<Master<VirtualIo>> {
     let mut m = Master::new(VirtualIo::new(cfg.build()?, host, seed));
     tell_loop_back(&mut m, method);
     Ok(m)
@@ -179,10 +181,12 @@ pub fn calibration(
 }
 
 /// The positions of the slaves with a DC unit, the reference first; an error if there are none.
-pub fn dc_slaves<I: World>(m: &Master<I>) -> anyhow::Result<Vec<usize>> {
+pub fn dc_slaves<I: World>(m: &Master<I>) -> crate::Result<Vec<usize>> {
     let dc: Vec<usize> =
         m.slaves().iter().enumerate().filter(|(_, s)| s.dc().has_system_time).map(|(k, _)| k).collect();
-    anyhow::ensure!(!dc.is_empty(), "the segment has no slave with distributed clocks");
+    if dc.is_empty() {
+        return Err(LabError::NoDcSlave);
+    }
     Ok(dc)
 }
 

@@ -1,6 +1,7 @@
 //! Paprocki & Erwiński 2022, Table 2: how simultaneously two drives see SYNC0 — the difference
 //! of their SYNC0 instants (true time, which the simulator knows) for the same system time, over
 //! 1000 cycles at 1000 and 500 µs, for each clock-sync method.
+use crate::LabError;
 use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
 use ferrocat_master::DcConfig;
@@ -64,7 +65,7 @@ pub struct Row {
 pub const PAPER: [(u64, f64, f64, f64, f64); 2] =
     [(1000, 805.5, 831.5, 730.0, 4.621), (500, 807.2, 831.5, 760.0, 3.725)];
 
-fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
+fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<Row> {
     let cycle_ns = cycle_us * 1000;
     // A coupler and two DC slaves standing in for the drives (their SYNC0 unit is what counts;
     // a DC-synchronous application enables it, without which an ET1200 has no system time).
@@ -85,7 +86,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     let drives = match dc.len() {
         2 => [dc[0], dc[1]],
         n if n >= 3 => [dc[1], dc[2]],
-        n => anyhow::bail!("two drives need two DC slaves; the segment has {n}"),
+        n => return Err(LabError::TooFewDcSlaves { what: "two drives", needed: 2, found: n }),
     };
     let nodes = drives.map(|k| crate::node_of(&m, k).unwrap_or(k) as u16);
     let dc_cfg = DcConfig {
@@ -115,7 +116,9 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
         next += c.next_period_ns.unwrap_or(cycle_ns);
         m.io_mut().sleep_until(next);
         k += 1;
-        anyhow::ensure!(k < settle + 100 * o.samples as u64, "SYNC0 pulses stopped");
+        if k >= settle + 100 * o.samples as u64 {
+            return Err(LabError::Sync0Stopped);
+        }
         if k >= settle {
             // The two drives' pulses for the same system time.
             sync0.sample(&m.io().seg, &nodes);
@@ -135,12 +138,10 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> anyhow::Result<Row> {
     })
 }
 
-pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
+pub fn run(o: &Options) -> crate::Result<Vec<Row>> {
     let jobs: Vec<(u64, String)> =
         o.cycles_us.iter().flat_map(|&c| o.methods.iter().map(move |m| (c, m.clone()))).collect();
-    jobs.par_iter()
-        .map(|(c, name)| run_one(o, *c, name).map_err(|e| anyhow::anyhow!("{c} µs, {name}: {e:#}")))
-        .collect()
+    jobs.par_iter().map(|(c, name)| run_one(o, *c, name).map_err(|e| e.in_run(format!("{c} µs, {name}")))).collect()
 }
 
 /// The row Table 2 is compared on: `none`, which leaves the slaves' clocks to their DC after the

@@ -1,6 +1,7 @@
 //! Park et al. 2020, Table 1: the master–reference and master–last-slave synchronisation
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
+use crate::LabError;
 use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::HostModel;
@@ -118,7 +119,7 @@ struct Round {
     samples: Option<(Vec<f32>, Vec<f32>)>,
 }
 
-fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> anyhow::Result<Round> {
+fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> crate::Result<Round> {
     let cfg = opts.segment.clone().unwrap_or_else(|| crate::line(slaves));
     let (mut m, mut sync, dc_report) =
         crate::segment(&cfg, opts.host, seed, method, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
@@ -189,14 +190,14 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
 
 /// Every (slaves, method) row; round `i` of every method uses seed `seed + i`, so the
 /// comparison is paired. `progress(done, total)` is called as rounds finish.
-pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::Result<Vec<Row>> {
+pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> crate::Result<Vec<Row>> {
     let jobs: Vec<(usize, String, u32)> = opts
         .slaves
         .iter()
         .flat_map(|&n| opts.methods.iter().flat_map(move |m| (0..opts.rounds).map(move |i| (n, m.clone(), i))))
         .collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<anyhow::Result<Round>> = jobs
+    let results: Vec<crate::Result<Round>> = jobs
         .par_iter()
         .map(|(n, method, i)| {
             let r = round(opts, *n, method, opts.seed.wrapping_add(*i as u64), *i == 0);
@@ -204,16 +205,19 @@ pub fn run(opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> anyhow::
             r
         })
         .collect();
+    // The jobs run in the rows' order: the first failure is the first row's.
+    let results: Vec<Round> = jobs
+        .iter()
+        .zip(results)
+        .map(|((n, method, i), r)| r.map_err(|e| e.in_run(format!("{n} slaves, {method}, round {i}"))))
+        .collect::<crate::Result<_>>()?;
     let mut rows = Vec::new();
     for &n in &opts.slaves {
         for method in &opts.methods {
             let mut rs = Vec::new();
             for (job, r) in jobs.iter().zip(&results) {
                 if job.0 == n && &job.1 == method {
-                    match r {
-                        Ok(r) => rs.push(r),
-                        Err(e) => anyhow::bail!("{n} slaves, {method}, round {}: {e:#}", job.2),
-                    }
+                    rs.push(r);
                 }
             }
             let k = rs.len() as f64;
@@ -338,10 +342,10 @@ pub struct FitStep {
 ///
 /// Each step moves the parameters by those relations' slopes and runs again; it stops when
 /// every error is under 20 ns, or after `steps`.
-pub fn fit(base: &Options, start: SetupModel, steps: usize) -> anyhow::Result<Vec<FitStep>> {
+pub fn fit(base: &Options, start: SetupModel, steps: usize) -> crate::Result<Vec<FitStep>> {
     let paper = |method: &str| PAPER.iter().find(|p| p.0 == 2 && p.1 == method).copied();
     let (Some(conv), Some(park)) = (paper("conventional"), paper("park2020")) else {
-        anyhow::bail!("Table 1 has no 2-slave rows")
+        return Err(LabError::MissingRow("Table 1 has no 2-slave rows".into()));
     };
     let mut model = start;
     let mut trace = Vec::new();
@@ -355,7 +359,8 @@ pub fn fit(base: &Options, start: SetupModel, steps: usize) -> anyhow::Result<Ve
             ..base.clone()
         };
         let rows = run(&o, &|_, _| {})?;
-        let row = |m: &str| rows.iter().find(|r| r.method == m).ok_or_else(|| anyhow::anyhow!("no {m} row"));
+        let row =
+            |m: &str| rows.iter().find(|r| r.method == m).ok_or_else(|| LabError::MissingRow(format!("no {m} row")));
         let (c, p) = (row("conventional")?, row("park2020")?);
         let e_c = c.gpi_ref_gmean_us - conv.2;
         let e_p = p.gpi_ref_gmean_us - park.2;

@@ -10,6 +10,7 @@
 //! the control's is the disturbance's own effect, free of the level's slow wander that a band
 //! drawn over the window before cannot foresee (a stock kernel's software stamps leave the line
 //! tens of ns of phase error that moves over seconds).
+use crate::LabError;
 use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
@@ -148,7 +149,7 @@ fn back_for_good(last_out: Option<usize>, len: usize, cycle_ns: u64) -> Option<f
     }
 }
 
-fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
+fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
     let cfg = o.segment.clone().unwrap_or_else(|| crate::line(o.slaves));
     let (mut m, mut sync, _) =
         crate::segment(&cfg, o.host, o.seed, method, o.cycle_ns, Coupling::ReferenceFollowsMaster)?;
@@ -209,10 +210,10 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
     m.io_mut().start_cycles(o.cycle_ns);
     for k in 0..settle + after {
         if k + window == settle {
-            probes_window = st.probes;
+            probes_window = st.probing.sent;
         }
         if k == settle {
-            probes0 = st.probes;
+            probes0 = st.probing.sent;
             events0 = sync.line_events();
             lost0 = st.lost;
             make_ups0 = st.make_ups;
@@ -223,7 +224,9 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
                     m.io_mut().seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
                 }
                 FOLLOWER_DRIFT_STEP => {
-                    let Some(&follower) = dc.get(1) else { anyhow::bail!("{FOLLOWER_DRIFT_STEP} needs two DC slaves") };
+                    let Some(&follower) = dc.get(1) else {
+                        return Err(LabError::TooFewDcSlaves { what: FOLLOWER_DRIFT_STEP, needed: 2, found: dc.len() });
+                    };
                     let node = crate::node_of(&m, follower).unwrap_or(0);
                     m.io_mut().seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
                 }
@@ -231,12 +234,12 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
                 RING_CABLE_PULLED => {
                     let Some(ring) = m.io().seg.secondary() else {
-                        anyhow::bail!("{RING_CABLE_PULLED} needs a ring segment (one with [secondary])")
+                        return Err(LabError::NeedsRing(RING_CABLE_PULLED));
                     };
                     m.io_mut().seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
                 }
                 CONTROL => {}
-                other => anyhow::bail!("unknown scenario {other:?} (known: {})", KNOWN.join(", ")),
+                other => return Err(LabError::UnknownDisturbance { name: other.into(), known: KNOWN.join(", ") }),
             }
         }
         // A master that follows the reference times its next cycle by it.
@@ -281,7 +284,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
         frames_lost: st.lost - lost0,
         make_ups: st.make_ups - make_ups0,
         probes_per_s_before: (probes0 - probes_window) as f64 / o.band_window_s,
-        probes_after: st.probes - probes0,
+        probes_after: st.probing.sent - probes0,
         line_restarts_after: events_after.map(|e| e.restarts),
         false_alarms_after: events_after.map(|e| e.false_alarms),
         calibration_ns,
@@ -303,16 +306,13 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> anyhow::Result<Run> {
 }
 
 /// Compares a disturbed run with its method's control, sample by sample.
-fn pair(run: &mut Run, control: &Run) -> anyhow::Result<()> {
+fn pair(run: &mut Run, control: &Run) -> crate::Result<()> {
     let w = run.window;
     let (mine_before, mine) = run.errors.split_at(w.min(run.errors.len()));
     let (theirs_before, theirs) = control.errors.split_at(w.min(control.errors.len()));
     // The same seed, method and host: identical until the disturbance, or the pairing is void.
     if mine_before != theirs_before {
-        anyhow::bail!(
-            "the undisturbed control of {} differs from its disturbed run before the disturbance",
-            run.row.method
-        );
+        return Err(LabError::ControlDiffers(run.row.method.clone()));
     }
     let d: Vec<f64> = mine.iter().zip(theirs).map(|(a, b)| a - b).collect();
     let last_out = d.iter().rposition(|x| x.abs() > run.row.band_ns);
@@ -322,7 +322,7 @@ fn pair(run: &mut Run, control: &Run) -> anyhow::Result<()> {
 }
 
 /// Every (scenario, method), on the same seed; the controls' rows (scenario `control`) first.
-pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
+pub fn run(o: &Options) -> crate::Result<Vec<Row>> {
     let control = o.control || o.scenarios.iter().any(|s| s == CONTROL);
     let scenarios: Vec<&str> = control
         .then_some(CONTROL)
@@ -333,8 +333,8 @@ pub fn run(o: &Options) -> anyhow::Result<Vec<Row>> {
         scenarios.iter().flat_map(|s| o.methods.iter().map(move |m| (*s, m.as_str()))).collect();
     let mut runs = jobs
         .par_iter()
-        .map(|(s, name)| run_one(o, s, name).map_err(|e| anyhow::anyhow!("{s}, {name}: {e:#}")))
-        .collect::<anyhow::Result<Vec<Run>>>()?;
+        .map(|(s, name)| run_one(o, s, name).map_err(|e| e.in_run(format!("{s}, {name}"))))
+        .collect::<crate::Result<Vec<Run>>>()?;
     if control {
         let (controls, disturbed) = runs.split_at_mut(o.methods.len());
         for run in disturbed {

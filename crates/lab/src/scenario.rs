@@ -4,7 +4,7 @@
 //! experiment, an unknown method or an out-of-range value is an error naming the file and key.
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, ensure, Context};
+use crate::{LabError, SettingOrigin};
 use ferrocat_segment::HostModel;
 use ferrocat_segment::SegmentConfig;
 use serde::Deserialize;
@@ -115,22 +115,32 @@ impl Scenario {
         self
     }
 
-    pub fn from_file(path: &Path) -> anyhow::Result<Scenario> {
+    pub fn from_file(path: &Path) -> crate::Result<Scenario> {
         let text = ferrocat_segment::files::read_toml(path, "a scenario")
-            .with_context(|| format!("reading scenario {}", path.display()))?;
-        let mut s: Scenario = toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?;
+            .map_err(|error| LabError::ScenarioRead { path: path.to_path_buf(), error })?;
+        let mut s: Scenario =
+            toml::from_str(&text).map_err(|error| LabError::ScenarioParse { path: path.to_path_buf(), error })?;
         s.path = path.to_path_buf();
         Ok(s)
     }
 
-    fn err(&self, key: &str, what: impl std::fmt::Display) -> anyhow::Error {
-        if self.path.as_os_str().is_empty() {
-            // The command line's flag for the key.
-            let flag = if key == "methods" { "method".to_string() } else { key.replace('_', "-") };
-            anyhow::anyhow!("--{flag}: {what}")
+    /// An error for `key` unless `ok` (a NaN fails every comparison, and so this check).
+    fn require(&self, ok: bool, key: &str, what: impl std::fmt::Display) -> crate::Result<()> {
+        if ok {
+            Ok(())
         } else {
-            anyhow::anyhow!("scenario {}: `{key}`: {what}", self.path.display())
+            Err(self.err(key, what))
         }
+    }
+
+    fn err(&self, key: &str, what: impl std::fmt::Display) -> LabError {
+        let origin = if self.path.as_os_str().is_empty() {
+            // The command line's flag for the key.
+            SettingOrigin::Flag(if key == "methods" { "method".to_string() } else { key.replace('_', "-") })
+        } else {
+            SettingOrigin::File { path: self.path.clone(), key: key.into() }
+        };
+        LabError::Setting { origin, what: what.to_string() }
     }
 
     /// This scenario without its durations, sample counts and rounds: what `--quick` replaces.
@@ -140,7 +150,7 @@ impl Scenario {
 
     /// The options of `experiment` (the scenario's own when `None`): the published set-up
     /// (`quick`: its short form), then the scenario's keys.
-    pub fn plan(&self, experiment: Option<Experiment>, quick: bool) -> anyhow::Result<Plan> {
+    pub fn plan(&self, experiment: Option<Experiment>, quick: bool) -> crate::Result<Plan> {
         let exp = match (experiment, self.experiment) {
             (Some(a), Some(b)) if a != b => {
                 return Err(self.err("experiment", format!("is {}, not {}", b.name(), a.name())))
@@ -153,7 +163,7 @@ impl Scenario {
             self.err("host", format!("unknown preset {h:?} (known: {})", HostModel::PRESETS.join(", ")))
         })?;
         let segment = self.segment()?;
-        let applies = |key: &str, set: bool, ok: &[Experiment]| -> anyhow::Result<()> {
+        let applies = |key: &str, set: bool, ok: &[Experiment]| -> crate::Result<()> {
             if set && !ok.contains(&exp) {
                 return Err(self.err(key, format!("does not apply to {}", exp.name())));
             }
@@ -176,15 +186,15 @@ impl Scenario {
             return Err(self.err(key, "describes the default segment; with `segment` set it has no meaning"));
         }
         let cycles = self.cycles()?;
-        let methods = |known: &[&str]| -> anyhow::Result<Option<Vec<String>>> {
+        let methods = |known: &[&str]| -> crate::Result<Option<Vec<String>>> {
             let Some(ms) = &self.methods else { return Ok(None) };
-            ensure!(!ms.is_empty(), self.err("methods", "empty"));
+            self.require(!ms.is_empty(), "methods", "empty")?;
             if let Some(m) = ms.iter().find(|m| !known.contains(&m.as_str())) {
                 return Err(self.err("methods", format!("{m:?} is not one of {}", known.join(", "))));
             }
             Ok(Some(ms.clone()))
         };
-        let positive = |key: &str, v: Option<f64>| -> anyhow::Result<Option<f64>> {
+        let positive = |key: &str, v: Option<f64>| -> crate::Result<Option<f64>> {
             match v {
                 Some(x) if !(0.0..=86_400.0).contains(&x) => {
                     Err(self.err(key, format!("{x:?} is not between 0 and 86400 s")))
@@ -195,9 +205,9 @@ impl Scenario {
         let settle_s = positive("settle_s", self.settle_s)?;
         let duration_s = positive("duration_s", self.duration_s)?;
         if let Some(n) = self.samples {
-            ensure!((1..=100_000_000).contains(&n), self.err("samples", format!("{n} is not between 1 and 10^8")));
+            self.require((1..=100_000_000).contains(&n), "samples", format!("{n} is not between 1 and 10^8"))?;
         }
-        let one_cycle = |cycles: &Option<Vec<u64>>| -> anyhow::Result<Option<u64>> {
+        let one_cycle = |cycles: &Option<Vec<u64>>| -> crate::Result<Option<u64>> {
             match cycles.as_deref() {
                 None => Ok(None),
                 Some([c]) => Ok(Some(*c)),
@@ -225,11 +235,11 @@ impl Scenario {
                     o.samples = n;
                 }
                 if let Some(n) = self.sample_every {
-                    ensure!((1..=10_000).contains(&n), self.err("sample_every", "must be between 1 and 10000"));
+                    self.require((1..=10_000).contains(&n), "sample_every", "must be between 1 and 10000")?;
                     o.sample_every = n;
                 }
                 if let Some(r) = self.rounds {
-                    ensure!((1..=1000).contains(&r), self.err("rounds", "must be between 1 and 1000"));
+                    self.require((1..=1000).contains(&r), "rounds", "must be between 1 and 1000")?;
                     o.rounds = r;
                 }
                 o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
@@ -247,11 +257,11 @@ impl Scenario {
                 }
                 o.segment = segment;
                 if let Some(p) = self.reference_ppm {
-                    ensure!(p.is_finite() && p.abs() <= 1000.0, self.err("reference_ppm", "must be within ±1000 ppm"));
+                    self.require(p.is_finite() && p.abs() <= 1000.0, "reference_ppm", "must be within ±1000 ppm")?;
                     o.reference_ppm = p;
                 }
                 if let Some(d) = duration_s {
-                    ensure!(d > 0.0, self.err("duration_s", "must be positive"));
+                    self.require(d > 0.0, "duration_s", "must be positive")?;
                     o.seconds = d;
                 }
                 o.seed = self.seed.unwrap_or(o.seed);
@@ -292,19 +302,21 @@ impl Scenario {
                 }
                 o.segment = segment;
                 if let Some(s) = settle_s {
-                    ensure!(
+                    self.require(
                         s > o.band_window_s,
-                        self.err("settle_s", format!("must exceed the band window of {} s", o.band_window_s))
-                    );
+                        "settle_s",
+                        format!("must exceed the band window of {} s", o.band_window_s),
+                    )?;
                     o.settle_s = s;
                 }
                 if let Some(d) = duration_s {
                     // Recovery is judged by the run's last 10 % and the after-figures are its
                     // last half: a shorter window had none of them (NaN in the table).
-                    ensure!(
+                    self.require(
                         d >= MIN_AFTER_S,
-                        self.err("duration_s", format!("must be at least {MIN_AFTER_S} s after the disturbance"))
-                    );
+                        "duration_s",
+                        format!("must be at least {MIN_AFTER_S} s after the disturbance"),
+                    )?;
                     o.after_s = d;
                 }
                 o.gpio_calibration = self.gpio_calibration.unwrap_or(o.gpio_calibration);
@@ -324,7 +336,7 @@ impl Scenario {
         })
     }
 
-    fn segment(&self) -> anyhow::Result<Option<SegmentConfig>> {
+    fn segment(&self) -> crate::Result<Option<SegmentConfig>> {
         let Some(p) = &self.segment else { return Ok(None) };
         let path = self.path.parent().unwrap_or(Path::new("")).join(p);
         let cfg = SegmentConfig::from_file(&path).map_err(|e| self.err("segment", e))?;
@@ -333,24 +345,24 @@ impl Scenario {
         Ok(Some(cfg))
     }
 
-    fn slaves(&self, segment: &Option<SegmentConfig>) -> anyhow::Result<Option<Vec<usize>>> {
+    fn slaves(&self, segment: &Option<SegmentConfig>) -> crate::Result<Option<Vec<usize>>> {
         if let Some(cfg) = segment {
             return Ok(Some(vec![cfg.devices.len()]));
         }
         let Some(v) = &self.slaves else { return Ok(None) };
-        ensure!(!v.is_empty(), self.err("slaves", "empty"));
+        self.require(!v.is_empty(), "slaves", "empty")?;
         if let Some(n) = v.iter().find(|n| !(1..=64).contains(*n)) {
-            bail!(self.err("slaves", format!("{n} is not between 1 and 64")));
+            return Err(self.err("slaves", format!("{n} is not between 1 and 64")));
         }
         Ok(Some(v.clone()))
     }
 
-    fn cycles(&self) -> anyhow::Result<Option<Vec<u64>>> {
+    fn cycles(&self) -> crate::Result<Option<Vec<u64>>> {
         let Some(c) = &self.cycle_us else { return Ok(None) };
         let v = c.list();
-        ensure!(!v.is_empty(), self.err("cycle_us", "empty"));
+        self.require(!v.is_empty(), "cycle_us", "empty")?;
         if let Some(c) = v.iter().find(|c| !(10..=100_000).contains(*c)) {
-            bail!(self.err("cycle_us", format!("{c} µs is not between 10 and 100000")));
+            return Err(self.err("cycle_us", format!("{c} µs is not between 10 and 100000")));
         }
         Ok(Some(v))
     }
@@ -360,7 +372,7 @@ impl Scenario {
 mod tests {
     use super::*;
 
-    fn scenario(text: &str) -> anyhow::Result<Plan> {
+    fn scenario(text: &str) -> crate::Result<Plan> {
         let mut s: Scenario = toml::from_str(text)?;
         s.path = "test.toml".into();
         s.plan(None, false)

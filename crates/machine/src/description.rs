@@ -81,6 +81,12 @@ pub struct SlaveDesc {
     /// What a simulator serves in its place: an EEPROM dump, `ESI.xml:PRODUCT`, or a built-in
     /// name, as `ferrocat sim --device` takes them.
     pub device: Option<String>,
+    /// Its process-data (SM) watchdog, µs, a multiple of 100 (0: off); `None`: the slave's own.
+    pub watchdog_us: Option<u32>,
+    /// The RxPDOs (outputs) to assign (0x1C12), in order; `None`: the slave's own assignment.
+    pub rx_pdos: Option<Vec<u16>>,
+    /// The TxPDOs (inputs) to assign (0x1C13), likewise.
+    pub tx_pdos: Option<Vec<u16>>,
 }
 
 /// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
@@ -140,6 +146,9 @@ struct RawSlave {
     #[serde(default)]
     optional: bool,
     device: Option<String>,
+    watchdog_us: Option<Spanned<i64>>,
+    rx_pdos: Option<Vec<Spanned<Number>>>,
+    tx_pdos: Option<Vec<Spanned<Number>>>,
 }
 
 /// Line and column of a byte offset in `text`.
@@ -204,6 +213,38 @@ impl Machine {
                 }
             };
             let serial = s.serial.as_ref().map(|n| num(n, "serial", u32::MAX as u64)).transpose()?;
+            let watchdog_us = match &s.watchdog_us {
+                // 0x0420 counts 100 µs steps in 16 bits.
+                Some(w) if (0..=6_553_500).contains(w.get_ref()) && w.get_ref() % 100 == 0 => Some(*w.get_ref() as u32),
+                Some(w) => {
+                    return Err(err(
+                        &w.span(),
+                        format!("watchdog_us = {}: give 0 (off) to 6 553 500 µs in steps of 100", w.get_ref()),
+                    ))
+                }
+                None => None,
+            };
+            // CiA 301's mapping objects: RxPDOs 0x1600–0x17FF, TxPDOs 0x1A00–0x1BFF.
+            let pdos = |list: &Option<Vec<Spanned<Number>>>, key: &str, range: std::ops::RangeInclusive<u32>| {
+                let Some(list) = list else { return Ok(None) };
+                if list.len() > 254 {
+                    return Err(err(&list[254].span(), format!("{key}: more than 254 PDOs (0x1C12/0x1C13 hold 254)")));
+                }
+                let mut v = Vec::with_capacity(list.len());
+                for n in list {
+                    let p = num(n, key, u16::MAX as u64)?;
+                    if !range.contains(&p) {
+                        return Err(err(
+                            &n.span(),
+                            format!("{key}: {p:#06x} is not one of {:#06x} to {:#06x}", range.start(), range.end()),
+                        ));
+                    }
+                    v.push(p as u16);
+                }
+                Ok(Some(v))
+            };
+            let rx_pdos = pdos(&s.rx_pdos, "rx_pdos", 0x1600..=0x17FF)?;
+            let tx_pdos = pdos(&s.tx_pdos, "tx_pdos", 0x1A00..=0x1BFF)?;
             slaves.push(SlaveDesc {
                 name: s.name.clone().unwrap_or_else(|| format!("slave {k}")),
                 identity: Identity {
@@ -217,6 +258,9 @@ impl Machine {
                 alias: s.alias.as_ref().map(|n| num(n, "alias", u16::MAX as u64).map(|v| v as u16)).transpose()?,
                 optional: s.optional,
                 device: s.device.clone(),
+                watchdog_us,
+                rx_pdos,
+                tx_pdos,
             });
         }
         let mut groups = Vec::new();
@@ -298,6 +342,9 @@ impl Machine {
                 alias: (f.alias != 0).then_some(f.alias),
                 optional: false,
                 device: None,
+                watchdog_us: None,
+                rx_pdos: None,
+                tx_pdos: None,
             })
             .collect();
         Machine { name, slaves, groups: Vec::new(), copies: Vec::new() }
@@ -344,6 +391,15 @@ impl Machine {
             if let Some(d) = &s.device {
                 out += &format!("device = {}\n", quote(d));
             }
+            if let Some(w) = s.watchdog_us {
+                out += &format!("watchdog_us = {w}\n");
+            }
+            for (key, list) in [("rx_pdos", &s.rx_pdos), ("tx_pdos", &s.tx_pdos)] {
+                if let Some(l) = list {
+                    let l: Vec<String> = l.iter().map(|p| format!("{p:#06x}")).collect();
+                    out += &format!("{key} = [{}]\n", l.join(", "));
+                }
+            }
         }
         for g in &self.groups {
             let names: Vec<String> = g.positions.iter().map(|&p| quote(&self.slaves[p as usize].name)).collect();
@@ -367,7 +423,7 @@ mod tests {
 
     #[test]
     fn a_description_reads_writes_and_reads_back() {
-        let text = "name = \"line 3\"\n[[copy]]\nfrom = \"slave 1:Input\"\nto = \"coupler:Output\"\n[[group]]\nname = \"slow\"\nslaves = [\"coupler\", 2]\nevery = 10\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
+        let text = "name = \"line 3\"\n[[copy]]\nfrom = \"slave 1:Input\"\nto = \"coupler:Output\"\n[[group]]\nname = \"slow\"\nslaves = [\"coupler\", 2]\nevery = 10\n\n[[slave]]\nname = \"coupler\"\nvendor = 0x2\nproduct = \"#x044C2C52\"\nrevision = 0x120000\ndevice = \"EK1100\"\nwatchdog_us = 20000\nrx_pdos = [0x1600, \"#x1601\"]\ntx_pdos = []\n\n[[slave]]\nvendor = 2\nproduct = 0x07D43052\nrevision_min = 0x100000\nrevision_max = 0x110000\nserial = 7\nalias = 0x10\noptional = true\n\n[[slave]]\nvendor = 0\nproduct = 0x402\nrevision = \"any\"\n";
         let m = Machine::parse(text).unwrap();
         assert_eq!(m.name.as_deref(), Some("line 3"));
         assert_eq!(
@@ -376,6 +432,12 @@ mod tests {
         );
         assert_eq!(m.slaves[0].revision, RevisionCheck::Exact);
         assert_eq!(m.slaves[0].device.as_deref(), Some("EK1100"));
+        assert_eq!((m.slaves[0].watchdog_us, m.slaves[1].watchdog_us), (Some(20_000), None));
+        assert_eq!(
+            (m.slaves[0].rx_pdos.as_deref(), m.slaves[0].tx_pdos.as_deref()),
+            (Some(&[0x1600, 0x1601][..]), Some(&[][..]))
+        );
+        assert_eq!(m.slaves[1].rx_pdos, None);
         let s1 = &m.slaves[1];
         assert_eq!(s1.name, "slave 1");
         assert_eq!(s1.revision, RevisionCheck::Range { min: 0x100000, max: 0x110000 });
@@ -405,6 +467,10 @@ mod tests {
                 "takes no revision_min",
             ),
             ("name = [\n", (2, 1), "invalid array"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nwatchdog_us = 150\n", (4, 15), "in steps of 100"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nwatchdog_us = 7000000\n", (4, 15), "6 553 500"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nrx_pdos = [0x1600, 0x1A00]\n", (4, 20), "rx_pdos: 0x1a00 is not one of 0x1600 to 0x17ff"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\ntx_pdos = [\"x\"]\n", (4, 12), "tx_pdos: not a number"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [\"x\"]\n", (6, 11), "no slave named 'x'"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[copy]]\nfrom = \"0:a\"\nto = \"x:b\"\n", (6, 6), "'x:b': give SLAVE:ENTRY"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [3]\n", (6, 11), "slave 3: the description has slaves 0 to 0"),

@@ -55,11 +55,7 @@ impl GpioCalibration {
         }
         let s = m.slave(self.slave)?;
         if !s.dc.has_system_time {
-            return Err(MasterError::slave(
-                self.slave,
-                &s.name,
-                "has no DC system time to latch the calibration pulse",
-            ));
+            return Err(MasterError::of(self.slave, &s.name, crate::error::SlaveError::NoLatchTime));
         }
         let (station, wide) = (s.station, s.dc.is_64bit);
         if !self.armed {

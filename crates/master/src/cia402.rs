@@ -9,7 +9,7 @@ use ferrocat_wire::cia402::{control, index as ix, Command};
 /// The CiA402 operation modes and states the driver takes and reports.
 pub use ferrocat_wire::cia402::{Mode, State};
 
-use crate::error::{MasterError, Result};
+use crate::error::{Cia402Error, ConfigError, MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::master::Master;
 use crate::process::Handle;
@@ -23,6 +23,17 @@ pub enum Goal {
     OperationEnabled,
     /// Quick stop active: the drive brakes on its quick-stop ramp.
     QuickStop,
+}
+
+impl Goal {
+    /// Its name, as errors give it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Goal::Disabled => "Disabled",
+            Goal::OperationEnabled => "OperationEnabled",
+            Goal::QuickStop => "QuickStop",
+        }
+    }
 }
 
 /// The process-data entries of one drive (by object index, so that any vendor's names work).
@@ -103,7 +114,11 @@ impl Axis {
     pub fn on_axis<I: Io>(m: &Master<I>, position: u16, axis: u8) -> Result<Self> {
         let s = m.slave(position)?;
         if axis >= MAX_AXES {
-            return Err(MasterError::slave(position, &s.name, format!("axis {axis}: a drive has at most {MAX_AXES}")));
+            return Err(MasterError::of(
+                position,
+                &s.name,
+                SlaveError::Cia402(Cia402Error::NoSuchAxis { axis, max: MAX_AXES }),
+            ));
         }
         let at = axis_offset(axis);
         let find_sub = |outputs: bool, index: u16, sub: Option<u8>| {
@@ -113,15 +128,18 @@ impl Axis {
                 .map(|e| Handle { bit: e.image_bit, bits: e.bits })
         };
         let find = |outputs: bool, index: u16| find_sub(outputs, index, None);
-        let need = |h: Option<Handle>, what: &str| {
+        let need = |h: Option<Handle>, object: &'static str, index: u16| {
             h.ok_or_else(|| {
-                let axis = if axis > 0 { format!("axis {axis}'s ") } else { String::new() };
-                MasterError::slave(position, &s.name, format!("no {axis}{what} in the process image"))
+                MasterError::of(
+                    position,
+                    &s.name,
+                    SlaveError::Cia402(Cia402Error::NotMapped { axis, object, index: index + at }),
+                )
             })
         };
         let h = Handles {
-            controlword: need(find(true, ix::CONTROLWORD), &format!("controlword ({:#06x})", ix::CONTROLWORD + at))?,
-            statusword: need(find(false, ix::STATUSWORD), &format!("statusword ({:#06x})", ix::STATUSWORD + at))?,
+            controlword: need(find(true, ix::CONTROLWORD), "controlword", ix::CONTROLWORD)?,
+            statusword: need(find(false, ix::STATUSWORD), "statusword", ix::STATUSWORD)?,
             mode: find(true, ix::MODES_OF_OPERATION),
             mode_display: find(false, ix::MODES_OF_OPERATION_DISPLAY),
             target_position: find(true, ix::TARGET_POSITION),
@@ -189,9 +207,8 @@ impl Axis {
     /// value × 10^index s: 1 ms is 1, −3; 250 µs is 25, −5). Call it before enabling, with the
     /// master's cycle; a period no such pair gives exactly is an error.
     pub fn set_interpolation_period<I: Io>(&self, m: &mut Master<I>, period_ns: u64) -> Result<()> {
-        let (value, index) = interpolation_period(period_ns).ok_or_else(|| {
-            MasterError::Config(format!("an interpolation period of {period_ns} ns is no u8 × 10^n s (0x60C2)"))
-        })?;
+        let (value, index) =
+            interpolation_period(period_ns).ok_or(MasterError::Config(ConfigError::InterpolationPeriod(period_ns)))?;
         m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
         m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
         Ok(())
@@ -403,16 +420,12 @@ pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64,
         .iter()
         .find(|a| a.goal != Goal::OperationEnabled || !a.ready(m))
         .or(axes.first())
-        .ok_or_else(|| MasterError::Config("no axes".into()))?;
+        .ok_or(MasterError::Config(ConfigError::NoAxes))?;
     let s = m.slave(a.position)?;
-    Err(MasterError::slave(
+    Err(MasterError::of(
         a.position,
         &s.name,
-        format!(
-            "CiA402: still {} after {max_cycles} cycles (wanted {:?})",
-            a.state.map_or("unknown", |s| s.name()),
-            a.goal
-        ),
+        SlaveError::Cia402(Cia402Error::Stuck { state: a.state, wanted: a.goal.name(), cycles: max_cycles }),
     ))
 }
 

@@ -6,7 +6,6 @@ use ferrocat_wire::mailbox::MailboxType;
 use crate::error::{MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::mailbox::Mailboxes;
-use crate::master::Master;
 
 /// An object's description from SDO information.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -42,14 +41,6 @@ pub struct EntryInfo {
 /// slave list for as long as it is used.
 pub struct Coe<'a, I: Io> {
     pub(crate) mbx: Mailboxes<'a, I>,
-}
-
-impl<I: Io> Master<I> {
-    /// The CoE client: SDO upload and download, SDO information (each call waits up to
-    /// `mailbox_timeout_ns` for room and for the reply).
-    pub fn coe(&mut self) -> Coe<'_, I> {
-        Coe { mbx: self.mailboxes() }
-    }
 }
 
 impl<I: Io> Coe<'_, I> {

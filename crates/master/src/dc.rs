@@ -9,11 +9,9 @@ use crate::dc_writes::{Rider, Riders, MAX_RIDERS};
 use crate::engine::{frame_bytes, Pdu, SplitRingClocks};
 use crate::error::{DcError, MasterError, Result};
 use crate::io::Io;
-use crate::master::Master;
+use crate::master::{loop_of, Master};
 use crate::sync::SyncState;
 
-/// Nanoseconds from 1970-01-01 to 2000-01-01, the epoch of DC system time.
-const EPOCH_2000_NS: u64 = 946_684_800_000_000_000;
 /// What a frame of the sync datagrams alone leaves for riders: four headers and working
 /// counters, the reference's time or offset, the FRMW, 0x092C and a follower's clock.
 pub(crate) const SYNC_ROOM_BYTES: usize =
@@ -21,9 +19,6 @@ pub(crate) const SYNC_ROOM_BYTES: usize =
 
 /// A NOP datagram without data in the follower's place, where riders follow.
 const NOP_LEN: usize = ferrocat_wire::datagram::HEADER_LEN + ferrocat_wire::datagram::WKC_LEN;
-
-/// The 8-byte preamble and start-of-frame delimiter at 100 Mbit/s.
-const PREAMBLE_NS: u64 = 8 * 80;
 
 /// The clock-synchronisation datagrams of one cycle and their buffers.
 #[derive(Debug)]
@@ -229,50 +224,6 @@ pub struct DcReport {
 }
 
 impl<I: Io> Master<I> {
-    /// The fixed offset from the world's clock to the master's DC time, once taken.
-    pub fn epoch_offset_ns(&self) -> Option<u64> {
-        self.epoch_offset_ns
-    }
-
-    /// The master's clock as DC system time (ns since 2000): the world's clock plus a fixed
-    /// offset taken once (for real time from CLOCK_REALTIME).
-    pub fn master_system_time(&mut self) -> u64 {
-        let now = self.engine.io.now_ns();
-        self.master_system_time_at(now)
-    }
-
-    /// The world's clock (`Io::now_ns`) at the first instant after now at which the master's
-    /// system time is `grid_ns` modulo `cycle_ns`: where to start cycling so that each cycle's
-    /// frame leaves on that phase of the DC cycle (for example half a cycle before SYNC0, with
-    /// `grid_ns` = [`DcReport::sync0_start`] less the shift). Where the reference follows the
-    /// master, its SYNC0 stays on the master's clock, so the phase holds; where the master
-    /// follows, its method keeps it.
-    pub fn next_on_grid_ns(&mut self, grid_ns: u64, cycle_ns: u64) -> u64 {
-        let now = self.engine.io.now_ns();
-        let sys = self.master_system_time_at(now);
-        // The grid may lie ahead (the first SYNC0 still to come): the phase taken signed.
-        let phase = (sys as i128 - grid_ns as i128).rem_euclid(cycle_ns.max(1) as i128) as u64;
-        now + (cycle_ns - phase)
-    }
-
-    /// The master's clock as DC system time when the world's clock reads `t_ns`.
-    pub fn master_system_time_at(&mut self, t_ns: u64) -> u64 {
-        if self.epoch_offset_ns.is_none() {
-            let now = self.engine.io.now_ns();
-            self.epoch_offset_ns = Some(if self.engine.io.is_virtual() {
-                // Virtual time starts at 2026-01-01 00:00 UTC.
-                1_767_225_600_000_000_000 - EPOCH_2000_NS
-            } else {
-                let real = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map(|d| d.as_nanos() as u64)
-                    .unwrap_or(EPOCH_2000_NS);
-                real.saturating_sub(EPOCH_2000_NS).saturating_sub(now)
-            });
-        }
-        t_ns.wrapping_add(self.epoch_offset_ns.unwrap_or(0))
-    }
-
     /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
     pub fn init_dc(&mut self, cfg: &DcConfig) -> Result<DcReport> {
         self.init_dc_with(cfg, None)
@@ -362,14 +313,16 @@ impl<I: Io> Master<I> {
         let mut steer = match sync.filter(|s| s.plan(0).steer_reference_offset) {
             Some(sync) => {
                 self.dc_reference = Some(ref_station);
-                Some((sync, SyncState { no_probes: true, ..self.sync_state()? }))
+                let mut st = self.sync_state()?;
+                st.probing.off = true;
+                Some((sync, st))
             }
             None => None,
         };
         // Split from the start: the far half follows its own reference from now on.
         let far = self.split_latch.as_ref().and_then(|l| l.far_reference).map(|r| self.slaves[r].station);
-        if matches!(self.engine.split_ring_clocks, SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld) {
-            self.engine.far_reference = far;
+        if matches!(self.engine.redundancy.clocks, SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld) {
+            self.engine.redundancy.far_reference = far;
         }
         self.far_steer = None;
         let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
@@ -382,13 +335,13 @@ impl<I: Io> Master<I> {
                 }
                 None => {
                     let mut t = [0u8; 8];
-                    self.engine.split_passes = None;
+                    self.engine.redundancy.split_passes = None;
                     self.engine.one(
                         Command::FRMW,
                         Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
                         &mut t,
                     )?;
-                    let passes = self.engine.split_passes.take();
+                    let passes = self.engine.redundancy.split_passes.take();
                     self.keep_far_reference(passes)?;
                 }
             }
@@ -442,6 +395,9 @@ impl<I: Io> Master<I> {
             if converged { "converged" } else { "not converged" },
             targets.len()
         );
+        // Diagnosis reads the sync-error flag of the slaves SYNC0 now runs on.
+        self.diagnosis.sync0_slaves = targets.clone();
+        self.diagnosis.sync_pending = None;
         Ok(DcReport {
             reference: reference as u16,
             static_frames: frames,
@@ -539,18 +495,6 @@ impl<I: Io> Master<I> {
     }
 }
 
-/// The latest receive time of the other active ports less the entry port's (across the 32-bit
-/// wrap): how long a frame spent behind a slave.
-fn loop_of(receive_times: &[u32; 4], active_ports: [bool; 4], entry_port: u8) -> u64 {
-    let e = entry_port as usize;
-    (0..4)
-        .filter(|&p| p != e && active_ports[p])
-        .map(|p| receive_times[p].wrapping_sub(receive_times[e]) as i32 as i64)
-        .max()
-        .unwrap_or(0)
-        .max(0) as u64
-}
-
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
 fn unwrap32(prev: Option<u64>, low: u64) -> u64 {
     match prev {
@@ -619,7 +563,7 @@ impl<I: Io> Master<I> {
 
     /// A fresh state for cyclic synchronisation, with the reference's loop time.
     pub fn sync_state(&self) -> Result<SyncState> {
-        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ring: self.engine.ring, ..SyncState::default() })
+        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ring: self.engine.redundancy.state, ..SyncState::default() })
     }
 
     /// How long a frame spends behind the reference before it passes it again on its way
@@ -637,7 +581,7 @@ impl<I: Io> Master<I> {
     /// reference's active ports read afresh.
     fn current_reference_loop_ns(&mut self) -> Result<u64> {
         use crate::engine::RingState;
-        if matches!(self.engine.ring, RingState::Intact | RingState::Unknown) {
+        if matches!(self.engine.redundancy.state, RingState::Intact | RingState::Unknown) {
             // Closed after a latch that found it split: its delays and loop measured now.
             self.rejoin_far_half()?;
             return self.reference_loop_ns();
@@ -660,12 +604,6 @@ impl<I: Io> Master<I> {
         // where on the ring it latched one: its loop-back belongs to the loop.
         let loops = view.loops_after_last_event() * self.settings.closed_port_loop_ns as i64;
         Ok(loop_of(&times, view.active_ports, view.entry_port) + loops.max(0) as u64)
-    }
-
-    /// How long a frame spends behind slave `k` before it passes it again on its way back.
-    pub(crate) fn loop_ns_of(&self, k: usize) -> u64 {
-        let s = &self.slaves[k];
-        loop_of(&s.dc.receive_times, s.ports.active, s.ports.entry)
     }
 
     /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master from
@@ -710,7 +648,7 @@ impl<I: Io> Master<I> {
         let pdus = &mut pdus[..n];
         let frame_bytes = frame_bytes(pdus);
         let res = self.engine.transact_once(pdus, self.settings.cyclic_timeout_ns);
-        let passes = self.engine.split_passes.take();
+        let passes = self.engine.redundancy.split_passes.take();
         let answered = match res {
             Ok(()) => SyncPdus::answered(pdus),
             Err(_) => SyncAnswers::NONE,
@@ -898,8 +836,8 @@ impl<I: Io> Master<I> {
             let mut s = self.stamped_sample(st, p.built_ns, frame_bytes);
             // The ring broke or closed under this frame: the reference's loop is measured
             // again (after the stamps were taken, which its frames would replace).
-            if self.engine.io.has_secondary() && self.engine.ring != st.ring {
-                st.ring = self.engine.ring;
+            if self.engine.io.has_secondary() && self.engine.redundancy.state != st.ring {
+                st.ring = self.engine.redundancy.state;
                 st.loop_ns = self.current_reference_loop_ns()?;
                 s.loop_ns = st.loop_ns;
             }
@@ -941,7 +879,7 @@ impl<I: Io> Master<I> {
         if self.dc_writes.pending() && (room || p.stuck) {
             self.flush_dc_writes()?;
         }
-        if !answered.sync && plan.make_up_lost_frames && !st.no_probes && room {
+        if !answered.sync && plan.make_up_lost_frames && !st.probing.off && room {
             st.make_ups += 1;
             let timeout_ns = self.settings.cyclic_timeout_ns;
             self.probe(
@@ -952,10 +890,10 @@ impl<I: Io> Master<I> {
                 timeout_ns,
             )?;
         }
-        let probes = if st.no_probes { 0 } else { plan.probes };
+        let probes = if st.probing.off { 0 } else { plan.probes };
         let window_ns = plan.probe_window_ns;
-        if let Some(b) = st.probe_budget_ns {
-            st.probe_credit_ns = st.probe_credit_ns.saturating_add(b).min(window_ns);
+        if let Some(b) = st.probing.budget_ns {
+            st.probing.credit_ns = st.probing.credit_ns.saturating_add(b).min(window_ns);
         }
         // The window counts from the cycle's planned start where the caller slept to one (a
         // target less than a window before the frame's build): a cycle that woke late has
@@ -978,14 +916,14 @@ impl<I: Io> Master<I> {
             let since_build_ns = self.master_system_time().wrapping_sub(p.built_ns);
             let elapsed_ns = since_build_ns.saturating_add(woke_late_ns);
             let expected_ns =
-                if st.probe_mean_ns > 0 { st.probe_mean_ns } else { *first_guess_ns.get_or_insert(since_build_ns) };
+                if st.probing.mean_ns > 0 { st.probing.mean_ns } else { *first_guess_ns.get_or_insert(since_build_ns) };
             let fits = |done_ns: u64| done_ns.saturating_add(expected_ns.saturating_mul(2)) <= window_ns;
             if !fits(elapsed_ns) {
-                st.probes_cut += 1;
+                st.probing.cut += 1;
                 break;
             }
-            if st.probe_budget_ns.is_some() && st.probe_credit_ns < expected_ns {
-                st.probes_unfunded += u64::from(probes - k);
+            if st.probing.budget_ns.is_some() && st.probing.credit_ns < expected_ns {
+                st.probing.unfunded += u64::from(probes - k);
                 break;
             }
             // An offset given stands until the next probe's passage, about one probe later,
@@ -993,7 +931,7 @@ impl<I: Io> Master<I> {
             let next_follows = k + 1 < probes && fits(elapsed_ns.saturating_add(expected_ns));
             let holds_ns = if next_follows { expected_ns } else { window_ns.saturating_sub(elapsed_ns) };
             let start_ns = self.engine.io.now_ns();
-            st.probes += 1;
+            st.probing.sent += 1;
             let offset = if steer { ProbeOffset::GiveFor { holds_ns } } else { ProbeOffset::Read };
             // Where the loop's period is known, a probe still unanswered at the window's end
             // is given up there rather than at the cyclic timeout, which would make the next
@@ -1007,9 +945,12 @@ impl<I: Io> Master<I> {
             self.probe(sync, st, (p.station, wide, plan.steer_reference_offset), offset, timeout_ns)?;
             // Mean over about 16 probes.
             let took_ns = self.engine.io.now_ns().saturating_sub(start_ns);
-            st.probe_credit_ns = st.probe_credit_ns.saturating_sub(took_ns);
-            st.probe_mean_ns =
-                if st.probe_mean_ns == 0 { took_ns } else { st.probe_mean_ns - st.probe_mean_ns / 16 + took_ns / 16 };
+            st.probing.credit_ns = st.probing.credit_ns.saturating_sub(took_ns);
+            st.probing.mean_ns = if st.probing.mean_ns == 0 {
+                took_ns
+            } else {
+                st.probing.mean_ns - st.probing.mean_ns / 16 + took_ns / 16
+            };
         }
         Ok(c)
     }
@@ -1053,7 +994,7 @@ impl<I: Io> Master<I> {
         // An FPRW counts 3 (read and write).
         let answered = sent && pdus.iter().all(|p| p.wkc == if p.cmd == Command::FPRW { 3 } else { 1 });
         if !answered {
-            st.probes_lost += 1;
+            st.probing.lost += 1;
             return Ok(());
         }
         let (time, offset) = (u64::from_le_bytes(time), u64::from_le_bytes(offset));
@@ -1064,35 +1005,6 @@ impl<I: Io> Master<I> {
         }
         sync.probe(&s);
         Ok(())
-    }
-
-    /// A sample of the frame just answered, with its stamps; the reference's readings are
-    /// the caller's to fill in.
-    pub(crate) fn stamped_sample(&mut self, st: &SyncState, built_ns: u64, frame_bytes: u64) -> crate::sync::Sample {
-        // A stamp is a reading of the world's clock: the master's clock at it is the same
-        // epoch away. (Taken as "the master's clock now, less how long ago the stamp was",
-        // the two readings of a real clock were ≈ 20–40 ns apart here and every stamp that late.)
-        let to_sys = |m: &mut Self, world: u64| m.master_system_time_at(world);
-        // Hardware stamps mark the end of the start-of-frame delimiter, 8 bytes after the
-        // first preamble bit, which is what an ESC latches: take them back to that bit.
-        let hw = self.engine.io.rx_stamps_start_of_frame();
-        let sfd = if hw { PREAMBLE_NS } else { 0 };
-        let tx = self.engine.io.last_tx_ns().map(|t| t.wrapping_sub(sfd));
-        let rx = self.engine.last_rx_ns.wrapping_sub(sfd);
-        crate::sync::Sample {
-            cycle: st.cycle,
-            built_ns,
-            tx_ns: tx.map(|t| to_sys(self, t)),
-            rx_ns: to_sys(self, rx),
-            reference_ns: st.reference_ns.unwrap_or(0),
-            reference_offset_ns: None,
-            difference_ns: 0,
-            loop_ns: st.loop_ns,
-            // A stamp after the last byte (software, or none) includes the whole frame.
-            frame_ns: if hw { 0 } else { frame_bytes * 80 },
-            data_ns: 0,
-            follower: None,
-        }
     }
 
     /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
@@ -1114,6 +1026,25 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// After a cyclic frame (`passes`: its two passes round a broken ring, if it made them):
+    /// reports a change of the ring's state once (cable redundancy; the first state seen is
+    /// the starting point, not news), sets the clocks up for it, and keeps a split ring's far
+    /// reference on the reference's time.
+    pub(crate) fn note_ring(&mut self, passes: Option<crate::SplitPasses>) -> Result<()> {
+        use crate::engine::RingState;
+        let now = self.engine.redundancy.state;
+        let before = std::mem::replace(&mut self.cyc.ring, now);
+        if now != before && before != RingState::Unknown && now != RingState::Unknown {
+            self.push_event(crate::MasterEvent::Ring { state: now });
+        }
+        if now != before {
+            self.ring_changed(before);
+        }
+        self.rejoin_far_half()?;
+        self.keep_far_reference(passes)?;
+        self.watch_split()
+    }
+
     /// The ring split or closed (cable redundancy). Split, with
     /// [`SplitRingClocks::FarReference`](crate::SplitRingClocks::FarReference), the first slave
     /// with a system time behind the break becomes the far half's reference: the FRMW of the
@@ -1123,20 +1054,20 @@ impl<I: Io> Master<I> {
     /// the reference as ever. Closed, the reference's FRMW again.
     pub(crate) fn ring_changed(&mut self, before: crate::engine::RingState) {
         use crate::engine::{RingState, SplitRingClocks};
-        let now = self.engine.ring;
+        let now = self.engine.redundancy.state;
         if now == RingState::Broken && before != RingState::Broken {
-            let far = self.engine.far_half_slaves as usize;
+            let far = self.engine.redundancy.far_half_slaves as usize;
             let n = self.slaves.len();
             let follows = matches!(
-                self.engine.split_ring_clocks,
+                self.engine.redundancy.clocks,
                 SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld
             );
             if follows && far > 0 && far < n {
-                self.engine.far_reference =
+                self.engine.redundancy.far_reference =
                     (n - far..n).find(|&k| self.slaves[k].dc.has_system_time).map(|k| self.slaves[k].station);
             }
         } else if now != RingState::Broken {
-            self.engine.far_reference = None;
+            self.engine.redundancy.far_reference = None;
         }
     }
 
@@ -1169,16 +1100,6 @@ impl<I: Io> Master<I> {
             self.engine.expect_wkc_each(&mut pdus, 1)?;
         }
         Ok(())
-    }
-
-    /// Adds `shift_ns` to the System_Time_Offset of the slave at station `st`.
-    pub(crate) fn shift_offset(&mut self, st: u16, shift_ns: i64) -> Result<()> {
-        let wide = self.slaves.iter().find(|s| s.station == st).is_some_and(|s| s.dc.is_64bit);
-        let n = if wide { 8 } else { 4 };
-        let mut d = [0u8; 8];
-        self.fprd(st, addr::DC_SYSTEM_TIME_OFFSET, &mut d[..n])?;
-        let v = u64::from_le_bytes(d).wrapping_add_signed(shift_ns);
-        self.fpwr(st, addr::DC_SYSTEM_TIME_OFFSET, &v.to_le_bytes()[..n])
     }
 }
 

@@ -1,6 +1,9 @@
-//! Diagnosis while cyclic: every slave's error counters (0x0300–0x0313) read at a low rate and
-//! every CoE slave's mailbox polled for emergencies, one datagram at a time in a cycle's spare
-//! time, so that none of it makes a cycle late.
+//! Diagnosis while cyclic: every slave's error counters (0x0300–0x0313) read at a low rate,
+//! every CoE slave's mailbox polled for emergencies, and the sync-error flag (0x1C32:20) of
+//! every slave with SYNC0 read, one datagram at a time in a cycle's spare time, so that none
+//! of it makes a cycle late.
+use ferrocat_wire::coe::{self, CoeHeader, CoeMessage, CoeService, Sdo};
+use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::{addr, ErrorCounters};
 use ferrocat_wire::{Address, Command};
 
@@ -13,15 +16,24 @@ use crate::MasterEvent;
 /// A datagram of diagnosis is started only where twice this, or twice the last cyclic round
 /// trip, is left before the deadline.
 const MIN_STEP_NS: u64 = 50_000;
+/// The SM output parameter's sync-error flag (ETG.1020: 0x1C32:20, set when the SM-event
+/// missed counter 0x1C32:0B reached the limit 0x10F1:02).
+const SYNC_ERROR_FLAG: (u16, u8) = (0x1C32, 0x20);
+/// How long a read of the flag waits for its reply before it is given up (the master's clock).
+const SYNC_READ_TIMEOUT_NS: u64 = 1_000_000_000;
 
 impl<I: Io> Master<I> {
     /// Diagnosis before `deadline_ns` (the master's clock), at most two datagrams, each only
     /// where twice a round trip is left: the next slave's error counters when a round of them
-    /// is due (one round every `counters_period_ns`), and the next CoE slave's mailbox (so that
-    /// each is polled once every as many calls as there are). A counter that grew and an
-    /// emergency become events ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`]). A
-    /// datagram is waited for until the deadline at most and not sent again. Returns the
-    /// datagrams sent.
+    /// is due (one round every `counters_period_ns`), and a mailbox datagram: while a read of a
+    /// slave's sync-error flag (0x1C32:20) is awaited, a poll of that slave's mailbox; else,
+    /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
+    /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
+    /// CoE slave's mailbox (so that each is polled once every as many calls as there are). A
+    /// counter that grew, an emergency and a flag found set become events
+    /// ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
+    /// [`MasterEvent::SyncError`]). A datagram is waited for until the deadline at most and
+    /// not sent again. Returns the datagrams sent.
     pub fn diagnose(&mut self, deadline_ns: u64, counters_period_ns: u64) -> Result<u32> {
         let n = self.slaves.len();
         if n == 0 {
@@ -40,7 +52,11 @@ impl<I: Io> Master<I> {
                 continue;
             }
             (self.engine.timeout_ns, self.engine.retries) = (deadline_ns - now, 0);
-            let r = if counters { self.read_counters_step(counters_period_ns) } else { self.poll_mailbox_step() };
+            let r = if counters {
+                self.read_counters_step(counters_period_ns)
+            } else {
+                self.mailbox_step(counters_period_ns)
+            };
             sent += 1;
             match r {
                 Ok(()) => result = Ok(sent),
@@ -103,6 +119,113 @@ impl<I: Io> Master<I> {
         }
         self.diagnosis.counters[k] = Some(now);
         Ok(())
+    }
+
+    /// The mailbox's datagram of this call: the awaited flag's reply, a flag's request, or an
+    /// emergency poll.
+    fn mailbox_step(&mut self, period_ns: u64) -> Result<()> {
+        let now = self.engine.io.now_ns();
+        if let Some((k, asked_ns)) = self.diagnosis.sync_pending {
+            if now.saturating_sub(asked_ns) > SYNC_READ_TIMEOUT_NS {
+                self.diagnosis.sync_pending = None;
+                self.diagnosis.stats.given_up += 1;
+            } else {
+                return self.await_sync_flag(k);
+            }
+        }
+        if now >= self.diagnosis.sync_due_ns {
+            if let Some(k) = self.next_sync_slave() {
+                return self.ask_sync_flag(k, period_ns);
+            }
+        }
+        self.poll_mailbox_step()
+    }
+
+    /// The next slave whose flag to read this round, if any is left.
+    fn next_sync_slave(&mut self) -> Option<u16> {
+        let d = &self.diagnosis;
+        let readable = |&&p: &&u16| {
+            self.slaves.get(p as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
+                && !d.sync_unreadable.contains(&p)
+        };
+        let candidates: Vec<u16> = d.sync0_slaves.iter().filter(readable).copied().collect();
+        if candidates.is_empty() {
+            return None;
+        }
+        Some(candidates[d.next_sync % candidates.len()])
+    }
+
+    /// Writes the request for `position`'s 0x1C32:20 into its mailbox (one datagram; a full
+    /// mailbox is tried again at the next call).
+    fn ask_sync_flag(&mut self, position: u16, period_ns: u64) -> Result<()> {
+        let (index, subindex) = SYNC_ERROR_FLAG;
+        let mut body = [0u8; 2 + coe::SDO_HEADER_LEN];
+        CoeHeader::new(CoeService::SDO_REQUEST).emit(&mut body)?;
+        Sdo::UploadRequest { index, subindex, complete_access: false, reserved: [0; 4] }.emit(&mut body[2..])?;
+        let mut mbx = self.mailboxes();
+        let mut msg = mbx.message(position, MailboxType::COE, &body)?;
+        if !mbx.try_write(position, &mut msg)? {
+            return Ok(());
+        }
+        let now = self.engine.io.now_ns();
+        self.diagnosis.sync_pending = Some((position, now));
+        self.diagnosis.next_sync += 1;
+        let n = self.diagnosis.sync0_slaves.len().max(1);
+        if self.diagnosis.next_sync % n == 0 {
+            self.diagnosis.sync_due_ns = now + period_ns;
+        }
+        Ok(())
+    }
+
+    /// Polls `position`'s mailbox for the flag's reply; an emergency met on the way is an
+    /// event as ever.
+    fn await_sync_flag(&mut self, position: u16) -> Result<()> {
+        self.diagnosis.stats.mailbox_polls += 1;
+        let payload = match self.mailboxes().poll(position) {
+            Ok(crate::mailbox::Polled::Message(MailboxType::COE, payload)) => payload,
+            Ok(_) => return Ok(()),
+            // A mailbox error reply, a malformed one: the read is over.
+            Err(MasterError::Slave { .. }) => {
+                self.diagnosis.sync_pending = None;
+                return Ok(());
+            }
+            Err(e) => return Err(e),
+        };
+        let (index, subindex) = SYNC_ERROR_FLAG;
+        let flag = match coe::parse(&payload) {
+            Ok((_, CoeMessage::Sdo(Sdo::UploadExpeditedResponse { index: i, subindex: s, data, .. })))
+                if (i, s) == (index, subindex) =>
+            {
+                data[0] & 1 != 0
+            }
+            Ok((_, CoeMessage::Sdo(Sdo::Abort { index: i, subindex: s, .. }))) if (i, s) == (index, subindex) => {
+                // The slave has no such object: it is not asked again.
+                self.diagnosis.sync_unreadable.push(position);
+                self.diagnosis.sync_pending = None;
+                return Ok(());
+            }
+            // Another reply (a late one of another client's): not the flag's.
+            _ => return Ok(()),
+        };
+        self.diagnosis.sync_pending = None;
+        self.diagnosis.stats.sync_flag_reads += 1;
+        let k = position as usize;
+        if self.diagnosis.sync_flags.len() <= k {
+            self.diagnosis.sync_flags.resize(k + 1, None);
+        }
+        let was = self.diagnosis.sync_flags[k].replace(flag);
+        if flag && was != Some(true) {
+            self.diagnosis.stats.sync_errors += 1;
+            let name = self.slaves[k].name.clone();
+            self.push_event(MasterEvent::SyncError { position, name });
+        }
+        Ok(())
+    }
+
+    /// The sync-error flag (0x1C32:20) of each slave as diagnosis last read it, by position
+    /// (`None`: not read, or no SYNC0 there).
+    pub fn sync_error_flags(&self) -> &[Option<bool>] {
+        &self.diagnosis.sync_flags
     }
 
     fn poll_mailbox_step(&mut self) -> Result<()> {

@@ -61,7 +61,7 @@ pub enum RingState {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum SplitRingClocks {
     /// The far half follows its first slave with a system time, which the master chooses
-    /// (`Engine::far_reference`): the FRMW of the second pass reads that slave's time instead
+    /// (`Redundancy::far_reference`): the FRMW of the second pass reads that slave's time instead
     /// of carrying the reference's, a whole master round trip old, and the far half keeps
     /// together. The master keeps that slave on the reference's time through its offset
     /// (`far_clock.rs`).
@@ -151,10 +151,21 @@ pub struct Engine<I: Io> {
     pub last_rx_ns: u64,
     /// Who is on the segment, so that an error can name the slave a datagram was meant for.
     pub directory: Vec<SlaveTag>,
-    /// Cable redundancy: what the last frame showed of the ring, and how a split ring's second
-    /// half gets its clock.
-    pub ring: RingState,
-    pub split_ring_clocks: SplitRingClocks,
+    /// Cable redundancy: what the frames show of the ring, and how a split ring's far half
+    /// gets its clock.
+    pub redundancy: Redundancy,
+    /// The secondary's last probe came back: worth waiting for the next.
+    secondary_alive: bool,
+}
+
+/// Cable redundancy as the engine sees it: what the last frame showed of the ring, and how a
+/// split ring's far half gets its clock.
+#[derive(Debug, Default)]
+pub struct Redundancy {
+    /// What the last frame showed of the ring.
+    pub state: RingState,
+    /// How a split ring's far half gets its clock.
+    pub clocks: SplitRingClocks,
     /// While the ring is split ([`SplitRingClocks::FarReference`]): the station whose time the
     /// far half's FRMW carries (the first slave with a system time behind the break, which the
     /// master chooses); none: every far clock on its own.
@@ -164,8 +175,6 @@ pub struct Engine<I: Io> {
     /// The last frame that went round both halves of a broken ring, since the last
     /// [`Engine::transact_once`] began (the master takes it after its cyclic frame).
     pub split_passes: Option<SplitPasses>,
-    /// The secondary's last probe came back: worth waiting for the next.
-    secondary_alive: bool,
     /// While set on a broken ring, frames go without a probe and round the far half as soon
     /// as they are back, counted as the last probe counted: a probe passes the far half's
     /// ports before the frame and would be the frame an ET1200's receive-time latch takes
@@ -221,14 +230,8 @@ impl<I: Io> Engine<I> {
                     resent_ns: 0,
                 })
                 .collect(),
-            ring: RingState::Unknown,
-            split_ring_clocks: SplitRingClocks::FarReference,
-            far_reference: None,
-            far_half_slaves: 0,
-            split_passes: None,
+            redundancy: Redundancy::default(),
             secondary_alive: true,
-            probes_off: false,
-            backward_wkc: 0,
             rx: Box::new([0; FRAME]),
             // Locally administered source address; ESCs set bit 1 of the first byte on the way.
             eth: EthernetRepr { dst: BROADCAST, src: SRC_PRIMARY, vlan_tci: None, ethertype: 0 },
@@ -240,7 +243,7 @@ impl<I: Io> Engine<I> {
     /// [`Engine::transact`] once, within `timeout_ns`: cyclic frames are not sent twice (a lost
     /// frame costs its cycle, not the next ones).
     pub fn transact_once(&mut self, pdus: &mut [Pdu<'_>], timeout_ns: u64) -> Result<()> {
-        self.split_passes = None;
+        self.redundancy.split_passes = None;
         let (timeout, retries) = (self.timeout_ns, self.retries);
         (self.timeout_ns, self.retries) = (timeout_ns, 0);
         let r = self.transact(pdus);
@@ -277,11 +280,11 @@ impl<I: Io> Engine<I> {
                 break;
             }
             if need > MAX_PDU_LEN {
-                return Err(MasterError::Config(format!(
-                    "{} of {} bytes does not fit a frame",
-                    pdus[k].cmd,
-                    pdus[k].data.len()
-                )));
+                return Err(crate::error::ConfigError::DatagramTooLarge {
+                    command: pdus[k].cmd,
+                    len: pdus[k].data.len(),
+                }
+                .into());
             }
             let h = DatagramHeader::new(pdus[k].cmd, idx, pdus[k].address, pdus[k].data.len() as u16);
             w.push_chained(&h, pdus[k].data, 0)?;
@@ -342,8 +345,8 @@ impl<I: Io> Engine<I> {
             if let Some(t) = self.io.last_tx_ns() {
                 self.slots[s].sent_ns = t;
             }
-            if self.probes_off && self.ring == RingState::Broken {
-                self.slots[s].probe = Some((true, self.far_half_slaves));
+            if self.redundancy.probes_off && self.redundancy.state == RingState::Broken {
+                self.slots[s].probe = Some((true, self.redundancy.far_half_slaves));
             } else {
                 self.send_probe(s)?;
             }
@@ -399,10 +402,10 @@ impl<I: Io> Engine<I> {
         let slot = &mut self.slots[s];
         let Some((n, _)) = slot.held else { return Ok(()) };
         if let Some((true, wkc @ 1..)) = slot.probe {
-            self.far_half_slaves = wkc;
-            match self.split_ring_clocks {
+            self.redundancy.far_half_slaves = wkc;
+            match self.redundancy.clocks {
                 SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld => {
-                    redirect_clock_distribution(&mut slot.held_buf[..n], self.far_reference)
+                    redirect_clock_distribution(&mut slot.held_buf[..n], self.redundancy.far_reference)
                 }
                 SplitRingClocks::HoldOver => redirect_clock_distribution(&mut slot.held_buf[..n], None),
                 SplitRingClocks::AsSent => {}
@@ -414,10 +417,10 @@ impl<I: Io> Engine<I> {
             // Its stamp now: other frames' second passes may follow before it is back.
             slot.resent_ns = self.io.last_tx_secondary_ns().unwrap_or(now);
             self.stats.resent += 1;
-            self.ring = RingState::Broken;
+            self.redundancy.state = RingState::Broken;
         } else {
             self.complete_held(s, pdus);
-            self.ring = RingState::Line;
+            self.redundancy.state = RingState::Line;
         }
         Ok(())
     }
@@ -437,7 +440,7 @@ impl<I: Io> Engine<I> {
                     self.secondary_alive = true;
                     let wkc = first.wkc();
                     if !on_secondary {
-                        self.backward_wkc = wkc;
+                        self.redundancy.backward_wkc = wkc;
                     }
                     if let Some(s) = self.slots.iter().position(|s| s.busy && s.idx == idx && s.probe.is_none()) {
                         self.slots[s].probe = Some((on_secondary, wkc));
@@ -467,7 +470,7 @@ impl<I: Io> Engine<I> {
                             None => Some(((0, 0, 0), (0, 0, 0))),
                         };
                         if let Some((near, far)) = passes {
-                            self.split_passes = Some(SplitPasses {
+                            self.redundancy.split_passes = Some(SplitPasses {
                                 near_tx_ns: slot.sent_ns,
                                 near_rx_ns,
                                 far_tx_ns: slot.resent_ns,
@@ -490,7 +493,7 @@ impl<I: Io> Engine<I> {
                     }
                     return Ok(());
                 } else if !slot.resent && self.io.has_secondary() {
-                    self.ring = RingState::Intact;
+                    self.redundancy.state = RingState::Intact;
                 }
                 let slot = &mut self.slots[s];
                 Self::fill(slot.first, slot.count, &self.rx[..n], pdus);
@@ -534,10 +537,7 @@ impl<I: Io> Engine<I> {
                         tracing::debug!("no answer after {} tries", self.retries + 1);
                         self.slots.iter_mut().for_each(|x| x.busy = false);
                         let p = &pdus[self.slots[s].first];
-                        return Err(MasterError::Timeout {
-                            what: describe(p.cmd, p.address, p.data.len()),
-                            tries: self.retries + 1,
-                        });
+                        return Err(MasterError::Timeout { datagram: datagram_ref(p), tries: self.retries + 1 });
                     }
                     self.stats.retries += 1;
                     self.send(s)?;
@@ -582,7 +582,7 @@ impl<I: Io> Engine<I> {
         }
         match pdus.iter().find(|p| p.wkc != expected) {
             Some(p) => Err(MasterError::Wkc {
-                what: describe(p.cmd, p.address, p.data.len()),
+                datagram: datagram_ref(p),
                 expected,
                 got: p.wkc,
                 slaves: self.who(p.cmd, p.address, expected, p.wkc),
@@ -656,11 +656,8 @@ fn frmw_passes(first: &[u8], second: &[u8]) -> Option<(FrmwSeen, FrmwSeen)> {
 }
 
 /// "FPRD 0x1001:0x0130 (2 bytes)": a datagram in words.
-pub fn describe(cmd: Command, address: Address, len: usize) -> String {
-    match address {
-        Address::Device { adp, ado } => format!("{cmd} {adp:#06x}:{ado:#06x} ({len} bytes)"),
-        Address::Logical(a) => format!("{cmd} logical {a:#010x} ({len} bytes)"),
-    }
+pub fn datagram_ref(p: &Pdu<'_>) -> crate::error::DatagramRef {
+    crate::error::DatagramRef { command: p.cmd, address: p.address, len: p.data.len() }
 }
 
 /// A frame's bytes on the wire: Ethernet and EtherCAT headers, each datagram's header, data

@@ -9,7 +9,7 @@ use ferrocat_wire::ethernet::{EthernetRepr, Ipv4Repr, ETHERTYPE_IPV4};
 use ferrocat_wire::inet::{IcmpEcho, IP_PROTO_ICMP};
 use ferrocat_wire::mailbox::MailboxType;
 
-use crate::error::{MasterError, Result};
+use crate::error::{EoeError, MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::mailbox::{Mailboxes, Polled};
 use crate::master::Master;
@@ -60,11 +60,15 @@ impl<I: Io> Eoe<'_, I> {
         }
     }
 
-    fn result(&self, position: u16, what: &str, result: EoeResult) -> Result<()> {
+    fn result(&self, position: u16, request: &'static str, result: EoeResult) -> Result<()> {
         if result == EoeResult::SUCCESS {
             return Ok(());
         }
-        Err(MasterError::slave(position, &self.mbx.name_of(position), format!("EoE {what}: {result}")))
+        Err(self.error(position, EoeError::Result { request, result }))
+    }
+
+    fn error(&self, position: u16, error: EoeError) -> MasterError {
+        MasterError::of(position, &self.mbx.name_of(position), SlaveError::Eoe(error))
     }
 
     /// Sets the slave's IP parameters (those given; the others it keeps).
@@ -79,9 +83,7 @@ impl<I: Io> Eoe<'_, I> {
     pub fn get_ip(&mut self, position: u16) -> Result<IpParameters> {
         let (h, body) = self.request(position, frame_type::GET_IP_REQUEST, &[], frame_type::GET_IP_RESPONSE)?;
         self.result(position, "Get IP Parameter", h.result())?;
-        IpParameters::parse(&body).map_err(|e| {
-            MasterError::slave(position, &self.mbx.name_of(position), format!("EoE Get IP Parameter: {e}"))
-        })
+        IpParameters::parse(&body).map_err(|e| self.error(position, EoeError::IpParameters(e)))
     }
 
     /// The frame cut into fragments for the slave's receive mailbox, under the next frame
@@ -91,15 +93,10 @@ impl<I: Io> Eoe<'_, I> {
         let max_len = (m.out.1 as usize).saturating_sub(ferrocat_wire::mailbox::HEADER_LEN);
         let link = &mut self.mbx.slaves[position as usize].eoe;
         let msgs = eoe::fragment_messages(frame, max_len, link.frame_number).ok_or_else(|| {
-            MasterError::slave(
+            MasterError::of(
                 position,
                 &name,
-                format!(
-                    "EoE: a {}-byte frame does not go through a {}-byte mailbox (1–{} bytes, 32 per fragment)",
-                    frame.len(),
-                    m.out.1,
-                    eoe::MAX_FRAME_LEN
-                ),
+                SlaveError::Eoe(EoeError::FrameTooLong { len: frame.len(), mailbox: m.out.1, max: eoe::MAX_FRAME_LEN }),
             )
         })?;
         link.frame_number = (link.frame_number + 1) & 0xF;
@@ -111,8 +108,7 @@ impl<I: Io> Eoe<'_, I> {
     /// fragments of two frames would interleave).
     pub fn send(&mut self, position: u16, frame: &[u8]) -> Result<()> {
         if self.mbx.slave(position)?.eoe.sending() {
-            let name = self.mbx.name_of(position);
-            return Err(MasterError::slave(position, &name, "EoE: frames queued for pump are still going out"));
+            return Err(self.error(position, EoeError::Busy));
         }
         for msg in self.cut(position, frame)? {
             self.mbx.write(position, MailboxType::EOE, &msg)?;
@@ -168,7 +164,14 @@ impl<I: Io> Eoe<'_, I> {
             }
         }
         if let Some(mut buf) = self.mbx.slaves[position as usize].eoe.trying.take() {
-            let written = self.mbx.try_write(position, &mut buf)?;
+            let written = match self.mbx.try_write(position, &mut buf) {
+                Ok(w) => w,
+                Err(e) => {
+                    // Not taken (its frame went unanswered): the same fragment at the next call.
+                    self.mbx.slaves[position as usize].eoe.trying = Some(buf);
+                    return Err(e);
+                }
+            };
             let link = &mut self.mbx.slaves[position as usize].eoe;
             if !written {
                 link.trying = Some(buf);

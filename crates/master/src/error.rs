@@ -96,9 +96,227 @@ pub enum SlaveError {
     /// A DC slave with receive times only was asked for SYNC0.
     #[error("has receive times only (no DC system time): no SYNC0 there")]
     NoSystemTime,
-    /// The rest, in words (module, EoE, FoE, CiA402 and init-command failures).
+    /// A calibration pulse asked of a slave without a DC system time to latch it.
+    #[error("has no DC system time to latch the calibration pulse")]
+    NoLatchTime,
+    /// Its SII interface did not acknowledge a read (0x0502 bit 13).
+    #[error("SII read not acknowledged")]
+    SiiNotAcknowledged,
+    /// Its SII interface stayed busy past the timeout.
+    #[error("EEPROM stays busy")]
+    EepromBusy,
+    /// An SDO the configuration sends (an ESI init command or a plan's) failed.
+    #[error("{}", config_sdo(origin, *index, *subindex, comment, error))]
+    ConfigSdo {
+        /// Where the SDO came from.
+        origin: SdoSource,
+        /// The object's index.
+        index: u16,
+        /// The object's subindex.
+        subindex: u8,
+        /// Its comment in the description.
+        comment: String,
+        /// What went wrong: an abort with its code, a mailbox failure.
+        error: Box<MasterError>,
+    },
+    /// Modular devices (ETG.5001): the modules configured and detected.
     #[error("{0}")]
-    Other(String),
+    Modules(ModuleError),
+    /// A file transfer (FoE) failed.
+    #[error("FoE '{file}': {error}")]
+    Foe {
+        /// The file's name.
+        file: String,
+        /// What went wrong.
+        error: FoeError,
+    },
+    /// A receive mailbox too small to carry any FoE data.
+    #[error("FoE: a {0}-byte mailbox carries no data")]
+    FoeMailboxTooSmall(u16),
+    /// Ethernet over EtherCAT failed.
+    #[error("EoE{0}")]
+    Eoe(EoeError),
+    /// A CiA402 drive's process data or state.
+    #[error("{0}")]
+    Cia402(Cia402Error),
+}
+
+/// Where an SDO the configuration sends came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SdoSource {
+    /// An ESI init command, at a transition ("PS"), from the file's line.
+    EsiInitCommand {
+        /// The transition, as the ESI names it.
+        transition: String,
+        /// The line of the ESI file.
+        line: u32,
+    },
+    /// A process-data plan's SDO.
+    Plan,
+}
+
+fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error: &MasterError) -> String {
+    match source {
+        SdoSource::EsiInitCommand { transition, line } => {
+            format!("ESI init command {transition} {index:#06x}:{subindex:02x} ({comment:?}, line {line}): {error}")
+        }
+        SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:02x} ({comment}): {error}"),
+    }
+}
+
+/// What a modular device (ETG.5001) got wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ModuleError {
+    /// More modules than 0xF030 holds.
+    #[error("{0} modules: 0xF030 holds 255")]
+    TooMany(usize),
+    /// An entry of 0xF050 (detected modules) that is no 32-bit ident.
+    #[error("0xF050:{subindex:02x} is {len} bytes, not 4")]
+    DetectedEntry {
+        /// The entry's subindex.
+        subindex: u8,
+        /// Its bytes.
+        len: usize,
+    },
+    /// The module configured in a slot is not the one detected there.
+    #[error("slot {slot}: module {} configured, {} detected (0xF050 lists {detected_count} modules)", ident(*configured), ident(*detected))]
+    Mismatch {
+        /// The slot, from 0.
+        slot: usize,
+        /// The module ident configured there, if any.
+        configured: Option<u32>,
+        /// The module ident detected there, if any.
+        detected: Option<u32>,
+        /// How many modules 0xF050 lists.
+        detected_count: usize,
+    },
+}
+
+fn ident(v: Option<u32>) -> String {
+    v.map_or("none".to_string(), |m| format!("{m:#010x}"))
+}
+
+/// What a file transfer (FoE) ran into.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FoeError {
+    /// The slave answered with an FoE error (ETG.1000.6 Table 92), and its text where it gave
+    /// one beyond the code's name.
+    #[error("{code}{}", text.as_ref().map(|t| format!(": {t}")).unwrap_or_default())]
+    Refused {
+        /// The FoE error code.
+        code: ferrocat_wire::foe::FoeErrorCode,
+        /// Its text.
+        text: Option<String>,
+    },
+    /// A reply of another kind than expected, as it was read.
+    #[error("{reply} where {expected} was expected")]
+    Unexpected {
+        /// The reply.
+        reply: String,
+        /// What was expected.
+        expected: String,
+    },
+    /// A reply that does not decode.
+    #[error("reply does not decode: {0}")]
+    Undecodable(ferrocat_wire::Error),
+    /// Busy answers past the limit for one packet.
+    #[error("busy {times} times at packet {packet}")]
+    Busy {
+        /// Busy answers taken.
+        times: u32,
+        /// The packet.
+        packet: u32,
+    },
+    /// A file longer than the bound the reader gave: the transfer was aborted.
+    #[error("longer than {0} bytes")]
+    TooLong(usize),
+}
+
+/// What Ethernet over EtherCAT ran into.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EoeError {
+    /// The slave's result code for a request (ETG.1000.6 Table 48).
+    #[error(" {request}: {result}")]
+    Result {
+        /// The request ("Set IP Parameter").
+        request: &'static str,
+        /// The slave's result.
+        result: ferrocat_wire::eoe::EoeResult,
+    },
+    /// IP parameters that do not parse.
+    #[error(" Get IP Parameter: {0}")]
+    IpParameters(ferrocat_wire::Error),
+    /// A frame that does not go through the slave's mailbox.
+    #[error(": a {len}-byte frame does not go through a {mailbox}-byte mailbox (1–{max} bytes, 32 per fragment)")]
+    FrameTooLong {
+        /// The frame's bytes.
+        len: usize,
+        /// The receive mailbox's bytes.
+        mailbox: u16,
+        /// The longest frame EoE carries.
+        max: usize,
+    },
+    /// A frame sent while frames queued for the pump still go out.
+    #[error(": frames queued for pump are still going out")]
+    Busy,
+}
+
+/// What a CiA402 drive lacks or did.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Cia402Error {
+    /// An axis past the last a drive may have.
+    #[error("axis {axis}: a drive has at most {max}")]
+    NoSuchAxis {
+        /// The axis asked for, from 0.
+        axis: u8,
+        /// The axes a drive may have.
+        max: u8,
+    },
+    /// An object the driver needs that is not mapped.
+    #[error("no {}{object} ({index:#06x}) in the process image", if *axis > 0 { format!("axis {axis}'s ") } else { String::new() })]
+    NotMapped {
+        /// The axis, from 0.
+        axis: u8,
+        /// The object's name.
+        object: &'static str,
+        /// Its index on this axis.
+        index: u16,
+    },
+    /// A drive that did not reach its goal in time.
+    #[error("CiA402: still {} after {cycles} cycles (wanted {wanted})", state.map_or("unknown", |s| s.name()))]
+    Stuck {
+        /// Where it stayed, where its statusword says.
+        state: Option<ferrocat_wire::cia402::State>,
+        /// The goal's name.
+        wanted: &'static str,
+        /// Cycles waited.
+        cycles: u64,
+    },
+}
+
+/// A datagram as errors name it: "FPRD 0x1001:0x0130 (2 bytes)".
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DatagramRef {
+    /// Its command.
+    pub command: ferrocat_wire::Command,
+    /// Its address.
+    pub address: ferrocat_wire::Address,
+    /// Its data's bytes.
+    pub len: usize,
+}
+
+impl std::fmt::Display for DatagramRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (cmd, len) = (self.command, self.len);
+        match self.address {
+            ferrocat_wire::Address::Device { adp, ado } => write!(f, "{cmd} {adp:#06x}:{ado:#06x} ({len} bytes)"),
+            ferrocat_wire::Address::Logical(a) => write!(f, "{cmd} logical {a:#010x} ({len} bytes)"),
+        }
+    }
 }
 
 /// An error of the master: the link's, the segment's, a slave's, or the configuration's.
@@ -108,23 +326,24 @@ pub enum MasterError {
     #[error(transparent)]
     Io(#[from] std::io::Error),
     /// A frame went unanswered through every retry.
-    #[error("no answer to {what} after {tries} tries (frame lost or the segment answers nothing)")]
+    #[error("no answer to {datagram} after {tries} tries (frame lost or the segment answers nothing)")]
     Timeout {
-        /// The datagram, e.g. "FPRD 0x1001:0x0130 (2 bytes)".
-        what: String,
+        /// Its first datagram.
+        datagram: DatagramRef,
         /// Tries made, the first included.
         tries: u32,
     },
     /// A datagram reached fewer (or more) slaves than it had to.
-    #[error("working counter {got}, expected {expected}, for {what}{slaves}")]
+    #[error("working counter {got}, expected {expected}, for {datagram}{slaves}")]
     Wkc {
         /// The datagram.
-        what: String,
+        datagram: DatagramRef,
         /// The working counter it had to come back with.
         expected: u16,
         /// The working counter it came back with.
         got: u16,
-        /// Which slave it was meant for, where the master knows (": slave 0 (EK1100, …)").
+        /// Which slave it was meant for, where the master knows, in words (": slave 0
+        /// (EK1100, …)").
         slaves: String,
     },
     /// A reply that does not parse.
@@ -145,7 +364,7 @@ pub enum MasterError {
     #[error(transparent)]
     Dc(#[from] DcError),
     /// A slave did not reach the AL state requested.
-    #[error("slave {position} ({name}) did not reach {requested}: {status}{code}")]
+    #[error("slave {position} ({name}) did not reach {requested}: {}", state_failure(*stayed, *code, cause))]
     State {
         /// Position on the segment, from 0.
         position: u16,
@@ -153,10 +372,12 @@ pub enum MasterError {
         name: String,
         /// The state requested.
         requested: AlState,
-        /// Where it stayed, in words ("stays in INIT with an error").
-        status: String,
-        /// Its AL status code in words, or empty.
-        code: String,
+        /// Where it stayed (AL status 0x0130), if that is a state.
+        stayed: Option<AlState>,
+        /// Its AL status code (0x0134).
+        code: AlStatusCode,
+        /// Why the master gave up.
+        cause: StateCause,
     },
     /// The slave aborted an SDO transfer.
     #[error("slave {position} ({name}): SDO {index:#06x}:{subindex:02x} aborted: {code}")]
@@ -181,19 +402,198 @@ pub enum MasterError {
         error: SlaveError,
     },
     /// The master was asked something its configuration does not allow.
-    #[error("{0}")]
-    Config(String),
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// Receive times that a second latch could not tell apart (the named slaves').
+    #[error("receive times of {} could not be latched again: the spacings of the latching frames did not tell their readings apart in {tries} tries", names(slaves))]
+    Relatch {
+        /// The slaves whose receive times stayed ambiguous.
+        slaves: Vec<SlaveRef>,
+        /// Tries made.
+        tries: u32,
+    },
+}
+
+fn names(slaves: &[SlaveRef]) -> String {
+    slaves.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ")
+}
+
+/// Which of the two images.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageSide {
+    /// The outputs.
+    Output,
+    /// The inputs.
+    Input,
+}
+
+impl std::fmt::Display for ImageSide {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ImageSide::Output => "output",
+            ImageSide::Input => "input",
+        })
+    }
+}
+
+/// What the master was asked that its configuration does not allow, or that the segment
+/// makes impossible.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// An SII image shorter than its header.
+    #[error("SII image of {0} bytes: shorter than its 16-byte header")]
+    SiiImageTooShort(usize),
+    /// An SII image whose header CRC is wrong: an ESC would not load it.
+    #[error(
+        "SII image: header CRC at byte 14 is {found:#04x}, bytes 0–13 give {computed:#04x}; an ESC would not load it"
+    )]
+    SiiHeaderCrc {
+        /// The CRC the image carries.
+        found: u8,
+        /// The CRC of its bytes 0–13.
+        computed: u8,
+    },
+    /// Slaves on the ring that only the secondary port's frames reach in order.
+    #[error("{0} slave(s) on the ring answer only frames from the secondary port: a device is entered by a port other than 0 and its port 0 leads on round the ring, so the primary's frames pass it without processing it; cable it the other way round")]
+    RingCabledBackwards(u16),
+    /// A group of process data that runs every 0 cycles.
+    #[error("group {0}: every 0 cycles: give 1 or more")]
+    GroupEveryZero(String),
+    /// A group naming a position past the last slave.
+    #[error("group {group}: no slave at position {position} (the segment has {count})")]
+    GroupNoSuchSlave {
+        /// The group.
+        group: String,
+        /// The position it names.
+        position: u16,
+        /// The slaves on the segment.
+        count: usize,
+    },
+    /// A slave in two groups.
+    #[error("slave {position} is in groups {first} and {second}: a slave's process data go in one frame")]
+    SlaveInTwoGroups {
+        /// The slave.
+        position: u16,
+        /// The first group.
+        first: String,
+        /// The second group.
+        second: String,
+    },
+    /// A group with more process data than a frame carries.
+    #[error("group {group}: {bytes} bytes of process data, more than one frame carries ({max})")]
+    GroupTooLarge {
+        /// The group.
+        group: String,
+        /// Its bytes.
+        bytes: u32,
+        /// What a frame carries.
+        max: u32,
+    },
+    /// A datagram larger than a frame.
+    #[error("{command} of {len} bytes does not fit a frame")]
+    DatagramTooLarge {
+        /// Its command.
+        command: ferrocat_wire::Command,
+        /// Its data's bytes.
+        len: usize,
+    },
+    /// A slave-to-slave copy between entries of other widths, or of none, or of more than 64
+    /// bits.
+    #[error("copy {copy}: {from_bits} bits into {to_bits} bits: a copy takes 1 to 64 bits into as many")]
+    CopyWidth {
+        /// The copy, from 0.
+        copy: usize,
+        /// The source's bits.
+        from_bits: u8,
+        /// The destination's bits.
+        to_bits: u8,
+    },
+    /// A slave-to-slave copy outside the image.
+    #[error("copy {copy}: bits {}..{} into {}..{} of a {image_bits}-bit image", from.0, from.1, to.0, to.1)]
+    CopyOutsideImage {
+        /// The copy, from 0.
+        copy: usize,
+        /// The source's bits, start and end.
+        from: (u32, u32),
+        /// The destination's bits, start and end.
+        to: (u32, u32),
+        /// The image's bits.
+        image_bits: u64,
+    },
+    /// A process image that more frames would carry than the cyclic exchange sends.
+    #[error("process image of {bytes} bytes exceeds {max_frames} frames")]
+    ImageTooLarge {
+        /// The image's bytes.
+        bytes: usize,
+        /// The frames the exchange sends at most.
+        max_frames: usize,
+    },
+    /// A plan's frame with more datagrams than the cyclic exchange takes.
+    #[error("plan frame {frame}: {datagrams} datagrams, more than {max}")]
+    PlanFrameTooLong {
+        /// The frame, from 0.
+        frame: usize,
+        /// Its datagrams.
+        datagrams: usize,
+        /// The most the exchange takes.
+        max: usize,
+    },
+    /// A plan's datagram whose data end past its image.
+    #[error("plan frame {frame}, datagram {datagram}: its data end at byte {end} of the {bytes}-byte {side} image")]
+    PlanDataOutsideImage {
+        /// The frame, from 0.
+        frame: usize,
+        /// The datagram, from 0.
+        datagram: usize,
+        /// Where its data end.
+        end: u64,
+        /// The image's bytes.
+        bytes: u32,
+        /// Which image.
+        side: ImageSide,
+    },
+    /// An interpolation period that 0x60C2 cannot express.
+    #[error("an interpolation period of {0} ns is no u8 × 10^n s (0x60C2)")]
+    InterpolationPeriod(u64),
+    /// A CiA402 step asked of no axis.
+    #[error("no axes")]
+    NoAxes,
+    /// A process-data watchdog longer than 0x0420 counts (65 535 steps of 100 µs).
+    #[error("a process-data watchdog of {0} ns is longer than 0x0420 counts (6.5535 s in 100 µs steps)")]
+    WatchdogTooLong(u64),
 }
 
 impl MasterError {
-    /// A slave's error in words, where no [`SlaveError`] kind fits yet.
-    pub(crate) fn slave(position: u16, name: &str, message: impl Into<String>) -> Self {
-        Self::of(position, name, SlaveError::Other(message.into()))
-    }
-
     /// A slave's error of a known kind.
     pub(crate) fn of(position: u16, name: &str, error: SlaveError) -> Self {
         MasterError::Slave { slave: SlaveRef { position, name: name.into() }, error }
+    }
+}
+
+/// Why a state change failed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum StateCause {
+    /// The slave set AL status's error bit.
+    Error,
+    /// The state timeout passed.
+    Timeout,
+    /// Its ESC runs unconfigured: the EEPROM's configuration area did not load (the SII
+    /// interface's status 0x0502, and why in words).
+    EepromNotLoaded {
+        /// 0x0502 as read.
+        sii_status: u16,
+        /// What that status means.
+        why: String,
+    },
+}
+
+fn state_failure(stayed: Option<AlState>, code: AlStatusCode, cause: &StateCause) -> String {
+    let reached = stayed.map(|s| s.name()).unwrap_or("an unknown state");
+    match cause {
+        StateCause::EepromNotLoaded { why, .. } => why.clone(),
+        StateCause::Error => format!("stays in {reached} with an error{}", code_text(code)),
+        StateCause::Timeout => format!("stays in {reached} (timeout){}", code_text(code)),
     }
 }
 

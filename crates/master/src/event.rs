@@ -43,6 +43,14 @@ pub enum MasterEvent {
         /// The manufacturer-specific bytes.
         data: [u8; 5],
     },
+    /// A synchronised slave's sync-error flag (0x1C32:20, ETG.1020) was found set: it missed
+    /// SM events past its limit (0x10F1:02).
+    SyncError {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+    },
     /// One of the slave's error counters (0x0300–0x0313) grew since diagnosis last read it.
     ErrorCounters {
         /// Position on the segment.
@@ -86,6 +94,10 @@ impl std::fmt::Display for MasterEvent {
                     ferrocat_wire::coe::emergency_text(*error_code)
                 )
             }
+            MasterEvent::SyncError { position, name } => write!(
+                f,
+                "slave {position} ({name}): sync error (0x1C32:20 set): it missed SM events past its limit (0x10F1:02)"
+            ),
             MasterEvent::ErrorCounters { position, name, kind, port, grown, total } => {
                 let port = port.map_or(String::new(), |p| format!("port {p} "));
                 write!(f, "slave {position} ({name}): {port}{} +{grown} (now {total})", kind.name())

@@ -4,7 +4,7 @@ use ferrocat_wire::foe::{self as wire, max_data_len};
 use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::AlState;
 
-use crate::error::{MasterError, Result};
+use crate::error::{FoeError, MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::mailbox::Mailboxes;
 use crate::master::Master;
@@ -61,8 +61,12 @@ impl<I: Io> Master<I> {
 }
 
 impl<I: Io> Foe<'_, I> {
-    fn error(&self, position: u16, what: String) -> MasterError {
-        MasterError::slave(position, &self.mbx.name_of(position), what)
+    fn error(&self, position: u16, error: SlaveError) -> MasterError {
+        MasterError::of(position, &self.mbx.name_of(position), error)
+    }
+
+    fn file_error(&self, position: u16, file: &str, error: FoeError) -> MasterError {
+        self.error(position, SlaveError::Foe { file: file.into(), error })
     }
 
     fn exchange(&mut self, position: u16, msg: wire::Foe<'_>) -> Result<Vec<u8>> {
@@ -74,20 +78,17 @@ impl<I: Io> Foe<'_, I> {
 
     /// What an FoE reply that is not the one expected means, as an error.
     fn unexpected(&self, position: u16, file: &str, reply: &[u8], expected: &str) -> MasterError {
-        let what = match wire::Foe::parse(reply) {
+        let error = match wire::Foe::parse(reply) {
             Ok(wire::Foe::Error { code, text }) => {
                 let text = String::from_utf8_lossy(text);
                 let text = text.trim_end_matches('\0');
-                if text.is_empty() || Some(text) == code.name() {
-                    format!("FoE '{file}': {code}")
-                } else {
-                    format!("FoE '{file}': {code}: {text}")
-                }
+                let text = (!text.is_empty() && Some(text) != code.name()).then(|| text.to_string());
+                FoeError::Refused { code, text }
             }
-            Ok(other) => format!("FoE '{file}': {other:?} where {expected} was expected"),
-            Err(e) => format!("FoE '{file}': reply does not decode: {e}"),
+            Ok(other) => FoeError::Unexpected { reply: format!("{other:?}"), expected: expected.into() },
+            Err(e) => FoeError::Undecodable(e),
         };
-        self.error(position, what)
+        self.file_error(position, file, error)
     }
 
     /// Writes `data` as file `file` to the slave at `position` (in a state with a mailbox:
@@ -96,7 +97,7 @@ impl<I: Io> Foe<'_, I> {
         let (_, _, m) = self.mbx.mailbox_of(position, MailboxType::FOE)?;
         let max = max_data_len(m.out.1 as usize);
         if max == 0 {
-            return Err(self.error(position, format!("FoE: a {}-byte mailbox carries no data", m.out.1)));
+            return Err(self.error(position, SlaveError::FoeMailboxTooSmall(m.out.1)));
         }
         let reply = self.exchange(position, wire::Foe::WriteRequest { password, file_name: file.as_bytes() })?;
         if wire::Foe::parse(&reply).ok() != Some(wire::Foe::Ack { packet: 0 }) {
@@ -114,7 +115,7 @@ impl<I: Io> Foe<'_, I> {
             while let Ok(wire::Foe::Busy { .. }) = wire::Foe::parse(&reply) {
                 busy += 1;
                 if busy > MAX_BUSY {
-                    return Err(self.error(position, format!("FoE '{file}': busy {MAX_BUSY} times at packet {packet}")));
+                    return Err(self.file_error(position, file, FoeError::Busy { times: MAX_BUSY, packet }));
                 }
                 reply = self.exchange(position, wire::Foe::Data { packet, data: chunk })?;
             }
@@ -147,7 +148,7 @@ impl<I: Io> Foe<'_, I> {
                 let mut b = vec![0u8; abort.len()];
                 abort.emit(&mut b)?;
                 self.mbx.write(position, MailboxType::FOE, &b)?;
-                return Err(self.error(position, format!("FoE '{file}': longer than {max_bytes} bytes")));
+                return Err(self.file_error(position, file, FoeError::TooLong(max_bytes)));
             }
             data.extend_from_slice(chunk);
             let last = chunk.len() < max;

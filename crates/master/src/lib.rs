@@ -26,6 +26,7 @@
 //! network interface, [`io::UdpIo`] over UDP, or (from the `ferrocat-segment` crate, which this
 //! one does not depend on) the simulated segment in virtual time. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
 //! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
+mod bring_up;
 pub mod calibrate;
 pub mod cia402;
 mod coe;
@@ -63,7 +64,10 @@ pub use diagnosis_state::DiagnosisStats;
 pub(crate) use engine::SplitPasses;
 pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};
-pub use error::{DcError, MasterError, Result, SlaveError, SlaveRef};
+pub use error::{
+    Cia402Error, ConfigError, DatagramRef, DcError, EoeError, FoeError, ImageSide, MasterError, ModuleError, Result,
+    SdoSource, SlaveError, SlaveRef, StateCause,
+};
 pub use event::MasterEvent;
 /// The ESI descriptions the master takes ([`Master::add_esi`]); the reader with the `esi-xml`
 /// feature.

@@ -6,7 +6,7 @@
 //! put them.
 use ferrocat_wire::{Address, Command};
 
-use crate::error::{MasterError, Result};
+use crate::error::{ConfigError, ImageSide, Result};
 
 /// The output and input images mirror the frames (as TwinCAT lays them out): a datagram's
 /// offset is where its header starts, its data follow the 10-byte header.
@@ -82,21 +82,29 @@ impl Plan {
     pub fn validate(&self) -> Result<()> {
         for (f, frame) in self.frames.iter().enumerate() {
             if frame.len() > MAX_PLAN_DATAGRAMS {
-                return Err(MasterError::Config(format!(
-                    "plan frame {f}: {} datagrams, more than {MAX_PLAN_DATAGRAMS}",
-                    frame.len()
-                )));
+                return Err(ConfigError::PlanFrameTooLong {
+                    frame: f,
+                    datagrams: frame.len(),
+                    max: MAX_PLAN_DATAGRAMS,
+                }
+                .into());
             }
             for (k, d) in frame.iter().enumerate() {
-                for (offset, bytes, image) in
-                    [(d.output_offset, self.output_bytes, "output"), (d.input_offset, self.input_bytes, "input")]
-                {
+                for (offset, bytes, image) in [
+                    (d.output_offset, self.output_bytes, ImageSide::Output),
+                    (d.input_offset, self.input_bytes, ImageSide::Input),
+                ] {
                     if let Some(o) = offset {
                         let end = o as u64 + HEADER_LEN as u64 + d.length as u64;
                         if end > bytes as u64 {
-                            return Err(MasterError::Config(format!(
-                                "plan frame {f}, datagram {k}: its data end at byte {end} of the {bytes}-byte {image} image"
-                            )));
+                            return Err(ConfigError::PlanDataOutsideImage {
+                                frame: f,
+                                datagram: k,
+                                end,
+                                bytes,
+                                side: image,
+                            }
+                            .into());
                         }
                     }
                 }

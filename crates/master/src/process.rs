@@ -7,7 +7,7 @@ use ferrocat_wire::{Address, Command};
 
 use crate::cycle_state::{CycleState, CycleStats};
 use crate::engine::Pdu;
-use crate::error::{MasterError, Result};
+use crate::error::{ConfigError, MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
 
@@ -22,25 +22,6 @@ const MAX_PDUS: usize = MAX_CHUNKS + crate::dc::MAX_SYNC_PDUS;
 pub use crate::handle::Handle;
 
 impl<I: Io> Master<I> {
-    /// After a cyclic frame (`passes`: its two passes round a broken ring, if it made them):
-    /// reports a change of the ring's state once (cable redundancy; the first state seen is
-    /// the starting point, not news), sets the clocks up for it, and keeps a split ring's far
-    /// reference on the reference's time.
-    pub(crate) fn note_ring(&mut self, passes: Option<crate::SplitPasses>) -> Result<()> {
-        use crate::engine::RingState;
-        let now = self.engine.ring;
-        let before = std::mem::replace(&mut self.cyc.ring, now);
-        if now != before && before != RingState::Unknown && now != RingState::Unknown {
-            self.push_event(crate::MasterEvent::Ring { state: now });
-        }
-        if now != before {
-            self.ring_changed(before);
-        }
-        self.rejoin_far_half()?;
-        self.keep_far_reference(passes)?;
-        self.watch_split()
-    }
-
     /// The handle of an output entry of slave `position` by its name (first match).
     pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.slave(position)?;
@@ -97,20 +78,16 @@ impl<I: Io> Master<I> {
         let bits = self.image.len() as u64 * 8;
         for (k, (from, to)) in copies.iter().enumerate() {
             if from.bits != to.bits || from.bits == 0 || from.bits > 64 {
-                return Err(MasterError::Config(format!(
-                    "copy {k}: {} bits into {} bits: a copy takes 1 to 64 bits into as many",
-                    from.bits, to.bits
-                )));
+                return Err(ConfigError::CopyWidth { copy: k, from_bits: from.bits, to_bits: to.bits }.into());
             }
             if [from, to].iter().any(|h| h.bit as u64 + h.bits as u64 > bits) {
-                return Err(MasterError::Config(format!(
-                    "copy {k}: bits {}..{} into {}..{} of a {}-bit image",
-                    from.bit,
-                    from.bit + from.bits as u32,
-                    to.bit,
-                    to.bit + to.bits as u32,
-                    bits
-                )));
+                return Err(ConfigError::CopyOutsideImage {
+                    copy: k,
+                    from: (from.bit, from.bit + from.bits as u32),
+                    to: (to.bit, to.bit + to.bits as u32),
+                    image_bits: bits,
+                }
+                .into());
             }
         }
         self.copies = copies;
@@ -194,11 +171,7 @@ impl<I: Io> Master<I> {
         }
         let chunks = self.image.len().div_ceil(CHUNK);
         if chunks > MAX_CHUNKS {
-            return Err(MasterError::Config(format!(
-                "process image of {} bytes exceeds {} frames",
-                self.image.len(),
-                MAX_CHUNKS
-            )));
+            return Err(ConfigError::ImageTooLarge { bytes: self.image.len(), max_frames: MAX_CHUNKS }.into());
         }
         let mut empty: [[u8; 0]; MAX_PDUS] = [[]; MAX_PDUS];
         let mut nop: [u8; 0] = [];
@@ -238,7 +211,7 @@ impl<I: Io> Master<I> {
         // Process data is not sent twice: a lost frame costs this cycle, not the next ones.
         let r = engine.transact_once(&mut pdus[..n], cyclic_timeout_ns);
         let exchanged = engine.io.now_ns();
-        let passes = engine.split_passes.take();
+        let passes = engine.redundancy.split_passes.take();
         let answered = match (r.is_ok(), with_sync) {
             (true, true) => crate::dc::SyncPdus::answered(&pdus[chunks..n]),
             _ => crate::dc::SyncAnswers::NONE,
@@ -379,7 +352,7 @@ impl<I: Io> Master<I> {
             }
             _ => None,
         };
-        let passes = self.engine.split_passes.take();
+        let passes = self.engine.redundancy.split_passes.take();
         self.note_ring(passes)?;
         self.apply_copies();
         self.finish_cycle(start, exchanged, wkc, expected, lost)?;

@@ -77,6 +77,9 @@ pub struct Slave {
     pub(crate) assignment: [Option<Vec<u16>>; 2],
     /// EoE frames from the slave, put together and waiting.
     pub(crate) eoe: crate::eoe_link::EoeLink,
+    /// The process-data watchdog the application chose (0x0420, in 100 µs steps; 0: off),
+    /// written again whenever the master configures the slave's process data.
+    pub(crate) pd_watchdog_steps: Option<u16>,
 }
 
 /// Who a slave is: the SII's identity (words 0x08–0x0F).

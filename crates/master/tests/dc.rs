@@ -227,8 +227,8 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
         m.io_mut().sleep_until(next);
     }
     // One frame per cycle, and the probes of the line while it was young.
-    assert_eq!(m.io().seg.stats.frames - frames0 - st.probes, 200, "one frame per cycle");
-    assert!(st.probes > 0 && st.probes_lost == 0, "{st:?}");
+    assert_eq!(m.io().seg.stats.frames - frames0 - st.probing.sent, 200, "one frame per cycle");
+    assert!(st.probing.sent > 0 && st.probing.lost == 0, "{st:?}");
     assert_eq!((st.cycle, st.lost), (200, 0));
     // The master's clock, its line through the reference's times, within 1 µs of the reference.
     let t = m.io_mut().now_ns();

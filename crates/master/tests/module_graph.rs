@@ -1,10 +1,11 @@
 //! The master's modules depend on one another without a cycle: each top-level module's
-//! `crate::` paths (outside comments and test code, root re-exports resolved through lib.rs)
-//! form an acyclic graph. A module that both uses `master` and is used by it would tie the
-//! two together again; types the master keeps live in leaf modules instead (`cycle_state`,
-//! `eoe_link`, `event`, `sync::SyncState`, `far_clock`), the mailbox layer borrows the engine
-//! and the slave list without knowing the master (`mailbox`), and the clients (CoE, FoE, EoE,
-//! DC, process data, CiA402) build on `master` from outside.
+//! `crate::` paths (outside comments and test code, root re-exports resolved through lib.rs),
+//! and its calls of the `Master`'s methods that another module defines, form an acyclic
+//! graph. A module that both uses `master` and is used by it would tie the two together
+//! again; types the master keeps live in leaf modules instead (`cycle_state`, `eoe_link`,
+//! `event`, `sync::SyncState`, `far_clock`), the mailbox layer and the CoE client over it
+//! borrow the engine and the slave table without knowing the master (`mailbox`, `coe`), and
+//! the clients (DC, process data, bring-up, FoE, EoE, CiA402) build on `master` from outside.
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
@@ -64,6 +65,61 @@ fn targets(code: &str, reexports: &BTreeMap<String, String>) -> BTreeSet<String>
     found
 }
 
+/// The names of the functions in `code`'s `impl<I: Io> Master<I>` blocks, and of every other
+/// function in it.
+fn functions(code: &str) -> (BTreeSet<String>, BTreeSet<String>) {
+    let (mut on_master, mut other) = (BTreeSet::new(), BTreeSet::new());
+    let fn_name = |s: &str| s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect::<String>();
+    // Depth of braces, and the depth at which a Master impl block's body starts.
+    let (mut depth, mut master_body) = (0usize, None::<usize>);
+    let mut rest = code;
+    while !rest.is_empty() {
+        if rest.starts_with("impl<I: Io> Master<I> {") {
+            master_body = Some(depth + 1);
+        }
+        if let Some(after) = rest.strip_prefix("fn ") {
+            let name = fn_name(after);
+            if !name.is_empty() {
+                if master_body == Some(depth) {
+                    on_master.insert(name);
+                } else {
+                    other.insert(name);
+                }
+            }
+        }
+        let c = rest.chars().next().unwrap();
+        match c {
+            '{' => depth += 1,
+            '}' => {
+                if master_body == Some(depth) {
+                    master_body = None;
+                }
+                depth = depth.saturating_sub(1);
+            }
+            _ => {}
+        }
+        rest = &rest[c.len_utf8()..];
+    }
+    (on_master, other)
+}
+
+/// The `Master` methods that `code` calls on `self` or on a master (`m.`, `master.`), of
+/// those in `methods`.
+fn master_calls<'a>(code: &str, methods: &'a BTreeMap<String, String>) -> BTreeSet<&'a str> {
+    methods
+        .iter()
+        .filter(|(name, _)| {
+            ["self.", "m.", "master."].iter().any(|recv| {
+                code.match_indices(&format!("{recv}{name}(")).any(|(at, _)| {
+                    // A whole receiver: `self.coe(`, not `myself.coe(`.
+                    code[..at].chars().next_back().is_none_or(|c| !(c.is_alphanumeric() || c == '_' || c == '.'))
+                })
+            })
+        })
+        .map(|(_, module)| module.as_str())
+        .collect()
+}
+
 #[test]
 fn the_masters_modules_form_no_cycle() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
@@ -78,20 +134,45 @@ fn the_masters_modules_form_no_cycle() {
     }
     let mut files = Vec::new();
     sources(&src, &mut files);
-    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let mut modules = Vec::new();
     for f in &files {
         let rel = f.strip_prefix(&src).unwrap();
         if rel == Path::new("lib.rs") || rel.file_name().is_some_and(|n| n == "tests.rs") {
             continue;
         }
         let top = rel.components().next().unwrap().as_os_str().to_string_lossy().trim_end_matches(".rs").to_string();
-        let deps = targets(&code(&std::fs::read_to_string(f).unwrap()), &reexports);
-        graph.entry(top.clone()).or_default().extend(deps.into_iter().filter(|d| *d != top));
+        modules.push((top, code(&std::fs::read_to_string(f).unwrap())));
+    }
+    // Each method of the `Master`, by the module that defines it; a name that any other
+    // function also has (another type's method, a free function) is left out: a call of it
+    // could be either.
+    let (mut defined, mut elsewhere): (BTreeMap<String, BTreeSet<String>>, BTreeSet<String>) = Default::default();
+    for (top, code) in &modules {
+        let (on_master, other) = functions(code);
+        for name in on_master {
+            defined.entry(name).or_default().insert(top.clone());
+        }
+        elsewhere.extend(other);
+    }
+    let methods: BTreeMap<String, String> = defined
+        .into_iter()
+        .filter(|(name, tops)| tops.len() == 1 && !elsewhere.contains(name))
+        .map(|(name, tops)| (name, tops.into_iter().next().unwrap()))
+        .collect();
+    assert!(methods.get("coe").is_some_and(|m| m == "master"), "the master's methods were read: {methods:?}");
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (top, code) in &modules {
+        let deps = targets(code, &reexports);
+        let calls = master_calls(code, &methods).into_iter().map(str::to_string);
+        graph.entry(top.clone()).or_default().extend(deps.into_iter().chain(calls).filter(|d| d != top));
     }
     for (m, deps) in &graph {
         println!("{m} → {}", deps.iter().cloned().collect::<Vec<_>>().join(", "));
     }
-    assert!(graph["master"].contains("engine") && graph["coe"].contains("master"), "the graph was read: {graph:?}");
+    assert!(
+        graph["master"].contains("engine") && graph["bring_up"].contains("process") && graph["dc"].contains("master"),
+        "the graph was read: {graph:?}"
+    );
     // Depth-first search for a back edge.
     fn visit(
         m: &str,

@@ -269,12 +269,12 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
     let mut settled_from = 0;
     for k in 0..cycles {
         if k == step_at - 1000 {
-            settled_from = st.probes;
+            settled_from = st.probing.sent;
         }
         if k == step_at {
             let now = m.io_mut().now_ns();
             m.io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
-            probes_before = st.probes;
+            probes_before = st.probing.sent;
         }
         let c = m.sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
@@ -292,7 +292,7 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
     let mean = before.iter().sum::<f64>() / before.len() as f64;
     let last_out = after.iter().rposition(|e| (e - mean).abs() > 100.0).map_or(0, |i| i + 1);
     let peak = after.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
-    (last_out as f64 * CYCLE_NS as f64 / 1e6, peak, probes_before - settled_from, st.probes - probes_before)
+    (last_out as f64 * CYCLE_NS as f64 / 1e6, peak, probes_before - settled_from, st.probing.sent - probes_before)
 }
 
 #[test]
@@ -387,7 +387,7 @@ fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
     let mut next = m.io_mut().now_ns();
     let (mut probed, mut quiet) = (Vec::new(), Vec::new());
     for k in 0..30_000 {
-        let probes_before = st.probes;
+        let probes_before = st.probing.sent;
         next += CYCLE_NS;
         m.io_mut().sleep_until(next);
         m.sync_step(&mut sync, &mut st).unwrap();
@@ -395,7 +395,7 @@ fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
         m.io_mut().sleep_until(next + CYCLE_NS - 1_000);
         let e = true_error(&mut m, 0) as f64;
         if k >= 2_000 {
-            if st.probes > probes_before {
+            if st.probing.sent > probes_before {
                 probed.push(e)
             } else {
                 quiet.push(e)
@@ -445,15 +445,18 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     for _ in 0..300 {
         next += CYCLE_NS;
         m.io_mut().sleep_until(next);
-        let probes_before = st.probes;
+        let probes_before = st.probing.sent;
         m.sync_step(&mut sync, &mut st).unwrap();
-        if st.probes > probes_before {
+        if st.probing.sent > probes_before {
             probed += 1;
             // How far past the next cycle's due time this one ended (negative: before it).
             latest_ns = latest_ns.max(m.io_mut().now_ns() as i64 - (next + CYCLE_NS) as i64);
         }
     }
-    println!("{probed} cycles probed ({} probes), the latest ended {latest_ns} ns after the next was due", st.probes);
+    println!(
+        "{probed} cycles probed ({} probes), the latest ended {latest_ns} ns after the next was due",
+        st.probing.sent
+    );
     assert!(probed > 10, "the young line probes: {probed}");
     assert!(latest_ns <= 0, "a cycle that probed ended {latest_ns} ns after the next was due");
 }
@@ -485,20 +488,20 @@ fn probes_end_within_the_cycle_on_a_slow_receive_path() {
         m.io_mut().sleep_until(next);
         // When the cycle really began: late if the one before overran.
         let began = m.io_mut().now_ns();
-        let probes_before = st.probes;
+        let probes_before = st.probing.sent;
         m.sync_step(&mut sync, &mut st).unwrap();
         // A cycle whose own writes (an offset shift to every slave) took it past its end has
         // no room for probes; those that probed must have ended within a period.
-        if st.probes > probes_before {
+        if st.probing.sent > probes_before {
             longest_ns = longest_ns.max(m.io_mut().now_ns() - began);
         }
     }
-    assert!(st.probes > 0, "the young line probes");
+    assert!(st.probing.sent > 0, "the young line probes");
     assert!(longest_ns <= CYCLE_NS, "a cycle that probed ended {longest_ns} ns after it began");
-    assert!(st.probes_cut > 0, "the window cut probing short");
+    assert!(st.probing.cut > 0, "the window cut probing short");
     println!(
         "probes {}, cut in {} cycles, mean {} ns, longest cycle {longest_ns} ns",
-        st.probes, st.probes_cut, st.probe_mean_ns
+        st.probing.sent, st.probing.cut, st.probing.mean_ns
     );
 }
 
@@ -656,7 +659,7 @@ fn probes_in_budget(budget_ns: Option<u64>, cycles: u64) -> ferrocat_master::Syn
     let mut m = segment(HostModel::pc_stock());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     let mut st = m.sync_state().unwrap();
-    st.probe_budget_ns = budget_ns;
+    st.probing.budget_ns = budget_ns;
     let mut next = m.io_mut().now_ns();
     for _ in 0..cycles {
         next += CYCLE_NS;
@@ -674,14 +677,19 @@ fn probing_keeps_to_its_budget_on_average() {
     let held = probes_in_budget(Some(budget_ns), CYCLES);
     println!(
         "no budget: {} probes (mean {} ns); {budget_ns} ns a cycle: {} probes, {} not funded",
-        free.probes, free.probe_mean_ns, held.probes, held.probes_unfunded
+        free.probing.sent, free.probing.mean_ns, held.probing.sent, held.probing.unfunded
     );
-    assert_eq!(free.probes_unfunded, 0);
-    assert!(held.probes > 0 && held.probes_unfunded > 0, "{held:?}");
+    assert_eq!(free.probing.unfunded, 0);
+    assert!(held.probing.sent > 0 && held.probing.unfunded > 0, "{held:?}");
     // The time spent probing: at most the budget of every cycle, and one window saved up.
-    let spent_ns = held.probes * held.probe_mean_ns;
+    let spent_ns = held.probing.sent * held.probing.mean_ns;
     assert!(spent_ns <= budget_ns * CYCLES + CYCLE_NS, "{spent_ns} ns probing for {} ns of budget", budget_ns * CYCLES);
-    assert!(held.probes < free.probes, "the budget bound: {} against {}", held.probes, free.probes);
+    assert!(
+        held.probing.sent < free.probing.sent,
+        "the budget bound: {} against {}",
+        held.probing.sent,
+        free.probing.sent
+    );
 }
 
 /// Three slaves brought up behind a master link of 300 µs each way: a round trip of about

@@ -186,3 +186,47 @@ fn a_dc_synchronous_terminal_given_a_firmware_and_a_limit_supervises_too() {
     assert!(text[0].contains("slave 2 (EL2004)") && text[0].contains("0x001a"), "{text:#?}");
     assert!(text[1].contains("slave 2 (EL2004) is back in OP"), "{text:#?}");
 }
+
+/// Cycles `n` times at 1 ms with diagnosis in each cycle's spare time (a round of reads every
+/// 5 ms); the events that came, emergencies left out.
+fn cycles_with_diagnosis(m: &mut Master<VirtualIo>, next: &mut u64, n: usize) -> Vec<MasterEvent> {
+    let before = m.events().len();
+    for _ in 0..n {
+        let _ = m.cycle().unwrap();
+        m.diagnose(*next + CYCLE_NS * 3 / 4, 5 * CYCLE_NS).unwrap();
+        *next += CYCLE_NS;
+        m.io_mut().sleep_until(*next);
+    }
+    m.events()[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
+}
+
+#[test]
+fn diagnosis_reads_the_sync_error_flag_of_the_slaves_with_sync0() {
+    // The drive keeps its error (no supervision to bring it back), so its flag stays set.
+    let (mut m, mut next) = servo_in_op("", &[]);
+    m.settings_mut().supervise_on_wkc = false;
+    let quiet = cycles_with_diagnosis(&mut m, &mut next, 50);
+    assert!(quiet.is_empty(), "{quiet:?}");
+    let read = m.diagnosis_stats().sync_flag_reads;
+    assert!(read >= 5, "a read every 5 ms: {read} in 50 ms");
+    assert_eq!(m.sync_error_flags().get(1), Some(&Some(false)), "the drive's flag, read and clear");
+    assert_eq!(m.sync_error_flags().first().copied().flatten(), None, "the coupler has no SYNC0");
+    // Three cycles without process data: the drive's SM-event missed counter reaches its limit.
+    next += 4 * CYCLE_NS;
+    m.io_mut().sleep_until(next);
+    let events = cycles_with_diagnosis(&mut m, &mut next, 50);
+    let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
+    assert!(events.iter().any(|e| matches!(e, MasterEvent::SyncError { position: 1, .. })), "{text:#?}");
+    assert_eq!(events.iter().filter(|e| matches!(e, MasterEvent::SyncError { .. })).count(), 1, "once: {text:#?}");
+    assert!(text.iter().any(|t| t.contains("slave 1 (") && t.contains("0x1C32:20")), "{text:#?}");
+    assert_eq!(m.sync_error_flags().get(1), Some(&Some(true)));
+    assert_eq!(m.diagnosis_stats().sync_errors, 1);
+}
+
+#[test]
+fn without_sync0_no_flag_is_read() {
+    let (mut m, mut next) = in_op("", &[], &[]);
+    cycles_with_diagnosis(&mut m, &mut next, 30);
+    assert_eq!(m.diagnosis_stats().sync_flag_reads, 0);
+    assert!(m.diagnosis_stats().mailbox_polls > 0, "the mailbox is polled for emergencies all the same");
+}

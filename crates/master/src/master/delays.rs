@@ -95,7 +95,7 @@ impl<I: Io> Master<I> {
     pub(super) fn find_ring_port(&mut self) -> Result<()> {
         self.ring_port = None;
         self.ring_shortening_ns = 0;
-        if !self.engine.io.has_secondary() || self.engine.ring != crate::engine::RingState::Intact {
+        if !self.engine.io.has_secondary() || self.engine.redundancy.state != crate::engine::RingState::Intact {
             return Ok(());
         }
         let n = self.slaves.len() as u16;
@@ -108,7 +108,7 @@ impl<I: Io> Master<I> {
                 let loop_control = self.close_port(st, port)?;
                 let mut b = [0u8; 2];
                 let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut b)?;
-                let turned = self.engine.ring == crate::engine::RingState::Line && wkc == n;
+                let turned = self.engine.redundancy.state == crate::engine::RingState::Line && wkc == n;
                 self.reopen_port(st, loop_control)?;
                 if turned {
                     self.ring_port = Some((k as u16, port));
@@ -211,7 +211,7 @@ impl<I: Io> Master<I> {
             tries -= 1;
             match self.engine.transact_once(&mut pdus, self.engine.timeout_ns) {
                 Ok(()) => {
-                    passes = self.engine.split_passes.take();
+                    passes = self.engine.redundancy.split_passes.take();
                     break Ok(self.stamped_sample(&crate::sync::SyncState::default(), built_ns, bytes));
                 }
                 Err(MasterError::Timeout { .. }) if tries > 0 => continue,

@@ -18,8 +18,8 @@ impl<I: Io> Master<I> {
     /// is moved to cancel it (module comment). A closed ring ends it; the next break starts
     /// afresh.
     pub(crate) fn keep_far_reference(&mut self, passes: Option<SplitPasses>) -> Result<()> {
-        let steered = self.engine.split_ring_clocks == SplitRingClocks::FarReference;
-        let Some(station) = self.engine.far_reference.filter(|_| steered) else {
+        let steered = self.engine.redundancy.clocks == SplitRingClocks::FarReference;
+        let Some(station) = self.engine.redundancy.far_reference.filter(|_| steered) else {
             self.far_steer = None;
             return Ok(());
         };
@@ -27,7 +27,7 @@ impl<I: Io> Master<I> {
         // The second pass went through every clock behind the break: the far reference read,
         // each other one took.
         let n = self.slaves.len();
-        let far = (self.engine.far_half_slaves as usize).min(n);
+        let far = (self.engine.redundancy.far_half_slaves as usize).min(n);
         let clocks = self.slaves[n - far..].iter().filter(|s| s.dc.has_system_time).count();
         let Some(k) = self.slaves.iter().position(|s| s.station == station) else { return Ok(()) };
         if p.far_wkc as usize != clocks {

@@ -3,7 +3,7 @@
 use ferrocat_wire::{Address, Command};
 
 use super::Master;
-use crate::error::{MasterError, Result};
+use crate::error::{ConfigError, Result};
 use crate::io::Io;
 use crate::plan::{Plan, PlanDatagram};
 
@@ -41,21 +41,22 @@ impl<I: Io> Master<I> {
         let mut member: Vec<Option<&str>> = vec![None; n];
         for g in &self.groups {
             if g.every == 0 {
-                return Err(MasterError::Config(format!("group {}: every 0 cycles: give 1 or more", g.name)));
+                return Err(ConfigError::GroupEveryZero(g.name.clone()).into());
             }
             for &p in &g.positions {
                 match member.get_mut(p as usize) {
                     None => {
-                        return Err(MasterError::Config(format!(
-                            "group {}: no slave at position {p} (the segment has {n})",
-                            g.name
-                        )))
+                        return Err(
+                            ConfigError::GroupNoSuchSlave { group: g.name.clone(), position: p, count: n }.into()
+                        )
                     }
                     Some(Some(other)) => {
-                        return Err(MasterError::Config(format!(
-                            "slave {p} is in groups {other} and {}: a slave's process data go in one frame",
-                            g.name
-                        )))
+                        return Err(ConfigError::SlaveInTwoGroups {
+                            position: p,
+                            first: other.to_string(),
+                            second: g.name.clone(),
+                        }
+                        .into())
                     }
                     Some(m) => *m = Some(&g.name),
                 }
@@ -88,10 +89,9 @@ impl<I: Io> Master<I> {
                 continue;
             }
             if len > MAX_GROUP_BYTES {
-                return Err(MasterError::Config(format!(
-                    "group {}: {len} bytes of process data, more than one frame carries ({MAX_GROUP_BYTES})",
-                    g.name
-                )));
+                return Err(
+                    ConfigError::GroupTooLarge { group: g.name.clone(), bytes: len, max: MAX_GROUP_BYTES }.into()
+                );
             }
             let mut wkc = 0u16;
             for &(p, out_at, in_at) in &places {

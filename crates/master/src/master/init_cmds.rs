@@ -28,13 +28,19 @@ impl<I: Io> Master<I> {
         for c in &cmds {
             self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
                 let name = self.slaves[position as usize].name.clone();
-                MasterError::slave(
+                MasterError::of(
                     position,
                     &name,
-                    format!(
-                        "ESI init command {transition} {:#06x}:{:02x} ({:?}, line {}): {e}",
-                        c.index, c.subindex, c.comment, c.line
-                    ),
+                    crate::error::SlaveError::ConfigSdo {
+                        origin: crate::error::SdoSource::EsiInitCommand {
+                            transition: transition.to_string(),
+                            line: c.line,
+                        },
+                        index: c.index,
+                        subindex: c.subindex,
+                        comment: c.comment.clone(),
+                        error: Box::new(e),
+                    },
                 )
             })?;
             tracing::debug!(position, transition, index = c.index, subindex = c.subindex, "init command sent");

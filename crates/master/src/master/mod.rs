@@ -10,6 +10,8 @@ use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::slave::{DcInfo, EscInfo, Identity, MailboxConfig, Ports, Slave};
 
+mod clock;
+pub(crate) use clock::loop_of;
 mod delays;
 mod far_steer;
 mod groups;
@@ -226,6 +228,12 @@ impl<I: Io> Master<I> {
         &self.relatched
     }
 
+    /// The CoE client: SDO upload and download, SDO information (each call waits up to
+    /// `mailbox_timeout_ns` for room and for the reply).
+    pub fn coe(&mut self) -> crate::coe::Coe<'_, I> {
+        crate::coe::Coe { mbx: self.mailboxes() }
+    }
+
     pub(crate) fn mailboxes(&mut self) -> crate::mailbox::Mailboxes<'_, I> {
         crate::mailbox::Mailboxes {
             engine: &mut self.engine,
@@ -279,13 +287,8 @@ impl<I: Io> Master<I> {
         // On an intact ring a slave the primary's frames pass without processing (entered by a
         // port other than 0, whose port 0 leads on round the ring) answers only the
         // secondary's probe: it would be missing from every count and every image.
-        if self.engine.ring == crate::engine::RingState::Intact && self.engine.backward_wkc > 0 {
-            return Err(MasterError::Config(format!(
-                "{} slave(s) on the ring answer only frames from the secondary port: a device is \
-                 entered by a port other than 0 and its port 0 leads on round the ring, so the \
-                 primary's frames pass it without processing it; cable it the other way round",
-                self.engine.backward_wkc
-            )));
+        if self.engine.redundancy.state == crate::engine::RingState::Intact && self.engine.redundancy.backward_wkc > 0 {
+            return Err(crate::error::ConfigError::RingCabledBackwards(self.engine.redundancy.backward_wkc).into());
         }
         let images = self.read_all_sii(&stations)?;
         for (pos, img) in images.into_iter().enumerate() {
@@ -339,11 +342,11 @@ impl<I: Io> Master<I> {
         ];
         // Every read must reach the one slave (on a ring asked again when short: `expect_wkc_each`).
         self.engine.expect_wkc_each(&mut p, 1).map_err(|e| match e {
-            MasterError::Wkc { got, .. } => MasterError::Wkc {
-                what: format!("identity of slave {pos}"),
+            MasterError::Wkc { datagram, got, .. } => MasterError::Wkc {
+                datagram,
                 expected: 1,
                 got,
-                slaves: format!(" (station {station:#06x})"),
+                slaves: format!(": the identity of slave {pos} (station {station:#06x})"),
             },
             e => e,
         })?;
@@ -401,49 +404,10 @@ impl<I: Io> Master<I> {
             state: AlState::Init,
             health: Default::default(),
             assignment: [None, None],
+            pd_watchdog_steps: None,
             eoe: Default::default(),
             sii,
         })
-    }
-
-    /// PREOP → SAFEOP → OP for every slave, exchanging process data meanwhile (slaves with an
-    /// SM watchdog want outputs before OP).
-    pub fn start(&mut self) -> Result<()> {
-        self.request_state_all(AlState::SafeOp)?;
-        for k in 0..self.slaves.len() as u16 {
-            if self.slaves[k as usize].has_coe() {
-                self.run_init_commands(k, "SO")?;
-            }
-        }
-        self.cycle()?;
-        self.engine.one(
-            Command::BWR,
-            Address::Device { adp: 0, ado: addr::AL_CONTROL },
-            &mut [AlState::Op as u8, 0],
-        )?;
-        let deadline = self.engine.io.now_ns() + self.settings.state_timeout_ns;
-        loop {
-            let now = self.engine.io.now_ns();
-            self.cycle()?;
-            let mut d = [0u8; 2];
-            let wkc = self.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::AL_STATUS }, &mut d)?;
-            if wkc as usize == self.slaves.len() && d[0] & 0x1F == AlState::Op as u8 {
-                // BRD ORs every slave's state: all OP and no error flag.
-                break;
-            }
-            if d[0] & 0x10 != 0 || now > deadline {
-                for k in 0..self.slaves.len() as u16 {
-                    self.wait_state(k, AlState::Op)?;
-                }
-                break;
-            }
-            self.engine.io.sleep_until(now + 1_000_000);
-        }
-        for s in &mut self.slaves {
-            s.state = AlState::Op;
-        }
-        tracing::info!("every slave in OP");
-        Ok(())
     }
 
     /// Adds an FRMW of the reference clock's system time (the first DC slave) to every cyclic
@@ -476,12 +440,12 @@ impl<I: Io> Master<I> {
 
     /// What the master's two ports show of a ring (cable redundancy).
     pub fn ring_state(&self) -> RingState {
-        self.engine.ring
+        self.engine.redundancy.state
     }
 
     /// On a broken ring, how the far half gets its clock.
     pub fn set_split_ring_clocks(&mut self, clocks: SplitRingClocks) {
-        self.engine.split_ring_clocks = clocks;
+        self.engine.redundancy.clocks = clocks;
     }
 
     /// One datagram as given, sent now and waited for with the engine's retries; returns its
@@ -506,13 +470,6 @@ impl<I: Io> Master<I> {
     /// keeps its period however long each cycle took).
     pub fn sleep_until(&mut self, t_ns: u64) {
         self.engine.io.sleep_until(t_ns)
-    }
-
-    /// Scan, configure, start: the whole bring-up.
-    pub fn bring_up(&mut self) -> Result<()> {
-        self.scan()?;
-        self.configure()?;
-        self.start()
     }
 }
 

@@ -1,6 +1,6 @@
 //! Modular devices (ETG.5001): the master tells the slave which modules it expects (0xF030)
 //! and checks them against those the slave detected (0xF050) before SAFEOP.
-use crate::error::{MasterError, Result};
+use crate::error::{MasterError, ModuleError, Result, SlaveError};
 use crate::io::Io;
 use crate::master::Master;
 
@@ -18,7 +18,11 @@ impl<I: Io> Master<I> {
                 let v = self.coe().sdo_read(position, DETECTED, k)?;
                 let b: [u8; 4] = v.get(..4).and_then(|b| b.try_into().ok()).ok_or_else(|| {
                     let name = self.slaves[position as usize].name.clone();
-                    MasterError::slave(position, &name, format!("0xF050:{k:02x} is {} bytes, not 4", v.len()))
+                    MasterError::of(
+                        position,
+                        &name,
+                        SlaveError::Modules(ModuleError::DetectedEntry { subindex: k, len: v.len() }),
+                    )
                 })?;
                 Ok(u32::from_le_bytes(b))
             })
@@ -32,7 +36,7 @@ impl<I: Io> Master<I> {
     pub fn configure_modules(&mut self, position: u16, idents: &[u32]) -> Result<()> {
         let name = self.slave(position)?.name.clone();
         let count = u8::try_from(idents.len())
-            .map_err(|_| MasterError::slave(position, &name, format!("{} modules: 0xF030 holds 255", idents.len())))?;
+            .map_err(|_| MasterError::of(position, &name, SlaveError::Modules(ModuleError::TooMany(idents.len()))))?;
         self.coe().sdo_write(position, CONFIGURED, 0, &[0])?;
         for (k, ident) in idents.iter().enumerate() {
             self.coe().sdo_write(position, CONFIGURED, k as u8 + 1, &ident.to_le_bytes())?;
@@ -40,17 +44,16 @@ impl<I: Io> Master<I> {
         self.coe().sdo_write(position, CONFIGURED, 0, &[count])?;
         let detected = self.detected_modules(position)?;
         let slots = idents.len().max(detected.len());
-        let shown = |v: Option<&u32>| v.map_or("none".to_string(), |m| format!("{m:#010x}"));
         if let Some(slot) = (0..slots).find(|&k| idents.get(k) != detected.get(k)) {
-            return Err(MasterError::slave(
+            return Err(MasterError::of(
                 position,
                 &name,
-                format!(
-                    "slot {slot}: module {} configured, {} detected (0xF050 lists {} modules)",
-                    shown(idents.get(slot)),
-                    shown(detected.get(slot)),
-                    detected.len()
-                ),
+                SlaveError::Modules(ModuleError::Mismatch {
+                    slot,
+                    configured: idents.get(slot).copied(),
+                    detected: detected.get(slot).copied(),
+                    detected_count: detected.len(),
+                }),
             ));
         }
         tracing::info!(position, modules = idents.len(), "modules configured");

@@ -71,10 +71,10 @@ impl<I: Io> Master<I> {
     /// Latches `targets` again (module doc) and puts their receive times, as the first latch's
     /// frame would have given them, in place of the first latch's; returns where it did.
     pub(super) fn relatch_next_frame(&mut self, targets: &[usize]) -> Result<Vec<usize>> {
-        let probes = std::mem::replace(&mut self.engine.probes_off, true);
+        let probes = std::mem::replace(&mut self.engine.redundancy.probes_off, true);
         let mut replaced = Vec::new();
         let done = targets.chunks(PER_ROUND).try_for_each(|chunk| self.relatch_round(chunk, &mut replaced));
-        self.engine.probes_off = probes;
+        self.engine.redundancy.probes_off = probes;
         done.map(|()| replaced)
     }
 
@@ -112,10 +112,13 @@ impl<I: Io> Master<I> {
             }
             return Ok(());
         }
-        Err(MasterError::Config(format!(
-            "receive times of {} could not be latched again: the spacings of the latching frames did not tell their readings apart in {ATTEMPTS} tries",
-            chunk.iter().map(|&k| self.slaves[k].name.clone()).collect::<Vec<_>>().join(", ")
-        )))
+        Err(MasterError::Relatch {
+            slaves: chunk
+                .iter()
+                .map(|&k| crate::error::SlaveRef { position: k as u16, name: self.slaves[k].name.clone() })
+                .collect(),
+            tries: ATTEMPTS as u32,
+        })
     }
 
     /// One frame: each slave's 0x0900–0x090F and 0x0918, then (with `write`) a BWR of 0x0900.
@@ -138,11 +141,12 @@ impl<I: Io> Master<I> {
         }
         self.engine.transact(&mut pdus)?;
         if let Some(p) = pdus.iter().find(|p| p.cmd == Command::FPRD && p.wkc != 1) {
-            return Err(MasterError::Config(format!(
-                "{} answered with working counter {} while latching receive times again",
-                crate::engine::describe(p.cmd, p.address, p.data.len()),
-                p.wkc
-            )));
+            return Err(MasterError::Wkc {
+                datagram: crate::engine::datagram_ref(p),
+                expected: 1,
+                got: p.wkc,
+                slaves: " (latching receive times again)".into(),
+            });
         }
         let epu_values: Vec<Option<u32>> =
             epu_at.iter().map(|at| at.map(|i| u32::from_le_bytes(pdus[i].data[..4].try_into().unwrap()))).collect();

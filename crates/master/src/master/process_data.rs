@@ -8,6 +8,11 @@ use crate::error::Result;
 use crate::io::Io;
 use crate::slave::Mapped;
 
+/// The watchdog divider the master writes (0x0400): 2 498 + 2 cycles of 40 ns, 100 µs a step of
+/// the watchdog time (ESC datasheet section II, 0x0400).
+const WATCHDOG_DIVIDER: u16 = 2498;
+const WATCHDOG_STEP_NS: u64 = (WATCHDOG_DIVIDER as u64 + 2) * 40;
+
 impl<I: Io> Master<I> {
     /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
     /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
@@ -36,10 +41,16 @@ impl<I: Io> Master<I> {
         for c in &sdos {
             self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
                 let name = self.slaves[position as usize].name.clone();
-                crate::error::MasterError::slave(
+                crate::error::MasterError::of(
                     position,
                     &name,
-                    format!("plan SDO {:#06x}:{:02x} ({}): {e}", c.index, c.subindex, c.comment),
+                    crate::error::SlaveError::ConfigSdo {
+                        origin: crate::error::SdoSource::Plan,
+                        index: c.index,
+                        subindex: c.subindex,
+                        comment: c.comment.clone(),
+                        error: Box::new(e),
+                    },
                 )
             })?;
         }
@@ -243,7 +254,32 @@ impl<I: Io> Master<I> {
         for (a, d) in process_registers(s, s.mapping.out_area.0, s.mapping.in_area.0) {
             self.fpwr(st, a, &d)?;
         }
-        Ok(())
+        self.write_watchdog(position)
+    }
+
+    /// Sets the process-data watchdog of the slave at `position` (the SM watchdog, ESC
+    /// registers 0x0400 and 0x0420) to `time_ns`, rounded to the 100 µs steps of the divider
+    /// 2 498 (25 MHz / 2 500, the ESC's default, written with it); 0 turns it off. The ESC arms
+    /// it when the output SyncManager is enabled with its watchdog trigger (control bit 6, from
+    /// the SII): without process data for that long, it
+    /// resets the outputs, and a slave with a firmware leaves OP (AL status code 0x001B). The
+    /// master writes it now and again whenever it configures the slave's process data (after
+    /// a power cycle, for instance). Without it the slave keeps its EEPROM's or the ESC's
+    /// default (100 ms on ET1100 and the simulated ESC).
+    pub fn set_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<()> {
+        self.slave(position)?;
+        let steps = time_ns.div_ceil(WATCHDOG_STEP_NS);
+        let steps = u16::try_from(steps).map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
+        self.slaves[position as usize].pd_watchdog_steps = Some(steps);
+        self.write_watchdog(position)
+    }
+
+    fn write_watchdog(&mut self, position: u16) -> Result<()> {
+        let s = &self.slaves[position as usize];
+        let Some(steps) = s.pd_watchdog_steps else { return Ok(()) };
+        let st = s.station;
+        self.fpwr(st, addr::WATCHDOG_DIVIDER, &WATCHDOG_DIVIDER.to_le_bytes())?;
+        self.fpwr(st, addr::WATCHDOG_TIME_PROCESS_DATA, &steps.to_le_bytes())
     }
 
     /// Writes the mailbox SyncManagers of one slave.

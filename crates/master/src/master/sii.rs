@@ -5,7 +5,7 @@ use ferrocat_wire::{Address, Command};
 
 use super::Master;
 use crate::engine::Pdu;
-use crate::error::{MasterError, Result, SlaveError};
+use crate::error::{ConfigError, MasterError, Result, SlaveError};
 use crate::io::Io;
 
 impl<I: Io> Master<I> {
@@ -80,7 +80,7 @@ impl<I: Io> Master<I> {
                         continue;
                     }
                     if c & 0x2000 != 0 {
-                        return Err(MasterError::Config(format!("slave {k}: SII read not acknowledged")));
+                        return Err(MasterError::of(k as u16, "?", SlaveError::SiiNotAcknowledged));
                     }
                     imgs[k].extend_from_slice(&r[6..if eight[k] { 14 } else { 10 }]);
                     done[k] = sii_complete(&imgs[k]);
@@ -91,7 +91,7 @@ impl<I: Io> Master<I> {
                 }
                 pending = still;
                 if self.engine.io.now_ns() > deadline {
-                    return Err(MasterError::Config("SII reads stay busy".into()));
+                    return Err(MasterError::of(pending.first().map_or(0, |&k| k as u16), "?", SlaveError::EepromBusy));
                 }
             }
         }
@@ -117,17 +117,11 @@ impl<I: Io> Master<I> {
     pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
         // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
         if image.len() < 16 {
-            return Err(MasterError::Config(format!(
-                "SII image of {} bytes: shorter than its 16-byte header",
-                image.len()
-            )));
+            return Err(ConfigError::SiiImageTooShort(image.len()).into());
         }
         let crc = ferrocat_wire::sii::header_crc(image);
         if image[14] != crc {
-            return Err(MasterError::Config(format!(
-                "SII image: header CRC at byte 14 is {:#04x}, bytes 0–13 give {crc:#04x}; an ESC would not load it",
-                image[14]
-            )));
+            return Err(ConfigError::SiiHeaderCrc { found: image[14], computed: crc }.into());
         }
         let (st, current, capacity) = {
             let s = self.slave(position)?;
@@ -176,7 +170,8 @@ impl<I: Io> Master<I> {
                     break;
                 }
                 if self.engine.io.now_ns() > deadline {
-                    return Err(MasterError::Config(format!("slave {position}: EEPROM stays busy")));
+                    let name = self.slaves[position as usize].name.clone();
+                    return Err(MasterError::of(position, &name, SlaveError::EepromBusy));
                 }
                 let now = self.engine.io.now_ns();
                 self.engine.io.sleep_until(now + 500_000);

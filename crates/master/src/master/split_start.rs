@@ -101,8 +101,8 @@ impl<I: Io> Master<I> {
     /// On a broken ring, the first position behind the break (the second passes reach it and
     /// those after it).
     pub(crate) fn first_far_position(&self) -> Option<usize> {
-        let (n, far) = (self.slaves.len(), self.engine.far_half_slaves as usize);
-        let split = self.engine.io.has_secondary() && self.engine.ring == RingState::Broken;
+        let (n, far) = (self.slaves.len(), self.engine.redundancy.far_half_slaves as usize);
+        let split = self.engine.io.has_secondary() && self.engine.redundancy.state == RingState::Broken;
         (split && far > 0 && far < n).then_some(n - far)
     }
 
@@ -165,7 +165,7 @@ impl<I: Io> Master<I> {
         }
         self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::LOOP_CONTROL }, &mut [AUTO])?;
         self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
-        if self.engine.ring == RingState::Intact {
+        if self.engine.redundancy.state == RingState::Intact {
             self.rejoin_far_half()
         } else {
             self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::LOOP_CONTROL }, &mut [AUTO_CLOSE])?;
@@ -216,7 +216,7 @@ impl<I: Io> Master<I> {
         if l.root >= self.slaves.len() {
             return Ok(());
         }
-        if self.engine.ring != RingState::Intact {
+        if self.engine.redundancy.state != RingState::Intact {
             self.split_latch = Some(l);
             return Ok(());
         }
@@ -231,11 +231,16 @@ impl<I: Io> Master<I> {
             }
         })?;
         if let Some(position) = unanswered {
+            let name = self.slaves[position as usize].name.clone();
             return Err(crate::error::MasterError::Wkc {
-                what: format!("DL status of slave {position}"),
+                datagram: crate::error::DatagramRef {
+                    command: Command::FPRD,
+                    address: Address::Device { adp: self.slaves[position as usize].station, ado: addr::DL_STATUS },
+                    len: 2,
+                },
                 expected: 1,
                 got: 0,
-                slaves: String::new(),
+                slaves: format!(": slave {position} ({name})"),
             });
         }
         self.ring_port = Some((l.root as u16, l.root_port));

@@ -5,7 +5,7 @@ use ferrocat_wire::{Address, Command};
 
 use super::{Master, MasterEvent};
 use crate::engine::Pdu;
-use crate::error::{code_text, MasterError, Result, SlaveError};
+use crate::error::{code_text, MasterError, Result, SlaveError, StateCause};
 use crate::io::Io;
 
 impl<I: Io> Master<I> {
@@ -147,17 +147,18 @@ impl<I: Io> Master<I> {
             let timed_out = self.engine.io.now_ns() > deadline;
             if state != AlState::Init && (timed_out || self.slaves[position as usize].eeprom_failed()) {
                 if let Ok(Some(why)) = self.eeprom_problem_now(position) {
+                    let sii_status = self.slaves[position as usize].esc.eeprom_status;
                     return Err(MasterError::State {
                         position,
                         name,
                         requested: state,
-                        status: String::new(),
-                        code: why,
+                        stayed: status.state(),
+                        code,
+                        cause: StateCause::EepromNotLoaded { sii_status, why },
                     });
                 }
             }
             if error || timed_out {
-                let reached = status.state().map(|s| s.name()).unwrap_or("an unknown state");
                 if error {
                     // Acknowledge, so that the slave accepts requests again.
                     let ack = status.state_bits() as u16 | AlStatus::ERROR;
@@ -177,8 +178,9 @@ impl<I: Io> Master<I> {
                     position,
                     name,
                     requested: state,
-                    status: format!("stays in {reached}{}", if error { " with an error" } else { " (timeout)" }),
-                    code: code_text(code),
+                    stayed: status.state(),
+                    code,
+                    cause: if error { StateCause::Error } else { StateCause::Timeout },
                 });
             }
             // Give the slave time between polls.

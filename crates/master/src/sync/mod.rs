@@ -22,7 +22,7 @@ pub use flywheel::speed_deviation;
 pub use lock::{Lock, LockState, LockThresholds};
 pub use park2020::Park2020;
 pub use pi::SoemPi;
-pub use state::SyncState;
+pub use state::{ProbeStats, SyncState};
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
 pub const MAX_CYCLE_NS: u64 = u32::MAX as u64;
