@@ -8,9 +8,9 @@
 //! experiment. Errors are expected; a panic, a hang or a wrong delay is the fault. Files the text names (EEPROM dumps, ESI files, a scenario's
 //! segment) are left out: the `sii`, `esi` and `device` targets take their bytes.
 use ferrocat_lab::scenario::{Experiment, Scenario};
-use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
@@ -30,12 +30,12 @@ fuzz_target!(|data: &[u8]| {
                 let default = ferrocat_segment::timing::EscTiming::default();
                 let knowable = knowable && seg.nodes.iter().all(|n| n.timing == default);
                 let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-                m.closed_port_loop_ns = 20;
+                m.settings_mut().closed_port_loop_ns = 20;
                 if m.scan().is_ok() {
                     if knowable && cfg.secondary.is_none() {
                         check_delays(&m, text);
                     }
-                    if knowable && m.ring_port.is_some() {
+                    if knowable && m.ring_port().is_some() {
                         check_ring_delays(&m, &cfg, text);
                     }
                     let _ = m.init_dc(&DcConfig { max_frames: 300, ..DcConfig::default() });
@@ -60,16 +60,16 @@ fn check_ring_delays(ring: &Master<VirtualIo>, cfg: &SegmentConfig, text: &str) 
     let line_cfg = SegmentConfig { secondary: None, ..cfg.clone() };
     let Ok(seg) = line_cfg.build() else { return };
     let mut line = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-    line.closed_port_loop_ns = 20;
-    if line.scan().is_err() || line.slaves.len() != ring.slaves.len() {
+    line.settings_mut().closed_port_loop_ns = 20;
+    if line.scan().is_err() || line.slaves().len() != ring.slaves().len() {
         return;
     }
-    for (k, (r, l)) in ring.slaves.iter().zip(&line.slaves).enumerate() {
+    for (k, (r, l)) in ring.slaves().iter().zip(line.slaves()).enumerate() {
         assert!(
-            (r.delay_ns as i64 - l.delay_ns as i64).abs() <= 10,
+            (r.dc().delay_ns as i64 - l.dc().delay_ns as i64).abs() <= 10,
             "slave {k}: ring {} ns, line {} ns, on\n{text}",
-            r.delay_ns,
-            l.delay_ns
+            r.dc().delay_ns,
+            l.dc().delay_ns
         );
     }
 }
@@ -81,17 +81,17 @@ fn check_ring_delays(ring: &Master<VirtualIo>, cfg: &SegmentConfig, text: &str) 
 /// the reference has no delay (clamped to 0).
 fn check_delays(m: &Master<VirtualIo>, text: &str) {
     let visits = m.io().seg.last_visits();
-    if visits.len() != m.slaves.len() {
+    if visits.len() != m.slaves().len() {
         return;
     }
-    let Some(reference) = m.slaves.iter().position(|s| s.has_system_time) else { return };
-    let checked = |s: &&ferrocat_master::Slave| s.has_system_time || (s.has_dc && s.entry_port == 0);
-    for (k, s) in m.slaves.iter().enumerate().filter(|(k, s)| *k >= reference && checked(s)) {
+    let Some(reference) = m.slaves().iter().position(|s| s.dc().has_system_time) else { return };
+    let checked = |s: &&ferrocat_master::Slave| s.dc().has_system_time || (s.dc().supported && s.ports().entry == 0);
+    for (k, s) in m.slaves().iter().enumerate().filter(|(k, s)| *k >= reference && checked(s)) {
         let truth = visits[k].1.epu_ns as i64 - visits[reference].1.epu_ns as i64;
         assert!(
-            (s.delay_ns as i64 - truth).abs() <= 10,
+            (s.dc().delay_ns as i64 - truth).abs() <= 10,
             "slave {k}: computed {} ns, true {truth} ns, on\n{text}",
-            s.delay_ns
+            s.dc().delay_ns
         );
     }
 }

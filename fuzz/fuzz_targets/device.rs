@@ -5,9 +5,9 @@
 //! dictionary listed and every object read. Building may fail with an error and the master may
 //! give up with one; neither may panic or hang.
 use ferrocat_esi::EsiFile;
-use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -16,9 +16,9 @@
 //! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
 //! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
 use ferrocat_master::io::Io;
-use ferrocat_segment::{HostModel, Tamper, VirtualIo};
 use ferrocat_master::{DcConfig, EoePing, Master};
 use ferrocat_segment::{Event, SegmentConfig};
+use ferrocat_segment::{HostModel, Tamper, VirtualIo};
 use ferrocat_wire::eoe::IpParameters;
 use libfuzzer_sys::fuzz_target;
 
@@ -100,7 +100,7 @@ fuzz_target!(|data: &[u8]| {
     }
     let _ = m.supervise();
     // The drive's position: the last, or before the reversed terminal behind which it hangs.
-    let drive = m.slaves.iter().position(|s| s.name == "SERVO").unwrap_or(3) as u16;
+    let drive = m.slaves().iter().position(|s| s.name() == "SERVO").unwrap_or(3) as u16;
     if let Ok(list) = m.coe().od_list(drive) {
         for index in list.into_iter().take(16) {
             let _ = m.coe().object_info(drive, index);

@@ -21,8 +21,8 @@
 //! header and all, which may lie about the length); flag bit 2 sends the frame from the
 //! secondary port. Built this way the fuzzer spends its time
 //! in the ESCs, not in guessing the frame format, which the `frame` target covers.
-use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_master::{DcConfig, Master};
+use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_segment::{MasterPort, Segment, SegmentConfig};
 use ferrocat_wire::Frame;
 use libfuzzer_sys::fuzz_target;
@@ -116,7 +116,7 @@ fn prepared(stage: u8) -> (Segment, u64) {
     if stage >= 3 {
         // Every slave with a DC system time gets SYNC0 (the 32-bit one too), a short drift
         // compensation; the terminals with receive times only cannot.
-        let positions = m.slaves.iter().filter(|s| s.has_system_time).map(|s| s.position).collect();
+        let positions = m.slaves().iter().filter(|s| s.dc().has_system_time).map(|s| s.position()).collect();
         let dc =
             DcConfig { max_frames: 300, sync0_cycle_ns: 250_000, sync0_slaves: Some(positions), ..DcConfig::default() };
         m.init_dc(&dc).expect("DC initialisation");
