@@ -541,9 +541,10 @@ enum SdoCmd {
         /// Complete access: the whole object, every subindex, in one transfer.
         #[arg(long)]
         complete: bool,
-        /// How to encode VALUE (numbers decimal or 0x hex, range-checked for the type).
-        #[arg(long = "type", value_enum, default_value_t = master_cmd::SdoType::U32)]
-        ty: master_cmd::SdoType,
+        /// How to encode VALUE (numbers decimal or 0x hex, range-checked for the type). Default:
+        /// the object's data type, as the slave's SDO information gives it.
+        #[arg(long = "type", value_enum)]
+        ty: Option<master_cmd::SdoType>,
         #[command(flatten)]
         target: target::Target,
     },

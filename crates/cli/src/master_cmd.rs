@@ -140,9 +140,43 @@ fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
             format!("object '{s}': '{t}' is not a number (give INDEX or INDEX:SUB, decimal or 0x hex)")
         })
     };
-    let index = u16::try_from(n(i)?).with_context(|| format!("index '{i}' out of range"))?;
-    let sub = u8::try_from(n(sub)?).with_context(|| format!("subindex '{sub}' out of range"))?;
+    let index =
+        u16::try_from(n(i)?).map_err(|_| anyhow::anyhow!("object '{s}': index '{i}' is more than 0xFFFF (65535)"))?;
+    let sub =
+        u8::try_from(n(sub)?).map_err(|_| anyhow::anyhow!("object '{s}': subindex '{sub}' is more than 0xFF (255)"))?;
     Ok((index, sub))
+}
+
+/// The type to encode a value for `index:sub` in, from the slave's SDO information (CiA 301's
+/// data type codes, ETG.1000.6 Table 63).
+fn object_type(m: &mut Master<CliIo>, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<SdoType> {
+    if complete {
+        bail!("complete access writes the whole object: give --type hex (its bytes) or string");
+    }
+    let e = m.coe().entry_info(position, index, sub).map_err(|e| {
+        anyhow::anyhow!(
+            "the slave does not say what type {index:#06x}:{sub:02x} is ({e}): give --type (u8, i8, u16, …, string, hex)"
+        )
+    })?;
+    use SdoType::*;
+    Ok(match e.data_type {
+        0x0001 | 0x0005 => U8,
+        0x0002 => I8,
+        0x0003 => I16,
+        0x0004 => I32,
+        0x0006 => U16,
+        0x0007 => U32,
+        0x0008 => F32,
+        0x0009 => String,
+        0x000A => Hex,
+        0x0011 => F64,
+        0x0015 => I64,
+        0x001B => U64,
+        code => bail!(
+            "{index:#06x}:{sub:02x} is of data type {code:#06x} ({} bits), which --type does not name: give --type hex",
+            e.bit_length
+        ),
+    })
 }
 
 /// How an SDO value is read from or written to its bytes (little-endian numbers).
@@ -215,7 +249,11 @@ fn encode(value: &str, ty: SdoType) -> anyhow::Result<Vec<u8>> {
         F32 => (float()? as f32).to_le_bytes().to_vec(),
         F64 => float()?.to_le_bytes().to_vec(),
         String => value.as_bytes().to_vec(),
-        Hex => ferrocat_wire::hex::decode(value).map_err(|e| anyhow::anyhow!("hex value '{value}': {e}"))?,
+        Hex => {
+            // As the help says, "0x" may lead.
+            let digits = value.trim().strip_prefix("0x").or_else(|| value.trim().strip_prefix("0X")).unwrap_or(value);
+            ferrocat_wire::hex::decode(digits).map_err(|e| anyhow::anyhow!("hex value '{value}': {e}"))?
+        }
     })
 }
 
@@ -250,7 +288,7 @@ fn show(bytes: &[u8], ty: SdoType) -> anyhow::Result<String> {
 
 pub enum SdoAction {
     Read { object: String, complete: bool, ty: SdoType },
-    Write { object: String, value: String, complete: bool, ty: SdoType },
+    Write { object: String, value: String, complete: bool, ty: Option<SdoType> },
     List,
 }
 
@@ -266,8 +304,13 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
         }
         SdoAction::Write { object, value, complete, ty } => {
             let (i, s) = parse_object(&object)?;
+            let ty = match ty {
+                Some(ty) => ty,
+                None => object_type(&mut m, position, i, s, complete)?,
+            };
             let bytes = encode(&value, ty)?;
             m.coe().sdo_download(position, i, s, complete, &bytes)?;
+            eprintln!("wrote {value} to {i:#06x}:{s:02x} of slave {position} ({}, {} byte(s))", ty.name(), bytes.len());
         }
         SdoAction::List => {
             for index in m.coe().od_list(position)? {

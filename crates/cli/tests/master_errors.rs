@@ -177,6 +177,18 @@ fn sdo_types_are_checked_both_ways() {
     assert!(ok && out.trim() == "0", "a fresh segment each run: {out}{err}");
     let (ok, out, err) = sdo(&["read", "1", "0x1000", "--type", "u32"]);
     assert!(ok && out.trim().parse::<u32>().is_ok(), "{out}{err}");
+    // Without --type, the object's own type from SDO information (0x6060 is INTEGER8), and
+    // what was written said.
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "8"]);
+    assert!(ok && err.contains("wrote 8 to 0x6060:00 of slave 1 (i8, 1 byte(s))"), "{err}");
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "300"]);
+    assert!(!ok && err.contains("value 300 is out of the range of --type i8"), "{err}");
+    // Hex as the help promises it, 0x and all.
+    let (ok, _, err) = sdo(&["write", "1", "0x6060", "0x08", "--type", "hex"]);
+    assert!(ok && err.contains("(hex, 1 byte(s))"), "{err}");
+    // A subindex past 255 in the user's words, not the conversion's.
+    let (ok, _, err) = sdo(&["read", "1", "0x1018:999"]);
+    assert!(!ok && err.contains("subindex '999' is more than 0xFF (255)") && !err.contains("integral"), "{err}");
 }
 
 /// `run --cycle-us` is bounded; the summary says what the cycle was (back to back for
