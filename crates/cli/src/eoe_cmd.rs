@@ -16,6 +16,7 @@ pub enum EoeCmd {
     /// Set the IP parameters of the slave at POSITION (those given; it keeps the others).
     SetIp {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = crate::args::position)]
         position: u16,
         #[command(flatten)]
         params: ParamArgs,
@@ -25,6 +26,7 @@ pub enum EoeCmd {
     /// Print the IP parameters the slave at POSITION reports.
     GetIp {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = crate::args::position)]
         position: u16,
         /// Print JSON instead of text.
         #[arg(long)]
@@ -35,6 +37,7 @@ pub enum EoeCmd {
     /// Ping the slave at POSITION over EoE (ICMP echo), after setting the parameters given.
     Ping {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = crate::args::position)]
         position: u16,
         #[command(flatten)]
         params: ParamArgs,
@@ -61,6 +64,7 @@ pub enum EoeCmd {
     /// SIGTERM, or for --seconds; the segment stays in PREOP.
     Bridge {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = crate::args::position)]
         position: u16,
         /// The TAP interface to create (give it an address and bring it up with `ip`).
         #[arg(long)]

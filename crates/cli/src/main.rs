@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod args;
 mod demo;
 mod eni;
 mod eoe_cmd;
@@ -85,7 +86,7 @@ enum Command {
         file: PathBuf,
         /// Device to show or build: its position in the listing (0-based), `#xPRODUCT[:#xREVISION]`,
         /// or its type name (any case).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         device: Option<String>,
         /// Write the device's SII EEPROM image to this file.
         #[arg(long, value_name = "OUT")]
@@ -207,7 +208,7 @@ enum Command {
         target: target::Target,
         /// How long to exchange process data (s; 0: until SIGINT or SIGTERM, as a service
         /// runs it); SIGINT or SIGTERM end it sooner, with the same summary.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = args::seconds)]
         seconds: f64,
         /// The cycle time (µs, 10 to 1 000 000).
         #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
@@ -517,6 +518,7 @@ enum SdoCmd {
     /// Read INDEX or INDEX:SUB of the slave at POSITION.
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The object: INDEX or INDEX:SUB, decimal or 0x hex (e.g. 0x6041, 0x1018:1).
         object: String,
@@ -532,6 +534,7 @@ enum SdoCmd {
     /// Write VALUE to INDEX or INDEX:SUB.
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The object: INDEX or INDEX:SUB, decimal or 0x hex (e.g. 0x6060:0).
         object: String,
@@ -551,6 +554,7 @@ enum SdoCmd {
     /// List the object dictionary (SDO information).
     List {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         #[command(flatten)]
         target: target::Target,
@@ -562,13 +566,14 @@ enum FoeCmd {
     /// Read file NAME of the slave at POSITION into FILE.
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The file's name on the slave.
         name: String,
         /// Where to write what the slave sends.
         file: PathBuf,
         /// The password the slave asks for (a number: decimal or 0x…).
-        #[arg(long, default_value = "0")]
+        #[arg(long, default_value = "0", allow_negative_numbers = true)]
         password: String,
         /// A longer file is an error.
         #[arg(long, default_value_t = 64 << 20)]
@@ -582,13 +587,14 @@ enum FoeCmd {
     /// Write FILE to the slave at POSITION as file NAME.
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The name the file gets on the slave.
         name: String,
         /// The file to send.
         file: PathBuf,
         /// The password the slave asks for (a number: decimal or 0x…).
-        #[arg(long, default_value = "0")]
+        #[arg(long, default_value = "0", allow_negative_numbers = true)]
         password: String,
         /// In BOOT, through the SII's bootstrap mailbox (firmware), then back to INIT.
         #[arg(long)]
@@ -603,6 +609,7 @@ enum EepromCmd {
     /// Read the SII of the slave at POSITION (hex dump, or --out FILE).
     Read {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// Write the image to this file (raw binary) instead of printing a hex dump.
         #[arg(long)]
@@ -613,6 +620,7 @@ enum EepromCmd {
     /// Program the SII of the slave at POSITION from an image file.
     Write {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The image to program (raw binary, Intel HEX or hex text).
         file: PathBuf,
@@ -631,6 +639,7 @@ enum EepromCmd {
     /// POSITION, with the header checksum; the ESC takes it at its next power-on.
     Alias {
         /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
         position: u16,
         /// The station alias to configure (0 to 65535, decimal or 0x…).
         alias: String,

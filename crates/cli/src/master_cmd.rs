@@ -347,11 +347,47 @@ pub fn foe(
     let password = ferrocat_esi::parse_number(password)
         .and_then(|p| u32::try_from(p).ok())
         .with_context(|| format!("--password '{password}' is not a 32-bit number"))?;
-    // The file first: a missing one should not cost a bring-up.
-    let data = match &action {
-        FoeAction::Write { file } => Some(std::fs::read(file).with_context(|| format!("reading {}", file.display()))?),
-        FoeAction::Read { .. } => None,
+    // The file first: a missing one, or a folder that cannot take one, should not cost a
+    // bring-up. A read goes to FILE.part, renamed to FILE once whole: a file already there is
+    // kept until then.
+    let (data, part) = match &action {
+        FoeAction::Write { file } => {
+            (Some(std::fs::read(file).with_context(|| format!("reading {}", file.display()))?), None)
+        }
+        // Not a regular file (/dev/null, a pipe): written to as it is, never replaced.
+        FoeAction::Read { file, .. } if std::fs::metadata(file).is_ok_and(|m| !m.is_file()) => {
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(file)
+                .with_context(|| format!("opening {}", file.display()))?;
+            (None, Some((None, f)))
+        }
+        FoeAction::Read { file, .. } => {
+            let mut name = file.file_name().unwrap_or_default().to_os_string();
+            name.push(".part");
+            let part = file.with_file_name(name);
+            let f = std::fs::File::create(&part).with_context(|| format!("creating {}", part.display()))?;
+            (None, Some((Some(part), f)))
+        }
     };
+    let result = foe_transfer(t, position, name, password, boot, action, data, part.as_ref());
+    if let (Some((Some(part), _)), Err(_)) = (&part, &result) {
+        let _ = std::fs::remove_file(part);
+    }
+    result
+}
+
+#[allow(clippy::too_many_arguments)]
+fn foe_transfer(
+    t: &Target,
+    position: u16,
+    name: &str,
+    password: u32,
+    boot: bool,
+    action: FoeAction,
+    data: Option<Vec<u8>>,
+    part: Option<&(Option<std::path::PathBuf>, std::fs::File)>,
+) -> anyhow::Result<ExitCode> {
     let mut m = t.master()?;
     t.scan(&mut m)?;
     if boot {
@@ -367,7 +403,17 @@ pub fn foe(
         }
         FoeAction::Read { file, max_bytes } => {
             let data = m.foe().read(position, name, password, max_bytes)?;
-            std::fs::write(&file, &data).with_context(|| format!("writing {}", file.display()))?;
+            if let Some((part_path, f)) = part {
+                use std::io::Write;
+                let mut f: &std::fs::File = f;
+                let written = part_path.as_deref().unwrap_or(&file);
+                f.write_all(&data).with_context(|| format!("writing {}", written.display()))?;
+                if let Some(p) = part_path {
+                    f.sync_all().with_context(|| format!("writing {}", p.display()))?;
+                    std::fs::rename(p, &file)
+                        .with_context(|| format!("renaming {} to {}", p.display(), file.display()))?;
+                }
+            }
             eprintln!("read '{name}' ({} bytes) from slave {position} into {}", data.len(), file.display());
         }
     }

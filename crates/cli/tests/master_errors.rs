@@ -36,6 +36,23 @@ fn needs_shared_an_sdo_abort_is_named() {
     assert!(!ok && err.contains("read-only"), "{err}");
 }
 
+/// Negative numbers where clap would have said "unexpected argument" and suggested `-- -1`,
+/// which then takes the options after it for values: said in the user's words instead.
+#[test]
+fn negative_numbers_are_answered_in_words() {
+    for (args, want) in [
+        (&["sdo", "read", "-1", "0x1000", "--device", "EK1100"][..], "positions count from 0"),
+        (&["sii", "read", "-1", "--device", "EK1100"], "positions count from 0"),
+        (&["eoe", "get-ip", "-2", "--device", "SERVO"], "positions count from 0"),
+        (&["sdo", "read", "70000", "0x1000", "--device", "EK1100"], "65535"),
+        (&["run", "--seconds", "-1", "--device", "EK1100"], "-1 s: give 0 or more seconds"),
+        (&["foe", "read", "0", "x", "/tmp/never", "--password", "-5", "--device", "SERVO"], "--password '-5'"),
+    ] {
+        let (ok, _, err) = ferrocat(args);
+        assert!(!ok && err.contains(want) && !err.contains("-- -1"), "{args:?}: {err}");
+    }
+}
+
 #[test]
 fn bad_arguments_are_errors_not_panics() {
     for args in [
@@ -118,10 +135,12 @@ fn needs_shared_foe_writes_firmware_in_boot_and_names_its_failures() {
     let (ok, _, err) =
         ferrocat(&["foe", "write", "1", "akd.i00", fw_s, "--boot", "--device", "EK1100", "--device", akd_s]);
     assert!(ok && err.contains("wrote") && err.contains("3000 bytes"), "{err}");
-    let failures: [(&[&str], &str); 4] = [
+    let failures: [(&[&str], &str); 5] = [
         (&["foe", "write", "0", "x", fw_s, "--boot", "--device", "SERVO"], "no bootstrap mailbox"),
         (&["foe", "read", "0", "none", "/dev/null", "--device", "SERVO"], "0x8001 (file not found)"),
         (&["foe", "write", "0", "x", "/nonexistent/fw", "--device", "SERVO"], "reading /nonexistent/fw"),
+        // A read's file where no file can be made: said before the bring-up, not after the transfer.
+        (&["foe", "read", "0", "x", "/nonexistent/fw", "--device", "SERVO"], "creating /nonexistent/fw.part"),
         (&["foe", "write", "0", "x", fw_s, "--password", "zz", "--device", "SERVO"], "--password 'zz'"),
     ];
     for (args, want) in failures {
