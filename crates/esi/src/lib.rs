@@ -21,6 +21,14 @@ pub use dictionary::{Access, DataType, Dictionary, Object, SubObject};
 pub use modular::{Depend, ModuleDesc, SlotDesc, Slots};
 pub use number::parse_number;
 
+/// The place (line, column, from 1) just past the end of `text`: where an XML reader's "ended
+/// too soon" belongs (roxmltree says line 1, column 1 for those), for a truncated file.
+pub fn end_of_text(text: &str) -> (u32, u32) {
+    let line = text.matches('\n').count() as u32 + 1;
+    let column = text.rsplit('\n').next().map_or(0, |l| l.chars().count()) as u32 + 1;
+    (line, column)
+}
+
 /// An error in an ESI file, with its 1-based line and column.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("line {line}, column {column}: {message}")]

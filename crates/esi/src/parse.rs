@@ -162,11 +162,24 @@ pub(crate) fn parse_file(xml: &str) -> R<EsiFile> {
     Ok(file)
 }
 
+/// Where an XML reader's error lies in `text` (line, column, from 1), and what it says. A
+/// document that ends too soon (a truncated file) is placed at its end.
+fn xml_error(text: &str, e: &roxmltree::Error) -> (u32, u32, String) {
+    use roxmltree::Error as E;
+    match e {
+        E::UnexpectedEndOfStream | E::UnclosedRootNode | E::NoRootNode => {
+            let (line, column) = crate::end_of_text(text);
+            (line, column, format!("malformed XML: {e} (the text ends here: a truncated file?)"))
+        }
+        _ => (e.pos().row, e.pos().col, format!("malformed XML: {e}")),
+    }
+}
+
 fn parse_document(xml: &str) -> R<EsiFile> {
     let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
     let doc = Document::parse_with_options(xml, opts).map_err(|e| {
-        let p = e.pos();
-        EsiError { line: p.row, column: p.col, message: format!("malformed XML: {e}") }
+        let (line, column, message) = xml_error(xml, &e);
+        EsiError { line, column, message }
     })?;
     let root = doc.root_element();
     if root.tag_name().name() != "EtherCATInfo" {

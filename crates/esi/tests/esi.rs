@@ -101,6 +101,18 @@ fn needs_shared_nanotec_sii_round_trips_identity_sm_pdo_dc() {
     assert_eq!(sii.to_image_sized(img.len()).unwrap(), img);
 }
 
+/// A file cut short (as `head -c` leaves one) is placed at its end, where the reader had said
+/// line 1, column 1.
+#[test]
+fn a_truncated_file_is_placed_at_its_end() {
+    let whole = "<?xml version=\"1.0\"?>\n<EtherCATInfo>\n  <Vendor>\n    <Id>2</Id>\n  </Vendor>\n  <Descriptions attr=\"x\">\n</EtherCATInfo>\n";
+    for (cut, line, column) in [(61, 4, 14), (70, 5, 8), (84, 6, 10)] {
+        let e = EsiFile::parse(&whole[..cut]).unwrap_err();
+        assert_eq!((e.line, e.column), (line, column), "cut at {cut}: {e}");
+        assert!(e.message.contains("a truncated file?"), "cut at {cut}: {e}");
+    }
+}
+
 #[test]
 fn malformed_xml_names_line_and_column() {
     let e = EsiFile::parse("<EtherCATInfo>\n  <Vendor><Id>2</Id>\n</EtherCATInfo>").unwrap_err();

@@ -184,4 +184,8 @@ fn bad_files_are_refused_with_their_place() {
     assert_eq!(root.to_string(), "line 1, column 1: root element is <EtherCATInfo>, expected <EtherCATConfig>");
     let not_text = Eni::parse(b"<EtherCATConfig>\xff</EtherCATConfig>").unwrap_err();
     assert!(not_text.message.contains("not UTF-8"), "{not_text}");
+    // A file cut short: placed at its end, not at line 1, column 1.
+    let cut = Eni::parse(b"<EtherCATConfig>\n  <Config>\n    <Slave").unwrap_err();
+    assert_eq!((cut.place.line, cut.place.column), (3, 11), "{cut}");
+    assert!(cut.message.contains("a truncated file?"), "{cut}");
 }

@@ -18,8 +18,16 @@ const MAX_DATAGRAM_DATA: usize = 1486;
 pub(super) fn read(text: &str) -> R<Eni> {
     let opts = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
     let doc = Document::parse_with_options(text, opts).map_err(|e| {
-        let p = e.pos();
-        EniError { place: Place { line: p.row, column: p.col }, message: format!("malformed XML: {e}") }
+        use roxmltree::Error as E;
+        // A document that ends too soon (a truncated file) at its end, not at line 1, column 1.
+        let (line, column, why) = match e {
+            E::UnexpectedEndOfStream | E::UnclosedRootNode | E::NoRootNode => {
+                let (line, column) = ferrocat_esi::end_of_text(text);
+                (line, column, " (the text ends here: a truncated file?)")
+            }
+            _ => (e.pos().row, e.pos().col, ""),
+        };
+        EniError { place: Place { line, column }, message: format!("malformed XML: {e}{why}") }
     })?;
     let root = doc.root_element();
     if root.tag_name().name() != "EtherCATConfig" {
