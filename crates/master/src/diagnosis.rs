@@ -134,30 +134,29 @@ impl<I: Io> Master<I> {
             }
         }
         if now >= self.diagnosis.sync_due_ns {
-            if let Some(k) = self.next_sync_slave() {
-                return self.ask_sync_flag(k, period_ns);
+            if let Some((k, round)) = self.next_sync_slave() {
+                return self.ask_sync_flag(k, round, period_ns);
             }
         }
         self.poll_mailbox_step()
     }
 
-    /// The next slave whose flag to read this round, if any is left.
-    fn next_sync_slave(&mut self) -> Option<u16> {
+    /// The next slave whose flag to read this round, and how many a round reads: the slaves
+    /// with SYNC0 and a CoE mailbox that did not refuse the read.
+    fn next_sync_slave(&self) -> Option<(u16, usize)> {
         let d = &self.diagnosis;
-        let readable = |&&p: &&u16| {
-            self.slaves.get(p as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
-                && !d.sync_unreadable.contains(&p)
+        let readable = |p: &&u16| {
+            self.slaves.get(**p as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
+                && !d.sync_unreadable.contains(p)
         };
-        let candidates: Vec<u16> = d.sync0_slaves.iter().filter(readable).copied().collect();
-        if candidates.is_empty() {
-            return None;
-        }
-        Some(candidates[d.next_sync % candidates.len()])
+        let count = d.sync0_slaves.iter().filter(readable).count();
+        let k = d.sync0_slaves.iter().filter(readable).nth(d.next_sync % count.max(1))?;
+        Some((*k, count))
     }
 
     /// Writes the request for `position`'s 0x1C32:20 into its mailbox (one datagram; a full
     /// mailbox is tried again at the next call).
-    fn ask_sync_flag(&mut self, position: u16, period_ns: u64) -> Result<()> {
+    fn ask_sync_flag(&mut self, position: u16, round: usize, period_ns: u64) -> Result<()> {
         let (index, subindex) = SYNC_ERROR_FLAG;
         let mut body = [0u8; 2 + coe::SDO_HEADER_LEN];
         CoeHeader::new(CoeService::SDO_REQUEST).emit(&mut body)?;
@@ -170,8 +169,7 @@ impl<I: Io> Master<I> {
         let now = self.engine.io.now_ns();
         self.diagnosis.sync_pending = Some((position, now));
         self.diagnosis.next_sync += 1;
-        let n = self.diagnosis.sync0_slaves.len().max(1);
-        if self.diagnosis.next_sync % n == 0 {
+        if self.diagnosis.next_sync % round.max(1) == 0 {
             self.diagnosis.sync_due_ns = now + period_ns;
         }
         Ok(())

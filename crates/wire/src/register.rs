@@ -2,7 +2,7 @@
 //! master and the simulator touch. All multi-byte registers are little-endian.
 use core::fmt;
 
-use crate::bytes::{need, put};
+use crate::bytes::{need, put, u16_at};
 use crate::Result;
 
 /// Register addresses.
@@ -393,11 +393,6 @@ mod field {
     }
 }
 
-/// A little-endian u16 at `f` of a buffer already checked to hold it.
-fn le16(buf: &[u8], f: field::Field) -> u16 {
-    u16::from_le_bytes([buf[f.start], buf[f.start + 1]])
-}
-
 impl Fmmu {
     pub const LEN: usize = 16;
     pub const READ: u8 = 1;
@@ -410,10 +405,10 @@ impl Fmmu {
         start.copy_from_slice(&buf[f::LOGICAL_START]);
         Ok(Fmmu {
             logical_start: u32::from_le_bytes(start),
-            length: le16(buf, f::LENGTH),
+            length: u16_at(buf, f::LENGTH.start, "")?,
             logical_start_bit: buf[f::LOGICAL_START_BIT],
             logical_stop_bit: buf[f::LOGICAL_STOP_BIT],
-            physical_start: le16(buf, f::PHYSICAL_START),
+            physical_start: u16_at(buf, f::PHYSICAL_START.start, "")?,
             physical_start_bit: buf[f::PHYSICAL_START_BIT],
             fmmu_type: buf[f::TYPE],
             active: buf[f::ACTIVATE] & 1 != 0,
@@ -472,8 +467,8 @@ impl SyncManager {
         need(buf, 0, Self::LEN, "SyncManager")?;
         use field::sm;
         Ok(SyncManager {
-            start: le16(buf, sm::START),
-            length: le16(buf, sm::LENGTH),
+            start: u16_at(buf, sm::START.start, "")?,
+            length: u16_at(buf, sm::LENGTH.start, "")?,
             control: buf[sm::CONTROL],
             status: buf[sm::STATUS],
             activate: buf[sm::ACTIVATE],
