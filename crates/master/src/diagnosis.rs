@@ -148,6 +148,7 @@ impl<I: Io> Master<I> {
         let readable = |p: &&u16| {
             self.slaves.get(**p as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
                 && !d.sync_unreadable.contains(p)
+                && !self.acyclic.holds_mailbox(**p)
         };
         let count = d.sync0_slaves.iter().filter(readable).count();
         let k = d.sync0_slaves.iter().filter(readable).nth(d.next_sync % count.max(1))?;
@@ -228,10 +229,9 @@ impl<I: Io> Master<I> {
 
     fn poll_mailbox_step(&mut self) -> Result<()> {
         let n = self.slaves.len();
-        let Some(k) = (0..n)
-            .map(|i| (self.diagnosis.next_mailbox + i) % n)
-            .find(|&k| self.slaves[k].mailbox.is_some() && self.slaves[k].has_coe())
-        else {
+        let Some(k) = (0..n).map(|i| (self.diagnosis.next_mailbox + i) % n).find(|&k| {
+            self.slaves[k].mailbox.is_some() && self.slaves[k].has_coe() && !self.acyclic.holds_mailbox(k as u16)
+        }) else {
             return Ok(());
         };
         self.diagnosis.next_mailbox = k + 1;

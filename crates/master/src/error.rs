@@ -44,6 +44,9 @@ pub enum SlaveError {
     /// No reply in its send mailbox within the mailbox timeout.
     #[error("no mailbox reply (timeout)")]
     NoReply,
+    /// A datagram addressed to the slave came back with working counter 0.
+    #[error("does not answer at its station address")]
+    NotAnswering,
     /// A reply that does not parse.
     #[error("mailbox reply: {0}")]
     MalformedReply(ferrocat_wire::Error),
@@ -319,6 +322,44 @@ impl std::fmt::Display for DatagramRef {
     }
 }
 
+/// A request to a running master's acyclic side ([`Master::submit`](crate::Master::submit))
+/// that it cannot take.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RequestError {
+    /// Too many requests wait already.
+    #[error("{limit} requests wait already: try again when one is answered")]
+    QueueFull {
+        /// The most that may wait.
+        limit: usize,
+    },
+    /// A register read or write longer than a datagram of its own may be.
+    #[error("{len} bytes of registers: give 1 to {max}")]
+    RegisterLength {
+        /// The length asked for.
+        len: usize,
+        /// The longest allowed.
+        max: usize,
+    },
+    /// A register range past the ESC's 64 KiB address space.
+    #[error("registers {register:#06x}+{len} go past 0xffff")]
+    RegisterRange {
+        /// The first register.
+        register: u16,
+        /// The length.
+        len: usize,
+    },
+    /// A state that a master does not request of a slave while cyclic.
+    #[error("{0}: request INIT, PREOP, SAFEOP or OP")]
+    State(AlState),
+    /// The request waited longer than its time for an answer (the master's clock).
+    #[error("no answer within {waited_ms} ms")]
+    TimedOut {
+        /// How long it waited, ms.
+        waited_ms: u64,
+    },
+}
+
 /// An error of the master: the link's, the segment's, a slave's, or the configuration's.
 #[derive(Debug, thiserror::Error)]
 pub enum MasterError {
@@ -404,6 +445,9 @@ pub enum MasterError {
     /// The master was asked something its configuration does not allow.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// A request to a running master's acyclic side that it cannot take.
+    #[error(transparent)]
+    Request(#[from] RequestError),
     /// Receive times that a second latch could not tell apart (the named slaves').
     #[error("receive times of {} could not be latched again: the spacings of the latching frames did not tell their readings apart in {tries} tries", names(slaves))]
     Relatch {

@@ -26,6 +26,8 @@
 //! network interface, [`io::UdpIo`] over UDP, or (from the `ferrocat-segment` crate, which this
 //! one does not depend on) the simulated segment in virtual time. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
 //! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
+pub mod acyclic;
+mod acyclic_state;
 mod bring_up;
 pub mod calibrate;
 pub mod cia402;
@@ -50,6 +52,7 @@ mod master;
 pub mod plan;
 mod process;
 mod rtt_weight;
+mod sdo_transfer;
 mod settings;
 mod slave;
 pub mod sync;
@@ -57,6 +60,7 @@ mod topology;
 pub mod trajectory;
 mod trimmed;
 
+pub use acyclic::{AcyclicStats, Answer, Request, RequestId};
 pub use coe::{Coe, EntryInfo, ObjectInfo};
 pub use cycle_state::CycleStats;
 pub use dc::{DcConfig, DcReport};
@@ -65,8 +69,8 @@ pub(crate) use engine::SplitPasses;
 pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};
 pub use error::{
-    Cia402Error, ConfigError, DatagramRef, DcError, EoeError, FoeError, ImageSide, MasterError, ModuleError, Result,
-    SdoSource, SlaveError, SlaveRef, StateCause,
+    Cia402Error, ConfigError, DatagramRef, DcError, EoeError, FoeError, ImageSide, MasterError, ModuleError,
+    RequestError, Result, SdoSource, SlaveError, SlaveRef, StateCause,
 };
 pub use event::MasterEvent;
 /// The ESI descriptions the master takes ([`Master::add_esi`]); the reader with the `esi-xml`

@@ -86,6 +86,8 @@ pub struct Master<I: Io> {
     pub(crate) groups: Vec<groups::Group>,
     /// Diagnosis while cyclic ([`Master::diagnose`]).
     pub(crate) diagnosis: crate::diagnosis_state::Diagnosis,
+    /// Requests beside the cycle ([`Master::submit`]).
+    pub(crate) acyclic: crate::acyclic_state::Acyclic,
 }
 
 impl<I: Io> Master<I> {
@@ -116,6 +118,7 @@ impl<I: Io> Master<I> {
             copies: Vec::new(),
             groups: Vec::new(),
             diagnosis: Default::default(),
+            acyclic: Default::default(),
         }
     }
 

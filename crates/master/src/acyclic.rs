@@ -1,0 +1,331 @@
+//! The acyclic side of a running master: requests from the application or from other
+//! processes (SDO transfers, SDO information, registers, AL states), each taken one datagram
+//! at a time in a cycle's spare time, so that none of them makes a cycle late. Requests wait
+//! in a queue and are served one after the other; their answers wait until taken.
+use ferrocat_wire::mailbox::MailboxType;
+use ferrocat_wire::register::{addr, AlState, AlStatus, AlStatusCode};
+use ferrocat_wire::{Address, Command};
+
+use crate::acyclic_state::{Active, InfoWanted, Job};
+pub use crate::acyclic_state::{AcyclicStats, Answer, Request, RequestId, QUEUE_LIMIT, REGISTER_MAX};
+use crate::coe;
+use crate::error::{MasterError, RequestError, Result, SlaveError, StateCause};
+use crate::io::Io;
+use crate::mailbox::Polled;
+use crate::master::Master;
+use crate::sdo_transfer::{InfoTransfer, Peer, SdoTransfer, Step};
+
+/// Datagrams a call of [`Master::serve_requests`] sends at most.
+const DATAGRAMS_PER_CALL: u32 = 4;
+/// A datagram is started only where twice this, or twice the last cyclic round trip, is left
+/// before the deadline.
+const MIN_STEP_NS: u64 = 50_000;
+
+impl<I: Io> Master<I> {
+    /// Queues `request` for the acyclic side ([`Master::serve_requests`]); its answer comes
+    /// under the number returned ([`Master::take_answers`]). A request that cannot be taken
+    /// (the queue full, a register range too long) is answered at once with the error.
+    pub fn submit(&mut self, request: Request) -> RequestId {
+        let a = &mut self.acyclic;
+        let id = RequestId(a.next_id);
+        a.next_id += 1;
+        a.stats.submitted += 1;
+        let refused = match &request {
+            _ if a.queue.len() + usize::from(a.active.is_some()) >= QUEUE_LIMIT => {
+                Some(RequestError::QueueFull { limit: QUEUE_LIMIT })
+            }
+            Request::RegisterRead { register, len, .. } => register_check(*register, *len as usize),
+            Request::RegisterWrite { register, data, .. } => register_check(*register, data.len()),
+            Request::State { state: AlState::Bootstrap, .. } => Some(RequestError::State(AlState::Bootstrap)),
+            _ => None,
+        };
+        match refused {
+            Some(e) => a.answer(id, Err(e.into())),
+            None => a.queue.push_back((id, request)),
+        }
+        id
+    }
+
+    /// The answers given since the last call, each under its request's number.
+    pub fn take_answers(&mut self) -> Vec<(RequestId, Result<Answer>)> {
+        std::mem::take(&mut self.acyclic.answers)
+    }
+
+    /// Requests waiting or being served.
+    pub fn requests_pending(&self) -> usize {
+        self.acyclic.queue.len() + usize::from(self.acyclic.active.is_some())
+    }
+
+    /// What the acyclic side did so far.
+    pub fn acyclic_stats(&self) -> AcyclicStats {
+        self.acyclic.stats
+    }
+
+    /// Serves the queued requests before `deadline_ns` (the master's clock): at most 4
+    /// datagrams, each only where twice a round trip (the last cyclic one, at least 50 µs) is
+    /// left, and waited for until the deadline at most, not sent again. A mailbox message not
+    /// yet taken is written again at the next call under the same counter (a slave drops a
+    /// repeated one, ETG.1000.4); a reply not yet there is polled for again. A request is
+    /// answered with an error when it has made no progress for the mailbox timeout (the state
+    /// timeout for a state request). Errors of a request are its answer; only the link's
+    /// errors are returned. Returns the datagrams sent.
+    pub fn serve_requests(&mut self, deadline_ns: u64) -> Result<u32> {
+        let step_ns = self.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
+        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
+        let mut sent = 0;
+        let mut result = Ok(0);
+        while sent < DATAGRAMS_PER_CALL {
+            if self.acyclic.active.is_none() && !self.start_next() {
+                break;
+            }
+            let now = self.engine.io.now_ns();
+            if now + 2 * step_ns > deadline_ns {
+                break;
+            }
+            (self.engine.timeout_ns, self.engine.retries) = (deadline_ns - now, 0);
+            sent += 1;
+            self.acyclic.stats.datagrams += 1;
+            match self.request_step() {
+                Ok(()) => result = Ok(sent),
+                Err(MasterError::Timeout { .. }) => {
+                    self.acyclic.stats.given_up += 1;
+                    result = Ok(sent);
+                    break;
+                }
+                Err(e @ MasterError::Io(_)) => {
+                    result = Err(e);
+                    break;
+                }
+                Err(e) => {
+                    let id = self.acyclic.active.take().map(|a| a.id);
+                    if let Some(id) = id {
+                        self.acyclic.answer(id, Err(e));
+                    }
+                    result = Ok(sent);
+                }
+            }
+        }
+        (self.engine.timeout_ns, self.engine.retries) = (timeout, retries);
+        result
+    }
+
+    /// Takes the next queued request that can start now: a mailbox request waits while
+    /// diagnosis awaits a reply of the same slave. Returns whether one is being served.
+    fn start_next(&mut self) -> bool {
+        let busy = self.diagnosis.sync_pending.map(|(p, _)| p);
+        let Some(k) = self.acyclic.queue.iter().position(|(_, r)| !(r.uses_mailbox() && busy == Some(r.position())))
+        else {
+            return false;
+        };
+        let Some((id, request)) = self.acyclic.queue.remove(k) else { return false };
+        let now = self.engine.io.now_ns();
+        match self.job_of(&request) {
+            Ok(job) => {
+                self.acyclic.active = Some(Active { id, position: request.position(), job, since_ns: now });
+                true
+            }
+            Err(e) => {
+                self.acyclic.answer(id, Err(e));
+                self.start_next()
+            }
+        }
+    }
+
+    fn job_of(&mut self, request: &Request) -> Result<Job> {
+        let position = request.position();
+        let job = match request.clone() {
+            Request::SdoRead { index, subindex, complete_access, .. } => {
+                Job::Sdo(SdoTransfer::upload(self.peer_of(position)?, index, subindex, complete_access), None)
+            }
+            Request::SdoWrite { index, subindex, complete_access, data, .. } => {
+                Job::Sdo(SdoTransfer::download(self.peer_of(position)?, index, subindex, complete_access, data), None)
+            }
+            Request::OdList { .. } => {
+                Job::Info(InfoTransfer::new(self.peer_of(position)?, coe::od_list_request())?, InfoWanted::List, None)
+            }
+            Request::ObjectInfo { index, .. } => {
+                let t = InfoTransfer::new(self.peer_of(position)?, coe::object_request(index))?;
+                Job::Info(t, InfoWanted::Object, None)
+            }
+            Request::EntryInfo { index, subindex, .. } => {
+                let t = InfoTransfer::new(self.peer_of(position)?, coe::entry_request(index, subindex))?;
+                Job::Info(t, InfoWanted::Entry, None)
+            }
+            Request::RegisterRead { register, len, .. } => {
+                self.slave(position)?;
+                Job::RegisterRead { register, len }
+            }
+            Request::RegisterWrite { register, data, .. } => {
+                self.slave(position)?;
+                Job::RegisterWrite { register, data }
+            }
+            Request::State { state, .. } => {
+                self.slave(position)?;
+                // Supervision keeps the slave where it was asked to be, not in OP.
+                self.slaves[position as usize].state = state;
+                Job::State { state, written: false }
+            }
+        };
+        // A mailbox conversation starts with its first message, under the next counter.
+        Ok(match job {
+            Job::Sdo(mut t, _) => {
+                let first = t.start()?;
+                Job::Sdo(t, Some(self.mailboxes().message(position, MailboxType::COE, &first)?))
+            }
+            Job::Info(mut t, wanted, _) => {
+                let first = t.start()?;
+                Job::Info(t, wanted, Some(self.mailboxes().message(position, MailboxType::COE, &first)?))
+            }
+            other => other,
+        })
+    }
+
+    /// Who `position` is, for a CoE conversation.
+    fn peer_of(&mut self, position: u16) -> Result<Peer> {
+        let (_, name, m) = self.mailboxes().mailbox_of(position, MailboxType::COE)?;
+        Ok(Peer { position, name, mailbox_len: m.out.1 as usize })
+    }
+
+    /// One datagram of the request being served.
+    fn request_step(&mut self) -> Result<()> {
+        let Some(mut a) = self.acyclic.active.take() else { return Ok(()) };
+        let now = self.engine.io.now_ns();
+        let limit_ns = match a.job {
+            Job::State { .. } => self.settings.state_timeout_ns,
+            _ => self.settings.mailbox_timeout_ns,
+        };
+        let station = self.slave(a.position)?.station;
+        let device = |ado| Address::Device { adp: station, ado };
+        let done = match &mut a.job {
+            Job::Sdo(_, Some(msg)) | Job::Info(_, _, Some(msg)) => {
+                // Written again under the same counter until the slave takes it.
+                let mut mbx = self.mailboxes();
+                if mbx.try_write(a.position, msg)? {
+                    a.since_ns = now;
+                    match &mut a.job {
+                        Job::Sdo(_, m) | Job::Info(_, _, m) => *m = None,
+                        _ => {}
+                    }
+                } else if now.saturating_sub(a.since_ns) > limit_ns {
+                    return Err(MasterError::of(a.position, &mbx.name_of(a.position), SlaveError::MailboxFull));
+                }
+                None
+            }
+            Job::Sdo(..) | Job::Info(..) => self.await_reply(&mut a, now, limit_ns)?,
+            Job::RegisterRead { register, len } => {
+                let mut b = vec![0u8; *len as usize];
+                let wkc = self.engine.one(Command::FPRD, device(*register), &mut b)?;
+                Some(self.wkc_checked(a.position, wkc).map(|()| Answer::Data(b)))
+            }
+            Job::RegisterWrite { register, data } => {
+                let wkc = self.engine.one(Command::FPWR, device(*register), data)?;
+                Some(self.wkc_checked(a.position, wkc).map(|()| Answer::Written))
+            }
+            Job::State { state, written: w @ false } => {
+                let wkc = self.engine.one(Command::FPWR, device(addr::AL_CONTROL), &mut [*state as u8, 0])?;
+                *w = wkc == 1;
+                None
+            }
+            Job::State { state, written: true } => {
+                let mut d = [0u8; 6];
+                self.engine.one(Command::FPRD, device(addr::AL_STATUS), &mut d)?;
+                let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
+                let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
+                let error = self.slaves[a.position as usize].al_error(status, code);
+                let failed = |cause| MasterError::State {
+                    position: a.position,
+                    name: self.slaves[a.position as usize].name.clone(),
+                    requested: *state,
+                    stayed: status.state(),
+                    code,
+                    cause,
+                };
+                if status.state() == Some(*state) && !error {
+                    Some(Ok(Answer::State(*state)))
+                } else if error {
+                    Some(Err(failed(StateCause::Error)))
+                } else if now.saturating_sub(a.since_ns) > limit_ns {
+                    Some(Err(failed(StateCause::Timeout)))
+                } else {
+                    None
+                }
+            }
+        };
+        match done {
+            Some(answer) => self.acyclic.answer(a.id, answer),
+            None => self.acyclic.active = Some(a),
+        }
+        Ok(())
+    }
+
+    /// One poll of the slave's send mailbox for the awaited reply.
+    fn await_reply(&mut self, a: &mut Active, now: u64, limit_ns: u64) -> Result<Option<Result<Answer>>> {
+        let polled = self.mailboxes().poll(a.position);
+        let reply = match polled {
+            Ok(Polled::Message(MailboxType::COE, payload)) => payload,
+            Ok(_) => {
+                if now.saturating_sub(a.since_ns) > limit_ns {
+                    let name = self.slaves[a.position as usize].name.clone();
+                    return Ok(Some(Err(MasterError::of(a.position, &name, SlaveError::NoReply))));
+                }
+                return Ok(None);
+            }
+            Err(e @ MasterError::Slave { .. }) => return Ok(Some(Err(e))),
+            Err(e) => return Err(e),
+        };
+        a.since_ns = now;
+        let next = match &mut a.job {
+            Job::Sdo(t, _) => match t.on_reply(&reply) {
+                Ok(Step::Done(data)) => return Ok(Some(Ok(written_or(Answer::Data(data), t)))),
+                Ok(Step::Send(next)) => Some(next),
+                Ok(Step::Await) => None,
+                Err(e) => return Ok(Some(Err(e))),
+            },
+            Job::Info(t, wanted, _) => match t.on_reply(&reply) {
+                Ok(Step::Done(parts)) => {
+                    let peer = t.peer().clone();
+                    return Ok(Some(match wanted {
+                        InfoWanted::List => coe::od_list_of(&parts).map(Answer::List),
+                        InfoWanted::Object => coe::object_info_of(&peer, &parts).map(Answer::Object),
+                        InfoWanted::Entry => coe::entry_info_of(&peer, &parts).map(Answer::Entry),
+                    }));
+                }
+                Ok(_) => None,
+                Err(e) => return Ok(Some(Err(e))),
+            },
+            _ => None,
+        };
+        if let Some(payload) = next {
+            let m = self.mailboxes().message(a.position, MailboxType::COE, &payload)?;
+            match &mut a.job {
+                Job::Sdo(_, slot) | Job::Info(_, _, slot) => *slot = Some(m),
+                _ => {}
+            }
+        }
+        Ok(None)
+    }
+
+    fn wkc_checked(&self, position: u16, wkc: u16) -> Result<()> {
+        if wkc == 1 {
+            return Ok(());
+        }
+        let name = self.slaves.get(position as usize).map(|s| s.name.clone()).unwrap_or_default();
+        Err(MasterError::of(position, &name, SlaveError::NotAnswering))
+    }
+}
+
+/// A download's answer is that it was written; an upload's, its data.
+fn written_or(answer: Answer, t: &SdoTransfer) -> Answer {
+    if t.is_download() {
+        Answer::Written
+    } else {
+        answer
+    }
+}
+
+fn register_check(register: u16, len: usize) -> Option<RequestError> {
+    if !(1..=REGISTER_MAX).contains(&len) {
+        return Some(RequestError::RegisterLength { len, max: REGISTER_MAX });
+    }
+    (register as usize + len > 0x1_0000).then_some(RequestError::RegisterRange { register, len })
+}

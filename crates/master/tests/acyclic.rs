@@ -1,0 +1,138 @@
+//! The acyclic side of a running master (`Master::submit`, `serve_requests`): SDO transfers,
+//! SDO information, registers and state requests served in the cycles' spare time while the
+//! cyclic exchange goes on whole, and each bad request answered with its error.
+use ferrocat_master::io::Io;
+use ferrocat_master::{AlState, Answer, Master, MasterError, Request, RequestError, RequestId};
+use ferrocat_segment::SegmentConfig;
+use ferrocat_segment::{HostModel, VirtualIo};
+use ferrocat_wire::register::addr;
+
+const CYCLE_NS: u64 = 1_000_000;
+
+/// EK1100, EL2004 and a SERVO in OP.
+fn running() -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
+    m.bring_up().unwrap();
+    m
+}
+
+/// Cycles until `id` is answered (at most `limit` cycles), serving requests in each cycle's
+/// first three quarters; the answer, and the cycles whose working counter was short.
+fn cycle_until(m: &mut Master<VirtualIo>, id: RequestId, limit: u32) -> (Result<Answer, MasterError>, u32) {
+    let mut next = m.io_mut().now_ns();
+    let mut short = 0;
+    for _ in 0..limit {
+        next += CYCLE_NS;
+        if m.cycle().unwrap() != m.expected_wkc() {
+            short += 1;
+        }
+        m.serve_requests(next - CYCLE_NS / 4).unwrap();
+        if let Some((_, a)) = m.take_answers().into_iter().find(|(k, _)| *k == id) {
+            return (a, short);
+        }
+        m.io_mut().sleep_until(next);
+    }
+    panic!("request {id:?} not answered in {limit} cycles");
+}
+
+#[test]
+fn sdo_transfers_and_information_are_served_beside_a_whole_cycle() {
+    let mut m = running();
+    let id = m.submit(Request::SdoRead { position: 2, index: 0x1018, subindex: 1, complete_access: false });
+    let (a, short) = cycle_until(&mut m, id, 200);
+    let vendor = m.slaves()[2].identity().vendor_id;
+    assert_eq!(a.unwrap(), Answer::Data(vendor.to_le_bytes().to_vec()));
+    assert_eq!(short, 0);
+
+    // A write, then the value read back (0x10F1:02, the sync error counter limit).
+    let id = m.submit(Request::SdoWrite {
+        position: 2,
+        index: 0x10F1,
+        subindex: 2,
+        complete_access: false,
+        data: vec![5, 0],
+    });
+    assert_eq!(cycle_until(&mut m, id, 200).0.unwrap(), Answer::Written);
+    let id = m.submit(Request::SdoRead { position: 2, index: 0x10F1, subindex: 2, complete_access: false });
+    assert_eq!(cycle_until(&mut m, id, 200).0.unwrap(), Answer::Data(vec![5, 0]));
+
+    // A string longer than an expedited transfer's 4 bytes (the device name).
+    let id = m.submit(Request::SdoRead { position: 2, index: 0x1008, subindex: 0, complete_access: false });
+    let Answer::Data(name) = cycle_until(&mut m, id, 200).0.unwrap() else { panic!() };
+    assert!(name.len() > 4, "{name:?}");
+
+    let id = m.submit(Request::EntryInfo { position: 2, index: 0x6060, subindex: 0 });
+    let Answer::Entry(e) = cycle_until(&mut m, id, 200).0.unwrap() else { panic!() };
+    assert_eq!(e.bit_length, 8);
+    let id = m.submit(Request::OdList { position: 2 });
+    let Answer::List(list) = cycle_until(&mut m, id, 400).0.unwrap() else { panic!() };
+    assert!(list.contains(&0x1018) && list.contains(&0x6060), "{list:x?}");
+    let s = m.acyclic_stats();
+    assert_eq!((s.answered, s.failed), (6, 0));
+    assert_eq!(m.cycle_stats().wkc_errors, 0);
+}
+
+#[test]
+fn an_abort_and_a_slave_without_coe_are_answers_not_errors_of_the_loop() {
+    let mut m = running();
+    let id = m.submit(Request::SdoRead { position: 2, index: 0x5FFF, subindex: 0, complete_access: false });
+    let (a, short) = cycle_until(&mut m, id, 200);
+    assert!(matches!(a, Err(MasterError::Abort { position: 2, index: 0x5FFF, .. })), "{a:?}");
+    assert_eq!(short, 0);
+    let id = m.submit(Request::SdoRead { position: 0, index: 0x1018, subindex: 1, complete_access: false });
+    let a = cycle_until(&mut m, id, 10).0;
+    assert!(a.as_ref().is_err_and(|e| e.to_string().contains("has no mailbox")), "{a:?}");
+    let id = m.submit(Request::RegisterRead { position: 9, register: 0, len: 2 });
+    let a = cycle_until(&mut m, id, 10).0;
+    assert!(matches!(a, Err(MasterError::NoSuchSlave { position: 9, count: 3 })), "{a:?}");
+    let id = m.submit(Request::RegisterRead { position: 1, register: 0xFFFF, len: 2 });
+    let a = cycle_until(&mut m, id, 10).0;
+    assert!(matches!(a, Err(MasterError::Request(RequestError::RegisterRange { .. }))), "{a:?}");
+    let id = m.submit(Request::RegisterWrite { position: 1, register: 0, data: vec![] });
+    let a = cycle_until(&mut m, id, 10).0;
+    assert!(matches!(a, Err(MasterError::Request(RequestError::RegisterLength { len: 0, .. }))), "{a:?}");
+}
+
+#[test]
+fn registers_and_a_state_request_reach_the_slave_and_supervision_keeps_it_there() {
+    let mut m = running();
+    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    assert_eq!(cycle_until(&mut m, id, 10).0.unwrap(), Answer::Data(vec![AlState::Op as u8, 0]));
+    let id = m.submit(Request::State { position: 1, state: AlState::SafeOp });
+    assert_eq!(cycle_until(&mut m, id, 1000).0.unwrap(), Answer::State(AlState::SafeOp));
+    // Supervision does not take it back to OP.
+    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    let _ = cycle_until(&mut m, id, 300);
+    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    assert_eq!(cycle_until(&mut m, id, 10).0.unwrap(), Answer::Data(vec![AlState::SafeOp as u8, 0]));
+    let id = m.submit(Request::State { position: 1, state: AlState::Op });
+    assert_eq!(cycle_until(&mut m, id, 1000).0.unwrap(), Answer::State(AlState::Op));
+    let id = m.submit(Request::State { position: 1, state: AlState::Bootstrap });
+    assert!(matches!(cycle_until(&mut m, id, 10).0, Err(MasterError::Request(RequestError::State(_)))));
+}
+
+#[test]
+fn a_full_queue_answers_at_once_and_nothing_is_lost() {
+    let mut m = running();
+    let ids: Vec<RequestId> =
+        (0..70).map(|_| m.submit(Request::RegisterRead { position: 0, register: addr::AL_STATUS, len: 2 })).collect();
+    let refused = m.take_answers();
+    assert_eq!(refused.len(), 70 - ferrocat_master::acyclic::QUEUE_LIMIT);
+    assert!(refused.iter().all(|(_, a)| matches!(a, Err(MasterError::Request(RequestError::QueueFull { .. })))));
+    let mut answered = refused.len();
+    let last = *ids.last().unwrap();
+    let mut next = m.io_mut().now_ns();
+    for _ in 0..200 {
+        next += CYCLE_NS;
+        m.cycle().unwrap();
+        m.serve_requests(next - CYCLE_NS / 4).unwrap();
+        answered += m.take_answers().iter().filter(|(_, a)| a.is_ok()).count();
+        m.io_mut().sleep_until(next);
+    }
+    assert_eq!(answered, 70, "every request answered once (the last was {last:?})");
+    assert_eq!(m.requests_pending(), 0);
+}
