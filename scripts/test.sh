@@ -46,6 +46,11 @@ if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem, kickcat' 2
   .venv/bin/pip install -q --disable-pip-version-check pysoem 'kickcat>=2.5'
 fi
 export FERROCAT_PYTHON="$(pwd)/.venv/bin/python"
+# The masters the tests start keep their locks, control sockets and shared images in a
+# directory of the run's own (docs/service.md), not in /run/ferrocat.
+export FERROCAT_RUN_DIR="$(mktemp -d -t ferrocat-run.XXXXXX)"
+chmod 1777 "$FERROCAT_RUN_DIR"
+trap 'rm -rf "$FERROCAT_RUN_DIR"' EXIT
 if ! cargo nextest --version >/dev/null 2>&1; then
   log "installing cargo-nextest"
   cargo install cargo-nextest --locked

@@ -9,6 +9,7 @@ mod demo;
 mod eni;
 mod eoe_cmd;
 mod esi;
+mod image_cmd;
 mod lab;
 mod lab_live;
 mod manpages;
@@ -16,6 +17,7 @@ mod master_cmd;
 mod pcap;
 mod plots;
 mod report;
+mod service_cmd;
 mod sii;
 mod sim;
 mod target;
@@ -276,6 +278,88 @@ enum Command {
         #[arg(long, value_name = "NAME")]
         show: Vec<String>,
         /// Print the summary as one JSON object on standard output instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Serve no control socket (by default a master on --iface or --udp serves one, and on
+        /// the embedded virtual segment where --control-socket names it).
+        #[arg(long)]
+        no_control: bool,
+        /// The control socket's file mode, octal.
+        #[arg(long, default_value = "660", value_name = "MODE", value_parser = parse_mode)]
+        control_mode: u32,
+        /// The group that owns the control socket (default: this process's).
+        #[arg(long, value_name = "GROUP")]
+        control_group: Option<String>,
+        /// Take register writes through the control socket (`ferrocat reg write`); off by
+        /// default, as a register write can take a slave off the segment.
+        #[arg(long)]
+        allow_register_writes: bool,
+        /// Leave the slaves in the state the run ends in (OP) instead of stepping them down to
+        /// SAFEOP, then INIT, when it ends (after --seconds, or on SIGINT or SIGTERM).
+        #[arg(long)]
+        keep_state: bool,
+        /// The application watchdog: once a client has written outputs to the shared image,
+        /// this long without a write trips it (ms; default: none).
+        #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=3_600_000))]
+        app_watchdog_ms: Option<u64>,
+        /// What a tripped application watchdog does: hold the last outputs, or take the
+        /// slaves with outputs to SAFEOP until the application writes again.
+        #[arg(long, value_enum, default_value = "hold", requires = "app_watchdog_ms")]
+        app_watchdog: image_cmd::AppWatchdogAction,
+    },
+    /// Print variables of the process image a running master shares (every one without NAME):
+    /// outputs as the last cycle sent them, inputs as it received them.
+    Get {
+        /// Variables: POS:ENTRY, or an ENI's variable.
+        #[arg(value_name = "NAME")]
+        names: Vec<String>,
+        #[command(flatten)]
+        target: target::Target,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write outputs of the process image a running master shares, as one change (sent by one
+    /// cycle, or none); waits until a cycle has sent them.
+    Set {
+        /// NAME=VALUE (decimal or 0x hex; negative in two's complement).
+        #[arg(value_name = "NAME=VALUE", required = true, allow_negative_numbers = true)]
+        values: Vec<String>,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// The slaves of the master running on the target, with their AL state read now (as IgH's
+    /// `ethercat slaves`); without a running master, the slaves a scan finds.
+    Slaves {
+        #[command(flatten)]
+        target: target::Target,
+        /// One JSON array instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Read or write a slave's ESC registers, through the master running on the target or by
+    /// a scan of its own.
+    Reg {
+        #[command(subcommand)]
+        action: RegCmd,
+    },
+    /// Ask the master running on the target to take a slave to INIT, PREOP, SAFEOP or OP and
+    /// keep it there.
+    State {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
+        position: u16,
+        /// INIT, PREOP, SAFEOP or OP (any case).
+        state: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// The statistics of the master running on the target: cycles, working counters, round
+    /// trip, requests served, the clock sync's lock.
+    Stats {
+        #[command(flatten)]
+        target: target::Target,
+        /// One JSON object instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -562,6 +646,38 @@ enum SdoCmd {
 }
 
 #[derive(Subcommand)]
+enum RegCmd {
+    /// Print LEN bytes of the slave's registers from REGISTER, as hex.
+    Read {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
+        position: u16,
+        /// The first register (decimal or 0x hex), e.g. 0x0130 for the AL status.
+        #[arg(value_parser = service_cmd::register)]
+        register: u16,
+        /// Bytes to read (1 to 1 024).
+        #[arg(default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=1024))]
+        len: u16,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// Write DATA (hex bytes, e.g. 0201) to the slave's registers from REGISTER; a running
+    /// master takes it only when started with --allow-register-writes.
+    Write {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
+        position: u16,
+        /// The first register (decimal or 0x hex).
+        #[arg(value_parser = service_cmd::register)]
+        register: u16,
+        /// The bytes, as hex (in wire order: the low byte of a number first).
+        data: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+}
+
+#[derive(Subcommand)]
 enum FoeCmd {
     /// Read file NAME of the slave at POSITION into FILE.
     Read {
@@ -804,8 +920,15 @@ fn main() -> ExitCode {
             counters_period_ms,
             no_diagnosis,
             json,
+            no_control,
+            control_mode,
+            control_group,
+            allow_register_writes,
+            app_watchdog_ms,
+            app_watchdog,
+            keep_state,
         } => {
-            let run = master_cmd::RunOptions {
+            let mut run = master_cmd::RunOptions {
                 diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
                 set: &set,
                 show: &show,
@@ -822,9 +945,27 @@ fn main() -> ExitCode {
                 frame_timeout_us,
                 eoe_taps: &eoe_tap,
                 json,
+                keep_state,
+                control: (!no_control).then_some(master_cmd::ControlOptions {
+                    mode: control_mode,
+                    group: control_group,
+                    register_writes: allow_register_writes,
+                    app_watchdog: app_watchdog_ms.map(|ms| image_cmd::AppWatchdog::new(ms * 1_000_000, app_watchdog)),
+                }),
             };
-            master_cmd::run(&target, &run)
+            master_cmd::run(&target, &mut run)
         }
+        Command::Slaves { target, json } => service_cmd::slaves(&target, json),
+        Command::Reg { action } => match action {
+            RegCmd::Read { position, register, len, target } => service_cmd::reg_read(&target, position, register, len),
+            RegCmd::Write { position, register, data, target } => {
+                service_cmd::reg_write(&target, position, register, &data)
+            }
+        },
+        Command::State { position, state, target } => service_cmd::state(&target, position, &state),
+        Command::Stats { target, json } => service_cmd::stats(&target, json),
+        Command::Get { names, target, json } => image_cmd::get(&target, &names, json),
+        Command::Set { values, target } => image_cmd::set(&target, &values),
     };
     match result {
         Ok(code) => code,
@@ -832,6 +973,14 @@ fn main() -> ExitCode {
             eprintln!("ferrocat: error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// A file mode in octal (e.g. 660).
+fn parse_mode(s: &str) -> Result<u32, String> {
+    match u32::from_str_radix(s.trim().trim_start_matches("0o"), 8) {
+        Ok(m) if m <= 0o777 => Ok(m),
+        _ => Err(format!("'{s}' is not a file mode (octal, 000 to 777, e.g. 660)")),
     }
 }
 

@@ -149,11 +149,11 @@ fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
 
 /// The type to encode a value for `index:sub` in, from the slave's SDO information (CiA 301's
 /// data type codes, ETG.1000.6 Table 63).
-fn object_type(m: &mut Master<CliIo>, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<SdoType> {
+fn object_type(m: &mut dyn CoeAccess, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<SdoType> {
     if complete {
         bail!("complete access writes the whole object: give --type hex (its bytes) or string");
     }
-    let e = m.coe().entry_info(position, index, sub).map_err(|e| {
+    let e = m.entry(position, index, sub).map_err(|e| {
         anyhow::anyhow!(
             "the slave does not say what type {index:#06x}:{sub:02x} is ({e}): give --type (u8, i8, u16, …, string, hex)"
         )
@@ -292,29 +292,67 @@ pub enum SdoAction {
     List,
 }
 
+/// The CoE services `sdo` uses: of a master of its own, or of the master running on the
+/// target (through its control socket).
+pub trait CoeAccess {
+    fn upload(&mut self, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<Vec<u8>>;
+    fn download(&mut self, position: u16, index: u16, sub: u8, complete: bool, data: &[u8]) -> anyhow::Result<()>;
+    /// An entry's description.
+    fn entry(&mut self, position: u16, index: u16, sub: u8) -> anyhow::Result<ferrocat_master::EntryInfo>;
+    fn objects(&mut self, position: u16) -> anyhow::Result<Vec<u16>>;
+    fn object(&mut self, position: u16, index: u16) -> anyhow::Result<ferrocat_master::ObjectInfo>;
+}
+
+impl CoeAccess for Master<CliIo> {
+    fn upload(&mut self, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<Vec<u8>> {
+        Ok(self.coe().sdo_upload(position, index, sub, complete)?)
+    }
+    fn download(&mut self, position: u16, index: u16, sub: u8, complete: bool, data: &[u8]) -> anyhow::Result<()> {
+        Ok(self.coe().sdo_download(position, index, sub, complete, data)?)
+    }
+    fn entry(&mut self, position: u16, index: u16, sub: u8) -> anyhow::Result<ferrocat_master::EntryInfo> {
+        Ok(self.coe().entry_info(position, index, sub)?)
+    }
+    fn objects(&mut self, position: u16) -> anyhow::Result<Vec<u16>> {
+        Ok(self.coe().od_list(position)?)
+    }
+    fn object(&mut self, position: u16, index: u16) -> anyhow::Result<ferrocat_master::ObjectInfo> {
+        Ok(self.coe().object_info(position, index)?)
+    }
+}
+
 pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitCode> {
+    if let Some(mut c) = t.running_master()? {
+        return sdo_with(&mut c, position, action);
+    }
     let mut m = t.master()?;
     t.scan(&mut m)?;
     m.configure()?;
+    let code = sdo_with(&mut m, position, action)?;
+    finish(m)?;
+    Ok(code)
+}
+
+fn sdo_with(m: &mut dyn CoeAccess, position: u16, action: SdoAction) -> anyhow::Result<ExitCode> {
     match action {
         SdoAction::Read { object, complete, ty } => {
             let (i, s) = parse_object(&object)?;
-            let v = m.coe().sdo_upload(position, i, s, complete)?;
+            let v = m.upload(position, i, s, complete)?;
             outln!("{}", show(&v, ty)?);
         }
         SdoAction::Write { object, value, complete, ty } => {
             let (i, s) = parse_object(&object)?;
             let ty = match ty {
                 Some(ty) => ty,
-                None => object_type(&mut m, position, i, s, complete)?,
+                None => object_type(m, position, i, s, complete)?,
             };
             let bytes = encode(&value, ty)?;
-            m.coe().sdo_download(position, i, s, complete, &bytes)?;
+            m.download(position, i, s, complete, &bytes)?;
             eprintln!("wrote {value} to {i:#06x}:{s:02x} of slave {position} ({}, {} byte(s))", ty.name(), bytes.len());
         }
         SdoAction::List => {
-            for index in m.coe().od_list(position)? {
-                let o = m.coe().object_info(position, index)?;
+            for index in m.objects(position)? {
+                let o = m.object(position, index)?;
                 outln!(
                     "{index:#06x} {:<40} type {:#06x} max sub {} code {}",
                     o.name,
@@ -325,7 +363,6 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
             }
         }
     }
-    finish(m)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -561,6 +598,22 @@ pub struct RunOptions<'a> {
     /// Slave-to-slave copies (`FROM=TO`) besides a description's.
     pub copy: &'a [String],
     pub json: bool,
+    /// The control socket (`None`: none).
+    pub control: Option<ControlOptions>,
+    /// Leave the slaves in OP at the end instead of stepping them down.
+    pub keep_state: bool,
+}
+
+/// How `run` serves its control socket.
+pub struct ControlOptions {
+    /// The socket file's mode.
+    pub mode: u32,
+    /// Its group.
+    pub group: Option<String>,
+    /// Whether register writes are taken.
+    pub register_writes: bool,
+    /// The application watchdog on the shared image's outputs.
+    pub app_watchdog: Option<crate::image_cmd::AppWatchdog>,
 }
 
 /// Where the cyclic frames passed the reference on the DC cycle, as time after the SYNC0
@@ -652,7 +705,7 @@ fn lock_text(method: &dyn ClockSync, st: &SyncState) -> String {
     }
 }
 
-pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
+pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let RunOptions { seconds, cycle_us, max_rate, eoe_taps, json, .. } = *o;
     let mut frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate, None));
     let dc = o.dc.is_some();
@@ -777,6 +830,53 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         bridges.push(crate::eoe_cmd::TapBridge::open(pos, name)?);
         eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
     }
+    let mut control = match (&o.control, t.control_path()) {
+        (Some(c), Some(path)) => {
+            let hello = ferrocat_service::protocol::Hello {
+                service: String::from("ferrocat"),
+                protocol: ferrocat_service::protocol::VERSION,
+                pid: std::process::id(),
+                target: t.service_name().unwrap_or_else(|| String::from("virtual")),
+                cycle_us: if max_rate { 0 } else { cycle_us },
+                slaves: m.slaves().len(),
+                register_writes: c.register_writes,
+            };
+            let options = ferrocat_service::ServerOptions {
+                path: path.clone(),
+                mode: c.mode,
+                group: c.group.clone(),
+                register_writes: c.register_writes,
+                hello,
+            };
+            let server = ferrocat_service::Server::start(options)
+                .with_context(|| format!("control socket {}", path.display()))?;
+            eprintln!("control socket {}", path.display());
+            Some(server)
+        }
+        _ => None,
+    };
+    // The process image shared with other processes, beside the socket.
+    let mut shared = match (&control, t.control_path()) {
+        (Some(_), Some(socket)) => {
+            let path = socket.with_extension("image");
+            let (out_bytes, in_bytes) = m.image_bytes();
+            let vars = crate::image_cmd::symbols(&m, eni);
+            let mode = o.control.as_ref().map_or(0o660, |c| c.mode);
+            let image = ferrocat_service::SharedImage::create(
+                &path,
+                out_bytes as usize,
+                in_bytes as usize,
+                &vars,
+                if max_rate { 0 } else { cycle_us * 1000 },
+                mode,
+            )
+            .with_context(|| format!("shared image {}", path.display()))?;
+            eprintln!("shared image {} ({} variables)", path.display(), vars.len());
+            Some(image)
+        }
+        _ => None,
+    };
+    let mut app_watchdog = o.control.as_mut().and_then(|c| c.app_watchdog.take());
     let t_op = {
         use ferrocat_master::io::Io;
         m.io_mut().now_ns()
@@ -834,6 +934,10 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
     while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
         next += next_period;
+        // The clients' outputs, whole or not at all, into this cycle's frame.
+        if let Some(image) = shared.as_mut() {
+            image.apply_outputs(m.outputs_mut());
+        }
         next_period = match sync.as_mut() {
             Some((method, st)) => {
                 let (lost_before, lock_before) = (st.lost, st.lock.state());
@@ -877,6 +981,13 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 );
             }
         }
+        if let Some(image) = shared.as_mut() {
+            let (s, now) = (m.cycle_stats(), m.io_mut().now_ns());
+            image.publish(m.image(), s.cycles, now, s.last_wkc as u32, m.expected_wkc() as u32);
+            if let Some(w) = app_watchdog.as_mut() {
+                w.check(&mut m, image.commits(), now);
+            }
+        }
         for b in bridges.iter_mut() {
             b.step(&mut m)?;
         }
@@ -884,6 +995,20 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         // slave a datagram, every `diagnosis_ms`; emergencies from the mailboxes between.
         if let (Some(ms), false) = (o.diagnosis_ms, max_rate) {
             m.diagnose(next.saturating_sub(next_period / 4), ms * 1_000_000)?;
+        }
+        // Requests from other processes, in the same spare time (back to back: a millisecond
+        // after the cycle, while any wait).
+        if let Some(server) = control.as_mut() {
+            let deadline =
+                if max_rate { m.io_mut().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
+            let extra = || {
+                json!({ "clock_sync": sync.as_ref().map(|(method, st)| json!({
+                    "method": method.name(),
+                    "lock": st.lock.state().name(),
+                    "offset_ns": st.lock.offset_ns(),
+                })) })
+            };
+            server.serve(&mut m, deadline, &extra)?;
         }
         let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
         for e in m.take_events() {
@@ -973,6 +1098,30 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         _ => None,
     };
+    // What the control socket and the shared image served (they go now).
+    let image_stats = shared.take().map(|i| i.stats());
+    let control_json = control.take().map(|server| {
+        let a = m.acyclic_stats();
+        let path = server.path().display().to_string();
+        drop(server);
+        json!({
+            "path": path,
+            "requests_answered": a.answered,
+            "requests_failed": a.failed,
+            "image": image_stats.map(|i| json!({
+                "writes_taken": i.writes_taken,
+                "cycles_busy": i.busy,
+                "writes_dropped_half_done": i.recovered,
+            })),
+            "app_watchdog_tripped": app_watchdog.as_ref().map(|w| w.tripped()),
+        })
+    });
+    if let Some(c) = &control_json {
+        eprintln!(
+            "control socket: {} requests answered, {} of them with an error",
+            c["requests_answered"], c["requests_failed"]
+        );
+    }
     let clock_sync = sync.as_ref().map(|(method, st)| {
         serde_json::json!({
             "method": method.name(),
@@ -1016,6 +1165,7 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
                 "diagnosis": diagnosis_json(&m, &tally, o.diagnosis_ms),
                 "groups": groups_json(&m),
+                "control": control_json,
             })
         );
     } else {
@@ -1092,6 +1242,18 @@ pub fn run(t: &Target, o: &RunOptions<'_>) -> anyhow::Result<ExitCode> {
             ferrocat_master::RingState::Unknown => "unknown",
         };
         outln!("ring {ring} at the end; {} frames sent round the far half again", m.frame_stats().resent);
+    }
+    // A master that stops takes its slaves down in order (outputs to their safe state, then
+    // process data and mailboxes off), as a service stopped by SIGTERM must.
+    if !o.keep_state {
+        let t0 = m.io_mut().now_ns();
+        match m.shut_down() {
+            Ok(()) => eprintln!(
+                "slaves stepped down to SAFEOP, then INIT ({:.1} ms)",
+                (m.io_mut().now_ns() - t0) as f64 / 1e6
+            ),
+            Err(e) => eprintln!("ferrocat: warning: stepping the slaves down to INIT: {e}"),
+        }
     }
     finish(m)?;
     Ok(ExitCode::SUCCESS)

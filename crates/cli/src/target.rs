@@ -74,11 +74,21 @@ pub struct Target {
     /// With --eni or --machine: report the differences and go on.
     #[arg(long)]
     pub allow_mismatch: bool,
+    /// The control socket of a master running on this target: `run` serves it there, and the
+    /// other commands reach that master through it. Default: IF.sock (--iface) or
+    /// udp-ADDR:PORT.sock (--udp) in /run/ferrocat for root ($FERROCAT_RUN_DIR,
+    /// $XDG_RUNTIME_DIR/ferrocat or /tmp/ferrocat-UID otherwise); on the embedded virtual
+    /// segment, none unless given.
+    #[arg(long, value_name = "PATH")]
+    pub control_socket: Option<PathBuf>,
     /// The --eni file and the --machine description, read once, by whichever step asks first.
     #[arg(skip)]
     pub(crate) loaded_eni: std::cell::OnceCell<ferrocat_machine::eni::Eni>,
     #[arg(skip)]
     pub(crate) loaded_machine: std::cell::OnceCell<ferrocat_machine::Machine>,
+    /// The segment's lock, held while this process works on it.
+    #[arg(skip)]
+    pub(crate) lock: std::cell::OnceCell<std::rc::Rc<ferrocat_service::MasterLock>>,
 }
 
 /// [`ferrocat_master::io::LinkPath`] on the command line.
@@ -280,13 +290,16 @@ impl Target {
             eni: None,
             machine: None,
             allow_mismatch: false,
+            control_socket: None,
             loaded_eni: Default::default(),
             loaded_machine: Default::default(),
+            lock: Default::default(),
         }
     }
 
     /// Opens the world this target names and a master on it.
     pub fn master(&self) -> anyhow::Result<Master<CliIo>> {
+        self.take_segment()?;
         let world = match (&self.iface, self.config.is_some() || !self.device.is_empty()) {
             _ if self.udp.is_some() => {
                 let a = self.udp.as_deref().unwrap_or_default();

@@ -35,6 +35,11 @@ impl<I: Io> Master<I> {
         self.groups = groups;
     }
 
+    /// The groups given ([`Master::set_groups`]).
+    pub fn groups(&self) -> &[Group] {
+        &self.groups
+    }
+
     /// The plan the groups make of the slaves' mapping.
     pub(super) fn plan_for_groups(&self) -> Result<Plan> {
         let n = self.slaves.len();

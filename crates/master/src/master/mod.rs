@@ -175,6 +175,13 @@ impl<I: Io> Master<I> {
         &self.image
     }
 
+    /// The image's outputs, to write (the next cycle sends them): the first
+    /// [`image_bytes`](Self::image_bytes)`().0` bytes of the image.
+    pub fn outputs_mut(&mut self) -> &mut [u8] {
+        let n = (self.out_bytes as usize).min(self.image.len());
+        &mut self.image[..n]
+    }
+
     /// Bytes of outputs and of inputs in the image.
     pub fn image_bytes(&self) -> (u32, u32) {
         (self.out_bytes, self.in_bytes)

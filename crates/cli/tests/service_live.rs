@@ -1,0 +1,220 @@
+//! `ferrocat run` as a service on a veth pair against `ferrocat sim`: while it runs, `ferrocat
+//! sdo`, `slaves`, `reg` and `stats` reach it through its control socket, `ferrocat set` (an
+//! application of its own process) moves outputs through the shared image, a second master on
+//! the interface is refused, and clients that vanish mid-request or mid-write change nothing;
+//! the master keeps every slave in OP throughout.
+mod common;
+
+use std::io::Write;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{ReportingSim, VethPair};
+
+/// `ferrocat ARGS` in the master's namespace, with the runtime directory `dir`.
+fn ferrocat(net: &VethPair, dir: &std::path::Path, args: &[&str]) -> Command {
+    let mut c = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"));
+    c.args(args).args(["--iface", &net.master_if]).env("FERROCAT_RUN_DIR", dir);
+    c
+}
+
+fn output(c: &mut Command) -> (bool, String, String) {
+    let o = c.output().unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+struct Running(Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_refused() {
+    let net = VethPair::new("sv");
+    let sim = ReportingSim::start(
+        &net,
+        "service",
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n",
+        &[],
+    );
+    let dir = std::env::temp_dir().join(format!("ferrocat-service-live-{}", std::process::id()));
+    let run = ferrocat(&net, &dir, &["run", "--seconds", "0", "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut run = Running(run);
+    // Ready once its socket answers.
+    let socket = dir.join(format!("{}.sock", net.master_if));
+    let t0 = Instant::now();
+    while ferrocat_service_ready(&socket).is_none() {
+        assert!(t0.elapsed() < Duration::from_secs(30), "no control socket at {} after 30 s", socket.display());
+        if let Ok(Some(s)) = run.0.try_wait() {
+            panic!("ferrocat run exited with {s}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+
+    let t = Instant::now();
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["sdo", "read", "2", "0x1018:1", "--type", "hex"]));
+    println!("sdo read beside the running master: {:?} (the command's whole run)", t.elapsed());
+    assert!(ok, "{err}");
+    assert!(err.contains("through the master running on"), "{err}");
+    assert_eq!(out.trim().split(' ').count(), 4, "{out}");
+
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["slaves", "--json"]));
+    assert!(ok, "{err}");
+    let slaves: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let states: Vec<&str> = slaves.as_array().unwrap().iter().map(|s| s["state"].as_str().unwrap()).collect();
+    assert_eq!(states, ["OP", "OP", "OP"], "{out}");
+
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["reg", "read", "1", "0x0130"]));
+    assert!(ok && out.trim() == "08 00", "{out} {err}");
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["reg", "write", "1", "0x0f80", "01"]));
+    assert!(!ok && err.contains("--allow-register-writes"), "{err}");
+
+    // An application in a process of its own moves outputs through the shared image, as one
+    // write; a client killed mid-write (its lock released by the kernel) leaves no trace.
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["set", "1:Output#2=1", "1:Output#3=1"]));
+    assert!(ok && err.contains("first sent by cycle"), "{err}");
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["get", "1:Output#2", "1:Output#1", "--json"]));
+    assert!(ok, "{err}");
+    let got: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(
+        (got["values"]["1:Output#2"].as_u64(), got["values"]["1:Output#1"].as_u64()),
+        (Some(1), Some(0)),
+        "{got}"
+    );
+    let image = socket.with_extension("image");
+    let mut dying = ferrocat_service::ImageClient::attach(&image).unwrap();
+    dying.begin_write_and_abandon("1:Output#4", 1).unwrap();
+    drop(dying);
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["set", "1:Output#1=1"]));
+    assert!(ok, "{err}");
+
+    // A second master, and a command that scans, are refused with the way to the first.
+    for args in [&["run", "--seconds", "1"][..], &["scan"][..]] {
+        let (ok, _, err) = output(&mut ferrocat(&net, &dir, args));
+        assert!(!ok && err.contains("a master runs on") && err.contains(".sock"), "{args:?}: {err}");
+    }
+
+    // Clients that send a request and vanish before the reply.
+    for _ in 0..5 {
+        let mut s = std::os::unix::net::UnixStream::connect(&socket).unwrap();
+        s.write_all(b"{\"id\":1,\"op\":\"od_list\",\"position\":2}\n").unwrap();
+    }
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["stats", "--json"]));
+    assert!(ok, "{err}");
+    let stats: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(stats["cycles"].as_u64().unwrap() > 0, "{stats}");
+
+    Command::new("kill").args(["-INT", &run.0.id().to_string()]).status().unwrap();
+    let child = std::mem::replace(&mut run.0, Command::new("true").spawn().unwrap());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // No slave left OP: nothing the clients asked took one out (without DC, a host's stall
+    // does not either; a lost frame may shorten a working counter, which is not asserted).
+    assert_eq!(summary["slaves"]["left_op"], 0, "{summary}");
+    assert_eq!(summary["slaves"]["in_op_at_end"], 3, "{summary}");
+    assert!(summary["control"]["requests_answered"].as_u64().unwrap() >= 4, "{summary}");
+    assert_eq!(summary["control"]["image"]["writes_dropped_half_done"], 1, "{summary}");
+    assert!(!socket.exists() && !image.exists(), "the socket and the image go when the master stops");
+    // What the EL2004 last received: outputs 1–3 on, 4 (the half-done write) off. And the
+    // master, stopped by a signal, stepped every slave down to INIT.
+    assert!(err.contains("slaves stepped down to SAFEOP, then INIT"), "{err}");
+    let report = sim.report();
+    let el2004 = &report["devices"][1];
+    assert_eq!(el2004["outputs"], serde_json::json!([0b0111]), "{el2004}");
+    let states: Vec<&str> =
+        report["devices"].as_array().unwrap().iter().map(|d| d["al_state"].as_str().unwrap()).collect();
+    assert_eq!(states, ["INIT"; 3], "{report}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The master's hello on `socket`, if it answers.
+fn ferrocat_service_ready(socket: &std::path::Path) -> Option<String> {
+    use std::io::BufRead;
+    let s = std::os::unix::net::UnixStream::connect(socket).ok()?;
+    let mut line = String::new();
+    std::io::BufReader::new(s).read_line(&mut line).ok()?;
+    line.contains("hello").then_some(line)
+}
+
+/// The service crate's examples, built with the profile this test was built with.
+fn service_examples() -> std::path::PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let profile_dir = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut build = Command::new(cargo);
+    build.args(["build", "--quiet", "-p", "ferrocat-service", "--examples"]);
+    if profile_dir.file_name().is_some_and(|n| n == "release") {
+        build.arg("--release");
+    }
+    let status = build.current_dir(env!("CARGO_MANIFEST_DIR")).status().expect("cargo, to build the examples");
+    assert!(status.success(), "building the service examples failed");
+    profile_dir.join("examples")
+}
+
+#[test]
+fn an_application_of_its_own_process_runs_beside_the_master() {
+    let examples = service_examples();
+    let net = VethPair::new("sa");
+    let sim = ReportingSim::start(
+        &net,
+        "service-app",
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'SERVO'\n",
+        &[],
+    );
+    let dir = std::env::temp_dir().join(format!("ferrocat-service-app-{}", std::process::id()));
+    let run = ferrocat(&net, &dir, &["run", "--seconds", "0", "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut run = Running(run);
+    let socket = dir.join(format!("{}.sock", net.master_if));
+    let t0 = Instant::now();
+    while ferrocat_service_ready(&socket).is_none() {
+        assert!(t0.elapsed() < Duration::from_secs(30), "no control socket after 30 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let example = |name: &str, args: &[&str]| {
+        let mut c = VethPair::cmd(&net.master_ns, examples.join(name).to_str().unwrap());
+        c.arg(&net.master_if).args(args).env("FERROCAT_RUN_DIR", &dir);
+        c
+    };
+    let (ok, out, err) = output(&mut example("io_app", &["1"]));
+    println!("{out}");
+    assert!(ok, "io_app: {out}{err}");
+    assert!(out.contains("vendor id") && out.contains("writing '1:Output#1'"), "{out}");
+    let writes: u64 = out.lines().find_map(|l| l.split(" writes;").next()?.parse().ok()).unwrap_or(0);
+    assert!(writes > 10, "{out}");
+
+    // The benchmark's writer: its figures printed, not asserted (they are the host's).
+    let writer = example("load", &["write", "1:Output#3"]).stdout(Stdio::piped()).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    Command::new("kill").args(["-TERM", &writer.id().to_string()]).status().unwrap();
+    let said = String::from_utf8_lossy(&writer.wait_with_output().unwrap().stdout).into_owned();
+    println!("{said}");
+    assert!(said.starts_with("write: ") && !said.starts_with("write: 0 writes"), "{said}");
+
+    Command::new("kill").args(["-TERM", &run.0.id().to_string()]).status().unwrap();
+    let child = std::mem::replace(&mut run.0, Command::new("true").spawn().unwrap());
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["slaves"]["left_op"], 0, "{summary}");
+    assert!(summary["control"]["image"]["writes_taken"].as_u64().unwrap() > 10, "{summary}");
+    sim.report();
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,371 @@
+//! The control socket's protocol, version 1 (docs/service.md).
+//!
+//! A stream socket; UTF-8 JSON, one object per line, at most [`MAX_LINE`] bytes a line. On
+//! connecting, the client reads the master's [`Hello`]. It then writes a [`Envelope`] (a
+//! request with a number of its choosing) and reads one [`Reply`] under the same number,
+//! one request at a time. Bytes go as hex text (`"78563412"`), numbers as JSON numbers.
+use serde::{Deserialize, Serialize};
+
+/// The protocol's version. A master refuses nothing by version: a client compares it with
+/// the one it speaks and says so.
+pub const VERSION: u32 = 1;
+/// The longest line either side sends or takes, in bytes (a line longer is an error, and the
+/// connection is closed).
+pub const MAX_LINE: usize = 64 * 1024;
+/// The longest value of an SDO write or a register write, in bytes.
+pub const MAX_DATA: usize = 16 * 1024;
+
+/// What the master says first.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Hello {
+    /// "ferrocat".
+    pub service: String,
+    /// The protocol's version ([`VERSION`]).
+    pub protocol: u32,
+    /// The master's process.
+    pub pid: u32,
+    /// What the master runs on: an interface's name, `udp:ADDR:PORT`, or `virtual`.
+    pub target: String,
+    /// Its cycle, µs (0: back to back).
+    pub cycle_us: u64,
+    /// Slaves on its segment.
+    pub slaves: usize,
+    /// Whether it takes register writes.
+    pub register_writes: bool,
+}
+
+/// A request with the number its reply will carry (read by [`parse_request`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Envelope {
+    /// Any number; the reply carries it back.
+    pub id: u64,
+    /// What is asked.
+    #[serde(flatten)]
+    pub request: Request,
+}
+
+/// What a client asks, by `op`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Request {
+    /// The slaves as the master knows them: [`SlaveInfo`] each, under `slaves`.
+    Slaves,
+    /// The cyclic loop's statistics ([`Stats`]).
+    Stats,
+    /// SDO upload: the value under `data`.
+    SdoRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The object.
+        index: u16,
+        /// The entry.
+        subindex: u8,
+        /// The whole object from `subindex` on.
+        #[serde(default)]
+        complete_access: bool,
+    },
+    /// SDO download of `data`.
+    SdoWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The object.
+        index: u16,
+        /// The entry.
+        subindex: u8,
+        /// The whole object from `subindex` on.
+        #[serde(default)]
+        complete_access: bool,
+        /// The value as it goes on the wire, hex.
+        data: String,
+    },
+    /// SDO information: every object's index, under `indices`.
+    OdList {
+        /// The slave's position, from 0.
+        position: u16,
+    },
+    /// SDO information: an object's description ([`ObjectDescription`]).
+    ObjectInfo {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The object.
+        index: u16,
+    },
+    /// SDO information: an entry's description ([`EntryDescription`]).
+    EntryInfo {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The object.
+        index: u16,
+        /// The entry.
+        subindex: u8,
+    },
+    /// `len` bytes of the ESC's registers from `register`, under `data`.
+    RegisterRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The first register.
+        register: u16,
+        /// Bytes, 1 to 1 024.
+        len: u16,
+    },
+    /// `data` to the ESC's registers from `register`; only where the master was started to
+    /// take register writes.
+    RegisterWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The first register.
+        register: u16,
+        /// The bytes, hex.
+        data: String,
+    },
+    /// The slave to `state` (INIT, PREOP, SAFEOP or OP); the master keeps it there.
+    State {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The state's name.
+        state: String,
+    },
+}
+
+/// The master's answer to one request: `ok` with the result, or `error`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Reply {
+    /// The request's number.
+    pub id: u64,
+    /// The result, as the request says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ok: Option<serde_json::Value>,
+    /// Why there is none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<ErrorReply>,
+}
+
+/// A request that failed.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ErrorReply {
+    /// What kind of failure.
+    pub kind: ErrorKind,
+    /// In words, naming the slave, object or register.
+    pub message: String,
+    /// The SDO abort code, for `abort`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub abort_code: Option<u32>,
+}
+
+/// The kinds of failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorKind {
+    /// The line is not a request of this protocol.
+    BadRequest,
+    /// The master does not take this request (register writes not allowed).
+    Refused,
+    /// Too many requests wait; try again.
+    Busy,
+    /// No slave at that position.
+    NoSuchSlave,
+    /// The slave aborted the SDO transfer (`abort_code`).
+    Abort,
+    /// The slave did not reach the state.
+    State,
+    /// The slave did not answer in time.
+    Timeout,
+    /// What the slave lacks or did wrong (no mailbox, no CoE, a malformed reply).
+    Slave,
+    /// The master's link failed, or it stopped.
+    Master,
+}
+
+impl ErrorReply {
+    /// An error of `kind` saying `message`.
+    pub fn new(kind: ErrorKind, message: impl Into<String>) -> Self {
+        ErrorReply { kind, message: message.into(), abort_code: None }
+    }
+}
+
+/// A slave as the master knows it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SlaveInfo {
+    /// Position on the segment, from 0.
+    pub position: u16,
+    /// Its configured station address.
+    pub station: u16,
+    /// Its station alias (0: none).
+    pub alias: u16,
+    /// Its name from the SII.
+    pub name: String,
+    /// Vendor ID.
+    pub vendor_id: u32,
+    /// Product code.
+    pub product_code: u32,
+    /// Revision number.
+    pub revision: u32,
+    /// Serial number.
+    pub serial: u32,
+    /// The state the master keeps it in.
+    pub state: String,
+    /// Whether it is there: `operational` (in the state the master keeps it in),
+    /// `recovering` or `lost`.
+    pub health: String,
+    /// Whether it has a mailbox with CoE.
+    pub coe: bool,
+}
+
+/// The cyclic loop's statistics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Stats {
+    /// Cycles so far.
+    pub cycles: u64,
+    /// Cycles whose working counter was not the expected one.
+    pub wkc_errors: u64,
+    /// The working counter a whole cycle gives.
+    pub expected_wkc: u16,
+    /// The last cycle's.
+    pub last_wkc: u16,
+    /// The last cycle's round trip, ns.
+    pub last_round_trip_ns: u64,
+    /// Requests answered and failed on the acyclic side.
+    pub requests_answered: u64,
+    /// Of those, failed.
+    pub requests_failed: u64,
+    /// What the application adds (`ferrocat run`: the clock sync's lock and offset).
+    #[serde(default)]
+    pub extra: serde_json::Value,
+}
+
+/// An object's description.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObjectDescription {
+    /// The object's index.
+    pub index: u16,
+    /// Its data type.
+    pub data_type: u16,
+    /// Its highest subindex.
+    pub max_subindex: u8,
+    /// 7 VAR, 8 ARRAY, 9 RECORD.
+    pub object_code: u8,
+    /// Its name.
+    pub name: String,
+}
+
+/// An entry's description.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EntryDescription {
+    /// The entry's subindex.
+    pub subindex: u8,
+    /// Its data type.
+    pub data_type: u16,
+    /// Its size in bits.
+    pub bit_length: u16,
+    /// Its access bits.
+    pub access: u16,
+    /// Its name.
+    pub name: String,
+}
+
+/// `bytes` as hex text.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Hex text as bytes: an even number of hex digits, at most [`MAX_DATA`] bytes.
+pub fn unhex(text: &str) -> Result<Vec<u8>, String> {
+    if !text.is_ascii() || text.len() % 2 != 0 {
+        return Err(format!("'{}': give an even number of hex digits", clip(text)));
+    }
+    if text.len() / 2 > MAX_DATA {
+        return Err(format!("{} bytes: at most {MAX_DATA}", text.len() / 2));
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&text[i..i + 2], 16).map_err(|_| format!("'{}': not hex", clip(text))))
+        .collect()
+}
+
+/// At most 40 characters of `text`, for an error.
+fn clip(text: &str) -> String {
+    let mut s: String = text.chars().take(40).collect();
+    if text.chars().count() > 40 {
+        s.push('…');
+    }
+    s
+}
+
+/// Parses a request line: the request, or the reply that says what is wrong with it (under
+/// the line's `id` where one could be read, else 0).
+pub fn parse_request(line: &[u8]) -> Result<Envelope, Reply> {
+    let bad =
+        |id, message: String| Reply { id, ok: None, error: Some(ErrorReply::new(ErrorKind::BadRequest, message)) };
+    let text = std::str::from_utf8(line).map_err(|e| bad(0, format!("not UTF-8 text ({e})")))?;
+    let not_ours = |id, e: String| bad(id, format!("not a request of protocol {VERSION}: {e}"));
+    let mut v: serde_json::Map<String, serde_json::Value> =
+        serde_json::from_str(text).map_err(|e| not_ours(0, e.to_string()))?;
+    let id = match v.remove("id") {
+        Some(serde_json::Value::Number(n)) if n.as_u64().is_some() => n.as_u64().unwrap_or(0),
+        Some(other) => return Err(not_ours(0, format!("id {other}: give a number from 0"))),
+        None => return Err(not_ours(0, String::from("no id"))),
+    };
+    // Whatever the request's own fields are not is refused, as `deny_unknown_fields` would
+    // (it does not reach the fields of a variant without any).
+    let op = v.get("op").and_then(|o| o.as_str()).unwrap_or_default();
+    if matches!(op, "slaves" | "stats") {
+        if let Some(extra) = v.keys().find(|k| *k != "op") {
+            return Err(not_ours(id, format!("unknown field `{extra}`")));
+        }
+    }
+    let request = serde_json::from_value(serde_json::Value::Object(v)).map_err(|e| not_ours(id, e.to_string()))?;
+    Ok(Envelope { id, request })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_goes_as_one_line_and_comes_back_the_same() {
+        let e = Envelope {
+            id: 7,
+            request: Request::SdoWrite {
+                position: 2,
+                index: 0x6060,
+                subindex: 0,
+                complete_access: false,
+                data: hex(&[8]),
+            },
+        };
+        let line = serde_json::to_string(&e).unwrap();
+        assert_eq!(
+            line,
+            r#"{"id":7,"op":"sdo_write","position":2,"index":24672,"subindex":0,"complete_access":false,"data":"08"}"#
+        );
+        assert_eq!(parse_request(line.as_bytes()).unwrap(), e);
+        let slaves = parse_request(br#"{"id":1,"op":"slaves"}"#).unwrap();
+        assert_eq!(slaves.request, Request::Slaves);
+    }
+
+    #[test]
+    fn bad_lines_are_answered_in_words_under_their_number() {
+        for (line, id, says) in [
+            (&b"\xff\xfe"[..], 0, "not UTF-8"),
+            (b"{\"id\":3,\"op\":\"format_disk\"}", 3, "unknown variant `format_disk`"),
+            (b"{\"id\":4,\"op\":\"sdo_read\",\"position\":70000,\"index\":1,\"subindex\":0}", 4, "70000"),
+            (b"{\"id\":5,\"op\":\"slaves\",\"extra\":1}", 5, "unknown field `extra`"),
+            (b"[]", 0, "not a request"),
+        ] {
+            let r = parse_request(line).unwrap_err();
+            let e = r.error.unwrap();
+            assert_eq!((r.id, e.kind), (id, ErrorKind::BadRequest));
+            assert!(e.message.contains(says), "{}", e.message);
+        }
+    }
+
+    #[test]
+    fn hex_takes_pairs_of_digits_only() {
+        assert_eq!(unhex("0aFF").unwrap(), vec![0x0a, 0xff]);
+        assert!(unhex("abc").unwrap_err().contains("even number"));
+        assert!(unhex("zz").unwrap_err().contains("not hex"));
+        assert!(unhex("é1").unwrap_err().contains("even number"));
+        assert!(unhex(&"00".repeat(MAX_DATA + 1)).unwrap_err().contains("at most"));
+        assert_eq!(hex(&[1, 0xab]), "01ab");
+    }
+}

@@ -1,0 +1,382 @@
+//! The master's side of the control socket.
+//!
+//! Threads of their own accept the clients and read their requests; each request reaches the
+//! cyclic loop through a bounded queue that the loop empties without waiting
+//! ([`Server::serve`], once a cycle), and its reply goes back through a channel of one place
+//! that the loop fills without waiting. So a client that hangs, floods or dies costs the loop
+//! a `try_recv` and nothing more; the work it asks for is the master's acyclic side's
+//! ([`Master::serve_requests`]), in the cycle's spare time.
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError, TrySendError};
+use std::sync::Arc;
+use std::time::Duration;
+
+use ferrocat_master::io::Io;
+use ferrocat_master::{AlState, Answer, Health, Master, MasterError, RequestError, RequestId, SlaveError};
+
+use crate::protocol::{self, ErrorKind, ErrorReply, Hello, Reply, Request, SlaveInfo, Stats, MAX_LINE};
+
+/// Requests on their way to the loop at most (beyond, a client is told the master is busy).
+const QUEUE: usize = 64;
+/// Clients connected at once at most.
+const MAX_CLIENTS: usize = 16;
+/// Requests the loop takes from the queue per call.
+const TAKEN_PER_CALL: usize = 16;
+/// How long a client's thread waits for the loop's reply: longer than any request's own
+/// limit (the state timeout, 10 s by default).
+const REPLY_WAIT: Duration = Duration::from_secs(25);
+/// How long a write to a client may block its thread (a client that does not read).
+const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How the control socket is made.
+#[derive(Debug, Clone)]
+pub struct ServerOptions {
+    /// The socket's path (its directory is made, mode 0755, where missing).
+    pub path: PathBuf,
+    /// The socket file's mode. Default 0o660: the owner and the group.
+    pub mode: u32,
+    /// The group that owns the socket file (`None`: the process's).
+    pub group: Option<String>,
+    /// Take register writes. Default off: a register write can take a slave off the bus.
+    pub register_writes: bool,
+    /// What the master says to each client first.
+    pub hello: Hello,
+}
+
+struct Job {
+    id: u64,
+    request: Request,
+    reply: SyncSender<Reply>,
+}
+
+/// A running master's control socket (removed when dropped).
+pub struct Server {
+    jobs: Receiver<Job>,
+    pending: HashMap<RequestId, (u64, SyncSender<Reply>)>,
+    path: PathBuf,
+    register_writes: bool,
+    stop: Arc<AtomicBool>,
+}
+
+impl std::fmt::Debug for Server {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Server").field("path", &self.path).field("pending", &self.pending.len()).finish()
+    }
+}
+
+impl Server {
+    /// Makes the socket and starts accepting clients. A file already at the path is removed
+    /// first: the caller holds the target's lock ([`crate::MasterLock`]), so no master serves
+    /// it.
+    pub fn start(o: ServerOptions) -> std::io::Result<Server> {
+        if let Some(dir) = o.path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        match std::fs::remove_file(&o.path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
+        }
+        let listener = UnixListener::bind(&o.path)?;
+        std::fs::set_permissions(&o.path, std::fs::Permissions::from_mode(o.mode))?;
+        if let Some(group) = &o.group {
+            chown_group(&o.path, group)?;
+        }
+        let (tx, jobs) = mpsc::sync_channel(QUEUE);
+        let stop = Arc::new(AtomicBool::new(false));
+        let clients = Arc::new(AtomicUsize::new(0));
+        let hello = o.hello.clone();
+        let stop_accept = Arc::clone(&stop);
+        std::thread::Builder::new().name(String::from("ferrocat-control")).spawn(move || {
+            for stream in listener.incoming() {
+                if stop_accept.load(Ordering::Relaxed) {
+                    break;
+                }
+                let Ok(stream) = stream else { continue };
+                if clients.fetch_add(1, Ordering::SeqCst) >= MAX_CLIENTS {
+                    clients.fetch_sub(1, Ordering::SeqCst);
+                    let e = ErrorReply::new(ErrorKind::Busy, format!("{MAX_CLIENTS} clients are connected already"));
+                    let _ = write_line(&stream, &Reply { id: 0, ok: None, error: Some(e) });
+                    continue;
+                }
+                let (tx, hello, clients) = (tx.clone(), hello.clone(), Arc::clone(&clients));
+                let spawned = std::thread::Builder::new().name(String::from("ferrocat-client")).spawn(move || {
+                    client(stream, &hello, &tx);
+                    clients.fetch_sub(1, Ordering::SeqCst);
+                });
+                if spawned.is_err() {
+                    tracing::warn!("control socket: no thread for a client");
+                }
+            }
+        })?;
+        tracing::info!("control socket {}", o.path.display());
+        Ok(Server { jobs, pending: HashMap::new(), path: o.path, register_writes: o.register_writes, stop })
+    }
+
+    /// The socket's path.
+    pub fn path(&self) -> &std::path::Path {
+        &self.path
+    }
+
+    /// Once a cycle, in its spare time: takes the requests that came (without waiting), serves
+    /// them before `deadline_ns` (the master's clock; [`Master::serve_requests`]) and hands
+    /// the answers back. `extra` adds to a statistics reply what the application knows (the
+    /// clock sync's lock), called only when one is asked for. Returns the datagrams sent;
+    /// only the link's errors are errors.
+    pub fn serve<I: Io>(
+        &mut self,
+        m: &mut Master<I>,
+        deadline_ns: u64,
+        extra: &dyn Fn() -> serde_json::Value,
+    ) -> ferrocat_master::Result<u32> {
+        for _ in 0..TAKEN_PER_CALL {
+            match self.jobs.try_recv() {
+                Ok(job) => self.take(m, job, extra),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => break,
+            }
+        }
+        let sent = if self.pending.is_empty() { 0 } else { m.serve_requests(deadline_ns)? };
+        for (id, answer) in m.take_answers() {
+            if let Some((client_id, reply)) = self.pending.remove(&id) {
+                // A channel of one place, this reply's own: never full, and a client gone
+                // makes it fail, which nobody needs to hear.
+                let _ = reply.try_send(reply_of(client_id, answer));
+            }
+        }
+        Ok(sent)
+    }
+
+    fn take<I: Io>(&mut self, m: &mut Master<I>, job: Job, extra: &dyn Fn() -> serde_json::Value) {
+        let reply = |r: Result<serde_json::Value, ErrorReply>| match r {
+            Ok(v) => Reply { id: job.id, ok: Some(v), error: None },
+            Err(e) => Reply { id: job.id, ok: None, error: Some(e) },
+        };
+        let bad = |message: String| Err(ErrorReply::new(ErrorKind::BadRequest, message));
+        let request = match job.request {
+            Request::Slaves => {
+                let _ = job.reply.try_send(reply(Ok(serde_json::json!({ "slaves": slave_list(m) }))));
+                return;
+            }
+            Request::Stats => {
+                let _ = job.reply.try_send(reply(Ok(stats(m, extra()))));
+                return;
+            }
+            Request::RegisterWrite { .. } if !self.register_writes => {
+                let e = ErrorReply::new(
+                    ErrorKind::Refused,
+                    "register writes are off: start the master with --allow-register-writes",
+                );
+                let _ = job.reply.try_send(reply(Err(e)));
+                return;
+            }
+            r => match master_request(r) {
+                Ok(r) => r,
+                Err(message) => {
+                    let _ = job.reply.try_send(reply(bad(message)));
+                    return;
+                }
+            },
+        };
+        let id = m.submit(request);
+        self.pending.insert(id, (job.id, job.reply));
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        // Wakes the accepting thread, which then ends.
+        let _ = UnixStream::connect(&self.path);
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// A protocol request as the master's (the slave list and statistics are the loop's own: an
+/// error), or what is wrong with its values.
+pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
+    use ferrocat_master::Request as M;
+    Ok(match r {
+        Request::SdoRead { position, index, subindex, complete_access } => {
+            M::SdoRead { position, index, subindex, complete_access }
+        }
+        Request::SdoWrite { position, index, subindex, complete_access, data } => {
+            M::SdoWrite { position, index, subindex, complete_access, data: protocol::unhex(&data)? }
+        }
+        Request::OdList { position } => M::OdList { position },
+        Request::ObjectInfo { position, index } => M::ObjectInfo { position, index },
+        Request::EntryInfo { position, index, subindex } => M::EntryInfo { position, index, subindex },
+        Request::RegisterRead { position, register, len } => M::RegisterRead { position, register, len },
+        Request::RegisterWrite { position, register, data } => {
+            M::RegisterWrite { position, register, data: protocol::unhex(&data)? }
+        }
+        Request::State { position, state } => M::State { position, state: state_named(&state)? },
+        Request::Slaves | Request::Stats => return Err(String::from("answered by the loop")),
+    })
+}
+
+/// INIT, PREOP, SAFEOP or OP, any case.
+fn state_named(name: &str) -> Result<AlState, String> {
+    match name.to_ascii_uppercase().as_str() {
+        "INIT" => Ok(AlState::Init),
+        "PREOP" | "PRE-OP" => Ok(AlState::PreOp),
+        "SAFEOP" | "SAFE-OP" => Ok(AlState::SafeOp),
+        "OP" => Ok(AlState::Op),
+        _ => Err(format!("state '{name}': give INIT, PREOP, SAFEOP or OP")),
+    }
+}
+
+fn slave_list<I: Io>(m: &Master<I>) -> Vec<SlaveInfo> {
+    m.slaves()
+        .iter()
+        .map(|s| {
+            let id = s.identity();
+            SlaveInfo {
+                position: s.position(),
+                station: s.station(),
+                alias: s.alias(),
+                name: s.name().to_string(),
+                vendor_id: id.vendor_id,
+                product_code: id.product_code,
+                revision: id.revision,
+                serial: id.serial,
+                state: s.state().name().to_string(),
+                health: String::from(match s.health() {
+                    Health::Operational => "operational",
+                    Health::Lost => "lost",
+                    Health::Recovering => "recovering",
+                }),
+                coe: s.mailbox().is_some() && s.has_coe(),
+            }
+        })
+        .collect()
+}
+
+fn stats<I: Io>(m: &Master<I>, extra: serde_json::Value) -> serde_json::Value {
+    let c = m.cycle_stats();
+    let a = m.acyclic_stats();
+    let s = Stats {
+        cycles: c.cycles,
+        wkc_errors: c.wkc_errors,
+        expected_wkc: m.expected_wkc(),
+        last_wkc: c.last_wkc,
+        last_round_trip_ns: c.last_round_trip_ns,
+        requests_answered: a.answered,
+        requests_failed: a.failed,
+        extra,
+    };
+    serde_json::to_value(s).unwrap_or_default()
+}
+
+/// The master's answer as the protocol's reply.
+fn reply_of(id: u64, answer: ferrocat_master::Result<Answer>) -> Reply {
+    let ok = match answer {
+        Ok(Answer::Data(d)) => serde_json::json!({ "data": protocol::hex(&d) }),
+        Ok(Answer::Written) => serde_json::json!({}),
+        Ok(Answer::List(l)) => serde_json::json!({ "indices": l }),
+        Ok(Answer::Object(o)) => serde_json::json!({
+            "index": o.index, "data_type": o.data_type, "max_subindex": o.max_subindex,
+            "object_code": o.object_code, "name": o.name,
+        }),
+        Ok(Answer::Entry(e)) => serde_json::json!({
+            "subindex": e.subindex, "data_type": e.data_type, "bit_length": e.bit_length,
+            "access": e.access, "name": e.name,
+        }),
+        Ok(Answer::State(s)) => serde_json::json!({ "state": s.name() }),
+        Err(e) => return Reply { id, ok: None, error: Some(error_of(&e)) },
+    };
+    Reply { id, ok: Some(ok), error: None }
+}
+
+fn error_of(e: &MasterError) -> ErrorReply {
+    let kind = match e {
+        MasterError::Abort { .. } => ErrorKind::Abort,
+        MasterError::NoSuchSlave { .. } => ErrorKind::NoSuchSlave,
+        MasterError::State { .. } => ErrorKind::State,
+        MasterError::Timeout { .. } => ErrorKind::Timeout,
+        MasterError::Slave { error: SlaveError::NoReply | SlaveError::MailboxFull, .. } => ErrorKind::Timeout,
+        MasterError::Request(RequestError::QueueFull { .. }) => ErrorKind::Busy,
+        MasterError::Request(RequestError::TimedOut { .. }) => ErrorKind::Timeout,
+        MasterError::Request(_) => ErrorKind::BadRequest,
+        MasterError::Io(_) => ErrorKind::Master,
+        _ => ErrorKind::Slave,
+    };
+    let abort_code = match e {
+        MasterError::Abort { code, .. } => Some(code.0),
+        _ => None,
+    };
+    ErrorReply { kind, message: e.to_string(), abort_code }
+}
+
+/// One client's connection: the hello, then a request and its reply at a time.
+fn client(stream: UnixStream, hello: &Hello, jobs: &SyncSender<Job>) {
+    let _ = stream.set_write_timeout(Some(WRITE_TIMEOUT));
+    if write_line(&stream, &serde_json::json!({ "hello": hello })).is_err() {
+        return;
+    }
+    let Ok(read) = stream.try_clone() else { return };
+    let mut reader = BufReader::new(read);
+    loop {
+        let mut line = Vec::new();
+        match (&mut reader).take(MAX_LINE as u64 + 1).read_until(b'\n', &mut line) {
+            Ok(0) | Err(_) => return,
+            Ok(_) => {}
+        }
+        if line.last() != Some(&b'\n') {
+            let e = ErrorReply::new(ErrorKind::BadRequest, format!("a line longer than {MAX_LINE} bytes: closed"));
+            let _ = write_line(&stream, &Reply { id: 0, ok: None, error: Some(e) });
+            return;
+        }
+        let reply = match protocol::parse_request(&line) {
+            Err(reply) => reply,
+            Ok(env) => {
+                let (tx, rx) = mpsc::sync_channel(1);
+                let id = env.id;
+                let error = |kind, message: &str| Reply { id, ok: None, error: Some(ErrorReply::new(kind, message)) };
+                match jobs.try_send(Job { id, request: env.request, reply: tx }) {
+                    Ok(()) => match rx.recv_timeout(REPLY_WAIT) {
+                        Ok(r) => r,
+                        Err(_) => error(ErrorKind::Master, "no answer from the cyclic loop (stopped, or stalled)"),
+                    },
+                    Err(TrySendError::Full(_)) => {
+                        error(ErrorKind::Busy, "the master's request queue is full: try again")
+                    }
+                    Err(TrySendError::Disconnected(_)) => error(ErrorKind::Master, "the master has stopped"),
+                }
+            }
+        };
+        if write_line(&stream, &reply).is_err() {
+            return;
+        }
+    }
+}
+
+fn write_line(mut stream: &UnixStream, v: &impl serde::Serialize) -> std::io::Result<()> {
+    let mut line = serde_json::to_vec(v).map_err(std::io::Error::other)?;
+    line.push(b'\n');
+    stream.write_all(&line)
+}
+
+/// Gives the socket file to `group`.
+fn chown_group(path: &std::path::Path, group: &str) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let name = std::ffi::CString::new(group).map_err(|_| std::io::Error::other("a group name with NUL"))?;
+    // SAFETY: getgrnam reads a NUL-terminated name; the record it returns is read at once.
+    let gid = unsafe {
+        let g = libc::getgrnam(name.as_ptr());
+        if g.is_null() {
+            return Err(std::io::Error::other(format!("no group '{group}'")));
+        }
+        (*g).gr_gid
+    };
+    let p = std::ffi::CString::new(path.as_os_str().as_bytes()).map_err(std::io::Error::other)?;
+    // SAFETY: a NUL-terminated path; -1 leaves the owner as it is.
+    if unsafe { libc::chown(p.as_ptr(), u32::MAX, gid) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}

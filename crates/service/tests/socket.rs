@@ -1,0 +1,172 @@
+//! The control socket against a master cycling on the embedded virtual segment in a thread of
+//! its own: every request of the protocol answered through the socket, bad lines and
+//! vanished clients answered or ignored, and the cyclic exchange whole throughout.
+#![cfg(feature = "server")]
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixStream;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use ferrocat_master::io::Io;
+use ferrocat_master::Master;
+use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
+use ferrocat_service::protocol::{ErrorKind, Hello};
+use ferrocat_service::{Client, Server, ServerOptions};
+
+const CYCLE_NS: u64 = 1_000_000;
+
+struct Running {
+    path: PathBuf,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<(u64, u64)>>,
+}
+
+impl Running {
+    /// Stops the loop: its cycles and the cycles whose working counter was short.
+    fn stop(mut self) -> (u64, u64) {
+        self.stop.store(true, Ordering::Relaxed);
+        let r = self.thread.take().unwrap().join().unwrap();
+        assert!(!self.path.exists(), "the socket goes with the server");
+        std::fs::remove_dir(self.path.parent().unwrap()).ok();
+        r
+    }
+}
+
+/// EK1100, EL2004 and a SERVO in OP, cycling in virtual time (each cycle also 50 µs of real
+/// time, so that clients get their turn), its control socket at a path of the test's own.
+fn running(name: &str, register_writes: bool) -> Running {
+    let dir = std::env::temp_dir().join(format!("ferrocat-service-test-{name}-{}", std::process::id()));
+    let path = dir.join(format!("{name}.sock"));
+    let (ready_tx, ready) = std::sync::mpsc::channel();
+    let stop = Arc::new(AtomicBool::new(false));
+    let stop_loop = Arc::clone(&stop);
+    let p = path.clone();
+    let thread = std::thread::spawn(move || {
+        let cfg: SegmentConfig = toml::from_str(
+            "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n",
+        )
+        .unwrap();
+        let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
+        m.bring_up().unwrap();
+        let hello = Hello {
+            service: "ferrocat".into(),
+            protocol: ferrocat_service::protocol::VERSION,
+            pid: std::process::id(),
+            target: "virtual".into(),
+            cycle_us: 1000,
+            slaves: m.slaves().len(),
+            register_writes,
+        };
+        let mut server =
+            Server::start(ServerOptions { path: p, mode: 0o600, group: None, register_writes, hello }).unwrap();
+        ready_tx.send(()).unwrap();
+        let mut next = m.io_mut().now_ns();
+        let mut short = 0;
+        while !stop_loop.load(Ordering::Relaxed) {
+            next += CYCLE_NS;
+            if m.cycle().unwrap() != m.expected_wkc() {
+                short += 1;
+            }
+            server.serve(&mut m, next - CYCLE_NS / 4, &|| serde_json::json!({ "lock": "none" })).unwrap();
+            m.io_mut().sleep_until(next);
+            std::thread::sleep(std::time::Duration::from_micros(50));
+        }
+        (m.cycle_stats().cycles, short)
+    });
+    ready.recv().unwrap();
+    Running { path, stop, thread: Some(thread) }
+}
+
+#[test]
+fn every_request_is_answered_through_the_socket_and_the_cycle_stays_whole() {
+    let r = running("all", false);
+    let mut c = Client::connect(&r.path).unwrap();
+    assert_eq!((c.hello().slaves, c.hello().target.as_str()), (3, "virtual"));
+    let slaves = c.slaves().unwrap();
+    assert_eq!(slaves.iter().map(|s| s.name.as_str()).collect::<Vec<_>>()[0], "EK1100");
+    assert!(slaves.iter().all(|s| s.state == "OP" && s.health == "operational"), "{slaves:?}");
+    assert_eq!((slaves[0].coe, slaves[2].coe), (false, true));
+
+    let vendor = c.sdo_read(2, 0x1018, 1).unwrap();
+    assert_eq!(vendor, slaves[2].vendor_id.to_le_bytes());
+    c.sdo_download(2, 0x10F1, 2, false, &[7, 0]).unwrap();
+    assert_eq!(c.sdo_read(2, 0x10F1, 2).unwrap(), [7, 0]);
+    assert_eq!(c.entry_info(2, 0x10F1, 2).unwrap().bit_length, 16);
+    assert!(c.od_list(2).unwrap().contains(&0x1018));
+    assert_eq!(c.object_info(2, 0x1018).unwrap().max_subindex, 4);
+    assert_eq!(c.register_read(1, 0x0130, 2).unwrap(), [8, 0]);
+
+    // Errors as the master words them, by kind.
+    let e = c.sdo_read(2, 0x5FFF, 0).unwrap_err();
+    let remote = e.remote().unwrap();
+    assert_eq!((remote.kind, remote.abort_code.is_some()), (ErrorKind::Abort, true));
+    assert!(remote.message.contains("slave 2") && remote.message.contains("0x5fff"), "{}", remote.message);
+    assert_eq!(c.sdo_read(7, 0x1018, 1).unwrap_err().remote().unwrap().kind, ErrorKind::NoSuchSlave);
+    assert_eq!(c.sdo_read(0, 0x1018, 1).unwrap_err().remote().unwrap().kind, ErrorKind::Slave);
+    let refused = c.register_write(1, 0x0120, &[2, 0]).unwrap_err();
+    assert_eq!(refused.remote().unwrap().kind, ErrorKind::Refused);
+    assert_eq!(c.request_state(1, "BOOT").unwrap_err().remote().unwrap().kind, ErrorKind::BadRequest);
+
+    let stats = c.stats().unwrap();
+    assert!(stats.cycles > 0 && stats.requests_answered >= 8, "{stats:?}");
+    assert_eq!(stats.extra["lock"], "none");
+    drop(c);
+    let (cycles, short) = r.stop();
+    assert!(cycles > 0);
+    assert_eq!(short, 0, "a cycle came back short while the socket was served");
+}
+
+#[test]
+fn a_state_request_holds_and_the_slave_comes_back_when_asked() {
+    let r = running("state", true);
+    let mut c = Client::connect(&r.path).unwrap();
+    assert_eq!(c.request_state(1, "safeop").unwrap(), "SAFEOP");
+    assert_eq!(c.slaves().unwrap()[1].state, "SAFEOP");
+    assert_eq!(c.register_read(1, 0x0130, 2).unwrap(), [4, 0]);
+    assert_eq!(c.request_state(1, "OP").unwrap(), "OP");
+    // Register writes where the master takes them: the ESC's user RAM, read back.
+    c.register_write(1, 0x0F80, &[0x34, 0x12]).unwrap();
+    assert_eq!(c.register_read(1, 0x0F80, 2).unwrap(), [0x34, 0x12]);
+    drop(c);
+    r.stop();
+}
+
+#[test]
+fn bad_lines_and_clients_that_vanish_change_nothing() {
+    let r = running("bad", false);
+    let s = UnixStream::connect(&r.path).unwrap();
+    let mut reader = BufReader::new(s.try_clone().unwrap());
+    let mut line = String::new();
+    reader.read_line(&mut line).unwrap();
+    assert!(line.contains("\"hello\""), "{line}");
+    for (bad, says) in [
+        ("{\"id\":9,\"op\":\"reboot\"}\n", "unknown variant"),
+        ("not json\n", "not a request"),
+        ("{\"id\":10,\"op\":\"sdo_write\",\"position\":2,\"index\":1,\"subindex\":0,\"data\":\"xyz\"}\n", "hex"),
+        ("{\"id\":11,\"op\":\"state\",\"position\":1,\"state\":\"RUN\"}\n", "give INIT"),
+    ] {
+        (&s).write_all(bad.as_bytes()).unwrap();
+        line.clear();
+        reader.read_line(&mut line).unwrap();
+        assert!(line.contains("bad_request") && line.contains(says), "{bad} → {line}");
+    }
+    // A line too long is answered and the connection closed.
+    (&s).write_all(&vec![b'x'; ferrocat_service::protocol::MAX_LINE + 10]).unwrap();
+    line.clear();
+    reader.read_line(&mut line).unwrap();
+    assert!(line.contains("longer than"), "{line}");
+    line.clear();
+    assert_eq!(reader.read_line(&mut line).unwrap(), 0);
+    // Clients that send a request and go before its reply (each holds a place until the
+    // reply, which nobody reads, is written).
+    for _ in 0..10 {
+        let s = UnixStream::connect(&r.path).unwrap();
+        (&s).write_all(b"{\"id\":1,\"op\":\"od_list\",\"position\":2}\n").unwrap();
+    }
+    let mut c = Client::connect(&r.path).unwrap();
+    assert_eq!(c.sdo_read(2, 0x1018, 1).unwrap().len(), 4);
+    drop(c);
+    let (_, short) = r.stop();
+    assert_eq!(short, 0);
+}
