@@ -4,8 +4,8 @@
 # removes, at 1 ms and 250 us, each cycle twice: alone, and with four clients at once (the
 # `load` example of ferrocat-service): one hammering SDO uploads through the control socket, one
 # reading the whole shared image at 10 kHz, one writing an output every cycle (and counting the
-# cycles each write took to reach the wire), and one writing back to back that is killed with
-# SIGKILL after a second. Prints per run: the wake-up p50/p99/max, overruns, frames lost,
+# cycles each write took to reach the wire), and one killed with SIGKILL in the middle of a
+# write (the file locked, the sequence odd). Prints per run: the wake-up p50/p99/max, overruns, frames lost,
 # working-counter errors, slaves that left OP, the loop's CPU per cycle, what the clients
 # measured, and the half-done writes the master dropped. Then the time of a fresh `ferrocat sdo
 # read` beside the running master (median of 20). Needs root. SECONDS_EACH (default 60) sets
@@ -62,9 +62,10 @@ for cycle in $cycles; do
       ip netns exec "$m" "$load" "$ifm" sdo >>"$work/clients" & pids+=($!)
       ip netns exec "$m" "$load" "$ifm" read 10000 >>"$work/clients" & pids+=($!)
       ip netns exec "$m" "$load" "$ifm" write "1:Output#1" >>"$work/clients" & pids+=($!)
-      ip netns exec "$m" "$load" "$ifm" write-forever "1:Output#2" >/dev/null & killed=$!
+      ip netns exec "$m" "$load" "$ifm" write-abandon "1:Output#2" >/dev/null & killed=$!
       sleep 1
       kill -KILL "$killed" 2>/dev/null || true
+      wait "$killed" 2>/dev/null || true
     fi
     # A fresh `sdo read` beside the master, 20 times (the command's whole run).
     if [ "$cycle" = 1000 ] && [ "$clients" = none ]; then

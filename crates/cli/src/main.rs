@@ -307,6 +307,31 @@ enum Command {
         #[arg(long, value_enum, default_value = "hold", requires = "app_watchdog_ms")]
         app_watchdog: image_cmd::AppWatchdogAction,
     },
+    /// The events of the master running on the target (the last 1 024 it keeps: slaves that
+    /// left OP, came back or stopped answering, emergencies, sync errors, error counters that
+    /// grew, ring changes); with --follow, each new one as it comes, until Ctrl-C.
+    Events {
+        #[command(flatten)]
+        target: target::Target,
+        /// Keep printing new events.
+        #[arg(long)]
+        follow: bool,
+        /// One JSON object per event instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The process data a slave maps (index, subindex, width, name, where in the image), from
+    /// the master running on the target, or a scan of this command's own.
+    Pdos {
+        /// The slave's position on the segment, counted from 0 (as `scan` shows it).
+        #[arg(allow_negative_numbers = true, value_parser = args::position)]
+        position: u16,
+        #[command(flatten)]
+        target: target::Target,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print variables of the process image a running master shares (every one without NAME):
     /// outputs as the last cycle sent them, inputs as it received them.
     Get {
@@ -965,6 +990,8 @@ fn main() -> ExitCode {
         Command::State { position, state, target } => service_cmd::state(&target, position, &state),
         Command::Stats { target, json } => service_cmd::stats(&target, json),
         Command::Get { names, target, json } => image_cmd::get(&target, &names, json),
+        Command::Events { target, follow, json } => service_cmd::events(&target, follow, json),
+        Command::Pdos { position, target, json } => service_cmd::pdos(&target, position, json),
         Command::Set { values, target } => image_cmd::set(&target, &values),
     };
     match result {

@@ -1011,9 +1011,13 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             server.serve(&mut m, deadline, &extra)?;
         }
         let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
-        for e in m.take_events() {
+        let events = m.take_events();
+        for e in &events {
             eprintln!("t={t_s:7.3} s  {e}");
-            tally.count(&e);
+            tally.count(e);
+        }
+        if let (Some(server), false) = (control.as_mut(), events.is_empty()) {
+            server.note_events(&events, t_s);
         }
         if m.io_mut().now_ns() >= report {
             let s = m.cycle_stats();

@@ -281,3 +281,73 @@ pub fn stats(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+/// `ferrocat events`: the running master's events (the last 1 024 it keeps), and with
+/// `follow` each new one as it comes, until SIGINT or SIGTERM.
+pub fn events(t: &Target, follow: bool, json: bool) -> anyhow::Result<ExitCode> {
+    let mut c = t.require_master("`events`")?;
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, std::sync::Arc::clone(&stop)).context("installing signal handlers")?;
+    }
+    let mut since = 0;
+    loop {
+        let batch = c.events(since)?;
+        if batch.missed > 0 {
+            eprintln!("({} events the master no longer keeps)", batch.missed);
+        }
+        for e in &batch.events {
+            if json {
+                outln!("{}", serde_json::to_value(e)?);
+            } else {
+                outln!("t={:9.3} s  {}", e.at_s, e.text);
+            }
+        }
+        since = batch.next;
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            return Ok(ExitCode::SUCCESS);
+        }
+        // A reply carries as many as fit its line: ask again at once while they come.
+        if batch.events.is_empty() {
+            if !follow {
+                return Ok(ExitCode::SUCCESS);
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    }
+}
+
+/// `ferrocat pdos`: the process data a slave maps, as the running master (or a scan and
+/// configuration of this command's own) has it.
+pub fn pdos(t: &Target, position: u16, json: bool) -> anyhow::Result<ExitCode> {
+    let p = match t.running_master()? {
+        Some(mut c) => c.pdos(position)?,
+        None => {
+            let mut m = t.master()?;
+            t.scan(&mut m)?;
+            t.configure(&mut m)?;
+            let p = ferrocat_service::pdos_of(m.slave(position)?);
+            crate::target::finish(m)?;
+            p
+        }
+    };
+    if json {
+        outln!("{}", serde_json::to_value(&p)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    for (title, list) in [("outputs", &p.outputs), ("inputs", &p.inputs)] {
+        outln!("{title}:");
+        for e in list {
+            outln!(
+                "  {:#06x}:{:02x}  {:>2} bit{}  image bit {:>6}  {}",
+                e.index,
+                e.subindex,
+                e.bits,
+                if e.bits == 1 { " " } else { "s" },
+                e.image_bit,
+                e.name
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -46,7 +46,18 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
         &[],
     );
     let dir = std::env::temp_dir().join(format!("ferrocat-service-live-{}", std::process::id()));
-    let run = ferrocat(&net, &dir, &["run", "--seconds", "0", "--json"])
+    // A described machine: the network is checked against it before anything leaves INIT.
+    std::fs::create_dir_all(&dir).unwrap();
+    let machine = dir.join("machine.toml");
+    std::fs::write(
+        &machine,
+        "name = \"bench\"\n\
+         [[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044C2C52\n\
+         [[slave]]\nname = \"lamps\"\nvendor = 2\nproduct = 0x07D43052\n\
+         [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\n",
+    )
+    .unwrap();
+    let run = ferrocat(&net, &dir, &["run", "--machine", machine.to_str().unwrap(), "--seconds", "0", "--json"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -76,6 +87,10 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     let states: Vec<&str> = slaves.as_array().unwrap().iter().map(|s| s["state"].as_str().unwrap()).collect();
     assert_eq!(states, ["OP", "OP", "OP"], "{out}");
 
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["pdos", "1"]));
+    assert!(ok && out.lines().filter(|l| l.contains("0x7")).count() == 4, "{out} {err}");
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["events"]));
+    assert!(ok, "{err}");
     let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["reg", "read", "1", "0x0130"]));
     assert!(ok && out.trim() == "08 00", "{out} {err}");
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["reg", "write", "1", "0x0f80", "01"]));

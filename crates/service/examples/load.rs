@@ -6,7 +6,9 @@
 //!     load TARGET write OUTPUT     OUTPUT toggled each cycle; how many cycles each write took
 //!                                  to reach the wire (the cycle that sent it less the one
 //!                                  published when it was written)
-//!     load TARGET write-forever OUTPUT   writes back to back (to be killed mid-write)
+//!     load TARGET write-abandon OUTPUT   begins a write of OUTPUT and stops in its middle, the
+//!                                  file locked and the sequence odd, until killed: a client
+//!                                  killed mid-write
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -19,7 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         signal_hook::flag::register(sig, Arc::clone(&stop))?;
     }
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: load TARGET sdo | read HZ | write OUTPUT | write-forever OUTPUT";
+    let usage = "usage: load TARGET sdo | read HZ | write OUTPUT | write-abandon OUTPUT";
     let (target, kind) = (args.first().ok_or(usage)?, args.get(1).ok_or(usage)?);
     let running = || !stop.load(Ordering::Relaxed);
     match kind.as_str() {
@@ -29,7 +31,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let mut times = Vec::new();
             while running() {
                 let t = Instant::now();
-                c.sdo_read(position, 0x1018, 1)?;
+                // The master stopping ends the load too.
+                if let Err(e) = c.sdo_read(position, 0x1018, 1) {
+                    eprintln!("sdo: {e}");
+                    break;
+                }
                 times.push(t.elapsed().as_micros() as u64);
             }
             times.sort_unstable();
@@ -47,8 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let c = ImageClient::attach(image::find_image(target))?;
             let period = Duration::from_secs_f64(1.0 / hz);
             let (t0, mut reads) = (Instant::now(), 0u64);
-            while running() {
-                c.read()?;
+            while running() && c.read()?.running {
                 reads += 1;
                 let next = period * reads as u32;
                 if let Some(wait) = next.checked_sub(t0.elapsed()) {
@@ -57,7 +62,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             println!("read: {reads} reads in {:.1} s", t0.elapsed().as_secs_f64());
         }
-        "write" | "write-forever" => {
+        "write-abandon" => {
+            let output = args.get(2).ok_or(usage)?;
+            let mut c = ImageClient::attach(image::find_image(target))?;
+            c.begin_write_and_abandon_locked(output, 1)?;
+            println!("write-abandon: mid-write, the lock held");
+            loop {
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        }
+        "write" => {
             let output = args.get(2).ok_or(usage)?;
             let mut c = ImageClient::attach(image::find_image(target))?;
             let cycle_ns = 1_000_000u64;
@@ -67,9 +81,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 value ^= 1;
                 let before = c.read()?.cycle;
                 let commit = c.write(&[(output.as_str(), value)])?;
-                if kind == "write-forever" {
-                    continue;
-                }
                 // Until a cycle has sent it (at most a second).
                 let t = Instant::now();
                 loop {

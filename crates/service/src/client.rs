@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use crate::protocol::{
-    self, EntryDescription, Envelope, ErrorKind, ErrorReply, Hello, ObjectDescription, Reply, Request, SlaveInfo,
-    Stats, MAX_LINE,
+    self, EntryDescription, Envelope, ErrorKind, ErrorReply, Events, Hello, ObjectDescription, Pdos, Reply, Request,
+    SlaveInfo, Stats, MAX_LINE,
 };
 
 /// How long a reply may take: longer than any request's own time limit on the master's side
@@ -173,6 +173,18 @@ impl Client {
     /// The cyclic loop's statistics.
     pub fn stats(&mut self) -> Result<Stats, ClientError> {
         let v = self.call(Request::Stats)?;
+        self.field(v, "")
+    }
+
+    /// The master's events from number `since` on (0: every one it keeps).
+    pub fn events(&mut self, since: u64) -> Result<Events, ClientError> {
+        let v = self.call(Request::Events { since })?;
+        self.field(v, "")
+    }
+
+    /// The process data the slave at `position` maps.
+    pub fn pdos(&mut self, position: u16) -> Result<Pdos, ClientError> {
+        let v = self.call(Request::Pdos { position })?;
         self.field(v, "")
     }
 

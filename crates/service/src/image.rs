@@ -412,9 +412,19 @@ impl ImageClient {
     }
 
     /// Writes the sequence's first half and stops, as a client killed mid-write would leave it
-    /// (for tests of the master's recovery).
+    /// (for tests of the master's recovery), the lock released as the kernel releases a dead
+    /// process's.
     #[doc(hidden)]
     pub fn begin_write_and_abandon(&mut self, name: &str, value: u64) -> Result<(), ImageError> {
+        self.begin_write_and_abandon_locked(name, value)?;
+        shm::unlock(&self.file);
+        Ok(())
+    }
+
+    /// As [`begin_write_and_abandon`](Self::begin_write_and_abandon), the lock kept: a process
+    /// that then stops, or is killed, is a client dead mid-write.
+    #[doc(hidden)]
+    pub fn begin_write_and_abandon_locked(&mut self, name: &str, value: u64) -> Result<(), ImageError> {
         let v = self.variable(name)?.clone();
         shm::lock(&self.file, true).map_err(|error| ImageError::Io { path: self.path.clone(), error })?;
         let seq = self.map.u64_at(field::OUT_SEQ);
@@ -429,7 +439,6 @@ impl ImageClient {
         self.map.load(self.areas.mask, &mut mask);
         set_bits(&mut mask, v.bit, v.bits, u64::MAX);
         self.map.store(self.areas.mask, &mask);
-        shm::unlock(&self.file);
         Ok(())
     }
 }

@@ -34,4 +34,4 @@ pub use client::{Client, ClientError};
 pub use image::{ImageClient, ImageError, SharedImage, Snapshot, Variable};
 pub use lock::{find_socket, lock_path, runtime_dir, socket_path, Held, MasterLock, SYSTEM_DIR};
 #[cfg(feature = "server")]
-pub use server::{master_request, Server, ServerOptions};
+pub use server::{master_request, pdos_of, Server, ServerOptions};

@@ -52,6 +52,19 @@ pub enum Request {
     Slaves,
     /// The cyclic loop's statistics ([`Stats`]).
     Stats,
+    /// The master's events from number `since` on ([`Events`]): slaves that left OP, came
+    /// back or stopped answering, emergencies, sync errors, error counters that grew, the
+    /// ring's changes. The master keeps the last 1 024.
+    Events {
+        /// The first event wanted (0: every one kept).
+        #[serde(default)]
+        since: u64,
+    },
+    /// The process data a slave maps ([`Pdos`]).
+    Pdos {
+        /// The slave's position, from 0.
+        position: u16,
+    },
     /// SDO upload: the value under `data`.
     SdoRead {
         /// The slave's position, from 0.
@@ -231,6 +244,60 @@ pub struct Stats {
     /// What the application adds (`ferrocat run`: the clock sync's lock and offset).
     #[serde(default)]
     pub extra: serde_json::Value,
+}
+
+/// Events from a number on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Events {
+    /// Where the next ask starts: after the last event given (a reply carries as many as fit
+    /// its line; ask again until one comes empty), or the number the next event will have.
+    pub next: u64,
+    /// Events asked for that the master no longer keeps.
+    pub missed: u64,
+    /// The events, oldest first.
+    pub events: Vec<Event>,
+}
+
+/// One event of the master.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Event {
+    /// Its number, from 0.
+    pub seq: u64,
+    /// `left_op`, `lost`, `recovered`, `emergency`, `sync_error`, `error_counters` or `ring`.
+    pub kind: String,
+    /// The slave's position, where it is a slave's.
+    #[serde(default)]
+    pub position: Option<u16>,
+    /// In words, as `ferrocat run` prints it.
+    pub text: String,
+    /// When the loop took it, seconds since the master's cyclic loop started.
+    pub at_s: f64,
+}
+
+/// One mapped entry of a slave's process data.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PdoEntry {
+    /// The object's index.
+    pub index: u16,
+    /// Its subindex.
+    pub subindex: u8,
+    /// Its width in bits.
+    pub bits: u8,
+    /// Its name.
+    pub name: String,
+    /// Its first bit in the whole image.
+    pub image_bit: u32,
+}
+
+/// A slave's process data as mapped.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Pdos {
+    /// The slave's position.
+    pub position: u16,
+    /// Its outputs, in image order.
+    pub outputs: Vec<PdoEntry>,
+    /// Its inputs, in image order.
+    pub inputs: Vec<PdoEntry>,
 }
 
 /// An object's description.

@@ -19,7 +19,9 @@ use std::time::Duration;
 use ferrocat_master::io::Io;
 use ferrocat_master::{AlState, Answer, Health, Master, MasterError, RequestError, RequestId, SlaveError};
 
-use crate::protocol::{self, ErrorKind, ErrorReply, Hello, Reply, Request, SlaveInfo, Stats, MAX_LINE};
+use crate::protocol::{
+    self, ErrorKind, ErrorReply, Event, Events, Hello, PdoEntry, Pdos, Reply, Request, SlaveInfo, Stats, MAX_LINE,
+};
 
 /// Requests on their way to the loop at most (beyond, a client is told the master is busy).
 const QUEUE: usize = 64;
@@ -32,6 +34,8 @@ const TAKEN_PER_CALL: usize = 16;
 const REPLY_WAIT: Duration = Duration::from_secs(25);
 /// How long a write to a client may block its thread (a client that does not read).
 const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
+/// Events kept for `events` requests.
+const EVENTS_KEPT: usize = 1024;
 
 /// How the control socket is made.
 #[derive(Debug, Clone)]
@@ -61,6 +65,9 @@ pub struct Server {
     path: PathBuf,
     register_writes: bool,
     stop: Arc<AtomicBool>,
+    /// The last events, and the number the next will have.
+    events: std::collections::VecDeque<Event>,
+    next_event: u64,
 }
 
 impl std::fmt::Debug for Server {
@@ -93,6 +100,7 @@ impl Server {
         let hello = o.hello.clone();
         let stop_accept = Arc::clone(&stop);
         std::thread::Builder::new().name(String::from("ferrocat-control")).spawn(move || {
+            ordinary_thread();
             for stream in listener.incoming() {
                 if stop_accept.load(Ordering::Relaxed) {
                     break;
@@ -106,6 +114,7 @@ impl Server {
                 }
                 let (tx, hello, clients) = (tx.clone(), hello.clone(), Arc::clone(&clients));
                 let spawned = std::thread::Builder::new().name(String::from("ferrocat-client")).spawn(move || {
+                    ordinary_thread();
                     client(stream, &hello, &tx);
                     clients.fetch_sub(1, Ordering::SeqCst);
                 });
@@ -115,12 +124,43 @@ impl Server {
             }
         })?;
         tracing::info!("control socket {}", o.path.display());
-        Ok(Server { jobs, pending: HashMap::new(), path: o.path, register_writes: o.register_writes, stop })
+        Ok(Server {
+            jobs,
+            pending: HashMap::new(),
+            path: o.path,
+            register_writes: o.register_writes,
+            stop,
+            events: std::collections::VecDeque::with_capacity(EVENTS_KEPT),
+            next_event: 0,
+        })
     }
 
     /// The socket's path.
     pub fn path(&self) -> &std::path::Path {
         &self.path
+    }
+
+    /// Keeps `events` (taken from the master at `at_s`, seconds since the loop started) for
+    /// `events` requests: the last 1 024.
+    pub fn note_events(&mut self, events: &[ferrocat_master::MasterEvent], at_s: f64) {
+        use ferrocat_master::MasterEvent as E;
+        for e in events {
+            let (kind, position) = match e {
+                E::LeftOp { position, .. } => ("left_op", Some(*position)),
+                E::Lost { position, .. } => ("lost", Some(*position)),
+                E::Recovered { position, .. } => ("recovered", Some(*position)),
+                E::Emergency { position, .. } => ("emergency", Some(*position)),
+                E::SyncError { position, .. } => ("sync_error", Some(*position)),
+                E::ErrorCounters { position, .. } => ("error_counters", Some(*position)),
+                E::Ring { .. } => ("ring", None),
+            };
+            if self.events.len() == EVENTS_KEPT {
+                self.events.pop_front();
+            }
+            let seq = self.next_event;
+            self.next_event += 1;
+            self.events.push_back(Event { seq, kind: kind.to_string(), position, text: e.to_string(), at_s });
+        }
     }
 
     /// Once a cycle, in its spare time: takes the requests that came (without waiting), serves
@@ -166,6 +206,31 @@ impl Server {
                 let _ = job.reply.try_send(reply(Ok(stats(m, extra()))));
                 return;
             }
+            Request::Events { since } => {
+                // As many as fit a reply's line (three quarters of it), oldest first; `next`
+                // is where the following ask starts.
+                let first = self.events.front().map_or(self.next_event, |e| e.seq);
+                let (mut events, mut bytes) = (Vec::new(), 0);
+                for e in self.events.iter().filter(|e| e.seq >= since) {
+                    bytes += serde_json::to_vec(e).map_or(0, |v| v.len() + 1);
+                    if bytes > MAX_LINE * 3 / 4 {
+                        break;
+                    }
+                    events.push(e.clone());
+                }
+                let next = events.last().map_or(self.next_event, |e| e.seq + 1);
+                let batch = Events { next, missed: first.saturating_sub(since), events };
+                let _ = job.reply.try_send(reply(Ok(serde_json::to_value(batch).unwrap_or_default())));
+                return;
+            }
+            Request::Pdos { position } => {
+                let r = match m.slave(position) {
+                    Ok(s) => Ok(serde_json::to_value(pdos_of(s)).unwrap_or_default()),
+                    Err(e) => Err(error_of(&e)),
+                };
+                let _ = job.reply.try_send(reply(r));
+                return;
+            }
             Request::RegisterWrite { .. } if !self.register_writes => {
                 let e = ErrorReply::new(
                     ErrorKind::Refused,
@@ -196,6 +261,23 @@ impl Drop for Server {
     }
 }
 
+/// The process data `slave` maps, as the protocol gives it.
+pub fn pdos_of(slave: &ferrocat_master::Slave) -> Pdos {
+    let entries = |list: &[ferrocat_master::Mapped]| {
+        list.iter()
+            .map(|e| PdoEntry {
+                index: e.index,
+                subindex: e.subindex,
+                bits: e.bits,
+                name: e.name.clone(),
+                image_bit: e.image_bit,
+            })
+            .collect()
+    };
+    let map = slave.mapping();
+    Pdos { position: slave.position(), outputs: entries(&map.outputs), inputs: entries(&map.inputs) }
+}
+
 /// A protocol request as the master's (the slave list and statistics are the loop's own: an
 /// error), or what is wrong with its values.
 pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
@@ -215,7 +297,9 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
             M::RegisterWrite { position, register, data: protocol::unhex(&data)? }
         }
         Request::State { position, state } => M::State { position, state: state_named(&state)? },
-        Request::Slaves | Request::Stats => return Err(String::from("answered by the loop")),
+        Request::Slaves | Request::Stats | Request::Events { .. } | Request::Pdos { .. } => {
+            return Err(String::from("answered by the loop"))
+        }
     })
 }
 
@@ -310,6 +394,23 @@ fn error_of(e: &MasterError) -> ErrorReply {
         _ => None,
     };
     ErrorReply { kind, message: e.to_string(), abort_code }
+}
+
+/// Makes the calling thread an ordinary one: a thread inherits the real-time policy and the CPU
+/// of the thread that made it, and the socket's threads, made by a master already on SCHED_FIFO
+/// and its own CPU, would compete with its cyclic loop at the loop's priority.
+fn ordinary_thread() {
+    // SAFETY: plain system calls on the calling thread (0), with values they take.
+    unsafe {
+        let param = libc::sched_param { sched_priority: 0 };
+        libc::sched_setscheduler(0, libc::SCHED_OTHER, &param);
+        let mut any: libc::cpu_set_t = std::mem::zeroed();
+        let cpus = libc::sysconf(libc::_SC_NPROCESSORS_CONF).clamp(1, 1024) as usize;
+        for cpu in 0..cpus {
+            libc::CPU_SET(cpu, &mut any);
+        }
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &any);
+    }
 }
 
 /// One client's connection: the hello, then a request and its reply at a time.

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use ferrocat_master::io::Io;
-use ferrocat_master::Master;
+use ferrocat_master::{Master, MasterEvent};
 use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
 use ferrocat_service::protocol::{ErrorKind, Hello};
 use ferrocat_service::{Client, Server, ServerOptions};
@@ -36,6 +36,12 @@ impl Running {
 /// EK1100, EL2004 and a SERVO in OP, cycling in virtual time (each cycle also 50 µs of real
 /// time, so that clients get their turn), its control socket at a path of the test's own.
 fn running(name: &str, register_writes: bool) -> Running {
+    running_with(name, register_writes, 0)
+}
+
+/// As [`running`], the loop also handing the server `events` events of its own at its tenth
+/// cycle (slave 1 back in OP, numbered in their `name`s), besides the master's.
+fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
     let dir = std::env::temp_dir().join(format!("ferrocat-service-test-{name}-{}", std::process::id()));
     let path = dir.join(format!("{name}.sock"));
     let (ready_tx, ready) = std::sync::mpsc::channel();
@@ -69,6 +75,11 @@ fn running(name: &str, register_writes: bool) -> Running {
                 short += 1;
             }
             server.serve(&mut m, next - CYCLE_NS / 4, &|| serde_json::json!({ "lock": "none" })).unwrap();
+            let mut taken = m.take_events();
+            if m.cycle_stats().cycles == 10 {
+                taken.extend((0..events).map(|k| MasterEvent::Recovered { position: 1, name: format!("e{k}") }));
+            }
+            server.note_events(&taken, 0.5);
             m.io_mut().sleep_until(next);
             std::thread::sleep(std::time::Duration::from_micros(50));
         }
@@ -96,6 +107,10 @@ fn every_request_is_answered_through_the_socket_and_the_cycle_stays_whole() {
     assert!(c.od_list(2).unwrap().contains(&0x1018));
     assert_eq!(c.object_info(2, 0x1018).unwrap().max_subindex, 4);
     assert_eq!(c.register_read(1, 0x0130, 2).unwrap(), [8, 0]);
+    let pdos = c.pdos(1).unwrap();
+    assert_eq!((pdos.outputs.len(), pdos.inputs.len()), (4, 0), "{pdos:?}");
+    assert!(pdos.outputs.iter().all(|e| e.bits == 1 && e.name == "Output"), "{pdos:?}");
+    assert_eq!(c.pdos(9).unwrap_err().remote().unwrap().kind, ErrorKind::NoSuchSlave);
 
     // Errors as the master words them, by kind.
     let e = c.sdo_read(2, 0x5FFF, 0).unwrap_err();
@@ -169,4 +184,43 @@ fn bad_lines_and_clients_that_vanish_change_nothing() {
     drop(c);
     let (_, short) = r.stop();
     assert_eq!(short, 0);
+}
+
+#[test]
+fn events_come_in_order_from_a_number_on_and_the_oldest_go_past_1024() {
+    let r = running_with("events", false, 1030);
+    let mut c = Client::connect(&r.path).unwrap();
+    let t0 = std::time::Instant::now();
+    let first = loop {
+        let e = c.events(0).unwrap();
+        if e.next > 0 || t0.elapsed() > std::time::Duration::from_secs(20) {
+            break e;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    };
+    // 1 030 given, the last 1 024 kept: 6 missed from 0; more than a line holds, so in parts.
+    assert_eq!(first.missed, 6);
+    assert!(first.events.len() < 1024 && first.next == first.events.last().unwrap().seq + 1);
+    let mut all = first.clone();
+    loop {
+        let more = c.events(all.next).unwrap();
+        assert_eq!(more.missed, 0);
+        if more.events.is_empty() {
+            assert_eq!(more.next, 1030);
+            break;
+        }
+        all.next = more.next;
+        all.events.extend(more.events);
+    }
+    assert_eq!(all.events.len(), 1024);
+    assert_eq!(all.events[0].seq, 6);
+    assert!(all.events[0].text.contains("slave 1 (e6) is back in OP"), "{:?}", all.events[0]);
+    assert_eq!((all.events[0].kind.as_str(), all.events[0].position, all.events[0].at_s), ("recovered", Some(1), 0.5));
+    assert!(all.events.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    let tail = c.events(1028).unwrap();
+    assert_eq!((tail.missed, tail.events.iter().map(|e| e.seq).collect::<Vec<_>>()), (0, vec![1028, 1029]));
+    let none = c.events(1030).unwrap();
+    assert!(none.events.is_empty() && none.next == 1030);
+    drop(c);
+    r.stop();
 }
