@@ -462,9 +462,15 @@ fn foe_transfer(
 }
 
 pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> anyhow::Result<ExitCode> {
-    let mut m = t.master()?;
-    t.scan(&mut m)?;
-    let img = m.slave(position)?.sii().to_image();
+    // Beside a running master: the SII it read at its start.
+    let (img, m) = match t.running_master()? {
+        Some(mut c) => (c.sii_read(position)?, None),
+        None => {
+            let mut m = t.master()?;
+            t.scan(&mut m)?;
+            (m.slave(position)?.sii().to_image(), Some(m))
+        }
+    };
     match out {
         Some(p) => {
             std::fs::write(p, &img).with_context(|| format!("writing {}", p.display()))?;
@@ -481,7 +487,9 @@ pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> any
             }
         }
     }
-    finish(m)?;
+    if let Some(m) = m {
+        finish(m)?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 

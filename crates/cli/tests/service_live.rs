@@ -91,6 +91,11 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     assert!(ok && out.lines().filter(|l| l.contains("0x7")).count() == 4, "{out} {err}");
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["events"]));
     assert!(ok, "{err}");
+    let sii = dir.join("servo.sii");
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["sii", "read", "2", "--out", sii.to_str().unwrap()]));
+    assert!(ok && err.contains("through the master running on"), "{err}");
+    let (ok, out, err) = output(Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["sii", sii.to_str().unwrap()]));
+    assert!(ok && out.contains("0x00000402"), "{out}{err}");
     let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["reg", "read", "1", "0x0130"]));
     assert!(ok && out.trim() == "08 00", "{out} {err}");
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["reg", "write", "1", "0x0f80", "01"]));
@@ -187,11 +192,12 @@ fn an_application_of_its_own_process_runs_beside_the_master() {
     let sim = ReportingSim::start(
         &net,
         "service-app",
-        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'SERVO'\n",
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
+         [[device]]\nbuiltin = 'SERVO'\n[[device]]\nbuiltin = 'SERVO'\n",
         &[],
     );
     let dir = std::env::temp_dir().join(format!("ferrocat-service-app-{}", std::process::id()));
-    let run = ferrocat(&net, &dir, &["run", "--seconds", "0", "--json"])
+    let run = ferrocat(&net, &dir, &["run", "--dc", "--seconds", "0", "--json"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -214,6 +220,16 @@ fn an_application_of_its_own_process_runs_beside_the_master() {
     assert!(out.contains("vendor id") && out.contains("writing '1:Output#1'"), "{out}");
     let writes: u64 = out.lines().find_map(|l| l.split(" writes;").next()?.parse().ok()).unwrap_or(0);
     assert!(writes > 10, "{out}");
+
+    // Two drives enabled and moved in CSP by a process of their own, a set-point a cycle.
+    let (ok, out, err) = output(&mut example("csp_app", &["65536"]));
+    println!("{out}");
+    assert!(ok, "csp_app: {out}{err}");
+    let moved: Vec<i64> =
+        out.lines().filter_map(|l| l.split(": moved ").nth(1)?.split(' ').next()?.parse().ok()).collect();
+    assert_eq!(moved.len(), 2, "{out}");
+    // Where the profile ends: a drive follows its set-points within its following window.
+    assert!(moved.iter().all(|m| (m - 65536).abs() < 4096), "{out}");
 
     // The benchmark's writer: its figures printed, not asserted (they are the host's).
     let writer = example("load", &["write", "1:Output#3"]).stdout(Stdio::piped()).spawn().unwrap();

@@ -182,6 +182,24 @@ impl Client {
         self.field(v, "")
     }
 
+    /// The SII (EEPROM image) of the slave at `position`, as the master read it at its start.
+    pub fn sii_read(&mut self, position: u16) -> Result<Vec<u8>, ClientError> {
+        let mut image = Vec::new();
+        loop {
+            let v = self.call(Request::SiiRead { position, offset: image.len() })?;
+            let total: usize = self.field(v.clone(), "total")?;
+            let part = self.bytes(v)?;
+            if part.is_empty() || total > 1 << 24 {
+                return Err(self.protocol_error(format!("an SII part of 0 bytes at {} of {total}", image.len())));
+            }
+            image.extend_from_slice(&part);
+            if image.len() >= total {
+                image.truncate(total);
+                return Ok(image);
+            }
+        }
+    }
+
     /// The process data the slave at `position` maps.
     pub fn pdos(&mut self, position: u16) -> Result<Pdos, ClientError> {
         let v = self.call(Request::Pdos { position })?;

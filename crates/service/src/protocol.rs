@@ -14,6 +14,8 @@ pub const VERSION: u32 = 1;
 pub const MAX_LINE: usize = 64 * 1024;
 /// The longest value of an SDO write or a register write, in bytes.
 pub const MAX_DATA: usize = 16 * 1024;
+/// The most bytes of an SII a reply carries.
+pub const SII_PART: usize = 16 * 1024;
 
 /// What the master says first.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -59,6 +61,15 @@ pub enum Request {
         /// The first event wanted (0: every one kept).
         #[serde(default)]
         since: u64,
+    },
+    /// A slave's SII (EEPROM) as the master read it at its start, in parts of at most
+    /// [`SII_PART`] bytes from `offset`: `{"total": N, "offset": O, "data": HEX}`.
+    SiiRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The first byte wanted.
+        #[serde(default)]
+        offset: usize,
     },
     /// The process data a slave maps ([`Pdos`]).
     Pdos {

@@ -223,6 +223,21 @@ impl Server {
                 let _ = job.reply.try_send(reply(Ok(serde_json::to_value(batch).unwrap_or_default())));
                 return;
             }
+            Request::SiiRead { position, offset } => {
+                let r = match m.slave(position) {
+                    Ok(s) => {
+                        let image = s.sii().to_image();
+                        let from = offset.min(image.len());
+                        let to = (from + protocol::SII_PART).min(image.len());
+                        Ok(serde_json::json!({
+                            "total": image.len(), "offset": from, "data": protocol::hex(&image[from..to]),
+                        }))
+                    }
+                    Err(e) => Err(error_of(&e)),
+                };
+                let _ = job.reply.try_send(reply(r));
+                return;
+            }
             Request::Pdos { position } => {
                 let r = match m.slave(position) {
                     Ok(s) => Ok(serde_json::to_value(pdos_of(s)).unwrap_or_default()),
@@ -297,7 +312,7 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
             M::RegisterWrite { position, register, data: protocol::unhex(&data)? }
         }
         Request::State { position, state } => M::State { position, state: state_named(&state)? },
-        Request::Slaves | Request::Stats | Request::Events { .. } | Request::Pdos { .. } => {
+        Request::Slaves | Request::Stats | Request::Events { .. } | Request::Pdos { .. } | Request::SiiRead { .. } => {
             return Err(String::from("answered by the loop"))
         }
     })

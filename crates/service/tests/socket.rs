@@ -107,6 +107,11 @@ fn every_request_is_answered_through_the_socket_and_the_cycle_stays_whole() {
     assert!(c.od_list(2).unwrap().contains(&0x1018));
     assert_eq!(c.object_info(2, 0x1018).unwrap().max_subindex, 4);
     assert_eq!(c.register_read(1, 0x0130, 2).unwrap(), [8, 0]);
+    // The SII as the master read it: its header's vendor ID (word 8) is the slave's.
+    let sii = c.sii_read(2).unwrap();
+    assert!(sii.len() >= 128, "{} bytes", sii.len());
+    assert_eq!(u32::from_le_bytes(sii[16..20].try_into().unwrap()), slaves[2].vendor_id);
+    assert_eq!(u32::from_le_bytes(sii[20..24].try_into().unwrap()), slaves[2].product_code);
     let pdos = c.pdos(1).unwrap();
     assert_eq!((pdos.outputs.len(), pdos.inputs.len()), (4, 0), "{pdos:?}");
     assert!(pdos.outputs.iter().all(|e| e.bits == 1 && e.name == "Output"), "{pdos:?}");
