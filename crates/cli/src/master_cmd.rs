@@ -425,21 +425,51 @@ fn foe_transfer(
     data: Option<Vec<u8>>,
     part: Option<&(Option<std::path::PathBuf>, std::fs::File)>,
 ) -> anyhow::Result<ExitCode> {
-    let mut m = t.master()?;
-    t.scan(&mut m)?;
-    if boot {
-        m.enter_bootstrap(position)?;
-    } else {
-        m.configure()?;
-    }
-    match action {
-        FoeAction::Write { file } => {
-            let data = data.unwrap_or_default();
-            m.foe().write(position, name, password, &data)?;
+    let data = data.unwrap_or_default();
+    // Beside a running master: through its socket, in its cycle's spare time.
+    let read = match t.running_master()? {
+        Some(_) if boot => bail!(
+            "--boot takes the slave to BOOT, out of the running master's cycle: stop that master first (a firmware is \
+             written with the segment to this command alone)"
+        ),
+        Some(mut c) => match &action {
+            FoeAction::Write { .. } => {
+                c.foe_write(position, name, password, &data)?;
+                None
+            }
+            FoeAction::Read { max_bytes, .. } => Some(
+                c.foe_read(position, name, password, *max_bytes)
+                    .context("through the running master's socket (a file of at most 16 384 bytes)")?,
+            ),
+        },
+        None => {
+            let mut m = t.master()?;
+            t.scan(&mut m)?;
+            if boot {
+                m.enter_bootstrap(position)?;
+            } else {
+                m.configure()?;
+            }
+            let read = match &action {
+                FoeAction::Write { .. } => {
+                    m.foe().write(position, name, password, &data)?;
+                    None
+                }
+                FoeAction::Read { max_bytes, .. } => Some(m.foe().read(position, name, password, *max_bytes)?),
+            };
+            if boot {
+                m.leave_bootstrap(position)?;
+            }
+            finish(m)?;
+            read
+        }
+    };
+    match (action, read) {
+        (FoeAction::Write { file }, _) => {
             eprintln!("wrote {} ({} bytes) to slave {position} as '{name}'", file.display(), data.len());
         }
-        FoeAction::Read { file, max_bytes } => {
-            let data = m.foe().read(position, name, password, max_bytes)?;
+        (FoeAction::Read { file, .. }, data) => {
+            let data = data.unwrap_or_default();
             if let Some((part_path, f)) = part {
                 use std::io::Write;
                 let mut f: &std::fs::File = f;
@@ -454,10 +484,6 @@ fn foe_transfer(
             eprintln!("read '{name}' ({} bytes) from slave {position} into {}", data.len(), file.display());
         }
     }
-    if boot {
-        m.leave_bootstrap(position)?;
-    }
-    finish(m)?;
     Ok(ExitCode::SUCCESS)
 }
 

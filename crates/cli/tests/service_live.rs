@@ -91,6 +91,19 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     assert!(ok && out.lines().filter(|l| l.contains("0x7")).count() == 4, "{out} {err}");
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["events"]));
     assert!(ok, "{err}");
+    // FoE beside the master: a parameter file there and back.
+    let params = dir.join("params.bin");
+    std::fs::write(&params, (0..2000u32).map(|k| (k * 13) as u8).collect::<Vec<u8>>()).unwrap();
+    let (ok, _, err) =
+        output(&mut ferrocat(&net, &dir, &["foe", "write", "2", "params.bin", params.to_str().unwrap()]));
+    assert!(ok && err.contains("through the master running on"), "{err}");
+    let back = dir.join("back.bin");
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["foe", "read", "2", "params.bin", back.to_str().unwrap()]));
+    assert!(ok, "{err}");
+    assert_eq!(std::fs::read(&back).unwrap(), std::fs::read(&params).unwrap());
+    let (ok, _, err) =
+        output(&mut ferrocat(&net, &dir, &["foe", "write", "2", "fw.bin", params.to_str().unwrap(), "--boot"]));
+    assert!(!ok && err.contains("stop that master first"), "{err}");
     let sii = dir.join("servo.sii");
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["sii", "read", "2", "--out", sii.to_str().unwrap()]));
     assert!(ok && err.contains("through the master running on"), "{err}");

@@ -10,6 +10,7 @@ use crate::acyclic_state::{Active, InfoWanted, Job};
 pub use crate::acyclic_state::{AcyclicStats, Answer, Request, RequestId, QUEUE_LIMIT, REGISTER_MAX};
 use crate::coe;
 use crate::error::{MasterError, RequestError, Result, SlaveError, StateCause};
+use crate::foe_transfer::{FoePeer, FoeStep, FoeTransfer};
 use crate::io::Io;
 use crate::mailbox::Polled;
 use crate::master::Master;
@@ -151,6 +152,12 @@ impl<I: Io> Master<I> {
                 let t = InfoTransfer::new(self.peer_of(position)?, coe::entry_request(index, subindex))?;
                 Job::Info(t, InfoWanted::Entry, None)
             }
+            Request::FoeRead { file, password, max_bytes, .. } => {
+                Job::Foe(FoeTransfer::read(self.foe_peer_of(position)?, &file, password, max_bytes), None, None, false)
+            }
+            Request::FoeWrite { file, password, data, .. } => {
+                Job::Foe(FoeTransfer::write(self.foe_peer_of(position)?, &file, password, data)?, None, None, true)
+            }
             Request::RegisterRead { register, len, .. } => {
                 self.slave(position)?;
                 Job::RegisterRead { register, len }
@@ -176,8 +183,18 @@ impl<I: Io> Master<I> {
                 let first = t.start()?;
                 Job::Info(t, wanted, Some(self.mailboxes().message(position, MailboxType::COE, &first)?))
             }
+            Job::Foe(mut t, _, _, writes) => {
+                let first = t.start()?;
+                Job::Foe(t, Some(self.mailboxes().message(position, MailboxType::FOE, &first)?), None, writes)
+            }
             other => other,
         })
+    }
+
+    /// Who `position` is, for an FoE transfer.
+    fn foe_peer_of(&mut self, position: u16) -> Result<FoePeer> {
+        let (_, name, m) = self.mailboxes().mailbox_of(position, MailboxType::FOE)?;
+        Ok(FoePeer { position, name, out_len: m.out.1 as usize, in_len: m.inp.1 as usize })
     }
 
     /// Who `position` is, for a CoE conversation.
@@ -197,21 +214,31 @@ impl<I: Io> Master<I> {
         let station = self.slave(a.position)?.station;
         let device = |ado| Address::Device { adp: station, ado };
         let done = match &mut a.job {
-            Job::Sdo(_, Some(msg)) | Job::Info(_, _, Some(msg)) => {
+            Job::Sdo(_, Some(msg)) | Job::Info(_, _, Some(msg)) | Job::Foe(_, Some(msg), _, _) => {
                 // Written again under the same counter until the slave takes it.
                 let mut mbx = self.mailboxes();
                 if mbx.try_write(a.position, msg)? {
                     a.since_ns = now;
                     match &mut a.job {
-                        Job::Sdo(_, m) | Job::Info(_, _, m) => *m = None,
-                        _ => {}
+                        // An FoE transfer's last message: over once written.
+                        Job::Foe(_, _, end @ Some(_), writes) => {
+                            let end = end.take().unwrap_or_else(|| Ok(Vec::new()));
+                            let writes = *writes;
+                            Some(end.map(|d| if writes { Answer::Written } else { Answer::Data(d) }))
+                        }
+                        Job::Sdo(_, m) | Job::Info(_, _, m) | Job::Foe(_, m, _, _) => {
+                            *m = None;
+                            None
+                        }
+                        _ => None,
                     }
                 } else if now.saturating_sub(a.since_ns) > limit_ns {
                     return Err(MasterError::of(a.position, &mbx.name_of(a.position), SlaveError::MailboxFull));
+                } else {
+                    None
                 }
-                None
             }
-            Job::Sdo(..) | Job::Info(..) => self.await_reply(&mut a, now, limit_ns)?,
+            Job::Sdo(..) | Job::Info(..) | Job::Foe(..) => self.await_reply(&mut a, now, limit_ns)?,
             Job::RegisterRead { register, len } => {
                 let mut b = vec![0u8; *len as usize];
                 let wkc = self.engine.one(Command::FPRD, device(*register), &mut b)?;
@@ -260,9 +287,10 @@ impl<I: Io> Master<I> {
 
     /// One poll of the slave's send mailbox for the awaited reply.
     fn await_reply(&mut self, a: &mut Active, now: u64, limit_ns: u64) -> Result<Option<Result<Answer>>> {
+        let protocol = if matches!(a.job, Job::Foe(..)) { MailboxType::FOE } else { MailboxType::COE };
         let polled = self.mailboxes().poll(a.position);
         let reply = match polled {
-            Ok(Polled::Message(MailboxType::COE, payload)) => payload,
+            Ok(Polled::Message(t, payload)) if t == protocol => payload,
             Ok(_) => {
                 if now.saturating_sub(a.since_ns) > limit_ns {
                     let name = self.slaves[a.position as usize].name.clone();
@@ -293,12 +321,24 @@ impl<I: Io> Master<I> {
                 Ok(_) => None,
                 Err(e) => return Ok(Some(Err(e))),
             },
+            Job::Foe(t, _, end, writes) => match t.on_reply(&reply) {
+                Ok(FoeStep::Done(data)) => {
+                    return Ok(Some(Ok(if *writes { Answer::Written } else { Answer::Data(data) })));
+                }
+                Ok(FoeStep::Send(next)) => Some(next),
+                // The last message is written at the next call, then the transfer answered.
+                Ok(FoeStep::Finish(last, result)) => {
+                    *end = Some(result);
+                    Some(last)
+                }
+                Err(e) => return Ok(Some(Err(e))),
+            },
             _ => None,
         };
         if let Some(payload) = next {
-            let m = self.mailboxes().message(a.position, MailboxType::COE, &payload)?;
+            let m = self.mailboxes().message(a.position, protocol, &payload)?;
             match &mut a.job {
-                Job::Sdo(_, slot) | Job::Info(_, _, slot) => *slot = Some(m),
+                Job::Sdo(_, slot) | Job::Info(_, _, slot) | Job::Foe(_, slot, _, _) => *slot = Some(m),
                 _ => {}
             }
         }

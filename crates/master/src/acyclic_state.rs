@@ -6,6 +6,7 @@ use ferrocat_wire::register::AlState;
 
 use crate::coe::{EntryInfo, ObjectInfo};
 use crate::error::Result;
+use crate::foe_transfer::FoeTransfer;
 use crate::sdo_transfer::{InfoTransfer, SdoTransfer};
 
 /// The most requests that wait at once, the one being served included.
@@ -83,6 +84,28 @@ pub enum Request {
         /// Bytes, 1 to [`REGISTER_MAX`].
         data: Vec<u8>,
     },
+    /// File `file` read from the slave by FoE, at most `max_bytes` of it.
+    FoeRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The file's name on the slave.
+        file: String,
+        /// The password the slave asks for (0: none).
+        password: u32,
+        /// A longer file is an error (the transfer aborted), not a truncated one.
+        max_bytes: usize,
+    },
+    /// `data` written to the slave as file `file` by FoE.
+    FoeWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The file's name on the slave.
+        file: String,
+        /// The password the slave asks for (0: none).
+        password: u32,
+        /// The file.
+        data: Vec<u8>,
+    },
     /// The slave to `state` (AL control), answered when its AL status says it is there. From
     /// then on the master keeps it there: supervision brings a slave back to the state last
     /// requested, not to OP.
@@ -105,6 +128,8 @@ impl Request {
             | Request::EntryInfo { position, .. }
             | Request::RegisterRead { position, .. }
             | Request::RegisterWrite { position, .. }
+            | Request::FoeRead { position, .. }
+            | Request::FoeWrite { position, .. }
             | Request::State { position, .. } => position,
         }
     }
@@ -117,6 +142,8 @@ impl Request {
                 | Request::OdList { .. }
                 | Request::ObjectInfo { .. }
                 | Request::EntryInfo { .. }
+                | Request::FoeRead { .. }
+                | Request::FoeWrite { .. }
         )
     }
 }
@@ -185,6 +212,9 @@ pub(crate) enum Job {
     /// A mailbox conversation: its message to write next, or (None) its reply awaited.
     Sdo(SdoTransfer, Option<Vec<u8>>),
     Info(InfoTransfer, InfoWanted, Option<Vec<u8>>),
+    /// An FoE transfer: its message to write next (or its reply awaited), and after the last
+    /// message (no reply awaited) the transfer's end; whether it writes.
+    Foe(FoeTransfer, Option<Vec<u8>>, Option<Result<Vec<u8>>>, bool),
     RegisterRead {
         register: u16,
         len: u16,
@@ -208,7 +238,7 @@ pub(crate) enum InfoWanted {
 
 impl Job {
     fn uses_mailbox(&self) -> bool {
-        matches!(self, Job::Sdo(..) | Job::Info(..))
+        matches!(self, Job::Sdo(..) | Job::Info(..) | Job::Foe(..))
     }
 }
 

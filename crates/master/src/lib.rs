@@ -44,6 +44,7 @@ mod error;
 mod event;
 mod far_clock;
 mod foe;
+mod foe_transfer;
 mod handle;
 pub mod io;
 mod line_fit;

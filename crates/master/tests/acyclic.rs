@@ -136,3 +136,44 @@ fn a_full_queue_answers_at_once_and_nothing_is_lost() {
     assert_eq!(answered, 70, "every request answered once (the last was {last:?})");
     assert_eq!(m.requests_pending(), 0);
 }
+
+#[test]
+fn foe_files_go_there_and_back_beside_the_cycle() {
+    // The drive answers each write's first data packet busy three times (a flash erased).
+    let cfg: SegmentConfig = toml::from_str(
+        "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\nfoe_busy = 3\n",
+    )
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
+    m.bring_up().unwrap();
+    let packet = ferrocat_wire::foe::max_data_len(m.slave(2).unwrap().mailbox().unwrap().out.1 as usize);
+    // Shorter than a packet, exactly three (an empty packet ends it), and a few and a half.
+    for n in [10, 3 * packet, 5 * packet / 2] {
+        let data: Vec<u8> = (0..n).map(|k| (k * 7 + k / 251) as u8).collect();
+        let name = format!("file-{n}.bin");
+        let id = m.submit(Request::FoeWrite { position: 2, file: name.clone(), password: 0, data: data.clone() });
+        let (a, short) = cycle_until(&mut m, id, 2000);
+        assert_eq!((a.unwrap(), short), (Answer::Written, 0), "{n} bytes");
+        let id = m.submit(Request::FoeRead { position: 2, file: name, password: 0, max_bytes: 1 << 20 });
+        assert_eq!(cycle_until(&mut m, id, 2000).0.unwrap(), Answer::Data(data), "{n} bytes read back");
+    }
+    // Longer than the reader takes: an error, the transfer aborted, and the next one as ever.
+    let id = m.submit(Request::FoeRead {
+        position: 2,
+        file: format!("file-{}.bin", 3 * packet),
+        password: 0,
+        max_bytes: packet,
+    });
+    let a = cycle_until(&mut m, id, 2000).0;
+    assert!(a.as_ref().is_err_and(|e| e.to_string().contains("longer than")), "{a:?}");
+    let id = m.submit(Request::FoeRead { position: 2, file: "file-10.bin".into(), password: 0, max_bytes: 100 });
+    assert!(matches!(cycle_until(&mut m, id, 2000).0, Ok(Answer::Data(d)) if d.len() == 10));
+    // A file the slave does not have: its refusal, in words.
+    let id = m.submit(Request::FoeRead { position: 2, file: "none.bin".into(), password: 0, max_bytes: 100 });
+    let a = cycle_until(&mut m, id, 2000).0;
+    assert!(a.as_ref().is_err_and(|e| e.to_string().contains("none.bin")), "{a:?}");
+    // A slave without FoE.
+    let id = m.submit(Request::FoeRead { position: 1, file: "x".into(), password: 0, max_bytes: 100 });
+    assert!(cycle_until(&mut m, id, 10).0.is_err());
+    assert_eq!(m.cycle_stats().wkc_errors, 0);
+}

@@ -264,6 +264,36 @@ impl Client {
         self.call(Request::RegisterWrite { position, register, data: protocol::hex(data) }).map(drop)
     }
 
+    /// File `file` of the slave at `position` by FoE: at most `max_bytes`, and through the
+    /// socket at most [`protocol::MAX_DATA`] (a longer file is an error, not a truncated one).
+    pub fn foe_read(
+        &mut self,
+        position: u16,
+        file: &str,
+        password: u32,
+        max_bytes: usize,
+    ) -> Result<Vec<u8>, ClientError> {
+        let max_bytes = max_bytes.min(protocol::MAX_DATA);
+        let v = self.call(Request::FoeRead { position, file: file.to_string(), password, max_bytes })?;
+        self.bytes(v)
+    }
+
+    /// `data` written to the slave at `position` as file `file` by FoE (at most
+    /// [`protocol::MAX_DATA`] bytes through the socket).
+    pub fn foe_write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<(), ClientError> {
+        if data.len() > protocol::MAX_DATA {
+            return Err(ClientError::Remote(ErrorReply::new(
+                ErrorKind::BadRequest,
+                format!(
+                    "a file of {} bytes: through a running master's socket at most {} (a larger one, a firmware, with the master stopped)",
+                    data.len(),
+                    protocol::MAX_DATA
+                ),
+            )));
+        }
+        self.call(Request::FoeWrite { position, file: file.to_string(), password, data: protocol::hex(data) }).map(drop)
+    }
+
     /// The slave to `state` (INIT, PREOP, SAFEOP, OP), answered once it is there.
     pub fn request_state(&mut self, position: u16, state: &str) -> Result<String, ClientError> {
         let v = self.call(Request::State { position, state: state.to_string() })?;

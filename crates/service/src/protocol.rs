@@ -142,6 +142,32 @@ pub enum Request {
         /// The bytes, hex.
         data: String,
     },
+    /// File `file` read from the slave by FoE (at most `max_bytes`, at most [`MAX_DATA`]),
+    /// under `data`.
+    FoeRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The file's name on the slave.
+        file: String,
+        /// The password the slave asks for.
+        #[serde(default)]
+        password: u32,
+        /// A longer file is an error.
+        #[serde(default = "max_data")]
+        max_bytes: usize,
+    },
+    /// `data` (hex, at most [`MAX_DATA`] bytes) written to the slave as file `file` by FoE.
+    FoeWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The file's name on the slave.
+        file: String,
+        /// The password the slave asks for.
+        #[serde(default)]
+        password: u32,
+        /// The file, hex.
+        data: String,
+    },
     /// The slave to `state` (INIT, PREOP, SAFEOP or OP); the master keeps it there.
     State {
         /// The slave's position, from 0.
@@ -149,6 +175,10 @@ pub enum Request {
         /// The state's name.
         state: String,
     },
+}
+
+fn max_data() -> usize {
+    MAX_DATA
 }
 
 /// The master's answer to one request: `ok` with the result, or `error`.

@@ -312,6 +312,18 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
             M::RegisterWrite { position, register, data: protocol::unhex(&data)? }
         }
         Request::State { position, state } => M::State { position, state: state_named(&state)? },
+        Request::FoeRead { position, file, password, max_bytes } => {
+            if max_bytes > protocol::MAX_DATA {
+                return Err(format!(
+                    "max_bytes {max_bytes}: a file through the socket has at most {} bytes",
+                    protocol::MAX_DATA
+                ));
+            }
+            M::FoeRead { position, file, password, max_bytes }
+        }
+        Request::FoeWrite { position, file, password, data } => {
+            M::FoeWrite { position, file, password, data: protocol::unhex(&data)? }
+        }
         Request::Slaves | Request::Stats | Request::Events { .. } | Request::Pdos { .. } | Request::SiiRead { .. } => {
             return Err(String::from("answered by the loop"))
         }

@@ -112,6 +112,12 @@ fn every_request_is_answered_through_the_socket_and_the_cycle_stays_whole() {
     assert!(sii.len() >= 128, "{} bytes", sii.len());
     assert_eq!(u32::from_le_bytes(sii[16..20].try_into().unwrap()), slaves[2].vendor_id);
     assert_eq!(u32::from_le_bytes(sii[20..24].try_into().unwrap()), slaves[2].product_code);
+    // FoE through the socket: a file written and read back, one too long for it refused.
+    let file: Vec<u8> = (0..3000u32).map(|k| (k * 7) as u8).collect();
+    c.foe_write(2, "params.bin", 0, &file).unwrap();
+    assert_eq!(c.foe_read(2, "params.bin", 0, 1 << 20).unwrap(), file);
+    let big = vec![0u8; ferrocat_service::protocol::MAX_DATA + 1];
+    assert!(c.foe_write(2, "big.bin", 0, &big).unwrap_err().to_string().contains("at most"));
     let pdos = c.pdos(1).unwrap();
     assert_eq!((pdos.outputs.len(), pdos.inputs.len()), (4, 0), "{pdos:?}");
     assert!(pdos.outputs.iter().all(|e| e.bits == 1 && e.name == "Output"), "{pdos:?}");
