@@ -16,6 +16,7 @@ mod manpages;
 mod master_cmd;
 mod pcap;
 mod plots;
+mod reload;
 mod report;
 mod service_cmd;
 mod sii;
@@ -376,6 +377,13 @@ enum Command {
         position: u16,
         /// INIT, PREOP, SAFEOP or OP (any case).
         state: String,
+        #[command(flatten)]
+        target: target::Target,
+    },
+    /// Ask the master running on the target to read its machine description again and apply
+    /// what can change while it cycles (as SIGHUP does): process-data watchdogs and
+    /// slave-to-slave copies; the network compared again.
+    Reload {
         #[command(flatten)]
         target: target::Target,
     },
@@ -989,6 +997,7 @@ fn main() -> ExitCode {
         },
         Command::State { position, state, target } => service_cmd::state(&target, position, &state),
         Command::Stats { target, json } => service_cmd::stats(&target, json),
+        Command::Reload { target } => service_cmd::reload(&target),
         Command::Get { names, target, json } => image_cmd::get(&target, &names, json),
         Command::Events { target, follow, json } => service_cmd::events(&target, follow, json),
         Command::Pdos { position, target, json } => service_cmd::pdos(&target, position, json),

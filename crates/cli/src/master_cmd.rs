@@ -753,6 +753,10 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing signal handlers")?;
     }
+    // SIGHUP: the machine description read again (crate::reload).
+    let sighup = Arc::new(AtomicBool::new(false));
+    signal_hook::flag::register(signal_hook::consts::SIGHUP, Arc::clone(&sighup))
+        .context("installing signal handlers")?;
     let eoe_taps = eoe_taps
         .iter()
         .map(|v| {
@@ -911,6 +915,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         _ => None,
     };
     let mut app_watchdog = o.control.as_mut().and_then(|c| c.app_watchdog.take());
+    let mut machine_in_force = t.machine_file()?.cloned();
     let t_op = {
         use ferrocat_master::io::Io;
         m.io_mut().now_ns()
@@ -1052,6 +1057,18 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         if let (Some(server), false) = (control.as_mut(), events.is_empty()) {
             server.note_events(&events, t_s);
+        }
+        // A reload between two cycles: what it changes goes out by requests of the acyclic
+        // side, in later cycles' spare time.
+        if sighup.swap(false, Ordering::Relaxed) || control.as_ref().is_some_and(|s| s.reload_asked()) {
+            let r = crate::reload::reload(t, &mut m, eni, o.copy, &mut machine_in_force);
+            match &r {
+                Ok(said) => eprintln!("t={t_s:7.3} s  reload: {said}"),
+                Err(e) => eprintln!("t={t_s:7.3} s  reload: {e}"),
+            }
+            if let Some(server) = control.as_mut() {
+                server.reloaded(&r);
+            }
         }
         if m.io_mut().now_ns() >= report {
             let s = m.cycle_stats();

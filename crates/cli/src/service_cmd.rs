@@ -351,3 +351,11 @@ pub fn pdos(t: &Target, position: u16, json: bool) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+/// `ferrocat reload`: the running master reads its machine description again.
+pub fn reload(t: &Target) -> anyhow::Result<ExitCode> {
+    let mut c = t.require_master("`reload`")?;
+    let said = c.reload()?;
+    eprintln!("{said}");
+    Ok(ExitCode::SUCCESS)
+}

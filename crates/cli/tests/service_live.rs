@@ -133,6 +133,17 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["set", "1:Output#1=1"]));
     assert!(ok, "{err}");
 
+    // The description edited while the master runs: a process-data watchdog for the lamps,
+    // written at `ferrocat reload` in the cycles' spare time (100 µs steps: 500 for 50 ms).
+    let text = std::fs::read_to_string(&machine).unwrap();
+    std::fs::write(&machine, text.replace("name = \"lamps\"\n", "name = \"lamps\"\nwatchdog_us = 50000\n")).unwrap();
+    let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["reload"]));
+    assert!(ok && err.contains("slave 1's process-data watchdog to 50000 us"), "{err}");
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["reg", "read", "1", "0x0420"]));
+    assert!(ok && out.trim() == "f4 01", "{out}{err}");
+    // SIGHUP does the same (the summary's stderr says so at the end).
+    Command::new("kill").args(["-HUP", &run.0.id().to_string()]).status().unwrap();
+
     // A second master, and a command that scans, are refused with the way to the first.
     for args in [&["run", "--seconds", "1"][..], &["scan"][..]] {
         let (ok, _, err) = output(&mut ferrocat(&net, &dir, args));
@@ -165,6 +176,7 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     // What the EL2004 last received: outputs 1–3 on, 4 (the half-done write) off. And the
     // master, stopped by a signal, stepped every slave down to INIT.
     assert!(err.contains("slaves stepped down to SAFEOP, then INIT"), "{err}");
+    assert_eq!(err.matches("reload: ").count(), 2, "{err}");
     let report = sim.report();
     let el2004 = &report["devices"][1];
     assert_eq!(el2004["outputs"], serde_json::json!([0b0111]), "{el2004}");

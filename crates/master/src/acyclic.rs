@@ -47,6 +47,22 @@ impl<I: Io> Master<I> {
         id
     }
 
+    /// [`Master::set_process_data_watchdog`] while cyclic: the two register writes (divider
+    /// and time) are requests, served in the cycles' spare time; their numbers. The master
+    /// writes the watchdog again whenever it configures the slave, as it does the other's.
+    pub fn submit_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<[RequestId; 2]> {
+        use crate::master::{WATCHDOG_DIVIDER, WATCHDOG_STEP_NS};
+        self.slave(position)?;
+        let steps = u16::try_from(time_ns.div_ceil(WATCHDOG_STEP_NS))
+            .map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
+        self.slaves[position as usize].pd_watchdog_steps = Some(steps);
+        let write = |register, data: [u8; 2]| Request::RegisterWrite { position, register, data: data.to_vec() };
+        Ok([
+            self.submit(write(addr::WATCHDOG_DIVIDER, WATCHDOG_DIVIDER.to_le_bytes())),
+            self.submit(write(addr::WATCHDOG_TIME_PROCESS_DATA, steps.to_le_bytes())),
+        ])
+    }
+
     /// The answers given since the last call, each under its request's number.
     pub fn take_answers(&mut self) -> Vec<(RequestId, Result<Answer>)> {
         std::mem::take(&mut self.acyclic.answers)

@@ -176,6 +176,13 @@ impl Client {
         self.field(v, "")
     }
 
+    /// Asks the master to read its machine description again and apply what can change while
+    /// it cycles: what it did, in words.
+    pub fn reload(&mut self) -> Result<String, ClientError> {
+        let v = self.call(Request::Reload)?;
+        self.field(v, "said")
+    }
+
     /// The master's events from number `since` on (0: every one it keeps).
     pub fn events(&mut self, since: u64) -> Result<Events, ClientError> {
         let v = self.call(Request::Events { since })?;

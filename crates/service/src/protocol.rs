@@ -54,6 +54,9 @@ pub enum Request {
     Slaves,
     /// The cyclic loop's statistics ([`Stats`]).
     Stats,
+    /// Read the machine description again and apply what can change without stopping the
+    /// cycle (as SIGHUP does): `{"said": TEXT}`.
+    Reload,
     /// The master's events from number `since` on ([`Events`]): slaves that left OP, came
     /// back or stopped answering, emergencies, sync errors, error counters that grew, the
     /// ring's changes. The master keeps the last 1 024.
@@ -416,7 +419,7 @@ pub fn parse_request(line: &[u8]) -> Result<Envelope, Reply> {
     // Whatever the request's own fields are not is refused, as `deny_unknown_fields` would
     // (it does not reach the fields of a variant without any).
     let op = v.get("op").and_then(|o| o.as_str()).unwrap_or_default();
-    if matches!(op, "slaves" | "stats") {
+    if matches!(op, "slaves" | "stats" | "reload") {
         if let Some(extra) = v.keys().find(|k| *k != "op") {
             return Err(not_ours(id, format!("unknown field `{extra}`")));
         }

@@ -68,6 +68,8 @@ pub struct Server {
     /// The last events, and the number the next will have.
     events: std::collections::VecDeque<Event>,
     next_event: u64,
+    /// A reload asked for and not yet done: the reply's number and channel.
+    reload: Option<(u64, SyncSender<Reply>)>,
 }
 
 impl std::fmt::Debug for Server {
@@ -132,12 +134,30 @@ impl Server {
             stop,
             events: std::collections::VecDeque::with_capacity(EVENTS_KEPT),
             next_event: 0,
+            reload: None,
         })
     }
 
     /// The socket's path.
     pub fn path(&self) -> &std::path::Path {
         &self.path
+    }
+
+    /// Whether a client asked for a reload that the application has not done yet
+    /// ([`Server::reloaded`] answers it).
+    pub fn reload_asked(&self) -> bool {
+        self.reload.is_some()
+    }
+
+    /// Answers the reload asked for: what it did, or why it did nothing.
+    pub fn reloaded(&mut self, result: &Result<String, String>) {
+        if let Some((id, reply)) = self.reload.take() {
+            let r = match result {
+                Ok(said) => Reply { id, ok: Some(serde_json::json!({ "said": said })), error: None },
+                Err(e) => Reply { id, ok: None, error: Some(ErrorReply::new(ErrorKind::Refused, e.clone())) },
+            };
+            let _ = reply.try_send(r);
+        }
     }
 
     /// Keeps `events` (taken from the master at `at_s`, seconds since the loop started) for
@@ -204,6 +224,14 @@ impl Server {
             }
             Request::Stats => {
                 let _ = job.reply.try_send(reply(Ok(stats(m, extra()))));
+                return;
+            }
+            Request::Reload => {
+                if self.reload.is_some() {
+                    let _ = job.reply.try_send(reply(Err(ErrorReply::new(ErrorKind::Busy, "a reload is under way"))));
+                } else {
+                    self.reload = Some((job.id, job.reply));
+                }
                 return;
             }
             Request::Events { since } => {
@@ -324,9 +352,12 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
         Request::FoeWrite { position, file, password, data } => {
             M::FoeWrite { position, file, password, data: protocol::unhex(&data)? }
         }
-        Request::Slaves | Request::Stats | Request::Events { .. } | Request::Pdos { .. } | Request::SiiRead { .. } => {
-            return Err(String::from("answered by the loop"))
-        }
+        Request::Slaves
+        | Request::Stats
+        | Request::Events { .. }
+        | Request::Pdos { .. }
+        | Request::SiiRead { .. }
+        | Request::Reload => return Err(String::from("answered by the loop")),
     })
 }
 

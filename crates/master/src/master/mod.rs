@@ -19,6 +19,7 @@ mod init_cmds;
 mod modules;
 mod next_frame_latch;
 mod process_data;
+pub(crate) use process_data::{WATCHDOG_DIVIDER, WATCHDOG_STEP_NS};
 mod sii;
 mod speed_direction;
 mod split_start;

@@ -10,8 +10,8 @@ use crate::slave::Mapped;
 
 /// The watchdog divider the master writes (0x0400): 2 498 + 2 cycles of 40 ns, 100 µs a step of
 /// the watchdog time (ESC datasheet section II, 0x0400).
-const WATCHDOG_DIVIDER: u16 = 2498;
-const WATCHDOG_STEP_NS: u64 = (WATCHDOG_DIVIDER as u64 + 2) * 40;
+pub(crate) const WATCHDOG_DIVIDER: u16 = 2498;
+pub(crate) const WATCHDOG_STEP_NS: u64 = (WATCHDOG_DIVIDER as u64 + 2) * 40;
 
 impl<I: Io> Master<I> {
     /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
