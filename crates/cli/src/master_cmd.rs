@@ -437,10 +437,7 @@ fn foe_transfer(
                 c.foe_write(position, name, password, &data)?;
                 None
             }
-            FoeAction::Read { max_bytes, .. } => Some(
-                c.foe_read(position, name, password, *max_bytes)
-                    .context("through the running master's socket (a file of at most 16 384 bytes)")?,
-            ),
+            FoeAction::Read { max_bytes, .. } => Some(c.foe_read(position, name, password, *max_bytes)?),
         },
         None => {
             let mut m = t.master()?;
@@ -1040,12 +1037,15 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         if let Some(server) = control.as_mut() {
             let deadline =
                 if max_rate { m.io_mut().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
-            let extra = || {
-                json!({ "clock_sync": sync.as_ref().map(|(method, st)| json!({
-                    "method": method.name(),
-                    "lock": st.lock.state().name(),
-                    "offset_ns": st.lock.offset_ns(),
-                })) })
+            let extra = |m: &Master<CliIo>| {
+                json!({
+                    "clock_sync": sync.as_ref().map(|(method, st)| json!({
+                        "method": method.name(),
+                        "lock": st.lock.state().name(),
+                        "offset_ns": st.lock.offset_ns(),
+                    })),
+                    "diagnosis": diagnosis_json(m, &tally, o.diagnosis_ms),
+                })
             };
             server.serve(&mut m, deadline, &extra)?;
         }

@@ -279,6 +279,19 @@ pub fn stats(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
             cs["offset_ns"]
         );
     }
+    if let Some(d) = s.extra.get("diagnosis").filter(|v| !v.is_null()) {
+        outln!(
+            "diagnosis: {} error-counter reads, {} mailbox polls, {} counters grew, {} emergencies, {} sync-error flags found set",
+            d["counter_reads"],
+            d["mailbox_polls"],
+            d["counters_grown"],
+            d["emergencies"],
+            d["sync_errors"]
+        );
+        for c in d["error_counters"].as_array().into_iter().flatten() {
+            outln!("  slave {} ({}): {}", c["position"], c["name"].as_str().unwrap_or("?"), c["counters"]);
+        }
+    }
     Ok(ExitCode::SUCCESS)
 }
 

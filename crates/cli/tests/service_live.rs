@@ -159,6 +159,8 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     assert!(ok, "{err}");
     let stats: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert!(stats["cycles"].as_u64().unwrap() > 0, "{stats}");
+    // Diagnosis while cyclic, as the master has it: error counters read.
+    assert!(stats["extra"]["diagnosis"]["counter_reads"].as_u64().unwrap() > 0, "{stats}");
 
     Command::new("kill").args(["-INT", &run.0.id().to_string()]).status().unwrap();
     let child = std::mem::replace(&mut run.0, Command::new("true").spawn().unwrap());

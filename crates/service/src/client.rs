@@ -271,8 +271,8 @@ impl Client {
         self.call(Request::RegisterWrite { position, register, data: protocol::hex(data) }).map(drop)
     }
 
-    /// File `file` of the slave at `position` by FoE: at most `max_bytes`, and through the
-    /// socket at most [`protocol::MAX_DATA`] (a longer file is an error, not a truncated one).
+    /// File `file` of the slave at `position` by FoE, at most `max_bytes` (at most
+    /// [`protocol::MAX_FOE_FILE`]; a longer file is an error, not a truncated one), in parts.
     pub fn foe_read(
         &mut self,
         position: u16,
@@ -280,25 +280,52 @@ impl Client {
         password: u32,
         max_bytes: usize,
     ) -> Result<Vec<u8>, ClientError> {
-        let max_bytes = max_bytes.min(protocol::MAX_DATA);
-        let v = self.call(Request::FoeRead { position, file: file.to_string(), password, max_bytes })?;
-        self.bytes(v)
+        let max_bytes = max_bytes.min(protocol::MAX_FOE_FILE);
+        let mut data = Vec::new();
+        loop {
+            let offset = data.len();
+            let request = Request::FoeRead { position, file: file.to_string(), password, max_bytes, offset };
+            // The first part waits for the whole file to come from the slave.
+            let v = self.call_long(request)?;
+            let total: usize = self.field(v.clone(), "total")?;
+            let part = self.bytes(v)?;
+            if total > protocol::MAX_FOE_FILE || (part.is_empty() && data.len() < total) {
+                return Err(self.protocol_error(format!("a part of {} bytes at {offset} of {total}", part.len())));
+            }
+            data.extend_from_slice(&part);
+            if data.len() >= total {
+                data.truncate(total);
+                return Ok(data);
+            }
+        }
     }
 
     /// `data` written to the slave at `position` as file `file` by FoE (at most
-    /// [`protocol::MAX_DATA`] bytes through the socket).
+    /// [`protocol::MAX_FOE_FILE`] bytes), in parts; returns once the slave took the last.
     pub fn foe_write(&mut self, position: u16, file: &str, password: u32, data: &[u8]) -> Result<(), ClientError> {
-        if data.len() > protocol::MAX_DATA {
-            return Err(ClientError::Remote(ErrorReply::new(
-                ErrorKind::BadRequest,
-                format!(
-                    "a file of {} bytes: through a running master's socket at most {} (a larger one, a firmware, with the master stopped)",
-                    data.len(),
-                    protocol::MAX_DATA
-                ),
-            )));
+        let mut parts = data.chunks(protocol::MAX_DATA).peekable();
+        if data.is_empty() {
+            let request =
+                Request::FoeWrite { position, file: file.to_string(), password, data: String::new(), more: false };
+            return self.call_long(request).map(drop);
         }
-        self.call(Request::FoeWrite { position, file: file.to_string(), password, data: protocol::hex(data) }).map(drop)
+        while let Some(part) = parts.next() {
+            let more = parts.peek().is_some();
+            let request =
+                Request::FoeWrite { position, file: file.to_string(), password, data: protocol::hex(part), more };
+            self.call_long(request)?;
+        }
+        Ok(())
+    }
+
+    /// [`call`](Self::call) for a file by FoE, waiting up to an hour for the reply (the
+    /// master ends a transfer that makes no progress for its mailbox timeout).
+    fn call_long(&mut self, request: Request) -> Result<serde_json::Value, ClientError> {
+        let io = |error| ClientError::Io { path: self.path.clone(), error };
+        self.writer.set_read_timeout(Some(std::time::Duration::from_secs(3600))).map_err(io)?;
+        let r = self.call(request);
+        let _ = self.writer.set_read_timeout(Some(REPLY_TIMEOUT));
+        r
     }
 
     /// The slave to `state` (INIT, PREOP, SAFEOP, OP), answered once it is there.

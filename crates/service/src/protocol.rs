@@ -14,6 +14,8 @@ pub const VERSION: u32 = 1;
 pub const MAX_LINE: usize = 64 * 1024;
 /// The longest value of an SDO write or a register write, in bytes.
 pub const MAX_DATA: usize = 16 * 1024;
+/// The longest file by FoE through the socket, bytes.
+pub const MAX_FOE_FILE: usize = 64 << 20;
 /// The most bytes of an SII a reply carries.
 pub const SII_PART: usize = 16 * 1024;
 
@@ -145,8 +147,10 @@ pub enum Request {
         /// The bytes, hex.
         data: String,
     },
-    /// File `file` read from the slave by FoE (at most `max_bytes`, at most [`MAX_DATA`]),
-    /// under `data`.
+    /// File `file` read from the slave by FoE (at most `max_bytes`, at most
+    /// [`MAX_FOE_FILE`]): `{"total": N, "offset": O, "data": HEX}`, at most [`MAX_DATA`]
+    /// bytes a reply. The ask from `offset` 0 reads the file; those after it (`offset` the
+    /// bytes had so far) take the rest of what that read gave, on the same connection.
     FoeRead {
         /// The slave's position, from 0.
         position: u16,
@@ -156,10 +160,15 @@ pub enum Request {
         #[serde(default)]
         password: u32,
         /// A longer file is an error.
-        #[serde(default = "max_data")]
+        #[serde(default = "max_foe_file")]
         max_bytes: usize,
+        /// The first byte wanted of the file read.
+        #[serde(default)]
+        offset: usize,
     },
-    /// `data` (hex, at most [`MAX_DATA`] bytes) written to the slave as file `file` by FoE.
+    /// A part of file `file` (hex, at most [`MAX_DATA`] bytes) for the slave by FoE: parts
+    /// with `more` are kept on the connection (`{"buffered": N}`), and the part without
+    /// writes the whole file (at most [`MAX_FOE_FILE`] bytes): `{}` once the slave took it.
     FoeWrite {
         /// The slave's position, from 0.
         position: u16,
@@ -168,8 +177,11 @@ pub enum Request {
         /// The password the slave asks for.
         #[serde(default)]
         password: u32,
-        /// The file, hex.
+        /// This part, hex.
         data: String,
+        /// More parts follow.
+        #[serde(default)]
+        more: bool,
     },
     /// The slave to `state` (INIT, PREOP, SAFEOP or OP); the master keeps it there.
     State {
@@ -180,8 +192,8 @@ pub enum Request {
     },
 }
 
-fn max_data() -> usize {
-    MAX_DATA
+fn max_foe_file() -> usize {
+    MAX_FOE_FILE
 }
 
 /// The master's answer to one request: `ok` with the result, or `error`.

@@ -32,6 +32,9 @@ const TAKEN_PER_CALL: usize = 16;
 /// How long a client's thread waits for the loop's reply: longer than any request's own
 /// limit (the state timeout, 10 s by default).
 const REPLY_WAIT: Duration = Duration::from_secs(25);
+/// The same for a file by FoE, which makes progress a packet a cycle (the master ends one
+/// that makes none for its mailbox timeout).
+const FILE_WAIT: Duration = Duration::from_secs(3600);
 /// How long a write to a client may block its thread (a client that does not read).
 const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
 /// Events kept for `events` requests.
@@ -52,16 +55,30 @@ pub struct ServerOptions {
     pub hello: Hello,
 }
 
+/// What goes back to a client's thread: a reply made by the loop, or a request's answer as
+/// the master gave it (the thread makes it a reply: a file's hex text is not the loop's work).
+enum Back {
+    Ready(Reply),
+    Answer(ferrocat_master::Result<Answer>),
+}
+
+/// A request as it reaches the loop: the protocol's, or the master's where the client's
+/// thread made it already (a file by FoE, its parts gathered).
+enum Asked {
+    Protocol(Request),
+    Ready(ferrocat_master::Request),
+}
+
 struct Job {
     id: u64,
-    request: Request,
-    reply: SyncSender<Reply>,
+    asked: Asked,
+    reply: SyncSender<Back>,
 }
 
 /// A running master's control socket (removed when dropped).
 pub struct Server {
     jobs: Receiver<Job>,
-    pending: HashMap<RequestId, (u64, SyncSender<Reply>)>,
+    pending: HashMap<RequestId, SyncSender<Back>>,
     path: PathBuf,
     register_writes: bool,
     stop: Arc<AtomicBool>,
@@ -69,7 +86,7 @@ pub struct Server {
     events: std::collections::VecDeque<Event>,
     next_event: u64,
     /// A reload asked for and not yet done: the reply's number and channel.
-    reload: Option<(u64, SyncSender<Reply>)>,
+    reload: Option<(u64, SyncSender<Back>)>,
 }
 
 impl std::fmt::Debug for Server {
@@ -156,7 +173,7 @@ impl Server {
                 Ok(said) => Reply { id, ok: Some(serde_json::json!({ "said": said })), error: None },
                 Err(e) => Reply { id, ok: None, error: Some(ErrorReply::new(ErrorKind::Refused, e.clone())) },
             };
-            let _ = reply.try_send(r);
+            let _ = reply.try_send(Back::Ready(r));
         }
     }
 
@@ -186,13 +203,13 @@ impl Server {
     /// Once a cycle, in its spare time: takes the requests that came (without waiting), serves
     /// them before `deadline_ns` (the master's clock; [`Master::serve_requests`]) and hands
     /// the answers back. `extra` adds to a statistics reply what the application knows (the
-    /// clock sync's lock), called only when one is asked for. Returns the datagrams sent;
+    /// clock sync's lock, diagnosis), called only when one is asked for. Returns the datagrams sent;
     /// only the link's errors are errors.
     pub fn serve<I: Io>(
         &mut self,
         m: &mut Master<I>,
         deadline_ns: u64,
-        extra: &dyn Fn() -> serde_json::Value,
+        extra: &dyn Fn(&Master<I>) -> serde_json::Value,
     ) -> ferrocat_master::Result<u32> {
         for _ in 0..TAKEN_PER_CALL {
             match self.jobs.try_recv() {
@@ -202,39 +219,42 @@ impl Server {
         }
         let sent = if self.pending.is_empty() { 0 } else { m.serve_requests(deadline_ns)? };
         for (id, answer) in m.take_answers() {
-            if let Some((client_id, reply)) = self.pending.remove(&id) {
+            if let Some(reply) = self.pending.remove(&id) {
                 // A channel of one place, this reply's own: never full, and a client gone
                 // makes it fail, which nobody needs to hear.
-                let _ = reply.try_send(reply_of(client_id, answer));
+                let _ = reply.try_send(Back::Answer(answer));
             }
         }
         Ok(sent)
     }
 
-    fn take<I: Io>(&mut self, m: &mut Master<I>, job: Job, extra: &dyn Fn() -> serde_json::Value) {
+    fn take<I: Io>(&mut self, m: &mut Master<I>, job: Job, extra: &dyn Fn(&Master<I>) -> serde_json::Value) {
         let reply = |r: Result<serde_json::Value, ErrorReply>| match r {
             Ok(v) => Reply { id: job.id, ok: Some(v), error: None },
             Err(e) => Reply { id: job.id, ok: None, error: Some(e) },
         };
         let bad = |message: String| Err(ErrorReply::new(ErrorKind::BadRequest, message));
-        let request = match job.request {
-            Request::Slaves => {
-                let _ = job.reply.try_send(reply(Ok(serde_json::json!({ "slaves": slave_list(m) }))));
+        let request = match job.asked {
+            Asked::Ready(ready) => ready,
+            Asked::Protocol(Request::Slaves) => {
+                let _ = job.reply.try_send(Back::Ready(reply(Ok(serde_json::json!({ "slaves": slave_list(m) })))));
                 return;
             }
-            Request::Stats => {
-                let _ = job.reply.try_send(reply(Ok(stats(m, extra()))));
+            Asked::Protocol(Request::Stats) => {
+                let _ = job.reply.try_send(Back::Ready(reply(Ok(stats(m, extra(m))))));
                 return;
             }
-            Request::Reload => {
+            Asked::Protocol(Request::Reload) => {
                 if self.reload.is_some() {
-                    let _ = job.reply.try_send(reply(Err(ErrorReply::new(ErrorKind::Busy, "a reload is under way"))));
+                    let _ = job
+                        .reply
+                        .try_send(Back::Ready(reply(Err(ErrorReply::new(ErrorKind::Busy, "a reload is under way")))));
                 } else {
                     self.reload = Some((job.id, job.reply));
                 }
                 return;
             }
-            Request::Events { since } => {
+            Asked::Protocol(Request::Events { since }) => {
                 // As many as fit a reply's line (three quarters of it), oldest first; `next`
                 // is where the following ask starts.
                 let first = self.events.front().map_or(self.next_event, |e| e.seq);
@@ -248,10 +268,10 @@ impl Server {
                 }
                 let next = events.last().map_or(self.next_event, |e| e.seq + 1);
                 let batch = Events { next, missed: first.saturating_sub(since), events };
-                let _ = job.reply.try_send(reply(Ok(serde_json::to_value(batch).unwrap_or_default())));
+                let _ = job.reply.try_send(Back::Ready(reply(Ok(serde_json::to_value(batch).unwrap_or_default()))));
                 return;
             }
-            Request::SiiRead { position, offset } => {
+            Asked::Protocol(Request::SiiRead { position, offset }) => {
                 let r = match m.slave(position) {
                     Ok(s) => {
                         let image = s.sii().to_image();
@@ -263,35 +283,35 @@ impl Server {
                     }
                     Err(e) => Err(error_of(&e)),
                 };
-                let _ = job.reply.try_send(reply(r));
+                let _ = job.reply.try_send(Back::Ready(reply(r)));
                 return;
             }
-            Request::Pdos { position } => {
+            Asked::Protocol(Request::Pdos { position }) => {
                 let r = match m.slave(position) {
                     Ok(s) => Ok(serde_json::to_value(pdos_of(s)).unwrap_or_default()),
                     Err(e) => Err(error_of(&e)),
                 };
-                let _ = job.reply.try_send(reply(r));
+                let _ = job.reply.try_send(Back::Ready(reply(r)));
                 return;
             }
-            Request::RegisterWrite { .. } if !self.register_writes => {
+            Asked::Protocol(Request::RegisterWrite { .. }) if !self.register_writes => {
                 let e = ErrorReply::new(
                     ErrorKind::Refused,
                     "register writes are off: start the master with --allow-register-writes",
                 );
-                let _ = job.reply.try_send(reply(Err(e)));
+                let _ = job.reply.try_send(Back::Ready(reply(Err(e))));
                 return;
             }
-            r => match master_request(r) {
+            Asked::Protocol(r) => match master_request(r) {
                 Ok(r) => r,
                 Err(message) => {
-                    let _ = job.reply.try_send(reply(bad(message)));
+                    let _ = job.reply.try_send(Back::Ready(reply(bad(message))));
                     return;
                 }
             },
         };
         let id = m.submit(request);
-        self.pending.insert(id, (job.id, job.reply));
+        self.pending.insert(id, job.reply);
     }
 }
 
@@ -340,16 +360,10 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
             M::RegisterWrite { position, register, data: protocol::unhex(&data)? }
         }
         Request::State { position, state } => M::State { position, state: state_named(&state)? },
-        Request::FoeRead { position, file, password, max_bytes } => {
-            if max_bytes > protocol::MAX_DATA {
-                return Err(format!(
-                    "max_bytes {max_bytes}: a file through the socket has at most {} bytes",
-                    protocol::MAX_DATA
-                ));
-            }
-            M::FoeRead { position, file, password, max_bytes }
+        Request::FoeRead { position, file, password, max_bytes, .. } => {
+            M::FoeRead { position, file, password, max_bytes: max_bytes.min(protocol::MAX_FOE_FILE) }
         }
-        Request::FoeWrite { position, file, password, data } => {
+        Request::FoeWrite { position, file, password, data, .. } => {
             M::FoeWrite { position, file, password, data: protocol::unhex(&data)? }
         }
         Request::Slaves
@@ -479,6 +493,7 @@ fn client(stream: UnixStream, hello: &Hello, jobs: &SyncSender<Job>) {
     }
     let Ok(read) = stream.try_clone() else { return };
     let mut reader = BufReader::new(read);
+    let mut files = Files::default();
     loop {
         let mut line = Vec::new();
         match (&mut reader).take(MAX_LINE as u64 + 1).read_until(b'\n', &mut line) {
@@ -492,25 +507,114 @@ fn client(stream: UnixStream, hello: &Hello, jobs: &SyncSender<Job>) {
         }
         let reply = match protocol::parse_request(&line) {
             Err(reply) => reply,
-            Ok(env) => {
-                let (tx, rx) = mpsc::sync_channel(1);
-                let id = env.id;
-                let error = |kind, message: &str| Reply { id, ok: None, error: Some(ErrorReply::new(kind, message)) };
-                match jobs.try_send(Job { id, request: env.request, reply: tx }) {
-                    Ok(()) => match rx.recv_timeout(REPLY_WAIT) {
-                        Ok(r) => r,
-                        Err(_) => error(ErrorKind::Master, "no answer from the cyclic loop (stopped, or stalled)"),
-                    },
-                    Err(TrySendError::Full(_)) => {
-                        error(ErrorKind::Busy, "the master's request queue is full: try again")
-                    }
-                    Err(TrySendError::Disconnected(_)) => error(ErrorKind::Master, "the master has stopped"),
-                }
-            }
+            Ok(env) => files.handle(env, jobs),
         };
         if write_line(&stream, &reply).is_err() {
             return;
         }
+    }
+}
+
+/// A connection's files by FoE: the parts of one being written, and the one read last, whose
+/// parts are handed out from there. They are the client's thread's, never the loop's.
+#[derive(Default)]
+struct Files {
+    writing: Option<(u16, String, u32, Vec<u8>)>,
+    read: Option<(u16, String, Vec<u8>)>,
+}
+
+impl Files {
+    /// `env`'s reply: a file's part kept or handed out here, anything else from the loop.
+    fn handle(&mut self, env: protocol::Envelope, jobs: &SyncSender<Job>) -> Reply {
+        let id = env.id;
+        let ok = |v: serde_json::Value| Reply { id, ok: Some(v), error: None };
+        let bad =
+            |message: String| Reply { id, ok: None, error: Some(ErrorReply::new(ErrorKind::BadRequest, message)) };
+        match env.request {
+            Request::FoeWrite { position, file, password, data, more } => {
+                let part = match protocol::unhex(&data) {
+                    Ok(p) => p,
+                    Err(e) => return bad(format!("data {e}")),
+                };
+                let same = self.writing.as_ref().is_some_and(|w| (w.0, &w.1, w.2) == (position, &file, password));
+                if !same {
+                    self.writing = Some((position, file.clone(), password, Vec::new()));
+                }
+                let Some(w) = self.writing.as_mut() else { return bad(String::from("no file")) };
+                if w.3.len() + part.len() > protocol::MAX_FOE_FILE {
+                    self.writing = None;
+                    return bad(format!("a file of more than {} bytes", protocol::MAX_FOE_FILE));
+                }
+                w.3.extend_from_slice(&part);
+                if more {
+                    return ok(serde_json::json!({ "buffered": w.3.len() }));
+                }
+                let (position, file, password, data) = self.writing.take().unwrap_or_default();
+                let ready = ferrocat_master::Request::FoeWrite { position, file, password, data };
+                forward(jobs, id, Asked::Ready(ready), true)
+            }
+            Request::FoeRead { position, file, offset, .. } if offset > 0 => match &self.read {
+                Some((p, f, data)) if (*p, f) == (position, &file) => ok(part_of(data, offset)),
+                _ => bad(format!(
+                    "offset {offset}: read '{file}' of slave {position} from offset 0 first, on this connection"
+                )),
+            },
+            Request::FoeRead { position, file, password, max_bytes, .. } => {
+                let max_bytes = max_bytes.min(protocol::MAX_FOE_FILE);
+                let ready = ferrocat_master::Request::FoeRead { position, file: file.clone(), password, max_bytes };
+                match forward_answer(jobs, id, Asked::Ready(ready), true) {
+                    Ok(Ok(Answer::Data(data))) => {
+                        let r = ok(part_of(&data, 0));
+                        self.read = Some((position, file, data));
+                        r
+                    }
+                    Ok(answer) => reply_of(id, answer),
+                    Err(r) => r,
+                }
+            }
+            request => forward(jobs, id, Asked::Protocol(request), false),
+        }
+    }
+}
+
+/// A file's part from `offset`, as a reply's result.
+fn part_of(data: &[u8], offset: usize) -> serde_json::Value {
+    let from = offset.min(data.len());
+    let to = (from + protocol::MAX_DATA).min(data.len());
+    serde_json::json!({ "total": data.len(), "offset": from, "data": protocol::hex(&data[from..to]) })
+}
+
+/// Sends a request to the loop and waits for its reply.
+fn forward(jobs: &SyncSender<Job>, id: u64, asked: Asked, long: bool) -> Reply {
+    match forward_answer(jobs, id, asked, long) {
+        Ok(answer) => reply_of(id, answer),
+        Err(r) => r,
+    }
+}
+
+/// Sends a request to the loop: the master's answer, or the reply that ends it here (made by
+/// the loop, or saying why none came). A file by FoE (`long`) may take minutes (a packet a
+/// cycle and the slave busy); anything else is answered within the loop's own limits.
+fn forward_answer(
+    jobs: &SyncSender<Job>,
+    id: u64,
+    asked: Asked,
+    long: bool,
+) -> Result<ferrocat_master::Result<Answer>, Reply> {
+    let (tx, rx) = mpsc::sync_channel(1);
+    let error = |kind, message: &str| Reply { id, ok: None, error: Some(ErrorReply::new(kind, message)) };
+    let wait = if long { FILE_WAIT } else { REPLY_WAIT };
+    match jobs.try_send(Job { id, asked, reply: tx }) {
+        Ok(()) => match rx.recv_timeout(wait) {
+            Ok(Back::Ready(r)) => Err(r),
+            Ok(Back::Answer(a)) => Ok(a),
+            Err(mpsc::RecvTimeoutError::Disconnected) => Err(error(ErrorKind::Master, "the master has stopped")),
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                Err(error(ErrorKind::Master, "no answer from the cyclic loop (stopped, or stalled)"))
+            }
+        },
+        Err(TrySendError::Full(_)) => Err(error(ErrorKind::Busy, "the master's request queue is full: try again")),
+        Err(TrySendError::Disconnected(_)) => Err(error(ErrorKind::Master, "the master has stopped")),
     }
 }
 

@@ -74,7 +74,7 @@ fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
             if m.cycle().unwrap() != m.expected_wkc() {
                 short += 1;
             }
-            server.serve(&mut m, next - CYCLE_NS / 4, &|| serde_json::json!({ "lock": "none" })).unwrap();
+            server.serve(&mut m, next - CYCLE_NS / 4, &|_| serde_json::json!({ "lock": "none" })).unwrap();
             let mut taken = m.take_events();
             if m.cycle_stats().cycles == 10 {
                 taken.extend((0..events).map(|k| MasterEvent::Recovered { position: 1, name: format!("e{k}") }));
@@ -112,12 +112,16 @@ fn every_request_is_answered_through_the_socket_and_the_cycle_stays_whole() {
     assert!(sii.len() >= 128, "{} bytes", sii.len());
     assert_eq!(u32::from_le_bytes(sii[16..20].try_into().unwrap()), slaves[2].vendor_id);
     assert_eq!(u32::from_le_bytes(sii[20..24].try_into().unwrap()), slaves[2].product_code);
-    // FoE through the socket: a file written and read back, one too long for it refused.
+    // FoE through the socket: files written and read back, one of several parts each way.
     let file: Vec<u8> = (0..3000u32).map(|k| (k * 7) as u8).collect();
     c.foe_write(2, "params.bin", 0, &file).unwrap();
     assert_eq!(c.foe_read(2, "params.bin", 0, 1 << 20).unwrap(), file);
-    let big = vec![0u8; ferrocat_service::protocol::MAX_DATA + 1];
-    assert!(c.foe_write(2, "big.bin", 0, &big).unwrap_err().to_string().contains("at most"));
+    let big: Vec<u8> =
+        (0..2 * ferrocat_service::protocol::MAX_DATA as u32 + 77).map(|k| (k * 13 + k / 256) as u8).collect();
+    c.foe_write(2, "big.bin", 0, &big).unwrap();
+    assert_eq!(c.foe_read(2, "big.bin", 0, 1 << 20).unwrap(), big);
+    let short = c.foe_read(2, "big.bin", 0, 1000).unwrap_err().to_string();
+    assert!(short.contains("longer than 1000"), "{short}");
     let pdos = c.pdos(1).unwrap();
     assert_eq!((pdos.outputs.len(), pdos.inputs.len()), (4, 0), "{pdos:?}");
     assert!(pdos.outputs.iter().all(|e| e.bits == 1 && e.name == "Output"), "{pdos:?}");
@@ -171,6 +175,7 @@ fn bad_lines_and_clients_that_vanish_change_nothing() {
         ("not json\n", "not a request"),
         ("{\"id\":10,\"op\":\"sdo_write\",\"position\":2,\"index\":1,\"subindex\":0,\"data\":\"xyz\"}\n", "hex"),
         ("{\"id\":11,\"op\":\"state\",\"position\":1,\"state\":\"RUN\"}\n", "give INIT"),
+        ("{\"id\":12,\"op\":\"foe_read\",\"position\":2,\"file\":\"x\",\"offset\":5}\n", "from offset 0 first"),
     ] {
         (&s).write_all(bad.as_bytes()).unwrap();
         line.clear();
