@@ -479,6 +479,9 @@ pub struct SharedImage {
     /// The last whole write of the clients: their outputs and mask.
     outputs: Vec<u8>,
     mask: Vec<u8>,
+    /// Where a write is copied before the sequence says whether it is whole.
+    scratch_outputs: Vec<u8>,
+    scratch_mask: Vec<u8>,
     seen_seq: u64,
     any_write: bool,
     /// A write taken but not yet sent: its number.
@@ -538,6 +541,8 @@ impl SharedImage {
             path: path.to_path_buf(),
             outputs: vec![0; out_bytes],
             mask: vec![0; out_bytes],
+            scratch_outputs: vec![0; out_bytes],
+            scratch_mask: vec![0; out_bytes],
             seen_seq: 0,
             any_write: false,
             taken_commit: None,
@@ -593,14 +598,16 @@ impl SharedImage {
                 result = Applied::Busy;
             }
         } else if s1 != self.seen_seq {
-            let n = self.areas.out_bytes;
-            let (mut out, mut mask) = (vec![0u8; n], vec![0u8; n]);
-            self.map.load(self.areas.client_out, &mut out);
-            self.map.load(self.areas.mask, &mut mask);
+            // Into the scratch copies, which take the place of the last whole write only when
+            // the sequence says this one is whole: no allocation in the cycle.
+            self.map.load(self.areas.client_out, &mut self.scratch_outputs);
+            self.map.load(self.areas.mask, &mut self.scratch_mask);
             let commit = self.map.u64_at(field::OUT_COMMITS).load(Ordering::Relaxed);
             fence(Ordering::Acquire);
             if seq.load(Ordering::Relaxed) == s1 {
-                (self.outputs, self.mask, self.seen_seq) = (out, mask, s1);
+                std::mem::swap(&mut self.outputs, &mut self.scratch_outputs);
+                std::mem::swap(&mut self.mask, &mut self.scratch_mask);
+                self.seen_seq = s1;
                 self.any_write = true;
                 self.taken_commit = Some(commit);
                 self.stats.writes_taken += 1;
