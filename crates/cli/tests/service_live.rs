@@ -271,7 +271,10 @@ fn an_application_of_its_own_process_runs_beside_the_master() {
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(summary["slaves"]["left_op"], 0, "{summary}");
+    // With DC, a stall of the host of several cycles takes a drive out of OP (0x001A) whatever
+    // the clients do: every slave that left came back, and all are in OP at the end.
+    assert_eq!(summary["slaves"]["left_op"], summary["slaves"]["recovered"], "{summary}");
+    assert_eq!(summary["slaves"]["in_op_at_end"], 5, "{summary}");
     assert!(summary["control"]["image"]["writes_taken"].as_u64().unwrap() > 10, "{summary}");
     sim.report();
     std::fs::remove_dir_all(&dir).ok();
