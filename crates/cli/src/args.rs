@@ -20,6 +20,16 @@ pub fn seconds(s: &str) -> Result<f64, String> {
     }
 }
 
+/// A cycle time in µs within `lo..=hi`, said in those words where it is not.
+pub fn cycle_us(s: &str, lo: u64, hi: u64) -> Result<u64, String> {
+    let t = s.trim();
+    match t.parse::<i64>() {
+        Ok(n) if (lo as i64..=hi as i64).contains(&n) => Ok(n as u64),
+        Ok(n) => Err(format!("{n} µs: give a cycle time from {lo} to {hi} µs")),
+        Err(_) => Err(format!("'{t}' is not a cycle time (a whole number of µs, {lo} to {hi})")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -34,5 +44,9 @@ mod tests {
         assert!(seconds("-1").unwrap_err().contains("0 or more"));
         assert!(seconds("inf").unwrap_err().contains("0 or more"));
         assert!(seconds("soon").unwrap_err().contains("not a number of seconds"));
+        assert_eq!(cycle_us("250", 10, 1000), Ok(250));
+        assert!(cycle_us("5", 10, 1000).unwrap_err().contains("from 10 to 1000 µs"));
+        assert!(cycle_us("-1", 10, 1000).unwrap_err().contains("from 10 to 1000 µs"));
+        assert!(cycle_us("1ms", 10, 1000).unwrap_err().contains("not a cycle time"));
     }
 }

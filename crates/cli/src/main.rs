@@ -11,6 +11,7 @@ mod eoe_cmd;
 mod esi;
 mod image_cmd;
 mod lab;
+mod lab_args;
 mod lab_live;
 mod manpages;
 mod master_cmd;
@@ -476,15 +477,15 @@ enum Command {
 enum LabCmd {
     /// Park et al. 2020 Table 1: master–reference and master–last-slave errors per method
     /// (default host beaglebone-rt).
-    Park2020(LabArgs),
+    Park2020(lab_args::Park2020),
     /// Chen et al. 2016 Table 2: jitter and lost process data per cycle time and method
     /// (default host rtx-10us).
-    Chen2016(LabArgs),
+    Chen2016(lab_args::Chen2016),
     /// Paprocki & Erwiński 2022 Table 2: how simultaneously two DC slaves see SYNC0.
-    Paprocki2022(LabArgs),
+    Paprocki2022(lab_args::Paprocki2022),
     /// Robustness: 1 % frame loss, a 50 ppm crystal step and a 3-cycle overrun, once each after
     /// settling, for every method of the error tables: peak excursion and recovery.
-    Robustness(LabArgs),
+    Robustness(lab_args::Robustness),
     /// The master–slave clock errors on this machine's real kernel: the master in real time on a
     /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root); and
     /// where each cycle's frame passed the reference on its cycle.
@@ -525,109 +526,7 @@ enum LabCmd {
         json: bool,
     },
     /// Run the experiment a scenario file names (docs/lab.md, scenarios/).
-    Run {
-        /// The scenario file (TOML; scenarios/ holds the papers' set-ups).
-        scenario: PathBuf,
-        #[command(flatten)]
-        args: LabArgs,
-    },
-}
-
-/// What every lab experiment takes; a flag overrides the scenario file's key of the same name.
-#[derive(clap::Args, Default)]
-struct LabArgs {
-    /// A scenario file (TOML); the flags below override its keys.
-    #[arg(long = "scenario", id = "scenario_file", value_name = "FILE")]
-    scenario_file: Option<PathBuf>,
-    /// Each experiment in under a minute: park2020 5 s settling, 5 000 samples, 3 rounds;
-    /// chen2016 10 s per run.
-    #[arg(long)]
-    quick: bool,
-    /// Seed of the simulation's random draws (crystals, latencies, faults): the same seed gives the same numbers on any machine (default: the scenario's, else 1).
-    #[arg(long)]
-    seed: Option<u64>,
-    /// Host model: ideal, pc-rt, pc-stock, nic-hwts, beaglebone-rt, rtx-10us.
-    #[arg(long)]
-    host: Option<String>,
-    /// A segment file (as for `sim --config`) instead of the experiment's own segment.
-    #[arg(long)]
-    segment: Option<PathBuf>,
-    /// Methods (repeatable): none, conventional, park2020, chen2016, pi, ferrocat, ferrocat-mfr; and
-    /// ferrocat's variants ferrocat-tcl, ferrocat-dense, ferrocat-mfr-dense, ferrocat-direct,
-    /// ferrocat-mfr-direct (docs/clock-sync.md).
-    #[arg(long)]
-    method: Vec<String>,
-    /// Segment sizes (repeatable; park2020 default 2 and 6).
-    #[arg(long)]
-    slaves: Vec<usize>,
-    /// Cycle times in µs (repeatable where the experiment takes several).
-    #[arg(long)]
-    cycle_us: Vec<u64>,
-    /// park2020: rounds per (segment, method).
-    #[arg(long)]
-    rounds: Option<u32>,
-    /// park2020, robustness: ferrocat without its GPIO calibration of the stamps' asymmetry.
-    #[arg(long)]
-    no_gpio_calibration: bool,
-    /// paprocki2022: leave the second drive's propagation delay uncompensated (its
-    /// System_Time_Delay 0), a candidate for the paper's constant ≈ 0.8 µs.
-    #[arg(long)]
-    uncompensated_drive_delay: bool,
-    /// park2020, chen2016: fit the paper's set-up model on the part of its table it is fitted
-    /// on, from the presets, and print every step instead of the table (docs/lab.md).
-    #[arg(long)]
-    fit: bool,
-    /// Print JSON instead of text.
-    #[arg(long)]
-    json: bool,
-    /// Folder for the CSV, the figures (SVG and PNG) and a Markdown report.
-    #[arg(long)]
-    out: Option<PathBuf>,
-}
-
-impl LabArgs {
-    fn run(
-        self,
-        experiment: Option<ferrocat_lab::scenario::Experiment>,
-        file: Option<PathBuf>,
-    ) -> anyhow::Result<ExitCode> {
-        use ferrocat_lab::scenario::{CycleUs, Scenario};
-        anyhow::ensure!(file.is_none() || self.scenario_file.is_none(), "give the scenario file once");
-        let mut base = match file.or(self.scenario_file) {
-            Some(f) => Scenario::from_file(&f)?,
-            None => Scenario::default(),
-        };
-        if self.quick {
-            // The keys `--quick` replaces are still checked: a bad value in the file is an
-            // error with or without the flag.
-            if base.experiment.is_some() || experiment.is_some() {
-                base.plan(experiment, false)?;
-            }
-            base = base.quick();
-        }
-        let over = Scenario {
-            host: self.host,
-            seed: self.seed,
-            segment: self.segment.map(|p| std::env::current_dir().unwrap_or_default().join(p)),
-            methods: (!self.method.is_empty()).then_some(self.method),
-            slaves: (!self.slaves.is_empty()).then_some(self.slaves),
-            cycle_us: (!self.cycle_us.is_empty()).then_some(CycleUs::Many(self.cycle_us)),
-            rounds: self.rounds,
-            gpio_calibration: self.no_gpio_calibration.then_some(false),
-            drive_delay_compensated: self.uncompensated_drive_delay.then_some(false),
-            ..Scenario::default()
-        };
-        // The flags checked on their own first, so that an error names the flag, not the file.
-        if let Some(e) = experiment.or(base.experiment) {
-            Scenario { experiment: Some(e), ..over.clone() }.plan(None, self.quick)?;
-        }
-        let plan = base.overlay(over).plan(experiment, self.quick)?;
-        if self.fit {
-            anyhow::ensure!(self.out.is_none(), "--fit prints the fit; it writes no report (--out)");
-            return lab::fit(plan, self.json);
-        }
-        lab::run(plan, self.json, self.out.as_deref())
-    }
+    Run(lab_args::Run),
 }
 
 #[derive(Subcommand)]
@@ -858,41 +757,38 @@ fn main() -> ExitCode {
             io,
             spin_us,
         }),
-        Command::Lab { experiment } => {
-            use ferrocat_lab::scenario::Experiment;
-            match experiment {
-                LabCmd::Park2020(a) => a.run(Some(Experiment::Park2020), None),
-                LabCmd::Chen2016(a) => a.run(Some(Experiment::Chen2016), None),
-                LabCmd::Paprocki2022(a) => a.run(Some(Experiment::Paprocki2022), None),
-                LabCmd::Robustness(a) => a.run(Some(Experiment::Robustness), None),
-                LabCmd::Run { scenario, args } => args.run(None, Some(scenario)),
-                LabCmd::Live {
-                    method,
-                    slaves,
-                    cycle_us,
-                    settle_s,
-                    seconds,
-                    seed,
-                    io,
-                    spin_us,
-                    sim_io,
-                    probe_budget_us,
-                    json,
-                } => lab_live::run(lab_live::LiveArgs {
-                    methods: method,
-                    slaves,
-                    cycle_us,
-                    settle_s,
-                    seconds,
-                    seed,
-                    io,
-                    spin_us,
-                    sim_io,
-                    probe_budget_us,
-                    json,
-                }),
-            }
-        }
+        Command::Lab { experiment } => match experiment {
+            LabCmd::Park2020(a) => a.run(),
+            LabCmd::Chen2016(a) => a.run(),
+            LabCmd::Paprocki2022(a) => a.run(),
+            LabCmd::Robustness(a) => a.run(),
+            LabCmd::Run(a) => a.run(),
+            LabCmd::Live {
+                method,
+                slaves,
+                cycle_us,
+                settle_s,
+                seconds,
+                seed,
+                io,
+                spin_us,
+                sim_io,
+                probe_budget_us,
+                json,
+            } => lab_live::run(lab_live::LiveArgs {
+                methods: method,
+                slaves,
+                cycle_us,
+                settle_s,
+                seconds,
+                seed,
+                io,
+                spin_us,
+                sim_io,
+                probe_budget_us,
+                json,
+            }),
+        },
         Command::Rtt { iface, frames, slaves, force } => sim::rtt(&iface, frames, slaves, force),
         Command::Completions { shell } => {
             use clap::CommandFactory;

@@ -35,13 +35,40 @@ pub fn write(dir: &Path, name: &str, text: &str) -> anyhow::Result<()> {
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-/// Says on stderr which files `dir` holds now, after an experiment wrote them there.
+/// Says on stderr which files `dir` holds now, after an experiment wrote them there: the
+/// reports by name, the figures counted.
 pub fn announce(dir: &Path) -> anyhow::Result<()> {
     let mut names: Vec<String> = std::fs::read_dir(dir)
         .with_context(|| format!("listing {}", dir.display()))?
         .filter_map(|e| e.ok()?.file_name().into_string().ok())
         .collect();
     names.sort();
-    eprintln!("wrote {} files to {}: {}", names.len(), dir.display(), names.join(", "));
+    eprintln!("{}", announcement(dir, &names));
     Ok(())
+}
+
+fn announcement(dir: &Path, names: &[String]) -> String {
+    let is = |n: &String, ext: &str| n.ends_with(ext);
+    let svg = names.iter().filter(|n| is(n, ".svg")).count();
+    let png = names.iter().filter(|n| is(n, ".png")).count();
+    let mut parts: Vec<String> = names.iter().filter(|n| !is(n, ".svg") && !is(n, ".png")).cloned().collect();
+    match (svg, png) {
+        (0, 0) => {}
+        (s, p) if s == p => parts.push(format!("{s} figures, each as SVG and PNG")),
+        (s, p) => parts.push(format!("figures: {s} SVG, {p} PNG")),
+    }
+    format!("wrote {} files to {}: {}", names.len(), dir.display(), parts.join(", "))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_figures_are_counted_and_the_reports_named() {
+        let names: Vec<String> =
+            ["a.csv", "a.md", "f1.png", "f1.svg", "f2.png", "f2.svg"].iter().map(|s| s.to_string()).collect();
+        assert_eq!(
+            super::announcement(std::path::Path::new("out"), &names),
+            "wrote 6 files to out: a.csv, a.md, 2 figures, each as SVG and PNG"
+        );
+    }
 }

@@ -46,7 +46,9 @@ fn every_experiment_writes_csv_figures_and_a_report() {
     figures::assert_chart_png(&chen.join("fig12-jitter-500us.png"));
     run(&["lab", "paprocki2022", "--out", &d("pap")]);
     has(&dir.join("pap"), "paprocki2022.md", "| 1000 | ferrocat |");
-    has(&dir.join("pap"), "paprocki2022.md", "| 1000 µs, mean | prediction |");
+    has(&dir.join("pap"), "paprocki2022.md", "Not held against the paper's Table 2");
+    run(&["lab", "paprocki2022", "--quick", "--uncompensated-drive-delay", "--out", &d("pap-paper")]);
+    has(&dir.join("pap-paper"), "paprocki2022.md", "| 1000 µs, mean | prediction |");
     has(&dir.join("pap"), "paprocki2022.csv", "cycle_us,method");
     has(&dir.join("pap"), "table2-sync0-1000us.svg", "ferrocat");
     figures::assert_chart_png(&dir.join("pap").join("table2-sync0-500us.png"));
@@ -100,5 +102,49 @@ fn the_papers_figures_and_the_fit_are_in_json() {
     assert_eq!(v["steps"].as_array().map(Vec::len), Some(1), "{v}");
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["lab", "robustness", "--fit"]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("park2020 and chen2016"), "{err}");
+    assert!(!out.status.success() && err.contains("unexpected argument '--fit'"), "{err}");
+}
+
+/// The reports read as what they are: a compensated Paprocki run is not set beside the
+/// paper's uncompensated figures, Park's columns are explained, every table has a header, and
+/// no source path reaches the user.
+#[test]
+fn the_reports_say_what_their_figures_are() {
+    let text = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let pap = text(&["lab", "paprocki2022", "--quick"]);
+    assert!(!pap.contains("MISSES") && pap.contains("Not held against the paper's Table 2"), "{pap}");
+    let paper = text(&["lab", "paprocki2022", "--quick", "--uncompensated-drive-delay"]);
+    assert!(paper.contains("figures within their bands"), "{paper}");
+    let park = text(&["lab", "park2020", "--quick", "--slaves", "2", "--rounds", "1"]);
+    assert!(park.contains("GMEAN: the mean of the rounds' mean errors") && park.contains("MRMS: the mean"), "{park}");
+    let lines: Vec<&str> = park.lines().collect();
+    let gpi = lines.iter().position(|l| l.starts_with("estimated from 1 000 measurements")).unwrap();
+    assert!(lines[gpi + 1].split_whitespace().take(2).eq(["slaves", "method"]), "the GPI table's header: {park}");
+    assert!(!park.contains("crates/") && !park.contains(".rs"), "{park}");
+}
+
+/// Each experiment takes its own flags: another's is refused by name, and `lab run` takes its
+/// scenario once, as its argument.
+#[test]
+fn an_experiment_refuses_another_experiments_flags() {
+    for (args, flag) in [
+        (&["lab", "park2020", "--uncompensated-drive-delay"][..], "--uncompensated-drive-delay"),
+        (&["lab", "paprocki2022", "--rounds", "2"], "--rounds"),
+        (&["lab", "chen2016", "--no-gpio-calibration"], "--no-gpio-calibration"),
+        (&["lab", "run", "scenarios/park2020.toml", "--scenario", "x.toml"], "--scenario"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(&format!("unexpected argument '{flag}'")), "{args:?}: {err}");
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(["lab", "park2020", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        !help.contains("chen2016") && !help.contains("paprocki2022:") && !help.contains("--uncompensated"),
+        "{help}"
+    );
 }
