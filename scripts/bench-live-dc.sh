@@ -63,7 +63,7 @@ import json, re, sys
 kind, cycle, method, run, err, sim, none_cpu = sys.argv[1:]
 v = json.load(open(run)); e = open(err).read(); s = json.load(open(sim))
 cs = v.get("clock_sync") or {}
-cpu = float(re.search(r"CPU time ([\d.]+) us per cycle", e).group(1))
+cpu = float(re.search(r"CPU time ([\d.]+) (?:us|µs) per cycle", e).group(1))
 n = max(v["cycles"], 1)
 # The simulator's sync errors by side (run steps the slaves down before its frames stop).
 errs = [x["side"] for x in s.get("sync_errors", [])]

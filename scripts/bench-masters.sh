@@ -61,7 +61,7 @@ for round in $(seq 1 "$ROUNDS"); do
     kill -TERM "$sim"; while kill -0 "$sim" 2>/dev/null; do sleep 0.1; done
     op=$(grep -oE 'bring-up to OP:? [0-9.]+ ms' <<<"$line" | grep -oE '[0-9.]+' | head -1)
     rate=$(grep -oE '[0-9.]+ cycles/s' <<<"$line" | grep -oE '[0-9.]+' | head -1)
-    cpu=$(grep -oE '[0-9.]+ us per cycle' <<<"$line" | grep -oE '[0-9.]+' | head -1)
+    cpu=$(grep -oE '[0-9.]+ (us|µs) per cycle' <<<"$line" | grep -oE '[0-9.]+' | head -1)
     per=$(python3 -c "import sys; c, r, s = sys.argv[1:]; print(f'{int(c) / (float(r) * float(s)):.2f}' if c and r else '-')" "${calls:-}" "${rate:-}" "$SECONDS_EACH")
     echo "round $round  $master  to-OP ${op} ms  ${rate} cycles/s  CPU ${cpu} us/cycle  ${per} syscalls/cycle"
     echo "$master $op $rate $cpu $per" >> "$out"

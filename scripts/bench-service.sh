@@ -85,7 +85,7 @@ for cycle in $cycles; do
 import json, re, sys
 cycle, clients, run, err, said = sys.argv[1:]
 v = json.load(open(run)); e = open(err).read()
-cpu = float(re.search(r"CPU time ([\d.]+) us per cycle", e).group(1))
+cpu = float(re.search(r"CPU time ([\d.]+) (?:us|µs) per cycle", e).group(1))
 n = max(v["cycles"], 1)
 w = v["wake_latency"]
 img = (v.get("control") or {}).get("image") or {}

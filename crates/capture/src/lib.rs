@@ -52,6 +52,15 @@ impl Packet<'_> {
 }
 
 const PCAPNG_MAGIC: [u8; 4] = [0x0A, 0x0D, 0x0D, 0x0A];
+/// pcap's magic numbers, microsecond and nanosecond, in either byte order.
+const PCAP_MAGICS: [[u8; 4]; 4] =
+    [[0xD4, 0xC3, 0xB2, 0xA1], [0xA1, 0xB2, 0xC3, 0xD4], [0x4D, 0x3C, 0xB2, 0xA1], [0xA1, 0xB2, 0x3C, 0x4D]];
+
+/// Whether a file beginning with `first` (its first four bytes) can be a pcap or pcapng
+/// capture: a reader can refuse anything else before it reads the rest.
+pub fn begins_like_a_capture(first: &[u8]) -> bool {
+    first.len() >= 4 && (first[..4] == PCAPNG_MAGIC || PCAP_MAGICS.iter().any(|m| first[..4] == m[..]))
+}
 
 /// Reads every packet of a pcap or pcapng file held in memory.
 pub fn read_packets(bytes: &[u8]) -> Result<Vec<Packet<'static>>, CaptureError> {

@@ -73,7 +73,7 @@ pub fn run(path: &Path, json: bool, strict: bool) -> anyhow::Result<ExitCode> {
     for (t, c) in eni.cyclic.iter().enumerate() {
         outln!(
             "cyclic task {t}{}: {} frame{}",
-            c.cycle_time_us.map_or(String::new(), |us| format!(" every {us} us")),
+            c.cycle_time_us.map_or(String::new(), |us| format!(" every {us} µs")),
             c.frames.len(),
             if c.frames.len() == 1 { "" } else { "s" }
         );

@@ -41,8 +41,8 @@ pub enum EoeCmd {
         position: u16,
         #[command(flatten)]
         params: ParamArgs,
-        /// Echo requests to send.
-        #[arg(long, default_value_t = 4)]
+        /// Echo requests to send (at least 1).
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u16).range(1..))]
         count: u16,
         /// Data bytes per request (1 472 fill a 1 514-byte frame).
         #[arg(long, default_value_t = 56)]
@@ -50,7 +50,8 @@ pub enum EoeCmd {
         /// Wait for each reply at most this long.
         #[arg(long, default_value_t = 1000)]
         timeout_ms: u64,
-        /// The master's address on the EoE network (default: the slave's gateway).
+        /// The master's address on the EoE network (default: the slave's gateway, else the first
+        /// other host address of the slave's subnet, by its netmask or /24 without one).
         #[arg(long)]
         from: Option<Ipv4Addr>,
         /// The master's MAC address on the EoE network.
@@ -206,7 +207,12 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             let from_ip = match (from, p.gateway) {
                 (Some(f), _) => f.octets(),
                 (None, Some(g)) if g != [0; 4] => g,
-                _ => bail!("slave {position} has no gateway to ping from: give --from"),
+                _ => neighbour(to_ip, p.subnet_mask).with_context(|| {
+                    format!(
+                        "slave {position}'s subnet ({}) has no other host address: give --from",
+                        Ipv4Addr::from(to_ip)
+                    )
+                })?,
             };
             let ping = EoePing { from_mac, from_ip, to_mac, to_ip };
             let to = Ipv4Addr::from(to_ip);
@@ -243,6 +249,19 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// An address for the master on the slave's subnet: its first host address other than the
+/// slave's (a /24 where the slave reports no netmask).
+fn neighbour(ip: [u8; 4], netmask: Option<[u8; 4]>) -> Option<[u8; 4]> {
+    let mask = match netmask.map(u32::from_be_bytes) {
+        Some(m) if m != 0 => m,
+        _ => 0xFFFF_FF00,
+    };
+    let ip = u32::from_be_bytes(ip);
+    let net = ip & mask;
+    let broadcast = net | !mask;
+    (net + 1..broadcast).find(|&a| a != ip).map(u32::to_be_bytes)
 }
 
 /// The segment in PREOP, the slave's IP parameters set where any were given.
@@ -371,5 +390,18 @@ impl TapBridge {
             link.fragment_errors,
             self.unanswered
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_master_takes_the_first_other_host_of_the_slaves_subnet() {
+        use super::neighbour;
+        assert_eq!(neighbour([192, 168, 9, 20], Some([255, 255, 255, 0])), Some([192, 168, 9, 1]));
+        assert_eq!(neighbour([192, 168, 9, 1], None), Some([192, 168, 9, 2]));
+        assert_eq!(neighbour([10, 0, 0, 5], Some([255, 255, 255, 252])), Some([10, 0, 0, 6]));
+        // A /31 or /32 has no other host address.
+        assert_eq!(neighbour([10, 0, 0, 5], Some([255, 255, 255, 255])), None);
     }
 }

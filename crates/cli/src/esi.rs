@@ -32,14 +32,26 @@ fn select<'a>(file: &'a EsiFile, sel: &str) -> anyhow::Result<&'a Device> {
     let code = num(p).ok();
     let matches = |d: &Device| code.map_or(d.type_name.eq_ignore_ascii_case(p), |c| d.product_code == c);
     let what = code.map_or(format!("type {p}"), |c| format!("product code {c:#010x}"));
+    let found: Vec<&Device> =
+        file.devices.iter().filter(|d| matches(d) && revision.is_none_or(|r| d.revision == r)).collect();
     // Without a revision, the newest; of equal ones the first in the file.
-    file.devices
-        .iter()
-        .filter(|d| matches(d) && revision.is_none_or(|r| d.revision == r))
-        .reduce(|best, d| if d.revision > best.revision { d } else { best })
-        .with_context(|| {
-            format!("no device with {what}{}", revision.map(|r| format!(" revision {r:#010x}")).unwrap_or_default())
-        })
+    let chosen =
+        found.iter().copied().reduce(|best, d| if d.revision > best.revision { d } else { best }).with_context(
+            || format!("no device with {what}{}", revision.map(|r| format!(" revision {r:#010x}")).unwrap_or_default()),
+        )?;
+    let mut revisions: Vec<u32> = found.iter().map(|d| d.revision).collect();
+    revisions.sort_unstable();
+    revisions.dedup();
+    if revisions.len() > 1 {
+        let all: Vec<String> = revisions.iter().map(|r| format!("{r:#010x}")).collect();
+        eprintln!(
+            "note: {what} has {} revisions in the file ({}): the newest, {:#010x}, is shown; --device {p}:REVISION chooses another",
+            revisions.len(),
+            all.join(", "),
+            chosen.revision
+        );
+    }
+    Ok(chosen)
 }
 
 pub fn run(
@@ -156,7 +168,7 @@ pub fn run(
                 outln!("  {kind} {:#06x} {:?} {sm} ({} bits)", p.index, p.name, p.bit_len());
                 for e in &p.entries {
                     outln!(
-                        "        {:#06x}:{:02x} {:2} bits {} {:?}",
+                        "        {:#06x}:{:#04x} {:2} bits {} {:?}",
                         e.index,
                         e.subindex,
                         e.bit_len,
@@ -241,7 +253,7 @@ fn init_cmd_text(c: &ferrocat_esi::InitCmd) -> String {
     let hex: String = c.data.iter().map(|b| format!("{b:02x}")).collect();
     let slot = if c.index_depends == ferrocat_esi::Depend::None { "" } else { " +slot" };
     let ca = if c.complete_access { " (complete access)" } else { "" };
-    format!("INIT {} {:#06x}:{:02x}{slot} ← {hex}{ca} {:?}", c.transitions.join(","), c.index, c.subindex, c.comment)
+    format!("INIT {} {:#06x}:{:#04x}{slot} ← {hex}{ca} {:?}", c.transitions.join(","), c.index, c.subindex, c.comment)
 }
 
 fn init_cmd_json(c: &ferrocat_esi::InitCmd) -> serde_json::Value {

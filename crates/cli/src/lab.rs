@@ -3,7 +3,6 @@ use std::io::IsTerminal;
 use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::Context;
 use ferrocat_lab::park2020::{self, Options, Row, PAPER};
 use ferrocat_lab::scenario::Plan;
 
@@ -31,6 +30,9 @@ pub fn host(name: &str) -> anyhow::Result<ferrocat_segment::HostModel> {
 
 /// An experiment as planned from its scenario and flags: run, print, and write `out`.
 pub fn run(plan: Plan, json: bool, out: Option<&Path>) -> anyhow::Result<ExitCode> {
+    if let Some(dir) = out {
+        crate::report::check_out_dir(dir)?;
+    }
     let code = match plan {
         Plan::Park2020(o) => park2020(o, json, out),
         Plan::Chen2016(o) => chen2016(o, json, out),
@@ -435,7 +437,7 @@ fn chen_outputs(
     figures: Option<&[ferrocat_lab::fit::Figure]>,
 ) -> anyhow::Result<()> {
     use crate::plots::{panel_chart, Series};
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    crate::report::make_dir(dir)?;
     let mut md = format!(
         "# Chen 2016, Table 2\n\nHost `{}`, seed {}, {} s per run, reference crystal {:+} ppm; lost and repeated \
          cycles of the DC-synchronous slaves with outputs, at positions {:?}.\n\n\

@@ -57,7 +57,7 @@ pub struct Park2020 {
     #[arg(long)]
     slaves: Vec<usize>,
     /// The cycle time (µs, 10 to 100 000; default 1000).
-    #[arg(long, value_parser = lab_cycle_us)]
+    #[arg(long, allow_negative_numbers = true, value_parser = lab_cycle_us)]
     cycle_us: Option<u64>,
     /// Rounds per (segment, method).
     #[arg(long)]
@@ -81,7 +81,7 @@ pub struct Chen2016 {
     #[arg(long)]
     method: Vec<String>,
     /// Cycle times (µs, 10 to 100 000; repeatable; default the paper's 500, 250, 100 and 50).
-    #[arg(long, value_parser = lab_cycle_us)]
+    #[arg(long, allow_negative_numbers = true, value_parser = lab_cycle_us)]
     cycle_us: Vec<u64>,
     /// Fit the paper's set-up model on the part of its table it is fitted on, from the
     /// presets, and print every step instead of the table (docs/lab.md).
@@ -100,7 +100,7 @@ pub struct Paprocki2022 {
     #[arg(long)]
     method: Vec<String>,
     /// Cycle times (µs, 10 to 100 000; repeatable; default 1000 and 500).
-    #[arg(long, value_parser = lab_cycle_us)]
+    #[arg(long, allow_negative_numbers = true, value_parser = lab_cycle_us)]
     cycle_us: Vec<u64>,
     /// Leave the second drive's propagation delay uncompensated (its System_Time_Delay 0), as
     /// the paper's set-up does: the run is then held against the paper's Table 2.
@@ -121,7 +121,7 @@ pub struct Robustness {
     #[arg(long)]
     slaves: Option<usize>,
     /// The cycle time (µs, 10 to 100 000; default 1000).
-    #[arg(long, value_parser = lab_cycle_us)]
+    #[arg(long, allow_negative_numbers = true, value_parser = lab_cycle_us)]
     cycle_us: Option<u64>,
     /// ferrocat without its GPIO calibration of the stamps' asymmetry.
     #[arg(long)]
@@ -143,7 +143,7 @@ pub struct Run {
     #[arg(long)]
     slaves: Vec<usize>,
     /// Cycle times (µs, 10 to 100 000; repeatable where the experiment takes several).
-    #[arg(long, value_parser = lab_cycle_us)]
+    #[arg(long, allow_negative_numbers = true, value_parser = lab_cycle_us)]
     cycle_us: Vec<u64>,
     /// park2020: rounds per (segment, method).
     #[arg(long)]

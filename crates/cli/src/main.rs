@@ -32,14 +32,15 @@ mod words;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Log more on stderr: -v the bring-up's steps and the slaves' events, -vv each slave and
-    /// state, each lost frame and each error before it is returned (RUST_LOG, e.g.
-    /// `ferrocat_master=debug`, overrides both).
-    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    /// Log more on stderr: -v the steps, -vv the details. A command that runs a master logs
+    /// with -v its bring-up and the slaves' events, with -vv each slave and state, each lost
+    /// frame and each error before it is returned. RUST_LOG (e.g. `ferrocat_master=debug`)
+    /// overrides both.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count, help_heading = "Logging")]
     verbose: u8,
-    /// Log errors only (the default logs warnings too: what the master handled itself, such as
-    /// acknowledging a slave's error to bring it back to OP).
-    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    /// Log errors only (the default logs warnings too, such as what a master handled itself:
+    /// a slave's error acknowledged to bring it back to OP).
+    #[arg(short, long, global = true, conflicts_with = "verbose", help_heading = "Logging")]
     quiet: bool,
 }
 
@@ -215,7 +216,7 @@ enum Command {
         #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = args::seconds)]
         seconds: f64,
         /// The cycle time (µs, 10 to 1 000 000).
-        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
+        #[arg(long, default_value_t = 1000, allow_negative_numbers = true, value_parser = |s: &str| args::cycle_us(s, 10, 1_000_000))]
         cycle_us: u64,
         /// Distribute the reference clock's time with an FRMW in every cyclic frame.
         #[arg(long)]
@@ -407,8 +408,8 @@ enum Command {
         /// The drive: SERVO (built in), an ESI file with :PRODUCT, or an EEPROM image.
         #[arg(long)]
         drive: Option<String>,
-        /// Cycle times in µs (repeatable; default 1000 and 250).
-        #[arg(long)]
+        /// Cycle times (µs, 100 to 10 000; repeatable; default 1000 and 250).
+        #[arg(long, allow_negative_numbers = true, value_parser = |s: &str| args::cycle_us(s, 100, 10_000))]
         cycle_us: Vec<u64>,
         /// Clock-sync methods (repeatable; default all: none, conventional, park2020, chen2016,
         /// pi, ferrocat, ferrocat-mfr).
@@ -496,8 +497,8 @@ enum LabCmd {
         /// Slaves on the simulated line (EK1100s; the first is the reference clock).
         #[arg(long, default_value_t = 2)]
         slaves: usize,
-        /// The cycle time (µs).
-        #[arg(long, default_value_t = 1000)]
+        /// The cycle time (µs, 100 to 100 000).
+        #[arg(long, default_value_t = 1000, allow_negative_numbers = true, value_parser = |s: &str| args::cycle_us(s, 100, 100_000))]
         cycle_us: u64,
         /// Seconds of cyclic operation before measuring.
         #[arg(long, default_value_t = 2.0)]

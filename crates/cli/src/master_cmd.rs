@@ -155,7 +155,7 @@ fn object_type(m: &mut dyn CoeAccess, position: u16, index: u16, sub: u8, comple
     }
     let e = m.entry(position, index, sub).map_err(|e| {
         anyhow::anyhow!(
-            "the slave does not say what type {index:#06x}:{sub:02x} is ({e}): give --type (u8, i8, u16, …, string, hex)"
+            "the slave does not say what type {index:#06x}:{sub:#04x} is ({e}): give --type (u8, i8, u16, …, string, hex)"
         )
     })?;
     use SdoType::*;
@@ -173,7 +173,7 @@ fn object_type(m: &mut dyn CoeAccess, position: u16, index: u16, sub: u8, comple
         0x0015 => I64,
         0x001B => U64,
         code => bail!(
-            "{index:#06x}:{sub:02x} is of data type {code:#06x} ({} bits), which --type does not name: give --type hex",
+            "{index:#06x}:{sub:#04x} is of data type {code:#06x} ({} bits), which --type does not name: give --type hex",
             e.bit_length
         ),
     })
@@ -348,18 +348,19 @@ fn sdo_with(m: &mut dyn CoeAccess, position: u16, action: SdoAction) -> anyhow::
             };
             let bytes = encode(&value, ty)?;
             m.download(position, i, s, complete, &bytes)?;
-            eprintln!("wrote {value} to {i:#06x}:{s:02x} of slave {position} ({}, {} byte(s))", ty.name(), bytes.len());
+            eprintln!(
+                "wrote {value} to {i:#06x}:{s:#04x} of slave {position} ({}, {} byte(s))",
+                ty.name(),
+                bytes.len()
+            );
         }
         SdoAction::List => {
             for index in m.objects(position)? {
                 let o = m.object(position, index)?;
-                outln!(
-                    "{index:#06x} {:<40} type {:#06x} max sub {} code {}",
-                    o.name,
-                    o.data_type,
-                    o.max_subindex,
-                    o.object_code
-                );
+                use ferrocat_wire::coe::{data_type_name, object_code_name};
+                let ty = data_type_name(o.data_type).map_or(format!("{:#06x}", o.data_type), |n| n.to_string());
+                let code = object_code_name(o.object_code).map_or(format!("{:#04x}", o.object_code), |n| n.to_string());
+                outln!("{index:#06x} {:<40} {code:<6} {ty:<16} subindices 0 to {}", o.name, o.max_subindex);
             }
         }
     }
@@ -741,7 +742,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let mut frame_timeout_us = o.frame_timeout_us.unwrap_or_else(|| frame_timeout_us(cycle_us, max_rate, None));
     let dc = o.dc.is_some();
     if let Some(shift) = o.dc.as_ref().and_then(|d| d.sync0_shift_us).filter(|&s| s >= cycle_us) {
-        bail!("--sync0-shift-us {shift}: give a shift below the cycle ({cycle_us} us)");
+        bail!("--sync0-shift-us {shift}: give a shift below the cycle ({cycle_us} µs)");
     }
     if !(0.0..1e6).contains(&seconds) {
         bail!("--seconds {seconds}: give 0 (until SIGINT or SIGTERM) or a time below 1 000 000 s");
@@ -790,8 +791,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     if !max_rate && round_trip_us * 10 > cycle_us * 8 {
         tracing::warn!(
-            "the segment's round trip ({round_trip_us} us) is {} % of the {cycle_us} us cycle: a frame more than \
-             {} us late counts as lost, and the next cycle starts late; a longer cycle gives it room",
+            "the segment's round trip ({round_trip_us} µs) is {} % of the {cycle_us} µs cycle: a frame more than \
+             {} µs late counts as lost, and the next cycle starts late; a longer cycle gives it room",
             round_trip_us * 100 / cycle_us.max(1),
             frame_timeout_us.saturating_sub(round_trip_us)
         );
@@ -1008,8 +1009,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 st.probing.budget_ns = Some(cpu_per_cycle_ns / 2);
                 st.probing.off = false;
                 eprintln!(
-                    "host: the loop took {:.1} us of CPU a cycle over its first {n} cycles ({:.1} % of a core at {cycle_us} us); \
-                     wake-ups late by {}; clock-sync probes get {:.1} us a cycle",
+                    "host: the loop took {:.1} µs of CPU a cycle over its first {n} cycles ({:.1} % of a core at {cycle_us} µs); \
+                     wake-ups late by {}; clock-sync probes get {:.1} µs a cycle",
                     cpu_per_cycle_ns as f64 / 1e3,
                     cpu_per_cycle_ns as f64 / (cycle_us * 10) as f64,
                     wake_late.summary(),
@@ -1074,7 +1075,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             let s = m.cycle_stats();
             let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
             eprintln!(
-                "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} us  round trip {:.1} us (max {:.1}){lock}",
+                "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} µs  round trip {:.1} µs (max {:.1}){lock}",
                 (m.io_mut().now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
@@ -1123,7 +1124,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let wall = m.io_mut().now_ns() - start;
     let s = m.cycle_stats();
     eprintln!(
-        "cyclic rate {:.0} cycles/s; master CPU time {:.2} us per cycle",
+        "cyclic rate {:.0} cycles/s; master CPU time {:.2} µs per cycle",
         s.cycles as f64 / (wall as f64 * 1e-9),
         cpu as f64 / 1000.0 / s.cycles.max(1) as f64
     );
@@ -1134,8 +1135,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let cycles = match (max_rate, s.cycles) {
         (true, 1) => String::from("1 cycle back to back"),
         (true, n) => format!("{n} cycles back to back"),
-        (false, 1) => format!("1 cycle of {cycle_us} us"),
-        (false, n) => format!("{n} cycles of {cycle_us} us"),
+        (false, 1) => format!("1 cycle of {cycle_us} µs"),
+        (false, n) => format!("{n} cycles of {cycle_us} µs"),
     };
     // Where the simulator knows the truth: the reference's true time less the method's belief
     // of it now, for a method that keeps one (the reference following the master, or a master
@@ -1225,7 +1226,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         );
     } else {
         outln!(
-            "{cycles} (mean period {mean_period_us:.1} us); {} working-counter errors; max jitter {:.1} us; max round trip {:.1} us; frames lost {}",
+            "{cycles} (mean period {mean_period_us:.1} µs); {} working-counter errors; max jitter {:.1} µs; max round trip {:.1} µs; frames lost {}",
             s.wkc_errors,
             s.max_jitter_ns as f64 / 1000.0,
             s.max_round_trip_ns as f64 / 1000.0,
@@ -1250,7 +1251,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             let h = &p.after_sync0;
             if let (Some(min), Some(p50), Some(max)) = (h.min_us(), h.quantile_us(0.5), h.max_us()) {
                 outln!(
-                    "frames passed the reference {min:.0} to {max:.0} us after a SYNC0 (p50 {p50:.0} us; aimed at {:.0} us)",
+                    "frames passed the reference {min:.0} to {max:.0} µs after a SYNC0 (p50 {p50:.0} µs; aimed at {:.0} µs)",
                     plan.aimed_ns as f64 / 1e3
                 );
             }

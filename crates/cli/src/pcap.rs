@@ -18,6 +18,11 @@ struct Shown<'a> {
 }
 
 pub fn run(path: &Path, json: bool) -> anyhow::Result<ExitCode> {
+    // Refused on its first bytes: an endless or huge file that is no capture is not read.
+    let first = ferrocat_segment::files::first_bytes(path, 4).with_context(|| format!("reading {}", path.display()))?;
+    if !ferrocat_capture::begins_like_a_capture(&first) {
+        anyhow::bail!("{}: not a pcap or pcapng capture (it begins with {first:02x?})", path.display());
+    }
     let bytes = ferrocat_segment::files::read_capture(path).with_context(|| format!("reading {}", path.display()))?;
     let (mut bad, mut cut) = (0usize, 0usize);
     for_each_packet(&bytes, |p| {

@@ -42,7 +42,7 @@ pub fn reload(
             if let Some(us) = s.watchdog_us {
                 m.submit_process_data_watchdog(k as u16, us as u64 * 1000)
                     .map_err(|e| format!("slave {k} ({})'s watchdog_us: {e}", s.name))?;
-                done.push(format!("slave {k}'s process-data watchdog to {us} us"));
+                done.push(format!("slave {k}'s process-data watchdog to {us} µs"));
             }
         }
         if was.is_some_and(|w| w.rx_pdos != s.rx_pdos || w.tx_pdos != s.tx_pdos) {

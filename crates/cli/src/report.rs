@@ -28,9 +28,26 @@ pub fn csv_of<T: Serialize>(rows: &[T]) -> String {
     csv
 }
 
+/// Checks, before any work, that `dir` can be an output folder: missing (it is made), or a
+/// folder already.
+pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
+    match std::fs::metadata(dir) {
+        Ok(m) if !m.is_dir() => {
+            anyhow::bail!("--out {}: that is a file; --out takes a folder (made if missing)", dir.display())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Makes the output folder `dir` (and its parents) where it is missing.
+pub fn make_dir(dir: &Path) -> anyhow::Result<()> {
+    check_out_dir(dir)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))
+}
+
 /// Writes `text` to `dir/name`, making the folder first.
 pub fn write(dir: &Path, name: &str, text: &str) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    make_dir(dir)?;
     let path = dir.join(name);
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
 }

@@ -262,7 +262,7 @@ pub fn stats(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     outln!(
-        "cycles {}  wkc {}/{} ({} short)  round trip {:.1} us  requests {} answered, {} failed",
+        "cycles {}  wkc {}/{} ({} short)  round trip {:.1} µs  requests {} answered, {} failed",
         s.cycles,
         s.last_wkc,
         s.expected_wkc,
@@ -352,7 +352,7 @@ pub fn pdos(t: &Target, position: u16, json: bool) -> anyhow::Result<ExitCode> {
         outln!("{title}:");
         for e in list {
             outln!(
-                "  {:#06x}:{:02x}  {:>2} bit{}  image bit {:>6}  {}",
+                "  {:#06x}:{:#04x}  {:>2} bit{}  image bit {:>6}  {}",
                 e.index,
                 e.subindex,
                 e.bits,

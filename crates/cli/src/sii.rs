@@ -193,7 +193,7 @@ pub fn run(path: &Path, json: bool) -> anyhow::Result<ExitCode> {
             );
             for e in &p.entries {
                 outln!(
-                    "              {:#06x}:{:02x} {:2} bits type {:#04x} {:?}",
+                    "              {:#06x}:{:#04x} {:2} bits type {:#04x} {:?}",
                     e.index,
                     e.subindex,
                     e.bit_len,

@@ -207,7 +207,7 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
         let (fast, slow) = (sim_s / walls[0], sim_s / walls[REPEATS - 1]);
         if !json {
             println!(
-                "{slaves:4} slaves, {cycle_us:5} us cycle: {sim_s:5.1} s simulated in {wall:6.3} s wall = {speed:8.1}x real time \
+                "{slaves:4} slaves, {cycle_us:5} µs cycle: {sim_s:5.1} s simulated in {wall:6.3} s wall = {speed:8.1}x real time \
                  (median of {REPEATS}, {slow:.1}–{fast:.1}x; {:.0} ns per cycle, {:.0} per ESC visit, {} lost)",
                 wall * 1e9 / cycles as f64,
                 wall * 1e9 / (cycles * slaves as u64) as f64,
@@ -230,7 +230,7 @@ pub fn bench(json: bool) -> anyhow::Result<ExitCode> {
     if !json {
         println!(
             "time control loop sample alone: {tcl_sample_ns:.1} ns (median of {REPEATS}, {:.1}–{:.1}; SCD sum {}); \
-             an ESC visit at 20x real time for 256 slaves at 100 us may take {budget_ns:.1} ns",
+             an ESC visit at 20x real time for 256 slaves at 100 µs may take {budget_ns:.1} ns",
             tcl_ns[0],
             tcl_ns[REPEATS - 1],
             tcl.scd_sum()
@@ -332,7 +332,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
                         .with_context(|| format!("a packet ring on {iface}"))?;
                     let send = if r.sends_through_io_uring() { "" } else { ", sending with sendto" };
                     eprintln!(
-                        "ferrocat sim: frames through a packet ring (spinning {} us before sleeping{send})",
+                        "ferrocat sim: frames through a packet ring (spinning {} µs before sleeping{send})",
                         a.spin_us
                     );
                     serve_ring(&mut seg, &mut r, &stop, log, &mut taps)?
@@ -365,14 +365,14 @@ pub fn run(a: SimArgs) -> anyhow::Result<ExitCode> {
     );
     if let (Some(m), Some(p99)) = (stats.busy_quantile_ns(0.5), stats.busy_quantile_ns(0.99)) {
         eprintln!(
-            "ferrocat sim: time per frame (receive to send) median {:.1} us, p99 {:.1} us",
+            "ferrocat sim: time per frame (receive to send) median {:.1} µs, p99 {:.1} µs",
             m as f64 / 1000.0,
             p99 as f64 / 1000.0
         );
     }
     if stats.frames_in > 0 {
         eprintln!(
-            "ferrocat sim: {}taken more than {} us after arriving (longest wait {:.0} us)",
+            "ferrocat sim: {}taken more than {} µs after arriving (longest wait {:.0} µs)",
             crate::count(stats.taken_late as usize, "frame", ""),
             ferrocat_sim::serve::SHARED_WAIT_NS / 1000,
             stats.max_wait_ns as f64 / 1e3
@@ -489,7 +489,7 @@ pub fn rtt(iface: &str, frames: u32, slaves: u16, force: bool) -> anyhow::Result
         anyhow::bail!("no slave answered any of {frames} frame(s) on {iface}");
     }
     println!(
-        "{frames} {}, {lost} unanswered ({unprocessed} back unprocessed); round trip median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us, min {:.1} us",
+        "{frames} {}, {lost} unanswered ({unprocessed} back unprocessed); round trip median {:.1} µs, p90 {:.1} µs, p99 {:.1} µs, max {:.1} µs, min {:.1} µs",
         if frames == 1 { "frame" } else { "frames" },
         q(0.5),
         q(0.9),

@@ -306,6 +306,14 @@ impl Target {
                 World::Udp(UdpIo::open(a).with_context(|| format!("UDP to {a}"))?)
             }
             (Some(iface), false) => {
+                // One interface as both ports would take each frame back as the ring's far
+                // end: a ring "open" that is no ring.
+                if self.secondary_iface.as_deref() == Some(iface.as_str()) {
+                    bail!(
+                        "--secondary-iface {iface} is --iface itself: cable redundancy takes the master's second \
+                         port, where the segment's far end comes back"
+                    );
+                }
                 check_iface(iface, self.force)?;
                 match &self.secondary_iface {
                     Some(sec) => World::Raw(

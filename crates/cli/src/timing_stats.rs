@@ -73,7 +73,7 @@ impl Histogram {
     pub fn summary(&self) -> String {
         match (self.quantile_us(0.5), self.quantile_us(0.99)) {
             (Some(p50), Some(p99)) => {
-                format!("p50 {p50:.0} us, p99 {p99:.0} us, max {:.1} us", self.max_ns as f64 / 1e3)
+                format!("p50 {p50:.0} µs, p99 {p99:.0} µs, max {:.1} µs", self.max_ns as f64 / 1e3)
             }
             _ => "none measured".into(),
         }

@@ -86,7 +86,7 @@ fn a_simulator_that_meets_frames_awake_answers_no_sooner_than_its_segment() {
     let report = sim.report();
     assert!(o.status.success(), "{out}{}", String::from_utf8_lossy(&o.stderr));
     let min_us: f64 =
-        out.rsplit("min ").next().and_then(|r| r.trim().strip_suffix("us")).unwrap().trim().parse().unwrap();
+        out.rsplit("min ").next().and_then(|r| r.trim().strip_suffix("µs")).unwrap().trim().parse().unwrap();
     println!("{out}");
     assert!(min_us >= 300.0, "an answer came back {min_us} us after its send, within the segment's 300 us: {out}");
     assert!(report["frames_out"].as_u64().unwrap() >= 200, "{report}");

@@ -31,7 +31,10 @@ fn needs_shared_an_sdo_abort_is_named() {
     assert!(ok && out.trim() == "620", "{out}");
     let (ok, _, err) = ferrocat(&["sdo", "read", "0", "0x1234", "--device", &dev]);
     assert!(!ok && err.lines().count() == 1, "{err}");
-    assert!(err.contains("SDO 0x1234:00 aborted") && err.contains("does not exist in the object dictionary"), "{err}");
+    assert!(
+        err.contains("SDO 0x1234:0x00 aborted") && err.contains("does not exist in the object dictionary"),
+        "{err}"
+    );
     let (ok, _, err) = ferrocat(&["sdo", "write", "0", "0x1018:1", "5", "--device", &dev]);
     assert!(!ok && err.contains("read-only"), "{err}");
 }
@@ -80,9 +83,10 @@ fn an_endless_file_is_refused_by_every_command_that_reads_one() {
     let toml = std::env::temp_dir().join(format!("ferrocat-endless-{}.toml", std::process::id()));
     std::fs::write(&toml, "[[device]]\neeprom = '/dev/zero'\n").unwrap();
     let segment = format!("--config={}", toml.display());
+    let (ok, _, err) = ferrocat(&["pcap", "/dev/zero"]);
+    assert!(!ok && err.contains("/dev/zero") && err.contains("not a pcap or pcapng capture"), "{err}");
     for args in [
         &["sii", "/dev/zero"][..],
-        &["pcap", "/dev/zero"],
         &["esi", "/dev/zero"],
         &["scan", "--device", "/dev/zero"],
         &["scan", &segment],
@@ -117,7 +121,8 @@ fn lab_park2020_prints_its_table_as_json() {
 #[test]
 fn lab_chen2016_refuses_bad_cycles_and_hosts() {
     let (ok, _, err) = ferrocat(&["lab", "chen2016", "--quick", "--cycle-us", "5"]);
-    assert!(!ok && err.contains("--cycle-us") && err.lines().count() == 1, "{err}");
+    let first = err.lines().next().unwrap_or_default();
+    assert!(!ok && first.contains("--cycle-us") && first.contains("from 10 to 100000 µs"), "{err}");
     let (ok, _, err) = ferrocat(&["lab", "chen2016", "--host", "vax"]);
     assert!(!ok && err.contains("rtx-10us"), "{err}");
 }
@@ -199,7 +204,7 @@ fn sdo_types_are_checked_both_ways() {
     // Without --type, the object's own type from SDO information (0x6060 is INTEGER8), and
     // what was written said.
     let (ok, _, err) = sdo(&["write", "1", "0x6060", "8"]);
-    assert!(ok && err.contains("wrote 8 to 0x6060:00 of slave 1 (i8, 1 byte(s))"), "{err}");
+    assert!(ok && err.contains("wrote 8 to 0x6060:0x00 of slave 1 (i8, 1 byte(s))"), "{err}");
     let (ok, _, err) = sdo(&["write", "1", "0x6060", "300"]);
     assert!(!ok && err.contains("value 300 is out of the range of --type i8"), "{err}");
     // Hex as the help promises it, 0x and all.
@@ -217,12 +222,12 @@ fn run_bounds_its_cycle_and_sums_up_when_interrupted() {
     let seg = ["--device", "EK1100", "--device", "EL2004"];
     for bad in ["1", "9", "1000001", "99999999999"] {
         let (ok, _, err) = ferrocat(&[&["run", "--cycle-us", bad], &seg[..]].concat());
-        assert!(!ok && err.contains("--cycle-us") && err.contains("10..=1000000"), "{bad}: {err}");
+        assert!(!ok && err.contains("--cycle-us") && err.contains("from 10 to 1000000 µs"), "{bad}: {err}");
     }
     let (ok, out, err) = ferrocat(&[&["run", "--seconds", "0.05", "--max-rate"], &seg[..]].concat());
     assert!(ok && out.contains("cycles back to back (mean period "), "{out}{err}");
     let (ok, out, err) = ferrocat(&[&["run", "--seconds", "0.05", "--cycle-us", "250"], &seg[..]].concat());
-    assert!(ok && out.starts_with("200 cycles of 250 us (mean period 250.0 us)"), "{out}{err}");
+    assert!(ok && out.starts_with("200 cycles of 250 µs (mean period 250.0 µs)"), "{out}{err}");
     // A run without end (--seconds 0, as a service runs it), stopped by SIGINT once it is
     // cycling (its handlers are in place before the bring-up it reports).
     use std::io::{BufRead, Read};
@@ -244,7 +249,7 @@ fn run_bounds_its_cycle_and_sums_up_when_interrupted() {
     assert!(o.status.success(), "{out}{err}");
     // However soon the signal came: "1 cycle of" was seen once in a loaded CI run, the signal
     // right after the bring-up.
-    let summed = out.contains(" cycles of 1000 us (mean period") || out.contains("1 cycle of 1000 us (mean period");
+    let summed = out.contains(" cycles of 1000 µs (mean period") || out.contains("1 cycle of 1000 µs (mean period");
     assert!(err.contains("stopped by a signal after") && summed, "{out}{err}");
 }
 
@@ -395,4 +400,70 @@ fn the_log_says_as_much_as_asked() {
     let env = run(&[], Some("ferrocat_master=debug"));
     assert!(env.contains("DEBUG slave 0 (EK1100)"), "{env}");
     assert_eq!(run(&["-q"], None), "");
+}
+
+/// The command line's second pass (#77): each input a user met, answered in the user's words.
+#[test]
+fn second_pass_inputs_are_answered_in_the_users_words() {
+    let seg = ["--device", "EK1100", "--device", "SERVO"];
+    let with = |args: &[&str]| ferrocat(&[args, &seg[..]].concat());
+    // A subindex typed in decimal comes back with its radix, not as bare hex.
+    let (ok, _, err) = with(&["sdo", "read", "1", "0x1018:99"]);
+    assert!(!ok && err.contains("SDO 0x1018:0x63 aborted") && !err.contains(":63 "), "{err}");
+    // SDO information in CiA 301's names.
+    let (ok, out, err) = with(&["sdo", "list", "1"]);
+    assert!(ok && out.contains("VAR    UNSIGNED32") && out.contains("RECORD IDENTITY"), "{out}{err}");
+    assert!(!out.contains("type 0x0007") && !out.contains(" code 7"), "{out}");
+    // One interface as both ports of a ring.
+    let (ok, _, err) = ferrocat(&["run", "--iface", "fcat-none", "--secondary-iface", "fcat-none", "--seconds", "0.1"]);
+    assert!(!ok && err.contains("--secondary-iface fcat-none is --iface itself"), "{err}");
+    // A ping of nothing, and one without --from on a slave without a gateway.
+    let (ok, _, err) = with(&["eoe", "ping", "1", "--ip", "192.168.9.20", "--count", "0"]);
+    assert!(!ok && err.contains("--count") && err.contains("1..=65535"), "{err}");
+    let (ok, out, err) = with(&["eoe", "ping", "1", "--ip", "192.168.9.20", "--count", "1"]);
+    assert!(ok && out.contains("from 192.168.9.1:") && out.contains("1 sent, 1 received"), "{out}{err}");
+    // Every cycle time's bounds, said the same way by every command.
+    for (args, bounds) in [
+        (&["run", "--cycle-us", "5", "--device", "EK1100"][..], "from 10 to 1000000 µs"),
+        (&["demo", "--cycle-us", "50"], "from 100 to 10000 µs"),
+        (&["lab", "park2020", "--cycle-us", "5"], "from 10 to 100000 µs"),
+        (&["lab", "chen2016", "--cycle-us", "-3"], "from 10 to 100000 µs"),
+        (&["lab", "live", "--cycle-us", "50"], "from 100 to 100000 µs"),
+    ] {
+        let (ok, _, err) = ferrocat(args);
+        assert!(!ok && err.contains("--cycle-us") && err.contains(bounds), "{args:?}: {err}");
+    }
+    for args in [&["demo", "--help"][..], &["lab", "park2020", "--help"], &["lab", "live", "--help"]] {
+        let (_, help, _) = ferrocat(args);
+        assert!(help.contains(" to 1") && help.contains("µs"), "{args:?} states its bounds: {help}");
+    }
+    // --out onto a file, said before any work.
+    let file = std::env::temp_dir().join(format!("ferrocat-out-file-{}.png", std::process::id()));
+    std::fs::write(&file, b"x").unwrap();
+    for cmd in [&["demo"][..], &["lab", "robustness"]] {
+        let (ok, _, err) = ferrocat(&[cmd, &["--out", file.to_str().unwrap()][..]].concat());
+        assert!(!ok && err.contains("that is a file; --out takes a folder"), "{cmd:?}: {err}");
+    }
+    std::fs::remove_file(&file).ok();
+    // Logging's flags under a heading of their own, in words that fit a command without a master.
+    for cmd in ["pcap", "esi", "sdo"] {
+        let (_, help, _) = ferrocat(&[cmd, "--help"]);
+        let logging = help.split("\nLogging:\n").nth(1).unwrap_or_else(|| panic!("{cmd}: {help}"));
+        assert!(logging.contains("--verbose") && logging.contains("--quiet"), "{cmd}: {help}");
+        assert!(!help.split("\nLogging:\n").next().unwrap().contains("--verbose"), "{cmd}: {help}");
+    }
+    // Units in the output as in the help.
+    let (ok, out, err) = ferrocat(&["run", "--seconds", "0.05", "--device", "EK1100", "--device", "EL2004"]);
+    assert!(ok && out.contains(" µs") && !out.contains(" us ") && !out.contains(" us;"), "{out}{err}");
+}
+
+/// `esi --device NAME` says which of several revisions it shows and how to choose another.
+#[test]
+fn needs_shared_esi_names_the_revision_it_chose() {
+    let esi = ferrocat_testdata::shared("esi/Beckhoff_EK11xx.xml");
+    let (ok, _, err) = ferrocat(&["esi", esi.to_str().unwrap(), "--device", "EK1100"]);
+    assert!(ok && err.contains("type EK1100 has 5 revisions in the file"), "{err}");
+    assert!(err.contains("the newest, 0x00120000, is shown; --device EK1100:REVISION chooses another"), "{err}");
+    let (ok, _, err) = ferrocat(&["esi", esi.to_str().unwrap(), "--device", "EK1100:0x00100000"]);
+    assert!(ok && !err.contains("revisions in the file"), "{err}");
 }

@@ -138,7 +138,7 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
     let text = std::fs::read_to_string(&machine).unwrap();
     std::fs::write(&machine, text.replace("name = \"lamps\"\n", "name = \"lamps\"\nwatchdog_us = 50000\n")).unwrap();
     let (ok, _, err) = output(&mut ferrocat(&net, &dir, &["reload"]));
-    assert!(ok && err.contains("slave 1's process-data watchdog to 50000 us"), "{err}");
+    assert!(ok && err.contains("slave 1's process-data watchdog to 50000 µs"), "{err}");
     let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["reg", "read", "1", "0x0420"]));
     assert!(ok && out.trim() == "f4 01", "{out}{err}");
     // SIGHUP does the same (the summary's stderr says so at the end).

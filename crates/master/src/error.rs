@@ -161,9 +161,9 @@ pub enum SdoSource {
 fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error: &MasterError) -> String {
     match source {
         SdoSource::EsiInitCommand { transition, line } => {
-            format!("ESI init command {transition} {index:#06x}:{subindex:02x} ({comment:?}, line {line}): {error}")
+            format!("ESI init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
         }
-        SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:02x} ({comment}): {error}"),
+        SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:#04x} ({comment}): {error}"),
     }
 }
 
@@ -175,7 +175,7 @@ pub enum ModuleError {
     #[error("{0} modules: 0xF030 holds 255")]
     TooMany(usize),
     /// An entry of 0xF050 (detected modules) that is no 32-bit ident.
-    #[error("0xF050:{subindex:02x} is {len} bytes, not 4")]
+    #[error("0xF050:{subindex:#04x} is {len} bytes, not 4")]
     DetectedEntry {
         /// The entry's subindex.
         subindex: u8,
@@ -421,7 +421,7 @@ pub enum MasterError {
         cause: StateCause,
     },
     /// The slave aborted an SDO transfer.
-    #[error("slave {position} ({name}): SDO {index:#06x}:{subindex:02x} aborted: {code}")]
+    #[error("slave {position} ({name}): SDO {index:#06x}:{subindex:#04x} aborted: {code}")]
     Abort {
         /// Position on the segment, from 0.
         position: u16,

@@ -96,7 +96,7 @@ impl std::fmt::Display for MasterEvent {
             }
             MasterEvent::SyncError { position, name } => write!(
                 f,
-                "slave {position} ({name}): sync error (0x1C32:20 set): it missed SM events past its limit (0x10F1:02)"
+                "slave {position} ({name}): sync error (0x1C32:0x20 set): it missed SM events past its limit (0x10F1:0x02)"
             ),
             MasterEvent::ErrorCounters { position, name, kind, port, grown, total } => {
                 let port = port.map_or(String::new(), |p| format!("port {p} "));

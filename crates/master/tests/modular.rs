@@ -172,5 +172,5 @@ fn module_objects_and_init_commands_follow_the_slot() {
     m.add_esi(file.vendor_id, bad);
     m.scan().unwrap();
     let e = m.configure().unwrap_err().to_string();
-    assert!(e.contains("ESI init command PS 0x2f00:00 (\"Gear ratio\", line "), "{e}");
+    assert!(e.contains("ESI init command PS 0x2f00:0x00 (\"Gear ratio\", line "), "{e}");
 }

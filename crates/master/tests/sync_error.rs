@@ -218,7 +218,7 @@ fn diagnosis_reads_the_sync_error_flag_of_the_slaves_with_sync0() {
     let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
     assert!(events.iter().any(|e| matches!(e, MasterEvent::SyncError { position: 1, .. })), "{text:#?}");
     assert_eq!(events.iter().filter(|e| matches!(e, MasterEvent::SyncError { .. })).count(), 1, "once: {text:#?}");
-    assert!(text.iter().any(|t| t.contains("slave 1 (") && t.contains("0x1C32:20")), "{text:#?}");
+    assert!(text.iter().any(|t| t.contains("slave 1 (") && t.contains("0x1C32:0x20")), "{text:#?}");
     assert_eq!(m.sync_error_flags().get(1), Some(&Some(true)));
     assert_eq!(m.diagnosis_stats().sync_errors, 1);
 }

@@ -59,6 +59,14 @@ pub fn read_capture(path: &Path) -> io::Result<Vec<u8>> {
     read_bounded(path, MAX_CAPTURE_FILE_BYTES, "a capture (split larger ones with `editcap -c`)")
 }
 
+/// The first `n` bytes of a file (fewer where it is shorter): enough to refuse one that does
+/// not begin as its kind does before reading the rest.
+pub fn first_bytes(path: &Path, n: u64) -> io::Result<Vec<u8>> {
+    let mut first = Vec::new();
+    std::fs::File::open(path)?.take(n).read_to_end(&mut first)?;
+    Ok(first)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

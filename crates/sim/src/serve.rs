@@ -80,14 +80,14 @@ impl std::fmt::Display for SyncErrorSide {
         let us = |ns: u64| ns as f64 / 1e3;
         match *self {
             SyncErrorSide::NoFrames { gap_ns } => {
-                write!(f, "no frame with process data arrived for {:.0} us (the master's side or the host's)", us(gap_ns))
+                write!(f, "no frame with process data arrived for {:.0} µs (the master's side or the host's)", us(gap_ns))
             }
             SyncErrorSide::Simulator { wait_ns } => {
-                write!(f, "the simulator took a frame {:.0} us after it arrived (the simulator's side)", us(wait_ns))
+                write!(f, "the simulator took a frame {:.0} µs after it arrived (the simulator's side)", us(wait_ns))
             }
             SyncErrorSide::Phase { gap_ns } => write!(
                 f,
-                "frames arrived at most {:.0} us apart and were taken in time: they met the slave on the wrong side of its SYNC0 (the master's cycle phase)",
+                "frames arrived at most {:.0} µs apart and were taken in time: they met the slave on the wrong side of its SYNC0 (the master's cycle phase)",
                 us(gap_ns)
             ),
         }

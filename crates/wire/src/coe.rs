@@ -418,6 +418,57 @@ impl<'a> Sdo<'a> {
     }
 }
 
+/// A CoE data type code's name (CiA 301's data type table, ETG.1000.6 Table 63), for the
+/// standard types; `None` for a code it does not name (a device's own, or a complex type of a
+/// profile).
+pub fn data_type_name(code: u16) -> Option<&'static str> {
+    Some(match code {
+        0x0001 => "BOOLEAN",
+        0x0002 => "INTEGER8",
+        0x0003 => "INTEGER16",
+        0x0004 => "INTEGER32",
+        0x0005 => "UNSIGNED8",
+        0x0006 => "UNSIGNED16",
+        0x0007 => "UNSIGNED32",
+        0x0008 => "REAL32",
+        0x0009 => "VISIBLE_STRING",
+        0x000A => "OCTET_STRING",
+        0x000B => "UNICODE_STRING",
+        0x000C => "TIME_OF_DAY",
+        0x000D => "TIME_DIFFERENCE",
+        0x000F => "DOMAIN",
+        0x0010 => "INTEGER24",
+        0x0011 => "REAL64",
+        0x0012 => "INTEGER40",
+        0x0013 => "INTEGER48",
+        0x0014 => "INTEGER56",
+        0x0015 => "INTEGER64",
+        0x0016 => "UNSIGNED24",
+        0x0018 => "UNSIGNED40",
+        0x0019 => "UNSIGNED48",
+        0x001A => "UNSIGNED56",
+        0x001B => "UNSIGNED64",
+        0x0020 => "PDO_COMMUNICATION_PARAMETER",
+        0x0021 => "PDO_MAPPING",
+        0x0022 => "SDO_PARAMETER",
+        0x0023 => "IDENTITY",
+        _ => return None,
+    })
+}
+
+/// An object code's name (CiA 301's object code table): VAR, ARRAY or RECORD.
+pub fn object_code_name(code: u8) -> Option<&'static str> {
+    Some(match code {
+        0x02 => "DOMAIN",
+        0x05 => "DEFTYPE",
+        0x06 => "DEFSTRUCT",
+        0x07 => "VAR",
+        0x08 => "ARRAY",
+        0x09 => "RECORD",
+        _ => return None,
+    })
+}
+
 /// An emergency error code in words: the code itself where it is a well-known one, else its
 /// class. Codes and classes from CiA 301 (the emergency error codes table), the drive codes
 /// from CiA 402 (IEC 61800-7-201's error codes), 0xA000/0xA001 from ETG.1000.6 (the EtherCAT
