@@ -317,10 +317,14 @@ impl Target {
                 check_iface(iface, self.force)?;
                 match &self.secondary_iface {
                     Some(sec) => World::Raw(
-                        RawIo::open_redundant(iface, sec).with_context(|| format!("opening {iface} and {sec}"))?,
+                        RawIo::open_redundant(iface, sec)
+                            .with_context(|| format!("opening {iface} and {sec}"))
+                            .map_err(|e| crate::words::opening(iface, e))?,
                     ),
                     None => World::Raw(
-                        RawIo::open_with(iface, self.io.link_path(self.spin_us)).with_context(|| format!("opening {iface}"))?,
+                        RawIo::open_with(iface, self.io.link_path(self.spin_us))
+                            .with_context(|| format!("opening {iface}"))
+                            .map_err(|e| crate::words::opening(iface, e))?,
                     ),
                 }
             }

@@ -1,6 +1,7 @@
 //! The link's failures in the user's words, the same for every subcommand: what did not
 //! answer, where, and what to check. A subcommand's first exchange with the segment is its
-//! scan, so `Target::scan` puts its errors through [`first_contact`].
+//! scan, so `Target::scan` puts its errors through [`first_contact`]; opening an interface
+//! goes through [`opening`].
 use ferrocat_master::MasterError;
 
 /// Where the frames went, as the user named it.
@@ -50,6 +51,22 @@ pub fn first_contact(place: Place<'_>, e: anyhow::Error) -> anyhow::Error {
             }
             _ => {}
         }
+    }
+    e
+}
+
+/// An error met opening the interface `iface`, reworded where the process lacks the right to
+/// raw frames (EPERM, EACCES); other errors are returned as they are.
+pub fn opening(iface: &str, e: anyhow::Error) -> anyhow::Error {
+    let denied = e.chain().filter_map(|c| c.downcast_ref::<std::io::Error>()).any(|io| {
+        io.kind() == std::io::ErrorKind::PermissionDenied
+            || matches!(io.raw_os_error(), Some(libc::EPERM | libc::EACCES))
+    });
+    if denied {
+        return anyhow::anyhow!(
+            "no permission to send raw frames on {iface}: run as root, or give the binary CAP_NET_RAW \
+             (sudo setcap cap_net_raw,cap_sys_nice,cap_ipc_lock+ep \"$(command -v ferrocat)\"; docs/cli.md) ({e:#})"
+        );
     }
     e
 }

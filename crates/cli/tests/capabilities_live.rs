@@ -61,5 +61,6 @@ fn an_unprivileged_user_with_three_capabilities_scans_and_runs_dc() {
     // Without the capabilities: one clear line naming the one that is missing.
     let p = text(&plain);
     assert!(!plain.status.success() && p.contains("needs CAP_NET_RAW"), "{p}");
+    assert!(p.contains(&format!("no permission to send raw frames on {}", net.master_if)), "{p}");
     assert_eq!(p.lines().filter(|l| l.contains("error")).count(), 1, "{p}");
 }
