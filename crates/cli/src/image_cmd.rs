@@ -13,8 +13,10 @@ use crate::target::Target;
 
 /// Every variable of the image: each slave's mapped entries (`POS:ENTRY`; an entry name the
 /// slave maps more than once in one direction, as an EL2004 does "Output", is `POS:ENTRY#K`,
-/// K counting from 1 in image order), then an ENI's variables under their own names.
-pub fn symbols<I: Io>(m: &Master<I>, eni: Option<&ferrocat_machine::eni::Eni>) -> Vec<Variable> {
+/// K counting from 1 in image order), then an ENI's variables and a machine description's
+/// `[[variable]]`s under their own names.
+pub fn symbols<I: Io>(m: &Master<I>, names: crate::values::Names<'_>) -> Vec<Variable> {
+    let eni = names.eni;
     let group_of = |pos: u16| m.groups().iter().find(|g| g.positions.contains(&pos)).map(|g| g.name.clone());
     let mut vars = Vec::new();
     for s in m.slaves() {
@@ -65,6 +67,24 @@ pub fn symbols<I: Io>(m: &Master<I>, eni: Option<&ferrocat_machine::eni::Eni>) -
                     subindex: 0,
                 });
             }
+        }
+    }
+    for v in names.machine.map_or(&[][..], |d| &d.variables[..]) {
+        let Some(s) = m.slaves().get(v.position as usize) else { continue };
+        let map = s.mapping();
+        let found = map.outputs.iter().map(|e| (true, e)).chain(map.inputs.iter().map(|e| (false, e)));
+        if let Some((output, e)) = found.filter(|(_, e)| e.bits > 0).find(|(_, e)| e.name == v.entry) {
+            vars.push(Variable {
+                name: v.name.clone(),
+                position: v.position,
+                slave: s.name().to_string(),
+                group: group_of(v.position),
+                output,
+                bit: e.image_bit,
+                bits: e.bits,
+                index: e.index,
+                subindex: e.subindex,
+            });
         }
     }
     vars

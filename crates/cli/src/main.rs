@@ -266,8 +266,10 @@ enum Command {
         #[arg(long)]
         no_diagnosis: bool,
         /// NAME=VALUE (repeatable): write this output before OP and hold it. NAME is a
-        /// variable of the ENI's process image (with --eni) or POS:ENTRY, a slave's position
-        /// and one of its entries; VALUE decimal or 0x hex, negative in two's complement.
+        /// variable of the ENI's process image (with --eni), a machine description's
+        /// variable (with --machine), or POS:ENTRY, a slave's position (or its name in the
+        /// description) and one of its entries; VALUE decimal or 0x hex, negative in two's
+        /// complement.
         #[arg(long, value_name = "NAME=VALUE")]
         set: Vec<String>,
         /// FROM=TO (repeatable): after every cycle copy FROM (an input, named as --set names
@@ -338,7 +340,7 @@ enum Command {
     /// Print variables of the process image a running master shares (every one without NAME):
     /// outputs as the last cycle sent them, inputs as it received them.
     Get {
-        /// Variables: POS:ENTRY, or an ENI's variable.
+        /// Variables: POS:ENTRY, an ENI's variable, or a machine description's variable.
         #[arg(value_name = "NAME")]
         names: Vec<String>,
         #[command(flatten)]

@@ -839,18 +839,25 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
     }
     let eni = t.eni_file()?;
+    let names = crate::values::Names { eni, machine: t.machine_file()? };
+    // Every variable the description names is an entry the slave maps, checked before OP.
+    for v in names.machine.map_or(&[][..], |d| &d.variables[..]) {
+        crate::values::handle(&m, names, &v.name, false).with_context(|| {
+            format!("{}: [[variable]] '{}'", t.machine.as_deref().unwrap_or(std::path::Path::new("")).display(), v.name)
+        })?;
+    }
     for spec in o.set {
-        let (h, v) = crate::values::assignment(&m, eni, spec)?;
+        let (h, v) = crate::values::assignment(&m, names, spec)?;
         m.set(h, v);
     }
     let shown = o
         .show
         .iter()
         .map(|n| {
-            crate::values::handle(&m, eni, n, false).map(|h| (n.as_str(), h)).with_context(|| format!("--show '{n}'"))
+            crate::values::handle(&m, names, n, false).map(|h| (n.as_str(), h)).with_context(|| format!("--show '{n}'"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let copies = crate::values::copies(&m, eni, t.machine_file()?, o.copy)?;
+    let copies = crate::values::copies(&m, names, o.copy)?;
     if !copies.is_empty() {
         eprintln!(
             "{} slave-to-slave cop{} after every cycle",
@@ -896,7 +903,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         (Some(_), Some(socket)) => {
             let path = socket.with_extension("image");
             let (out_bytes, in_bytes) = m.image_bytes();
-            let vars = crate::image_cmd::symbols(&m, eni);
+            let vars = crate::image_cmd::symbols(&m, names);
             let mode = o.control.as_ref().map_or(0o660, |c| c.mode);
             let image = ferrocat_service::SharedImage::create(
                 &path,

@@ -48,11 +48,18 @@ pub fn reload(
         if was.is_some_and(|w| w.rx_pdos != s.rx_pdos || w.tx_pdos != s.tx_pdos) {
             restart.push(format!("slave {k}'s PDO assignment"));
         }
+        if was.is_some_and(|w| w.init != s.init) {
+            restart.push(format!("slave {k}'s init commands"));
+        }
     }
     if changed(&|d| format!("{:?}", d.groups)) {
         restart.push(String::from("the process-data groups"));
     }
-    let copies = crate::values::copies(m, eni, Some(&new), copy_flags).map_err(|e| format!("copies: {e:#}"))?;
+    if changed(&|d| format!("{:?}", d.variables)) {
+        restart.push(String::from("the variables (the shared image's names)"));
+    }
+    let names = crate::values::Names { eni, machine: Some(&new) };
+    let copies = crate::values::copies(m, names, copy_flags).map_err(|e| format!("copies: {e:#}"))?;
     let n = copies.len();
     m.set_copies(copies).map_err(|e| format!("copies: {e}"))?;
     done.push(format!("{n} slave-to-slave cop{}", if n == 1 { "y" } else { "ies" }));

@@ -180,3 +180,36 @@ fn a_description_assigns_a_slaves_pdos() {
     assert!(!ok && err.contains("slave 0 (axis)'s rx_pdos") && err.contains("0x06020000"), "{err}");
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn a_description_sends_init_commands_and_names_variables() {
+    let path = temp("init");
+    let p = path.to_str().unwrap();
+    let servo = "[[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\ndevice = \"SERVO\"\n";
+    let run = |rest: &str, extra: &[&str]| {
+        std::fs::write(&path, format!("{servo}{rest}")).unwrap();
+        ferrocat(&[&["run", "--machine", p, "--seconds", "0.1", "--json"][..], extra].concat())
+    };
+    // Variables by name, and a slave's entry by the slave's name in the description.
+    let vars = "[[variable]]\nname = \"status\"\nentry = \"axis:Statusword\"\n\
+                [[variable]]\nname = \"mode\"\nentry = \"0:Modes of operation\"\n";
+    let (ok, out, err) = run(vars, &["--show", "status", "--show", "axis:Statusword", "--set", "mode=8"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["values"]["status"].is_number() && v["values"]["status"] == v["values"]["axis:Statusword"], "{v}");
+    // A PS init command runs before the mapping is read: no TxPDO assigned, no statusword.
+    let none = "[[slave.init]]\ntransition = \"PS\"\nindex = 0x1C13\nsubindex = 0\nvalue = 0\ntype = \"u8\"\n";
+    let (ok, _, err) = run(none, &["--show", "0:Statusword"]);
+    assert!(!ok && err.contains("Statusword"), "{err}");
+    // An object the drive lacks: its abort, with the command's line.
+    let bad = "[[slave.init]]\ntransition = \"PS\"\nindex = 0x2345\ndata = \"01\"\ncomment = \"gear\"\n";
+    let (ok, _, err) = run(bad, &[]);
+    assert!(
+        !ok && err.contains("init command PS 0x2345:0x00 (\"gear\", line 8)") && err.contains("0x06020000"),
+        "{err}"
+    );
+    // A variable naming no entry of its slave: said before OP, with the file.
+    let (ok, _, err) = run("[[variable]]\nname = \"x\"\nentry = \"axis:Nothing\"\n", &[]);
+    assert!(!ok && err.contains("[[variable]] 'x'") && err.contains(p), "{err}");
+    std::fs::remove_file(&path).ok();
+}

@@ -54,7 +54,8 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
         "name = \"bench\"\n\
          [[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044C2C52\n\
          [[slave]]\nname = \"lamps\"\nvendor = 2\nproduct = 0x07D43052\n\
-         [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\n",
+         [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\n\
+         [[variable]]\nname = \"status\"\nentry = \"axis:Statusword\"\n",
     )
     .unwrap();
     let run = ferrocat(&net, &dir, &["run", "--machine", machine.to_str().unwrap(), "--seconds", "0", "--json"])
@@ -126,6 +127,10 @@ fn commands_reach_a_running_master_through_its_socket_and_a_second_master_is_ref
         (Some(1), Some(0)),
         "{got}"
     );
+    // The description's variable, by its name, from another process.
+    let (ok, out, err) = output(&mut ferrocat(&net, &dir, &["get", "status", "2:Statusword", "--json"]));
+    let got: serde_json::Value = serde_json::from_str(&out).unwrap_or_default();
+    assert!(ok && got["values"]["status"].is_u64(), "{out}{err}");
     let image = socket.with_extension("image");
     let mut dying = ferrocat_service::ImageClient::attach(&image).unwrap();
     dying.begin_write_and_abandon("1:Output#4", 1).unwrap();

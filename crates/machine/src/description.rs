@@ -20,6 +20,16 @@
 //! serial = 1234                    # checked where given
 //! alias = 0x10                     # checked where given
 //! optional = true                  # may be absent
+//!
+//! [[slave.init]]                   # a CoE write at a transition
+//! transition = "PS"
+//! index = 0x6060
+//! value = 8
+//! type = "i8"
+//!
+//! [[variable]]                     # a name for an entry, for --set, --show and the image
+//! name = "x_mode"
+//! entry = "axis X:Modes of operation"
 //! ```
 use serde::Deserialize;
 use toml::Spanned;
@@ -49,6 +59,19 @@ pub struct Machine {
     /// Slave-to-slave copies through the master: (from, to), each `SLAVE:ENTRY` with the slave
     /// by its name in the description or its position.
     pub copies: Vec<(String, String)>,
+    /// Names the user gives to slaves' entries.
+    pub variables: Vec<VariableDesc>,
+}
+
+/// A name for one of a slave's process-data entries.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct VariableDesc {
+    /// The name (no `:` in it, so that it never reads as `POS:ENTRY`).
+    pub name: String,
+    /// The slave's position.
+    pub position: u16,
+    /// The entry's name, as the slave maps it (`ferrocat pdos`).
+    pub entry: String,
 }
 
 /// A process-data group: its slaves' process data in a frame of their own, every `every`
@@ -87,6 +110,8 @@ pub struct SlaveDesc {
     pub rx_pdos: Option<Vec<u16>>,
     /// The TxPDOs (inputs) to assign (0x1C13), likewise.
     pub tx_pdos: Option<Vec<u16>>,
+    /// CoE writes at transitions, in order (after the ESI's own init commands).
+    pub init: Vec<ferrocat_esi::InitCmd>,
 }
 
 /// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
@@ -107,7 +132,54 @@ struct Raw {
     groups: Vec<RawGroup>,
     #[serde(default, rename = "copy")]
     copies: Vec<RawCopy>,
+    #[serde(default, rename = "variable")]
+    variables: Vec<RawVariable>,
 }
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVariable {
+    name: Spanned<String>,
+    entry: Spanned<String>,
+}
+
+/// One transition or several.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Transitions {
+    One(String),
+    Many(Vec<String>),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInit {
+    transition: Spanned<Transitions>,
+    index: Spanned<Number>,
+    subindex: Option<Spanned<Number>>,
+    value: Option<Spanned<i64>>,
+    #[serde(rename = "type")]
+    ty: Option<Spanned<String>>,
+    data: Option<Spanned<String>>,
+    #[serde(default)]
+    complete_access: bool,
+    comment: Option<String>,
+}
+
+/// The transitions the master sends init commands at (ETG.2000's names).
+pub const INIT_TRANSITIONS: [&str; 3] = ["IP", "PS", "SO"];
+
+/// A value's type in an init command: its name, its width in bytes, and whether it is signed.
+const INIT_TYPES: [(&str, usize, bool); 8] = [
+    ("u8", 1, false),
+    ("i8", 1, true),
+    ("u16", 2, false),
+    ("i16", 2, true),
+    ("u32", 4, false),
+    ("i32", 4, true),
+    ("u64", 8, false),
+    ("i64", 8, true),
+];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -149,6 +221,8 @@ struct RawSlave {
     watchdog_us: Option<Spanned<i64>>,
     rx_pdos: Option<Vec<Spanned<Number>>>,
     tx_pdos: Option<Vec<Spanned<Number>>>,
+    #[serde(default)]
+    init: Vec<RawInit>,
 }
 
 /// Line and column of a byte offset in `text`.
@@ -157,6 +231,75 @@ fn place_at(text: &str, offset: usize) -> Place {
     let line = before.matches('\n').count() as u32 + 1;
     let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) as u32 + 1;
     Place { line, column }
+}
+
+/// How a description's numbers are read: the value, its key and its largest value.
+type ReadNumber<'a> = &'a dyn Fn(&Spanned<Number>, &str, u64) -> Result<u32, DescriptionError>;
+
+/// One `[[slave.init]]`: its transitions, object and the bytes it writes (a `value` in its
+/// `type`'s width, little-endian as CoE sends numbers, or `data` as hex).
+fn init_command(
+    c: &RawInit,
+    text: &str,
+    err: &dyn Fn(&std::ops::Range<usize>, String) -> DescriptionError,
+    num: ReadNumber<'_>,
+) -> Result<ferrocat_esi::InitCmd, DescriptionError> {
+    let transitions = match c.transition.get_ref() {
+        Transitions::One(t) => vec![t.trim().to_uppercase()],
+        Transitions::Many(v) => v.iter().map(|t| t.trim().to_uppercase()).collect(),
+    };
+    if let Some(t) = transitions.iter().find(|t| !INIT_TRANSITIONS.contains(&t.as_str())) {
+        return Err(err(
+            &c.transition.span(),
+            format!("transition '{t}': the master sends init commands at {}", INIT_TRANSITIONS.join(", ")),
+        ));
+    }
+    if transitions.is_empty() {
+        return Err(err(&c.transition.span(), "transition: give at least one".into()));
+    }
+    let index = num(&c.index, "index", u16::MAX as u64)? as u16;
+    let subindex = c.subindex.as_ref().map(|n| num(n, "subindex", u8::MAX as u64)).transpose()?.unwrap_or(0) as u8;
+    let data = match (&c.value, &c.ty, &c.data) {
+        (Some(v), Some(ty), None) => {
+            let Some(&(_, bytes, signed)) = INIT_TYPES.iter().find(|(n, _, _)| *n == ty.get_ref().trim()) else {
+                let names: Vec<&str> = INIT_TYPES.iter().map(|t| t.0).collect();
+                return Err(err(&ty.span(), format!("type '{}': give one of {}", ty.get_ref(), names.join(", "))));
+            };
+            let x = *v.get_ref();
+            let bits = bytes as u32 * 8;
+            let fits = match (signed, bits) {
+                (_, 64) => signed || x >= 0,
+                (true, b) => (-(1i64 << (b - 1))..(1i64 << (b - 1))).contains(&x),
+                (false, b) => (0..(1i64 << b)).contains(&x),
+            };
+            if !fits {
+                return Err(err(&v.span(), format!("value = {x}: does not fit {}", ty.get_ref().trim())));
+            }
+            x.to_le_bytes()[..bytes].to_vec()
+        }
+        (None, None, Some(d)) => {
+            let bytes = ferrocat_wire::hex::decode(d.get_ref()).map_err(|e| err(&d.span(), format!("data: {e}")))?;
+            if bytes.is_empty() {
+                return Err(err(&d.span(), "data: no bytes".into()));
+            }
+            bytes
+        }
+        (Some(v), None, None) => return Err(err(&v.span(), "value: give its type too (type = \"u16\", …)".into())),
+        (None, Some(t), None) => return Err(err(&t.span(), "type: give the value too".into())),
+        _ => {
+            return Err(err(&c.index.span(), "give value and type, or data (hex bytes), not both".into()));
+        }
+    };
+    Ok(ferrocat_esi::InitCmd {
+        line: place_at(text, c.index.span().start).line,
+        transitions,
+        index,
+        index_depends: ferrocat_esi::Depend::None,
+        subindex,
+        data,
+        complete_access: c.complete_access,
+        comment: c.comment.clone().unwrap_or_default(),
+    })
 }
 
 impl Machine {
@@ -245,6 +388,10 @@ impl Machine {
             };
             let rx_pdos = pdos(&s.rx_pdos, "rx_pdos", 0x1600..=0x17FF)?;
             let tx_pdos = pdos(&s.tx_pdos, "tx_pdos", 0x1A00..=0x1BFF)?;
+            let mut init = Vec::with_capacity(s.init.len());
+            for c in &s.init {
+                init.push(init_command(c, text, &err, &num)?);
+            }
             slaves.push(SlaveDesc {
                 name: s.name.clone().unwrap_or_else(|| format!("slave {k}")),
                 identity: Identity {
@@ -261,6 +408,7 @@ impl Machine {
                 watchdog_us,
                 rx_pdos,
                 tx_pdos,
+                init,
             });
         }
         let mut groups = Vec::new();
@@ -308,7 +456,32 @@ impl Machine {
             }
             copies.push((c.from.get_ref().clone(), c.to.get_ref().clone()));
         }
-        Ok(Machine { name: raw.name, slaves, groups, copies })
+        let mut variables: Vec<VariableDesc> = Vec::new();
+        for v in &raw.variables {
+            let name = v.name.get_ref().trim();
+            if name.is_empty() || name.contains(':') {
+                return Err(err(&v.name.span(), format!("'{name}': a variable's name is not empty and has no ':'")));
+            }
+            if variables.iter().any(|o| o.name == name) {
+                return Err(err(&v.name.span(), format!("a variable named '{name}' is there already")));
+            }
+            let resolved = v.entry.get_ref().split_once(':').and_then(|(slave, entry)| {
+                let slave = slave.trim();
+                let position = slaves
+                    .iter()
+                    .position(|d| d.name == slave)
+                    .or_else(|| slave.parse::<usize>().ok().filter(|&p| p < slaves.len()))?;
+                Some((position as u16, entry.trim().to_string()))
+            });
+            let Some((position, entry)) = resolved.filter(|(_, e)| !e.is_empty()) else {
+                return Err(err(
+                    &v.entry.span(),
+                    format!("'{}': give SLAVE:ENTRY, the slave by its name or position", v.entry.get_ref()),
+                ));
+            };
+            variables.push(VariableDesc { name: name.to_string(), position, entry });
+        }
+        Ok(Machine { name: raw.name, slaves, groups, copies, variables })
     }
 
     /// The slaves as the comparison takes them.
@@ -345,9 +518,10 @@ impl Machine {
                 watchdog_us: None,
                 rx_pdos: None,
                 tx_pdos: None,
+                init: Vec::new(),
             })
             .collect();
-        Machine { name, slaves, groups: Vec::new(), copies: Vec::new() }
+        Machine { name, slaves, groups: Vec::new(), copies: Vec::new(), variables: Vec::new() }
     }
 
     /// The description as TOML that [`Machine::parse`] reads back, with a comment for each
@@ -400,6 +574,23 @@ impl Machine {
                     out += &format!("{key} = [{}]\n", l.join(", "));
                 }
             }
+            for c in &s.init {
+                let t: Vec<String> = c.transitions.iter().map(|t| quote(t)).collect();
+                let data: Vec<String> = c.data.iter().map(|b| format!("{b:02x}")).collect();
+                out += &format!(
+                    "\n[[slave.init]]\ntransition = [{}]\nindex = {:#06x}\nsubindex = {}\ndata = {}\n",
+                    t.join(", "),
+                    c.index,
+                    c.subindex,
+                    quote(&data.join(" "))
+                );
+                if c.complete_access {
+                    out += "complete_access = true\n";
+                }
+                if !c.comment.is_empty() {
+                    out += &format!("comment = {}\n", quote(&c.comment));
+                }
+            }
         }
         for g in &self.groups {
             let names: Vec<String> = g.positions.iter().map(|&p| quote(&self.slaves[p as usize].name)).collect();
@@ -412,6 +603,18 @@ impl Machine {
         }
         for (from, to) in &self.copies {
             out += &format!("\n[[copy]]\nfrom = {}\nto = {}\n", quote(from), quote(to));
+        }
+        for v in &self.variables {
+            // By name where that names this slave alone, else by position.
+            let name = &self.slaves[v.position as usize].name;
+            let unique = self.slaves.iter().filter(|s| &s.name == name).count() == 1;
+            let plain = !name.contains(':') && name.trim() == name && name.parse::<usize>().is_err();
+            let slave = if unique && plain { name.clone() } else { v.position.to_string() };
+            out += &format!(
+                "\n[[variable]]\nname = {}\nentry = {}\n",
+                quote(&v.name),
+                quote(&format!("{slave}:{}", v.entry))
+            );
         }
         out
     }
@@ -446,6 +649,36 @@ mod tests {
         assert_eq!(m.groups, [GroupDesc { name: "slow".into(), positions: vec![0, 2], every: 10 }]);
         assert_eq!(m.copies, [("slave 1:Input".to_string(), "coupler:Output".to_string())]);
         assert_eq!(Machine::parse(&m.to_toml()).unwrap(), m);
+        // Init commands and variables.
+        let text = format!(
+            "{text}[[slave.init]]\ntransition = \"ps\"\nindex = 0x6060\nvalue = -3\ntype = \"i8\"\ncomment = \"mode\"\n\
+             [[slave.init]]\ntransition = [\"PS\", \"SO\"]\nindex = \"#x8000\"\nsubindex = 0x11\ndata = \"01 02 0a\"\ncomplete_access = true\n\
+             [[variable]]\nname = \"lamp\"\nentry = \"coupler:Output 1\"\n[[variable]]\nname = \"mode\"\nentry = \"2:Modes of operation\"\n"
+        );
+        let m = Machine::parse(&text).unwrap();
+        let init = &m.slaves[2].init;
+        assert_eq!(init.len(), 2);
+        assert_eq!((init[0].transitions.clone(), init[0].index, init[0].subindex), (vec!["PS".to_string()], 0x6060, 0));
+        assert_eq!((init[0].data.clone(), init[0].comment.as_str(), init[0].line), (vec![0xFD], "mode", 35));
+        assert_eq!(init[1].transitions, ["PS", "SO"]);
+        assert_eq!((init[1].index, init[1].subindex, init[1].data.clone()), (0x8000, 0x11, vec![1, 2, 0x0A]));
+        assert!(init[1].complete_access && !init[0].complete_access);
+        assert_eq!(
+            m.variables,
+            [
+                VariableDesc { name: "lamp".into(), position: 0, entry: "Output 1".into() },
+                VariableDesc { name: "mode".into(), position: 2, entry: "Modes of operation".into() }
+            ]
+        );
+        let again = Machine::parse(&m.to_toml()).unwrap();
+        let lines = |m: &Machine| m.slaves.iter().flat_map(|s| s.init.iter().map(|c| c.line)).collect::<Vec<_>>();
+        // The written file puts each command on a line of its own; all else reads back the same.
+        let strip = |mut m: Machine| {
+            m.slaves.iter_mut().flat_map(|s| s.init.iter_mut()).for_each(|c| c.line = 0);
+            m
+        };
+        assert_eq!(lines(&again).len(), 2);
+        assert_eq!(strip(again), strip(m.clone()));
         let e = m.expected();
         assert_eq!((e[1].position, e[1].alias, e[1].optional), (1, Some(0x10), true));
     }
@@ -476,6 +709,16 @@ mod tests {
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [3]\n", (6, 11), "slave 3: the description has slaves 0 to 0"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\nevery = 0\n", (7, 9), "every = 0"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[group]]\nname = \"g\"\nslaves = [0]\n[[group]]\nname = \"h\"\nslaves = [0]\n", (9, 11), "slave 0 is in group 'g' already"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"OI\"\nindex = 1\ndata = \"00\"\n", (5, 14), "transition 'OI': the master sends init commands at IP, PS, SO"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 300\ntype = \"u8\"\n", (7, 9), "value = 300: does not fit u8"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 3\ntype = \"word\"\n", (8, 8), "type 'word': give one of u8"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 3\n", (7, 9), "give its type too"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\ndata = \"0g\"\n", (7, 8), "data:"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 0x10000\ndata = \"00\"\n", (6, 9), "index = 65536: more than 0xffff"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 1\ntype = \"u8\"\ndata = \"00\"\n", (6, 9), "not both"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a:b\"\nentry = \"0:x\"\n", (5, 8), "has no ':'"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"x\"\n", (6, 9), "'x': give SLAVE:ENTRY"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"0:x\"\n[[variable]]\nname = \"a\"\nentry = \"0:y\"\n", (8, 8), "named 'a' is there already"),
         ];
         for (text, (line, column), want) in cases {
             let e = Machine::parse(text).unwrap_err();

@@ -156,6 +156,14 @@ pub enum SdoSource {
     },
     /// A process-data plan's SDO.
     Plan,
+    /// An init command the application gave (`Master::set_init_commands`: a machine
+    /// description's), at a transition, from the description's line.
+    Description {
+        /// The transition ("PS").
+        transition: String,
+        /// The line of the description.
+        line: u32,
+    },
 }
 
 fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error: &MasterError) -> String {
@@ -164,6 +172,9 @@ fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error
             format!("ESI init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
         }
         SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:#04x} ({comment}): {error}"),
+        SdoSource::Description { transition, line } => {
+            format!("init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
+        }
     }
 }
 

@@ -80,6 +80,9 @@ pub struct Slave {
     /// The process-data watchdog the application chose (0x0420, in 100 µs steps; 0: off),
     /// written again whenever the master configures the slave's process data.
     pub(crate) pd_watchdog_steps: Option<u16>,
+    /// CoE init commands the application gives (a machine description's), sent at their
+    /// transitions after the ESI's own.
+    pub(crate) init_cmds: Vec<ferrocat_esi::InitCmd>,
 }
 
 /// Who a slave is: the SII's identity (words 0x08–0x0F).

@@ -1,6 +1,7 @@
-//! The CoE init commands of a slave's ESI description (`<InitCmd>`, ETG.2000), sent at the state
-//! transitions they name, as a configuration tool's master does: "IP" and "PS" while the slave
-//! is in PREOP, before the process data are read and SAFEOP is asked; "SO" in SAFEOP, before OP.
+//! The CoE init commands of a slave's ESI description (`<InitCmd>`, ETG.2000) and those the
+//! application gives (a machine description's), sent at the state transitions they name, as a
+//! configuration tool's master does: "IP" and "PS" while the slave is in PREOP, before the
+//! process data are read and SAFEOP is asked; "SO" in SAFEOP, before OP.
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
@@ -17,25 +18,42 @@ impl<I: Io> Master<I> {
             .map(|(_, d)| d)
     }
 
-    /// Sends slave `position` the init commands its ESI description gives for `transition`
-    /// ("IP", "PS", "SO", …), in the file's order: each an SDO download (complete access where
-    /// it says so). Returns how many it sent; an abort is an error naming the command.
+    /// Init commands for slave `position` beside its ESI's (a machine description's CoE writes
+    /// per transition): sent at their transitions after the ESI's own, in the order given,
+    /// whenever the master configures the slave. Replaces those given before.
+    pub fn set_init_commands(&mut self, position: u16, cmds: Vec<ferrocat_esi::InitCmd>) -> Result<()> {
+        self.slave(position)?;
+        self.slaves[position as usize].init_cmds = cmds;
+        Ok(())
+    }
+
+    /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): its ESI
+    /// description's, in the file's order, then those the application gave
+    /// ([`Master::set_init_commands`]); each an SDO download (complete access where it says
+    /// so). Returns how many it sent; an abort is an error naming the command.
     pub fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
-        let cmds: Vec<ferrocat_esi::InitCmd> = match self.esi_description(position) {
-            Some(d) => d.init_cmds.iter().filter(|c| c.transitions.iter().any(|t| t == transition)).cloned().collect(),
-            None => return Ok(0),
+        let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
+        let mut cmds: Vec<(ferrocat_esi::InitCmd, bool)> = match self.esi_description(position) {
+            Some(d) => d.init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
+            None => Vec::new(),
         };
-        for c in &cmds {
+        if let Some(s) = self.slaves.get(position as usize) {
+            cmds.extend(s.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
+        }
+        for (c, from_esi) in &cmds {
             self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
                 let name = self.slaves[position as usize].name.clone();
+                let transition = transition.to_string();
+                let origin = if *from_esi {
+                    crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
+                } else {
+                    crate::error::SdoSource::Description { transition, line: c.line }
+                };
                 MasterError::of(
                     position,
                     &name,
                     crate::error::SlaveError::ConfigSdo {
-                        origin: crate::error::SdoSource::EsiInitCommand {
-                            transition: transition.to_string(),
-                            line: c.line,
-                        },
+                        origin,
                         index: c.index,
                         subindex: c.subindex,
                         comment: c.comment.clone(),

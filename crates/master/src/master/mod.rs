@@ -416,6 +416,7 @@ impl<I: Io> Master<I> {
             health: Default::default(),
             assignment: [None, None],
             pd_watchdog_steps: None,
+            init_cmds: Vec::new(),
             eoe: Default::default(),
             sii,
         })
