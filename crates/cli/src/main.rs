@@ -218,7 +218,9 @@ enum Command {
         /// The cycle time (µs, 10 to 1 000 000).
         #[arg(long, default_value_t = 1000, allow_negative_numbers = true, value_parser = |s: &str| args::cycle_us(s, 10, 1_000_000))]
         cycle_us: u64,
-        /// Distribute the reference clock's time with an FRMW in every cyclic frame.
+        /// Distributed clocks: the DC initialisation, SYNC0, and the reference clock's time in
+        /// every cyclic frame with the clock-sync method (a machine description's `[dc]` turns
+        /// them on too).
         #[arg(long)]
         dc: bool,
         /// Cycle back to back, as fast as the segment answers (a benchmark), instead of every
@@ -233,30 +235,30 @@ enum Command {
         /// the cycle is warned of.
         #[arg(long, value_parser = clap::value_parser!(u64).range(10..=1_000_000))]
         frame_timeout_us: Option<u64>,
-        /// With --dc: at most this many frames of static drift compensation (it stops earlier
-        /// once converged).
-        #[arg(long, default_value_t = 15_000, requires = "dc")]
-        dc_static_frames: u32,
+        /// With DC: at most this many frames of static drift compensation (it stops earlier
+        /// once converged). Default: 15 000.
+        #[arg(long)]
+        dc_static_frames: Option<u32>,
         /// POS:TAP (repeatable) — bridge the slave at POS to a new TAP interface TAP by EoE
         /// during the run (one fragment each way between cycles, per slave).
         #[arg(long)]
         eoe_tap: Vec<String>,
-        /// With --dc: the clock-sync method the master runs each cycle, in the cyclic frame
-        /// (docs/clock-sync.md); `none` only distributes the reference's time.
-        #[arg(long, default_value = "ferrocat", requires = "dc",
-              value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
-        sync: String,
+        /// With DC: the clock-sync method the master runs each cycle, in the cyclic frame
+        /// (docs/clock-sync.md); `none` only distributes the reference's time. Default: the
+        /// machine description's `[dc] sync`, else ferrocat.
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(ferrocat_master::sync::SyncMethod::PRESETS))]
+        sync: Option<String>,
         /// With --dc: where SYNC0 falls after each cycle's start (µs, below --cycle-us).
         /// Default: half a cycle after the frame passes the reference (for SOEM's PI and
         /// ferrocat-mfr, which aim that passage at the cycle's start, half the cycle; for the
         /// others, which send on it, half the cycle and half the segment's round trip), so that
         /// a frame up to half a cycle late still reaches the slaves before their SYNC0.
-        #[arg(long, requires = "dc")]
+        #[arg(long)]
         sync0_shift_us: Option<u64>,
-        /// With --dc: how long the clock sync's probe frames may take per cycle on average (µs;
+        /// With DC: how long the clock sync's probe frames may take per cycle on average (µs;
         /// 0: no probes). Default: half the loop's own CPU time per cycle, measured over its
         /// first 0.2 s (at least 200 cycles), which run without probes.
-        #[arg(long, requires = "dc")]
+        #[arg(long)]
         probe_budget_us: Option<u64>,
         /// How often each slave's error counters (0x0300–0x0313) are read while cyclic, ms; the
         /// mailboxes are polled for emergencies between. Both only in a cycle's spare time.
@@ -860,32 +862,31 @@ fn main() -> ExitCode {
             app_watchdog,
             keep_state,
         } => {
-            let mut run = master_cmd::RunOptions {
-                diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
-                set: &set,
-                show: &show,
-                copy: &copy,
-                seconds,
-                cycle_us,
-                dc: dc.then_some(master_cmd::DcOptions {
-                    static_frames: dc_static_frames,
-                    sync: sync.as_str(),
-                    sync0_shift_us,
-                    probe_budget_us,
-                }),
-                max_rate,
-                frame_timeout_us,
-                eoe_taps: &eoe_tap,
-                json,
-                keep_state,
-                control: (!no_control).then_some(master_cmd::ControlOptions {
-                    mode: control_mode,
-                    group: control_group,
-                    register_writes: allow_register_writes,
-                    app_watchdog: app_watchdog_ms.map(|ms| image_cmd::AppWatchdog::new(ms * 1_000_000, app_watchdog)),
-                }),
-            };
-            master_cmd::run(&target, &mut run)
+            let flags = master_cmd::DcFlags { static_frames: dc_static_frames, sync, sync0_shift_us, probe_budget_us };
+            master_cmd::DcOptions::merged(&target, dc, flags).and_then(|dc| {
+                let mut run = master_cmd::RunOptions {
+                    diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
+                    set: &set,
+                    show: &show,
+                    copy: &copy,
+                    seconds,
+                    cycle_us,
+                    dc,
+                    max_rate,
+                    frame_timeout_us,
+                    eoe_taps: &eoe_tap,
+                    json,
+                    keep_state,
+                    control: (!no_control).then_some(master_cmd::ControlOptions {
+                        mode: control_mode,
+                        group: control_group,
+                        register_writes: allow_register_writes,
+                        app_watchdog: app_watchdog_ms
+                            .map(|ms| image_cmd::AppWatchdog::new(ms * 1_000_000, app_watchdog)),
+                    }),
+                };
+                master_cmd::run(&target, &mut run)
+            })
         }
         Command::Slaves { target, json } => service_cmd::slaves(&target, json),
         Command::Reg { action } => match action {

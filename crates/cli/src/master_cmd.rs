@@ -617,7 +617,7 @@ pub struct RunOptions<'a> {
     pub seconds: f64,
     pub cycle_us: u64,
     /// With DC: how the clocks are brought together and kept so.
-    pub dc: Option<DcOptions<'a>>,
+    pub dc: Option<DcOptions>,
     pub max_rate: bool,
     /// The cyclic frames' timeout; `None`: [`frame_timeout_us`]'s default.
     pub frame_timeout_us: Option<u64>,
@@ -698,15 +698,69 @@ impl Sync0Plan {
 }
 
 /// `ferrocat run --dc`'s settings.
-pub struct DcOptions<'a> {
+pub struct DcOptions {
     /// The static drift compensation's frames at most.
     pub static_frames: u32,
     /// The clock-sync preset.
-    pub sync: &'a str,
+    pub sync: String,
     /// SYNC0 after the frame leaves, µs (`None`: half the cycle).
     pub sync0_shift_us: Option<u64>,
+    /// SYNC1 after SYNC0, µs (0: none).
+    pub sync1_us: u32,
+    /// Slaves whose SYNC0 is started (`true`) or not (`false`) whatever their SII says.
+    pub sync0_overrides: Vec<(u16, bool)>,
     /// Probing's time per cycle, µs (`None`: from the loop's measured cost).
     pub probe_budget_us: Option<u64>,
+}
+
+/// The DC flags of `run` as given (`None`: not given).
+pub struct DcFlags {
+    pub static_frames: Option<u32>,
+    pub sync: Option<String>,
+    pub sync0_shift_us: Option<u64>,
+    pub probe_budget_us: Option<u64>,
+}
+
+impl DcOptions {
+    /// DC as `--dc` and the machine description's `[dc]` ask for it, the flags over the
+    /// description; `None` without either. A DC flag without DC is an error.
+    pub fn merged(t: &Target, dc: bool, flags: DcFlags) -> anyhow::Result<Option<DcOptions>> {
+        let machine = t.machine_file()?;
+        let desc = machine.and_then(|d| d.dc.clone());
+        let file = t.machine.as_deref().map(|p| p.display().to_string()).unwrap_or_default();
+        if !dc && desc.is_none() {
+            let given = [
+                ("--dc-static-frames", flags.static_frames.is_some()),
+                ("--sync", flags.sync.is_some()),
+                ("--sync0-shift-us", flags.sync0_shift_us.is_some()),
+                ("--probe-budget-us", flags.probe_budget_us.is_some()),
+            ];
+            if let Some((flag, _)) = given.iter().find(|(_, g)| *g) {
+                bail!("{flag} goes with --dc (or a machine description's [dc])");
+            }
+            return Ok(None);
+        }
+        let desc = desc.unwrap_or_default();
+        let sync = match (flags.sync, &desc.sync) {
+            (Some(s), _) => s,
+            (None, Some(s)) if SyncMethod::PRESETS.contains(&s.as_str()) => s.clone(),
+            (None, Some(s)) => {
+                bail!("{file}: [dc] sync = '{s}': not a method ({})", SyncMethod::PRESETS.join(", "))
+            }
+            (None, None) => String::from("ferrocat"),
+        };
+        let sync0_overrides = machine
+            .map(|d| d.slaves.iter().enumerate().filter_map(|(k, s)| Some((k as u16, s.sync0?))).collect())
+            .unwrap_or_default();
+        Ok(Some(DcOptions {
+            static_frames: flags.static_frames.unwrap_or(15_000),
+            sync,
+            sync0_shift_us: flags.sync0_shift_us.or(desc.sync0_shift_us.map(u64::from)),
+            sync1_us: desc.sync1_us,
+            sync0_overrides,
+            probe_budget_us: flags.probe_budget_us,
+        }))
+    }
 }
 
 /// The cycles at the start of a run that measure the loop's own cost, without probes: 0.2 s,
@@ -802,15 +856,29 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let mut grid_ns = None;
     let mut sync0 = None;
     if let Some(d) = &o.dc {
-        let name = d.sync;
+        let name = d.sync.as_str();
         let method = SyncMethod::preset(name, Coupling::ReferenceFollowsMaster)
             .with_context(|| format!("--sync {name}: not a method ({})", SyncMethod::PRESETS.join(", ")))?;
         let plan = Sync0Plan::new(&method, cycle_us * 1000, round_trip_ns, d.sync0_shift_us);
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
+        // The SII's choice of SYNC0 slaves, with a description's `sync0` over it.
+        let sync0_slaves = (!d.sync0_overrides.is_empty()).then(|| {
+            let mut on = m.sync0_by_sii();
+            for &(k, wanted) in &d.sync0_overrides {
+                on.retain(|&p| p != k);
+                if wanted && (k as usize) < m.slaves().len() {
+                    on.push(k);
+                }
+            }
+            on.sort_unstable();
+            on
+        });
         let cfg = ferrocat_master::DcConfig {
             sync0_cycle_ns: (cycle_us * 1000).min(u32::MAX as u64) as u32,
             sync0_shift_ns: plan.shift_ns as i32,
+            sync1_ns: d.sync1_us.saturating_mul(1000),
             max_frames: d.static_frames,
+            sync0_slaves,
             ..Default::default()
         };
         let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;

@@ -213,3 +213,37 @@ fn a_description_sends_init_commands_and_names_variables() {
     assert!(!ok && err.contains("[[variable]] 'x'") && err.contains(p), "{err}");
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn a_description_sets_up_distributed_clocks() {
+    let path = temp("dc");
+    let p = path.to_str().unwrap();
+    let pcap = std::env::temp_dir().join(format!("ferrocat-machine-dc-{}.pcapng", std::process::id()));
+    let line = "[[slave]]\nname = \"coupler\"\nvendor = 2\nproduct = 0x044c2c52\ndevice = \"EK1100\"\n\
+                [[slave]]\nname = \"lamps\"\nvendor = 2\nproduct = 0x07d43052\ndevice = \"EL2004\"\n\
+                [[slave]]\nname = \"axis\"\nvendor = 0\nproduct = 0x402\ndevice = \"SERVO\"\n";
+    let run = |rest: &str, extra: &[&str]| {
+        std::fs::write(&path, format!("{line}{rest}")).unwrap();
+        ferrocat(&[&["run", "--machine", p, "--seconds", "0.2", "--json"][..], extra].concat())
+    };
+    // [dc] alone turns DC on, with its method and SYNC1 (0x09A4, ns) on the SII's SYNC0 slave.
+    let (ok, out, err) =
+        run("[dc]\nsync = \"pi\"\nsync1_us = 20\n", &["--pcap", pcap.to_str().unwrap()]);
+    assert!(ok && err.contains("SYNC0 on slave 2"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["clock_sync"]["method"], "pi", "{v}");
+    let (ok, dump, _) = ferrocat(&["pcap", pcap.to_str().unwrap(), "--json"]);
+    std::fs::remove_file(&pcap).ok();
+    assert!(ok && dump.lines().any(|l| l.contains("\"ado\":2468") && l.contains("\"data\":\"204e0000\"")), "no SYNC1");
+    // A slave's sync0 = false over its SII; a flag over the description's method.
+    let (ok, out, err) = run("sync0 = false\n[dc]\nsync = \"pi\"\n", &["--sync", "ferrocat"]);
+    assert!(ok && err.contains("SYNC0 on no slave"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["clock_sync"]["method"], "ferrocat", "{v}");
+    // A method the master does not have, named with the file; a DC flag without DC.
+    let (ok, _, err) = run("[dc]\nsync = \"magic\"\n", &[]);
+    assert!(!ok && err.contains("[dc] sync = 'magic': not a method") && err.contains(p), "{err}");
+    let (ok, _, err) = run("", &["--sync0-shift-us", "100"]);
+    assert!(!ok && err.contains("--sync0-shift-us goes with --dc (or a machine description's [dc])"), "{err}");
+    std::fs::remove_file(&path).ok();
+}

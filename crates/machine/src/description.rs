@@ -61,6 +61,20 @@ pub struct Machine {
     pub copies: Vec<(String, String)>,
     /// Names the user gives to slaves' entries.
     pub variables: Vec<VariableDesc>,
+    /// Distributed clocks: `Some` turns them on for `run`.
+    pub dc: Option<DcDesc>,
+}
+
+/// The machine's distributed clocks (`[dc]`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DcDesc {
+    /// The clock-sync method, as `run --sync` names it (`None`: run's default).
+    pub sync: Option<String>,
+    /// SYNC0 after each cycle's start, µs (`None`: run's default, half a cycle after the
+    /// frame's passage).
+    pub sync0_shift_us: Option<u32>,
+    /// SYNC1 after SYNC0, µs (0: no SYNC1).
+    pub sync1_us: u32,
 }
 
 /// A name for one of a slave's process-data entries.
@@ -112,6 +126,8 @@ pub struct SlaveDesc {
     pub tx_pdos: Option<Vec<u16>>,
     /// CoE writes at transitions, in order (after the ESI's own init commands).
     pub init: Vec<ferrocat_esi::InitCmd>,
+    /// Whether its SYNC0 is started (`None`: where its SII declares a DC op-mode with SYNC0).
+    pub sync0: Option<bool>,
 }
 
 /// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
@@ -134,6 +150,15 @@ struct Raw {
     copies: Vec<RawCopy>,
     #[serde(default, rename = "variable")]
     variables: Vec<RawVariable>,
+    dc: Option<RawDc>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDc {
+    sync: Option<String>,
+    sync0_shift_us: Option<Spanned<i64>>,
+    sync1_us: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -223,6 +248,7 @@ struct RawSlave {
     tx_pdos: Option<Vec<Spanned<Number>>>,
     #[serde(default)]
     init: Vec<RawInit>,
+    sync0: Option<bool>,
 }
 
 /// Line and column of a byte offset in `text`.
@@ -409,6 +435,7 @@ impl Machine {
                 rx_pdos,
                 tx_pdos,
                 init,
+                sync0: s.sync0,
             });
         }
         let mut groups = Vec::new();
@@ -481,7 +508,25 @@ impl Machine {
             };
             variables.push(VariableDesc { name: name.to_string(), position, entry });
         }
-        Ok(Machine { name: raw.name, slaves, groups, copies, variables })
+        let dc = match &raw.dc {
+            None => None,
+            Some(d) => {
+                // 0x0990/0x09A0 hold SYNC0's start and SYNC1's cycle in ns, 32 bits.
+                let us = |v: &Option<Spanned<i64>>, key: &str| -> Result<Option<u32>, DescriptionError> {
+                    match v {
+                        Some(x) if (0..=4_000_000).contains(x.get_ref()) => Ok(Some(*x.get_ref() as u32)),
+                        Some(x) => Err(err(&x.span(), format!("{key} = {}: give 0 to 4 000 000 µs", x.get_ref()))),
+                        None => Ok(None),
+                    }
+                };
+                Some(DcDesc {
+                    sync: d.sync.as_ref().map(|s| s.trim().to_string()),
+                    sync0_shift_us: us(&d.sync0_shift_us, "sync0_shift_us")?,
+                    sync1_us: us(&d.sync1_us, "sync1_us")?.unwrap_or(0),
+                })
+            }
+        };
+        Ok(Machine { name: raw.name, slaves, groups, copies, variables, dc })
     }
 
     /// The slaves as the comparison takes them.
@@ -519,9 +564,10 @@ impl Machine {
                 rx_pdos: None,
                 tx_pdos: None,
                 init: Vec::new(),
+                sync0: None,
             })
             .collect();
-        Machine { name, slaves, groups: Vec::new(), copies: Vec::new(), variables: Vec::new() }
+        Machine { name, slaves, groups: Vec::new(), copies: Vec::new(), variables: Vec::new(), dc: None }
     }
 
     /// The description as TOML that [`Machine::parse`] reads back, with a comment for each
@@ -574,6 +620,9 @@ impl Machine {
                     out += &format!("{key} = [{}]\n", l.join(", "));
                 }
             }
+            if let Some(on) = s.sync0 {
+                out += &format!("sync0 = {on}\n");
+            }
             for c in &s.init {
                 let t: Vec<String> = c.transitions.iter().map(|t| quote(t)).collect();
                 let data: Vec<String> = c.data.iter().map(|b| format!("{b:02x}")).collect();
@@ -603,6 +652,18 @@ impl Machine {
         }
         for (from, to) in &self.copies {
             out += &format!("\n[[copy]]\nfrom = {}\nto = {}\n", quote(from), quote(to));
+        }
+        if let Some(d) = &self.dc {
+            out += "\n[dc]\n";
+            if let Some(m) = &d.sync {
+                out += &format!("sync = {}\n", quote(m));
+            }
+            if let Some(sh) = d.sync0_shift_us {
+                out += &format!("sync0_shift_us = {sh}\n");
+            }
+            if d.sync1_us > 0 {
+                out += &format!("sync1_us = {}\n", d.sync1_us);
+            }
         }
         for v in &self.variables {
             // By name where that names this slave alone, else by position.
@@ -678,6 +739,12 @@ mod tests {
             m
         };
         assert_eq!(lines(&again).len(), 2);
+        let dc = Machine::parse(&format!("{text}[dc]\nsync = \"pi\"\nsync0_shift_us = 300\nsync1_us = 20\n")).unwrap();
+        assert_eq!(dc.dc, Some(DcDesc { sync: Some("pi".into()), sync0_shift_us: Some(300), sync1_us: 20 }));
+        assert_eq!(strip(Machine::parse(&dc.to_toml()).unwrap()), strip(dc.clone()));
+        let off = Machine::parse("[[slave]]\nvendor = 2\nproduct = 3\nsync0 = false\n").unwrap();
+        assert_eq!((off.slaves[0].sync0, off.dc.clone()), (Some(false), None));
+        assert_eq!(Machine::parse(&off.to_toml()).unwrap(), off);
         assert_eq!(strip(again), strip(m.clone()));
         let e = m.expected();
         assert_eq!((e[1].position, e[1].alias, e[1].optional), (1, Some(0x10), true));
@@ -716,6 +783,8 @@ mod tests {
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\ndata = \"0g\"\n", (7, 8), "data:"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 0x10000\ndata = \"00\"\n", (6, 9), "index = 65536: more than 0xffff"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 1\ntype = \"u8\"\ndata = \"00\"\n", (6, 9), "not both"),
+            ("[dc]\nsync1_us = -1\n", (2, 12), "sync1_us = -1: give 0 to 4 000 000 µs"),
+            ("[dc]\nsync = \"pi\"\nlock = 3\n", (3, 1), "unknown field `lock`"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a:b\"\nentry = \"0:x\"\n", (5, 8), "has no ':'"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"x\"\n", (6, 9), "'x': give SLAVE:ENTRY"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"0:x\"\n[[variable]]\nname = \"a\"\nentry = \"0:y\"\n", (8, 8), "named 'a' is there already"),
