@@ -863,7 +863,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
         // The SII's choice of SYNC0 slaves, with a description's `sync0` over it.
         let sync0_slaves = (!d.sync0_overrides.is_empty()).then(|| {
-            let mut on = m.sync0_by_sii();
+            let mut on = ferrocat_master::sync0_by_sii(m.slaves());
             for &(k, wanted) in &d.sync0_overrides {
                 on.retain(|&p| p != k);
                 if wanted && (k as usize) < m.slaves().len() {

@@ -454,7 +454,9 @@ impl Target {
                     m.set_process_data_watchdog(k as u16, us as u64 * 1000)
                         .with_context(|| format!("{}: slave {k} ({})'s watchdog_us", path.display(), s.name))?;
                 }
-                m.set_init_commands(k as u16, s.init.clone())?;
+                let setup = m.setup_mut(k as u16)?;
+                setup.init_cmds = s.init.clone();
+                setup.modules = s.modules.clone();
             }
         }
         Ok(())

@@ -227,8 +227,7 @@ fn a_description_sets_up_distributed_clocks() {
         ferrocat(&[&["run", "--machine", p, "--seconds", "0.2", "--json"][..], extra].concat())
     };
     // [dc] alone turns DC on, with its method and SYNC1 (0x09A4, ns) on the SII's SYNC0 slave.
-    let (ok, out, err) =
-        run("[dc]\nsync = \"pi\"\nsync1_us = 20\n", &["--pcap", pcap.to_str().unwrap()]);
+    let (ok, out, err) = run("[dc]\nsync = \"pi\"\nsync1_us = 20\n", &["--pcap", pcap.to_str().unwrap()]);
     assert!(ok && err.contains("SYNC0 on slave 2"), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["clock_sync"]["method"], "pi", "{v}");
@@ -245,5 +244,28 @@ fn a_description_sets_up_distributed_clocks() {
     assert!(!ok && err.contains("[dc] sync = 'magic': not a method") && err.contains(p), "{err}");
     let (ok, _, err) = run("", &["--sync0-shift-us", "100"]);
     assert!(!ok && err.contains("--sync0-shift-us goes with --dc (or a machine description's [dc])"), "{err}");
+    std::fs::remove_file(&path).ok();
+}
+
+#[test]
+fn a_description_configures_and_checks_a_modular_devices_modules() {
+    let path = temp("modules");
+    let p = path.to_str().unwrap();
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_modular.xml");
+    let run = |device: &str, modules: &str| {
+        let text = format!(
+            "[[slave]]\nname = \"drive\"\nvendor = 0xf3c\nproduct = 0x00010002\ndevice = \"{device}\"\nmodules = {modules}\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        ferrocat(&["run", "--machine", p, "--seconds", "0.1", "--show", "drive:Target velocity", "--json"])
+    };
+    // Plugged as described, configured and checked: axis 1 in velocity mode, its entry there.
+    let (ok, out, err) = run(&format!("{esi}:#x00010002"), "[0x9010, 0x9020]");
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["values"]["drive:Target velocity"].is_number() && v["wkc_errors"] == 0, "{v}");
+    // The device carries other modules than described: the slot and both modules named.
+    let (ok, _, err) = run(&format!("{esi}:#x00010002:0x9010,0x9010"), "[0x9010, 0x9020]");
+    assert!(!ok && err.contains("slot 1: module 0x00009020 configured, 0x00009010 detected"), "{err}");
     std::fs::remove_file(&path).ok();
 }

@@ -128,6 +128,9 @@ pub struct SlaveDesc {
     pub init: Vec<ferrocat_esi::InitCmd>,
     /// Whether its SYNC0 is started (`None`: where its SII declares a DC op-mode with SYNC0).
     pub sync0: Option<bool>,
+    /// A modular device's modules, slot by slot, by their ESI module idents (`None`: what it
+    /// carries is not checked).
+    pub modules: Option<Vec<u32>>,
 }
 
 /// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
@@ -249,6 +252,7 @@ struct RawSlave {
     #[serde(default)]
     init: Vec<RawInit>,
     sync0: Option<bool>,
+    modules: Option<Vec<Spanned<Number>>>,
 }
 
 /// Line and column of a byte offset in `text`.
@@ -414,6 +418,16 @@ impl Machine {
             };
             let rx_pdos = pdos(&s.rx_pdos, "rx_pdos", 0x1600..=0x17FF)?;
             let tx_pdos = pdos(&s.tx_pdos, "tx_pdos", 0x1A00..=0x1BFF)?;
+            let modules = match &s.modules {
+                // 0xF030:00 counts the slots in 8 bits.
+                Some(list) if list.len() > 255 => {
+                    return Err(err(&list[255].span(), "modules: more than 255 slots (0xF030 holds 255)".into()))
+                }
+                Some(list) => {
+                    Some(list.iter().map(|n| num(n, "modules", u32::MAX as u64)).collect::<Result<Vec<_>, _>>()?)
+                }
+                None => None,
+            };
             let mut init = Vec::with_capacity(s.init.len());
             for c in &s.init {
                 init.push(init_command(c, text, &err, &num)?);
@@ -436,6 +450,7 @@ impl Machine {
                 tx_pdos,
                 init,
                 sync0: s.sync0,
+                modules,
             });
         }
         let mut groups = Vec::new();
@@ -565,6 +580,7 @@ impl Machine {
                 tx_pdos: None,
                 init: Vec::new(),
                 sync0: None,
+                modules: None,
             })
             .collect();
         Machine { name, slaves, groups: Vec::new(), copies: Vec::new(), variables: Vec::new(), dc: None }
@@ -622,6 +638,10 @@ impl Machine {
             }
             if let Some(on) = s.sync0 {
                 out += &format!("sync0 = {on}\n");
+            }
+            if let Some(m) = &s.modules {
+                let m: Vec<String> = m.iter().map(|i| format!("{i:#x}")).collect();
+                out += &format!("modules = [{}]\n", m.join(", "));
             }
             for c in &s.init {
                 let t: Vec<String> = c.transitions.iter().map(|t| quote(t)).collect();
@@ -742,8 +762,10 @@ mod tests {
         let dc = Machine::parse(&format!("{text}[dc]\nsync = \"pi\"\nsync0_shift_us = 300\nsync1_us = 20\n")).unwrap();
         assert_eq!(dc.dc, Some(DcDesc { sync: Some("pi".into()), sync0_shift_us: Some(300), sync1_us: 20 }));
         assert_eq!(strip(Machine::parse(&dc.to_toml()).unwrap()), strip(dc.clone()));
-        let off = Machine::parse("[[slave]]\nvendor = 2\nproduct = 3\nsync0 = false\n").unwrap();
+        let off = Machine::parse("[[slave]]\nvendor = 2\nproduct = 3\nsync0 = false\nmodules = [0x9010, \"#x9020\"]\n")
+            .unwrap();
         assert_eq!((off.slaves[0].sync0, off.dc.clone()), (Some(false), None));
+        assert_eq!(off.slaves[0].modules, Some(vec![0x9010, 0x9020]));
         assert_eq!(Machine::parse(&off.to_toml()).unwrap(), off);
         assert_eq!(strip(again), strip(m.clone()));
         let e = m.expected();
@@ -784,6 +806,7 @@ mod tests {
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 0x10000\ndata = \"00\"\n", (6, 9), "index = 65536: more than 0xffff"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 1\ntype = \"u8\"\ndata = \"00\"\n", (6, 9), "not both"),
             ("[dc]\nsync1_us = -1\n", (2, 12), "sync1_us = -1: give 0 to 4 000 000 µs"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nmodules = [1, \"x\"]\n", (4, 15), "modules: not a number"),
             ("[dc]\nsync = \"pi\"\nlock = 3\n", (3, 1), "unknown field `lock`"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a:b\"\nentry = \"0:x\"\n", (5, 8), "has no ':'"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"x\"\n", (6, 9), "'x': give SLAVE:ENTRY"),

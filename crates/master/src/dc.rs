@@ -202,6 +202,17 @@ impl Default for DcConfig {
     }
 }
 
+/// The slaves the DC initialisation starts SYNC0 on when [`DcConfig::sync0_slaves`] is
+/// `None`: those with a system time whose SII declares a DC op-mode that activates SYNC0
+/// (assign-activate bit 9).
+pub fn sync0_by_sii(slaves: &[crate::slave::Slave]) -> Vec<u16> {
+    slaves
+        .iter()
+        .filter(|s| s.dc.has_system_time && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
+        .map(|s| s.position)
+        .collect()
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 /// What the DC initialisation did.
 pub struct DcReport {
@@ -382,7 +393,7 @@ impl<I: Io> Master<I> {
         // 9. SYNC0 on the cycle grid of the reference's time.
         let targets: Vec<u16> = match &cfg.sync0_slaves {
             Some(v) => v.clone(),
-            None => self.sync0_by_sii(),
+            None => sync0_by_sii(&self.slaves),
         };
         let sync0_start = if targets.is_empty() { None } else { Some(self.start_sync(&targets, cfg)?) };
         tracing::info!(
@@ -403,17 +414,6 @@ impl<I: Io> Master<I> {
             sync0_start,
             sync0_slaves: targets,
         })
-    }
-
-    /// The slaves the DC initialisation starts SYNC0 on when [`DcConfig::sync0_slaves`] is
-    /// `None`: those with a system time whose SII declares a DC op-mode that activates SYNC0
-    /// (assign-activate bit 9).
-    pub fn sync0_by_sii(&self) -> Vec<u16> {
-        self.slaves
-            .iter()
-            .filter(|s| s.dc.has_system_time && s.sii.dc_op_modes().iter().any(|m| m.assign_activate & 0x0200 != 0))
-            .map(|s| s.position)
-            .collect()
     }
 
     fn start_sync(&mut self, targets: &[u16], cfg: &DcConfig) -> Result<u64> {

@@ -156,7 +156,7 @@ pub enum SdoSource {
     },
     /// A process-data plan's SDO.
     Plan,
-    /// An init command the application gave (`Master::set_init_commands`: a machine
+    /// An init command the application gave (`Master::setup_mut`: a machine
     /// description's), at a transition, from the description's line.
     Description {
         /// The transition ("PS").

@@ -80,9 +80,21 @@ pub struct Slave {
     /// The process-data watchdog the application chose (0x0420, in 100 µs steps; 0: off),
     /// written again whenever the master configures the slave's process data.
     pub(crate) pd_watchdog_steps: Option<u16>,
-    /// CoE init commands the application gives (a machine description's), sent at their
-    /// transitions after the ESI's own.
-    pub(crate) init_cmds: Vec<ferrocat_esi::InitCmd>,
+    /// What the application asks of the slave's configuration beyond the master's own.
+    pub(crate) setup: Setup,
+}
+
+/// What the application asks of a slave's configuration beyond what the master finds (a
+/// machine description's), applied whenever the master configures the slave
+/// (`Master::setup_mut`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Setup {
+    /// CoE init commands, sent at their transitions after the ESI's own, in order.
+    pub init_cmds: Vec<ferrocat_esi::InitCmd>,
+    /// The modules a modular device is to carry, slot by slot (their ESI module idents):
+    /// written to 0xF030 and checked against 0xF050 in PREOP, after the IP and PS init
+    /// commands and before the process data are read.
+    pub modules: Option<Vec<u32>>,
 }
 
 /// Who a slave is: the SII's identity (words 0x08–0x0F).
@@ -216,6 +228,10 @@ impl Slave {
     /// What the controller has.
     pub fn esc(&self) -> EscInfo {
         self.esc
+    }
+    /// What the application asked of its configuration (`Master::setup_mut`).
+    pub fn setup(&self) -> &Setup {
+        &self.setup
     }
     /// What the SII says: strings, general category, FMMUs, SyncManagers, PDOs.
     pub fn sii(&self) -> &SiiInfo {

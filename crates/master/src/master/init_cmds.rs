@@ -18,18 +18,16 @@ impl<I: Io> Master<I> {
             .map(|(_, d)| d)
     }
 
-    /// Init commands for slave `position` beside its ESI's (a machine description's CoE writes
-    /// per transition): sent at their transitions after the ESI's own, in the order given,
-    /// whenever the master configures the slave. Replaces those given before.
-    pub fn set_init_commands(&mut self, position: u16, cmds: Vec<ferrocat_esi::InitCmd>) -> Result<()> {
+    /// What the application asks of slave `position`'s configuration (a machine
+    /// description's init commands and modules), applied whenever the master configures it.
+    pub fn setup_mut(&mut self, position: u16) -> Result<&mut crate::slave::Setup> {
         self.slave(position)?;
-        self.slaves[position as usize].init_cmds = cmds;
-        Ok(())
+        Ok(&mut self.slaves[position as usize].setup)
     }
 
     /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): its ESI
     /// description's, in the file's order, then those the application gave
-    /// ([`Master::set_init_commands`]); each an SDO download (complete access where it says
+    /// ([`Master::setup_mut`]); each an SDO download (complete access where it says
     /// so). Returns how many it sent; an abort is an error naming the command.
     pub fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
@@ -38,7 +36,7 @@ impl<I: Io> Master<I> {
             None => Vec::new(),
         };
         if let Some(s) = self.slaves.get(position as usize) {
-            cmds.extend(s.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
+            cmds.extend(s.setup.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
         }
         for (c, from_esi) in &cmds {
             self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {

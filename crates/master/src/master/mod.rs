@@ -416,7 +416,7 @@ impl<I: Io> Master<I> {
             health: Default::default(),
             assignment: [None, None],
             pd_watchdog_steps: None,
-            init_cmds: Vec::new(),
+            setup: Default::default(),
             eoe: Default::default(),
             sii,
         })

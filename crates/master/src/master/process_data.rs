@@ -25,6 +25,9 @@ impl<I: Io> Master<I> {
             if self.slaves[k as usize].has_coe() {
                 self.run_init_commands(k, "IP")?;
                 self.run_init_commands(k, "PS")?;
+                if let Some(modules) = self.slaves[k as usize].setup.modules.clone() {
+                    self.configure_modules(k, &modules)?;
+                }
             }
             self.run_plan_sdos(k)?;
             self.read_mapping(k)?;
