@@ -85,8 +85,14 @@ fn bad_scenarios_are_named_with_their_key() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("`settle_s`: NaN is not between 0 and 86400 s"), "{err}");
+    // Another experiment's flag: chen2016 has none named so; `lab run` takes every flag and the
+    // scenario's check names the one that does not apply.
     let out = ferrocat(&["lab", "chen2016", "--rounds", "2"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--rounds: does not apply to chen2016"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unexpected argument '--rounds'"));
+    std::fs::write(&f, "experiment = 'chen2016'\n").unwrap();
+    let out = ferrocat(&["lab", "run", f.to_str().unwrap(), "--rounds", "2"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--rounds: does not apply to chen2016"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
