@@ -1451,7 +1451,8 @@ fn diagnosis_json(
             .sync_error_flags()
             .iter()
             .enumerate()
-            .filter_map(|(k, f)| f.map(|set| serde_json::json!({"position": k, "set": set})))
+            .filter(|(_, f)| f.outputs.is_some() || f.inputs.is_some())
+            .map(|(k, f)| serde_json::json!({"position": k, "outputs": f.outputs, "inputs": f.inputs}))
             .collect::<Vec<_>>(),
         "error_counters": counters,
     })

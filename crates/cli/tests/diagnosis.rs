@@ -53,8 +53,9 @@ fn the_sync_error_flag_of_a_drive_with_sync0_is_read_while_cyclic() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let d = &v["diagnosis"];
-    // A read every 100 ms of the one slave with SYNC0, the drive; its flag clear throughout.
+    // A round every 100 ms of the one slave with SYNC0, the drive: both its SM parameters' flags,
+    // clear throughout.
     assert!(d["sync_flag_reads"].as_u64().unwrap() >= 5, "{d}");
     assert_eq!(d["sync_errors"], 0, "{d}");
-    assert_eq!(d["sync_error_flags"], serde_json::json!([{"position": 1, "set": false}]), "{d}");
+    assert_eq!(d["sync_error_flags"], serde_json::json!([{"position": 1, "outputs": false, "inputs": false}]), "{d}");
 }

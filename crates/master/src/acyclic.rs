@@ -129,7 +129,7 @@ impl<I: Io> Master<I> {
     /// Takes the next queued request that can start now: a mailbox request waits while
     /// diagnosis awaits a reply of the same slave. Returns whether one is being served.
     fn start_next(&mut self) -> bool {
-        let busy = self.diagnosis.sync_pending.map(|(p, _)| p);
+        let busy = self.diagnosis.sync_pending.map(|(p, _, _)| p);
         let Some(k) = self.acyclic.queue.iter().position(|(_, r)| !(r.uses_mailbox() && busy == Some(r.position())))
         else {
             return false;

@@ -1,7 +1,7 @@
 //! Diagnosis while cyclic: every slave's error counters (0x0300–0x0313) read at a low rate,
-//! every CoE slave's mailbox polled for emergencies, and the sync-error flag (0x1C32:20) of
-//! every slave with SYNC0 read, one datagram at a time in a cycle's spare time, so that none
-//! of it makes a cycle late.
+//! every CoE slave's mailbox polled for emergencies, and the sync-error flags of the output
+//! and input SM parameters (0x1C32:20, 0x1C33:20) of every slave with SYNC0 read, one datagram
+//! at a time in a cycle's spare time, so that none of it makes a cycle late.
 use ferrocat_wire::coe::{self, CoeHeader, CoeMessage, CoeService, Sdo};
 use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::{addr, ErrorCounters};
@@ -16,9 +16,9 @@ use crate::MasterEvent;
 /// A datagram of diagnosis is started only where twice this, or twice the last cyclic round
 /// trip, is left before the deadline.
 const MIN_STEP_NS: u64 = 50_000;
-/// The SM output parameter's sync-error flag (ETG.1020: 0x1C32:20, set when the SM-event
-/// missed counter 0x1C32:0B reached the limit 0x10F1:02).
-const SYNC_ERROR_FLAG: (u16, u8) = (0x1C32, 0x20);
+// The SM parameters' sync-error flags (ETG.1020: 0x1C32:20 and 0x1C33:20, set when the SM-event
+// missed counter, subindex 0x0B, reached the limit 0x10F1:02): `SyncSm`.
+use crate::diagnosis_state::{SyncFlags, SyncSm};
 /// How long a read of the flag waits for its reply before it is given up (the master's clock).
 const SYNC_READ_TIMEOUT_NS: u64 = 1_000_000_000;
 
@@ -26,7 +26,8 @@ impl<I: Io> Master<I> {
     /// Diagnosis before `deadline_ns` (the master's clock), at most two datagrams, each only
     /// where twice a round trip is left: the next slave's error counters when a round of them
     /// is due (one round every `counters_period_ns`), and a mailbox datagram: while a read of a
-    /// slave's sync-error flag (0x1C32:20) is awaited, a poll of that slave's mailbox; else,
+    /// slave's sync-error flag (0x1C32:20 or 0x1C33:20) is awaited, a poll of that slave's
+    /// mailbox; else,
     /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
     /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
     /// CoE slave's mailbox (so that each is polled once every as many calls as there are). A
@@ -125,40 +126,41 @@ impl<I: Io> Master<I> {
     /// emergency poll.
     fn mailbox_step(&mut self, period_ns: u64) -> Result<()> {
         let now = self.engine.io.now_ns();
-        if let Some((k, asked_ns)) = self.diagnosis.sync_pending {
+        if let Some((k, sm, asked_ns)) = self.diagnosis.sync_pending {
             if now.saturating_sub(asked_ns) > SYNC_READ_TIMEOUT_NS {
                 self.diagnosis.sync_pending = None;
                 self.diagnosis.stats.given_up += 1;
             } else {
-                return self.await_sync_flag(k);
+                return self.await_sync_flag(k, sm);
             }
         }
         if now >= self.diagnosis.sync_due_ns {
-            if let Some((k, round)) = self.next_sync_slave() {
-                return self.ask_sync_flag(k, round, period_ns);
+            if let Some((k, sm, round)) = self.next_sync_flag() {
+                return self.ask_sync_flag(k, sm, round, period_ns);
             }
         }
         self.poll_mailbox_step()
     }
 
-    /// The next slave whose flag to read this round, and how many a round reads: the slaves
-    /// with SYNC0 and a CoE mailbox that did not refuse the read.
-    fn next_sync_slave(&self) -> Option<(u16, usize)> {
+    /// The next flag to read this round (a slave and which of its two), and how many a round
+    /// reads: both flags of each slave with SYNC0 and a CoE mailbox, but those it refused.
+    fn next_sync_flag(&self) -> Option<(u16, SyncSm, usize)> {
         let d = &self.diagnosis;
-        let readable = |p: &&u16| {
-            self.slaves.get(**p as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
-                && !d.sync_unreadable.contains(p)
-                && !self.acyclic.holds_mailbox(**p)
+        let flags = d.sync0_slaves.iter().flat_map(|&p| [(p, SyncSm::Outputs), (p, SyncSm::Inputs)]);
+        let readable = |f: &(u16, SyncSm)| {
+            self.slaves.get(f.0 as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
+                && !d.sync_unreadable.contains(f)
+                && !self.acyclic.holds_mailbox(f.0)
         };
-        let count = d.sync0_slaves.iter().filter(readable).count();
-        let k = d.sync0_slaves.iter().filter(readable).nth(d.next_sync % count.max(1))?;
-        Some((*k, count))
+        let count = flags.clone().filter(readable).count();
+        let (k, sm) = flags.filter(readable).nth(d.next_sync % count.max(1))?;
+        Some((k, sm, count))
     }
 
-    /// Writes the request for `position`'s 0x1C32:20 into its mailbox (one datagram; a full
+    /// Writes the request for `position`'s flag of `sm` into its mailbox (one datagram; a full
     /// mailbox is tried again at the next call).
-    fn ask_sync_flag(&mut self, position: u16, round: usize, period_ns: u64) -> Result<()> {
-        let (index, subindex) = SYNC_ERROR_FLAG;
+    fn ask_sync_flag(&mut self, position: u16, sm: SyncSm, round: usize, period_ns: u64) -> Result<()> {
+        let (index, subindex) = sm.object();
         let mut body = [0u8; 2 + coe::SDO_HEADER_LEN];
         CoeHeader::new(CoeService::SDO_REQUEST).emit(&mut body)?;
         Sdo::UploadRequest { index, subindex, complete_access: false, reserved: [0; 4] }.emit(&mut body[2..])?;
@@ -168,7 +170,7 @@ impl<I: Io> Master<I> {
             return Ok(());
         }
         let now = self.engine.io.now_ns();
-        self.diagnosis.sync_pending = Some((position, now));
+        self.diagnosis.sync_pending = Some((position, sm, now));
         self.diagnosis.next_sync += 1;
         if self.diagnosis.next_sync % round.max(1) == 0 {
             self.diagnosis.sync_due_ns = now + period_ns;
@@ -176,9 +178,9 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    /// Polls `position`'s mailbox for the flag's reply; an emergency met on the way is an
-    /// event as ever.
-    fn await_sync_flag(&mut self, position: u16) -> Result<()> {
+    /// Polls `position`'s mailbox for the reply of its flag of `sm`; an emergency met on the
+    /// way is an event as ever.
+    fn await_sync_flag(&mut self, position: u16, sm: SyncSm) -> Result<()> {
         self.diagnosis.stats.mailbox_polls += 1;
         let payload = match self.mailboxes().poll(position) {
             Ok(crate::mailbox::Polled::Message(MailboxType::COE, payload)) => payload,
@@ -190,7 +192,7 @@ impl<I: Io> Master<I> {
             }
             Err(e) => return Err(e),
         };
-        let (index, subindex) = SYNC_ERROR_FLAG;
+        let (index, subindex) = sm.object();
         let flag = match coe::parse(&payload) {
             Ok((_, CoeMessage::Sdo(Sdo::UploadExpeditedResponse { index: i, subindex: s, data, .. })))
                 if (i, s) == (index, subindex) =>
@@ -199,7 +201,7 @@ impl<I: Io> Master<I> {
             }
             Ok((_, CoeMessage::Sdo(Sdo::Abort { index: i, subindex: s, .. }))) if (i, s) == (index, subindex) => {
                 // The slave has no such object: it is not asked again.
-                self.diagnosis.sync_unreadable.push(position);
+                self.diagnosis.sync_unreadable.push((position, sm));
                 self.diagnosis.sync_pending = None;
                 return Ok(());
             }
@@ -210,20 +212,20 @@ impl<I: Io> Master<I> {
         self.diagnosis.stats.sync_flag_reads += 1;
         let k = position as usize;
         if self.diagnosis.sync_flags.len() <= k {
-            self.diagnosis.sync_flags.resize(k + 1, None);
+            self.diagnosis.sync_flags.resize(k + 1, SyncFlags::default());
         }
-        let was = self.diagnosis.sync_flags[k].replace(flag);
+        let was = self.diagnosis.sync_flags[k].of(sm).replace(flag);
         if flag && was != Some(true) {
             self.diagnosis.stats.sync_errors += 1;
             let name = self.slaves[k].name.clone();
-            self.push_event(MasterEvent::SyncError { position, name });
+            self.push_event(MasterEvent::SyncError { position, name, index });
         }
         Ok(())
     }
 
-    /// The sync-error flag (0x1C32:20) of each slave as diagnosis last read it, by position
-    /// (`None`: not read, or no SYNC0 there).
-    pub fn sync_error_flags(&self) -> &[Option<bool>] {
+    /// The sync-error flags (0x1C32:20, 0x1C33:20) of each slave as diagnosis last read them,
+    /// by position.
+    pub fn sync_error_flags(&self) -> &[SyncFlags] {
         &self.diagnosis.sync_flags
     }
 

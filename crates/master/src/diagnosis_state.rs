@@ -14,7 +14,7 @@ pub struct DiagnosisStats {
     pub given_up: u64,
     /// Counters that grew (each reported as an event).
     pub counters_grown: u64,
-    /// Reads of a synchronised slave's sync-error flag (0x1C32:20) answered.
+    /// Reads of a synchronised slave's sync-error flags (0x1C32:20, 0x1C33:20) answered.
     pub sync_flag_reads: u64,
     /// Times a sync-error flag was found set where it had been clear (each an event).
     pub sync_errors: u64,
@@ -28,15 +28,56 @@ pub(crate) struct Diagnosis {
     pub next_mailbox: usize,
     pub round_due_ns: u64,
     pub stats: DiagnosisStats,
-    /// The slaves whose SYNC0 the DC initialisation started: their 0x1C32:20 is read.
+    /// The slaves whose SYNC0 the DC initialisation started: their 0x1C32:20 and 0x1C33:20
+    /// are read.
     pub sync0_slaves: Vec<u16>,
+    /// The next read of a round: slave `next_sync / 2`'s output (even) or input (odd) flag.
     pub next_sync: usize,
     pub sync_due_ns: u64,
-    /// A read of 0x1C32:20 written to the slave's mailbox, its reply awaited: the slave, and
-    /// when (the master's clock).
-    pub sync_pending: Option<(u16, u64)>,
-    /// The flag as last read, by position.
-    pub sync_flags: Vec<Option<bool>>,
-    /// Slaves that aborted the read (no such object): not asked again.
-    pub sync_unreadable: Vec<u16>,
+    /// A read of a flag written to the slave's mailbox, its reply awaited: the slave, which
+    /// flag, and when (the master's clock).
+    pub sync_pending: Option<(u16, SyncSm, u64)>,
+    /// The flags as last read, by position.
+    pub sync_flags: Vec<SyncFlags>,
+    /// Flags a slave aborted the read of (no such object): not asked again.
+    pub sync_unreadable: Vec<(u16, SyncSm)>,
+}
+
+/// Which SyncManager's parameter object a sync-error flag is in (ETG.1020).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SyncSm {
+    /// The output SM's, 0x1C32:20.
+    Outputs,
+    /// The input SM's, 0x1C33:20.
+    Inputs,
+}
+
+impl SyncSm {
+    /// The flag's object and subindex.
+    pub fn object(self) -> (u16, u8) {
+        match self {
+            SyncSm::Outputs => (0x1C32, 0x20),
+            SyncSm::Inputs => (0x1C33, 0x20),
+        }
+    }
+}
+
+/// A slave's sync-error flags as diagnosis last read them (`None`: not read, or the slave has
+/// no such object, or no SYNC0).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SyncFlags {
+    /// The output SM parameter's (0x1C32:20).
+    pub outputs: Option<bool>,
+    /// The input SM parameter's (0x1C33:20).
+    pub inputs: Option<bool>,
+}
+
+impl SyncFlags {
+    /// The flag of `sm`.
+    pub fn of(&mut self, sm: SyncSm) -> &mut Option<bool> {
+        match sm {
+            SyncSm::Outputs => &mut self.outputs,
+            SyncSm::Inputs => &mut self.inputs,
+        }
+    }
 }

@@ -43,13 +43,15 @@ pub enum MasterEvent {
         /// The manufacturer-specific bytes.
         data: [u8; 5],
     },
-    /// A synchronised slave's sync-error flag (0x1C32:20, ETG.1020) was found set: it missed
-    /// SM events past its limit (0x10F1:02).
+    /// A synchronised slave's sync-error flag (0x1C32:20 for its outputs, 0x1C33:20 for its
+    /// inputs, ETG.1020) was found set: it missed SM events past its limit (0x10F1:02).
     SyncError {
         /// Position on the segment.
         position: u16,
         /// Name from the SII.
         name: String,
+        /// The SM parameter object whose flag was set: 0x1C32 or 0x1C33.
+        index: u16,
     },
     /// One of the slave's error counters (0x0300–0x0313) grew since diagnosis last read it.
     ErrorCounters {
@@ -94,9 +96,10 @@ impl std::fmt::Display for MasterEvent {
                     ferrocat_wire::coe::emergency_text(*error_code)
                 )
             }
-            MasterEvent::SyncError { position, name } => write!(
+            MasterEvent::SyncError { position, name, index } => write!(
                 f,
-                "slave {position} ({name}): sync error (0x1C32:0x20 set): it missed SM events past its limit (0x10F1:0x02)"
+                "slave {position} ({name}): sync error ({index:#06X}:0x20 set, its {}): it missed SM events past its limit (0x10F1:0x02)",
+                if *index == 0x1C33 { "inputs" } else { "outputs" }
             ),
             MasterEvent::ErrorCounters { position, name, kind, port, grown, total } => {
                 let port = port.map_or(String::new(), |p| format!("port {p} "));

@@ -65,7 +65,7 @@ pub use acyclic::{AcyclicStats, Answer, Request, RequestId};
 pub use coe::{Coe, EntryInfo, ObjectInfo};
 pub use cycle_state::CycleStats;
 pub use dc::{sync0_by_sii, DcConfig, DcReport};
-pub use diagnosis_state::DiagnosisStats;
+pub use diagnosis_state::{DiagnosisStats, SyncFlags, SyncSm};
 pub(crate) use engine::SplitPasses;
 pub use engine::{EngineStats, RingState, SplitRingClocks};
 pub use eoe::{Eoe, EoeLink, EoePing, INBOX_FRAMES};

@@ -4,7 +4,7 @@
 //! file) turns the reaction off; the master reports the drive once and brings it back to OP.
 use ferrocat_esc::Cia402Drive;
 use ferrocat_master::io::Io;
-use ferrocat_master::{DcConfig, Master, MasterEvent};
+use ferrocat_master::{DcConfig, Master, MasterEvent, SyncFlags};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
 use ferrocat_wire::register::AlStatusCode;
@@ -209,8 +209,10 @@ fn diagnosis_reads_the_sync_error_flag_of_the_slaves_with_sync0() {
     assert!(quiet.is_empty(), "{quiet:?}");
     let read = m.diagnosis_stats().sync_flag_reads;
     assert!(read >= 5, "a read every 5 ms: {read} in 50 ms");
-    assert_eq!(m.sync_error_flags().get(1), Some(&Some(false)), "the drive's flag, read and clear");
-    assert_eq!(m.sync_error_flags().first().copied().flatten(), None, "the coupler has no SYNC0");
+    // Both SM parameters' flags, outputs' and inputs', read and clear.
+    let clear = SyncFlags { outputs: Some(false), inputs: Some(false) };
+    assert_eq!(m.sync_error_flags().get(1), Some(&clear), "the drive's flags");
+    assert_eq!(m.sync_error_flags().first().copied().unwrap_or_default(), SyncFlags::default(), "no SYNC0 there");
     // Three cycles without process data: the drive's SM-event missed counter reaches its limit.
     next += 4 * CYCLE_NS;
     m.io_mut().sleep_until(next);
@@ -218,8 +220,10 @@ fn diagnosis_reads_the_sync_error_flag_of_the_slaves_with_sync0() {
     let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
     assert!(events.iter().any(|e| matches!(e, MasterEvent::SyncError { position: 1, .. })), "{text:#?}");
     assert_eq!(events.iter().filter(|e| matches!(e, MasterEvent::SyncError { .. })).count(), 1, "once: {text:#?}");
-    assert!(text.iter().any(|t| t.contains("slave 1 (") && t.contains("0x1C32:0x20")), "{text:#?}");
-    assert_eq!(m.sync_error_flags().get(1), Some(&Some(true)));
+    assert!(events.iter().any(|e| matches!(e, MasterEvent::SyncError { position: 1, index: 0x1C32, .. })));
+    assert!(text.iter().any(|t| t.contains("slave 1 (") && t.contains("0x1C32:0x20 set, its outputs")), "{text:#?}");
+    // The model's drive sets its output SM's flag; its input SM's stays clear.
+    assert_eq!(m.sync_error_flags().get(1), Some(&SyncFlags { outputs: Some(true), inputs: Some(false) }));
     assert_eq!(m.diagnosis_stats().sync_errors, 1);
 }
 
