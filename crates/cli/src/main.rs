@@ -264,6 +264,10 @@ enum Command {
         /// mailboxes are polled for emergencies between. Both only in a cycle's spare time.
         #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=3_600_000))]
         counters_period_ms: u64,
+        /// How long a mapped TxPDO Toggle may stand still before the run says that slave's
+        /// inputs are not refreshed, ms (diagnosis; a TxPDO State set is said at once).
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=3_600_000))]
+        txpdo_stale_ms: u64,
         /// No diagnosis while cyclic (error counters, emergencies).
         #[arg(long)]
         no_diagnosis: bool,
@@ -852,6 +856,7 @@ fn main() -> ExitCode {
             show,
             copy,
             counters_period_ms,
+            txpdo_stale_ms,
             no_diagnosis,
             json,
             no_control,
@@ -866,6 +871,7 @@ fn main() -> ExitCode {
             master_cmd::DcOptions::merged(&target, dc, flags).and_then(|dc| {
                 let mut run = master_cmd::RunOptions {
                     diagnosis_ms: (!no_diagnosis).then_some(counters_period_ms),
+                    txpdo_stale_ms,
                     set: &set,
                     show: &show,
                     copy: &copy,

@@ -624,6 +624,8 @@ pub struct RunOptions<'a> {
     pub eoe_taps: &'a [String],
     /// How often each slave's error counters are read while cyclic, ms (`None`: no diagnosis).
     pub diagnosis_ms: Option<u64>,
+    /// How long a TxPDO Toggle may stand still, ms.
+    pub txpdo_stale_ms: u64,
     /// Outputs to write before OP (`NAME=VALUE`), and values to show at the end.
     pub set: &'a [String],
     pub show: &'a [String],
@@ -819,6 +821,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
     m.settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
+    m.settings_mut().txpdo_stale_ns = o.txpdo_stale_ms.saturating_mul(1_000_000);
     if !m.io_mut().is_virtual() {
         crate::target::go_real_time();
     }
@@ -1363,6 +1366,14 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 d.sync_flag_reads,
                 d.sync_errors
             );
+            if d.txpdo_watched > 0 {
+                outln!(
+                    "TxPDO status: {} entries watched; {} times inputs said invalid (TxPDO State), {} times not refreshed (TxPDO Toggle)",
+                    d.txpdo_watched,
+                    d.inputs_invalid,
+                    d.inputs_stale
+                );
+            }
         }
     }
     if m.io_mut().has_secondary() {
@@ -1447,6 +1458,9 @@ fn diagnosis_json(
         "emergencies": tally.emergencies,
         "sync_flag_reads": d.sync_flag_reads,
         "sync_errors": d.sync_errors,
+        "txpdo_watched": d.txpdo_watched,
+        "inputs_invalid": d.inputs_invalid,
+        "inputs_stale": d.inputs_stale,
         "sync_error_flags": m
             .sync_error_flags()
             .iter()

@@ -59,3 +59,30 @@ fn the_sync_error_flag_of_a_drive_with_sync0_is_read_while_cyclic() {
     assert_eq!(d["sync_errors"], 0, "{d}");
     assert_eq!(d["sync_error_flags"], serde_json::json!([{"position": 1, "outputs": false, "inputs": false}]), "{d}");
 }
+
+/// A terminal whose inputs carry Beckhoff's TxPDO Toggle (the EL2212's status, one a channel,
+/// from its vendor's ESI): the simulated device has no firmware to refresh them, so each toggle
+/// stands still, and the run says so once per entry, naming it.
+#[test]
+fn needs_shared_a_txpdo_toggle_that_stands_still_is_said_once_per_entry() {
+    let esi = ferrocat_testdata::shared("esi-corpus/Beckhoff EL2xxx.xml");
+    let dev = format!("{}:EL2212", esi.display());
+    let o = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", "EK1100", "--device", &dev, "--seconds", "0.5", "--json"])
+        .args(["--txpdo-stale-ms", "200"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let d = &v["diagnosis"];
+    assert_eq!(
+        (d["txpdo_watched"].as_u64(), d["inputs_stale"].as_u64(), d["inputs_invalid"].as_u64()),
+        (Some(2), Some(2), Some(0)),
+        "{d}"
+    );
+    for object in ["0x6000:0x10", "0x6010:0x10"] {
+        let said = format!("slave 1 (EL2212): Status__TxPDO Toggle ({object}) unchanged for 200 ms");
+        assert_eq!(err.matches(&said).count(), 1, "{object}: {err}");
+    }
+}

@@ -30,16 +30,18 @@ impl<I: Io> Master<I> {
     /// mailbox; else,
     /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
     /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
-    /// CoE slave's mailbox (so that each is polled once every as many calls as there are). A
-    /// counter that grew, an emergency and a flag found set become events
-    /// ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
-    /// [`MasterEvent::SyncError`]). A datagram is waited for until the deadline at most and
+    /// CoE slave's mailbox (so that each is polled once every as many calls as there are).
+    /// Before those, without a datagram, the last cycle's TxPDO State and Toggle entries. A
+    /// counter that grew, an emergency, a flag found set, a TxPDO State set and a Toggle that
+    /// stood still become events ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
+    /// [`MasterEvent::SyncError`], [`MasterEvent::InputsInvalid`], [`MasterEvent::InputsStale`]). A datagram is waited for until the deadline at most and
     /// not sent again. Returns the datagrams sent.
     pub fn diagnose(&mut self, deadline_ns: u64, counters_period_ns: u64) -> Result<u32> {
         let n = self.slaves.len();
         if n == 0 {
             return Ok(0);
         }
+        self.watch_txpdo_entries();
         self.diagnosis.counters.resize(n, None);
         let step_ns = self.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
         let mailboxes = self.slaves.iter().any(|s| s.mailbox.is_some() && s.has_coe());
@@ -221,6 +223,45 @@ impl<I: Io> Master<I> {
             self.push_event(MasterEvent::SyncError { position, name, index });
         }
         Ok(())
+    }
+
+    /// The last cycle's TxPDO State and Toggle entries, found in the image when it was laid
+    /// out: a State set and a Toggle standing still for `Settings::txpdo_stale_ns` are events.
+    fn watch_txpdo_entries(&mut self) {
+        use crate::diagnosis_state::{TxPdoKind, TxPdoWatch};
+        if self.diagnosis.txpdo.is_none() {
+            let entries = self.slaves.iter().flat_map(|s| {
+                s.mapping.inputs.iter().filter_map(move |e| {
+                    TxPdoKind::of(e.index, e.subindex, &e.name, e.bits).map(|kind| {
+                        (s.position, format!("{} ({:#06x}:{:#04x})", e.name, e.index, e.subindex), kind, e.image_bit)
+                    })
+                })
+            });
+            let watch = TxPdoWatch::new(entries);
+            self.diagnosis.stats.txpdo_watched = watch.entries.len() as u64;
+            self.diagnosis.txpdo = Some(watch);
+        }
+        let now = self.engine.io.now_ns();
+        let stale_ns = self.settings.txpdo_stale_ns;
+        let Some(watch) = self.diagnosis.txpdo.as_mut() else { return };
+        if watch.entries.is_empty() {
+            return;
+        }
+        for c in watch.observe(&self.image, now, stale_ns) {
+            let name = self.slaves.get(c.position as usize).map(|s| s.name.clone()).unwrap_or_default();
+            let (position, entry) = (c.position, c.entry);
+            let event = match c.kind {
+                TxPdoKind::State => {
+                    self.diagnosis.stats.inputs_invalid += 1;
+                    MasterEvent::InputsInvalid { position, name, entry }
+                }
+                TxPdoKind::Toggle => {
+                    self.diagnosis.stats.inputs_stale += 1;
+                    MasterEvent::InputsStale { position, name, entry, unchanged_ns: c.unchanged_ns }
+                }
+            };
+            self.push_event(event);
+        }
     }
 
     /// The sync-error flags (0x1C32:20, 0x1C33:20) of each slave as diagnosis last read them,

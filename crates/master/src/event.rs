@@ -43,6 +43,27 @@ pub enum MasterEvent {
         /// The manufacturer-specific bytes.
         data: [u8; 5],
     },
+    /// A mapped TxPDO State entry was found set: the slave says those inputs are invalid.
+    InputsInvalid {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The entry's name and object (`Status__TxPDO State (0x6000:0x0f)`).
+        entry: String,
+    },
+    /// A mapped TxPDO Toggle entry stood still for `Settings::txpdo_stale_ns`: the slave did
+    /// not refresh those inputs.
+    InputsStale {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The entry's name and object (`Status__TxPDO Toggle (0x6000:0x10)`).
+        entry: String,
+        /// How long it had not changed, ns.
+        unchanged_ns: u64,
+    },
     /// A synchronised slave's sync-error flag (0x1C32:20 for its outputs, 0x1C33:20 for its
     /// inputs, ETG.1020) was found set: it missed SM events past its limit (0x10F1:02).
     SyncError {
@@ -96,6 +117,14 @@ impl std::fmt::Display for MasterEvent {
                     ferrocat_wire::coe::emergency_text(*error_code)
                 )
             }
+            MasterEvent::InputsInvalid { position, name, entry } => {
+                write!(f, "slave {position} ({name}): {entry} set: the slave says those inputs are invalid")
+            }
+            MasterEvent::InputsStale { position, name, entry, unchanged_ns } => write!(
+                f,
+                "slave {position} ({name}): {entry} unchanged for {} ms: those inputs are not refreshed",
+                unchanged_ns / 1_000_000
+            ),
             MasterEvent::SyncError { position, name, index } => write!(
                 f,
                 "slave {position} ({name}): sync error ({index:#06X}:0x20 set, its {}): it missed SM events past its limit (0x10F1:0x02)",

@@ -17,6 +17,9 @@ pub struct Settings {
     /// What a closed port's loop-back adds to a frame's way, for the delay computation, in ns.
     /// Default 0: assume nothing, as SOEM, IgH and ethercrab do.
     pub closed_port_loop_ns: u32,
+    /// How long a mapped TxPDO Toggle may stand still before diagnosis says the slave's inputs
+    /// are not refreshed, in ns. Default 1 s (a slow converter refreshes every few 10 ms).
+    pub txpdo_stale_ns: u64,
 }
 
 impl Default for Settings {
@@ -27,6 +30,7 @@ impl Default for Settings {
             cyclic_timeout_ns: 1_000_000,
             supervise_on_wkc: true,
             closed_port_loop_ns: 0,
+            txpdo_stale_ns: 1_000_000_000,
         }
     }
 }

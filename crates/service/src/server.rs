@@ -188,6 +188,8 @@ impl Server {
                 E::Recovered { position, .. } => ("recovered", Some(*position)),
                 E::Emergency { position, .. } => ("emergency", Some(*position)),
                 E::SyncError { position, .. } => ("sync_error", Some(*position)),
+                E::InputsInvalid { position, .. } => ("inputs_invalid", Some(*position)),
+                E::InputsStale { position, .. } => ("inputs_stale", Some(*position)),
                 E::ErrorCounters { position, .. } => ("error_counters", Some(*position)),
                 E::Ring { .. } => ("ring", None),
             };

@@ -166,6 +166,8 @@ impl<I: Io> Master<I> {
     /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
     /// writes the SyncManagers and FMMUs; with a plan ([`Master::set_plan`]), as the plan says.
     pub fn layout(&mut self) -> Result<()> {
+        // Diagnosis finds the TxPDO status entries of the new image.
+        self.diagnosis.txpdo = None;
         if !self.groups.is_empty() {
             let plan = self.plan_for_groups()?;
             self.set_plan(plan)?;
