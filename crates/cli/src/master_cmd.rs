@@ -711,6 +711,8 @@ pub struct DcOptions {
     pub sync1_us: u32,
     /// Slaves whose SYNC0 is started (`true`) or not (`false`) whatever their SII says.
     pub sync0_overrides: Vec<(u16, bool)>,
+    /// Assign-activate words of the description's, by position.
+    pub assign_activate: Vec<(u16, u16)>,
     /// Probing's time per cycle, µs (`None`: from the loop's measured cost).
     pub probe_budget_us: Option<u64>,
 }
@@ -751,16 +753,24 @@ impl DcOptions {
             }
             (None, None) => String::from("ferrocat"),
         };
-        let sync0_overrides = machine
-            .map(|d| d.slaves.iter().enumerate().filter_map(|(k, s)| Some((k as u16, s.sync0?))).collect())
-            .unwrap_or_default();
+        // `sync0` where given; else a slave given an assign-activate word that activates
+        // anything (its high byte, 0x0981) is started.
+        let slaves = machine.map_or(&[][..], |d| &d.slaves[..]);
+        let sync0_overrides = slaves
+            .iter()
+            .enumerate()
+            .filter_map(|(k, s)| Some((k as u16, s.sync0.or(s.assign_activate.map(|w| w >> 8 != 0))?)))
+            .collect();
+        let assign_activate =
+            slaves.iter().enumerate().filter_map(|(k, s)| Some((k as u16, s.assign_activate?))).collect();
         Ok(Some(DcOptions {
-            static_frames: flags.static_frames.unwrap_or(15_000),
+            static_frames: flags.static_frames.or(desc.static_frames).unwrap_or(15_000),
             sync,
             sync0_shift_us: flags.sync0_shift_us.or(desc.sync0_shift_us.map(u64::from)),
             sync1_us: desc.sync1_us,
             sync0_overrides,
-            probe_budget_us: flags.probe_budget_us,
+            assign_activate,
+            probe_budget_us: flags.probe_budget_us.or(desc.probe_budget_us.map(u64::from)),
         }))
     }
 }
@@ -882,6 +892,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             sync1_ns: d.sync1_us.saturating_mul(1000),
             max_frames: d.static_frames,
             sync0_slaves,
+            assign_activate: d.assign_activate.clone(),
             ..Default::default()
         };
         let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;

@@ -234,6 +234,30 @@ fn a_description_sets_up_distributed_clocks() {
     let (ok, dump, _) = ferrocat(&["pcap", pcap.to_str().unwrap(), "--json"]);
     std::fs::remove_file(&pcap).ok();
     assert!(ok && dump.lines().any(|l| l.contains("\"ado\":2468") && l.contains("\"data\":\"204e0000\"")), "no SYNC1");
+    // The axis's own assign-activate word (cyclic operation and SYNC0: 0x03 into 0x0981 where
+    // the master, SYNC1 asked for, would write 0x07; its low byte into 0x0980 after the stop's
+    // 0), and the method's settings from [dc]: its probe budget, the static frames.
+    let (ok, out, err) = run(
+        "assign_activate = 0x0300\n[dc]\nsync1_us = 20\nprobe_budget_us = 7\nstatic_frames = 300\n",
+        &["--pcap", pcap.to_str().unwrap()],
+    );
+    assert!(ok && err.contains("SYNC0 on slave 2") && err.contains("static drift compensation 300 frames"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["clock_sync"]["probe_budget_us"], 7.0, "{v}");
+    let (ok, dump, _) = ferrocat(&["pcap", pcap.to_str().unwrap(), "--json"]);
+    std::fs::remove_file(&pcap).ok();
+    let writes = |ado: u32, data: &str| {
+        dump.lines()
+            .filter(|l| {
+                l.contains("FPWR")
+                    && l.contains(&format!("\"ado\":{ado}"))
+                    && l.contains(&format!("\"data\":\"{data}\""))
+                    && l.contains("\"wkc\":1")
+            })
+            .count()
+    };
+    assert!(ok && writes(0x0981, "03") == 1 && writes(0x0981, "07") == 0, "0x0981 ← 0x03 once, never 0x07");
+    assert_eq!(writes(0x0980, "00"), 2, "0x0980: the stop's 0, then the word's low byte");
     // A slave's sync0 = false over its SII; a flag over the description's method.
     let (ok, out, err) = run("sync0 = false\n[dc]\nsync = \"pi\"\n", &["--sync", "ferrocat"]);
     assert!(ok && err.contains("SYNC0 on no slave"), "{err}");

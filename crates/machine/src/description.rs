@@ -75,6 +75,10 @@ pub struct DcDesc {
     pub sync0_shift_us: Option<u32>,
     /// SYNC1 after SYNC0, µs (0: no SYNC1).
     pub sync1_us: u32,
+    /// The clock-sync probes' time per cycle, µs (`None`: run's default, from the loop's cost).
+    pub probe_budget_us: Option<u32>,
+    /// The static drift compensation's frames at most (`None`: run's default).
+    pub static_frames: Option<u32>,
 }
 
 /// A name for one of a slave's process-data entries.
@@ -131,6 +135,8 @@ pub struct SlaveDesc {
     /// A modular device's modules, slot by slot, by their ESI module idents (`None`: what it
     /// carries is not checked).
     pub modules: Option<Vec<u32>>,
+    /// Its assign-activate word, as ESI's `AssignActivate` gives it (`None`: the master's).
+    pub assign_activate: Option<u16>,
 }
 
 /// A number: a TOML integer (`0x2`, `2`) or text (`"#x2"`, `"0x2"`).
@@ -162,6 +168,8 @@ struct RawDc {
     sync: Option<String>,
     sync0_shift_us: Option<Spanned<i64>>,
     sync1_us: Option<Spanned<i64>>,
+    probe_budget_us: Option<Spanned<i64>>,
+    static_frames: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -253,6 +261,7 @@ struct RawSlave {
     init: Vec<RawInit>,
     sync0: Option<bool>,
     modules: Option<Vec<Spanned<Number>>>,
+    assign_activate: Option<Spanned<Number>>,
 }
 
 /// Line and column of a byte offset in `text`.
@@ -451,6 +460,11 @@ impl Machine {
                 init,
                 sync0: s.sync0,
                 modules,
+                assign_activate: s
+                    .assign_activate
+                    .as_ref()
+                    .map(|n| num(n, "assign_activate", u16::MAX as u64).map(|v| v as u16))
+                    .transpose()?,
             });
         }
         let mut groups = Vec::new();
@@ -534,10 +548,19 @@ impl Machine {
                         None => Ok(None),
                     }
                 };
+                let static_frames = match &d.static_frames {
+                    Some(x) if (0..=1_000_000).contains(x.get_ref()) => Some(*x.get_ref() as u32),
+                    Some(x) => {
+                        return Err(err(&x.span(), format!("static_frames = {}: give 0 to 1 000 000", x.get_ref())))
+                    }
+                    None => None,
+                };
                 Some(DcDesc {
                     sync: d.sync.as_ref().map(|s| s.trim().to_string()),
                     sync0_shift_us: us(&d.sync0_shift_us, "sync0_shift_us")?,
                     sync1_us: us(&d.sync1_us, "sync1_us")?.unwrap_or(0),
+                    probe_budget_us: us(&d.probe_budget_us, "probe_budget_us")?,
+                    static_frames,
                 })
             }
         };
@@ -581,6 +604,7 @@ impl Machine {
                 init: Vec::new(),
                 sync0: None,
                 modules: None,
+                assign_activate: None,
             })
             .collect();
         Machine { name, slaves, groups: Vec::new(), copies: Vec::new(), variables: Vec::new(), dc: None }
@@ -639,6 +663,9 @@ impl Machine {
             if let Some(on) = s.sync0 {
                 out += &format!("sync0 = {on}\n");
             }
+            if let Some(a) = s.assign_activate {
+                out += &format!("assign_activate = {a:#06x}\n");
+            }
             if let Some(m) = &s.modules {
                 let m: Vec<String> = m.iter().map(|i| format!("{i:#x}")).collect();
                 out += &format!("modules = [{}]\n", m.join(", "));
@@ -683,6 +710,12 @@ impl Machine {
             }
             if d.sync1_us > 0 {
                 out += &format!("sync1_us = {}\n", d.sync1_us);
+            }
+            if let Some(b) = d.probe_budget_us {
+                out += &format!("probe_budget_us = {b}\n");
+            }
+            if let Some(n) = d.static_frames {
+                out += &format!("static_frames = {n}\n");
             }
         }
         for v in &self.variables {
@@ -759,13 +792,28 @@ mod tests {
             m
         };
         assert_eq!(lines(&again).len(), 2);
-        let dc = Machine::parse(&format!("{text}[dc]\nsync = \"pi\"\nsync0_shift_us = 300\nsync1_us = 20\n")).unwrap();
-        assert_eq!(dc.dc, Some(DcDesc { sync: Some("pi".into()), sync0_shift_us: Some(300), sync1_us: 20 }));
+        let dc = Machine::parse(&format!(
+            "{text}[dc]\nsync = \"pi\"\nsync0_shift_us = 300\nsync1_us = 20\nprobe_budget_us = 40\nstatic_frames = 500\n"
+        ))
+        .unwrap();
+        assert_eq!(
+            dc.dc,
+            Some(DcDesc {
+                sync: Some("pi".into()),
+                sync0_shift_us: Some(300),
+                sync1_us: 20,
+                probe_budget_us: Some(40),
+                static_frames: Some(500)
+            })
+        );
         assert_eq!(strip(Machine::parse(&dc.to_toml()).unwrap()), strip(dc.clone()));
         let off = Machine::parse("[[slave]]\nvendor = 2\nproduct = 3\nsync0 = false\nmodules = [0x9010, \"#x9020\"]\n")
             .unwrap();
         assert_eq!((off.slaves[0].sync0, off.dc.clone()), (Some(false), None));
         assert_eq!(off.slaves[0].modules, Some(vec![0x9010, 0x9020]));
+        let aa = Machine::parse("[[slave]]\nvendor = 2\nproduct = 3\nassign_activate = 0x0700\n").unwrap();
+        assert_eq!(aa.slaves[0].assign_activate, Some(0x0700));
+        assert_eq!(Machine::parse(&aa.to_toml()).unwrap(), aa);
         assert_eq!(Machine::parse(&off.to_toml()).unwrap(), off);
         assert_eq!(strip(again), strip(m.clone()));
         let e = m.expected();
@@ -807,6 +855,7 @@ mod tests {
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[slave.init]]\ntransition = \"PS\"\nindex = 1\nvalue = 1\ntype = \"u8\"\ndata = \"00\"\n", (6, 9), "not both"),
             ("[dc]\nsync1_us = -1\n", (2, 12), "sync1_us = -1: give 0 to 4 000 000 µs"),
             ("[[slave]]\nvendor = 2\nproduct = 3\nmodules = [1, \"x\"]\n", (4, 15), "modules: not a number"),
+            ("[[slave]]\nvendor = 2\nproduct = 3\nassign_activate = 0x10000\n", (4, 19), "assign_activate = 65536: more than 0xffff"),
             ("[dc]\nsync = \"pi\"\nlock = 3\n", (3, 1), "unknown field `lock`"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a:b\"\nentry = \"0:x\"\n", (5, 8), "has no ':'"),
             ("[[slave]]\nvendor = 2\nproduct = 3\n[[variable]]\nname = \"a\"\nentry = \"x\"\n", (6, 9), "'x': give SLAVE:ENTRY"),

@@ -184,6 +184,11 @@ pub struct DcConfig {
     pub start_delay_ns: u64,
     /// Slaves to start SYNC0 on (positions); `None`: those whose SII declares a DC op-mode.
     pub sync0_slaves: Option<Vec<u16>>,
+    /// Assign-activate words of the application's (position, word), as ESI's `AssignActivate`
+    /// writes them: the high byte to 0x0981 (activation), the low byte to 0x0980 (cyclic unit
+    /// control). A slave without one gets cyclic operation, SYNC0 and, where `sync1_ns` is set,
+    /// SYNC1 (0x0981), and 0x0980 stays 0.
+    pub assign_activate: Vec<(u16, u16)>,
 }
 
 impl Default for DcConfig {
@@ -198,6 +203,7 @@ impl Default for DcConfig {
             sync1_ns: 0,
             start_delay_ns: 100_000_000,
             sync0_slaves: None,
+            assign_activate: Vec::new(),
         }
     }
 }
@@ -463,7 +469,14 @@ impl<I: Io> Master<I> {
             fp(self, addr::DC_SYNC1_CYCLE_TIME, &mut cfg.sync1_ns.to_le_bytes())?;
             let mut s = start.to_le_bytes();
             fp(self, addr::DC_START_TIME, &mut s[..if wide { 8 } else { 4 }])?;
-            let a = act::CYCLIC_OPERATION | act::SYNC0 | if cfg.sync1_ns > 0 { act::SYNC1 } else { 0 };
+            let given = cfg.assign_activate.iter().find(|(q, _)| *q == p).map(|&(_, w)| w);
+            let a = match given {
+                Some(word) => {
+                    fp(self, addr::DC_CYCLIC_UNIT_CONTROL, &mut [word as u8])?;
+                    (word >> 8) as u8
+                }
+                None => act::CYCLIC_OPERATION | act::SYNC0 | if cfg.sync1_ns > 0 { act::SYNC1 } else { 0 },
+            };
             fp(self, addr::DC_ACTIVATION, &mut [a])?;
         }
         Ok(start)
