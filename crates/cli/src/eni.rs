@@ -156,7 +156,8 @@ pub fn check(
 ) -> anyhow::Result<()> {
     let diffs: Vec<Mismatch> = ferrocat_machine::compare(expected, &found(slaves));
     if diffs.is_empty() {
-        eprintln!("network as {} describes it: {} slaves", path.display(), slaves.len());
+        let n = slaves.len();
+        eprintln!("network as {} describes it: {n} slave{}", path.display(), if n == 1 { "" } else { "s" });
         return Ok(());
     }
     let list: Vec<String> = diffs.iter().map(|d| format!("  {d}")).collect();
