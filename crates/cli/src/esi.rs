@@ -75,8 +75,16 @@ pub fn run(
             if file.warnings.len() == 1 { "" } else { "s" }
         );
     }
-    if file.devices.is_empty() {
+    if file.devices.is_empty() && file.passive.is_empty() {
         bail!("{}: the file describes no device (no Descriptions/Devices/Device)", path.display());
+    }
+    if let Some(p) = device.and_then(|sel| file.passive.iter().find(|p| p.type_name.eq_ignore_ascii_case(sel.trim()))) {
+        bail!(
+            "{}: {} (line {}) is a passive device: no ESC, no EtherCAT identity, nothing to describe or simulate",
+            path.display(),
+            p.type_name,
+            p.line
+        );
     }
     let chosen = match (device, sii_out) {
         (Some(sel), _) => Some(select(&file, sel)?),
@@ -91,7 +99,12 @@ pub fn run(
             let v: Vec<_> = file.devices.iter().enumerate().map(|(i, d)| json!({
                 "position": i, "type": d.type_name, "name": d.name, "product_code": d.product_code, "revision": d.revision,
             })).collect();
-            outln!("{}", json!({"vendor_id": file.vendor_id, "vendor": file.vendor_name, "devices": v}));
+            let passive: Vec<_> =
+                file.passive.iter().map(|p| json!({"type": p.type_name, "name": p.name, "line": p.line})).collect();
+            outln!(
+                "{}",
+                json!({"vendor_id": file.vendor_id, "vendor": file.vendor_name, "devices": v, "passive": passive})
+            );
         } else {
             outln!("{}: vendor {:#010x} {}", path.display(), file.vendor_id, file.vendor_name);
             for (i, d) in file.devices.iter().enumerate() {
@@ -102,6 +115,9 @@ pub fn run(
                     d.type_name,
                     d.name
                 );
+            }
+            for p in &file.passive {
+                outln!("     passive (no ESC, no EtherCAT identity)  {:14} {}", p.type_name, p.name);
             }
         }
         return Ok(ExitCode::SUCCESS);

@@ -15,6 +15,8 @@ mod modular;
 mod number;
 #[cfg(feature = "xml")]
 mod parse;
+#[cfg(feature = "xml")]
+pub mod text;
 
 pub use build::coe_data_type;
 pub use dictionary::{Access, DataType, Dictionary, Object, SubObject};
@@ -48,6 +50,21 @@ pub struct EsiFile {
     /// What the file does that ETG.2000 does not allow but vendors' tools accept, each read
     /// as the message says.
     pub warnings: Vec<EsiError>,
+    /// Passive devices: a `<Device>` whose `<Type>` has neither product code nor revision (an
+    /// end terminal without an ESC, such as Beckhoff's EL9010), listed and not described.
+    pub passive: Vec<PassiveDevice>,
+}
+
+/// A device the file names that has no EtherCAT identity (no ESC): nothing to simulate or
+/// configure.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct PassiveDevice {
+    /// Line of the `<Device>` element.
+    pub line: u32,
+    /// The `<Type>` text.
+    pub type_name: String,
+    /// The English `<Name>`, or the first one.
+    pub name: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, Default)]

@@ -182,9 +182,50 @@ fn parse_document(xml: &str) -> R<EsiFile> {
         EsiError { line, column, message }
     })?;
     let root = doc.root_element();
-    if root.tag_name().name() != "EtherCATInfo" {
-        return Err(err(root, format!("root element is <{}>, expected <EtherCATInfo>", root.tag_name().name())));
+    match root.tag_name().name() {
+        "EtherCATInfo" => parse_info(root),
+        // IgH's `ethercat xml`: an <EtherCATInfo> a slave, in one list.
+        "EtherCATInfoList" => parse_list(root),
+        other => Err(err(root, format!("root element is <{other}>, expected <EtherCATInfo> or <EtherCATInfoList>"))),
     }
+}
+
+/// An `<EtherCATInfoList>` as one file: its infos' devices and modules in order, all of one
+/// vendor (a description of several vendors' devices is refused: each device here has its
+/// file's vendor).
+fn parse_list(root: Node<'_, '_>) -> R<EsiFile> {
+    let mut infos = children(root, "EtherCATInfo");
+    let first = infos.next().ok_or_else(|| err(root, "an <EtherCATInfoList> without an <EtherCATInfo>"))?;
+    let mut file = parse_info(first)?;
+    for info in infos {
+        let more = parse_info(info)?;
+        if more.vendor_id != file.vendor_id {
+            return Err(err(
+                info,
+                format!(
+                    "vendor {:#x} here, {:#x} in the list's first <EtherCATInfo>: give each vendor's devices a file of their own",
+                    more.vendor_id, file.vendor_id
+                ),
+            ));
+        }
+        for dev in more.devices {
+            if let Some(o) =
+                file.devices.iter().find(|o| (o.product_code, o.revision) == (dev.product_code, dev.revision))
+            {
+                // The same device once a slave: the first kept, as for a file that repeats one.
+                if *o == (Device { line: o.line, ..dev.clone() }) {
+                    continue;
+                }
+            }
+            file.devices.push(dev);
+        }
+        file.modules.extend(more.modules);
+        file.passive.extend(more.passive);
+    }
+    Ok(file)
+}
+
+fn parse_info(root: Node<'_, '_>) -> R<EsiFile> {
     let vendor = child(root, "Vendor").ok_or_else(|| err(root, "no <Vendor>"))?;
     let vendor_id = req_child_number::<i64>(vendor, "Id")?;
     // Vendor IDs are 32-bit; some files write them as negative decimals.
@@ -197,7 +238,16 @@ fn parse_document(xml: &str) -> R<EsiFile> {
     let devices_node =
         descriptions.and_then(|d| child(d, "Devices")).ok_or_else(|| err(root, "no <Descriptions><Devices>"))?;
     let mut devices: Vec<Device> = Vec::new();
+    let mut passive = Vec::new();
     for d in children(devices_node, "Device") {
+        // Neither product code nor revision: a passive device (no ESC), as Beckhoff's end
+        // terminals are written; one with a revision and no product code is an error below.
+        if let Some(ty) =
+            child(d, "Type").filter(|t| t.attribute("ProductCode").is_none() && t.attribute("RevisionNo").is_none())
+        {
+            passive.push(PassiveDevice { line: line_of(d), type_name: text(ty).to_string(), name: name_of(d) });
+            continue;
+        }
         let dev = parse_device(d)?;
         if let Some(first) = devices.iter().find(|o| (o.product_code, o.revision) == (dev.product_code, dev.revision)) {
             warn(
@@ -224,7 +274,7 @@ fn parse_document(xml: &str) -> R<EsiFile> {
         }
         modules.push(module);
     }
-    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new() })
+    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new(), passive })
 }
 
 fn parse_device(d: Node<'_, '_>) -> R<Device> {

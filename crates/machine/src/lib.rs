@@ -17,7 +17,6 @@
 pub mod compare;
 pub mod description;
 pub mod eni;
-mod text;
 
 pub use compare::{compare, Expected, Found, Identity, Mismatch, RevisionCheck};
 pub use description::{DescriptionError, GroupDesc, Machine, SlaveDesc};

@@ -45,7 +45,12 @@ pub fn read_eeprom_dump(path: &Path) -> io::Result<Vec<u8>> {
 
 /// An ESI file's text, bounded by [`MAX_ESI_FILE_BYTES`].
 pub fn read_esi(path: &Path) -> io::Result<String> {
-    read_bounded_text(path, MAX_ESI_FILE_BYTES, "an ESI file")
+    // In the encoding the file declares (most of Beckhoff's are ISO-8859-1), UTF-8 or UTF-16.
+    let bytes = read_bounded(path, MAX_ESI_FILE_BYTES, "an ESI file")?;
+    match ferrocat_esi::text::decode(&bytes) {
+        Ok((text, _)) => Ok(text.into_owned()),
+        Err(message) => Err(io::Error::new(io::ErrorKind::InvalidData, message)),
+    }
 }
 
 /// A TOML description's text (`what`: "a segment description", "a scenario"), bounded by

@@ -426,7 +426,7 @@ impl Eni {
     /// leniently: each departure from the schema is a warning in [`Eni::warnings`].
     pub fn parse(bytes: &[u8]) -> Result<Eni, EniError> {
         let start = Place { line: 1, column: 1 };
-        let (text, note) = crate::text::decode(bytes).map_err(|message| EniError { place: start, message })?;
+        let (text, note) = ferrocat_esi::text::decode(bytes).map_err(|message| EniError { place: start, message })?;
         let mut eni = read::read(&text)?;
         if let Some(n) = note {
             eni.warnings.insert(0, Warning { place: start, message: format!("not UTF-8: {n}") });

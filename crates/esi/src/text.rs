@@ -1,10 +1,20 @@
-//! A file's bytes as text: UTF-8, or the 8-bit encoding its XML declaration names.
+//! An XML file's bytes as text: UTF-8 (with or without a BOM), UTF-16 by its BOM, or the 8-bit
+//! encoding its XML declaration names. The ESI and ENI readers both take their files so.
 
 /// The text of `bytes`, and a note when it was not UTF-8. XML files say their encoding in the
 /// declaration (`<?xml version="1.0" encoding="ISO-8859-1"?>`); TwinCAT and many vendors'
 /// tools write ISO-8859-1, whose bytes are read as windows-1252 (its superset, as the WHATWG
 /// encoding standard maps the label).
-pub(crate) fn decode(bytes: &[u8]) -> Result<(std::borrow::Cow<'_, str>, Option<String>), String> {
+pub fn decode(bytes: &[u8]) -> Result<(std::borrow::Cow<'_, str>, Option<String>), String> {
+    for (bom, enc) in [(&b"\xFF\xFE"[..], encoding_rs::UTF_16LE), (&b"\xFE\xFF"[..], encoding_rs::UTF_16BE)] {
+        if bytes.starts_with(bom) {
+            let (text, had_errors) = enc.decode_without_bom_handling(&bytes[2..]);
+            if had_errors {
+                return Err(format!("not valid {} text", enc.name()));
+            }
+            return Ok((text, Some(format!("read as {} (its byte-order mark)", enc.name()))));
+        }
+    }
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     if let Ok(s) = std::str::from_utf8(bytes) {
         return Ok((s.into(), None));
@@ -50,5 +60,10 @@ mod tests {
         assert!(err.contains("'klingon'"), "{err}");
         let err = decode(b"<a>\xE9</a>").unwrap_err();
         assert!(err.contains("byte 3"), "{err}");
+        // UTF-8 with a BOM, and UTF-16 by its BOM.
+        assert_eq!(decode(b"\xEF\xBB\xBF<a/>").unwrap().0, "<a/>");
+        let utf16: Vec<u8> =
+            [0xFF, 0xFE].into_iter().chain("<a>\u{e9}</a>".encode_utf16().flat_map(u16::to_le_bytes)).collect();
+        assert_eq!(decode(&utf16).unwrap().0, "<a>\u{e9}</a>");
     }
 }
