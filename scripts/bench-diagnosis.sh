@@ -5,7 +5,8 @@
 # and 250 us, with diagnosis (error counters every second, a mailbox every cycle) and without,
 # alternately. Prints each run's wake-up p99 and max, overruns, frames lost and what diagnosis
 # read. Needs root. SECONDS_EACH (default 20) sets each run's length, ROUNDS (default 2) how
-# often each pairing runs.
+# often each pairing runs; DC=1 runs with --dc, so that diagnosis also reads the servo's
+# sync-error flags (0x1C32:20 and 0x1C33:20).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build -q --release -p ferrocat
@@ -39,11 +40,12 @@ ip netns exec "$s" "$bin" sim --config "$seg" --iface "fcd${id}b" 2>/dev/null &
 sim=$!
 sleep 0.5
 echo "host: $(nproc) CPUs, $(uname -r); ${SECONDS_EACH:-20} s a run"
-printf '%-8s %-10s %10s %10s %9s %7s %9s %9s\n' cycle diagnosis "wake p99" "wake max" overruns lost "counters" "polls"
+printf '%-8s %-10s %10s %10s %9s %7s %9s %9s %6s\n' cycle diagnosis "wake p99" "wake max" overruns lost "counters" "polls" "flags"
 for round in $(seq "${ROUNDS:-2}"); do
   for cycle in 1000 250; do
     for diag in on off; do
       flag=(); [ "$diag" = off ] && flag=(--no-diagnosis)
+      [ "${DC:-0}" = 1 ] && flag+=(--dc)
       out=$(ip netns exec "$m" "$bin" run --iface "fcd${id}a" --cycle-us "$cycle" --seconds "${SECONDS_EACH:-20}" --json "${flag[@]}" 2>/dev/null)
       python3 - "$cycle" "$diag" "$out" <<'PY'
 import json, sys
@@ -51,7 +53,7 @@ cycle, diag, v = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
 d = v.get("diagnosis") or {}
 w = v["wake_latency"]
 print(f"{cycle+' us':<8} {diag:<10} {w['p99_us']:>8.1f}us {w['max_us']:>8.1f}us {v['overruns']:>9} {v['frames_lost']:>7} "
-      f"{d.get('counter_reads', '-'):>9} {d.get('mailbox_polls', '-'):>9}")
+      f"{d.get('counter_reads', '-'):>9} {d.get('mailbox_polls', '-'):>9} {d.get('sync_flag_reads', '-'):>6}")
 PY
     done
   done
