@@ -293,3 +293,19 @@ fn a_description_configures_and_checks_a_modular_devices_modules() {
     assert!(!ok && err.contains("slot 1: module 0x00009020 configured, 0x00009010 detected"), "{err}");
     std::fs::remove_file(&path).ok();
 }
+
+/// docs/machine.md's example description runs as the page says: DC on, the variable shown.
+#[test]
+fn the_documented_example_runs() {
+    let page = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/machine.md")).unwrap();
+    let after = page.split("A description after step 2").nth(1).expect("the example's heading");
+    let toml = after.split("```toml\n").nth(1).and_then(|t| t.split("```").next()).expect("its TOML");
+    let path = temp("documented");
+    std::fs::write(&path, toml).unwrap();
+    let (ok, out, err) =
+        ferrocat(&["run", "--machine", path.to_str().unwrap(), "--show", "axis_status", "--seconds", "0.3", "--json"]);
+    std::fs::remove_file(&path).ok();
+    assert!(ok && err.contains("SYNC0 on slave 1"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["values"]["axis_status"].is_number() && v["clock_sync"]["method"] == "ferrocat", "{v}");
+}
