@@ -21,20 +21,42 @@ use serde::Serialize;
 
 use crate::outln;
 
+/// `lab live`'s settings.
+#[derive(clap::Args)]
 pub struct LiveArgs {
+    /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr and their variants -direct, -dense (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
+    #[arg(long = "method", value_name = "METHOD", default_values = ["conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"])]
     pub methods: Vec<String>,
+    /// Slaves on the simulated line (EK1100s; the first is the reference clock).
+    #[arg(long, default_value_t = 2)]
     pub slaves: usize,
+    /// The cycle time (µs, 100 to 100 000).
+    #[arg(long, default_value_t = 1000, allow_negative_numbers = true, value_parser = |s: &str| crate::args::cycle_us(s, 100, 100_000))]
     pub cycle_us: u64,
+    /// Seconds of cyclic operation before measuring.
+    #[arg(long, default_value_t = 2.0)]
     pub settle_s: f64,
+    /// Seconds measured per method.
+    #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
+    /// Seed of the simulator's random draws (crystals, latencies): the same seed gives the same segment.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// How the master's frames move (as `run --io`).
+    #[arg(long, value_enum, default_value = "auto")]
     pub io: crate::target::IoPath,
-    /// With `io` ring: how long a receive spins before it sleeps, µs.
+    /// With --io ring: how long a receive spins before it sleeps, in µs (as `run --spin-us`).
+    #[arg(long, value_name = "US", default_value_t = ferrocat_link::DEFAULT_RING_SPIN_NS / 1000)]
     pub spin_us: u64,
-    /// How the simulator's frames move.
+    /// How the simulator's frames move (as `sim --io`).
+    #[arg(long, value_enum, default_value = "socket")]
     pub sim_io: crate::target::IoPath,
-    /// ferrocat's probing per cycle on average, µs (`None`: unbudgeted).
+    /// How long ferrocat's probe frames may take per cycle on average (µs, as `run
+    /// --probe-budget-us`). Default: as many as the method wants within the cycle.
+    #[arg(long)]
     pub probe_budget_us: Option<u64>,
+    /// Print JSON instead of text.
+    #[arg(long)]
     pub json: bool,
 }
 

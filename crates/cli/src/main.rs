@@ -498,42 +498,7 @@ enum LabCmd {
     /// The master–slave clock errors on this machine's real kernel: the master in real time on a
     /// veth pair, `ferrocat sim` on the other end logging the true slave clocks (root); and
     /// where each cycle's frame passed the reference on its cycle.
-    Live {
-        /// Methods (repeatable): none, conventional, park2020, ferrocat, ferrocat-mfr and their variants -direct, -dense (whose master clock is its estimate of the reference's), chen2016 and pi (which keep no master clock: their phase only).
-        #[arg(long, default_values = ["conventional", "park2020", "chen2016", "pi", "ferrocat", "ferrocat-mfr"])]
-        method: Vec<String>,
-        /// Slaves on the simulated line (EK1100s; the first is the reference clock).
-        #[arg(long, default_value_t = 2)]
-        slaves: usize,
-        /// The cycle time (µs, 100 to 100 000).
-        #[arg(long, default_value_t = 1000, allow_negative_numbers = true, value_parser = |s: &str| args::cycle_us(s, 100, 100_000))]
-        cycle_us: u64,
-        /// Seconds of cyclic operation before measuring.
-        #[arg(long, default_value_t = 2.0)]
-        settle_s: f64,
-        /// Seconds measured per method.
-        #[arg(long, default_value_t = 10.0)]
-        seconds: f64,
-        /// Seed of the simulator's random draws (crystals, latencies): the same seed gives the same segment.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// How the master's frames move (as `run --io`).
-        #[arg(long, value_enum, default_value = "auto")]
-        io: target::IoPath,
-        /// With --io ring: how long a receive spins before it sleeps, in µs (as `run --spin-us`).
-        #[arg(long, value_name = "US", default_value_t = ferrocat_link::DEFAULT_RING_SPIN_NS / 1000)]
-        spin_us: u64,
-        /// How the simulator's frames move (as `sim --io`).
-        #[arg(long, value_enum, default_value = "socket")]
-        sim_io: target::IoPath,
-        /// How long ferrocat's probe frames may take per cycle on average (µs, as `run
-        /// --probe-budget-us`). Default: as many as the method wants within the cycle.
-        #[arg(long)]
-        probe_budget_us: Option<u64>,
-        /// Print JSON instead of text.
-        #[arg(long)]
-        json: bool,
-    },
+    Live(lab_live::LiveArgs),
     /// Run the experiment a scenario file names (docs/lab.md, scenarios/).
     Run(lab_args::Run),
 }
@@ -772,31 +737,7 @@ fn main() -> ExitCode {
             LabCmd::Paprocki2022(a) => a.run(),
             LabCmd::Robustness(a) => a.run(),
             LabCmd::Run(a) => a.run(),
-            LabCmd::Live {
-                method,
-                slaves,
-                cycle_us,
-                settle_s,
-                seconds,
-                seed,
-                io,
-                spin_us,
-                sim_io,
-                probe_budget_us,
-                json,
-            } => lab_live::run(lab_live::LiveArgs {
-                methods: method,
-                slaves,
-                cycle_us,
-                settle_s,
-                seconds,
-                seed,
-                io,
-                spin_us,
-                sim_io,
-                probe_budget_us,
-                json,
-            }),
+            LabCmd::Live(a) => lab_live::run(a),
         },
         Command::Rtt { iface, frames, slaves, force } => sim::rtt(&iface, frames, slaves, force),
         Command::Completions { shell } => {

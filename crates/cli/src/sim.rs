@@ -58,33 +58,25 @@ pub fn machine_segment(path: &Path, seed: Option<u64>) -> anyhow::Result<Segment
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            let device = s.device.clone().with_context(|| {
+            s.device.clone().with_context(|| {
                 format!(
                     "{}: slave {k} ('{}') has no `device = …` to simulate (an ESI file with :PRODUCT, an EEPROM dump or a built-in name)",
                     path.display(),
                     s.name
                 )
-            })?;
-            // The description's modules plugged into an ESI device that names none of its own.
-            match &s.modules {
-                Some(mods) if esi_without_modules(&device) => {
-                    let list: Vec<String> = mods.iter().map(|i| format!("{i:#x}")).collect();
-                    Ok(format!("{device}:{}", list.join(",")))
-                }
-                _ => Ok(device),
-            }
+            })
         })
         .collect::<anyhow::Result<Vec<String>>>()?;
     let mut cfg = SegmentConfig::from_device_args(&devices).with_context(|| format!("{}", path.display()))?;
+    // The description's modules plugged into an ESI device that names none of its own.
+    for (d, s) in cfg.devices.iter_mut().zip(&m.slaves) {
+        if let (Some(mods), true, None) = (&s.modules, d.esi.is_some(), &d.modules) {
+            d.modules = Some(mods.iter().map(|i| ferrocat_segment::Number::Text(format!("{i:#x}"))).collect());
+        }
+    }
     cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
     cfg.seed = seed.unwrap_or(0);
     Ok(cfg)
-}
-
-/// Whether `device` (as `--device` takes it) is `ESI.xml:PRODUCT`, with no `:MODULES` after.
-fn esi_without_modules(device: &str) -> bool {
-    let lower = device.to_ascii_lowercase();
-    lower.rfind(".xml:").is_some_and(|at| !device[at + 5..].contains(':'))
 }
 
 /// Builds the segment a command describes with `--config` or `--device`.
