@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The master's shape, measured (docs/architecture.md, "The master's shape"): public fields of
-each public struct, the `Master`'s impl blocks, files and public methods, and how many errors
-are built from free text. Reads crates/master/src; prints a Markdown table.
+each public struct, public methods of each type and trait (the `Master`'s with its impl blocks
+and files), and how many errors are built from free text. Reads crates/master/src; prints a Markdown table.
 
     python3 scripts/shape.py
 """
@@ -40,7 +40,8 @@ def blocks(text, head):
 
 
 structs = {}
-master_impls, master_files, master_pub_methods = 0, set(), 0
+methods = {}  # public type -> public methods over all its inherent impl blocks
+master_impls, master_files = 0, set()
 free_text = 0
 for f in files:
     t = code(f.read_text())
@@ -52,18 +53,27 @@ for f in files:
                 pub += 1
             depth += line.count("{") + line.count("(") - line.count("}") - line.count(")")
         structs[m.group(1)] = max(structs.get(m.group(1), 0), pub)
-    for m, body in blocks(t, r"impl<I: Io> Master<I>\s*\{"):
-        master_impls += 1
-        master_files.add(f.relative_to(root))
-        master_pub_methods += len(re.findall(r"^\s{4}pub fn ", body, re.M))
+    # Inherent impls (not `impl Trait for`), by the type's last path segment.
+    for m, body in blocks(t, r"(?m)^impl(?:<[^>{]*>)?\s+((?:\w+::)*(\w+))(?:<[^>{]*>)?\s*\{"):
+        name = m.group(2)
+        methods[name] = methods.get(name, 0) + len(re.findall(r"^\s{4}pub fn ", body, re.M))
+        if name == "Master":
+            master_impls += 1
+            master_files.add(f.relative_to(root))
+    # The parts' accessors, made by a macro (part.rs): one method of `Master` each.
+    methods["Master"] = methods.get("Master", 0) + len(re.findall(r"^part!\(", t, re.M))
     free_text += len(re.findall(r"MasterError::Config\((?:format!|\"|String)|MasterError::slave\(|SlaveError::Other\(", t))
+    for m, body in blocks(t, r"pub trait (\w+)(?:<[^>{]*>)?[^{]*\{"):
+        methods[m.group(1)] = len(re.findall(r"^\s{4}fn ", body, re.M))
 
 print("| measure | value |")
 print("|---|---|")
 print(f"| `Master`: public fields | {structs.get('Master', 0)} |")
-print(f"| `Master`: impl blocks / files / public methods | {master_impls} / {len(master_files)} / {master_pub_methods} |")
+print(f"| `Master`: impl blocks / files / public methods | {master_impls} / {len(master_files)} / {methods.get('Master', 0)} |")
 print(f"| `Slave`: public fields | {structs.get('Slave', 0)} |")
 wide = sorted(((n, c) for n, c in structs.items() if c > 12), key=lambda x: -x[1])
 print(f"| public structs with more than 12 public fields | {', '.join(f'`{n}` ({c})' for n, c in wide) or 'none'} |")
+many = sorted(((n, c) for n, c in methods.items() if c > 12), key=lambda x: -x[1])
+print(f"| types and traits with more than 12 public methods | {', '.join(f'`{n}` ({c})' for n, c in many) or 'none'} |")
 print(f"| errors built from free text (`Config(…)`, `slave(…)`, `Other(…)` sites) | {free_text} |")
 sys.exit(0)

@@ -30,15 +30,15 @@ fuzz_target!(|data: &[u8]| {
                 let default = ferrocat_segment::timing::EscTiming::default();
                 let knowable = knowable && seg.nodes.iter().all(|n| n.timing == default);
                 let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-                m.settings_mut().closed_port_loop_ns = 20;
-                if m.scan().is_ok() {
+                m.config().settings_mut().closed_port_loop_ns = 20;
+                if m.states().scan().is_ok() {
                     if knowable && cfg.secondary.is_none() {
                         check_delays(&m, text);
                     }
-                    if knowable && m.ring_port().is_some() {
+                    if knowable && m.dc().ring_port().is_some() {
                         check_ring_delays(&m, &cfg, text);
                     }
-                    let _ = m.init_dc(&DcConfig { max_frames: 300, ..DcConfig::default() });
+                    let _ = m.dc().init_dc(&DcConfig { max_frames: 300, ..DcConfig::default() });
                 }
             }
         }
@@ -60,8 +60,8 @@ fn check_ring_delays(ring: &Master<VirtualIo>, cfg: &SegmentConfig, text: &str) 
     let line_cfg = SegmentConfig { secondary: None, ..cfg.clone() };
     let Ok(seg) = line_cfg.build() else { return };
     let mut line = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-    line.settings_mut().closed_port_loop_ns = 20;
-    if line.scan().is_err() || line.slaves().len() != ring.slaves().len() {
+    line.config().settings_mut().closed_port_loop_ns = 20;
+    if line.states().scan().is_err() || line.slaves().len() != ring.slaves().len() {
         return;
     }
     for (k, (r, l)) in ring.slaves().iter().zip(line.slaves()).enumerate() {

@@ -14,10 +14,9 @@ thread_local! {
 }
 
 fn running() -> Master<VirtualIo> {
-    let cfg: SegmentConfig =
-        toml::from_str("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n").unwrap();
+    let cfg: SegmentConfig = toml::from_str("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n").unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     m
 }
 
@@ -28,18 +27,18 @@ fuzz_target!(|data: &[u8]| {
     MASTER.with(|cell| {
         let mut slot = cell.borrow_mut();
         let m = slot.get_or_insert_with(running);
-        let id = m.submit(request);
-        let mut next = m.io_mut().now_ns();
+        let id = m.acyclic().submit(request);
+        let mut next = m.cyclic().io_mut().now_ns();
         for _ in 0..50 {
             next += 1_000_000;
             // A request may leave a slave unanswering (a register write): the loop's errors
             // are the loop's, not the request's, and are not what this target looks for.
-            let _ = m.cycle();
-            let _ = m.serve_requests(next - 250_000);
-            if m.take_answers().iter().any(|(k, _)| *k == id) {
+            let _ = m.cyclic().cycle();
+            let _ = m.acyclic().serve_requests(next - 250_000);
+            if m.acyclic().take_answers().iter().any(|(k, _)| *k == id) {
                 return;
             }
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
         }
     });
 });

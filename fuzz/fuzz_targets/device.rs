@@ -30,18 +30,18 @@ fuzz_target!(|data: &[u8]| {
 
 fn exercise(seg: ferrocat_segment::Segment) {
     let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-    if m.scan().is_err() || m.configure().is_err() {
+    if m.states().scan().is_err() || m.states().configure().is_err() {
         return;
     }
     let dc = DcConfig { max_frames: 300, ..DcConfig::default() };
-    let _ = m.init_dc(&dc);
-    let _ = m.start();
-    if let Ok(list) = m.coe().od_list(1) {
+    let _ = m.dc().init_dc(&dc);
+    let _ = m.states().start();
+    if let Ok(list) = m.acyclic().coe().od_list(1) {
         for index in list.into_iter().take(64) {
-            if let Ok(info) = m.coe().object_info(1, index) {
+            if let Ok(info) = m.acyclic().coe().object_info(1, index) {
                 for sub in 0..=info.max_subindex.min(8) {
-                    let _ = m.coe().entry_info(1, index, sub);
-                    let _ = m.coe().sdo_read(1, index, sub);
+                    let _ = m.acyclic().coe().entry_info(1, index, sub);
+                    let _ = m.acyclic().coe().sdo_read(1, index, sub);
                 }
             }
         }

@@ -68,62 +68,62 @@ fuzz_target!(|data: &[u8]| {
     let hook = move |buf: &mut [u8], n: usize, _: bool| tamper(&mut script, buf, n);
     let io = Tamper { inner: VirtualIo::new(seg, HostModel::ideal(), 1), hook };
     let mut m = Master::new(io);
-    if m.scan().is_err() || m.configure().is_err() {
+    if m.states().scan().is_err() || m.states().configure().is_err() {
         return;
     }
     let dc = DcConfig { max_frames: 300, sync0_cycle_ns: 500_000, ..DcConfig::default() };
-    let _ = m.init_dc(&dc);
-    if m.start().is_err() {
+    let _ = m.dc().init_dc(&dc);
+    if m.states().start().is_err() {
         return;
     }
     // A ring: its cable pulled now, and cycles enough for the far reference to be kept.
     let cycles = if ring {
-        let now = m.io_mut().now_ns();
+        let now = m.cyclic().io_mut().now_ns();
         let event = if split_first {
             (now + 50_000_000, Event::LinkUp { node: 2, port: 0 })
         } else {
             (now, Event::LinkDown { node: 2, port: 0 })
         };
-        m.io_mut().inner.seg.schedule(event.0, event.1);
+        m.cyclic().io_mut().inner.seg.schedule(event.0, event.1);
         200
     } else {
         20
     };
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     for _ in 0..cycles {
-        let _ = m.cycle();
-        let _ = m.dc_monitor();
+        let _ = m.cyclic().cycle();
+        let _ = m.dc().dc_monitor();
         if ring {
             next += 1_000_000;
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
         }
     }
-    let _ = m.supervise();
+    let _ = m.states().supervise();
     // The drive's position: the last, or before the reversed terminal behind which it hangs.
     let drive = m.slaves().iter().position(|s| s.name() == "SERVO").unwrap_or(3) as u16;
-    if let Ok(list) = m.coe().od_list(drive) {
+    if let Ok(list) = m.acyclic().coe().od_list(drive) {
         for index in list.into_iter().take(16) {
-            let _ = m.coe().object_info(drive, index);
-            let _ = m.coe().sdo_read(drive, index, 0);
+            let _ = m.acyclic().coe().object_info(drive, index);
+            let _ = m.acyclic().coe().sdo_read(drive, index, 0);
         }
     }
-    let _ = m.coe().sdo_write(drive, 0x6060, 0, &[8]);
+    let _ = m.acyclic().coe().sdo_write(drive, 0x6060, 0, &[8]);
     // EoE with the drive: its address set and read, a ping, and the pump between cycles.
     let params = IpParameters { mac: Some([2, 0, 0, 0, 0, 2]), ip: Some([10, 0, 0, 2]), ..Default::default() };
-    let _ = m.eoe().set_ip(drive, &params);
-    let _ = m.eoe().get_ip(drive);
+    let _ = m.acyclic().eoe().set_ip(drive, &params);
+    let _ = m.acyclic().eoe().get_ip(drive);
     let p = EoePing {
         from_mac: [2, 0, 0, 0, 0, 1],
         from_ip: [10, 0, 0, 1],
         to_mac: [2, 0, 0, 0, 0, 2],
         to_ip: [10, 0, 0, 2],
     };
-    let _ = m.eoe().ping(drive, &p, 1, 200, 5_000_000);
+    let _ = m.acyclic().eoe().ping(drive, &p, 1, 200, 5_000_000);
     if let Ok(frame) = p.echo_request(2, &[7; 300]) {
-        let _ = m.eoe().queue(drive, &frame);
+        let _ = m.acyclic().eoe().queue(drive, &frame);
         for _ in 0..20 {
-            let _ = m.cycle();
-            let _ = m.eoe().pump(drive);
+            let _ = m.cyclic().cycle();
+            let _ = m.acyclic().eoe().pump(drive);
         }
     }
 });

@@ -109,9 +109,9 @@ fn prepared(stage: u8) -> (Segment, u64) {
         return (seg, 1_000_000);
     }
     let mut m = Master::new(VirtualIo::new(seg, HostModel::ideal(), 1));
-    m.scan().expect("scan");
+    m.states().scan().expect("scan");
     if stage >= 2 {
-        m.configure().expect("configure");
+        m.states().configure().expect("configure");
     }
     if stage >= 3 {
         // Every slave with a DC system time gets SYNC0 (the 32-bit one too), a short drift
@@ -119,10 +119,10 @@ fn prepared(stage: u8) -> (Segment, u64) {
         let positions = m.slaves().iter().filter(|s| s.dc().has_system_time).map(|s| s.position()).collect();
         let dc =
             DcConfig { max_frames: 300, sync0_cycle_ns: 250_000, sync0_slaves: Some(positions), ..DcConfig::default() };
-        m.init_dc(&dc).expect("DC initialisation");
+        m.dc().init_dc(&dc).expect("DC initialisation");
     }
     if stage >= 4 {
-        m.start().expect("OP");
+        m.states().start().expect("OP");
     }
     let mut io = m.into_io();
     let t_ns = ferrocat_master::io::Io::now_ns(&mut io);

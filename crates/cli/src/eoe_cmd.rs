@@ -184,14 +184,14 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             }
             let mut m = preop_with(&target, position, &params)?;
             eprintln!("set the IP parameters of slave {position}");
-            show(&m.eoe().get_ip(position)?, false);
+            show(&m.acyclic().eoe().get_ip(position)?, false);
             finish(m)?;
         }
         EoeCmd::GetIp { position, json, target } => {
             let mut m = target.master()?;
             target.scan(&mut m)?;
-            m.configure()?;
-            show(&m.eoe().get_ip(position)?, json);
+            m.states().configure()?;
+            show(&m.acyclic().eoe().get_ip(position)?, json);
             finish(m)?;
         }
         EoeCmd::Ping { position, params, count, size, timeout_ms, from, from_mac, target } => {
@@ -200,7 +200,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
                 bail!("--size {size}: at most 1 472 bytes fit one Ethernet frame");
             }
             let mut m = preop_with(&target, position, &params)?;
-            let p = m.eoe().get_ip(position)?;
+            let p = m.acyclic().eoe().get_ip(position)?;
             let (Some(to_mac), Some(to_ip)) = (p.mac, p.ip) else {
                 bail!("slave {position} has no MAC or IP address: give --ip (and --mac)");
             };
@@ -219,7 +219,7 @@ pub fn run(cmd: EoeCmd) -> anyhow::Result<ExitCode> {
             outln!("PING {to} over EoE (slave {position}) from {}: {size} data bytes", Ipv4Addr::from(from_ip));
             let mut rtts = Vec::new();
             for seq in 0..count {
-                match m.eoe().ping(position, &ping, seq, size, timeout_ms.saturating_mul(1_000_000))? {
+                match m.acyclic().eoe().ping(position, &ping, seq, size, timeout_ms.saturating_mul(1_000_000))? {
                     Some(ns) => {
                         outln!("{} bytes from {to}: seq={seq} time={:.3} ms", size + 8, ns as f64 / 1e6);
                         rtts.push(ns);
@@ -272,10 +272,10 @@ fn preop_with(
 ) -> anyhow::Result<ferrocat_master::Master<crate::target::CliIo>> {
     let mut m = target.master()?;
     target.scan(&mut m)?;
-    m.configure()?;
+    m.states().configure()?;
     if params.given() {
-        let p = params.to_params(m.slave(position)?.station())?;
-        m.eoe().set_ip(position, &p)?;
+        let p = params.to_params(m.slaves().at(position)?.station())?;
+        m.acyclic().eoe().set_ip(position, &p)?;
     }
     Ok(m)
 }
@@ -309,7 +309,7 @@ fn bridge(
             std::thread::sleep(std::time::Duration::from_micros(200));
         }
     }
-    eprintln!("bridge stopped: {}", b.summary(&m)?);
+    eprintln!("bridge stopped: {}", b.summary(&mut m)?);
     finish(m)?;
     Ok(ExitCode::SUCCESS)
 }
@@ -351,14 +351,14 @@ impl TapBridge {
         while let Some(n) = self.tap.try_read(&mut self.buf)? {
             moved = true;
             // A frame with no EoE form, or one more than the queue holds, is dropped.
-            match m.eoe().queue(self.position, &self.buf[..n]) {
+            match m.acyclic().eoe().queue(self.position, &self.buf[..n]) {
                 Ok(true) => self.to_slave += 1,
                 Ok(false) | Err(_) => self.refused += 1,
             }
         }
         // A mailbox datagram that went unanswered through its retries (a stalled host, a lost
         // frame) is tried again at the next step: the cyclic run goes on.
-        let pumped = match m.eoe().pump(self.position) {
+        let pumped = match m.acyclic().eoe().pump(self.position) {
             Err(ferrocat_master::MasterError::Timeout { .. }) => {
                 self.unanswered += 1;
                 None
@@ -373,11 +373,12 @@ impl TapBridge {
                 self.host_down += 1;
             }
         }
-        Ok(moved || m.eoe_link(self.position)?.sending())
+        let sending = m.acyclic().eoe().link(self.position)?.sending();
+        Ok(moved || sending)
     }
 
-    pub fn summary(&self, m: &ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {
-        let link = m.eoe_link(self.position)?;
+    pub fn summary(&self, m: &mut ferrocat_master::Master<crate::target::CliIo>) -> anyhow::Result<String> {
+        let link = m.acyclic().eoe().link(self.position)?.clone();
         Ok(format!(
             "EoE bridge of slave {} to {}: {} frames to the slave ({} refused), {} to the host ({} while it was down), {} dropped, {} fragments that did not fit, {} mailbox datagrams unanswered (tried again)",
             self.position,

@@ -15,9 +15,11 @@ use crate::target::Target;
 /// slave maps more than once in one direction, as an EL2004 does "Output", is `POS:ENTRY#K`,
 /// K counting from 1 in image order), then an ENI's variables and a machine description's
 /// `[[variable]]`s under their own names.
-pub fn symbols<I: Io>(m: &Master<I>, names: crate::values::Names<'_>) -> Vec<Variable> {
+pub fn symbols<I: Io>(m: &mut Master<I>, names: crate::values::Names<'_>) -> Vec<Variable> {
     let eni = names.eni;
-    let group_of = |pos: u16| m.groups().iter().find(|g| g.positions.contains(&pos)).map(|g| g.name.clone());
+    let groups = m.config().groups().to_vec();
+    let m = &*m;
+    let group_of = |pos: u16| groups.iter().find(|g| g.positions.contains(&pos)).map(|g| g.name.clone());
     let mut vars = Vec::new();
     for s in m.slaves() {
         let map = s.mapping();
@@ -46,7 +48,7 @@ pub fn symbols<I: Io>(m: &Master<I>, names: crate::values::Names<'_>) -> Vec<Var
         }
     }
     if let Some(e) = eni {
-        let (out_bytes, in_bytes) = m.image_bytes();
+        let (out_bytes, in_bytes) = m.image().byte_counts();
         let pi = &e.process_image;
         for (output, area, base) in [(true, &pi.outputs, 0), (false, &pi.inputs, out_bytes * 8)] {
             for v in area.variables.iter().filter(|v| (1..=64).contains(&v.bit_size)) {
@@ -149,7 +151,7 @@ impl AppWatchdog {
     fn request_all<I: Io>(&self, m: &mut Master<I>, state: AlState) {
         let with_outputs: Vec<u16> = m.slaves().iter().filter(|s| s.output_bits() > 0).map(|s| s.position()).collect();
         for position in with_outputs {
-            m.submit(Request::State { position, state });
+            m.acyclic().submit(Request::State { position, state });
         }
     }
 

@@ -239,14 +239,14 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     let mut m = target.master()?;
     // The simulator's ESCs, as in the virtual lab: ferrocat's methods are told their loop-back.
     ferrocat_lab::tell_loop_back(&mut m, method);
-    m.bring_up()?;
+    m.states().bring_up()?;
     let cycle_ns = a.cycle_us * 1000;
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
     let (mut sync, _) =
         ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
-    let mut st = m.sync_state()?;
+    let mut st = m.clock().sync_state()?;
     st.probing.budget_ns = a.probe_budget_us.map(|us| us * 1000);
-    let start = m.io_mut().now_ns();
+    let start = m.cyclic().io_mut().now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
     let mut clock = Vec::new();
@@ -256,18 +256,18 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     while next < to_ns {
         // A master that follows the reference wakes when it says.
         next = ferrocat_lab::next_wake(next, cycle_ns, &c);
-        m.io_mut().sleep_until(next);
-        let now = m.io_mut().now_ns();
+        m.cyclic().io_mut().sleep_until(next);
+        let now = m.cyclic().io_mut().now_ns();
         if now >= from_ns && probes_from.is_none() {
             probes_from = Some(st.probing.sent);
         }
         if (from_ns..to_ns).contains(&now) {
             cycle_starts.push(now);
         }
-        c = m.sync_step(sync.as_mut(), &mut st)?;
+        c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
-        if m.io_mut().now_ns() + 2 * cycle_ns >= from_ns {
-            let own = m.master_system_time();
+        if m.cyclic().io_mut().now_ns() + 2 * cycle_ns >= from_ns {
+            let own = m.clock().master_system_time();
             let ahead = own.wrapping_add(cycle_ns);
             if let (Some(a), Some(b)) = (sync.master_time(own), sync.master_time(ahead)) {
                 let rate = b.wrapping_sub(a) as i64 as f64 / cycle_ns as f64;
@@ -275,7 +275,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
             }
         }
     }
-    let epoch_offset_ns = m.epoch_offset_ns().context("the master's clock was never read")?;
+    let epoch_offset_ns = m.clock().epoch_offset_ns().context("the master's clock was never read")?;
     // A method that keeps no clock of its own leaves the master's.
     let clock = (!clock.is_empty()).then_some(clock);
     let probes = st.probing.sent - probes_from.unwrap_or(st.probing.sent);

@@ -24,7 +24,9 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
         eprintln!("wrote {} ({} slaves): edit it, then give it to --machine", out.display(), m.slaves().len());
     }
     // A ring split from the start: the secondary's cable comes in at the far half's root.
-    let split_root = m.split_latch().map(|l| (l.root as u16, l.root_port));
+    let split_root = m.dc().split_latch().map(|l| (l.root as u16, l.root_port));
+    let relatched = m.dc().relatched().to_vec();
+    let ring_port = m.dc().ring_port();
     if json {
         let v: Vec<_> = m
             .slaves()
@@ -37,8 +39,8 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
                     "esc_type": s.esc().kind, "fmmus": s.esc().fmmu_count, "sync_managers": s.esc().sm_count,
                     "has_dc": s.dc().supported, "system_time": s.dc().has_system_time, "dc_64bit": s.dc().is_64bit, "delay_ns": s.dc().delay_ns,
                     "parent": s.ports().parent, "parent_port": s.ports().parent_port, "entry_port": s.ports().entry,
-                    "active_ports": s.ports().active, "eeprom_loaded": s.ports().dl_status.pdi_operational(), "relatched": m.relatched().contains(&(s.position() as usize)),
-                    "ring_port": m.ring_port().or(split_root).filter(|r| r.0 == s.position()).map(|r| r.1),
+                    "active_ports": s.ports().active, "eeprom_loaded": s.ports().dl_status.pdi_operational(), "relatched": relatched.contains(&(s.position() as usize)),
+                    "ring_port": ring_port.or(split_root).filter(|r| r.0 == s.position()).map(|r| r.1),
                     "mailbox": s.mailbox().map(|mb| json!({"out": [mb.out.0, mb.out.1], "in": [mb.inp.0, mb.inp.1], "protocols": mb.protocols})),
                 })
             })
@@ -47,11 +49,11 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
     } else {
         outln!("{}", crate::count(m.slaves().len(), "slave", "found"));
         use ferrocat_master::io::Io;
-        if m.io_mut().has_secondary() {
-            let far = m.split_latch().and_then(|l| l.far_reference);
+        if m.cyclic().io_mut().has_secondary() {
+            let far = m.dc().split_latch().and_then(|l| l.far_reference);
             outln!(
                 "{}",
-                match (m.ring_state(), far) {
+                match (m.diagnosis().ring_state(), far) {
                     (ferrocat_master::RingState::Intact, _) => "Ring intact: every slave on one pass".to_string(),
                     (ferrocat_master::RingState::Broken, Some(f)) => format!(
                         "Ring broken: the slaves behind the break answer from the secondary port; \
@@ -91,10 +93,10 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
             if s.ports().entry != 0 {
                 outln!(" Entered on port {}", s.ports().entry);
             }
-            if m.relatched().contains(&(s.position() as usize)) {
+            if relatched.contains(&(s.position() as usize)) {
                 outln!(" DC: latched again (its ports 1–3 take the frame after the write to 0x0900)");
             }
-            if let Some((_, port)) = m.ring_port().or(split_root).filter(|r| r.0 == s.position()) {
+            if let Some((_, port)) = ring_port.or(split_root).filter(|r| r.0 == s.position()) {
                 outln!(" Ring: port {port} leads back to the master's secondary port");
             }
             if let Some(mb) = &s.mailbox() {
@@ -305,19 +307,19 @@ pub trait CoeAccess {
 
 impl CoeAccess for Master<CliIo> {
     fn upload(&mut self, position: u16, index: u16, sub: u8, complete: bool) -> anyhow::Result<Vec<u8>> {
-        Ok(self.coe().sdo_upload(position, index, sub, complete)?)
+        Ok(self.acyclic().coe().sdo_upload(position, index, sub, complete)?)
     }
     fn download(&mut self, position: u16, index: u16, sub: u8, complete: bool, data: &[u8]) -> anyhow::Result<()> {
-        Ok(self.coe().sdo_download(position, index, sub, complete, data)?)
+        Ok(self.acyclic().coe().sdo_download(position, index, sub, complete, data)?)
     }
     fn entry(&mut self, position: u16, index: u16, sub: u8) -> anyhow::Result<ferrocat_master::EntryInfo> {
-        Ok(self.coe().entry_info(position, index, sub)?)
+        Ok(self.acyclic().coe().entry_info(position, index, sub)?)
     }
     fn objects(&mut self, position: u16) -> anyhow::Result<Vec<u16>> {
-        Ok(self.coe().od_list(position)?)
+        Ok(self.acyclic().coe().od_list(position)?)
     }
     fn object(&mut self, position: u16, index: u16) -> anyhow::Result<ferrocat_master::ObjectInfo> {
-        Ok(self.coe().object_info(position, index)?)
+        Ok(self.acyclic().coe().object_info(position, index)?)
     }
 }
 
@@ -327,7 +329,7 @@ pub fn sdo(t: &Target, position: u16, action: SdoAction) -> anyhow::Result<ExitC
     }
     let mut m = t.master()?;
     t.scan(&mut m)?;
-    m.configure()?;
+    m.states().configure()?;
     let code = sdo_with(&mut m, position, action)?;
     finish(m)?;
     Ok(code)
@@ -444,19 +446,21 @@ fn foe_transfer(
             let mut m = t.master()?;
             t.scan(&mut m)?;
             if boot {
-                m.enter_bootstrap(position)?;
+                m.states().enter_bootstrap(position)?;
             } else {
-                m.configure()?;
+                m.states().configure()?;
             }
             let read = match &action {
                 FoeAction::Write { .. } => {
-                    m.foe().write(position, name, password, &data)?;
+                    m.acyclic().foe().write(position, name, password, &data)?;
                     None
                 }
-                FoeAction::Read { max_bytes, .. } => Some(m.foe().read(position, name, password, *max_bytes)?),
+                FoeAction::Read { max_bytes, .. } => {
+                    Some(m.acyclic().foe().read(position, name, password, *max_bytes)?)
+                }
             };
             if boot {
-                m.leave_bootstrap(position)?;
+                m.states().leave_bootstrap(position)?;
             }
             finish(m)?;
             read
@@ -492,7 +496,7 @@ pub fn sii_read(t: &Target, position: u16, out: Option<&std::path::Path>) -> any
         None => {
             let mut m = t.master()?;
             t.scan(&mut m)?;
-            (m.slave(position)?.sii().to_image(), Some(m))
+            (m.slaves().at(position)?.sii().to_image(), Some(m))
         }
     };
     match out {
@@ -535,7 +539,7 @@ pub fn sii_write(
     }
     let mut m = t.master()?;
     t.scan(&mut m)?;
-    let s = m.slave(position)?;
+    let s = m.slaves().at(position)?;
     let (h, mine) = (&info.header, &s.sii().header);
     if (h.vendor_id, h.product_code) != (s.identity().vendor_id, s.identity().product_code) && !overwrite_identity {
         bail!(
@@ -571,9 +575,9 @@ pub fn sii_write(
     };
     std::fs::write(&backup, &before).with_context(|| format!("writing the backup {}", backup.display()))?;
     eprintln!("slave {position}'s EEPROM as it was ({} bytes) is in {}", before.len(), backup.display());
-    let words = m.sii_write(position, &img)?;
+    let words = m.acyclic().sii_write(position, &img)?;
     // Read back (the master reloads and reads the SII after writing) and compared.
-    let after = m.slave(position)?.sii().to_image();
+    let after = m.slaves().at(position)?.sii().to_image();
     let used = data_len.min(after.len());
     if let Some(at) = (0..used).find(|&k| after.get(k) != img.get(k)) {
         bail!(
@@ -593,7 +597,7 @@ pub fn sii_alias(t: &Target, position: u16, alias: &str) -> anyhow::Result<ExitC
         .with_context(|| format!("alias '{alias}' is not a 16-bit number"))?;
     let mut m = t.master()?;
     t.scan(&mut m)?;
-    let words = m.sii_set_alias(position, value)?;
+    let words = m.acyclic().sii_set_alias(position, value)?;
     let name = &m.slaves()[position as usize].name();
     eprintln!(
         "slave {position} ({name}): alias {value:#06x} in its EEPROM ({words} words written); \
@@ -830,31 +834,31 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut m = t.master()?;
-    m.settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
-    m.settings_mut().txpdo_stale_ns = o.txpdo_stale_ms.saturating_mul(1_000_000);
-    if !m.io_mut().is_virtual() {
+    m.config().settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
+    m.config().settings_mut().txpdo_stale_ns = o.txpdo_stale_ms.saturating_mul(1_000_000);
+    if !m.cyclic().io_mut().is_virtual() {
         crate::target::go_real_time();
     }
-    eprintln!("timestamps: {}; frames through {}", m.io_mut().timestamps(), m.io_mut().path());
+    eprintln!("timestamps: {}; frames through {}", m.cyclic().io_mut().timestamps(), m.cyclic().io_mut().path());
     let t_start = {
         use ferrocat_master::io::Io;
-        m.io_mut().now_ns()
+        m.cyclic().io_mut().now_ns()
     };
     t.scan(&mut m)?;
     t.configure(&mut m)?;
     // Nothing to exchange: no frame would go out, and the summary would count none.
-    if m.image().is_empty() && !dc {
+    if m.image().bytes().is_empty() && !dc {
         bail!(
             "no slave maps process data ({}): nothing to exchange cyclically (--dc runs the clock distribution alone)",
             crate::count(m.slaves().len(), "slave", "found")
         );
     }
     // The segment's round trip, for the frame timeout and SYNC0's place.
-    let round_trip_ns = (m.median_round_trip_ns(16)?).max(0) as u64;
+    let round_trip_ns = (m.dc().median_round_trip_ns(16)?).max(0) as u64;
     let round_trip_us = round_trip_ns.div_ceil(1000);
     if o.frame_timeout_us.is_none() {
         frame_timeout_us = self::frame_timeout_us(cycle_us, max_rate, Some(round_trip_us));
-        m.settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
+        m.config().settings_mut().cyclic_timeout_ns = frame_timeout_us * 1000;
     }
     if !max_rate && round_trip_us * 10 > cycle_us * 8 {
         tracing::warn!(
@@ -895,7 +899,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             assign_activate: d.assign_activate.clone(),
             ..Default::default()
         };
-        let (s, r, st) = m.start_clock_sync(&cfg, &method, cycle_us * 1000)?;
+        let (s, r, st) = m.clock().start_clock_sync(&cfg, &method, cycle_us * 1000)?;
         sync = Some((s, st));
         grid_ns = r.sync0_start.map(|t| t.wrapping_sub(plan.shift_ns));
         sync0 = Some(plan);
@@ -911,7 +915,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 many => format!("slaves {}", many.iter().map(|p| p.to_string()).collect::<Vec<_>>().join(", ")),
             }
         );
-        if let Some((l, lag)) = m.split_latch().and_then(|l| Some((l, l.far_lag_ns()?))) {
+        if let Some((l, lag)) = m.dc().split_latch().and_then(|l| Some((l, l.far_lag_ns()?))) {
             eprintln!(
                 "DC: ring split from the start: the far half (from slave {}) latched {:.1} µs after the reference, \
                  its clocks set for that instant",
@@ -930,7 +934,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     for spec in o.set {
         let (h, v) = crate::values::assignment(&m, names, spec)?;
-        m.set(h, v);
+        m.cyclic().set(h, v);
     }
     let shown = o
         .show
@@ -947,11 +951,11 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             if copies.len() == 1 { "y" } else { "ies" }
         );
     }
-    m.set_copies(copies)?;
-    m.start()?;
+    m.cyclic().set_copies(copies)?;
+    m.states().start()?;
     let mut bridges = Vec::new();
     for &(pos, name) in &eoe_taps {
-        m.eoe_link(pos)?;
+        m.acyclic().eoe().link(pos)?;
         bridges.push(crate::eoe_cmd::TapBridge::open(pos, name)?);
         eprintln!("bridging slave {pos} to {name} (EoE between cycles)");
     }
@@ -984,8 +988,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let mut shared = match (&control, t.control_path()) {
         (Some(_), Some(socket)) => {
             let path = socket.with_extension("image");
-            let (out_bytes, in_bytes) = m.image_bytes();
-            let vars = crate::image_cmd::symbols(&m, names);
+            let (out_bytes, in_bytes) = m.image().byte_counts();
+            let vars = crate::image_cmd::symbols(&mut m, names);
             let mode = o.control.as_ref().map_or(0o660, |c| c.mode);
             let image = ferrocat_service::SharedImage::create(
                 &path,
@@ -1005,30 +1009,30 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     let mut machine_in_force = t.machine_file()?.cloned();
     let t_op = {
         use ferrocat_master::io::Io;
-        m.io_mut().now_ns()
+        m.cyclic().io_mut().now_ns()
     };
     eprintln!("bring-up to OP: {:.1} ms", (t_op - t_start) as f64 / 1e6);
     let period = if max_rate { 0 } else { cycle_us * 1000 };
-    m.set_period_ns(period);
-    m.reset_cycle_stats();
+    m.cyclic().set_period_ns(period);
+    m.diagnosis().reset_cycle_stats();
     use ferrocat_master::io::Io;
     // Each frame leaves the shift before SYNC0 (the master-following methods then keep that
     // phase themselves): a frame leaving at a random phase could pass the slaves at their SYNC0,
     // and with a host's jitter reach them in one SYNC0 interval or the next, which a drive's
     // SM-synchronisation supervision takes for missed outputs (0x001A).
     if let Some(grid) = grid_ns.filter(|_| !max_rate) {
-        let first = m.next_on_grid_ns(grid, cycle_us * 1000);
-        m.io_mut().sleep_until(first);
+        let first = m.clock().next_on_grid_ns(grid, cycle_us * 1000);
+        m.cyclic().io_mut().sleep_until(first);
     }
     let cpu0 = cpu_ns();
-    let start = m.io_mut().now_ns();
+    let start = m.cyclic().io_mut().now_ns();
     let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
     let mut report = start + 1_000_000_000;
     // The events are taken as they come (a long run would otherwise keep every one) and
     // counted for the summary.
     let mut tally = SlaveTally::default();
-    for e in m.take_events() {
+    for e in m.diagnosis().take_events() {
         tally.count(&e);
     }
     let mut next_period = period;
@@ -1046,7 +1050,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     if let Some((_, st)) = sync.as_mut() {
         // A virtual segment's host is a model: its CPU is not the loop's, and a budget from it
         // would make the run depend on the machine that simulates it.
-        let virtual_host = m.io_mut().is_virtual();
+        let virtual_host = m.cyclic().io_mut().is_virtual();
         match probe_budget_us {
             Some(us) => st.probing.budget_ns = Some(us * 1000),
             None if !max_rate && !virtual_host => {
@@ -1057,21 +1061,21 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         st.probing.off |= probe_budget_us == Some(0);
     }
-    while m.io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
+    while m.cyclic().io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
         next += next_period;
         // The clients' outputs, whole or not at all, into this cycle's frame.
         if let Some(image) = shared.as_mut() {
-            image.apply_outputs(m.outputs_mut());
+            image.apply_outputs(m.cyclic().outputs_mut());
         }
         next_period = match sync.as_mut() {
             Some((method, st)) => {
                 let (lost_before, lock_before) = (st.lost, st.lock.state());
-                let (_, c) = m.cycle_sync(method.as_mut(), st)?;
+                let (_, c) = m.cyclic().cycle_sync(method.as_mut(), st)?;
                 if st.lock.state() != lock_before {
                     eprintln!(
                         "t={:7.3} s  clock sync {lock_before} -> {} (offset {} ns; {} frames lost so far)",
-                        (m.io_mut().now_ns() - start) as f64 * 1e-9,
+                        (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9,
                         st.lock.state(),
                         st.lock.offset_ns().unwrap_or(0),
                         st.lost
@@ -1087,12 +1091,12 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 }
             }
             None => {
-                m.cycle()?;
+                m.cyclic().cycle()?;
                 period
             }
         };
         if let (Some(n), Some((_, st))) = (measuring, sync.as_mut()) {
-            if m.cycle_stats().cycles >= n {
+            if m.diagnosis().cycle_stats().cycles >= n {
                 measuring = None;
                 let cpu_per_cycle_ns = (cpu_ns() - cpu0) / n;
                 st.probing.budget_ns = Some(cpu_per_cycle_ns / 2);
@@ -1108,8 +1112,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             }
         }
         if let Some(image) = shared.as_mut() {
-            let (s, now) = (m.cycle_stats(), m.io_mut().now_ns());
-            image.publish(m.image(), s.cycles, now, s.last_wkc as u32, m.expected_wkc() as u32);
+            let (s, now) = (m.diagnosis().cycle_stats(), m.cyclic().io_mut().now_ns());
+            image.publish(m.image().bytes(), s.cycles, now, s.last_wkc as u32, m.image().expected_wkc() as u32);
             if let Some(w) = app_watchdog.as_mut() {
                 w.check(&mut m, image.commits(), now);
             }
@@ -1120,14 +1124,14 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         // Diagnosis in the cycle's spare time, none in its last quarter: error counters, one
         // slave a datagram, every `diagnosis_ms`; emergencies from the mailboxes between.
         if let (Some(ms), false) = (o.diagnosis_ms, max_rate) {
-            m.diagnose(next.saturating_sub(next_period / 4), ms * 1_000_000)?;
+            m.diagnosis().diagnose(next.saturating_sub(next_period / 4), ms * 1_000_000)?;
         }
         // Requests from other processes, in the same spare time (back to back: a millisecond
         // after the cycle, while any wait).
         if let Some(server) = control.as_mut() {
             let deadline =
-                if max_rate { m.io_mut().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
-            let extra = |m: &Master<CliIo>| {
+                if max_rate { m.cyclic().io_mut().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
+            let extra = |m: &mut Master<CliIo>| {
                 json!({
                     "clock_sync": sync.as_ref().map(|(method, st)| json!({
                         "method": method.name(),
@@ -1139,8 +1143,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             };
             server.serve(&mut m, deadline, &extra)?;
         }
-        let t_s = (m.io_mut().now_ns() - start) as f64 * 1e-9;
-        let events = m.take_events();
+        let t_s = (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9;
+        let events = m.diagnosis().take_events();
         for e in &events {
             eprintln!("t={t_s:7.3} s  {e}");
             tally.count(e);
@@ -1160,15 +1164,15 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 server.reloaded(&r);
             }
         }
-        if m.io_mut().now_ns() >= report {
-            let s = m.cycle_stats();
+        if m.cyclic().io_mut().now_ns() >= report {
+            let s = m.diagnosis().cycle_stats();
             let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
             eprintln!(
                 "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} µs  round trip {:.1} µs (max {:.1}){lock}",
-                (m.io_mut().now_ns() - start) as f64 * 1e-9,
+                (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
-                m.expected_wkc(),
+                m.image().expected_wkc(),
                 crate::count(s.wkc_errors as usize, "error", "").trim_end(),
                 s.max_jitter_ns as f64 / 1000.0,
                 s.last_round_trip_ns as f64 / 1000.0,
@@ -1176,13 +1180,13 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             );
             // The values asked for with --show, at the report's rate.
             if !shown.is_empty() {
-                let values: Vec<String> = shown.iter().map(|(n, h)| format!("{n} = {}", m.get(*h))).collect();
+                let values: Vec<String> = shown.iter().map(|(n, h)| format!("{n} = {}", m.image().get(*h))).collect();
                 eprintln!("          {}", values.join("; "));
             }
             report += 1_000_000_000;
         }
         if !max_rate {
-            let now = m.io_mut().now_ns();
+            let now = m.cyclic().io_mut().now_ns();
             if now > next {
                 overruns += 1;
                 // A whole cycle or more behind (a stall): the cycles missed are skipped, on the
@@ -1194,8 +1198,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                     skipped += missed;
                 }
             }
-            m.io_mut().sleep_until(next);
-            let woke = m.io_mut().now_ns();
+            m.cyclic().io_mut().sleep_until(next);
+            let woke = m.cyclic().io_mut().now_ns();
             wake_late.add(woke.saturating_sub(next));
             if let Some(prev) = last_wake {
                 jitter.add((woke - prev).abs_diff(planned_period));
@@ -1205,13 +1209,13 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     }
     let cpu = cpu_ns() - cpu0;
     for b in &bridges {
-        eprintln!("{}", b.summary(&m)?);
+        eprintln!("{}", b.summary(&mut m)?);
     }
     if dc {
-        eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc_monitor()?);
+        eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc().dc_monitor()?);
     }
-    let wall = m.io_mut().now_ns() - start;
-    let s = m.cycle_stats();
+    let wall = m.cyclic().io_mut().now_ns() - start;
+    let s = m.diagnosis().cycle_stats();
     eprintln!(
         "cyclic rate {:.0} cycles/s; master CPU time {:.2} µs per cycle",
         s.cycles as f64 / (wall as f64 * 1e-9),
@@ -1230,13 +1234,14 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // Where the simulator knows the truth: the reference's true time less the method's belief
     // of it now, for a method that keeps one (the reference following the master, or a master
     // clock of its own).
-    let true_offset_ns = match (&sync, m.dc_reference()) {
+    let true_offset_ns = match (&sync, m.dc().dc_reference()) {
         (Some((method, _)), Some(station)) => {
-            let t = m.io_mut().now_ns();
-            let own = m.master_system_time_at(t);
+            let t = m.cyclic().io_mut().now_ns();
+            let own = m.clock().master_system_time_at(t);
             let keeps_clock =
                 method.coupling() == Coupling::ReferenceFollowsMaster || method.master_time(own).is_some();
-            m.io_mut()
+            m.cyclic()
+                .io_mut()
                 .true_system_time(station, t)
                 .filter(|_| keeps_clock)
                 .map(|truth| truth.wrapping_sub(method.reference_belief_ns(own)) as i64)
@@ -1246,7 +1251,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // What the control socket and the shared image served (they go now).
     let image_stats = shared.take().map(|i| i.stats());
     let control_json = control.take().map(|server| {
-        let a = m.acyclic_stats();
+        let a = m.acyclic().acyclic_stats();
         let path = server.path().display().to_string();
         drop(server);
         json!({
@@ -1300,16 +1305,16 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wkc_errors": s.wkc_errors,
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,
                 "max_round_trip_us": s.max_round_trip_ns as f64 / 1000.0,
-                "frames_lost": m.frame_stats().lost,
+                "frames_lost": m.cyclic().frame_stats().lost,
                 "overruns": overruns,
                 "cycles_skipped": skipped,
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
                 "slaves": tally.to_json(m.slaves().iter().filter(|s| s.state() == ferrocat_wire::register::AlState::Op).count(), m.slaves().len()),
-                "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.get(*h)))).collect::<serde_json::Map<_, _>>(),
-                "diagnosis": diagnosis_json(&m, &tally, o.diagnosis_ms),
-                "groups": groups_json(&m),
+                "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.image().get(*h)))).collect::<serde_json::Map<_, _>>(),
+                "diagnosis": diagnosis_json(&mut m, &tally, o.diagnosis_ms),
+                "groups": groups_json(&mut m),
                 "control": control_json,
             })
         );
@@ -1319,7 +1324,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             s.wkc_errors,
             s.max_jitter_ns as f64 / 1000.0,
             s.max_round_trip_ns as f64 / 1000.0,
-            m.frame_stats().lost
+            m.cyclic().frame_stats().lost
         );
         if !max_rate {
             outln!(
@@ -1346,11 +1351,12 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             }
         }
         for (n, h) in &shown {
-            let v = m.get(*h);
+            let v = m.image().get(*h);
             outln!("{n} = {v} ({v:#x})");
         }
-        if let Some(plan) = m.plan() {
-            for (f, s) in m.plan_frame_stats().iter().enumerate() {
+        let frame_stats = m.diagnosis().plan_frame_stats();
+        if let Some(plan) = m.config().plan() {
+            for (f, s) in frame_stats.iter().enumerate() {
                 let name = plan.frame_names.get(f).cloned().unwrap_or_else(|| format!("frame {f}"));
                 let every = match plan.every(f) {
                     1 => String::from("every cycle"),
@@ -1366,7 +1372,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             }
         }
         if o.diagnosis_ms.is_some() {
-            let d = m.diagnosis_stats();
+            let d = m.diagnosis().diagnosis_stats();
             outln!(
                 "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies; {} sync-error flag reads, {} found set",
                 d.counter_reads,
@@ -1387,23 +1393,23 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             }
         }
     }
-    if m.io_mut().has_secondary() {
-        let ring = match m.ring_state() {
+    if m.cyclic().io_mut().has_secondary() {
+        let ring = match m.diagnosis().ring_state() {
             ferrocat_master::RingState::Intact => "intact",
             ferrocat_master::RingState::Broken => "broken",
             ferrocat_master::RingState::Line => "open (no answer on the secondary port)",
             ferrocat_master::RingState::Unknown => "unknown",
         };
-        outln!("ring {ring} at the end; {} frames sent round the far half again", m.frame_stats().resent);
+        outln!("ring {ring} at the end; {} frames sent round the far half again", m.cyclic().frame_stats().resent);
     }
     // A master that stops takes its slaves down in order (outputs to their safe state, then
     // process data and mailboxes off), as a service stopped by SIGTERM must.
     if !o.keep_state {
-        let t0 = m.io_mut().now_ns();
-        match m.shut_down() {
+        let t0 = m.cyclic().io_mut().now_ns();
+        match m.states().shut_down() {
             Ok(()) => eprintln!(
                 "slaves stepped down to SAFEOP, then INIT ({:.1} ms)",
-                (m.io_mut().now_ns() - t0) as f64 / 1e6
+                (m.cyclic().io_mut().now_ns() - t0) as f64 / 1e6
             ),
             Err(e) => eprintln!("ferrocat: warning: stepping the slaves down to INIT: {e}"),
         }
@@ -1413,9 +1419,10 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
 }
 
 /// The summary's `groups`: each frame of a plan (a process-data group's, an ENI's), or null.
-fn groups_json(m: &ferrocat_master::Master<crate::target::CliIo>) -> serde_json::Value {
-    let Some(plan) = m.plan() else { return serde_json::Value::Null };
-    m.plan_frame_stats()
+fn groups_json(m: &mut ferrocat_master::Master<crate::target::CliIo>) -> serde_json::Value {
+    let stats = m.diagnosis().plan_frame_stats();
+    let Some(plan) = m.config().plan() else { return serde_json::Value::Null };
+    stats
         .iter()
         .enumerate()
         .map(|(f, s)| {
@@ -1434,14 +1441,15 @@ fn groups_json(m: &ferrocat_master::Master<crate::target::CliIo>) -> serde_json:
 
 /// The summary's `diagnosis`: what was read, and each slave's error counters that are not 0.
 fn diagnosis_json(
-    m: &ferrocat_master::Master<crate::target::CliIo>,
+    m: &mut ferrocat_master::Master<crate::target::CliIo>,
     tally: &SlaveTally,
     period_ms: Option<u64>,
 ) -> serde_json::Value {
     let Some(ms) = period_ms else { return serde_json::Value::Null };
-    let d = m.diagnosis_stats();
-    let counters: Vec<serde_json::Value> = m
-        .error_counters()
+    let d = m.diagnosis().diagnosis_stats();
+    let sync_error_flags = m.diagnosis().sync_error_flags().to_vec();
+    let error_counters = m.diagnosis().error_counters().to_vec();
+    let counters: Vec<serde_json::Value> = error_counters
         .iter()
         .enumerate()
         .filter_map(|(k, c)| {
@@ -1472,8 +1480,7 @@ fn diagnosis_json(
         "txpdo_watched": d.txpdo_watched,
         "inputs_invalid": d.inputs_invalid,
         "inputs_stale": d.inputs_stale,
-        "sync_error_flags": m
-            .sync_error_flags()
+        "sync_error_flags": sync_error_flags
             .iter()
             .enumerate()
             .filter(|(_, f)| f.outputs.is_some() || f.inputs.is_some())

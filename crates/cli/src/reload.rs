@@ -40,7 +40,8 @@ pub fn reload(
         let was = old.and_then(|o| o.slaves.get(k));
         if was.map(|w| w.watchdog_us) != Some(s.watchdog_us) {
             if let Some(us) = s.watchdog_us {
-                m.submit_process_data_watchdog(k as u16, us as u64 * 1000)
+                m.acyclic()
+                    .submit_process_data_watchdog(k as u16, us as u64 * 1000)
                     .map_err(|e| format!("slave {k} ({})'s watchdog_us: {e}", s.name))?;
                 done.push(format!("slave {k}'s process-data watchdog to {us} µs"));
             }
@@ -61,7 +62,7 @@ pub fn reload(
     let names = crate::values::Names { eni, machine: Some(&new) };
     let copies = crate::values::copies(m, names, copy_flags).map_err(|e| format!("copies: {e:#}"))?;
     let n = copies.len();
-    m.set_copies(copies).map_err(|e| format!("copies: {e}"))?;
+    m.cyclic().set_copies(copies).map_err(|e| format!("copies: {e}"))?;
     done.push(format!("{n} slave-to-slave cop{}", if n == 1 { "y" } else { "ies" }));
     *last = Some(new);
     let mut said = format!("{} read again: {}", path.display(), done.join("; "));

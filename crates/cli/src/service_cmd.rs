@@ -209,10 +209,10 @@ pub fn reg_read(t: &Target, position: u16, register: u16, len: u16) -> anyhow::R
         None => {
             let mut m = t.master()?;
             t.scan(&mut m)?;
-            let station = m.slave(position)?.station();
+            let station = m.slaves().at(position)?.station();
             let mut b = vec![0u8; len as usize];
             let a = ferrocat_master::Address::Device { adp: station, ado: register };
-            m.expect_datagram(ferrocat_master::Command::FPRD, a, &mut b, 1)?;
+            m.cyclic().expect_datagram(ferrocat_master::Command::FPRD, a, &mut b, 1)?;
             crate::target::finish(m)?;
             b
         }
@@ -234,10 +234,10 @@ pub fn reg_write(t: &Target, position: u16, register: u16, data: &str) -> anyhow
         None => {
             let mut m = t.master()?;
             t.scan(&mut m)?;
-            let station = m.slave(position)?.station();
+            let station = m.slaves().at(position)?.station();
             let a = ferrocat_master::Address::Device { adp: station, ado: register };
             let mut b = bytes.clone();
-            m.expect_datagram(ferrocat_master::Command::FPWR, a, &mut b, 1)?;
+            m.cyclic().expect_datagram(ferrocat_master::Command::FPWR, a, &mut b, 1)?;
             crate::target::finish(m)?;
         }
     }
@@ -339,7 +339,7 @@ pub fn pdos(t: &Target, position: u16, json: bool) -> anyhow::Result<ExitCode> {
             let mut m = t.master()?;
             t.scan(&mut m)?;
             t.configure(&mut m)?;
-            let p = ferrocat_service::pdos_of(m.slave(position)?);
+            let p = ferrocat_service::pdos_of(m.slaves().at(position)?);
             crate::target::finish(m)?;
             p
         }

@@ -353,10 +353,10 @@ impl Target {
             None => None,
         };
         let mut m = Master::new(CliIo { world, capture });
-        m.set_split_ring_clocks(self.split_ring_clocks.into());
+        m.dc().set_split_ring_clocks(self.split_ring_clocks.into());
         // A machine description's process-data groups.
         if let Some(d) = self.machine_file()? {
-            m.set_groups(
+            m.config().set_groups(
                 d.groups
                     .iter()
                     .map(|g| ferrocat_master::Group {
@@ -369,13 +369,13 @@ impl Target {
         }
         // An ENI's own layout: its station addresses, FMMUs, SyncManagers and cyclic frames.
         if let (Some(eni), Some(p)) = (self.eni_file()?, &self.eni) {
-            m.set_plan(crate::eni::plan(eni)).with_context(|| format!("{}", p.display()))?;
+            m.config().set_plan(crate::eni::plan(eni)).with_context(|| format!("{}", p.display()))?;
         }
         for f in &self.esi {
             let xml = ferrocat_segment::files::read_esi(f).with_context(|| format!("reading {}", f.display()))?;
             let file = ferrocat_esi::EsiFile::parse(&xml).with_context(|| format!("{}", f.display()))?;
             for d in file.devices {
-                m.add_esi(file.vendor_id, d);
+                m.config().add_esi(file.vendor_id, d);
             }
         }
         Ok(m)
@@ -413,13 +413,13 @@ impl Target {
     /// The master's configuration to PREOP, and a machine description's PDO assignments
     /// (`rx_pdos`, `tx_pdos`) in place of the slaves' own.
     pub fn configure(&self, m: &mut Master<CliIo>) -> anyhow::Result<()> {
-        m.configure()?;
+        m.states().configure()?;
         let (Some(d), Some(path)) = (self.machine_file()?, &self.machine) else { return Ok(()) };
         let found = m.slaves().len();
         for (k, s) in d.slaves.iter().enumerate().filter(|(k, _)| *k < found) {
             for (outputs, pdos) in [(true, &s.rx_pdos), (false, &s.tx_pdos)] {
                 if let Some(pdos) = pdos {
-                    m.remap(k as u16, outputs, pdos).with_context(|| {
+                    m.config().remap(k as u16, outputs, pdos).with_context(|| {
                         format!(
                             "{}: slave {k} ({})'s {}",
                             path.display(),
@@ -442,7 +442,7 @@ impl Target {
         if self.allow_mismatch && expected.is_none() {
             bail!("--allow-mismatch goes with --eni or --machine");
         }
-        m.scan().map_err(|e| crate::words::first_contact(self.place(), e.into()))?;
+        m.states().scan().map_err(|e| crate::words::first_contact(self.place(), e.into()))?;
         if let Some((path, expected)) = expected {
             crate::eni::check(path, &expected, m.slaves(), self.allow_mismatch)?;
         }
@@ -451,10 +451,11 @@ impl Target {
             let found = m.slaves().len();
             for (k, s) in d.slaves.iter().enumerate().filter(|(k, _)| *k < found) {
                 if let Some(us) = s.watchdog_us {
-                    m.set_process_data_watchdog(k as u16, us as u64 * 1000)
+                    m.config()
+                        .set_process_data_watchdog(k as u16, us as u64 * 1000)
                         .with_context(|| format!("{}: slave {k} ({})'s watchdog_us", path.display(), s.name))?;
                 }
-                let setup = m.setup_mut(k as u16)?;
+                let setup = m.config().setup_mut(k as u16)?;
                 setup.init_cmds = s.init.clone();
                 setup.modules = s.modules.clone();
             }

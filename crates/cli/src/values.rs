@@ -21,7 +21,9 @@ pub fn handle<I: Io>(m: &Master<I>, names: Names<'_>, name: &str, output: bool) 
         let pi = &e.process_image;
         let found = pi.outputs.variables.iter().find(|v| v.name == name).map(|v| (v, 0)).or_else(|| {
             (!output)
-                .then(|| pi.inputs.variables.iter().find(|v| v.name == name).map(|v| (v, m.image_bytes().0 * 8)))
+                .then(|| {
+                    pi.inputs.variables.iter().find(|v| v.name == name).map(|v| (v, m.image().byte_counts().0 * 8))
+                })
                 .flatten()
         });
         if let Some((v, base)) = found {
@@ -29,7 +31,7 @@ pub fn handle<I: Io>(m: &Master<I>, names: Names<'_>, name: &str, output: bool) 
                 bail!("'{name}' has {} bits: values of at most 64 bits are read and written", v.bit_size);
             }
             let h = Handle { bit: base + v.bit_offs, bits: v.bit_size as u8 };
-            if (h.bit as u64 + h.bits as u64).div_ceil(8) > m.image().len() as u64 {
+            if (h.bit as u64 + h.bits as u64).div_ceil(8) > m.image().bytes().len() as u64 {
                 bail!("'{name}' lies past the process image (a variable no cyclic frame carries)");
             }
             return Ok(h);
@@ -39,7 +41,11 @@ pub fn handle<I: Io>(m: &Master<I>, names: Names<'_>, name: &str, output: bool) 
         }
     }
     let entry_of = |pos: u16, entry: &str| -> anyhow::Result<Handle> {
-        Ok(if output { m.output(pos, entry)? } else { m.input(pos, entry).or_else(|_| m.output(pos, entry))? })
+        Ok(if output {
+            m.image().output(pos, entry)?
+        } else {
+            m.image().input(pos, entry).or_else(|_| m.image().output(pos, entry))?
+        })
     };
     if let Some(v) = names.machine.and_then(|d| d.variables.iter().find(|v| v.name == name.trim())) {
         return entry_of(v.position, &v.entry)
@@ -92,7 +98,7 @@ pub fn copies<I: Io>(m: &Master<I>, names: Names<'_>, flags: &[String]) -> anyho
             while done < c.bits {
                 let bits = (c.bits - done).min(64) as u8;
                 out.push((
-                    Handle { bit: m.image_bytes().0 * 8 + c.src_bit + done, bits },
+                    Handle { bit: m.image().byte_counts().0 * 8 + c.src_bit + done, bits },
                     Handle { bit: c.dst_bit + done, bits },
                 ));
                 done += bits as u32;

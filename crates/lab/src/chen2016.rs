@@ -116,8 +116,8 @@ fn prepare(o: &Options) -> crate::Result<(Master<VirtualIo>, Vec<u16>, Setup)> {
         None => toml::from_str(&toml)?,
     };
     let mut m = Master::new(VirtualIo::new(cfg.build()?, o.host, o.seed));
-    m.scan()?;
-    m.configure()?;
+    m.states().scan()?;
+    m.states().configure()?;
     let dc_synchronous = |k: usize| {
         crate::node_of(&m, k)
             .and_then(|n| m.io().seg.nodes[n].esc.app().as_any().downcast_ref::<SyncApp>())
@@ -148,14 +148,14 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
     let cycle_ns = cycle_us * 1000;
     let (mut m, synced, setup) = prepare(o)?;
     // SYNC0 half a cycle after the reference's cycle grid (Chen §6: "half the cycle time").
-    m.init_dc(&DcConfig {
+    m.dc().init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
         sync0_shift_ns: (cycle_ns / 2) as i32,
         sync0_slaves: Some(synced),
         start_delay_ns: 20_000_000,
         ..DcConfig::default()
     })?;
-    m.start()?;
+    m.states().start()?;
     let mut sync: Box<dyn ClockSync> = if name == "ferrocat" {
         // ferrocat knows the SYNC0 its frames serve, and holds a frame back after a late one.
         let mut f = Ferrocat::new(Coupling::MasterFollowsReference, cycle_ns).with_flywheel();
@@ -164,7 +164,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
     } else {
         crate::method(name, &mut m, cycle_ns, Coupling::MasterFollowsReference)?
     };
-    let mut st = m.sync_state()?;
+    let mut st = m.clock().sync_state()?;
     // Common start for every method, Chen's compensation of the initial offset and the
     // propagation delay at t1 (§3, §5.3: T_m(i) = T_s + T_p·i "after compensation for the
     // propagation delay and initial offset"): a probe frame measures where the reference's
@@ -173,14 +173,14 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
     // than the passage put every frame a lead — 27 µs on rtx-10us — into the cycle, and
     // chen2016 lost data at 100 µs where the paper lost none.)
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.io_mut().start_cycles(cycle_ns);
+    m.cyclic().io_mut().start_cycles(cycle_ns);
     let mut probe = Nominal { cycle_ns };
-    let sent = m.io_mut().now_ns();
-    m.sync_step(&mut probe, &mut st)?;
+    let sent = m.cyclic().io_mut().now_ns();
+    m.clock().sync_step(&mut probe, &mut st)?;
     let r0 = st.reference_ns.unwrap_or(0);
     // The reference read r0 one lead after `sent`; a send at sent + d passes at r0 + d.
     let mut next = sent + 2 * cycle_ns - r0 % cycle_ns;
-    m.io_mut().sleep_until(next);
+    m.cyclic().io_mut().sleep_until(next);
     for a in apps(&mut m, &setup.counted_slaves) {
         a.reset_counts();
     }
@@ -196,7 +196,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
     let mut slot = 0u64;
     for k in 0..total {
         // One frame per cycle: the process data with the sync datagrams behind it.
-        let (_, c) = m.cycle_sync(sync.as_mut(), &mut st)?;
+        let (_, c) = m.cyclic().cycle_sync(sync.as_mut(), &mut st)?;
         let period = c.next_period_ns.unwrap_or(cycle_ns);
         if let (Some(t), true) = (st.reference_ns, k >= total / 10) {
             let (k0, t0) = *first.get_or_insert((slot, t));
@@ -213,7 +213,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
         }
         slot += ((period + cycle_ns / 2) / cycle_ns).max(1);
         next += period;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
     let (lost, repeated) =
         apps(&mut m, &setup.counted_slaves).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));
@@ -230,7 +230,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
         lost,
         repeated,
         loss_rate: lost as f64 / (setup.counted_slaves.len() as u64 * cycles).max(1) as f64,
-        frames_lost: st.lost + m.cycle_stats().lost_frames,
+        frames_lost: st.lost + m.diagnosis().cycle_stats().lost_frames,
         trace,
     };
     Ok((setup, row))
@@ -249,7 +249,8 @@ fn spread_ns(n: i128, sum: i128, sq: i128) -> f64 {
 /// The applications of the slaves at `positions`.
 fn apps<'m>(m: &'m mut Master<VirtualIo>, positions: &[u16]) -> Vec<&'m mut SyncApp> {
     let nodes: Vec<usize> = positions.iter().filter_map(|&k| crate::node_of(m, k as usize)).collect();
-    m.io_mut()
+    m.cyclic()
+        .io_mut()
         .seg
         .nodes
         .iter_mut()

@@ -160,15 +160,15 @@ impl<I: World> Rig<I> {
 
     /// The cycle's frames and the clock sync's correction.
     fn exchange(&mut self) -> crate::Result<()> {
-        self.m.cycle()?;
-        let c = self.m.sync_step(self.sync.as_mut(), &mut self.st)?;
+        self.m.cyclic().cycle()?;
+        let c = self.m.clock().sync_step(self.sync.as_mut(), &mut self.st)?;
         self.next += c.next_period_ns.unwrap_or(self.cycle_ns);
         Ok(())
     }
 
     /// Until the next cycle is due.
     fn wait(&mut self) {
-        self.m.io_mut().sleep_until(self.next);
+        self.m.cyclic().io_mut().sleep_until(self.next);
     }
 
     /// The simulated drive at `k`, when the world is the in-process simulator.
@@ -182,8 +182,8 @@ impl<I: World> Rig<I> {
 /// slaves with a controlword and a statusword in their image (after `map_for_csp`).
 fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result<(Rig<I>, Vec<u16>)> {
     let cycle_ns = cycle_us * 1000;
-    m.scan()?;
-    m.configure()?;
+    m.states().scan()?;
+    m.states().configure()?;
     let mut drives = Vec::new();
     for k in 0..m.slaves().len() as u16 {
         if Axis::new(&m, k).is_err() {
@@ -193,8 +193,8 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
         // What an integrator sets up in PREOP: a torque limit and a following-error window the
         // move needs (a vendor's defaults may be far tighter), where the drive has the objects.
         for a in Axis::all(&m, k)? {
-            let _ = m.coe().sdo_write(k, a.index(ix::MAX_TORQUE), 0, &3000u16.to_le_bytes());
-            let _ = m.coe().sdo_write(k, a.index(ix::FOLLOWING_ERROR_WINDOW), 0, &13_107u32.to_le_bytes());
+            let _ = m.acyclic().coe().sdo_write(k, a.index(ix::MAX_TORQUE), 0, &3000u16.to_le_bytes());
+            let _ = m.acyclic().coe().sdo_write(k, a.index(ix::FOLLOWING_ERROR_WINDOW), 0, &13_107u32.to_le_bytes());
         }
         drives.push(k);
     }
@@ -202,7 +202,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
         return Err(LabError::NoDrive);
     }
     let shift = (cycle_ns / 2) as i32;
-    let report = m.init_dc(&DcConfig {
+    let report = m.dc().init_dc(&DcConfig {
         sync0_cycle_ns: cycle_ns as u32,
         sync0_shift_ns: shift,
         sync0_slaves: Some(drives.clone()),
@@ -212,12 +212,12 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
     // Before OP: Park's 1000 delay round trips carry no process data, and in OP the drives'
     // SM-synchronisation supervision would take them out of OP (sync error 0x001A).
     let sync = crate::method(method, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;
-    m.start()?;
-    let st = m.sync_state()?;
+    m.states().start()?;
+    let st = m.clock().sync_state()?;
     // The master's cycles on the grid: SYNC0 half a cycle after each frame leaves.
     let grid = report.sync0_start.unwrap_or(0).wrapping_sub(shift as u64);
-    let next = m.next_on_grid_ns(grid, cycle_ns);
-    m.io_mut().sleep_until(next);
+    let next = m.clock().next_on_grid_ns(grid, cycle_ns);
+    m.cyclic().io_mut().sleep_until(next);
     Ok((Rig { m, sync, st, cycle_ns, next }, drives))
 }
 
@@ -254,7 +254,7 @@ fn run_one<I: World>(
     calibrate: Calibrate<'_, I>,
 ) -> crate::Result<Row> {
     let (mut r, drives) = rig(m, cycle_us, method)?;
-    let events0 = r.m.events().len();
+    let events0 = r.m.diagnosis().events().len();
     let cycle_ns = r.cycle_ns;
     let mfr = r.sync.coupling() == Coupling::MasterFollowsReference;
     let settle_cycles = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
@@ -329,7 +329,7 @@ fn run_one<I: World>(
     let move_s = there.duration_s() + back.duration_s() + 2.0 * dwell_s;
     let cycles = (move_s * 1e9 / cycle_ns as f64).ceil() as u64;
     let simulated = r.m.io().segment().is_some();
-    if let Some(seg) = r.m.io_mut().segment_mut() {
+    if let Some(seg) = r.m.cyclic().io_mut().segment_mut() {
         for &d in &drives {
             if let Some(dr) = seg.nodes[d as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>() {
                 dr.reset_stats();
@@ -469,7 +469,7 @@ fn run_one<I: World>(
         })
         .collect();
     let enabled = drives.iter().filter(|&&d| axis_rows.iter().filter(|a| a.slave == d).all(|a| a.enabled)).count();
-    let left_op = r.m.events()[events0..]
+    let left_op = r.m.diagnosis().events()[events0..]
         .iter()
         .filter(|e| matches!(e, MasterEvent::LeftOp { position, .. } if drives.contains(position)))
         .count();
@@ -522,7 +522,7 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
     if !mfr {
         return crate::clock_error_ns(m, 0).map(|e| e as f64);
     }
-    let now = m.io_mut().now_ns();
+    let now = m.cyclic().io_mut().now_ns();
     let rsys = m.io().segment()?.nodes.first()?.esc.dc.as_ref()?.system_at(now);
     let c = cycle_ns as i64;
     let ph = (rsys % cycle_ns) as i64;
@@ -533,8 +533,8 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
 /// model's 131 072 when the drive does not say.
 fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16, index: u16) -> f64 {
     let u32_of = |v: Vec<u8>| v.get(..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-    let inc = m.coe().sdo_read(d, index, 1).ok().and_then(u32_of).unwrap_or(0);
-    let revs = m.coe().sdo_read(d, index, 2).ok().and_then(u32_of).unwrap_or(0);
+    let inc = m.acyclic().coe().sdo_read(d, index, 1).ok().and_then(u32_of).unwrap_or(0);
+    let revs = m.acyclic().coe().sdo_read(d, index, 2).ok().and_then(u32_of).unwrap_or(0);
     if inc > 0 && revs > 0 {
         inc as f64 / revs as f64
     } else {
@@ -547,8 +547,8 @@ fn increments_per_rev<I: World>(m: &mut Master<I>, d: u16, index: u16) -> f64 {
 fn sync_counters<I: World>(m: &mut Master<I>, drives: &[u16]) -> Option<(u64, u64)> {
     let mut sum = (0u64, 0u64);
     for &d in drives {
-        let late = m.coe().sdo_read(d, 0x1C32, 0x0C).ok()?;
-        let missed = m.coe().sdo_read(d, 0x1C32, 0x0B).ok()?;
+        let late = m.acyclic().coe().sdo_read(d, 0x1C32, 0x0C).ok()?;
+        let missed = m.acyclic().coe().sdo_read(d, 0x1C32, 0x0B).ok()?;
         sum.0 += u16::from_le_bytes([*late.first()?, *late.get(1)?]) as u64;
         sum.1 += u16::from_le_bytes([*missed.first()?, *missed.get(1)?]) as u64;
     }

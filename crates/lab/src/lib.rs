@@ -53,7 +53,7 @@ pub fn line(slaves: usize) -> SegmentConfig {
 /// brought up and DC-initialised, in virtual time on `host`, and `method` prepared on it for
 /// `cycle_ns`, with the DC initialisation's report (see [`master`], [`method`]). ferrocat's
 /// methods are made before the DC initialisation, so that one that steers the reference's
-/// offset does so from the static drift compensation on (`Master::init_dc_with`); the others
+/// offset does so from the static drift compensation on (`Dc::init_dc_with`); the others
 /// after it, as published.
 pub fn segment(
     cfg: &SegmentConfig,
@@ -64,7 +64,7 @@ pub fn segment(
     coupling: Coupling,
 ) -> crate::Result<(Master<VirtualIo>, Box<dyn ClockSync>, DcReport)> {
     let mut m = master(SegmentConfig { seed, ..cfg.clone() }, host, seed, method)?;
-    m.bring_up()?;
+    m.states().bring_up()?;
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
     let (sync, report) = init_with_method(&mut m, &dc, method, cycle_ns, coupling)?;
     Ok((m, sync, report))
@@ -78,18 +78,18 @@ pub fn sync_method(name: &str, coupling: Coupling) -> crate::Result<SyncMethod> 
 }
 
 /// The method named `name` made on `m`, whose DC is initialised already (see
-/// [`Master::make_clock_sync`]); `coupling` as [`sync_method`] takes it.
+/// [`Clock::make_clock_sync`](ferrocat_master::part::Clock::make_clock_sync)); `coupling` as [`sync_method`] takes it.
 pub fn method<I: World>(
     name: &str,
     m: &mut Master<I>,
     cycle_ns: u64,
     coupling: Coupling,
 ) -> crate::Result<Box<dyn ClockSync>> {
-    Ok(m.make_clock_sync(&sync_method(name, coupling)?, cycle_ns)?)
+    Ok(m.clock().make_clock_sync(&sync_method(name, coupling)?, cycle_ns)?)
 }
 
 /// `init_dc` on `m` and `method` made for it, in the order the master owns
-/// ([`Master::start_clock_sync`]); with the DC initialisation's report.
+/// ([`Clock::start_clock_sync`](ferrocat_master::part::Clock::start_clock_sync)); with the DC initialisation's report.
 pub fn init_with_method<I: World>(
     m: &mut Master<I>,
     dc: &DcConfig,
@@ -98,7 +98,7 @@ pub fn init_with_method<I: World>(
     coupling: Coupling,
 ) -> crate::Result<(Box<dyn ClockSync>, DcReport)> {
     let config = sync_method(method, coupling)?;
-    let (sync, report, _) = m.start_clock_sync(dc, &config, cycle_ns)?;
+    let (sync, report, _) = m.clock().start_clock_sync(dc, &config, cycle_ns)?;
     Ok((sync, report))
 }
 
@@ -115,7 +115,7 @@ pub fn master(cfg: SegmentConfig, host: HostModel, seed: u64, method: &str) -> c
 /// one of ferrocat's (in virtual time or against `ferrocat sim` on a real interface alike).
 pub fn tell_loop_back<I: World>(m: &mut Master<I>, method: &str) {
     if CALIBRATED.contains(&method) {
-        m.settings_mut().closed_port_loop_ns = loop_back_ns();
+        m.config().settings_mut().closed_port_loop_ns = loop_back_ns();
     }
 }
 
@@ -172,11 +172,11 @@ pub fn calibration(
     reference: usize,
     pulses: usize,
 ) -> Option<ferrocat_master::calibrate::GpioCalibration> {
-    let gpio = m.io_mut().host.gpio?;
+    let gpio = m.cyclic().io_mut().host.gpio?;
     if !CALIBRATED.contains(&method) {
         return None;
     }
-    m.io_mut().gpio_wire = Some((node_of(m, reference)?, 0));
+    m.cyclic().io_mut().gpio_wire = Some((node_of(m, reference)?, 0));
     Some(ferrocat_master::calibrate::GpioCalibration::new(reference as u16, gpio.mean_ns.round() as u64, pulses))
 }
 
@@ -194,8 +194,8 @@ pub fn dc_slaves<I: World>(m: &Master<I>) -> crate::Result<Vec<usize>> {
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
-    let t = m.io_mut().now_ns();
-    let master = m.master_system_time() as u32;
+    let t = m.cyclic().io_mut().now_ns();
+    let master = m.clock().master_system_time() as u32;
     let node = &m.io().segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);
     Some(master.wrapping_sub(slave) as i32 as i64)

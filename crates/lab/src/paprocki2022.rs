@@ -79,7 +79,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<Row> {
         None => toml::from_str(&toml)?,
     };
     let mut m = crate::master(cfg, o.host, o.seed, name)?;
-    m.bring_up()?;
+    m.states().bring_up()?;
     let dc = crate::dc_slaves(&m)?;
     // The paper's line is the master and two drives, the first the reference; the default
     // segment puts a coupler before them, whose clock is then the reference.
@@ -99,22 +99,22 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<Row> {
     if !o.drive_delay_compensated {
         // The delay register as a master that never wrote it leaves it: the drive's loop then
         // steers its time onto the reference's as it arrives, one hop late.
-        if let Some(d) = m.io_mut().seg.nodes[nodes[1] as usize].esc.dc.as_mut() {
+        if let Some(d) = m.cyclic().io_mut().seg.nodes[nodes[1] as usize].esc.dc.as_mut() {
             d.delay = 0;
         }
     }
-    let mut st = m.sync_state()?;
+    let mut st = m.clock().sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut sync0 = crate::stats::Sync0Stats::default();
     let mut k = 0u64;
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.io_mut().start_cycles(cycle_ns);
+    m.cyclic().io_mut().start_cycles(cycle_ns);
     while (sync0.diffs.n as usize) < o.samples {
-        m.cycle()?;
-        let c = m.sync_step(sync.as_mut(), &mut st)?;
+        m.cyclic().cycle()?;
+        let c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         next += c.next_period_ns.unwrap_or(cycle_ns);
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         k += 1;
         if k >= settle + 100 * o.samples as u64 {
             return Err(LabError::Sync0Stopped);

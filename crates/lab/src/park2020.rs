@@ -124,10 +124,10 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let (mut m, mut sync, dc_report) =
         crate::segment(&cfg, opts.host, seed, method, opts.cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let dc = crate::dc_slaves(&m)?;
-    let mut st = m.sync_state()?;
+    let mut st = m.clock().sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
     let total = settle + opts.samples * opts.sample_every;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut r = Round::default();
     if keep {
         r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
@@ -162,15 +162,15 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
         }
     };
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.io_mut().start_cycles(opts.cycle_ns);
+    m.cyclic().io_mut().start_cycles(opts.cycle_ns);
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         if k % opts.sample_every == 0 {
             sampler.arm(&mut m, next, opts.cycle_ns, k);
         }
-        c = m.sync_step(sync.as_mut(), &mut st)?;
+        c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         if let Some(cal) = calibration.as_mut().filter(|_| crate::calibration_cycle(k, settle)) {
             r.calibration_ns = r.calibration_ns.or(cal.pulse(&mut m, sync.as_mut())?);
         }

@@ -156,16 +156,16 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
     // The master waits a quarter of the cycle for its frame (SOEM's examples wait 2 ms, IgH
     // until the next cycle): what is not back by then is lost, and a method may still make up
     // for it before the next cycle.
-    m.settings_mut().cyclic_timeout_ns = o.cycle_ns / 4;
+    m.config().settings_mut().cyclic_timeout_ns = o.cycle_ns / 4;
     let dc = crate::dc_slaves(&m)?;
     let reference = dc[0];
     let reference_node = crate::node_of(&m, reference).unwrap_or(0);
-    let mut st = m.sync_state()?;
+    let mut st = m.clock().sync_state()?;
     let per_s = 1e9 / o.cycle_ns as f64;
     let settle = (o.settle_s * per_s) as u64;
     let window = (o.band_window_s * per_s) as u64;
     let after = (o.after_s * per_s) as u64;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut before, mut late) = (Moments::default(), Moments::default());
     // From the band window on: the control's pairing checks the window is the same.
     let mut errors = Vec::with_capacity((window + after) as usize);
@@ -207,7 +207,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
         }
     };
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
-    m.io_mut().start_cycles(o.cycle_ns);
+    m.cyclic().io_mut().start_cycles(o.cycle_ns);
     for k in 0..settle + after {
         if k + window == settle {
             probes_window = st.probing.sent;
@@ -217,18 +217,18 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
             events0 = sync.line_events();
             lost0 = st.lost;
             make_ups0 = st.make_ups;
-            let now = m.io_mut().now_ns();
+            let now = m.cyclic().io_mut().now_ns();
             match scenario {
-                "loss-1pct" => m.io_mut().seg.loss_probability = 0.01,
+                "loss-1pct" => m.cyclic().io_mut().seg.loss_probability = 0.01,
                 "drift-step-50ppm" => {
-                    m.io_mut().seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
+                    m.cyclic().io_mut().seg.schedule(now, Event::DriftStep { node: reference_node, delta_ppb: 50_000 })
                 }
                 FOLLOWER_DRIFT_STEP => {
                     let Some(&follower) = dc.get(1) else {
                         return Err(LabError::TooFewDcSlaves { what: FOLLOWER_DRIFT_STEP, needed: 2, found: dc.len() });
                     };
                     let node = crate::node_of(&m, follower).unwrap_or(0);
-                    m.io_mut().seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
+                    m.cyclic().io_mut().seg.schedule(now, Event::DriftStep { node, delta_ppb: 50_000 })
                 }
                 // The master's task misses three periods: no frame, no correction.
                 "overrun-3-cycles" => next += 3 * o.cycle_ns,
@@ -236,7 +236,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
                     let Some(ring) = m.io().seg.secondary() else {
                         return Err(LabError::NeedsRing(RING_CABLE_PULLED));
                     };
-                    m.io_mut().seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
+                    m.cyclic().io_mut().seg.schedule(now, Event::LinkDown { node: ring.node, port: 0 })
                 }
                 CONTROL => {}
                 other => return Err(LabError::UnknownDisturbance { name: other.into(), known: KNOWN.join(", ") }),
@@ -244,9 +244,9 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
         }
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, o.cycle_ns, &c);
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         sampler.arm(&mut m, next, o.cycle_ns, k);
-        c = m.sync_step(sync.as_mut(), &mut st)?;
+        c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         if let Some(cal) =
             calibration.as_mut().filter(|_| k < calibrated_by && crate::calibration_cycle(k, calibrated_by))
         {

@@ -45,7 +45,7 @@ impl Sampler {
     /// Arms sample `tag` at an instant drawn uniformly over `[start_ns, start_ns + span_ns)`.
     pub fn arm(&mut self, m: &mut Master<VirtualIo>, start_ns: u64, span_ns: u64, tag: u64) {
         let at = start_ns + self.rng.gen_range(0..span_ns.max(1));
-        m.io_mut().seg.watch(at);
+        m.cyclic().io_mut().seg.watch(at);
         self.armed.push_back((tag, at, None));
     }
 
@@ -59,7 +59,7 @@ impl Sampler {
             *master = Some(master_at(m, sync, *at));
         }
         let mut out = Vec::new();
-        while let Some(w) = m.io_mut().seg.watched() {
+        while let Some(w) = m.cyclic().io_mut().seg.watched() {
             out.extend(self.sample(m, sync, w));
         }
         out
@@ -68,7 +68,7 @@ impl Sampler {
     /// Every sample still armed, read from the clocks as they stand (the end of a run).
     pub fn rest(&mut self, m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> Vec<Sample> {
         let mut out = self.after_cycle(m, sync);
-        while let Some(w) = m.io_mut().seg.watched_now() {
+        while let Some(w) = m.cyclic().io_mut().seg.watched_now() {
             out.extend(self.sample(m, sync, w));
         }
         out
@@ -100,7 +100,7 @@ impl Sampler {
 /// The master's clock at true time `at_ns` (low 32 bits): its own, or where it follows the
 /// reference, the method's estimate of the reference's time.
 fn master_at(m: &mut Master<VirtualIo>, sync: &dyn ClockSync, at_ns: u64) -> u32 {
-    let own = m.master_system_time_at(at_ns);
+    let own = m.clock().master_system_time_at(at_ns);
     sync.master_time(own).unwrap_or(own) as u32
 }
 

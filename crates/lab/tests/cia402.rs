@@ -16,17 +16,18 @@ fn master(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) -> Master<
     let toml = format!("seed = 3\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\n{drive_toml}\n");
     let cfg: SegmentConfig = toml::from_str(&toml).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.scan().unwrap();
-    m.configure().unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
     prepare(&mut m);
-    m.init_dc(&DcConfig {
-        sync0_slaves: Some(vec![DRIVE]),
-        sync0_shift_ns: 500_000,
-        start_delay_ns: 10_000_000,
-        ..DcConfig::default()
-    })
-    .unwrap();
-    m.start().unwrap();
+    m.dc()
+        .init_dc(&DcConfig {
+            sync0_slaves: Some(vec![DRIVE]),
+            sync0_shift_ns: 500_000,
+            start_delay_ns: 10_000_000,
+            ..DcConfig::default()
+        })
+        .unwrap();
+    m.states().start().unwrap();
     // Until SYNC0 runs, a DC-synchronous drive takes no set-points.
     cycles(&mut m, 20);
     m
@@ -34,9 +35,9 @@ fn master(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) -> Master<
 
 fn cycles(m: &mut Master<VirtualIo>, n: u64) {
     for _ in 0..n {
-        m.cycle().unwrap();
-        let now = m.io_mut().now_ns();
-        m.io_mut().sleep_until(now + CYCLE_NS);
+        m.cyclic().cycle().unwrap();
+        let now = m.cyclic().io_mut().now_ns();
+        m.cyclic().io_mut().sleep_until(now + CYCLE_NS);
     }
 }
 
@@ -81,10 +82,10 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     up(&mut m, &a);
     assert_eq!(command(&mut m, &a, 0x00), Some(SwitchOnDisabled), "9");
     // Quick stop with option code 2: decelerate, then switch on disabled (11, 12).
-    m.coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &2i16.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &2i16.to_le_bytes()).unwrap();
     up(&mut m, &a);
     a.write_controlword(&mut m, 0x02);
-    m.cycle().unwrap();
+    m.cyclic().cycle().unwrap();
     let mut seen_quick_stop = false;
     for _ in 0..50 {
         cycles(&mut m, 1);
@@ -99,7 +100,7 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     assert!(seen_quick_stop, "11: quick stop active first");
     assert_eq!(State::from_statusword(a.statusword(&m)), Some(SwitchOnDisabled), "12");
     // Option code 6: stay in quick stop active; enable operation returns (16).
-    m.coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &6i16.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &6i16.to_le_bytes()).unwrap();
     up(&mut m, &a);
     assert_eq!(command(&mut m, &a, 0x02), Some(QuickStopActive), "11");
     cycles(&mut m, 20);
@@ -108,9 +109,9 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     assert_eq!(command(&mut m, &a, 0x0F), Some(OperationEnabled), "16");
     // 13, 14: a blocked axis (its torque limit below friction) behind a target beyond the
     // following-error window for longer than the window's timeout.
-    m.take_events();
-    m.coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &1u16.to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes()).unwrap();
+    m.diagnosis().take_events();
+    m.acyclic().coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &1u16.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes()).unwrap();
     let p = a.position_actual(&m).unwrap();
     a.set_target_position(&mut m, p.wrapping_add(30_000));
     let mut states = Vec::new();
@@ -126,19 +127,19 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     }
     // At standstill the fault reaction (13) ends at once; `run_modes` sees it while moving.
     assert_eq!(states.last(), Some(&Some(Fault)), "13, 14: {states:?}");
-    let code = m.coe().sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
+    let code = m.acyclic().coe().sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
     assert_eq!(u16::from_le_bytes([code[0], code[1]]), error_code::FOLLOWING_ERROR);
-    m.poll_mailboxes().unwrap();
+    m.acyclic().poll_mailboxes().unwrap();
     assert!(
-        m.events().iter().any(|e| matches!(e, MasterEvent::Emergency { error_code: 0x8611, .. })),
+        m.diagnosis().events().iter().any(|e| matches!(e, MasterEvent::Emergency { error_code: 0x8611, .. })),
         "an emergency: {:?}",
-        m.events()
+        m.diagnosis().events()
     );
-    m.coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes()).unwrap();
     // Faults ignore everything but a rising edge of bit 7 (15).
     assert_eq!(command(&mut m, &a, 0x0F), Some(Fault));
     assert_eq!(command(&mut m, &a, 0x80), Some(SwitchOnDisabled), "15");
-    let code = m.coe().sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
+    let code = m.acyclic().coe().sdo_read(DRIVE, ix::ERROR_CODE, 0).unwrap();
     assert_eq!(code[..2], [0, 0], "the error code clears with the reset");
     // The driver brings it back from a fault on its own.
     drive_mut(&mut m).inject_fault(error_code::OVERCURRENT);
@@ -150,7 +151,7 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
 }
 
 fn drive_mut(m: &mut Master<VirtualIo>) -> &mut Cia402Drive {
-    m.io_mut().seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
+    m.cyclic().io_mut().seg.nodes[DRIVE as usize].esc.app_mut().as_any_mut().downcast_mut::<Cia402Drive>().unwrap()
 }
 
 /// 500 cycles of position set-points from `p0`: up to `v` (increments/s) over 100 ms, then at
@@ -238,9 +239,9 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
             break;
         }
     }
-    let (w0, t0) = (drive(&m).velocity_increments(), m.io_mut().now_ns());
+    let (w0, t0) = (drive(&m).velocity_increments(), m.cyclic().io_mut().now_ns());
     cycles(&mut m, 100);
-    let dt = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
+    let dt = (m.cyclic().io_mut().now_ns() - t0) as f64 * 1e-9;
     let d = drive(&m);
     let p = *d.motor();
     let accel = (d.velocity_increments() - w0) / per_rev * std::f64::consts::TAU / dt;
@@ -284,7 +285,8 @@ fn needs_shared_nanotec_esi_runs_csp_csv_and_cst_after_remapping() {
     run_modes(&nanotec(), &|m| {
         // The ESI's default PDOs carry no target velocity or torque: map them into 0x1602 and
         // their actual values into 0x1A02, as an integrator would.
-        let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.coe().sdo_write(DRIVE, i, s, v).unwrap();
+        let w =
+            |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.acyclic().coe().sdo_write(DRIVE, i, s, v).unwrap();
         w(m, 0x1602, 0, &[0]);
         w(m, 0x1602, 1, &0x60FF_0020u32.to_le_bytes());
         w(m, 0x1602, 2, &0x6071_0010u32.to_le_bytes());
@@ -293,8 +295,8 @@ fn needs_shared_nanotec_esi_runs_csp_csv_and_cst_after_remapping() {
         w(m, 0x1A02, 1, &0x606C_0020u32.to_le_bytes());
         w(m, 0x1A02, 2, &0x6077_0010u32.to_le_bytes());
         w(m, 0x1A02, 0, &[2]);
-        m.remap(DRIVE, true, &[0x1600, 0x1601, 0x1602]).unwrap();
-        m.remap(DRIVE, false, &[0x1A00, 0x1A01, 0x1A02]).unwrap();
+        m.config().remap(DRIVE, true, &[0x1600, 0x1601, 0x1602]).unwrap();
+        m.config().remap(DRIVE, false, &[0x1A00, 0x1A01, 0x1A02]).unwrap();
         // The Nanotec's defaults (a 10 % torque limit, a 256-increment window) are tighter than
         // the test's moves: set them as an integrator would.
         w(m, ix::MAX_TORQUE, 0, &3000u16.to_le_bytes());
@@ -315,9 +317,9 @@ fn the_builtin_servo_runs_profile_position() {
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
     let per_rev = drive(&m).motor().increments_per_rev;
     // 3 rev/s, 30 rev/s² both ways; 2 revolutions from here.
-    m.coe().sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((3.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((3.0 * per_rev) as u32).to_le_bytes()).unwrap();
     for i in [ix::PROFILE_ACCELERATION, ix::PROFILE_DECELERATION] {
-        m.coe().sdo_write(DRIVE, i, 0, &((30.0 * per_rev) as u32).to_le_bytes()).unwrap();
+        m.acyclic().coe().sdo_write(DRIVE, i, 0, &((30.0 * per_rev) as u32).to_le_bytes()).unwrap();
     }
     let start = a.position_actual(&m).unwrap();
     let target = start.wrapping_add((2.0 * per_rev) as i32);
@@ -353,7 +355,7 @@ fn needs_shared_akd_eeprom_walks_every_transition() {
     let p = ferrocat_testdata::shared("captures/eeprom/akd.hex");
     walk_every_transition(&format!("eeprom = '{}'", p.display()), &|m| {
         map_for_csp(m, DRIVE).unwrap();
-        let s = m.slave(DRIVE).unwrap();
+        let s = m.slaves().at(DRIVE).unwrap();
         assert!(
             s.mapping().outputs.iter().any(|e| e.index == 0x607A)
                 && s.mapping().inputs.iter().any(|e| e.index == 0x6064)
@@ -391,9 +393,9 @@ fn until(m: &mut Master<VirtualIo>, a: &Axis, max: u64, done: &dyn Fn(u16) -> bo
 fn the_builtin_servo_runs_profile_velocity() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
-    m.coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((40.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::VELOCITY_WINDOW_TIME, 0, &100u16.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((40.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::VELOCITY_WINDOW_TIME, 0, &100u16.to_le_bytes()).unwrap();
     assert_ne!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "standing before the move");
     let target = (4.0 * per_rev) as i32;
     a.set_target_velocity(&mut m, target);
@@ -421,10 +423,19 @@ fn halt_stops_as_its_option_code_says() {
     let mut stops = Vec::new();
     for code in [1i16, 2, 3] {
         let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
-        m.coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
-        m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
-        m.coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes()).unwrap();
-        m.coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
+        m.acyclic()
+            .coe()
+            .sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes())
+            .unwrap();
+        m.acyclic()
+            .coe()
+            .sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes())
+            .unwrap();
+        m.acyclic()
+            .coe()
+            .sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes())
+            .unwrap();
+        m.acyclic().coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
         let target = (4.0 * per_rev) as i32;
         a.set_target_velocity(&mut m, target);
         cycles(&mut m, 5);
@@ -459,9 +470,9 @@ fn halt_stops_as_its_option_code_says() {
 fn halt_interrupts_a_profile_position_move_and_release_resumes_it() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, per_rev) = enabled_in(Mode::ProfilePosition);
-    m.coe().sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
     let start = a.position_actual(&m).unwrap();
     let target = start.wrapping_add((3.0 * per_rev) as i32);
     a.set_target_position(&mut m, target);
@@ -495,8 +506,8 @@ fn homing_on_the_current_position_sets_the_home_offset_there() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, _) = enabled_in(Mode::Homing);
     let before = a.position_actual(&m).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[37]).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &1_000i32.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[37]).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &1_000i32.to_le_bytes()).unwrap();
     let sw = a.statusword(&m);
     assert_eq!(sw & (status::OP_SPECIFIC_12 | status::OP_SPECIFIC_13), 0, "not homed yet");
     a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
@@ -517,10 +528,10 @@ fn homing_on_the_index_pulse_puts_the_home_offset_on_it() {
     let (mut m, a, per_rev) = enabled_in(Mode::Homing);
     let start = drive(&m).position_increments();
     let index = (start / per_rev).ceil() * per_rev;
-    m.coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[34]).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &(-500i32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[34]).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &(-500i32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
     a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
     cycles(&mut m, 5);
     let sw = a.statusword(&m);
@@ -546,7 +557,7 @@ fn homing_methods_that_need_a_switch_end_in_a_homing_error() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, _) = enabled_in(Mode::Homing);
     let before = a.position_actual(&m).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[17]).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[17]).unwrap();
     a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
     until(&mut m, &a, 20, &|sw| sw & status::OP_SPECIFIC_13 != 0).expect("homing error");
     assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0);
@@ -579,8 +590,8 @@ fn profile_position_takes_one_set_point_after_another() {
 fn the_driver_homes_through_its_update_loop() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, mut a, per_rev) = enabled_in(Mode::Homing);
-    m.coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[33]).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((1.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[33]).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((1.0 * per_rev) as u32).to_le_bytes()).unwrap();
     a.set_mode_bits(control::HOMING_START);
     let step = |m: &mut Master<VirtualIo>, a: &mut Axis| {
         a.update(m);
@@ -625,9 +636,9 @@ fn homing_with(drive_toml: &str, switch_rps: f64, zero_rps: f64, acc_rps2: f64) 
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
     let per_rev = drive(&m).motor().increments_per_rev;
     let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
-    m.coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 1, &u32le(switch_rps)).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &u32le(zero_rps)).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &u32le(acc_rps2)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 1, &u32le(switch_rps)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &u32le(zero_rps)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &u32le(acc_rps2)).unwrap();
     (m, a, per_rev)
 }
 
@@ -635,8 +646,8 @@ fn homing_with(drive_toml: &str, switch_rps: f64, zero_rps: f64, acc_rps2: f64) 
 /// attained (Ok, after how many cycles) or error (Err).
 fn home(m: &mut Master<VirtualIo>, a: &Axis, method: i8, offset: i32, max: u64) -> Result<u64, u16> {
     use ferrocat_wire::cia402::{control, status};
-    m.coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[method as u8]).unwrap();
-    m.coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &offset.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[method as u8]).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &offset.to_le_bytes()).unwrap();
     a.write_controlword(m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
     let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
     let end = until(m, a, max, &|sw| sw & done == done || sw & status::OP_SPECIFIC_13 != 0).expect("homing ends");
@@ -656,7 +667,7 @@ fn home_on_shaft(m: &mut Master<VirtualIo>, a: &Axis, offset: i32) -> f64 {
 }
 
 fn digital_inputs(m: &mut Master<VirtualIo>) -> u32 {
-    u32::from_le_bytes(m.coe().sdo_read(DRIVE, ix::DIGITAL_INPUTS, 0).unwrap()[..4].try_into().unwrap())
+    u32::from_le_bytes(m.acyclic().coe().sdo_read(DRIVE, ix::DIGITAL_INPUTS, 0).unwrap()[..4].try_into().unwrap())
 }
 
 /// A home switch from the segment file (active above 5 rev of the shaft; the drive starts
@@ -747,9 +758,9 @@ fn a_limit_switch_stops_profile_velocity_toward_it_and_lets_it_back() {
     use ferrocat_wire::cia402::status;
     let (mut m, a, per_rev) = enabled_in(Mode::ProfileVelocity);
     let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &u32le(30.0)).unwrap();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(30.0)).unwrap();
-    m.coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(60.0)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &u32le(30.0)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(30.0)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(60.0)).unwrap();
     let start = drive(&m).position_increments() / per_rev;
     let limit = start + 0.5;
     drive_mut(&mut m).set_switches(Switches { positive_limit_rev: Some(limit), ..Switches::default() });
@@ -781,9 +792,12 @@ fn a_limit_switch_stops_profile_velocity_toward_it_and_lets_it_back() {
 fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
     use ferrocat_wire::cia402::status;
     let (mut m, a, per_rev) = enabled_in(Mode::CyclicSyncPosition);
-    m.coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes()).unwrap();
+    m.acyclic()
+        .coe()
+        .sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &((100.0 * per_rev) as u32).to_le_bytes())
+        .unwrap();
     // No following-error fault while the set-points run away (0xFFFFFFFF: check off).
-    m.coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &u32::MAX.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &u32::MAX.to_le_bytes()).unwrap();
     let shaft0 = drive(&m).position_increments();
     let p0 = a.position_actual(&m).unwrap() as f64;
     let limit = shaft0 / per_rev - 0.3;
@@ -824,7 +838,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     use ferrocat_wire::cia402::{control, status};
     let p = ferrocat_testdata::shared("captures/eeprom/akd.hex");
     let mut m = master(&format!("eeprom = '{}'", p.display()), &|_| {});
-    let s = m.slave(DRIVE).unwrap();
+    let s = m.slaves().at(DRIVE).unwrap();
     assert!(
         s.mapping().outputs.iter().any(|e| (e.index, e.subindex) == (ix::INTERPOLATION_DATA, 1)),
         "the default PDOs"
@@ -832,7 +846,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     assert!(!s.mapping().outputs.iter().any(|e| e.index == ix::TARGET_POSITION));
     let mut a = Axis::new(&m, DRIVE).unwrap();
     a.set_interpolation_period(&mut m, CYCLE_NS).unwrap();
-    assert_eq!(m.coe().sdo_read(DRIVE, ix::INTERPOLATION_TIME_PERIOD, 2).unwrap(), [(-3i8) as u8]);
+    assert_eq!(m.acyclic().coe().sdo_read(DRIVE, ix::INTERPOLATION_TIME_PERIOD, 2).unwrap(), [(-3i8) as u8]);
     a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
@@ -871,13 +885,14 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
 /// increments per revolution.
 fn ip_servo(period_ns: u64) -> (Master<VirtualIo>, Axis, f64) {
     let mut m = master("builtin = 'SERVO'", &|m| {
-        let w = |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.coe().sdo_write(DRIVE, i, s, v).unwrap();
+        let w =
+            |m: &mut Master<VirtualIo>, i: u16, s: u8, v: &[u8]| m.acyclic().coe().sdo_write(DRIVE, i, s, v).unwrap();
         w(m, 0x1600, 0, &[0]);
         w(m, 0x1600, 1, &0x6040_0010u32.to_le_bytes());
         w(m, 0x1600, 2, &0x60C1_0120u32.to_le_bytes());
         w(m, 0x1600, 3, &0x6060_0008u32.to_le_bytes());
         w(m, 0x1600, 0, &[3]);
-        m.remap(DRIVE, true, &[0x1600]).unwrap();
+        m.config().remap(DRIVE, true, &[0x1600]).unwrap();
     });
     let mut a = Axis::new(&m, DRIVE).unwrap();
     a.set_interpolation_period(&mut m, period_ns).unwrap();
@@ -926,8 +941,11 @@ fn halt_in_interpolated_position_stops_at_the_halt_option_deceleration() {
     use ferrocat_wire::cia402::{control, status};
     let run = |code: i16| {
         let (mut m, mut a, per_rev) = ip_servo(CYCLE_NS);
-        m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
-        m.coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
+        m.acyclic()
+            .coe()
+            .sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes())
+            .unwrap();
+        m.acyclic().coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
         let p0 = a.position_actual(&m).unwrap() as f64;
         let mut k = 0u64;
         let mut step = |m: &mut Master<VirtualIo>, a: &mut Axis, cw: u16| {
@@ -979,9 +997,9 @@ fn halt_in_interpolated_position_stops_at_the_halt_option_deceleration() {
 fn stop_by_option(option: u16, code: i16, cw: u16, fault: bool) -> (Vec<(u64, Option<State>)>, f64) {
     let (mut m, mut a, per_rev) = enabled_in(Mode::CyclicSyncVelocity);
     let u32le = |x: f64| ((x * per_rev) as u32).to_le_bytes();
-    m.coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(20.0)).unwrap();
-    m.coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(100.0)).unwrap();
-    m.coe().sdo_write(DRIVE, option, 0, &code.to_le_bytes()).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &u32le(20.0)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(100.0)).unwrap();
+    m.acyclic().coe().sdo_write(DRIVE, option, 0, &code.to_le_bytes()).unwrap();
     for _ in 0..300 {
         a.set_target_velocity(&mut m, (5.0 * per_rev) as i32);
         cycles(&mut m, 1);

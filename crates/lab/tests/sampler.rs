@@ -17,17 +17,17 @@ fn run(method: &str) -> Vec<(u64, Sample)> {
     let (mut m, mut sync, _) =
         ferrocat_lab::segment(&cfg, HostModel::pc_rt(), 1, method, CYCLE_NS, Coupling::ReferenceFollowsMaster).unwrap();
     let dc = ferrocat_lab::dc_slaves(&m).unwrap();
-    let mut st = m.sync_state().unwrap();
+    let mut st = m.clock().sync_state().unwrap();
     let mut sampler = Sampler::new(&m, &dc, 1);
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut starts = Vec::new();
     let mut out = Vec::new();
     for k in 0..2_000 {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         sampler.arm(&mut m, next, CYCLE_NS, k);
         starts.push(next);
-        m.sync_step(sync.as_mut(), &mut st).unwrap();
+        m.clock().sync_step(sync.as_mut(), &mut st).unwrap();
         out.extend(sampler.after_cycle(&mut m, sync.as_ref()));
     }
     out.extend(sampler.rest(&mut m, sync.as_ref()));

@@ -25,8 +25,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cycles: u64 = args.next().map_or(Ok(2_000), |n| n.parse())?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
-    master.bring_up()?;
+    master.config().settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.states().bring_up()?;
     // Entries by name, as the slaves' EEPROMs (or CoE) name them.
     let find = |outputs: bool| {
         master.slaves().iter().find_map(|s| {
@@ -36,29 +36,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (out_slave, out_name) = find(true).ok_or("no slave has outputs")?;
     let input = find(false);
-    let light = master.output(out_slave, &out_name)?;
+    let light = master.image().output(out_slave, &out_name)?;
     println!("writing '{out_name}' of slave {out_slave}");
-    let mut next = master.now_ns();
+    let mut next = master.cyclic().now_ns();
     let mut last_input = None;
     let (mut short, mut done) = (0, 0);
     for k in 0..cycles {
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        master.set(light, (k / 100) & 1);
-        let wkc = master.cycle()?;
-        if wkc != master.expected_wkc() {
+        master.cyclic().set(light, (k / 100) & 1);
+        let wkc = master.cyclic().cycle()?;
+        if wkc != master.image().expected_wkc() {
             short += 1;
-            eprintln!("cycle {k}: working counter {wkc}, expected {}", master.expected_wkc());
+            eprintln!("cycle {k}: working counter {wkc}, expected {}", master.image().expected_wkc());
         }
         if let Some((pos, name)) = &input {
-            last_input = Some((name.clone(), master.get(master.input(*pos, name)?)));
+            last_input = Some((name.clone(), master.image().get(master.image().input(*pos, name)?)));
         }
         done += 1;
         next += CYCLE_NS;
-        master.sleep_until(next);
+        master.cyclic().sleep_until(next);
     }
-    master.shut_down()?;
+    master.states().shut_down()?;
     println!("{done} cycles, {short} with a working counter short");
     if let Some((name, value)) = last_input {
         println!("input '{name}' = {value}");

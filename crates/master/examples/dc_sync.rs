@@ -30,29 +30,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok_or_else(|| format!("unknown method {name}; known: {}", SyncMethod::PRESETS.join(", ")))?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
-    master.scan()?;
-    master.configure()?;
+    master.config().settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.states().scan()?;
+    master.states().configure()?;
     // In PREOP: delays, offsets, static drift compensation, SYNC0 every cycle; then the method.
     let dc = DcConfig { sync0_cycle_ns: CYCLE_NS as u32, ..DcConfig::default() };
-    let (mut sync, report, mut state) = master.start_clock_sync(&dc, &method, CYCLE_NS)?;
+    let (mut sync, report, mut state) = master.clock().start_clock_sync(&dc, &method, CYCLE_NS)?;
     println!("reference clock: slave {}; method {}", report.reference, sync.name());
-    master.start()?;
-    let mut next = master.now_ns();
+    master.states().start()?;
+    let mut next = master.cyclic().now_ns();
     for k in 1..=seconds * 1_000 {
         if stop.load(Ordering::Relaxed) {
             break;
         }
         // Process data and the clock-sync datagrams in one frame.
-        let (_, correction) = master.cycle_sync(sync.as_mut(), &mut state)?;
+        let (_, correction) = master.cyclic().cycle_sync(sync.as_mut(), &mut state)?;
         if k % 500 == 0 {
             println!("t = {:.1} s  {}  offset {:?} ns", k as f64 / 1e3, state.lock.state(), state.lock.offset_ns());
         }
         // A method where the master follows the reference sets the next period.
         next += correction.next_period_ns.unwrap_or(CYCLE_NS);
-        master.sleep_until(next);
+        master.cyclic().sleep_until(next);
     }
-    master.shut_down()?;
+    master.states().shut_down()?;
     println!("lock state: {}", state.lock.state());
     Ok(())
 }

@@ -12,7 +12,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let iface = std::env::args().nth(1).ok_or("usage: scan INTERFACE")?;
     let mut master = Master::new(RawIo::open(&iface)?);
     // Counts the slaves, gives them station addresses and reads their EEPROMs.
-    master.scan()?;
+    master.states().scan()?;
     println!("{} slaves on {iface}", master.slaves().len());
     for s in master.slaves() {
         println!(

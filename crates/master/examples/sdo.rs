@@ -16,16 +16,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         _ => return Err("usage: sdo INTERFACE POSITION".into()),
     };
     let mut master = Master::new(RawIo::open(&iface)?);
-    master.scan()?;
+    master.states().scan()?;
     // Mailboxes set up and every slave in PREOP, where SDOs work.
-    master.configure()?;
-    let name = master.coe().sdo_read(position, 0x1008, 0)?;
+    master.states().configure()?;
+    let name = master.acyclic().coe().sdo_read(position, 0x1008, 0)?;
     println!("0x1008 device name: {}", String::from_utf8_lossy(&name));
-    let vendor = master.coe().sdo_read(position, 0x1018, 1)?;
+    let vendor = master.acyclic().coe().sdo_read(position, 0x1018, 1)?;
     println!("0x1018:01 vendor id: {:#010x}", u32::from_le_bytes(vendor[..4].try_into()?));
     // Cyclic synchronous position (8), as a CiA402 drive takes it.
-    master.coe().sdo_write(position, 0x6060, 0, &[8])?;
-    let mode = master.coe().sdo_read(position, 0x6060, 0)?;
+    master.acyclic().coe().sdo_write(position, 0x6060, 0, &[8])?;
+    let mode = master.acyclic().coe().sdo_read(position, 0x6060, 0)?;
     println!("0x6060 mode of operation: {}", mode[0] as i8);
     Ok(())
 }

@@ -28,25 +28,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let positions = [a.parse::<u16>()?, b.parse::<u16>()?];
     let mut master = Master::new(RawIo::open(iface)?);
     // A cycle's frame is given up at ¾ of the cycle: a lost one costs its own cycle, not the next.
-    master.settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
-    master.scan()?;
-    master.configure()?;
+    master.config().settings_mut().cyclic_timeout_ns = CYCLE_NS * 3 / 4;
+    master.states().scan()?;
+    master.states().configure()?;
     for &p in &positions {
         // Target position and position actual value in the process image.
         map_for_csp(&mut master, p)?;
     }
     let dc = DcConfig { sync0_cycle_ns: CYCLE_NS as u32, sync0_slaves: Some(positions.to_vec()), ..Default::default() };
-    let (mut sync, _, mut state) = master.start_clock_sync(&dc, &SyncMethod::default(), CYCLE_NS)?;
+    let (mut sync, _, mut state) = master.clock().start_clock_sync(&dc, &SyncMethod::default(), CYCLE_NS)?;
     let mut axes = positions.map(|p| Axis::new(&master, p)).into_iter().collect::<Result<Vec<_>, _>>()?;
     for axis in &mut axes {
         axis.set_mode(&mut master, Mode::CyclicSyncPosition)?;
         axis.set_goal(Goal::OperationEnabled);
     }
-    master.start()?;
+    master.states().start()?;
     drive_to_goal(&mut master, &mut axes, CYCLE_NS, 2_000)?;
     let start: Vec<i32> = axes.iter().map(|a| a.position_actual(&master).unwrap_or(0)).collect();
     let steps = 1_000;
-    let mut next = master.now_ns();
+    let mut next = master.cyclic().now_ns();
     for k in 0..=steps + 200 {
         if stop.load(Ordering::Relaxed) {
             break;
@@ -57,11 +57,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             axis.set_target_position(&mut master, from.wrapping_add((MOVE as f64 * (1.0 - s) / 2.0) as i32));
             axis.update(&mut master);
         }
-        master.cycle_sync(sync.as_mut(), &mut state)?;
+        master.cyclic().cycle_sync(sync.as_mut(), &mut state)?;
         next += CYCLE_NS;
-        master.sleep_until(next);
+        master.cyclic().sleep_until(next);
     }
-    master.shut_down()?;
+    master.states().shut_down()?;
     for (axis, &from) in axes.iter().zip(&start) {
         let moved = axis.position_actual(&master).unwrap_or(from).wrapping_sub(from);
         println!("axis at slave {}: moved {moved} increments, {:?}", axis.position, axis.state());

@@ -16,116 +16,13 @@ use crate::mailbox::Polled;
 use crate::master::Master;
 use crate::sdo_transfer::{InfoTransfer, Peer, SdoTransfer, Step};
 
-/// Datagrams a call of [`Master::serve_requests`] sends at most.
+/// Datagrams a call of [`Acyclic::serve_requests`](crate::part::Acyclic::serve_requests) sends at most.
 const DATAGRAMS_PER_CALL: u32 = 4;
 /// A datagram is started only where twice this, or twice the last cyclic round trip, is left
 /// before the deadline.
 const MIN_STEP_NS: u64 = 50_000;
 
 impl<I: Io> Master<I> {
-    /// Queues `request` for the acyclic side ([`Master::serve_requests`]); its answer comes
-    /// under the number returned ([`Master::take_answers`]). A request that cannot be taken
-    /// (the queue full, a register range too long) is answered at once with the error.
-    pub fn submit(&mut self, request: Request) -> RequestId {
-        let a = &mut self.acyclic;
-        let id = RequestId(a.next_id);
-        a.next_id += 1;
-        a.stats.submitted += 1;
-        let refused = match &request {
-            _ if a.queue.len() + usize::from(a.active.is_some()) >= QUEUE_LIMIT => {
-                Some(RequestError::QueueFull { limit: QUEUE_LIMIT })
-            }
-            Request::RegisterRead { register, len, .. } => register_check(*register, *len as usize),
-            Request::RegisterWrite { register, data, .. } => register_check(*register, data.len()),
-            Request::State { state: AlState::Bootstrap, .. } => Some(RequestError::State(AlState::Bootstrap)),
-            _ => None,
-        };
-        match refused {
-            Some(e) => a.answer(id, Err(e.into())),
-            None => a.queue.push_back((id, request)),
-        }
-        id
-    }
-
-    /// [`Master::set_process_data_watchdog`] while cyclic: the two register writes (divider
-    /// and time) are requests, served in the cycles' spare time; their numbers. The master
-    /// writes the watchdog again whenever it configures the slave, as it does the other's.
-    pub fn submit_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<[RequestId; 2]> {
-        use crate::master::{WATCHDOG_DIVIDER, WATCHDOG_STEP_NS};
-        self.slave(position)?;
-        let steps = u16::try_from(time_ns.div_ceil(WATCHDOG_STEP_NS))
-            .map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
-        self.slaves[position as usize].pd_watchdog_steps = Some(steps);
-        let write = |register, data: [u8; 2]| Request::RegisterWrite { position, register, data: data.to_vec() };
-        Ok([
-            self.submit(write(addr::WATCHDOG_DIVIDER, WATCHDOG_DIVIDER.to_le_bytes())),
-            self.submit(write(addr::WATCHDOG_TIME_PROCESS_DATA, steps.to_le_bytes())),
-        ])
-    }
-
-    /// The answers given since the last call, each under its request's number.
-    pub fn take_answers(&mut self) -> Vec<(RequestId, Result<Answer>)> {
-        std::mem::take(&mut self.acyclic.answers)
-    }
-
-    /// Requests waiting or being served.
-    pub fn requests_pending(&self) -> usize {
-        self.acyclic.queue.len() + usize::from(self.acyclic.active.is_some())
-    }
-
-    /// What the acyclic side did so far.
-    pub fn acyclic_stats(&self) -> AcyclicStats {
-        self.acyclic.stats
-    }
-
-    /// Serves the queued requests before `deadline_ns` (the master's clock): at most 4
-    /// datagrams, each only where twice a round trip (the last cyclic one, at least 50 µs) is
-    /// left, and waited for until the deadline at most, not sent again. A mailbox message not
-    /// yet taken is written again at the next call under the same counter (a slave drops a
-    /// repeated one, ETG.1000.4); a reply not yet there is polled for again. A request is
-    /// answered with an error when it has made no progress for the mailbox timeout (the state
-    /// timeout for a state request). Errors of a request are its answer; only the link's
-    /// errors are returned. Returns the datagrams sent.
-    pub fn serve_requests(&mut self, deadline_ns: u64) -> Result<u32> {
-        let step_ns = self.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
-        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
-        let mut sent = 0;
-        let mut result = Ok(0);
-        while sent < DATAGRAMS_PER_CALL {
-            if self.acyclic.active.is_none() && !self.start_next() {
-                break;
-            }
-            let now = self.engine.io.now_ns();
-            if now + 2 * step_ns > deadline_ns {
-                break;
-            }
-            (self.engine.timeout_ns, self.engine.retries) = (deadline_ns - now, 0);
-            sent += 1;
-            self.acyclic.stats.datagrams += 1;
-            match self.request_step() {
-                Ok(()) => result = Ok(sent),
-                Err(MasterError::Timeout { .. }) => {
-                    self.acyclic.stats.given_up += 1;
-                    result = Ok(sent);
-                    break;
-                }
-                Err(e @ MasterError::Io(_)) => {
-                    result = Err(e);
-                    break;
-                }
-                Err(e) => {
-                    let id = self.acyclic.active.take().map(|a| a.id);
-                    if let Some(id) = id {
-                        self.acyclic.answer(id, Err(e));
-                    }
-                    result = Ok(sent);
-                }
-            }
-        }
-        (self.engine.timeout_ns, self.engine.retries) = (timeout, retries);
-        result
-    }
-
     /// Takes the next queued request that can start now: a mailbox request waits while
     /// diagnosis awaits a reply of the same slave. Returns whether one is being served.
     fn start_next(&mut self) -> bool {
@@ -384,4 +281,109 @@ fn register_check(register: u16, len: usize) -> Option<RequestError> {
         return Some(RequestError::RegisterLength { len, max: REGISTER_MAX });
     }
     (register as usize + len > 0x1_0000).then_some(RequestError::RegisterRange { register, len })
+}
+
+impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
+    /// Queues `request` for the acyclic side ([`Acyclic::serve_requests`](crate::part::Acyclic::serve_requests)); its answer comes
+    /// under the number returned ([`Acyclic::take_answers`](crate::part::Acyclic::take_answers)). A request that cannot be taken
+    /// (the queue full, a register range too long) is answered at once with the error.
+    pub fn submit(&mut self, request: Request) -> RequestId {
+        let a = &mut self.m.acyclic;
+        let id = RequestId(a.next_id);
+        a.next_id += 1;
+        a.stats.submitted += 1;
+        let refused = match &request {
+            _ if a.queue.len() + usize::from(a.active.is_some()) >= QUEUE_LIMIT => {
+                Some(RequestError::QueueFull { limit: QUEUE_LIMIT })
+            }
+            Request::RegisterRead { register, len, .. } => register_check(*register, *len as usize),
+            Request::RegisterWrite { register, data, .. } => register_check(*register, data.len()),
+            Request::State { state: AlState::Bootstrap, .. } => Some(RequestError::State(AlState::Bootstrap)),
+            _ => None,
+        };
+        match refused {
+            Some(e) => a.answer(id, Err(e.into())),
+            None => a.queue.push_back((id, request)),
+        }
+        id
+    }
+
+    /// [`Config::set_process_data_watchdog`](crate::part::Config::set_process_data_watchdog) while cyclic: the two register writes (divider
+    /// and time) are requests, served in the cycles' spare time; their numbers. The master
+    /// writes the watchdog again whenever it configures the slave, as it does the other's.
+    pub fn submit_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<[RequestId; 2]> {
+        use crate::master::{WATCHDOG_DIVIDER, WATCHDOG_STEP_NS};
+        self.m.slave(position)?;
+        let steps = u16::try_from(time_ns.div_ceil(WATCHDOG_STEP_NS))
+            .map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
+        self.m.slaves[position as usize].pd_watchdog_steps = Some(steps);
+        let write = |register, data: [u8; 2]| Request::RegisterWrite { position, register, data: data.to_vec() };
+        Ok([
+            self.m.acyclic().submit(write(addr::WATCHDOG_DIVIDER, WATCHDOG_DIVIDER.to_le_bytes())),
+            self.m.acyclic().submit(write(addr::WATCHDOG_TIME_PROCESS_DATA, steps.to_le_bytes())),
+        ])
+    }
+
+    /// The answers given since the last call, each under its request's number.
+    pub fn take_answers(&mut self) -> Vec<(RequestId, Result<Answer>)> {
+        std::mem::take(&mut self.m.acyclic.answers)
+    }
+
+    /// Requests waiting or being served.
+    pub fn requests_pending(&self) -> usize {
+        self.m.acyclic.queue.len() + usize::from(self.m.acyclic.active.is_some())
+    }
+
+    /// What the acyclic side did so far.
+    pub fn acyclic_stats(&self) -> AcyclicStats {
+        self.m.acyclic.stats
+    }
+
+    /// Serves the queued requests before `deadline_ns` (the master's clock): at most 4
+    /// datagrams, each only where twice a round trip (the last cyclic one, at least 50 µs) is
+    /// left, and waited for until the deadline at most, not sent again. A mailbox message not
+    /// yet taken is written again at the next call under the same counter (a slave drops a
+    /// repeated one, ETG.1000.4); a reply not yet there is polled for again. A request is
+    /// answered with an error when it has made no progress for the mailbox timeout (the state
+    /// timeout for a state request). Errors of a request are its answer; only the link's
+    /// errors are returned. Returns the datagrams sent.
+    pub fn serve_requests(&mut self, deadline_ns: u64) -> Result<u32> {
+        let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
+        let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
+        let mut sent = 0;
+        let mut result = Ok(0);
+        while sent < DATAGRAMS_PER_CALL {
+            if self.m.acyclic.active.is_none() && !self.m.start_next() {
+                break;
+            }
+            let now = self.m.engine.io.now_ns();
+            if now + 2 * step_ns > deadline_ns {
+                break;
+            }
+            (self.m.engine.timeout_ns, self.m.engine.retries) = (deadline_ns - now, 0);
+            sent += 1;
+            self.m.acyclic.stats.datagrams += 1;
+            match self.m.request_step() {
+                Ok(()) => result = Ok(sent),
+                Err(MasterError::Timeout { .. }) => {
+                    self.m.acyclic.stats.given_up += 1;
+                    result = Ok(sent);
+                    break;
+                }
+                Err(e @ MasterError::Io(_)) => {
+                    result = Err(e);
+                    break;
+                }
+                Err(e) => {
+                    let id = self.m.acyclic.active.take().map(|a| a.id);
+                    if let Some(id) = id {
+                        self.m.acyclic.answer(id, Err(e));
+                    }
+                    result = Ok(sent);
+                }
+            }
+        }
+        (self.m.engine.timeout_ns, self.m.engine.retries) = (timeout, retries);
+        result
+    }
 }

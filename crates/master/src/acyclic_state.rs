@@ -14,7 +14,7 @@ pub const QUEUE_LIMIT: usize = 64;
 /// The longest register read or write (a datagram of its own in a frame of its own).
 pub const REGISTER_MAX: usize = 1024;
 
-/// A request's number, given by [`Master::submit`](crate::Master::submit), under which its answer comes.
+/// A request's number, given by [`Acyclic::submit`](crate::part::Acyclic::submit), under which its answer comes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct RequestId(pub u64);
 

@@ -63,7 +63,7 @@ impl GpioCalibration {
             m.engine.io.set_gpio(false)?;
             self.armed = true;
         }
-        let own = m.master_system_time().wrapping_add(self.output_latency_ns);
+        let own = m.clock().master_system_time().wrapping_add(self.output_latency_ns);
         m.engine.io.set_gpio(true)?;
         let claimed = sync.reference_belief_ns(own);
         let mut latch = [0u8; 8];

@@ -190,8 +190,13 @@ impl Axis {
     pub fn set_mode<I: Io>(&mut self, m: &mut Master<I>, mode: Mode) -> Result<()> {
         self.mode = mode;
         match self.h.mode {
-            Some(h) => m.set(h, mode.code() as u8 as u64),
-            None => m.coe().sdo_write(self.position, self.index(ix::MODES_OF_OPERATION), 0, &[mode.code() as u8])?,
+            Some(h) => m.cyclic().set(h, mode.code() as u8 as u64),
+            None => m.acyclic().coe().sdo_write(
+                self.position,
+                self.index(ix::MODES_OF_OPERATION),
+                0,
+                &[mode.code() as u8],
+            )?,
         }
         Ok(())
     }
@@ -209,8 +214,8 @@ impl Axis {
     pub fn set_interpolation_period<I: Io>(&self, m: &mut Master<I>, period_ns: u64) -> Result<()> {
         let (value, index) =
             interpolation_period(period_ns).ok_or(MasterError::Config(ConfigError::InterpolationPeriod(period_ns)))?;
-        m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
-        m.coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
+        m.acyclic().coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 1, &[value])?;
+        m.acyclic().coe().sdo_write(self.position, self.index(ix::INTERPOLATION_TIME_PERIOD), 2, &[index as u8])?;
         Ok(())
     }
 
@@ -222,16 +227,16 @@ impl Axis {
     /// The statusword in the image, and a controlword written as it is (for tools and tests
     /// that walk the state machine by hand; `update` overwrites it).
     pub fn statusword<I: Io>(&self, m: &Master<I>) -> u16 {
-        m.get(self.h.statusword) as u16
+        m.image().get(self.h.statusword) as u16
     }
     /// Writes the controlword as given (the driver writes it in [`Axis::update`]).
     pub fn write_controlword<I: Io>(&self, m: &mut Master<I>, cw: u16) {
-        m.set(self.h.controlword, cw as u64);
+        m.cyclic().set(self.h.controlword, cw as u64);
     }
 
     /// The mode the drive says it runs (0x6061), where mapped.
     pub fn mode_display<I: Io>(&self, m: &Master<I>) -> Option<Mode> {
-        self.h.mode_display.and_then(|h| Mode::from_code(m.get(h) as u8 as i8))
+        self.h.mode_display.and_then(|h| Mode::from_code(m.image().get(h) as u8 as i8))
     }
 
     /// Operation enabled in the wanted mode (as far as the image shows the mode).
@@ -241,38 +246,38 @@ impl Axis {
 
     /// Position actual value (0x6064), where mapped.
     pub fn position_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.position_actual.map(|h| signed(m.get(h), h.bits) as i32)
+        self.h.position_actual.map(|h| signed(m.image().get(h), h.bits) as i32)
     }
     /// Velocity actual value (0x606C), where mapped.
     pub fn velocity_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.velocity_actual.map(|h| signed(m.get(h), h.bits) as i32)
+        self.h.velocity_actual.map(|h| signed(m.image().get(h), h.bits) as i32)
     }
     /// Torque actual value (0x6077, per mille of rated), where mapped.
     pub fn torque_actual<I: Io>(&self, m: &Master<I>) -> Option<i16> {
-        self.h.torque_actual.map(|h| signed(m.get(h), h.bits) as i16)
+        self.h.torque_actual.map(|h| signed(m.image().get(h), h.bits) as i16)
     }
     /// Following error actual value (0x60F4), where mapped.
     pub fn following_error<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.following_error.map(|h| signed(m.get(h), h.bits) as i32)
+        self.h.following_error.map(|h| signed(m.image().get(h), h.bits) as i32)
     }
 
     /// The position to follow: the target position (0x607A) and interpolated position's
     /// set-point (0x60C1:01), whichever the image holds.
     pub fn set_target_position<I: Io>(&self, m: &mut Master<I>, pos: i32) {
         for h in [self.h.target_position, self.h.ip_setpoint].into_iter().flatten() {
-            m.set(h, pos as u32 as u64);
+            m.cyclic().set(h, pos as u32 as u64);
         }
     }
     /// Sets the target velocity (0x60FF), where mapped.
     pub fn set_target_velocity<I: Io>(&self, m: &mut Master<I>, vel: i32) {
         if let Some(h) = self.h.target_velocity {
-            m.set(h, vel as u32 as u64);
+            m.cyclic().set(h, vel as u32 as u64);
         }
     }
     /// Sets the target torque (0x6071, per mille of rated), where mapped.
     pub fn set_target_torque<I: Io>(&self, m: &mut Master<I>, per_mille: i16) {
         if let Some(h) = self.h.target_torque {
-            m.set(h, per_mille as u16 as u64);
+            m.cyclic().set(h, per_mille as u16 as u64);
         }
     }
 
@@ -280,7 +285,7 @@ impl Axis {
     /// operation is enabled in a cyclic mode, targets that hold the drive where it stands).
     /// Returns the drive's state.
     pub fn update<I: Io>(&mut self, m: &mut Master<I>) -> Option<State> {
-        let state = State::from_statusword(m.get(self.h.statusword) as u16);
+        let state = State::from_statusword(m.image().get(self.h.statusword) as u16);
         if state != self.state {
             if state == Some(State::Fault) {
                 self.faults += 1;
@@ -300,11 +305,11 @@ impl Axis {
             self.set_target_torque(m, 0);
         }
         if let Some(h) = self.h.mode {
-            m.set(h, self.mode.code() as u8 as u64);
+            m.cyclic().set(h, self.mode.code() as u8 as u64);
         }
         let cw = self.next_controlword(state);
         self.controlword = cw;
-        m.set(self.h.controlword, cw as u64);
+        m.cyclic().set(self.h.controlword, cw as u64);
         state
     }
 
@@ -378,10 +383,10 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
             let pdos = if whole.is_some() {
                 vec![pdo]
             } else {
-                let n = m.coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+                let n = m.acyclic().coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
                 let mut pdos = Vec::with_capacity(n as usize + 1);
                 for k in 1..=n {
-                    let v = m.coe().sdo_read(position, assign, k)?;
+                    let v = m.acyclic().coe().sdo_read(position, assign, k)?;
                     pdos.push(u16::from_le_bytes([v.first().copied().unwrap_or(0), v.get(1).copied().unwrap_or(0)]));
                 }
                 if !pdos.contains(&pdo) {
@@ -389,7 +394,7 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
                 }
                 pdos
             };
-            m.remap(position, outputs, &pdos)?;
+            m.config().remap(position, outputs, &pdos)?;
         }
     }
     Ok(())
@@ -400,7 +405,7 @@ pub fn map_for_csp<I: Io>(m: &mut Master<I>, position: u16) -> Result<()> {
 pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64, max_cycles: u64) -> Result<u64> {
     let mut next = m.engine.io.now_ns();
     for k in 0..max_cycles {
-        m.cycle()?;
+        m.cyclic().cycle()?;
         let mut done = true;
         for a in axes.iter_mut() {
             let s = a.update(m);

@@ -38,7 +38,7 @@ pub struct EntryInfo {
     pub name: String,
 }
 
-/// The CoE client of one master (see [`Master::coe`](crate::Master::coe)): it borrows the master's engine and
+/// The CoE client of one master (see [`Acyclic::coe`](crate::part::Acyclic::coe)): it borrows the master's engine and
 /// slave list for as long as it is used.
 pub struct Coe<'a, I: Io> {
     pub(crate) mbx: Mailboxes<'a, I>,

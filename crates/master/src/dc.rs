@@ -164,7 +164,7 @@ impl SyncPdus {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
-/// How the DC initialisation runs ([`Master::init_dc`]).
+/// How the DC initialisation runs ([`Dc::init_dc`](crate::part::Dc::init_dc)).
 pub struct DcConfig {
     /// Static drift compensation stops when every |0x092C| stays at or below this…
     pub converged_ns: u32,
@@ -241,187 +241,6 @@ pub struct DcReport {
 }
 
 impl<I: Io> Master<I> {
-    /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
-    pub fn init_dc(&mut self, cfg: &DcConfig) -> Result<DcReport> {
-        self.init_dc_with(cfg, None)
-    }
-
-    /// As [`Master::init_dc`]; where `sync` makes the reference follow the master through its
-    /// System_Time_Offset, its frames are the static drift compensation's, so that the
-    /// reference already runs at the master's rate while the other slaves learn its rate:
-    /// cyclic operation then starts without the rate change every follower would have to
-    /// relearn (docs/clock-sync.md, lock time).
-    pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
-        if !self.slaves.iter().any(|s| s.dc.supported) {
-            return Err(DcError::NoDcSlave.into());
-        }
-        // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
-        //    when the latching frame passed the reference, from its stamps (half its round
-        //    trip, less the segment's own loop and the frame's length), not when the master
-        //    read its clock before sending it (KickCAT) or after it came back (SOEM).
-        let t_master = match self.latch_and_measure_delays()? {
-            Some(latch) => latch.built_ns.wrapping_add_signed(latch.lead_ns()),
-            None => self.master_system_time(),
-        };
-        // The reference: the first slave whose system time answers (the latch found out).
-        let reference = self.slaves.iter().position(|s| s.dc.has_system_time).ok_or(DcError::NoSystemTime)?;
-        // 4. Offsets, including each slave's delay: all local copies equal the reference's,
-        //    and the reference's equals the master's time at the latch.
-        let r_ref = self.slaves[reference].dc.receive_time_epu;
-        let offset_ref = t_master.wrapping_sub(r_ref);
-        // A ring split from the start: the far half latched on the second pass, this much
-        // later, and its delays are from its own reference (master/split_start.rs).
-        let far_lag = self.split_latch.as_ref().and_then(|l| Some((l.first_far, l.far_lag_ns()?)));
-        for k in 0..self.slaves.len() {
-            let s = &self.slaves[k];
-            if !s.dc.has_system_time {
-                continue;
-            }
-            let lag = far_lag.filter(|&(f, _)| k >= f).map_or(0, |(_, lag)| lag);
-            let offset = r_ref
-                .wrapping_add(offset_ref)
-                .wrapping_sub(s.dc.receive_time_epu)
-                .wrapping_add(s.dc.delay_ns as u64)
-                .wrapping_add_signed(lag);
-            let mut d = [0u8; 12];
-            let n = if s.dc.is_64bit { 8 } else { 4 };
-            d[..8].copy_from_slice(&offset.to_le_bytes());
-            let (st, delay) = (s.station, s.dc.delay_ns);
-            self.engine.expect_wkc(
-                Command::FPWR,
-                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET },
-                &mut d[..n],
-                1,
-            )?;
-            self.engine.expect_wkc(
-                Command::FPWR,
-                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DELAY },
-                &mut delay.to_le_bytes(),
-                1,
-            )?;
-        }
-        // 5. Reset the time control loops: filter depth first, then the speed counter start.
-        let dc_count = self.slaves.iter().filter(|s| s.dc.has_system_time).count() as u16;
-        self.engine.one(
-            Command::BWR,
-            Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH },
-            &mut [4],
-        )?;
-        self.engine.expect_wkc(
-            Command::BWR,
-            Address::Device { adp: 0, ado: addr::DC_SPEED_COUNTER_START },
-            &mut 0x1000u16.to_le_bytes(),
-            dc_count,
-        )?;
-        // 5a. For a method that takes the loops' corrections back out of a follower's clock:
-        //     the raw crystal rates now, which way the speed counter moves them once converged.
-        //     Not where the method steers the reference's offset from here on: the followers
-        //     then converge on the master's rate, not the reference crystal's (that method's
-        //     offsets work the loops hard enough for its own trial to tell the direction).
-        let measure =
-            sync.as_ref().map(|s| s.plan(0)).is_some_and(|p| p.read_follower_clock && !p.steer_reference_offset);
-        let crystal_rates = match measure {
-            true => Some(self.measure_crystal_rates(reference)?),
-            false => None,
-        };
-        // 6. Static drift compensation, until converged (checked, not a fixed count).
-        let ref_station = self.slaves[reference].station;
-        // (`steer_reference_offset` implies the reference follows the master.)
-        let mut steer = match sync.filter(|s| s.plan(0).steer_reference_offset) {
-            Some(sync) => {
-                self.dc_reference = Some(ref_station);
-                let mut st = self.sync_state()?;
-                st.probing.off = true;
-                Some((sync, st))
-            }
-            None => None,
-        };
-        // Split from the start: the far half follows its own reference from now on.
-        let far = self.split_latch.as_ref().and_then(|l| l.far_reference).map(|r| self.slaves[r].station);
-        if matches!(self.engine.redundancy.clocks, SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld) {
-            self.engine.redundancy.far_reference = far;
-        }
-        self.far_steer = None;
-        let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
-        let mut converged = false;
-        let static_from_ns = self.engine.io.now_ns();
-        while frames < cfg.max_frames {
-            match steer.as_mut() {
-                Some((sync, st)) => {
-                    self.sync_step(&mut **sync, st)?;
-                }
-                None => {
-                    let mut t = [0u8; 8];
-                    self.engine.redundancy.split_passes = None;
-                    self.engine.one(
-                        Command::FRMW,
-                        Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
-                        &mut t,
-                    )?;
-                    let passes = self.engine.redundancy.split_passes.take();
-                    self.keep_far_reference(passes)?;
-                }
-            }
-            frames += 1;
-            if frames % cfg.check_every.max(1) == 0 {
-                max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
-                stable = if max_diff <= cfg.converged_ns { stable + 1 } else { 0 };
-                if stable >= cfg.stable_checks {
-                    converged = true;
-                    break;
-                }
-            }
-        }
-        let static_ns = self.engine.io.now_ns().wrapping_sub(static_from_ns);
-        // The far half's offsets were written for the latching frame's two passes, one
-        // sample (scattered by microseconds on a PC's software stamps); the static drift
-        // compensation's frames gave hundreds: the far half is moved by what they say, all
-        // its clocks together. Their line goes on into the cycles: it knows the far
-        // reference's rate, which a new one took 128 samples to learn while the far half
-        // drifted away (3.8 µs at 30 ppm).
-        if let Some(e) = self.far_steer.as_ref().and_then(|f| f.clock.error_now()) {
-            self.shift_far_half(-e, None);
-            if let Some(f) = self.far_steer.as_mut() {
-                f.clock.applied(-e);
-                f.forget_offset();
-            }
-        }
-        if !converged {
-            max_diff = self.dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
-        }
-        if let Some(rates) = crystal_rates.filter(|_| converged) {
-            self.measure_speed_direction(&rates)?;
-        }
-        // A ring split from the start closes only when the master opens it.
-        self.arm_split_watch()?;
-        // 7. Cyclic distribution from now on.
-        self.distribute_dc();
-        // 9. SYNC0 on the cycle grid of the reference's time.
-        let targets: Vec<u16> = match &cfg.sync0_slaves {
-            Some(v) => v.clone(),
-            None => sync0_by_sii(&self.slaves),
-        };
-        let sync0_start = if targets.is_empty() { None } else { Some(self.start_sync(&targets, cfg)?) };
-        tracing::info!(
-            "DC set up: reference slave {reference}, static drift compensation {frames} frames, {}, SYNC0 on {} slave(s)",
-            if converged { "converged" } else { "not converged" },
-            targets.len()
-        );
-        // Diagnosis reads the sync-error flag of the slaves SYNC0 now runs on.
-        self.diagnosis.sync0_slaves = targets.clone();
-        self.diagnosis.sync_pending = None;
-        Ok(DcReport {
-            reference: reference as u16,
-            static_frames: frames,
-            static_ns,
-            reference_steered: steer.is_some(),
-            converged,
-            max_difference_ns: max_diff,
-            sync0_start,
-            sync0_slaves: targets,
-        })
-    }
-
     fn start_sync(&mut self, targets: &[u16], cfg: &DcConfig) -> Result<u64> {
         let cycle = cfg.sync0_cycle_ns.max(1) as u64;
         for &p in targets {
@@ -481,37 +300,6 @@ impl<I: Io> Master<I> {
         }
         Ok(start)
     }
-
-    /// Every DC slave's filtered system time difference (0x092C), signed.
-    pub fn dc_differences(&mut self) -> Result<Vec<(u16, i64)>> {
-        let dc: Vec<(u16, u16)> =
-            self.slaves.iter().filter(|s| s.dc.has_system_time).map(|s| (s.position, s.station)).collect();
-        let mut bufs = vec![[0u8; 4]; dc.len()];
-        {
-            let mut p: Vec<Pdu<'_>> = dc
-                .iter()
-                .zip(bufs.iter_mut())
-                .map(|(&(_, st), b)| {
-                    Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, b)
-                })
-                .collect();
-            // A slave that did not answer read zero: not "synchronised".
-            self.engine.expect_wkc_each(&mut p, 1)?;
-        }
-        Ok(dc
-            .iter()
-            .zip(&bufs)
-            .map(|(&(pos, _), b)| (pos, SystemTimeDifference(u32::from_le_bytes(*b)).as_ns()))
-            .collect())
-    }
-
-    /// The sync monitor: one BRD of 0x092C, the OR of every slave's |difference| (an upper
-    /// bound of the largest), as IgH's monitor reads it.
-    pub fn dc_monitor(&mut self) -> Result<u32> {
-        let mut d = [0u8; 4];
-        self.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, &mut d)?;
-        Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
-    }
 }
 
 /// `low` (the low 32 bits of a 32-bit DC's register) placed on the 64-bit line next to `prev`.
@@ -539,61 +327,6 @@ impl<I: Io> Master<I> {
         self.slaves.iter().position(|s| s.station == st).ok_or(DcError::ReferenceGone.into())
     }
 
-    /// Starts clock synchronisation with `method` for a cycle of `cycle_ns`: the DC
-    /// initialisation (`cfg`) and the method, in the order the method needs. ferrocat's own is
-    /// made first, so that one steering the reference's offset does so from the static drift
-    /// compensation on; the others after it, as published (Park 2020's delay is measured over
-    /// its round trips then). Returns the running method, the DC initialisation's report, and
-    /// the state to pass to each [`Master::cycle_sync`] or [`Master::sync_step`].
-    pub fn start_clock_sync(
-        &mut self,
-        cfg: &DcConfig,
-        method: &crate::sync::SyncMethod,
-        cycle_ns: u64,
-    ) -> Result<(Box<dyn crate::sync::ClockSync>, DcReport, SyncState)> {
-        let resolution_ns = self.engine.io.timer_resolution_ns();
-        let (sync, report) = if method.is_ferrocat() {
-            let mut sync = method.build(cycle_ns, 0, resolution_ns);
-            let report = self.init_dc_with(cfg, Some(sync.as_mut()))?;
-            (sync, report)
-        } else {
-            let report = self.init_dc(cfg)?;
-            (self.make_clock_sync(method, cycle_ns)?, report)
-        };
-        tracing::info!(method = sync.name(), cycle_ns, "clock sync started");
-        let st = self.sync_state()?;
-        Ok((sync, report, st))
-    }
-
-    /// `method` made for a cycle of `cycle_ns` on a master whose DC is initialised already
-    /// (Park 2020's delay is measured here, over its round trips). [`Master::start_clock_sync`]
-    /// does the DC initialisation and this in the order the method needs.
-    pub fn make_clock_sync(
-        &mut self,
-        method: &crate::sync::SyncMethod,
-        cycle_ns: u64,
-    ) -> Result<Box<dyn crate::sync::ClockSync>> {
-        let park_delay_ns = match *method {
-            crate::sync::SyncMethod::Park2020 { round_trips, .. } => self.park_delay(round_trips)?,
-            _ => 0,
-        };
-        Ok(method.build(cycle_ns, park_delay_ns, self.engine.io.timer_resolution_ns()))
-    }
-
-    /// A fresh state for cyclic synchronisation, with the reference's loop time.
-    pub fn sync_state(&self) -> Result<SyncState> {
-        Ok(SyncState { loop_ns: self.reference_loop_ns()?, ring: self.engine.redundancy.state, ..SyncState::default() })
-    }
-
-    /// How long a frame spends behind the reference before it passes it again on its way
-    /// back: the latest receive time of its other open ports minus that of its entry port.
-    /// On an intact ring the frame leaves for the secondary port instead of coming back through
-    /// the reference: the loop is shorter by what `find_ring_port` measured.
-    pub fn reference_loop_ns(&self) -> Result<u64> {
-        let line = self.loop_ns_of(self.reference_index()?);
-        Ok((line as i64 - self.ring_shortening_ns).max(0) as u64)
-    }
-
     /// The reference's loop as the ring now is: on an intact ring the one `find_ring_port`
     /// measured; on a broken one (or a ring whose secondary cable is pulled, now a line) the
     /// frame turns where the link is gone, so the receive times are latched again and the
@@ -603,7 +336,7 @@ impl<I: Io> Master<I> {
         if matches!(self.engine.redundancy.state, RingState::Intact | RingState::Unknown) {
             // Closed after a latch that found it split: its delays and loop measured now.
             self.rejoin_far_half()?;
-            return self.reference_loop_ns();
+            return self.clock().reference_loop_ns();
         }
         let r = self.reference_index()?;
         let st = self.slaves[r].station;
@@ -625,58 +358,6 @@ impl<I: Io> Master<I> {
         Ok(loop_of(&times, view.active_ports, view.entry_port) + loops.max(0) as u64)
     }
 
-    /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master from
-    /// its send call's return to its arrival, then the reference's receive times. Returns the
-    /// averaged delay.
-    pub fn park_delay(&mut self, n: u32) -> Result<i64> {
-        let r = self.reference_index()?;
-        let (st, active, entry) = (self.slaves[r].station, self.slaves[r].ports.active, self.slaves[r].ports.entry);
-        let mut trips = Vec::with_capacity(n as usize);
-        for _ in 0..n {
-            // Eq. 3's t_p0^m is taken "immediately after sending", t_p1^m once it is back.
-            let (_, t0) = self.engine.one_timed(
-                Command::BWR,
-                Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 },
-                &mut [0u8; 4],
-            )?;
-            let t1 = self.engine.io.now_ns();
-            let times = self.port_receive_times(st)?;
-            // Eq. 3's t_p1 − t_p0 is the time the frame spends behind the reference: on a line
-            // through its port 1, but none where the reference is the last slave (port 1
-            // closed, its receive time never latched: taken as it read, it put Park's delay,
-            // and the reference, 2.1 s off with one slave), and its other ports' on a tree.
-            trips.push((t1 - t0, loop_of(&times, active, entry)));
-        }
-        Ok(crate::sync::Park2020::delay_from(&trips))
-    }
-
-    /// One cycle of clock synchronisation: one frame with the master's time for the reference
-    /// (reference-follows-master methods), the FRMW that distributes the reference's time and a
-    /// read of its 0x092C; the sample goes to `sync`, and an offset shift it asks for is
-    /// written to every DC slave. Returns the correction (the next period for
-    /// master-follows-reference methods). Lost frames are counted, not errors.
-    /// [`Master::cycle_sync`] sends the same datagrams behind the process data, in one frame.
-    pub fn sync_step(
-        &mut self,
-        sync: &mut dyn crate::sync::ClockSync,
-        st: &mut SyncState,
-    ) -> Result<crate::sync::Correction> {
-        let mut p = self.sync_begin(sync, st, SYNC_ROOM_BYTES)?;
-        let mut nop: [u8; 0] = [];
-        let (mut pdus, n) = p.pdus(&mut nop);
-        let pdus = &mut pdus[..n];
-        let frame_bytes = frame_bytes(pdus);
-        let res = self.engine.transact_once(pdus, self.settings.cyclic_timeout_ns);
-        let passes = self.engine.redundancy.split_passes.take();
-        let answered = match res {
-            Ok(()) => SyncPdus::answered(pdus),
-            Err(_) => SyncAnswers::NONE,
-        };
-        let c = self.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
-        self.note_ring(passes)?;
-        Ok(c)
-    }
-
     /// The sync datagrams of this cycle, built now (the master's time goes into them).
     /// `room_bytes`: what the frame the sync datagrams go in has left for riders.
     pub(crate) fn sync_begin(
@@ -687,7 +368,7 @@ impl<I: Io> Master<I> {
     ) -> Result<SyncPdus> {
         let r = self.reference_index()?;
         st.cycle += 1;
-        let built_ns = self.master_system_time();
+        let built_ns = self.clock().master_system_time();
         let rfm = sync.coupling() == crate::sync::Coupling::ReferenceFollowsMaster;
         let wide = self.slaves[r].dc.is_64bit;
         let plan = sync.plan(st.cycle);
@@ -920,7 +601,7 @@ impl<I: Io> Master<I> {
         let woke_late_ns = if probes == 0 {
             0
         } else {
-            let since_build_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let since_build_ns = self.clock().master_system_time().wrapping_sub(p.built_ns);
             let built_io_ns = self.engine.io.now_ns().saturating_sub(since_build_ns);
             let target = self.engine.io.wake_target_ns();
             target.and_then(|t| built_io_ns.checked_sub(t)).filter(|&late| late < window_ns).unwrap_or(0)
@@ -932,7 +613,7 @@ impl<I: Io> Master<I> {
         for k in 0..probes {
             // Probing must not make the next cycle late: a probe twice as long as they have
             // taken on average still ends within the window.
-            let since_build_ns = self.master_system_time().wrapping_sub(p.built_ns);
+            let since_build_ns = self.clock().master_system_time().wrapping_sub(p.built_ns);
             let elapsed_ns = since_build_ns.saturating_add(woke_late_ns);
             let expected_ns =
                 if st.probing.mean_ns > 0 { st.probing.mean_ns } else { *first_guess_ns.get_or_insert(since_build_ns) };
@@ -989,7 +670,7 @@ impl<I: Io> Master<I> {
         let n = if wide { 8 } else { 4 };
         let (mut time, mut offset) = ([0u8; 8], [0u8; 8]);
         let at = |ado| Address::Device { adp: station, ado };
-        let built_ns = self.master_system_time();
+        let built_ns = self.clock().master_system_time();
         let given = match give {
             _ if !steer => None,
             ProbeOffset::Read => None,
@@ -1024,11 +705,6 @@ impl<I: Io> Master<I> {
         }
         sync.probe(&s);
         Ok(())
-    }
-
-    /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
-    pub fn shift_offsets(&mut self, shift_ns: i64) -> Result<()> {
-        self.shift_offsets_but(shift_ns, None)
     }
 
     /// Writes every DC slave's System_Time_Delay (0x0928) as its measured delay plus
@@ -1090,7 +766,7 @@ impl<I: Io> Master<I> {
         }
     }
 
-    /// As [`Master::shift_offsets`], leaving out the slave at station `skip`.
+    /// As [`Clock::shift_offsets`](crate::part::Clock::shift_offsets), leaving out the slave at station `skip`.
     fn shift_offsets_but(&mut self, shift_ns: i64, skip: Option<u16>) -> Result<()> {
         let clocks: Vec<(u16, usize)> = self
             .slaves
@@ -1119,6 +795,341 @@ impl<I: Io> Master<I> {
             self.engine.expect_wkc_each(&mut pdus, 1)?;
         }
         Ok(())
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Dc<'a, I> {
+    /// Initialises the distributed clocks of every DC slave (esc-spec §3.4 steps 1–9).
+    pub fn init_dc(&mut self, cfg: &DcConfig) -> Result<DcReport> {
+        self.m.dc().init_dc_with(cfg, None)
+    }
+
+    /// As [`Dc::init_dc`](crate::part::Dc::init_dc); where `sync` makes the reference follow the master through its
+    /// System_Time_Offset, its frames are the static drift compensation's, so that the
+    /// reference already runs at the master's rate while the other slaves learn its rate:
+    /// cyclic operation then starts without the rate change every follower would have to
+    /// relearn (docs/clock-sync.md, lock time).
+    pub fn init_dc_with(&mut self, cfg: &DcConfig, sync: Option<&mut dyn crate::sync::ClockSync>) -> Result<DcReport> {
+        if !self.m.slaves.iter().any(|s| s.dc.supported) {
+            return Err(DcError::NoDcSlave.into());
+        }
+        // 1–3. Latch receive times, compute delays, and take the master's time at the latch:
+        //    when the latching frame passed the reference, from its stamps (half its round
+        //    trip, less the segment's own loop and the frame's length), not when the master
+        //    read its clock before sending it (KickCAT) or after it came back (SOEM).
+        let t_master = match self.m.latch_and_measure_delays()? {
+            Some(latch) => latch.built_ns.wrapping_add_signed(latch.lead_ns()),
+            None => self.m.clock().master_system_time(),
+        };
+        // The reference: the first slave whose system time answers (the latch found out).
+        let reference = self.m.slaves.iter().position(|s| s.dc.has_system_time).ok_or(DcError::NoSystemTime)?;
+        // 4. Offsets, including each slave's delay: all local copies equal the reference's,
+        //    and the reference's equals the master's time at the latch.
+        let r_ref = self.m.slaves[reference].dc.receive_time_epu;
+        let offset_ref = t_master.wrapping_sub(r_ref);
+        // A ring split from the start: the far half latched on the second pass, this much
+        // later, and its delays are from its own reference (master/split_start.rs).
+        let far_lag = self.m.split_latch.as_ref().and_then(|l| Some((l.first_far, l.far_lag_ns()?)));
+        for k in 0..self.m.slaves.len() {
+            let s = &self.m.slaves[k];
+            if !s.dc.has_system_time {
+                continue;
+            }
+            let lag = far_lag.filter(|&(f, _)| k >= f).map_or(0, |(_, lag)| lag);
+            let offset = r_ref
+                .wrapping_add(offset_ref)
+                .wrapping_sub(s.dc.receive_time_epu)
+                .wrapping_add(s.dc.delay_ns as u64)
+                .wrapping_add_signed(lag);
+            let mut d = [0u8; 12];
+            let n = if s.dc.is_64bit { 8 } else { 4 };
+            d[..8].copy_from_slice(&offset.to_le_bytes());
+            let (st, delay) = (s.station, s.dc.delay_ns);
+            self.m.engine.expect_wkc(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_OFFSET },
+                &mut d[..n],
+                1,
+            )?;
+            self.m.engine.expect_wkc(
+                Command::FPWR,
+                Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DELAY },
+                &mut delay.to_le_bytes(),
+                1,
+            )?;
+        }
+        // 5. Reset the time control loops: filter depth first, then the speed counter start.
+        let dc_count = self.m.slaves.iter().filter(|s| s.dc.has_system_time).count() as u16;
+        self.m.engine.one(
+            Command::BWR,
+            Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFF_FILTER_DEPTH },
+            &mut [4],
+        )?;
+        self.m.engine.expect_wkc(
+            Command::BWR,
+            Address::Device { adp: 0, ado: addr::DC_SPEED_COUNTER_START },
+            &mut 0x1000u16.to_le_bytes(),
+            dc_count,
+        )?;
+        // 5a. For a method that takes the loops' corrections back out of a follower's clock:
+        //     the raw crystal rates now, which way the speed counter moves them once converged.
+        //     Not where the method steers the reference's offset from here on: the followers
+        //     then converge on the master's rate, not the reference crystal's (that method's
+        //     offsets work the loops hard enough for its own trial to tell the direction).
+        let measure =
+            sync.as_ref().map(|s| s.plan(0)).is_some_and(|p| p.read_follower_clock && !p.steer_reference_offset);
+        let crystal_rates = match measure {
+            true => Some(self.m.measure_crystal_rates(reference)?),
+            false => None,
+        };
+        // 6. Static drift compensation, until converged (checked, not a fixed count).
+        let ref_station = self.m.slaves[reference].station;
+        // (`steer_reference_offset` implies the reference follows the master.)
+        let mut steer = match sync.filter(|s| s.plan(0).steer_reference_offset) {
+            Some(sync) => {
+                self.m.dc_reference = Some(ref_station);
+                let mut st = self.m.clock().sync_state()?;
+                st.probing.off = true;
+                Some((sync, st))
+            }
+            None => None,
+        };
+        // Split from the start: the far half follows its own reference from now on.
+        let far = self.m.split_latch.as_ref().and_then(|l| l.far_reference).map(|r| self.m.slaves[r].station);
+        if matches!(self.m.engine.redundancy.clocks, SplitRingClocks::FarReference | SplitRingClocks::FarReferenceHeld)
+        {
+            self.m.engine.redundancy.far_reference = far;
+        }
+        self.m.far_steer = None;
+        let (mut frames, mut stable, mut max_diff) = (0u32, 0u32, u32::MAX);
+        let mut converged = false;
+        let static_from_ns = self.m.engine.io.now_ns();
+        while frames < cfg.max_frames {
+            match steer.as_mut() {
+                Some((sync, st)) => {
+                    self.m.clock().sync_step(&mut **sync, st)?;
+                }
+                None => {
+                    let mut t = [0u8; 8];
+                    self.m.engine.redundancy.split_passes = None;
+                    self.m.engine.one(
+                        Command::FRMW,
+                        Address::Device { adp: ref_station, ado: addr::DC_SYSTEM_TIME },
+                        &mut t,
+                    )?;
+                    let passes = self.m.engine.redundancy.split_passes.take();
+                    self.m.keep_far_reference(passes)?;
+                }
+            }
+            frames += 1;
+            if frames % cfg.check_every.max(1) == 0 {
+                max_diff =
+                    self.m.dc().dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
+                stable = if max_diff <= cfg.converged_ns { stable + 1 } else { 0 };
+                if stable >= cfg.stable_checks {
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        let static_ns = self.m.engine.io.now_ns().wrapping_sub(static_from_ns);
+        // The far half's offsets were written for the latching frame's two passes, one
+        // sample (scattered by microseconds on a PC's software stamps); the static drift
+        // compensation's frames gave hundreds: the far half is moved by what they say, all
+        // its clocks together. Their line goes on into the cycles: it knows the far
+        // reference's rate, which a new one took 128 samples to learn while the far half
+        // drifted away (3.8 µs at 30 ppm).
+        if let Some(e) = self.m.far_steer.as_ref().and_then(|f| f.clock.error_now()) {
+            self.m.shift_far_half(-e, None);
+            if let Some(f) = self.m.far_steer.as_mut() {
+                f.clock.applied(-e);
+                f.forget_offset();
+            }
+        }
+        if !converged {
+            max_diff = self.m.dc().dc_differences()?.iter().map(|&(_, d)| d.unsigned_abs() as u32).max().unwrap_or(0);
+        }
+        if let Some(rates) = crystal_rates.filter(|_| converged) {
+            self.m.measure_speed_direction(&rates)?;
+        }
+        // A ring split from the start closes only when the master opens it.
+        self.m.arm_split_watch()?;
+        // 7. Cyclic distribution from now on.
+        self.m.distribute_dc();
+        // 9. SYNC0 on the cycle grid of the reference's time.
+        let targets: Vec<u16> = match &cfg.sync0_slaves {
+            Some(v) => v.clone(),
+            None => sync0_by_sii(&self.m.slaves),
+        };
+        let sync0_start = if targets.is_empty() { None } else { Some(self.m.start_sync(&targets, cfg)?) };
+        tracing::info!(
+            "DC set up: reference slave {reference}, static drift compensation {frames} frames, {}, SYNC0 on {} slave(s)",
+            if converged { "converged" } else { "not converged" },
+            targets.len()
+        );
+        // Diagnosis reads the sync-error flag of the slaves SYNC0 now runs on.
+        self.m.diagnosis.sync0_slaves = targets.clone();
+        self.m.diagnosis.sync_pending = None;
+        Ok(DcReport {
+            reference: reference as u16,
+            static_frames: frames,
+            static_ns,
+            reference_steered: steer.is_some(),
+            converged,
+            max_difference_ns: max_diff,
+            sync0_start,
+            sync0_slaves: targets,
+        })
+    }
+
+    /// Every DC slave's filtered system time difference (0x092C), signed.
+    pub fn dc_differences(&mut self) -> Result<Vec<(u16, i64)>> {
+        let dc: Vec<(u16, u16)> =
+            self.m.slaves.iter().filter(|s| s.dc.has_system_time).map(|s| (s.position, s.station)).collect();
+        let mut bufs = vec![[0u8; 4]; dc.len()];
+        {
+            let mut p: Vec<Pdu<'_>> = dc
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&(_, st), b)| {
+                    Pdu::new(Command::FPRD, Address::Device { adp: st, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, b)
+                })
+                .collect();
+            // A slave that did not answer read zero: not "synchronised".
+            self.m.engine.expect_wkc_each(&mut p, 1)?;
+        }
+        Ok(dc
+            .iter()
+            .zip(&bufs)
+            .map(|(&(pos, _), b)| (pos, SystemTimeDifference(u32::from_le_bytes(*b)).as_ns()))
+            .collect())
+    }
+
+    /// The sync monitor: one BRD of 0x092C, the OR of every slave's |difference| (an upper
+    /// bound of the largest), as IgH's monitor reads it.
+    pub fn dc_monitor(&mut self) -> Result<u32> {
+        let mut d = [0u8; 4];
+        self.m.engine.one(Command::BRD, Address::Device { adp: 0, ado: addr::DC_SYSTEM_TIME_DIFFERENCE }, &mut d)?;
+        Ok(u32::from_le_bytes(d) & 0x7FFF_FFFF)
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Clock<'a, I> {
+    /// Starts clock synchronisation with `method` for a cycle of `cycle_ns`: the DC
+    /// initialisation (`cfg`) and the method, in the order the method needs. ferrocat's own is
+    /// made first, so that one steering the reference's offset does so from the static drift
+    /// compensation on; the others after it, as published (Park 2020's delay is measured over
+    /// its round trips then). Returns the running method, the DC initialisation's report, and
+    /// the state to pass to each [`Cyclic::cycle_sync`](crate::part::Cyclic::cycle_sync) or [`Clock::sync_step`](crate::part::Clock::sync_step).
+    pub fn start_clock_sync(
+        &mut self,
+        cfg: &DcConfig,
+        method: &crate::sync::SyncMethod,
+        cycle_ns: u64,
+    ) -> Result<(Box<dyn crate::sync::ClockSync>, DcReport, SyncState)> {
+        let resolution_ns = self.m.engine.io.timer_resolution_ns();
+        let (sync, report) = if method.is_ferrocat() {
+            let mut sync = method.build(cycle_ns, 0, resolution_ns);
+            let report = self.m.dc().init_dc_with(cfg, Some(sync.as_mut()))?;
+            (sync, report)
+        } else {
+            let report = self.m.dc().init_dc(cfg)?;
+            (self.m.clock().make_clock_sync(method, cycle_ns)?, report)
+        };
+        tracing::info!(method = sync.name(), cycle_ns, "clock sync started");
+        let st = self.m.clock().sync_state()?;
+        Ok((sync, report, st))
+    }
+
+    /// `method` made for a cycle of `cycle_ns` on a master whose DC is initialised already
+    /// (Park 2020's delay is measured here, over its round trips). [`Clock::start_clock_sync`](crate::part::Clock::start_clock_sync)
+    /// does the DC initialisation and this in the order the method needs.
+    pub fn make_clock_sync(
+        &mut self,
+        method: &crate::sync::SyncMethod,
+        cycle_ns: u64,
+    ) -> Result<Box<dyn crate::sync::ClockSync>> {
+        let park_delay_ns = match *method {
+            crate::sync::SyncMethod::Park2020 { round_trips, .. } => self.m.clock().park_delay(round_trips)?,
+            _ => 0,
+        };
+        Ok(method.build(cycle_ns, park_delay_ns, self.m.engine.io.timer_resolution_ns()))
+    }
+
+    /// A fresh state for cyclic synchronisation, with the reference's loop time.
+    pub fn sync_state(&self) -> Result<SyncState> {
+        Ok(SyncState {
+            loop_ns: self.reference_loop_ns()?,
+            ring: self.m.engine.redundancy.state,
+            ..SyncState::default()
+        })
+    }
+
+    /// How long a frame spends behind the reference before it passes it again on its way
+    /// back: the latest receive time of its other open ports minus that of its entry port.
+    /// On an intact ring the frame leaves for the secondary port instead of coming back through
+    /// the reference: the loop is shorter by what `find_ring_port` measured.
+    pub fn reference_loop_ns(&self) -> Result<u64> {
+        let line = self.m.loop_ns_of(self.m.reference_index()?);
+        Ok((line as i64 - self.m.ring_shortening_ns).max(0) as u64)
+    }
+
+    /// Park 2020 eq. 3 over `n` round trips: each a latching broadcast timed by the master from
+    /// its send call's return to its arrival, then the reference's receive times. Returns the
+    /// averaged delay.
+    pub fn park_delay(&mut self, n: u32) -> Result<i64> {
+        let r = self.m.reference_index()?;
+        let (st, active, entry) =
+            (self.m.slaves[r].station, self.m.slaves[r].ports.active, self.m.slaves[r].ports.entry);
+        let mut trips = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            // Eq. 3's t_p0^m is taken "immediately after sending", t_p1^m once it is back.
+            let (_, t0) = self.m.engine.one_timed(
+                Command::BWR,
+                Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 },
+                &mut [0u8; 4],
+            )?;
+            let t1 = self.m.engine.io.now_ns();
+            let times = self.m.port_receive_times(st)?;
+            // Eq. 3's t_p1 − t_p0 is the time the frame spends behind the reference: on a line
+            // through its port 1, but none where the reference is the last slave (port 1
+            // closed, its receive time never latched: taken as it read, it put Park's delay,
+            // and the reference, 2.1 s off with one slave), and its other ports' on a tree.
+            trips.push((t1 - t0, loop_of(&times, active, entry)));
+        }
+        Ok(crate::sync::Park2020::delay_from(&trips))
+    }
+
+    /// One cycle of clock synchronisation: one frame with the master's time for the reference
+    /// (reference-follows-master methods), the FRMW that distributes the reference's time and a
+    /// read of its 0x092C; the sample goes to `sync`, and an offset shift it asks for is
+    /// written to every DC slave. Returns the correction (the next period for
+    /// master-follows-reference methods). Lost frames are counted, not errors.
+    /// [`Cyclic::cycle_sync`](crate::part::Cyclic::cycle_sync) sends the same datagrams behind the process data, in one frame.
+    pub fn sync_step(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut SyncState,
+    ) -> Result<crate::sync::Correction> {
+        let mut p = self.m.sync_begin(sync, st, SYNC_ROOM_BYTES)?;
+        let mut nop: [u8; 0] = [];
+        let (mut pdus, n) = p.pdus(&mut nop);
+        let pdus = &mut pdus[..n];
+        let frame_bytes = frame_bytes(pdus);
+        let res = self.m.engine.transact_once(pdus, self.m.settings.cyclic_timeout_ns);
+        let passes = self.m.engine.redundancy.split_passes.take();
+        let answered = match res {
+            Ok(()) => SyncPdus::answered(pdus),
+            Err(_) => SyncAnswers::NONE,
+        };
+        let c = self.m.sync_end(sync, st, &p, answered, frame_bytes, 0)?;
+        self.m.note_ring(passes)?;
+        Ok(c)
+    }
+
+    /// Adds `shift_ns` to every DC slave's System_Time_Offset (0x0920).
+    pub fn shift_offsets(&mut self, shift_ns: i64) -> Result<()> {
+        self.m.shift_offsets_but(shift_ns, None)
     }
 }
 

@@ -23,71 +23,6 @@ use crate::diagnosis_state::{SyncFlags, SyncSm};
 const SYNC_READ_TIMEOUT_NS: u64 = 1_000_000_000;
 
 impl<I: Io> Master<I> {
-    /// Diagnosis before `deadline_ns` (the master's clock), at most two datagrams, each only
-    /// where twice a round trip is left: the next slave's error counters when a round of them
-    /// is due (one round every `counters_period_ns`), and a mailbox datagram: while a read of a
-    /// slave's sync-error flag (0x1C32:20 or 0x1C33:20) is awaited, a poll of that slave's
-    /// mailbox; else,
-    /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
-    /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
-    /// CoE slave's mailbox (so that each is polled once every as many calls as there are).
-    /// Before those, without a datagram, the last cycle's TxPDO State and Toggle entries. A
-    /// counter that grew, an emergency, a flag found set, a TxPDO State set and a Toggle that
-    /// stood still become events ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
-    /// [`MasterEvent::SyncError`], [`MasterEvent::InputsInvalid`], [`MasterEvent::InputsStale`]). A datagram is waited for until the deadline at most and
-    /// not sent again. Returns the datagrams sent.
-    pub fn diagnose(&mut self, deadline_ns: u64, counters_period_ns: u64) -> Result<u32> {
-        let n = self.slaves.len();
-        if n == 0 {
-            return Ok(0);
-        }
-        self.watch_txpdo_entries();
-        self.diagnosis.counters.resize(n, None);
-        let step_ns = self.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
-        let mailboxes = self.slaves.iter().any(|s| s.mailbox.is_some() && s.has_coe());
-        let (timeout, retries) = (self.engine.timeout_ns, self.engine.retries);
-        let mut sent = 0;
-        let mut result = Ok(0);
-        for counters in [true, false] {
-            let now = self.engine.io.now_ns();
-            let wanted = if counters { now >= self.diagnosis.round_due_ns } else { mailboxes };
-            if !wanted || now + 2 * step_ns > deadline_ns {
-                continue;
-            }
-            (self.engine.timeout_ns, self.engine.retries) = (deadline_ns - now, 0);
-            let r = if counters {
-                self.read_counters_step(counters_period_ns)
-            } else {
-                self.mailbox_step(counters_period_ns)
-            };
-            sent += 1;
-            match r {
-                Ok(()) => result = Ok(sent),
-                Err(MasterError::Timeout { .. }) => {
-                    self.diagnosis.stats.given_up += 1;
-                    result = Ok(sent);
-                    break;
-                }
-                Err(e) => {
-                    result = Err(e);
-                    break;
-                }
-            }
-        }
-        (self.engine.timeout_ns, self.engine.retries) = (timeout, retries);
-        result
-    }
-
-    /// What diagnosis did so far.
-    pub fn diagnosis_stats(&self) -> DiagnosisStats {
-        self.diagnosis.stats
-    }
-
-    /// The error counters of every slave as diagnosis last read them.
-    pub fn error_counters(&self) -> &[Option<ErrorCounters>] {
-        &self.diagnosis.counters
-    }
-
     fn read_counters_step(&mut self, period_ns: u64) -> Result<()> {
         let k = self.diagnosis.next_counters % self.slaves.len();
         let station = self.slaves[k].station;
@@ -264,12 +199,6 @@ impl<I: Io> Master<I> {
         }
     }
 
-    /// The sync-error flags (0x1C32:20, 0x1C33:20) of each slave as diagnosis last read them,
-    /// by position.
-    pub fn sync_error_flags(&self) -> &[SyncFlags] {
-        &self.diagnosis.sync_flags
-    }
-
     fn poll_mailbox_step(&mut self) -> Result<()> {
         let n = self.slaves.len();
         let Some(k) = (0..n).map(|i| (self.diagnosis.next_mailbox + i) % n).find(|&k| {
@@ -283,5 +212,78 @@ impl<I: Io> Master<I> {
             Ok(_) | Err(MasterError::Slave { .. }) => Ok(()),
             Err(e) => Err(e),
         }
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
+    /// Diagnosis before `deadline_ns` (the master's clock), at most two datagrams, each only
+    /// where twice a round trip is left: the next slave's error counters when a round of them
+    /// is due (one round every `counters_period_ns`), and a mailbox datagram: while a read of a
+    /// slave's sync-error flag (0x1C32:20 or 0x1C33:20) is awaited, a poll of that slave's
+    /// mailbox; else,
+    /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
+    /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
+    /// CoE slave's mailbox (so that each is polled once every as many calls as there are).
+    /// Before those, without a datagram, the last cycle's TxPDO State and Toggle entries. A
+    /// counter that grew, an emergency, a flag found set, a TxPDO State set and a Toggle that
+    /// stood still become events ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
+    /// [`MasterEvent::SyncError`], [`MasterEvent::InputsInvalid`], [`MasterEvent::InputsStale`]). A datagram is waited for until the deadline at most and
+    /// not sent again. Returns the datagrams sent.
+    pub fn diagnose(&mut self, deadline_ns: u64, counters_period_ns: u64) -> Result<u32> {
+        let n = self.m.slaves.len();
+        if n == 0 {
+            return Ok(0);
+        }
+        self.m.watch_txpdo_entries();
+        self.m.diagnosis.counters.resize(n, None);
+        let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
+        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox.is_some() && s.has_coe());
+        let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
+        let mut sent = 0;
+        let mut result = Ok(0);
+        for counters in [true, false] {
+            let now = self.m.engine.io.now_ns();
+            let wanted = if counters { now >= self.m.diagnosis.round_due_ns } else { mailboxes };
+            if !wanted || now + 2 * step_ns > deadline_ns {
+                continue;
+            }
+            (self.m.engine.timeout_ns, self.m.engine.retries) = (deadline_ns - now, 0);
+            let r = if counters {
+                self.m.read_counters_step(counters_period_ns)
+            } else {
+                self.m.mailbox_step(counters_period_ns)
+            };
+            sent += 1;
+            match r {
+                Ok(()) => result = Ok(sent),
+                Err(MasterError::Timeout { .. }) => {
+                    self.m.diagnosis.stats.given_up += 1;
+                    result = Ok(sent);
+                    break;
+                }
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            }
+        }
+        (self.m.engine.timeout_ns, self.m.engine.retries) = (timeout, retries);
+        result
+    }
+
+    /// What diagnosis did so far.
+    pub fn diagnosis_stats(&self) -> DiagnosisStats {
+        self.m.diagnosis.stats
+    }
+
+    /// The error counters of every slave as diagnosis last read them.
+    pub fn error_counters(self) -> &'a [Option<ErrorCounters>] {
+        &self.m.diagnosis.counters
+    }
+
+    /// The sync-error flags (0x1C32:20, 0x1C33:20) of each slave as diagnosis last read them,
+    /// by position.
+    pub fn sync_error_flags(self) -> &'a [SyncFlags] {
+        &self.m.diagnosis.sync_flags
     }
 }

@@ -31,20 +31,20 @@ pub struct EoePing {
     pub to_ip: [u8; 4],
 }
 
-/// The EoE client of one master (see [`Master::eoe`](crate::Master::eoe)): it borrows the master's engine and
+/// The EoE client of one master (see [`Acyclic::eoe`](crate::part::Acyclic::eoe)): it borrows the master's engine and
 /// slave list for as long as it is used.
 pub struct Eoe<'a, I: Io> {
     pub(crate) mbx: Mailboxes<'a, I>,
 }
 
-impl<I: Io> Master<I> {
-    /// The EoE client: a slave's IP parameters, Ethernet frames to and from it, ping.
-    pub fn eoe(&mut self) -> Eoe<'_, I> {
-        Eoe { mbx: self.mailboxes() }
-    }
-}
+impl<I: Io> Master<I> {}
 
 impl<I: Io> Eoe<'_, I> {
+    /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
+    pub fn link(&self, position: u16) -> Result<&EoeLink> {
+        Ok(&crate::slave::slave_at(self.mbx.slaves, position)?.eoe)
+    }
+
     /// Sends an EoE request and returns the service data after the header of the first EoE
     /// message of `response` type (fragments met meanwhile go to the inbox).
     fn request(&mut self, position: u16, request: u8, body: &[u8], response: u8) -> Result<(EoeHeader, Vec<u8>)> {
@@ -213,12 +213,7 @@ impl<I: Io> Eoe<'_, I> {
     }
 }
 
-impl<I: Io> Master<I> {
-    /// The frames, fragments lost and frames dropped of the slave's EoE inbox.
-    pub fn eoe_link(&self, position: u16) -> Result<&EoeLink> {
-        Ok(&self.slave(position)?.eoe)
-    }
-}
+impl<I: Io> Master<I> {}
 
 impl EoePing {
     /// The identifier its echo requests carry.
@@ -246,5 +241,12 @@ impl EoePing {
         }
         IcmpEcho::parse(&f[n + hl..end])
             .is_ok_and(|e| e.reply && e.ident == Self::IDENT && e.seq == seq && e.data == data)
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
+    /// The EoE client: a slave's IP parameters, Ethernet frames to and from it, ping.
+    pub fn eoe(self) -> Eoe<'a, I> {
+        Eoe { mbx: self.m.mailboxes() }
     }
 }

@@ -156,7 +156,7 @@ pub enum SdoSource {
     },
     /// A process-data plan's SDO.
     Plan,
-    /// An init command the application gave (`Master::setup_mut`: a machine
+    /// An init command the application gave (`Config::setup_mut`: a machine
     /// description's), at a transition, from the description's line.
     Description {
         /// The transition ("PS").
@@ -333,7 +333,7 @@ impl std::fmt::Display for DatagramRef {
     }
 }
 
-/// A request to a running master's acyclic side ([`Master::submit`](crate::Master::submit))
+/// A request to a running master's acyclic side ([`Acyclic::submit`](crate::part::Acyclic::submit))
 /// that it cannot take.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]

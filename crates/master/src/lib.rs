@@ -6,14 +6,15 @@
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let mut master = Master::new(RawIo::open("eth0")?);
-//! master.bring_up()?; // scan, configure, and every slave to OP
-//! let light = master.output(1, "Output")?; // an entry by slave position and name
-//! let mut next = master.now_ns();
+//! master.states().bring_up()?; // scan, configure, and every slave to OP
+//! let light = master.image().output(1, "Output")?; // an entry by slave position and name
+//! let mut cyclic = master.cyclic(); // the cyclic core, held for the loop
+//! let mut next = cyclic.now_ns();
 //! for k in 0..1_000u64 {
-//!     master.set(light, (k / 100) & 1);
-//!     master.cycle()?; // one exchange of the whole process image
+//!     cyclic.set(light, (k / 100) & 1);
+//!     cyclic.cycle()?; // one exchange of the whole process image
 //!     next += 1_000_000;
-//!     master.sleep_until(next);
+//!     cyclic.sleep_until(next);
 //! }
 //! # Ok(())
 //! # }
@@ -24,8 +25,17 @@
 //!
 //! The master runs on any world behind the [`io::Io`] trait: [`io::RawIo`] in real time on a
 //! network interface, [`io::UdpIo`] over UDP, or (from the `ferrocat-segment` crate, which this
-//! one does not depend on) the simulated segment in virtual time. The [`Master`] brings a segment up to OP ([`Master::bring_up`]),
-//! speaks CoE, and exchanges process data every cycle without allocating ([`Master::cycle`]).
+//! one does not depend on) the simulated segment in virtual time.
+//!
+//! The [`Master`] owns the world, the slave table ([`Master::slaves`]) and the process image;
+//! an application reaches the rest through its parts ([`part`]), each one concern's
+//! operations: [`Master::states`] (scan, bring-up to OP, state requests, supervision),
+//! [`Master::config`] (settings, ESI descriptions, groups, the set-up of each slave),
+//! [`Master::cyclic`] (the link, its frames and the cycle, which exchanges process data
+//! without allocating), [`Master::image`] (the image, to read, through `&Master`),
+//! [`Master::dc`] (distributed clocks), [`Master::clock`] (the master's clock and its
+//! clock-sync method), [`Master::acyclic`] (the mailbox clients, the EEPROM, the requests of
+//! other processes) and [`Master::diagnosis`] (events, counters, statistics).
 pub mod acyclic;
 mod acyclic_state;
 mod bring_up;
@@ -74,7 +84,7 @@ pub use error::{
     RequestError, Result, SdoSource, SlaveError, SlaveRef, StateCause,
 };
 pub use event::MasterEvent;
-/// The ESI descriptions the master takes ([`Master::add_esi`]); the reader with the `esi-xml`
+/// The ESI descriptions the master takes ([`Config::add_esi`](crate::part::Config::add_esi)); the reader with the `esi-xml`
 /// feature.
 pub use ferrocat_esi as esi;
 /// The wire crate whole, for what the re-exports below do not name.
@@ -85,7 +95,10 @@ pub use ferrocat_wire::sii::SiiInfo;
 pub use ferrocat_wire::{Address, Command};
 pub use foe::Foe;
 pub use handle::Handle;
-pub use master::{Group, Master, SplitLatch, STATION_BASE};
+pub use master::part;
+pub use master::{
+    Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Group, Image, Master, SplitLatch, States, STATION_BASE,
+};
 pub use settings::Settings;
-pub use slave::{DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Setup, Slave};
+pub use slave::{DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Setup, Slave, Slaves};
 pub use sync::SyncState;

@@ -246,7 +246,7 @@ impl<I: Io> Mailboxes<'_, I> {
         true
     }
 
-    /// Reads every CoE slave's send mailbox once (see [`Master::poll_mailboxes`](crate::Master::poll_mailboxes)).
+    /// Reads every CoE slave's send mailbox once (see [`Acyclic::poll_mailboxes`](crate::part::Acyclic::poll_mailboxes)).
     pub(crate) fn poll_all(&mut self) -> Result<usize> {
         let mut read = 0;
         for k in 0..self.slaves.len() {

@@ -22,120 +22,12 @@ const MAX_PDUS: usize = MAX_CHUNKS + crate::dc::MAX_SYNC_PDUS;
 pub use crate::handle::Handle;
 
 impl<I: Io> Master<I> {
-    /// The handle of an output entry of slave `position` by its name (first match).
-    pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
-        let s = self.slave(position)?;
-        s.mapping
-            .outputs
-            .iter()
-            .find(|m| m.name == name)
-            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
-            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoOutput(name.into())))
-    }
-
-    /// The handle of an input entry of slave `position` by its name (first match).
-    pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
-        let s = self.slave(position)?;
-        s.mapping
-            .inputs
-            .iter()
-            .find(|m| m.name == name)
-            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
-            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoInput(name.into())))
-    }
-
-    /// Writes `value` (its low `bits` bits) into the image.
-    pub fn set(&mut self, h: Handle, value: u64) {
-        for b in 0..h.bits as u32 {
-            let at = (h.bit + b) as usize;
-            let Some(byte) = self.image.get_mut(at / 8) else { return };
-            let bit = 1u8 << (at % 8);
-            if value >> b & 1 == 1 {
-                *byte |= bit;
-            } else {
-                *byte &= !bit;
-            }
-        }
-    }
-
-    /// Reads an entry from the image.
-    pub fn get(&self, h: Handle) -> u64 {
-        let mut v = 0u64;
-        for b in 0..h.bits as u32 {
-            let at = (h.bit + b) as usize;
-            if self.image.get(at / 8).is_some_and(|byte| byte >> (at % 8) & 1 == 1) {
-                v |= 1 << b;
-            }
-        }
-        v
-    }
-
-    /// Slave-to-slave communication through the master (ETG.1500 item 1201): after every
-    /// cycle, each `from`'s value (an input) is written into `to` (an output), which the next
-    /// cycle sends, so that it reaches its slave one cycle after it was read. Each pair the
-    /// same width, at most 64 bits, within the image (after the layout).
-    pub fn set_copies(&mut self, copies: Vec<(Handle, Handle)>) -> Result<()> {
-        let bits = self.image.len() as u64 * 8;
-        for (k, (from, to)) in copies.iter().enumerate() {
-            if from.bits != to.bits || from.bits == 0 || from.bits > 64 {
-                return Err(ConfigError::CopyWidth { copy: k, from_bits: from.bits, to_bits: to.bits }.into());
-            }
-            if [from, to].iter().any(|h| h.bit as u64 + h.bits as u64 > bits) {
-                return Err(ConfigError::CopyOutsideImage {
-                    copy: k,
-                    from: (from.bit, from.bit + from.bits as u32),
-                    to: (to.bit, to.bit + to.bits as u32),
-                    image_bits: bits,
-                }
-                .into());
-            }
-        }
-        self.copies = copies;
-        Ok(())
-    }
-
     fn apply_copies(&mut self) {
         for k in 0..self.copies.len() {
             let (from, to) = self.copies[k];
-            let v = self.get(from);
-            self.set(to, v);
+            let v = self.image().get(from);
+            self.cyclic().set(to, v);
         }
-    }
-
-    /// The cyclic exchange's statistics so far.
-    pub fn cycle_stats(&self) -> CycleStats {
-        self.cyc.stats
-    }
-
-    /// Starts the statistics afresh (at the start of cyclic operation).
-    pub fn reset_cycle_stats(&mut self) {
-        let nominal = self.cyc.stats.nominal_period_ns;
-        self.cyc = CycleState::default();
-        self.cyc.stats.nominal_period_ns = nominal;
-    }
-
-    /// Sets the nominal period the jitter figures are measured against.
-    pub fn set_period_ns(&mut self, ns: u64) {
-        self.cyc.stats.nominal_period_ns = ns;
-    }
-
-    /// One exchange of the whole process image (LRW, split over frames when it is larger than
-    /// one). Returns the working counter; a shortfall is counted, not an error, so that the
-    /// control loop keeps running.
-    pub fn cycle(&mut self) -> Result<u16> {
-        self.cycle_inner(None).map(|(wkc, _)| wkc)
-    }
-
-    /// [`Master::cycle`] with the clock synchronisation of [`Master::sync_step`] in the same
-    /// frame, behind the process data (as SOEM appends its FRMW): one frame per cycle, and the
-    /// method's timing is the process data's. Returns the working counter and the correction.
-    pub fn cycle_sync(
-        &mut self,
-        sync: &mut dyn crate::sync::ClockSync,
-        st: &mut crate::SyncState,
-    ) -> Result<(u16, crate::sync::Correction)> {
-        let (wkc, c) = self.cycle_inner(Some((sync, st)))?;
-        Ok((wkc, c.unwrap_or_default()))
     }
 
     fn cycle_inner(
@@ -359,12 +251,6 @@ impl<I: Io> Master<I> {
         Ok((wkc, correction))
     }
 
-    /// Each of the plan's frames' statistics (a process-data group's), in the plan's order;
-    /// empty without a plan.
-    pub fn plan_frame_stats(&self) -> Vec<crate::plan::FrameStats> {
-        self.plan.as_ref().map_or(Vec::new(), |(_, b)| b.stats.clone())
-    }
-
     /// What the first frame of the plan due this cycle leaves for the sync datagrams' riders.
     fn plan_room_bytes(&self) -> usize {
         let Some((plan, buffers)) = self.plan.as_ref() else { return 0 };
@@ -394,8 +280,128 @@ impl<I: Io> Master<I> {
         // back, since one acknowledged in SAFEOP answers its process data in full (its outputs
         // given back) and would stay there.
         if ((short && !lost) || self.cyc.recovering) && self.settings.supervise_on_wkc {
-            self.supervise()?;
+            self.states().supervise()?;
         }
         Ok(())
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Cyclic<'a, I> {
+    /// Writes `value` (its low `bits` bits) into the image.
+    pub fn set(&mut self, h: Handle, value: u64) {
+        for b in 0..h.bits as u32 {
+            let at = (h.bit + b) as usize;
+            let Some(byte) = self.m.image.get_mut(at / 8) else { return };
+            let bit = 1u8 << (at % 8);
+            if value >> b & 1 == 1 {
+                *byte |= bit;
+            } else {
+                *byte &= !bit;
+            }
+        }
+    }
+
+    /// Slave-to-slave communication through the master (ETG.1500 item 1201): after every
+    /// cycle, each `from`'s value (an input) is written into `to` (an output), which the next
+    /// cycle sends, so that it reaches its slave one cycle after it was read. Each pair the
+    /// same width, at most 64 bits, within the image (after the layout).
+    pub fn set_copies(&mut self, copies: Vec<(Handle, Handle)>) -> Result<()> {
+        let bits = self.m.image.len() as u64 * 8;
+        for (k, (from, to)) in copies.iter().enumerate() {
+            if from.bits != to.bits || from.bits == 0 || from.bits > 64 {
+                return Err(ConfigError::CopyWidth { copy: k, from_bits: from.bits, to_bits: to.bits }.into());
+            }
+            if [from, to].iter().any(|h| h.bit as u64 + h.bits as u64 > bits) {
+                return Err(ConfigError::CopyOutsideImage {
+                    copy: k,
+                    from: (from.bit, from.bit + from.bits as u32),
+                    to: (to.bit, to.bit + to.bits as u32),
+                    image_bits: bits,
+                }
+                .into());
+            }
+        }
+        self.m.copies = copies;
+        Ok(())
+    }
+
+    /// Sets the nominal period the jitter figures are measured against.
+    pub fn set_period_ns(&mut self, ns: u64) {
+        self.m.cyc.stats.nominal_period_ns = ns;
+    }
+
+    /// One exchange of the whole process image (LRW, split over frames when it is larger than
+    /// one). Returns the working counter; a shortfall is counted, not an error, so that the
+    /// control loop keeps running.
+    pub fn cycle(&mut self) -> Result<u16> {
+        self.m.cycle_inner(None).map(|(wkc, _)| wkc)
+    }
+
+    /// [`Cyclic::cycle`](crate::part::Cyclic::cycle) with the clock synchronisation of [`Clock::sync_step`](crate::part::Clock::sync_step) in the same
+    /// frame, behind the process data (as SOEM appends its FRMW): one frame per cycle, and the
+    /// method's timing is the process data's. Returns the working counter and the correction.
+    pub fn cycle_sync(
+        &mut self,
+        sync: &mut dyn crate::sync::ClockSync,
+        st: &mut crate::SyncState,
+    ) -> Result<(u16, crate::sync::Correction)> {
+        let (wkc, c) = self.m.cycle_inner(Some((sync, st)))?;
+        Ok((wkc, c.unwrap_or_default()))
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
+    /// The cyclic exchange's statistics so far.
+    pub fn cycle_stats(&self) -> CycleStats {
+        self.m.cyc.stats
+    }
+
+    /// Starts the statistics afresh (at the start of cyclic operation).
+    pub fn reset_cycle_stats(&mut self) {
+        let nominal = self.m.cyc.stats.nominal_period_ns;
+        self.m.cyc = CycleState::default();
+        self.m.cyc.stats.nominal_period_ns = nominal;
+    }
+
+    /// Each of the plan's frames' statistics (a process-data group's), in the plan's order;
+    /// empty without a plan.
+    pub fn plan_frame_stats(&self) -> Vec<crate::plan::FrameStats> {
+        self.m.plan.as_ref().map_or(Vec::new(), |(_, b)| b.stats.clone())
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Image<'a, I> {
+    /// The handle of an output entry of slave `position` by its name (first match).
+    pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
+        let s = self.m.slave(position)?;
+        s.mapping
+            .outputs
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoOutput(name.into())))
+    }
+
+    /// The handle of an input entry of slave `position` by its name (first match).
+    pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
+        let s = self.m.slave(position)?;
+        s.mapping
+            .inputs
+            .iter()
+            .find(|m| m.name == name)
+            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+            .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoInput(name.into())))
+    }
+
+    /// Reads an entry from the image.
+    pub fn get(&self, h: Handle) -> u64 {
+        let mut v = 0u64;
+        for b in 0..h.bits as u32 {
+            let at = (h.bit + b) as usize;
+            if self.m.image.get(at / 8).is_some_and(|byte| byte >> (at % 8) & 1 == 1) {
+                v |= 1 << b;
+            }
+        }
+        v
     }
 }

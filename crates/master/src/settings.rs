@@ -1,7 +1,7 @@
 //! What a master waits for, and what it does on its own: the settings an application may
 //! change at any time.
 
-/// The master's settings ([`Master::settings_mut`](crate::Master::settings_mut)).
+/// The master's settings ([`Config::settings_mut`](crate::part::Config::settings_mut)).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Settings {
     /// How long a state transition may take before it is an error, in ns. Default 10 s.

@@ -86,7 +86,7 @@ pub struct Slave {
 
 /// What the application asks of a slave's configuration beyond what the master finds (a
 /// machine description's), applied whenever the master configures the slave
-/// (`Master::setup_mut`).
+/// (`Config::setup_mut`).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Setup {
     /// CoE init commands, sent at their transitions after the ESI's own, in order.
@@ -229,7 +229,7 @@ impl Slave {
     pub fn esc(&self) -> EscInfo {
         self.esc
     }
-    /// What the application asked of its configuration (`Master::setup_mut`).
+    /// What the application asked of its configuration (`Config::setup_mut`).
     pub fn setup(&self) -> &Setup {
         &self.setup
     }
@@ -326,4 +326,40 @@ impl Slave {
 /// The slave at `position` in `slaves`, or an error saying how many there are.
 pub(crate) fn slave_at(slaves: &[Slave], position: u16) -> crate::error::Result<&Slave> {
     slaves.get(position as usize).ok_or(crate::error::MasterError::NoSuchSlave { position, count: slaves.len() })
+}
+
+/// The slave table: the slaves the scan found, by position ([`Master::slaves`](crate::Master::slaves)).
+/// It reads as a slice (`len`, `iter`, indexing) and finds a slave with an error that says how
+/// many there are ([`Slaves::at`]).
+#[derive(Debug, Default)]
+pub struct Slaves {
+    pub(crate) all: Vec<Slave>,
+}
+
+impl Slaves {
+    /// The slave at `position`, or an error saying how many there are.
+    pub fn at(&self, position: u16) -> crate::error::Result<&Slave> {
+        slave_at(&self.all, position)
+    }
+}
+
+impl std::ops::Deref for Slaves {
+    type Target = [Slave];
+    fn deref(&self) -> &[Slave] {
+        &self.all
+    }
+}
+
+impl std::ops::DerefMut for Slaves {
+    fn deref_mut(&mut self) -> &mut [Slave] {
+        &mut self.all
+    }
+}
+
+impl<'a> IntoIterator for &'a Slaves {
+    type Item = &'a Slave;
+    type IntoIter = std::slice::Iter<'a, Slave>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.all.iter()
+    }
 }

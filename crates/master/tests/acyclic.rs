@@ -1,4 +1,4 @@
-//! The acyclic side of a running master (`Master::submit`, `serve_requests`): SDO transfers,
+//! The acyclic side of a running master (`Acyclic::submit`, `serve_requests`): SDO transfers,
 //! SDO information, registers and state requests served in the cycles' spare time while the
 //! cyclic exchange goes on whole, and each bad request answered with its error.
 use ferrocat_master::io::Io;
@@ -16,25 +16,25 @@ fn running() -> Master<VirtualIo> {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     m
 }
 
 /// Cycles until `id` is answered (at most `limit` cycles), serving requests in each cycle's
 /// first three quarters; the answer, and the cycles whose working counter was short.
 fn cycle_until(m: &mut Master<VirtualIo>, id: RequestId, limit: u32) -> (Result<Answer, MasterError>, u32) {
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut short = 0;
     for _ in 0..limit {
         next += CYCLE_NS;
-        if m.cycle().unwrap() != m.expected_wkc() {
+        if m.cyclic().cycle().unwrap() != m.image().expected_wkc() {
             short += 1;
         }
-        m.serve_requests(next - CYCLE_NS / 4).unwrap();
-        if let Some((_, a)) = m.take_answers().into_iter().find(|(k, _)| *k == id) {
+        m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
+        if let Some((_, a)) = m.acyclic().take_answers().into_iter().find(|(k, _)| *k == id) {
             return (a, short);
         }
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
     panic!("request {id:?} not answered in {limit} cycles");
 }
@@ -42,14 +42,14 @@ fn cycle_until(m: &mut Master<VirtualIo>, id: RequestId, limit: u32) -> (Result<
 #[test]
 fn sdo_transfers_and_information_are_served_beside_a_whole_cycle() {
     let mut m = running();
-    let id = m.submit(Request::SdoRead { position: 2, index: 0x1018, subindex: 1, complete_access: false });
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x1018, subindex: 1, complete_access: false });
     let (a, short) = cycle_until(&mut m, id, 200);
     let vendor = m.slaves()[2].identity().vendor_id;
     assert_eq!(a.unwrap(), Answer::Data(vendor.to_le_bytes().to_vec()));
     assert_eq!(short, 0);
 
     // A write, then the value read back (0x10F1:02, the sync error counter limit).
-    let id = m.submit(Request::SdoWrite {
+    let id = m.acyclic().submit(Request::SdoWrite {
         position: 2,
         index: 0x10F1,
         subindex: 2,
@@ -57,42 +57,42 @@ fn sdo_transfers_and_information_are_served_beside_a_whole_cycle() {
         data: vec![5, 0],
     });
     assert_eq!(cycle_until(&mut m, id, 200).0.unwrap(), Answer::Written);
-    let id = m.submit(Request::SdoRead { position: 2, index: 0x10F1, subindex: 2, complete_access: false });
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x10F1, subindex: 2, complete_access: false });
     assert_eq!(cycle_until(&mut m, id, 200).0.unwrap(), Answer::Data(vec![5, 0]));
 
     // A string longer than an expedited transfer's 4 bytes (the device name).
-    let id = m.submit(Request::SdoRead { position: 2, index: 0x1008, subindex: 0, complete_access: false });
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x1008, subindex: 0, complete_access: false });
     let Answer::Data(name) = cycle_until(&mut m, id, 200).0.unwrap() else { panic!() };
     assert!(name.len() > 4, "{name:?}");
 
-    let id = m.submit(Request::EntryInfo { position: 2, index: 0x6060, subindex: 0 });
+    let id = m.acyclic().submit(Request::EntryInfo { position: 2, index: 0x6060, subindex: 0 });
     let Answer::Entry(e) = cycle_until(&mut m, id, 200).0.unwrap() else { panic!() };
     assert_eq!(e.bit_length, 8);
-    let id = m.submit(Request::OdList { position: 2 });
+    let id = m.acyclic().submit(Request::OdList { position: 2 });
     let Answer::List(list) = cycle_until(&mut m, id, 400).0.unwrap() else { panic!() };
     assert!(list.contains(&0x1018) && list.contains(&0x6060), "{list:x?}");
-    let s = m.acyclic_stats();
+    let s = m.acyclic().acyclic_stats();
     assert_eq!((s.answered, s.failed), (6, 0));
-    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
 }
 
 #[test]
 fn an_abort_and_a_slave_without_coe_are_answers_not_errors_of_the_loop() {
     let mut m = running();
-    let id = m.submit(Request::SdoRead { position: 2, index: 0x5FFF, subindex: 0, complete_access: false });
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x5FFF, subindex: 0, complete_access: false });
     let (a, short) = cycle_until(&mut m, id, 200);
     assert!(matches!(a, Err(MasterError::Abort { position: 2, index: 0x5FFF, .. })), "{a:?}");
     assert_eq!(short, 0);
-    let id = m.submit(Request::SdoRead { position: 0, index: 0x1018, subindex: 1, complete_access: false });
+    let id = m.acyclic().submit(Request::SdoRead { position: 0, index: 0x1018, subindex: 1, complete_access: false });
     let a = cycle_until(&mut m, id, 10).0;
     assert!(a.as_ref().is_err_and(|e| e.to_string().contains("has no mailbox")), "{a:?}");
-    let id = m.submit(Request::RegisterRead { position: 9, register: 0, len: 2 });
+    let id = m.acyclic().submit(Request::RegisterRead { position: 9, register: 0, len: 2 });
     let a = cycle_until(&mut m, id, 10).0;
     assert!(matches!(a, Err(MasterError::NoSuchSlave { position: 9, count: 3 })), "{a:?}");
-    let id = m.submit(Request::RegisterRead { position: 1, register: 0xFFFF, len: 2 });
+    let id = m.acyclic().submit(Request::RegisterRead { position: 1, register: 0xFFFF, len: 2 });
     let a = cycle_until(&mut m, id, 10).0;
     assert!(matches!(a, Err(MasterError::Request(RequestError::RegisterRange { .. }))), "{a:?}");
-    let id = m.submit(Request::RegisterWrite { position: 1, register: 0, data: vec![] });
+    let id = m.acyclic().submit(Request::RegisterWrite { position: 1, register: 0, data: vec![] });
     let a = cycle_until(&mut m, id, 10).0;
     assert!(matches!(a, Err(MasterError::Request(RequestError::RegisterLength { len: 0, .. }))), "{a:?}");
 }
@@ -100,41 +100,42 @@ fn an_abort_and_a_slave_without_coe_are_answers_not_errors_of_the_loop() {
 #[test]
 fn registers_and_a_state_request_reach_the_slave_and_supervision_keeps_it_there() {
     let mut m = running();
-    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    let id = m.acyclic().submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
     assert_eq!(cycle_until(&mut m, id, 10).0.unwrap(), Answer::Data(vec![AlState::Op as u8, 0]));
-    let id = m.submit(Request::State { position: 1, state: AlState::SafeOp });
+    let id = m.acyclic().submit(Request::State { position: 1, state: AlState::SafeOp });
     assert_eq!(cycle_until(&mut m, id, 1000).0.unwrap(), Answer::State(AlState::SafeOp));
     // Supervision does not take it back to OP.
-    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    let id = m.acyclic().submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
     let _ = cycle_until(&mut m, id, 300);
-    let id = m.submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
+    let id = m.acyclic().submit(Request::RegisterRead { position: 1, register: addr::AL_STATUS, len: 2 });
     assert_eq!(cycle_until(&mut m, id, 10).0.unwrap(), Answer::Data(vec![AlState::SafeOp as u8, 0]));
-    let id = m.submit(Request::State { position: 1, state: AlState::Op });
+    let id = m.acyclic().submit(Request::State { position: 1, state: AlState::Op });
     assert_eq!(cycle_until(&mut m, id, 1000).0.unwrap(), Answer::State(AlState::Op));
-    let id = m.submit(Request::State { position: 1, state: AlState::Bootstrap });
+    let id = m.acyclic().submit(Request::State { position: 1, state: AlState::Bootstrap });
     assert!(matches!(cycle_until(&mut m, id, 10).0, Err(MasterError::Request(RequestError::State(_)))));
 }
 
 #[test]
 fn a_full_queue_answers_at_once_and_nothing_is_lost() {
     let mut m = running();
-    let ids: Vec<RequestId> =
-        (0..70).map(|_| m.submit(Request::RegisterRead { position: 0, register: addr::AL_STATUS, len: 2 })).collect();
-    let refused = m.take_answers();
+    let ids: Vec<RequestId> = (0..70)
+        .map(|_| m.acyclic().submit(Request::RegisterRead { position: 0, register: addr::AL_STATUS, len: 2 }))
+        .collect();
+    let refused = m.acyclic().take_answers();
     assert_eq!(refused.len(), 70 - ferrocat_master::acyclic::QUEUE_LIMIT);
     assert!(refused.iter().all(|(_, a)| matches!(a, Err(MasterError::Request(RequestError::QueueFull { .. })))));
     let mut answered = refused.len();
     let last = *ids.last().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     for _ in 0..200 {
         next += CYCLE_NS;
-        m.cycle().unwrap();
-        m.serve_requests(next - CYCLE_NS / 4).unwrap();
-        answered += m.take_answers().iter().filter(|(_, a)| a.is_ok()).count();
-        m.io_mut().sleep_until(next);
+        m.cyclic().cycle().unwrap();
+        m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
+        answered += m.acyclic().take_answers().iter().filter(|(_, a)| a.is_ok()).count();
+        m.cyclic().io_mut().sleep_until(next);
     }
     assert_eq!(answered, 70, "every request answered once (the last was {last:?})");
-    assert_eq!(m.requests_pending(), 0);
+    assert_eq!(m.acyclic().requests_pending(), 0);
 }
 
 #[test]
@@ -145,20 +146,21 @@ fn foe_files_go_there_and_back_beside_the_cycle() {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
-    m.bring_up().unwrap();
-    let packet = ferrocat_wire::foe::max_data_len(m.slave(2).unwrap().mailbox().unwrap().out.1 as usize);
+    m.states().bring_up().unwrap();
+    let packet = ferrocat_wire::foe::max_data_len(m.slaves().at(2).unwrap().mailbox().unwrap().out.1 as usize);
     // Shorter than a packet, exactly three (an empty packet ends it), and a few and a half.
     for n in [10, 3 * packet, 5 * packet / 2] {
         let data: Vec<u8> = (0..n).map(|k| (k * 7 + k / 251) as u8).collect();
         let name = format!("file-{n}.bin");
-        let id = m.submit(Request::FoeWrite { position: 2, file: name.clone(), password: 0, data: data.clone() });
+        let id =
+            m.acyclic().submit(Request::FoeWrite { position: 2, file: name.clone(), password: 0, data: data.clone() });
         let (a, short) = cycle_until(&mut m, id, 2000);
         assert_eq!((a.unwrap(), short), (Answer::Written, 0), "{n} bytes");
-        let id = m.submit(Request::FoeRead { position: 2, file: name, password: 0, max_bytes: 1 << 20 });
+        let id = m.acyclic().submit(Request::FoeRead { position: 2, file: name, password: 0, max_bytes: 1 << 20 });
         assert_eq!(cycle_until(&mut m, id, 2000).0.unwrap(), Answer::Data(data), "{n} bytes read back");
     }
     // Longer than the reader takes: an error, the transfer aborted, and the next one as ever.
-    let id = m.submit(Request::FoeRead {
+    let id = m.acyclic().submit(Request::FoeRead {
         position: 2,
         file: format!("file-{}.bin", 3 * packet),
         password: 0,
@@ -166,14 +168,15 @@ fn foe_files_go_there_and_back_beside_the_cycle() {
     });
     let a = cycle_until(&mut m, id, 2000).0;
     assert!(a.as_ref().is_err_and(|e| e.to_string().contains("longer than")), "{a:?}");
-    let id = m.submit(Request::FoeRead { position: 2, file: "file-10.bin".into(), password: 0, max_bytes: 100 });
+    let id =
+        m.acyclic().submit(Request::FoeRead { position: 2, file: "file-10.bin".into(), password: 0, max_bytes: 100 });
     assert!(matches!(cycle_until(&mut m, id, 2000).0, Ok(Answer::Data(d)) if d.len() == 10));
     // A file the slave does not have: its refusal, in words.
-    let id = m.submit(Request::FoeRead { position: 2, file: "none.bin".into(), password: 0, max_bytes: 100 });
+    let id = m.acyclic().submit(Request::FoeRead { position: 2, file: "none.bin".into(), password: 0, max_bytes: 100 });
     let a = cycle_until(&mut m, id, 2000).0;
     assert!(a.as_ref().is_err_and(|e| e.to_string().contains("none.bin")), "{a:?}");
     // A slave without FoE.
-    let id = m.submit(Request::FoeRead { position: 1, file: "x".into(), password: 0, max_bytes: 100 });
+    let id = m.acyclic().submit(Request::FoeRead { position: 1, file: "x".into(), password: 0, max_bytes: 100 });
     assert!(cycle_until(&mut m, id, 10).0.is_err());
-    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
 }

@@ -17,15 +17,15 @@ fn segment(host: HostModel) -> Master<VirtualIo> {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, 3));
-    m.bring_up().unwrap();
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     m
 }
 
 /// The method's clock minus the reference's true system time now, ns.
 fn true_error(m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> i64 {
-    let t = m.io_mut().now_ns();
-    let own = m.master_system_time();
+    let t = m.cyclic().io_mut().now_ns();
+    let own = m.clock().master_system_time();
     let master = sync.master_time(own).unwrap_or(own);
     let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
     master.wrapping_sub(reference) as i64
@@ -38,14 +38,14 @@ fn run(
     sync: &mut Ferrocat,
     mut cal: Option<&mut GpioCalibration>,
 ) -> (f64, f64, Option<i64>) {
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut c = Correction::default();
     let (mut during, mut last, mut found) = (0.0, 0.0, None);
     for k in 0..4_000 {
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.io_mut().sleep_until(next);
-        c = m.sync_step(sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        c = m.clock().sync_step(sync, &mut st).unwrap();
         if (1_000..2_000).contains(&k) {
             during += true_error(m, sync) as f64 / 1e3;
             if let Some(cal) = cal.as_deref_mut() {
@@ -69,7 +69,7 @@ fn the_calibration_finds_and_removes_the_stamps_asymmetry() {
         assert!(before < -300.0, "{coupling:?}: uncalibrated {before:.0} ns");
 
         let mut m = segment(host);
-        m.io_mut().gpio_wire = Some((0, 0));
+        m.cyclic().io_mut().gpio_wire = Some((0, 0));
         let mut cal = GpioCalibration::new(0, host.gpio.unwrap().mean_ns as u64, 1_000);
         let mut sync = Ferrocat::new(coupling, CYCLE_NS);
         let (during, after, found) = run(&mut m, &mut sync, Some(&mut cal));
@@ -94,7 +94,7 @@ fn a_host_without_a_wired_output_says_so() {
     let e = cal.pulse(&mut m, &mut sync).unwrap_err().to_string();
     assert!(e.contains("not wired"), "{e}");
     // A slave position that does not exist.
-    m.io_mut().gpio_wire = Some((0, 0));
+    m.cyclic().io_mut().gpio_wire = Some((0, 0));
     let e = GpioCalibration::new(7, 0, 10).pulse(&mut m, &mut sync).unwrap_err().to_string();
     assert!(e.contains('7'), "{e}");
 }
@@ -114,25 +114,25 @@ fn steering_the_offset_the_calibration_leaves_the_sawtooth_alone() {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, 5));
-    m.bring_up().unwrap();
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
-    m.io_mut().gpio_wire = Some((0, 0));
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m.cyclic().io_mut().gpio_wire = Some((0, 0));
     let mut cal = GpioCalibration::new(0, host.gpio.unwrap().mean_ns as u64, 500);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE);
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut sum, mut n, mut found) = (0.0, 0u32, None);
     for k in 0..2_000 {
         next += CYCLE;
-        m.io_mut().sleep_until(next);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         if (500..1_000).contains(&k) {
             found = found.or(cal.pulse(&mut m, &mut sync).unwrap());
         }
         // After the calibration, the true error at eight instants spread over the cycle.
         if k >= 1_500 {
             for j in 1..8 {
-                m.io_mut().sleep_until(next + j * CYCLE / 8);
+                m.cyclic().io_mut().sleep_until(next + j * CYCLE / 8);
                 sum += true_error(&mut m, &sync) as f64;
                 n += 1;
             }

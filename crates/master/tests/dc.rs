@@ -35,29 +35,29 @@ fn spread_ns(m: &Master<VirtualIo>, t: u64) -> i64 {
 #[test]
 fn init_dc_converges_and_starts_sync0_together() {
     let mut m = segment();
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), ..DcConfig::default() };
-    let r = m.init_dc(&cfg).unwrap();
-    let t = m.io_mut().now_ns();
+    let r = m.dc().init_dc(&cfg).unwrap();
+    let t = m.cyclic().io_mut().now_ns();
     println!("{r:?}; true spread {} ns", spread_ns(&m, t));
     assert!(r.converged && r.static_frames < cfg.max_frames, "{r:?}");
     assert!(r.max_difference_ns <= 50);
-    assert_eq!(m.dc_reference(), Some(0x1001));
+    assert_eq!(m.dc().dc_reference(), Some(0x1001));
     // One second of 1 ms cycles with the FRMW: every slave's true system time within 100 ns of
     // the others (the target of the clock issues). What is left is mostly the delay estimate's
     // forward/return asymmetry, which 0x092C cannot see.
     let mut next = t;
     let mut worst = 0;
     for k in 0..1000 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         if k > 200 {
-            let now = m.io_mut().now_ns();
+            let now = m.cyclic().io_mut().now_ns();
             worst = worst.max(spread_ns(&m, now));
         }
     }
-    println!("worst true spread over the last 800 cycles: {worst} ns; monitor {} ns", m.dc_monitor().unwrap());
+    println!("worst true spread over the last 800 cycles: {worst} ns; monitor {} ns", m.dc().dc_monitor().unwrap());
     assert!(worst <= 100, "{worst}");
     // SYNC0 on all six: their pulses for the same system time within 100 ns of each other.
     let start = r.sync0_start.unwrap();
@@ -78,21 +78,21 @@ fn every_offset_moves_in_one_frame() {
     // end of the same frame: the true spread stays what it was (a read and a write per slave,
     // twelve frames, left a SYNC0 between two slaves' moves firing one move apart).
     let mut m = segment();
-    m.bring_up().unwrap();
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let read_offsets = |m: &Master<VirtualIo>| -> Vec<u64> {
         m.io().seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.offset)).collect()
     };
     let offsets = read_offsets(&m);
-    let t = m.io_mut().now_ns();
+    let t = m.cyclic().io_mut().now_ns();
     let spread = spread_ns(&m, t);
-    let frames = m.frame_stats().frames_sent;
-    m.shift_offsets(-5_000).unwrap();
-    assert_eq!(m.frame_stats().frames_sent - frames, 2, "one frame to read, one to write");
+    let frames = m.cyclic().frame_stats().frames_sent;
+    m.clock().shift_offsets(-5_000).unwrap();
+    assert_eq!(m.cyclic().frame_stats().frames_sent - frames, 2, "one frame to read, one to write");
     let moved: Vec<i64> =
         read_offsets(&m).iter().zip(&offsets).map(|(new, old)| (new.wrapping_sub(*old) as u32) as i32 as i64).collect();
     assert_eq!(moved, [-5_000; 6]);
-    let t = m.io_mut().now_ns();
+    let t = m.cyclic().io_mut().now_ns();
     assert!(spread_ns(&m, t).abs_diff(spread) <= 20, "spread {spread} ns before, {} after", spread_ns(&m, t));
 }
 
@@ -101,12 +101,12 @@ fn every_offset_moves_in_one_frame() {
 #[test]
 fn init_dc_starts_sync1_after_sync0() {
     let mut m = segment();
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), sync1_ns: 200_000, ..DcConfig::default() };
-    let r = m.init_dc(&cfg).unwrap();
+    let r = m.dc().init_dc(&cfg).unwrap();
     let start = r.sync0_start.unwrap();
     // 50 ms after the first pulse (the start is `start_delay_ns` ahead).
-    let t = m.io_mut().now_ns() + cfg.start_delay_ns + 50_000_000;
+    let t = m.cyclic().io_mut().now_ns() + cfg.start_delay_ns + 50_000_000;
     for (k, n) in m.io().seg.nodes.iter().enumerate() {
         let dc = n.esc.dc.as_ref().unwrap();
         // Differences on the low 32 bits: the same for 32- and 64-bit DCs.
@@ -124,12 +124,12 @@ fn init_dc_starts_sync1_after_sync0() {
 fn the_references_offset_gives_it_the_masters_time_at_the_latch() {
     for host in [HostModel::pc_rt(), HostModel::beaglebone_rt(), HostModel::pc_stock(), HostModel::nic_hwts()] {
         let mut m = segment_on(host);
-        m.bring_up().unwrap();
+        m.states().bring_up().unwrap();
         // No static drift compensation to speak of: the reference free-runs from the latch.
         let cfg = DcConfig { max_frames: 1, sync0_slaves: Some(vec![]), ..DcConfig::default() };
-        m.init_dc(&cfg).unwrap();
-        let t = m.io_mut().now_ns();
-        let master = m.master_system_time();
+        m.dc().init_dc(&cfg).unwrap();
+        let t = m.cyclic().io_mut().now_ns();
+        let master = m.clock().master_system_time();
         let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let error = master.wrapping_sub(reference) as i64;
         println!("{}: master − reference just after DC initialisation {error} ns", host.name);
@@ -187,24 +187,24 @@ proptest::proptest! {
     fn delays_offsets_and_sync_hold_across_every_wrap(local0 in proptest::array::uniform6(local_time())) {
         let baseline: Vec<u32> = {
             let mut m = powered_at(&[0; 6]);
-            m.scan().unwrap();
+            m.states().scan().unwrap();
             m.slaves().iter().map(|s| s.dc().delay_ns).collect()
         };
         let mut m = powered_at(&local0);
-        m.bring_up().unwrap();
+        m.states().bring_up().unwrap();
         let delays: Vec<u32> = m.slaves().iter().map(|s| s.dc().delay_ns).collect();
         for (d, b) in delays.iter().zip(&baseline) {
             proptest::prop_assert!((*d as i64 - *b as i64).abs() <= 10, "{delays:?} against {baseline:?}");
         }
-        let r = m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+        let r = m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
         proptest::prop_assert!(r.converged && r.max_difference_ns <= 50, "{r:?}");
-        let mut next = m.io_mut().now_ns();
+        let mut next = m.cyclic().io_mut().now_ns();
         for _ in 0..300 {
-            m.cycle().unwrap();
+            m.cyclic().cycle().unwrap();
             next += 1_000_000;
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
         }
-        let t = m.io_mut().now_ns();
+        let t = m.cyclic().io_mut().now_ns();
         let spread = spread_ns(&m, t);
         proptest::prop_assert!(spread <= 100, "true spread {spread} ns");
     }
@@ -214,25 +214,25 @@ proptest::proptest! {
 fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
     use ferrocat_master::sync::{Coupling, Ferrocat};
     let mut m = segment();
-    m.bring_up().unwrap();
-    m.init_dc(&DcConfig::default()).unwrap();
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&DcConfig::default()).unwrap();
     let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, 1_000_000);
-    let mut st = m.sync_state().unwrap();
+    let mut st = m.clock().sync_state().unwrap();
     let frames0 = m.io().seg.stats.frames;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     for _ in 0..200 {
-        let (wkc, c) = m.cycle_sync(&mut sync, &mut st).unwrap();
+        let (wkc, c) = m.cyclic().cycle_sync(&mut sync, &mut st).unwrap();
         assert!(wkc > 0, "the process data answered");
         next += c.next_period_ns.expect("the master follows: a period every cycle");
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
     // One frame per cycle, and the probes of the line while it was young.
     assert_eq!(m.io().seg.stats.frames - frames0 - st.probing.sent, 200, "one frame per cycle");
     assert!(st.probing.sent > 0 && st.probing.lost == 0, "{st:?}");
     assert_eq!((st.cycle, st.lost), (200, 0));
     // The master's clock, its line through the reference's times, within 1 µs of the reference.
-    let t = m.io_mut().now_ns();
-    let own = m.master_system_time();
+    let t = m.cyclic().io_mut().now_ns();
+    let own = m.clock().master_system_time();
     let mine = ferrocat_master::sync::ClockSync::master_time(&sync, own).expect("a line after 200 samples");
     let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
     let e = mine.wrapping_sub(reference) as i64;
@@ -253,23 +253,23 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
-    m.bring_up().unwrap();
-    let r = m.init_dc(&DcConfig::default()).unwrap();
+    m.states().bring_up().unwrap();
+    let r = m.dc().init_dc(&DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
     let flags: Vec<(bool, bool)> = m.slaves().iter().map(|s| (s.dc().supported, s.dc().has_system_time)).collect();
     assert_eq!(flags, [(true, true), (true, false), (true, false), (true, true)]);
     let delays: Vec<u32> = m.slaves().iter().map(|s| s.dc().delay_ns).collect();
     assert!(delays[0] == 0 && delays.windows(2).all(|w| w[0] < w[1]), "{delays:?}");
-    let monitored: Vec<u16> = m.dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
+    let monitored: Vec<u16> = m.dc().dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
     assert_eq!(monitored, [0, 3]);
     // The slave behind the terminals follows the reference.
-    let t = m.io_mut().now_ns();
+    let t = m.cyclic().io_mut().now_ns();
     let nodes = &m.io().seg.nodes;
     let (a, b) = (nodes[0].esc.dc.as_ref().unwrap().system_at(t), nodes[3].esc.dc.as_ref().unwrap().system_at(t));
     assert!((a as i64 - b as i64).abs() <= 100, "reference {a}, last slave {b}");
     // SYNC0 asked of such a terminal: an error that says why, not a working-counter error.
     let cfg = DcConfig { sync0_slaves: Some(vec![1]), ..DcConfig::default() };
-    let e = m.init_dc(&cfg).unwrap_err().to_string();
+    let e = m.dc().init_dc(&cfg).unwrap_err().to_string();
     assert!(e.contains("EL2004") && e.contains("receive times only"), "{e}");
 }
 
@@ -282,9 +282,9 @@ fn parks_delay_needs_no_slave_behind_the_reference() {
     let delay = |devices: &str| {
         let cfg: SegmentConfig = toml::from_str(&format!("seed = 2\n{devices}")).unwrap();
         let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 2));
-        m.bring_up().unwrap();
-        m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
-        m.park_delay(100).unwrap()
+        m.states().bring_up().unwrap();
+        m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+        m.clock().park_delay(100).unwrap()
     };
     let alone = delay("[[device]]\nbuiltin = 'EK1100'\n");
     let line = delay("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EK1100'\n");

@@ -34,9 +34,9 @@ fn check_prepared(name: &str, toml: &str, soem_ns: i64, prepare: fn(&mut Master<
 fn scan(name: &str, toml: &str, loop_ns: u32, bound_ns: i64, prepare: fn(&mut Master<VirtualIo>)) -> Master<VirtualIo> {
     let cfg: SegmentConfig = toml::from_str(toml).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.settings_mut().closed_port_loop_ns = loop_ns;
+    m.config().settings_mut().closed_port_loop_ns = loop_ns;
     prepare(&mut m);
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     // The last frame of the scan visited every slave; any frame does: delays are fixed.
     // Visits are in processing order, which is the order of positions.
     let visits = m.io().seg.last_visits().to_vec();
@@ -166,7 +166,7 @@ fn ip_cores_left_in_reverse_latch_mode() {
          [[device]]\nname = 'r'\nbuiltin = 'SERVO'\nesc = 'ipcore'\nparent = 'b'\nparent_port = 1\nport = 1\n\
          [[device]]\nbuiltin = 'SERVO'\nparent = 'r'\nparent_port = 0\n";
     let m = check_prepared("reverse mode", toml, 10, |m| {
-        m.datagram(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [1]).unwrap();
+        m.cyclic().datagram(Command::BWR, Address::Device { adp: 0, ado: 0x0936 }, &mut [1]).unwrap();
     });
     assert_eq!(m.slaves().iter().map(|s| s.ports().entry).collect::<Vec<_>>(), [0, 0, 0, 0, 0, 1]);
 }
@@ -175,17 +175,17 @@ fn ip_cores_left_in_reverse_latch_mode() {
 /// within 100 ns of the reference's (32-bit DCs on their low 32 bits).
 fn synchronises(mut m: Master<VirtualIo>) {
     use ferrocat_master::io::Io;
-    m.bring_up().unwrap();
-    let r = m.init_dc(&ferrocat_master::DcConfig::default()).unwrap();
+    m.states().bring_up().unwrap();
+    let r = m.dc().init_dc(&ferrocat_master::DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut worst = 0i64;
     for k in 0..1000 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         if k > 200 {
-            let t = m.io_mut().now_ns();
+            let t = m.cyclic().io_mut().now_ns();
             // Slaves with receive times only (ET1200 terminals) have no system time to compare.
             let times: Vec<u32> = m.io().seg.system_times_at(t).iter().map(|&x| x as u32).collect();
             let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(times[0]) as i32 as i64).collect();

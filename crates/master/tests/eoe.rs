@@ -19,8 +19,8 @@ fn master() -> Master<VirtualIo> {
     let toml = "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n";
     let cfg: SegmentConfig = toml::from_str(toml).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
-    m.scan().unwrap();
-    m.configure().unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
     m
 }
 
@@ -38,7 +38,7 @@ fn addressed(m: &mut Master<VirtualIo>) {
         dns_name: Some(IpParameters::dns_name_field(b"axis-1").unwrap()),
         ..Default::default()
     };
-    m.eoe().set_ip(DRIVE, &params).unwrap();
+    m.acyclic().eoe().set_ip(DRIVE, &params).unwrap();
 }
 
 fn ping() -> EoePing {
@@ -58,7 +58,7 @@ fn arp_request(target_ip: [u8; 4]) -> Vec<u8> {
 fn set_ip_is_read_back_and_announced() {
     let mut m = master();
     addressed(&mut m);
-    let p = m.eoe().get_ip(DRIVE).unwrap();
+    let p = m.acyclic().eoe().get_ip(DRIVE).unwrap();
     assert_eq!(
         (p.mac, p.ip, p.subnet_mask, p.gateway),
         (Some(DRIVE_MAC), Some(DRIVE_IP), Some([255, 255, 255, 0]), Some(MASTER_IP))
@@ -67,12 +67,12 @@ fn set_ip_is_read_back_and_announced() {
     assert_eq!(p.dns_server, None);
     // The announcement came before the Get IP response; it waited in the inbox (a timeout of
     // any size: it is there at once).
-    let f = m.eoe().receive(DRIVE, u64::MAX).unwrap().expect("an ARP announcement");
+    let f = m.acyclic().eoe().receive(DRIVE, u64::MAX).unwrap().expect("an ARP announcement");
     let (eth, n) = EthernetRepr::parse(&f).unwrap();
     assert_eq!((eth.dst, eth.src, eth.ethertype), (BROADCAST, DRIVE_MAC, ETHERTYPE_ARP));
     let a = ArpRepr::parse(&f[n..]).unwrap();
     assert_eq!((a.operation, a.sender_ip, a.target_ip, a.target_mac), (ARP_REQUEST, DRIVE_IP, DRIVE_IP, [0; 6]));
-    assert_eq!(m.eoe().receive(DRIVE, 1_000_000).unwrap(), None);
+    assert_eq!(m.acyclic().eoe().receive(DRIVE, 1_000_000).unwrap(), None);
 }
 
 #[test]
@@ -82,16 +82,16 @@ fn pings_of_every_size_come_back_whole() {
     // Up to a full 1 514-byte Ethernet frame: 16 fragments of 96 bytes through the 128-byte
     // mailbox each way.
     for (seq, len) in [0usize, 1, 56, 95, 96, 97, 1000, 1472].into_iter().enumerate() {
-        let rtt = m.eoe().ping(DRIVE, &ping(), seq as u16, len, u64::MAX).unwrap();
+        let rtt = m.acyclic().eoe().ping(DRIVE, &ping(), seq as u16, len, u64::MAX).unwrap();
         assert!(rtt.is_some_and(|t| t > 0), "{len} bytes: {rtt:?}");
     }
     let e = endpoint(&m);
     assert_eq!((e.frames_in, e.frames_out, e.fragment_errors), (8, 9, 0));
     // Another address is not answered: no reply within the timeout.
     let lost = EoePing { to_ip: [192, 168, 7, 3], ..ping() };
-    assert_eq!(m.eoe().ping(DRIVE, &lost, 99, 8, 20_000_000).unwrap(), None);
+    assert_eq!(m.acyclic().eoe().ping(DRIVE, &lost, 99, 8, 20_000_000).unwrap(), None);
     // More than 63 × 32 bytes has no EoE form.
-    let err = m.eoe().send(DRIVE, &[0u8; 2017]).unwrap_err().to_string();
+    let err = m.acyclic().eoe().send(DRIVE, &[0u8; 2017]).unwrap_err().to_string();
     assert!(err.contains("2017-byte frame") && err.contains("SERVO"), "{err}");
 }
 
@@ -99,21 +99,21 @@ fn pings_of_every_size_come_back_whole() {
 fn a_frame_that_arrives_during_an_sdo_transfer_is_kept() {
     let mut m = master();
     addressed(&mut m);
-    assert!(m.eoe().receive(DRIVE, 1_000_000).unwrap().is_some(), "the announcement");
-    m.eoe().send(DRIVE, &arp_request(DRIVE_IP)).unwrap();
+    assert!(m.acyclic().eoe().receive(DRIVE, 1_000_000).unwrap().is_some(), "the announcement");
+    m.acyclic().eoe().send(DRIVE, &arp_request(DRIVE_IP)).unwrap();
     // The ARP reply is in the send mailbox before the SDO response: the SDO read meets it.
-    let v = m.coe().sdo_read(DRIVE, 0x1000, 0).unwrap();
+    let v = m.acyclic().coe().sdo_read(DRIVE, 0x1000, 0).unwrap();
     assert_eq!(v.len(), 4);
-    let f = m.eoe().receive(DRIVE, 0).unwrap().expect("the ARP reply, kept");
+    let f = m.acyclic().eoe().receive(DRIVE, 0).unwrap().expect("the ARP reply, kept");
     let a = ArpRepr::parse(&f[14..]).unwrap();
     assert_eq!((a.operation, a.sender_mac, a.target_ip), (ARP_REPLY, DRIVE_MAC, MASTER_IP));
-    assert_eq!(m.eoe_link(DRIVE).unwrap().dropped, 0);
+    assert_eq!(m.acyclic().eoe().link(DRIVE).unwrap().dropped, 0);
 }
 
 #[test]
 fn a_slave_without_eoe_is_refused_before_anything_is_sent() {
     let mut m = master();
-    let e = m.eoe().get_ip(0).unwrap_err().to_string();
+    let e = m.acyclic().eoe().get_ip(0).unwrap_err().to_string();
     assert!(e.contains("EK1100") && e.contains("mailbox"), "{e}");
 }
 
@@ -121,25 +121,25 @@ fn a_slave_without_eoe_is_refused_before_anything_is_sent() {
 fn the_pump_moves_frames_between_cycles_in_op_without_waiting() {
     let mut m = master();
     addressed(&mut m);
-    m.start().unwrap();
-    m.set_period_ns(1_000_000);
+    m.states().start().unwrap();
+    m.cyclic().set_period_ns(1_000_000);
     let p = ping();
     let data = [0x5Au8; 600];
     // Three echo requests of 642 bytes queued at once: 7 fragments each through the 128-byte
     // mailbox, one written per cycle.
     for seq in 0..3 {
-        assert!(m.eoe().queue(DRIVE, &p.echo_request(seq, &data).unwrap()).unwrap());
+        assert!(m.acyclic().eoe().queue(DRIVE, &p.echo_request(seq, &data).unwrap()).unwrap());
     }
     // Meanwhile a blocking send would interleave its fragments with the queue's.
-    let e = m.eoe().send(DRIVE, &p.echo_request(9, &data).unwrap()).unwrap_err().to_string();
+    let e = m.acyclic().eoe().send(DRIVE, &p.echo_request(9, &data).unwrap()).unwrap_err().to_string();
     assert!(e.contains("still going out"), "{e}");
     let mut echoes = Vec::new();
     let mut cycles = 0;
     while echoes.len() < 3 && cycles < 200 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
         cycles += 1;
         // The drive's ARP announcement (42 bytes) waited in its mailbox: not an echo.
-        if let Some(f) = m.eoe().pump(DRIVE).unwrap().filter(|f| f.len() > 42) {
+        if let Some(f) = m.acyclic().eoe().pump(DRIVE).unwrap().filter(|f| f.len() > 42) {
             echoes.push(f);
         }
     }
@@ -148,6 +148,6 @@ fn the_pump_moves_frames_between_cycles_in_op_without_waiting() {
     }
     assert_eq!(echoes.len(), 3, "after {cycles} cycles");
     // Every cycle kept the whole working counter: the pump's frames are its own.
-    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
     println!("three 642-byte echoes there and back in {cycles} cycles of 1 ms");
 }

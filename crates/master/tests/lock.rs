@@ -1,4 +1,4 @@
-//! Clock sync as configuration: `Master::start_clock_sync` runs a named method, and its lock
+//! Clock sync as configuration: `Clock::start_clock_sync` runs a named method, and its lock
 //! state follows what the frames measure, judged against the true clocks of the simulator.
 use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Coupling, LockState, SyncMethod};
@@ -19,15 +19,15 @@ fn io(seed: u64) -> VirtualIo {
 
 /// `cycles` cycles of `method` with the process data, returning the state after each.
 fn run<I: Io>(m: &mut Master<I>, sync: &mut dyn ClockSync, st: &mut SyncState, cycles: u64) -> Vec<LockState> {
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut period = CYCLE_NS;
     (0..cycles)
         .map(|_| {
             next += period;
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
             // A cycle whose slaves do not answer is an error after the sync frame's sample was
             // taken; an application cycles on.
-            let c = m.cycle_sync(sync, st).map(|(_, c)| c).unwrap_or_default();
+            let c = m.cyclic().cycle_sync(sync, st).map(|(_, c)| c).unwrap_or_default();
             period = c.next_period_ns.unwrap_or(CYCLE_NS);
             st.lock.state()
         })
@@ -36,10 +36,10 @@ fn run<I: Io>(m: &mut Master<I>, sync: &mut dyn ClockSync, st: &mut SyncState, c
 
 fn started(io: VirtualIo, method: &SyncMethod) -> (Master<VirtualIo>, Box<dyn ClockSync>, SyncState) {
     let mut m = Master::new(io);
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
-    let (sync, _, st) = m.start_clock_sync(&dc, method, CYCLE_NS).unwrap();
-    m.start().unwrap();
+    let (sync, _, st) = m.clock().start_clock_sync(&dc, method, CYCLE_NS).unwrap();
+    m.states().start().unwrap();
     (m, sync, st)
 }
 
@@ -54,8 +54,8 @@ fn the_default_method_locks_and_its_offset_matches_the_true_clocks() {
     println!("locked after {first_lock} cycles; offset {:?} ns", st.lock.offset_ns());
     assert!(states[first_lock..].iter().all(|&s| s == LockState::Locked), "left lock without a cause");
     // What the method believes against the reference's true time, now.
-    let t = m.io_mut().now_ns();
-    let own = m.master_system_time_at(t);
+    let t = m.cyclic().io_mut().now_ns();
+    let own = m.clock().master_system_time_at(t);
     let truth = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
     let error_ns = truth.wrapping_sub(sync.reference_belief_ns(own)) as i64;
     assert!(error_ns.abs() < 1_000, "locked, yet the true error is {error_ns} ns");
@@ -83,10 +83,10 @@ fn a_hundred_lost_frames_in_a_row_unlock() {
         move |_: &mut [u8], n: usize, _: bool| (!cut.get()).then_some(n)
     };
     let mut m = Master::new(Tamper { inner: io(4), hook });
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
-    let (mut sync, _, mut st) = m.start_clock_sync(&dc, &SyncMethod::default(), CYCLE_NS).unwrap();
-    m.start().unwrap();
+    let (mut sync, _, mut st) = m.clock().start_clock_sync(&dc, &SyncMethod::default(), CYCLE_NS).unwrap();
+    m.states().start().unwrap();
     assert_eq!(run(&mut m, sync.as_mut(), &mut st, 2_000).last(), Some(&LockState::Locked));
     cut.set(true);
     let states = run(&mut m, sync.as_mut(), &mut st, 120);

@@ -25,26 +25,26 @@ fn indices(entries: &[ferrocat_master::Mapped]) -> Vec<u16> {
 #[test]
 fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
     let mut m = drive(None);
-    m.scan().unwrap();
-    m.configure().unwrap();
-    assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9010]);
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    assert_eq!(m.config().detected_modules(0).unwrap(), [0x9010, 0x9010]);
     // 0xF000: the index distance between modules and how many the slots take at most.
-    assert_eq!(m.coe().sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
-    assert_eq!(m.coe().sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
+    assert_eq!(m.acyclic().coe().sdo_read(0, 0xF000, 1).unwrap(), 0x800u16.to_le_bytes());
+    assert_eq!(m.acyclic().coe().sdo_read(0, 0xF000, 2).unwrap(), 2u16.to_le_bytes());
     // Axis 1's objects 0x800 above axis 0's (CiA402's multi-axis layout).
     assert_eq!(indices(&m.slaves()[0].mapping().outputs), [0x6040, 0x607A, 0x6840, 0x687A]);
     assert_eq!(indices(&m.slaves()[0].mapping().inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
-    m.configure_modules(0, &[0x9010, 0x9010]).unwrap();
-    m.start().unwrap();
+    m.config().configure_modules(0, &[0x9010, 0x9010]).unwrap();
+    m.states().start().unwrap();
     assert_eq!(m.slaves()[0].state(), AlState::Op);
 }
 
 #[test]
 fn chosen_modules_are_plugged_in_order() {
     let mut m = drive(Some(&["#x9010", "#x9020"]));
-    m.scan().unwrap();
-    m.configure().unwrap();
-    assert_eq!(m.detected_modules(0).unwrap(), [0x9010, 0x9020]);
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    assert_eq!(m.config().detected_modules(0).unwrap(), [0x9010, 0x9020]);
     assert_eq!(indices(&m.slaves()[0].mapping().outputs), [0x6040, 0x607A, 0x6840, 0x68FF]);
     assert_eq!(indices(&m.slaves()[0].mapping().inputs), [0x6041, 0x6064, 0x6841, 0x686C]);
 }
@@ -52,15 +52,15 @@ fn chosen_modules_are_plugged_in_order() {
 #[test]
 fn other_modules_configured_are_an_error_naming_the_slot_and_the_slave_refuses_safeop() {
     let mut m = drive(None);
-    m.scan().unwrap();
-    m.configure().unwrap();
-    let e = m.configure_modules(0, &[0x9010, 0x9020]).unwrap_err().to_string();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    let e = m.config().configure_modules(0, &[0x9010, 0x9020]).unwrap_err().to_string();
     assert!(e.contains("slot 1: module 0x00009020 configured, 0x00009010 detected"), "{e}");
     // Told so, the slave keeps to PREOP.
-    let e = m.request_state(0, AlState::SafeOp).unwrap_err().to_string();
+    let e = m.states().request_state(0, AlState::SafeOp).unwrap_err().to_string();
     assert!(e.contains("0x0070"), "{e}");
     // Told the right modules, it goes on.
-    m.configure_modules(0, &[0x9010, 0x9010]).unwrap();
+    m.config().configure_modules(0, &[0x9010, 0x9010]).unwrap();
 }
 
 #[test]
@@ -93,9 +93,9 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
     use ferrocat_master::cia402::{drive_to_goal, Axis, Goal};
     use ferrocat_wire::cia402::{error_code, State};
     let mut m = drive(None);
-    m.scan().unwrap();
-    m.configure().unwrap();
-    m.start().unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    m.states().start().unwrap();
     let mut axes = Axis::all(&m, 0).unwrap();
     assert_eq!(axes.iter().map(|a| (a.axis, a.index(0x6040))).collect::<Vec<_>>(), [(0, 0x6040), (1, 0x6840)]);
     assert_eq!(sim(&m).axes().len(), 2);
@@ -103,9 +103,9 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
     drive_to_goal(&mut m, &mut axes[1..], 1_000_000, 200).unwrap();
     let s = sim(&m);
     assert_eq!((s.axes()[0].state(), s.axes()[1].state()), (State::SwitchOnDisabled, State::OperationEnabled));
-    m.cycle().unwrap();
+    m.cyclic().cycle().unwrap();
     assert_eq!(axes[0].update(&mut m), Some(State::SwitchOnDisabled));
-    m.io_mut().seg.nodes[0]
+    m.cyclic().io_mut().seg.nodes[0]
         .esc
         .app_mut()
         .as_any_mut()
@@ -113,12 +113,12 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
         .unwrap()
         .inject_axis_fault(1, error_code::OVERCURRENT);
     for _ in 0..20 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
     }
     assert_eq!(axes[1].update(&mut m), Some(State::Fault));
     assert_eq!(axes[0].update(&mut m), Some(State::SwitchOnDisabled));
     let code = |m: &mut Master<VirtualIo>, index| {
-        u16::from_le_bytes(m.coe().sdo_read(0, index, 0).unwrap()[..2].try_into().unwrap())
+        u16::from_le_bytes(m.acyclic().coe().sdo_read(0, index, 0).unwrap()[..2].try_into().unwrap())
     };
     assert_eq!((code(&mut m, 0x603F), code(&mut m, 0x683F)), (0, error_code::OVERCURRENT));
     // Past the last axis a drive may have, the driver says so.
@@ -146,31 +146,31 @@ fn module_objects_and_init_commands_follow_the_slot() {
         ]
     );
     let read_u32 = |m: &mut Master<VirtualIo>, index| {
-        let v = m.coe().sdo_read(0, index, 0).unwrap();
+        let v = m.acyclic().coe().sdo_read(0, index, 0).unwrap();
         let mut b = [0u8; 4];
         b[..v.len().min(4)].copy_from_slice(&v[..v.len().min(4)]);
         u32::from_le_bytes(b)
     };
     // Without the description: the module objects with their defaults, nothing sent.
     let mut m = drive(None);
-    m.scan().unwrap();
-    m.configure().unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
     assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (1, 1));
     assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (0, 0));
     // With it: every command at its slot's index.
     let mut m = drive(None);
-    m.add_esi(file.vendor_id, plugged.clone());
-    m.scan().unwrap();
-    m.configure().unwrap();
+    m.config().add_esi(file.vendor_id, plugged.clone());
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
     assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (10, 10));
     assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (8, 8));
-    m.start().unwrap();
+    m.states().start().unwrap();
     // A command to an object the device lacks.
     let mut bad = plugged;
     bad.init_cmds[3].index = 0x2F00;
     let mut m = drive(None);
-    m.add_esi(file.vendor_id, bad);
-    m.scan().unwrap();
-    let e = m.configure().unwrap_err().to_string();
+    m.config().add_esi(file.vendor_id, bad);
+    m.states().scan().unwrap();
+    let e = m.states().configure().unwrap_err().to_string();
     assert!(e.contains("ESI init command PS 0x2f00:0x00 (\"Gear ratio\", line "), "{e}");
 }

@@ -65,7 +65,8 @@ fn targets(code: &str, reexports: &BTreeMap<String, String>) -> BTreeSet<String>
     found
 }
 
-/// The names of the functions in `code`'s `impl<I: Io> Master<I>` blocks, and of every other
+/// The names of the functions in `code`'s `impl<I: Io> Master<I>` blocks and in its blocks of
+/// the master's parts (`impl<'a, I: Io> crate::master::part::Dc<'a, I>`), and of every other
 /// function in it.
 fn functions(code: &str) -> (BTreeSet<String>, BTreeSet<String>) {
     let (mut on_master, mut other) = (BTreeSet::new(), BTreeSet::new());
@@ -74,7 +75,7 @@ fn functions(code: &str) -> (BTreeSet<String>, BTreeSet<String>) {
     let (mut depth, mut master_body) = (0usize, None::<usize>);
     let mut rest = code;
     while !rest.is_empty() {
-        if rest.starts_with("impl<I: Io> Master<I> {") {
+        if rest.starts_with("impl<I: Io> Master<I> {") || rest.starts_with("impl<'a, I: Io> crate::master::part::") {
             master_body = Some(depth + 1);
         }
         if let Some(after) = rest.strip_prefix("fn ") {
@@ -103,18 +104,21 @@ fn functions(code: &str) -> (BTreeSet<String>, BTreeSet<String>) {
     (on_master, other)
 }
 
-/// The `Master` methods that `code` calls on `self` or on a master (`m.`, `master.`), of
-/// those in `methods`.
+/// The `Master` methods (and its parts') that `code` calls on `self`, on a master (`m.`,
+/// `master.`) or on a part (`.dc().`), of those in `methods`.
 fn master_calls<'a>(code: &str, methods: &'a BTreeMap<String, String>) -> BTreeSet<&'a str> {
     methods
         .iter()
         .filter(|(name, _)| {
-            ["self.", "m.", "master."].iter().any(|recv| {
-                code.match_indices(&format!("{recv}{name}(")).any(|(at, _)| {
-                    // A whole receiver: `self.coe(`, not `myself.coe(`.
-                    code[..at].chars().next_back().is_none_or(|c| !(c.is_alphanumeric() || c == '_' || c == '.'))
+            let parts = ["states", "config", "cyclic", "image", "dc", "clock", "acyclic", "diagnosis"];
+            let on_part = parts.iter().any(|p| code.contains(&format!(".{p}().{name}(")));
+            on_part
+                || ["self.", "m.", "master."].iter().any(|recv| {
+                    code.match_indices(&format!("{recv}{name}(")).any(|(at, _)| {
+                        // A whole receiver: `self.coe(`, not `myself.coe(`.
+                        code[..at].chars().next_back().is_none_or(|c| !(c.is_alphanumeric() || c == '_' || c == '.'))
+                    })
                 })
-            })
         })
         .map(|(_, module)| module.as_str())
         .collect()

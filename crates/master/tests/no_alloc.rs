@@ -36,23 +36,23 @@ fn ten_thousand_cycles_allocate_nothing() {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.bring_up().unwrap();
-    let out = m.output(1, "Output").unwrap();
-    let inp = m.input(2, "Input").unwrap();
+    m.states().bring_up().unwrap();
+    let out = m.image().output(1, "Output").unwrap();
+    let inp = m.image().input(2, "Input").unwrap();
     let period = 1_000_000;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
         for k in 0..cycles {
-            m.set(out, k & 1);
-            let _ = m.get(inp);
-            m.cycle().unwrap();
+            m.cyclic().set(out, k & 1);
+            let _ = m.image().get(inp);
+            m.cyclic().cycle().unwrap();
             next += period;
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
         }
     };
     run(&mut m, 200);
     let allocations = counted(|| run(&mut m, 10_000));
-    let s = m.cycle_stats();
+    let s = m.diagnosis().cycle_stats();
     println!("10 000 cycles: {allocations} allocations, {} WKC errors, last WKC {}", s.wkc_errors, s.last_wkc);
     assert_eq!(s.wkc_errors, 0);
     assert_eq!(allocations, 0);
@@ -61,48 +61,48 @@ fn ten_thousand_cycles_allocate_nothing() {
     // reference kept on the reference's time, once the split is known (in the same test: the
     // counter is the process's).
     let (mut m, mut next) = ring("");
-    m.io_mut().seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
+    m.cyclic().io_mut().seg.schedule(next + 1_000_000_000, ferrocat_segment::Event::LinkDown { node: 2, port: 0 });
     run_cycles(&mut m, &mut next, 3_000);
-    assert_eq!(m.ring_state(), ferrocat_master::RingState::Broken);
+    assert_eq!(m.diagnosis().ring_state(), ferrocat_master::RingState::Broken);
     let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
-    let moved = m.far_reference_offset_ns();
+    let moved = m.dc().far_reference_offset_ns();
     println!("ring split: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns");
     assert!(moved.is_some(), "the far reference is being kept");
-    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
     assert_eq!(allocations, 0);
 
     // The same ring split before the master starts: the far reference kept from the latch's
     // geometry, moved with every frame while it drifts, and the DL status read every 100 ms
     // for the cable at the break.
     let (mut m, mut next) = ring("[[event]]\nat_ms = 0\nlink_down = { device = 2, port = 0 }\n");
-    assert!(m.split_latch().is_some_and(|l| l.watch_next_ns.is_some()), "{:?}", m.split_latch());
+    assert!(m.dc().split_latch().is_some_and(|l| l.watch_next_ns.is_some()), "{:?}", m.dc().split_latch());
     run_cycles(&mut m, &mut next, 3_000);
     let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
-    let moved = m.far_reference_offset_ns();
+    let moved = m.dc().far_reference_offset_ns();
     println!(
         "ring split from the start: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns"
     );
     assert!(moved.is_some_and(|ns| ns != 0), "the far reference is being kept");
-    assert_eq!(m.ring_state(), ferrocat_master::RingState::Broken);
+    assert_eq!(m.diagnosis().ring_state(), ferrocat_master::RingState::Broken);
     assert_eq!(allocations, 0);
 
     // A plan from outside (an ENI's layout): its FMMUs at logical 0x01000000, one LRW in an
     // image that mirrors the frame.
     let mut m = planned();
-    let out = m.output(1, "Output").unwrap();
-    let mut next = m.io_mut().now_ns();
+    let out = m.image().output(1, "Output").unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut cycles = |m: &mut Master<VirtualIo>, n: u64| {
         for k in 0..n {
-            m.set(out, k & 1);
-            m.cycle().unwrap();
+            m.cyclic().set(out, k & 1);
+            m.cyclic().cycle().unwrap();
             next += 1_000_000;
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
         }
     };
     cycles(&mut m, 200);
     let allocations = counted(|| cycles(&mut m, 10_000));
-    println!("a plan's frames: 10 000 cycles, {allocations} allocations, expected WKC {}", m.expected_wkc());
-    assert_eq!((m.cycle_stats().wkc_errors, m.expected_wkc()), (0, 3));
+    println!("a plan's frames: 10 000 cycles, {allocations} allocations, expected WKC {}", m.image().expected_wkc());
+    assert_eq!((m.diagnosis().cycle_stats().wkc_errors, m.image().expected_wkc()), (0, 3));
     assert_eq!(allocations, 0);
 }
 
@@ -152,8 +152,8 @@ fn planned() -> Master<VirtualIo> {
         ..Plan::default()
     };
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.set_plan(plan).unwrap();
-    m.bring_up().unwrap();
+    m.config().set_plan(plan).unwrap();
+    m.states().bring_up().unwrap();
     m
 }
 
@@ -166,18 +166,18 @@ fn ring(events: &str) -> (Master<VirtualIo>, u64) {
     ))
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
-    m.bring_up().unwrap();
-    m.init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
-    let now = m.io_mut().now_ns();
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
+    let now = m.cyclic().io_mut().now_ns();
     (m, now)
 }
 
 /// `cycles` 1 ms cycles from `next` on.
 fn run_cycles(m: &mut Master<VirtualIo>, next: &mut u64, cycles: u64) {
     for _ in 0..cycles {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
         *next += 1_000_000;
-        m.io_mut().sleep_until(*next);
+        m.cyclic().io_mut().sleep_until(*next);
     }
 }
 

@@ -16,35 +16,40 @@ fn loss_power_cycle_and_link_pull() {
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 8));
     // Bring-up on a lossy segment: the engine retries non-cyclic frames.
-    m.bring_up().unwrap();
-    let t0 = m.io_mut().now_ns();
+    m.states().bring_up().unwrap();
+    let t0 = m.cyclic().io_mut().now_ns();
     let s = 1_000_000_000;
-    m.io_mut().seg.schedule(t0 + s, Event::PowerOff { node: 1 });
-    m.io_mut().seg.schedule(t0 + s + s / 2, Event::PowerOn { node: 1 });
-    m.io_mut().seg.schedule(t0 + 3 * s, Event::LinkDown { node: 2, port: 1 });
-    m.io_mut().seg.schedule(t0 + 3 * s + s / 2, Event::LinkUp { node: 2, port: 1 });
-    let out = m.output(3, "Output").unwrap();
+    m.cyclic().io_mut().seg.schedule(t0 + s, Event::PowerOff { node: 1 });
+    m.cyclic().io_mut().seg.schedule(t0 + s + s / 2, Event::PowerOn { node: 1 });
+    m.cyclic().io_mut().seg.schedule(t0 + 3 * s, Event::LinkDown { node: 2, port: 1 });
+    m.cyclic().io_mut().seg.schedule(t0 + 3 * s + s / 2, Event::LinkUp { node: 2, port: 1 });
+    let out = m.image().output(3, "Output").unwrap();
     let mut next = t0;
     let mut reported = 0;
     for k in 0..6000u64 {
-        m.set(out, k & 1);
-        m.cycle().unwrap();
-        let t_s = (m.io_mut().now_ns() - t0) as f64 * 1e-9;
-        for e in &m.events()[reported..] {
+        m.cyclic().set(out, k & 1);
+        m.cyclic().cycle().unwrap();
+        let t_s = (m.cyclic().io_mut().now_ns() - t0) as f64 * 1e-9;
+        for e in &m.diagnosis().events()[reported..] {
             println!("{t_s:7.3} s  {e}");
         }
-        reported = m.events().len();
+        reported = m.diagnosis().events().len();
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
-    let st = m.cycle_stats();
+    let st = m.diagnosis().cycle_stats();
     println!("{} cycles, {} lost frames, {} short working counters", st.cycles, st.lost_frames, st.wkc_errors);
     assert!(st.cycles >= 6000 && st.lost_frames > 20, "the exchange kept running through ~1 % loss");
     // Each event once, naming the slave. Powering off the EL2004 at position 1 also cuts off
     // the terminals behind it (an E-Bus line), so 1, 2 and 3 go and come back; the pulled link
     // cuts off 3 alone. A single lost frame is no event.
-    let named: Vec<String> =
-        m.events().iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
+    let named: Vec<String> = m
+        .diagnosis()
+        .events()
+        .iter()
+        .filter(|e| !matches!(e, MasterEvent::Emergency { .. }))
+        .map(|e| e.to_string())
+        .collect();
     let count = |needle: &str| named.iter().filter(|e| e.contains(needle)).count();
     assert_eq!(count("slave 1 (EL2004) is not answering"), 1, "{named:#?}");
     assert_eq!(count("slave 1 (EL2004) is back in OP"), 1, "{named:#?}");
@@ -59,7 +64,7 @@ fn loss_power_cycle_and_link_pull() {
     );
     assert!(m.slaves().iter().all(|s| s.health() == Health::Operational));
     // And the outputs flow again to the slave that was cut off.
-    assert_eq!(m.cycle().unwrap(), m.expected_wkc());
+    assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
 }
 
 /// A cyclic frame lost while `start` walks the slaves from SAFEOP to OP: the short cycle
@@ -98,15 +103,15 @@ fn a_frame_lost_while_starting_is_no_event() {
         Some(n)
     };
     let mut m = Master::new(Tamper { inner: VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 1), hook });
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     assert_eq!(stage.get(), 2, "a cyclic frame was lost while starting");
-    assert!(m.cycle_stats().lost_frames >= 1);
-    let t0 = m.io_mut().now_ns();
+    assert!(m.diagnosis().cycle_stats().lost_frames >= 1);
+    let t0 = m.cyclic().io_mut().now_ns();
     for k in 1..=100u64 {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc());
-        m.io_mut().sleep_until(t0 + k * 1_000_000);
+        assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
+        m.cyclic().io_mut().sleep_until(t0 + k * 1_000_000);
     }
-    assert!(m.events().is_empty(), "{:?}", m.events());
+    assert!(m.diagnosis().events().is_empty(), "{:?}", m.diagnosis().events());
     assert!(m.slaves().iter().all(|s| s.health() == Health::Operational && s.state() == AlState::Op));
 }
 
@@ -118,29 +123,34 @@ fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
     let cfg: SegmentConfig =
         toml::from_str("seed = 2\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n").unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 2));
-    m.scan().unwrap();
-    m.configure().unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
     let dc = ferrocat_master::DcConfig { sync0_cycle_ns: 1_000_000, ..Default::default() };
-    m.init_dc(&dc).unwrap();
-    m.start().unwrap();
-    let mut next = m.io_mut().now_ns();
+    m.dc().init_dc(&dc).unwrap();
+    m.states().start().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut left = false;
     for k in 0..400u64 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
         // Two stalls of 20 ms: the drive misses its outputs and leaves OP with 0x001A.
         next += if k == 100 || k == 300 { 20_000_000 } else { 1_000_000 };
-        m.io_mut().sleep_until(next);
-        left |= m.take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
+        m.cyclic().io_mut().sleep_until(next);
+        left |= m.diagnosis().take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
         if k > 300 && m.slaves()[1].state() != AlState::Op {
             break;
         }
     }
     assert!(left, "the stall took the drive out of OP");
-    m.shut_down().unwrap();
+    m.states().shut_down().unwrap();
     for k in 0..2u16 {
         let mut al = [0u8; 2];
         let station = m.slaves()[k as usize].station();
-        m.datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: station, ado: 0x0130 }, &mut al)
+        m.cyclic()
+            .datagram(
+                ferrocat_wire::Command::FPRD,
+                ferrocat_wire::Address::Device { adp: station, ado: 0x0130 },
+                &mut al,
+            )
             .unwrap();
         // The state bits (an EK1100 in device emulation copies AL control, the request's
         // acknowledge bit included, into its status).

@@ -22,12 +22,12 @@ fn master(toml: &str, host: HostModel) -> Master<VirtualIo> {
 #[test]
 fn the_ring_port_is_found_and_the_delays_are_a_lines() {
     let mut line = master(DEVICES, HostModel::ideal());
-    line.scan().unwrap();
+    line.states().scan().unwrap();
     let mut ring = master(&format!("{DEVICES}{RING}"), HostModel::ideal());
-    ring.scan().unwrap();
-    assert_eq!(ring.ring_state(), RingState::Intact);
-    assert_eq!(ring.ring_port(), Some((2, 2)), "the second coupler's X2 OUT");
-    assert_eq!(line.ring_port(), None);
+    ring.states().scan().unwrap();
+    assert_eq!(ring.diagnosis().ring_state(), RingState::Intact);
+    assert_eq!(ring.dc().ring_port(), Some((2, 2)), "the second coupler's X2 OUT");
+    assert_eq!(line.dc().ring_port(), None);
     let delays = |m: &Master<VirtualIo>| {
         m.slaves().iter().map(|s| (s.ports().parent, s.ports().parent_port, s.dc().delay_ns)).collect::<Vec<_>>()
     };
@@ -39,7 +39,7 @@ fn the_ring_port_is_found_and_the_delays_are_a_lines() {
     // On the line the frame loops at the closed port (20 ns), goes back to the first coupler
     // (420 ns of 100BASE-TX), through it (65 ns) and to the master (500 ns); on the ring it
     // leaves by that port for the secondary (500 ns): back 505 ns sooner.
-    assert_eq!(ring.ring_shortening_ns(), 505);
+    assert_eq!(ring.dc().ring_shortening_ns(), 505);
 }
 
 /// Brings the ring to OP with DC and runs `cycles` 1 ms cycles; the cable between the couplers
@@ -47,20 +47,24 @@ fn the_ring_port_is_found_and_the_delays_are_a_lines() {
 /// the second coupler's true system time less the first's.
 fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<VirtualIo>, Vec<i64>) {
     let mut m = master(&format!("{DEVICES}{RING}"), HostModel::pc_rt());
-    m.set_split_ring_clocks(clocks);
-    m.bring_up().unwrap();
-    let r = m.init_dc(&DcConfig::default()).unwrap();
+    m.dc().set_split_ring_clocks(clocks);
+    m.states().bring_up().unwrap();
+    let r = m.dc().init_dc(&DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let t0 = m.io_mut().now_ns();
-    m.io_mut().seg.schedule(t0 + break_after * 1_000_000, Event::LinkDown { node: 2, port: 0 });
+    let t0 = m.cyclic().io_mut().now_ns();
+    m.cyclic().io_mut().seg.schedule(t0 + break_after * 1_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut after = Vec::new();
     let mut next = t0;
     for k in 0..cycles {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc(), "cycle {k}: the whole ring's working counter");
+        assert_eq!(
+            m.cyclic().cycle().unwrap(),
+            m.image().expected_wkc(),
+            "cycle {k}: the whole ring's working counter"
+        );
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         if k > break_after {
-            let now = m.io_mut().now_ns();
+            let now = m.cyclic().io_mut().now_ns();
             let t = m.io().seg.system_times_at(now);
             after.push(t[1].wrapping_sub(t[0]) as i64);
         }
@@ -70,14 +74,14 @@ fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<
 
 #[test]
 fn process_data_goes_on_across_a_pulled_ring_cable() {
-    let (m, _) = run_split(SplitRingClocks::HoldOver, 400, 200);
-    assert_eq!(m.ring_state(), RingState::Broken);
-    assert!(m.frame_stats().resent >= 198, "{:?}", m.frame_stats());
+    let (mut m, _) = run_split(SplitRingClocks::HoldOver, 400, 200);
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
+    assert!(m.cyclic().frame_stats().resent >= 198, "{:?}", m.cyclic().frame_stats());
     // The far half's terminal still takes its outputs: its SyncManager saw every cycle.
-    let stats = m.cycle_stats();
+    let stats = m.diagnosis().cycle_stats();
     assert_eq!(stats.wkc_errors, 0, "{stats:?}");
     // Said once.
-    let said: Vec<String> = m.events().iter().map(|e| e.to_string()).collect();
+    let said: Vec<String> = m.diagnosis().events().iter().map(|e| e.to_string()).collect();
     assert_eq!(said, ["ring broken: the slaves behind the break are served from the secondary port"]);
 }
 
@@ -109,21 +113,21 @@ fn ferrocat_across_a_break(host: HostModel) -> [(f64, f64); 2] {
     use ferrocat_master::sync::{Coupling, Ferrocat};
     let mut m = master(&format!("{DEVICES}{RING}"), host);
     // A closed port's loop-back, as the lab tells the master (ferrocat_lab::loop_back_ns).
-    m.settings_mut().closed_port_loop_ns = 20;
-    m.bring_up().unwrap();
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m.config().settings_mut().closed_port_loop_ns = 20;
+    m.states().bring_up().unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
-    m.io_mut().seg.schedule(next + 4_000_000_000, Event::LinkDown { node: 2, port: 0 });
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
+    m.cyclic().io_mut().seg.schedule(next + 4_000_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut errs = [(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
     for k in 0..8000u64 {
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         if k % 4000 >= 2000 {
-            let t = m.io_mut().now_ns();
-            let master = m.master_system_time();
+            let t = m.cyclic().io_mut().now_ns();
+            let master = m.clock().master_system_time();
             let clocks = m.io().seg.system_times_at(t);
             let half = &mut errs[(k / 4000) as usize];
             half.0.push(master.wrapping_sub(clocks[0]) as i64 as f64);
@@ -158,17 +162,17 @@ const BROKEN_FROM_START: &str = "[[event]]\nat_ms = 0\nlink_down = { device = 2,
 #[test]
 fn a_ring_broken_at_start_up_comes_up_whole() {
     let mut m = master(&format!("{DEVICES}{RING}{BROKEN_FROM_START}"), HostModel::pc_rt());
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     assert_eq!(m.slaves().len(), 4);
-    assert_eq!(m.ring_state(), RingState::Broken);
-    assert_eq!(m.ring_port(), None);
-    let mut next = m.io_mut().now_ns();
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
+    assert_eq!(m.dc().ring_port(), None);
+    let mut next = m.cyclic().io_mut().now_ns();
     for _ in 0..100 {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc());
+        assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
         next += 1_000_000;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
-    assert_eq!(m.expected_wkc(), 4, "both EL2004s written");
+    assert_eq!(m.image().expected_wkc(), 4, "both EL2004s written");
 }
 
 /// A ring broken at start-up whose first probe comes back too late: the scan's count does not
@@ -189,10 +193,10 @@ fn a_late_first_probe_does_not_hide_the_far_half_of_a_broken_ring() {
         Some(n)
     };
     let mut m = Master::new(Tamper { inner: VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5), hook });
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     assert_eq!(lost.get(), 1, "the first probe's answer was held back");
     assert_eq!(m.slaves().len(), 4);
-    assert_eq!(m.ring_state(), RingState::Broken);
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
 }
 
 /// The ring `toml` under `host`, in OP with DC, `events` scheduled (ns after that), then one
@@ -220,19 +224,19 @@ fn cycle_ring_every(
     mut each: impl FnMut(u64, &[u64]),
 ) -> Master<VirtualIo> {
     let mut m = master(toml, host);
-    m.set_split_ring_clocks(clocks);
-    m.bring_up().unwrap();
-    assert!(m.init_dc(&DcConfig::default()).unwrap().converged);
-    let t0 = m.io_mut().now_ns();
+    m.dc().set_split_ring_clocks(clocks);
+    m.states().bring_up().unwrap();
+    assert!(m.dc().init_dc(&DcConfig::default()).unwrap().converged);
+    let t0 = m.cyclic().io_mut().now_ns();
     for (at, event) in events {
-        m.io_mut().seg.schedule(t0 + at, event.clone());
+        m.cyclic().io_mut().seg.schedule(t0 + at, event.clone());
     }
     let mut next = t0;
     for k in 0..cycles {
-        assert_eq!(m.cycle().unwrap(), m.expected_wkc(), "cycle {k}");
+        assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc(), "cycle {k}");
         next += cycle_ns;
-        m.io_mut().sleep_until(next);
-        let now = m.io_mut().now_ns();
+        m.cyclic().io_mut().sleep_until(next);
+        let now = m.cyclic().io_mut().now_ns();
         each(k, &m.io().seg.system_times_at(now));
     }
     m
@@ -252,7 +256,7 @@ fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
     ];
     let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}");
     let (mut split, mut closed) = (0i64, 0i64);
-    let m = cycle_ring(&toml, HostModel::pc_rt(), clocks, &events, 13_000, |k, t| {
+    let mut m = cycle_ring(&toml, HostModel::pc_rt(), clocks, &events, 13_000, |k, t| {
         // The coupler's and the terminal's (an ET1200: 32 bits) system times.
         let apart = ((t[2] as u32).wrapping_sub(t[1] as u32) as i32 as i64).abs();
         if (1_001..11_000).contains(&k) {
@@ -261,7 +265,7 @@ fn far_half_spread(clocks: SplitRingClocks) -> (i64, i64) {
             closed = closed.max(apart);
         }
     });
-    assert_eq!(m.ring_state(), RingState::Intact);
+    assert_eq!(m.diagnosis().ring_state(), RingState::Intact);
     (split, closed)
 }
 
@@ -288,7 +292,7 @@ fn far_reference_error(clocks: SplitRingClocks, host: HostModel, split_s: u64) -
     let s = 1_000_000_000;
     let events = [(s, Event::LinkDown { node: 2, port: 0 }), (3 * s, Event::DriftStep { node: 2, delta_ppb: 3_000 })];
     let mut worst = Vec::new();
-    let m = cycle_ring(&format!("{DEVICES}{RING}"), host, clocks, &events, (1 + split_s) * 1000, |k, t| {
+    let mut m = cycle_ring(&format!("{DEVICES}{RING}"), host, clocks, &events, (1 + split_s) * 1000, |k, t| {
         if k > 1000 {
             let e = (t[1].wrapping_sub(t[0]) as i64).abs();
             if (k - 1001) % 100 == 0 {
@@ -298,8 +302,8 @@ fn far_reference_error(clocks: SplitRingClocks, host: HostModel, split_s: u64) -
             }
         }
     });
-    assert_eq!(m.ring_state(), RingState::Broken);
-    (worst, m.far_reference_offset_ns().unwrap_or(0))
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
+    (worst, m.dc().far_reference_offset_ns().unwrap_or(0))
 }
 
 /// Split for 30 s, the far coupler warming up by 3 ppm 2 s after the break: kept through
@@ -345,7 +349,7 @@ fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
     let s = 1_000_000_000;
     let events = [(s, Event::LinkDown { node: 2, port: 0 }), (3 * s, Event::DriftStep { node: 2, delta_ppb: 3_000 })];
     let (mut worst, cycle_ns) = (0i64, 15_000_000);
-    let m = cycle_ring_every(
+    let mut m = cycle_ring_every(
         &format!("{DEVICES}{RING}"),
         HostModel::pc_rt(),
         SplitRingClocks::FarReference,
@@ -359,7 +363,7 @@ fn the_far_reference_is_kept_with_cycles_longer_than_its_moves_apart() {
         },
     );
     println!("15 ms cycles: far coupler − reference worst {worst} ns over the last 20 s");
-    assert_eq!(m.ring_state(), RingState::Broken);
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
     assert!(worst < 500, "{worst}");
 }
 
@@ -375,9 +379,9 @@ fn wiring(m: &Master<VirtualIo>) -> Wiring {
 /// the far reference's — for a terminal with receive times only, its port 0's time, which the
 /// master takes for its processing unit's (as `delays.rs` does).
 fn far_pass_truth(m: &mut Master<VirtualIo>, far_ref: usize) -> Vec<Option<i64>> {
-    m.cycle().unwrap();
+    m.cyclic().cycle().unwrap();
     let visits = m.io().seg.last_visits();
-    let first_far = m.split_latch().expect("a split ring").first_far;
+    let first_far = m.dc().split_latch().expect("a split ring").first_far;
     assert!(visits.iter().all(|(n, _)| *n >= first_far), "the far half's pass: {visits:?}");
     let at = |n: usize| {
         let (_, t) = visits.iter().find(|(k, _)| *k == n)?;
@@ -411,7 +415,7 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
     let toml = format!("{DEVICES}sync_unit = true\ndrift_ppm = 30.0\n{RING}{BROKEN_FROM_START}")
         .replace("seed = 5", &format!("seed = {seed}"));
     let mut worst = Vec::new();
-    let m = cycle_ring(&toml, host, clocks, &events, 10_000, |k, t| {
+    let mut m = cycle_ring(&toml, host, clocks, &events, 10_000, |k, t| {
         let e = (t[1].wrapping_sub(t[0]) as i64).abs();
         if k % 100 == 0 {
             worst.push(e);
@@ -419,8 +423,8 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
             *w = (*w).max(e);
         }
     });
-    assert_eq!(m.ring_state(), RingState::Broken);
-    let latch = m.split_latch().expect("the latch saw the split");
+    assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
+    let latch = m.dc().split_latch().expect("the latch saw the split");
     assert_eq!((latch.first_far, latch.root, latch.root_port, latch.far_reference), (2, 2, 2, Some(2)));
     let far = wiring(&m);
     assert_eq!(far[2].0, None, "the far coupler is the far tree's root");
@@ -430,7 +434,7 @@ fn split_from_the_start(clocks: SplitRingClocks, host: HostModel, seed: u64) -> 
 #[test]
 fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
     let mut intact = master(&format!("{DEVICES}{RING}"), HostModel::ideal());
-    intact.scan().unwrap();
+    intact.states().scan().unwrap();
     let intact_apart = intact.slaves()[3].dc().delay_ns as i64 - intact.slaves()[2].dc().delay_ns as i64;
     let worst = |v: &[i64]| *v.iter().max().unwrap();
     for (host, seed) in
@@ -478,7 +482,7 @@ fn a_ring_split_from_the_start_has_its_far_half_on_the_references_time() {
 #[test]
 fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     let mut intact = master(&format!("{DEVICES}{RING}"), HostModel::nic_hwts());
-    intact.scan().unwrap();
+    intact.states().scan().unwrap();
     let s = 1_000_000_000;
     let events = [(3 * s, Event::LinkUp { node: 2, port: 0 })];
     // Four crystal draws: the far coupler 0.7 ppm off the reference with seed 5, 15–30 ppm
@@ -486,7 +490,7 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
     for seed in 5..=8 {
         let toml = format!("{DEVICES}{RING}{BROKEN_FROM_START}").replace("seed = 5", &format!("seed = {seed}"));
         let (mut transient, mut after) = (0i64, 0i64);
-        let m = cycle_ring(&toml, HostModel::nic_hwts(), SplitRingClocks::FarReference, &events, 6_000, |k, t| {
+        let mut m = cycle_ring(&toml, HostModel::nic_hwts(), SplitRingClocks::FarReference, &events, 6_000, |k, t| {
             let e = (t[1].wrapping_sub(t[0]) as i64).abs();
             if k >= 5_000 {
                 after = after.max(e);
@@ -498,9 +502,12 @@ fn a_ring_split_from_the_start_takes_the_references_delays_when_it_closes() {
             "seed {seed}: closed after a split from the start: far coupler − reference worst {transient} ns over \
              the 2 s after, {after} ns over the next second"
         );
-        assert_eq!(m.ring_state(), RingState::Intact);
-        assert_eq!(m.split_latch(), None);
-        assert_eq!((m.ring_port(), m.ring_shortening_ns()), (intact.ring_port(), intact.ring_shortening_ns()));
+        assert_eq!(m.diagnosis().ring_state(), RingState::Intact);
+        assert_eq!(m.dc().split_latch(), None);
+        assert_eq!(
+            (m.dc().ring_port(), m.dc().ring_shortening_ns()),
+            (intact.dc().ring_port(), intact.dc().ring_shortening_ns())
+        );
         assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
         // Split from the start, the far coupler never followed the reference: the master kept
         // it by its offset, and its own loop takes up its crystal's whole offset once the
@@ -540,9 +547,9 @@ fn three_couplers_split_from_the_start(
     // (The wiring as init_dc left it is gone once the ring closed: cycle_ring's callback sees
     // only clocks, so the split latch's view is checked by a second bring-up.)
     let mut again = master(&toml, host);
-    again.bring_up().unwrap();
-    again.init_dc(&DcConfig::default()).unwrap();
-    let l = again.split_latch().unwrap();
+    again.states().bring_up().unwrap();
+    again.dc().init_dc(&DcConfig::default()).unwrap();
+    let l = again.dc().split_latch().unwrap();
     assert_eq!((l.first_far, l.root, l.root_port, l.far_reference), (2, 4, 2, Some(2)));
     let split = wiring(&again);
     let truth = far_pass_truth(&mut again, 2);
@@ -559,9 +566,9 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         [HostModel::nic_hwts(), HostModel::pc_rt()].into_iter().flat_map(|h| (5..=8).map(move |s| (h, s)))
     {
         let mut intact = master(THREE_COUPLERS, host);
-        intact.scan().unwrap();
+        intact.states().scan().unwrap();
         let whole = wiring(&intact);
-        let (split, truth, worst, m) = three_couplers_split_from_the_start(host, seed);
+        let (split, truth, worst, mut m) = three_couplers_split_from_the_start(host, seed);
         println!(
             "{} seed {seed}: intact {whole:?}\n  split {split:?}\n  true on the far pass {truth:?}\n  worst |far couplers − \
              reference| {} ns over the first 3 s, {} ns over the 2 s after the cable is back, {} ns over the third",
@@ -587,7 +594,7 @@ fn a_longer_ring_split_from_the_start_roots_its_far_tree_where_the_secondary_com
         let split_bound = if host.name == "nic-hwts" { 100 } else { 400 };
         assert!(worst[0] < split_bound && worst[1] < 1_000 && worst[2] < 50, "{worst:?}");
         // Closed again: the intact ring's tree and delays.
-        assert_eq!(m.ring_state(), RingState::Intact);
+        assert_eq!(m.diagnosis().ring_state(), RingState::Intact);
         assert_wiring_as_intact(&wiring(&m), &whole);
     }
 }
@@ -605,7 +612,7 @@ const IP_CORE_RING: &str = "seed = 8\n[[device]]\nname = 'c'\nbuiltin = 'EK1100'
 #[test]
 fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
     let mut intact = master(IP_CORE_RING, HostModel::pc_rt());
-    intact.scan().unwrap();
+    intact.states().scan().unwrap();
     let whole = wiring(&intact);
     let toml = format!("{IP_CORE_RING}[[event]]\nat_ms = 0\nlink_down = {{ device = 3, port = 0 }}\n");
     let mut worst = 0i64;
@@ -618,7 +625,7 @@ fn a_ring_of_ip_cores_split_from_the_start_is_latched_again_without_probes() {
     });
     let mut m = m;
     let split = wiring(&m);
-    let l = m.split_latch().expect("the latch saw the split");
+    let l = m.dc().split_latch().expect("the latch saw the split");
     assert_eq!((l.first_far, l.root, l.root_port), (3, 4, 1), "entered on the last drive's port 1");
     assert_eq!(m.slaves().iter().map(|s| s.ports().entry).collect::<Vec<_>>(), [0, 0, 0, 1, 1]);
     let truth = far_pass_truth(&mut m, 3);
@@ -642,12 +649,15 @@ fn a_ring_with_a_device_cabled_the_wrong_way_round_is_refused_by_name() {
         [[device]]\nname = 'a'\nbuiltin = 'SERVO'\nparent = 'c'\nparent_port = 2\n\
         [[device]]\nbuiltin = 'SERVO'\nparent = 'a'\nparent_port = 1\nport = 1\n[secondary]\ndevice = 3\n";
     let mut m = master(toml, HostModel::pc_rt());
-    let e = m.scan().unwrap_err().to_string();
+    let e = m.states().scan().unwrap_err().to_string();
     assert!(e.contains("1 slave(s) on the ring answer only frames from the secondary port"), "{e}");
     // Cabled the right way round (its port 1 back to the master), it is a ring like any other.
     let mut m = master(&toml.replace("port = 1\n[secondary]", "[secondary]"), HostModel::pc_rt());
-    m.scan().unwrap();
-    assert_eq!((m.slaves().len(), m.ring_state(), m.ring_port()), (4, RingState::Intact, Some((3, 1))));
+    m.states().scan().unwrap();
+    assert_eq!(
+        (m.slaves().len(), m.diagnosis().ring_state(), m.dc().ring_port()),
+        (4, RingState::Intact, Some((3, 1)))
+    );
 }
 
 #[test]
@@ -657,7 +667,7 @@ fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
     let s = 1_000_000_000;
     let toml = format!("{IP_CORE_RING}[[event]]\nat_ms = 0\nlink_down = {{ device = 3, port = 0 }}\n");
     let mut worst = 0i64;
-    let m = cycle_ring(
+    let mut m = cycle_ring(
         &toml,
         HostModel::pc_rt(),
         SplitRingClocks::FarReference,
@@ -672,14 +682,14 @@ fn a_ring_of_ip_cores_split_from_the_start_closes_on_the_references_delays() {
         },
     );
     let mut intact = master(IP_CORE_RING, HostModel::pc_rt());
-    intact.scan().unwrap();
+    intact.states().scan().unwrap();
     println!(
         "closed {:?}\nintact {:?}\nworst |far drives − reference| over the last second: {worst} ns",
         wiring(&m),
         wiring(&intact)
     );
-    assert_eq!(m.ring_state(), RingState::Intact);
+    assert_eq!(m.diagnosis().ring_state(), RingState::Intact);
     assert_wiring_as_intact(&wiring(&m), &wiring(&intact));
-    assert!(m.relatched().is_empty(), "{:?}", m.relatched());
+    assert!(m.dc().relatched().is_empty(), "{:?}", m.dc().relatched());
     assert!(worst < 100, "{worst} ns");
 }

@@ -28,7 +28,7 @@ fn brought_up_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), host, seed));
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     m
 }
 
@@ -38,14 +38,14 @@ fn segment(host: HostModel) -> Master<VirtualIo> {
 
 fn segment_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
     let mut m = brought_up_seeded(host, seed);
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     m
 }
 
 /// True error of slave `k`'s system time against the master's clock now (ns, low 32 bits).
 fn true_error(m: &mut Master<VirtualIo>, k: usize) -> i64 {
-    let t = m.io_mut().now_ns();
-    let master = m.master_system_time() as u32;
+    let t = m.cyclic().io_mut().now_ns();
+    let master = m.clock().master_system_time() as u32;
     let slave = m.io().seg.nodes[k].esc.dc.as_ref().unwrap().system_at(t) as u32;
     slave.wrapping_sub(master) as i32 as i64
 }
@@ -63,13 +63,13 @@ struct Figures {
 fn run_rfm(host: HostModel, make: impl FnOnce(&mut Master<VirtualIo>) -> Box<dyn ClockSync>, cycles: u64) -> Figures {
     let mut m = segment(host);
     let mut sync = make(&mut m);
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut r, mut l) = (Vec::new(), Vec::new());
     for k in 0..cycles {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.sync_step(sync.as_mut(), &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(sync.as_mut(), &mut st).unwrap();
         if k >= cycles / 2 && k % 2 == 0 {
             r.push(true_error(&mut m, 0) as f64);
             l.push(true_error(&mut m, 3) as f64);
@@ -89,7 +89,7 @@ fn reference_follows_master_methods_side_by_side() {
         let park = run_rfm(
             host,
             |m| {
-                let d = m.park_delay(1000).unwrap();
+                let d = m.clock().park_delay(1000).unwrap();
                 Box::new(Park2020::new(d))
             },
             4000,
@@ -143,15 +143,15 @@ fn reference_follows_master_methods_side_by_side() {
 fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64, seed: u64) -> (f64, f64) {
     let mut m = segment_seeded(HostModel::pc_rt(), seed);
     let mut sync = make();
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut phases = Vec::new();
     for k in 0..cycles {
-        let c = m.sync_step(sync.as_mut(), &mut st).unwrap();
+        let c = m.clock().sync_step(sync.as_mut(), &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         if k >= cycles / 2 {
-            let t = m.io_mut().now_ns();
+            let t = m.cyclic().io_mut().now_ns();
             let reft = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
             let mut p = (reft % CYCLE_NS) as f64;
             if p > CYCLE_NS as f64 / 2.0 {
@@ -212,14 +212,14 @@ fn rfm_start(steer_from_init: bool, cycles: u64) -> (i64, i64, ferrocat_master::
     let mut m = brought_up(HostModel::pc_rt());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
-    let report = if steer_from_init { m.init_dc_with(&dc, Some(&mut sync)) } else { m.init_dc(&dc) }.unwrap();
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let report = if steer_from_init { m.dc().init_dc_with(&dc, Some(&mut sync)) } else { m.dc().init_dc(&dc) }.unwrap();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut spread, mut master) = (0i64, 0i64);
     for _ in 0..cycles {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         let r = true_error(&mut m, 0);
         master = master.max(r.abs());
         for k in 1..4 {
@@ -262,8 +262,8 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
     if !probing {
         sync.options_mut().probing = Probing::Off;
     }
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (step_at, cycles) = (12000, 13000);
     let (mut before, mut after, mut probes_before) = (Vec::new(), Vec::new(), 0);
     let mut settled_from = 0;
@@ -272,15 +272,15 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
             settled_from = st.probing.sent;
         }
         if k == step_at {
-            let now = m.io_mut().now_ns();
-            m.io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
+            let now = m.cyclic().io_mut().now_ns();
+            m.cyclic().io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
             probes_before = st.probing.sent;
         }
-        let c = m.sync_step(&mut sync, &mut st).unwrap();
+        let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.io_mut().sleep_until(next);
-        let t = m.io_mut().now_ns();
-        let own = m.master_system_time();
+        m.cyclic().io_mut().sleep_until(next);
+        let t = m.cyclic().io_mut().now_ns();
+        let own = m.clock().master_system_time();
         let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let e = sync.master_time(own).unwrap().wrapping_sub(reference) as i64 as f64;
         if k >= step_at {
@@ -336,25 +336,25 @@ fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
     let mut m = segment(HostModel::pc_rt());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.options_mut().lost_frames = if make_up { LostFrames::MakeUp } else { LostFrames::Wait };
-    m.settings_mut().cyclic_timeout_ns = CYCLE_NS / 4;
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    m.config().settings_mut().cyclic_timeout_ns = CYCLE_NS / 4;
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut prev, mut lost_before, mut jumps): (Option<i64>, u64, Vec<f64>) = (None, 0, Vec::new());
     for k in 0..3_000 {
         next += CYCLE_NS;
         if k % 50 == 25 {
             let down = ferrocat_segment::Event::LinkDown { node: 0, port: 0 };
-            m.io_mut().seg.schedule(next, down);
-            m.io_mut().seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
+            m.cyclic().io_mut().seg.schedule(next, down);
+            m.cyclic().io_mut().seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
         }
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         // Just before the frame the reference has run on its crystal longest since its offset.
         let e = true_error(&mut m, 0);
         if let Some(p) = prev.filter(|_| st.lost > lost_before) {
             jumps.push((e - p).abs() as f64);
         }
         (prev, lost_before) = (Some(e), st.lost);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
     }
     (jumps.iter().sum::<f64>() / jumps.len().max(1) as f64, st.lost, st.make_ups)
 }
@@ -383,16 +383,16 @@ fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.options_mut().probes = if probes_steer { ProbeFrames::Steer } else { ProbeFrames::ReadOnly };
     sync.options_mut().followers = FollowerDelays::Measured;
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut probed, mut quiet) = (Vec::new(), Vec::new());
     for k in 0..30_000 {
         let probes_before = st.probing.sent;
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         // Just before the next cycle's frame is built.
-        m.io_mut().sleep_until(next + CYCLE_NS - 1_000);
+        m.cyclic().io_mut().sleep_until(next + CYCLE_NS - 1_000);
         let e = true_error(&mut m, 0) as f64;
         if k >= 2_000 {
             if st.probing.sent > probes_before {
@@ -439,18 +439,18 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     let mut m = segment(host);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.options_mut().followers = FollowerDelays::Measured;
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let (mut latest_ns, mut probed) = (i64::MIN, 0);
     for _ in 0..300 {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         let probes_before = st.probing.sent;
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         if st.probing.sent > probes_before {
             probed += 1;
             // How far past the next cycle's due time this one ended (negative: before it).
-            latest_ns = latest_ns.max(m.io_mut().now_ns() as i64 - (next + CYCLE_NS) as i64);
+            latest_ns = latest_ns.max(m.cyclic().io_mut().now_ns() as i64 - (next + CYCLE_NS) as i64);
         }
     }
     println!(
@@ -480,20 +480,20 @@ fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     // Only the cycle's frame and its probes: no writes of the followers' delays between them.
     sync.options_mut().followers = FollowerDelays::Measured;
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut longest_ns = 0;
     for _ in 0..200 {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         // When the cycle really began: late if the one before overran.
-        let began = m.io_mut().now_ns();
+        let began = m.cyclic().io_mut().now_ns();
         let probes_before = st.probing.sent;
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
         // A cycle whose own writes (an offset shift to every slave) took it past its end has
         // no room for probes; those that probed must have ended within a period.
         if st.probing.sent > probes_before {
-            longest_ns = longest_ns.max(m.io_mut().now_ns() - began);
+            longest_ns = longest_ns.max(m.cyclic().io_mut().now_ns() - began);
         }
     }
     assert!(st.probing.sent > 0, "the young line probes");
@@ -518,17 +518,17 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
     // Initialised for the method: the speed counter's direction measured, the flywheel in use
     // from the start (without, its trial would still be on at the follower's step, which the
     // direct line in use then never sees).
-    m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    m.dc().init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let steps = [(12_000, 1), (32_000, 0)];
     let mut before = [Vec::new(), Vec::new()];
     let mut after = [Vec::new(), Vec::new()];
     for k in 0..33_000 {
         for (i, &(at, node)) in steps.iter().enumerate() {
             if k == at {
-                let now = m.io_mut().now_ns();
-                m.io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node, delta_ppb: 50_000 });
+                let now = m.cyclic().io_mut().now_ns();
+                m.cyclic().io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node, delta_ppb: 50_000 });
             }
             let e_slot = if k >= at && k < at + 1_000 {
                 Some(&mut after[i])
@@ -538,15 +538,15 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
                 None
             };
             if let Some(v) = e_slot {
-                let t = m.io_mut().now_ns();
-                let own = m.master_system_time();
+                let t = m.cyclic().io_mut().now_ns();
+                let own = m.clock().master_system_time();
                 let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
                 v.push(sync.master_time(own).map_or(0.0, |e| e.wrapping_sub(reference) as i64 as f64));
             }
         }
-        let c = m.sync_step(&mut sync, &mut st).unwrap();
+        let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
     }
     [0, 1].map(|i| {
         let mean = before[i].iter().sum::<f64>() / before[i].len() as f64;
@@ -586,7 +586,7 @@ fn the_speed_counters_direction_is_measured_at_the_dc_initialisation() {
     let mut m = brought_up(HostModel::pc_rt());
     let mut fly = Ferrocat::new(Coupling::MasterFollowsReference, CYCLE_NS).with_flywheel();
     let report =
-        m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut fly)).unwrap();
+        m.dc().init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut fly)).unwrap();
     assert!(report.converged);
     let measured: Vec<_> = m.slaves().iter().map(|s| s.dc().speed_diff_slows).collect();
     assert_eq!(measured, [None, Some(true), Some(true), Some(true)]);
@@ -599,7 +599,7 @@ fn the_speed_counters_direction_is_measured_at_the_dc_initialisation() {
     ] {
         let mut sync = sync;
         let mut m = brought_up(HostModel::pc_rt());
-        m.init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
+        m.dc().init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
         assert!(m.slaves().iter().all(|s| s.dc().speed_diff_slows.is_none()));
     }
 }
@@ -610,14 +610,14 @@ fn the_speed_counters_direction_is_measured_at_the_dc_initialisation() {
 fn flywheel_eps_line(host: HostModel, coupling: Coupling, cycles: u64) -> (f64, f64) {
     let mut m = segment(host);
     let mut sync = Ferrocat::new(coupling, CYCLE_NS).with_flywheel();
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut pts = Vec::new();
     let (mut last, mut first) = (None, None);
     for _ in 0..cycles {
-        let c = m.sync_step(&mut sync, &mut st).unwrap();
+        let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.io_mut().sleep_until(next);
+        m.cyclic().io_mut().sleep_until(next);
         let e = sync.flywheel_eps();
         if e != last {
             let (reference_ns, eps_ns) = e.unwrap();
@@ -658,13 +658,13 @@ fn the_flywheels_eps_is_a_straight_line() {
 fn probes_in_budget(budget_ns: Option<u64>, cycles: u64) -> ferrocat_master::SyncState {
     let mut m = segment(HostModel::pc_stock());
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
-    let mut st = m.sync_state().unwrap();
+    let mut st = m.clock().sync_state().unwrap();
     st.probing.budget_ns = budget_ns;
-    let mut next = m.io_mut().now_ns();
+    let mut next = m.cyclic().io_mut().now_ns();
     for _ in 0..cycles {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.sync_step(&mut sync, &mut st).unwrap();
+        m.cyclic().io_mut().sleep_until(next);
+        m.clock().sync_step(&mut sync, &mut st).unwrap();
     }
     st
 }
@@ -702,7 +702,7 @@ fn slow_segment() -> Master<VirtualIo> {
     )
     .unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 5));
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     m
 }
 
@@ -712,20 +712,20 @@ fn slow_segment() -> Master<VirtualIo> {
 /// their period, and how far the corrections moved the last clock's System_Time_Offset (ns).
 fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
     let mut m = slow_segment();
-    m.init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
-    let d = m.park_delay(100).unwrap();
+    m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
+    let d = m.clock().park_delay(100).unwrap();
     let mut sync = Park2020::new(d);
-    m.start().unwrap();
+    m.states().start().unwrap();
     let offset_before = u64::from_le_bytes(m.io().seg.nodes[2].esc.peek(0x0920, 8).try_into().unwrap());
-    m.set_period_ns(period_ns);
-    let mut st = m.sync_state().unwrap();
-    let mut next = m.io_mut().now_ns();
+    m.cyclic().set_period_ns(period_ns);
+    let mut st = m.clock().sync_state().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut late = 0;
     for _ in 0..1500 {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.cycle_sync(&mut sync, &mut st).unwrap();
-        late += (m.io_mut().now_ns() > next + CYCLE_NS) as u32;
+        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().cycle_sync(&mut sync, &mut st).unwrap();
+        late += (m.cyclic().io_mut().now_ns() > next + CYCLE_NS) as u32;
     }
     // How far Park's corrections moved the last clock's offset, from the simulator's register.
     let offset =
@@ -760,16 +760,16 @@ fn on_a_slow_segment_ferrocats_writes_ride_too() {
     let mut m = slow_segment();
     let method = ferrocat_master::sync::SyncMethod::default();
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
-    let (mut sync, _, mut st) = m.start_clock_sync(&dc, &method, CYCLE_NS).unwrap();
-    m.start().unwrap();
-    m.set_period_ns(CYCLE_NS);
-    let mut next = m.io_mut().now_ns();
+    let (mut sync, _, mut st) = m.clock().start_clock_sync(&dc, &method, CYCLE_NS).unwrap();
+    m.states().start().unwrap();
+    m.cyclic().set_period_ns(CYCLE_NS);
+    let mut next = m.cyclic().io_mut().now_ns();
     let mut late = 0;
     for _ in 0..3000 {
         next += CYCLE_NS;
-        m.io_mut().sleep_until(next);
-        m.cycle_sync(sync.as_mut(), &mut st).unwrap();
-        late += (m.io_mut().now_ns() > next + CYCLE_NS) as u32;
+        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().cycle_sync(sync.as_mut(), &mut st).unwrap();
+        late += (m.cyclic().io_mut().now_ns() > next + CYCLE_NS) as u32;
     }
     let errors: Vec<i64> = (0..3).map(|k| true_error(&mut m, k)).collect();
     println!("late cycles {late}; clocks − master {errors:?} ns; lock {:?}", st.lock.state());

@@ -14,7 +14,7 @@ fn master(toml: &str, host: HostModel) -> Master<VirtualIo> {
 fn coupler_and_output_scanned() -> Master<VirtualIo> {
     let mut m =
         master("seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n", HostModel::ideal());
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     m
 }
 
@@ -29,7 +29,7 @@ fn real_io_segment() -> String {
 #[test]
 fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     let mut m = master(&real_io_segment(), HostModel::pc_rt());
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     let names: Vec<_> = m.slaves().iter().map(|s| s.name()).collect();
     assert_eq!(names, ["EK1100", "EL2004", "EL2004"]);
     assert_eq!(
@@ -40,31 +40,31 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     assert_eq!(m.slaves().iter().map(|s| s.ports().parent).collect::<Vec<_>>(), [None, Some(0), Some(1)]);
     assert_eq!(m.slaves().iter().map(|s| s.active_ports_text()).collect::<Vec<_>>(), ["1.1.0.0", "1.1.0.0", "1.0.0.0"]);
     assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
-    assert_eq!(m.expected_wkc(), 4);
+    assert_eq!(m.image().expected_wkc(), 4);
     // Outputs by entry name: channel 1 of the first terminal, channel 4 of the second.
-    let a = m.output(1, "Output").unwrap();
-    m.set(a, 1);
+    let a = m.image().output(1, "Output").unwrap();
+    m.cyclic().set(a, 1);
     let b = m.slaves()[2].mapping().outputs[3].clone();
     let hb = ferrocat_master::Handle { bit: b.image_bit, bits: b.bits };
-    m.set(hb, 1);
+    m.cyclic().set(hb, 1);
     for _ in 0..10 {
-        let now = ferrocat_master::io::Io::now_ns(m.io_mut());
-        ferrocat_master::io::Io::sleep_until(m.io_mut(), now + 1_000_000);
-        assert_eq!(m.cycle().unwrap(), 4);
+        let now = ferrocat_master::io::Io::now_ns(m.cyclic().io_mut());
+        ferrocat_master::io::Io::sleep_until(m.cyclic().io_mut(), now + 1_000_000);
+        assert_eq!(m.cyclic().cycle().unwrap(), 4);
     }
     let outs: Vec<Vec<u8>> = m.io().seg.nodes[1..]
         .iter()
         .map(|n| n.esc.app().as_any().downcast_ref::<DigitalIo>().unwrap().outputs.clone())
         .collect();
     assert_eq!(outs, [vec![0x01], vec![0x08]]);
-    assert_eq!(m.cycle_stats().wkc_errors, 0);
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
     // A group of two goes back to SAFEOP and returns to OP; the coupler stays in OP.
-    m.request_state_group(&[1, 2], AlState::SafeOp).unwrap();
+    m.states().request_state_group(&[1, 2], AlState::SafeOp).unwrap();
     assert_eq!(
         m.slaves().iter().map(|s| s.state()).collect::<Vec<_>>(),
         [AlState::Op, AlState::SafeOp, AlState::SafeOp]
     );
-    m.request_state_group(&[1, 2], AlState::Op).unwrap();
+    m.states().request_state_group(&[1, 2], AlState::Op).unwrap();
     assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
 }
 
@@ -73,48 +73,52 @@ fn needs_shared_drive_sdo_of_every_kind_and_remapping() {
     let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
     let toml = format!("seed = 2\n[[device]]\nesi = '{}'\nproduct = 0x4F\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n", esi.display());
     let mut m = master(&toml, HostModel::pc_rt());
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     assert_eq!(m.slaves()[0].name(), "C5-E-2-21");
-    m.configure().unwrap();
+    m.states().configure().unwrap();
     // Expedited, normal (a name of more than 4 bytes), segmented (≈1 KiB), complete access.
-    assert_eq!(m.coe().sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
-    let name = m.coe().sdo_read(0, 0x1008, 0).unwrap();
+    assert_eq!(m.acyclic().coe().sdo_read(0, 0x1018, 1).unwrap(), 0x26Cu32.to_le_bytes());
+    let name = m.acyclic().coe().sdo_read(0, 0x1008, 0).unwrap();
     assert!(name.len() > 4, "{name:?}");
-    let big = m.coe().sdo_upload(0, 0x2701, 0, true).unwrap();
+    let big = m.acyclic().coe().sdo_upload(0, 0x2701, 0, true).unwrap();
     assert!(big.len() > 1000);
     // A long string into the drive's customer storage (segmented download), and back
     // (segmented upload).
     let text = "ferrocat writes a long string through a 128-byte mailbox, segment by segment. ".repeat(12);
     let mut pattern = big.clone();
     pattern[2..2 + text.len()].copy_from_slice(text.as_bytes());
-    m.coe().sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
-    let back = m.coe().sdo_upload(0, 0x2701, 0, true).unwrap();
+    m.acyclic().coe().sdo_download(0, 0x2701, 0, true, &pattern).unwrap();
+    let back = m.acyclic().coe().sdo_upload(0, 0x2701, 0, true).unwrap();
     assert_eq!(&back[2..2 + text.len()], text.as_bytes());
     assert_eq!(back, pattern);
-    assert_eq!(m.coe().sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
-    m.coe().sdo_write(0, 0x6060, 0, &[8]).unwrap();
-    assert_eq!(m.coe().sdo_read(0, 0x6060, 0).unwrap(), [8]);
+    assert_eq!(m.acyclic().coe().sdo_upload(0, 0x1C12, 0, true).unwrap()[..4], [1, 0, 0x00, 0x16]);
+    m.acyclic().coe().sdo_write(0, 0x6060, 0, &[8]).unwrap();
+    assert_eq!(m.acyclic().coe().sdo_read(0, 0x6060, 0).unwrap(), [8]);
     // Aborts by name.
-    let e = m.coe().sdo_read(0, 0x1234, 0).unwrap_err().to_string();
+    let e = m.acyclic().coe().sdo_read(0, 0x1234, 0).unwrap_err().to_string();
     assert!(e.contains("does not exist"), "{e}");
     // SDO information.
-    let list = m.coe().od_list(0).unwrap();
+    let list = m.acyclic().coe().od_list(0).unwrap();
     assert!(list.len() > 150 && list.contains(&0x6040));
-    assert_eq!(m.coe().object_info(0, 0x1018).unwrap().max_subindex, 4);
+    assert_eq!(m.acyclic().coe().object_info(0, 0x1018).unwrap().max_subindex, 4);
     // Remapping: 0x1601 (target position, profile velocity) instead of 0x1600.
-    let before = m.image_bytes().0;
-    m.remap(0, true, &[0x1601]).unwrap();
-    assert_ne!(m.image_bytes().0, before);
+    let before = m.image().byte_counts().0;
+    m.config().remap(0, true, &[0x1601]).unwrap();
+    assert_ne!(m.image().byte_counts().0, before);
     assert_eq!(m.slaves()[0].mapping().outputs.iter().map(|e| e.index).collect::<Vec<_>>(), [0x607A, 0x6081]);
-    m.start().unwrap();
+    m.states().start().unwrap();
     let target = m.slaves()[0].mapping().outputs[0].clone();
-    m.set(ferrocat_master::Handle { bit: target.image_bit, bits: target.bits }, 4242);
+    m.cyclic().set(ferrocat_master::Handle { bit: target.image_bit, bits: target.bits }, 4242);
     for _ in 0..5 {
-        let now = ferrocat_master::io::Io::now_ns(m.io_mut());
-        ferrocat_master::io::Io::sleep_until(m.io_mut(), now + 1_000_000);
-        m.cycle().unwrap();
+        let now = ferrocat_master::io::Io::now_ns(m.cyclic().io_mut());
+        ferrocat_master::io::Io::sleep_until(m.cyclic().io_mut(), now + 1_000_000);
+        m.cyclic().cycle().unwrap();
     }
-    assert_eq!(m.coe().sdo_read(0, 0x607A, 0).unwrap(), 4242i32.to_le_bytes(), "the output reached the drive's object");
+    assert_eq!(
+        m.acyclic().coe().sdo_read(0, 0x607A, 0).unwrap(),
+        4242i32.to_le_bytes(),
+        "the output reached the drive's object"
+    );
 }
 
 #[test]
@@ -123,24 +127,34 @@ fn needs_shared_emergencies_reach_the_application() {
     let esi = ferrocat_testdata::shared("esi/Nanotec_C5-E-2-21.xml");
     let toml = format!("seed = 2\n[[device]]\nesi = '{}'\nproduct = 0x4F\n", esi.display());
     let mut m = master(&toml, HostModel::pc_rt());
-    m.scan().unwrap();
-    m.configure().unwrap();
-    assert_eq!(m.poll_mailboxes().unwrap(), 0, "nothing waiting");
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    assert_eq!(m.acyclic().poll_mailboxes().unwrap(), 0, "nothing waiting");
     let e = ferrocat_wire::coe::Emergency { error_code: 0x8611, error_register: 0x20, data: [1, 2, 3, 4, 5] };
     // The Nanotec is a CiA402 drive: its CoE device queues the message.
-    let dev = m.io_mut().seg.nodes[0].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>().unwrap();
+    let dev = m.cyclic().io_mut().seg.nodes[0]
+        .esc
+        .app_mut()
+        .as_any_mut()
+        .downcast_mut::<ferrocat_esc::Cia402Drive>()
+        .unwrap();
     dev.coe.emergency(e);
     // The ESC delivers it to SM1 with the next frame; the application's poll finds it.
-    m.poll_mailboxes().unwrap();
-    m.poll_mailboxes().unwrap();
-    let got: Vec<_> =
-        m.events().iter().filter(|e| matches!(e, MasterEvent::Emergency { .. })).map(|e| e.to_string()).collect();
+    m.acyclic().poll_mailboxes().unwrap();
+    m.acyclic().poll_mailboxes().unwrap();
+    let got: Vec<_> = m
+        .diagnosis()
+        .events()
+        .iter()
+        .filter(|e| matches!(e, MasterEvent::Emergency { .. }))
+        .map(|e| e.to_string())
+        .collect();
     assert_eq!(
         got,
         ["slave 0 (C5-E-2-21): emergency 0x8611 (following error), error register 0x20, data [01, 02, 03, 04, 05]"]
     );
     // And an SDO still works afterwards.
-    assert_eq!(m.coe().sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
+    assert_eq!(m.acyclic().coe().sdo_read(0, 0x1018, 2).unwrap(), 0x4Fu32.to_le_bytes());
 }
 
 #[test]
@@ -150,20 +164,20 @@ fn inputs_come_back_and_esi_describes_a_bare_slave() {
         "seed = 5\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL1004'\n[[device]]\nbuiltin = 'EL2004'\n",
         HostModel::pc_rt(),
     );
-    m.bring_up().unwrap();
-    let io = m.io_mut().seg.nodes[1].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap();
+    m.states().bring_up().unwrap();
+    let io = m.cyclic().io_mut().seg.nodes[1].esc.app_mut().as_any_mut().downcast_mut::<DigitalIo>().unwrap();
     io.inputs = vec![0b0101];
     for _ in 0..3 {
-        m.cycle().unwrap();
+        m.cyclic().cycle().unwrap();
     }
     let bits: Vec<u64> = m.slaves()[1]
         .mapping()
         .inputs
         .iter()
-        .map(|e| m.get(ferrocat_master::Handle { bit: e.image_bit, bits: e.bits }))
+        .map(|e| m.image().get(ferrocat_master::Handle { bit: e.image_bit, bits: e.bits }))
         .collect();
     assert_eq!(bits, [1, 0, 1, 0]);
-    assert_eq!(m.get(m.input(1, "Input").unwrap()), 1);
+    assert_eq!(m.image().get(m.image().input(1, "Input").unwrap()), 1);
 }
 
 /// An ESI for a 2-channel output terminal; `pdos` says whether it describes its PDOs.
@@ -196,21 +210,21 @@ fn esi_describes_a_slave_whose_sii_does_not() {
         bare.display()
     );
     let mut m = master(&toml, HostModel::ideal());
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     assert!(m.slaves()[1].mapping().outputs.is_empty(), "the SII alone says nothing");
     // The same bring-up with the ESI: two outputs, in OP, reaching the terminal.
     let mut m = master(&toml, HostModel::ideal());
     let f = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(&full).unwrap()).unwrap();
     for d in f.devices {
-        m.add_esi(f.vendor_id, d);
+        m.config().add_esi(f.vendor_id, d);
     }
-    m.bring_up().unwrap();
+    m.states().bring_up().unwrap();
     std::fs::remove_file(&bare).ok();
     std::fs::remove_file(&full).ok();
     assert_eq!(m.slaves()[1].mapping().outputs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["Out 1", "Out 2"]);
-    let h = m.output(1, "Out 2").unwrap();
-    m.set(h, 1);
-    m.cycle().unwrap();
+    let h = m.image().output(1, "Out 2").unwrap();
+    m.cyclic().set(h, 1);
+    m.cyclic().cycle().unwrap();
     let io = m.io().seg.nodes[1].esc.app().as_any().downcast_ref::<DigitalIo>().unwrap();
     assert_eq!(io.outputs, [0b10]);
 }
@@ -221,20 +235,26 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
         "seed = 1\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\nstation_alias = 0x0777\n",
         HostModel::ideal(),
     );
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     assert_eq!((m.slaves()[0].alias(), m.slaves()[1].alias()), (0, 0x0777));
     let mut d = [0u8; 2];
     let fprd_alias = ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 };
-    assert_eq!(m.datagram(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(), 0, "alias not yet enabled");
-    assert_eq!(m.enable_alias(1).unwrap(), 0x0777);
     assert_eq!(
-        m.datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 }, &mut d)
+        m.cyclic().datagram(ferrocat_wire::Command::FPRD, fprd_alias, &mut d).unwrap(),
+        0,
+        "alias not yet enabled"
+    );
+    assert_eq!(m.states().enable_alias(1).unwrap(), 0x0777);
+    assert_eq!(
+        m.cyclic()
+            .datagram(ferrocat_wire::Command::FPRD, ferrocat_wire::Address::Device { adp: 0x0777, ado: 0x0010 }, &mut d)
             .unwrap(),
         1
     );
     assert_eq!(u16::from_le_bytes(d), 0x1002, "the alias reaches the slave with station address 0x1002");
-    assert!(m.enable_alias(0).unwrap_err().to_string().contains("no station alias"));
+    assert!(m.states().enable_alias(0).unwrap_err().to_string().contains("no station alias"));
     let e = m
+        .cyclic()
         .expect_datagram(
             ferrocat_wire::Command::FPRD,
             ferrocat_wire::Address::Device { adp: 0x4242, ado: 0x0130 },
@@ -245,6 +265,7 @@ fn aliases_are_honoured_and_wkc_errors_name_the_slave() {
         .to_string();
     assert!(e.contains("FPRD 0x4242:0x0130") && e.contains("station address or alias 0x4242"), "{e}");
     let e = m
+        .cyclic()
         .expect_datagram(ferrocat_wire::Command::BRD, ferrocat_wire::Address::Device { adp: 0, ado: 0x0130 }, &mut d, 5)
         .unwrap_err()
         .to_string();
@@ -258,16 +279,16 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     assert_eq!(info.header.station_alias, 0);
     info.header.station_alias = 0x0321;
     let mut image = info.to_image();
-    let e = m.sii_write(1, &image).unwrap_err().to_string();
+    let e = m.acyclic().sii_write(1, &image).unwrap_err().to_string();
     assert!(e.contains("header CRC"), "a stale CRC is refused: {e}");
     image[14] = ferrocat_wire::sii::header_crc(&image);
     // The alias word and the header CRC word differ; nothing else.
-    assert_eq!(m.sii_write(1, &image).unwrap(), 2);
+    assert_eq!(m.acyclic().sii_write(1, &image).unwrap(), 2);
     assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321);
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321, "what a new scan reads from the EEPROM");
     assert_eq!(m.slaves()[1].name(), "EL2004");
-    assert_eq!(m.sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
+    assert_eq!(m.acyclic().sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
 
 /// IgH's `ethercat alias`: the alias goes into EEPROM word 4 with the checksum, and the ESC
@@ -276,18 +297,18 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
 fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     use ferrocat_master::io::Io;
     let mut m = coupler_and_output_scanned();
-    assert_eq!(m.sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
-    m.scan().unwrap();
+    assert_eq!(m.acyclic().sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
+    m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0, "the register keeps its power-on value");
     assert!(m.slaves()[1].eeprom_problem().is_none());
-    let t = m.io_mut().now_ns();
-    m.io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
-    m.io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
-    m.io_mut().sleep_until(t + 3_000_000);
-    m.scan().unwrap();
+    let t = m.cyclic().io_mut().now_ns();
+    m.cyclic().io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
+    m.cyclic().io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
+    m.cyclic().io_mut().sleep_until(t + 3_000_000);
+    m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0x0BAD);
-    assert_eq!(m.enable_alias(1).unwrap(), 0x0BAD);
-    m.bring_up().unwrap();
+    assert_eq!(m.states().enable_alias(1).unwrap(), 0x0BAD);
+    m.states().bring_up().unwrap();
 }
 
 /// An EEPROM whose configuration area fails its checksum (an alias written without it): the
@@ -305,16 +326,19 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
         HostModel::ideal(),
     );
     std::fs::remove_file(&path).unwrap();
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     let problem = m.slaves()[1].eeprom_problem().expect("an unconfigured ESC");
     assert!(problem.contains("checksum"), "{problem}");
     assert_eq!(m.slaves()[1].esc().eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
     assert!(m.slaves()[0].eeprom_problem().is_none());
-    let t0 = m.io_mut().now_ns();
-    let e = m.bring_up().unwrap_err().to_string();
+    let t0 = m.cyclic().io_mut().now_ns();
+    let e = m.states().bring_up().unwrap_err().to_string();
     println!("{e}");
     assert!(e.contains("slave 1 (EL2004)") && e.contains("checksum"), "{e}");
-    assert!(m.io_mut().now_ns() - t0 < m.settings().state_timeout_ns / 10, "not after the state timeout");
+    assert!(
+        m.cyclic().io_mut().now_ns() - t0 < m.config().settings().state_timeout_ns / 10,
+        "not after the state timeout"
+    );
 }
 
 /// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the

@@ -19,39 +19,40 @@ fn gap_after(watchdog_ns: Option<u64>, gap_ns: u64) -> (Master<VirtualIo>, Vec<M
     let cfg: SegmentConfig =
         toml::from_str("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'LAN9252-EVB'\n").unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
-    m.scan().unwrap();
+    m.states().scan().unwrap();
     if let Some(ns) = watchdog_ns {
-        m.set_process_data_watchdog(BOARD, ns).unwrap();
+        m.config().set_process_data_watchdog(BOARD, ns).unwrap();
     }
-    m.configure().unwrap();
-    m.start().unwrap();
-    let mut next = m.io_mut().now_ns();
+    m.states().configure().unwrap();
+    m.states().start().unwrap();
+    let mut next = m.cyclic().io_mut().now_ns();
     let cycles = |m: &mut Master<VirtualIo>, next: &mut u64, n: usize| {
         for _ in 0..n {
-            m.cycle().unwrap();
+            m.cyclic().cycle().unwrap();
             *next += CYCLE_NS;
-            m.io_mut().sleep_until(*next);
+            m.cyclic().io_mut().sleep_until(*next);
         }
     };
     cycles(&mut m, &mut next, 100);
-    let before = m.events().len();
+    let before = m.diagnosis().events().len();
     next += gap_ns;
-    m.io_mut().sleep_until(next);
+    m.cyclic().io_mut().sleep_until(next);
     cycles(&mut m, &mut next, 200);
-    let events = m.events()[before..].to_vec();
+    let events = m.diagnosis().events()[before..].to_vec();
     (m, events)
 }
 
 fn watchdog_steps(m: &mut Master<VirtualIo>) -> u16 {
-    let station = m.slave(BOARD).unwrap().station();
+    let station = m.slaves().at(BOARD).unwrap().station();
     let mut d = [0u8; 2];
-    m.expect_datagram(
-        Command::FPRD,
-        Address::Device { adp: station, ado: addr::WATCHDOG_TIME_PROCESS_DATA },
-        &mut d,
-        1,
-    )
-    .unwrap();
+    m.cyclic()
+        .expect_datagram(
+            Command::FPRD,
+            Address::Device { adp: station, ado: addr::WATCHDOG_TIME_PROCESS_DATA },
+            &mut d,
+            1,
+        )
+        .unwrap();
     u16::from_le_bytes(d)
 }
 
@@ -82,15 +83,21 @@ fn the_esc_default_lets_the_same_gap_pass() {
 fn a_watchdog_past_what_0x0420_counts_is_refused() {
     let cfg: SegmentConfig = toml::from_str("[[device]]\nbuiltin = 'LAN9252-EVB'\n").unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
-    m.scan().unwrap();
-    let e = m.set_process_data_watchdog(0, 7_000_000_000).unwrap_err();
+    m.states().scan().unwrap();
+    let e = m.config().set_process_data_watchdog(0, 7_000_000_000).unwrap_err();
     assert!(matches!(e, MasterError::Config(ConfigError::WatchdogTooLong(7_000_000_000))), "{e:?}");
     assert!(e.to_string().contains("6.5535 s"), "{e}");
     // 0 turns it off; a time between steps rounds up.
-    m.set_process_data_watchdog(0, 0).unwrap();
-    m.set_process_data_watchdog(0, 150_000).unwrap();
+    m.config().set_process_data_watchdog(0, 0).unwrap();
+    m.config().set_process_data_watchdog(0, 150_000).unwrap();
     let mut d = [0u8; 2];
-    m.expect_datagram(Command::FPRD, Address::Device { adp: 0x1001, ado: addr::WATCHDOG_TIME_PROCESS_DATA }, &mut d, 1)
+    m.cyclic()
+        .expect_datagram(
+            Command::FPRD,
+            Address::Device { adp: 0x1001, ado: addr::WATCHDOG_TIME_PROCESS_DATA },
+            &mut d,
+            1,
+        )
         .unwrap();
     assert_eq!(u16::from_le_bytes(d), 2);
 }

@@ -5,7 +5,7 @@
 //! ([`Server::serve`], once a cycle), and its reply goes back through a channel of one place
 //! that the loop fills without waiting. So a client that hangs, floods or dies costs the loop
 //! a `try_recv` and nothing more; the work it asks for is the master's acyclic side's
-//! ([`Master::serve_requests`]), in the cycle's spare time.
+//! ([`Acyclic::serve_requests`](ferrocat_master::part::Acyclic::serve_requests)), in the cycle's spare time.
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::fs::PermissionsExt;
@@ -203,7 +203,7 @@ impl Server {
     }
 
     /// Once a cycle, in its spare time: takes the requests that came (without waiting), serves
-    /// them before `deadline_ns` (the master's clock; [`Master::serve_requests`]) and hands
+    /// them before `deadline_ns` (the master's clock; [`Acyclic::serve_requests`](ferrocat_master::part::Acyclic::serve_requests)) and hands
     /// the answers back. `extra` adds to a statistics reply what the application knows (the
     /// clock sync's lock, diagnosis), called only when one is asked for. Returns the datagrams sent;
     /// only the link's errors are errors.
@@ -211,7 +211,7 @@ impl Server {
         &mut self,
         m: &mut Master<I>,
         deadline_ns: u64,
-        extra: &dyn Fn(&Master<I>) -> serde_json::Value,
+        extra: &dyn Fn(&mut Master<I>) -> serde_json::Value,
     ) -> ferrocat_master::Result<u32> {
         for _ in 0..TAKEN_PER_CALL {
             match self.jobs.try_recv() {
@@ -219,8 +219,8 @@ impl Server {
                 Err(TryRecvError::Empty | TryRecvError::Disconnected) => break,
             }
         }
-        let sent = if self.pending.is_empty() { 0 } else { m.serve_requests(deadline_ns)? };
-        for (id, answer) in m.take_answers() {
+        let sent = if self.pending.is_empty() { 0 } else { m.acyclic().serve_requests(deadline_ns)? };
+        for (id, answer) in m.acyclic().take_answers() {
             if let Some(reply) = self.pending.remove(&id) {
                 // A channel of one place, this reply's own: never full, and a client gone
                 // makes it fail, which nobody needs to hear.
@@ -230,7 +230,7 @@ impl Server {
         Ok(sent)
     }
 
-    fn take<I: Io>(&mut self, m: &mut Master<I>, job: Job, extra: &dyn Fn(&Master<I>) -> serde_json::Value) {
+    fn take<I: Io>(&mut self, m: &mut Master<I>, job: Job, extra: &dyn Fn(&mut Master<I>) -> serde_json::Value) {
         let reply = |r: Result<serde_json::Value, ErrorReply>| match r {
             Ok(v) => Reply { id: job.id, ok: Some(v), error: None },
             Err(e) => Reply { id: job.id, ok: None, error: Some(e) },
@@ -243,7 +243,10 @@ impl Server {
                 return;
             }
             Asked::Protocol(Request::Stats) => {
-                let _ = job.reply.try_send(Back::Ready(reply(Ok(stats(m, extra(m))))));
+                let _ = job.reply.try_send(Back::Ready(reply(Ok({
+                    let extra = extra(m);
+                    stats(m, extra)
+                }))));
                 return;
             }
             Asked::Protocol(Request::Reload) => {
@@ -274,7 +277,7 @@ impl Server {
                 return;
             }
             Asked::Protocol(Request::SiiRead { position, offset }) => {
-                let r = match m.slave(position) {
+                let r = match m.slaves().at(position) {
                     Ok(s) => {
                         let image = s.sii().to_image();
                         let from = offset.min(image.len());
@@ -289,7 +292,7 @@ impl Server {
                 return;
             }
             Asked::Protocol(Request::Pdos { position }) => {
-                let r = match m.slave(position) {
+                let r = match m.slaves().at(position) {
                     Ok(s) => Ok(serde_json::to_value(pdos_of(s)).unwrap_or_default()),
                     Err(e) => Err(error_of(&e)),
                 };
@@ -312,7 +315,7 @@ impl Server {
                 }
             },
         };
-        let id = m.submit(request);
+        let id = m.acyclic().submit(request);
         self.pending.insert(id, job.reply);
     }
 }
@@ -414,13 +417,13 @@ fn slave_list<I: Io>(m: &Master<I>) -> Vec<SlaveInfo> {
         .collect()
 }
 
-fn stats<I: Io>(m: &Master<I>, extra: serde_json::Value) -> serde_json::Value {
-    let c = m.cycle_stats();
-    let a = m.acyclic_stats();
+fn stats<I: Io>(m: &mut Master<I>, extra: serde_json::Value) -> serde_json::Value {
+    let c = m.diagnosis().cycle_stats();
+    let a = m.acyclic().acyclic_stats();
     let s = Stats {
         cycles: c.cycles,
         wkc_errors: c.wkc_errors,
-        expected_wkc: m.expected_wkc(),
+        expected_wkc: m.image().expected_wkc(),
         last_wkc: c.last_wkc,
         last_round_trip_ns: c.last_round_trip_ns,
         requests_answered: a.answered,

@@ -54,7 +54,7 @@ fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
         )
         .unwrap();
         let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
-        m.bring_up().unwrap();
+        m.states().bring_up().unwrap();
         let hello = Hello {
             service: "ferrocat".into(),
             protocol: ferrocat_service::protocol::VERSION,
@@ -67,23 +67,23 @@ fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
         let mut server =
             Server::start(ServerOptions { path: p, mode: 0o600, group: None, register_writes, hello }).unwrap();
         ready_tx.send(()).unwrap();
-        let mut next = m.io_mut().now_ns();
+        let mut next = m.cyclic().io_mut().now_ns();
         let mut short = 0;
         while !stop_loop.load(Ordering::Relaxed) {
             next += CYCLE_NS;
-            if m.cycle().unwrap() != m.expected_wkc() {
+            if m.cyclic().cycle().unwrap() != m.image().expected_wkc() {
                 short += 1;
             }
             server.serve(&mut m, next - CYCLE_NS / 4, &|_| serde_json::json!({ "lock": "none" })).unwrap();
-            let mut taken = m.take_events();
-            if m.cycle_stats().cycles == 10 {
+            let mut taken = m.diagnosis().take_events();
+            if m.diagnosis().cycle_stats().cycles == 10 {
                 taken.extend((0..events).map(|k| MasterEvent::Recovered { position: 1, name: format!("e{k}") }));
             }
             server.note_events(&taken, 0.5);
-            m.io_mut().sleep_until(next);
+            m.cyclic().io_mut().sleep_until(next);
             std::thread::sleep(std::time::Duration::from_micros(50));
         }
-        (m.cycle_stats().cycles, short)
+        (m.diagnosis().cycle_stats().cycles, short)
     });
     ready.recv().unwrap();
     Running { path, stop, thread: Some(thread) }

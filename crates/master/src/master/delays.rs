@@ -158,33 +158,19 @@ impl<I: Io> Master<I> {
     /// times the reference's pass from the round trip less the loop behind it; on the ring the
     /// loop is this much shorter than the line's receive times say.
     pub(super) fn measure_ring_shortening(&mut self, station: u16, port: u8, trips: usize) -> Result<()> {
-        let ring = self.median_round_trip_ns(trips)?;
+        let ring = self.dc().median_round_trip_ns(trips)?;
         let loop_control = self.close_port(station, port)?;
-        let line = self.median_round_trip_ns(trips);
+        let line = self.dc().median_round_trip_ns(trips);
         self.reopen_port(station, loop_control)?;
         self.ring_shortening_ns = line? - ring;
         Ok(())
-    }
-
-    /// The segment's round trip: the median of `n` two-byte broadcasts (BRD 0x0000), by the
-    /// link's stamps (ns).
-    pub fn median_round_trip_ns(&mut self, n: usize) -> Result<i64> {
-        let mut trips = Vec::with_capacity(n);
-        for _ in 0..n.max(1) {
-            let built = self.engine.io.now_ns();
-            self.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
-            let tx = self.engine.io.last_tx_ns().unwrap_or(built);
-            trips.push(self.engine.last_rx_ns.wrapping_sub(tx) as i64);
-        }
-        trips.sort_unstable();
-        Ok(trips[trips.len() / 2])
     }
 
     /// Latches the receive times (BWR 0x0900) and computes every DC slave's propagation delay
     /// from the reference (the first DC slave) for any tree: a child's hop is half of its
     /// parent's round trip through that port minus the child's own loop; slaves behind a later
     /// port also wait for the earlier branches (esc-spec §3.6).
-    pub fn measure_delays(&mut self) -> Result<()> {
+    pub(crate) fn measure_delays(&mut self) -> Result<()> {
         self.latch_and_measure_delays().map(|_| ())
     }
 
@@ -203,7 +189,7 @@ impl<I: Io> Master<I> {
         let mut tries = self.engine.retries.saturating_add(1);
         let mut passes = None;
         let latched = loop {
-            let built_ns = self.master_system_time();
+            let built_ns = self.clock().master_system_time();
             let mut latch = [0u8; 4];
             let mut pdus =
                 [Pdu::new(Command::BWR, Address::Device { adp: 0, ado: addr::DC_RECEIVE_TIME_PORT0 }, &mut latch)];
@@ -362,5 +348,21 @@ impl<I: Io> Master<I> {
             i += 1;
         }
         order
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Dc<'a, I> {
+    /// The segment's round trip: the median of `n` two-byte broadcasts (BRD 0x0000), by the
+    /// link's stamps (ns).
+    pub fn median_round_trip_ns(&mut self, n: usize) -> Result<i64> {
+        let mut trips = Vec::with_capacity(n);
+        for _ in 0..n.max(1) {
+            let built = self.m.engine.io.now_ns();
+            self.m.engine.one(Command::BRD, Address::Device { adp: 0, ado: 0 }, &mut [0u8; 2])?;
+            let tx = self.m.engine.io.last_tx_ns().unwrap_or(built);
+            trips.push(self.m.engine.last_rx_ns.wrapping_sub(tx) as i64);
+        }
+        trips.sort_unstable();
+        Ok(trips[trips.len() / 2])
     }
 }

@@ -141,10 +141,12 @@ impl<I: Io> Master<I> {
     }
 }
 
-impl<I: Io> Master<I> {
+impl<I: Io> Master<I> {}
+
+impl<'a, I: Io> crate::master::part::Dc<'a, I> {
     /// What the master has added to the far reference's offset since the ring split (None
     /// while it keeps none).
     pub fn far_reference_offset_ns(&self) -> Option<i64> {
-        self.far_steer.as_ref().map(|f| f.clock.applied_ns())
+        self.m.far_steer.as_ref().map(|f| f.clock.applied_ns())
     }
 }

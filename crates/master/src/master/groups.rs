@@ -23,23 +23,6 @@ pub struct Group {
 }
 
 impl<I: Io> Master<I> {
-    /// Puts the process data in groups, from the next [`Master::layout`] (which
-    /// [`Master::configure`] calls) on: each group's slaves' outputs, then their inputs, in an
-    /// LRW of its own at a logical address of its own, sent every `every` cycles and checked
-    /// on its own ([`Master::plan_frame_stats`]). Slaves in no group form a group `default`,
-    /// sent every cycle. The groups that go every cycle come first: the first frame of a cycle
-    /// carries the clock-sync method's datagrams. A slave in two groups, a position past the
-    /// last slave, a group sent never (`every` 0) or one whose data do not fit a frame is an
-    /// error at the layout.
-    pub fn set_groups(&mut self, groups: Vec<Group>) {
-        self.groups = groups;
-    }
-
-    /// The groups given ([`Master::set_groups`]).
-    pub fn groups(&self) -> &[Group] {
-        &self.groups
-    }
-
     /// The plan the groups make of the slaves' mapping.
     pub(super) fn plan_for_groups(&self) -> Result<Plan> {
         let n = self.slaves.len();
@@ -125,5 +108,24 @@ impl<I: Io> Master<I> {
         plan.input_bytes = logical + 10 + 2;
         plan.validate()?;
         Ok(plan)
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Config<'a, I> {
+    /// Puts the process data in groups, from the next
+    /// [`States::configure`](crate::part::States::configure) on: each group's slaves' outputs, then their inputs, in an
+    /// LRW of its own at a logical address of its own, sent every `every` cycles and checked
+    /// on its own ([`Diagnosis::plan_frame_stats`](crate::part::Diagnosis::plan_frame_stats)). Slaves in no group form a group `default`,
+    /// sent every cycle. The groups that go every cycle come first: the first frame of a cycle
+    /// carries the clock-sync method's datagrams. A slave in two groups, a position past the
+    /// last slave, a group sent never (`every` 0) or one whose data do not fit a frame is an
+    /// error at the layout.
+    pub fn set_groups(&mut self, groups: Vec<Group>) {
+        self.m.groups = groups;
+    }
+
+    /// The groups given ([`Config::set_groups`](crate::part::Config::set_groups)).
+    pub fn groups(self) -> &'a [Group] {
+        &self.m.groups
     }
 }

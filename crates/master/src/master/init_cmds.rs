@@ -9,7 +9,7 @@ use crate::master::Master;
 impl<I: Io> Master<I> {
     /// The ESI description the master holds for slave `position` (`Master::esi`): vendor and
     /// product code match, the slave's own revision first, else the newest.
-    pub fn esi_description(&self, position: u16) -> Option<&ferrocat_esi::Device> {
+    pub(crate) fn esi_description(&self, position: u16) -> Option<&ferrocat_esi::Device> {
         let s = self.slaves.get(position as usize)?;
         self.esi
             .iter()
@@ -18,18 +18,11 @@ impl<I: Io> Master<I> {
             .map(|(_, d)| d)
     }
 
-    /// What the application asks of slave `position`'s configuration (a machine
-    /// description's init commands and modules), applied whenever the master configures it.
-    pub fn setup_mut(&mut self, position: u16) -> Result<&mut crate::slave::Setup> {
-        self.slave(position)?;
-        Ok(&mut self.slaves[position as usize].setup)
-    }
-
     /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): its ESI
     /// description's, in the file's order, then those the application gave
-    /// ([`Master::setup_mut`]); each an SDO download (complete access where it says
+    /// ([`Config::setup_mut`](crate::part::Config::setup_mut)); each an SDO download (complete access where it says
     /// so). Returns how many it sent; an abort is an error naming the command.
-    pub fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
+    pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
         let mut cmds: Vec<(ferrocat_esi::InitCmd, bool)> = match self.esi_description(position) {
             Some(d) => d.init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
@@ -39,28 +32,39 @@ impl<I: Io> Master<I> {
             cmds.extend(s.setup.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
         }
         for (c, from_esi) in &cmds {
-            self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
-                let name = self.slaves[position as usize].name.clone();
-                let transition = transition.to_string();
-                let origin = if *from_esi {
-                    crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
-                } else {
-                    crate::error::SdoSource::Description { transition, line: c.line }
-                };
-                MasterError::of(
-                    position,
-                    &name,
-                    crate::error::SlaveError::ConfigSdo {
-                        origin,
-                        index: c.index,
-                        subindex: c.subindex,
-                        comment: c.comment.clone(),
-                        error: Box::new(e),
-                    },
-                )
-            })?;
+            self.acyclic().coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(
+                |e| {
+                    let name = self.slaves[position as usize].name.clone();
+                    let transition = transition.to_string();
+                    let origin = if *from_esi {
+                        crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
+                    } else {
+                        crate::error::SdoSource::Description { transition, line: c.line }
+                    };
+                    MasterError::of(
+                        position,
+                        &name,
+                        crate::error::SlaveError::ConfigSdo {
+                            origin,
+                            index: c.index,
+                            subindex: c.subindex,
+                            comment: c.comment.clone(),
+                            error: Box::new(e),
+                        },
+                    )
+                },
+            )?;
             tracing::debug!(position, transition, index = c.index, subindex = c.subindex, "init command sent");
         }
         Ok(cmds.len())
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Config<'a, I> {
+    /// What the application asks of slave `position`'s configuration (a machine
+    /// description's init commands and modules), applied whenever the master configures it.
+    pub fn setup_mut(self, position: u16) -> Result<&'a mut crate::slave::Setup> {
+        self.m.slave(position)?;
+        Ok(&mut self.m.slaves[position as usize].setup)
     }
 }

@@ -14,27 +14,6 @@ pub(crate) const WATCHDOG_DIVIDER: u16 = 2498;
 pub(crate) const WATCHDOG_STEP_NS: u64 = (WATCHDOG_DIVIDER as u64 + 2) * 40;
 
 impl<I: Io> Master<I> {
-    /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
-    /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
-    pub fn configure(&mut self) -> Result<()> {
-        for k in 0..self.slaves.len() as u16 {
-            self.write_mailbox_config(k)?;
-        }
-        self.request_state_all(AlState::PreOp)?;
-        for k in 0..self.slaves.len() as u16 {
-            if self.slaves[k as usize].has_coe() {
-                self.run_init_commands(k, "IP")?;
-                self.run_init_commands(k, "PS")?;
-                if let Some(modules) = self.slaves[k as usize].setup.modules.clone() {
-                    self.configure_modules(k, &modules)?;
-                }
-            }
-            self.run_plan_sdos(k)?;
-            self.read_mapping(k)?;
-        }
-        self.layout()
-    }
-
     /// The plan's SDO downloads for the slave at `position`, if a plan gives any.
     fn run_plan_sdos(&mut self, position: u16) -> Result<()> {
         let sdos = match &self.plan {
@@ -42,27 +21,29 @@ impl<I: Io> Master<I> {
             None => return Ok(()),
         };
         for c in &sdos {
-            self.coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(|e| {
-                let name = self.slaves[position as usize].name.clone();
-                crate::error::MasterError::of(
-                    position,
-                    &name,
-                    crate::error::SlaveError::ConfigSdo {
-                        origin: crate::error::SdoSource::Plan,
-                        index: c.index,
-                        subindex: c.subindex,
-                        comment: c.comment.clone(),
-                        error: Box::new(e),
-                    },
-                )
-            })?;
+            self.acyclic().coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(
+                |e| {
+                    let name = self.slaves[position as usize].name.clone();
+                    crate::error::MasterError::of(
+                        position,
+                        &name,
+                        crate::error::SlaveError::ConfigSdo {
+                            origin: crate::error::SdoSource::Plan,
+                            index: c.index,
+                            subindex: c.subindex,
+                            comment: c.comment.clone(),
+                            error: Box::new(e),
+                        },
+                    )
+                },
+            )?;
         }
         Ok(())
     }
 
     /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects)
     /// when it speaks CoE, else the PDOs its SII assigns to SyncManagers.
-    pub fn read_mapping(&mut self, position: u16) -> Result<()> {
+    pub(crate) fn read_mapping(&mut self, position: u16) -> Result<()> {
         let k = position as usize;
         let sms = self.slaves[k].sii.sync_managers().to_vec();
         let out_sm =
@@ -118,13 +99,13 @@ impl<I: Io> Master<I> {
 
     pub(super) fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
         let mut v = Vec::new();
-        let n = self.coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
+        let n = self.acyclic().coe().sdo_read(position, assign, 0)?.first().copied().unwrap_or(0);
         for k in 1..=n {
-            let p = self.coe().sdo_read(position, assign, k)?;
+            let p = self.acyclic().coe().sdo_read(position, assign, k)?;
             let pdo = u16::from_le_bytes([p[0], *p.get(1).unwrap_or(&0)]);
-            let m = self.coe().sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
+            let m = self.acyclic().coe().sdo_read(position, pdo, 0)?.first().copied().unwrap_or(0);
             for j in 1..=m {
-                let e = self.coe().sdo_read(position, pdo, j)?;
+                let e = self.acyclic().coe().sdo_read(position, pdo, j)?;
                 if e.len() < 4 {
                     continue;
                 }
@@ -145,44 +126,35 @@ impl<I: Io> Master<I> {
         Ok(v)
     }
 
-    /// Lets the application choose the PDOs of one slave (PREOP only): writes the assignment
-    /// object and reads the mapping back.
-    pub fn remap(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
-        self.slaves[position as usize].assignment[!outputs as usize] = Some(pdos.to_vec());
-        self.write_assignment(position, outputs, pdos)?;
-        self.read_mapping(position)?;
-        self.layout()
-    }
-
     pub(super) fn write_assignment(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
         let assign = if outputs { 0x1C12 } else { 0x1C13 };
-        self.coe().sdo_write(position, assign, 0, &[0])?;
+        self.acyclic().coe().sdo_write(position, assign, 0, &[0])?;
         for (k, p) in pdos.iter().enumerate() {
-            self.coe().sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
+            self.acyclic().coe().sdo_write(position, assign, k as u8 + 1, &p.to_le_bytes())?;
         }
-        self.coe().sdo_write(position, assign, 0, &[pdos.len() as u8])
+        self.acyclic().coe().sdo_write(position, assign, 0, &[pdos.len() as u8])
     }
 
     /// Places every slave's outputs, then every slave's inputs, byte-aligned in the image, and
-    /// writes the SyncManagers and FMMUs; with a plan ([`Master::set_plan`]), as the plan says.
-    pub fn layout(&mut self) -> Result<()> {
+    /// writes the SyncManagers and FMMUs; with a plan ([`Config::set_plan`](crate::part::Config::set_plan)), as the plan says.
+    pub(crate) fn layout(&mut self) -> Result<()> {
         // Diagnosis finds the TxPDO status entries of the new image.
         self.diagnosis.txpdo = None;
         if !self.groups.is_empty() {
             let plan = self.plan_for_groups()?;
-            self.set_plan(plan)?;
+            self.config().set_plan(plan)?;
         }
         if self.plan.is_some() {
             return self.layout_by_plan();
         }
         let mut out = 0u32;
-        for s in &mut self.slaves {
+        for s in self.slaves.iter_mut() {
             let bytes = s.output_bits().div_ceil(8);
             s.mapping.out_area = (out, bytes);
             out += bytes;
         }
         let mut inp = out;
-        for s in &mut self.slaves {
+        for s in self.slaves.iter_mut() {
             let bytes = s.input_bits().div_ceil(8);
             s.mapping.in_area = (inp, bytes);
             inp += bytes;
@@ -262,23 +234,6 @@ impl<I: Io> Master<I> {
         self.write_watchdog(position)
     }
 
-    /// Sets the process-data watchdog of the slave at `position` (the SM watchdog, ESC
-    /// registers 0x0400 and 0x0420) to `time_ns`, rounded to the 100 µs steps of the divider
-    /// 2 498 (25 MHz / 2 500, the ESC's default, written with it); 0 turns it off. The ESC arms
-    /// it when the output SyncManager is enabled with its watchdog trigger (control bit 6, from
-    /// the SII): without process data for that long, it
-    /// resets the outputs, and a slave with a firmware leaves OP (AL status code 0x001B). The
-    /// master writes it now and again whenever it configures the slave's process data (after
-    /// a power cycle, for instance). Without it the slave keeps its EEPROM's or the ESC's
-    /// default (100 ms on ET1100 and the simulated ESC).
-    pub fn set_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<()> {
-        self.slave(position)?;
-        let steps = time_ns.div_ceil(WATCHDOG_STEP_NS);
-        let steps = u16::try_from(steps).map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
-        self.slaves[position as usize].pd_watchdog_steps = Some(steps);
-        self.write_watchdog(position)
-    }
-
     fn write_watchdog(&mut self, position: u16) -> Result<()> {
         let s = &self.slaves[position as usize];
         let Some(steps) = s.pd_watchdog_steps else { return Ok(()) };
@@ -344,4 +299,55 @@ pub(crate) fn process_registers(s: &crate::slave::Slave, out_logical: u32, in_lo
         }
     }
     writes
+}
+
+impl<'a, I: Io> crate::master::part::States<'a, I> {
+    /// Mailboxes, PREOP, process-data mapping (from CoE where the slave has it, else the SII),
+    /// SyncManagers and FMMUs, the process image; leaves every slave in PREOP.
+    pub fn configure(&mut self) -> Result<()> {
+        for k in 0..self.m.slaves.len() as u16 {
+            self.m.write_mailbox_config(k)?;
+        }
+        self.m.states().request_state_all(AlState::PreOp)?;
+        for k in 0..self.m.slaves.len() as u16 {
+            if self.m.slaves[k as usize].has_coe() {
+                self.m.run_init_commands(k, "IP")?;
+                self.m.run_init_commands(k, "PS")?;
+                if let Some(modules) = self.m.slaves[k as usize].setup.modules.clone() {
+                    self.m.config().configure_modules(k, &modules)?;
+                }
+            }
+            self.m.run_plan_sdos(k)?;
+            self.m.read_mapping(k)?;
+        }
+        self.m.layout()
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Config<'a, I> {
+    /// Lets the application choose the PDOs of one slave (PREOP only): writes the assignment
+    /// object and reads the mapping back.
+    pub fn remap(&mut self, position: u16, outputs: bool, pdos: &[u16]) -> Result<()> {
+        self.m.slaves[position as usize].assignment[!outputs as usize] = Some(pdos.to_vec());
+        self.m.write_assignment(position, outputs, pdos)?;
+        self.m.read_mapping(position)?;
+        self.m.layout()
+    }
+
+    /// Sets the process-data watchdog of the slave at `position` (the SM watchdog, ESC
+    /// registers 0x0400 and 0x0420) to `time_ns`, rounded to the 100 µs steps of the divider
+    /// 2 498 (25 MHz / 2 500, the ESC's default, written with it); 0 turns it off. The ESC arms
+    /// it when the output SyncManager is enabled with its watchdog trigger (control bit 6, from
+    /// the SII): without process data for that long, it
+    /// resets the outputs, and a slave with a firmware leaves OP (AL status code 0x001B). The
+    /// master writes it now and again whenever it configures the slave's process data (after
+    /// a power cycle, for instance). Without it the slave keeps its EEPROM's or the ESC's
+    /// default (100 ms on ET1100 and the simulated ESC).
+    pub fn set_process_data_watchdog(&mut self, position: u16, time_ns: u64) -> Result<()> {
+        self.m.slave(position)?;
+        let steps = time_ns.div_ceil(WATCHDOG_STEP_NS);
+        let steps = u16::try_from(steps).map_err(|_| crate::error::ConfigError::WatchdogTooLong(time_ns))?;
+        self.m.slaves[position as usize].pd_watchdog_steps = Some(steps);
+        self.m.write_watchdog(position)
+    }
 }

@@ -101,89 +101,6 @@ impl<I: Io> Master<I> {
         }
         Ok(imgs)
     }
-
-    /// Writes a configured station alias into the slave's EEPROM: word 4 and, with it, the
-    /// checksum word 7 (as IgH's `ethercat alias` does). The ESC takes an alias from its
-    /// EEPROM only at power-on, never at a reload. Returns the number of words written.
-    pub fn sii_set_alias(&mut self, position: u16, alias: u16) -> Result<usize> {
-        let mut image = self.slave(position)?.sii.to_image();
-        image[8..10].copy_from_slice(&alias.to_le_bytes());
-        image[14] = ferrocat_wire::sii::header_crc(&image);
-        self.sii_write(position, &image)
-    }
-
-    /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
-    /// Returns the number of words written.
-    pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
-        // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
-        if image.len() < 16 {
-            return Err(ConfigError::SiiImageTooShort(image.len()).into());
-        }
-        let crc = ferrocat_wire::sii::header_crc(image);
-        if image[14] != crc {
-            return Err(ConfigError::SiiHeaderCrc { found: image[14], computed: crc }.into());
-        }
-        let (st, current, capacity) = {
-            let s = self.slave(position)?;
-            (s.station, s.sii.to_image(), s.sii.header.eeprom_size_bytes())
-        };
-        // Nothing past the EEPROM's end (its own word 0x3E): a write there fails half-way,
-        // the slave left with part of another image.
-        let data_len = image.iter().rposition(|b| *b != 0xFF).map_or(0, |i| i + 1);
-        if data_len > capacity {
-            let name = self.slaves[position as usize].name.clone();
-            return Err(MasterError::of(
-                position,
-                &name,
-                SlaveError::EepromTooSmall { image: data_len, eeprom: capacity },
-            ));
-        }
-        let image = &image[..image.len().min(capacity)];
-        self.fpwr(st, addr::SII_CONFIG, &[0])?;
-        let mut written = 0;
-        for (w, pair) in image.chunks(2).enumerate() {
-            let v = u16::from_le_bytes([pair[0], *pair.get(1).unwrap_or(&0xFF)]);
-            let old = current.get(2 * w..2 * w + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
-            if old == Some(v) {
-                continue;
-            }
-            // The data first, then "write" with write enable and the word address.
-            self.fpwr(st, addr::SII_DATA, &v.to_le_bytes())?;
-            let mut cmd = [0u8; 6];
-            cmd[0..2].copy_from_slice(&0x0201u16.to_le_bytes());
-            cmd[2..6].copy_from_slice(&(w as u32).to_le_bytes());
-            self.fpwr(st, addr::SII_CONTROL, &cmd)?;
-            let deadline = self.engine.io.now_ns() + 100_000_000;
-            loop {
-                let mut ctl = [0u8; 2];
-                self.fprd(st, addr::SII_CONTROL, &mut ctl)?;
-                let c = u16::from_le_bytes(ctl);
-                if c & 0x8000 == 0 {
-                    if c & 0x6000 != 0 {
-                        let name = self.slaves[position as usize].name.clone();
-                        return Err(MasterError::of(
-                            position,
-                            &name,
-                            SlaveError::EepromWrite { word: w as u32, status: c },
-                        ));
-                    }
-                    break;
-                }
-                if self.engine.io.now_ns() > deadline {
-                    let name = self.slaves[position as usize].name.clone();
-                    return Err(MasterError::of(position, &name, SlaveError::EepromBusy));
-                }
-                let now = self.engine.io.now_ns();
-                self.engine.io.sleep_until(now + 500_000);
-            }
-            written += 1;
-        }
-        let sii = self.read_all_sii(&[st])?.pop().unwrap_or_default();
-        if let Ok(info) = SiiInfo::from_image(&sii) {
-            self.slaves[position as usize].sii = info;
-        }
-        Ok(written)
-    }
 }
 
 /// Bytes of an SII image up to and including its end marker (or the whole of it).
@@ -230,5 +147,90 @@ fn sii_complete(img: &[u8]) -> bool {
         if at >= max {
             return true;
         }
+    }
+}
+
+impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
+    /// Writes a configured station alias into the slave's EEPROM: word 4 and, with it, the
+    /// checksum word 7 (as IgH's `ethercat alias` does). The ESC takes an alias from its
+    /// EEPROM only at power-on, never at a reload. Returns the number of words written.
+    pub fn sii_set_alias(&mut self, position: u16, alias: u16) -> Result<usize> {
+        let mut image = self.m.slave(position)?.sii.to_image();
+        image[8..10].copy_from_slice(&alias.to_le_bytes());
+        image[14] = ferrocat_wire::sii::header_crc(&image);
+        self.m.acyclic().sii_write(position, &image)
+    }
+
+    /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
+    /// Returns the number of words written.
+    pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
+        // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
+        if image.len() < 16 {
+            return Err(ConfigError::SiiImageTooShort(image.len()).into());
+        }
+        let crc = ferrocat_wire::sii::header_crc(image);
+        if image[14] != crc {
+            return Err(ConfigError::SiiHeaderCrc { found: image[14], computed: crc }.into());
+        }
+        let (st, current, capacity) = {
+            let s = self.m.slave(position)?;
+            (s.station, s.sii.to_image(), s.sii.header.eeprom_size_bytes())
+        };
+        // Nothing past the EEPROM's end (its own word 0x3E): a write there fails half-way,
+        // the slave left with part of another image.
+        let data_len = image.iter().rposition(|b| *b != 0xFF).map_or(0, |i| i + 1);
+        if data_len > capacity {
+            let name = self.m.slaves[position as usize].name.clone();
+            return Err(MasterError::of(
+                position,
+                &name,
+                SlaveError::EepromTooSmall { image: data_len, eeprom: capacity },
+            ));
+        }
+        let image = &image[..image.len().min(capacity)];
+        self.m.fpwr(st, addr::SII_CONFIG, &[0])?;
+        let mut written = 0;
+        for (w, pair) in image.chunks(2).enumerate() {
+            let v = u16::from_le_bytes([pair[0], *pair.get(1).unwrap_or(&0xFF)]);
+            let old = current.get(2 * w..2 * w + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+            if old == Some(v) {
+                continue;
+            }
+            // The data first, then "write" with write enable and the word address.
+            self.m.fpwr(st, addr::SII_DATA, &v.to_le_bytes())?;
+            let mut cmd = [0u8; 6];
+            cmd[0..2].copy_from_slice(&0x0201u16.to_le_bytes());
+            cmd[2..6].copy_from_slice(&(w as u32).to_le_bytes());
+            self.m.fpwr(st, addr::SII_CONTROL, &cmd)?;
+            let deadline = self.m.engine.io.now_ns() + 100_000_000;
+            loop {
+                let mut ctl = [0u8; 2];
+                self.m.fprd(st, addr::SII_CONTROL, &mut ctl)?;
+                let c = u16::from_le_bytes(ctl);
+                if c & 0x8000 == 0 {
+                    if c & 0x6000 != 0 {
+                        let name = self.m.slaves[position as usize].name.clone();
+                        return Err(MasterError::of(
+                            position,
+                            &name,
+                            SlaveError::EepromWrite { word: w as u32, status: c },
+                        ));
+                    }
+                    break;
+                }
+                if self.m.engine.io.now_ns() > deadline {
+                    let name = self.m.slaves[position as usize].name.clone();
+                    return Err(MasterError::of(position, &name, SlaveError::EepromBusy));
+                }
+                let now = self.m.engine.io.now_ns();
+                self.m.engine.io.sleep_until(now + 500_000);
+            }
+            written += 1;
+        }
+        let sii = self.m.read_all_sii(&[st])?.pop().unwrap_or_default();
+        if let Ok(info) = SiiInfo::from_image(&sii) {
+            self.m.slaves[position as usize].sii = info;
+        }
+        Ok(written)
     }
 }

@@ -9,101 +9,6 @@ use crate::error::{code_text, MasterError, Result, SlaveError, StateCause};
 use crate::io::Io;
 
 impl<I: Io> Master<I> {
-    /// Requests `state` from every slave and waits until all are there.
-    pub fn request_state_all(&mut self, state: AlState) -> Result<()> {
-        self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut [state as u8, 0])?;
-        self.wait_state_all(state)
-    }
-
-    /// Steps every slave down for a clean stop, as a program on its way out does: SAFEOP first,
-    /// where outputs take their safe state while inputs still come, then INIT, where process
-    /// data and mailboxes stop. Each step waits until every slave is there.
-    ///
-    /// Slaves on their way back to OP after an error are left where they are (the master stops
-    /// bringing them back), each request acknowledges an error with it (AL control bit 4), and a
-    /// slave that misses the broadcast request (an error met on the way) is asked on its own.
-    pub fn shut_down(&mut self) -> Result<()> {
-        self.cyc.recovering = false;
-        for state in [AlState::SafeOp, AlState::Init] {
-            let mut request = [state as u8 | 0x10, 0];
-            self.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut request)?;
-            for k in 0..self.slaves.len() as u16 {
-                if self.wait_state(k, state).is_err() {
-                    self.request_state(k, state)?;
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Requests `state` from one slave and waits for it. A slave whose firmware has not yet
-    /// read the last AL control write refuses the next (no working counter): the request is
-    /// repeated until it is taken or the state timeout passes.
-    pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
-        let st = self.slave(position)?.station;
-        let deadline = self.engine.io.now_ns() + self.settings.state_timeout_ns;
-        loop {
-            let mut control = [state as u8, 0];
-            let wkc =
-                self.engine.one(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, &mut control)?;
-            if wkc == 1 || self.engine.io.now_ns() > deadline {
-                break;
-            }
-            let now = self.engine.io.now_ns();
-            self.engine.io.sleep_until(now + 100_000);
-        }
-        self.wait_state(position, state)
-    }
-
-    /// Lets a slave be addressed by its configured station alias (0x0012, from its EEPROM) as
-    /// well as by its station address (DL control bit 24), and checks that it answers to it.
-    pub fn enable_alias(&mut self, position: u16) -> Result<u16> {
-        let (st, alias, name) = {
-            let s = self.slave(position)?;
-            (s.station, s.alias, s.name.clone())
-        };
-        if alias == 0 {
-            return Err(MasterError::of(position, &name, SlaveError::NoAlias));
-        }
-        if self
-            .slaves
-            .iter()
-            .any(|s| s.position != position && (s.alias == alias && s.alias != 0 || s.station == alias))
-        {
-            return Err(MasterError::of(position, &name, SlaveError::AliasNotUnique(alias)));
-        }
-        let mut dl = [0u8; 4];
-        self.fprd(st, addr::DL_CONTROL, &mut dl)?;
-        dl[3] |= 0x01;
-        self.fpwr(st, addr::DL_CONTROL, &dl)?;
-        let mut check = [0u8; 2];
-        self.engine.expect_wkc(
-            Command::FPRD,
-            Address::Device { adp: alias, ado: addr::STATION_ADDRESS },
-            &mut check,
-            1,
-        )?;
-        Ok(alias)
-    }
-
-    /// Requests `state` from a group of slaves at once and waits until all of them are there.
-    pub fn request_state_group(&mut self, positions: &[u16], state: AlState) -> Result<()> {
-        let mut bufs: Vec<[u8; 2]> = vec![[state as u8, 0]; positions.len()];
-        let stations: Vec<u16> = positions.iter().map(|&p| self.slave(p).map(|s| s.station)).collect::<Result<_>>()?;
-        {
-            let mut p: Vec<Pdu<'_>> = stations
-                .iter()
-                .zip(bufs.iter_mut())
-                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, b))
-                .collect();
-            self.engine.transact(&mut p)?;
-        }
-        for &p in positions {
-            self.wait_state(p, state)?;
-        }
-        Ok(())
-    }
-
     pub(super) fn wait_state_all(&mut self, state: AlState) -> Result<()> {
         for k in 0..self.slaves.len() as u16 {
             self.wait_state(k, state)?;
@@ -123,7 +28,7 @@ impl<I: Io> Master<I> {
     }
 
     /// Polls AL status until `state` or an error; an error is acknowledged and reported by name.
-    pub fn wait_state(&mut self, position: u16, state: AlState) -> Result<()> {
+    pub(crate) fn wait_state(&mut self, position: u16, state: AlState) -> Result<()> {
         let (st, name) = {
             let s = self.slave(position)?;
             (s.station, s.name.clone())
@@ -188,6 +93,105 @@ impl<I: Io> Master<I> {
             self.engine.io.sleep_until(now + 100_000);
         }
     }
+}
+
+impl<'a, I: Io> crate::master::part::States<'a, I> {
+    /// Requests `state` from every slave and waits until all are there.
+    pub fn request_state_all(&mut self, state: AlState) -> Result<()> {
+        self.m.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut [state as u8, 0])?;
+        self.m.wait_state_all(state)
+    }
+
+    /// Steps every slave down for a clean stop, as a program on its way out does: SAFEOP first,
+    /// where outputs take their safe state while inputs still come, then INIT, where process
+    /// data and mailboxes stop. Each step waits until every slave is there.
+    ///
+    /// Slaves on their way back to OP after an error are left where they are (the master stops
+    /// bringing them back), each request acknowledges an error with it (AL control bit 4), and a
+    /// slave that misses the broadcast request (an error met on the way) is asked on its own.
+    pub fn shut_down(&mut self) -> Result<()> {
+        self.m.cyc.recovering = false;
+        for state in [AlState::SafeOp, AlState::Init] {
+            let mut request = [state as u8 | 0x10, 0];
+            self.m.engine.one(Command::BWR, Address::Device { adp: 0, ado: addr::AL_CONTROL }, &mut request)?;
+            for k in 0..self.m.slaves.len() as u16 {
+                if self.m.wait_state(k, state).is_err() {
+                    self.m.states().request_state(k, state)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Requests `state` from one slave and waits for it. A slave whose firmware has not yet
+    /// read the last AL control write refuses the next (no working counter): the request is
+    /// repeated until it is taken or the state timeout passes.
+    pub fn request_state(&mut self, position: u16, state: AlState) -> Result<()> {
+        let st = self.m.slave(position)?.station;
+        let deadline = self.m.engine.io.now_ns() + self.m.settings.state_timeout_ns;
+        loop {
+            let mut control = [state as u8, 0];
+            let wkc =
+                self.m.engine.one(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, &mut control)?;
+            if wkc == 1 || self.m.engine.io.now_ns() > deadline {
+                break;
+            }
+            let now = self.m.engine.io.now_ns();
+            self.m.engine.io.sleep_until(now + 100_000);
+        }
+        self.m.wait_state(position, state)
+    }
+
+    /// Lets a slave be addressed by its configured station alias (0x0012, from its EEPROM) as
+    /// well as by its station address (DL control bit 24), and checks that it answers to it.
+    pub fn enable_alias(&mut self, position: u16) -> Result<u16> {
+        let (st, alias, name) = {
+            let s = self.m.slave(position)?;
+            (s.station, s.alias, s.name.clone())
+        };
+        if alias == 0 {
+            return Err(MasterError::of(position, &name, SlaveError::NoAlias));
+        }
+        if self
+            .m
+            .slaves
+            .iter()
+            .any(|s| s.position != position && (s.alias == alias && s.alias != 0 || s.station == alias))
+        {
+            return Err(MasterError::of(position, &name, SlaveError::AliasNotUnique(alias)));
+        }
+        let mut dl = [0u8; 4];
+        self.m.fprd(st, addr::DL_CONTROL, &mut dl)?;
+        dl[3] |= 0x01;
+        self.m.fpwr(st, addr::DL_CONTROL, &dl)?;
+        let mut check = [0u8; 2];
+        self.m.engine.expect_wkc(
+            Command::FPRD,
+            Address::Device { adp: alias, ado: addr::STATION_ADDRESS },
+            &mut check,
+            1,
+        )?;
+        Ok(alias)
+    }
+
+    /// Requests `state` from a group of slaves at once and waits until all of them are there.
+    pub fn request_state_group(&mut self, positions: &[u16], state: AlState) -> Result<()> {
+        let mut bufs: Vec<[u8; 2]> = vec![[state as u8, 0]; positions.len()];
+        let stations: Vec<u16> =
+            positions.iter().map(|&p| self.m.slave(p).map(|s| s.station)).collect::<Result<_>>()?;
+        {
+            let mut p: Vec<Pdu<'_>> = stations
+                .iter()
+                .zip(bufs.iter_mut())
+                .map(|(&st, b)| Pdu::new(Command::FPWR, Address::Device { adp: st, ado: addr::AL_CONTROL }, b))
+                .collect();
+            self.m.engine.transact(&mut p)?;
+        }
+        for &p in positions {
+            self.m.wait_state(p, state)?;
+        }
+        Ok(())
+    }
 
     /// Checks every slave after a cycle came back short, reports what changed once per slave,
     /// and takes one step of bringing each fallen slave back to OP (so that the cyclic exchange
@@ -196,7 +200,7 @@ impl<I: Io> Master<I> {
         // Only slaves the master has brought to OP can fall from it: one still on its way (a
         // frame lost while `start` walks it up) or put elsewhere on purpose is not "left OP",
         // and is not pushed back there.
-        let watched: Vec<usize> = (0..self.slaves.len()).filter(|&k| self.slaves[k].state == AlState::Op).collect();
+        let watched: Vec<usize> = (0..self.m.slaves.len()).filter(|&k| self.m.slaves[k].state == AlState::Op).collect();
         // Every AL status in one exchange (as few frames as fit): a frame each, in a cycle of
         // 100 µs on a stock kernel, overran the next cycles and took more drives out of OP.
         let mut status = vec![[0u8; 6]; watched.len()];
@@ -205,17 +209,17 @@ impl<I: Io> Master<I> {
                 .iter()
                 .zip(status.iter_mut())
                 .map(|(&k, d)| {
-                    Pdu::new(Command::FPRD, Address::Device { adp: self.slaves[k].station, ado: addr::AL_STATUS }, d)
+                    Pdu::new(Command::FPRD, Address::Device { adp: self.m.slaves[k].station, ado: addr::AL_STATUS }, d)
                 })
                 .collect();
             // Within a cycle's frame timeout and not sent again: lost, as the cyclic frame may
             // have been, it is asked again after the next short cycle instead of holding the
             // cyclic loop for the acyclic timeout (20 ms) and its retries.
-            match self.engine.transact_once(&mut pdus, self.settings.cyclic_timeout_ns) {
+            match self.m.engine.transact_once(&mut pdus, self.m.settings.cyclic_timeout_ns) {
                 Ok(()) => {}
                 Err(crate::MasterError::Timeout { .. }) => {
                     tracing::debug!("supervision's status read lost: asked again after the next short cycle");
-                    return Ok(self.slaves.iter().filter(|s| s.health != crate::slave::Health::Operational).count());
+                    return Ok(self.m.slaves.iter().filter(|s| s.health != crate::slave::Health::Operational).count());
                 }
                 Err(e) => return Err(e),
             }
@@ -223,55 +227,56 @@ impl<I: Io> Master<I> {
         };
         let mut down = 0;
         for (i, &k) in watched.iter().enumerate() {
-            let (st, name, pos) = (self.slaves[k].station, self.slaves[k].name.clone(), k as u16);
+            let (st, name, pos) = (self.m.slaves[k].station, self.m.slaves[k].name.clone(), k as u16);
             let (mut d, mut wkc) = (status[i], wkcs[i]);
             if wkc == 0 {
                 // Powered off and on again it has lost its station address: give it back.
                 let mut a = [0u8; 2];
-                if self.engine.one(Command::APRD, Address::position(pos, addr::STATION_ADDRESS), &mut a)? == 1
+                if self.m.engine.one(Command::APRD, Address::position(pos, addr::STATION_ADDRESS), &mut a)? == 1
                     && a == [0, 0]
                 {
-                    self.engine.one(
+                    self.m.engine.one(
                         Command::APWR,
                         Address::position(pos, addr::STATION_ADDRESS),
                         &mut st.to_le_bytes(),
                     )?;
-                    wkc = self.engine.one(Command::FPRD, Address::Device { adp: st, ado: addr::AL_STATUS }, &mut d)?;
+                    wkc =
+                        self.m.engine.one(Command::FPRD, Address::Device { adp: st, ado: addr::AL_STATUS }, &mut d)?;
                 }
             }
             if wkc == 0 {
-                if self.slaves[k].health != crate::slave::Health::Lost {
-                    self.slaves[k].health = crate::slave::Health::Lost;
-                    self.push_event(MasterEvent::Lost { position: pos, name });
+                if self.m.slaves[k].health != crate::slave::Health::Lost {
+                    self.m.slaves[k].health = crate::slave::Health::Lost;
+                    self.m.push_event(MasterEvent::Lost { position: pos, name });
                 }
                 down += 1;
                 continue;
             }
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-            let error = self.slaves[k].al_error(status, code);
+            let error = self.m.slaves[k].al_error(status, code);
             if status.state() == Some(AlState::Op) && !error {
-                if self.slaves[k].health != crate::slave::Health::Operational {
-                    self.slaves[k].health = crate::slave::Health::Operational;
-                    self.push_event(MasterEvent::Recovered { position: pos, name });
+                if self.m.slaves[k].health != crate::slave::Health::Operational {
+                    self.m.slaves[k].health = crate::slave::Health::Operational;
+                    self.m.push_event(MasterEvent::Recovered { position: pos, name });
                 }
                 continue;
             }
             down += 1;
-            if self.slaves[k].health == crate::slave::Health::Operational {
-                self.push_event(MasterEvent::LeftOp { position: pos, name, status, code });
+            if self.m.slaves[k].health == crate::slave::Health::Operational {
+                self.m.push_event(MasterEvent::LeftOp { position: pos, name, status, code });
             }
-            self.slaves[k].health = crate::slave::Health::Recovering;
+            self.m.slaves[k].health = crate::slave::Health::Recovering;
             // One step towards OP.
             if error {
                 tracing::warn!(
                     "slave {pos} ({}) in {} with an error{}: acknowledged, on its way back to OP",
-                    self.slaves[k].name,
+                    self.m.slaves[k].name,
                     status.state().map_or("an unknown state", |s| s.name()),
                     code_text(code)
                 );
                 let ack = status.state_bits() as u16 | AlStatus::ERROR;
-                self.engine.one(
+                self.m.engine.one(
                     Command::FPWR,
                     Address::Device { adp: st, ado: addr::AL_CONTROL },
                     &mut ack.to_le_bytes(),
@@ -280,30 +285,30 @@ impl<I: Io> Master<I> {
             }
             match status.state() {
                 Some(AlState::Init) | Some(AlState::Bootstrap) | None => {
-                    self.write_mailbox_config(pos)?;
-                    self.engine.one(
+                    self.m.write_mailbox_config(pos)?;
+                    self.m.engine.one(
                         Command::FPWR,
                         Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::PreOp as u8, 0],
                     )?;
                 }
                 Some(AlState::PreOp) => {
-                    if self.slaves[k].has_coe() {
+                    if self.m.slaves[k].has_coe() {
                         for (i, outputs) in [(0usize, true), (1, false)] {
-                            if let Some(p) = self.slaves[k].assignment[i].clone() {
-                                self.write_assignment(pos, outputs, &p)?;
+                            if let Some(p) = self.m.slaves[k].assignment[i].clone() {
+                                self.m.write_assignment(pos, outputs, &p)?;
                             }
                         }
                     }
-                    self.write_process_config(pos)?;
-                    self.engine.one(
+                    self.m.write_process_config(pos)?;
+                    self.m.engine.one(
                         Command::FPWR,
                         Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::SafeOp as u8, 0],
                     )?;
                 }
                 Some(AlState::SafeOp) | Some(AlState::Op) => {
-                    self.engine.one(
+                    self.m.engine.one(
                         Command::FPWR,
                         Address::Device { adp: st, ado: addr::AL_CONTROL },
                         &mut [AlState::Op as u8, 0],
@@ -311,7 +316,7 @@ impl<I: Io> Master<I> {
                 }
             }
         }
-        self.cyc.recovering = down > 0;
+        self.m.cyc.recovering = down > 0;
         Ok(down)
     }
 }

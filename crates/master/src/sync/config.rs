@@ -1,5 +1,5 @@
 //! Clock synchronisation as one configuration value: which method, with its settings, units
-//! and defaults. [`crate::Master::start_clock_sync`] turns it into a running method in the
+//! and defaults. [`Clock::start_clock_sync`](crate::part::Clock::start_clock_sync) turns it into a running method in the
 //! right order with the DC initialisation.
 use super::{Chen2016, ClockSync, Conventional, Coupling, Ferrocat, Nominal, Park2020, SoemPi, Steering};
 
