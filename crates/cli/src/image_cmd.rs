@@ -149,7 +149,8 @@ impl AppWatchdog {
     }
 
     fn request_all<I: Io>(&self, m: &mut Master<I>, state: AlState) {
-        let with_outputs: Vec<u16> = m.slaves().iter().filter(|s| s.output_bits() > 0).map(|s| s.position()).collect();
+        let with_outputs: Vec<u16> =
+            m.slaves().iter().filter(|s| s.mapping().output_bits() > 0).map(|s| s.position()).collect();
         for position in with_outputs {
             m.acyclic().submit(Request::State { position, state });
         }

@@ -34,7 +34,7 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
             .map(|s| {
                 json!({
                     "position": s.position(), "station_address": s.station(), "alias": s.alias(),
-                    "name": s.name(), "description": s.description(),
+                    "name": s.name(), "description": s.sii().name().unwrap_or_default(),
                     "vendor_id": s.identity().vendor_id, "product_code": s.identity().product_code, "revision": s.identity().revision, "serial": s.identity().serial,
                     "esc_type": s.esc().kind, "fmmus": s.esc().fmmu_count, "sync_managers": s.esc().sm_count,
                     "has_dc": s.dc().supported, "system_time": s.dc().has_system_time, "dc_64bit": s.dc().is_64bit, "delay_ns": s.dc().delay_ns,
@@ -68,7 +68,7 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
         }
         for s in m.slaves() {
             outln!("");
-            outln!("Slave {}: {} ({})", s.position(), s.name(), s.description());
+            outln!("Slave {}: {} ({})", s.position(), s.name(), s.sii().name().unwrap_or_default());
             outln!(" Configured address: {:04x}  alias {}", s.station(), s.alias());
             outln!(
                 " Man: {:08x} ID: {:08x} Rev: {:08x} Serial: {:08x}",
@@ -82,9 +82,9 @@ pub fn scan(t: &Target, json: bool, write_machine: Option<&std::path::Path>) -> 
                 " Has DC: {}  Delay: {}[ns]  Activeports: {}",
                 s.dc().supported as u8,
                 s.dc().delay_ns,
-                s.active_ports_text()
+                s.ports().active_text()
             );
-            if let Some(problem) = s.eeprom_problem() {
+            if let Some(problem) = s.esc().eeprom_problem() {
                 outln!(" {problem}");
             }
             if s.dc().supported && !s.dc().has_system_time {
@@ -1311,7 +1311,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "wake_latency": wake_late.to_json(),
                 "period_jitter": jitter.to_json(),
                 "clock_sync": clock_sync,
-                "slaves": tally.to_json(m.slaves().iter().filter(|s| s.state() == ferrocat_wire::register::AlState::Op).count(), m.slaves().len()),
+                "slaves": tally.to_json(m.slaves().iter().filter(|s| s.status().state() == ferrocat_wire::register::AlState::Op).count(), m.slaves().len()),
                 "values": shown.iter().map(|(n, h)| (n.to_string(), serde_json::json!(m.image().get(*h)))).collect::<serde_json::Map<_, _>>(),
                 "diagnosis": diagnosis_json(&mut m, &tally, o.diagnosis_ms),
                 "groups": groups_json(&mut m),

@@ -162,7 +162,7 @@ pub fn slaves(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
                     serde_json::json!({
                         "position": s.position(), "station": s.station(), "alias": s.alias(), "name": s.name(),
                         "vendor_id": id.vendor_id, "product_code": id.product_code, "revision": id.revision,
-                        "state": s.state().name(), "al_status_code": 0, "kept_in": null, "health": null,
+                        "state": s.status().state().name(), "al_status_code": 0, "kept_in": null, "health": null,
                     })
                 })
                 .collect();

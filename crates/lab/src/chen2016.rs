@@ -128,7 +128,7 @@ fn prepare(o: &Options) -> crate::Result<(Master<VirtualIo>, Vec<u16>, Setup)> {
         return Err(LabError::NoDcSynchronousSlave);
     }
     let counted_slaves: Vec<u16> =
-        synced.iter().copied().filter(|&k| m.slaves()[k as usize].output_bits() > 0).collect();
+        synced.iter().copied().filter(|&k| m.slaves()[k as usize].mapping().output_bits() > 0).collect();
     if counted_slaves.is_empty() {
         return Err(LabError::NoSynchronousOutputs(synced));
     }

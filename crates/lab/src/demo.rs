@@ -10,6 +10,7 @@ use crate::LabError;
 use crate::World;
 use ferrocat_esc::Cia402Drive;
 use ferrocat_master::calibrate::GpioCalibration;
+use ferrocat_master::cia402::Output;
 use ferrocat_master::cia402::{map_for_csp, Axis, Goal};
 use ferrocat_master::sync::{ClockSync, Coupling};
 use ferrocat_master::trajectory::{Limits, Move};
@@ -186,7 +187,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
     m.states().configure()?;
     let mut drives = Vec::new();
     for k in 0..m.slaves().len() as u16 {
-        if Axis::new(&m, k).is_err() {
+        if Axis::on_axis(&m, k, 0).is_err() {
             continue;
         }
         map_for_csp(&mut m, k)?;
@@ -278,8 +279,10 @@ fn run_one<I: World>(
     // Position where the image carries a target position, else velocity.
     let mut csv = Vec::with_capacity(axes.len());
     for a in &mut axes {
-        let velocity = !a.has_target_position();
-        if !(a.has_target_position() || a.has_target_velocity()) {
+        let velocity = !a.can_run(ferrocat_master::cia402::Mode::CyclicSyncPosition);
+        if !(a.can_run(ferrocat_master::cia402::Mode::CyclicSyncPosition)
+            || a.can_run(ferrocat_master::cia402::Mode::CyclicSyncVelocity))
+        {
             return Err(LabError::NoTarget { position: a.position, axis: a.axis });
         }
         a.set_mode(&mut r.m, if velocity { Mode::CyclicSyncVelocity } else { Mode::CyclicSyncPosition })?;
@@ -292,7 +295,7 @@ fn run_one<I: World>(
         let mut ready = true;
         for a in &mut axes {
             a.update(&mut r.m);
-            ready &= a.ready(&r.m);
+            ready &= a.feedback(&r.m).ready;
         }
         if ready {
             break;
@@ -308,7 +311,7 @@ fn run_one<I: World>(
             None => increments_per_rev(&mut r.m, a.position, a.index(0x608F)),
         });
     }
-    let start: Vec<f64> = axes.iter().map(|a| a.position_actual(&r.m).unwrap_or(0) as f64).collect();
+    let start: Vec<f64> = axes.iter().map(|a| a.feedback(&r.m).position.unwrap_or(0) as f64).collect();
     // Axis i moves (i + 1) · 2 revolutions, alternating direction, then back.
     let out: Vec<f64> = start
         .iter()
@@ -369,9 +372,9 @@ fn run_one<I: World>(
         for (i, a) in axes.iter().enumerate() {
             if csv[i] {
                 // CSV: the slope to the next cycle's set-point (increments/s).
-                a.set_target_velocity(&mut r.m, ((sp_next[i] - sp[i]) / cycle_s).round() as i32);
+                a.write(&mut r.m, Output::Velocity(((sp_next[i] - sp[i]) / cycle_s).round() as i32));
             } else {
-                a.set_target_position(&mut r.m, sp[i].round() as i64 as i32);
+                a.write(&mut r.m, Output::Position(sp[i].round() as i64 as i32));
             }
         }
         let e = true_error_ns(&mut r.m, mfr, cycle_ns);
@@ -383,9 +386,9 @@ fn run_one<I: World>(
         for (i, (a, fe)) in axes.iter_mut().zip(&mut fe_image).enumerate() {
             a.update(&mut r.m);
             let f = if csv[i] {
-                a.position_actual(&r.m).map(|p| (sp[i] - p as f64).abs())
+                a.feedback(&r.m).position.map(|p| (sp[i] - p as f64).abs())
             } else {
-                a.following_error(&r.m).map(|f| f.unsigned_abs() as f64)
+                a.feedback(&r.m).following_error.map(|f| f.unsigned_abs() as f64)
             };
             if let Some(f) = f {
                 *fe = Some(fe.unwrap_or(0.0).max(f));
@@ -416,8 +419,8 @@ fn run_one<I: World>(
                     }
                     Some(ax) => (ax.position_increments(), ax.following_error_increments()),
                     None => (
-                        a.position_actual(&r.m).unwrap_or(0) as f64,
-                        a.following_error(&r.m).map_or(f64::NAN, |f| f as f64),
+                        a.feedback(&r.m).position.unwrap_or(0) as f64,
+                        a.feedback(&r.m).following_error.map_or(f64::NAN, |f| f as f64),
                     ),
                 };
                 p.actual_rev.push(pos / per_rev[i]);

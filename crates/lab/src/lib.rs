@@ -125,7 +125,7 @@ pub fn loop_back_ns() -> u32 {
     ferrocat_segment::timing::EscTiming::default().loopback_ns
 }
 
-/// Methods that take out what a calibration measured (`ClockSync::take_error`).
+/// Methods that take out what a calibration measured (`ReferenceSteering::take_error`).
 pub const CALIBRATED: [&str; 7] = SyncMethod::FERROCAT_PRESETS;
 
 /// `a` then `b`, for method lists built from others (`C` must be their lengths' sum).

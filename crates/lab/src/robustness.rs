@@ -214,7 +214,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
         }
         if k == settle {
             probes0 = st.probing.sent;
-            events0 = sync.line_events();
+            events0 = sync.reference_steering().and_then(|s| s.line_events());
             lost0 = st.lost;
             make_ups0 = st.make_ups;
             let now = m.cyclic().io_mut().now_ns();
@@ -264,7 +264,8 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
     let for_good = |last: Option<usize>| back_for_good(last, errors_after.len(), o.cycle_ns);
     let recovery_ms = for_good(last_out);
     let relock_ms = if locked_before { for_good(last_unlocked.map(|k| k as usize)) } else { None };
-    let events_after = sync.line_events().zip(events0).map(|(now, then)| now.since(then));
+    let events_after =
+        sync.reference_steering().and_then(|s| s.line_events()).zip(events0).map(|(now, then)| now.since(then));
     let row = Row {
         scenario: scenario.to_string(),
         method: method.to_string(),

@@ -2,6 +2,7 @@
 //! the state machine, a following-error fault and its reset, CSP, CSV and CST — for the built-in
 //! servo and for the Nanotec drive as its ESI file describes it.
 use ferrocat_esc::{Cia402Drive, Switches};
+use ferrocat_master::cia402::Output;
 use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
 use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master, MasterEvent};
@@ -47,23 +48,23 @@ fn drive(m: &Master<VirtualIo>) -> &Cia402Drive {
 
 /// Writes `cw`, runs a few cycles, returns the state the statusword reports.
 fn command(m: &mut Master<VirtualIo>, a: &Axis, cw: u16) -> Option<State> {
-    a.write_controlword(m, cw);
+    a.write(m, Output::Controlword(cw));
     cycles(m, 4);
-    State::from_statusword(a.statusword(m))
+    State::from_statusword(a.feedback(m).statusword)
 }
 
 fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     use State::*;
     let mut m = master(drive_toml, prepare);
     assert!(drive(&m).dc_synchronous(), "the drive takes its set-points on SYNC0");
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_mode(&mut m, Mode::CyclicSyncPosition).unwrap();
     cycles(&mut m, 4);
-    assert_eq!(State::from_statusword(a.statusword(&m)), Some(SwitchOnDisabled));
+    assert_eq!(State::from_statusword(a.feedback(&m).statusword), Some(SwitchOnDisabled));
     // Keep the target on the actual position while enabling (a CSP start without a jump).
     let hold = |m: &mut Master<VirtualIo>, a: &Axis| {
-        let p = a.position_actual(m).unwrap();
-        a.set_target_position(m, p);
+        let p = a.feedback(m).position.unwrap();
+        a.write(m, Output::Position(p));
     };
     let up = |m: &mut Master<VirtualIo>, a: &Axis| {
         hold(m, a);
@@ -84,12 +85,12 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     // Quick stop with option code 2: decelerate, then switch on disabled (11, 12).
     m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &2i16.to_le_bytes()).unwrap();
     up(&mut m, &a);
-    a.write_controlword(&mut m, 0x02);
+    a.write(&mut m, Output::Controlword(0x02));
     m.cyclic().cycle().unwrap();
     let mut seen_quick_stop = false;
     for _ in 0..50 {
         cycles(&mut m, 1);
-        match State::from_statusword(a.statusword(&m)) {
+        match State::from_statusword(a.feedback(&m).statusword) {
             // The statusword answers a cycle or two later.
             Some(OperationEnabled) if !seen_quick_stop => {}
             Some(QuickStopActive) => seen_quick_stop = true,
@@ -98,13 +99,13 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
         }
     }
     assert!(seen_quick_stop, "11: quick stop active first");
-    assert_eq!(State::from_statusword(a.statusword(&m)), Some(SwitchOnDisabled), "12");
+    assert_eq!(State::from_statusword(a.feedback(&m).statusword), Some(SwitchOnDisabled), "12");
     // Option code 6: stay in quick stop active; enable operation returns (16).
     m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_OPTION, 0, &6i16.to_le_bytes()).unwrap();
     up(&mut m, &a);
     assert_eq!(command(&mut m, &a, 0x02), Some(QuickStopActive), "11");
     cycles(&mut m, 20);
-    assert_eq!(State::from_statusword(a.statusword(&m)), Some(QuickStopActive), "stays with option 6");
+    assert_eq!(State::from_statusword(a.feedback(&m).statusword), Some(QuickStopActive), "stays with option 6");
     hold(&mut m, &a);
     assert_eq!(command(&mut m, &a, 0x0F), Some(OperationEnabled), "16");
     // 13, 14: a blocked axis (its torque limit below friction) behind a target beyond the
@@ -112,12 +113,12 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     m.diagnosis().take_events();
     m.acyclic().coe().sdo_write(DRIVE, ix::MAX_TORQUE, 0, &1u16.to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &13_107u32.to_le_bytes()).unwrap();
-    let p = a.position_actual(&m).unwrap();
-    a.set_target_position(&mut m, p.wrapping_add(30_000));
+    let p = a.feedback(&m).position.unwrap();
+    a.write(&mut m, Output::Position(p.wrapping_add(30_000)));
     let mut states = Vec::new();
     for _ in 0..400 {
         cycles(&mut m, 1);
-        let s = State::from_statusword(a.statusword(&m));
+        let s = State::from_statusword(a.feedback(&m).statusword);
         if states.last() != Some(&s) {
             states.push(s);
         }
@@ -144,7 +145,7 @@ fn walk_every_transition(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualI
     // The driver brings it back from a fault on its own.
     drive_mut(&mut m).inject_fault(error_code::OVERCURRENT);
     cycles(&mut m, 2);
-    assert_eq!(State::from_statusword(a.statusword(&m)), Some(Fault));
+    assert_eq!(State::from_statusword(a.feedback(&m).statusword), Some(Fault));
     a.set_goal(Goal::OperationEnabled);
     let n = drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
     assert!(a.faults >= 1 && n > 3, "{n} cycles, {} faults", a.faults);
@@ -161,10 +162,10 @@ fn follow_ramp(m: &mut Master<VirtualIo>, a: &mut Axis, p0: f64, v: f64) -> Vec<
         .map(|k| {
             let t = k as f64 * 1e-3;
             let p = if t < 0.1 { 0.5 * v / 0.1 * t * t } else { v * 0.05 + v * (t - 0.1) };
-            a.set_target_position(m, (p0 + p) as i64 as i32);
+            a.write(m, Output::Position((p0 + p) as i64 as i32));
             cycles(m, 1);
             a.update(m);
-            a.statusword(m)
+            a.feedback(m).statusword
         })
         .collect()
 }
@@ -173,13 +174,13 @@ fn follow_ramp(m: &mut Master<VirtualIo>, a: &mut Axis, p0: f64, v: f64) -> Vec<
 /// the inertia as the torque says.
 fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     let mut m = master(drive_toml, prepare);
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     let per_rev = drive(&m).motor().increments_per_rev;
     // CSP: enable without a jump, then 2 rev/s for half a second.
     a.set_mode(&mut m, Mode::CyclicSyncPosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
-    let p0 = a.position_actual(&m).unwrap() as f64;
+    let p0 = a.feedback(&m).position.unwrap() as f64;
     let actual0 = drive(&m).position_increments();
     assert!((p0 - actual0).abs() < 2.0, "image {p0} vs drive {actual0}");
     drive_mut(&mut m).reset_stats();
@@ -192,16 +193,16 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     // CSV: 5 rev/s.
     a.set_mode(&mut m, Mode::CyclicSyncVelocity).unwrap();
     for _ in 0..300 {
-        if a.ready(&m) {
-            a.set_target_velocity(&mut m, (5.0 * per_rev) as i32);
+        if a.feedback(&m).ready {
+            a.write(&mut m, Output::Velocity((5.0 * per_rev) as i32));
         }
         cycles(&mut m, 1);
         a.update(&mut m);
     }
     let vel = drive(&m).velocity_increments() / per_rev;
     assert!((vel - 5.0).abs() < 0.05, "CSV: {vel} rev/s");
-    if a.velocity_actual(&m).is_some() {
-        assert!((a.velocity_actual(&m).unwrap() as f64 / per_rev - 5.0).abs() < 0.05);
+    if a.feedback(&m).velocity.is_some() {
+        assert!((a.feedback(&m).velocity.unwrap() as f64 / per_rev - 5.0).abs() < 0.05);
     }
     // A fault while moving: the reaction decelerates (13), then the fault (14); the driver
     // resets it and enables again.
@@ -215,7 +216,7 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
         if states.last() != Some(&s) {
             states.push(s);
         }
-        if a.ready(&m) && states.len() > 3 {
+        if a.feedback(&m).ready && states.len() > 3 {
             break;
         }
     }
@@ -224,18 +225,18 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
         [Some(State::FaultReactionActive), Some(State::Fault), Some(State::SwitchOnDisabled)],
         "{states:?}"
     );
-    assert!(a.ready(&m), "{states:?}");
+    assert!(a.feedback(&m).ready, "{states:?}");
     // CST: from the speed reached, 100 ‰ of rated torque for 100 ms.
     a.set_mode(&mut m, Mode::CyclicSyncTorque).unwrap();
     let mut v0 = None;
     for _ in 0..200 {
-        if a.ready(&m) {
-            a.set_target_torque(&mut m, 100);
+        if a.feedback(&m).ready {
+            a.write(&mut m, Output::Torque(100));
             v0.get_or_insert(drive(&m).velocity_increments());
         }
         cycles(&mut m, 1);
         a.update(&mut m);
-        if v0.is_some() && a.ready(&m) && drive(&m).torque_nm() > 0.05 {
+        if v0.is_some() && a.feedback(&m).ready && drive(&m).torque_nm() > 0.05 {
             break;
         }
     }
@@ -249,7 +250,7 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
     let w = w0 / per_rev * std::f64::consts::TAU;
     let expected = (0.1 * p.rated_torque_nm - p.coulomb_nm - p.viscous_nm_per_rad_s * w) / p.inertia_kg_m2;
     assert!((accel - expected).abs() / expected < 0.1, "CST: {accel} rad/s² vs {expected}");
-    if let Some(t) = a.torque_actual(&m) {
+    if let Some(t) = a.feedback(&m).torque {
         assert!((t - 100).abs() <= 2, "torque actual {t} ‰");
     }
 }
@@ -274,9 +275,9 @@ fn needs_shared_nanotec_esi_walks_every_transition() {
     // Its dictionary assigns only the PDOs with the controlword and statusword by default: the
     // driver adds the ESI's PDOs with the target position and the position actual value.
     walk_every_transition(&nanotec(), &|m| {
-        assert!(Axis::new(m, DRIVE).unwrap().position_actual(m).is_none());
+        assert!(Axis::on_axis(m, DRIVE, 0).unwrap().feedback(m).position.is_none());
         map_for_csp(m, DRIVE).unwrap();
-        assert!(Axis::new(m, DRIVE).unwrap().position_actual(m).is_some());
+        assert!(Axis::on_axis(m, DRIVE, 0).unwrap().feedback(m).position.is_some());
     });
 }
 
@@ -311,7 +312,7 @@ fn needs_shared_nanotec_esi_runs_csp_csv_and_cst_after_remapping() {
 fn the_builtin_servo_runs_profile_position() {
     use ferrocat_wire::cia402::{control, status};
     let mut m = master("builtin = 'SERVO'", &|_| {});
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_mode(&mut m, Mode::ProfilePosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
@@ -321,18 +322,18 @@ fn the_builtin_servo_runs_profile_position() {
     for i in [ix::PROFILE_ACCELERATION, ix::PROFILE_DECELERATION] {
         m.acyclic().coe().sdo_write(DRIVE, i, 0, &((30.0 * per_rev) as u32).to_le_bytes()).unwrap();
     }
-    let start = a.position_actual(&m).unwrap();
+    let start = a.feedback(&m).position.unwrap();
     let target = start.wrapping_add((2.0 * per_rev) as i32);
-    a.set_target_position(&mut m, target);
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+    a.write(&mut m, Output::Position(target));
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT));
     let mut acknowledged = false;
     let mut reached_after = None;
     for k in 0..2000 {
         cycles(&mut m, 1);
-        let sw = a.statusword(&m);
+        let sw = a.feedback(&m).statusword;
         if sw & status::OP_SPECIFIC_12 != 0 {
             acknowledged = true;
-            a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+            a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
         }
         if acknowledged && k > 10 && sw & status::TARGET_REACHED != 0 {
             reached_after = Some(k);
@@ -343,7 +344,7 @@ fn the_builtin_servo_runs_profile_position() {
     let k = reached_after.expect("target reached") as f64 * 1e-3;
     // 2 rev at 3 rev/s with 0.1 s ramps each way: 0.767 s, plus the settling of the loops.
     assert!((0.7..1.0).contains(&k), "reached after {k} s");
-    let end = a.position_actual(&m).unwrap();
+    let end = a.feedback(&m).position.unwrap();
     assert!(end.wrapping_sub(target).abs() < 100, "ends at {end}, target {target}");
 }
 
@@ -367,7 +368,7 @@ fn needs_shared_akd_eeprom_walks_every_transition() {
 /// the drive's increments per revolution.
 fn enabled_in(mode: Mode) -> (Master<VirtualIo>, Axis, f64) {
     let mut m = master("builtin = 'SERVO'", &|_| {});
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_mode(&mut m, mode).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
@@ -379,7 +380,7 @@ fn enabled_in(mode: Mode) -> (Master<VirtualIo>, Axis, f64) {
 fn until(m: &mut Master<VirtualIo>, a: &Axis, max: u64, done: &dyn Fn(u16) -> bool) -> Option<u64> {
     for k in 0..max {
         cycles(m, 1);
-        if done(a.statusword(m)) {
+        if done(a.feedback(m).statusword) {
             return Some(k);
         }
     }
@@ -396,22 +397,22 @@ fn the_builtin_servo_runs_profile_velocity() {
     m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((40.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::VELOCITY_WINDOW_TIME, 0, &100u16.to_le_bytes()).unwrap();
-    assert_ne!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "standing before the move");
+    assert_ne!(a.feedback(&m).statusword & status::OP_SPECIFIC_12, 0, "standing before the move");
     let target = (4.0 * per_rev) as i32;
-    a.set_target_velocity(&mut m, target);
+    a.write(&mut m, Output::Velocity(target));
     cycles(&mut m, 5);
-    assert_eq!(a.statusword(&m) & status::TARGET_REACHED, 0, "4 rev/s at 20 rev/s² takes 0.2 s");
+    assert_eq!(a.feedback(&m).statusword & status::TARGET_REACHED, 0, "4 rev/s at 20 rev/s² takes 0.2 s");
     let k = until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("target velocity reached") as f64;
     // The ramp's 0.2 s, then 0.1 s in the window.
     assert!((280.0..360.0).contains(&k), "reached after {k} ms");
-    let v = a.velocity_actual(&m).unwrap();
+    let v = a.feedback(&m).velocity.unwrap();
     assert!((v - target).abs() as f64 <= 0.05 * per_rev, "{v} against {target}");
-    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0, "moving");
+    assert_eq!(a.feedback(&m).statusword & status::OP_SPECIFIC_12, 0, "moving");
     // Halt: down at 40 rev/s², 0.1 s.
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HALT));
     let k = until(&mut m, &a, 1000, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("stopped") as f64;
     assert!((80.0..160.0).contains(&k), "stopped after {k} ms");
-    assert!(a.velocity_actual(&m).unwrap().abs() as f64 <= 0.01 * per_rev);
+    assert!(a.feedback(&m).velocity.unwrap().abs() as f64 <= 0.01 * per_rev);
 }
 
 /// Halt in profile velocity stops the shaft as 0x605D says — 1 the profile deceleration, 2
@@ -437,19 +438,19 @@ fn halt_stops_as_its_option_code_says() {
             .unwrap();
         m.acyclic().coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
         let target = (4.0 * per_rev) as i32;
-        a.set_target_velocity(&mut m, target);
+        a.write(&mut m, Output::Velocity(target));
         cycles(&mut m, 5);
-        assert_eq!(a.statusword(&m) & (status::TARGET_REACHED | status::OP_SPECIFIC_12), 0, "accelerating");
+        assert_eq!(a.feedback(&m).statusword & (status::TARGET_REACHED | status::OP_SPECIFIC_12), 0, "accelerating");
         until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("target velocity reached");
-        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+        a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HALT));
         let k = until(&mut m, &a, 1000, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("stopped");
-        let sw = a.statusword(&m);
+        let sw = a.feedback(&m).statusword;
         assert_eq!(sw & 0x6F, 0x27, "halt {code}: still operation enabled ({sw:#06x})");
         stops.push(k);
-        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
         cycles(&mut m, 5);
         until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("running again");
-        let v = a.velocity_actual(&m).unwrap();
+        let v = a.feedback(&m).velocity.unwrap();
         assert!((v - target).abs() as f64 <= 0.05 * per_rev, "halt {code}: {v} against {target} after release");
     }
     println!(
@@ -473,29 +474,29 @@ fn halt_interrupts_a_profile_position_move_and_release_resumes_it() {
     m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_VELOCITY, 0, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_ACCELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    let start = a.position_actual(&m).unwrap();
+    let start = a.feedback(&m).position.unwrap();
     let target = start.wrapping_add((3.0 * per_rev) as i32);
-    a.set_target_position(&mut m, target);
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+    a.write(&mut m, Output::Position(target));
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT));
     until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("set-point acknowledged");
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
     cycles(&mut m, 500);
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HALT);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HALT));
     // From 2 rev/s at 20 rev/s²: 0.1 s.
     let k = until(&mut m, &a, 1000, &|sw| sw & status::TARGET_REACHED != 0).expect("halted");
     cycles(&mut m, 20);
-    let held = a.position_actual(&m).unwrap();
-    let v = a.velocity_actual(&m).unwrap();
+    let held = a.feedback(&m).position.unwrap();
+    let v = a.feedback(&m).velocity.unwrap();
     println!("halted after {k} ms at {:.2} rev of 3", held.wrapping_sub(start) as f64 / per_rev);
     assert!((90..200).contains(&k), "{k} ms");
     assert!((v as f64).abs() < 0.01 * per_rev, "{v}");
     let done = held.wrapping_sub(start) as f64 / per_rev;
     assert!((0.5..2.0).contains(&done), "{done} rev");
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
     cycles(&mut m, 5);
-    assert_eq!(a.statusword(&m) & status::TARGET_REACHED, 0, "moving again");
+    assert_eq!(a.feedback(&m).statusword & status::TARGET_REACHED, 0, "moving again");
     until(&mut m, &a, 3000, &|sw| sw & status::TARGET_REACHED != 0).expect("target reached");
-    let end = a.position_actual(&m).unwrap();
+    let end = a.feedback(&m).position.unwrap();
     assert!(end.wrapping_sub(target).abs() < 100, "ends at {end}, target {target}");
 }
 
@@ -505,17 +506,17 @@ fn halt_interrupts_a_profile_position_move_and_release_resumes_it() {
 fn homing_on_the_current_position_sets_the_home_offset_there() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, _) = enabled_in(Mode::Homing);
-    let before = a.position_actual(&m).unwrap();
+    let before = a.feedback(&m).position.unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[37]).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &1_000i32.to_le_bytes()).unwrap();
-    let sw = a.statusword(&m);
+    let sw = a.feedback(&m).statusword;
     assert_eq!(sw & (status::OP_SPECIFIC_12 | status::OP_SPECIFIC_13), 0, "not homed yet");
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HOMING_START));
     let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
     until(&mut m, &a, 20, &|sw| sw & done == done).expect("homing attained");
     // The position in the image was latched at the SYNC0 before the application homed.
     cycles(&mut m, 2);
-    let after = a.position_actual(&m).unwrap();
+    let after = a.feedback(&m).position.unwrap();
     assert!((after - 1_000).abs() <= 2, "position {after} after homing (was {before})");
 }
 
@@ -532,22 +533,22 @@ fn homing_on_the_index_pulse_puts_the_home_offset_on_it() {
     m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &(-500i32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_SPEEDS, 2, &((2.0 * per_rev) as u32).to_le_bytes()).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_ACCELERATION, 0, &((50.0 * per_rev) as u32).to_le_bytes()).unwrap();
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HOMING_START));
     cycles(&mut m, 5);
-    let sw = a.statusword(&m);
+    let sw = a.feedback(&m).statusword;
     assert_eq!(sw & (status::OP_SPECIFIC_12 | status::TARGET_REACHED), 0, "searching: {sw:#06x}");
-    assert!(a.velocity_actual(&m).unwrap() > 0, "moving the positive way");
+    assert!(a.feedback(&m).velocity.unwrap() > 0, "moving the positive way");
     let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
     // At most a turn at 2 rev/s, then 40 ms of braking.
     let k = until(&mut m, &a, 1000, &|sw| sw & done == done).expect("homing attained");
     assert!(k < 700, "{k} ms");
     cycles(&mut m, 50);
     let shaft = drive(&m).position_increments();
-    let actual = a.position_actual(&m).unwrap() as f64;
+    let actual = a.feedback(&m).position.unwrap() as f64;
     // Where the shaft stands now is as far past the index as the position is past the offset.
     assert!(((shaft - index) - (actual + 500.0)).abs() <= 2.0, "shaft {shaft}, index {index}, position {actual}");
     assert!(shaft > index && shaft - index < 0.1 * per_rev, "stopped just past the index: {}", shaft - index);
-    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_13, 0);
+    assert_eq!(a.feedback(&m).statusword & status::OP_SPECIFIC_13, 0);
 }
 
 /// A homing method that needs a limit or home switch, which this drive does not have: homing
@@ -556,13 +557,13 @@ fn homing_on_the_index_pulse_puts_the_home_offset_on_it() {
 fn homing_methods_that_need_a_switch_end_in_a_homing_error() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, _) = enabled_in(Mode::Homing);
-    let before = a.position_actual(&m).unwrap();
+    let before = a.feedback(&m).position.unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[17]).unwrap();
-    a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HOMING_START));
     until(&mut m, &a, 20, &|sw| sw & status::OP_SPECIFIC_13 != 0).expect("homing error");
-    assert_eq!(a.statusword(&m) & status::OP_SPECIFIC_12, 0);
+    assert_eq!(a.feedback(&m).statusword & status::OP_SPECIFIC_12, 0);
     cycles(&mut m, 50);
-    assert!((a.position_actual(&m).unwrap() - before).abs() < 50);
+    assert!((a.feedback(&m).position.unwrap() - before).abs() < 50);
 }
 
 /// Profile position takes every rising edge of bit 4 as a new set-point: two moves in a row.
@@ -570,16 +571,16 @@ fn homing_methods_that_need_a_switch_end_in_a_homing_error() {
 fn profile_position_takes_one_set_point_after_another() {
     use ferrocat_wire::cia402::{control, status};
     let (mut m, a, per_rev) = enabled_in(Mode::ProfilePosition);
-    let start = a.position_actual(&m).unwrap();
+    let start = a.feedback(&m).position.unwrap();
     for (i, revs) in [1.0, -0.5].iter().enumerate() {
         let target = start.wrapping_add((revs * per_rev) as i32);
-        a.set_target_position(&mut m, target);
-        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT);
+        a.write(&mut m, Output::Position(target));
+        a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::NEW_SETPOINT));
         until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 != 0).expect("set-point acknowledged");
-        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
         until(&mut m, &a, 100, &|sw| sw & status::OP_SPECIFIC_12 == 0).expect("acknowledge cleared");
         until(&mut m, &a, 3000, &|sw| sw & status::TARGET_REACHED != 0).expect("target reached");
-        let end = a.position_actual(&m).unwrap();
+        let end = a.feedback(&m).position.unwrap();
         assert!(end.wrapping_sub(target).abs() < 100, "move {i}: ends at {end}, target {target}");
     }
 }
@@ -600,13 +601,13 @@ fn the_driver_homes_through_its_update_loop() {
     for _ in 0..20 {
         step(&mut m, &mut a);
     }
-    assert!(a.velocity_actual(&m).unwrap() < 0, "searching the negative way");
+    assert!(a.feedback(&m).velocity.unwrap() < 0, "searching the negative way");
     a.set_mode_bits(0);
     let mut interrupted = false;
     for _ in 0..300 {
         step(&mut m, &mut a);
-        let sw = a.statusword(&m);
-        if sw & status::TARGET_REACHED != 0 && a.velocity_actual(&m).unwrap().abs() < (0.01 * per_rev) as i32 {
+        let sw = a.feedback(&m).statusword;
+        if sw & status::TARGET_REACHED != 0 && a.feedback(&m).velocity.unwrap().abs() < (0.01 * per_rev) as i32 {
             interrupted = sw & (status::OP_SPECIFIC_12 | status::OP_SPECIFIC_13) == 0;
             break;
         }
@@ -618,7 +619,7 @@ fn the_driver_homes_through_its_update_loop() {
     let mut homed = false;
     for _ in 0..2000 {
         step(&mut m, &mut a);
-        if a.statusword(&m) & done == done {
+        if a.feedback(&m).statusword & done == done {
             homed = true;
             break;
         }
@@ -630,7 +631,7 @@ fn the_driver_homes_through_its_update_loop() {
 /// acceleration (rev/s²) set.
 fn homing_with(drive_toml: &str, switch_rps: f64, zero_rps: f64, acc_rps2: f64) -> (Master<VirtualIo>, Axis, f64) {
     let mut m = master(drive_toml, &|_| {});
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_mode(&mut m, Mode::Homing).unwrap();
     a.set_goal(Goal::OperationEnabled);
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
@@ -648,10 +649,10 @@ fn home(m: &mut Master<VirtualIo>, a: &Axis, method: i8, offset: i32, max: u64) 
     use ferrocat_wire::cia402::{control, status};
     m.acyclic().coe().sdo_write(DRIVE, ix::HOMING_METHOD, 0, &[method as u8]).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, ix::HOME_OFFSET, 0, &offset.to_le_bytes()).unwrap();
-    a.write_controlword(m, control::ENABLE_OPERATION_CMD | control::HOMING_START);
+    a.write(m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::HOMING_START));
     let done = status::OP_SPECIFIC_12 | status::TARGET_REACHED;
     let end = until(m, a, max, &|sw| sw & done == done || sw & status::OP_SPECIFIC_13 != 0).expect("homing ends");
-    let sw = a.statusword(m);
+    let sw = a.feedback(m).statusword;
     if sw & status::OP_SPECIFIC_13 != 0 {
         Err(sw)
     } else {
@@ -663,7 +664,7 @@ fn home(m: &mut Master<VirtualIo>, a: &Axis, method: i8, offset: i32, max: u64) 
 /// minus the offset is the shaft's distance past home.
 fn home_on_shaft(m: &mut Master<VirtualIo>, a: &Axis, offset: i32) -> f64 {
     cycles(m, 20);
-    drive(m).position_increments() - (a.position_actual(m).unwrap() - offset) as f64
+    drive(m).position_increments() - (a.feedback(m).position.unwrap() - offset) as f64
 }
 
 fn digital_inputs(m: &mut Master<VirtualIo>) -> u32 {
@@ -764,20 +765,20 @@ fn a_limit_switch_stops_profile_velocity_toward_it_and_lets_it_back() {
     let start = drive(&m).position_increments() / per_rev;
     let limit = start + 0.5;
     drive_mut(&mut m).set_switches(Switches { positive_limit_rev: Some(limit), ..Switches::default() });
-    assert_eq!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
-    a.set_target_velocity(&mut m, (3.0 * per_rev) as i32);
+    assert_eq!(a.feedback(&m).statusword & status::INTERNAL_LIMIT, 0);
+    a.write(&mut m, Output::Velocity((3.0 * per_rev) as i32));
     until(&mut m, &a, 1000, &|sw| sw & status::INTERNAL_LIMIT != 0).expect("the limit reached");
     cycles(&mut m, 500);
     let at = drive(&m).position_increments() / per_rev - limit;
     // 3 rev/s at 60 rev/s²: 0.075 rev, and a control period's travel.
     assert!((0.06..0.09).contains(&at), "held {at} rev past the switch");
     assert!(drive(&m).velocity_increments().abs() < 0.01 * per_rev, "standing");
-    let sw = a.statusword(&m);
+    let sw = a.feedback(&m).statusword;
     assert_ne!(sw & status::INTERNAL_LIMIT, 0, "bit 11 while held: {sw:#06x}");
     assert_eq!(a.state(), Some(State::OperationEnabled), "stopped, not faulted");
     assert_eq!(digital_inputs(&mut m) & 0b010, 0b010, "on the positive limit");
     // Away from the limit: free.
-    a.set_target_velocity(&mut m, -(3.0 * per_rev) as i32);
+    a.write(&mut m, Output::Velocity(-(3.0 * per_rev) as i32));
     until(&mut m, &a, 1000, &|sw| sw & status::INTERNAL_LIMIT == 0).expect("off the limit");
     cycles(&mut m, 300);
     assert!(drive(&m).velocity_increments() < -2.9 * per_rev, "moving away at the target");
@@ -799,7 +800,7 @@ fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
     // No following-error fault while the set-points run away (0xFFFFFFFF: check off).
     m.acyclic().coe().sdo_write(DRIVE, ix::FOLLOWING_ERROR_WINDOW, 0, &u32::MAX.to_le_bytes()).unwrap();
     let shaft0 = drive(&m).position_increments();
-    let p0 = a.position_actual(&m).unwrap() as f64;
+    let p0 = a.feedback(&m).position.unwrap() as f64;
     let limit = shaft0 / per_rev - 0.3;
     drive_mut(&mut m).set_switches(Switches { negative_limit_rev: Some(limit), ..Switches::default() });
     // −1 rev/s for 600 ms: 0.6 rev, twice the way to the switch.
@@ -807,7 +808,7 @@ fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
     let mut target = p0;
     for _ in 0..600 {
         target += v * 1e-3;
-        a.set_target_position(&mut m, target as i64 as i32);
+        a.write(&mut m, Output::Position(target as i64 as i32));
         cycles(&mut m, 1);
     }
     let at = drive(&m).position_increments() / per_rev - limit;
@@ -815,17 +816,17 @@ fn a_limit_switch_holds_cyclic_position_set_points_beyond_it() {
     assert!((-0.01..0.0).contains(&at), "stopped {at} rev from the switch");
     let fe = drive(&m).following_error_increments() / per_rev;
     assert!(fe.abs() > 0.2, "set-points ran on: following error {fe} rev");
-    assert_ne!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+    assert_ne!(a.feedback(&m).statusword & status::INTERNAL_LIMIT, 0);
     assert_eq!(a.state(), Some(State::OperationEnabled));
     // Set-points back on the free side, 0.1 rev above where it stopped: it follows there.
     let back = p0 + (limit + 0.1) * per_rev - shaft0;
     for _ in 0..300 {
-        a.set_target_position(&mut m, back as i64 as i32);
+        a.write(&mut m, Output::Position(back as i64 as i32));
         cycles(&mut m, 1);
     }
     let off = (drive(&m).position_increments() - (back - p0 + shaft0)) / per_rev;
     assert!(off.abs() < 0.01, "follows again: {off} rev from the set-point");
-    assert_eq!(a.statusword(&m) & status::INTERNAL_LIMIT, 0);
+    assert_eq!(a.feedback(&m).statusword & status::INTERNAL_LIMIT, 0);
 }
 
 /// The AKD as its EEPROM dump describes it runs interpolated position (mode 7) on its default
@@ -844,7 +845,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
         "the default PDOs"
     );
     assert!(!s.mapping().outputs.iter().any(|e| e.index == ix::TARGET_POSITION));
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_interpolation_period(&mut m, CYCLE_NS).unwrap();
     assert_eq!(m.acyclic().coe().sdo_read(DRIVE, ix::INTERPOLATION_TIME_PERIOD, 2).unwrap(), [(-3i8) as u8]);
     a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
@@ -852,7 +853,7 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     drive_to_goal(&mut m, std::slice::from_mut(&mut a), CYCLE_NS, 100).unwrap();
     assert_eq!(drive(&m).mode(), Some(Mode::InterpolatedPosition));
     let per_rev = drive(&m).motor().increments_per_rev;
-    let p0 = a.position_actual(&m).unwrap() as f64;
+    let p0 = a.feedback(&m).position.unwrap() as f64;
     let actual0 = drive(&m).position_increments();
     drive_mut(&mut m).reset_stats();
     let v = 2.0 * per_rev;
@@ -867,14 +868,14 @@ fn needs_shared_akd_eeprom_runs_interpolated_position_on_its_default_pdos() {
     let last = drive(&m).position_increments();
     for k in 0..300 {
         let t = 0.5 + k as f64 * 1e-3;
-        a.set_target_position(&mut m, (p0 + v * 0.05 + v * (t - 0.1)) as i64 as i32);
-        a.write_controlword(&mut m, control::ENABLE_OPERATION_CMD);
+        a.write(&mut m, Output::Position((p0 + v * 0.05 + v * (t - 0.1)) as i64 as i32));
+        a.write(&mut m, Output::Controlword(control::ENABLE_OPERATION_CMD));
         cycles(&mut m, 1);
     }
     let stopped = (drive(&m).position_increments() - last) / per_rev;
     // At most the two set-points in the pipeline (2 rev/s × 2 ms) beyond where it was.
     assert!((0.0..0.006).contains(&stopped), "went on {stopped} rev after bit 4 cleared");
-    let sw = a.statusword(&m);
+    let sw = a.feedback(&m).statusword;
     assert_eq!(sw & status::OP_SPECIFIC_12, 0, "ip mode inactive: {sw:#06x}");
     assert_ne!(sw & status::TARGET_REACHED, 0, "standing at the last set-point: {sw:#06x}");
     assert_eq!(a.state(), Some(State::OperationEnabled));
@@ -894,7 +895,7 @@ fn ip_servo(period_ns: u64) -> (Master<VirtualIo>, Axis, f64) {
         w(m, 0x1600, 0, &[3]);
         m.config().remap(DRIVE, true, &[0x1600]).unwrap();
     });
-    let mut a = Axis::new(&m, DRIVE).unwrap();
+    let mut a = Axis::on_axis(&m, DRIVE, 0).unwrap();
     a.set_interpolation_period(&mut m, period_ns).unwrap();
     a.set_mode(&mut m, Mode::InterpolatedPosition).unwrap();
     a.set_goal(Goal::OperationEnabled);
@@ -911,11 +912,11 @@ fn ip_servo(period_ns: u64) -> (Master<VirtualIo>, Axis, f64) {
 fn interpolation_follows_the_period_0x60c2_gives() {
     let run = |period_ns: u64| {
         let (mut m, mut a, per_rev) = ip_servo(period_ns);
-        let p0 = a.position_actual(&m).unwrap() as f64;
+        let p0 = a.feedback(&m).position.unwrap() as f64;
         let actual0 = drive(&m).position_increments();
         // 1 rev/s from standstill, 300 ms: the demand's lag behind the set-points at the end.
         for k in 1..=300 {
-            a.set_target_position(&mut m, (p0 + per_rev * k as f64 * 1e-3) as i64 as i32);
+            a.write(&mut m, Output::Position((p0 + per_rev * k as f64 * 1e-3) as i64 as i32));
             cycles(&mut m, 1);
             a.update(&mut m);
         }
@@ -946,15 +947,15 @@ fn halt_in_interpolated_position_stops_at_the_halt_option_deceleration() {
             .sdo_write(DRIVE, ix::PROFILE_DECELERATION, 0, &((20.0 * per_rev) as u32).to_le_bytes())
             .unwrap();
         m.acyclic().coe().sdo_write(DRIVE, ix::HALT_OPTION, 0, &code.to_le_bytes()).unwrap();
-        let p0 = a.position_actual(&m).unwrap() as f64;
+        let p0 = a.feedback(&m).position.unwrap() as f64;
         let mut k = 0u64;
         let mut step = |m: &mut Master<VirtualIo>, a: &mut Axis, cw: u16| {
             k += 1;
             // 2 rev/s, reached over the first 100 ms.
             let t = k as f64 * 1e-3;
             let p = if t < 0.1 { per_rev * 10.0 * t * t } else { per_rev * (0.1 + 2.0 * (t - 0.1)) };
-            a.set_target_position(m, (p0 + p) as i64 as i32);
-            a.write_controlword(m, control::ENABLE_OPERATION_CMD | control::ENABLE_IP_MODE | cw);
+            a.write(m, Output::Position((p0 + p) as i64 as i32));
+            a.write(m, Output::Controlword(control::ENABLE_OPERATION_CMD | control::ENABLE_IP_MODE | cw));
             cycles(m, 1);
         };
         for _ in 0..300 {
@@ -965,16 +966,16 @@ fn halt_in_interpolated_position_stops_at_the_halt_option_deceleration() {
             step(&mut m, &mut a, control::HALT);
         }
         let after = (drive(&m).position_increments() - at_halt) / per_rev;
-        let sw = a.statusword(&m);
+        let sw = a.feedback(&m).statusword;
         assert_eq!(a.state(), Some(State::OperationEnabled), "halt {code}");
         assert_ne!(sw & status::TARGET_REACHED, 0, "halt {code}: standing ({sw:#06x})");
         assert_eq!(sw & status::OP_SPECIFIC_12, 0, "halt {code}: ip mode inactive ({sw:#06x})");
-        assert!(a.velocity_actual(&m).unwrap().abs() as f64 <= 0.01 * per_rev);
+        assert!(a.feedback(&m).velocity.unwrap().abs() as f64 <= 0.01 * per_rev);
         // Released: the set-points are approached again, from where it stood.
         for _ in 0..1_000 {
             step(&mut m, &mut a, 0);
         }
-        let moving = a.velocity_actual(&m).unwrap() as f64 / per_rev;
+        let moving = a.feedback(&m).velocity.unwrap() as f64 / per_rev;
         (after, moving)
     };
     let (profile, profile_after) = run(1);
@@ -1001,7 +1002,7 @@ fn stop_by_option(option: u16, code: i16, cw: u16, fault: bool) -> (Vec<(u64, Op
     m.acyclic().coe().sdo_write(DRIVE, ix::QUICK_STOP_DECELERATION, 0, &u32le(100.0)).unwrap();
     m.acyclic().coe().sdo_write(DRIVE, option, 0, &code.to_le_bytes()).unwrap();
     for _ in 0..300 {
-        a.set_target_velocity(&mut m, (5.0 * per_rev) as i32);
+        a.write(&mut m, Output::Velocity((5.0 * per_rev) as i32));
         cycles(&mut m, 1);
         a.update(&mut m);
     }
@@ -1009,16 +1010,16 @@ fn stop_by_option(option: u16, code: i16, cw: u16, fault: bool) -> (Vec<(u64, Op
     if fault {
         drive_mut(&mut m).inject_fault(error_code::OVERCURRENT);
     } else {
-        a.write_controlword(&mut m, cw);
+        a.write(&mut m, Output::Controlword(cw));
     }
-    let mut states = vec![(0, State::from_statusword(a.statusword(&m)))];
+    let mut states = vec![(0, State::from_statusword(a.feedback(&m).statusword))];
     let mut vel_10ms = 0.0;
     for k in 1..=600 {
         cycles(&mut m, 1);
         if k == 10 {
             vel_10ms = drive(&m).velocity_increments() / per_rev;
         }
-        let s = State::from_statusword(a.statusword(&m));
+        let s = State::from_statusword(a.feedback(&m).statusword);
         if states.last().map(|l| l.1) != Some(s) {
             states.push((k, s));
         }

@@ -2,6 +2,7 @@
 //! together by one revolution's worth of increments along a smooth profile.
 //!
 //!     cargo run --example two_axes_csp -- eth0 AXIS0 AXIS1
+use ferrocat_master::cia402::Output;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -37,14 +38,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let dc = DcConfig { sync0_cycle_ns: CYCLE_NS as u32, sync0_slaves: Some(positions.to_vec()), ..Default::default() };
     let (mut sync, _, mut state) = master.clock().start_clock_sync(&dc, &SyncMethod::default(), CYCLE_NS)?;
-    let mut axes = positions.map(|p| Axis::new(&master, p)).into_iter().collect::<Result<Vec<_>, _>>()?;
+    let mut axes = positions.map(|p| Axis::on_axis(&master, p, 0)).into_iter().collect::<Result<Vec<_>, _>>()?;
     for axis in &mut axes {
         axis.set_mode(&mut master, Mode::CyclicSyncPosition)?;
         axis.set_goal(Goal::OperationEnabled);
     }
     master.states().start()?;
     drive_to_goal(&mut master, &mut axes, CYCLE_NS, 2_000)?;
-    let start: Vec<i32> = axes.iter().map(|a| a.position_actual(&master).unwrap_or(0)).collect();
+    let start: Vec<i32> = axes.iter().map(|a| a.feedback(&master).position.unwrap_or(0)).collect();
     let steps = 1_000;
     let mut next = master.cyclic().now_ns();
     for k in 0..=steps + 200 {
@@ -54,7 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // A cosine ramp from 0 to MOVE over `steps` cycles, then holding still.
         let s = (k.min(steps) as f64 / steps as f64 * std::f64::consts::PI).cos();
         for (axis, &from) in axes.iter_mut().zip(&start) {
-            axis.set_target_position(&mut master, from.wrapping_add((MOVE as f64 * (1.0 - s) / 2.0) as i32));
+            axis.write(&mut master, Output::Position(from.wrapping_add((MOVE as f64 * (1.0 - s) / 2.0) as i32)));
             axis.update(&mut master);
         }
         master.cyclic().cycle_sync(sync.as_mut(), &mut state)?;
@@ -63,7 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     master.states().shut_down()?;
     for (axis, &from) in axes.iter().zip(&start) {
-        let moved = axis.position_actual(&master).unwrap_or(from).wrapping_sub(from);
+        let moved = axis.feedback(&master).position.unwrap_or(from).wrapping_sub(from);
         println!("axis at slave {}: moved {moved} increments, {:?}", axis.position, axis.state());
     }
     println!("clock sync {}", state.lock.state());

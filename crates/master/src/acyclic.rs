@@ -171,7 +171,7 @@ impl<I: Io> Master<I> {
                 self.engine.one(Command::FPRD, device(addr::AL_STATUS), &mut d)?;
                 let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
                 let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-                let error = self.slaves[a.position as usize].al_error(status, code);
+                let error = self.slaves[a.position as usize].esc().al_error(status, code);
                 let failed = |cause| MasterError::State {
                     position: a.position,
                     name: self.slaves[a.position as usize].name.clone(),

@@ -85,7 +85,9 @@ impl GpioCalibration {
             return Ok(None);
         }
         let error = robust_mean(&self.errors);
-        sync.take_error(error);
+        if let Some(steering) = sync.reference_steering() {
+            steering.take_error(error);
+        }
         Ok(Some(error))
     }
 }

@@ -87,13 +87,41 @@ fn signed(v: u64, bits: u8) -> i64 {
     ((v << shift) as i64) >> shift
 }
 
-impl Axis {
-    /// The drive at `position` (its first axis), whose process image must hold at least the
-    /// controlword and the statusword.
-    pub fn new<I: Io>(m: &Master<I>, position: u16) -> Result<Self> {
-        Self::on_axis(m, position, 0)
-    }
+/// What a drive reports in the image ([`Axis::feedback`]); `None` where the object is not
+/// mapped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Feedback {
+    /// The statusword (0x6041).
+    pub statusword: u16,
+    /// The mode the drive says it runs (0x6061).
+    pub mode: Option<Mode>,
+    /// Operation enabled in the wanted mode (as far as the image shows the mode).
+    pub ready: bool,
+    /// Position actual value (0x6064, else 0x6063).
+    pub position: Option<i32>,
+    /// Velocity actual value (0x606C).
+    pub velocity: Option<i32>,
+    /// Torque actual value (0x6077, per mille of rated).
+    pub torque: Option<i16>,
+    /// Following error actual value (0x60F4).
+    pub following_error: Option<i32>,
+}
 
+/// One of an axis's outputs, to write ([`Axis::write`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// The position to follow: the target position (0x607A) and interpolated position's
+    /// set-point (0x60C1:01), whichever the image holds.
+    Position(i32),
+    /// The target velocity (0x60FF).
+    Velocity(i32),
+    /// The target torque (0x6071, per mille of rated).
+    Torque(i16),
+    /// The controlword (0x6040) as given.
+    Controlword(u16),
+}
+
+impl Axis {
     /// Every axis of the drive at `position` whose controlword and statusword are in the
     /// process image, the first axis always (an error where it lacks them).
     pub fn all<I: Io>(m: &Master<I>, position: u16) -> Result<Vec<Self>> {
@@ -103,7 +131,7 @@ impl Axis {
             s.mapping.outputs.iter().any(|e| e.index == ix::CONTROLWORD + at)
                 && s.mapping.inputs.iter().any(|e| e.index == ix::STATUSWORD + at)
         };
-        let mut axes = vec![Self::new(m, position)?];
+        let mut axes = vec![Self::on_axis(m, position, 0)?];
         for axis in (1..MAX_AXES).filter(|&n| mapped(n)) {
             axes.push(Self::on_axis(m, position, axis)?);
         }
@@ -165,16 +193,6 @@ impl Axis {
         })
     }
 
-    /// Whether the target position (0x607A) or interpolated position's set-point is in the
-    /// process image: the axis can run CSP (or IP).
-    pub fn has_target_position(&self) -> bool {
-        self.h.target_position.is_some() || self.h.ip_setpoint.is_some()
-    }
-    /// Whether the target velocity (0x60FF) is in the process image: the axis can run CSV.
-    pub fn has_target_velocity(&self) -> bool {
-        self.h.target_velocity.is_some()
-    }
-
     /// A profile object's index for this axis (`ix::CONTROLWORD` is 0x6840 on axis 1).
     pub fn index(&self, profile_index: u16) -> u16 {
         profile_index + axis_offset(self.axis)
@@ -224,60 +242,61 @@ impl Axis {
         self.state
     }
 
-    /// The statusword in the image, and a controlword written as it is (for tools and tests
-    /// that walk the state machine by hand; `update` overwrites it).
-    pub fn statusword<I: Io>(&self, m: &Master<I>) -> u16 {
-        m.image().get(self.h.statusword) as u16
-    }
-    /// Writes the controlword as given (the driver writes it in [`Axis::update`]).
-    pub fn write_controlword<I: Io>(&self, m: &mut Master<I>, cw: u16) {
-        m.cyclic().set(self.h.controlword, cw as u64);
-    }
-
-    /// The mode the drive says it runs (0x6061), where mapped.
-    pub fn mode_display<I: Io>(&self, m: &Master<I>) -> Option<Mode> {
-        self.h.mode_display.and_then(|h| Mode::from_code(m.image().get(h) as u8 as i8))
-    }
-
-    /// Operation enabled in the wanted mode (as far as the image shows the mode).
-    pub fn ready<I: Io>(&self, m: &Master<I>) -> bool {
-        self.state == Some(State::OperationEnabled) && self.mode_display(m).is_none_or(|d| d == self.mode)
-    }
-
-    /// Position actual value (0x6064), where mapped.
-    pub fn position_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.position_actual.map(|h| signed(m.image().get(h), h.bits) as i32)
-    }
-    /// Velocity actual value (0x606C), where mapped.
-    pub fn velocity_actual<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.velocity_actual.map(|h| signed(m.image().get(h), h.bits) as i32)
-    }
-    /// Torque actual value (0x6077, per mille of rated), where mapped.
-    pub fn torque_actual<I: Io>(&self, m: &Master<I>) -> Option<i16> {
-        self.h.torque_actual.map(|h| signed(m.image().get(h), h.bits) as i16)
-    }
-    /// Following error actual value (0x60F4), where mapped.
-    pub fn following_error<I: Io>(&self, m: &Master<I>) -> Option<i32> {
-        self.h.following_error.map(|h| signed(m.image().get(h), h.bits) as i32)
-    }
-
-    /// The position to follow: the target position (0x607A) and interpolated position's
-    /// set-point (0x60C1:01), whichever the image holds.
-    pub fn set_target_position<I: Io>(&self, m: &mut Master<I>, pos: i32) {
-        for h in [self.h.target_position, self.h.ip_setpoint].into_iter().flatten() {
-            m.cyclic().set(h, pos as u32 as u64);
+    /// Whether the image holds what `mode` commands: the target position (0x607A) or
+    /// interpolated position's set-point for CSP and IP, the target velocity (0x60FF) for CSV,
+    /// the target torque (0x6071) for CST; for the profile modes and homing, the mode object
+    /// (0x6060) or nothing (they are set by SDO).
+    pub fn can_run(&self, mode: Mode) -> bool {
+        match mode {
+            Mode::CyclicSyncPosition | Mode::InterpolatedPosition => {
+                self.h.target_position.is_some() || self.h.ip_setpoint.is_some()
+            }
+            Mode::CyclicSyncVelocity => self.h.target_velocity.is_some(),
+            Mode::CyclicSyncTorque => self.h.target_torque.is_some(),
+            _ => true,
         }
     }
-    /// Sets the target velocity (0x60FF), where mapped.
-    pub fn set_target_velocity<I: Io>(&self, m: &mut Master<I>, vel: i32) {
-        if let Some(h) = self.h.target_velocity {
-            m.cyclic().set(h, vel as u32 as u64);
+
+    /// What the drive reports in the image now: the statusword, the mode it says it runs, and
+    /// the actual values that are mapped; `ready` is operation enabled in the wanted mode (as
+    /// far as the image shows the mode).
+    pub fn feedback<I: Io>(&self, m: &Master<I>) -> Feedback {
+        let image = m.image();
+        let value = |h: Option<Handle>| h.map(|h| signed(image.get(h), h.bits));
+        let mode = self.h.mode_display.and_then(|h| Mode::from_code(image.get(h) as u8 as i8));
+        Feedback {
+            statusword: image.get(self.h.statusword) as u16,
+            mode,
+            ready: self.state == Some(State::OperationEnabled) && mode.is_none_or(|d| d == self.mode),
+            position: value(self.h.position_actual).map(|v| v as i32),
+            velocity: value(self.h.velocity_actual).map(|v| v as i32),
+            torque: value(self.h.torque_actual).map(|v| v as i16),
+            following_error: value(self.h.following_error).map(|v| v as i32),
         }
     }
-    /// Sets the target torque (0x6071, per mille of rated), where mapped.
-    pub fn set_target_torque<I: Io>(&self, m: &mut Master<I>, per_mille: i16) {
-        if let Some(h) = self.h.target_torque {
-            m.cyclic().set(h, per_mille as u16 as u64);
+
+    /// Writes one of the axis's outputs into the image (where it is mapped; the next cycle
+    /// sends it). A controlword written so is sent as it is, for tools and tests that walk the
+    /// state machine by hand; [`Axis::update`] overwrites it.
+    pub fn write<I: Io>(&self, m: &mut Master<I>, output: Output) {
+        let mut c = m.cyclic();
+        match output {
+            Output::Position(pos) => {
+                for h in [self.h.target_position, self.h.ip_setpoint].into_iter().flatten() {
+                    c.set(h, pos as u32 as u64);
+                }
+            }
+            Output::Velocity(vel) => {
+                if let Some(h) = self.h.target_velocity {
+                    c.set(h, vel as u32 as u64);
+                }
+            }
+            Output::Torque(per_mille) => {
+                if let Some(h) = self.h.target_torque {
+                    c.set(h, per_mille as u16 as u64);
+                }
+            }
+            Output::Controlword(cw) => c.set(self.h.controlword, cw as u64),
         }
     }
 
@@ -295,14 +314,14 @@ impl Axis {
             self.cycles_in_state += 1;
         }
         self.state = state;
-        let holding = !self.ready(m);
+        let holding = !self.feedback(m).ready;
         if holding {
             // Until the drive runs in the wanted mode, command what it is doing now: no jump.
-            if let Some(p) = self.position_actual(m) {
-                self.set_target_position(m, p);
+            if let Some(p) = self.feedback(m).position {
+                self.write(m, Output::Position(p));
             }
-            self.set_target_velocity(m, 0);
-            self.set_target_torque(m, 0);
+            self.write(m, Output::Velocity(0));
+            self.write(m, Output::Torque(0));
         }
         if let Some(h) = self.h.mode {
             m.cyclic().set(h, self.mode.code() as u8 as u64);
@@ -410,7 +429,7 @@ pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64,
         for a in axes.iter_mut() {
             let s = a.update(m);
             done &= match a.goal {
-                Goal::OperationEnabled => a.ready(m),
+                Goal::OperationEnabled => a.feedback(m).ready,
                 Goal::Disabled => s == Some(State::SwitchOnDisabled),
                 Goal::QuickStop => matches!(s, Some(State::QuickStopActive | State::SwitchOnDisabled)),
             };
@@ -423,7 +442,7 @@ pub fn drive_to_goal<I: Io>(m: &mut Master<I>, axes: &mut [Axis], cycle_ns: u64,
     }
     let a = axes
         .iter()
-        .find(|a| a.goal != Goal::OperationEnabled || !a.ready(m))
+        .find(|a| a.goal != Goal::OperationEnabled || !a.feedback(m).ready)
         .or(axes.first())
         .ok_or(MasterError::Config(ConfigError::NoAxes))?;
     let s = m.slave(a.position)?;

@@ -374,7 +374,7 @@ impl<I: Io> Master<I> {
         let plan = sync.plan(st.cycle);
         let first = if rfm && plan.steer_reference_offset {
             let len = if wide { 8 } else { 4 };
-            match sync.reference_offset(built_ns, None) {
+            match sync.reference_steering().and_then(|s| s.reference_offset(built_ns, None)) {
                 Some(v) => FirstPdu::Offset { data: v.to_le_bytes(), len, write: true },
                 None => FirstPdu::Offset { data: [0; 8], len, write: false },
             }
@@ -573,7 +573,7 @@ impl<I: Io> Master<I> {
             let skip = if plan.steer_reference_offset { Some(p.station) } else { None };
             self.dc_writes.add_shift(c.shift_offsets_ns, skip);
         }
-        if let Some(bias) = sync.follower_delay_bias_ns() {
+        if let Some(bias) = sync.reference_steering().and_then(|s| s.follower_delay_bias_ns()) {
             self.dc_writes.bias = Some((bias, p.station));
         }
         if self.dc_writes.pending() && (room || p.stuck) {
@@ -657,7 +657,7 @@ impl<I: Io> Master<I> {
 
     /// One probe frame: the reference's time (and offset, where the method steers it) read,
     /// and as `give` says the reference given the offset the method wants
-    /// ([`crate::sync::ClockSync::reference_offset`]; the write answers the offset it
+    /// ([`crate::sync::ReferenceSteering::reference_offset`]; the write answers the offset it
     /// replaced); its sample to the method. A lost probe is only counted.
     fn probe(
         &mut self,
@@ -674,8 +674,12 @@ impl<I: Io> Master<I> {
         let given = match give {
             _ if !steer => None,
             ProbeOffset::Read => None,
-            ProbeOffset::GiveUntilNextCycle => sync.reference_offset(built_ns, None),
-            ProbeOffset::GiveFor { holds_ns } => sync.reference_offset(built_ns, Some(holds_ns)),
+            ProbeOffset::GiveUntilNextCycle => {
+                sync.reference_steering().and_then(|s| s.reference_offset(built_ns, None))
+            }
+            ProbeOffset::GiveFor { holds_ns } => {
+                sync.reference_steering().and_then(|s| s.reference_offset(built_ns, Some(holds_ns)))
+            }
         };
         let offset_cmd = match given {
             Some(v) => {
@@ -703,7 +707,9 @@ impl<I: Io> Master<I> {
         if steer {
             s.reference_offset_ns = Some(if wide { offset } else { unwrap32(st.reference_offset_ns, offset) });
         }
-        sync.probe(&s);
+        if let Some(steering) = sync.reference_steering() {
+            steering.probe(&s);
+        }
         Ok(())
     }
 

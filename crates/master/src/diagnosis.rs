@@ -85,7 +85,9 @@ impl<I: Io> Master<I> {
         let d = &self.diagnosis;
         let flags = d.sync0_slaves.iter().flat_map(|&p| [(p, SyncSm::Outputs), (p, SyncSm::Inputs)]);
         let readable = |f: &(u16, SyncSm)| {
-            self.slaves.get(f.0 as usize).is_some_and(|s| s.mailbox.is_some() && s.has_coe())
+            self.slaves
+                .get(f.0 as usize)
+                .is_some_and(|s| s.mailbox.is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()))
                 && !d.sync_unreadable.contains(f)
                 && !self.acyclic.holds_mailbox(f.0)
         };
@@ -202,7 +204,9 @@ impl<I: Io> Master<I> {
     fn poll_mailbox_step(&mut self) -> Result<()> {
         let n = self.slaves.len();
         let Some(k) = (0..n).map(|i| (self.diagnosis.next_mailbox + i) % n).find(|&k| {
-            self.slaves[k].mailbox.is_some() && self.slaves[k].has_coe() && !self.acyclic.holds_mailbox(k as u16)
+            self.slaves[k].mailbox.is_some()
+                && self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe())
+                && !self.acyclic.holds_mailbox(k as u16)
         }) else {
             return Ok(());
         };
@@ -237,7 +241,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
         self.m.watch_txpdo_entries();
         self.m.diagnosis.counters.resize(n, None);
         let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
-        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox.is_some() && s.has_coe());
+        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox.is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()));
         let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
         let mut sent = 0;
         let mut result = Ok(0);

@@ -100,5 +100,7 @@ pub use master::{
     Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Group, Image, Master, SplitLatch, States, STATION_BASE,
 };
 pub use settings::Settings;
-pub use slave::{DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Setup, Slave, Slaves};
+pub use slave::{
+    DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Setup, Slave, Slaves, Status,
+};
 pub use sync::SyncState;

@@ -68,7 +68,7 @@ impl<I: Io> Mailboxes<'_, I> {
         protocol: MailboxType,
     ) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let (st, name, m) = self.mailbox_any(position)?;
-        if !self.slave(position)?.has_protocol(protocol.sii_protocol()) {
+        if !self.slave(position)?.mailbox().is_some_and(|mb| mb.has_protocol(protocol.sii_protocol())) {
             return Err(MasterError::of(position, &name, SlaveError::Unsupported(protocol)));
         }
         Ok((st, name, m))
@@ -251,7 +251,7 @@ impl<I: Io> Mailboxes<'_, I> {
         let mut read = 0;
         for k in 0..self.slaves.len() {
             let s = &self.slaves[k];
-            if s.mailbox.is_none() || !s.has_coe() {
+            if s.mailbox.is_none() || !s.mailbox().is_some_and(|mb| mb.has_coe()) {
                 continue;
             }
             // Through the one mailbox read: EoE fragments kept, counters followed, a lost read

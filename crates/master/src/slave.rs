@@ -57,7 +57,6 @@ pub struct Slave {
     pub(crate) station: u16,
     pub(crate) alias: u16,
     pub(crate) name: String,
-    pub(crate) description: String,
     pub(crate) identity: Identity,
     pub(crate) esc: EscInfo,
     pub(crate) sii: SiiInfo,
@@ -129,6 +128,9 @@ pub struct EscInfo {
     /// operational) was clear (0 otherwise): bits 11–12 say why the ESC did not load the
     /// EEPROM's configuration area.
     pub eeprom_status: u16,
+    /// DL status bit 0 at the scan: the PDI is operational, the ESC loaded its EEPROM's
+    /// configuration area.
+    pub pdi_operational: bool,
 }
 
 /// Where a slave sits: its ports, and the neighbour towards the master.
@@ -201,6 +203,11 @@ pub enum Health {
 }
 
 impl Slave {
+    /// The AL state last seen, whether it answers in OP or is being brought back, and the
+    /// mailbox repeat requests made.
+    pub fn status(&self) -> Status {
+        Status { state: self.state, health: self.health, mailbox_repeats: self.mbx_repeats }
+    }
     /// Position on the segment, from 0.
     pub fn position(&self) -> u16 {
         self.position
@@ -217,10 +224,6 @@ impl Slave {
     pub fn name(&self) -> &str {
         &self.name
     }
-    /// The general category's name string.
-    pub fn description(&self) -> &str {
-        &self.description
-    }
     /// Identity from the SII.
     pub fn identity(&self) -> Identity {
         self.identity
@@ -228,10 +231,6 @@ impl Slave {
     /// What the controller has.
     pub fn esc(&self) -> EscInfo {
         self.esc
-    }
-    /// What the application asked of its configuration (`Config::setup_mut`).
-    pub fn setup(&self) -> &Setup {
-        &self.setup
     }
     /// What the SII says: strings, general category, FMMUs, SyncManagers, PDOs.
     pub fn sii(&self) -> &SiiInfo {
@@ -249,46 +248,43 @@ impl Slave {
     pub fn mailbox(&self) -> Option<&MailboxConfig> {
         self.mailbox.as_ref()
     }
-    /// Mailbox repeat requests made (reads lost after the slave handed its message over).
-    pub fn mailbox_repeats(&self) -> u64 {
-        self.mbx_repeats
-    }
     /// Its process data: entries, SyncManagers, image areas.
     pub fn mapping(&self) -> &Mapping {
         &self.mapping
     }
-    /// The AL state last seen.
-    pub fn state(&self) -> AlState {
-        self.state
-    }
-    /// Operation: answering and in OP, or being brought back.
-    pub fn health(&self) -> Health {
-        self.health
-    }
-    /// Bits of outputs mapped.
-    pub fn output_bits(&self) -> u32 {
-        self.mapping.outputs.iter().map(|m| m.bits as u32).sum()
-    }
-    /// Bits of inputs mapped.
-    pub fn input_bits(&self) -> u32 {
-        self.mapping.inputs.iter().map(|m| m.bits as u32).sum()
-    }
+}
+
+impl MailboxConfig {
     /// Whether the slave speaks CoE.
     pub fn has_coe(&self) -> bool {
         self.has_protocol(ferrocat_wire::sii::mailbox_protocol::COE)
     }
     /// Whether the SII names this mailbox protocol (a `sii::mailbox_protocol` bit).
     pub fn has_protocol(&self, bit: u16) -> bool {
-        self.mailbox.as_ref().is_some_and(|m| m.protocols & bit != 0)
+        self.protocols & bit != 0
     }
+}
+
+impl Mapping {
+    /// Bits of outputs mapped.
+    pub fn output_bits(&self) -> u32 {
+        self.outputs.iter().map(|m| m.bits as u32).sum()
+    }
+    /// Bits of inputs mapped.
+    pub fn input_bits(&self) -> u32 {
+        self.inputs.iter().map(|m| m.bits as u32).sum()
+    }
+}
+
+impl EscInfo {
     /// Why the ESC runs unconfigured, if it does: DL status bit 0 (PDI operational) clear
     /// because the EEPROM's configuration area did not load. Such a slave stays in INIT.
     pub fn eeprom_problem(&self) -> Option<String> {
         use ferrocat_wire::register::SiiControl;
-        if self.ports.dl_status.pdi_operational() {
+        if self.pdi_operational {
             return None;
         }
-        let sii_status = self.esc.eeprom_status;
+        let sii_status = self.eeprom_status;
         let why = if sii_status & SiiControl::CHECKSUM_ERROR != 0 {
             "the checksum of its EEPROM's configuration area (word 7) is wrong"
         } else if sii_status & SiiControl::ACK_ERROR != 0 {
@@ -307,19 +303,44 @@ impl Slave {
     /// bit 0 clear with a checksum error or no EEPROM acknowledge), not merely not yet.
     pub fn eeprom_failed(&self) -> bool {
         use ferrocat_wire::register::SiiControl;
-        !self.ports.dl_status.pdi_operational()
-            && self.esc.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
+        !self.pdi_operational && self.eeprom_status & (SiiControl::CHECKSUM_ERROR | SiiControl::ACK_ERROR) != 0
     }
     /// Whether AL status reports an error the master must deal with. Under device emulation
     /// the error-indication bit only mirrors the acknowledge bit the master wrote (real
     /// EK1100, EL1004 and EL2004 read back 0x0011 with code 0 after a write of 0x0011), so it
     /// is an error only with a status code.
     pub fn al_error(&self, status: AlStatus, code: AlStatusCode) -> bool {
-        status.error() && !(self.esc.device_emulation && code == AlStatusCode::NO_ERROR)
+        status.error() && !(self.device_emulation && code == AlStatusCode::NO_ERROR)
     }
+}
+
+impl Ports {
     /// Active ports as SOEM prints them: "1.1.0.0".
-    pub fn active_ports_text(&self) -> String {
-        self.ports.active.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
+    pub fn active_text(&self) -> String {
+        self.active.iter().map(|&a| if a { "1" } else { "0" }).collect::<Vec<_>>().join(".")
+    }
+}
+
+/// What the master last saw of a slave during operation ([`Slave::status`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Status {
+    state: AlState,
+    health: Health,
+    mailbox_repeats: u64,
+}
+
+impl Status {
+    /// The AL state last seen.
+    pub fn state(&self) -> AlState {
+        self.state
+    }
+    /// Operation: answering and in OP, or being brought back.
+    pub fn health(&self) -> Health {
+        self.health
+    }
+    /// Mailbox repeat requests made (reads lost after the slave handed its message over).
+    pub fn mailbox_repeats(&self) -> u64 {
+        self.mailbox_repeats
     }
 }
 

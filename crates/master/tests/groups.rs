@@ -90,7 +90,7 @@ fn the_clock_sync_rides_with_the_fastest_group() {
     }
     assert_eq!(state.lock.state().name(), "locked", "{:?}", state.lock.offset_ns());
     assert!(m.diagnosis().plan_frame_stats().iter().all(|s| s.short == 0), "{:?}", m.diagnosis().plan_frame_stats());
-    assert_eq!(m.slaves()[3].state(), ferrocat_wire::register::AlState::Op);
+    assert_eq!(m.slaves()[3].status().state(), ferrocat_wire::register::AlState::Op);
 }
 
 /// Slave-to-slave through the master: an input copied into an output after each cycle reaches

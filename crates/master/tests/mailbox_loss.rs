@@ -38,7 +38,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         assert!(!name.is_empty());
         m.acyclic().foe().write(DRIVE, "f.bin", 0, &file).unwrap();
         assert_eq!(m.acyclic().foe().read(DRIVE, "f.bin", 0, 1 << 20).unwrap(), file, "seed {seed}");
-        repeats += m.slaves().at(DRIVE).unwrap().mailbox_repeats();
+        repeats += m.slaves().at(DRIVE).unwrap().status().mailbox_repeats();
         duplicates += m.io().seg.nodes[DRIVE as usize].esc.mbx_duplicates;
         // Through INIT and configured again (SM1's activate written with the repeat bit
         // clear, whatever the last repeat left): the firmware takes that as its start, not as
@@ -57,7 +57,7 @@ fn sdo_and_foe_transfers_come_through_five_percent_frame_loss() {
         let answered = m.io().seg.nodes[DRIVE as usize].esc.mbx_repeats;
         assert_eq!(
             answered,
-            m.slaves().at(DRIVE).unwrap().mailbox_repeats(),
+            m.slaves().at(DRIVE).unwrap().status().mailbox_repeats(),
             "seed {seed}: repeats answered and asked for"
         );
     }

@@ -36,7 +36,7 @@ fn the_default_modules_map_one_csp_axis_per_slot_and_reach_op() {
     assert_eq!(indices(&m.slaves()[0].mapping().inputs), [0x6041, 0x6064, 0x6841, 0x6864]);
     m.config().configure_modules(0, &[0x9010, 0x9010]).unwrap();
     m.states().start().unwrap();
-    assert_eq!(m.slaves()[0].state(), AlState::Op);
+    assert_eq!(m.slaves()[0].status().state(), AlState::Op);
 }
 
 #[test]

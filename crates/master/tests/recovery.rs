@@ -62,7 +62,7 @@ fn loss_power_cycle_and_link_pull() {
         named.iter().all(|e| e.contains("slave 1") || e.contains("slave 2") || e.contains("slave 3")),
         "{named:#?}"
     );
-    assert!(m.slaves().iter().all(|s| s.health() == Health::Operational));
+    assert!(m.slaves().iter().all(|s| s.status().health() == Health::Operational));
     // And the outputs flow again to the slave that was cut off.
     assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
 }
@@ -112,7 +112,7 @@ fn a_frame_lost_while_starting_is_no_event() {
         m.cyclic().io_mut().sleep_until(t0 + k * 1_000_000);
     }
     assert!(m.diagnosis().events().is_empty(), "{:?}", m.diagnosis().events());
-    assert!(m.slaves().iter().all(|s| s.health() == Health::Operational && s.state() == AlState::Op));
+    assert!(m.slaves().iter().all(|s| s.status().health() == Health::Operational && s.status().state() == AlState::Op));
 }
 
 /// A program on its way out steps the slaves down even while the master is bringing a drive
@@ -136,7 +136,7 @@ fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
         next += if k == 100 || k == 300 { 20_000_000 } else { 1_000_000 };
         m.cyclic().io_mut().sleep_until(next);
         left |= m.diagnosis().take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
-        if k > 300 && m.slaves()[1].state() != AlState::Op {
+        if k > 300 && m.slaves()[1].status().state() != AlState::Op {
             break;
         }
     }

@@ -38,8 +38,11 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
         "SOEM on the real hardware: 0, 144, 299"
     );
     assert_eq!(m.slaves().iter().map(|s| s.ports().parent).collect::<Vec<_>>(), [None, Some(0), Some(1)]);
-    assert_eq!(m.slaves().iter().map(|s| s.active_ports_text()).collect::<Vec<_>>(), ["1.1.0.0", "1.1.0.0", "1.0.0.0"]);
-    assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
+    assert_eq!(
+        m.slaves().iter().map(|s| s.ports().active_text()).collect::<Vec<_>>(),
+        ["1.1.0.0", "1.1.0.0", "1.0.0.0"]
+    );
+    assert!(m.slaves().iter().all(|s| s.status().state() == AlState::Op));
     assert_eq!(m.image().expected_wkc(), 4);
     // Outputs by entry name: channel 1 of the first terminal, channel 4 of the second.
     let a = m.image().output(1, "Output").unwrap();
@@ -61,11 +64,11 @@ fn needs_shared_ek1100_and_two_el2004_to_op_with_outputs() {
     // A group of two goes back to SAFEOP and returns to OP; the coupler stays in OP.
     m.states().request_state_group(&[1, 2], AlState::SafeOp).unwrap();
     assert_eq!(
-        m.slaves().iter().map(|s| s.state()).collect::<Vec<_>>(),
+        m.slaves().iter().map(|s| s.status().state()).collect::<Vec<_>>(),
         [AlState::Op, AlState::SafeOp, AlState::SafeOp]
     );
     m.states().request_state_group(&[1, 2], AlState::Op).unwrap();
-    assert!(m.slaves().iter().all(|s| s.state() == AlState::Op));
+    assert!(m.slaves().iter().all(|s| s.status().state() == AlState::Op));
 }
 
 #[test]
@@ -300,7 +303,7 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     assert_eq!(m.acyclic().sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
     m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0, "the register keeps its power-on value");
-    assert!(m.slaves()[1].eeprom_problem().is_none());
+    assert!(m.slaves()[1].esc().eeprom_problem().is_none());
     let t = m.cyclic().io_mut().now_ns();
     m.cyclic().io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
     m.cyclic().io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
@@ -327,10 +330,10 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     );
     std::fs::remove_file(&path).unwrap();
     m.states().scan().unwrap();
-    let problem = m.slaves()[1].eeprom_problem().expect("an unconfigured ESC");
+    let problem = m.slaves()[1].esc().eeprom_problem().expect("an unconfigured ESC");
     assert!(problem.contains("checksum"), "{problem}");
     assert_eq!(m.slaves()[1].esc().eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
-    assert!(m.slaves()[0].eeprom_problem().is_none());
+    assert!(m.slaves()[0].esc().eeprom_problem().is_none());
     let t0 = m.cyclic().io_mut().now_ns();
     let e = m.states().bring_up().unwrap_err().to_string();
     println!("{e}");

@@ -405,13 +405,13 @@ fn slave_list<I: Io>(m: &Master<I>) -> Vec<SlaveInfo> {
                 product_code: id.product_code,
                 revision: id.revision,
                 serial: id.serial,
-                state: s.state().name().to_string(),
-                health: String::from(match s.health() {
+                state: s.status().state().name().to_string(),
+                health: String::from(match s.status().health() {
                     Health::Operational => "operational",
                     Health::Lost => "lost",
                     Health::Recovering => "recovering",
                 }),
-                coe: s.mailbox().is_some() && s.has_coe(),
+                coe: s.mailbox().is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()),
             }
         })
         .collect()

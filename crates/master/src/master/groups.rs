@@ -63,12 +63,12 @@ impl<I: Io> Master<I> {
             let mut at = start;
             let mut places = Vec::new();
             for &p in &g.positions {
-                let bytes = self.slaves[p as usize].output_bits().div_ceil(8);
+                let bytes = self.slaves[p as usize].mapping().output_bits().div_ceil(8);
                 places.push((p, at, None));
                 at += bytes;
             }
             for place in &mut places {
-                let bytes = self.slaves[place.0 as usize].input_bits().div_ceil(8);
+                let bytes = self.slaves[place.0 as usize].mapping().input_bits().div_ceil(8);
                 place.2 = Some(at);
                 at += bytes;
             }
@@ -84,7 +84,7 @@ impl<I: Io> Master<I> {
             let mut wkc = 0u16;
             for &(p, out_at, in_at) in &places {
                 let s = &self.slaves[p as usize];
-                let (has_out, has_in) = (s.output_bits() > 0, s.input_bits() > 0);
+                let (has_out, has_in) = (s.mapping().output_bits() > 0, s.mapping().input_bits() > 0);
                 wkc += 2 * has_out as u16 + has_in as u16;
                 let in_at = in_at.unwrap_or(out_at);
                 plan.registers[p as usize] = super::process_data::process_registers(s, out_at, in_at);

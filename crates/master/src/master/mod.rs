@@ -206,7 +206,6 @@ impl<I: Io> Master<I> {
             station,
             alias: u16::from_le_bytes(alias),
             name: sii.string(1).unwrap_or_else(|| format!("{:#010x}", h.product_code)),
-            description: sii.name().unwrap_or_default(),
             identity: Identity {
                 vendor_id: h.vendor_id,
                 product_code: h.product_code,
@@ -220,6 +219,7 @@ impl<I: Io> Master<I> {
                 features,
                 device_emulation: pdi[1] & 0x01 != 0,
                 eeprom_status: u16::from_le_bytes(sii_status),
+                pdi_operational: dl_status.pdi_operational(),
             },
             ports: Ports {
                 dl_status,

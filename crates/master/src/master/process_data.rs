@@ -54,7 +54,7 @@ impl<I: Io> Master<I> {
             let sii = &self.slaves[k].sii;
             sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
         };
-        let (outputs, inputs) = if self.slaves[k].has_coe() {
+        let (outputs, inputs) = if self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe()) {
             (self.coe_mapping(position, 0x1C12)?, self.coe_mapping(position, 0x1C13)?)
         } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
             // The ESI's default assignment: PDOs with an Sm attribute.
@@ -149,13 +149,13 @@ impl<I: Io> Master<I> {
         }
         let mut out = 0u32;
         for s in self.slaves.iter_mut() {
-            let bytes = s.output_bits().div_ceil(8);
+            let bytes = s.mapping().output_bits().div_ceil(8);
             s.mapping.out_area = (out, bytes);
             out += bytes;
         }
         let mut inp = out;
         for s in self.slaves.iter_mut() {
-            let bytes = s.input_bits().div_ceil(8);
+            let bytes = s.mapping().input_bits().div_ceil(8);
             s.mapping.in_area = (inp, bytes);
             inp += bytes;
         }
@@ -206,8 +206,8 @@ impl<I: Io> Master<I> {
                 m.image_bit = bit;
                 bit += m.bits as u32;
             }
-            s.mapping.out_area = (out_at.unwrap_or(0) / 8, s.output_bits().div_ceil(8));
-            s.mapping.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.input_bits().div_ceil(8));
+            s.mapping.out_area = (out_at.unwrap_or(0) / 8, s.mapping().output_bits().div_ceil(8));
+            s.mapping.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.mapping().input_bits().div_ceil(8));
         }
         for k in 0..registers.len().min(self.slaves.len()) {
             self.write_process_config(k as u16)?;
@@ -264,8 +264,8 @@ impl<I: Io> Master<I> {
 pub(crate) fn process_registers(s: &crate::slave::Slave, out_logical: u32, in_logical: u32) -> Vec<(u16, Vec<u8>)> {
     let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
     let mut fmmu = 0u16;
-    let out_bytes = s.output_bits().div_ceil(8);
-    let in_bytes = s.input_bits().div_ceil(8);
+    let out_bytes = s.mapping().output_bits().div_ceil(8);
+    let in_bytes = s.mapping().input_bits().div_ceil(8);
     for (area, sm, write) in
         [((out_logical, out_bytes), s.mapping.out_sm, true), ((in_logical, in_bytes), s.mapping.in_sm, false)]
     {
@@ -310,7 +310,7 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
         }
         self.m.states().request_state_all(AlState::PreOp)?;
         for k in 0..self.m.slaves.len() as u16 {
-            if self.m.slaves[k as usize].has_coe() {
+            if self.m.slaves[k as usize].mailbox().is_some_and(|mb| mb.has_coe()) {
                 self.m.run_init_commands(k, "IP")?;
                 self.m.run_init_commands(k, "PS")?;
                 if let Some(modules) = self.m.slaves[k as usize].setup.modules.clone() {

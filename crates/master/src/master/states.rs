@@ -24,7 +24,7 @@ impl<I: Io> Master<I> {
         self.fprd(st, addr::SII_CONTROL, &mut sii)?;
         let s = &mut self.slaves[position as usize];
         (s.ports.dl_status, s.esc.eeprom_status) = (DlStatus(u16::from_le_bytes(dl)), u16::from_le_bytes(sii));
-        Ok(s.eeprom_problem())
+        Ok(s.esc().eeprom_problem())
     }
 
     /// Polls AL status until `state` or an error; an error is acknowledged and reported by name.
@@ -39,7 +39,7 @@ impl<I: Io> Master<I> {
             self.fprd(st, addr::AL_STATUS, &mut d)?;
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-            let error = self.slaves[position as usize].al_error(status, code);
+            let error = self.slaves[position as usize].esc().al_error(status, code);
             if status.state() == Some(state) && !error {
                 self.slaves[position as usize].state = state;
                 tracing::debug!("slave {position} ({name}) in {}", state.name());
@@ -50,7 +50,7 @@ impl<I: Io> Master<I> {
             // timeout, if it still has none. One still loading (a controller that emulates
             // the EEPROM and is booting) is waited for; at the timeout the reason is given.
             let timed_out = self.engine.io.now_ns() > deadline;
-            if state != AlState::Init && (timed_out || self.slaves[position as usize].eeprom_failed()) {
+            if state != AlState::Init && (timed_out || self.slaves[position as usize].esc().eeprom_failed()) {
                 if let Ok(Some(why)) = self.eeprom_problem_now(position) {
                     let sii_status = self.slaves[position as usize].esc.eeprom_status;
                     return Err(MasterError::State {
@@ -254,7 +254,7 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
             }
             let status = AlStatus(u16::from_le_bytes([d[0], d[1]]));
             let code = AlStatusCode(u16::from_le_bytes([d[4], d[5]]));
-            let error = self.m.slaves[k].al_error(status, code);
+            let error = self.m.slaves[k].esc().al_error(status, code);
             if status.state() == Some(AlState::Op) && !error {
                 if self.m.slaves[k].health != crate::slave::Health::Operational {
                     self.m.slaves[k].health = crate::slave::Health::Operational;
@@ -293,7 +293,7 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
                     )?;
                 }
                 Some(AlState::PreOp) => {
-                    if self.m.slaves[k].has_coe() {
+                    if self.m.slaves[k].mailbox().is_some_and(|mb| mb.has_coe()) {
                         for (i, outputs) in [(0usize, true), (1, false)] {
                             if let Some(p) = self.m.slaves[k].assignment[i].clone() {
                                 self.m.write_assignment(pos, outputs, &p)?;

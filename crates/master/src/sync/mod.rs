@@ -141,12 +141,12 @@ pub struct CyclePlan {
     pub write_reference_time: bool,
     /// Reference-follows-master: the method steers the reference through its
     /// System_Time_Offset (0x0920) instead of its time control loop; its frames then read the
-    /// offset, or replace it with what [`ClockSync::reference_offset`] returns.
+    /// offset, or replace it with what [`ReferenceSteering::reference_offset`] returns.
     pub steer_reference_offset: bool,
     /// The cycle's frame also reads a follower's clock ([`Sample::follower`]).
     pub read_follower_clock: bool,
     /// Probe frames after the cycle's: each only reads the reference's time (and offset), and
-    /// its sample goes to [`ClockSync::probe`].
+    /// its sample goes to [`ReferenceSteering::probe`].
     pub probes: u32,
     /// How long after the cycle's frame was built its probes must have ended (ns): the next
     /// cycle's frame is due then. None starts that, at twice the probes' mean duration so far,
@@ -192,12 +192,6 @@ pub trait ClockSync {
     fn plan(&self, _cycle: u64) -> CyclePlan {
         CyclePlan::default()
     }
-    /// The offset to give the reference in the frame built at `built_ns`, which stands for
-    /// `holds_ns` after the frame's passage, until the next frame gives another (`None`: until
-    /// the next cycle's frame); `None`: read it only.
-    fn reference_offset(&mut self, _built_ns: u64, _holds_ns: Option<u64>) -> Option<u64> {
-        None
-    }
     /// The master's offset to the reference that `sample` measures, ns: the reference's time
     /// at the frame's passage less what the method believed it (its
     /// [`ClockSync::reference_belief_ns`] at the frame's build plus the one-way lead), as
@@ -225,23 +219,32 @@ pub trait ClockSync {
     fn reference_belief_ns(&self, host_ns: u64) -> u64 {
         self.master_time(host_ns).unwrap_or(host_ns)
     }
+    /// The method's offset steering and probes, where it has them (ferrocat's method); `None`
+    /// for a method that only takes the cycle's sample, as the papers' do.
+    fn reference_steering(&mut self) -> Option<&mut dyn ReferenceSteering> {
+        None
+    }
+}
+
+/// What a method adds that steers the reference by its offset and takes samples between
+/// cycles (ferrocat's; [`ClockSync::reference_steering`]): the master asks it only where the method has
+/// it.
+pub trait ReferenceSteering {
+    /// The offset to give the reference in the frame built at `built_ns`, which stands for
+    /// `holds_ns` after the frame's passage, until the next frame gives another (`None`: until
+    /// the next cycle's frame); `None`: read it only.
+    fn reference_offset(&mut self, built_ns: u64, holds_ns: Option<u64>) -> Option<u64>;
+    /// Takes a probe frame's sample.
+    fn probe(&mut self, sample: &Sample);
     /// A master − reference error measured by an independent path (`crate::calibrate`): a
     /// method that can takes it out from now on. Returns whether it did (the papers' methods,
     /// as published, do not).
-    fn take_error(&mut self, _error_ns: i64) -> bool {
-        false
-    }
-    /// Takes a probe frame's sample.
-    fn probe(&mut self, _sample: &Sample) {}
+    fn take_error(&mut self, error_ns: i64) -> bool;
     /// What the method's line has been through so far; `None`: it keeps no line.
-    fn line_events(&self) -> Option<LineEvents> {
-        None
-    }
+    fn line_events(&self) -> Option<LineEvents>;
     /// What every follower's System_Time_Delay (0x0928) should carry over its measured delay
     /// from now on; `None`: leave the delays as they are.
-    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
-        None
-    }
+    fn follower_delay_bias_ns(&mut self) -> Option<i64>;
 }
 
 #[cfg(test)]

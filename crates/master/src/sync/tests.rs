@@ -56,7 +56,7 @@ proptest! {
             for (k, s) in samples.iter().enumerate() {
                 let _ = m.reference_time(built);
                 let _ = m.plan(k as u64);
-                let _ = m.reference_offset(built, None);
+                let _ = m.reference_steering().and_then(|s| s.reference_offset(built, None));
                 let c = m.update(if k % 7 == 3 { None } else { Some(s) });
                 if let Some(p) = c.next_period_ns {
                     prop_assert!(p >= 1);

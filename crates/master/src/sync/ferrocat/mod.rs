@@ -6,7 +6,7 @@ mod estimator;
 mod offset;
 mod schedule;
 
-use super::{ClockSync, Correction, Coupling, CyclePlan, LineEvents, Sample, MAX_CYCLE_NS};
+use super::{ClockSync, Correction, Coupling, CyclePlan, LineEvents, ReferenceSteering, Sample, MAX_CYCLE_NS};
 use crate::trimmed::TrimmedWindow;
 use estimator::Estimator;
 pub use estimator::{DENSE_FIT_WINDOW, FIT_WINDOW};
@@ -35,7 +35,7 @@ use schedule::Schedule;
 ///   sawtooth of |rate − 1|·cycle (50 ns at 50 ppm and 1 ms). The followers' loops lock to
 ///   the reference's time as the frame reads it, the sawtooth's top; every follower's delay
 ///   register gets −(rate − 1)·cycle/2 on top of its measured delay, which moves it to the
-///   middle (see [`ClockSync::follower_delay_bias_ns`]).
+///   middle (see [`ReferenceSteering::follower_delay_bias_ns`]).
 /// - Reference follows master ([`Steering::TimeControlLoop`]): the master writes its time plus
 ///   that lead into 0x0910, so the reference's time control loop steers to the master's time
 ///   at the instant the frame passes; a late send is a sample off by its lateness.
@@ -369,11 +369,6 @@ impl ClockSync for Ferrocat {
             }
         }
     }
-    fn reference_offset(&mut self, built_ns: u64, holds_ns: Option<u64>) -> Option<u64> {
-        let lead_ns = self.lead_ns?;
-        let Law::Offset(o) = &mut self.law else { return None };
-        o.give(built_ns, holds_ns, lead_ns, self.cycle_ns, &self.line)
-    }
     fn master_time(&self, host_ns: u64) -> Option<u64> {
         match self.law {
             Law::Period(_) => self.line.at(host_ns),
@@ -386,20 +381,21 @@ impl ClockSync for Ferrocat {
             _ => self.master_time(host_ns).unwrap_or(host_ns),
         }
     }
+    fn reference_steering(&mut self) -> Option<&mut dyn ReferenceSteering> {
+        Some(self)
+    }
+}
+
+impl ReferenceSteering for Ferrocat {
+    fn reference_offset(&mut self, built_ns: u64, holds_ns: Option<u64>) -> Option<u64> {
+        let lead_ns = self.lead_ns?;
+        let Law::Offset(o) = &mut self.law else { return None };
+        o.give(built_ns, holds_ns, lead_ns, self.cycle_ns, &self.line)
+    }
     fn probe(&mut self, s: &Sample) {
         if let Some(y) = self.line_point(s) {
             self.take_point(s, y);
         }
-    }
-    fn line_events(&self) -> Option<LineEvents> {
-        self.keeps_line().then(|| self.line.events())
-    }
-    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
-        if self.options.followers != FollowerDelays::Centred {
-            return None;
-        }
-        let Law::Offset(o) = &mut self.law else { return None };
-        o.follower_delay_bias_ns(&self.line, self.cycle_ns)
     }
     fn take_error(&mut self, error_ns: i64) -> bool {
         // The master (or its estimate of the reference) is ahead by `error_ns`: the passages
@@ -411,6 +407,16 @@ impl ClockSync for Ferrocat {
             o.master_moved(error_ns);
         }
         true
+    }
+    fn line_events(&self) -> Option<LineEvents> {
+        self.keeps_line().then(|| self.line.events())
+    }
+    fn follower_delay_bias_ns(&mut self) -> Option<i64> {
+        if self.options.followers != FollowerDelays::Centred {
+            return None;
+        }
+        let Law::Offset(o) = &mut self.law else { return None };
+        o.follower_delay_bias_ns(&self.line, self.cycle_ns)
     }
 }
 
