@@ -221,11 +221,15 @@ fn service_examples() -> std::path::PathBuf {
 fn an_application_of_its_own_process_runs_beside_the_master() {
     let examples = service_examples();
     let net = VethPair::new("sa");
+    // The drives' sync supervision is off: this test is about an application beside the
+    // master, and a stall of the host of three cycles (this VM's vCPUs stall 4-6 ms several
+    // times a second) would take them out of OP more often than the application re-enables
+    // them in one move. The recovery itself is the soak's and `soem_live`'s.
     let sim = ReportingSim::start(
         &net,
         "service-app",
         "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'EL1004'\n\
-         [[device]]\nbuiltin = 'SERVO'\n[[device]]\nbuiltin = 'SERVO'\n",
+         [[device]]\nbuiltin = 'SERVO'\nsync_error_limit = 0\n[[device]]\nbuiltin = 'SERVO'\nsync_error_limit = 0\n",
         &[],
     );
     let dir = std::env::temp_dir().join(format!("ferrocat-service-app-{}", std::process::id()));
@@ -276,8 +280,8 @@ fn an_application_of_its_own_process_runs_beside_the_master() {
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    // With DC, a stall of the host of several cycles takes a drive out of OP (0x001A) whatever
-    // the clients do: every slave that left came back, and all are in OP at the end.
+    // Every slave that left OP (a stall of the host of several cycles) came back, and all are
+    // in OP at the end.
     assert_eq!(summary["slaves"]["left_op"], summary["slaves"]["recovered"], "{summary}");
     assert_eq!(summary["slaves"]["in_op_at_end"], 5, "{summary}");
     assert!(summary["control"]["image"]["writes_taken"].as_u64().unwrap() > 10, "{summary}");

@@ -490,12 +490,14 @@ impl SegmentConfig {
             in_range("segment", "drift_spread_ppm", self.drift_spread_ppm.unwrap_or(25.0), 0.0..=MAX_DRIFT_PPM)?;
         let mut nodes = Vec::new();
         let mut names = Vec::new();
+        // Each ESI file is read once, however many of its devices the segment has.
+        let mut esi_files = EsiFiles::default();
         for (i, d) in self.devices.iter().enumerate() {
             // Built-in names in any case: "ek1100" is the EK1100.
             let canonical = d.builtin.as_deref().and_then(crate::builtin::canonical);
             let d = &DeviceToml { builtin: canonical.map(String::from).or_else(|| d.builtin.clone()), ..d.clone() };
             let src = self.source(i, d)?;
-            let (mut sii, default_name, esi_dev) = load_device(&src)?;
+            let (mut sii, default_name, esi_dev) = esi_files.load_device(&src)?;
             if let Some(alias) = d.station_alias {
                 patch_sii_header(&mut sii, |h| h[8..10].copy_from_slice(&alias.to_le_bytes()));
             }
@@ -538,10 +540,22 @@ impl SegmentConfig {
                     ))
                 }
             };
-            // An ENI names no ESC: its process RAM grows to hold the SyncManagers the file places
-            // (the EtherCAT IP core offers up to 60 KB; an ET1100 has 8).
-            if matches!(src, DeviceSource::Eni { .. }) && d.esc.is_none() {
+            // The SyncManagers the SII places must lie in the ESC's process RAM: a real device's
+            // EEPROM points only into memory its ESC has. Where they do not fit the default ESC,
+            // the device has a larger one: an E-Bus terminal whose SMs reach past the ET1200's
+            // 1 KB (Beckhoff's EL6751 places SM3 at 0x2400) an ET1100 (8 KB); an ENI, which names
+            // no ESC, or a device beyond 8 KB, process RAM grown to hold them (the EtherCAT IP
+            // core offers up to 60 KB).
+            if d.esc.is_none() {
                 let need = info.sync_managers().iter().map(|s| s.start as usize + s.length as usize).max().unwrap_or(0);
+                let eni = matches!(src, DeviceSource::Eni { .. });
+                if need > config.memory_len()
+                    && !eni
+                    && esc_kind == "et1200"
+                    && need <= EscConfig::et1100().memory_len()
+                {
+                    config = EscConfig::et1100();
+                }
                 if need > config.memory_len() {
                     config.ram_kb = (need - 0x1000).div_ceil(1024).min(60) as u8;
                 }
@@ -963,104 +977,129 @@ fn read_eni(path: &Path) -> Result<ferrocat_machine::eni::Eni, SegmentError> {
 
 /// Loads the SII image of a device and a default name for it.
 pub fn load_device(src: &DeviceSource) -> Result<(Vec<u8>, String, Option<ferrocat_esi::Device>), SegmentError> {
-    match src {
-        DeviceSource::Eeprom(path) => {
-            let raw = read_eeprom_dump(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
-            let (img, _) =
-                parse_dump(&raw).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
-            let info = SiiInfo::from_image(&img)
-                .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("not an SII image: {e}") })?;
-            let name = info.string(1).unwrap_or_else(|| format!("{:#010x}", info.header.product_code));
-            Ok((img, name, None))
+    EsiFiles::default().load_device(src)
+}
+
+/// The ESI files a segment's devices come from, each read and parsed once.
+#[derive(Default)]
+struct EsiFiles {
+    parsed: std::collections::HashMap<PathBuf, EsiFile>,
+}
+
+impl EsiFiles {
+    fn file(&mut self, path: &Path) -> Result<&EsiFile, SegmentError> {
+        if !self.parsed.contains_key(path) {
+            let xml = read_esi(path).map_err(|reason| SegmentError::Io { path: path.to_path_buf(), reason })?;
+            let f = EsiFile::parse(&xml)
+                .map_err(|e| SegmentError::Parse { path: path.to_path_buf(), message: e.to_string() })?;
+            self.parsed.insert(path.to_path_buf(), f);
         }
-        DeviceSource::Esi { path, product, revision, modules } => {
-            let xml = read_esi(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
-            let f =
-                EsiFile::parse(&xml).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
-            let dev = match product {
-                Some(p) => f
-                    .devices
-                    .iter()
-                    .filter(|d| match p {
-                        Product::Code(c) => d.product_code == *c,
-                        Product::Name(n) => d.type_name.eq_ignore_ascii_case(n),
-                    })
-                    .filter(|d| revision.is_none_or(|r| d.revision == r))
-                    // The newest revision; of equal ones the first in the file.
-                    .reduce(|best, d| if d.revision > best.revision { d } else { best })
-                    .ok_or_else(|| SegmentError::Parse {
-                        path: path.clone(),
-                        message: format!(
-                            "no device {} (the file has: {})",
-                            match p {
-                                Product::Code(c) => format!("with product code {c:#x}"),
-                                Product::Name(n) => format!("of type {n}"),
-                            },
-                            f.devices
-                                .iter()
-                                .map(|d| format!("{} {:#x}", d.type_name, d.product_code))
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    })?,
-                None if f.devices.len() == 1 => &f.devices[0],
-                None => {
-                    return Err(SegmentError::Parse {
-                        path: path.clone(),
-                        message: format!(
-                            "{} devices: give the product code (FILE:PRODUCT or product = ...)",
-                            f.devices.len()
-                        ),
-                    })
-                }
-            };
-            let parse_err = |message: String| SegmentError::Parse { path: path.clone(), message };
-            let dev = match (&dev.slots, modules) {
-                (None, Some(_)) => return Err(parse_err(format!("{} has no slots for modules", dev.type_name))),
-                (None, None) => dev.clone(),
-                (Some(_), chosen) => {
-                    let idents = match chosen {
-                        Some(m) => m.clone(),
-                        None => dev.default_modules().ok_or_else(|| {
-                            parse_err(format!(
-                                "{}: a slot needs a module and names no default: give them (FILE:PRODUCT:MODULE,…)",
-                                dev.type_name
-                            ))
-                        })?,
-                    };
-                    dev.plugged(&f.modules, &idents).map_err(parse_err)?
-                }
-            };
-            let img = dev.to_sii(f.vendor_id).map_err(|e| parse_err(e.to_string()))?;
-            Ok((img, dev.type_name.clone(), Some(dev)))
-        }
-        DeviceSource::Builtin(name) => {
-            let dev = crate::builtin::device(name).ok_or_else(|| {
-                device_err(
-                    format!("builtin {name}"),
-                    format!("unknown built-in device (known: {})", crate::builtin::NAMES.join(", ")),
-                )
-            })?;
-            let img = dev
-                .to_sii(crate::builtin::vendor_id(name))
-                .map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
-            Ok((img, dev.type_name.clone(), Some(dev)))
-        }
-        DeviceSource::Eni { path, slave } => {
-            let eni = read_eni(path)?;
-            let s = eni.slaves.get(*slave).ok_or_else(|| SegmentError::Parse {
-                path: path.clone(),
-                message: format!("no slave at position {slave} (the file has {})", eni.slaves.len()),
-            })?;
-            let dev = s.to_device();
-            let mut img = dev
-                .to_sii(s.identity.vendor_id)
-                .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("slave {slave}: {e}") })?;
-            // The serial number the tool scanned (SII word 0x0E, outside the header's CRC).
-            if let Some(b) = img.get_mut(0x1C..0x20) {
-                b.copy_from_slice(&s.identity.serial.to_le_bytes());
+        Ok(&self.parsed[path])
+    }
+
+    fn load_device(
+        &mut self,
+        src: &DeviceSource,
+    ) -> Result<(Vec<u8>, String, Option<ferrocat_esi::Device>), SegmentError> {
+        match src {
+            DeviceSource::Eeprom(path) => {
+                let raw = read_eeprom_dump(path).map_err(|reason| SegmentError::Io { path: path.clone(), reason })?;
+                let (img, _) =
+                    parse_dump(&raw).map_err(|e| SegmentError::Parse { path: path.clone(), message: e.to_string() })?;
+                let info = SiiInfo::from_image(&img).map_err(|e| SegmentError::Parse {
+                    path: path.clone(),
+                    message: format!("not an SII image: {e}"),
+                })?;
+                let name = info.string(1).unwrap_or_else(|| format!("{:#010x}", info.header.product_code));
+                Ok((img, name, None))
             }
-            Ok((img, s.name.clone(), Some(dev)))
+            DeviceSource::Esi { path, product, revision, modules } => {
+                let f = self.file(path)?;
+                let dev = match product {
+                    Some(p) => f
+                        .devices
+                        .iter()
+                        .filter(|d| match p {
+                            Product::Code(c) => d.product_code == *c,
+                            Product::Name(n) => d.type_name.eq_ignore_ascii_case(n),
+                        })
+                        .filter(|d| revision.is_none_or(|r| d.revision == r))
+                        // The newest revision; of equal ones the first in the file.
+                        .reduce(|best, d| if d.revision > best.revision { d } else { best })
+                        .ok_or_else(|| SegmentError::Parse {
+                            path: path.clone(),
+                            message: format!(
+                                "no device {} (the file has: {})",
+                                match p {
+                                    Product::Code(c) => format!("with product code {c:#x}"),
+                                    Product::Name(n) => format!("of type {n}"),
+                                },
+                                f.devices
+                                    .iter()
+                                    .map(|d| format!("{} {:#x}", d.type_name, d.product_code))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        })?,
+                    None if f.devices.len() == 1 => &f.devices[0],
+                    None => {
+                        return Err(SegmentError::Parse {
+                            path: path.clone(),
+                            message: format!(
+                                "{} devices: give the product code (FILE:PRODUCT or product = ...)",
+                                f.devices.len()
+                            ),
+                        })
+                    }
+                };
+                let parse_err = |message: String| SegmentError::Parse { path: path.clone(), message };
+                let dev = match (&dev.slots, modules) {
+                    (None, Some(_)) => return Err(parse_err(format!("{} has no slots for modules", dev.type_name))),
+                    (None, None) => dev.clone(),
+                    (Some(_), chosen) => {
+                        let idents = match chosen {
+                            Some(m) => m.clone(),
+                            None => dev.default_modules().ok_or_else(|| {
+                                parse_err(format!(
+                                    "{}: a slot needs a module and names no default: give them (FILE:PRODUCT:MODULE,…)",
+                                    dev.type_name
+                                ))
+                            })?,
+                        };
+                        dev.plugged(&f.modules, &idents).map_err(parse_err)?
+                    }
+                };
+                let img = dev.to_sii(f.vendor_id).map_err(|e| parse_err(e.to_string()))?;
+                Ok((img, dev.type_name.clone(), Some(dev)))
+            }
+            DeviceSource::Builtin(name) => {
+                let dev = crate::builtin::device(name).ok_or_else(|| {
+                    device_err(
+                        format!("builtin {name}"),
+                        format!("unknown built-in device (known: {})", crate::builtin::NAMES.join(", ")),
+                    )
+                })?;
+                let img = dev
+                    .to_sii(crate::builtin::vendor_id(name))
+                    .map_err(|e| device_err(format!("builtin {name}"), e.to_string()))?;
+                Ok((img, dev.type_name.clone(), Some(dev)))
+            }
+            DeviceSource::Eni { path, slave } => {
+                let eni = read_eni(path)?;
+                let s = eni.slaves.get(*slave).ok_or_else(|| SegmentError::Parse {
+                    path: path.clone(),
+                    message: format!("no slave at position {slave} (the file has {})", eni.slaves.len()),
+                })?;
+                let dev = s.to_device();
+                let mut img = dev
+                    .to_sii(s.identity.vendor_id)
+                    .map_err(|e| SegmentError::Parse { path: path.clone(), message: format!("slave {slave}: {e}") })?;
+                // The serial number the tool scanned (SII word 0x0E, outside the header's CRC).
+                if let Some(b) = img.get_mut(0x1C..0x20) {
+                    b.copy_from_slice(&s.identity.serial.to_le_bytes());
+                }
+                Ok((img, s.name.clone(), Some(dev)))
+            }
         }
     }
 }
