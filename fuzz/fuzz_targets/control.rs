@@ -4,7 +4,6 @@
 //! segment (EK1100, SERVO) for up to 50 cycles. Any bytes as a reply, as a client reads it.
 use std::cell::RefCell;
 
-use ferrocat_master::io::Io;
 use ferrocat_master::Master;
 use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
 use libfuzzer_sys::fuzz_target;
@@ -28,7 +27,7 @@ fuzz_target!(|data: &[u8]| {
         let mut slot = cell.borrow_mut();
         let m = slot.get_or_insert_with(running);
         let id = m.acyclic().submit(request);
-        let mut next = m.cyclic().io_mut().now_ns();
+        let mut next = m.cyclic().now_ns();
         for _ in 0..50 {
             next += 1_000_000;
             // A request may leave a slave unanswering (a register write): the loop's errors
@@ -38,7 +37,7 @@ fuzz_target!(|data: &[u8]| {
             if m.acyclic().take_answers().iter().any(|(k, _)| *k == id) {
                 return;
             }
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
         }
     });
 });

@@ -15,7 +15,6 @@
 //! terminal (an ET1200) on port 1 with the drive behind its port 0, which the master latches
 //! again (master/next_frame_latch.rs); its fourth makes the drive's controller an IP core.
 //! Last, the drive's EoE: IP parameters set and read, a ping, and frames pumped between cycles.
-use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, EoePing, Master};
 use ferrocat_segment::{Event, SegmentConfig};
 use ferrocat_segment::{HostModel, Tamper, VirtualIo};
@@ -78,7 +77,7 @@ fuzz_target!(|data: &[u8]| {
     }
     // A ring: its cable pulled now, and cycles enough for the far reference to be kept.
     let cycles = if ring {
-        let now = m.cyclic().io_mut().now_ns();
+        let now = m.cyclic().now_ns();
         let event = if split_first {
             (now + 50_000_000, Event::LinkUp { node: 2, port: 0 })
         } else {
@@ -89,13 +88,13 @@ fuzz_target!(|data: &[u8]| {
     } else {
         20
     };
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..cycles {
         let _ = m.cyclic().cycle();
         let _ = m.dc().dc_monitor();
         if ring {
             next += 1_000_000;
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
         }
     }
     let _ = m.states().supervise();

@@ -14,7 +14,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, ensure, Context};
 use ferrocat_lab::stats::Moments;
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
 use ferrocat_master::DcConfig;
 use serde::Serialize;
@@ -246,7 +245,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
         ferrocat_lab::init_with_method(&mut m, &dc, method, cycle_ns, Coupling::ReferenceFollowsMaster)?;
     let mut st = m.clock().sync_state()?;
     st.probing.budget_ns = a.probe_budget_us.map(|us| us * 1000);
-    let start = m.cyclic().io_mut().now_ns();
+    let start = m.cyclic().now_ns();
     let from_ns = start + (a.settle_s * 1e9) as u64;
     let to_ns = from_ns + (a.seconds * 1e9) as u64;
     let mut clock = Vec::new();
@@ -256,8 +255,8 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
     while next < to_ns {
         // A master that follows the reference wakes when it says.
         next = ferrocat_lab::next_wake(next, cycle_ns, &c);
-        m.cyclic().io_mut().sleep_until(next);
-        let now = m.cyclic().io_mut().now_ns();
+        m.cyclic().sleep_until(next);
+        let now = m.cyclic().now_ns();
         if now >= from_ns && probes_from.is_none() {
             probes_from = Some(st.probing.sent);
         }
@@ -266,7 +265,7 @@ fn run_master(iface: &str, a: &LiveArgs, method: &str) -> anyhow::Result<MasterR
         }
         c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         cycles += 1;
-        if m.cyclic().io_mut().now_ns() + 2 * cycle_ns >= from_ns {
+        if m.cyclic().now_ns() + 2 * cycle_ns >= from_ns {
             let own = m.clock().master_system_time();
             let ahead = own.wrapping_add(cycle_ns);
             if let (Some(a), Some(b)) = (sync.master_time(own), sync.master_time(ahead)) {

@@ -840,10 +840,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         crate::target::go_real_time();
     }
     eprintln!("timestamps: {}; frames through {}", m.cyclic().io_mut().timestamps(), m.cyclic().io_mut().path());
-    let t_start = {
-        use ferrocat_master::io::Io;
-        m.cyclic().io_mut().now_ns()
-    };
+    let t_start = { m.cyclic().now_ns() };
     t.scan(&mut m)?;
     t.configure(&mut m)?;
     // Nothing to exchange: no frame would go out, and the summary would count none.
@@ -1007,10 +1004,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     };
     let mut app_watchdog = o.control.as_mut().and_then(|c| c.app_watchdog.take());
     let mut machine_in_force = t.machine_file()?.cloned();
-    let t_op = {
-        use ferrocat_master::io::Io;
-        m.cyclic().io_mut().now_ns()
-    };
+    let t_op = { m.cyclic().now_ns() };
     eprintln!("bring-up to OP: {:.1} ms", (t_op - t_start) as f64 / 1e6);
     let period = if max_rate { 0 } else { cycle_us * 1000 };
     m.cyclic().set_period_ns(period);
@@ -1022,10 +1016,10 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // SM-synchronisation supervision takes for missed outputs (0x001A).
     if let Some(grid) = grid_ns.filter(|_| !max_rate) {
         let first = m.clock().next_on_grid_ns(grid, cycle_us * 1000);
-        m.cyclic().io_mut().sleep_until(first);
+        m.cyclic().sleep_until(first);
     }
     let cpu0 = cpu_ns();
-    let start = m.cyclic().io_mut().now_ns();
+    let start = m.cyclic().now_ns();
     let end = if seconds == 0.0 { u64::MAX } else { start + (seconds * 1e9) as u64 };
     let mut next = start;
     let mut report = start + 1_000_000_000;
@@ -1061,7 +1055,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         }
         st.probing.off |= probe_budget_us == Some(0);
     }
-    while m.cyclic().io_mut().now_ns() < end && !stop.load(Ordering::Relaxed) {
+    while m.cyclic().now_ns() < end && !stop.load(Ordering::Relaxed) {
         let planned_period = next_period;
         next += next_period;
         // The clients' outputs, whole or not at all, into this cycle's frame.
@@ -1075,7 +1069,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 if st.lock.state() != lock_before {
                     eprintln!(
                         "t={:7.3} s  clock sync {lock_before} -> {} (offset {} ns; {} frames lost so far)",
-                        (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9,
+                        (m.cyclic().now_ns() - start) as f64 * 1e-9,
                         st.lock.state(),
                         st.lock.offset_ns().unwrap_or(0),
                         st.lost
@@ -1112,7 +1106,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             }
         }
         if let Some(image) = shared.as_mut() {
-            let (s, now) = (m.diagnosis().cycle_stats(), m.cyclic().io_mut().now_ns());
+            let (s, now) = (m.diagnosis().cycle_stats(), m.cyclic().now_ns());
             image.publish(m.image().bytes(), s.cycles, now, s.last_wkc as u32, m.image().expected_wkc() as u32);
             if let Some(w) = app_watchdog.as_mut() {
                 w.check(&mut m, image.commits(), now);
@@ -1130,7 +1124,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         // after the cycle, while any wait).
         if let Some(server) = control.as_mut() {
             let deadline =
-                if max_rate { m.cyclic().io_mut().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
+                if max_rate { m.cyclic().now_ns() + 1_000_000 } else { next.saturating_sub(next_period / 4) };
             let extra = |m: &mut Master<CliIo>| {
                 json!({
                     "clock_sync": sync.as_ref().map(|(method, st)| json!({
@@ -1143,7 +1137,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             };
             server.serve(&mut m, deadline, &extra)?;
         }
-        let t_s = (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9;
+        let t_s = (m.cyclic().now_ns() - start) as f64 * 1e-9;
         let events = m.diagnosis().take_events();
         for e in &events {
             eprintln!("t={t_s:7.3} s  {e}");
@@ -1164,12 +1158,12 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 server.reloaded(&r);
             }
         }
-        if m.cyclic().io_mut().now_ns() >= report {
+        if m.cyclic().now_ns() >= report {
             let s = m.diagnosis().cycle_stats();
             let lock = sync.as_ref().map_or(String::new(), |(method, st)| format!("  {}", lock_text(&**method, st)));
             eprintln!(
                 "t={:5.1} s  cycles {}  wkc {}/{} ({})  max jitter {:.1} µs  round trip {:.1} µs (max {:.1}){lock}",
-                (m.cyclic().io_mut().now_ns() - start) as f64 * 1e-9,
+                (m.cyclic().now_ns() - start) as f64 * 1e-9,
                 s.cycles,
                 s.last_wkc,
                 m.image().expected_wkc(),
@@ -1186,7 +1180,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             report += 1_000_000_000;
         }
         if !max_rate {
-            let now = m.cyclic().io_mut().now_ns();
+            let now = m.cyclic().now_ns();
             if now > next {
                 overruns += 1;
                 // A whole cycle or more behind (a stall): the cycles missed are skipped, on the
@@ -1198,8 +1192,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                     skipped += missed;
                 }
             }
-            m.cyclic().io_mut().sleep_until(next);
-            let woke = m.cyclic().io_mut().now_ns();
+            m.cyclic().sleep_until(next);
+            let woke = m.cyclic().now_ns();
             wake_late.add(woke.saturating_sub(next));
             if let Some(prev) = last_wake {
                 jitter.add((woke - prev).abs_diff(planned_period));
@@ -1214,7 +1208,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     if dc {
         eprintln!("DC monitor (BRD 0x092C, upper bound): {} ns", m.dc().dc_monitor()?);
     }
-    let wall = m.cyclic().io_mut().now_ns() - start;
+    let wall = m.cyclic().now_ns() - start;
     let s = m.diagnosis().cycle_stats();
     eprintln!(
         "cyclic rate {:.0} cycles/s; master CPU time {:.2} µs per cycle",
@@ -1236,7 +1230,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // clock of its own).
     let true_offset_ns = match (&sync, m.dc().dc_reference()) {
         (Some((method, _)), Some(station)) => {
-            let t = m.cyclic().io_mut().now_ns();
+            let t = m.cyclic().now_ns();
             let own = m.clock().master_system_time_at(t);
             let keeps_clock =
                 method.coupling() == Coupling::ReferenceFollowsMaster || method.master_time(own).is_some();
@@ -1405,11 +1399,11 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
     // A master that stops takes its slaves down in order (outputs to their safe state, then
     // process data and mailboxes off), as a service stopped by SIGTERM must.
     if !o.keep_state {
-        let t0 = m.cyclic().io_mut().now_ns();
+        let t0 = m.cyclic().now_ns();
         match m.states().shut_down() {
             Ok(()) => eprintln!(
                 "slaves stepped down to SAFEOP, then INIT ({:.1} ms)",
-                (m.cyclic().io_mut().now_ns() - t0) as f64 / 1e6
+                (m.cyclic().now_ns() - t0) as f64 / 1e6
             ),
             Err(e) => eprintln!("ferrocat: warning: stepping the slaves down to INIT: {e}"),
         }

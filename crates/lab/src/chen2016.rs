@@ -4,7 +4,6 @@
 //! twice, for 500, 250, 100 and 50 µs cycles.
 use crate::LabError;
 use ferrocat_esc::{SyncApp, SyncMode};
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Coupling, Ferrocat, Nominal};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
@@ -175,12 +174,12 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
     m.cyclic().io_mut().start_cycles(cycle_ns);
     let mut probe = Nominal { cycle_ns };
-    let sent = m.cyclic().io_mut().now_ns();
+    let sent = m.cyclic().now_ns();
     m.clock().sync_step(&mut probe, &mut st)?;
     let r0 = st.reference_ns.unwrap_or(0);
     // The reference read r0 one lead after `sent`; a send at sent + d passes at r0 + d.
     let mut next = sent + 2 * cycle_ns - r0 % cycle_ns;
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     for a in apps(&mut m, &setup.counted_slaves) {
         a.reset_counts();
     }
@@ -213,7 +212,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<(Setup, Row)
         }
         slot += ((period + cycle_ns / 2) / cycle_ns).max(1);
         next += period;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     let (lost, repeated) =
         apps(&mut m, &setup.counted_slaves).iter().fold((0, 0), |(l, r), a| (l + a.lost, r + a.repeated));

@@ -169,7 +169,7 @@ impl<I: World> Rig<I> {
 
     /// Until the next cycle is due.
     fn wait(&mut self) {
-        self.m.cyclic().io_mut().sleep_until(self.next);
+        self.m.cyclic().sleep_until(self.next);
     }
 
     /// The simulated drive at `k`, when the world is the in-process simulator.
@@ -218,7 +218,7 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
     // The master's cycles on the grid: SYNC0 half a cycle after each frame leaves.
     let grid = report.sync0_start.unwrap_or(0).wrapping_sub(shift as u64);
     let next = m.clock().next_on_grid_ns(grid, cycle_ns);
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     Ok((Rig { m, sync, st, cycle_ns, next }, drives))
 }
 
@@ -525,7 +525,7 @@ fn true_error_ns<I: World>(m: &mut Master<I>, mfr: bool, cycle_ns: u64) -> Optio
     if !mfr {
         return crate::clock_error_ns(m, 0).map(|e| e as f64);
     }
-    let now = m.cyclic().io_mut().now_ns();
+    let now = m.cyclic().now_ns();
     let rsys = m.io().segment()?.nodes.first()?.esc.dc.as_ref()?.system_at(now);
     let c = cycle_ns as i64;
     let ph = (rsys % cycle_ns) as i64;

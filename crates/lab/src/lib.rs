@@ -194,7 +194,7 @@ pub fn dc_slaves<I: World>(m: &Master<I>) -> crate::Result<Vec<usize>> {
 /// sign: positive when the slave lags), on the low 32 bits so that 32-bit DCs compare too;
 /// `None` outside a simulator. The slave is found by its station address, so any topology works.
 pub fn clock_error_ns<I: World>(m: &mut Master<I>, k: usize) -> Option<i64> {
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let master = m.clock().master_system_time() as u32;
     let node = &m.io().segment()?.nodes[node_of(m, k)?];
     let slave = node.esc.dc.as_ref().map(|d| d.system_at(t) as u32).unwrap_or(master);

@@ -2,7 +2,6 @@
 //! of their SYNC0 instants (true time, which the simulator knows) for the same system time, over
 //! 1000 cycles at 1000 and 500 µs, for each clock-sync method.
 use crate::LabError;
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
 use ferrocat_master::DcConfig;
 use ferrocat_segment::HostModel;
@@ -105,7 +104,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<Row> {
     }
     let mut st = m.clock().sync_state()?;
     let settle = (o.settle_s * 1e9 / cycle_ns as f64) as u64;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut sync0 = crate::stats::Sync0Stats::default();
     let mut k = 0u64;
     // Every method's cyclic phase meets the same host, whatever its bring-up did.
@@ -114,7 +113,7 @@ fn run_one(o: &Options, cycle_us: u64, name: &str) -> crate::Result<Row> {
         m.cyclic().cycle()?;
         let c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         next += c.next_period_ns.unwrap_or(cycle_ns);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         k += 1;
         if k >= settle + 100 * o.samples as u64 {
             return Err(LabError::Sync0Stopped);

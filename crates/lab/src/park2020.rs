@@ -2,7 +2,6 @@
 //! errors (GMEAN: the mean of each round's mean; MRMS: the mean of each round's RMS) for 2 and
 //! 6 slaves, 1 ms cycle, a sample every 2 ms after a settling time.
 use crate::LabError;
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::HostModel;
 use rayon::prelude::*;
@@ -127,7 +126,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     let mut st = m.clock().sync_state()?;
     let settle = (opts.settle_s * 1e9 / opts.cycle_ns as f64) as u64;
     let total = settle + opts.samples * opts.sample_every;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut r = Round::default();
     if keep {
         r.samples = Some((Vec::with_capacity(opts.samples as usize), Vec::with_capacity(opts.samples as usize)));
@@ -166,7 +165,7 @@ fn round(opts: &Options, slaves: usize, method: &str, seed: u64, keep: bool) -> 
     for k in 0..total {
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, opts.cycle_ns, &c);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         if k % opts.sample_every == 0 {
             sampler.arm(&mut m, next, opts.cycle_ns, k);
         }

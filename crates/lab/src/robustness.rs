@@ -11,7 +11,6 @@
 //! drawn over the window before cannot foresee (a stock kernel's software stamps leave the line
 //! tens of ns of phase error that moves over seconds).
 use crate::LabError;
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::{Correction, Coupling};
 use ferrocat_segment::Event;
 use ferrocat_segment::HostModel;
@@ -165,7 +164,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
     let settle = (o.settle_s * per_s) as u64;
     let window = (o.band_window_s * per_s) as u64;
     let after = (o.after_s * per_s) as u64;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut before, mut late) = (Moments::default(), Moments::default());
     // From the band window on: the control's pairing checks the window is the same.
     let mut errors = Vec::with_capacity((window + after) as usize);
@@ -217,7 +216,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
             events0 = sync.reference_steering().and_then(|s| s.line_events());
             lost0 = st.lost;
             make_ups0 = st.make_ups;
-            let now = m.cyclic().io_mut().now_ns();
+            let now = m.cyclic().now_ns();
             match scenario {
                 "loss-1pct" => m.cyclic().io_mut().seg.loss_probability = 0.01,
                 "drift-step-50ppm" => {
@@ -244,7 +243,7 @@ fn run_one(o: &Options, scenario: &str, method: &str) -> crate::Result<Run> {
         }
         // A master that follows the reference times its next cycle by it.
         next = crate::next_wake(next, o.cycle_ns, &c);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         sampler.arm(&mut m, next, o.cycle_ns, k);
         c = m.clock().sync_step(sync.as_mut(), &mut st)?;
         if let Some(cal) =

@@ -4,7 +4,6 @@
 use ferrocat_esc::{Cia402Drive, Switches};
 use ferrocat_master::cia402::Output;
 use ferrocat_master::cia402::{drive_to_goal, map_for_csp, Axis, Goal};
-use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master, MasterEvent};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -37,8 +36,8 @@ fn master(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) -> Master<
 fn cycles(m: &mut Master<VirtualIo>, n: u64) {
     for _ in 0..n {
         m.cyclic().cycle().unwrap();
-        let now = m.cyclic().io_mut().now_ns();
-        m.cyclic().io_mut().sleep_until(now + CYCLE_NS);
+        let now = m.cyclic().now_ns();
+        m.cyclic().sleep_until(now + CYCLE_NS);
     }
 }
 
@@ -240,9 +239,9 @@ fn run_modes(drive_toml: &str, prepare: &dyn Fn(&mut Master<VirtualIo>)) {
             break;
         }
     }
-    let (w0, t0) = (drive(&m).velocity_increments(), m.cyclic().io_mut().now_ns());
+    let (w0, t0) = (drive(&m).velocity_increments(), m.cyclic().now_ns());
     cycles(&mut m, 100);
-    let dt = (m.cyclic().io_mut().now_ns() - t0) as f64 * 1e-9;
+    let dt = (m.cyclic().now_ns() - t0) as f64 * 1e-9;
     let d = drive(&m);
     let p = *d.motor();
     let accel = (d.velocity_increments() - w0) / per_rev * std::f64::consts::TAU / dt;

@@ -1,7 +1,6 @@
 //! The lab looks at the clocks at every phase of the cycle, at the same instants for every
 //! method, and sees what a clock steered once per frame does in between.
 use ferrocat_lab::sampler::{Sample, Sampler};
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::Coupling;
 use ferrocat_segment::HostModel;
 
@@ -19,12 +18,12 @@ fn run(method: &str) -> Vec<(u64, Sample)> {
     let dc = ferrocat_lab::dc_slaves(&m).unwrap();
     let mut st = m.clock().sync_state().unwrap();
     let mut sampler = Sampler::new(&m, &dc, 1);
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut starts = Vec::new();
     let mut out = Vec::new();
     for k in 0..2_000 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         sampler.arm(&mut m, next, CYCLE_NS, k);
         starts.push(next);
         m.clock().sync_step(sync.as_mut(), &mut st).unwrap();

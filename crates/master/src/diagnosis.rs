@@ -85,9 +85,7 @@ impl<I: Io> Master<I> {
         let d = &self.diagnosis;
         let flags = d.sync0_slaves.iter().flat_map(|&p| [(p, SyncSm::Outputs), (p, SyncSm::Inputs)]);
         let readable = |f: &(u16, SyncSm)| {
-            self.slaves
-                .get(f.0 as usize)
-                .is_some_and(|s| s.mailbox.is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()))
+            self.slaves.get(f.0 as usize).is_some_and(|s| s.mailbox().is_some_and(|mb| mb.has_coe()))
                 && !d.sync_unreadable.contains(f)
                 && !self.acyclic.holds_mailbox(f.0)
         };
@@ -241,7 +239,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
         self.m.watch_txpdo_entries();
         self.m.diagnosis.counters.resize(n, None);
         let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
-        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox.is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()));
+        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox().is_some_and(|mb| mb.has_coe()));
         let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
         let mut sent = 0;
         let mut result = Ok(0);

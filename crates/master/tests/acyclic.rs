@@ -1,7 +1,6 @@
 //! The acyclic side of a running master (`Acyclic::submit`, `serve_requests`): SDO transfers,
 //! SDO information, registers and state requests served in the cycles' spare time while the
 //! cyclic exchange goes on whole, and each bad request answered with its error.
-use ferrocat_master::io::Io;
 use ferrocat_master::{AlState, Answer, Master, MasterError, Request, RequestError, RequestId};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -23,7 +22,7 @@ fn running() -> Master<VirtualIo> {
 /// Cycles until `id` is answered (at most `limit` cycles), serving requests in each cycle's
 /// first three quarters; the answer, and the cycles whose working counter was short.
 fn cycle_until(m: &mut Master<VirtualIo>, id: RequestId, limit: u32) -> (Result<Answer, MasterError>, u32) {
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut short = 0;
     for _ in 0..limit {
         next += CYCLE_NS;
@@ -34,7 +33,7 @@ fn cycle_until(m: &mut Master<VirtualIo>, id: RequestId, limit: u32) -> (Result<
         if let Some((_, a)) = m.acyclic().take_answers().into_iter().find(|(k, _)| *k == id) {
             return (a, short);
         }
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     panic!("request {id:?} not answered in {limit} cycles");
 }
@@ -126,13 +125,13 @@ fn a_full_queue_answers_at_once_and_nothing_is_lost() {
     assert!(refused.iter().all(|(_, a)| matches!(a, Err(MasterError::Request(RequestError::QueueFull { .. })))));
     let mut answered = refused.len();
     let last = *ids.last().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..200 {
         next += CYCLE_NS;
         m.cyclic().cycle().unwrap();
         m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
         answered += m.acyclic().take_answers().iter().filter(|(_, a)| a.is_ok()).count();
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     assert_eq!(answered, 70, "every request answered once (the last was {last:?})");
     assert_eq!(m.acyclic().requests_pending(), 0);

@@ -1,7 +1,6 @@
 //! The GPIO calibration against the simulator's true clocks: it finds what half the software
 //! stamps' asymmetry does to ferrocat's master clock, and taking it out removes it.
 use ferrocat_master::calibrate::GpioCalibration;
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::{ClockSync, Correction, Coupling, Ferrocat};
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
@@ -24,7 +23,7 @@ fn segment(host: HostModel) -> Master<VirtualIo> {
 
 /// The method's clock minus the reference's true system time now, ns.
 fn true_error(m: &mut Master<VirtualIo>, sync: &dyn ClockSync) -> i64 {
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let own = m.clock().master_system_time();
     let master = sync.master_time(own).unwrap_or(own);
     let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
@@ -39,12 +38,12 @@ fn run(
     mut cal: Option<&mut GpioCalibration>,
 ) -> (f64, f64, Option<i64>) {
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut c = Correction::default();
     let (mut during, mut last, mut found) = (0.0, 0.0, None);
     for k in 0..4_000 {
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         c = m.clock().sync_step(sync, &mut st).unwrap();
         if (1_000..2_000).contains(&k) {
             during += true_error(m, sync) as f64 / 1e3;
@@ -120,11 +119,11 @@ fn steering_the_offset_the_calibration_leaves_the_sawtooth_alone() {
     let mut cal = GpioCalibration::new(0, host.gpio.unwrap().mean_ns as u64, 500);
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE);
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut sum, mut n, mut found) = (0.0, 0u32, None);
     for k in 0..2_000 {
         next += CYCLE;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         if (500..1_000).contains(&k) {
             found = found.or(cal.pulse(&mut m, &mut sync).unwrap());
@@ -132,7 +131,7 @@ fn steering_the_offset_the_calibration_leaves_the_sawtooth_alone() {
         // After the calibration, the true error at eight instants spread over the cycle.
         if k >= 1_500 {
             for j in 1..8 {
-                m.cyclic().io_mut().sleep_until(next + j * CYCLE / 8);
+                m.cyclic().sleep_until(next + j * CYCLE / 8);
                 sum += true_error(&mut m, &sync) as f64;
                 n += 1;
             }

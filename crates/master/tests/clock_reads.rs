@@ -97,16 +97,16 @@ fn mean_error<I: Simulated>(io: I) -> f64 {
     m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut c = Correction::default();
     let mut sum = 0.0;
     for k in 0..4_000 {
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         if k >= 2_000 {
             // The world's time first, then the master's clock at that same reading.
-            let t = m.cyclic().io_mut().now_ns();
+            let t = m.cyclic().now_ns();
             let own = m.clock().master_system_time_at(t);
             let master = sync.master_time(own).unwrap_or(own);
             let seg = m.io().segment();

@@ -1,5 +1,4 @@
 //! DC initialisation in virtual time, judged by the true clocks the simulator knows.
-use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, Stamps, VirtualIo};
@@ -38,7 +37,7 @@ fn init_dc_converges_and_starts_sync0_together() {
     m.states().bring_up().unwrap();
     let cfg = DcConfig { sync0_slaves: Some((0..6).collect()), ..DcConfig::default() };
     let r = m.dc().init_dc(&cfg).unwrap();
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     println!("{r:?}; true spread {} ns", spread_ns(&m, t));
     assert!(r.converged && r.static_frames < cfg.max_frames, "{r:?}");
     assert!(r.max_difference_ns <= 50);
@@ -51,9 +50,9 @@ fn init_dc_converges_and_starts_sync0_together() {
     for k in 0..1000 {
         m.cyclic().cycle().unwrap();
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         if k > 200 {
-            let now = m.cyclic().io_mut().now_ns();
+            let now = m.cyclic().now_ns();
             worst = worst.max(spread_ns(&m, now));
         }
     }
@@ -84,7 +83,7 @@ fn every_offset_moves_in_one_frame() {
         m.io().seg.nodes.iter().filter_map(|n| Some(n.esc.dc.as_ref()?.offset)).collect()
     };
     let offsets = read_offsets(&m);
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let spread = spread_ns(&m, t);
     let frames = m.cyclic().frame_stats().frames_sent;
     m.clock().shift_offsets(-5_000).unwrap();
@@ -92,7 +91,7 @@ fn every_offset_moves_in_one_frame() {
     let moved: Vec<i64> =
         read_offsets(&m).iter().zip(&offsets).map(|(new, old)| (new.wrapping_sub(*old) as u32) as i32 as i64).collect();
     assert_eq!(moved, [-5_000; 6]);
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     assert!(spread_ns(&m, t).abs_diff(spread) <= 20, "spread {spread} ns before, {} after", spread_ns(&m, t));
 }
 
@@ -106,7 +105,7 @@ fn init_dc_starts_sync1_after_sync0() {
     let r = m.dc().init_dc(&cfg).unwrap();
     let start = r.sync0_start.unwrap();
     // 50 ms after the first pulse (the start is `start_delay_ns` ahead).
-    let t = m.cyclic().io_mut().now_ns() + cfg.start_delay_ns + 50_000_000;
+    let t = m.cyclic().now_ns() + cfg.start_delay_ns + 50_000_000;
     for (k, n) in m.io().seg.nodes.iter().enumerate() {
         let dc = n.esc.dc.as_ref().unwrap();
         // Differences on the low 32 bits: the same for 32- and 64-bit DCs.
@@ -128,7 +127,7 @@ fn the_references_offset_gives_it_the_masters_time_at_the_latch() {
         // No static drift compensation to speak of: the reference free-runs from the latch.
         let cfg = DcConfig { max_frames: 1, sync0_slaves: Some(vec![]), ..DcConfig::default() };
         m.dc().init_dc(&cfg).unwrap();
-        let t = m.cyclic().io_mut().now_ns();
+        let t = m.cyclic().now_ns();
         let master = m.clock().master_system_time();
         let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let error = master.wrapping_sub(reference) as i64;
@@ -198,13 +197,13 @@ proptest::proptest! {
         }
         let r = m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
         proptest::prop_assert!(r.converged && r.max_difference_ns <= 50, "{r:?}");
-        let mut next = m.cyclic().io_mut().now_ns();
+        let mut next = m.cyclic().now_ns();
         for _ in 0..300 {
             m.cyclic().cycle().unwrap();
             next += 1_000_000;
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
         }
-        let t = m.cyclic().io_mut().now_ns();
+        let t = m.cyclic().now_ns();
         let spread = spread_ns(&m, t);
         proptest::prop_assert!(spread <= 100, "true spread {spread} ns");
     }
@@ -219,19 +218,19 @@ fn cycle_sync_sends_process_data_and_clock_sync_in_one_frame() {
     let mut sync = Ferrocat::new(Coupling::MasterFollowsReference, 1_000_000);
     let mut st = m.clock().sync_state().unwrap();
     let frames0 = m.io().seg.stats.frames;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..200 {
         let (wkc, c) = m.cyclic().cycle_sync(&mut sync, &mut st).unwrap();
         assert!(wkc > 0, "the process data answered");
         next += c.next_period_ns.expect("the master follows: a period every cycle");
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     // One frame per cycle, and the probes of the line while it was young.
     assert_eq!(m.io().seg.stats.frames - frames0 - st.probing.sent, 200, "one frame per cycle");
     assert!(st.probing.sent > 0 && st.probing.lost == 0, "{st:?}");
     assert_eq!((st.cycle, st.lost), (200, 0));
     // The master's clock, its line through the reference's times, within 1 µs of the reference.
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let own = m.clock().master_system_time();
     let mine = ferrocat_master::sync::ClockSync::master_time(&sync, own).expect("a line after 200 samples");
     let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
@@ -263,7 +262,7 @@ fn terminals_with_receive_times_only_are_placed_but_not_synchronised() {
     let monitored: Vec<u16> = m.dc().dc_differences().unwrap().iter().map(|&(p, _)| p).collect();
     assert_eq!(monitored, [0, 3]);
     // The slave behind the terminals follows the reference.
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let nodes = &m.io().seg.nodes;
     let (a, b) = (nodes[0].esc.dc.as_ref().unwrap().system_at(t), nodes[3].esc.dc.as_ref().unwrap().system_at(t));
     assert!((a as i64 - b as i64).abs() <= 100, "reference {a}, last slave {b}");

@@ -174,18 +174,17 @@ fn ip_cores_left_in_reverse_latch_mode() {
 /// Brings `m` up with DC and runs a second of 1 ms cycles: every DC slave's true system time
 /// within 100 ns of the reference's (32-bit DCs on their low 32 bits).
 fn synchronises(mut m: Master<VirtualIo>) {
-    use ferrocat_master::io::Io;
     m.states().bring_up().unwrap();
     let r = m.dc().init_dc(&ferrocat_master::DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut worst = 0i64;
     for k in 0..1000 {
         m.cyclic().cycle().unwrap();
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         if k > 200 {
-            let t = m.cyclic().io_mut().now_ns();
+            let t = m.cyclic().now_ns();
             // Slaves with receive times only (ET1200 terminals) have no system time to compare.
             let times: Vec<u32> = m.io().seg.system_times_at(t).iter().map(|&x| x as u32).collect();
             let d: Vec<i64> = times.iter().map(|&x| x.wrapping_sub(times[0]) as i32 as i64).collect();

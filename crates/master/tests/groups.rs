@@ -1,7 +1,6 @@
 //! Process-data groups on the virtual segment: each group's frame at its own rate with its own
 //! working-counter check, outputs and inputs through it, the clock sync behind the fastest.
 use ferrocat_esc::DigitalIo;
-use ferrocat_master::io::Io;
 use ferrocat_master::{Group, Master};
 use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
 
@@ -28,12 +27,12 @@ fn groups_run_at_their_own_rates_with_their_own_checks() {
         vec![0b0101];
     m.diagnosis().reset_cycle_stats();
     let before = m.diagnosis().plan_frame_stats();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for k in 0..400u64 {
         m.cyclic().set(out, k & 1);
         m.cyclic().cycle().unwrap();
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     let plan = m.config().plan().unwrap();
     // The fastest first; the slave in no group (the coupler, without process data) adds none.
@@ -82,11 +81,11 @@ fn the_clock_sync_rides_with_the_fastest_group() {
     let (mut sync, _, mut state) =
         m.clock().start_clock_sync(&dc, &ferrocat_master::sync::SyncMethod::default(), 1_000_000).unwrap();
     m.states().start().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..3000 {
         let (_, c) = m.cyclic().cycle_sync(sync.as_mut(), &mut state).unwrap();
         next += c.next_period_ns.unwrap_or(1_000_000);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     assert_eq!(state.lock.state().name(), "locked", "{:?}", state.lock.offset_ns());
     assert!(m.diagnosis().plan_frame_stats().iter().all(|s| s.short == 0), "{:?}", m.diagnosis().plan_frame_stats());

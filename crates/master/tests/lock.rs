@@ -19,12 +19,12 @@ fn io(seed: u64) -> VirtualIo {
 
 /// `cycles` cycles of `method` with the process data, returning the state after each.
 fn run<I: Io>(m: &mut Master<I>, sync: &mut dyn ClockSync, st: &mut SyncState, cycles: u64) -> Vec<LockState> {
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut period = CYCLE_NS;
     (0..cycles)
         .map(|_| {
             next += period;
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
             // A cycle whose slaves do not answer is an error after the sync frame's sample was
             // taken; an application cycles on.
             let c = m.cyclic().cycle_sync(sync, st).map(|(_, c)| c).unwrap_or_default();
@@ -54,7 +54,7 @@ fn the_default_method_locks_and_its_offset_matches_the_true_clocks() {
     println!("locked after {first_lock} cycles; offset {:?} ns", st.lock.offset_ns());
     assert!(states[first_lock..].iter().all(|&s| s == LockState::Locked), "left lock without a cause");
     // What the method believes against the reference's true time, now.
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let own = m.clock().master_system_time_at(t);
     let truth = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
     let error_ns = truth.wrapping_sub(sync.reference_belief_ns(own)) as i64;

@@ -3,7 +3,6 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use ferrocat_master::io::Io;
 use ferrocat_master::Master;
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -40,14 +39,14 @@ fn ten_thousand_cycles_allocate_nothing() {
     let out = m.image().output(1, "Output").unwrap();
     let inp = m.image().input(2, "Input").unwrap();
     let period = 1_000_000;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut run = |m: &mut Master<VirtualIo>, cycles: u64| {
         for k in 0..cycles {
             m.cyclic().set(out, k & 1);
             let _ = m.image().get(inp);
             m.cyclic().cycle().unwrap();
             next += period;
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
         }
     };
     run(&mut m, 200);
@@ -90,13 +89,13 @@ fn ten_thousand_cycles_allocate_nothing() {
     // image that mirrors the frame.
     let mut m = planned();
     let out = m.image().output(1, "Output").unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut cycles = |m: &mut Master<VirtualIo>, n: u64| {
         for k in 0..n {
             m.cyclic().set(out, k & 1);
             m.cyclic().cycle().unwrap();
             next += 1_000_000;
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
         }
     };
     cycles(&mut m, 200);
@@ -168,7 +167,7 @@ fn ring(events: &str) -> (Master<VirtualIo>, u64) {
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
     m.states().bring_up().unwrap();
     m.dc().init_dc(&ferrocat_master::DcConfig { sync0_slaves: Some(vec![]), ..Default::default() }).unwrap();
-    let now = m.cyclic().io_mut().now_ns();
+    let now = m.cyclic().now_ns();
     (m, now)
 }
 
@@ -177,7 +176,7 @@ fn run_cycles(m: &mut Master<VirtualIo>, next: &mut u64, cycles: u64) {
     for _ in 0..cycles {
         m.cyclic().cycle().unwrap();
         *next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(*next);
+        m.cyclic().sleep_until(*next);
     }
 }
 

@@ -1,7 +1,6 @@
 //! Faults during cyclic operation: 1 % frame loss, a slave power-cycled, a link pulled and
 //! restored. The exchange keeps running, each event is reported once naming the slave, and the
 //! slaves come back to OP without restarting the master.
-use ferrocat_master::io::Io;
 use ferrocat_master::{Health, Master, MasterEvent};
 use ferrocat_segment::{Event, SegmentConfig};
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -17,7 +16,7 @@ fn loss_power_cycle_and_link_pull() {
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 8));
     // Bring-up on a lossy segment: the engine retries non-cyclic frames.
     m.states().bring_up().unwrap();
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     let s = 1_000_000_000;
     m.cyclic().io_mut().seg.schedule(t0 + s, Event::PowerOff { node: 1 });
     m.cyclic().io_mut().seg.schedule(t0 + s + s / 2, Event::PowerOn { node: 1 });
@@ -29,13 +28,13 @@ fn loss_power_cycle_and_link_pull() {
     for k in 0..6000u64 {
         m.cyclic().set(out, k & 1);
         m.cyclic().cycle().unwrap();
-        let t_s = (m.cyclic().io_mut().now_ns() - t0) as f64 * 1e-9;
+        let t_s = (m.cyclic().now_ns() - t0) as f64 * 1e-9;
         for e in &m.diagnosis().events()[reported..] {
             println!("{t_s:7.3} s  {e}");
         }
         reported = m.diagnosis().events().len();
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     let st = m.diagnosis().cycle_stats();
     println!("{} cycles, {} lost frames, {} short working counters", st.cycles, st.lost_frames, st.wkc_errors);
@@ -106,10 +105,10 @@ fn a_frame_lost_while_starting_is_no_event() {
     m.states().bring_up().unwrap();
     assert_eq!(stage.get(), 2, "a cyclic frame was lost while starting");
     assert!(m.diagnosis().cycle_stats().lost_frames >= 1);
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     for k in 1..=100u64 {
         assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
-        m.cyclic().io_mut().sleep_until(t0 + k * 1_000_000);
+        m.cyclic().sleep_until(t0 + k * 1_000_000);
     }
     assert!(m.diagnosis().events().is_empty(), "{:?}", m.diagnosis().events());
     assert!(m.slaves().iter().all(|s| s.status().health() == Health::Operational && s.status().state() == AlState::Op));
@@ -128,13 +127,13 @@ fn shut_down_reaches_init_while_a_drive_is_on_its_way_back() {
     let dc = ferrocat_master::DcConfig { sync0_cycle_ns: 1_000_000, ..Default::default() };
     m.dc().init_dc(&dc).unwrap();
     m.states().start().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut left = false;
     for k in 0..400u64 {
         m.cyclic().cycle().unwrap();
         // Two stalls of 20 ms: the drive misses its outputs and leaves OP with 0x001A.
         next += if k == 100 || k == 300 { 20_000_000 } else { 1_000_000 };
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         left |= m.diagnosis().take_events().iter().any(|e| matches!(e, MasterEvent::LeftOp { .. }));
         if k > 300 && m.slaves()[1].status().state() != AlState::Op {
             break;

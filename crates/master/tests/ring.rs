@@ -4,7 +4,6 @@
 //! counter when a cable in the ring is pulled; and the split ring's far half keeps its clocks
 //! by holding over instead of taking a reference time a master round trip old, together behind
 //! its own first clock.
-use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master};
 use ferrocat_master::{RingState, SplitRingClocks};
 use ferrocat_segment::{Event, SegmentConfig};
@@ -51,7 +50,7 @@ fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<
     m.states().bring_up().unwrap();
     let r = m.dc().init_dc(&DcConfig::default()).unwrap();
     assert!(r.converged, "{r:?}");
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     m.cyclic().io_mut().seg.schedule(t0 + break_after * 1_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut after = Vec::new();
     let mut next = t0;
@@ -62,9 +61,9 @@ fn run_split(clocks: SplitRingClocks, cycles: u64, break_after: u64) -> (Master<
             "cycle {k}: the whole ring's working counter"
         );
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         if k > break_after {
-            let now = m.cyclic().io_mut().now_ns();
+            let now = m.cyclic().now_ns();
             let t = m.io().seg.system_times_at(now);
             after.push(t[1].wrapping_sub(t[0]) as i64);
         }
@@ -118,15 +117,15 @@ fn ferrocat_across_a_break(host: HostModel) -> [(f64, f64); 2] {
     m.dc().init_dc(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }).unwrap();
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, 1_000_000);
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     m.cyclic().io_mut().seg.schedule(next + 4_000_000_000, Event::LinkDown { node: 2, port: 0 });
     let mut errs = [(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
     for k in 0..8000u64 {
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         if k % 4000 >= 2000 {
-            let t = m.cyclic().io_mut().now_ns();
+            let t = m.cyclic().now_ns();
             let master = m.clock().master_system_time();
             let clocks = m.io().seg.system_times_at(t);
             let half = &mut errs[(k / 4000) as usize];
@@ -166,11 +165,11 @@ fn a_ring_broken_at_start_up_comes_up_whole() {
     assert_eq!(m.slaves().len(), 4);
     assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
     assert_eq!(m.dc().ring_port(), None);
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..100 {
         assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
         next += 1_000_000;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     assert_eq!(m.image().expected_wkc(), 4, "both EL2004s written");
 }
@@ -227,7 +226,7 @@ fn cycle_ring_every(
     m.dc().set_split_ring_clocks(clocks);
     m.states().bring_up().unwrap();
     assert!(m.dc().init_dc(&DcConfig::default()).unwrap().converged);
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     for (at, event) in events {
         m.cyclic().io_mut().seg.schedule(t0 + at, event.clone());
     }
@@ -235,8 +234,8 @@ fn cycle_ring_every(
     for k in 0..cycles {
         assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc(), "cycle {k}");
         next += cycle_ns;
-        m.cyclic().io_mut().sleep_until(next);
-        let now = m.cyclic().io_mut().now_ns();
+        m.cyclic().sleep_until(next);
+        let now = m.cyclic().now_ns();
         each(k, &m.io().seg.system_times_at(now));
     }
     m

@@ -1,6 +1,5 @@
 //! The cyclic synchronisation methods in virtual time, on the same segment and seed (paired),
 //! judged by the true clocks the simulator knows.
-use ferrocat_master::io::Io;
 use ferrocat_master::sync::{
     Chen2016, ClockSync, Conventional, Coupling, Ferrocat, FollowerDelays, LostFrames, Park2020, ProbeFrames, Probing,
     SoemPi, Steering,
@@ -44,7 +43,7 @@ fn segment_seeded(host: HostModel, seed: u64) -> Master<VirtualIo> {
 
 /// True error of slave `k`'s system time against the master's clock now (ns, low 32 bits).
 fn true_error(m: &mut Master<VirtualIo>, k: usize) -> i64 {
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     let master = m.clock().master_system_time() as u32;
     let slave = m.io().seg.nodes[k].esc.dc.as_ref().unwrap().system_at(t) as u32;
     slave.wrapping_sub(master) as i32 as i64
@@ -64,11 +63,11 @@ fn run_rfm(host: HostModel, make: impl FnOnce(&mut Master<VirtualIo>) -> Box<dyn
     let mut m = segment(host);
     let mut sync = make(&mut m);
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut r, mut l) = (Vec::new(), Vec::new());
     for k in 0..cycles {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(sync.as_mut(), &mut st).unwrap();
         if k >= cycles / 2 && k % 2 == 0 {
             r.push(true_error(&mut m, 0) as f64);
@@ -144,14 +143,14 @@ fn run_mfr(make: impl FnOnce() -> Box<dyn ClockSync>, cycles: u64, seed: u64) ->
     let mut m = segment_seeded(HostModel::pc_rt(), seed);
     let mut sync = make();
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut phases = Vec::new();
     for k in 0..cycles {
         let c = m.clock().sync_step(sync.as_mut(), &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         if k >= cycles / 2 {
-            let t = m.cyclic().io_mut().now_ns();
+            let t = m.cyclic().now_ns();
             let reft = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
             let mut p = (reft % CYCLE_NS) as f64;
             if p > CYCLE_NS as f64 / 2.0 {
@@ -214,11 +213,11 @@ fn rfm_start(steer_from_init: bool, cycles: u64) -> (i64, i64, ferrocat_master::
     let dc = DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() };
     let report = if steer_from_init { m.dc().init_dc_with(&dc, Some(&mut sync)) } else { m.dc().init_dc(&dc) }.unwrap();
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut spread, mut master) = (0i64, 0i64);
     for _ in 0..cycles {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         let r = true_error(&mut m, 0);
         master = master.max(r.abs());
@@ -263,7 +262,7 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
         sync.options_mut().probing = Probing::Off;
     }
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (step_at, cycles) = (12000, 13000);
     let (mut before, mut after, mut probes_before) = (Vec::new(), Vec::new(), 0);
     let mut settled_from = 0;
@@ -272,14 +271,14 @@ fn mfr_crystal_step_on(host: HostModel, probing: bool, every_cycle: bool) -> (f6
             settled_from = st.probing.sent;
         }
         if k == step_at {
-            let now = m.cyclic().io_mut().now_ns();
+            let now = m.cyclic().now_ns();
             m.cyclic().io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node: 0, delta_ppb: 50_000 });
             probes_before = st.probing.sent;
         }
         let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.cyclic().io_mut().sleep_until(next);
-        let t = m.cyclic().io_mut().now_ns();
+        m.cyclic().sleep_until(next);
+        let t = m.cyclic().now_ns();
         let own = m.clock().master_system_time();
         let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
         let e = sync.master_time(own).unwrap().wrapping_sub(reference) as i64 as f64;
@@ -338,7 +337,7 @@ fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
     sync.options_mut().lost_frames = if make_up { LostFrames::MakeUp } else { LostFrames::Wait };
     m.config().settings_mut().cyclic_timeout_ns = CYCLE_NS / 4;
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut prev, mut lost_before, mut jumps): (Option<i64>, u64, Vec<f64>) = (None, 0, Vec::new());
     for k in 0..3_000 {
         next += CYCLE_NS;
@@ -347,7 +346,7 @@ fn offset_steering_across_lost_frames(make_up: bool) -> (f64, u64, u64) {
             m.cyclic().io_mut().seg.schedule(next, down);
             m.cyclic().io_mut().seg.schedule(next + CYCLE_NS / 8, ferrocat_segment::Event::LinkUp { node: 0, port: 0 });
         }
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         // Just before the frame the reference has run on its crystal longest since its offset.
         let e = true_error(&mut m, 0);
         if let Some(p) = prev.filter(|_| st.lost > lost_before) {
@@ -384,15 +383,15 @@ fn sawtooth_top_after_probes(probes_steer: bool) -> (f64, f64, usize) {
     sync.options_mut().probes = if probes_steer { ProbeFrames::Steer } else { ProbeFrames::ReadOnly };
     sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut probed, mut quiet) = (Vec::new(), Vec::new());
     for k in 0..30_000 {
         let probes_before = st.probing.sent;
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         // Just before the next cycle's frame is built.
-        m.cyclic().io_mut().sleep_until(next + CYCLE_NS - 1_000);
+        m.cyclic().sleep_until(next + CYCLE_NS - 1_000);
         let e = true_error(&mut m, 0) as f64;
         if k >= 2_000 {
             if st.probing.sent > probes_before {
@@ -440,17 +439,17 @@ fn probes_of_a_cycle_that_woke_late_end_before_the_next_is_due() {
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let (mut latest_ns, mut probed) = (i64::MIN, 0);
     for _ in 0..300 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         let probes_before = st.probing.sent;
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         if st.probing.sent > probes_before {
             probed += 1;
             // How far past the next cycle's due time this one ended (negative: before it).
-            latest_ns = latest_ns.max(m.cyclic().io_mut().now_ns() as i64 - (next + CYCLE_NS) as i64);
+            latest_ns = latest_ns.max(m.cyclic().now_ns() as i64 - (next + CYCLE_NS) as i64);
         }
     }
     println!(
@@ -481,19 +480,19 @@ fn probes_end_within_the_cycle_on_a_slow_receive_path() {
     // Only the cycle's frame and its probes: no writes of the followers' delays between them.
     sync.options_mut().followers = FollowerDelays::Measured;
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut longest_ns = 0;
     for _ in 0..200 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         // When the cycle really began: late if the one before overran.
-        let began = m.cyclic().io_mut().now_ns();
+        let began = m.cyclic().now_ns();
         let probes_before = st.probing.sent;
         m.clock().sync_step(&mut sync, &mut st).unwrap();
         // A cycle whose own writes (an offset shift to every slave) took it past its end has
         // no room for probes; those that probed must have ended within a period.
         if st.probing.sent > probes_before {
-            longest_ns = longest_ns.max(m.cyclic().io_mut().now_ns() - began);
+            longest_ns = longest_ns.max(m.cyclic().now_ns() - began);
         }
     }
     assert!(st.probing.sent > 0, "the young line probes");
@@ -520,14 +519,14 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
     // direct line in use then never sees).
     m.dc().init_dc_with(&DcConfig { sync0_slaves: Some(vec![]), ..DcConfig::default() }, Some(&mut sync)).unwrap();
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let steps = [(12_000, 1), (32_000, 0)];
     let mut before = [Vec::new(), Vec::new()];
     let mut after = [Vec::new(), Vec::new()];
     for k in 0..33_000 {
         for (i, &(at, node)) in steps.iter().enumerate() {
             if k == at {
-                let now = m.cyclic().io_mut().now_ns();
+                let now = m.cyclic().now_ns();
                 m.cyclic().io_mut().seg.schedule(now, ferrocat_segment::Event::DriftStep { node, delta_ppb: 50_000 });
             }
             let e_slot = if k >= at && k < at + 1_000 {
@@ -538,7 +537,7 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
                 None
             };
             if let Some(v) = e_slot {
-                let t = m.cyclic().io_mut().now_ns();
+                let t = m.cyclic().now_ns();
                 let own = m.clock().master_system_time();
                 let reference = m.io().seg.nodes[0].esc.dc.as_ref().unwrap().system_at(t);
                 v.push(sync.master_time(own).map_or(0.0, |e| e.wrapping_sub(reference) as i64 as f64));
@@ -546,7 +545,7 @@ fn flywheel_two_steps(seed: u64) -> [(f64, f64); 2] {
         }
         let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap();
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     [0, 1].map(|i| {
         let mean = before[i].iter().sum::<f64>() / before[i].len() as f64;
@@ -611,13 +610,13 @@ fn flywheel_eps_line(host: HostModel, coupling: Coupling, cycles: u64) -> (f64, 
     let mut m = segment(host);
     let mut sync = Ferrocat::new(coupling, CYCLE_NS).with_flywheel();
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut pts = Vec::new();
     let (mut last, mut first) = (None, None);
     for _ in 0..cycles {
         let c = m.clock().sync_step(&mut sync, &mut st).unwrap();
         next += c.next_period_ns.unwrap_or(CYCLE_NS);
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         let e = sync.flywheel_eps();
         if e != last {
             let (reference_ns, eps_ns) = e.unwrap();
@@ -660,10 +659,10 @@ fn probes_in_budget(budget_ns: Option<u64>, cycles: u64) -> ferrocat_master::Syn
     let mut sync = Ferrocat::new(Coupling::ReferenceFollowsMaster, CYCLE_NS);
     let mut st = m.clock().sync_state().unwrap();
     st.probing.budget_ns = budget_ns;
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..cycles {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.clock().sync_step(&mut sync, &mut st).unwrap();
     }
     st
@@ -719,13 +718,13 @@ fn park_on_a_slow_segment(period_ns: u64) -> (u32, i64) {
     let offset_before = u64::from_le_bytes(m.io().seg.nodes[2].esc.peek(0x0920, 8).try_into().unwrap());
     m.cyclic().set_period_ns(period_ns);
     let mut st = m.clock().sync_state().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut late = 0;
     for _ in 0..1500 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.cyclic().cycle_sync(&mut sync, &mut st).unwrap();
-        late += (m.cyclic().io_mut().now_ns() > next + CYCLE_NS) as u32;
+        late += (m.cyclic().now_ns() > next + CYCLE_NS) as u32;
     }
     // How far Park's corrections moved the last clock's offset, from the simulator's register.
     let offset =
@@ -763,13 +762,13 @@ fn on_a_slow_segment_ferrocats_writes_ride_too() {
     let (mut sync, _, mut st) = m.clock().start_clock_sync(&dc, &method, CYCLE_NS).unwrap();
     m.states().start().unwrap();
     m.cyclic().set_period_ns(CYCLE_NS);
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let mut late = 0;
     for _ in 0..3000 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.cyclic().cycle_sync(sync.as_mut(), &mut st).unwrap();
-        late += (m.cyclic().io_mut().now_ns() > next + CYCLE_NS) as u32;
+        late += (m.cyclic().now_ns() > next + CYCLE_NS) as u32;
     }
     let errors: Vec<i64> = (0..3).map(|k| true_error(&mut m, k)).collect();
     println!("late cycles {late}; clocks − master {errors:?} ns; lock {:?}", st.lock.state());

@@ -3,7 +3,6 @@
 //! error (0x001A), one missed cycle does not, a limit of 0 (0x10F1:02 by SDO, or the segment
 //! file) turns the reaction off; the master reports the drive once and brings it back to OP.
 use ferrocat_esc::Cia402Drive;
-use ferrocat_master::io::Io;
 use ferrocat_master::{DcConfig, Master, MasterEvent, SyncFlags};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -24,11 +23,11 @@ fn in_op(extra: &str, setup: &[(u16, u8, Vec<u8>)], sync0: &[u16]) -> (Master<Vi
         toml::from_str(&format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'SERVO'\n{extra}")).unwrap();
     let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
     bring_up(&mut m, setup, sync0);
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..100 {
         m.cyclic().cycle().unwrap();
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     (m, next)
 }
@@ -55,11 +54,11 @@ fn bring_up(m: &mut Master<VirtualIo>, setup: &[(u16, u8, Vec<u8>)], sync0: &[u1
 fn gap(m: &mut Master<VirtualIo>, mut next: u64, missed: u64) -> Vec<MasterEvent> {
     let before = m.diagnosis().events().len();
     next += missed * CYCLE_NS;
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     for _ in 0..2000 {
         m.cyclic().cycle().unwrap();
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
     }
     m.diagnosis().events()[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
 }
@@ -73,7 +72,7 @@ fn three_cycles_without_process_data_are_a_sync_error_one_is_not() {
     let (mut m, next) = servo_in_op("", &[]);
     let events = gap(&mut m, next, 1);
     assert!(events.is_empty(), "one missed cycle: {events:?}");
-    let next = m.cyclic().io_mut().now_ns() + 1;
+    let next = m.cyclic().now_ns() + 1;
     let events = gap(&mut m, next, 3);
     let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
     assert!(
@@ -101,7 +100,7 @@ fn a_limit_of_zero_turns_the_reaction_off() {
     // the outputs' SM events wear it down), not ten.
     let (mut m, next) = servo_in_op("sync_error_limit = 9\n", &[]);
     assert!(gap(&mut m, next, 3).is_empty());
-    let next = m.cyclic().io_mut().now_ns() + 1;
+    let next = m.cyclic().now_ns() + 1;
     assert_eq!(gap(&mut m, next, 10).len(), 2);
 }
 
@@ -115,15 +114,15 @@ fn a_new_session_after_a_sync_error_gets_the_outputs_back() {
     let (mut m, mut next) = servo_in_op("", &[]);
     m.config().settings_mut().supervise_on_wkc = false;
     next += 4 * CYCLE_NS;
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     assert!(m.cyclic().cycle().unwrap() < m.image().expected_wkc());
     let seg = &m.io().seg;
     assert_eq!(seg.nodes[1].esc.al.code, AlStatusCode::SYNC_ERROR);
     bring_up(&mut m, &[], &[1]);
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     for _ in 0..100 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
     }
 }
@@ -150,15 +149,15 @@ fn sync0_switched_off_in_op_is_a_fatal_sync_error() {
     let (mut m, mut next) = servo_in_op("", &[]);
     let st = m.slaves()[1].station();
     m.cyclic().datagram(Command::FPWR, Address::Device { adp: st, ado: 0x0981 }, &mut [0]).unwrap();
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     let before = m.diagnosis().events().len();
     let mut left_after_ns = None;
     for _ in 0..20 {
         next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(next);
+        m.cyclic().sleep_until(next);
         m.cyclic().cycle().unwrap();
         if left_after_ns.is_none() && m.diagnosis().events().len() > before {
-            left_after_ns = Some(m.cyclic().io_mut().now_ns() - t0);
+            left_after_ns = Some(m.cyclic().now_ns() - t0);
         }
     }
     let text: Vec<String> = m.diagnosis().events()[before..].iter().map(|e| e.to_string()).collect();
@@ -196,7 +195,7 @@ fn cycles_with_diagnosis(m: &mut Master<VirtualIo>, next: &mut u64, n: usize) ->
         let _ = m.cyclic().cycle().unwrap();
         m.diagnosis().diagnose(*next + CYCLE_NS * 3 / 4, 5 * CYCLE_NS).unwrap();
         *next += CYCLE_NS;
-        m.cyclic().io_mut().sleep_until(*next);
+        m.cyclic().sleep_until(*next);
     }
     m.diagnosis().events()[before..].iter().filter(|e| !matches!(e, MasterEvent::Emergency { .. })).cloned().collect()
 }
@@ -220,7 +219,7 @@ fn diagnosis_reads_the_sync_error_flag_of_the_slaves_with_sync0() {
     );
     // Three cycles without process data: the drive's SM-event missed counter reaches its limit.
     next += 4 * CYCLE_NS;
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     let events = cycles_with_diagnosis(&mut m, &mut next, 50);
     let text: Vec<String> = events.iter().map(|e| e.to_string()).collect();
     assert!(events.iter().any(|e| matches!(e, MasterEvent::SyncError { position: 1, .. })), "{text:#?}");

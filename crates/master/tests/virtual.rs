@@ -298,16 +298,15 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
 /// takes it at its next power-on (not before, and not at a reload).
 #[test]
 fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
-    use ferrocat_master::io::Io;
     let mut m = coupler_and_output_scanned();
     assert_eq!(m.acyclic().sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
     m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0, "the register keeps its power-on value");
     assert!(m.slaves()[1].esc().eeprom_problem().is_none());
-    let t = m.cyclic().io_mut().now_ns();
+    let t = m.cyclic().now_ns();
     m.cyclic().io_mut().seg.schedule(t + 1_000_000, ferrocat_segment::Event::PowerOff { node: 1 });
     m.cyclic().io_mut().seg.schedule(t + 2_000_000, ferrocat_segment::Event::PowerOn { node: 1 });
-    m.cyclic().io_mut().sleep_until(t + 3_000_000);
+    m.cyclic().sleep_until(t + 3_000_000);
     m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0x0BAD);
     assert_eq!(m.states().enable_alias(1).unwrap(), 0x0BAD);
@@ -318,7 +317,6 @@ fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
 /// ESC runs unconfigured and stays in INIT, and the master says so at once, by name.
 #[test]
 fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
-    use ferrocat_master::io::Io;
     let m = coupler_and_output_scanned();
     let mut image = m.slaves()[1].sii().to_image();
     image[8] ^= 0x01;
@@ -334,14 +332,11 @@ fn a_slave_whose_eeprom_checksum_is_wrong_is_named_at_once() {
     assert!(problem.contains("checksum"), "{problem}");
     assert_eq!(m.slaves()[1].esc().eeprom_status & 0x1800, 0x1800, "checksum error, not loaded");
     assert!(m.slaves()[0].esc().eeprom_problem().is_none());
-    let t0 = m.cyclic().io_mut().now_ns();
+    let t0 = m.cyclic().now_ns();
     let e = m.states().bring_up().unwrap_err().to_string();
     println!("{e}");
     assert!(e.contains("slave 1 (EL2004)") && e.contains("checksum"), "{e}");
-    assert!(
-        m.cyclic().io_mut().now_ns() - t0 < m.config().settings().state_timeout_ns / 10,
-        "not after the state timeout"
-    );
+    assert!(m.cyclic().now_ns() - t0 < m.config().settings().state_timeout_ns / 10, "not after the state timeout");
 }
 
 /// The virtual host's NIC sends one frame at a time: of two frames handed over 1 µs apart, the

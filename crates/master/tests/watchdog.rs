@@ -3,7 +3,6 @@
 //! trigger (control bit 6, as the LAN9252 board's SII sets it), and a gap in the process data
 //! longer than it takes a firmware slave out of OP with 0x001B, where the ESC's default
 //! (100 ms) lets the same gap pass.
-use ferrocat_master::io::Io;
 use ferrocat_master::{ConfigError, Master, MasterError, MasterEvent};
 use ferrocat_segment::SegmentConfig;
 use ferrocat_segment::{HostModel, VirtualIo};
@@ -25,18 +24,18 @@ fn gap_after(watchdog_ns: Option<u64>, gap_ns: u64) -> (Master<VirtualIo>, Vec<M
     }
     m.states().configure().unwrap();
     m.states().start().unwrap();
-    let mut next = m.cyclic().io_mut().now_ns();
+    let mut next = m.cyclic().now_ns();
     let cycles = |m: &mut Master<VirtualIo>, next: &mut u64, n: usize| {
         for _ in 0..n {
             m.cyclic().cycle().unwrap();
             *next += CYCLE_NS;
-            m.cyclic().io_mut().sleep_until(*next);
+            m.cyclic().sleep_until(*next);
         }
     };
     cycles(&mut m, &mut next, 100);
     let before = m.diagnosis().events().len();
     next += gap_ns;
-    m.cyclic().io_mut().sleep_until(next);
+    m.cyclic().sleep_until(next);
     cycles(&mut m, &mut next, 200);
     let events = m.diagnosis().events()[before..].to_vec();
     (m, events)

@@ -411,7 +411,7 @@ fn slave_list<I: Io>(m: &Master<I>) -> Vec<SlaveInfo> {
                     Health::Lost => "lost",
                     Health::Recovering => "recovering",
                 }),
-                coe: s.mailbox().is_some() && s.mailbox().is_some_and(|mb| mb.has_coe()),
+                coe: s.mailbox().is_some_and(|mb| mb.has_coe()),
             }
         })
         .collect()

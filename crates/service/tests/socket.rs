@@ -8,7 +8,6 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use ferrocat_master::io::Io;
 use ferrocat_master::{Master, MasterEvent};
 use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
 use ferrocat_service::protocol::{ErrorKind, Hello};
@@ -67,7 +66,7 @@ fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
         let mut server =
             Server::start(ServerOptions { path: p, mode: 0o600, group: None, register_writes, hello }).unwrap();
         ready_tx.send(()).unwrap();
-        let mut next = m.cyclic().io_mut().now_ns();
+        let mut next = m.cyclic().now_ns();
         let mut short = 0;
         while !stop_loop.load(Ordering::Relaxed) {
             next += CYCLE_NS;
@@ -80,7 +79,7 @@ fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
                 taken.extend((0..events).map(|k| MasterEvent::Recovered { position: 1, name: format!("e{k}") }));
             }
             server.note_events(&taken, 0.5);
-            m.cyclic().io_mut().sleep_until(next);
+            m.cyclic().sleep_until(next);
             std::thread::sleep(std::time::Duration::from_micros(50));
         }
         (m.diagnosis().cycle_stats().cycles, short)
