@@ -263,16 +263,26 @@ impl Axis {
     pub fn feedback<I: Io>(&self, m: &Master<I>) -> Feedback {
         let image = m.image();
         let value = |h: Option<Handle>| h.map(|h| signed(image.get(h), h.bits));
-        let mode = self.h.mode_display.and_then(|h| Mode::from_code(image.get(h) as u8 as i8));
+        let mode = self.mode_display(m);
         Feedback {
             statusword: image.get(self.h.statusword) as u16,
             mode,
-            ready: self.state == Some(State::OperationEnabled) && mode.is_none_or(|d| d == self.mode),
+            ready: self.ready(mode),
             position: value(self.h.position_actual).map(|v| v as i32),
             velocity: value(self.h.velocity_actual).map(|v| v as i32),
             torque: value(self.h.torque_actual).map(|v| v as i16),
             following_error: value(self.h.following_error).map(|v| v as i32),
         }
+    }
+
+    /// The mode the drive says it runs (0x6061), where mapped.
+    fn mode_display<I: Io>(&self, m: &Master<I>) -> Option<Mode> {
+        self.h.mode_display.and_then(|h| Mode::from_code(m.image().get(h) as u8 as i8))
+    }
+
+    /// Operation enabled in the wanted mode, as far as `shown` (the mode display) tells.
+    fn ready(&self, shown: Option<Mode>) -> bool {
+        self.state == Some(State::OperationEnabled) && shown.is_none_or(|d| d == self.mode)
     }
 
     /// Writes one of the axis's outputs into the image (where it is mapped; the next cycle
@@ -314,7 +324,7 @@ impl Axis {
             self.cycles_in_state += 1;
         }
         self.state = state;
-        let holding = !self.feedback(m).ready;
+        let holding = !self.ready(self.mode_display(m));
         if holding {
             // Until the drive runs in the wanted mode, command what it is doing now: no jump.
             if let Some(p) = self.feedback(m).position {

@@ -370,26 +370,23 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
     }
 }
 
+/// The handle of the first of `entries` named `name`.
+fn handle_named(entries: &[crate::slave::Mapped], name: &str) -> Option<Handle> {
+    entries.iter().find(|m| m.name == name).map(|m| Handle { bit: m.image_bit, bits: m.bits })
+}
+
 impl<'a, I: Io> crate::master::part::Image<'a, I> {
     /// The handle of an output entry of slave `position` by its name (first match).
     pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.m.slave(position)?;
-        s.mapping
-            .outputs
-            .iter()
-            .find(|m| m.name == name)
-            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+        handle_named(&s.mapping.outputs, name)
             .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoOutput(name.into())))
     }
 
     /// The handle of an input entry of slave `position` by its name (first match).
     pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.m.slave(position)?;
-        s.mapping
-            .inputs
-            .iter()
-            .find(|m| m.name == name)
-            .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+        handle_named(&s.mapping.inputs, name)
             .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoInput(name.into())))
     }
 
