@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark, iproute2, iputils-ping and libcap2-bin from Debian, pysoem and kickcat from PyPI into
-# .venv, cargo-nextest and cargo-fuzz from crates.io), then checks formatting, clippy, the API
+# (tshark, iproute2, iputils-ping and libcap2-bin from Debian, pysoem, kickcat and pytest from PyPI
+# into .venv with ferrocat's own Python package built from python/, cargo-nextest and cargo-fuzz
+# from crates.io), then checks formatting, clippy, the API
 # docs, `cargo package` and the Debian package, runs every fuzz target for a bounded time, and
 # last the unit, property and integration tests with nextest (so that the run ends on the test
 # summary). The live tests (cli/tests/*_live.rs) need root; without it they are skipped.
@@ -45,6 +46,10 @@ if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem, kickcat' 2
   python3 -m venv .venv
   .venv/bin/pip install -q --disable-pip-version-check pysoem 'kickcat>=2.5'
 fi
+# The Python package (python/, PyO3 + maturin) is built and installed into .venv on every run,
+# so that it cannot rot: pip fetches maturin and cargo builds the extension (python/target).
+log "building the Python package (pip install ./python) and pytest into .venv"
+.venv/bin/pip install -q --disable-pip-version-check pytest ./python
 export FERROCAT_PYTHON="$(pwd)/.venv/bin/python"
 # The masters the tests start keep their locks, control sockets and shared images in a
 # directory of the run's own (docs/service.md), not in /run/ferrocat.
@@ -103,6 +108,11 @@ segdeps=$(cargo tree -p ferrocat-segment -e normal --prefix none --format '{p}' 
 for banned in ferrocat-link io-uring; do
   if grep -qx "$banned" <<<"$segdeps"; then echo "ferrocat-segment depends on $banned"; exit 1; fi
 done
+log "the Python package's crate: rustfmt and clippy (its own workspace)"
+cargo fmt --manifest-path python/Cargo.toml -- --check
+if cargo clippy --version >/dev/null 2>&1; then
+  cargo clippy --manifest-path python/Cargo.toml --quiet -- -D warnings
+fi
 log "cargo doc (warnings are errors: broken intra-doc links)"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --quiet
 log "doctests (nextest runs none)"
@@ -155,6 +165,9 @@ if [ "$FUZZ_SECONDS" != 0 ]; then
     rm -f "$out"
   done
 fi
+
+log "the Python package's tests (pytest, virtual time; its live tests are crates/cli/tests/python_live.rs)"
+.venv/bin/python -m pytest -q python/tests
 
 # Tests last, so that the run closes on nextest's summary.
 log "tests (cargo nextest)"

@@ -4,7 +4,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{bail, Context};
-use ferrocat_master::sync::{ClockSync, Coupling, SyncMethod};
+use ferrocat_master::sync::{ClockSync, Coupling, Sync0Plan, SyncMethod};
 use ferrocat_master::{Master, SyncState};
 use serde_json::json;
 
@@ -677,32 +677,6 @@ impl Sync0Passage {
     }
 }
 
-/// Where SYNC0 falls in the master's cycle.
-#[derive(Debug, Clone, Copy)]
-struct Sync0Plan {
-    /// SYNC0 after the cycle's start on the grid, ns.
-    shift_ns: u64,
-    /// Where the frames should pass the reference, after the SYNC0 before, ns.
-    aimed_ns: u64,
-}
-
-impl Sync0Plan {
-    /// SYNC0 half a cycle from the frame's passage of the reference unless `shift_us` says
-    /// where: a method that steers the master's phase aims the passage at the grid itself; the
-    /// others send the frame on the grid, and it passes half the segment's round trip later (measured now, the median of 16): on a segment whose master link is long,
-    /// SYNC0 half a cycle after the departure would come soon after the passage.
-    fn new(method: &SyncMethod, cycle_ns: u64, round_trip_ns: u64, shift_us: Option<u64>) -> Self {
-        // SOEM's PI loop and ferrocat following the reference aim the passage (at phase 0);
-        // the others send on the grid (chen2016 and `none` from their first frame on).
-        let aims_passage = matches!(method, SyncMethod::Pi { .. })
-            || (method.is_ferrocat() && method.coupling() == Coupling::MasterFollowsReference);
-        let lead_ns = if aims_passage { 0 } else { round_trip_ns / 2 };
-        let shift_ns = shift_us.map_or((cycle_ns / 2 + lead_ns) % cycle_ns, |us| us * 1000);
-        let aimed_ns = (lead_ns as i128 - shift_ns as i128).rem_euclid(cycle_ns as i128) as u64;
-        Sync0Plan { shift_ns, aimed_ns }
-    }
-}
-
 /// `ferrocat run --dc`'s settings.
 pub struct DcOptions {
     /// The static drift compensation's frames at most.
@@ -873,7 +847,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         let name = d.sync.as_str();
         let method = SyncMethod::preset(name, Coupling::ReferenceFollowsMaster)
             .with_context(|| format!("--sync {name}: not a method ({})", SyncMethod::PRESETS.join(", ")))?;
-        let plan = Sync0Plan::new(&method, cycle_us * 1000, round_trip_ns, d.sync0_shift_us);
+        let plan = Sync0Plan::new(&method, cycle_us * 1000, round_trip_ns, d.sync0_shift_us.map(|us| us * 1000));
         // In PREOP, before SAFEOP: delays, offsets, static drift compensation, SYNC0.
         // The SII's choice of SYNC0 slaves, with a description's `sync0` over it.
         let sync0_slaves = (!d.sync0_overrides.is_empty()).then(|| {

@@ -38,6 +38,11 @@ struct Msg {
     data: [u8; RX_LEN],
 }
 
+// SAFETY: the header's pointers point into the same boxed allocation (its vector, address,
+// control and data), which moves with it; nothing else is shared. A master may so run its
+// cycles in a thread of their own.
+unsafe impl Send for Msg {}
+
 impl Msg {
     fn new() -> Box<Msg> {
         // SAFETY: every field is plain data for which all-zero bytes are a valid value.
@@ -253,7 +258,9 @@ impl UringSocket {
                     if let Some(b) = self.tx_busy.get_mut(slot as usize) {
                         *b = false;
                     }
-                    if res < 0 && self.send_error.is_none() {
+                    // A send cancelled with the thread that submitted it (below) is a frame
+                    // lost, which the master's retries cover, not a broken link.
+                    if res < 0 && res != -libc::ECANCELED && self.send_error.is_none() {
                         self.send_error = Some(io::Error::from_raw_os_error(-res));
                     }
                 }
@@ -284,6 +291,10 @@ impl UringSocket {
                     Ok(Some(frame)) => return Ok(Some(frame)),
                     Ok(None) => self.truncated += 1,
                     Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted) => {}
+                    // io_uring cancels a task's requests when the thread that submitted them
+                    // exits: the socket went on in another thread (an application's cyclic
+                    // thread ended), and the receive is armed again from this one.
+                    Err(e) if e.raw_os_error() == Some(libc::ECANCELED) => {}
                     Err(e) => return Err(e),
                 }
                 continue;

@@ -114,3 +114,35 @@ fn frames_and_stamps_cross_the_ring_and_a_frame_too_long_is_counted_not_cut() {
     assert!(monotonic_ns() >= deadline);
     assert!(ring.sleeps() >= 1);
 }
+
+/// An io_uring socket whose receive was armed by a thread that has since ended (an
+/// application's cyclic thread, stopped): the kernel cancels that thread's requests, and the
+/// socket goes on receiving in the thread that uses it now.
+#[test]
+fn an_io_uring_socket_outlives_the_thread_that_armed_its_receive() {
+    let pair = Pair::new("u");
+    let Ok(mut uring) = ferrocat_link::UringSocket::new(pair.open(0)) else {
+        eprintln!("SKIPPED: this kernel gives no io_uring");
+        return;
+    };
+    let plain = pair.open(1);
+    let mut buf = vec![0u8; 2048];
+    // Armed and left waiting by another thread, which ends.
+    uring = std::thread::spawn(move || {
+        let mut b = vec![0u8; 2048];
+        assert!(uring.recv(&mut b, monotonic_ns() + 1_000_000).unwrap().is_none());
+        uring
+    })
+    .join()
+    .unwrap();
+    plain.send(&frame(60, 9)).unwrap();
+    let (n, _) =
+        uring.recv(&mut buf, monotonic_ns() + 500_000_000).unwrap().expect("the frame, after the thread ended");
+    assert_eq!(&buf[..n], &frame(60, 9)[..]);
+    // Sending works from here too.
+    uring.send(&frame(60, 10)).unwrap();
+    uring.flush().unwrap();
+    plain.set_timeout_ns(500_000_000).unwrap();
+    let (n, _) = plain.recv_stamped(&mut buf).unwrap().expect("the frame sent after the thread ended");
+    assert_eq!(&buf[..n], &frame(60, 10)[..]);
+}

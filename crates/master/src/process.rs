@@ -370,20 +370,34 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
     }
 }
 
-/// The handle of the first of `entries` named `name`.
+/// The handle of the first of `entries` named `name`, or of the entry `INDEX:SUB` in hex
+/// (`0x7010:01`, `7010:1`): entries of one slave often share a name (each channel's `Output`).
 fn handle_named(entries: &[crate::slave::Mapped], name: &str) -> Option<Handle> {
-    entries.iter().find(|m| m.name == name).map(|m| Handle { bit: m.image_bit, bits: m.bits })
+    let by_index = index_subindex(name);
+    entries
+        .iter()
+        .find(|m| m.name == name || by_index == Some((m.index, m.subindex)))
+        .map(|m| Handle { bit: m.image_bit, bits: m.bits })
+}
+
+/// `0xIIII:SS` or `IIII:SS`, both hex.
+fn index_subindex(name: &str) -> Option<(u16, u8)> {
+    let (i, s) = name.trim().split_once(':')?;
+    let hex = |t: &str| t.trim().trim_start_matches("0x").trim_start_matches("0X").to_string();
+    Some((u16::from_str_radix(&hex(i), 16).ok()?, u8::from_str_radix(&hex(s), 16).ok()?))
 }
 
 impl<'a, I: Io> crate::master::part::Image<'a, I> {
-    /// The handle of an output entry of slave `position` by its name (first match).
+    /// The handle of an output entry of slave `position` by its name (first match) or its
+    /// `INDEX:SUB` in hex (`0x7010:01`).
     pub fn output(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.m.slave(position)?;
         handle_named(&s.mapping.outputs, name)
             .ok_or_else(|| MasterError::of(position, &s.name, crate::error::SlaveError::NoOutput(name.into())))
     }
 
-    /// The handle of an input entry of slave `position` by its name (first match).
+    /// The handle of an input entry of slave `position` by its name (first match) or its
+    /// `INDEX:SUB` in hex (`0x6000:01`).
     pub fn input(&self, position: u16, name: &str) -> Result<Handle> {
         let s = self.m.slave(position)?;
         handle_named(&s.mapping.inputs, name)
@@ -400,5 +414,23 @@ impl<'a, I: Io> crate::master::part::Image<'a, I> {
             }
         }
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{handle_named, index_subindex};
+    use crate::slave::Mapped;
+
+    #[test]
+    fn entries_sharing_a_name_are_told_apart_by_index() {
+        let e = |index, bit| Mapped { index, subindex: 1, bits: 1, name: "Output".into(), image_bit: bit };
+        let entries = [e(0x7000, 0), e(0x7010, 1)];
+        assert_eq!(handle_named(&entries, "Output").map(|h| h.bit), Some(0), "a name: the first");
+        assert_eq!(handle_named(&entries, "0x7010:01").map(|h| h.bit), Some(1));
+        assert_eq!(handle_named(&entries, "7010:1").map(|h| h.bit), Some(1));
+        assert_eq!(handle_named(&entries, "0x7020:01"), None);
+        assert_eq!(index_subindex("Channel 1:Output"), None);
+        assert_eq!(index_subindex("0x10000:1"), None, "past 16 bits");
     }
 }

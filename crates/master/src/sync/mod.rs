@@ -10,6 +10,7 @@ mod lock;
 mod park2020;
 mod pi;
 mod state;
+mod sync0_plan;
 
 pub use chen2016::Chen2016;
 pub use config::{FerrocatSettings, SyncMethod};
@@ -23,6 +24,7 @@ pub use lock::{Lock, LockState, LockThresholds};
 pub use park2020::Park2020;
 pub use pi::SoemPi;
 pub use state::{ProbeStats, SyncState};
+pub use sync0_plan::Sync0Plan;
 
 /// The longest cycle a method accepts: SYNC0's cycle register (0x09A0) is 32 bits of ns.
 pub const MAX_CYCLE_NS: u64 = u32::MAX as u64;
@@ -175,7 +177,8 @@ impl Default for CyclePlan {
 }
 
 /// A clock-synchronisation method, as linuxptp's servos: each cycle the master hands it what the frame measured and carries out the [`Correction`] it returns.
-pub trait ClockSync {
+/// `Send`, so that an application may run its cycles in a thread of their own.
+pub trait ClockSync: Send {
     /// The method's name (a [`SyncMethod::PRESETS`] family).
     fn name(&self) -> &'static str;
     /// Who follows whom under it.
