@@ -95,7 +95,17 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 fn run(state: &Mutex<State>, stop: &AtomicBool, stats: &Mutex<LoopStats>, rx: &mpsc::Receiver<(Request, Reply)>) {
     let mut waiting: Vec<(RequestId, Reply)> = Vec::new();
-    let mut next = lock(state).next_ns;
+    // The first cycle on the grid from now: the real-time set-up (locking a Python process's
+    // memory takes tens of ms) and the thread's start took time since the last cycle, which
+    // is no lateness of the loop's.
+    let mut next = {
+        let mut s = lock(state);
+        let (now, period) = (ferrocat_link::monotonic_ns(), s.cycle_ns.max(1));
+        if s.next_ns < now {
+            s.next_ns += (now - s.next_ns).div_ceil(period) * period;
+        }
+        s.next_ns
+    };
     while !stop.load(Ordering::Relaxed) {
         // The sleep outside the lock: Python reads and writes the image meanwhile.
         let planned = next;

@@ -80,6 +80,15 @@ impl Segment {
         Ok(Self::wrap(build(cfg, seed)?))
     }
 
+    /// The machine a ferrocat machine description (TOML, docs/machine.md) describes: each
+    /// slave's `device`, in order.
+    #[staticmethod]
+    #[pyo3(signature = (path, seed = None))]
+    fn from_machine(path: std::path::PathBuf, seed: Option<u64>) -> PyResult<Self> {
+        let cfg = SegmentConfig::from_machine(&path).map_err(error::other)?;
+        Ok(Self::wrap(build(cfg, seed)?))
+    }
+
     /// The devices' names, in line order.
     #[getter]
     fn devices(&self) -> PyResult<Vec<String>> {

@@ -1,5 +1,6 @@
 """The master against the virtual segment in virtual time: scan, states, SDO, SII, the image
 by name, DC lock, faults, determinism, errors, and that the GIL is released."""
+import os
 import threading
 import time
 
@@ -247,3 +248,25 @@ def test_state_requests_step_a_slave_and_come_back():
         m.request_state("sleepy")
     m.shut_down()
     assert [m.segment.device_state(n) for n in range(4)] == ["init"] * 4
+
+
+def test_segments_from_a_machine_description_and_an_eni(tmp_path):
+    desc = tmp_path / "bench.toml"
+    desc.write_text(
+        'name = "bench"\n'
+        '[[slave]]\nname = "coupler"\nvendor = 2\nproduct = 0x044c2c52\ndevice = "EK1100"\n'
+        '[[slave]]\nname = "axis"\nvendor = 0\nproduct = 0x402\ndevice = "SERVO"\n'
+    )
+    seg = ferrocat.Segment.from_machine(desc, seed=2)
+    assert len(seg.devices) == 2
+    m = ferrocat.Master.virtual(seg)
+    assert [(s.vendor_id, s.product_code) for s in m.scan()] == [(2, 0x044C2C52), (0, 0x402)]
+    (tmp_path / "empty.toml").write_text('name = "nothing"\n')
+    with pytest.raises(ferrocat.Error, match="names no slave"):
+        ferrocat.Segment.from_machine(tmp_path / "empty.toml")
+    (tmp_path / "nodevice.toml").write_text('[[slave]]\nname = "x"\nvendor = 2\nproduct = 1\n')
+    with pytest.raises(ferrocat.Error, match="no `device = …`"):
+        ferrocat.Segment.from_machine(tmp_path / "nodevice.toml")
+    eni = os.path.join(os.path.dirname(__file__), "../../crates/machine/tests/data/ferrocat_lenient.eni.xml")
+    m = ferrocat.Master.virtual(ferrocat.Segment.from_eni(eni))
+    assert len(m.scan()) >= 1

@@ -46,35 +46,9 @@ fn eoe_tap(seg: &mut Segment, spec: &str) -> anyhow::Result<ferrocat_sim::serve:
     Ok(ferrocat_sim::serve::EoeTap { node, tap, to_host: 0, from_host: 0, dropped: 0 })
 }
 
-/// The segment a machine description describes: each slave's `device` (as `--device` takes
-/// it, paths from the description's folder), in order.
+/// The segment a machine description describes (`SegmentConfig::from_machine`), with `seed`.
 pub fn machine_segment(path: &Path, seed: Option<u64>) -> anyhow::Result<SegmentConfig> {
-    let m = crate::eni::read_machine(path)?;
-    if m.slaves.is_empty() {
-        bail!("{}: the description names no slave", path.display());
-    }
-    let devices = m
-        .slaves
-        .iter()
-        .enumerate()
-        .map(|(k, s)| {
-            s.device.clone().with_context(|| {
-                format!(
-                    "{}: slave {k} ('{}') has no `device = …` to simulate (an ESI file with :PRODUCT, an EEPROM dump or a built-in name)",
-                    path.display(),
-                    s.name
-                )
-            })
-        })
-        .collect::<anyhow::Result<Vec<String>>>()?;
-    let mut cfg = SegmentConfig::from_device_args(&devices).with_context(|| format!("{}", path.display()))?;
-    // The description's modules plugged into an ESI device that names none of its own.
-    for (d, s) in cfg.devices.iter_mut().zip(&m.slaves) {
-        if let (Some(mods), true, None) = (&s.modules, d.esi.is_some(), &d.modules) {
-            d.modules = Some(mods.iter().map(|i| ferrocat_segment::Number::Text(format!("{i:#x}"))).collect());
-        }
-    }
-    cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut cfg = SegmentConfig::from_machine(path)?;
     cfg.seed = seed.unwrap_or(0);
     Ok(cfg)
 }

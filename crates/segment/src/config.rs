@@ -483,6 +483,41 @@ impl SegmentConfig {
         Ok(cfg)
     }
 
+    /// The segment a machine description (docs/machine.md) describes: each slave's `device`
+    /// (as `--device` takes it, paths from the description's folder), in order, with the
+    /// description's modules plugged into an ESI device that names none of its own.
+    pub fn from_machine(path: &Path) -> Result<Self, SegmentError> {
+        let text = std::fs::read_to_string(path).map_err(|reason| SegmentError::Io { path: path.into(), reason })?;
+        let m = ferrocat_machine::Machine::parse(&text)
+            .map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })?;
+        if m.slaves.is_empty() {
+            return Err(SegmentError::Parse { path: path.into(), message: "the description names no slave".into() });
+        }
+        let devices = m
+            .slaves
+            .iter()
+            .enumerate()
+            .map(|(k, s)| {
+                s.device.clone().ok_or_else(|| SegmentError::Parse {
+                    path: path.into(),
+                    message: format!(
+                        "slave {k} ('{}') has no `device = …` to simulate (an ESI file with :PRODUCT, an EEPROM dump or a built-in name)",
+                        s.name
+                    ),
+                })
+            })
+            .collect::<Result<Vec<String>, _>>()?;
+        let mut cfg = SegmentConfig::from_device_args(&devices)
+            .map_err(|e| SegmentError::Parse { path: path.into(), message: e.to_string() })?;
+        for (d, s) in cfg.devices.iter_mut().zip(&m.slaves) {
+            if let (Some(mods), true, None) = (&s.modules, d.esi.is_some(), &d.modules) {
+                d.modules = Some(mods.iter().map(|i| Number::Text(format!("{i:#x}"))).collect());
+            }
+        }
+        cfg.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Ok(cfg)
+    }
+
     /// Builds the segment: loads every device, wires the topology, draws oscillators.
     pub fn build(&self) -> Result<Segment, SegmentError> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5EED_05C1);
