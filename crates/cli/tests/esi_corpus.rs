@@ -32,14 +32,12 @@ fn needs_shared_the_files_once_refused_are_read() {
 /// The types that do not reach OP, each with the reason docs/esi-corpus.md names: the EK1960
 /// TwinSAFE controllers place a second output SyncManager (SM6, 4 bytes at 0x2FF4, its own
 /// sync unit) that the master does not configure, so their firmware refuses SAFEOP with
-/// 0x001D; the AX2000-B110 is an SoE drive, whose process data the master cannot configure
-/// without SoE (0x001E).
-const KNOWN: [(&str, &str, &str); 5] = [
+/// 0x001D.
+const KNOWN: [(&str, &str, &str); 4] = [
     ("Beckhoff EKx9xx.xml", "EK1960-0000", "0x001d"),
     ("Beckhoff EKx9xx.xml", "EK1960-0008", "0x001d"),
     ("Beckhoff EKx9xx.xml", "EK1960-2600", "0x001d"),
     ("Beckhoff EKx9xx.xml", "EK1960-2608", "0x001d"),
-    ("Beckhoff AX2xxx.xml", "AX2000-B110", "0x001e"),
 ];
 
 /// `ferrocat run --dc` of an EK1100 and `devices` on the embedded segment: whether every slave
@@ -137,4 +135,28 @@ fn a_terminal_whose_sync_managers_pass_1_kb_gets_an_esc_that_holds_them() {
     assert!(ferrocat(&["sdo", "read", "1", "0x1018:1"]).contains("3c 0f 00 00"), "the vendor id 0xF3C");
     let esc_type = ferrocat(&["reg", "read", "1", "0x0000", "1"]);
     assert_eq!(esc_type.trim(), "11", "ESC type 0x0000");
+}
+
+/// A drive whose inputs' SyncManager is in mailbox mode (one buffer, control byte 0x22: our
+/// `ferrocat_single_buffer_inputs.xml`, as Beckhoff's AX2000-B110 describes its inputs): the
+/// master configures the mode the file gives, the device takes it (it refused SAFEOP with
+/// 0x001E when it wanted three buffers), every working counter is whole, and the drive's
+/// statusword arrives through the one buffer.
+#[test]
+fn a_drive_whose_inputs_are_single_buffered_reaches_op_and_its_inputs_arrive() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../esi/tests/data/ferrocat_single_buffer_inputs.xml");
+    let (good, said) = run_to_op(&path, &["FC-DRIVE-1BUF"]);
+    assert!(good, "{said}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--device", "EK1100", "--seconds", "0.1", "--no-control", "--show", "1:Statusword"])
+        .arg("--device")
+        .arg(format!("{}:FC-DRIVE-1BUF", path.display()))
+        .output()
+        .unwrap();
+    let (said, err) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{err}");
+    // CiA402's SWITCH ON DISABLED (0x0040 with the drive's remote bit 0x0200), not the zeros of
+    // a buffer never handed over.
+    assert!(said.contains("1:Statusword = 576 (0x240)"), "{said}{err}");
 }

@@ -35,12 +35,13 @@ impl Pdi<'_> {
     pub fn process_mailbox_len(&self) -> usize {
         self.sm(1).length as usize
     }
-    /// The SyncManager whose control byte says "ECAT writes, buffered" (outputs) or "ECAT
-    /// reads, buffered" (inputs), among the first `count`.
+    /// The SyncManager of the outputs ("ECAT writes") or the inputs ("ECAT reads") among the
+    /// first `count`: a buffered one, or from SM2 on one in mailbox mode (one buffer, as the
+    /// AX2000's ESI has its inputs), SM0 and SM1 being a mailbox device's mailbox (ETG.1000.4).
     pub fn process_data_sm(&self, outputs: bool, count: u8) -> Option<(u8, SyncManager)> {
         (0..count)
             .map(|n| (n, self.sm(n)))
-            .find(|(_, s)| s.enabled() && !s.is_mailbox() && s.length > 0 && s.ecat_writes() == outputs)
+            .find(|(n, s)| s.enabled() && (*n >= 2 || !s.is_mailbox()) && s.length > 0 && s.ecat_writes() == outputs)
     }
 }
 

@@ -56,7 +56,13 @@ impl Esc {
                         let good = if *len == 0 {
                             !s.enabled() || s.length == 0
                         } else {
-                            s.enabled() && s.length == *len && s.ecat_writes() == outputs && !s.is_mailbox()
+                            // In the operation mode the device describes: most buffer their
+                            // process data (three buffers), some hand it over in one (mailbox
+                            // mode: the AX2000's inputs, control byte 0x22 in its ESI).
+                            s.enabled()
+                                && s.length == *len
+                                && s.ecat_writes() == outputs
+                                && s.is_mailbox() == (e.control & 0b11 == SyncManager::MODE_MAILBOX)
                         };
                         if !good {
                             return Err(if outputs {

@@ -23,6 +23,7 @@ impl Esc {
         if matches!(self.al.state, AlState::SafeOp | AlState::Op) {
             let mut pdi = Pdi { mem: &mut self.mem, now_ns: self.now_ns };
             self.app.sample_inputs(&mut pdi);
+            self.hand_over_single_buffer_inputs();
         }
         if self.eeprom.busy(self.now_ns) != self.sii_busy_shown {
             self.refresh_registers();
@@ -212,6 +213,21 @@ impl Esc {
             }
         }
         Some(self.mem[a as usize])
+    }
+
+    /// Inputs in a SyncManager of mailbox mode (one buffer, from SM2 on: the AX2000's ESI has
+    /// its inputs so): the firmware's last inputs are handed over whenever the master has read
+    /// the buffer, so that each frame finds it full. No capture of such a device is at hand;
+    /// the datasheets' mailbox rules (a read of an empty buffer is not counted) apply.
+    fn hand_over_single_buffer_inputs(&mut self) {
+        for n in 2..self.config.sm_count {
+            let s = self.sm(n);
+            if s.enabled() && s.is_mailbox() && !s.ecat_writes() && s.length > 0 && !self.sms[n as usize].full {
+                self.sms[n as usize].full = true;
+                self.sms[n as usize].int_write = true;
+                self.put_sm_status(n);
+            }
+        }
     }
 
     pub(super) fn read(&mut self, ado: u16, data: &mut [u8], or: bool) -> bool {
