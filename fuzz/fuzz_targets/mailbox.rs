@@ -3,8 +3,11 @@
 //! FoE; as a sequence of FoE requests (split at 0xFF bytes) to the simulated file server,
 //! whose every reply must decode; and as a sequence of EoE messages (split at 0xFE bytes) to
 //! the simulated EoE endpoint, whose every reply must decode, fit the mailbox and, in
-//! fragments, put together into whole frames.
-use ferrocat_esc::{EoeServer, FoeServer};
+//! fragments, put together into whole frames; and as a sequence of SoE requests (split at 0xFD
+//! bytes) to the simulated drive, whose every reply must decode and fit the mailbox.
+use ferrocat_esc::{EoeServer, FoeServer, SoeServer};
+use ferrocat_wire::register::AlState;
+use ferrocat_wire::soe::{self, SoeHeader};
 use ferrocat_wire::coe::{self, CoeMessage, Sdo, SdoInfo};
 use ferrocat_wire::eoe::{frame_type, EoeHeader, Reassembler};
 use ferrocat_wire::foe::Foe;
@@ -29,6 +32,15 @@ fuzz_target!(|data: &[u8]| {
                 frames.push(&h, &reply[4..]).expect("the endpoint's fragments fit together");
             }
         }
+    }
+    let mut drive = SoeServer::one_drive("fuzz");
+    let state = [AlState::PreOp, AlState::SafeOp, AlState::Op][data.first().map_or(0, |&b| b as usize % 3)];
+    for request in data.split(|&b| b == 0xFD) {
+        for reply in drive.handle(request, 30, state) {
+            assert!(reply.len() + 6 <= 30, "an SoE reply longer than the mailbox");
+            SoeHeader::parse(&reply).expect("the drive's reply decodes");
+        }
+        let _ = soe::list_items(request);
     }
     let Ok(m) = Mailbox::parse(data) else { return };
     if let Ok(f) = Foe::parse(m.payload) {

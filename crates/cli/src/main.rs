@@ -22,6 +22,7 @@ mod report;
 mod service_cmd;
 mod sii;
 mod sim;
+mod soe_cmd;
 mod target;
 mod timing_stats;
 mod values;
@@ -196,6 +197,11 @@ enum Command {
     Sdo {
         #[command(subcommand)]
         action: SdoCmd,
+    },
+    /// Read, write or list a servo drive's IDNs by SoE (S-0-0030, P-0-0001 …).
+    Soe {
+        #[command(subcommand)]
+        action: soe_cmd::SoeCmd,
     },
     /// Read or write a file of a slave by FoE (firmware, parameter sets), in PREOP or BOOT.
     Foe {
@@ -756,6 +762,7 @@ fn main() -> ExitCode {
             }
             SdoCmd::List { position, target } => master_cmd::sdo(&target, position, master_cmd::SdoAction::List),
         },
+        Command::Soe { action } => soe_cmd::run(action),
         Command::Foe { action } => match action {
             FoeCmd::Read { position, name, file, password, max_bytes, boot, target } => {
                 let action = master_cmd::FoeAction::Read { file, max_bytes };

@@ -575,7 +575,7 @@ pub fn sii_write(
     };
     std::fs::write(&backup, &before).with_context(|| format!("writing the backup {}", backup.display()))?;
     eprintln!("slave {position}'s EEPROM as it was ({} bytes) is in {}", before.len(), backup.display());
-    let words = m.acyclic().sii_write(position, &img)?;
+    let words = m.acyclic().sii().write(position, &img)?;
     // Read back (the master reloads and reads the SII after writing) and compared.
     let after = m.slaves().at(position)?.sii().to_image();
     let used = data_len.min(after.len());
@@ -597,7 +597,7 @@ pub fn sii_alias(t: &Target, position: u16, alias: &str) -> anyhow::Result<ExitC
         .with_context(|| format!("alias '{alias}' is not a 16-bit number"))?;
     let mut m = t.master()?;
     t.scan(&mut m)?;
-    let words = m.acyclic().sii_set_alias(position, value)?;
+    let words = m.acyclic().sii().set_alias(position, value)?;
     let name = &m.slaves()[position as usize].name();
     eprintln!(
         "slave {position} ({name}): alias {value:#06x} in its EEPROM ({words} words written); \

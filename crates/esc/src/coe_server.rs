@@ -68,6 +68,8 @@ pub struct CoeDevice {
     pub foe: Option<FoeServer>,
     /// The EoE endpoint, where the SII names EoE among the mailbox protocols.
     pub eoe: Option<EoeServer>,
+    /// The SoE service channel, where the SII names SoE among the mailbox protocols.
+    pub soe: Option<crate::SoeServer>,
 }
 
 /// A mapped entry of the process image.
@@ -92,6 +94,7 @@ impl CoeDevice {
             sdo_requests: 0,
             foe: None,
             eoe: None,
+            soe: None,
         }
     }
 
@@ -525,6 +528,16 @@ impl Application for CoeDevice {
             let max_len = pdi.process_mailbox_len().saturating_sub(MBX_HEADER);
             let bodies = self.eoe.as_mut()?.handle(m.payload, max_len);
             let mut msgs: VecDeque<Vec<u8>> = bodies.iter().map(|b| self.typed_message(MailboxType::EOE, b)).collect();
+            let first = msgs.pop_front().unwrap_or_default();
+            self.queue.extend(msgs);
+            return Some(first);
+        }
+        if m.header.mailbox_type == MailboxType::SOE {
+            let in_len = pdi.process_mailbox_len();
+            let state = self.state;
+            let bodies = self.soe.as_mut()?.handle(m.payload, in_len, state);
+            let mut msgs: VecDeque<Vec<u8>> = bodies.iter().map(|b| self.typed_message(MailboxType::SOE, b)).collect();
+            // A fragment of a write is taken without a reply (an empty one: handled).
             let first = msgs.pop_front().unwrap_or_default();
             self.queue.extend(msgs);
             return Some(first);

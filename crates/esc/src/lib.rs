@@ -17,6 +17,7 @@ mod foe_server;
 pub mod od;
 mod rate_table;
 mod regs;
+mod soe_server;
 mod sync_monitor;
 
 pub use al::AlMachine;
@@ -27,4 +28,5 @@ pub use drive::{Cia402Drive, DriveAxis, DriveStats, MotorParams, ProcessingTime,
 pub use eoe_server::EoeServer;
 pub use esc::{Esc, FrameTiming, LinkState, MailboxResponse, SyncLog};
 pub use foe_server::FoeServer;
+pub use soe_server::{standard_idns, IdnEntry, SoeServer};
 pub use sync_monitor::{SmSyncMonitor, DEFAULT_SYNC_ERROR_LIMIT};

@@ -142,6 +142,16 @@ pub enum SlaveError {
     /// A CiA402 drive's process data or state.
     #[error("{0}")]
     Cia402(Cia402Error),
+    /// An SoE drive refused a read or write of an IDN.
+    #[error("SoE {idn} (drive {drive}): {error}")]
+    Soe {
+        /// The IDN.
+        idn: ferrocat_wire::soe::Idn,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// The drive's error code.
+        error: ferrocat_wire::soe::SoeError,
+    },
 }
 
 /// Where an SDO the configuration sends came from.

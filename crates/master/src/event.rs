@@ -43,6 +43,22 @@ pub enum MasterEvent {
         /// The manufacturer-specific bytes.
         data: [u8; 5],
     },
+    /// An SoE drive's own message (ETG.1000.6 §5.8): a notification that an IDN's element
+    /// changed, or an emergency (its diagnosis).
+    Soe {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// An emergency, else a notification.
+        emergency: bool,
+        /// The IDN the message names.
+        idn: ferrocat_wire::soe::Idn,
+        /// What it carries.
+        data: Vec<u8>,
+    },
     /// A mapped TxPDO State entry was found set: the slave says those inputs are invalid.
     InputsInvalid {
         /// Position on the segment.
@@ -116,6 +132,16 @@ impl std::fmt::Display for MasterEvent {
                     "slave {position} ({name}): emergency {error_code:#06x} ({}), error register {error_register:#04x}, data {data:02x?}",
                     ferrocat_wire::coe::emergency_text(*error_code)
                 )
+            }
+            MasterEvent::Soe { position, name, drive, emergency, idn, data } => {
+                let text = String::from_utf8_lossy(data);
+                let shown = if !data.is_empty() && text.chars().all(|c| !c.is_control()) {
+                    format!("\"{text}\"")
+                } else {
+                    format!("{data:02x?}")
+                };
+                let what = if *emergency { "emergency" } else { "notification" };
+                write!(f, "slave {position} ({name}) drive {drive}: SoE {what} for {idn}: {shown}")
             }
             MasterEvent::InputsInvalid { position, name, entry } => {
                 write!(f, "slave {position} ({name}): {entry} set: the slave says those inputs are invalid")

@@ -66,6 +66,7 @@ mod rtt_weight;
 mod sdo_transfer;
 mod settings;
 mod slave;
+mod soe;
 pub mod sync;
 mod topology;
 pub mod trajectory;
@@ -97,10 +98,11 @@ pub use foe::Foe;
 pub use handle::Handle;
 pub use master::part;
 pub use master::{
-    Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Group, Image, Master, SplitLatch, States, STATION_BASE,
+    Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Eeprom, Group, Image, Master, SplitLatch, States, STATION_BASE,
 };
 pub use settings::Settings;
 pub use slave::{
     DcInfo, EscInfo, Health, Identity, MailboxConfig, Mapped, Mapping, Ports, Setup, Slave, Slaves, Status,
 };
+pub use soe::{IdnDescription, Soe};
 pub use sync::SyncState;

@@ -180,6 +180,22 @@ impl<I: Io> Mailboxes<'_, I> {
                 return Ok(Polled::Taken);
             }
         }
+        if mbx.header.mailbox_type == MailboxType::SOE {
+            if let Ok(h) = ferrocat_wire::soe::SoeHeader::parse(mbx.payload) {
+                use ferrocat_wire::soe::opcode;
+                if matches!(h.opcode, opcode::NOTIFICATION | opcode::EMERGENCY) {
+                    self.push_event(MasterEvent::Soe {
+                        position,
+                        name,
+                        drive: h.drive,
+                        emergency: h.opcode == opcode::EMERGENCY,
+                        idn: ferrocat_wire::soe::Idn(h.idn),
+                        data: mbx.payload[ferrocat_wire::soe::HEADER_LEN..].to_vec(),
+                    });
+                    return Ok(Polled::Taken);
+                }
+            }
+        }
         if mbx.header.mailbox_type == MailboxType::EOE && self.take_eoe_fragment(position, mbx.payload) {
             return Ok(Polled::Taken);
         }

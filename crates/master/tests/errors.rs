@@ -47,7 +47,7 @@ fn an_image_with_more_data_than_the_eeprom_is_refused_before_any_write() {
     let size = m.slaves()[0].sii().header.eeprom_size_bytes();
     img.resize(size + 2, 0xFF);
     img[size] = 0;
-    match m.acyclic().sii_write(0, &img).unwrap_err() {
+    match m.acyclic().sii().write(0, &img).unwrap_err() {
         MasterError::Slave { error: SlaveError::EepromTooSmall { image, eeprom }, .. } => {
             assert_eq!((image, eeprom), (size + 1, size))
         }
@@ -55,7 +55,7 @@ fn an_image_with_more_data_than_the_eeprom_is_refused_before_any_write() {
     }
     // Padding (0xFF) past the end is no data: the image is written up to the EEPROM's end.
     img[size] = 0xFF;
-    m.acyclic().sii_write(0, &img).unwrap();
+    m.acyclic().sii().write(0, &img).unwrap();
 }
 
 #[test]

@@ -282,16 +282,16 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
     assert_eq!(info.header.station_alias, 0);
     info.header.station_alias = 0x0321;
     let mut image = info.to_image();
-    let e = m.acyclic().sii_write(1, &image).unwrap_err().to_string();
+    let e = m.acyclic().sii().write(1, &image).unwrap_err().to_string();
     assert!(e.contains("header CRC"), "a stale CRC is refused: {e}");
     image[14] = ferrocat_wire::sii::header_crc(&image);
     // The alias word and the header CRC word differ; nothing else.
-    assert_eq!(m.acyclic().sii_write(1, &image).unwrap(), 2);
+    assert_eq!(m.acyclic().sii().write(1, &image).unwrap(), 2);
     assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321);
     m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].sii().header.station_alias, 0x0321, "what a new scan reads from the EEPROM");
     assert_eq!(m.slaves()[1].name(), "EL2004");
-    assert_eq!(m.acyclic().sii_write(1, &image).unwrap(), 0, "the same image again writes nothing");
+    assert_eq!(m.acyclic().sii().write(1, &image).unwrap(), 0, "the same image again writes nothing");
 }
 
 /// IgH's `ethercat alias`: the alias goes into EEPROM word 4 with the checksum, and the ESC
@@ -299,7 +299,7 @@ fn sii_write_programs_only_changed_words_and_reads_back() {
 #[test]
 fn an_alias_written_to_the_eeprom_is_taken_at_the_next_power_on() {
     let mut m = coupler_and_output_scanned();
-    assert_eq!(m.acyclic().sii_set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
+    assert_eq!(m.acyclic().sii().set_alias(1, 0x0BAD).unwrap(), 2, "words 4 and 7");
     m.states().scan().unwrap();
     assert_eq!(m.slaves()[1].alias(), 0, "the register keeps its power-on value");
     assert!(m.slaves()[1].esc().eeprom_problem().is_none());

@@ -661,6 +661,14 @@ impl SegmentConfig {
             // So is EoE: an endpoint with no address until the master sets one.
             let eoe = (coe && info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::EOE != 0)
                 .then(ferrocat_esc::EoeServer::default);
+            // And SoE: a drive's service channel with the standard IDNs.
+            let soe =
+                (coe && info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::SOE != 0).then(|| {
+                    ferrocat_esc::SoeServer::one_drive(&format!(
+                        "{} (ferrocat simulation)",
+                        info.name().unwrap_or_else(|| String::from("SoE drive"))
+                    ))
+                });
             // The dictionary is built once, for CoE devices only.
             let od = coe.then(|| match &esi_dev {
                 Some(dev) => {
@@ -706,6 +714,7 @@ impl SegmentConfig {
                     drive.set_switches(switches(d, &place)?);
                     drive.coe.foe = foe;
                     drive.coe.eoe = eoe;
+                    drive.coe.soe = soe;
                     Box::new(drive)
                 }
                 (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
@@ -713,6 +722,7 @@ impl SegmentConfig {
                     let mut dev = CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic));
                     dev.foe = foe;
                     dev.eoe = eoe;
+                    dev.soe = soe;
                     Box::new(dev)
                 }
                 (None, None) if info.header.mailbox_rx_size > 0 => Box::new(NoApplication),

@@ -187,6 +187,7 @@ impl Server {
                 E::Lost { position, .. } => ("lost", Some(*position)),
                 E::Recovered { position, .. } => ("recovered", Some(*position)),
                 E::Emergency { position, .. } => ("emergency", Some(*position)),
+                E::Soe { position, .. } => ("soe", Some(*position)),
                 E::SyncError { position, .. } => ("sync_error", Some(*position)),
                 E::InputsInvalid { position, .. } => ("inputs_invalid", Some(*position)),
                 E::InputsStale { position, .. } => ("inputs_stale", Some(*position)),

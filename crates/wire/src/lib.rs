@@ -28,6 +28,7 @@ pub mod inet;
 pub mod mailbox;
 pub mod register;
 pub mod sii;
+pub mod soe;
 
 pub use datagram::{Address, Command, Datagram, DatagramHeader};
 pub use error::{Error, Result};

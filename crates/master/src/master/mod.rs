@@ -30,6 +30,7 @@ use crate::event::MasterEvent;
 use crate::settings::Settings;
 pub use groups::Group;
 pub use part::{Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Image, States};
+pub use sii::Eeprom;
 pub use split_start::SplitLatch;
 
 /// First station address; slave k gets `STATION_BASE + k` (SOEM's convention).

@@ -150,20 +150,32 @@ fn sii_complete(img: &[u8]) -> bool {
     }
 }
 
+/// A slave's EEPROM, programmed through its ESC (see [`Acyclic::sii`](crate::part::Acyclic::sii)).
+pub struct Eeprom<'a, I: Io> {
+    m: &'a mut Master<I>,
+}
+
 impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
+    /// The slaves' EEPROMs: an image programmed, an alias set.
+    pub fn sii(self) -> Eeprom<'a, I> {
+        Eeprom { m: self.m }
+    }
+}
+
+impl<I: Io> Eeprom<'_, I> {
     /// Writes a configured station alias into the slave's EEPROM: word 4 and, with it, the
     /// checksum word 7 (as IgH's `ethercat alias` does). The ESC takes an alias from its
     /// EEPROM only at power-on, never at a reload. Returns the number of words written.
-    pub fn sii_set_alias(&mut self, position: u16, alias: u16) -> Result<usize> {
+    pub fn set_alias(&mut self, position: u16, alias: u16) -> Result<usize> {
         let mut image = self.m.slave(position)?.sii.to_image();
         image[8..10].copy_from_slice(&alias.to_le_bytes());
         image[14] = ferrocat_wire::sii::header_crc(&image);
-        self.m.acyclic().sii_write(position, &image)
+        self.write(position, &image)
     }
 
     /// Programs the slave's EEPROM with `image`, word by word where it differs, and reloads it.
     /// Returns the number of words written.
-    pub fn sii_write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
+    pub fn write(&mut self, position: u16, image: &[u8]) -> Result<usize> {
         // An ESC does not load a header whose CRC is wrong: refuse to brick the slave.
         if image.len() < 16 {
             return Err(ConfigError::SiiImageTooShort(image.len()).into());

@@ -1,0 +1,60 @@
+//! `ferrocat soe read|write|list` on the embedded virtual segment, against the simulated drive
+//! of our `ferrocat_soe_drive.xml`: values shown as their attributes say, written back,
+//! refused with the drive's words, and the IDN given as S-0-…/P-0-… or refused with what to
+//! give.
+use std::process::Command;
+
+fn soe(args: &[&str]) -> (bool, String, String) {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .arg("soe")
+        .args(args)
+        .args(["--device", "EK1100", "--device", &format!("{esi}:FC-SOE-DRIVE")])
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn an_idn_is_read_written_and_listed() {
+    let (ok, out, err) = soe(&["read", "1", "S-0-0030"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "\"ferrocat SoE drive (ferrocat simulation)\"");
+    let (ok, out, err) = soe(&["read", "1", "P-0-0001", "--element", "all"]);
+    assert!(ok, "{err}");
+    for line in ["P-0-0001  Gain", "unit      %", "min       0", "max       1000", "value     100"] {
+        assert!(out.contains(line), "{line:?} in {out}");
+    }
+    let (ok, out, err) = soe(&["read", "1", "0x0010"]);
+    assert!(ok && out.trim() == "S-0-0135, S-0-0051", "{out}{err}");
+    // Written in one run (each run is a fresh segment): the drive took it.
+    let (ok, _, err) = soe(&["write", "1", "P-0-0001", "250"]);
+    assert!(ok && err.contains("wrote 2 byte(s) to P-0-0001"), "{err}");
+    let (ok, out, err) = soe(&["list", "1"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.lines().any(|l| l.starts_with("S-0-0016  Configuration list of AT") && l.ends_with("S-0-0135, S-0-0051")),
+        "{out}"
+    );
+    assert_eq!(out.lines().count(), 11, "{out}");
+}
+
+#[test]
+fn the_drive_s_refusals_and_bad_idns_are_errors_that_say_so() {
+    let (ok, _, err) = soe(&["write", "1", "P-0-0001", "1001"]);
+    assert!(!ok && err.contains("SoE error 0x7007 (operation data is greater than the maximum)"), "{err}");
+    let (ok, _, err) = soe(&["write", "1", "P-0-0001", "70000"]);
+    assert!(!ok && err.contains("out of range for 2 bytes"), "{err}");
+    let (ok, _, err) = soe(&["read", "1", "S-0-0999"]);
+    assert!(!ok && err.contains("SoE error 0x1001 (no IDN)"), "{err}");
+    let (ok, _, err) = soe(&["read", "1", "Q-0-0001"]);
+    assert!(!ok && err.contains("IDN 'Q-0-0001': give S-SET-BLOCK or P-SET-BLOCK"), "{err}");
+    let (ok, _, err) = soe(&["read", "1", "S-0-0001", "--element", "colour"]);
+    assert!(!ok && err.contains("--element 'colour': give data-state, name, attribute"), "{err}");
+    let (ok, _, err) = soe(&["read", "0", "S-0-0001"]);
+    assert!(!ok && err.contains("slave 0 (EK1100): has no mailbox"), "{err}");
+}
