@@ -6,7 +6,7 @@ it against, from Python.
     m = ferrocat.Master.virtual(seg)          # or Master.open("eth0"), Master.udp("host:port")
     for s in m.bring_up(cycle_us=1000, dc=True):
         print(s.position, s.name, s.state)
-    m.set(1, "Output 1", 1)
+    m.set(1, "0x7000:01", 1)               # the EL2004's first output
     m.run(100)                                # 100 cycles, 0.1 s of the segment's time
 
 The master's work runs in Rust with the GIL released. Errors are `ferrocat.Error` (an SDO

@@ -73,6 +73,10 @@ impl SegmentView {
     fn true_offset_ns(&self, py: Python<'_>) -> PyResult<Option<i64>> {
         let m = self.master.borrow(py);
         let mut s = m.lock();
+        // Before DC the master's clock is not the segment's system time.
+        if s.sync.is_none() {
+            return Ok(None);
+        }
         let now = s.m.cyclic().now_ns();
         let master_time = s.m.clock().master_system_time_at(now);
         let v = s.m.cyclic().io_mut().virtual_io().ok_or_else(|| error::text("not a virtual segment"))?;

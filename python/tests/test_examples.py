@@ -44,3 +44,14 @@ def test_two_drives_csp():
         moved = int(l.split("moved ")[1].split(" ")[0])
         assert abs(moved - 65536) <= 16, l
         assert "OperationEnabled" in l
+
+
+def test_the_python_snippets_of_the_readme_and_docs_run():
+    root = os.path.dirname(os.path.dirname(EXAMPLES))
+    blocks = []
+    for doc in ["README.md", "docs/python.md"]:
+        text = open(os.path.join(root, doc), encoding="utf-8").read()
+        blocks += [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
+    assert len(blocks) >= 2
+    for code in blocks:
+        exec(compile(code, "<snippet>", "exec"), {})

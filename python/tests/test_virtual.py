@@ -126,6 +126,9 @@ def test_sii_is_the_device_s_eeprom():
 
 def test_dc_locks_and_the_true_offset_is_small():
     m = virtual(["EK1100", "SERVO", "SERVO"])
+    m.bring_up(cycle_us=1000)
+    assert m.segment.true_offset_ns() is None and m.clock_sync() is None, "no DC yet"
+    m = virtual(["EK1100", "SERVO", "SERVO"])
     m.bring_up(cycle_us=1000, dc=True, sync="ferrocat")
     m.run(1000)
     cs = m.clock_sync()
