@@ -70,34 +70,79 @@ fn idn_arg(text: &str) -> anyhow::Result<Idn> {
     })
 }
 
+/// Where the reads and writes go: a running master's socket (between its cycles), or a master
+/// of this command's own.
+trait SoeAccess {
+    fn read(&mut self, position: u16, drive: u8, idn: Idn, elements: Elements) -> anyhow::Result<Vec<u8>>;
+    fn write(&mut self, position: u16, drive: u8, idn: Idn, data: &[u8]) -> anyhow::Result<()>;
+}
+
+impl SoeAccess for ferrocat_master::Master<crate::target::CliIo> {
+    fn read(&mut self, position: u16, drive: u8, idn: Idn, elements: Elements) -> anyhow::Result<Vec<u8>> {
+        Ok(self.acyclic().soe().read(position, drive, idn, elements)?)
+    }
+    fn write(&mut self, position: u16, drive: u8, idn: Idn, data: &[u8]) -> anyhow::Result<()> {
+        Ok(self.acyclic().soe().write(position, drive, idn, Elements::VALUE, data)?)
+    }
+}
+
+impl SoeAccess for ferrocat_service::Client {
+    fn read(&mut self, position: u16, drive: u8, idn: Idn, elements: Elements) -> anyhow::Result<Vec<u8>> {
+        Ok(self.soe_read(position, drive, idn.0, elements.0)?)
+    }
+    fn write(&mut self, position: u16, drive: u8, idn: Idn, data: &[u8]) -> anyhow::Result<()> {
+        Ok(self.soe_write(position, drive, idn.0, Elements::VALUE.0, data)?)
+    }
+}
+
 pub fn run(cmd: SoeCmd) -> anyhow::Result<ExitCode> {
     let target = match &cmd {
         SoeCmd::Read { target, .. } | SoeCmd::Write { target, .. } | SoeCmd::List { target, .. } => target,
     };
-    if target.running_master()?.is_some() {
-        bail!("SoE through a running master's control socket is not offered yet: stop that master for `ferrocat soe`");
+    if let Some(mut c) = target.running_master()? {
+        soe_with(&mut c, cmd)?;
+        return Ok(ExitCode::SUCCESS);
     }
     let mut m = target.master()?;
     target.scan(&mut m)?;
     // PREOP: the mailbox set up.
     m.states().configure()?;
+    soe_with(&mut m, cmd)?;
+    finish(m)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// An element the drive may lack: `None` where it says so (an SoE error, in the words of
+/// either path: the master's own error or the running master's reply carrying it), else what
+/// it sent.
+fn optional(a: &mut dyn SoeAccess, position: u16, drive: u8, idn: Idn, e: Elements) -> anyhow::Result<Option<Vec<u8>>> {
+    match a.read(position, drive, idn, e) {
+        Ok(v) => Ok(Some(v)),
+        Err(err) if err.to_string().contains("SoE error 0x") => Ok(None),
+        Err(err) => Err(err),
+    }
+}
+
+fn soe_with(a: &mut dyn SoeAccess, cmd: SoeCmd) -> anyhow::Result<()> {
     match cmd {
         SoeCmd::Read { position, idn, drive, element, .. } => {
             let idn = idn_arg(&idn)?;
             if element == "all" {
-                let d = m.acyclic().soe().describe(position, drive, idn)?;
-                outln!("{idn}  {}", d.name.as_deref().unwrap_or("(no name)"));
-                outln!("  attribute {:#010x}: {}", d.attribute.0, attribute_text(d.attribute));
-                if let Some(u) = &d.unit {
-                    outln!("  unit      {u}");
+                let attr = read_attribute(a, position, drive, idn)?;
+                let name = optional(a, position, drive, idn, Elements::NAME)?.map(|v| text(&v));
+                outln!("{idn}  {}", name.as_deref().unwrap_or("(no name)"));
+                outln!("  attribute {:#010x}: {}", attr.0, attribute_text(attr));
+                if let Some(u) = optional(a, position, drive, idn, Elements::UNIT)? {
+                    outln!("  unit      {}", text(&u));
                 }
-                if let Some(v) = &d.min {
-                    outln!("  min       {}", show(d.attribute, v));
+                if matches!(attr.length(), ValueLength::Fixed(_)) {
+                    for (e, label) in [(Elements::MIN, "min"), (Elements::MAX, "max")] {
+                        if let Some(v) = optional(a, position, drive, idn, e)? {
+                            outln!("  {label:<9} {}", show(attr, &v));
+                        }
+                    }
                 }
-                if let Some(v) = &d.max {
-                    outln!("  max       {}", show(d.attribute, v));
-                }
-                outln!("  value     {}", show(d.attribute, &d.value));
+                outln!("  value     {}", show(attr, &a.read(position, drive, idn, Elements::VALUE)?));
             } else {
                 let e = Elements::by_name(&element).with_context(|| {
                     format!(
@@ -105,16 +150,15 @@ pub fn run(cmd: SoeCmd) -> anyhow::Result<ExitCode> {
                         Elements::NAMES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
                     )
                 })?;
-                let v = m.acyclic().soe().read(position, drive, idn, e)?;
+                let v = a.read(position, drive, idn, e)?;
                 let shown = match e {
                     Elements::VALUE | Elements::MIN | Elements::MAX | Elements::DEFAULT => {
-                        let a = read_attribute(&mut m, position, drive, idn)?;
-                        show(a, &v)
+                        show(read_attribute(a, position, drive, idn)?, &v)
                     }
                     Elements::NAME | Elements::UNIT => text(&v),
                     Elements::ATTRIBUTE => {
-                        let a = attribute_of(&v)?;
-                        format!("{:#010x}: {}", a.0, attribute_text(a))
+                        let at = attribute_of(&v)?;
+                        format!("{:#010x}: {}", at.0, attribute_text(at))
                     }
                     _ => hex(&v),
                 };
@@ -126,36 +170,30 @@ pub fn run(cmd: SoeCmd) -> anyhow::Result<ExitCode> {
             let bytes = if raw {
                 ferrocat_service::protocol::unhex(&value).map_err(|e| anyhow::anyhow!("VALUE {e}"))?
             } else {
-                let a = read_attribute(&mut m, position, drive, idn)?;
-                encode(a, &value).with_context(|| format!("VALUE '{value}' for {idn} ({})", attribute_text(a)))?
+                let at = read_attribute(a, position, drive, idn)?;
+                encode(at, &value).with_context(|| format!("VALUE '{value}' for {idn} ({})", attribute_text(at)))?
             };
-            m.acyclic().soe().write(position, drive, idn, Elements::VALUE, &bytes)?;
+            a.write(position, drive, idn, &bytes)?;
             eprintln!("wrote {} byte(s) to {idn} of slave {position} drive {drive}", bytes.len());
         }
         SoeCmd::List { position, drive, .. } => {
-            let all = m.acyclic().soe().idn_list(position, drive, Idn::ALL_IDNS)?;
-            for idn in all {
-                let d = m.acyclic().soe().describe(position, drive, idn)?;
-                outln!(
-                    "{idn}  {:<32}  {}{}",
-                    d.name.as_deref().unwrap_or(""),
-                    show(d.attribute, &d.value),
-                    d.unit.as_deref().map_or(String::new(), |u| format!(" {u}"))
-                );
+            let all = a.read(position, drive, Idn::ALL_IDNS, Elements::VALUE)?;
+            let (items, _) = soe::list_items(&all).context("S-0-0017, the list of every IDN")?;
+            let idns: Vec<Idn> = items.chunks_exact(2).map(|c| Idn(u16::from_le_bytes([c[0], c[1]]))).collect();
+            for idn in idns {
+                let attr = read_attribute(a, position, drive, idn)?;
+                let name = optional(a, position, drive, idn, Elements::NAME)?.map(|v| text(&v)).unwrap_or_default();
+                let unit = optional(a, position, drive, idn, Elements::UNIT)?.map(|v| format!(" {}", text(&v)));
+                let value = a.read(position, drive, idn, Elements::VALUE)?;
+                outln!("{idn}  {name:<32}  {}{}", show(attr, &value), unit.unwrap_or_default());
             }
         }
     }
-    finish(m)?;
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
-fn read_attribute(
-    m: &mut ferrocat_master::Master<crate::target::CliIo>,
-    position: u16,
-    drive: u8,
-    idn: Idn,
-) -> anyhow::Result<Attribute> {
-    let v = m.acyclic().soe().read(position, drive, idn, Elements::ATTRIBUTE)?;
+fn read_attribute(a: &mut dyn SoeAccess, position: u16, drive: u8, idn: Idn) -> anyhow::Result<Attribute> {
+    let v = a.read(position, drive, idn, Elements::ATTRIBUTE)?;
     attribute_of(&v)
 }
 

@@ -15,6 +15,7 @@ use crate::io::Io;
 use crate::mailbox::Polled;
 use crate::master::Master;
 use crate::sdo_transfer::{InfoTransfer, Peer, SdoTransfer, Step};
+use crate::soe_transfer::{SoeStep, SoeTransfer};
 
 /// Datagrams a call of [`Acyclic::serve_requests`](crate::part::Acyclic::serve_requests) sends at most.
 const DATAGRAMS_PER_CALL: u32 = 4;
@@ -79,6 +80,14 @@ impl<I: Io> Master<I> {
                 self.slave(position)?;
                 Job::RegisterWrite { register, data }
             }
+            Request::SoeRead { drive, idn, elements, .. } => {
+                let peer = self.acyclic().soe().peer(position)?;
+                Job::Soe(SoeTransfer::read(peer, drive, idn, elements)?, None, false)
+            }
+            Request::SoeWrite { drive, idn, elements, data, .. } => {
+                let peer = self.acyclic().soe().peer(position)?;
+                Job::Soe(SoeTransfer::write(peer, drive, idn, elements, &data)?, None, true)
+            }
             Request::State { state, .. } => {
                 self.slave(position)?;
                 // Supervision keeps the slave where it was asked to be, not in OP.
@@ -99,6 +108,10 @@ impl<I: Io> Master<I> {
             Job::Foe(mut t, _, _, writes) => {
                 let first = t.start()?;
                 Job::Foe(t, Some(self.mailboxes().message(position, MailboxType::FOE, &first)?), None, writes)
+            }
+            Job::Soe(mut t, _, writes) => {
+                let first = t.next_message().unwrap_or_default();
+                Job::Soe(t, Some(self.mailboxes().message(position, MailboxType::SOE, &first)?), writes)
             }
             other => other,
         })
@@ -126,8 +139,13 @@ impl<I: Io> Master<I> {
         };
         let station = self.slave(a.position)?.station;
         let device = |ado| Address::Device { adp: station, ado };
+        // A write's next fragment, once the one before was taken (no reply comes between).
+        let mut soe_next = None;
         let done = match &mut a.job {
-            Job::Sdo(_, Some(msg)) | Job::Info(_, _, Some(msg)) | Job::Foe(_, Some(msg), _, _) => {
+            Job::Sdo(_, Some(msg))
+            | Job::Info(_, _, Some(msg))
+            | Job::Foe(_, Some(msg), _, _)
+            | Job::Soe(_, Some(msg), _) => {
                 // Written again under the same counter until the slave takes it.
                 let mut mbx = self.mailboxes();
                 if mbx.try_write(a.position, msg)? {
@@ -138,6 +156,11 @@ impl<I: Io> Master<I> {
                             let end = end.take().unwrap_or_else(|| Ok(Vec::new()));
                             let writes = *writes;
                             Some(end.map(|d| if writes { Answer::Written } else { Answer::Data(d) }))
+                        }
+                        Job::Soe(t, m, _) => {
+                            *m = None;
+                            soe_next = t.next_message();
+                            None
                         }
                         Job::Sdo(_, m) | Job::Info(_, _, m) | Job::Foe(_, m, _, _) => {
                             *m = None;
@@ -151,7 +174,7 @@ impl<I: Io> Master<I> {
                     None
                 }
             }
-            Job::Sdo(..) | Job::Info(..) | Job::Foe(..) => self.await_reply(&mut a, now, limit_ns)?,
+            Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..) => self.await_reply(&mut a, now, limit_ns)?,
             Job::RegisterRead { register, len } => {
                 let mut b = vec![0u8; *len as usize];
                 let wkc = self.engine.one(Command::FPRD, device(*register), &mut b)?;
@@ -191,6 +214,9 @@ impl<I: Io> Master<I> {
                 }
             }
         };
+        if let (Some(next), Job::Soe(_, slot, _)) = (soe_next, &mut a.job) {
+            *slot = Some(self.mailboxes().message(a.position, MailboxType::SOE, &next)?);
+        }
         match done {
             Some(answer) => self.acyclic.answer(a.id, answer),
             None => self.acyclic.active = Some(a),
@@ -200,7 +226,11 @@ impl<I: Io> Master<I> {
 
     /// One poll of the slave's send mailbox for the awaited reply.
     fn await_reply(&mut self, a: &mut Active, now: u64, limit_ns: u64) -> Result<Option<Result<Answer>>> {
-        let protocol = if matches!(a.job, Job::Foe(..)) { MailboxType::FOE } else { MailboxType::COE };
+        let protocol = match a.job {
+            Job::Foe(..) => MailboxType::FOE,
+            Job::Soe(..) => MailboxType::SOE,
+            _ => MailboxType::COE,
+        };
         let polled = self.mailboxes().poll(a.position);
         let reply = match polled {
             Ok(Polled::Message(t, payload)) if t == protocol => payload,
@@ -244,6 +274,13 @@ impl<I: Io> Master<I> {
                     *end = Some(result);
                     Some(last)
                 }
+                Err(e) => return Ok(Some(Err(e))),
+            },
+            Job::Soe(t, _, writes) => match t.on_reply(&reply) {
+                Ok(SoeStep::Done(data)) => {
+                    return Ok(Some(Ok(if *writes { Answer::Written } else { Answer::Data(data) })));
+                }
+                Ok(SoeStep::Await) => None,
                 Err(e) => return Ok(Some(Err(e))),
             },
             _ => None,

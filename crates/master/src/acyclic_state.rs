@@ -115,6 +115,30 @@ pub enum Request {
         /// INIT, PREOP, SAFEOP or OP.
         state: AlState,
     },
+    /// SoE read of `elements` of `idn` of drive `drive`: the elements' data, in order.
+    SoeRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// The IDN.
+        idn: ferrocat_wire::soe::Idn,
+        /// Which of its elements.
+        elements: ferrocat_wire::soe::Elements,
+    },
+    /// SoE write of `data` to `elements` of `idn` of drive `drive`.
+    SoeWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// The IDN.
+        idn: ferrocat_wire::soe::Idn,
+        /// Which of its elements (the value, mostly).
+        elements: ferrocat_wire::soe::Elements,
+        /// The data as it goes on the wire.
+        data: Vec<u8>,
+    },
 }
 
 impl Request {
@@ -130,7 +154,9 @@ impl Request {
             | Request::RegisterWrite { position, .. }
             | Request::FoeRead { position, .. }
             | Request::FoeWrite { position, .. }
-            | Request::State { position, .. } => position,
+            | Request::State { position, .. }
+            | Request::SoeRead { position, .. }
+            | Request::SoeWrite { position, .. } => position,
         }
     }
 
@@ -144,6 +170,8 @@ impl Request {
                 | Request::EntryInfo { .. }
                 | Request::FoeRead { .. }
                 | Request::FoeWrite { .. }
+                | Request::SoeRead { .. }
+                | Request::SoeWrite { .. }
         )
     }
 }
@@ -227,6 +255,9 @@ pub(crate) enum Job {
         state: AlState,
         written: bool,
     },
+    /// An SoE read or write: its message to write next, or (None) its reply awaited; whether
+    /// it writes.
+    Soe(crate::soe_transfer::SoeTransfer, Option<Vec<u8>>, bool),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -238,7 +269,7 @@ pub(crate) enum InfoWanted {
 
 impl Job {
     fn uses_mailbox(&self) -> bool {
-        matches!(self, Job::Sdo(..) | Job::Info(..) | Job::Foe(..))
+        matches!(self, Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..))
     }
 }
 

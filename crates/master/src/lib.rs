@@ -67,6 +67,7 @@ mod sdo_transfer;
 mod settings;
 mod slave;
 mod soe;
+mod soe_transfer;
 pub mod sync;
 mod topology;
 pub mod trajectory;

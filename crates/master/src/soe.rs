@@ -3,11 +3,12 @@
 //! fragmented both ways where they do not fit one mailbox. The drive's notifications and
 //! emergencies met on the way are events ([`MasterEvent::Soe`](crate::MasterEvent::Soe)).
 use ferrocat_wire::mailbox::MailboxType;
-use ferrocat_wire::soe::{self, opcode, Attribute, Elements, Idn, SoeError, SoeHeader, ValueLength};
+use ferrocat_wire::soe::{self, Attribute, Elements, Idn, ValueLength};
 
 use crate::error::{MasterError, Result, SlaveError};
 use crate::io::Io;
 use crate::mailbox::Mailboxes;
+use crate::soe_transfer::{SoePeer, SoeStep, SoeTransfer};
 
 /// The SoE client of one master (see [`Acyclic::soe`](crate::part::Acyclic::soe)): it borrows
 /// the master's engine and slave list for as long as it is used.
@@ -34,91 +35,43 @@ pub struct IdnDescription {
     pub value: Vec<u8>,
 }
 
-/// Fragments a transfer may have, whichever way: past this a drive's reply is an error
-/// rather than a loop (a drive's list of every IDN, S-0-0017, is a few KB).
-const MAX_FRAGMENTS: usize = 4096;
-
 impl<I: Io> Soe<'_, I> {
     fn fail(&self, position: u16, error: SlaveError) -> MasterError {
         MasterError::of(position, &self.mbx.name_of(position), error)
     }
 
-    /// One reply of `opcode` for `idn` (fragments joined): its data; an error reply is the
-    /// drive's error code.
-    fn reply(&mut self, position: u16, drive: u8, idn: Idn, want: u8) -> Result<(SoeHeader, Vec<u8>)> {
-        let mut data = Vec::new();
-        for _ in 0..MAX_FRAGMENTS {
-            let payload = self.mbx.read(position, MailboxType::SOE)?;
-            let h = SoeHeader::parse(&payload).map_err(|e| self.fail(position, SlaveError::MalformedReply(e)))?;
-            if h.opcode != want {
-                return Err(self.fail(
-                    position,
-                    SlaveError::UnexpectedReply(format!("SoE opcode {} where {want} was due", h.opcode)),
-                ));
-            }
-            let body = &payload[soe::HEADER_LEN..];
-            if h.error {
-                let code = body.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])).unwrap_or(SoeError::GENERAL.0);
-                return Err(self.fail(position, SlaveError::Soe { idn, drive, error: SoeError(code) }));
-            }
-            data.extend_from_slice(body);
-            if !h.incomplete {
-                if h.idn != idn.0 || h.drive != drive {
-                    return Err(self.fail(
-                        position,
-                        SlaveError::UnexpectedReply(format!(
-                            "SoE reply for {} of drive {} where {idn} of drive {drive} was asked",
-                            Idn(h.idn),
-                            h.drive
-                        )),
-                    ));
-                }
-                return Ok((h, data));
+    /// Who `position` is, for a transfer's errors, and its receive mailbox's length.
+    pub(crate) fn peer(&self, position: u16) -> Result<SoePeer> {
+        let (_, name, m) = self.mbx.mailbox_of(position, MailboxType::SOE)?;
+        Ok(SoePeer { position, name, out_len: m.out.1 as usize })
+    }
+
+    /// Each message of `t` written into SM0, then its replies read from SM1 until it is over.
+    fn drive_transfer(&mut self, position: u16, mut t: SoeTransfer) -> Result<Vec<u8>> {
+        while let Some(msg) = t.next_message() {
+            self.mbx.write(position, MailboxType::SOE, &msg)?;
+        }
+        loop {
+            let reply = self.mbx.read(position, MailboxType::SOE)?;
+            if let SoeStep::Done(data) = t.on_reply(&reply)? {
+                return Ok(data);
             }
         }
-        Err(self.fail(position, SlaveError::UnexpectedReply(format!("SoE {idn}: more than {MAX_FRAGMENTS} fragments"))))
     }
 
     /// Reads `elements` of `idn` of drive `drive` (0 on a one-axis device) of the slave at
     /// `position`: their data in the order of the element bits, fragments joined.
     pub fn read(&mut self, position: u16, drive: u8, idn: Idn, elements: Elements) -> Result<Vec<u8>> {
-        let h =
-            SoeHeader { opcode: opcode::READ_REQUEST, incomplete: false, error: false, drive, elements, idn: idn.0 };
-        let mut req = [0u8; soe::HEADER_LEN];
-        h.emit(&mut req).map_err(|e| self.fail(position, SlaveError::MalformedReply(e)))?;
-        self.mbx.write(position, MailboxType::SOE, &req)?;
-        Ok(self.reply(position, drive, idn, opcode::READ_RESPONSE)?.1)
+        let t = SoeTransfer::read(self.peer(position)?, drive, idn, elements)?;
+        self.drive_transfer(position, t)
     }
 
     /// Writes `data` to `elements` (the value, mostly) of `idn` of drive `drive`, in fragments
     /// where it does not fit one mailbox (each but the last counting the fragments left; the
     /// drive answers the last).
     pub fn write(&mut self, position: u16, drive: u8, idn: Idn, elements: Elements, data: &[u8]) -> Result<()> {
-        let out_len = self.mbx.mailbox_of(position, MailboxType::SOE)?.2.out.1 as usize;
-        let per = soe::max_fragment_len(out_len);
-        if per == 0 {
-            return Err(self.fail(position, SlaveError::RequestTooLong { len: data.len(), mailbox: out_len }));
-        }
-        let parts: Vec<&[u8]> = if data.is_empty() { vec![&[][..]] } else { data.chunks(per).collect() };
-        if parts.len() > MAX_FRAGMENTS {
-            return Err(self.fail(position, SlaveError::RequestTooLong { len: data.len(), mailbox: out_len }));
-        }
-        for (k, part) in parts.iter().enumerate() {
-            let left = parts.len() - 1 - k;
-            let h = SoeHeader {
-                opcode: opcode::WRITE_REQUEST,
-                incomplete: left > 0,
-                error: false,
-                drive,
-                elements,
-                idn: if left > 0 { left as u16 } else { idn.0 },
-            };
-            let mut msg = vec![0u8; soe::HEADER_LEN + part.len()];
-            h.emit(&mut msg).map_err(|e| self.fail(position, SlaveError::MalformedReply(e)))?;
-            msg[soe::HEADER_LEN..].copy_from_slice(part);
-            self.mbx.write(position, MailboxType::SOE, &msg)?;
-        }
-        self.reply(position, drive, idn, opcode::WRITE_RESPONSE).map(drop)
+        let t = SoeTransfer::write(self.peer(position)?, drive, idn, elements, data)?;
+        self.drive_transfer(position, t).map(drop)
     }
 
     /// The IDN's value (element 7) alone.

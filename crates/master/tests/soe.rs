@@ -84,3 +84,53 @@ fn the_drive_s_refusals_and_devices_without_soe_are_errors_that_say_so() {
     // The mailbox works on after each refusal.
     assert_eq!(m.acyclic().soe().value(2, 0, Idn::TELEGRAM_TYPE).unwrap(), 7u16.to_le_bytes());
 }
+
+/// SoE as a running master's acyclic side serves it: submitted, one datagram at a time in the
+/// cycles' spare time, beside cycles whose working counters stay whole and the diagnosis's
+/// work. (In virtual time the drive's fragments come at once; that the diagnosis's mailbox
+/// polls leave a request's replies alone shows live, in `cli/tests/soe_live.rs`.)
+#[test]
+fn soe_is_served_beside_the_cycle_in_fragments() {
+    use ferrocat_master::{Answer, Request};
+    const CYCLE_NS: u64 = 1_000_000;
+    let mut m = drive();
+    m.states().start().unwrap();
+    let serve = |m: &mut Master<VirtualIo>, request: Request| {
+        let id = m.acyclic().submit(request);
+        let mut next = m.cyclic().now_ns();
+        for _ in 0..500 {
+            next += CYCLE_NS;
+            assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc(), "a whole cycle beside SoE");
+            m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
+            // Diagnosis in the spare time polls the mailboxes that no request holds.
+            m.diagnosis().diagnose(next - CYCLE_NS / 4, 100 * CYCLE_NS).unwrap();
+            if let Some((_, a)) = m.acyclic().take_answers().into_iter().find(|(k, _)| *k == id) {
+                return a;
+            }
+            m.cyclic().sleep_until(next);
+        }
+        panic!("not answered in 500 cycles");
+    };
+    let a = serve(
+        &mut m,
+        Request::SoeRead { position: 2, drive: 0, idn: Idn::FIRMWARE_VERSION, elements: Elements::VALUE },
+    );
+    let Answer::Data(v) = a.unwrap() else { panic!("not data") };
+    assert_eq!(ferrocat_master::wire::soe::list_items(&v).unwrap().0, b"ferrocat SoE drive (ferrocat simulation)");
+    // A 36-byte list in two fragments, in SAFEOP (started): protected there.
+    let mut data = vec![32, 0, 32, 0];
+    data.extend((0..16u16).flat_map(|k| (40 + k).to_le_bytes()));
+    let a = serve(
+        &mut m,
+        Request::SoeWrite { position: 2, drive: 0, idn: Idn::AT_CONFIG, elements: Elements::VALUE, data },
+    );
+    assert_eq!(soe_error(a), SoeError::VALUE_WRITE_PROTECTED_NOW);
+    let gain = Idn::product(0, 1).unwrap();
+    let a = serve(
+        &mut m,
+        Request::SoeWrite { position: 2, drive: 0, idn: gain, elements: Elements::VALUE, data: vec![7, 0] },
+    );
+    assert_eq!(a.unwrap(), Answer::Written);
+    let a = serve(&mut m, Request::SoeRead { position: 2, drive: 0, idn: gain, elements: Elements::VALUE });
+    assert_eq!(a.unwrap(), Answer::Data(vec![7, 0]));
+}

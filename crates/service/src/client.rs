@@ -242,6 +242,25 @@ impl Client {
         self.call(Request::SdoWrite { position, index, subindex, complete_access, data: protocol::hex(data) }).map(drop)
     }
 
+    /// SoE read of `elements` (the element bits, 0x40 the value) of IDN number `idn` of drive
+    /// `drive`: the elements' data.
+    pub fn soe_read(&mut self, position: u16, drive: u8, idn: u16, elements: u8) -> Result<Vec<u8>, ClientError> {
+        let v = self.call(Request::SoeRead { position, drive, idn, elements })?;
+        self.bytes(v)
+    }
+
+    /// SoE write of `data` (as it goes on the wire) to `elements` of IDN number `idn`.
+    pub fn soe_write(
+        &mut self,
+        position: u16,
+        drive: u8,
+        idn: u16,
+        elements: u8,
+        data: &[u8],
+    ) -> Result<(), ClientError> {
+        self.call(Request::SoeWrite { position, drive, idn, elements, data: protocol::hex(data) }).map(drop)
+    }
+
     /// Every object's index (SDO information).
     pub fn od_list(&mut self, position: u16) -> Result<Vec<u16>, ClientError> {
         let v = self.call(Request::OdList { position })?;

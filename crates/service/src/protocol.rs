@@ -190,6 +190,33 @@ pub enum Request {
         /// The state's name.
         state: String,
     },
+    /// SoE read of `elements` (the element bits, 0x40 the value) of IDN `idn` (its 16-bit
+    /// number: 0x801E for P-0-0030) of drive `drive`: the elements' data under `data`.
+    SoeRead {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The drive (axis) of the device.
+        #[serde(default)]
+        drive: u8,
+        /// The IDN's number.
+        idn: u16,
+        /// The elements' bits.
+        elements: u8,
+    },
+    /// SoE write of `data` (hex, as it goes on the wire) to `elements` of IDN `idn`: `{}`.
+    SoeWrite {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The drive (axis) of the device.
+        #[serde(default)]
+        drive: u8,
+        /// The IDN's number.
+        idn: u16,
+        /// The elements' bits.
+        elements: u8,
+        /// The data, hex.
+        data: String,
+    },
 }
 
 fn max_foe_file() -> usize {

@@ -372,6 +372,19 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
         Request::FoeWrite { position, file, password, data, .. } => {
             M::FoeWrite { position, file, password, data: protocol::unhex(&data)? }
         }
+        Request::SoeRead { position, drive, idn, elements } => M::SoeRead {
+            position,
+            drive,
+            idn: ferrocat_master::wire::soe::Idn(idn),
+            elements: ferrocat_master::wire::soe::Elements(elements),
+        },
+        Request::SoeWrite { position, drive, idn, elements, data } => M::SoeWrite {
+            position,
+            drive,
+            idn: ferrocat_master::wire::soe::Idn(idn),
+            elements: ferrocat_master::wire::soe::Elements(elements),
+            data: protocol::unhex(&data)?,
+        },
         Request::Slaves
         | Request::Stats
         | Request::Events { .. }
