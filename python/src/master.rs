@@ -578,11 +578,13 @@ impl Master {
     /// Stops the loop started by `start()` (after its current cycle) and returns its figures,
     /// as `loop_stats()`. The loop's error, if it ended on one, is raised.
     fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let Some(r) = self.running.lock().unwrap_or_else(|p| p.into_inner()).take() else {
+        let Some(mut r) = self.running.lock().unwrap_or_else(|p| p.into_inner()).take() else {
             return Err(error::text("the cyclic loop is not running"));
         };
         r.stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        py.detach(|| r.thread.join()).map_err(|_| error::text("the cyclic loop's thread panicked"))?;
+        if let Some(thread) = r.thread.take() {
+            py.detach(|| thread.join()).map_err(|_| error::text("the cyclic loop's thread panicked"))?;
+        }
         let st = r.stats.lock().unwrap_or_else(|p| p.into_inner()).clone();
         if let Some(e) = &st.error {
             return Err(error::text(format!("the cyclic loop ended: {e}")));
@@ -603,7 +605,11 @@ impl Master {
     /// The loop runs (`start()` called, `stop()` not yet, and it has not ended on an error).
     #[getter]
     fn running(&self) -> bool {
-        self.running.lock().unwrap_or_else(|p| p.into_inner()).as_ref().is_some_and(|r| !r.thread.is_finished())
+        self.running
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .is_some_and(|r| r.thread.as_ref().is_some_and(|t| !t.is_finished()))
     }
 
     fn __repr__(&self) -> String {

@@ -55,9 +55,18 @@ impl LoopStats {
 
 pub struct Running {
     pub stop: Arc<AtomicBool>,
-    pub thread: JoinHandle<()>,
+    /// `None` once joined.
+    pub thread: Option<JoinHandle<()>>,
     pub stats: Arc<Mutex<LoopStats>>,
     pub requests: mpsc::SyncSender<(Request, Reply)>,
+}
+
+/// A loop whose master is dropped (its Python object collected while the loop ran) stops
+/// with it, rather than drive the segment on in a thread nobody can reach.
+impl Drop for Running {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
 }
 
 /// Requests waiting in the loop at most; more are refused (the caller hears it).
@@ -86,7 +95,7 @@ pub fn start(state: Arc<Mutex<State>>, priority: Option<i32>, cpu: Option<usize>
         lock(&shared).real_time = rt;
         run(&state, &flag, &shared, &rx);
     })?;
-    Ok(Running { stop, thread, stats, requests: tx })
+    Ok(Running { stop, thread: Some(thread), stats, requests: tx })
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {

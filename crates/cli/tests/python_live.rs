@@ -64,12 +64,18 @@ fn the_python_master_cycles_in_a_thread_beside_busy_python_and_serves_sdo_betwee
 }
 
 #[test]
-fn the_python_basic_example_runs_on_an_interface() {
+fn the_python_basic_example_runs_on_an_interface_and_a_dropped_master_stops_its_loop() {
     let net = VethPair::new("pb");
     let sim = Sim::start(&net, &["--device", "EK1100", "--device", "EL2004", "--device", "EL1004"]);
     let (ok, out, err) = run_python(&net.master_ns, &[&example("basic_example.py"), &net.master_if]);
+    // The loop's thread comes with start() and goes with the master's Python object.
+    let (dropped, said, err_d) = run_python(&net.master_ns, &[&script("loop_drop.py"), &net.master_if]);
     sim.stop();
     assert!(ok, "basic_example.py: {err}");
+    assert!(dropped, "loop_drop.py: {err_d}");
+    let t: serde_json::Value = serde_json::from_str(said.trim()).unwrap();
+    let t: Vec<u64> = t["threads"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+    assert!(t[1] == t[0] + 1 && t[2] == t[0], "threads idle, looping, after the drop: {t:?}");
     assert!(out.contains("all slaves in OP: EK1100") && out.contains("cycles in a Rust thread"), "{out}");
     assert!(out.contains("basic_example done"), "{out}");
 }

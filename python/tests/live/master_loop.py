@@ -50,6 +50,9 @@ busy.join()
 during = m.loop_stats()
 stats = m.stop()
 elapsed = time.monotonic() - t0
+outputs = m.get(1, "0x7010:01") + 2 * m.get(1, "0x7030:01")
+running_after = m.running
+
 print(
     json.dumps(
         {
@@ -61,8 +64,8 @@ print(
             "vendor": vendor,
             "readback": readback,
             "abort": abort,
-            "outputs": m.get(1, "0x7010:01") + 2 * m.get(1, "0x7030:01"),
-            "running_after": m.running,
+            "outputs": outputs,
+            "running_after": running_after,
             "second": second,
         }
     )
