@@ -646,10 +646,11 @@ fn loop_stats_dict<'py>(py: Python<'py>, st: &crate::running::LoopStats) -> PyRe
     d.set_item("cycles", st.cycles)?;
     d.set_item("short_wkc", st.short_wkc)?;
     d.set_item("overruns", st.overruns)?;
-    let us = |p: f64| st.wake_percentile_ns(p).map(|v| v as f64 / 1e3);
-    d.set_item("wake_late_p50_us", us(50.0))?;
-    d.set_item("wake_late_p99_us", us(99.0))?;
-    d.set_item("wake_late_max_us", us(100.0))?;
+    let us: Vec<Option<f64>> =
+        st.wake_percentiles_ns(&[50.0, 99.0, 100.0]).into_iter().map(|v| v.map(|v| v as f64 / 1e3)).collect();
+    d.set_item("wake_late_p50_us", us[0])?;
+    d.set_item("wake_late_p99_us", us[1])?;
+    d.set_item("wake_late_max_us", us[2])?;
     d.set_item("scheduling", &st.real_time)?;
     d.set_item("error", st.error.clone())?;
     Ok(d)

@@ -41,15 +41,16 @@ impl LoopStats {
         }
         self.next_sample = (self.next_sample + 1) % SAMPLES;
     }
-    /// Percentile `p` (0–100) of the wake-up lateness kept, ns.
-    pub fn wake_percentile_ns(&self, p: f64) -> Option<u32> {
-        if self.wake_late_ns.is_empty() {
-            return None;
-        }
+    /// Percentiles `ps` (0–100) of the wake-up lateness kept, ns (one sort for all).
+    pub fn wake_percentiles_ns(&self, ps: &[f64]) -> Vec<Option<u32>> {
         let mut v = self.wake_late_ns.clone();
         v.sort_unstable();
-        let k = ((p / 100.0) * (v.len() - 1) as f64).round() as usize;
-        v.get(k.min(v.len() - 1)).copied()
+        ps.iter()
+            .map(|p| {
+                let k = ((p / 100.0) * v.len().saturating_sub(1) as f64).round() as usize;
+                v.get(k.min(v.len().saturating_sub(1))).copied()
+            })
+            .collect()
     }
 }
 
@@ -98,6 +99,19 @@ pub fn start(state: Arc<Mutex<State>>, priority: Option<i32>, cpu: Option<usize>
     Ok(Running { stop, thread: Some(thread), stats, requests: tx })
 }
 
+/// The loop's counters and its wake-up samples since the last hand-over into `shared`.
+fn publish(shared: &mut LoopStats, local: &LoopStats, pending: &mut Vec<u64>) {
+    for late in pending.drain(..) {
+        shared.add_wake(late);
+    }
+    shared.cycles = local.cycles;
+    shared.short_wkc = local.short_wkc;
+    shared.overruns = local.overruns;
+    if local.error.is_some() {
+        shared.error.clone_from(&local.error);
+    }
+}
+
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
@@ -115,6 +129,10 @@ fn run(state: &Mutex<State>, stop: &AtomicBool, stats: &Mutex<LoopStats>, rx: &m
         }
         s.next_ns
     };
+    // The loop's figures, handed to the shared ones only when Python is not reading them
+    // (`try_lock`): the loop never waits for a copy Python makes.
+    let mut local = LoopStats::default();
+    let mut pending: Vec<u64> = Vec::new();
     while !stop.load(Ordering::Relaxed) {
         // The sleep outside the lock: Python reads and writes the image meanwhile.
         let planned = next;
@@ -124,22 +142,24 @@ fn run(state: &Mutex<State>, stop: &AtomicBool, stats: &Mutex<LoopStats>, rx: &m
         let r = cycle(&mut s, rx, &mut waiting);
         next = s.next_ns;
         s.m.cyclic().io_mut().prepare_sleep(next);
-        let overruns = s.overruns;
+        local.overruns = s.overruns;
         drop(s);
-        let mut st = lock(stats);
-        st.add_wake(woke.saturating_sub(planned));
-        st.overruns = overruns;
+        pending.push(woke.saturating_sub(planned));
         match r {
             Ok(short) => {
-                st.cycles += 1;
-                st.short_wkc += u64::from(short);
+                local.cycles += 1;
+                local.short_wkc += u64::from(short);
             }
             Err(e) => {
-                st.error = Some(e.to_string());
+                local.error = Some(e.to_string());
                 break;
             }
         }
+        if let Ok(mut st) = stats.try_lock() {
+            publish(&mut st, &local, &mut pending);
+        }
     }
+    publish(&mut lock(stats), &local, &mut pending);
     for (_, reply) in waiting {
         let _ = reply.try_send(Err(ferrocat_master::MasterError::Io(std::io::Error::other("the cyclic loop stopped"))));
     }

@@ -54,10 +54,7 @@ impl SegmentView {
 
     /// The segment's counters: frames, returned, lost, corrupted, its time.
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let m = self.master.borrow(py);
-        let mut s = m.lock();
-        let v = s.m.cyclic().io_mut().virtual_io().ok_or_else(|| error::text("not a virtual segment"))?;
-        crate::segment::stats(py, &v.seg)
+        self.with(py, |v| crate::segment::stats(py, &v.seg))
     }
 
     /// The device at `node`'s AL state as the simulated ESC holds it (`op`, `safeop` …).
