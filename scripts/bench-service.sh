@@ -5,11 +5,14 @@
 # `load` example of ferrocat-service): one hammering SDO uploads through the control socket, one
 # reading the whole shared image at 10 kHz, one writing an output every cycle (and counting the
 # cycles each write took to reach the wire), and one killed with SIGKILL in the middle of a
-# write (the file locked, the sequence odd). Prints per run: the wake-up p50/p99/max, overruns, frames lost,
+# write (the file locked, the sequence odd); and a third time with the mailbox gateway on and
+# flooded (`load … gateway`: diagnosis uploads from station 0 back to back, one datagram in ten
+# malformed). Prints per run: the wake-up p50/p99/max, overruns, frames lost,
 # working-counter errors, slaves that left OP, the loop's CPU per cycle, what the clients
 # measured, and the half-done writes the master dropped. Then the time of a fresh `ferrocat sdo
 # read` beside the running master (median of 20). Needs root. SECONDS_EACH (default 60) sets
-# each run's length, CYCLES the cycles (default 1000 250).
+# each run's length, CYCLES the cycles (default 1000 250), CLIENTS the loads (default
+# "none four gateway").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build -q --release -p ferrocat
@@ -18,6 +21,7 @@ bin=target/release/ferrocat
 load=target/release/examples/load
 secs=${SECONDS_EACH:-60}
 cycles=${CYCLES:-1000 250}
+loads=${CLIENTS:-none four gateway}
 id=$$
 m=fcbm$id; s=fcbs$id; ifm="fcb${id}a"; ifs="fcb${id}b"
 work=$(mktemp -d)
@@ -37,17 +41,20 @@ for ns_if in "$m $ifm" "$s $ifs"; do
   ip netns exec "$1" sysctl -qw "net.ipv6.conf.$2.disable_ipv6=1"
   ip -n "$1" link set "$2" up
 done
+# The mailbox gateway listens on the master's namespace's loopback.
+ip -n "$m" link set lo up
 printf "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n" > "$work/seg.toml"
 
 echo "host: $(nproc) CPUs, $(uname -r), $(git rev-parse --short HEAD); $secs s a run"
 printf '%-6s %-8s %8s %8s %9s %6s %6s %5s %5s %7s  %s\n' \
   cycle clients "wake50" "wake99" "wakemax" "over" "lost" "wkc" "left" "cpu us" "clients' figures"
 for cycle in $cycles; do
-  for clients in none four; do
+  for clients in $loads; do
     ip netns exec "$s" "$bin" sim --config "$work/seg.toml" --iface "$ifs" 2>/dev/null &
     sim=$!
     sleep 0.5
-    ip netns exec "$m" "$bin" run --iface "$ifm" --dc --cycle-us "$cycle" --seconds "$secs" --json \
+    gw=(); [ "$clients" = gateway ] && gw=(--mailbox-gateway)
+    ip netns exec "$m" "$bin" run --iface "$ifm" --dc --cycle-us "$cycle" --seconds "$secs" --json "${gw[@]}" \
       >"$work/run.json" 2>"$work/run.err" &
     run=$!
     # Ready once the socket answers.
@@ -67,6 +74,10 @@ for cycle in $cycles; do
       kill -KILL "$killed" 2>/dev/null || true
       wait "$killed" 2>/dev/null || true
     fi
+    if [ "$clients" = gateway ]; then
+      : > "$work/clients"
+      ip netns exec "$m" "$load" 127.0.0.1:34980 gateway >>"$work/clients" & pids+=($!)
+    fi
     # A fresh `sdo read` beside the master, 20 times (the command's whole run).
     if [ "$cycle" = 1000 ] && [ "$clients" = none ]; then
       for _ in $(seq 20); do
@@ -80,7 +91,7 @@ for cycle in $cycles; do
     for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; wait "$p" 2>/dev/null || true; done
     pids=()
     kill -TERM "$sim"; wait "$sim" || true; sim=
-    [ "$clients" = four ] && said=$(tr '\n' ';' < "$work/clients")
+    [ "$clients" != none ] && said=$(tr '\n' ';' < "$work/clients")
     python3 - "$cycle" "$clients" "$work/run.json" "$work/run.err" "$said" <<'PY'
 import json, re, sys
 cycle, clients, run, err, said = sys.argv[1:]

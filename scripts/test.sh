@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh machine: installs what the tests need when it is missing
-# (tshark, iproute2, iputils-ping and libcap2-bin from Debian, pysoem, kickcat and pytest from PyPI
+# (tshark, iproute2, iputils-ping and libcap2-bin from Debian, pysoem, kickcat, pyetg1510 and
+# pytest from PyPI
 # into .venv with ferrocat's own Python package built from python/, cargo-nextest and cargo-fuzz
 # from crates.io), then checks formatting, clippy, the API
 # docs, `cargo package` and the Debian package, runs every fuzz target for a bounded time, and
@@ -41,10 +42,10 @@ if ! command -v ping >/dev/null; then
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq --no-install-recommends iputils-ping >/dev/null
 fi
-if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem, kickcat' 2>/dev/null; then
-  log "creating .venv with pysoem and kickcat (SOEM and KickCAT as independent masters)"
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import pysoem, kickcat, pyetg1510' 2>/dev/null; then
+  log "creating .venv with pysoem, kickcat and pyetg1510 (SOEM and KickCAT as independent masters, an ETG.1510 client)"
   python3 -m venv .venv
-  .venv/bin/pip install -q --disable-pip-version-check pysoem 'kickcat>=2.5'
+  .venv/bin/pip install -q --disable-pip-version-check pysoem 'kickcat>=2.5' 'pyetg1510==0.1.3'
 fi
 # The Python package (python/, PyO3 + maturin) is built and installed into .venv on every run,
 # so that it cannot rot: pip fetches maturin and cargo builds the extension (python/target).

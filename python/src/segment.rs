@@ -107,7 +107,8 @@ impl Segment {
 
     /// Schedules a fault `at_s` seconds of segment time from now (0: before the next frame).
     /// `kind` is one of `link_down`, `link_up` (with `port`), `power_off`, `power_on`,
-    /// `drive_fault` (with `code`, a CiA402 drive's own fault) and `drift_step` (with
+    /// `drive_fault` (with `code`, a CiA402 drive's own fault), `al_error` (with `code`, its
+    /// application's local error: SAFEOP with the error bit) and `drift_step` (with
     /// `delta_ppb`). `node` counts devices from 0 in line order.
     #[pyo3(signature = (kind, node, at_s = 0.0, port = 0, code = 0x2310, delta_ppb = 0))]
     fn fault(&self, kind: &str, node: usize, at_s: f64, port: u8, code: u16, delta_ppb: i64) -> PyResult<()> {
@@ -200,10 +201,11 @@ pub fn schedule(s: &mut Seg, kind: &str, node: usize, at_s: f64, port: u8, code:
         "power_off" => Event::PowerOff { node },
         "power_on" => Event::PowerOn { node },
         "drive_fault" => Event::DriveFault { node, code },
+        "al_error" => Event::AlError { node, code },
         "drift_step" => Event::DriftStep { node, delta_ppb },
         other => {
             return Err(error::text(format!(
-                "unknown fault '{other}': give link_down, link_up, power_off, power_on, drive_fault or drift_step"
+                "unknown fault '{other}': give link_down, link_up, power_off, power_on, drive_fault, al_error or drift_step"
             )))
         }
     };

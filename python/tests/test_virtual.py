@@ -273,3 +273,17 @@ def test_segments_from_a_machine_description_and_an_eni(tmp_path):
     eni = os.path.join(os.path.dirname(__file__), "../../crates/machine/tests/data/ferrocat_lenient.eni.xml")
     m = ferrocat.Master.virtual(ferrocat.Segment.from_eni(eni))
     assert len(m.scan()) >= 1
+
+
+def test_an_al_error_takes_the_slave_to_safeop():
+    m = virtual(["EK1100", "EL2004", "EL1004"])
+    m.bring_up()
+    assert m.segment.device_state(2) == "op"
+    m.segment.fault("al_error", node=2, code=0x8001, at_s=0.005)
+    states = []
+    for _ in range(20):
+        m.cycle()
+        states.append(m.segment.device_state(2))
+    assert states[0] == "op" and states[-1] == "safeop", states
+    with pytest.raises(ferrocat.Error, match="al_error|unknown fault"):
+        m.segment.fault("al_errors", node=2)

@@ -311,6 +311,21 @@ enum Command {
         /// default, as a register write can take a slave off the segment.
         #[arg(long)]
         allow_register_writes: bool,
+        /// Serve the mailbox gateway (ETG.8200) on UDP: engineering tools reach the slaves'
+        /// mailboxes, and the master's object dictionary (ETG.1510) at station address 0.
+        /// Without a value, 127.0.0.1:34980 (0x88A4); off by default. Needs the control socket.
+        #[arg(long, value_name = "ADDR:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:34980",
+              conflicts_with = "no_control")]
+        mailbox_gateway: Option<std::net::SocketAddr>,
+        /// A sender the mailbox gateway takes besides loopback (repeat for several); others
+        /// are dropped and counted.
+        #[arg(long, value_name = "IP", requires = "mailbox_gateway")]
+        gateway_allow: Vec<std::net::IpAddr>,
+        /// Requests a second each sender of the mailbox gateway may make on average (a burst
+        /// of a fifth of it beyond); more are answered with mailbox error 0x07.
+        #[arg(long, value_name = "N", default_value_t = 500, requires = "mailbox_gateway",
+              value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        gateway_rate: u32,
         /// Leave the slaves in the state the run ends in (OP) instead of stepping them down to
         /// SAFEOP, then INIT, when it ends (after --seconds, or on SIGINT or SIGTERM).
         #[arg(long)]
@@ -334,6 +349,17 @@ enum Command {
         #[arg(long)]
         follow: bool,
         /// One JSON object per event instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The object dictionary of the master running on the target (ETG.1510: its identity, a
+    /// configuration, information and diagnosis object per slave, the address lists, the
+    /// master's diagnosis, the diagnosis history), an entry a line; the same objects the
+    /// mailbox gateway serves at station address 0.
+    MasterOd {
+        #[command(flatten)]
+        target: target::Target,
+        /// One JSON object per object instead of text.
         #[arg(long)]
         json: bool,
     },
@@ -811,6 +837,9 @@ fn main() -> ExitCode {
             control_mode,
             control_group,
             allow_register_writes,
+            mailbox_gateway,
+            gateway_allow,
+            gateway_rate,
             app_watchdog_ms,
             app_watchdog,
             keep_state,
@@ -835,6 +864,12 @@ fn main() -> ExitCode {
                         mode: control_mode,
                         group: control_group,
                         register_writes: allow_register_writes,
+                        gateway: mailbox_gateway.map(|bind| ferrocat_service::GatewayOptions {
+                            bind,
+                            allow: gateway_allow,
+                            rate_per_s: gateway_rate,
+                            burst: (gateway_rate / 5).max(1),
+                        }),
                         app_watchdog: app_watchdog_ms
                             .map(|ms| image_cmd::AppWatchdog::new(ms * 1_000_000, app_watchdog)),
                     }),
@@ -855,6 +890,7 @@ fn main() -> ExitCode {
         Command::Get { names, target, json } => image_cmd::get(&target, &names, json),
         Command::Events { target, follow, json } => service_cmd::events(&target, follow, json),
         Command::Pdos { position, target, json } => service_cmd::pdos(&target, position, json),
+        Command::MasterOd { target, json } => service_cmd::master_od(&target, json),
         Command::Set { values, target } => image_cmd::set(&target, &values),
     };
     match result {

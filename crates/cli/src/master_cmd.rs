@@ -650,6 +650,8 @@ pub struct ControlOptions {
     pub group: Option<String>,
     /// Whether register writes are taken.
     pub register_writes: bool,
+    /// The mailbox gateway, where one is asked for.
+    pub gateway: Option<ferrocat_service::GatewayOptions>,
     /// The application watchdog on the shared image's outputs.
     pub app_watchdog: Option<crate::image_cmd::AppWatchdog>,
 }
@@ -776,7 +778,15 @@ pub fn frame_timeout_us(cycle_us: u64, max_rate: bool, round_trip_us: Option<u64
 /// A method's lock state and filtered offset, in words.
 fn lock_text(method: &dyn ClockSync, st: &SyncState) -> String {
     match st.lock.offset_ns() {
-        Some(o) => format!("{}: {}, offset {o} ns", method.name(), st.lock.state()),
+        Some(o) => {
+            let (lock_ns, unlock_ns) = st.lock.bounds_ns();
+            format!(
+                "{}: {}, offset {o} ns (locks within {lock_ns} ns, unlocks beyond {unlock_ns} ns; noise {} ns)",
+                method.name(),
+                st.lock.state(),
+                st.lock.noise_ns()
+            )
+        }
         None => format!("{}: {}", method.name(), st.lock.state()),
     }
 }
@@ -948,9 +958,14 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 register_writes: c.register_writes,
                 hello,
             };
-            let server = ferrocat_service::Server::start(options)
+            let mut server = ferrocat_service::Server::start(options)
                 .with_context(|| format!("control socket {}", path.display()))?;
             eprintln!("control socket {}", path.display());
+            if let Some(g) = &c.gateway {
+                let at =
+                    server.start_gateway(g.clone()).with_context(|| format!("mailbox gateway on udp {}", g.bind))?;
+                eprintln!("mailbox gateway on udp {at}");
+            }
             Some(server)
         }
         _ => None,
@@ -1004,6 +1019,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         tally.count(&e);
     }
     let mut next_period = period;
+    let mut told_no_room = false;
     // The loop's quality: how late each wake-up came, how far each period strayed from the
     // one planned, and the cycles whose work ran past the next cycle's start.
     let (mut wake_late, mut jitter) = (Histogram::default(), Histogram::default());
@@ -1110,6 +1126,17 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 })
             };
             server.serve(&mut m, deadline, &extra)?;
+            let a = m.acyclic().acyclic_stats();
+            if a.starved >= u64::from(ferrocat_master::acyclic::STARVED_CALLS) && !told_no_room {
+                told_no_room = true;
+                eprintln!(
+                    "warning: requests found no room for {} cycles in a row: a round trip of {} µs does not fit \
+                     after the cyclic frame in ¾ of the cycle; each now gets one datagram a cycle, until a \
+                     sixteenth before the next (a longer --cycle-us leaves them more)",
+                    ferrocat_master::acyclic::STARVED_CALLS,
+                    m.diagnosis().cycle_stats().last_round_trip_ns / 1000
+                );
+            }
         }
         let t_s = (m.cyclic().now_ns() - start) as f64 * 1e-9;
         let events = m.diagnosis().take_events();
@@ -1226,6 +1253,8 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "path": path,
             "requests_answered": a.answered,
             "requests_failed": a.failed,
+            "calls_without_room": a.starved,
+            "datagrams_in_last_sixteenth": a.relieved,
             "image": image_stats.map(|i| json!({
                 "writes_taken": i.writes_taken,
                 "cycles_busy": i.busy,
@@ -1249,6 +1278,9 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             "true_offset_ns": true_offset_ns,
             "lock_changes": st.lock.changes(),
             "lock_left_out": st.lock.left_out(),
+            // The bounds in force (the thresholds, widened by the offsets' noise) and the noise.
+            "lock_bounds_ns": st.lock.bounds_ns(),
+            "lock_noise_ns": st.lock.noise_ns(),
             "locked_after_s": st.lock.first_locked_cycle().map(|c| c as f64 * cycle_us as f64 * 1e-6),
             "probes": st.probing.sent,
             "probes_lost": st.probing.lost,

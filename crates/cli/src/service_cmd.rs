@@ -372,3 +372,37 @@ pub fn reload(t: &Target) -> anyhow::Result<ExitCode> {
     eprintln!("{said}");
     Ok(ExitCode::SUCCESS)
 }
+
+/// `ferrocat master-od`: the running master's own object dictionary, an entry a line (text
+/// values where the type is a string, numbers in decimal and hex, octet strings in hex).
+pub fn master_od(t: &Target, json: bool) -> anyhow::Result<ExitCode> {
+    let mut c = t.require_master("`master-od`")?;
+    for o in c.master_od()? {
+        if json {
+            outln!("{o}");
+            continue;
+        }
+        let index = o["index"].as_u64().unwrap_or(0);
+        outln!("{index:#06x}  {}", o["name"].as_str().unwrap_or(""));
+        for e in o["entries"].as_array().map(Vec::as_slice).unwrap_or(&[]) {
+            let bytes = ferrocat_service::protocol::unhex(e["value"].as_str().unwrap_or("")).unwrap_or_default();
+            let value = match e["data_type"].as_u64() {
+                Some(0x0009) => format!("\"{}\"", String::from_utf8_lossy(&bytes).trim_end_matches('\0')),
+                Some(0x000A) => ferrocat_service::protocol::hex(&bytes),
+                _ if bytes.len() <= 8 => {
+                    let mut w = [0u8; 8];
+                    w[..bytes.len()].copy_from_slice(&bytes);
+                    let v = u64::from_le_bytes(w);
+                    format!("{v} ({v:#x})")
+                }
+                _ => ferrocat_service::protocol::hex(&bytes),
+            };
+            outln!(
+                "  {index:#06x}:{:02}  {:<40} {value}",
+                e["subindex"].as_u64().unwrap_or(0),
+                e["name"].as_str().unwrap_or("")
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

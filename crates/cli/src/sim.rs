@@ -109,6 +109,8 @@ fn report(seg: &Segment, stats: &ServeStats) -> serde_json::Value {
                 "eeprom_loaded": n.esc.sii_loaded(),
                 "al_state": n.esc.al_status().state().map(|s| s.name()),
                 "al_status_code": n.esc.al.code.0,
+                // 0x0300–0x0313: invalid frames and RX errors by port, forwarded errors, lost links.
+                "error_counters": n.esc.peek(0x0300, 0x14),
                 "frames": n.esc.frames,
                 "outputs": outputs,
                 "output_updates": io.map(|d| d.output_updates),

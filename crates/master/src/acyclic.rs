@@ -7,7 +7,7 @@ use ferrocat_wire::register::{addr, AlState, AlStatus, AlStatusCode};
 use ferrocat_wire::{Address, Command};
 
 use crate::acyclic_state::{Active, InfoWanted, Job};
-pub use crate::acyclic_state::{AcyclicStats, Answer, Request, RequestId, QUEUE_LIMIT, REGISTER_MAX};
+pub use crate::acyclic_state::{AcyclicStats, Answer, Request, RequestId, QUEUE_LIMIT, REGISTER_MAX, STARVED_CALLS};
 use crate::coe;
 use crate::error::{MasterError, RequestError, Result, SlaveError, StateCause};
 use crate::foe_transfer::{FoePeer, FoeStep, FoeTransfer};
@@ -19,8 +19,9 @@ use crate::soe_transfer::{SoeStep, SoeTransfer};
 
 /// Datagrams a call of [`Acyclic::serve_requests`](crate::part::Acyclic::serve_requests) sends at most.
 const DATAGRAMS_PER_CALL: u32 = 4;
-/// A datagram is started only where twice this, or twice the last cyclic round trip, is left
-/// before the deadline.
+/// A datagram is started only where this, or the last cyclic round trip, is left before the
+/// deadline (it is waited for until the deadline at most): a segment whose round trip is a
+/// large part of the cycle is still served.
 const MIN_STEP_NS: u64 = 50_000;
 
 impl<I: Io> Master<I> {
@@ -88,6 +89,14 @@ impl<I: Io> Master<I> {
                 let peer = self.acyclic().soe().peer(position)?;
                 Job::Soe(SoeTransfer::write(peer, drive, idn, elements, &data)?, None, true)
             }
+            // Empty data awaiting a reply: nothing written, the slave's next message awaited.
+            Request::Mailbox { mailbox_type, data, reply: true, .. } if data.is_empty() => {
+                self.mailboxes().mailbox_of(position, mailbox_type)?;
+                Job::Mailbox(mailbox_type, None, true)
+            }
+            Request::Mailbox { mailbox_type, data, reply, .. } => {
+                Job::Mailbox(mailbox_type, Some(self.mailboxes().message(position, mailbox_type, &data)?), reply)
+            }
             Request::State { state, .. } => {
                 self.slave(position)?;
                 // Supervision keeps the slave where it was asked to be, not in OP.
@@ -115,6 +124,41 @@ impl<I: Io> Master<I> {
             }
             other => other,
         })
+    }
+
+    /// Where a starved request's one datagram may wait until: a sixteenth of the period before
+    /// the next cycle (the wake-up target plus the nominal period), when that is past
+    /// `deadline_ns` and the requests found no room for [`STARVED_CALLS`] calls in a row.
+    fn relief_deadline_ns(&mut self, deadline_ns: u64) -> Option<u64> {
+        let period = self.cyc.stats.nominal_period_ns;
+        let start = self.engine.io.wake_target_ns()?;
+        let r = (start + period).checked_sub(period / 16)?;
+        (self.acyclic.starved_calls >= STARVED_CALLS && period > 0 && r > deadline_ns).then_some(r)
+    }
+
+    /// A call without room: counted, and the request being served answered with
+    /// [`RequestError::NoRoom`] once it has waited the mailbox timeout (the state timeout for a
+    /// state request) without a datagram.
+    fn starved(&mut self, deadline_ns: u64, step_ns: u64) {
+        self.acyclic.starved_calls = self.acyclic.starved_calls.saturating_add(1);
+        self.acyclic.stats.starved += 1;
+        let now = self.engine.io.now_ns();
+        let Some(a) = self.acyclic.active.as_ref() else { return };
+        let limit_ns = match a.job {
+            Job::State { .. } => self.settings.state_timeout_ns,
+            _ => self.settings.mailbox_timeout_ns,
+        };
+        let waited_ns = now.saturating_sub(a.since_ns);
+        if waited_ns > limit_ns {
+            let id = a.id;
+            self.acyclic.active = None;
+            let e = RequestError::NoRoom {
+                waited_ms: waited_ns / 1_000_000,
+                round_trip_us: step_ns / 1000,
+                spare_us: deadline_ns.saturating_sub(now) / 1000,
+            };
+            self.acyclic.answer(id, Err(e.into()));
+        }
     }
 
     /// Who `position` is, for an FoE transfer.
@@ -145,7 +189,8 @@ impl<I: Io> Master<I> {
             Job::Sdo(_, Some(msg))
             | Job::Info(_, _, Some(msg))
             | Job::Foe(_, Some(msg), _, _)
-            | Job::Soe(_, Some(msg), _) => {
+            | Job::Soe(_, Some(msg), _)
+            | Job::Mailbox(_, Some(msg), _) => {
                 // Written again under the same counter until the slave takes it.
                 let mut mbx = self.mailboxes();
                 if mbx.try_write(a.position, msg)? {
@@ -162,6 +207,11 @@ impl<I: Io> Master<I> {
                             soe_next = t.next_message();
                             None
                         }
+                        Job::Mailbox(_, _, false) => Some(Ok(Answer::Mailbox(Vec::new()))),
+                        Job::Mailbox(_, m, true) => {
+                            *m = None;
+                            None
+                        }
                         Job::Sdo(_, m) | Job::Info(_, _, m) | Job::Foe(_, m, _, _) => {
                             *m = None;
                             None
@@ -174,7 +224,9 @@ impl<I: Io> Master<I> {
                     None
                 }
             }
-            Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..) => self.await_reply(&mut a, now, limit_ns)?,
+            Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..) | Job::Mailbox(..) => {
+                self.await_reply(&mut a, now, limit_ns)?
+            }
             Job::RegisterRead { register, len } => {
                 let mut b = vec![0u8; *len as usize];
                 let wkc = self.engine.one(Command::FPRD, device(*register), &mut b)?;
@@ -229,6 +281,7 @@ impl<I: Io> Master<I> {
         let protocol = match a.job {
             Job::Foe(..) => MailboxType::FOE,
             Job::Soe(..) => MailboxType::SOE,
+            Job::Mailbox(t, ..) => t,
             _ => MailboxType::COE,
         };
         let polled = self.mailboxes().poll(a.position);
@@ -283,6 +336,7 @@ impl<I: Io> Master<I> {
                 Ok(SoeStep::Await) => None,
                 Err(e) => return Ok(Some(Err(e))),
             },
+            Job::Mailbox(..) => return Ok(Some(Ok(Answer::Mailbox(reply)))),
             _ => None,
         };
         if let Some(payload) = next {
@@ -377,7 +431,7 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
     }
 
     /// Serves the queued requests before `deadline_ns` (the master's clock): at most 4
-    /// datagrams, each only where twice a round trip (the last cyclic one, at least 50 µs) is
+    /// datagrams, each only where a round trip (the last cyclic one, at least 50 µs) is
     /// left, and waited for until the deadline at most, not sent again. A mailbox message not
     /// yet taken is written again at the next call under the same counter (a slave drops a
     /// repeated one, ETG.1000.4); a reply not yet there is polled for again. A request is
@@ -389,15 +443,28 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
         let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
         let mut sent = 0;
         let mut result = Ok(0);
+        let mut no_room = false;
         while sent < DATAGRAMS_PER_CALL {
             if self.m.acyclic.active.is_none() && !self.m.start_next() {
                 break;
             }
             let now = self.m.engine.io.now_ns();
-            if now + 2 * step_ns > deadline_ns {
-                break;
+            let mut until_ns = deadline_ns;
+            if now + step_ns > deadline_ns {
+                // A round trip as long as most of the cycle would otherwise starve the requests
+                // for good: after a run of calls without room, one datagram in the last part.
+                match self.m.relief_deadline_ns(deadline_ns) {
+                    Some(r) if sent == 0 && now + step_ns <= r => {
+                        until_ns = r;
+                        self.m.acyclic.stats.relieved += 1;
+                    }
+                    _ => {
+                        no_room = sent == 0;
+                        break;
+                    }
+                }
             }
-            (self.m.engine.timeout_ns, self.m.engine.retries) = (deadline_ns - now, 0);
+            (self.m.engine.timeout_ns, self.m.engine.retries) = (until_ns - now, 0);
             sent += 1;
             self.m.acyclic.stats.datagrams += 1;
             match self.m.request_step() {
@@ -419,8 +486,16 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
                     result = Ok(sent);
                 }
             }
+            if until_ns != deadline_ns {
+                break;
+            }
         }
         (self.m.engine.timeout_ns, self.m.engine.retries) = (timeout, retries);
+        if no_room {
+            self.m.starved(deadline_ns, step_ns);
+        } else if sent > 0 {
+            self.m.acyclic.starved_calls = 0;
+        }
         result
     }
 }

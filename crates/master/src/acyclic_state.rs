@@ -139,6 +139,19 @@ pub enum Request {
         /// The data as it goes on the wire.
         data: Vec<u8>,
     },
+    /// One mailbox message of `mailbox_type` passed through as it is (a mailbox gateway's
+    /// request): written under the master's next counter, and with `reply` the slave's next
+    /// message of the same type answered ([`Answer::Mailbox`]).
+    Mailbox {
+        /// The slave's position, from 0.
+        position: u16,
+        /// The protocol (CoE, FoE, SoE, EoE, VoE …): the slave's SII must name it.
+        mailbox_type: ferrocat_wire::mailbox::MailboxType,
+        /// The message after the mailbox header.
+        data: Vec<u8>,
+        /// Whether a reply is awaited (an EoE fragment has none).
+        reply: bool,
+    },
 }
 
 impl Request {
@@ -156,7 +169,8 @@ impl Request {
             | Request::FoeWrite { position, .. }
             | Request::State { position, .. }
             | Request::SoeRead { position, .. }
-            | Request::SoeWrite { position, .. } => position,
+            | Request::SoeWrite { position, .. }
+            | Request::Mailbox { position, .. } => position,
         }
     }
 
@@ -172,6 +186,7 @@ impl Request {
                 | Request::FoeWrite { .. }
                 | Request::SoeRead { .. }
                 | Request::SoeWrite { .. }
+                | Request::Mailbox { .. }
         )
     }
 }
@@ -191,6 +206,9 @@ pub enum Answer {
     Entry(EntryInfo),
     /// The slave reached this state.
     State(AlState),
+    /// A passed-through mailbox message's reply: the slave's message after its mailbox header
+    /// (empty where none was awaited).
+    Mailbox(Vec<u8>),
 }
 
 /// What the acyclic side did so far.
@@ -207,7 +225,16 @@ pub struct AcyclicStats {
     /// Datagrams whose answer did not come before the spare time's end (sent again, or the
     /// mailbox polled again, at the next call).
     pub given_up: u64,
+    /// Calls in which a request waited and no datagram of it fitted before the deadline.
+    pub starved: u64,
+    /// Datagrams sent past the deadline, in the cycle's last sixteenth, for a request that had
+    /// found no room for [`STARVED_CALLS`] calls in a row.
+    pub relieved: u64,
 }
+
+/// Calls of `serve_requests` in a row without room after which a waiting request is given one
+/// datagram up to a sixteenth of the period before the next cycle.
+pub const STARVED_CALLS: u32 = 8;
 
 /// The acyclic side's state (the master holds it).
 #[derive(Debug, Default)]
@@ -217,6 +244,8 @@ pub(crate) struct Acyclic {
     pub(crate) answers: Vec<(RequestId, Result<Answer>)>,
     pub(crate) next_id: u64,
     pub(crate) stats: AcyclicStats,
+    /// Calls in a row in which a request waited and found no room.
+    pub(crate) starved_calls: u32,
 }
 
 impl Acyclic {
@@ -258,6 +287,9 @@ pub(crate) enum Job {
     /// An SoE read or write: its message to write next, or (None) its reply awaited; whether
     /// it writes.
     Soe(crate::soe_transfer::SoeTransfer, Option<Vec<u8>>, bool),
+    /// A passed-through message: its type, the message to write (None: the reply awaited),
+    /// and whether a reply is awaited.
+    Mailbox(ferrocat_wire::mailbox::MailboxType, Option<Vec<u8>>, bool),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -269,7 +301,7 @@ pub(crate) enum InfoWanted {
 
 impl Job {
     fn uses_mailbox(&self) -> bool {
-        matches!(self, Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..))
+        matches!(self, Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..) | Job::Mailbox(..))
     }
 }
 

@@ -13,8 +13,8 @@ use crate::io::Io;
 use crate::master::Master;
 use crate::MasterEvent;
 
-/// A datagram of diagnosis is started only where twice this, or twice the last cyclic round
-/// trip, is left before the deadline.
+/// A datagram of diagnosis is started only where this, or the last cyclic round trip, is left
+/// before the deadline (it is waited for until the deadline at most).
 const MIN_STEP_NS: u64 = 50_000;
 // The SM parameters' sync-error flags (ETG.1020: 0x1C32:20 and 0x1C33:20, set when the SM-event
 // missed counter, subindex 0x0B, reached the limit 0x10F1:02): `SyncSm`.
@@ -219,7 +219,7 @@ impl<I: Io> Master<I> {
 
 impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
     /// Diagnosis before `deadline_ns` (the master's clock), at most two datagrams, each only
-    /// where twice a round trip is left: the next slave's error counters when a round of them
+    /// where a round trip is left: the next slave's error counters when a round of them
     /// is due (one round every `counters_period_ns`), and a mailbox datagram: while a read of a
     /// slave's sync-error flag (0x1C32:20 or 0x1C33:20) is awaited, a poll of that slave's
     /// mailbox; else,
@@ -246,7 +246,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
         for counters in [true, false] {
             let now = self.m.engine.io.now_ns();
             let wanted = if counters { now >= self.m.diagnosis.round_due_ns } else { mailboxes };
-            if !wanted || now + 2 * step_ns > deadline_ns {
+            if !wanted || now + step_ns > deadline_ns {
                 continue;
             }
             (self.m.engine.timeout_ns, self.m.engine.retries) = (deadline_ns - now, 0);

@@ -373,6 +373,20 @@ pub enum RequestError {
     /// A state that a master does not request of a slave while cyclic.
     #[error("{0}: request INIT, PREOP, SAFEOP or OP")]
     State(AlState),
+    /// The cycle never left room for the request's datagram: its round trip is longer than
+    /// the spare time after the cyclic frame, for the mailbox timeout.
+    #[error(
+        "no room in the cycle for {waited_ms} ms: a round trip of {round_trip_us} µs and {spare_us} µs to spare \
+         (lengthen the cycle)"
+    )]
+    NoRoom {
+        /// How long it waited, ms.
+        waited_ms: u64,
+        /// The last cyclic round trip, µs.
+        round_trip_us: u64,
+        /// The time left in the cycle for it at the last call, µs.
+        spare_us: u64,
+    },
     /// The request waited longer than its time for an answer (the master's clock).
     #[error("no answer within {waited_ms} ms")]
     TimedOut {

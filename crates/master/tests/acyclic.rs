@@ -179,3 +179,59 @@ fn foe_files_go_there_and_back_beside_the_cycle() {
     assert!(cycle_until(&mut m, id, 10).0.is_err());
     assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
 }
+
+/// EK1100, EL2004 and a SERVO in OP behind a master link of `link_ns` each way.
+fn running_far(link_ns: u32) -> Master<VirtualIo> {
+    let cfg: SegmentConfig = toml::from_str(&format!(
+        "master_link_ns = {link_ns}\n[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n\
+         [[device]]\nbuiltin = 'SERVO'\n"
+    ))
+    .unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 7));
+    m.states().bring_up().unwrap();
+    m.cyclic().set_period_ns(CYCLE_NS);
+    m
+}
+
+#[test]
+fn a_round_trip_of_most_of_the_cycle_starves_no_request_and_makes_no_cycle_late() {
+    // 2 × 200 µs of cable: a round trip of about 400 µs, twice of which passes ¾ of the cycle.
+    let mut m = running_far(200_000);
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x1018, subindex: 1, complete_access: false });
+    let mut next = m.cyclic().now_ns();
+    let (mut answer, mut latest_end_ns) = (None, i64::MIN);
+    for _ in 0..400 {
+        next += CYCLE_NS;
+        assert_eq!(m.cyclic().cycle().unwrap(), m.image().expected_wkc());
+        m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
+        // Where the acyclic side's work ended, against the next cycle's start.
+        latest_end_ns = latest_end_ns.max(m.cyclic().now_ns() as i64 - next as i64);
+        if let Some((_, a)) = m.acyclic().take_answers().into_iter().find(|(k, _)| *k == id) {
+            answer = Some(a);
+            break;
+        }
+        m.cyclic().sleep_until(next);
+    }
+    let vendor = m.slaves()[2].identity().vendor_id;
+    assert_eq!(answer.expect("answered in 400 cycles").unwrap(), Answer::Data(vendor.to_le_bytes().to_vec()));
+    let s = m.acyclic().acyclic_stats();
+    assert!(s.starved >= ferrocat_master::acyclic::STARVED_CALLS as u64, "{s:?}");
+    assert!(s.relieved > 0 && s.relieved <= s.datagrams, "{s:?}");
+    // No datagram was waited for past a sixteenth of the period before the next cycle.
+    assert!(latest_end_ns <= -((CYCLE_NS / 16) as i64) + 20_000, "{latest_end_ns} ns");
+    let c = m.diagnosis().cycle_stats();
+    assert_eq!((c.lost_frames, c.wkc_errors), (0, 0), "{c:?}");
+}
+
+#[test]
+fn a_round_trip_that_leaves_no_room_at_all_is_an_answer_that_says_so() {
+    // 2 × 320 µs: one round trip passes 15/16 of the cycle after the cyclic frame's.
+    let mut m = running_far(320_000);
+    let id = m.acyclic().submit(Request::SdoRead { position: 2, index: 0x1018, subindex: 1, complete_access: false });
+    let (a, short) = cycle_until(&mut m, id, 5_000);
+    assert_eq!(short, 0);
+    let Err(MasterError::Request(RequestError::NoRoom { round_trip_us, spare_us, .. })) = a else { panic!("{a:?}") };
+    assert!(round_trip_us > spare_us && round_trip_us >= 640, "{round_trip_us} µs, {spare_us} µs");
+    assert_eq!(m.acyclic().acyclic_stats().datagrams, 0);
+    assert_eq!(m.acyclic().requests_pending(), 0);
+}

@@ -134,3 +134,42 @@ fn soe_is_served_beside_the_cycle_in_fragments() {
     let a = serve(&mut m, Request::SoeRead { position: 2, drive: 0, idn: gain, elements: Elements::VALUE });
     assert_eq!(a.unwrap(), Answer::Data(vec![7, 0]));
 }
+
+/// `Request::Mailbox` passes a message through as the mailbox gateway does: an SoE read of a
+/// long value written once, then each further fragment the drive sends awaited without a write
+/// (empty data); the fragments joined are the value the SoE client reads.
+#[test]
+fn a_passed_through_read_comes_in_fragments_each_awaited_without_a_write() {
+    use ferrocat_master::wire::mailbox::MailboxType;
+    use ferrocat_master::{Answer, Request};
+    const CYCLE_NS: u64 = 1_000_000;
+    let mut m = drive();
+    let want = m.acyclic().soe().read(2, 0, Idn::FIRMWARE_VERSION, Elements::VALUE).unwrap();
+    m.states().start().unwrap();
+    let serve = |m: &mut Master<VirtualIo>, data: Vec<u8>| {
+        let id =
+            m.acyclic().submit(Request::Mailbox { position: 2, mailbox_type: MailboxType::SOE, data, reply: true });
+        let mut next = m.cyclic().now_ns();
+        for _ in 0..500 {
+            next += CYCLE_NS;
+            m.cyclic().cycle().unwrap();
+            m.acyclic().serve_requests(next - CYCLE_NS / 4).unwrap();
+            if let Some((_, a)) = m.acyclic().take_answers().into_iter().find(|(k, _)| *k == id) {
+                let Ok(Answer::Mailbox(reply)) = a else { panic!("{a:?}") };
+                return reply;
+            }
+            m.cyclic().sleep_until(next);
+        }
+        panic!("not answered in 500 cycles");
+    };
+    // Read request (opcode 1), the value element (0x40), S-0-0030.
+    let [i0, i1] = Idn::FIRMWARE_VERSION.0.to_le_bytes();
+    let mut replies = vec![serve(&mut m, vec![0x01, 0x40, i0, i1])];
+    // The incomplete bit (3) of the SoE header: more fragments follow.
+    while replies.last().unwrap()[0] & 0x08 != 0 {
+        replies.push(serve(&mut m, Vec::new()));
+    }
+    assert!(replies.len() > 1, "a 40-byte mailbox gives the value in fragments");
+    let data: Vec<u8> = replies.iter().flat_map(|r| r[4..].to_vec()).collect();
+    assert_eq!(data, want);
+}

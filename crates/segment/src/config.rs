@@ -305,6 +305,9 @@ pub struct EventToml {
     pub drift_step: Option<DriftStepToml>,
     /// A CiA402 drive faults by itself, with an emergency of `code`.
     pub drive_fault: Option<DriveFaultToml>,
+    /// A device's application reports a local error: SAFEOP with the error indication and
+    /// the AL status code `code`.
+    pub al_error: Option<DriveFaultToml>,
 }
 
 /// A drive's own fault, in an event.
@@ -931,19 +934,23 @@ impl SegmentConfig {
             let ppm = in_range(&place, "drift_step.ppm", d.ppm, -MAX_DRIFT_PPM..=MAX_DRIFT_PPM)?;
             kinds.push(Event::DriftStep { node: node(&d.device)?, delta_ppb: (ppm * 1000.0).round() as i64 });
         }
-        if let Some(f) = &e.drive_fault {
-            let code = f
-                .code
+        let code = |f: &DriveFaultToml, key: &str| {
+            f.code
                 .get()
                 .and_then(|c| u16::try_from(c).ok())
-                .ok_or_else(|| device_err(&place, "drive_fault.code: not a 16-bit number"))?;
-            kinds.push(Event::DriveFault { node: node(&f.device)?, code });
+                .ok_or_else(|| device_err(&place, format!("{key}.code: not a 16-bit number")))
+        };
+        if let Some(f) = &e.drive_fault {
+            kinds.push(Event::DriveFault { node: node(&f.device)?, code: code(f, "drive_fault")? });
+        }
+        if let Some(f) = &e.al_error {
+            kinds.push(Event::AlError { node: node(&f.device)?, code: code(f, "al_error")? });
         }
         match (kinds.pop(), kinds.is_empty()) {
             (Some(ev), true) => Ok(((at_ms * 1e6).round() as u64, ev)),
             _ => Err(device_err(
                 place,
-                "give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault",
+                "give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault, al_error",
             )),
         }
     }

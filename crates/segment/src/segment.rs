@@ -97,6 +97,13 @@ pub enum Event {
         node: usize,
         code: u16,
     },
+    /// A device's application reports a local error (ETG.1000.6, AL status code): from OP or
+    /// SAFEOP it goes to SAFEOP with the error indication and `code`; in a lower state it stays
+    /// there, with them.
+    AlError {
+        node: usize,
+        code: u16,
+    },
 }
 
 /// Counters of what the segment did.
@@ -348,6 +355,14 @@ impl Segment {
                 {
                     d.inject_fault(code);
                 }
+            }
+            Event::AlError { node, code } => {
+                let al = &mut self.nodes[node].esc.al;
+                let state = match al.state {
+                    ferrocat_wire::register::AlState::Op => ferrocat_wire::register::AlState::SafeOp,
+                    s => s,
+                };
+                al.fail(state, ferrocat_wire::register::AlStatusCode(code));
             }
         }
         self.refresh_links();

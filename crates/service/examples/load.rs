@@ -6,6 +6,9 @@
 //!     load TARGET write OUTPUT     OUTPUT toggled each cycle; how many cycles each write took
 //!                                  to reach the wire (the cycle that sent it less the one
 //!                                  published when it was written)
+//!     load ADDR:PORT gateway      a flood of the mailbox gateway, as fast as one socket sends:
+//!                                  diagnosis uploads from station 0 (each a register read
+//!                                  of the slave), and one malformed datagram in ten
 //!     load TARGET write-abandon OUTPUT   begins a write of OUTPUT and stops in its middle, the
 //!                                  file locked and the sequence odd, until killed: a client
 //!                                  killed mid-write
@@ -21,10 +24,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         signal_hook::flag::register(sig, Arc::clone(&stop))?;
     }
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: load TARGET sdo | read HZ | write OUTPUT | write-abandon OUTPUT";
+    let usage = "usage: load TARGET sdo | read HZ | write OUTPUT | write-abandon OUTPUT | gateway";
     let (target, kind) = (args.first().ok_or(usage)?, args.get(1).ok_or(usage)?);
     let running = || !stop.load(Ordering::Relaxed);
     match kind.as_str() {
+        "gateway" => {
+            let to: std::net::SocketAddr = target.parse()?;
+            let sock = std::net::UdpSocket::bind("127.0.0.1:0")?;
+            sock.set_nonblocking(true)?;
+            // SDO upload of 0xA000:01 (the first slave's AL status) from the master (station
+            // 0): the EtherCAT header (16 bytes follow, type 5), the mailbox header (10 bytes,
+            // CoE, counter 1), the CoE and SDO headers.
+            let upload = [0x10, 0x50, 10, 0, 0, 0, 0, 0x13, 0, 0x20, 0x40, 0, 0xA0, 1, 0, 0, 0, 0];
+            let (mut sent, mut replies, mut limited) = (0u64, 0u64, 0u64);
+            let mut buf = [0u8; 2048];
+            while running() {
+                let d: &[u8] = if sent % 10 == 9 { &[0x10, 0x50, 0xFF] } else { &upload };
+                if sock.send_to(d, to).is_ok() {
+                    sent += 1;
+                }
+                while let Ok(n) = sock.recv(&mut buf) {
+                    replies += 1;
+                    limited += u64::from(buf.get(7).is_some_and(|b| b & 0x0F == 0) && n == 12);
+                }
+                std::thread::sleep(Duration::from_micros(20));
+            }
+            println!("gateway: {sent} datagrams sent, {replies} replies ({limited} mailbox errors: over the rate)");
+        }
         "sdo" => {
             let mut c = Client::connect(ferrocat_service::find_socket(target))?;
             let position = c.slaves()?.into_iter().find(|s| s.coe).ok_or("no CoE slave")?.position;

@@ -207,6 +207,21 @@ impl Client {
         }
     }
 
+    /// The master's own object dictionary (ETG.1510): every object, each as the protocol's
+    /// JSON gives it (`index`, `name`, `object_code`, `entries`).
+    pub fn master_od(&mut self) -> Result<Vec<serde_json::Value>, ClientError> {
+        let (mut all, mut from) = (Vec::new(), 0u16);
+        loop {
+            let v = self.call(Request::MasterOd { from })?;
+            let objects: Vec<serde_json::Value> = self.field(v.clone(), "objects")?;
+            all.extend(objects);
+            match v.get("next").and_then(serde_json::Value::as_u64) {
+                Some(n) if n > u64::from(from) && n <= u64::from(u16::MAX) => from = n as u16,
+                _ => return Ok(all),
+            }
+        }
+    }
+
     /// The process data the slave at `position` maps.
     pub fn pdos(&mut self, position: u16) -> Result<Pdos, ClientError> {
         let v = self.call(Request::Pdos { position })?;

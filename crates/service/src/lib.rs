@@ -23,14 +23,20 @@
 //! With the feature `server`, [`Server`] is the master's side: `ferrocat run` starts it and
 //! calls [`Server::serve`] once a cycle.
 pub mod client;
+#[cfg(feature = "server")]
+pub mod gateway;
 pub mod image;
 mod lock;
+#[cfg(feature = "server")]
+pub mod master_od;
 pub mod protocol;
 #[cfg(feature = "server")]
 mod server;
 mod shm;
 
 pub use client::{Client, ClientError};
+#[cfg(feature = "server")]
+pub use gateway::{GatewayOptions, GatewayStats};
 pub use image::{ImageClient, ImageError, SharedImage, Snapshot, Variable};
 pub use lock::{find_socket, lock_path, runtime_dir, socket_path, Held, MasterLock, SYSTEM_DIR};
 #[cfg(feature = "server")]

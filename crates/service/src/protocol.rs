@@ -76,6 +76,16 @@ pub enum Request {
         #[serde(default)]
         offset: usize,
     },
+    /// The master's own object dictionary (ETG.1510) from object `from` on, every object with
+    /// its entries' names, types and values, as many as fit a reply: `{"objects": [{"index",
+    /// "name", "object_code", "entries": [{"subindex", "name", "data_type", "bit_length",
+    /// "value": HEX}]}], "next": INDEX or null}`. Diagnosis objects carry the master's counters;
+    /// their live registers are read over the mailbox gateway.
+    MasterOd {
+        /// The first index wanted.
+        #[serde(default)]
+        from: u16,
+    },
     /// The process data a slave maps ([`Pdos`]).
     Pdos {
         /// The slave's position, from 0.

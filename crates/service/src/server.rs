@@ -19,6 +19,8 @@ use std::time::Duration;
 use ferrocat_master::io::Io;
 use ferrocat_master::{AlState, Answer, Health, Master, MasterError, RequestError, RequestId, SlaveError};
 
+use crate::gateway::{Gateway, GatewayOptions};
+use crate::master_od::{Facts, SlaveFacts};
 use crate::protocol::{
     self, ErrorKind, ErrorReply, Event, Events, Hello, PdoEntry, Pdos, Reply, Request, SlaveInfo, Stats, MAX_LINE,
 };
@@ -57,19 +59,23 @@ pub struct ServerOptions {
 
 /// What goes back to a client's thread: a reply made by the loop, or a request's answer as
 /// the master gave it (the thread makes it a reply: a file's hex text is not the loop's work).
-enum Back {
+pub(crate) enum Back {
     Ready(Reply),
     Answer(ferrocat_master::Result<Answer>),
+    Facts(Box<Facts>),
 }
 
 /// A request as it reaches the loop: the protocol's, or the master's where the client's
 /// thread made it already (a file by FoE, its parts gathered).
-enum Asked {
+pub(crate) enum Asked {
     Protocol(Request),
     Ready(ferrocat_master::Request),
+    /// What the master's object dictionary is built from (the mailbox gateway's, the
+    /// `master_od` request's).
+    Facts,
 }
 
-struct Job {
+pub(crate) struct Job {
     id: u64,
     asked: Asked,
     reply: SyncSender<Back>,
@@ -87,6 +93,13 @@ pub struct Server {
     next_event: u64,
     /// A reload asked for and not yet done: the reply's number and channel.
     reload: Option<(u64, SyncSender<Back>)>,
+    /// The queue's sending side, for the mailbox gateway.
+    tx: SyncSender<Job>,
+    gateway: Option<Gateway>,
+    /// Per slave: times it stopped answering, times it left OP (the dictionary's counters).
+    lost: HashMap<u16, u32>,
+    left_op: HashMap<u16, u32>,
+    started: std::time::Instant,
 }
 
 impl std::fmt::Debug for Server {
@@ -114,6 +127,7 @@ impl Server {
             chown_group(&o.path, group)?;
         }
         let (tx, jobs) = mpsc::sync_channel(QUEUE);
+        let gateway_tx = tx.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let clients = Arc::new(AtomicUsize::new(0));
         let hello = o.hello.clone();
@@ -152,7 +166,26 @@ impl Server {
             events: std::collections::VecDeque::with_capacity(EVENTS_KEPT),
             next_event: 0,
             reload: None,
+            tx: gateway_tx,
+            gateway: None,
+            lost: HashMap::new(),
+            left_op: HashMap::new(),
+            started: std::time::Instant::now(),
         })
+    }
+
+    /// Starts the mailbox gateway (ETG.8200) beside the socket: its requests take the same
+    /// queue as the socket's.
+    pub fn start_gateway(&mut self, o: GatewayOptions) -> std::io::Result<std::net::SocketAddr> {
+        let g = Gateway::start(o, self.tx.clone())?;
+        let at = g.local_addr();
+        self.gateway = Some(g);
+        Ok(at)
+    }
+
+    /// The mailbox gateway's counts, if it runs.
+    pub fn gateway_stats(&self) -> Option<serde_json::Value> {
+        self.gateway.as_ref().map(|g| g.stats().to_json())
     }
 
     /// The socket's path.
@@ -183,8 +216,14 @@ impl Server {
         use ferrocat_master::MasterEvent as E;
         for e in events {
             let (kind, position) = match e {
-                E::LeftOp { position, .. } => ("left_op", Some(*position)),
-                E::Lost { position, .. } => ("lost", Some(*position)),
+                E::LeftOp { position, .. } => {
+                    *self.left_op.entry(*position).or_default() += 1;
+                    ("left_op", Some(*position))
+                }
+                E::Lost { position, .. } => {
+                    *self.lost.entry(*position).or_default() += 1;
+                    ("lost", Some(*position))
+                }
                 E::Recovered { position, .. } => ("recovered", Some(*position)),
                 E::Emergency { position, .. } => ("emergency", Some(*position)),
                 E::Soe { position, .. } => ("soe", Some(*position)),
@@ -239,13 +278,36 @@ impl Server {
         let bad = |message: String| Err(ErrorReply::new(ErrorKind::BadRequest, message));
         let request = match job.asked {
             Asked::Ready(ready) => ready,
+            Asked::Facts => {
+                let _ = job.reply.try_send(Back::Facts(Box::new(self.facts(m))));
+                return;
+            }
+            Asked::Protocol(Request::MasterOd { from }) => {
+                // As many objects as fit three quarters of a reply's line; `next` the rest's.
+                let od = crate::master_od::dictionary(&self.facts(m));
+                let (mut objects, mut bytes, mut next) = (Vec::new(), 0, None);
+                for o in od.into_iter().filter(|o| o.index >= from) {
+                    bytes += serde_json::to_vec(&o).map_or(0, |v| v.len() + 1);
+                    if bytes > MAX_LINE * 3 / 4 && !objects.is_empty() {
+                        next = Some(o.index);
+                        break;
+                    }
+                    objects.push(o);
+                }
+                let r = serde_json::json!({ "objects": objects, "next": next });
+                let _ = job.reply.try_send(Back::Ready(reply(Ok(r))));
+                return;
+            }
             Asked::Protocol(Request::Slaves) => {
                 let _ = job.reply.try_send(Back::Ready(reply(Ok(serde_json::json!({ "slaves": slave_list(m) })))));
                 return;
             }
             Asked::Protocol(Request::Stats) => {
                 let _ = job.reply.try_send(Back::Ready(reply(Ok({
-                    let extra = extra(m);
+                    let mut extra = extra(m);
+                    if let (Some(g), Some(o)) = (self.gateway_stats(), extra.as_object_mut()) {
+                        o.insert(String::from("gateway"), g);
+                    }
                     stats(m, extra)
                 }))));
                 return;
@@ -390,6 +452,7 @@ pub fn master_request(r: Request) -> Result<ferrocat_master::Request, String> {
         | Request::Events { .. }
         | Request::Pdos { .. }
         | Request::SiiRead { .. }
+        | Request::MasterOd { .. }
         | Request::Reload => return Err(String::from("answered by the loop")),
     })
 }
@@ -462,6 +525,7 @@ fn reply_of(id: u64, answer: ferrocat_master::Result<Answer>) -> Reply {
             "access": e.access, "name": e.name,
         }),
         Ok(Answer::State(s)) => serde_json::json!({ "state": s.name() }),
+        Ok(Answer::Mailbox(d)) => serde_json::json!({ "data": protocol::hex(&d) }),
         Err(e) => return Reply { id, ok: None, error: Some(error_of(&e)) },
     };
     Reply { id, ok: Some(ok), error: None }
@@ -490,7 +554,7 @@ fn error_of(e: &MasterError) -> ErrorReply {
 /// Makes the calling thread an ordinary one: a thread inherits the real-time policy and the CPU
 /// of the thread that made it, and the socket's threads, made by a master already on SCHED_FIFO
 /// and its own CPU, would compete with its cyclic loop at the loop's priority.
-fn ordinary_thread() {
+pub(crate) fn ordinary_thread() {
     // SAFETY: plain system calls on the calling thread (0), with values they take.
     unsafe {
         let param = libc::sched_param { sched_priority: 0 };
@@ -627,6 +691,7 @@ fn forward_answer(
         Ok(()) => match rx.recv_timeout(wait) {
             Ok(Back::Ready(r)) => Err(r),
             Ok(Back::Answer(a)) => Ok(a),
+            Ok(Back::Facts(_)) => Err(error(ErrorKind::Master, "an answer of the wrong kind")),
             Err(mpsc::RecvTimeoutError::Disconnected) => Err(error(ErrorKind::Master, "the master has stopped")),
             Err(mpsc::RecvTimeoutError::Timeout) => {
                 Err(error(ErrorKind::Master, "no answer from the cyclic loop (stopped, or stalled)"))
@@ -661,4 +726,83 @@ fn chown_group(path: &std::path::Path, group: &str) -> std::io::Result<()> {
         return Err(std::io::Error::last_os_error());
     }
     Ok(())
+}
+
+/// Asks the loop for `request` on a thread that is not the loop's (the mailbox gateway's):
+/// its answer, or `None` where the queue was full or no answer came in time.
+pub(crate) fn ask(
+    jobs: &SyncSender<Job>,
+    request: ferrocat_master::Request,
+) -> Option<ferrocat_master::Result<Answer>> {
+    forward_answer(jobs, 0, Asked::Ready(request), false).ok()
+}
+
+/// Asks the loop for the facts the master's object dictionary is built from.
+pub(crate) fn ask_facts(jobs: &SyncSender<Job>) -> Option<Facts> {
+    let (tx, rx) = mpsc::sync_channel(1);
+    jobs.try_send(Job { id: 0, asked: Asked::Facts, reply: tx }).ok()?;
+    match rx.recv_timeout(REPLY_WAIT) {
+        Ok(Back::Facts(f)) => Some(*f),
+        _ => None,
+    }
+}
+
+impl Server {
+    /// What the master's object dictionary is built from, taken in the loop: the slave table,
+    /// the counters, the events kept.
+    fn facts<I: Io>(&self, m: &mut Master<I>) -> Facts {
+        let slaves: Vec<SlaveFacts> = m
+            .slaves()
+            .iter()
+            .map(|s| {
+                let id = s.identity();
+                let ports = s.ports();
+                let mut neighbours = [0u16; 4];
+                if let Some(parent) = ports.parent.and_then(|p| m.slaves().get(p as usize)) {
+                    neighbours[usize::from(ports.entry & 3)] = parent.station();
+                }
+                for child in m.slaves().iter().filter(|c| c.ports().parent == Some(s.position())) {
+                    neighbours[usize::from(child.ports().parent_port & 3)] = child.station();
+                }
+                let sii = s.sii();
+                let type_name = sii.general().and_then(|g| sii.string(g.order_idx)).unwrap_or_else(|| s.name().into());
+                SlaveFacts {
+                    position: s.position(),
+                    station: s.station(),
+                    type_name,
+                    name: s.name().to_string(),
+                    identity: [id.vendor_id, id.product_code, id.revision, id.serial],
+                    mailbox_out: s.mailbox().map_or(0, |mb| mb.out.1),
+                    mailbox_in: s.mailbox().map_or(0, |mb| mb.inp.1),
+                    protocols: s.mailbox().map_or(0, |mb| mb.protocols),
+                    port_descriptor: ports.descriptor,
+                    active: ports.active,
+                    dl_status: ports.dl_status.0,
+                    neighbours,
+                    requested_state: s.status().state() as u8,
+                    lost_count: self.lost.get(&s.position()).copied().unwrap_or(0),
+                    left_op_count: self.left_op.get(&s.position()).copied().unwrap_or(0),
+                }
+            })
+            .collect();
+        let c = m.diagnosis().cycle_stats();
+        let f = m.cyclic().frame_stats();
+        let severity = |kind: &str| match kind {
+            "recovered" => 0,
+            "left_op" | "lost" | "sync_error" | "emergency" => 2,
+            _ => 1,
+        };
+        let started = self.started;
+        Facts {
+            slaves,
+            cycles: c.cycles,
+            wkc_errors: c.wkc_errors,
+            cyclic_lost: c.lost_frames,
+            frames_lost: f.lost,
+            frames_sent: f.frames_sent,
+            uptime_ns: started.elapsed().as_nanos() as u64,
+            events: self.events.iter().map(|e| ((e.at_s * 1e9) as u64, severity(&e.kind), e.text.clone())).collect(),
+            events_dropped: self.events.front().map_or(0, |e| e.seq),
+        }
+    }
 }

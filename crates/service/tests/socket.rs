@@ -2,38 +2,16 @@
 //! its own: every request of the protocol answered through the socket, bad lines and
 //! vanished clients answered or ignored, and the cyclic exchange whole throughout.
 #![cfg(feature = "server")]
+mod common;
+
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
-use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
-use ferrocat_master::{Master, MasterEvent};
-use ferrocat_segment::{HostModel, SegmentConfig, VirtualIo};
-use ferrocat_service::protocol::{ErrorKind, Hello};
-use ferrocat_service::{Client, Server, ServerOptions};
+use common::{Running, Setup};
+use ferrocat_service::protocol::ErrorKind;
+use ferrocat_service::Client;
 
-const CYCLE_NS: u64 = 1_000_000;
-
-struct Running {
-    path: PathBuf,
-    stop: Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<(u64, u64)>>,
-}
-
-impl Running {
-    /// Stops the loop: its cycles and the cycles whose working counter was short.
-    fn stop(mut self) -> (u64, u64) {
-        self.stop.store(true, Ordering::Relaxed);
-        let r = self.thread.take().unwrap().join().unwrap();
-        assert!(!self.path.exists(), "the socket goes with the server");
-        std::fs::remove_dir(self.path.parent().unwrap()).ok();
-        r
-    }
-}
-
-/// EK1100, EL2004 and a SERVO in OP, cycling in virtual time (each cycle also 50 µs of real
-/// time, so that clients get their turn), its control socket at a path of the test's own.
+/// EK1100, EL2004 and a SERVO in OP on the virtual segment, the socket served once a cycle.
 fn running(name: &str, register_writes: bool) -> Running {
     running_with(name, register_writes, 0)
 }
@@ -41,51 +19,10 @@ fn running(name: &str, register_writes: bool) -> Running {
 /// As [`running`], the loop also handing the server `events` events of its own at its tenth
 /// cycle (slave 1 back in OP, numbered in their `name`s), besides the master's.
 fn running_with(name: &str, register_writes: bool, events: usize) -> Running {
-    let dir = std::env::temp_dir().join(format!("ferrocat-service-test-{name}-{}", std::process::id()));
-    let path = dir.join(format!("{name}.sock"));
-    let (ready_tx, ready) = std::sync::mpsc::channel();
-    let stop = Arc::new(AtomicBool::new(false));
-    let stop_loop = Arc::clone(&stop);
-    let p = path.clone();
-    let thread = std::thread::spawn(move || {
-        let cfg: SegmentConfig = toml::from_str(
-            "[[device]]\nbuiltin = 'EK1100'\n[[device]]\nbuiltin = 'EL2004'\n[[device]]\nbuiltin = 'SERVO'\n",
-        )
-        .unwrap();
-        let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::ideal(), 1));
-        m.states().bring_up().unwrap();
-        let hello = Hello {
-            service: "ferrocat".into(),
-            protocol: ferrocat_service::protocol::VERSION,
-            pid: std::process::id(),
-            target: "virtual".into(),
-            cycle_us: 1000,
-            slaves: m.slaves().len(),
-            register_writes,
-        };
-        let mut server =
-            Server::start(ServerOptions { path: p, mode: 0o600, group: None, register_writes, hello }).unwrap();
-        ready_tx.send(()).unwrap();
-        let mut next = m.cyclic().now_ns();
-        let mut short = 0;
-        while !stop_loop.load(Ordering::Relaxed) {
-            next += CYCLE_NS;
-            if m.cyclic().cycle().unwrap() != m.image().expected_wkc() {
-                short += 1;
-            }
-            server.serve(&mut m, next - CYCLE_NS / 4, &|_| serde_json::json!({ "lock": "none" })).unwrap();
-            let mut taken = m.diagnosis().take_events();
-            if m.diagnosis().cycle_stats().cycles == 10 {
-                taken.extend((0..events).map(|k| MasterEvent::Recovered { position: 1, name: format!("e{k}") }));
-            }
-            server.note_events(&taken, 0.5);
-            m.cyclic().sleep_until(next);
-            std::thread::sleep(std::time::Duration::from_micros(50));
-        }
-        (m.diagnosis().cycle_stats().cycles, short)
-    });
-    ready.recv().unwrap();
-    Running { path, stop, thread: Some(thread) }
+    common::running(
+        name,
+        Setup { register_writes, events: (0..events).map(|k| format!("e{k}")).collect(), gateway: None },
+    )
 }
 
 #[test]

@@ -35,22 +35,53 @@ impl std::fmt::Display for LockState {
 }
 
 /// When a method counts as locked. The offset compared is the median of the last
-/// 15 measured offsets, so that one late frame neither locks nor unlocks.
+/// 15 measured offsets, so that one late frame neither locks nor unlocks. The bounds widen
+/// with the offsets' measured noise ([`Lock::bounds_ns`]): on a host whose software stamps
+/// scatter the offsets by microseconds, a median that wanders by its own noise is not a lost
+/// lock.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LockThresholds {
-    /// Lock within this |offset|, ns (default 1 000).
+    /// Lock within this |offset|, ns, or three standard deviations of the median where that is
+    /// more (default 1 000).
     pub lock_ns: u64,
-    /// Leave lock beyond this |offset|, ns (default 4 000).
+    /// Leave lock beyond this |offset|, ns, or six standard deviations of the median where that
+    /// is more (default 4 000).
     pub unlock_ns: u64,
-    /// Answered frames in a row within `lock_ns` to lock (default 100).
+    /// Answered frames in a row within the lock bound to lock (default 100).
     pub lock_cycles: u32,
+    /// Answered frames in a row beyond the unlock bound to leave lock (default 15, the
+    /// median's length: a stall that holds a few frames does not unlock).
+    pub unlock_cycles: u32,
     /// Frames lost in a row that unlock (default 100).
     pub lost_cycles: u32,
 }
 
 impl Default for LockThresholds {
     fn default() -> Self {
-        LockThresholds { lock_ns: 1_000, unlock_ns: 4_000, lock_cycles: 100, lost_cycles: 100 }
+        LockThresholds { lock_ns: 1_000, unlock_ns: 4_000, lock_cycles: 100, unlock_cycles: 15, lost_cycles: 100 }
+    }
+}
+
+/// The offsets' noise: a running mean (over about 64 answered frames) of each offset's
+/// distance from the median, each distance capped at four times the mean (at least 1 µs),
+/// so that a stall's offsets do not make the noise.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Noise {
+    mean_abs_ns: i64,
+    n: u64,
+}
+
+impl Noise {
+    fn learn(&mut self, distance_ns: i64) {
+        let d = distance_ns.min(4 * self.mean_abs_ns.max(250));
+        self.mean_abs_ns += (d - self.mean_abs_ns) / (self.n as i64 + 1).min(64);
+        self.n += 1;
+    }
+
+    /// The median's standard deviation, ns: for a normal spread σ ≈ 1.25 × the mean absolute
+    /// deviation, and the median of 15 has 1.25 σ / √15 ≈ 0.32 σ, so ≈ 0.4 × the mean.
+    fn median_sigma_ns(&self) -> u64 {
+        (self.mean_abs_ns.max(0) as u64) * 2 / 5
     }
 }
 
@@ -67,7 +98,9 @@ pub struct Lock {
     filled: usize,
     next: usize,
     within: u32,
+    beyond: u32,
     lost_in_row: u32,
+    noise: Noise,
     offset_ns: Option<i64>,
     /// Cycles observed, changes of state, and the cycle that first locked (counted from 1).
     observed: u64,
@@ -135,6 +168,18 @@ impl Lock {
         self.first_locked
     }
 
+    /// The lock and unlock bounds in force, ns: the thresholds, widened to three and six
+    /// standard deviations of the median where the measured noise makes those more.
+    pub fn bounds_ns(&self) -> (u64, u64) {
+        let sigma = self.noise.median_sigma_ns();
+        (self.thresholds.lock_ns.max(3 * sigma), self.thresholds.unlock_ns.max(6 * sigma))
+    }
+
+    /// The offsets' measured noise: the mean distance of an offset from the median, ns.
+    pub fn noise_ns(&self) -> u64 {
+        self.noise.mean_abs_ns.max(0) as u64
+    }
+
     /// Frames whose offsets were left out for their round trip ([`Lock::observe_frame`]).
     pub fn left_out(&self) -> u64 {
         self.trips.left_out
@@ -186,10 +231,15 @@ impl Lock {
         window.sort_unstable();
         let median = window[window.len() / 2];
         self.offset_ns = Some(median);
+        if self.filled == FILTER_LEN {
+            self.noise.learn((offset - median).abs());
+        }
         let size = median.unsigned_abs();
-        self.within = if size <= t.lock_ns { self.within.saturating_add(1) } else { 0 };
+        let (lock_ns, unlock_ns) = self.bounds_ns();
+        self.within = if size <= lock_ns { self.within.saturating_add(1) } else { 0 };
+        self.beyond = if size > unlock_ns { self.beyond.saturating_add(1) } else { 0 };
         self.state = match self.state {
-            LockState::Locked if size <= t.unlock_ns => LockState::Locked,
+            LockState::Locked if self.beyond < t.unlock_cycles.max(1) => LockState::Locked,
             _ if self.within >= t.lock_cycles.max(1) => LockState::Locked,
             _ => LockState::Locking,
         };
@@ -218,8 +268,9 @@ mod tests {
             assert_eq!(lock.observe_frame(Some(-1_000_000), 2_040_000), LockState::Locked);
         }
         assert_eq!(lock.left_out(), 10);
-        // The same offsets from frames with the usual round trip unlock.
-        for _ in 0..10 {
+        // The same offsets from frames with the usual round trip unlock, once the median has
+        // stayed beyond for 15 frames.
+        for _ in 0..22 {
             lock.observe_frame(Some(-1_000_000), 40_000);
         }
         assert_eq!(lock.state(), LockState::Locking);
@@ -235,7 +286,7 @@ mod tests {
         run(&mut lock, [0; 200]);
         assert_eq!((lock.changes(), lock.first_locked_cycle()), (2, Some(127)));
         // Out and back: two more changes; the first lock stays where it was.
-        run(&mut lock, [10_000; 20]);
+        run(&mut lock, [10_000; 30]);
         run(&mut lock, [0; 200]);
         assert_eq!((lock.changes(), lock.first_locked_cycle()), (4, Some(127)));
     }
@@ -252,8 +303,43 @@ mod tests {
         assert_eq!(run(&mut lock, [3_000; 30]), LockState::Locked);
         // One outlier does not move the median.
         assert_eq!(run(&mut lock, [-90_000; 1]), LockState::Locked);
-        assert_eq!(run(&mut lock, [9_000; 8]), LockState::Locking);
+        // Beyond unlock_ns: the median there from the 8th, and 15 frames of it in a row unlock.
+        assert_eq!(run(&mut lock, [9_000; 7 + 14]), LockState::Locked);
         assert_eq!(lock.offset_ns(), Some(9_000));
+        assert_eq!(run(&mut lock, [9_000; 1]), LockState::Locking);
+    }
+
+    #[test]
+    fn noisy_offsets_widen_the_bounds_so_that_the_median_s_own_wander_does_not_unlock() {
+        // Offsets scattered ±6 µs about 0 (a software-stamped host): the median of 15 wanders
+        // past 1 µs now and then, and past 4 µs too rarely to matter; the bounds follow.
+        let mut lock = Lock::default();
+        let mut x: u64 = 1;
+        let mut noisy = || {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((x >> 33) % 12_001) as i64 - 6_000
+        };
+        for _ in 0..3_000 {
+            lock.observe(Some(noisy()), false);
+        }
+        let (lock_ns, unlock_ns) = lock.bounds_ns();
+        assert!(lock.noise_ns() > 2_500 && lock.noise_ns() < 3_500, "{}", lock.noise_ns());
+        assert!(lock_ns > 3_000 && unlock_ns > 6_000, "{lock_ns} {unlock_ns}");
+        assert_eq!(lock.state(), LockState::Locked);
+        let changes = lock.changes();
+        for _ in 0..30_000 {
+            lock.observe(Some(noisy()), false);
+        }
+        assert_eq!(lock.changes(), changes, "no flapping");
+        // A real offset of 40 µs, far beyond the noise, unlocks.
+        for _ in 0..40 {
+            lock.observe(Some(40_000 + noisy()), false);
+        }
+        assert_eq!(lock.state(), LockState::Locking);
+        // Quiet offsets keep the thresholds as they are.
+        let mut quiet = Lock::default();
+        run(&mut quiet, (0..500).map(|k| (k % 7) * 20 - 60));
+        assert_eq!(quiet.bounds_ns(), (1_000, 4_000));
     }
 
     #[test]
