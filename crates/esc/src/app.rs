@@ -77,9 +77,9 @@ pub trait Application: Debug + Send {
     fn pending_mailbox(&mut self) -> Option<Vec<u8>> {
         None
     }
-    /// Process-image bytes the application expects in the output or input SyncManager, when
-    /// it decides them (PDO mapping through CoE) rather than the SII.
-    fn process_data_bytes(&self, _outputs: bool) -> Option<u16> {
+    /// Process-image bytes the application expects in process-data SyncManager `sm` (of
+    /// outputs or inputs), when it decides them (PDO mapping through CoE) rather than the SII.
+    fn process_data_bytes(&self, _sm: u8, _outputs: bool) -> Option<u16> {
         None
     }
     /// True time of the application's next own event (a free-running timer), if any.

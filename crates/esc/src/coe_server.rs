@@ -133,7 +133,11 @@ impl CoeDevice {
 
     /// The entries the assignment object (`0x1C12` outputs, `0x1C13` inputs) maps, in order.
     pub fn mapping(&self, outputs: bool) -> Vec<Mapped> {
-        let assign = if outputs { 0x1C12 } else { 0x1C13 };
+        self.assigned(if outputs { 0x1C12 } else { 0x1C13 })
+    }
+
+    /// The entries the PDOs of assignment object `assign` map, in order.
+    fn assigned(&self, assign: u16) -> Vec<Mapped> {
         let mut v = Vec::new();
         let n = self.od.read(assign, 0).ok().and_then(|b| b.first().copied()).unwrap_or(0);
         for k in 1..=n {
@@ -486,8 +490,20 @@ impl Application for CoeDevice {
         }
         Ok(())
     }
-    fn process_data_bytes(&self, outputs: bool) -> Option<u16> {
-        Some(self.image_bits(outputs).div_ceil(8) as u16)
+    fn process_data_bytes(&self, sm: u8, outputs: bool) -> Option<u16> {
+        // SyncManager n's PDOs are those of its assignment object, 0x1C10 + n (ETG.1000.6): a
+        // TwinSAFE controller's SM6 beside SM2. Where SM2 or SM3 is not the direction's
+        // SyncManager, 0x1C12 and 0x1C13 still say what the outputs and inputs carry; a further
+        // SyncManager without an object of its own carries nothing.
+        let own = 0x1C10 + sm as u16;
+        let bits = if own != 0x1C12 && own != 0x1C13 && self.od.get(own).is_some() {
+            self.assigned(own).iter().map(|m| m.bits as u32).sum()
+        } else if sm <= 3 {
+            self.image_bits(outputs)
+        } else {
+            0
+        };
+        Some(bits.div_ceil(8) as u16)
     }
     fn state_changed(&mut self, pdi: &mut Pdi<'_>, state: AlState) {
         self.state = state;

@@ -184,6 +184,12 @@ pub struct Mapping {
     pub out_sm: Option<(u8, SmEntry)>,
     /// The SyncManager (number, settings) of the inputs.
     pub in_sm: Option<(u8, SmEntry)>,
+    /// Output SyncManagers after `out_sm` that carry data (a TwinSAFE controller's SM6 beside
+    /// SM2): number, settings, and the index in `outputs` of the first entry it carries. Each
+    /// SyncManager's entries start on a byte of their own, in the order listed.
+    pub more_out_sms: Vec<(u8, SmEntry, usize)>,
+    /// Input SyncManagers after `in_sm` that carry data, as `more_out_sms`.
+    pub more_in_sms: Vec<(u8, SmEntry, usize)>,
     /// Byte offset and length of this slave's outputs in the process image.
     pub out_area: (u32, u32),
     /// Byte offset and length of this slave's inputs in the process image.
@@ -266,13 +272,75 @@ impl MailboxConfig {
 }
 
 impl Mapping {
-    /// Bits of outputs mapped.
+    /// Bits of outputs mapped (where several SyncManagers carry them, each one's rounded up to
+    /// a byte but the last).
     pub fn output_bits(&self) -> u32 {
-        self.outputs.iter().map(|m| m.bits as u32).sum()
+        region_bits(&self.outputs, &self.more_out_sms).iter().map(|r| r.2).sum()
     }
-    /// Bits of inputs mapped.
+    /// Bits of inputs mapped, as [`Mapping::output_bits`].
     pub fn input_bits(&self) -> u32 {
-        self.inputs.iter().map(|m| m.bits as u32).sum()
+        region_bits(&self.inputs, &self.more_in_sms).iter().map(|r| r.2).sum()
+    }
+
+    /// The output SyncManagers with their byte offset in this slave's outputs and their length
+    /// in bytes: `out_sm` first, then `more_out_sms`.
+    pub fn output_sms(&self) -> Vec<(u8, SmEntry, u32, u32)> {
+        sm_regions(self.out_sm, &self.outputs, &self.more_out_sms)
+    }
+    /// The input SyncManagers, as [`Mapping::output_sms`].
+    pub fn input_sms(&self) -> Vec<(u8, SmEntry, u32, u32)> {
+        sm_regions(self.in_sm, &self.inputs, &self.more_in_sms)
+    }
+
+    /// Gives each entry its place in the image: outputs from bit `out_bit` on, inputs from
+    /// `in_bit` on, a further SyncManager's entries from the next whole byte.
+    pub(crate) fn place(&mut self, out_bit: u32, in_bit: u32) {
+        place_entries(&mut self.outputs, &self.more_out_sms, out_bit);
+        place_entries(&mut self.inputs, &self.more_in_sms, in_bit);
+    }
+}
+
+/// The entries' regions, one per SyncManager: (first entry, end, bits, the last rounded to a
+/// byte but the last region's).
+fn region_bits(entries: &[Mapped], more: &[(u8, SmEntry, usize)]) -> Vec<(usize, usize, u32)> {
+    let mut starts: Vec<usize> = std::iter::once(0).chain(more.iter().map(|m| m.2.min(entries.len()))).collect();
+    starts.dedup();
+    let n = starts.len();
+    (0..n)
+        .map(|k| {
+            let end = starts.get(k + 1).copied().unwrap_or(entries.len());
+            let bits: u32 = entries[starts[k]..end].iter().map(|m| m.bits as u32).sum();
+            (starts[k], end, if k + 1 < n { bits.div_ceil(8) * 8 } else { bits })
+        })
+        .collect()
+}
+
+fn sm_regions(
+    first: Option<(u8, SmEntry)>,
+    entries: &[Mapped],
+    more: &[(u8, SmEntry, usize)],
+) -> Vec<(u8, SmEntry, u32, u32)> {
+    let Some(first) = first else { return Vec::new() };
+    let sms = std::iter::once(first).chain(more.iter().map(|m| (m.0, m.1)));
+    let mut at = 0u32;
+    sms.zip(region_bits(entries, more))
+        .map(|((n, e), (_, _, bits))| {
+            let r = (n, e, at, bits.div_ceil(8));
+            at += bits.div_ceil(8);
+            r
+        })
+        .collect()
+}
+
+fn place_entries(entries: &mut [Mapped], more: &[(u8, SmEntry, usize)], from_bit: u32) {
+    let mut bit = from_bit;
+    for (first, end, bits) in region_bits(entries, more) {
+        let start = bit;
+        for m in &mut entries[first..end] {
+            m.image_bit = bit;
+            bit += m.bits as u32;
+        }
+        bit = start + bits;
     }
 }
 

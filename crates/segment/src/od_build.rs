@@ -228,8 +228,33 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
     // The assignment the ESI defines by default (PDOs with an Sm attribute); a modular device's
     // is the plugged modules' whatever its dictionary's default says, as its firmware fills it
     // from the modules it detects.
-    for (assign, pdos) in [(0x1C12u16, &dev.rx_pdos), (0x1C13, &dev.tx_pdos)] {
-        let default: Vec<u16> = pdos.iter().filter(|p| p.sm.is_some()).map(|p| p.index).collect();
+    // A PDO assigned to a further SyncManager of its direction (a TwinSAFE controller's SM6
+    // beside SM2) is in that SyncManager's assignment object, 0x1C10 + n, made where the
+    // dictionary lacks it (ETG.1000.6: 0x1C10–0x1C2F, one per SyncManager).
+    let sms = info.sync_managers();
+    let further = |p: &ferrocat_esi::PdoDesc, sm_type: u8, first: u8| {
+        p.sm.filter(|&n| n != first && sms.get(n as usize).is_some_and(|s| s.sm_type == sm_type))
+    };
+    let mut assignments: Vec<(u16, Vec<u16>)> = Vec::new();
+    for (pdos, sm_type, first) in [(&dev.rx_pdos, SmEntry::TYPE_OUTPUTS, 2u8), (&dev.tx_pdos, SmEntry::TYPE_INPUTS, 3)]
+    {
+        let main: Vec<u16> =
+            pdos.iter().filter(|p| p.sm.is_some() && further(p, sm_type, first).is_none()).map(|p| p.index).collect();
+        assignments.push((0x1C10 + first as u16, main));
+        let mut more: Vec<u8> = pdos.iter().filter_map(|p| further(p, sm_type, first)).collect();
+        more.sort_unstable();
+        more.dedup();
+        for n in more {
+            let assign = 0x1C10 + n as u16;
+            if od.get(assign).is_none() {
+                let name = format!("SM{n} PDO assign");
+                od.insert(Object::list(assign, &name, ObjectCode::Array, dt::UINT, rw_preop(), vec![]));
+            }
+            let listed = pdos.iter().filter(|p| further(p, sm_type, first) == Some(n)).map(|p| p.index).collect();
+            assignments.push((assign, listed));
+        }
+    }
+    for (assign, default) in assignments {
         if let Some(o) = od.objects.get_mut(&assign) {
             let has_default = o.entry(0).and_then(|e| e.value.first()).is_some_and(|&n| n > 0);
             if (!has_default || dev.slots.is_some()) && !default.is_empty() {

@@ -1187,8 +1187,8 @@ impl Application for Cia402Drive {
         }
         Ok(())
     }
-    fn process_data_bytes(&self, outputs: bool) -> Option<u16> {
-        self.coe.process_data_bytes(outputs)
+    fn process_data_bytes(&self, sm: u8, outputs: bool) -> Option<u16> {
+        self.coe.process_data_bytes(sm, outputs)
     }
     fn state_changed(&mut self, pdi: &mut Pdi<'_>, state: AlState) {
         let was_op = self.op;

@@ -14,8 +14,8 @@ impl Esc {
             self.al.copy_control(control);
         } else {
             let mut expected = self.expected.clone();
-            for (_, e, len) in expected.process_data.iter_mut() {
-                if let Some(b) = self.app.process_data_bytes(e.sm_type == SmEntry::TYPE_OUTPUTS) {
+            for (n, e, len) in expected.process_data.iter_mut() {
+                if let Some(b) = self.app.process_data_bytes(*n, e.sm_type == SmEntry::TYPE_OUTPUTS) {
                     *len = b;
                 }
             }

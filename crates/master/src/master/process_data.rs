@@ -41,59 +41,97 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects)
-    /// when it speaks CoE, else the PDOs its SII assigns to SyncManagers.
+    /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects,
+    /// 0x1C10 + n for a further SyncManager n) when it speaks CoE, else the PDOs its ESI or SII
+    /// assigns to SyncManagers. Every process-data SyncManager of the SII that gets entries is
+    /// configured (a TwinSAFE controller's SM6 beside SM2).
     pub(crate) fn read_mapping(&mut self, position: u16) -> Result<()> {
         let k = position as usize;
         let sms = self.slaves[k].sii.sync_managers().to_vec();
-        let out_sm =
-            sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_OUTPUTS).map(|(i, s)| (i as u8, *s));
-        let in_sm = sms.iter().enumerate().find(|(_, s)| s.sm_type == SmEntry::TYPE_INPUTS).map(|(i, s)| (i as u8, *s));
+        let of_type = |t: u8| -> Vec<(u8, SmEntry)> {
+            sms.iter().enumerate().filter(|(_, s)| s.sm_type == t).map(|(i, s)| (i as u8, *s)).collect()
+        };
+        let (out_sms, in_sms) = (of_type(SmEntry::TYPE_OUTPUTS), of_type(SmEntry::TYPE_INPUTS));
         let esi_dev = self.esi_description(position).cloned();
         let sii_has_mapping = {
             let sii = &self.slaves[k].sii;
             sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
         };
-        let (outputs, inputs) = if self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe()) {
-            (self.coe_mapping(position, 0x1C12)?, self.coe_mapping(position, 0x1C13)?)
-        } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
-            // The ESI's default assignment: PDOs with an Sm attribute.
-            let from = |pdos: &[ferrocat_esi::PdoDesc]| -> Vec<Mapped> {
-                pdos.iter()
-                    .filter(|p| p.sm.is_some())
-                    .flat_map(|p| p.entries.iter())
-                    .map(|e| Mapped {
-                        index: e.index,
-                        subindex: e.subindex,
-                        bits: e.bit_len,
-                        name: e.name.clone(),
-                        image_bit: 0,
-                    })
-                    .collect()
-            };
-            (from(&dev.rx_pdos), from(&dev.tx_pdos))
-        } else {
-            let sii = &self.slaves[k].sii;
-            let from = |pdos: &[ferrocat_wire::sii::Pdo], sm: Option<(u8, SmEntry)>| -> Vec<Mapped> {
-                pdos.iter()
-                    .filter(|p| sm.is_some_and(|(n, _)| p.sync_manager == n))
-                    .flat_map(|p| p.entries.iter())
-                    .map(|e| Mapped {
-                        index: e.index,
-                        subindex: e.subindex,
-                        bits: e.bit_len,
-                        name: sii.string(e.name_idx).unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex)),
-                        image_bit: 0,
-                    })
-                    .collect()
-            };
-            (from(sii.rx_pdos(), out_sm), from(sii.tx_pdos(), in_sm))
-        };
+        let coe = self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe());
+        // Each SyncManager's entries, the first SyncManager of a direction first.
+        let mut per_sm: Vec<(bool, u8, SmEntry, Vec<Mapped>)> = Vec::new();
+        for (outputs, list) in [(true, &out_sms), (false, &in_sms)] {
+            for (j, &(n, e)) in list.iter().enumerate() {
+                let first = j == 0;
+                let entries = if coe {
+                    let assign = match (first, outputs) {
+                        (true, true) => 0x1C12,
+                        (true, false) => 0x1C13,
+                        _ => 0x1C10 + n as u16,
+                    };
+                    if first {
+                        self.coe_mapping(position, assign)?
+                    } else {
+                        // A device without the object has nothing assigned there.
+                        self.coe_mapping(position, assign).unwrap_or_default()
+                    }
+                } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
+                    // The ESI's default assignment: PDOs with an Sm attribute (one naming no
+                    // process-data SyncManager goes with the direction's first).
+                    let known: Vec<u8> = list.iter().map(|x| x.0).collect();
+                    let pdos = if outputs { &dev.rx_pdos } else { &dev.tx_pdos };
+                    pdos.iter()
+                        .filter(|p| p.sm.is_some_and(|sm| sm == n || (first && !known.contains(&sm))))
+                        .flat_map(|p| p.entries.iter())
+                        .map(|e| Mapped {
+                            index: e.index,
+                            subindex: e.subindex,
+                            bits: e.bit_len,
+                            name: e.name.clone(),
+                            image_bit: 0,
+                        })
+                        .collect()
+                } else {
+                    let sii = &self.slaves[k].sii;
+                    let pdos = if outputs { sii.rx_pdos() } else { sii.tx_pdos() };
+                    pdos.iter()
+                        .filter(|p| p.sync_manager == n)
+                        .flat_map(|p| p.entries.iter())
+                        .map(|e| Mapped {
+                            index: e.index,
+                            subindex: e.subindex,
+                            bits: e.bit_len,
+                            name: sii
+                                .string(e.name_idx)
+                                .unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex)),
+                            image_bit: 0,
+                        })
+                        .collect()
+                };
+                per_sm.push((outputs, n, e, entries));
+            }
+        }
         let s = &mut self.slaves[k];
-        s.mapping.outputs = outputs;
-        s.mapping.inputs = inputs;
-        s.mapping.out_sm = out_sm;
-        s.mapping.in_sm = in_sm;
+        s.mapping.outputs.clear();
+        s.mapping.inputs.clear();
+        s.mapping.more_out_sms.clear();
+        s.mapping.more_in_sms.clear();
+        s.mapping.out_sm = out_sms.first().copied();
+        s.mapping.in_sm = in_sms.first().copied();
+        for (outputs, n, e, entries) in per_sm {
+            let (list, more, first) = if outputs {
+                (&mut s.mapping.outputs, &mut s.mapping.more_out_sms, s.mapping.out_sm)
+            } else {
+                (&mut s.mapping.inputs, &mut s.mapping.more_in_sms, s.mapping.in_sm)
+            };
+            if first.is_some_and(|f| f.0 != n) {
+                if entries.is_empty() {
+                    continue;
+                }
+                more.push((n, e, list.len()));
+            }
+            list.extend(entries);
+        }
         Ok(())
     }
 
@@ -165,16 +203,7 @@ impl<I: Io> Master<I> {
         self.expected_wkc = 0;
         for k in 0..self.slaves.len() {
             let s = &mut self.slaves[k];
-            let mut bit = s.mapping.out_area.0 * 8;
-            for m in &mut s.mapping.outputs {
-                m.image_bit = bit;
-                bit += m.bits as u32;
-            }
-            let mut bit = s.mapping.in_area.0 * 8;
-            for m in &mut s.mapping.inputs {
-                m.image_bit = bit;
-                bit += m.bits as u32;
-            }
+            s.mapping.place(s.mapping.out_area.0 * 8, s.mapping.in_area.0 * 8);
             let has_out = s.mapping.out_area.1 > 0;
             let has_in = s.mapping.in_area.1 > 0;
             self.expected_wkc += 2 * has_out as u16 + has_in as u16;
@@ -196,16 +225,7 @@ impl<I: Io> Master<I> {
         self.image = vec![0; (out_bytes + in_bytes) as usize];
         for (k, s) in self.slaves.iter_mut().enumerate() {
             let (out_at, in_at) = entries_at.get(k).copied().unwrap_or((None, None));
-            let mut bit = out_at.unwrap_or(0);
-            for m in &mut s.mapping.outputs {
-                m.image_bit = bit;
-                bit += m.bits as u32;
-            }
-            let mut bit = out_bytes * 8 + in_at.unwrap_or(0);
-            for m in &mut s.mapping.inputs {
-                m.image_bit = bit;
-                bit += m.bits as u32;
-            }
+            s.mapping.place(out_at.unwrap_or(0), out_bytes * 8 + in_at.unwrap_or(0));
             s.mapping.out_area = (out_at.unwrap_or(0) / 8, s.mapping().output_bits().div_ceil(8));
             s.mapping.in_area = (out_bytes + in_at.unwrap_or(0) / 8, s.mapping().input_bits().div_ceil(8));
         }
@@ -260,42 +280,41 @@ impl<I: Io> Master<I> {
 
 /// The SyncManager and FMMU registers of a slave's process data, its outputs at logical address
 /// `out_logical` and its inputs at `in_logical`: each SyncManager as long as its data, one FMMU
-/// per direction that has data.
+/// per SyncManager that has data.
 pub(crate) fn process_registers(s: &crate::slave::Slave, out_logical: u32, in_logical: u32) -> Vec<(u16, Vec<u8>)> {
     let mut writes: Vec<(u16, Vec<u8>)> = Vec::new();
-    let mut fmmu = 0u16;
-    let out_bytes = s.mapping().output_bits().div_ceil(8);
-    let in_bytes = s.mapping().input_bits().div_ceil(8);
-    for (area, sm, write) in
-        [((out_logical, out_bytes), s.mapping.out_sm, true), ((in_logical, in_bytes), s.mapping.in_sm, false)]
+    let mut fmmu = 0u8;
+    for (logical, sms, write) in
+        [(out_logical, s.mapping.output_sms(), true), (in_logical, s.mapping.input_sms(), false)]
     {
-        let Some((n, e)) = sm else { continue };
-        let smr = if area.1 == 0 {
-            SyncManager::default()
-        } else {
-            SyncManager {
-                start: e.start,
-                length: area.1 as u16,
-                control: e.control,
-                status: 0,
-                activate: 1,
-                pdi_control: 0,
-            }
-        };
-        writes.push((addr::sm(n), smr.to_bytes().to_vec()));
-        if area.1 > 0 {
-            let f = Fmmu {
-                logical_start: area.0,
-                length: area.1 as u16,
-                logical_start_bit: 0,
-                logical_stop_bit: 7,
-                physical_start: e.start,
-                physical_start_bit: 0,
-                fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
-                active: true,
+        for (n, e, offset, bytes) in sms {
+            let smr = if bytes == 0 {
+                SyncManager::default()
+            } else {
+                SyncManager {
+                    start: e.start,
+                    length: bytes as u16,
+                    control: e.control,
+                    status: 0,
+                    activate: 1,
+                    pdi_control: 0,
+                }
             };
-            writes.push((addr::fmmu(fmmu as u8), f.to_bytes().to_vec()));
-            fmmu += 1;
+            writes.push((addr::sm(n), smr.to_bytes().to_vec()));
+            if bytes > 0 {
+                let f = Fmmu {
+                    logical_start: logical + offset,
+                    length: bytes as u16,
+                    logical_start_bit: 0,
+                    logical_stop_bit: 7,
+                    physical_start: e.start,
+                    physical_start_bit: 0,
+                    fmmu_type: if write { Fmmu::WRITE } else { Fmmu::READ },
+                    active: true,
+                };
+                writes.push((addr::fmmu(fmmu), f.to_bytes().to_vec()));
+                fmmu += 1;
+            }
         }
     }
     writes
