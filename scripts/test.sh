@@ -170,6 +170,12 @@ fi
 log "the Python package's tests (pytest, virtual time; its live tests are crates/cli/tests/python_live.rs)"
 .venv/bin/python -m pytest -q python/tests
 
+# The examples the live tests run (examples_live, service_live) are built here, as those tests
+# build them (one package each: its own features), so that their build does not run inside a
+# test beside the others (219 s in a fresh clone, past the live tests' 60 s warning).
+log "the examples the live tests run"
+cargo build --quiet -p ferrocat-master --examples
+cargo build --quiet -p ferrocat-service --examples
 # Tests last, so that the run closes on nextest's summary.
 log "tests (cargo nextest)"
 cargo nextest run --workspace --no-fail-fast "${filter[@]}"

@@ -105,6 +105,27 @@ pub enum MasterEvent {
         /// Its value now (it stops at 255).
         total: u8,
     },
+    /// An init command of the slave's ESI description was not sent: the slave has no such
+    /// object or subindex (abort 0x06020000 or 0x06090011). A vendor's file describes a family
+    /// and its revisions; the command has nothing to act on in this one.
+    InitCommandSkipped {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The transition it was for ("PS", …).
+        transition: String,
+        /// The object.
+        index: u16,
+        /// The subindex.
+        subindex: u8,
+        /// Its comment in the file.
+        comment: String,
+        /// Its line in the file.
+        line: u32,
+        /// What the slave answered.
+        code: ferrocat_wire::coe::AbortCode,
+    },
     /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
     Ring {
         /// The ring's state now.
@@ -142,6 +163,12 @@ impl std::fmt::Display for MasterEvent {
                 };
                 let what = if *emergency { "emergency" } else { "notification" };
                 write!(f, "slave {position} ({name}) drive {drive}: SoE {what} for {idn}: {shown}")
+            }
+            MasterEvent::InitCommandSkipped { position, name, transition, index, subindex, comment, line, code } => {
+                write!(
+                    f,
+                    "slave {position} ({name}): ESI init command {transition} {index:#06x}:{subindex:02x} (\"{comment}\", line {line}) not sent: {code}"
+                )
             }
             MasterEvent::InputsInvalid { position, name, entry } => {
                 write!(f, "slave {position} ({name}): {entry} set: the slave says those inputs are invalid")

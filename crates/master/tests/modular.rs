@@ -128,7 +128,8 @@ fn each_axis_of_a_two_axis_drive_runs_its_own_state_machine() {
 
 /// A module's objects sit at its slot's indices in the simulated device, and with the ESI
 /// description in `Master::esi` the master sends its init commands (each at its slot's index)
-/// in PREOP before SAFEOP; one the device aborts is an error naming the command.
+/// in PREOP before SAFEOP; one on an object the device lacks is left out with a warning, one
+/// the device refuses otherwise is an error naming the command.
 #[test]
 fn module_objects_and_init_commands_follow_the_slot() {
     use ferrocat_esi::EsiFile;
@@ -165,12 +166,32 @@ fn module_objects_and_init_commands_follow_the_slot() {
     assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x2800)), (10, 10));
     assert_eq!((read_u32(&mut m, 0x6060), read_u32(&mut m, 0x6860)), (8, 8));
     m.states().start().unwrap();
-    // A command to an object the device lacks.
-    let mut bad = plugged;
-    bad.init_cmds[3].index = 0x2F00;
+    // A command to an object the device lacks (the file describes a family; this device has
+    // no 0x2F00): left out with a warning, the others sent, the slave configured.
+    let mut absent = plugged.clone();
+    absent.init_cmds[3].index = 0x2F00;
     let mut m = drive(None);
-    m.config().add_esi(file.vendor_id, bad);
+    m.config().add_esi(file.vendor_id, absent);
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    let skipped: Vec<String> = m
+        .diagnosis()
+        .take_events()
+        .iter()
+        .filter(|e| matches!(e, ferrocat_master::MasterEvent::InitCommandSkipped { .. }))
+        .map(|e| e.to_string())
+        .collect();
+    assert_eq!(skipped.len(), 1, "{skipped:?}");
+    assert!(skipped[0].contains("ESI init command PS 0x2f00:00 (\"Gear ratio\", line "), "{skipped:?}");
+    assert!(skipped[0].contains("not sent"), "{skipped:?}");
+    assert_eq!((read_u32(&mut m, 0x2000), read_u32(&mut m, 0x6860)), (10, 8));
+    // A command the device refuses for another reason (a read-only object) is an error
+    // naming it.
+    let mut refused = plugged;
+    (refused.init_cmds[3].index, refused.init_cmds[3].subindex) = (0x1018, 1);
+    let mut m = drive(None);
+    m.config().add_esi(file.vendor_id, refused);
     m.states().scan().unwrap();
     let e = m.states().configure().unwrap_err().to_string();
-    assert!(e.contains("ESI init command PS 0x2f00:0x00 (\"Gear ratio\", line "), "{e}");
+    assert!(e.contains("ESI init command PS 0x1018:0x01 (\"Gear ratio\", line "), "{e}");
 }

@@ -225,6 +225,7 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
     for (i, o) in from_sii(info).objects {
         od.objects.entry(i).or_insert(o);
     }
+    add_init_command_targets(&mut od, &dev.init_cmds);
     // The assignment the ESI defines by default (PDOs with an Sm attribute); a modular device's
     // is the plugged modules' whatever its dictionary's default says, as its firmware fills it
     // from the modules it detects.
@@ -283,6 +284,47 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
         }
     }
     od
+}
+
+/// The objects the device's own init commands write, where its dictionary lacks them (a file
+/// without `<Dictionary>`, or one that leaves out a vendor object): the vendor says the device
+/// takes them, so the simulated one does, writable, as long as the command's data, zero until
+/// written (the device's own default is not in the file). A model choice: the real device's
+/// object may be longer or typed otherwise, and an application model (a CiA402 drive) keeps
+/// its own objects' types where it defines them. Complete-access
+/// commands are left alone (their layout is not known from the data).
+fn add_init_command_targets(od: &mut ObjectDictionary, cmds: &[ferrocat_esi::InitCmd]) {
+    for c in cmds.iter().filter(|c| !c.complete_access && !c.data.is_empty()) {
+        if od.get(c.index).is_some_and(|o| o.entry(c.subindex).is_some()) {
+            continue;
+        }
+        let bits = (c.data.len() * 8).min(u16::MAX as usize) as u16;
+        let data_type = match c.data.len() {
+            1 => dt::USINT,
+            2 => dt::UINT,
+            4 => dt::UDINT,
+            8 => dt::ULINT,
+            _ => dt::OCTET_STRING,
+        };
+        let access = Access { read: true, write: true, ..Default::default() };
+        let name = format!("{:#06x}:{:02x} (an init command's)", c.index, c.subindex);
+        if c.subindex == 0 && od.get(c.index).is_none() {
+            od.insert(Object::var(c.index, &name, data_type, bits, access, vec![0; c.data.len()]));
+            continue;
+        }
+        let o = od
+            .objects
+            .entry(c.index)
+            .or_insert_with(|| Object::list(c.index, &name, ObjectCode::Record, 0, Access::RO, vec![]));
+        let bit_offset = o.entries.iter().map(|e| e.bit_offset + e.bit_len as u32).max().unwrap_or(16);
+        let value = vec![0; c.data.len()];
+        o.entries.push(Entry { subindex: c.subindex, name, data_type, bit_len: bits, bit_offset, access, value });
+        o.entries.sort_by_key(|e| e.subindex);
+        let n = o.entries.iter().map(|e| e.subindex).max().unwrap_or(0);
+        if let Some(s0) = o.entry_mut(0) {
+            s0.value = vec![n];
+        }
+    }
 }
 
 /// The Modular Device Profile's objects (ETG.5001): 0xF000 (the object index distance between

@@ -231,6 +231,7 @@ impl Server {
                 E::InputsInvalid { position, .. } => ("inputs_invalid", Some(*position)),
                 E::InputsStale { position, .. } => ("inputs_stale", Some(*position)),
                 E::ErrorCounters { position, .. } => ("error_counters", Some(*position)),
+                E::InitCommandSkipped { position, .. } => ("init_command_skipped", Some(*position)),
                 E::Ring { .. } => ("ring", None),
             };
             if self.events.len() == EVENTS_KEPT {

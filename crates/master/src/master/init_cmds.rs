@@ -21,7 +21,9 @@ impl<I: Io> Master<I> {
     /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): its ESI
     /// description's, in the file's order, then those the application gave
     /// ([`Config::setup_mut`](crate::part::Config::setup_mut)); each an SDO download (complete access where it says
-    /// so). Returns how many it sent; an abort is an error naming the command.
+    /// so). Returns how many it sent; an abort is an error naming the command, but for an ESI
+    /// command on an object or subindex the slave lacks: that one is left out with
+    /// [`MasterEvent::InitCommandSkipped`](crate::event::MasterEvent::InitCommandSkipped).
     pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
         let mut cmds: Vec<(ferrocat_esi::InitCmd, bool)> = match self.esi_description(position) {
@@ -31,32 +33,58 @@ impl<I: Io> Master<I> {
         if let Some(s) = self.slaves.get(position as usize) {
             cmds.extend(s.setup.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
         }
+        let mut sent = 0;
         for (c, from_esi) in &cmds {
-            self.acyclic().coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data).map_err(
-                |e| {
+            let result = self.acyclic().coe().sdo_download(position, c.index, c.subindex, c.complete_access, &c.data);
+            // An ESI's command on an object this slave does not have is left out with a warning:
+            // a vendor's file covers a family and its revisions (WAGO's and CODESYS's
+            // configurators go on past a start parameter that fails where told to; TwinCAT's
+            // ESI commands are the vendor's, not the user's). The application's own commands
+            // stay errors.
+            if let (true, Err(crate::error::MasterError::Abort { code, .. })) = (*from_esi, &result) {
+                if *code == ferrocat_wire::coe::AbortCode::NO_OBJECT
+                    || *code == ferrocat_wire::coe::AbortCode::NO_SUBINDEX
+                {
                     let name = self.slaves[position as usize].name.clone();
-                    let transition = transition.to_string();
-                    let origin = if *from_esi {
-                        crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
-                    } else {
-                        crate::error::SdoSource::Description { transition, line: c.line }
-                    };
-                    MasterError::of(
+                    let e = crate::event::MasterEvent::InitCommandSkipped {
                         position,
-                        &name,
-                        crate::error::SlaveError::ConfigSdo {
-                            origin,
-                            index: c.index,
-                            subindex: c.subindex,
-                            comment: c.comment.clone(),
-                            error: Box::new(e),
-                        },
-                    )
-                },
-            )?;
+                        name,
+                        transition: transition.to_string(),
+                        index: c.index,
+                        subindex: c.subindex,
+                        comment: c.comment.clone(),
+                        line: c.line,
+                        code: *code,
+                    };
+                    tracing::warn!("{e}");
+                    self.events.push(e);
+                    continue;
+                }
+            }
+            result.map_err(|e| {
+                let name = self.slaves[position as usize].name.clone();
+                let transition = transition.to_string();
+                let origin = if *from_esi {
+                    crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
+                } else {
+                    crate::error::SdoSource::Description { transition, line: c.line }
+                };
+                MasterError::of(
+                    position,
+                    &name,
+                    crate::error::SlaveError::ConfigSdo {
+                        origin,
+                        index: c.index,
+                        subindex: c.subindex,
+                        comment: c.comment.clone(),
+                        error: Box::new(e),
+                    },
+                )
+            })?;
             tracing::debug!(position, transition, index = c.index, subindex = c.subindex, "init command sent");
+            sent += 1;
         }
-        Ok(cmds.len())
+        Ok(sent)
     }
 }
 
