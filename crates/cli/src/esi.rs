@@ -62,7 +62,10 @@ pub fn run(
     strict: bool,
 ) -> anyhow::Result<ExitCode> {
     let xml = ferrocat_segment::files::read_esi(path).with_context(|| format!("reading {}", path.display()))?;
-    let file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    let mut file = EsiFile::parse(&xml).with_context(|| format!("{}", path.display()))?;
+    for m in ferrocat_segment::files::add_module_files(path, &mut file) {
+        eprintln!("modules also from {} (an <EtherCATModule> file beside it)", m.display());
+    }
     let level = if strict { "error" } else { "warning" };
     for w in &file.warnings {
         eprintln!("{level}: {}: {w}", path.display());
@@ -74,6 +77,41 @@ pub fn run(
             file.warnings.len(),
             if file.warnings.len() == 1 { "" } else { "s" }
         );
+    }
+    if file.devices.is_empty() && file.passive.is_empty() && !file.modules.is_empty() {
+        // A module file (<EtherCATModule>): its modules, for the devices whose slots name them.
+        if device.is_some() || sii_out.is_some() {
+            bail!("{}: a module file (<EtherCATModule>) describes no device", path.display());
+        }
+        if json {
+            let modules: Vec<_> = file
+                .modules
+                .iter()
+                .map(|m| {
+                    json!({
+                        "ident": m.ident, "type": m.type_name, "name": m.name, "class": m.class, "line": m.line,
+                        "rx_pdos": m.rx_pdos.len(), "tx_pdos": m.tx_pdos.len(),
+                    })
+                })
+                .collect();
+            outln!(
+                "{}",
+                json!({"vendor_id": file.vendor_id, "vendor": file.vendor_name, "devices": [], "passive": [], "modules": modules})
+            );
+        } else {
+            outln!("{}: module file, vendor {:#010x} {}", path.display(), file.vendor_id, file.vendor_name);
+            for m in &file.modules {
+                outln!(
+                    "  MODULE {:#010x} {:14} {} ({} RxPDO, {} TxPDO)",
+                    m.ident,
+                    m.type_name,
+                    m.name,
+                    m.rx_pdos.len(),
+                    m.tx_pdos.len()
+                );
+            }
+        }
+        return Ok(ExitCode::SUCCESS);
     }
     if file.devices.is_empty() && file.passive.is_empty() {
         bail!("{}: the file describes no device (no Descriptions/Devices/Device)", path.display());

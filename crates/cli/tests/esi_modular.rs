@@ -81,3 +81,62 @@ fn esi_strict_refuses_deviations_and_devices_go_by_type_name() {
         "{stderr}"
     );
 }
+
+/// Modules in a file of their own (`<EtherCATModule>`, ISO-8859-1) beside the device's: `esi`
+/// lists the device's modules from it and reads the module file itself; `run` plugs the default
+/// and chosen modules from it and reaches OP with their process data; without the module file
+/// the error says where the module was looked for.
+#[test]
+fn modules_in_a_module_file_beside_the_device_file_are_plugged() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/module_file");
+    let device = format!("{dir}/ferrocat_iohead.xml");
+    let ferrocat = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_ferrocat")).args(args).output().unwrap();
+    let out = ferrocat(&["esi", &device, "--device", "FC-IOHEAD-M", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let types: Vec<&str> = v["modules"].as_array().unwrap().iter().map(|m| m["type"].as_str().unwrap()).collect();
+    assert_eq!(types, ["FC-DO4", "FC-DI8", "FC-AI2"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("modules also from "), "the module file is named");
+    let out = ferrocat(&["esi", &format!("{dir}/ferrocat_iohead_modules.xml"), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["vendor_id"].as_u64(), v["modules"].as_array().map(Vec::len)), (Some(0xF3C), Some(3)), "{v}");
+
+    for spec in [format!("{device}:FC-IOHEAD-M"), format!("{device}:FC-IOHEAD-M:#x802,#x801,#x803")] {
+        let out = ferrocat(&["run", "--device", &spec, "--seconds", "0.1", "--json", "--no-control"]);
+        assert!(out.status.success(), "{spec}: {}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!((v["slaves"]["in_op_at_end"].as_u64(), v["wkc_errors"].as_u64()), (Some(1), Some(0)), "{spec}: {v}");
+    }
+    // The inputs of the chosen modules are in the image: AI1 of the analog module in slot 2.
+    let out = ferrocat(&[
+        "run",
+        "--device",
+        &format!("{device}:FC-IOHEAD-M:#x802,#x801,#x803"),
+        "--seconds",
+        "0.1",
+        "--no-control",
+        "--show",
+        "0:AI1",
+    ]);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && said.contains("0:AI1 = "), "{said}{}", String::from_utf8_lossy(&out.stderr));
+
+    let alone = std::env::temp_dir().join(format!("ferrocat-module-file-{}", std::process::id()));
+    std::fs::create_dir_all(&alone).unwrap();
+    std::fs::copy(&device, alone.join("ferrocat_iohead.xml")).unwrap();
+    let out = ferrocat(&[
+        "run",
+        "--device",
+        &format!("{}:FC-IOHEAD-M", alone.join("ferrocat_iohead.xml").display()),
+        "--seconds",
+        "0.1",
+    ]);
+    std::fs::remove_dir_all(&alone).ok();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("no module with ident 0x00000801 in the file or an <EtherCATModule> file beside it"),
+        "{err}"
+    );
+}

@@ -280,10 +280,11 @@ impl Device {
             plan.extend(std::iter::repeat_n(s, s.min_instances as usize + more));
         }
         for (n, (&ident, slot)) in idents.iter().zip(plan).enumerate() {
-            let m = modules
-                .iter()
-                .find(|m| m.ident == ident)
-                .ok_or_else(|| format!("slot {n}: no module with ident {ident:#010x} in the file"))?;
+            let m = modules.iter().find(|m| m.ident == ident).ok_or_else(|| {
+                format!(
+                    "slot {n}: no module with ident {ident:#010x} in the file or an <EtherCATModule> file beside it"
+                )
+            })?;
             if !slot.fits(m) {
                 return Err(format!(
                     "slot {n} ({}): module {} ({ident:#010x}) does not fit it",

@@ -186,7 +186,13 @@ fn parse_document(xml: &str) -> R<EsiFile> {
         "EtherCATInfo" => parse_info(root),
         // IgH's `ethercat xml`: an <EtherCATInfo> a slave, in one list.
         "EtherCATInfoList" => parse_list(root),
-        other => Err(err(root, format!("root element is <{other}>, expected <EtherCATInfo> or <EtherCATInfoList>"))),
+        // A module file (ETG.2000's EtherCATModule schema): modules of modular devices whose
+        // own files name them in their slots, kept apart by some vendors.
+        "EtherCATModule" => parse_module_file(root),
+        other => Err(err(
+            root,
+            format!("root element is <{other}>, expected <EtherCATInfo>, <EtherCATInfoList> or <EtherCATModule>"),
+        )),
     }
 }
 
@@ -260,8 +266,43 @@ fn parse_info(root: Node<'_, '_>) -> R<EsiFile> {
         }
         devices.push(dev);
     }
+    let modules = parse_modules(descriptions.and_then(|d| child(d, "Modules")))?;
+    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new(), passive })
+}
+
+/// An `<EtherCATModule>` file: its vendor (where it names one; 0 where not) and modules, no
+/// devices.
+fn parse_module_file(root: Node<'_, '_>) -> R<EsiFile> {
+    let vendor = child(root, "Vendor");
+    let vendor_id = match vendor {
+        Some(v) => {
+            let id = req_child_number::<i64>(v, "Id")?;
+            if id < 0 {
+                id as i32 as u32
+            } else {
+                u32::try_from(id).map_err(|_| err(v, "vendor Id out of range"))?
+            }
+        }
+        None => 0,
+    };
+    let modules = parse_modules(child(root, "Modules"))?;
+    if modules.is_empty() {
+        warn(root, "an <EtherCATModule> file without a <Modules><Module>".to_string());
+    }
+    Ok(EsiFile {
+        vendor_id,
+        vendor_name: vendor.map(name_of).unwrap_or_default(),
+        devices: Vec::new(),
+        modules,
+        warnings: Vec::new(),
+        passive: Vec::new(),
+    })
+}
+
+/// The `<Module>`s of a `<Modules>`, the first of an ident kept (a repeat is a warning).
+fn parse_modules(list: Option<Node<'_, '_>>) -> R<Vec<ModuleDesc>> {
     let mut modules: Vec<ModuleDesc> = Vec::new();
-    for m in descriptions.and_then(|d| child(d, "Modules")).into_iter().flat_map(|m| children(m, "Module")) {
+    for m in list.into_iter().flat_map(|m| children(m, "Module")) {
         let module = parse_module(m)?;
         if let Some(first) = modules.iter().find(|o| o.ident == module.ident) {
             warn(
@@ -274,7 +315,7 @@ fn parse_info(root: Node<'_, '_>) -> R<EsiFile> {
         }
         modules.push(module);
     }
-    Ok(EsiFile { vendor_id, vendor_name: name_of(vendor), devices, modules, warnings: Vec::new(), passive })
+    Ok(modules)
 }
 
 fn parse_device(d: Node<'_, '_>) -> R<Device> {

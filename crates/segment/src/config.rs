@@ -1042,8 +1042,9 @@ impl EsiFiles {
     fn file(&mut self, path: &Path) -> Result<&EsiFile, SegmentError> {
         if !self.parsed.contains_key(path) {
             let xml = read_esi(path).map_err(|reason| SegmentError::Io { path: path.to_path_buf(), reason })?;
-            let f = EsiFile::parse(&xml)
+            let mut f = EsiFile::parse(&xml)
                 .map_err(|e| SegmentError::Parse { path: path.to_path_buf(), message: e.to_string() })?;
+            crate::files::add_module_files(path, &mut f);
             self.parsed.insert(path.to_path_buf(), f);
         }
         Ok(&self.parsed[path])

@@ -53,6 +53,53 @@ pub fn read_esi(path: &Path) -> io::Result<String> {
     }
 }
 
+/// Where `file` (read from `path`) has modular devices whose slots name modules it does not
+/// describe, the modules of the `<EtherCATModule>` files beside it (`*.xml` in the same
+/// folder, as a configuration tool reads the whole folder of ESI files) of its vendor or none:
+/// added to `file.modules`, the file's own first. Returns the module files read. A sibling
+/// that cannot be read or parsed is skipped: it is not the file asked for.
+pub fn add_module_files(path: &Path, file: &mut ferrocat_esi::EsiFile) -> Vec<std::path::PathBuf> {
+    let named: Vec<u32> = file
+        .devices
+        .iter()
+        .filter_map(|d| d.slots.as_ref())
+        .flat_map(|s| s.slots.iter())
+        .flat_map(|s| s.module_idents.iter().copied().chain(s.default_module))
+        .collect();
+    let missing = named.iter().any(|i| !file.modules.iter().any(|m| m.ident == *i));
+    let Some(dir) = path.parent().filter(|_| missing) else { return Vec::new() };
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    let Ok(entries) = std::fs::read_dir(dir) else { return Vec::new() };
+    let mut siblings: Vec<std::path::PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("xml")))
+        .filter(|p| p.file_name() != path.file_name())
+        .collect();
+    siblings.sort();
+    let mut used = Vec::new();
+    for sibling in siblings {
+        // The root element is near the start; a file without it there is no module file.
+        let head = first_bytes(&sibling, 4096).unwrap_or_default();
+        if !String::from_utf8_lossy(&head).contains("<EtherCATModule") {
+            continue;
+        }
+        let Ok(Ok(more)) = read_esi(&sibling).map(|xml| ferrocat_esi::EsiFile::parse(&xml)) else { continue };
+        if more.vendor_id != 0 && more.vendor_id != file.vendor_id {
+            continue;
+        }
+        let before = file.modules.len();
+        for m in more.modules {
+            if !file.modules.iter().any(|o| o.ident == m.ident) {
+                file.modules.push(m);
+            }
+        }
+        if file.modules.len() > before {
+            used.push(sibling);
+        }
+    }
+    used
+}
+
 /// A TOML description's text (`what`: "a segment description", "a scenario"), bounded by
 /// [`MAX_TOML_FILE_BYTES`].
 pub fn read_toml(path: &Path, what: &str) -> io::Result<String> {

@@ -69,11 +69,11 @@ impl<I: Io> Master<I> {
                         (true, false) => 0x1C13,
                         _ => 0x1C10 + n as u16,
                     };
-                    if first {
-                        self.coe_mapping(position, assign)?
-                    } else {
-                        // A device without the object has nothing assigned there.
-                        self.coe_mapping(position, assign).unwrap_or_default()
+                    match self.coe_mapping(position, assign) {
+                        // A device without the object (it aborts the read) has nothing
+                        // assigned to a further SyncManager; any other failure is one.
+                        Err(crate::error::MasterError::Abort { .. }) if !first => Vec::new(),
+                        other => other?,
                     }
                 } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
                     // The ESI's default assignment: PDOs with an Sm attribute (one naming no
