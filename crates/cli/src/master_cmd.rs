@@ -1301,6 +1301,7 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
                 "cycle_us": if max_rate { None } else { Some(cycle_us) },
                 "frame_timeout_us": frame_timeout_us,
                 "segment_round_trip_us": round_trip_ns as f64 / 1000.0,
+                "image_bytes": { "outputs": m.image().byte_counts().0, "inputs": m.image().byte_counts().1 },
                 "mean_period_us": mean_period_us,
                 "wkc_errors": s.wkc_errors,
                 "max_jitter_us": s.max_jitter_ns as f64 / 1000.0,

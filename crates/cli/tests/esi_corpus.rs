@@ -33,9 +33,36 @@ fn needs_shared_the_files_once_refused_are_read() {
 /// the list stays, so that a failure found later is named here with its reason).
 const KNOWN: [(&str, &str, &str); 0] = [];
 
+/// The types whose files give them no process data by default, so that they reach OP with an
+/// empty image (docs/esi-corpus.md): no PDO at all (the EL67xx fieldbus masters, whose image is
+/// their fieldbus's configuration; the AX5805 option card, whose slots' modules carry none),
+/// PDOs none of which is assigned (the EJ6002: the master may assign them), or PDOs of 0 bits
+/// (EasyCAT's configurable type).
+const NO_PROCESS_DATA: [(&str, &str); 13] = [
+    ("Beckhoff EJ6xxx.xml", "EJ6002"),
+    ("Beckhoff EL67xx.xml", "EL6720"),
+    ("Beckhoff EL67xx.xml", "EL6731"),
+    ("Beckhoff EL67xx.xml", "EL6731-0100"),
+    ("Beckhoff EL67xx.xml", "EL6731-0010"),
+    ("Beckhoff EL67xx.xml", "EL6731-1003"),
+    ("Beckhoff EL67xx.xml", "EL6751"),
+    ("Beckhoff EL67xx.xml", "EL6751-0005"),
+    ("Beckhoff EL67xx.xml", "EL6751-0010"),
+    ("Beckhoff EL67xx.xml", "EL6752"),
+    ("Beckhoff EL67xx.xml", "EL6752-0010"),
+    ("Beckhoff ELx9xx.xml", "AX5805"),
+    ("EasyCAT_V2_0.xml", "EasyCAT configurable rev 1"),
+];
+
 /// `ferrocat run --dc` of an EK1100 and `devices` on the embedded segment: whether every slave
-/// was in OP at the end with every working counter whole, and what it said.
+/// was in OP at the end with every working counter whole and the image not empty, and what it
+/// said.
 fn run_to_op(path: &std::path::Path, devices: &[&str]) -> (bool, String) {
+    run_to_op_with(path, devices, true)
+}
+
+/// As [`run_to_op`]; `with_data` false asks for an empty image instead.
+fn run_to_op_with(path: &std::path::Path, devices: &[&str], with_data: bool) -> (bool, String) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_ferrocat"));
     cmd.args(["run", "--device", "EK1100", "--dc", "--seconds", "0.2", "--json", "--no-control"]);
     for d in devices {
@@ -45,10 +72,13 @@ fn run_to_op(path: &std::path::Path, devices: &[&str]) -> (bool, String) {
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     let Ok(v) = serde_json::from_slice::<serde_json::Value>(&out.stdout) else { return (false, err) };
     let s = &v["slaves"];
+    // With process data: the image holds the devices' outputs or inputs (the EK1100 has none).
+    let image = &v["image_bytes"];
     let good = out.status.success()
         && s["count"].as_u64() == Some(devices.len() as u64 + 1)
         && s["in_op_at_end"] == s["count"]
-        && v["wkc_errors"] == 0;
+        && v["wkc_errors"] == 0
+        && (image["outputs"].as_u64().unwrap_or(0) + image["inputs"].as_u64().unwrap_or(0) > 0) == with_data;
     (good, format!("{v}\n{err}"))
 }
 
@@ -61,7 +91,7 @@ fn run_to_op(path: &std::path::Path, devices: &[&str]) -> (bool, String) {
 fn needs_shared_every_corpus_device_reaches_op() {
     let files = ferrocat_testdata::shared_files("esi-corpus", ".xml");
     assert!(!files.is_empty(), "no ESI file in the corpus");
-    let (mut types, mut reached, mut passive) = (0usize, 0usize, 0usize);
+    let (mut types, mut reached, mut passive, mut without_data) = (0usize, 0usize, 0usize, 0usize);
     for path in &files {
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
         let (ok, out, err) = esi(&name, &["--json"]);
@@ -80,7 +110,8 @@ fn needs_shared_every_corpus_device_reaches_op() {
         }
         types += list.len();
         let known: Vec<_> = KNOWN.iter().filter(|k| k.0 == name).collect();
-        if known.is_empty() {
+        let empty: Vec<&str> = NO_PROCESS_DATA.iter().filter(|k| k.0 == name).map(|k| k.1).collect();
+        if known.is_empty() && empty.is_empty() {
             // All the file's types on one segment; where that does not come up (a device
             // with one port cannot have another behind it), each behind its own coupler.
             let all: Vec<&str> = list.iter().map(String::as_str).collect();
@@ -90,6 +121,12 @@ fn needs_shared_every_corpus_device_reaches_op() {
             }
         }
         for t in &list {
+            if empty.contains(&t.as_str()) {
+                let (good, said) = run_to_op_with(path, &[t], false);
+                assert!(good, "{name}: {t} was to reach OP with no process data: {said}");
+                (reached, without_data) = (reached + 1, without_data + 1);
+                continue;
+            }
             let (good, said) = run_to_op(path, &[t]);
             match known.iter().find(|k| k.1 == t) {
                 Some(k) => assert!(!good && said.contains(k.2), "{name}: {t} was to fail with {}: {said}", k.2),
@@ -100,7 +137,11 @@ fn needs_shared_every_corpus_device_reaches_op() {
             }
         }
     }
-    println!("{reached} of {types} types reached OP; {passive} passive devices listed");
+    println!(
+        "{reached} of {types} types reached OP, {} of them with process data, {without_data} with none by their files; {passive} passive devices listed",
+        reached - without_data
+    );
+    assert_eq!(without_data, NO_PROCESS_DATA.len(), "every type without process data is a named one");
     assert!(reached * 100 >= types * 95, "{reached} of {types} types reached OP, fewer than 95 %");
     assert_eq!(types - reached, KNOWN.len(), "every failure is a known one");
     assert_eq!(reached, types, "every type reaches OP");

@@ -64,17 +64,41 @@ pub(crate) fn parse_dictionary(dict: Node<'_, '_>) -> R<Dictionary> {
     Ok(d)
 }
 
+/// A `<DefaultValue>` as the bytes of a value of `bits` (little-endian, as `<DefaultData>`
+/// writes them): a string type's text as it stands, else a number (`#x…` or decimal). One that
+/// is no number or does not fit is left out with a warning.
+fn default_value(node: Node<'_, '_>, bits: u32, type_name: &str) -> Option<Vec<u8>> {
+    let raw = text(node);
+    if type_name.to_ascii_uppercase().contains("STRING") {
+        return Some(raw.as_bytes().to_vec());
+    }
+    let Some(v) = crate::number::parse_number(raw) else {
+        warn(node, format!("<DefaultValue> '{raw}' is not a number: no default read"));
+        return None;
+    };
+    let bytes = (bits.div_ceil(8) as usize).clamp(1, 8);
+    let fits = bits >= 64 || (v >= -(1i64 << (bits.max(1) - 1)) && v < (1i64 << bits.max(1)));
+    if !fits {
+        warn(node, format!("<DefaultValue> {raw} does not fit {bits} bits: no default read"));
+        return None;
+    }
+    Some(v.to_le_bytes()[..bytes].to_vec())
+}
+
 fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
     let index = child(o, "Index").ok_or_else(|| err(o, "<Object> lacks <Index>"))?;
     let index: u16 = number(index, text(index), "object <Index>")?;
     let type_name = child_text(o, "Type").unwrap_or_default();
     let access = access_of(o).unwrap_or_default();
     let info = child(o, "Info");
-    let default_of = |n: Option<Node<'_, '_>>| -> R<Option<Vec<u8>>> {
-        match n.and_then(|i| child(i, "DefaultData")) {
-            Some(dd) => hex_bytes(dd, text(dd)).map(Some),
-            None => Ok(None),
+    // `<DefaultData>` is the value's bytes; `<DefaultValue>` the value itself (a number, or a
+    // string's text), as Inovance's files give their PDO mappings' defaults.
+    let default_of = |n: Option<Node<'_, '_>>, bits: u32, type_name: &str| -> R<Option<Vec<u8>>> {
+        let Some(i) = n else { return Ok(None) };
+        if let Some(dd) = child(i, "DefaultData") {
+            return hex_bytes(dd, text(dd)).map(Some);
         }
+        Ok(child(i, "DefaultValue").and_then(|dv| default_value(dv, bits, type_name)))
     };
     let mut obj = Object {
         index,
@@ -83,7 +107,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
         bit_size: child_number(o, "BitSize")?.unwrap_or(0),
         access,
         pdo_mapping: child(o, "Flags").and_then(|f| child_text(f, "PdoMapping")),
-        default_data: default_of(info)?,
+        default_data: default_of(info, child_number(o, "BitSize")?.unwrap_or(0), &type_name)?,
         subs: Vec::new(),
         is_array: false,
         type_name,
@@ -126,7 +150,7 @@ fn parse_object(d: &Dictionary, o: Node<'_, '_>) -> R<Object> {
         if let Some(info) = info {
             for (k, s) in children(info, "SubItem").enumerate() {
                 if let Some(sub) = obj.subs.get_mut(k) {
-                    sub.default_data = default_of(child(s, "Info"))?;
+                    sub.default_data = default_of(child(s, "Info"), sub.bit_size, &sub.type_name)?;
                     if let Some(dn) = child(s, "Info").and_then(|i| child_text(i, "DisplayName")) {
                         sub.name = dn;
                     }

@@ -356,10 +356,27 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
             None => FmmuKind::Other(text(f).to_string()),
         });
     }
-    for sm in children(d, "Sm") {
+    for (n, sm) in children(d, "Sm").enumerate() {
+        let control: u8 = attr_number(sm, "ControlByte")?.unwrap_or(0);
+        let enabled = number_or_flag(sm, "Enable")?;
         dev.sync_managers.push(SmDesc {
             kind: match text(sm) {
-                // An unnamed SyncManager is one the device does not use.
+                // An unnamed SyncManager that is enabled takes its kind from its control byte
+                // (bits 0–1 the mode, 2–3 the direction: ESC datasheet section II, 0x0804):
+                // IgH's `ethercat xml` writes its slaves' SyncManagers without their kind. One
+                // not enabled is one the device does not use.
+                "" if enabled && control != 0 => {
+                    let writes = (control >> 2) & 3 == 1;
+                    let mailbox = control & 3 == 2 && n < 2;
+                    let kind = match (mailbox, writes) {
+                        (true, true) => SmKind::MailboxOut,
+                        (true, false) => SmKind::MailboxIn,
+                        (false, true) => SmKind::Outputs,
+                        (false, false) => SmKind::Inputs,
+                    };
+                    warn(sm, format!("<Sm> {n} names no kind: taken as {kind:?} from its control byte {control:#04x}"));
+                    kind
+                }
                 "" => SmKind::Unused,
                 _ => match keyword(sm, &["MBoxOut", "MBoxIn", "Outputs", "Inputs"]) {
                     Some("MBoxOut") => SmKind::MailboxOut,
@@ -371,8 +388,8 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
             },
             start: attr_number(sm, "StartAddress")?.ok_or_else(|| err(sm, "<Sm> lacks StartAddress"))?,
             default_size: attr_number(sm, "DefaultSize")?,
-            control: attr_number(sm, "ControlByte")?.unwrap_or(0),
-            enable: number_or_flag(sm, "Enable")?,
+            control,
+            enable: enabled,
         });
     }
     for p in children(d, "RxPdo") {

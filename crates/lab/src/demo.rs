@@ -283,7 +283,14 @@ fn run_one<I: World>(
         if !(a.can_run(ferrocat_master::cia402::Mode::CyclicSyncPosition)
             || a.can_run(ferrocat_master::cia402::Mode::CyclicSyncVelocity))
         {
-            return Err(LabError::NoTarget { position: a.position, axis: a.axis });
+            let mapped = r.m.slaves().get(a.position as usize).map(|s| s.mapping().outputs.clone()).unwrap_or_default();
+            let outputs = mapped
+                .iter()
+                .filter(|e| e.index != 0)
+                .map(|e| format!("{:#06X} {}", e.index, e.name))
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(LabError::NoTarget { position: a.position, axis: a.axis, outputs });
         }
         a.set_mode(&mut r.m, if velocity { Mode::CyclicSyncVelocity } else { Mode::CyclicSyncPosition })?;
         a.set_goal(Goal::OperationEnabled);

@@ -95,12 +95,16 @@ pub enum LabError {
         name: String,
     },
     /// A drive axis whose process image has neither target.
-    #[error("slave {position} axis {axis}: neither a target position nor a target velocity in the process image")]
+    #[error(
+        "slave {position} axis {axis}: neither a target position (0x607A) nor a target velocity (0x60FF) in the process image, so no cyclic synchronous mode to run; its outputs: {outputs} (set-points of another kind are not driven by the demo)"
+    )]
     NoTarget {
         /// The drive's position.
         position: u16,
         /// The axis.
         axis: u8,
+        /// The objects its outputs map (`0x606B Velocity demand value, …`).
+        outputs: String,
     },
     /// Drives that did not reach Operation enabled.
     #[error("drives not enabled: {0:?}")]

@@ -561,8 +561,22 @@ impl SegmentConfig {
             let kinds = port_kinds(&info);
             // A device whose ESC the captures show carries it; otherwise E-Bus terminals carry an
             // ET1200, everything with an MII port an ET1100.
-            let default_esc = known_esc(info.header.vendor_id, info.header.product_code)
-                .unwrap_or(if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) { "et1200" } else { "et1100" });
+            // A device whose description asks for SYNC0 (a DC op mode with AssignActivate's
+            // SYNC0 bit) while its ConfigData leaves 0x0141's SYNC out and latch units off (the
+            // AX2000-B110: 0x0141 = 0x00) cannot be an ET1100 or ET1200, which would then have
+            // no system time: its ESC is one whose DC units 0x0141 does not switch, as the AKD's
+            // IP core (0x0141 = 0x00 in its dump, a system time on the wire).
+            let wants_sync0 =
+                esi_dev.as_ref().is_some_and(|dev| dev.dc_op_modes.iter().any(|m| m.assign_activate & 0x0200 != 0));
+            let units_off = sii.get(1).is_some_and(|c| c & 0x0C == 0);
+            let default_esc =
+                known_esc(info.header.vendor_id, info.header.product_code).unwrap_or(if wants_sync0 && units_off {
+                    "ipcore"
+                } else if kinds.iter().flatten().all(|k| *k == PortKind::Ebus) {
+                    "et1200"
+                } else {
+                    "et1100"
+                });
             let esc_kind = d.esc.as_deref().unwrap_or(default_esc);
             let mut config = match esc_kind {
                 "et1100" => EscConfig::et1100(),
