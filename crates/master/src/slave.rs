@@ -300,11 +300,11 @@ impl Mapping {
     }
 }
 
-/// The entries' regions, one per SyncManager: (first entry, end, bits, the last rounded to a
-/// byte but the last region's).
+/// The entries' regions, one per SyncManager, empty ones too (the first SyncManager may carry
+/// nothing where a further one carries all): (first entry, end, bits, each rounded up to a byte
+/// but the last region's).
 fn region_bits(entries: &[Mapped], more: &[(u8, SmEntry, usize)]) -> Vec<(usize, usize, u32)> {
-    let mut starts: Vec<usize> = std::iter::once(0).chain(more.iter().map(|m| m.2.min(entries.len()))).collect();
-    starts.dedup();
+    let starts: Vec<usize> = std::iter::once(0).chain(more.iter().map(|m| m.2.min(entries.len()))).collect();
     let n = starts.len();
     (0..n)
         .map(|k| {
@@ -450,5 +450,43 @@ impl<'a> IntoIterator for &'a Slaves {
     type IntoIter = std::slice::Iter<'a, Slave>;
     fn into_iter(self) -> Self::IntoIter {
         self.all.iter()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(bits: u8) -> Mapped {
+        Mapped { index: 0x7000, subindex: 1, bits, name: String::new(), image_bit: 0 }
+    }
+
+    #[test]
+    fn each_sync_manager_s_entries_start_on_a_byte_and_an_empty_first_one_keeps_its_place() {
+        let sm = |start| SmEntry { start, ..SmEntry::default() };
+        // SM2 with 12 bits, SM6 with 9: 2 bytes, then 2 bytes from the next whole byte.
+        let mut m = Mapping {
+            outputs: vec![entry(8), entry(4), entry(1), entry(8)],
+            out_sm: Some((2, sm(0x1100))),
+            more_out_sms: vec![(6, sm(0x1FF4), 2)],
+            ..Mapping::default()
+        };
+        let regions: Vec<_> = m.output_sms().iter().map(|r| (r.0, r.2, r.3)).collect();
+        assert_eq!(regions, [(2, 0, 2), (6, 2, 2)]);
+        assert_eq!(m.output_bits(), 16 + 9);
+        m.place(80, 0);
+        let bits: Vec<u32> = m.outputs.iter().map(|e| e.image_bit).collect();
+        assert_eq!(bits, [80, 88, 96, 97]);
+        // Nothing on SM2, everything on SM6: SM2 stays (off, 0 bytes), SM6 carries the bytes.
+        let mut m = Mapping {
+            outputs: vec![entry(16)],
+            out_sm: Some((2, sm(0x1100))),
+            more_out_sms: vec![(6, sm(0x1FF4), 0)],
+            ..Mapping::default()
+        };
+        let regions: Vec<_> = m.output_sms().iter().map(|r| (r.0, r.2, r.3)).collect();
+        assert_eq!(regions, [(2, 0, 0), (6, 0, 2)]);
+        m.place(8, 0);
+        assert_eq!(m.outputs[0].image_bit, 8);
     }
 }
