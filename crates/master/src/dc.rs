@@ -554,9 +554,21 @@ impl<I: Io> Master<I> {
         let now = match sample.as_ref() {
             Some(s) => {
                 let trip_ns = s.rx_ns.wrapping_sub(s.tx_ns.unwrap_or(s.built_ns)) as i64;
-                st.lock.observe_frame(sync.offset_ns(s), trip_ns)
+                let offset_ns = sync.offset_ns(s);
+                tracing::trace!(
+                    cycle = st.cycle,
+                    offset_ns,
+                    trip_ns,
+                    built_ns = s.built_ns,
+                    send_ns = s.tx_ns.map(|t| t.wrapping_sub(s.built_ns) as i64),
+                    "clock sync sample"
+                );
+                st.lock.observe_frame(offset_ns, trip_ns)
             }
-            None => st.lock.observe(None, true),
+            None => {
+                tracing::trace!(cycle = st.cycle, "clock sync frame lost");
+                st.lock.observe(None, true)
+            }
         };
         if now != before {
             tracing::info!(method = sync.name(), offset_ns = st.lock.offset_ns(), "clock sync {before} -> {now}");
