@@ -6,7 +6,12 @@
 //! Tests that need the data carry `needs_shared` in their name. When the folder is absent the
 //! test command (`scripts/test.sh`) leaves them out and prints that they were skipped and why;
 //! run directly, they fail with the reason instead of passing silently.
+//!
+//! It also holds [`CountingAllocator`], for the tests that assert a path allocates nothing.
 use std::path::{Path, PathBuf};
+
+mod counting;
+pub use counting::{allocations, CountingAllocator};
 
 pub const ENV: &str = "FERROCAT_SHARED";
 
