@@ -4,30 +4,15 @@ use std::collections::BTreeMap;
 use ferrocat_wire::coe::AbortCode;
 use ferrocat_wire::register::AlState;
 
-/// CoE data type indices used here (ETG.1000.6 Table 64).
-pub mod data_type {
-    pub const BOOL: u16 = 0x0001;
-    pub const SINT: u16 = 0x0002;
-    pub const INT: u16 = 0x0003;
-    pub const DINT: u16 = 0x0004;
-    pub const USINT: u16 = 0x0005;
-    pub const UINT: u16 = 0x0006;
-    pub const UDINT: u16 = 0x0007;
-    pub const REAL: u16 = 0x0008;
-    pub const VISIBLE_STRING: u16 = 0x0009;
-    pub const OCTET_STRING: u16 = 0x000A;
-    pub const LINT: u16 = 0x0015;
-    pub const ULINT: u16 = 0x001B;
-    pub const PDO_MAPPING: u16 = 0x0021;
-    pub const IDENTITY: u16 = 0x0023;
-}
+pub use ferrocat_wire::coe::data_type;
+use ferrocat_wire::coe::object_code;
 
 /// Object codes of SDO information.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ObjectCode {
-    Var = 7,
-    Array = 8,
-    Record = 9,
+    Var = object_code::VAR as isize,
+    Array = object_code::ARRAY as isize,
+    Record = object_code::RECORD as isize,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -124,7 +109,7 @@ impl Object {
         let mut entries = vec![Entry {
             subindex: 0,
             name: "Number of entries".into(),
-            data_type: data_type::USINT,
+            data_type: data_type::UNSIGNED8,
             bit_len: 8,
             bit_offset: 0,
             access: sub0_access,

@@ -16,7 +16,7 @@ fn u32_entry(sub: u8, name: &str, v: u32, access: Access) -> Entry {
     Entry {
         subindex: sub,
         name: name.into(),
-        data_type: dt::UDINT,
+        data_type: dt::UNSIGNED32,
         bit_len: 32,
         bit_offset: 0,
         access,
@@ -36,7 +36,7 @@ pub fn from_sii(info: &SiiInfo) -> ObjectDictionary {
     od.insert(Object::var(
         0x1000,
         "Device type",
-        dt::UDINT,
+        dt::UNSIGNED32,
         32,
         ro(),
         (if drive { 0x0002_0192u32 } else { 0 }).to_le_bytes().to_vec(),
@@ -68,14 +68,14 @@ pub fn from_sii(info: &SiiInfo) -> ObjectDictionary {
         0x1C00,
         "Sync manager type",
         ObjectCode::Array,
-        dt::USINT,
+        dt::UNSIGNED8,
         ro(),
         sms.iter()
             .enumerate()
             .map(|(i, s)| Entry {
                 subindex: i as u8 + 1,
                 name: format!("SM{i}"),
-                data_type: dt::USINT,
+                data_type: dt::UNSIGNED8,
                 bit_len: 8,
                 bit_offset: 0,
                 access: ro(),
@@ -144,7 +144,7 @@ fn add_pdos(od: &mut ObjectDictionary, pdos: &[Pdo], sm: u8, assign: u16, rx: bo
             .map(|k| Entry {
                 subindex: k as u8 + 1,
                 name: format!("PDO {}", k + 1),
-                data_type: dt::UINT,
+                data_type: dt::UNSIGNED16,
                 bit_len: 16,
                 bit_offset: 0,
                 access: rw_preop(),
@@ -156,7 +156,7 @@ fn add_pdos(od: &mut ObjectDictionary, pdos: &[Pdo], sm: u8, assign: u16, rx: bo
             assign,
             if rx { "RxPDO assign" } else { "TxPDO assign" },
             ObjectCode::Array,
-            dt::UINT,
+            dt::UNSIGNED16,
             rw_preop(),
             items,
         );
@@ -249,7 +249,7 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
             let assign = 0x1C10 + n as u16;
             if od.get(assign).is_none() {
                 let name = format!("SM{n} PDO assign");
-                od.insert(Object::list(assign, &name, ObjectCode::Array, dt::UINT, rw_preop(), vec![]));
+                od.insert(Object::list(assign, &name, ObjectCode::Array, dt::UNSIGNED16, rw_preop(), vec![]));
             }
             let listed = pdos.iter().filter(|p| further(p, sm_type, first) == Some(n)).map(|p| p.index).collect();
             assignments.push((assign, listed));
@@ -266,7 +266,7 @@ pub fn from_esi(dev: &ferrocat_esi::Device, info: &SiiInfo) -> ObjectDictionary 
                         o.entries.push(Entry {
                             subindex: sub,
                             name: format!("PDO {sub}"),
-                            data_type: dt::UINT,
+                            data_type: dt::UNSIGNED16,
                             bit_len: 16,
                             bit_offset: 16 * sub as u32,
                             access: rw_preop(),
@@ -300,10 +300,10 @@ fn add_init_command_targets(od: &mut ObjectDictionary, cmds: &[ferrocat_esi::Ini
         }
         let bits = (c.data.len() * 8).min(u16::MAX as usize) as u16;
         let data_type = match c.data.len() {
-            1 => dt::USINT,
-            2 => dt::UINT,
-            4 => dt::UDINT,
-            8 => dt::ULINT,
+            1 => dt::UNSIGNED8,
+            2 => dt::UNSIGNED16,
+            4 => dt::UNSIGNED32,
+            8 => dt::UNSIGNED64,
             _ => dt::OCTET_STRING,
         };
         let access = Access { read: true, write: true, ..Default::default() };
@@ -338,7 +338,7 @@ pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, 
         let sub = |subindex: u8, name: &str, v: u16| Entry {
             subindex,
             name: name.into(),
-            data_type: dt::UINT,
+            data_type: dt::UNSIGNED16,
             bit_len: 16,
             bit_offset: 0,
             access: Access::RO,
@@ -348,7 +348,7 @@ pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, 
             0xF000,
             "Modular device profile",
             ObjectCode::Record,
-            dt::UINT,
+            dt::UNSIGNED16,
             Access::RO,
             vec![
                 sub(1, "Index distance", slots.slot_index_increment),
@@ -363,7 +363,7 @@ pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, 
             .map(|(k, v)| Entry {
                 subindex: k as u8 + 1,
                 name: format!("Module {}", k + 1),
-                data_type: dt::UDINT,
+                data_type: dt::UNSIGNED32,
                 bit_len: 32,
                 bit_offset: 0,
                 access,
@@ -376,7 +376,7 @@ pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, 
         0xF030,
         "Configured module ident list",
         ObjectCode::Array,
-        dt::UDINT,
+        dt::UNSIGNED32,
         preop,
         entries(preop, &vec![0; plugged.len()]),
     );
@@ -388,7 +388,7 @@ pub fn add_module_lists(od: &mut ObjectDictionary, slots: &ferrocat_esi::Slots, 
         0xF050,
         "Detected module ident list",
         ObjectCode::Array,
-        dt::UDINT,
+        dt::UNSIGNED32,
         Access::RO,
         entries(Access::RO, plugged),
     ));

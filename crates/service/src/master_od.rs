@@ -11,33 +11,7 @@
 //! its text rounded up to an even length (never cut).
 use ferrocat_master::wire::coe::AbortCode;
 
-/// CoE data types (ETG.1000.6 Table 63) the dictionary uses.
-pub mod data_type {
-    /// BOOLEAN.
-    pub const BOOLEAN: u16 = 0x0001;
-    /// UNSIGNED8.
-    pub const UNSIGNED8: u16 = 0x0005;
-    /// UNSIGNED16.
-    pub const UNSIGNED16: u16 = 0x0006;
-    /// UNSIGNED32.
-    pub const UNSIGNED32: u16 = 0x0007;
-    /// VISIBLE_STRING.
-    pub const VISIBLE_STRING: u16 = 0x0009;
-    /// OCTET_STRING.
-    pub const OCTET_STRING: u16 = 0x000A;
-    /// UNSIGNED64.
-    pub const UNSIGNED64: u16 = 0x001B;
-}
-
-/// Object codes (ETG.1000.6 Table 62).
-pub mod object_code {
-    /// A single value.
-    pub const VAR: u8 = 7;
-    /// Entries of one type.
-    pub const ARRAY: u8 = 8;
-    /// Entries of several types.
-    pub const RECORD: u8 = 9;
-}
+pub use ferrocat_master::wire::coe::{data_type, object_code};
 
 /// Read in PREOP, SAFEOP and OP; never written (ETG.1000.6 object access bits 0–2).
 pub const READ_ONLY: u16 = 0x0007;

@@ -418,6 +418,35 @@ impl<'a> Sdo<'a> {
     }
 }
 
+/// CoE data type codes (CiA 301's data type table, ETG.1000.6 Table 63) that ferrocat's
+/// dictionaries use; [`data_type_name`] names every standard one.
+pub mod data_type {
+    pub const BOOLEAN: u16 = 0x0001;
+    pub const INTEGER8: u16 = 0x0002;
+    pub const INTEGER16: u16 = 0x0003;
+    pub const INTEGER32: u16 = 0x0004;
+    pub const UNSIGNED8: u16 = 0x0005;
+    pub const UNSIGNED16: u16 = 0x0006;
+    pub const UNSIGNED32: u16 = 0x0007;
+    pub const REAL32: u16 = 0x0008;
+    pub const VISIBLE_STRING: u16 = 0x0009;
+    pub const OCTET_STRING: u16 = 0x000A;
+    pub const INTEGER64: u16 = 0x0015;
+    pub const UNSIGNED64: u16 = 0x001B;
+    pub const PDO_MAPPING: u16 = 0x0021;
+    pub const IDENTITY: u16 = 0x0023;
+}
+
+/// Object codes of SDO information (CiA 301's object code table, ETG.1000.6 Table 62).
+pub mod object_code {
+    /// A single value.
+    pub const VAR: u8 = 0x07;
+    /// Entries of one type.
+    pub const ARRAY: u8 = 0x08;
+    /// Entries of several types.
+    pub const RECORD: u8 = 0x09;
+}
+
 /// A CoE data type code's name (CiA 301's data type table, ETG.1000.6 Table 63), for the
 /// standard types; `None` for a code it does not name (a device's own, or a complex type of a
 /// profile).
@@ -462,9 +491,9 @@ pub fn object_code_name(code: u8) -> Option<&'static str> {
         0x02 => "DOMAIN",
         0x05 => "DEFTYPE",
         0x06 => "DEFSTRUCT",
-        0x07 => "VAR",
-        0x08 => "ARRAY",
-        0x09 => "RECORD",
+        object_code::VAR => "VAR",
+        object_code::ARRAY => "ARRAY",
+        object_code::RECORD => "RECORD",
         _ => return None,
     })
 }
