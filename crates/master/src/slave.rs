@@ -17,6 +17,14 @@ pub struct Mapped {
     pub image_bit: u32,
 }
 
+impl Mapped {
+    /// An entry as its PDO describes it, not yet placed in the image (`image_bit` 0 until
+    /// the image is laid out).
+    pub fn unplaced(index: u16, subindex: u8, bits: u8, name: String) -> Self {
+        Mapped { index, subindex, bits, name, image_bit: 0 }
+    }
+}
+
 /// Where a slave's mailbox lies, and what it speaks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MailboxConfig {

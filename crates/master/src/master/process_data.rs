@@ -83,13 +83,7 @@ impl<I: Io> Master<I> {
                     pdos.iter()
                         .filter(|p| p.sm.is_some_and(|sm| sm == n || (first && !known.contains(&sm))))
                         .flat_map(|p| p.entries.iter())
-                        .map(|e| Mapped {
-                            index: e.index,
-                            subindex: e.subindex,
-                            bits: e.bit_len,
-                            name: e.name.clone(),
-                            image_bit: 0,
-                        })
+                        .map(|e| Mapped::unplaced(e.index, e.subindex, e.bit_len, e.name.clone()))
                         .collect()
                 } else {
                     let sii = &self.slaves[k].sii;
@@ -97,14 +91,10 @@ impl<I: Io> Master<I> {
                     pdos.iter()
                         .filter(|p| p.sync_manager == n)
                         .flat_map(|p| p.entries.iter())
-                        .map(|e| Mapped {
-                            index: e.index,
-                            subindex: e.subindex,
-                            bits: e.bit_len,
-                            name: sii
-                                .string(e.name_idx)
-                                .unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex)),
-                            image_bit: 0,
+                        .map(|e| {
+                            let name = sii.string(e.name_idx);
+                            let name = name.unwrap_or_else(|| format!("{:#06x}:{:02x}", e.index, e.subindex));
+                            Mapped::unplaced(e.index, e.subindex, e.bit_len, name)
                         })
                         .collect()
                 };
@@ -158,7 +148,7 @@ impl<I: Io> Master<I> {
                     .find(|e| e.index == index && e.subindex == subindex)
                     .and_then(|e| self.slaves[position as usize].sii.string(e.name_idx))
                     .unwrap_or_else(|| format!("{index:#06x}:{subindex:02x}"));
-                v.push(Mapped { index, subindex, bits, name, image_bit: 0 });
+                v.push(Mapped::unplaced(index, subindex, bits, name));
             }
         }
         Ok(v)
