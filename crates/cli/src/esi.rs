@@ -191,8 +191,10 @@ pub fn run(
                     "tx_pdos": m.tx_pdos.iter().map(|p| json!({"index": p.index, "name": p.name, "bit_len": p.bit_len()})).collect::<Vec<_>>(),
                     "objects": m.dictionary.as_ref().map_or(0, |d| d.objects.len()),
                     "init_cmds": m.init_cmds.iter().map(init_cmd_json).collect::<Vec<_>>(),
+                    "soe_init_cmds": m.soe_init_cmds.iter().map(soe_init_cmd_json).collect::<Vec<_>>(),
                 })).collect::<Vec<_>>(),
                 "init_cmds": d.init_cmds.iter().map(init_cmd_json).collect::<Vec<_>>(),
+                "soe_init_cmds": d.soe_init_cmds.iter().map(soe_init_cmd_json).collect::<Vec<_>>(),
                 "warnings": file.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
             })
         );
@@ -293,10 +295,16 @@ pub fn run(
                 for c in &m.init_cmds {
                     outln!("         {}", init_cmd_text(c));
                 }
+                for c in &m.soe_init_cmds {
+                    outln!("         {}", soe_init_cmd_text(c));
+                }
             }
         }
         for c in &d.init_cmds {
             outln!("  {}", init_cmd_text(c));
+        }
+        for c in &d.soe_init_cmds {
+            outln!("  {}", soe_init_cmd_text(c));
         }
     }
     Ok(ExitCode::SUCCESS)
@@ -308,6 +316,23 @@ fn init_cmd_text(c: &ferrocat_esi::InitCmd) -> String {
     let slot = if c.index_depends == ferrocat_esi::Depend::None { "" } else { " +slot" };
     let ca = if c.complete_access { " (complete access)" } else { "" };
     format!("INIT {} {:#06x}:{:#04x}{slot} ← {hex}{ca} {:?}", c.transitions.join(","), c.index, c.subindex, c.comment)
+}
+
+/// "SoE PS P-0-0001 drive 0 ← fa00 (value) "Gain"".
+fn soe_init_cmd_text(c: &ferrocat_esi::SoeInitCmd) -> String {
+    let hex: String = c.data.iter().map(|b| format!("{b:02x}")).collect();
+    let elements = ferrocat_wire::soe::Elements::NAMES
+        .iter()
+        .filter(|(_, e)| c.elements.0 & e.0 != 0)
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(",");
+    format!("SoE {} {} drive {} ← {hex} ({elements}) {:?}", c.transitions.join(","), c.idn, c.drive, c.comment)
+}
+
+fn soe_init_cmd_json(c: &ferrocat_esi::SoeInitCmd) -> serde_json::Value {
+    json!({"transitions": c.transitions, "idn": c.idn.to_string(), "drive": c.drive, "elements": c.elements.0,
+        "data": c.data, "timeout_ms": c.timeout_ms, "comment": c.comment})
 }
 
 fn init_cmd_json(c: &ferrocat_esi::InitCmd) -> serde_json::Value {

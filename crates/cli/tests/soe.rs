@@ -58,3 +58,37 @@ fn the_drive_s_refusals_and_bad_idns_are_errors_that_say_so() {
     let (ok, _, err) = soe(&["read", "0", "S-0-0001"]);
     assert!(!ok && err.contains("slave 0 (EK1100): has no mailbox"), "{err}");
 }
+
+/// `ferrocat esi` lists a description's SoE init commands, and `ferrocat run --esi` sends them
+/// at their transitions: the one on an IDN this drive lacks is left out with a warning naming
+/// it, and the drive reaches OP.
+#[test]
+fn esi_soe_init_commands_are_listed_and_sent_by_run() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["esi", esi, "--device", "FC-SOE-DRIVE-INIT"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    for line in [
+        "SoE IP S-0-0001 drive 0 ← f401 (value) \"NC cycle time\"",
+        "SoE PS P-0-0001 drive 0 ← fa00 (value) \"Gain\"",
+        "SoE SO P-0-0001 drive 0 ← 2c01 (value) \"Gain in OP\"",
+    ] {
+        assert!(text.contains(line), "{line:?} in {text}");
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["run", "--seconds", "0.1", "--json", "--esi", esi, "--device", "EK1100"])
+        .args(["--device", &format!("{esi}:FC-SOE-DRIVE-INIT")])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 68) not sent"),
+        "{err}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((&v["slaves"]["in_op_at_end"], &v["slaves"]["left_op"]), (&2.into(), &0.into()), "{v}");
+}

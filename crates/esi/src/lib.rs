@@ -16,6 +16,8 @@ mod number;
 #[cfg(feature = "xml")]
 mod parse;
 #[cfg(feature = "xml")]
+mod soe_init;
+#[cfg(feature = "xml")]
 pub mod text;
 
 pub use build::coe_data_type;
@@ -99,6 +101,30 @@ pub struct Device {
     /// The CoE commands a master sends at state transitions (`<Mailbox><CoE><InitCmd>`), with
     /// the plugged modules' after the device's own in a device made by [`Device::plugged`].
     pub init_cmds: Vec<InitCmd>,
+    /// The SoE commands a master sends at state transitions (`<Mailbox><SoE><InitCmd>`), the
+    /// plugged modules' after the device's own.
+    pub soe_init_cmds: Vec<SoeInitCmd>,
+}
+
+/// An SoE write of an IDN that a master sends at a state transition (`<Mailbox><SoE><InitCmd>`,
+/// ETG.2000; the elements are those of an ENI's SoE init command, ETG.2100).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SoeInitCmd {
+    /// Line of the `<InitCmd>` element.
+    pub line: u32,
+    /// The transitions it belongs to, as written ("IP", "PS", "SO", …).
+    pub transitions: Vec<String>,
+    /// The drive (axis) of the device, 0–7 (`<DriveNo>`, 0 where absent).
+    pub drive: u8,
+    /// The IDN written.
+    pub idn: ferrocat_wire::soe::Idn,
+    /// The elements written (`<Elements>`, the value where absent).
+    pub elements: ferrocat_wire::soe::Elements,
+    /// The bytes written, as the file gives them.
+    pub data: Vec<u8>,
+    /// How long the drive may take to answer, in ms (`<Timeout>`), where given.
+    pub timeout_ms: Option<u32>,
+    pub comment: String,
 }
 
 /// A CoE SDO download a master sends at a state transition (`<InitCmd>`, ETG.2000).
@@ -296,6 +322,7 @@ impl Device {
             dev.rx_pdos.extend(rx);
             dev.tx_pdos.extend(tx);
             dev.init_cmds.extend(m.init_cmds_in_slot(slots, n as u16, group));
+            dev.soe_init_cmds.extend(m.soe_init_cmds.iter().cloned());
             let objects = m.objects_in_slot(slots, n as u16, group);
             if !objects.is_empty() {
                 let dict = dev.dictionary.get_or_insert_with(Dictionary::default);

@@ -83,6 +83,8 @@ pub struct ModuleDesc {
     pub dictionary: Option<Dictionary>,
     /// Its CoE init commands, indices as written.
     pub init_cmds: Vec<InitCmd>,
+    /// Its SoE init commands (an IDN does not move with the slot).
+    pub soe_init_cmds: Vec<crate::SoeInitCmd>,
 }
 
 impl ModuleDesc {

@@ -415,6 +415,7 @@ fn parse_device(d: Node<'_, '_>) -> R<Device> {
         });
     }
     dev.init_cmds = init_cmds(d)?;
+    dev.soe_init_cmds = crate::soe_init::soe_init_cmds(d)?;
     if let Some(dc) = child(d, "Dc") {
         for m in children(dc, "OpMode") {
             let cyc = |name| -> R<(u32, Option<i16>)> {
@@ -524,6 +525,7 @@ fn parse_module(m: Node<'_, '_>) -> R<ModuleDesc> {
         push_pdo(&mut module.tx_pdos, p)?;
     }
     module.init_cmds = init_cmds(m)?;
+    module.soe_init_cmds = crate::soe_init::soe_init_cmds(m)?;
     if let Some(dict) = child(m, "Profile").and_then(|p| child(p, "Dictionary")) {
         module.dictionary = Some(parse_dictionary(dict)?);
     }

@@ -122,6 +122,20 @@ pub enum SlaveError {
         /// What went wrong: an abort with its code, a mailbox failure.
         error: Box<MasterError>,
     },
+    /// An SoE init command the configuration sends (an ESI's or the application's) failed.
+    #[error("{}", config_idn(origin, *drive, *idn, comment, error))]
+    ConfigIdn {
+        /// Where the command came from.
+        origin: SdoSource,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// The IDN written.
+        idn: ferrocat_wire::soe::Idn,
+        /// Its comment in the description.
+        comment: String,
+        /// What went wrong: the drive's SoE error, a mailbox failure.
+        error: Box<MasterError>,
+    },
     /// Modular devices (ETG.5001): the modules configured and detected.
     #[error("{0}")]
     Modules(ModuleError),
@@ -154,7 +168,7 @@ pub enum SlaveError {
     },
 }
 
-/// Where an SDO the configuration sends came from.
+/// Where a command the configuration sends (an SDO, an SoE write) came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SdoSource {
     /// An ESI init command, at a transition ("PS"), from the file's line.
@@ -184,6 +198,24 @@ fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error
         SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:#04x} ({comment}): {error}"),
         SdoSource::Description { transition, line } => {
             format!("init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
+        }
+    }
+}
+
+fn config_idn(
+    source: &SdoSource,
+    drive: u8,
+    idn: ferrocat_wire::soe::Idn,
+    comment: &str,
+    error: &MasterError,
+) -> String {
+    match source {
+        SdoSource::EsiInitCommand { transition, line } => {
+            format!("ESI SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {error}")
+        }
+        SdoSource::Plan => format!("plan IDN {idn} drive {drive} ({comment}): {error}"),
+        SdoSource::Description { transition, line } => {
+            format!("SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {error}")
         }
     }
 }

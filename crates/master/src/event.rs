@@ -126,6 +126,26 @@ pub enum MasterEvent {
         /// What the slave answered.
         code: ferrocat_wire::coe::AbortCode,
     },
+    /// An SoE init command of the slave's ESI description was not sent: the drive has no such
+    /// IDN (SoE error 0x1001), as [`MasterEvent::InitCommandSkipped`] for CoE.
+    SoeInitCommandSkipped {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The transition it was for ("PS", …).
+        transition: String,
+        /// The drive (axis) of the device.
+        drive: u8,
+        /// The IDN.
+        idn: ferrocat_wire::soe::Idn,
+        /// Its comment in the file.
+        comment: String,
+        /// Its line in the file.
+        line: u32,
+        /// What the drive answered.
+        error: ferrocat_wire::soe::SoeError,
+    },
     /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
     Ring {
         /// The ring's state now.
@@ -168,6 +188,12 @@ impl std::fmt::Display for MasterEvent {
                 write!(
                     f,
                     "slave {position} ({name}): ESI init command {transition} {index:#06x}:{subindex:02x} (\"{comment}\", line {line}) not sent: {code}"
+                )
+            }
+            MasterEvent::SoeInitCommandSkipped { position, name, transition, drive, idn, comment, line, error } => {
+                write!(
+                    f,
+                    "slave {position} ({name}): ESI SoE init command {transition} {idn} drive {drive} (\"{comment}\", line {line}) not sent: {error}"
                 )
             }
             MasterEvent::InputsInvalid { position, name, entry } => {

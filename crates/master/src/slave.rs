@@ -98,6 +98,8 @@ pub struct Slave {
 pub struct Setup {
     /// CoE init commands, sent at their transitions after the ESI's own, in order.
     pub init_cmds: Vec<ferrocat_esi::InitCmd>,
+    /// SoE init commands, sent at their transitions after the ESI's own, in order.
+    pub soe_init_cmds: Vec<ferrocat_esi::SoeInitCmd>,
     /// The modules a modular device is to carry, slot by slot (their ESI module idents):
     /// written to 0xF030 and checked against 0xF050 in PREOP, after the IP and PS init
     /// commands and before the process data are read.

@@ -121,10 +121,3 @@ impl<I: Io> Soe<'_, I> {
         Ok(items.chunks_exact(2).map(|c| Idn(u16::from_le_bytes([c[0], c[1]]))).collect())
     }
 }
-
-impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
-    /// The SoE client: IDNs of a servo drive (AX5000, IndraDrive and others).
-    pub fn soe(self) -> Soe<'a, I> {
-        Soe { mbx: self.m.mailboxes() }
-    }
-}

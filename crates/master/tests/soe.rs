@@ -173,3 +173,74 @@ fn a_passed_through_read_comes_in_fragments_each_awaited_without_a_write() {
     let data: Vec<u8> = replies.iter().flat_map(|r| r[4..].to_vec()).collect();
     assert_eq!(data, want);
 }
+
+/// The drive of `FC-SOE-DRIVE-INIT`, its ESI description in the master or not.
+fn drive_with_init_commands(description: Option<ferrocat_esi::Device>) -> Master<VirtualIo> {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let cfg = SegmentConfig::from_device_args(&[format!("{esi}:FC-SOE-DRIVE-INIT")]).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    if let Some(d) = description {
+        m.config().add_esi(0x0F3C, d);
+    }
+    m.states().scan().unwrap();
+    m
+}
+
+fn init_description() -> ferrocat_esi::Device {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let file = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(path).unwrap()).unwrap();
+    file.devices.into_iter().find(|d| d.type_name == "FC-SOE-DRIVE-INIT").unwrap()
+}
+
+/// The ESI's SoE init commands go at their transitions (IP and PS in PREOP, SO in SAFEOP), one
+/// on an IDN the drive lacks is left out with an event naming it, one the drive refuses is an
+/// error naming it; the application's own command on an absent IDN stays an error.
+#[test]
+fn esi_soe_init_commands_are_sent_at_their_transitions() {
+    let gain = Idn::product(0, 1).unwrap();
+    let u16_of = |v: Vec<u8>| u16::from_le_bytes([v[0], v[1]]);
+    // Without the description: the drive's own values.
+    let mut m = drive_with_init_commands(None);
+    m.states().configure().unwrap();
+    assert_eq!(u16_of(m.acyclic().soe().value(0, 0, gain).unwrap()), 100);
+    // With it: IP and PS in PREOP, the absent S-0-0999 skipped, SO on the way to OP.
+    let mut m = drive_with_init_commands(Some(init_description()));
+    m.states().configure().unwrap();
+    assert_eq!(u16_of(m.acyclic().soe().value(0, 0, Idn(1)).unwrap()), 500);
+    assert_eq!(u16_of(m.acyclic().soe().value(0, 0, gain).unwrap()), 250);
+    let skipped: Vec<String> = m
+        .diagnosis()
+        .take_events()
+        .iter()
+        .filter(|e| matches!(e, ferrocat_master::MasterEvent::SoeInitCommandSkipped { .. }))
+        .map(|e| e.to_string())
+        .collect();
+    assert_eq!(skipped.len(), 1, "{skipped:?}");
+    assert!(
+        skipped[0].contains(
+            "ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 68) not sent: SoE error 0x1001"
+        ),
+        "{skipped:?}"
+    );
+    m.states().start().unwrap();
+    assert_eq!(u16_of(m.acyclic().soe().value(0, 0, gain).unwrap()), 300);
+    // A value the drive refuses: an error naming the command.
+    let mut refused = init_description();
+    refused.soe_init_cmds[1].data = 1001u16.to_le_bytes().to_vec();
+    let mut m = drive_with_init_commands(Some(refused));
+    let e = m.states().configure().unwrap_err();
+    let MasterError::Slave { error: SlaveError::ConfigIdn { error, .. }, .. } = &e else { panic!("{e:?}") };
+    assert!(
+        matches!(**error, MasterError::Slave { error: SlaveError::Soe { error: SoeError::VALUE_ABOVE_MAX, .. }, .. }),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("ESI SoE init command PS P-0-0001 drive 0 (\"Gain\", line 58): "), "{e}");
+    // The application's own command on an absent IDN is its mistake: an error.
+    let mut m = drive_with_init_commands(None);
+    let mut own = init_description().soe_init_cmds[2].clone();
+    own.line = 12;
+    m.config().setup_mut(0).unwrap().soe_init_cmds.push(own);
+    let e = m.states().configure().unwrap_err().to_string();
+    assert!(e.contains("SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 12): "), "{e}");
+    assert!(!e.contains("ESI"), "{e}");
+}

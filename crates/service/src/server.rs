@@ -232,6 +232,7 @@ impl Server {
                 E::InputsStale { position, .. } => ("inputs_stale", Some(*position)),
                 E::ErrorCounters { position, .. } => ("error_counters", Some(*position)),
                 E::InitCommandSkipped { position, .. } => ("init_command_skipped", Some(*position)),
+                E::SoeInitCommandSkipped { position, .. } => ("soe_init_command_skipped", Some(*position)),
                 E::Ring { .. } => ("ring", None),
             };
             if self.events.len() == EVENTS_KEPT {

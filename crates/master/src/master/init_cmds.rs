@@ -1,7 +1,8 @@
-//! The CoE init commands of a slave's ESI description (`<InitCmd>`, ETG.2000) and those the
-//! application gives (a machine description's), sent at the state transitions they name, as a
-//! configuration tool's master does: "IP" and "PS" while the slave is in PREOP, before the
-//! process data are read and SAFEOP is asked; "SO" in SAFEOP, before OP.
+//! The CoE and SoE init commands of a slave's ESI description (`<Mailbox><CoE><InitCmd>`,
+//! `<Mailbox><SoE><InitCmd>`, ETG.2000) and those the application gives (a machine
+//! description's), sent at the state transitions they name, as a configuration tool's master
+//! does: "IP" and "PS" while the slave is in PREOP, before the process data are read and SAFEOP
+//! is asked; "SO" in SAFEOP, before OP.
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
@@ -18,13 +19,19 @@ impl<I: Io> Master<I> {
             .map(|(_, d)| d)
     }
 
-    /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): its ESI
-    /// description's, in the file's order, then those the application gave
-    /// ([`Config::setup_mut`](crate::part::Config::setup_mut)); each an SDO download (complete access where it says
-    /// so). Returns how many it sent; an abort is an error naming the command, but for an ESI
-    /// command on an object or subindex the slave lacks: that one is left out with
-    /// [`MasterEvent::InitCommandSkipped`](crate::event::MasterEvent::InitCommandSkipped).
+    /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): the CoE
+    /// ones, then the SoE ones (each kind its ESI description's in the file's order, then those
+    /// the application gave, [`Config::setup_mut`](crate::part::Config::setup_mut)). Returns how
+    /// many it sent.
     pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
+        Ok(self.run_coe_init_commands(position, transition)? + self.run_soe_init_commands(position, transition)?)
+    }
+
+    /// The CoE commands for `transition`, each an SDO download (complete access where it says
+    /// so). An abort is an error naming the command, but for an ESI command on an object or
+    /// subindex the slave lacks: that one is left out with
+    /// [`MasterEvent::InitCommandSkipped`](crate::event::MasterEvent::InitCommandSkipped).
+    fn run_coe_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
         let mut cmds: Vec<(ferrocat_esi::InitCmd, bool)> = match self.esi_description(position) {
             Some(d) => d.init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
@@ -56,22 +63,15 @@ impl<I: Io> Master<I> {
                         line: c.line,
                         code: *code,
                     };
-                    tracing::warn!("{e}");
-                    self.events.push(e);
+                    self.skipped(e);
                     continue;
                 }
             }
             result.map_err(|e| {
-                let name = self.slaves[position as usize].name.clone();
-                let transition = transition.to_string();
-                let origin = if *from_esi {
-                    crate::error::SdoSource::EsiInitCommand { transition, line: c.line }
-                } else {
-                    crate::error::SdoSource::Description { transition, line: c.line }
-                };
+                let origin = origin(*from_esi, transition, c.line);
                 MasterError::of(
                     position,
-                    &name,
+                    &self.slaves[position as usize].name,
                     crate::error::SlaveError::ConfigSdo {
                         origin,
                         index: c.index,
@@ -85,6 +85,86 @@ impl<I: Io> Master<I> {
             sent += 1;
         }
         Ok(sent)
+    }
+
+    /// The SoE commands for `transition`, each a write of its IDN's elements to its drive, the
+    /// mailbox wait stretched to the command's `<Timeout>` where that is longer. The drive's
+    /// refusal is an error naming the command, but for an ESI command on an IDN the drive lacks
+    /// (SoE error 0x1001), left out with
+    /// [`MasterEvent::SoeInitCommandSkipped`](crate::event::MasterEvent::SoeInitCommandSkipped)
+    /// for the reason the CoE ones are.
+    fn run_soe_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
+        let wanted = |c: &&ferrocat_esi::SoeInitCmd| c.transitions.iter().any(|t| t == transition);
+        let mut cmds: Vec<(ferrocat_esi::SoeInitCmd, bool)> = match self.esi_description(position) {
+            Some(d) => d.soe_init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
+            None => Vec::new(),
+        };
+        if let Some(s) = self.slaves.get(position as usize) {
+            cmds.extend(s.setup.soe_init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
+        }
+        let mut sent = 0;
+        for (c, from_esi) in &cmds {
+            let result = {
+                let mut soe = self.acyclic().soe();
+                if let Some(ms) = c.timeout_ms {
+                    soe.mbx.timeout_ns = soe.mbx.timeout_ns.max(ms as u64 * 1_000_000);
+                }
+                soe.write(position, c.drive, c.idn, c.elements, &c.data)
+            };
+            if let (true, Err(MasterError::Slave { error: crate::error::SlaveError::Soe { error, .. }, .. })) =
+                (*from_esi, &result)
+            {
+                if *error == ferrocat_wire::soe::SoeError::NO_IDN {
+                    let e = crate::event::MasterEvent::SoeInitCommandSkipped {
+                        position,
+                        name: self.slaves[position as usize].name.clone(),
+                        transition: transition.to_string(),
+                        drive: c.drive,
+                        idn: c.idn,
+                        comment: c.comment.clone(),
+                        line: c.line,
+                        error: *error,
+                    };
+                    self.skipped(e);
+                    continue;
+                }
+            }
+            result.map_err(|e| {
+                let origin = origin(*from_esi, transition, c.line);
+                MasterError::of(
+                    position,
+                    &self.slaves[position as usize].name,
+                    crate::error::SlaveError::ConfigIdn {
+                        origin,
+                        drive: c.drive,
+                        idn: c.idn,
+                        comment: c.comment.clone(),
+                        error: Box::new(e),
+                    },
+                )
+            })?;
+            tracing::debug!(position, transition, idn = %c.idn, drive = c.drive, "SoE init command sent");
+            sent += 1;
+        }
+        Ok(sent)
+    }
+}
+
+impl<I: Io> Master<I> {
+    /// An ESI command left out: a warning and an event.
+    fn skipped(&mut self, e: crate::event::MasterEvent) {
+        tracing::warn!("{e}");
+        self.events.push(e);
+    }
+}
+
+/// Whose command failed: the ESI's or the application's, at `transition` from `line`.
+fn origin(from_esi: bool, transition: &str, line: u32) -> crate::error::SdoSource {
+    let transition = transition.to_string();
+    if from_esi {
+        crate::error::SdoSource::EsiInitCommand { transition, line }
+    } else {
+        crate::error::SdoSource::Description { transition, line }
     }
 }
 

@@ -375,6 +375,11 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
         crate::coe::Coe { mbx: self.m.mailboxes() }
     }
 
+    /// The SoE client: IDNs of a servo drive (AX5000, IndraDrive and others).
+    pub fn soe(self) -> crate::soe::Soe<'a, I> {
+        crate::soe::Soe { mbx: self.m.mailboxes() }
+    }
+
     /// Reads every CoE slave's send mailbox once: emergencies waiting there become events.
     /// Returns how many messages were read.
     pub fn poll_mailboxes(&mut self) -> Result<usize> {
