@@ -195,3 +195,26 @@ fn a_drive_whose_inputs_are_single_buffered_reaches_op_and_its_inputs_arrive() {
     // a buffer never handed over.
     assert!(said.contains("1:Statusword = 576 (0x240)"), "{said}{err}");
 }
+
+/// The Ingenia drive's SII (its ESI's ConfigData) sets a SYNC pulse of 400 µs: at a shorter
+/// cycle its SYNC0 output stays active after the first pulse, so the drive would run once. The
+/// demo says so at once, naming the slave and the pulse, instead of waiting for drives that
+/// never leave Switch on disabled.
+#[test]
+fn needs_shared_a_drive_whose_sync_pulse_outlasts_the_cycle_is_refused_naming_it() {
+    let drive = format!("{}:EVS-NET-01", ferrocat_testdata::shared("esi-corpus/ingenia_esi.xml").display());
+    let dir = std::env::temp_dir().join(format!("ferrocat-demo-pulse-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+        .args(["demo", "--drives", "1", "--cycle-us", "250", "--method", "none", "--drive", &drive, "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("slave 3: its SYNC pulse (0x0982, from its SII) is 400 µs, longer than the 250 µs cycle"),
+        "{err}"
+    );
+    assert!(err.contains("WARN slave 3 (EVS-NET-01): its SYNC pulse"), "the master's warning: {err}");
+}

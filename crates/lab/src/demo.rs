@@ -210,6 +210,9 @@ fn rig<I: World>(mut m: Master<I>, cycle_us: u64, method: &str) -> crate::Result
         start_delay_ns: 20_000_000,
         ..DcConfig::default()
     })?;
+    if let Some(&(position, pulse_ns)) = report.sync0_held.first() {
+        return Err(LabError::Sync0Held { position, pulse_ns, cycle_ns });
+    }
     // Before OP: Park's 1000 delay round trips carry no process data, and in OP the drives'
     // SM-synchronisation supervision would take them out of OP (sync error 0x001A).
     let sync = crate::method(method, &mut m, cycle_ns, Coupling::ReferenceFollowsMaster)?;

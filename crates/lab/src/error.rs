@@ -106,6 +106,21 @@ pub enum LabError {
         /// The objects its outputs map (`0x606B Velocity demand value, …`).
         outputs: String,
     },
+    /// A drive whose SYNC pulse outlasts the cycle: its SYNC0 output stays active.
+    #[error(
+        "slave {position}: its SYNC pulse (0x0982, from its SII) is {} µs, longer than the {} µs cycle: \
+         its SYNC0 output stays active after the first pulse (ESC datasheet section I, 9.2.3.1), so the drive \
+         would run once; give a cycle of at least the pulse",
+        *pulse_ns as f64 / 1e3, *cycle_ns as f64 / 1e3
+    )]
+    Sync0Held {
+        /// The drive's position.
+        position: u16,
+        /// Its SYNC pulse, ns.
+        pulse_ns: u64,
+        /// The cycle asked, ns.
+        cycle_ns: u64,
+    },
     /// Drives that did not reach Operation enabled.
     #[error("drives not enabled: {0:?}")]
     DrivesNotEnabled(Vec<Option<State>>),

@@ -238,9 +238,35 @@ pub struct DcReport {
     pub sync0_start: Option<u64>,
     /// The slaves SYNC0 was started on.
     pub sync0_slaves: Vec<u16>,
+    /// Those of them whose SYNC pulse (0x0982, which their SII sets) is longer than the SYNC0
+    /// cycle, with the pulse (ns): their SYNC0 output stays active after its first pulse (ESC
+    /// datasheet section I, 9.2.3.1), so an application that runs on its edges runs once.
+    pub sync0_held: Vec<(u16, u64)>,
 }
 
 impl<I: Io> Master<I> {
+    /// The targets whose SYNC pulse is longer than a `cycle_ns` SYNC0 cycle, with the pulse
+    /// (ns), each a warning. The pulse is the SII's word 2, which the ESC loads into 0x0982
+    /// (read-only from ECAT): read from the SII the scan read, no frame sent.
+    fn sync0_held(&self, targets: &[u16], cycle_ns: u32) -> Result<Vec<(u16, u64)>> {
+        let mut held = Vec::new();
+        for &p in targets {
+            let s = self.slave(p)?;
+            let pulse_ns = s.sii.header.sync_impulse_len as u64 * 10;
+            if cycle_ns > 0 && pulse_ns > cycle_ns as u64 {
+                tracing::warn!(
+                    "slave {p} ({}): its SYNC pulse (0x0982, from its SII) is {} µs, longer than the {} µs SYNC0 \
+                     cycle: its SYNC0 output stays active after the first pulse (ESC datasheet section I, 9.2.3.1)",
+                    s.name,
+                    pulse_ns as f64 / 1e3,
+                    cycle_ns as f64 / 1e3
+                );
+                held.push((p, pulse_ns));
+            }
+        }
+        Ok(held)
+    }
+
     fn start_sync(&mut self, targets: &[u16], cfg: &DcConfig) -> Result<u64> {
         let cycle = cfg.sync0_cycle_ns.max(1) as u64;
         for &p in targets {
@@ -980,6 +1006,7 @@ impl<'a, I: Io> crate::master::part::Dc<'a, I> {
             None => sync0_by_sii(&self.m.slaves),
         };
         let sync0_start = if targets.is_empty() { None } else { Some(self.m.start_sync(&targets, cfg)?) };
+        let sync0_held = self.m.sync0_held(&targets, cfg.sync0_cycle_ns)?;
         tracing::info!(
             "DC set up: reference slave {reference}, static drift compensation {frames} frames, {}, SYNC0 on {} slave(s)",
             if converged { "converged" } else { "not converged" },
@@ -997,6 +1024,7 @@ impl<'a, I: Io> crate::master::part::Dc<'a, I> {
             max_difference_ns: max_diff,
             sync0_start,
             sync0_slaves: targets,
+            sync0_held,
         })
     }
 
