@@ -86,7 +86,7 @@ fn esi_soe_init_commands_are_listed_and_sent_by_run() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(
-        err.contains("ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 68) not sent"),
+        err.contains("ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 83) not sent"),
         "{err}"
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

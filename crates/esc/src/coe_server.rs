@@ -70,6 +70,10 @@ pub struct CoeDevice {
     pub eoe: Option<EoeServer>,
     /// The SoE service channel, where the SII names SoE among the mailbox protocols.
     pub soe: Option<crate::SoeServer>,
+    /// Whether it serves CoE (its SII names it). A drive that speaks SoE alone answers CoE with
+    /// the mailbox error "unsupported protocol", and its process data are what its SoE
+    /// telegram configuration (S-0-0016, S-0-0024) names.
+    pub serves_coe: bool,
 }
 
 /// A mapped entry of the process image.
@@ -95,6 +99,7 @@ impl CoeDevice {
             foe: None,
             eoe: None,
             soe: None,
+            serves_coe: true,
         }
     }
 
@@ -491,6 +496,11 @@ impl Application for CoeDevice {
         Ok(())
     }
     fn process_data_bytes(&self, sm: u8, outputs: bool) -> Option<u16> {
+        if let (false, Some(soe)) = (self.serves_coe, &self.soe) {
+            // IEC 61800-7-304: the MDT goes to the outputs' SyncManager, the AT comes from the
+            // inputs'.
+            return if sm <= 3 { soe.telegram_bytes(outputs) } else { Some(0) };
+        }
         // SyncManager n's PDOs are those of its assignment object, 0x1C10 + n (ETG.1000.6): a
         // TwinSAFE controller's SM6 beside SM2. Where SM2 or SM3 is not the direction's
         // SyncManager, 0x1C12 and 0x1C13 still say what the outputs and inputs carry; a further
@@ -559,6 +569,10 @@ impl Application for CoeDevice {
             return Some(first);
         }
         if m.header.mailbox_type != MailboxType::COE {
+            return None;
+        }
+        if !self.serves_coe {
+            // The ESC answers "unsupported protocol".
             return None;
         }
         let mbx_len = pdi.process_mailbox_len();

@@ -154,6 +154,26 @@ pub fn standard_idns(firmware: &str) -> BTreeMap<Idn, IdnEntry> {
 }
 
 impl SoeServer {
+    /// The bytes of the telegram every drive's configuration list names: the MDT's (S-0-0024,
+    /// the outputs) or the AT's (S-0-0016, the inputs), drive after drive, each IDN as long as
+    /// its attribute says. A list naming an IDN the drive lacks or one of variable length
+    /// cannot be mapped: `None`.
+    pub fn telegram_bytes(&self, outputs: bool) -> Option<u16> {
+        let list_idn = if outputs { Idn::MDT_CONFIG } else { Idn::AT_CONFIG };
+        let mut bytes = 0u32;
+        for drive in &self.drives {
+            let Some(list) = drive.get(&list_idn) else { continue };
+            for item in list.value.chunks_exact(2) {
+                let idn = Idn(u16::from_le_bytes([item[0], item[1]]));
+                match drive.get(&idn)?.attribute.length() {
+                    ValueLength::Fixed(n) => bytes += n as u32,
+                    ValueLength::List(_) => return None,
+                }
+            }
+        }
+        u16::try_from(bytes).ok()
+    }
+
     /// One drive with [`standard_idns`].
     pub fn one_drive(firmware: &str) -> Self {
         SoeServer { drives: vec![standard_idns(firmware)], ..SoeServer::default() }
@@ -412,5 +432,19 @@ mod tests {
         let all: Vec<u16> = items.chunks(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect();
         assert!(all.contains(&17) && all.contains(&30) && all.contains(&0x8001));
         assert_eq!(all.len(), s.drives[0].len());
+    }
+
+    #[test]
+    fn the_telegrams_are_as_long_as_the_configuration_lists_name() {
+        let mut s = SoeServer::one_drive("x");
+        // MDT: control word and position command; AT: status word and position feedback.
+        assert_eq!((s.telegram_bytes(true), s.telegram_bytes(false)), (Some(6), Some(6)));
+        s.drives[0].get_mut(&Idn::AT_CONFIG).unwrap().value = idns(&[Idn(135), Idn(51), Idn(47)]);
+        assert_eq!(s.telegram_bytes(false), Some(10));
+        // An IDN the drive lacks, or a list, cannot go in a telegram.
+        s.drives[0].get_mut(&Idn::AT_CONFIG).unwrap().value = idns(&[Idn(999)]);
+        assert_eq!(s.telegram_bytes(false), None);
+        s.drives[0].get_mut(&Idn::AT_CONFIG).unwrap().value = idns(&[Idn::FIRMWARE_VERSION]);
+        assert_eq!(s.telegram_bytes(false), None);
     }
 }

@@ -16,9 +16,7 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
     pub fn start(&mut self) -> Result<()> {
         self.m.states().request_state_all(AlState::SafeOp)?;
         for k in 0..self.m.slaves.len() as u16 {
-            if self.m.slaves[k as usize].mailbox().is_some_and(|mb| mb.has_coe()) {
-                self.m.run_init_commands(k, "SO")?;
-            }
+            self.m.run_init_commands(k, "SO")?;
         }
         self.m.cyclic().cycle()?;
         self.m.engine.one(

@@ -218,7 +218,7 @@ fn esi_soe_init_commands_are_sent_at_their_transitions() {
     assert_eq!(skipped.len(), 1, "{skipped:?}");
     assert!(
         skipped[0].contains(
-            "ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 68) not sent: SoE error 0x1001"
+            "ESI SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 83) not sent: SoE error 0x1001"
         ),
         "{skipped:?}"
     );
@@ -234,7 +234,7 @@ fn esi_soe_init_commands_are_sent_at_their_transitions() {
         matches!(**error, MasterError::Slave { error: SlaveError::Soe { error: SoeError::VALUE_ABOVE_MAX, .. }, .. }),
         "{e:?}"
     );
-    assert!(e.to_string().contains("ESI SoE init command PS P-0-0001 drive 0 (\"Gain\", line 58): "), "{e}");
+    assert!(e.to_string().contains("ESI SoE init command PS P-0-0001 drive 0 (\"Gain\", line 73): "), "{e}");
     // The application's own command on an absent IDN is its mistake: an error.
     let mut m = drive_with_init_commands(None);
     let mut own = init_description().soe_init_cmds[2].clone();
@@ -243,4 +243,65 @@ fn esi_soe_init_commands_are_sent_at_their_transitions() {
     let e = m.states().configure().unwrap_err().to_string();
     assert!(e.contains("SoE init command PS S-0-0999 drive 0 (\"Brake delay (later revisions)\", line 12): "), "{e}");
     assert!(!e.contains("ESI"), "{e}");
+}
+
+/// A drive that speaks SoE alone (`FC-SOE-ONLY`, whose file gives no PDOs): the master maps its
+/// telegrams as S-0-0024 (the MDT, outputs) and S-0-0016 (the AT, inputs) name them, and the
+/// simulated drive checks its SyncManagers against the same lists: a list changed in PREOP
+/// changes both, and the slave reaches OP with whole working counters.
+#[test]
+fn a_drive_that_speaks_soe_alone_maps_its_telegram_configuration() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let build = || {
+        let cfg = SegmentConfig::from_device_args(&["EK1100".into(), format!("{esi}:FC-SOE-ONLY")]).unwrap();
+        let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+        m.states().scan().unwrap();
+        m
+    };
+    let entries = |m: &Master<VirtualIo>, outputs: bool| -> Vec<(u16, u8, String)> {
+        let map = m.slaves()[1].mapping();
+        let list = if outputs { &map.outputs } else { &map.inputs };
+        list.iter().map(|e| (e.index, e.bits, e.name.clone())).collect()
+    };
+    let mut m = build();
+    m.states().configure().unwrap();
+    assert_eq!(
+        entries(&m, true),
+        [
+            (134, 16, "S-0-0134 Master control word".to_string()),
+            (47, 32, "S-0-0047 Position command value".to_string())
+        ]
+    );
+    assert_eq!(entries(&m, false).iter().map(|e| (e.0, e.1)).collect::<Vec<_>>(), [(135, 16), (51, 32)]);
+    m.states().start().unwrap();
+    for _ in 0..20 {
+        m.cyclic().cycle().unwrap();
+    }
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
+    // The AT with the position command beside the feedback: ten bytes of inputs on both sides.
+    let mut m = build();
+    let mut list = vec![6, 0, 32, 0];
+    list.extend([135u16, 51, 47].iter().flat_map(|i| i.to_le_bytes()));
+    // Written as a configuration tool's startup list writes it: an init command at IP, before
+    // the mapping is read.
+    m.config().setup_mut(1).unwrap().soe_init_cmds.push(ferrocat_esi::SoeInitCmd {
+        line: 1,
+        transitions: vec!["IP".into()],
+        drive: 0,
+        idn: Idn::AT_CONFIG,
+        elements: Elements::VALUE,
+        data: list,
+        timeout_ms: None,
+        comment: "AT with the position command".into(),
+    });
+    m.states().configure().unwrap();
+    assert_eq!(entries(&m, false).iter().map(|e| e.0).collect::<Vec<_>>(), [135, 51, 47]);
+    m.states().start().unwrap();
+    for _ in 0..20 {
+        m.cyclic().cycle().unwrap();
+    }
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
+    // CoE is not its protocol: the master says so before it asks.
+    let e = m.acyclic().coe().sdo_read(1, 0x1000, 0).unwrap_err().to_string();
+    assert_eq!(e, "slave 1 (FC-SOE-ONLY): does not support CoE");
 }

@@ -678,16 +678,17 @@ impl SegmentConfig {
             // So is EoE: an endpoint with no address until the master sets one.
             let eoe = (coe && info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::EOE != 0)
                 .then(ferrocat_esc::EoeServer::default);
-            // And SoE: a drive's service channel with the standard IDNs.
-            let soe =
-                (coe && info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::SOE != 0).then(|| {
-                    ferrocat_esc::SoeServer::one_drive(&format!(
-                        "{} (ferrocat simulation)",
-                        info.name().unwrap_or_else(|| String::from("SoE drive"))
-                    ))
-                });
-            // The dictionary is built once, for CoE devices only.
-            let od = coe.then(|| match &esi_dev {
+            // And SoE: a drive's service channel with the standard IDNs, beside CoE or alone.
+            let speaks_soe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::SOE != 0;
+            let soe = speaks_soe.then(|| {
+                ferrocat_esc::SoeServer::one_drive(&format!(
+                    "{} (ferrocat simulation)",
+                    info.name().unwrap_or_else(|| String::from("SoE drive"))
+                ))
+            });
+            // The dictionary is built once, for CoE devices (and the empty one of a drive that
+            // speaks SoE alone).
+            let od = (coe || speaks_soe).then(|| match &esi_dev {
                 Some(dev) => {
                     let mut od = crate::od_build::from_esi(dev, &info);
                     if let Some(slots) = &dev.slots {
@@ -697,7 +698,7 @@ impl SegmentConfig {
                 }
                 None => crate::od_build::from_sii(&info),
             });
-            let drive = od.as_ref().is_some_and(|od| d.app.is_some() || is_drive(&info, od));
+            let drive = coe && od.as_ref().is_some_and(|od| d.app.is_some() || is_drive(&info, od));
             let has_switches = d.negative_limit_rev.is_some()
                 || d.positive_limit_rev.is_some()
                 || d.home_switch_rev.is_some()
@@ -737,6 +738,7 @@ impl SegmentConfig {
                 (Some("cia402"), _) => return Err(device_err(&place, "app = \"cia402\" needs a CoE mailbox")),
                 (None, Some(od)) => {
                     let mut dev = CoeDevice::new(od, config.sm_count, Box::new(PassiveLogic));
+                    dev.serves_coe = coe;
                     dev.foe = foe;
                     dev.eoe = eoe;
                     dev.soe = soe;
@@ -747,7 +749,7 @@ impl SegmentConfig {
                 // The synchronised applications have no mailbox: on a device whose SII names CoE
                 // the master's first SDO would meet "protocol not supported", as no real device
                 // of that SII answers.
-                (Some(a @ ("sm" | "dc" | "free-run")), Some(_)) => {
+                (Some(a @ ("sm" | "dc" | "free-run")), Some(_)) if coe => {
                     return Err(device_err(
                         &place,
                         format!(

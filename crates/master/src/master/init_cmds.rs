@@ -3,6 +3,8 @@
 //! description's), sent at the state transitions they name, as a configuration tool's master
 //! does: "IP" and "PS" while the slave is in PREOP, before the process data are read and SAFEOP
 //! is asked; "SO" in SAFEOP, before OP.
+use ferrocat_wire::sii::mailbox_protocol;
+
 use crate::error::{MasterError, Result};
 use crate::io::Io;
 use crate::master::Master;
@@ -23,8 +25,20 @@ impl<I: Io> Master<I> {
     /// ones, then the SoE ones (each kind its ESI description's in the file's order, then those
     /// the application gave, [`Config::setup_mut`](crate::part::Config::setup_mut)). Returns how
     /// many it sent.
+    /// A slave whose mailbox lacks the protocol gets none of that kind.
     pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
-        Ok(self.run_coe_init_commands(position, transition)? + self.run_soe_init_commands(position, transition)?)
+        let has = |m: &Self, bit| {
+            m.slaves.get(position as usize).and_then(|s| s.mailbox()).is_some_and(|mb| mb.has_protocol(bit))
+        };
+        let (coe, soe) = (has(self, mailbox_protocol::COE), has(self, mailbox_protocol::SOE));
+        let mut sent = 0;
+        if coe {
+            sent += self.run_coe_init_commands(position, transition)?;
+        }
+        if soe {
+            sent += self.run_soe_init_commands(position, transition)?;
+        }
+        Ok(sent)
     }
 
     /// The CoE commands for `transition`, each an SDO download (complete access where it says

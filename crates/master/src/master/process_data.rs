@@ -42,8 +42,9 @@ impl<I: Io> Master<I> {
     }
 
     /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects,
-    /// 0x1C10 + n for a further SyncManager n) when it speaks CoE, else the PDOs its ESI or SII
-    /// assigns to SyncManagers. Every process-data SyncManager of the SII that gets entries is
+    /// 0x1C10 + n for a further SyncManager n) when it speaks CoE, from drive 0's telegram
+    /// configuration (S-0-0024, S-0-0016) when it speaks SoE alone, else the PDOs its ESI or
+    /// SII assigns to SyncManagers. Every process-data SyncManager of the SII that gets entries is
     /// configured (a TwinSAFE controller's SM6 beside SM2).
     pub(crate) fn read_mapping(&mut self, position: u16) -> Result<()> {
         let k = position as usize;
@@ -58,6 +59,8 @@ impl<I: Io> Master<I> {
             sii.rx_pdos().iter().chain(sii.tx_pdos()).any(|p| p.sync_manager != 0xFF)
         };
         let coe = self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe());
+        let soe_alone = !coe
+            && self.slaves[k].mailbox().is_some_and(|mb| mb.has_protocol(ferrocat_wire::sii::mailbox_protocol::SOE));
         // Each SyncManager's entries, the first SyncManager of a direction first.
         let mut per_sm: Vec<(bool, u8, SmEntry, Vec<Mapped>)> = Vec::new();
         for (outputs, list) in [(true, &out_sms), (false, &in_sms)] {
@@ -74,6 +77,15 @@ impl<I: Io> Master<I> {
                         // assigned to a further SyncManager; any other failure is one.
                         Err(crate::error::MasterError::Abort { .. }) if !first => Vec::new(),
                         other => other?,
+                    }
+                } else if soe_alone {
+                    // A drive that speaks SoE alone: its telegrams as its configuration lists
+                    // name them (the MDT the outputs, the AT the inputs), a further
+                    // SyncManager nothing.
+                    if first {
+                        self.soe_mapping(position, outputs)?
+                    } else {
+                        Vec::new()
                     }
                 } else if let (Some(dev), false) = (&esi_dev, sii_has_mapping) {
                     // The ESI's default assignment: PDOs with an Sm attribute (one naming no
@@ -123,6 +135,42 @@ impl<I: Io> Master<I> {
             list.extend(entries);
         }
         Ok(())
+    }
+
+    /// Drive 0's MDT (`outputs`: S-0-0024) or AT (S-0-0016) as entries: each IDN of the list as
+    /// long as its attribute says, indexed by its number with subindex 0 (as ESI files write an
+    /// SoE drive's PDO entries), named by its name element where it has one.
+    pub(super) fn soe_mapping(&mut self, position: u16, outputs: bool) -> Result<Vec<Mapped>> {
+        use crate::error::{MasterError, SlaveError};
+        use ferrocat_wire::soe::{list_items, Attribute, Elements, Idn, ValueLength};
+        let list_idn = if outputs { Idn::MDT_CONFIG } else { Idn::AT_CONFIG };
+        let list = self.acyclic().soe().idn_list(position, 0, list_idn)?;
+        let mut v = Vec::with_capacity(list.len());
+        for idn in list {
+            let a = self.acyclic().soe().read(position, 0, idn, Elements::ATTRIBUTE)?;
+            let attribute = a.get(..4).map(|b| Attribute(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+            let bits = match attribute.map(|a| a.length()) {
+                Some(ValueLength::Fixed(n)) => u8::try_from(n as u16 * 8).ok(),
+                _ => None,
+            };
+            let Some(bits) = bits else {
+                let name = self.slaves[position as usize].name.clone();
+                let why = format!(
+                    "SoE {list_idn} names {idn}, whose attribute {a:02x?} gives no fixed length of 1 to 31 bytes"
+                );
+                return Err(MasterError::of(position, &name, SlaveError::UnexpectedReply(why)));
+            };
+            let name = match self.acyclic().soe().read(position, 0, idn, Elements::NAME) {
+                Ok(n) => {
+                    let text = list_items(&n).map_or(&n[..], |(items, _)| items);
+                    format!("{idn} {}", String::from_utf8_lossy(text))
+                }
+                Err(MasterError::Slave { error: SlaveError::Soe { .. }, .. }) => idn.to_string(),
+                Err(e) => return Err(e),
+            };
+            v.push(Mapped::unplaced(idn.0, 0, bits, name));
+        }
+        Ok(v)
     }
 
     pub(super) fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
@@ -319,9 +367,9 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
         }
         self.m.states().request_state_all(AlState::PreOp)?;
         for k in 0..self.m.slaves.len() as u16 {
+            self.m.run_init_commands(k, "IP")?;
+            self.m.run_init_commands(k, "PS")?;
             if self.m.slaves[k as usize].mailbox().is_some_and(|mb| mb.has_coe()) {
-                self.m.run_init_commands(k, "IP")?;
-                self.m.run_init_commands(k, "PS")?;
                 if let Some(modules) = self.m.slaves[k as usize].setup.modules.clone() {
                     self.m.config().configure_modules(k, &modules)?;
                 }
