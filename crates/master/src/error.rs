@@ -27,6 +27,10 @@ pub enum SlaveError {
     /// Its SII gives no mailbox.
     #[error("has no mailbox")]
     NoMailbox,
+    /// Its mailbox was asked for while the slave is in INIT, where the master has not set its
+    /// SyncManagers up (`States::configure` takes it to PREOP).
+    #[error("its mailbox is not set up in INIT: configure the slaves first (PREOP)")]
+    MailboxInInit,
     /// Its SII does not name the mailbox protocol.
     #[error("does not support {}", .0.name())]
     Unsupported(MailboxType),

@@ -78,6 +78,11 @@ impl<I: Io> Mailboxes<'_, I> {
     fn mailbox_any(&self, position: u16) -> Result<(u16, String, crate::slave::MailboxConfig)> {
         let s = self.slave(position)?;
         let m = s.mailbox.clone().ok_or_else(|| MasterError::of(position, &s.name, SlaveError::NoMailbox))?;
+        // In INIT the mailbox SyncManagers are off: a write would land in plain memory and the
+        // read find zeros, a "mailbox error" of nothing.
+        if s.state == ferrocat_wire::register::AlState::Init {
+            return Err(MasterError::of(position, &s.name, SlaveError::MailboxInInit));
+        }
         Ok((s.station, s.name.clone(), m))
     }
 

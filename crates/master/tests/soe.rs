@@ -305,3 +305,18 @@ fn a_drive_that_speaks_soe_alone_maps_its_telegram_configuration() {
     let e = m.acyclic().coe().sdo_read(1, 0x1000, 0).unwrap_err().to_string();
     assert_eq!(e, "slave 1 (FC-SOE-ONLY): does not support CoE");
 }
+
+/// A mailbox asked for before the slaves are configured (in INIT its SyncManagers are off): an
+/// error that says so, not a malformed reply read from plain memory.
+#[test]
+fn a_mailbox_in_init_is_an_error_that_says_so() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let cfg = SegmentConfig::from_device_args(&[format!("{esi}:FC-SOE-DRIVE")]).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.states().scan().unwrap();
+    let e = m.acyclic().soe().value(0, 0, Idn::FIRMWARE_VERSION).unwrap_err();
+    assert!(matches!(e, MasterError::Slave { error: SlaveError::MailboxInInit, .. }), "{e:?}");
+    assert!(e.to_string().contains("mailbox is not set up in INIT"), "{e}");
+    m.states().configure().unwrap();
+    assert!(m.acyclic().soe().value(0, 0, Idn::FIRMWARE_VERSION).is_ok());
+}
