@@ -294,13 +294,6 @@ fn a_drive_that_speaks_soe_alone_maps_its_telegram_configuration() {
         timeout_ms: None,
         comment: "AT with the position command".into(),
     });
-    // A CoE command for a drive without CoE is not sent (a warning says so), not an error.
-    m.config().setup_mut(1).unwrap().init_cmds.push(ferrocat_esi::InitCmd {
-        transitions: vec!["PS".into()],
-        index: 0x2000,
-        data: vec![1],
-        ..Default::default()
-    });
     m.states().configure().unwrap();
     assert_eq!(entries(&m, false).iter().map(|e| e.0).collect::<Vec<_>>(), [135, 51, 47]);
     m.states().start().unwrap();

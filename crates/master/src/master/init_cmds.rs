@@ -24,8 +24,8 @@ impl<I: Io> Master<I> {
     /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): the CoE
     /// ones, then the SoE ones (each kind its ESI description's in the file's order, then those
     /// the application gave, [`Config::setup_mut`](crate::part::Config::setup_mut)). Returns how
-    /// many it sent. A slave whose mailbox lacks the protocol gets none of that kind: those
-    /// there are, a warning says how many.
+    /// many it sent.
+    /// A slave whose mailbox lacks the protocol gets none of that kind.
     pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let has = |m: &Self, bit| {
             m.slaves.get(position as usize).and_then(|s| s.mailbox()).is_some_and(|mb| mb.has_protocol(bit))
@@ -38,26 +38,7 @@ impl<I: Io> Master<I> {
         if soe {
             sent += self.run_soe_init_commands(position, transition)?;
         }
-        let (coe_cmds, soe_cmds) = self.init_commands_for(position, transition);
-        for (kind, speaks, n) in [("CoE", coe, coe_cmds), ("SoE", soe, soe_cmds)] {
-            if !speaks && n > 0 {
-                let name = self.slaves.get(position as usize).map_or("", |s| s.name.as_str());
-                tracing::warn!(
-                    "slave {position} ({name}): {n} {kind} init command(s) for {transition} not sent: its mailbox has no {kind}"
-                );
-            }
-        }
         Ok(sent)
-    }
-
-    /// How many CoE and SoE init commands (the ESI's and the application's) name `transition`.
-    fn init_commands_for(&self, position: u16, transition: &str) -> (usize, usize) {
-        let at = |ts: &[String]| ts.iter().any(|t| t == transition);
-        let esi = self.esi_description(position);
-        let setup = self.slaves.get(position as usize).map(|s| &s.setup);
-        let coe = esi.iter().flat_map(|d| &d.init_cmds).chain(setup.iter().flat_map(|s| &s.init_cmds));
-        let soe = esi.iter().flat_map(|d| &d.soe_init_cmds).chain(setup.iter().flat_map(|s| &s.soe_init_cmds));
-        (coe.filter(|c| at(&c.transitions)).count(), soe.filter(|c| at(&c.transitions)).count())
     }
 
     /// The CoE commands for `transition`, each an SDO download (complete access where it says
