@@ -353,7 +353,8 @@ fn soem_sdo_transfers_come_through_frame_loss() {
 /// address), reconfigures it and brings it back to OP. Then SOEM writes a station alias into
 /// its EEPROM as its eepromtool does (word 4 and the checksum word 7); after the second power
 /// cycle the ESC has taken it into 0x0012. The second cycle comes 9.5 s after the first, so that
-/// the alias is written before it on a loaded machine too (4.5 s were once too few).
+/// the alias is written before it on a loaded machine too (4.5 s were once too few); the script
+/// takes 150 ms of short cycles on end for the slave gone, not one stalled cycle.
 #[test]
 fn soem_recovers_a_power_cycled_slave_and_its_new_alias_loads() {
     let net = VethPair::new("pc");
