@@ -146,6 +146,20 @@ pub enum MasterEvent {
         /// What the drive answered.
         error: ferrocat_wire::soe::SoeError,
     },
+    /// Init commands of the slave's ESI description were not sent: they are for a mailbox
+    /// protocol the slave's SII does not name (a family's file for a revision without it).
+    InitCommandsNotSent {
+        /// Position on the segment.
+        position: u16,
+        /// Name from the SII.
+        name: String,
+        /// The transition they were for ("PS", …).
+        transition: String,
+        /// Their protocol (CoE or SoE).
+        protocol: ferrocat_wire::mailbox::MailboxType,
+        /// How many.
+        count: usize,
+    },
     /// Cable redundancy: the ring broke, closed again, or lost its secondary side.
     Ring {
         /// The ring's state now.
@@ -195,6 +209,10 @@ impl std::fmt::Display for MasterEvent {
                     f,
                     "slave {position} ({name}): ESI SoE init command {transition} {idn} drive {drive} (\"{comment}\", line {line}) not sent: {error}"
                 )
+            }
+            MasterEvent::InitCommandsNotSent { position, name, transition, protocol, count } => {
+                let p = protocol.name();
+                write!(f, "slave {position} ({name}): {count} ESI {p} init command(s) for {transition} not sent: its mailbox has no {p}")
             }
             MasterEvent::InputsInvalid { position, name, entry } => {
                 write!(f, "slave {position} ({name}): {entry} set: the slave says those inputs are invalid")

@@ -306,6 +306,52 @@ fn a_drive_that_speaks_soe_alone_maps_its_telegram_configuration() {
     assert_eq!(e, "slave 1 (FC-SOE-ONLY): does not support CoE");
 }
 
+/// CoE init commands for a drive that speaks SoE alone: the description's are not sent, an
+/// event saying how many and why; the application's own is sent and refused, naming it.
+#[test]
+fn init_commands_of_a_protocol_the_mailbox_lacks() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let file = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut only = file.devices.into_iter().find(|d| d.type_name == "FC-SOE-ONLY").unwrap();
+    let coe_cmd = |transition: &str| ferrocat_esi::InitCmd {
+        transitions: vec![transition.into()],
+        index: 0x2000,
+        data: vec![1],
+        comment: "a family's object".into(),
+        ..Default::default()
+    };
+    only.init_cmds = vec![coe_cmd("PS"), coe_cmd("PS"), coe_cmd("SO")];
+    let build = |description: ferrocat_esi::Device| {
+        let cfg = SegmentConfig::from_device_args(&[format!("{path}:FC-SOE-ONLY")]).unwrap();
+        let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+        m.config().add_esi(0x0F3C, description);
+        m.states().scan().unwrap();
+        m
+    };
+    let mut m = build(only.clone());
+    m.states().configure().unwrap();
+    m.states().start().unwrap();
+    let not_sent: Vec<(String, usize, String)> = m
+        .diagnosis()
+        .take_events()
+        .iter()
+        .filter_map(|e| match e {
+            ferrocat_master::MasterEvent::InitCommandsNotSent { transition, protocol, count, .. } => {
+                Some((transition.clone(), *count, protocol.name().to_string()))
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(not_sent, [("PS".into(), 2, "CoE".into()), ("SO".into(), 1, "CoE".into())]);
+    assert_eq!(m.slaves()[0].status().state(), AlState::Op);
+    // The application's own: its mistake, an error naming it.
+    let mut m = build(only);
+    m.config().setup_mut(0).unwrap().init_cmds.push(coe_cmd("PS"));
+    let e = m.states().configure().unwrap_err().to_string();
+    assert!(e.contains("does not support CoE"), "{e}");
+    assert!(e.contains("0x2000"), "{e}");
+}
+
 /// A mailbox asked for before the slaves are configured (in INIT its SyncManagers are off): an
 /// error that says so, not a malformed reply read from plain memory.
 #[test]

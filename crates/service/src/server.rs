@@ -233,6 +233,7 @@ impl Server {
                 E::ErrorCounters { position, .. } => ("error_counters", Some(*position)),
                 E::InitCommandSkipped { position, .. } => ("init_command_skipped", Some(*position)),
                 E::SoeInitCommandSkipped { position, .. } => ("soe_init_command_skipped", Some(*position)),
+                E::InitCommandsNotSent { position, .. } => ("init_commands_not_sent", Some(*position)),
                 E::Ring { .. } => ("ring", None),
             };
             if self.events.len() == EVENTS_KEPT {

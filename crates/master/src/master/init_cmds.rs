@@ -3,6 +3,7 @@
 //! description's), sent at the state transitions they name, as a configuration tool's master
 //! does: "IP" and "PS" while the slave is in PREOP, before the process data are read and SAFEOP
 //! is asked; "SO" in SAFEOP, before OP.
+use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::sii::mailbox_protocol;
 
 use crate::error::{MasterError, Result};
@@ -24,33 +25,47 @@ impl<I: Io> Master<I> {
     /// Sends slave `position` the init commands for `transition` ("IP", "PS", "SO", …): the CoE
     /// ones, then the SoE ones (each kind its ESI description's in the file's order, then those
     /// the application gave, [`Config::setup_mut`](crate::part::Config::setup_mut)). Returns how
-    /// many it sent.
-    /// A slave whose mailbox lacks the protocol gets none of that kind.
+    /// many it sent. The description's commands of a protocol the slave's mailbox lacks are not
+    /// sent ([`MasterEvent::InitCommandsNotSent`](crate::event::MasterEvent::InitCommandsNotSent));
+    /// the application's are, and fail naming the command.
     pub(crate) fn run_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
         let has = |m: &Self, bit| {
             m.slaves.get(position as usize).and_then(|s| s.mailbox()).is_some_and(|mb| mb.has_protocol(bit))
         };
         let (coe, soe) = (has(self, mailbox_protocol::COE), has(self, mailbox_protocol::SOE));
-        let mut sent = 0;
-        if coe {
-            sent += self.run_coe_init_commands(position, transition)?;
+        Ok(self.run_coe_init_commands(position, transition, coe)?
+            + self.run_soe_init_commands(position, transition, soe)?)
+    }
+
+    /// The event for `count` commands of the description's for `protocol` left out, if any.
+    fn not_sent(&mut self, position: u16, transition: &str, protocol: MailboxType, count: usize) {
+        if count > 0 {
+            let name = self.slaves[position as usize].name.clone();
+            let transition = transition.to_string();
+            self.skipped(crate::event::MasterEvent::InitCommandsNotSent {
+                position,
+                name,
+                transition,
+                protocol,
+                count,
+            });
         }
-        if soe {
-            sent += self.run_soe_init_commands(position, transition)?;
-        }
-        Ok(sent)
     }
 
     /// The CoE commands for `transition`, each an SDO download (complete access where it says
     /// so). An abort is an error naming the command, but for an ESI command on an object or
     /// subindex the slave lacks: that one is left out with
     /// [`MasterEvent::InitCommandSkipped`](crate::event::MasterEvent::InitCommandSkipped).
-    fn run_coe_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
+    fn run_coe_init_commands(&mut self, position: u16, transition: &str, speaks: bool) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::InitCmd| c.transitions.iter().any(|t| t == transition);
         let mut cmds: Vec<(ferrocat_esi::InitCmd, bool)> = match self.esi_description(position) {
             Some(d) => d.init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
             None => Vec::new(),
         };
+        if !speaks {
+            self.not_sent(position, transition, MailboxType::COE, cmds.len());
+            cmds.clear();
+        }
         if let Some(s) = self.slaves.get(position as usize) {
             cmds.extend(s.setup.init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
         }
@@ -107,12 +122,16 @@ impl<I: Io> Master<I> {
     /// (SoE error 0x1001), left out with
     /// [`MasterEvent::SoeInitCommandSkipped`](crate::event::MasterEvent::SoeInitCommandSkipped)
     /// for the reason the CoE ones are.
-    fn run_soe_init_commands(&mut self, position: u16, transition: &str) -> Result<usize> {
+    fn run_soe_init_commands(&mut self, position: u16, transition: &str, speaks: bool) -> Result<usize> {
         let wanted = |c: &&ferrocat_esi::SoeInitCmd| c.transitions.iter().any(|t| t == transition);
         let mut cmds: Vec<(ferrocat_esi::SoeInitCmd, bool)> = match self.esi_description(position) {
             Some(d) => d.soe_init_cmds.iter().filter(wanted).map(|c| (c.clone(), true)).collect(),
             None => Vec::new(),
         };
+        if !speaks {
+            self.not_sent(position, transition, MailboxType::SOE, cmds.len());
+            cmds.clear();
+        }
         if let Some(s) = self.slaves.get(position as usize) {
             cmds.extend(s.setup.soe_init_cmds.iter().filter(wanted).map(|c| (c.clone(), false)));
         }
