@@ -61,7 +61,7 @@ pub fn run(path: &Path, json: bool, strict: bool) -> anyhow::Result<ExitCode> {
             bits(s.process_data.send),
             bits(s.process_data.recv),
             s.mailbox.as_ref().map_or("-".into(), |m| m.protocols.join(",")),
-            s.init_cmds.len() + s.mailbox.as_ref().map_or(0, |m| m.coe_init_cmds.len()),
+            s.init_cmds.len() + s.mailbox.as_ref().map_or(0, |m| m.coe_init_cmds.len() + m.soe_init_cmds.len()),
             match s.dc {
                 Some(dc) if dc.reference_clock => format!("reference, SYNC0 {} ns", dc.cycle_time0_ns),
                 Some(dc) if dc.cycle_time0_ns > 0 => format!("SYNC0 {} ns", dc.cycle_time0_ns),
@@ -184,10 +184,10 @@ pub fn check(
 /// The master's plan for an ENI: its station addresses, each slave's FMMU and process-data
 /// SyncManager writes (its register init commands for PREOP → SAFEOP and SAFEOP → OP, the
 /// mailbox's SyncManagers left to the master), its CoE init commands for INIT → PREOP and
-/// PREOP → SAFEOP, where its entries start, and the cyclic frames of every task.
+/// PREOP → SAFEOP and its SoE ones (IDN writes) for the same, where its entries start, and the cyclic frames of every task.
 pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
     use ferrocat_machine::eni::Transition;
-    use ferrocat_master::plan::{Plan, PlanDatagram, PlanSdo};
+    use ferrocat_master::plan::{Plan, PlanDatagram, PlanIdn, PlanSdo};
     use ferrocat_master::{AlState, Command};
     let any = |ts: &[Transition], wanted: &[(AlState, AlState)]| ts.iter().any(|t| wanted.contains(&(t.from, t.to)));
     let (ip, ps, so) =
@@ -234,6 +234,25 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
                     subindex: c.subindex,
                     complete_access: c.complete_access,
                     data: c.data.clone(),
+                    comment: c.comment.clone(),
+                })
+                .collect()
+        })
+        .collect();
+    let idns = eni
+        .slaves
+        .iter()
+        .map(|s| {
+            s.mailbox
+                .iter()
+                .flat_map(|m| &m.soe_init_cmds)
+                .filter(|c| any(&c.transitions, &[ip, ps]))
+                .map(|c| PlanIdn {
+                    drive: c.drive,
+                    idn: ferrocat_master::wire::soe::Idn(c.idn),
+                    elements: ferrocat_master::wire::soe::Elements(c.elements),
+                    data: c.data.clone(),
+                    timeout_ms: c.timeout_ms.filter(|&ms| ms > 0),
                     comment: c.comment.clone(),
                 })
                 .collect()
@@ -286,6 +305,7 @@ pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
         stations: if stations.len() == eni.slaves.len() { stations } else { Vec::new() },
         registers,
         sdos,
+        idns,
         entries_at: eni
             .slaves
             .iter()

@@ -200,3 +200,32 @@ fn every_kind_of_difference_from_the_eni_is_named_and_stops_the_start_up() {
     }
     std::fs::remove_file(older).ok();
 }
+
+/// An ENI's SoE init commands run with its machine: the drive takes them in PREOP and the
+/// machine reaches OP; a value the drive refuses stops the start-up with an error naming the
+/// command and the drive's reason.
+#[test]
+fn an_eni_s_soe_init_commands_go_to_its_drive() {
+    let f = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../machine/tests/data/ferrocat_soe.eni.xml");
+    let (ok, out, err) = ferrocat(&["run", "--eni", f.to_str().unwrap(), "--seconds", "0.3", "--json"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("IDN -1 does not fit SoE's 16 bits: left out"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["wkc_errors"], 0, "{v}");
+    // The gain above the drive's maximum (1000).
+    let text = std::fs::read(&f).unwrap();
+    let at = text.windows(13).position(|w| w == b"<Data>fa00</D").unwrap();
+    let mut refused = text.clone();
+    refused[at + 6..at + 10].copy_from_slice(b"e903");
+    let path = std::env::temp_dir().join(format!("ferrocat-soe-refused-{}.eni.xml", std::process::id()));
+    std::fs::write(&path, refused).unwrap();
+    let (ok, _, err) = ferrocat(&["run", "--eni", path.to_str().unwrap(), "--seconds", "0.3"]);
+    std::fs::remove_file(&path).unwrap();
+    assert!(!ok, "{err}");
+    assert!(
+        err.contains(
+            "slave 2 (Drive \u{b5}): plan IDN P-0-0001 drive 0 (Gain): SoE P-0-0001 (drive 0): SoE error 0x7007"
+        ),
+        "{err}"
+    );
+}

@@ -189,3 +189,35 @@ fn bad_files_are_refused_with_their_place() {
     assert_eq!((cut.place.line, cut.place.column), (3, 11), "{cut}");
     assert!(cut.message.contains("a truncated file?"), "{cut}");
 }
+
+/// A drive's SoE init commands (`<Mailbox><SoE><InitCmds>`): each write read with its drive,
+/// IDN, elements, data and timeout; one on an IDN beyond 16 bits and one that is no write left
+/// out with a warning naming it.
+#[test]
+fn a_drive_s_soe_init_commands_are_read() {
+    let e = Eni::parse(include_bytes!("data/ferrocat_soe.eni.xml")).unwrap();
+    let mbx = e.slaves[2].mailbox.as_ref().unwrap();
+    assert_eq!(mbx.protocols, ["CoE", "SoE"]);
+    let cmds: Vec<_> = mbx
+        .soe_init_cmds
+        .iter()
+        .map(|c| (c.transitions.clone(), c.drive, c.idn, c.elements, c.data.clone(), c.timeout_ms, c.fixed))
+        .collect();
+    let (ip, ps) = (Transition::parse("IP").unwrap(), Transition::parse("PS").unwrap());
+    assert_eq!(
+        cmds,
+        [
+            (vec![ip], 0, 1, 0x40, vec![0xF4, 0x01], Some(0), false),
+            (vec![ps], 0, 0x8001, 0x40, vec![0xFA, 0x00], Some(500), true),
+        ]
+    );
+    assert_eq!(mbx.soe_init_cmds[1].comment, "Gain");
+    let soe: Vec<&str> = e.warnings.iter().map(|w| w.message.as_str()).filter(|m| m.contains("SoE")).collect();
+    assert_eq!(
+        soe,
+        [
+            "SoE init command: IDN -1 does not fit SoE's 16 bits: left out",
+            "SoE init command for S-0-0030: opcode 1 is not a write request (3): left out"
+        ]
+    );
+}

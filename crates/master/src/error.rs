@@ -194,14 +194,26 @@ pub enum SdoSource {
     },
 }
 
+/// A command's error as the slave's own: the slave is named once, before the command.
+fn own(error: &MasterError) -> String {
+    match error {
+        MasterError::Slave { error, .. } => error.to_string(),
+        MasterError::Abort { code, .. } => format!("aborted: {code}"),
+        other => other.to_string(),
+    }
+}
+
 fn config_sdo(source: &SdoSource, index: u16, subindex: u8, comment: &str, error: &MasterError) -> String {
     match source {
         SdoSource::EsiInitCommand { transition, line } => {
-            format!("ESI init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
+            format!(
+                "ESI init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {}",
+                own(error)
+            )
         }
-        SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:#04x} ({comment}): {error}"),
+        SdoSource::Plan => format!("plan SDO {index:#06x}:{subindex:#04x} ({comment}): {}", own(error)),
         SdoSource::Description { transition, line } => {
-            format!("init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {error}")
+            format!("init command {transition} {index:#06x}:{subindex:#04x} ({comment:?}, line {line}): {}", own(error))
         }
     }
 }
@@ -215,11 +227,11 @@ fn config_idn(
 ) -> String {
     match source {
         SdoSource::EsiInitCommand { transition, line } => {
-            format!("ESI SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {error}")
+            format!("ESI SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {}", own(error))
         }
-        SdoSource::Plan => format!("plan IDN {idn} drive {drive} ({comment}): {error}"),
+        SdoSource::Plan => format!("plan IDN {idn} drive {drive} ({comment}): {}", own(error)),
         SdoSource::Description { transition, line } => {
-            format!("SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {error}")
+            format!("SoE init command {transition} {idn} drive {drive} ({comment:?}, line {line}): {}", own(error))
         }
     }
 }

@@ -27,6 +27,9 @@ pub struct Plan {
     /// By position: the SDO downloads made in PREOP before the mapping is read (PDO assignment
     /// and mapping, settings), in order.
     pub sdos: Vec<Vec<PlanSdo>>,
+    /// By position: the SoE IDN writes made in PREOP after the SDOs, before the mapping is read
+    /// (a drive's telegram configuration, its settings), in order.
+    pub idns: Vec<Vec<PlanIdn>>,
     /// By position: the first bit of the slave's outputs in the output image and of its inputs
     /// in the input image, where it has them; its entries follow one another from there.
     pub entries_at: Vec<(Option<u32>, Option<u32>)>,
@@ -55,6 +58,23 @@ pub struct PlanSdo {
     pub complete_access: bool,
     /// The data.
     pub data: Vec<u8>,
+    /// What it is for, for messages.
+    pub comment: String,
+}
+
+/// An SoE IDN write of a plan.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlanIdn {
+    /// The drive (axis) of the device, 0–7.
+    pub drive: u8,
+    /// The IDN.
+    pub idn: ferrocat_wire::soe::Idn,
+    /// The elements written (usually the value).
+    pub elements: ferrocat_wire::soe::Elements,
+    /// The data.
+    pub data: Vec<u8>,
+    /// How long the drive may take to answer, where given, ms.
+    pub timeout_ms: Option<u32>,
     /// What it is for, for messages.
     pub comment: String,
 }

@@ -352,6 +352,34 @@ fn init_commands_of_a_protocol_the_mailbox_lacks() {
     assert!(e.contains("0x2000"), "{e}");
 }
 
+/// A plan's IDN writes (an ENI's SoE init commands) go to the drive in PREOP, after the scan
+/// and before the mapping is read.
+#[test]
+fn a_plan_s_idn_writes_reach_the_drive() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let cfg = SegmentConfig::from_device_args(&["EK1100".into(), format!("{esi}:FC-SOE-DRIVE")]).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    let write = |idn: Idn, value: u16| ferrocat_master::plan::PlanIdn {
+        drive: 0,
+        idn,
+        elements: Elements::VALUE,
+        data: value.to_le_bytes().to_vec(),
+        timeout_ms: None,
+        comment: String::new(),
+    };
+    let gain = Idn::product(0, 1).unwrap();
+    let plan = ferrocat_master::plan::Plan {
+        idns: vec![Vec::new(), vec![write(Idn(1), 500), write(gain, 250)]],
+        ..Default::default()
+    };
+    m.config().set_plan(plan).unwrap();
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    let u16_of = |v: Vec<u8>| u16::from_le_bytes([v[0], v[1]]);
+    assert_eq!(u16_of(m.acyclic().soe().value(1, 0, Idn(1)).unwrap()), 500);
+    assert_eq!(u16_of(m.acyclic().soe().value(1, 0, gain).unwrap()), 250);
+}
+
 /// A mailbox asked for before the slaves are configured (in INIT its SyncManagers are off): an
 /// error that says so, not a malformed reply read from plain memory.
 #[test]

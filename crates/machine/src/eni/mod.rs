@@ -182,6 +182,8 @@ pub struct Mailbox {
     pub protocols: Vec<String>,
     /// CoE init commands, in file order.
     pub coe_init_cmds: Vec<CoeInitCmd>,
+    /// SoE init commands, in file order (`<SoE><InitCmds>`): IDN writes to a drive.
+    pub soe_init_cmds: Vec<SoeInitCmd>,
     /// The device profile (`<CoE><Profile><ChannelInfo><ProfileNo>`: 402 for a drive).
     pub profile_no: Option<u32>,
 }
@@ -306,6 +308,30 @@ pub struct CoeInitCmd {
     /// The whole object at once.
     pub complete_access: bool,
     /// The data.
+    pub data: Vec<u8>,
+    /// The tool generated it from the mapping (`Fixed="true"`).
+    pub fixed: bool,
+    /// How long it may take, where given (0: the master's default), ms.
+    pub timeout_ms: Option<u32>,
+}
+
+/// An SoE init command (`<Mailbox><SoE><InitCmds><InitCmd>`, ETG.2100): an IDN written to one
+/// of the device's drives in a transition, as TwinCAT writes an AX5000's startup list.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct SoeInitCmd {
+    /// Where it starts in the file.
+    pub place: Place,
+    /// The transitions it belongs to.
+    pub transitions: Vec<Transition>,
+    /// What it does, as the tool said.
+    pub comment: String,
+    /// The drive (axis) of the device, 0–7 (`<DriveNo>`).
+    pub drive: u8,
+    /// The IDN (S-0-0015 is 15, P-0-0001 is 0x8001).
+    pub idn: u16,
+    /// The elements written (`<Elements>`: 0x40 the value).
+    pub elements: u8,
+    /// The data, as the file gives them.
     pub data: Vec<u8>,
     /// The tool generated it from the mapping (`Fixed="true"`).
     pub fixed: bool,

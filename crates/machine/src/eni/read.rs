@@ -361,6 +361,12 @@ impl Reader {
                 coe_init_cmds.push(self.coe_init_cmd(c)?);
             }
         }
+        let mut soe_init_cmds = Vec::new();
+        if let Some(cmds) = child(m, "SoE").and_then(|c| child(c, "InitCmds")) {
+            for c in children(cmds, "InitCmd") {
+                soe_init_cmds.extend(self.soe_init_cmd(c)?);
+            }
+        }
         let profile_no = match child(m, "CoE").and_then(|c| child(c, "Profile")).and_then(|p| child(p, "ChannelInfo")) {
             Some(ci) => self.child_number(ci, "ProfileNo")?,
             None => None,
@@ -375,6 +381,7 @@ impl Reader {
             bootstrap,
             protocols,
             coe_init_cmds,
+            soe_init_cmds,
             profile_no,
         })
     }
@@ -411,6 +418,54 @@ impl Reader {
             fixed: self.attr_bool(c, "Fixed")?,
             timeout_ms: self.child_number(c, "Timeout")?,
         })
+    }
+
+    /// One SoE init command; one the master cannot send as written (an IDN beyond SoE's 16 bits,
+    /// which the schema's `xs:int` allows and files fill with -1; an opcode other than a write
+    /// request, 3) is left out with a warning.
+    fn soe_init_cmd(&mut self, c: Node<'_, '_>) -> R<Option<SoeInitCmd>> {
+        let idn_node = child(c, "IDN").ok_or_else(|| err(c, "SoE <InitCmd> has no <IDN>"))?;
+        let idn: i64 = self.number(idn_node, "IDN")?;
+        let Ok(idn) = u16::try_from(idn) else {
+            self.warn(idn_node, format!("SoE init command: IDN {idn} does not fit SoE's 16 bits: left out"));
+            return Ok(None);
+        };
+        let shown = ferrocat_wire::soe::Idn(idn);
+        let op_code: u8 = self.child_number(c, "OpCode")?.unwrap_or(3);
+        if op_code != 3 {
+            self.warn(
+                c,
+                format!("SoE init command for {shown}: opcode {op_code} is not a write request (3): left out"),
+            );
+            return Ok(None);
+        }
+        let drive: u8 = self.child_number(c, "DriveNo")?.unwrap_or(0);
+        if drive > 7 {
+            return Err(err(c, format!("SoE init command for {shown}: <DriveNo> {drive} is not a drive 0–7")));
+        }
+        let elements = match self.child_number::<u8>(c, "Elements")? {
+            None => 0x40,
+            Some(0) => {
+                self.warn(c, format!("SoE init command for {shown}: <Elements> 0 names no element: the value written"));
+                0x40
+            }
+            Some(e) => e,
+        };
+        let data = match child(c, "Data") {
+            Some(d) => self.hex(d, "Data")?,
+            None => Vec::new(),
+        };
+        Ok(Some(SoeInitCmd {
+            place: place(c),
+            transitions: self.transitions(c),
+            comment: self.child_text(c, "Comment").unwrap_or_default(),
+            drive,
+            idn,
+            elements,
+            data,
+            fixed: self.attr_bool(c, "Fixed")?,
+            timeout_ms: self.child_number(c, "Timeout")?,
+        }))
     }
 
     fn init_cmds(&mut self, owner: Node<'_, '_>) -> R<Vec<InitCmd>> {

@@ -137,13 +137,7 @@ impl<I: Io> Master<I> {
         }
         let mut sent = 0;
         for (c, from_esi) in &cmds {
-            let result = {
-                let mut soe = self.acyclic().soe();
-                if let Some(ms) = c.timeout_ms {
-                    soe.mbx.timeout_ns = soe.mbx.timeout_ns.max(ms as u64 * 1_000_000);
-                }
-                soe.write(position, c.drive, c.idn, c.elements, &c.data)
-            };
+            let result = self.soe_write_waiting(position, (c.drive, c.idn, c.elements), &c.data, c.timeout_ms);
             if let (true, Err(MasterError::Slave { error: crate::error::SlaveError::Soe { error, .. }, .. })) =
                 (*from_esi, &result)
             {
@@ -184,6 +178,22 @@ impl<I: Io> Master<I> {
 }
 
 impl<I: Io> Master<I> {
+    /// An SoE write of a configuration step (`drive`, `idn`, `elements`), the mailbox wait
+    /// stretched to `timeout_ms` where that is longer.
+    pub(crate) fn soe_write_waiting(
+        &mut self,
+        position: u16,
+        (drive, idn, elements): (u8, ferrocat_wire::soe::Idn, ferrocat_wire::soe::Elements),
+        data: &[u8],
+        timeout_ms: Option<u32>,
+    ) -> Result<()> {
+        let mut soe = self.acyclic().soe();
+        if let Some(ms) = timeout_ms {
+            soe.mbx.timeout_ns = soe.mbx.timeout_ns.max(ms as u64 * 1_000_000);
+        }
+        soe.write(position, drive, idn, elements, data)
+    }
+
     /// An ESI command left out: a warning and an event.
     fn skipped(&mut self, e: crate::event::MasterEvent) {
         tracing::warn!("{e}");

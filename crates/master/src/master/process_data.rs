@@ -41,6 +41,32 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
+    /// The plan's SoE writes for the slave at `position`, if a plan gives any, each with its
+    /// `timeout_ms` where that is longer than the mailbox's.
+    fn run_plan_idns(&mut self, position: u16) -> Result<()> {
+        let idns = match &self.plan {
+            Some((p, _)) => p.idns.get(position as usize).cloned().unwrap_or_default(),
+            None => return Ok(()),
+        };
+        for c in &idns {
+            self.soe_write_waiting(position, (c.drive, c.idn, c.elements), &c.data, c.timeout_ms).map_err(|e| {
+                let name = self.slaves[position as usize].name.clone();
+                crate::error::MasterError::of(
+                    position,
+                    &name,
+                    crate::error::SlaveError::ConfigIdn {
+                        origin: crate::error::SdoSource::Plan,
+                        drive: c.drive,
+                        idn: c.idn,
+                        comment: c.comment.clone(),
+                        error: Box::new(e),
+                    },
+                )
+            })?;
+        }
+        Ok(())
+    }
+
     /// The process-data mapping of one slave: from CoE (0x1C12/0x1C13 and the mapping objects,
     /// 0x1C10 + n for a further SyncManager n) when it speaks CoE, from drive 0's telegram
     /// configuration (S-0-0024, S-0-0016) when it speaks SoE alone, else the PDOs its ESI or
@@ -375,6 +401,7 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
                 }
             }
             self.m.run_plan_sdos(k)?;
+            self.m.run_plan_idns(k)?;
             self.m.read_mapping(k)?;
         }
         self.m.layout()
