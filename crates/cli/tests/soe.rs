@@ -92,3 +92,21 @@ fn esi_soe_init_commands_are_listed_and_sent_by_run() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!((&v["slaves"]["in_op_at_end"], &v["slaves"]["left_op"]), (&2.into(), &0.into()), "{v}");
 }
+
+/// `ferrocat demo --drive` with a drive of the SoE profile, beside CoE or alone: refused at
+/// once, saying that the demo drives CiA402 drives and that the SoE profile is not modelled.
+#[test]
+fn the_demo_says_it_does_not_drive_the_soe_profile() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    for (device, speaks) in [("FC-SOE-DRIVE", "SoE beside CoE"), ("FC-SOE-ONLY", "SoE, not CoE")] {
+        let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(["demo", "--drive", &format!("{esi}:{device}"), "--cycle-us", "1000", "--method", "none"])
+            .current_dir(std::env::temp_dir())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{err}");
+        assert!(err.contains(&format!("{device} is a drive of the SoE profile (its SII names {speaks}")), "{err}");
+        assert!(err.contains("the demo drives CiA402 drives only"), "{err}");
+    }
+}

@@ -242,6 +242,14 @@ pub fn segment_config(o: &Options) -> crate::Result<SegmentConfig> {
     {
         return Err(LabError::NotADrive { drive: o.drive.clone(), name: node.name.clone() });
     }
+    // A drive of the SoE profile (SERCOS over EtherCAT) has its own control and status words:
+    // the demo drives CiA402 only, and says so rather than finding no 0x6040 later.
+    if let Some(dev) = node.esc.app().as_any().downcast_ref::<ferrocat_esc::CoeDevice>() {
+        if dev.soe.is_some() {
+            let coe = dev.serves_coe;
+            return Err(LabError::SoeProfile { drive: o.drive.clone(), name: node.name.clone(), coe });
+        }
+    }
     drive.app = Some("cia402".into());
     cfg.devices.extend(std::iter::repeat_n(drive, o.drives));
     Ok(cfg)

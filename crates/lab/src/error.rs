@@ -94,6 +94,22 @@ pub enum LabError {
         /// The device's name.
         name: String,
     },
+    /// The demo's `--drive` names a drive of the SoE profile, which the demo does not drive.
+    #[error(
+        "--drive {drive}: {name} is a drive of the SoE profile (its SII names SoE{}, its objects no CiA402 \
+         controlword 0x6040 or statusword 0x6041): the demo drives CiA402 drives only; the SoE profile's \
+         master control word (S-0-0134) and drive status word (S-0-0135) are not modelled in it \
+         (`ferrocat soe` reads and writes its IDNs)",
+        if *coe { " beside CoE" } else { ", not CoE" }
+    )]
+    SoeProfile {
+        /// The `--drive` argument.
+        drive: String,
+        /// The device's name.
+        name: String,
+        /// Whether its mailbox speaks CoE too.
+        coe: bool,
+    },
     /// A drive axis whose process image has neither target.
     #[error(
         "slave {position} axis {axis}: neither a target position (0x607A) nor a target velocity (0x60FF) in the process image, so no cyclic synchronous mode to run; its outputs: {outputs} (set-points of another kind are not driven by the demo)"
