@@ -1375,12 +1375,13 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
         if o.diagnosis_ms.is_some() {
             let d = m.diagnosis().diagnosis_stats();
             outln!(
-                "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies; {} sync-error flag reads, {} found set",
+                "diagnosis: {} error-counter reads, {} mailbox polls ({} given up at the cycle's spare time's end); {} counters grew, {} emergencies, {} SoE notifications and emergencies; {} sync-error flag reads, {} found set",
                 d.counter_reads,
                 d.mailbox_polls,
                 d.given_up,
                 d.counters_grown,
                 tally.emergencies,
+                tally.soe_messages,
                 d.sync_flag_reads,
                 d.sync_errors
             );
@@ -1476,6 +1477,7 @@ fn diagnosis_json(
         "given_up": d.given_up,
         "counters_grown": d.counters_grown,
         "emergencies": tally.emergencies,
+        "soe_messages": tally.soe_messages,
         "sync_flag_reads": d.sync_flag_reads,
         "sync_errors": d.sync_errors,
         "txpdo_watched": d.txpdo_watched,
@@ -1499,6 +1501,8 @@ struct SlaveTally {
     lost: u64,
     recovered: u64,
     emergencies: u64,
+    /// SoE notifications and emergencies.
+    soe_messages: u64,
 }
 
 impl SlaveTally {
@@ -1509,6 +1513,7 @@ impl SlaveTally {
             E::Lost { .. } => self.lost += 1,
             E::Recovered { .. } => self.recovered += 1,
             E::Emergency { .. } => self.emergencies += 1,
+            E::Soe { .. } => self.soe_messages += 1,
             _ => {}
         }
     }

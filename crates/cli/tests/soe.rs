@@ -110,3 +110,48 @@ fn the_demo_says_it_does_not_drive_the_soe_profile() {
         assert!(err.contains("the demo drives CiA402 drives only"), "{err}");
     }
 }
+
+/// SoE notifications and emergencies a drive sends (scheduled `soe_message` events) reach the
+/// user of `run` while cyclic, decoded and counted; an event the drive cannot send is refused
+/// naming why.
+#[test]
+fn soe_notifications_and_emergencies_reach_the_user_while_cyclic() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let run = |tag: &str, events: &str| {
+        let toml =
+            format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nesi = '{esi}'\nproduct = 'FC-SOE-DRIVE'\n{events}");
+        let path = std::env::temp_dir().join(format!("ferrocat-soe-events-{tag}-{}.toml", std::process::id()));
+        std::fs::write(&path, toml).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
+            .args(["run", "--config", path.to_str().unwrap(), "--seconds", "1", "--json"])
+            .output()
+            .unwrap();
+        std::fs::remove_file(&path).unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (ok, out, err) = run(
+        "sent",
+        "[[event]]\nat_ms = 300\nsoe_message = { device = 1, idn = 'S-0-0095', data = '4f7665722074656d70' }\n\
+         [[event]]\nat_ms = 600\nsoe_message = { device = 1, drive = 0, idn = 11, data = '0100', emergency = true }\n",
+    );
+    assert!(ok, "{err}");
+    assert!(err.contains("slave 1 (FC-SOE-DRIVE) drive 0: SoE notification for S-0-0095: \"Over temp\""), "{err}");
+    assert!(err.contains("slave 1 (FC-SOE-DRIVE) drive 0: SoE emergency for S-0-0011: [01, 00]"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["diagnosis"]["soe_messages"], 2, "{v}");
+    let long = format!("device = 1, idn = 1, data = '{}'", "00".repeat(31));
+    for (tag, event, says) in [
+        ("nosoe", "device = 0, idn = 'S-0-0095'", "device 0 ('EK1100') speaks no SoE"),
+        ("long", long.as_str(), "31 bytes, more than the device's mailbox carries (30)"),
+        ("idn", "device = 1, idn = 'Q-0-0001'", "soe_message.idn 'Q-0-0001'"),
+        ("data", "device = 1, idn = 1, data = 'abc'", "soe_message.data 'abc': not hex bytes"),
+        ("drive", "device = 1, idn = 1, drive = 8", "soe_message.drive 8"),
+    ] {
+        let (ok, _, err) = run(tag, &format!("[[event]]\nat_ms = 1\nsoe_message = {{ {event} }}\n"));
+        assert!(!ok && err.contains(says), "{tag}: {err}");
+    }
+}

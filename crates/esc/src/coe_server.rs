@@ -136,6 +136,32 @@ impl CoeDevice {
         self.queue.push_back(msg);
     }
 
+    /// Queues an SoE notification (opcode 5) or emergency (opcode 6) of `drive` about `idn`
+    /// with `data` (its value element) for the master; `false` where the device speaks no SoE
+    /// or the drive number is no 0–7.
+    pub fn soe_message(&mut self, drive: u8, idn: ferrocat_wire::soe::Idn, emergency: bool, data: &[u8]) -> bool {
+        use ferrocat_wire::soe::{opcode, Elements, SoeHeader, HEADER_LEN};
+        if self.soe.is_none() {
+            return false;
+        }
+        let h = SoeHeader {
+            opcode: if emergency { opcode::EMERGENCY } else { opcode::NOTIFICATION },
+            incomplete: false,
+            error: false,
+            drive,
+            elements: Elements::VALUE,
+            idn: idn.0,
+        };
+        let mut body = vec![0u8; HEADER_LEN];
+        if h.emit(&mut body).is_err() {
+            return false;
+        }
+        body.extend_from_slice(data);
+        let msg = self.typed_message(MailboxType::SOE, &body);
+        self.queue.push_back(msg);
+        true
+    }
+
     /// The entries the assignment object (`0x1C12` outputs, `0x1C13` inputs) maps, in order.
     pub fn mapping(&self, outputs: bool) -> Vec<Mapped> {
         self.assigned(if outputs { 0x1C12 } else { 0x1C13 })

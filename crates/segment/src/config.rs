@@ -308,6 +308,23 @@ pub struct EventToml {
     /// A device's application reports a local error: SAFEOP with the error indication and
     /// the AL status code `code`.
     pub al_error: Option<DriveFaultToml>,
+    /// A drive of the SoE profile sends an SoE notification or emergency.
+    pub soe_message: Option<SoeMessageToml>,
+}
+
+/// An SoE notification or emergency, in an event.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SoeMessageToml {
+    pub device: NodeRef,
+    /// The drive (axis) of the device, 0–7 (default 0).
+    pub drive: Option<u8>,
+    /// The IDN it is about: `"S-0-0095"`, `"P-0-0001"` or its number.
+    pub idn: Number,
+    /// Its data, in hex (`"4f4b"`; default none).
+    pub data: Option<String>,
+    /// An emergency (opcode 6) rather than a notification (opcode 5); default false.
+    pub emergency: Option<bool>,
 }
 
 /// A drive's own fault, in an event.
@@ -962,14 +979,66 @@ impl SegmentConfig {
         if let Some(f) = &e.al_error {
             kinds.push(Event::AlError { node: node(&f.device)?, code: code(f, "al_error")? });
         }
+        if let Some(m) = &e.soe_message {
+            let i = node(&m.device)?;
+            let ev = soe_message(m, i, &place)?;
+            let esc = &seg.nodes[i].esc;
+            let any = esc.app().as_any();
+            let coe = any
+                .downcast_ref::<ferrocat_esc::CoeDevice>()
+                .or_else(|| any.downcast_ref::<ferrocat_esc::Cia402Drive>().map(|d| &d.coe));
+            if coe.is_none_or(|c| c.soe.is_none()) {
+                return Err(device_err(&place, format!("soe_message: device {i} ('{}') speaks no SoE", names[i])));
+            }
+            // One message in the slave's send mailbox (SII word 0x1B, ETG.2010): the mailbox
+            // header (6 bytes), the SoE header (4) and the data.
+            let room = (esc.sii_word(0x1B) as usize).saturating_sub(10);
+            if let Event::SoeMessage { data, .. } = &ev {
+                if data.len() > room {
+                    return Err(device_err(
+                        &place,
+                        format!(
+                            "soe_message.data: {} bytes, more than the device's mailbox carries ({room})",
+                            data.len()
+                        ),
+                    ));
+                }
+            }
+            kinds.push(ev);
+        }
         match (kinds.pop(), kinds.is_empty()) {
             (Some(ev), true) => Ok(((at_ms * 1e6).round() as u64, ev)),
             _ => Err(device_err(
                 place,
-                "give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault, al_error",
+                "give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault, al_error, \
+                 soe_message",
             )),
         }
     }
+}
+
+/// An event's SoE message to device `node`, its IDN, drive and data checked.
+fn soe_message(m: &SoeMessageToml, node: usize, place: &str) -> Result<Event, SegmentError> {
+    let (idn, given) = match &m.idn {
+        Number::Int(n) => (u16::try_from(*n).ok().map(ferrocat_wire::soe::Idn), n.to_string()),
+        Number::Text(t) => (ferrocat_wire::soe::Idn::parse(t), t.clone()),
+    };
+    let idn = idn.ok_or_else(|| {
+        device_err(
+            place,
+            format!("soe_message.idn '{given}': give S-0-0095, P-0-0001 (set 0–7, block 0–4095) or a number"),
+        )
+    })?;
+    let drive = m.drive.unwrap_or(0);
+    if drive > 7 {
+        return Err(device_err(place, format!("soe_message.drive {drive}: a drive 0–7")));
+    }
+    let text: String = m.data.as_deref().unwrap_or("").split_whitespace().collect();
+    let data = (text.len() % 2 == 0 && text.bytes().all(|b| b.is_ascii_hexdigit()))
+        .then(|| (0..text.len()).step_by(2).map(|i| u8::from_str_radix(&text[i..i + 2], 16).ok()).collect())
+        .flatten()
+        .ok_or_else(|| device_err(place, format!("soe_message.data '{text}': not hex bytes")))?;
+    Ok(Event::SoeMessage { node, drive, idn, emergency: m.emergency.unwrap_or(false), data })
 }
 
 /// A device by index or name.

@@ -97,6 +97,15 @@ pub enum Event {
         node: usize,
         code: u16,
     },
+    /// A drive of the SoE profile sends an SoE notification or emergency about `idn` with
+    /// `data`. Nothing happens on a device that speaks no SoE.
+    SoeMessage {
+        node: usize,
+        drive: u8,
+        idn: ferrocat_wire::soe::Idn,
+        emergency: bool,
+        data: Vec<u8>,
+    },
     /// A device's application reports a local error (ETG.1000.6, AL status code): from OP or
     /// SAFEOP it goes to SAFEOP with the error indication and `code`; in a lower state it stays
     /// there, with them.
@@ -354,6 +363,11 @@ impl Segment {
                 if let Some(d) = self.nodes[node].esc.app_mut().as_any_mut().downcast_mut::<ferrocat_esc::Cia402Drive>()
                 {
                     d.inject_fault(code);
+                }
+            }
+            Event::SoeMessage { node, drive, idn, emergency, ref data } => {
+                if let Some(dev) = ferrocat_esc::CoeDevice::of(self.nodes[node].esc.app_mut()) {
+                    dev.soe_message(drive, idn, emergency, data);
                 }
             }
             Event::AlError { node, code } => {

@@ -144,7 +144,7 @@ fn bad_rings_and_events_are_named() {
     );
     assert_eq!(
         err(&format!("{two}[[event]]\nat_ms = 1\npower_off = 1\npower_on = 1\n")),
-        "event 0: give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault, al_error"
+        "event 0: give exactly one of link_down, link_up, power_off, power_on, drift_step, drive_fault, al_error, soe_message"
     );
     assert_eq!(
         err(&format!("{two}[[event]]\nat_ms = 1\ndrift_step = {{ device = 0, ppm = 2000.0 }}\n")),

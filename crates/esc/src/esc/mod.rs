@@ -463,6 +463,11 @@ impl Esc {
         }
     }
 
+    /// Word `word` of the EEPROM (ETG.2010's SII), as the ESC would read it.
+    pub fn sii_word(&self, word: usize) -> u16 {
+        self.eeprom.word(word)
+    }
+
     /// Whether the ESC configuration area passed its checksum (DL status bit 0).
     pub fn sii_loaded(&self) -> bool {
         self.sii_loaded
