@@ -176,7 +176,12 @@ impl SoeServer {
 
     /// One drive with [`standard_idns`].
     pub fn one_drive(firmware: &str) -> Self {
-        SoeServer { drives: vec![standard_idns(firmware)], ..SoeServer::default() }
+        Self::drives(1, firmware)
+    }
+
+    /// `count` drives (axes 0 to `count` − 1), each with [`standard_idns`].
+    pub fn drives(count: u8, firmware: &str) -> Self {
+        SoeServer { drives: (0..count).map(|_| standard_idns(firmware)).collect(), ..SoeServer::default() }
     }
 
     /// The messages (service data after the mailbox header) answering `request`, in order;

@@ -263,6 +263,13 @@ impl EsiFile {
 }
 
 impl Device {
+    /// How many drives (axes) an SoE device has by its file: one more than the highest drive
+    /// number its SoE init commands address, and at least one. ETG.2000 gives the count no
+    /// element of its own.
+    pub fn soe_drives(&self) -> u8 {
+        self.soe_init_cmds.iter().map(|c| c.drive).max().map_or(1, |d| d.saturating_add(1))
+    }
+
     /// The modules a modular device has by default: each slot's default module, as many
     /// times as the slot's minimum and at least once; `None` where a slot needs a module and
     /// names no default.

@@ -306,6 +306,40 @@ fn a_drive_that_speaks_soe_alone_maps_its_telegram_configuration() {
     assert_eq!(e, "slave 1 (FC-SOE-ONLY): does not support CoE");
 }
 
+/// A two-axis drive that speaks SoE alone: the simulated device has the two drives its init
+/// commands address, each takes its own, and the master maps both telegrams, drive after drive
+/// (the entry's subindex its drive), to OP with whole working counters.
+#[test]
+fn a_two_axis_soe_drive_maps_both_telegrams() {
+    let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
+    let file = ferrocat_esi::EsiFile::parse(&std::fs::read_to_string(esi).unwrap()).unwrap();
+    let two = file.devices.into_iter().find(|d| d.type_name == "FC-SOE-ONLY-2AX").unwrap();
+    assert_eq!(two.soe_drives(), 2);
+    let cfg = SegmentConfig::from_device_args(&["EK1100".into(), format!("{esi}:FC-SOE-ONLY-2AX")]).unwrap();
+    let mut m = Master::new(VirtualIo::new(cfg.build().unwrap(), HostModel::pc_rt(), 3));
+    m.config().add_esi(0x0F3C, two);
+    m.states().scan().unwrap();
+    m.states().configure().unwrap();
+    let entries = |m: &Master<VirtualIo>, outputs: bool| -> Vec<(u16, u8, u8)> {
+        let map = m.slaves()[1].mapping();
+        let list = if outputs { &map.outputs } else { &map.inputs };
+        list.iter().map(|e| (e.index, e.subindex, e.bits)).collect()
+    };
+    assert_eq!(entries(&m, true), [(134, 0, 16), (47, 0, 32), (134, 1, 16), (47, 1, 32)]);
+    assert_eq!(entries(&m, false), [(135, 0, 16), (51, 0, 32), (135, 1, 16), (51, 1, 32)]);
+    assert_eq!(m.slaves()[1].mapping().inputs[2].name, "drive 1 S-0-0135 Drive status word");
+    for drive in [0, 1] {
+        assert_eq!(m.acyclic().soe().value(1, drive, Idn(1)).unwrap(), 500u16.to_le_bytes(), "drive {drive}");
+    }
+    assert_eq!(soe_error(m.acyclic().soe().value(1, 2, Idn(1))), SoeError::INVALID_DRIVE);
+    m.states().start().unwrap();
+    for _ in 0..20 {
+        m.cyclic().cycle().unwrap();
+    }
+    assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
+    assert_eq!(m.slaves()[1].status().state(), AlState::Op);
+}
+
 /// CoE init commands for a drive that speaks SoE alone: the description's are not sent, an
 /// event saying how many and why; the application's own is sent and refused, naming it.
 #[test]

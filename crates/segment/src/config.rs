@@ -697,11 +697,12 @@ impl SegmentConfig {
                 .then(ferrocat_esc::EoeServer::default);
             // And SoE: a drive's service channel with the standard IDNs, beside CoE or alone.
             let speaks_soe = info.header.mailbox_protocols & ferrocat_wire::sii::mailbox_protocol::SOE != 0;
+            // As many drives as its file's SoE init commands address (ENI and ESI alike).
             let soe = speaks_soe.then(|| {
-                ferrocat_esc::SoeServer::one_drive(&format!(
-                    "{} (ferrocat simulation)",
-                    info.name().unwrap_or_else(|| String::from("SoE drive"))
-                ))
+                ferrocat_esc::SoeServer::drives(
+                    esi_dev.as_ref().map_or(1, |d| d.soe_drives()),
+                    &format!("{} (ferrocat simulation)", info.name().unwrap_or_else(|| String::from("SoE drive"))),
+                )
             });
             // The dictionary is built once, for CoE devices (and the empty one of a drive that
             // speaks SoE alone).

@@ -9,7 +9,7 @@ impl Slave {
     /// `to_sii` gives its EEPROM image). What an ENI does not say is filled in as a
     /// configuration tool would have found it: every FMMU kind, CoE with SDO information and
     /// PDO assignment and configuration, and for a slave with `<DC>` one operation mode with
-    /// SYNC0 (assign-activate 0x0300). Its type name is the order number of
+    /// SYNC0 (assign-activate 0x0300), and its SoE init commands. Its type name is the order number of
     /// `<ProductRevision>` (`EL2008-0000-0018` → `EL2008`) where given, else its name.
     pub fn to_device(&self) -> Device {
         let mut sync_managers = Vec::new();
@@ -106,6 +106,22 @@ impl Slave {
             }],
             None => Vec::new(),
         };
+        // Its SoE init commands, so that a simulator gives it the drives they address.
+        let soe_init_cmds = self
+            .mailbox
+            .iter()
+            .flat_map(|m| &m.soe_init_cmds)
+            .map(|c| ferrocat_esi::SoeInitCmd {
+                line: c.place.line,
+                transitions: c.transitions.iter().map(|t| t.to_string()).collect(),
+                drive: c.drive,
+                idn: ferrocat_wire::soe::Idn(c.idn),
+                elements: ferrocat_wire::soe::Elements(c.elements),
+                data: c.data.clone(),
+                timeout_ms: c.timeout_ms,
+                comment: c.comment.clone(),
+            })
+            .collect();
         Device {
             line: self.place.line,
             type_name: self.type_name(),
@@ -120,6 +136,7 @@ impl Slave {
             tx_pdos: self.process_data.tx_pdos.iter().map(pdo).collect(),
             mailbox,
             dc_op_modes,
+            soe_init_cmds,
             ..Default::default()
         }
     }

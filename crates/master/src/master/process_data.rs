@@ -163,17 +163,46 @@ impl<I: Io> Master<I> {
         Ok(())
     }
 
-    /// Drive 0's MDT (`outputs`: S-0-0024) or AT (S-0-0016) as entries: each IDN of the list as
-    /// long as its attribute says, indexed by its number with subindex 0 (as ESI files write an
-    /// SoE drive's PDO entries), named by its name element where it has one.
+    /// The MDT (`outputs`: S-0-0024) or AT (S-0-0016) of every drive of the device as entries,
+    /// drive after drive (drive 0 first, up to the first drive number the device refuses): each
+    /// IDN of a list as long as its attribute says, indexed by its number with the drive as
+    /// subindex (drive 0's as ESI files write an SoE drive's PDO entries, subindex 0), named by
+    /// its name element where it has one.
     pub(super) fn soe_mapping(&mut self, position: u16, outputs: bool) -> Result<Vec<Mapped>> {
         use crate::error::{MasterError, SlaveError};
-        use ferrocat_wire::soe::{list_items, Attribute, Elements, Idn, ValueLength};
+        use ferrocat_wire::soe::Idn;
         let list_idn = if outputs { Idn::MDT_CONFIG } else { Idn::AT_CONFIG };
-        let list = self.acyclic().soe().idn_list(position, 0, list_idn)?;
-        let mut v = Vec::with_capacity(list.len());
-        for idn in list {
-            let a = self.acyclic().soe().read(position, 0, idn, Elements::ATTRIBUTE)?;
+        let mut v = Vec::new();
+        for drive in 0..8u8 {
+            let list = match self.acyclic().soe().idn_list(position, drive, list_idn) {
+                Ok(list) => list,
+                // A device with fewer drives refuses the drive number (SoE error 0x800A on the
+                // simulated drive; a real one may answer another error).
+                Err(MasterError::Slave { error: SlaveError::Soe { .. } | SlaveError::MailboxError(_), .. })
+                    if drive > 0 =>
+                {
+                    break
+                }
+                Err(e) => return Err(e),
+            };
+            self.soe_telegram(position, drive, list_idn, &list, &mut v)?;
+        }
+        Ok(v)
+    }
+
+    /// One drive's telegram list `list` (of `list_idn`) as entries, onto `v`.
+    fn soe_telegram(
+        &mut self,
+        position: u16,
+        drive: u8,
+        list_idn: ferrocat_wire::soe::Idn,
+        list: &[ferrocat_wire::soe::Idn],
+        v: &mut Vec<Mapped>,
+    ) -> Result<()> {
+        use crate::error::{MasterError, SlaveError};
+        use ferrocat_wire::soe::{list_items, Attribute, Elements, ValueLength};
+        for &idn in list {
+            let a = self.acyclic().soe().read(position, drive, idn, Elements::ATTRIBUTE)?;
             let attribute = a.get(..4).map(|b| Attribute(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
             let bits = match attribute.map(|a| a.length()) {
                 Some(ValueLength::Fixed(n)) => u8::try_from(n as u16 * 8).ok(),
@@ -182,11 +211,11 @@ impl<I: Io> Master<I> {
             let Some(bits) = bits else {
                 let name = self.slaves[position as usize].name.clone();
                 let why = format!(
-                    "SoE {list_idn} names {idn}, whose attribute {a:02x?} gives no fixed length of 1 to 31 bytes"
+                    "SoE {list_idn} of drive {drive} names {idn}, whose attribute {a:02x?} gives no fixed length of 1 to 31 bytes"
                 );
                 return Err(MasterError::of(position, &name, SlaveError::UnexpectedReply(why)));
             };
-            let name = match self.acyclic().soe().read(position, 0, idn, Elements::NAME) {
+            let name = match self.acyclic().soe().read(position, drive, idn, Elements::NAME) {
                 Ok(n) => {
                     let text = list_items(&n).map_or(&n[..], |(items, _)| items);
                     format!("{idn} {}", String::from_utf8_lossy(text))
@@ -194,9 +223,10 @@ impl<I: Io> Master<I> {
                 Err(MasterError::Slave { error: SlaveError::Soe { .. }, .. }) => idn.to_string(),
                 Err(e) => return Err(e),
             };
-            v.push(Mapped::unplaced(idn.0, 0, bits, name));
+            let name = if drive > 0 { format!("drive {drive} {name}") } else { name };
+            v.push(Mapped::unplaced(idn.0, drive, bits, name));
         }
-        Ok(v)
+        Ok(())
     }
 
     pub(super) fn coe_mapping(&mut self, position: u16, assign: u16) -> Result<Vec<Mapped>> {
