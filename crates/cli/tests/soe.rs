@@ -118,8 +118,9 @@ fn the_demo_says_it_does_not_drive_the_soe_profile() {
 fn soe_notifications_and_emergencies_reach_the_user_while_cyclic() {
     let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
     let run = |tag: &str, events: &str| {
+        let product = if tag == "alone" { "FC-SOE-ONLY" } else { "FC-SOE-DRIVE" };
         let toml =
-            format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nesi = '{esi}'\nproduct = 'FC-SOE-DRIVE'\n{events}");
+            format!("[[device]]\nbuiltin = 'EK1100'\n[[device]]\nesi = '{esi}'\nproduct = '{product}'\n{events}");
         let path = std::env::temp_dir().join(format!("ferrocat-soe-events-{tag}-{}.toml", std::process::id()));
         std::fs::write(&path, toml).unwrap();
         let o = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
@@ -143,6 +144,11 @@ fn soe_notifications_and_emergencies_reach_the_user_while_cyclic() {
     assert!(err.contains("slave 1 (FC-SOE-DRIVE) drive 0: SoE emergency for S-0-0011: [01, 00]"), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["diagnosis"]["soe_messages"], 2, "{v}");
+    // A drive that speaks SoE alone is polled too (CoE emergencies are not all there is).
+    let (ok, _, err) =
+        run("alone", "[[event]]\nat_ms = 300\nsoe_message = { device = 1, idn = 'S-0-0095', data = '4f4b' }\n");
+    assert!(ok, "{err}");
+    assert!(err.contains("slave 1 (FC-SOE-ONLY) drive 0: SoE notification for S-0-0095: \"OK\""), "{err}");
     let long = format!("device = 1, idn = 1, data = '{}'", "00".repeat(31));
     for (tag, event, says) in [
         ("nosoe", "device = 0, idn = 'S-0-0095'", "device 0 ('EK1100') speaks no SoE"),

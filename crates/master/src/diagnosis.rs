@@ -1,7 +1,8 @@
 //! Diagnosis while cyclic: every slave's error counters (0x0300–0x0313) read at a low rate,
-//! every CoE slave's mailbox polled for emergencies, and the sync-error flags of the output
-//! and input SM parameters (0x1C32:20, 0x1C33:20) of every slave with SYNC0 read, one datagram
-//! at a time in a cycle's spare time, so that none of it makes a cycle late.
+//! every CoE or SoE slave's mailbox polled for emergencies (and SoE notifications), and the
+//! sync-error flags of the output and input SM parameters (0x1C32:20, 0x1C33:20) of every slave
+//! with SYNC0 read, one datagram at a time in a cycle's spare time, so that none of it makes a
+//! cycle late.
 use ferrocat_wire::coe::{self, CoeHeader, CoeMessage, CoeService, Sdo};
 use ferrocat_wire::mailbox::MailboxType;
 use ferrocat_wire::register::{addr, ErrorCounters};
@@ -199,11 +200,12 @@ impl<I: Io> Master<I> {
         }
     }
 
+    /// Polls the next mailbox that may hold a message nobody asked for (below).
     fn poll_mailbox_step(&mut self) -> Result<()> {
         let n = self.slaves.len();
         let Some(k) = (0..n).map(|i| (self.diagnosis.next_mailbox + i) % n).find(|&k| {
             self.slaves[k].mailbox.is_some()
-                && self.slaves[k].mailbox().is_some_and(|mb| mb.has_coe())
+                && self.slaves[k].mailbox().is_some_and(sends_unasked)
                 && !self.acyclic.holds_mailbox(k as u16)
         }) else {
             return Ok(());
@@ -225,7 +227,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
     /// mailbox; else,
     /// when a round of those reads is due (one every `counters_period_ns` over the slaves whose
     /// SYNC0 the DC initialisation started), the next read's request; else a poll of the next
-    /// CoE slave's mailbox (so that each is polled once every as many calls as there are).
+    /// CoE or SoE slave's mailbox (so that each is polled once every as many calls as there are).
     /// Before those, without a datagram, the last cycle's TxPDO State and Toggle entries. A
     /// counter that grew, an emergency, a flag found set, a TxPDO State set and a Toggle that
     /// stood still become events ([`MasterEvent::ErrorCounters`], [`MasterEvent::Emergency`],
@@ -239,7 +241,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
         self.m.watch_txpdo_entries();
         self.m.diagnosis.counters.resize(n, None);
         let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
-        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox().is_some_and(|mb| mb.has_coe()));
+        let mailboxes = self.m.slaves.iter().any(|s| s.mailbox().is_some_and(sends_unasked));
         let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
         let mut sent = 0;
         let mut result = Ok(0);
@@ -288,4 +290,10 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
     pub fn sync_error_flags(self) -> &'a [SyncFlags] {
         &self.m.diagnosis.sync_flags
     }
+}
+
+/// Whether a slave's mailbox may hold messages nobody asked for: CoE emergencies, SoE
+/// notifications and emergencies.
+fn sends_unasked(mb: &crate::slave::MailboxConfig) -> bool {
+    mb.has_coe() || mb.has_protocol(ferrocat_wire::sii::mailbox_protocol::SOE)
 }
