@@ -184,7 +184,8 @@ pub fn check(
 /// The master's plan for an ENI: its station addresses, each slave's FMMU and process-data
 /// SyncManager writes (its register init commands for PREOP → SAFEOP and SAFEOP → OP, the
 /// mailbox's SyncManagers left to the master), its CoE init commands for INIT → PREOP and
-/// PREOP → SAFEOP and its SoE ones (IDN writes) for the same, where its entries start, and the cyclic frames of every task.
+/// PREOP → SAFEOP and its SoE ones (IDN writes) for the same, where its entries start, and the
+/// cyclic frames of every task.
 pub fn plan(eni: &Eni) -> ferrocat_master::plan::Plan {
     use ferrocat_machine::eni::Transition;
     use ferrocat_master::plan::{Plan, PlanDatagram, PlanIdn, PlanSdo};

@@ -9,8 +9,8 @@ impl Slave {
     /// `to_sii` gives its EEPROM image). What an ENI does not say is filled in as a
     /// configuration tool would have found it: every FMMU kind, CoE with SDO information and
     /// PDO assignment and configuration, and for a slave with `<DC>` one operation mode with
-    /// SYNC0 (assign-activate 0x0300), and its SoE init commands. Its type name is the order number of
-    /// `<ProductRevision>` (`EL2008-0000-0018` → `EL2008`) where given, else its name.
+    /// SYNC0 (assign-activate 0x0300); its SoE init commands too. Its type name is the order
+    /// number of `<ProductRevision>` (`EL2008-0000-0018` → `EL2008`) where given, else its name.
     pub fn to_device(&self) -> Device {
         let mut sync_managers = Vec::new();
         if let Some(m) = &self.mailbox {
