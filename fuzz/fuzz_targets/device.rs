@@ -26,6 +26,7 @@ fuzz_target!(|data: &[u8]| {
         let Ok(seg) = cfg.build() else { continue };
         exercise(seg);
     }
+    let _ = std::fs::remove_file(&path);
 });
 
 fn exercise(seg: ferrocat_segment::Segment) {

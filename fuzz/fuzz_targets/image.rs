@@ -15,4 +15,5 @@ fuzz_target!(|data: &[u8]| {
             let _ = c.write(&[(name.as_str(), 1)]);
         }
     }
+    let _ = std::fs::remove_file(&path);
 });

@@ -6,12 +6,12 @@
 //! fragments, put together into whole frames; and as a sequence of SoE requests (split at 0xFD
 //! bytes) to the simulated drive, whose every reply must decode and fit the mailbox.
 use ferrocat_esc::{EoeServer, FoeServer, SoeServer};
-use ferrocat_wire::register::AlState;
-use ferrocat_wire::soe::{self, SoeHeader};
 use ferrocat_wire::coe::{self, CoeMessage, Sdo, SdoInfo};
 use ferrocat_wire::eoe::{frame_type, EoeHeader, Reassembler};
 use ferrocat_wire::foe::Foe;
 use ferrocat_wire::mailbox::{Mailbox, MailboxErrorCode};
+use ferrocat_wire::register::AlState;
+use ferrocat_wire::soe::{self, SoeHeader};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

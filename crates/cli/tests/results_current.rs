@@ -9,7 +9,11 @@ use std::process::Command;
 use serde_json::Value;
 
 fn run(args: &[&str]) -> Value {
-    let out_dir = std::env::temp_dir().join(format!("ferrocat-results-{}-{}", std::process::id(), args.join("-")));
+    // One folder, whatever the arguments hold (a scenario's path has slashes: joined as they
+    // were, the folder removed below was a subfolder of one left behind).
+    let name: String =
+        args.join("-").chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+    let out_dir = std::env::temp_dir().join(format!("ferrocat-results-{}-{name}", std::process::id()));
     let out = Command::new(env!("CARGO_BIN_EXE_ferrocat"))
         .args(args)
         .args(["--json", "--out"])
