@@ -128,6 +128,12 @@ impl CoeDevice {
         any.downcast_mut::<crate::Cia402Drive>().map(|d| &mut d.coe)
     }
 
+    /// As [`CoeDevice::of`], to look at.
+    pub fn of_ref(app: &dyn Application) -> Option<&CoeDevice> {
+        let any = app.as_any();
+        any.downcast_ref::<CoeDevice>().or_else(|| any.downcast_ref::<crate::Cia402Drive>().map(|d| &d.coe))
+    }
+
     /// Queues an emergency message for the master.
     pub fn emergency(&mut self, e: Emergency) {
         let mut body = CoeHeader::new(CoeService::EMERGENCY).word().to_le_bytes().to_vec();

@@ -984,11 +984,7 @@ impl SegmentConfig {
             let i = node(&m.device)?;
             let ev = soe_message(m, i, &place)?;
             let esc = &seg.nodes[i].esc;
-            let any = esc.app().as_any();
-            let coe = any
-                .downcast_ref::<ferrocat_esc::CoeDevice>()
-                .or_else(|| any.downcast_ref::<ferrocat_esc::Cia402Drive>().map(|d| &d.coe));
-            if coe.is_none_or(|c| c.soe.is_none()) {
+            if ferrocat_esc::CoeDevice::of_ref(esc.app()).is_none_or(|c| c.soe.is_none()) {
                 return Err(device_err(&place, format!("soe_message: device {i} ('{}') speaks no SoE", names[i])));
             }
             // One message in the slave's send mailbox (SII word 0x1B, ETG.2010): the mailbox
