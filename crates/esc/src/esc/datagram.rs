@@ -1,7 +1,7 @@
 //! One frame's datagrams: addressing, reads and writes of the register space (shadowed until
 //! the frame ends), logical addressing through the FMMUs, and the working counter.
 use ferrocat_wire::datagram::HEADER_LEN;
-use ferrocat_wire::register::{AlState, Fmmu, SyncManager};
+use ferrocat_wire::register::{AlState, SyncManager};
 use ferrocat_wire::Command;
 
 use super::{sm_area, Esc, FrameEffects, FrameTiming};
@@ -208,7 +208,7 @@ impl Esc {
                 }
                 if a as u32 == s.start as u32 + s.length as u32 - 1 {
                     st.last_byte_read = true;
-                    self.effects.sm_buffer_done = true;
+                    self.effects.sm_done |= 1 << n;
                 }
             }
         }
@@ -220,9 +220,11 @@ impl Esc {
     /// the buffer, so that each frame finds it full. No capture of such a device is at hand;
     /// the datasheets' mailbox rules (a read of an empty buffer is not counted) apply.
     fn hand_over_single_buffer_inputs(&mut self) {
-        for n in 2..self.config.sm_count {
-            let s = self.sm(n);
-            if s.enabled() && s.is_mailbox() && !s.ecat_writes() && s.length > 0 && !self.sms[n as usize].full {
+        let mut inputs = self.single_buffer_inputs;
+        while inputs != 0 {
+            let n = inputs.trailing_zeros() as u8;
+            inputs &= inputs - 1;
+            if !self.sms[n as usize].full {
                 self.sms[n as usize].full = true;
                 self.sms[n as usize].int_write = true;
                 self.put_sm_status(n);
@@ -293,7 +295,7 @@ impl Esc {
             }
             if last {
                 st.last_byte_written = true;
-                self.effects.sm_buffer_done = true;
+                self.effects.sm_done |= 1 << n;
             }
             return true;
         }
@@ -354,89 +356,6 @@ impl Esc {
             ok |= self.write_byte(a, v, cmd);
         }
         ok
-    }
-
-    /// LRD/LWR/LRW through the FMMUs, bit by bit where they are not byte-aligned. Returns the
-    /// WKC increment: +1 if something was read, +2 if something was written (LWR: +1).
-    pub(super) fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
-        let dg_start = logical as u64 * 8;
-        let dg_end = dg_start + data.len() as u64 * 8;
-        let overlap = |f: &Fmmu| {
-            let f_start = f.logical_start as u64 * 8 + (f.logical_start_bit & 7) as u64;
-            let f_end = (f.logical_start as u64 + f.length as u64 - 1) * 8 + (f.logical_stop_bit & 7) as u64 + 1;
-            (f_start, f_start.max(dg_start), f_end.min(dg_end))
-        };
-        // The frame bytes some FMMU maps: writes take them as they arrived (a read through
-        // another FMMU may change them first), so they are kept aside; most ESCs map only a
-        // few bytes of a long LRW.
-        let (first, last, hits) = self
-            .fmmu_cache
-            .iter()
-            .map(overlap)
-            .filter(|(_, lo, hi)| lo < hi)
-            .fold((u64::MAX, 0, 0), |(a, b, n), (_, lo, hi)| {
-                (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)), n + 1)
-            });
-        if first >= last {
-            return 0;
-        }
-        // One FMMU's runs cover disjoint frame bits, each written before it is read: only a
-        // second FMMU can read into bits another writes, so only then is a copy needed.
-        let mut original = std::mem::take(&mut self.scratch);
-        original.clear();
-        if hits > 1 {
-            original.extend_from_slice(&data[first as usize..last as usize]);
-        }
-        let (mut read_ok, mut write_ok) = (false, false);
-        for i in 0..self.fmmu_cache.len() {
-            let f = self.fmmu_cache[i];
-            let (f_start, lo, hi) = overlap(&f);
-            if lo >= hi {
-                continue;
-            }
-            let phys0 = f.physical_start as u64 * 8 + (f.physical_start_bit & 7) as u64;
-            let reads = f.fmmu_type & Fmmu::READ != 0 && matches!(cmd, Command::LRD | Command::LRW);
-            let writes = f.fmmu_type & Fmmu::WRITE != 0 && matches!(cmd, Command::LWR | Command::LRW);
-            // Walk the overlap in runs that stay within one physical and one frame byte.
-            let mut bit = lo;
-            while bit < hi {
-                let pbit = phys0 + (bit - f_start);
-                let fbit = bit - dg_start;
-                let run = (8 - pbit % 8).min(8 - fbit % 8).min(hi - bit);
-                let pa = (pbit / 8) as u16;
-                let fi = (fbit / 8) as usize;
-                let mask_p = (((1u16 << run) - 1) << (pbit % 8)) as u8;
-                let mask_f = (((1u16 << run) - 1) << (fbit % 8)) as u8;
-                let shift = |v: u8, from: u64, to: u64| -> u8 {
-                    if to >= from {
-                        v << (to - from)
-                    } else {
-                        v >> (from - to)
-                    }
-                };
-                if writes {
-                    let cur = self.current_byte(pa);
-                    let arrived = if hits > 1 { original[fi - first as usize] } else { data[fi] };
-                    let bits = shift(arrived & mask_f, fbit % 8, pbit % 8);
-                    if self.write_byte(pa, (cur & !mask_p) | bits, cmd) {
-                        write_ok = true;
-                    }
-                }
-                if reads {
-                    if let Some(v) = self.read_byte(pa) {
-                        data[fi] = (data[fi] & !mask_f) | shift(v & mask_p, pbit % 8, fbit % 8);
-                        read_ok = true;
-                    }
-                }
-                bit += run;
-            }
-        }
-        self.scratch = original;
-        match cmd {
-            Command::LRD => read_ok as u16,
-            Command::LWR => write_ok as u16,
-            _ => read_ok as u16 + 2 * write_ok as u16,
-        }
     }
 
     /// The value a partial (bit-wise) write builds on: the staging buffer of a buffered output

@@ -68,7 +68,7 @@ impl Esc {
     pub(super) fn end_of_frame(&mut self, timing: &FrameTiming, origin_ns: u64) {
         let t = timing.epu_ns + origin_ns;
         let mut pending = std::mem::take(&mut self.pending);
-        if pending.is_empty() && !self.effects.sm_buffer_done {
+        if pending.is_empty() && self.effects.sm_done == 0 {
             self.pending = pending;
             // Nothing but (perhaps) a system-time write: a TCL sample, which changes only the
             // difference (0x092C) and the speed counter difference (0x0932).
@@ -187,7 +187,11 @@ impl Esc {
     #[inline]
     fn complete_sm_buffers(&mut self, t: u64) -> (bool, bool) {
         let (mut deliver, mut mailbox_moved, mut handed) = (false, false, false);
-        for n in 0..self.config.sm_count {
+        // Only a SyncManager whose last byte the frame wrote or read has anything to complete.
+        let mut done = std::mem::take(&mut self.effects.sm_done);
+        while done != 0 {
+            let n = done.trailing_zeros() as u8;
+            done &= done - 1;
             let s = self.sm(n);
             let st = &mut self.sms[n as usize];
             let (written, read) = (std::mem::take(&mut st.last_byte_written), std::mem::take(&mut st.last_byte_read));

@@ -11,6 +11,7 @@ use crate::eeprom::Eeprom;
 mod al_mailbox;
 mod datagram;
 mod end_of_frame;
+mod logical;
 mod receive_latch;
 mod registers;
 
@@ -137,8 +138,8 @@ struct FrameEffects {
     latch_ports: bool,
     latch_epu: bool,
     tcl: Option<[Option<u8>; 4]>,
-    /// Some SyncManager's last byte was written or read.
-    sm_buffer_done: bool,
+    /// The SyncManagers whose last byte was written or read (bit n: SM n).
+    sm_done: u32,
 }
 
 #[derive(Debug)]
@@ -178,6 +179,10 @@ pub struct Esc {
     /// Lowest start and highest end of the enabled SyncManagers' areas.
     sm_span: (u32, u32),
     fmmu_cache: Vec<Fmmu>,
+    /// SyncManagers from SM2 on that hold inputs in mailbox mode (bit n: SM n), enabled.
+    single_buffer_inputs: u32,
+    /// Logical datagrams' walks resolved for the configuration in `sm_cache` / `fmmu_cache`.
+    plans: Vec<logical::Plan>,
     /// When the frame being processed passed the processing unit (0x0910's latch instant),
     /// until a read puts that time into the register.
     system_time_latch: Option<u64>,
@@ -259,6 +264,8 @@ impl Esc {
             sm_cache: Vec::new(),
             sm_span: (0, 0),
             fmmu_cache: Vec::new(),
+            single_buffer_inputs: 0,
+            plans: Vec::new(),
             system_time_latch: None,
             scratch: Vec::new(),
             sii_busy_shown: false,
@@ -397,6 +404,12 @@ impl Esc {
                 SyncManager::parse(&self.mem[a..a + 8]).unwrap_or_default()
             })
             .collect();
+        self.single_buffer_inputs = (2..self.config.sm_count)
+            .filter(|&n| {
+                let s = self.sm(n);
+                s.enabled() && s.is_mailbox() && !s.ecat_writes() && s.length > 0
+            })
+            .fold(0, |m, n| m | 1 << n);
         let active = self.sm_cache.iter().filter(|s| s.enabled() && s.length > 0);
         let lo = active.clone().map(|s| s.start as u32).min().unwrap_or(0);
         let hi = active.map(|s| s.start as u32 + s.length as u32).max().unwrap_or(0);
@@ -411,6 +424,7 @@ impl Esc {
                 Fmmu::parse(&self.mem[a..a + 16]).ok().filter(|f| f.active && f.length > 0)
             })
             .collect();
+        self.plans.clear();
     }
 
     pub fn app(&self) -> &dyn Application {
