@@ -80,7 +80,6 @@ impl Esc {
         let n = d.len() - 2;
         let (head, rest) = d.split_at_mut(HEADER_LEN);
         let (data, wkc) = rest.split_at_mut(n - HEADER_LEN);
-        let rw_offset = u16::from_le_bytes([self.mem[0x0108], self.mem[0x0109]]);
         let mut inc = 0u16;
         match cmd {
             Command::APRD | Command::FPRD | Command::BRD => {
@@ -107,6 +106,7 @@ impl Esc {
                 if self.read(ado, data, cmd == Command::BRW) {
                     inc += 1;
                 }
+                let rw_offset = u16::from_le_bytes([self.mem[0x0108], self.mem[0x0109]]);
                 if self.write(ado.wrapping_add(rw_offset), out, cmd) {
                     inc += 2;
                 }

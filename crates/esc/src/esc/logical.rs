@@ -207,9 +207,10 @@ impl Esc {
         }
         // One FMMU's runs cover disjoint frame bits, each written before it is read: only a
         // second FMMU can read into bits another writes, so only then is a copy needed.
-        let mut original = std::mem::take(&mut self.scratch);
-        original.clear();
+        let mut original = Vec::new();
         if plan.several {
+            original = std::mem::take(&mut self.scratch);
+            original.clear();
             original.extend_from_slice(&data[plan.first..plan.last]);
         }
         let (mut read_ok, mut write_ok) = (false, false);
@@ -232,7 +233,9 @@ impl Esc {
                 }
             }
         }
-        self.scratch = original;
+        if plan.several {
+            self.scratch = original;
+        }
         match cmd {
             Command::LRD => read_ok as u16,
             Command::LWR => write_ok as u16,
