@@ -51,16 +51,21 @@ struct Run {
 /// A logical datagram's walk through this ESC, for one command, span and configuration.
 #[derive(Debug, Clone)]
 pub(super) struct Plan {
-    cmd: u8,
-    logical: u32,
-    len: u16,
-    sii_loaded: bool,
+    /// The command, span and whether process memory is accessible, as [`Plan::key`] packs them.
+    key: u64,
     /// The frame bytes some FMMU maps, `first..last`, and whether more than one FMMU does
     /// (then writes take the bytes as they arrived, kept aside first).
     first: usize,
     last: usize,
     several: bool,
     runs: Vec<Run>,
+}
+
+impl Plan {
+    /// What a plan holds for: a datagram's length has 11 bits, its address 32.
+    fn key(cmd: Command, logical: u32, len: usize, sii_loaded: bool) -> u64 {
+        (sii_loaded as u64) << 52 | (cmd.0 as u64) << 44 | (len as u64 & 0x7FF) << 32 | logical as u64
+    }
 }
 
 fn shift(v: u8, from: u8, to: u8) -> u8 {
@@ -75,12 +80,8 @@ impl Esc {
     /// LRD/LWR/LRW through the FMMUs. Returns the WKC increment: +1 if something was read,
     /// +2 if something was written (LWR: +1).
     pub(super) fn logical(&mut self, cmd: Command, logical: u32, data: &mut [u8]) -> u16 {
-        let len = data.len() as u16;
-        let found = self
-            .plans
-            .iter()
-            .position(|p| p.cmd == cmd.0 && p.logical == logical && p.len == len && p.sii_loaded == self.sii_loaded);
-        let k = match found {
+        let key = Plan::key(cmd, logical, data.len(), self.sii_loaded);
+        let k = match self.plans.iter().position(|p| p.key == key) {
             Some(k) => k,
             None => {
                 let plan = self.plan(cmd, logical, data.len(), true);
@@ -118,10 +119,7 @@ impl Esc {
                 (a.min((lo - dg_start) / 8), b.max((hi - dg_start).div_ceil(8)), n + 1)
             });
         let mut plan = Plan {
-            cmd: cmd.0,
-            logical,
-            len: len as u16,
-            sii_loaded: self.sii_loaded,
+            key: Plan::key(cmd, logical, len, self.sii_loaded),
             first: first.min(last) as usize,
             last: last as usize,
             several: hits > 1,
