@@ -17,7 +17,8 @@
 //! System_Time_Offset. The far half follows it, as it follows the far reference anyway.
 //!
 //! [`FarClock`] is sans-IO: samples in, an offset change out; the master does the I/O after
-//! each cyclic frame.
+//! each cyclic frame, and leaves out samples whose passes took far longer than the path needs
+//! (`pass_filter.rs`).
 use crate::engine::SplitPasses;
 use crate::line_fit::{Fate, LineFit};
 
@@ -181,6 +182,7 @@ impl FarClock {
 pub(crate) struct FarSteer {
     pub(crate) station: u16,
     pub(crate) clock: FarClock,
+    pub(crate) filter: crate::pass_filter::PassFilter,
     pub(crate) last_move_ns: Option<u64>,
     pub(crate) offset: Option<u64>,
 }

@@ -60,6 +60,7 @@ pub mod io;
 mod line_fit;
 mod mailbox;
 mod master;
+mod pass_filter;
 pub mod plan;
 mod process;
 mod rtt_weight;

@@ -8,6 +8,7 @@ use crate::far_clock::{
 };
 use crate::io::Io;
 use crate::master::Master;
+use crate::pass_filter::PassFilter;
 use ferrocat_wire::register::addr;
 use ferrocat_wire::{Address, Command};
 
@@ -33,15 +34,20 @@ impl<I: Io> Master<I> {
         if p.far_wkc as usize != clocks {
             return Ok(());
         }
-        let wide = p.len >= 8 && self.slaves[k].dc.is_64bit;
-        let (x, diff) = measured_difference_ns(&p, wide);
         if self.far_steer.as_ref().is_none_or(|f| f.station != station) {
             // Split from the start: the level is the latch's geometry, not the break's.
             let latch = self.split_latch.as_ref().filter(|l| l.far_reference == Some(k));
             let clock = latch.map_or_else(FarClock::new, |l| FarClock::anchored(l.anchor_ns, ANCHOR_SD_NS));
-            self.far_steer = Some(FarSteer { station, clock, last_move_ns: None, offset: None });
+            self.far_steer =
+                Some(FarSteer { station, clock, filter: PassFilter::new(), last_move_ns: None, offset: None });
         }
         let Some(f) = self.far_steer.as_mut() else { return Ok(()) };
+        // Not a sample whose passes took far longer than the path needs (pass_filter.rs).
+        if !f.filter.admits(&p) {
+            return Ok(());
+        }
+        let wide = p.len >= 8 && self.slaves[k].dc.is_64bit;
+        let (x, diff) = measured_difference_ns(&p, wide);
         let spacing_ns = f.clock.last_sample_ns().map_or(STEER_EVERY_NS, |p| x.wrapping_sub(p)).min(STEER_EVERY_NS);
         f.clock.push(x, diff);
         // Moved every 10 ms, a far reference drifting from the reference saw-tooths by half an
