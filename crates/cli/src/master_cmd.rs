@@ -1403,6 +1403,15 @@ pub fn run(t: &Target, o: &mut RunOptions<'_>) -> anyhow::Result<ExitCode> {
             ferrocat_master::RingState::Unknown => "unknown",
         };
         outln!("ring {ring} at the end; {} frames sent round the far half again", m.cyclic().frame_stats().resent);
+        if let Some(f) = m.dc().far_reference() {
+            outln!(
+                "far reference: {} samples taken, {} left out (their passes took over twice the floor), \
+                 its offset moved by {:.1} µs in all",
+                f.samples_taken,
+                f.samples_left_out,
+                f.offset_ns as f64 / 1e3
+            );
+        }
     }
     // A master that stops takes its slaves down in order (outputs to their safe state, then
     // process data and mailboxes off), as a service stopped by SIGTERM must.

@@ -100,7 +100,8 @@ pub use foe::Foe;
 pub use handle::Handle;
 pub use master::part;
 pub use master::{
-    Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Eeprom, Group, Image, Master, SplitLatch, States, STATION_BASE,
+    Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Eeprom, FarReferenceKept, Group, Image, Master, SplitLatch, States,
+    STATION_BASE,
 };
 pub use settings::Settings;
 pub use slave::{

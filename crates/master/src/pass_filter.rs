@@ -34,6 +34,8 @@ pub(crate) struct PassFilter {
     blocks: Vec<u64>,
     next: usize,
     blocks_min_ns: u64,
+    taken: u64,
+    left_out: u64,
 }
 
 impl Default for PassFilter {
@@ -50,6 +52,8 @@ impl PassFilter {
             blocks: Vec::with_capacity(FLOOR_BLOCKS),
             next: 0,
             blocks_min_ns: u64::MAX,
+            taken: 0,
+            left_out: 0,
         }
     }
 
@@ -74,7 +78,15 @@ impl PassFilter {
             self.blocks_min_ns = self.blocks.iter().copied().min().unwrap_or(u64::MAX);
             (self.seen, self.block_min_ns) = (0, u64::MAX);
         }
-        took <= floor.saturating_mul(2).saturating_add(FLOOR_SLACK_NS)
+        let admitted = took <= floor.saturating_mul(2).saturating_add(FLOOR_SLACK_NS);
+        self.taken += admitted as u64;
+        self.left_out += !admitted as u64;
+        admitted
+    }
+
+    /// The samples taken and those left out so far.
+    pub(crate) fn counts(&self) -> (u64, u64) {
+        (self.taken, self.left_out)
     }
 }
 
@@ -105,6 +117,7 @@ mod tests {
         // Both passes together: 180 µs is over 2 × 70 µs + 10 µs; once the floor is 60 µs,
         // 160 and 142 µs are over 130 µs.
         assert_eq!(taken, [true, true, false, true, true, true, true, true, false, false]);
+        assert_eq!(f.counts(), (7, 3));
     }
 
     #[test]

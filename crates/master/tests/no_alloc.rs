@@ -45,7 +45,7 @@ fn ten_thousand_cycles_allocate_nothing() {
     run_cycles(&mut m, &mut next, 3_000);
     assert_eq!(m.diagnosis().ring_state(), ferrocat_master::RingState::Broken);
     let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
-    let moved = m.dc().far_reference_offset_ns();
+    let moved = m.dc().far_reference().map(|f| f.offset_ns);
     println!("ring split: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns");
     assert!(moved.is_some(), "the far reference is being kept");
     assert_eq!(m.diagnosis().cycle_stats().wkc_errors, 0);
@@ -58,7 +58,7 @@ fn ten_thousand_cycles_allocate_nothing() {
     assert!(m.dc().split_latch().is_some_and(|l| l.watch_next_ns.is_some()), "{:?}", m.dc().split_latch());
     run_cycles(&mut m, &mut next, 3_000);
     let allocations = counted(|| run_cycles(&mut m, &mut next, 10_000));
-    let moved = m.dc().far_reference_offset_ns();
+    let moved = m.dc().far_reference().map(|f| f.offset_ns);
     println!(
         "ring split from the start: 10 000 cycles, {allocations} allocations, far reference moved by {moved:?} ns"
     );

@@ -302,7 +302,7 @@ fn far_reference_error(clocks: SplitRingClocks, host: HostModel, split_s: u64) -
         }
     });
     assert_eq!(m.diagnosis().ring_state(), RingState::Broken);
-    (worst, m.dc().far_reference_offset_ns().unwrap_or(0))
+    (worst, m.dc().far_reference().map_or(0, |f| f.offset_ns))
 }
 
 /// Split for 30 s, the far coupler warming up by 3 ppm 2 s after the break: kept through

@@ -147,12 +147,25 @@ impl<I: Io> Master<I> {
     }
 }
 
-impl<I: Io> Master<I> {}
+/// How the master keeps a split ring's far reference on the reference's time
+/// ([`Dc::far_reference`](crate::Dc::far_reference)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FarReferenceKept {
+    /// What the master has added to the far reference's offset since the ring split (ns).
+    pub offset_ns: i64,
+    /// The samples its estimator took.
+    pub samples_taken: u64,
+    /// The samples it left out because their passes took over twice the floor (docs/master.md,
+    /// "Which samples count").
+    pub samples_left_out: u64,
+}
 
 impl<'a, I: Io> crate::master::part::Dc<'a, I> {
-    /// What the master has added to the far reference's offset since the ring split (None
-    /// while it keeps none).
-    pub fn far_reference_offset_ns(&self) -> Option<i64> {
-        self.m.far_steer.as_ref().map(|f| f.clock.applied_ns())
+    /// How the master keeps the far reference since the ring split (None while it keeps none).
+    pub fn far_reference(&self) -> Option<FarReferenceKept> {
+        self.m.far_steer.as_ref().map(|f| {
+            let (samples_taken, samples_left_out) = f.filter.counts();
+            FarReferenceKept { offset_ns: f.clock.applied_ns(), samples_taken, samples_left_out }
+        })
     }
 }

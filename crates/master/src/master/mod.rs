@@ -28,6 +28,7 @@ mod states;
 
 use crate::event::MasterEvent;
 use crate::settings::Settings;
+pub use far_steer::FarReferenceKept;
 pub use groups::Group;
 pub use part::{Acyclic, Clock, Config, Cyclic, Dc, Diagnosis, Image, States};
 pub use sii::Eeprom;
