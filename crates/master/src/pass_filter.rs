@@ -26,7 +26,8 @@ const FLOOR_BLOCKS: usize = 256;
 /// path as short as a few µs.
 const FLOOR_SLACK_NS: u64 = 10_000;
 
-/// The filter: the least of the block so far, the last blocks' least, and their least.
+/// The filter: the least of the block so far, the last blocks' least and their least, and the
+/// samples taken and left out.
 #[derive(Debug, Clone)]
 pub(crate) struct PassFilter {
     block_min_ns: u64,
@@ -36,12 +37,6 @@ pub(crate) struct PassFilter {
     blocks_min_ns: u64,
     taken: u64,
     left_out: u64,
-}
-
-impl Default for PassFilter {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl PassFilter {
