@@ -18,13 +18,35 @@ fn ferrocat(net: &VethPair, dir: &std::path::Path, args: &[&str]) -> Command {
     c
 }
 
+/// How long a command beside the running master may take: past this it is stopped and the
+/// test fails naming it (the client's own waits are longer: an FoE file's an hour).
+const COMMAND_LIMIT: Duration = Duration::from_secs(60);
+
 fn output(c: &mut Command) -> (bool, String, String) {
-    let o = c.output().unwrap();
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    use std::io::Read;
+    let mut child = c.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let read = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut s = Vec::new();
+            let _ = r.read_to_end(&mut s);
+            String::from_utf8_lossy(&s).into_owned()
+        })
+    };
+    let out = read(Box::new(child.stdout.take().unwrap()));
+    let err = read(Box::new(child.stderr.take().unwrap()));
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if t0.elapsed() > COMMAND_LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{c:?} gave no answer in {COMMAND_LIMIT:?}: {}", err.join().unwrap_or_default());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    (status.success(), out.join().unwrap_or_default(), err.join().unwrap_or_default())
 }
 
 struct Running(Child);

@@ -173,7 +173,11 @@ impl<I: Io> Master<I> {
         Ok(Peer { position, name, mailbox_len: m.out.1 as usize })
     }
 
-    /// One datagram of the request being served.
+    /// One datagram of the request being served. A datagram lost or the link failing leaves
+    /// the request to the next call (a lost datagram's outcome is unknown: a register or a
+    /// state is written again, a mailbox message again under its counter, which a slave takes
+    /// once) until it has made no progress for its timeout, and is returned; any other error
+    /// is the request's answer.
     fn request_step(&mut self) -> Result<()> {
         let Some(mut a) = self.acyclic.active.take() else { return Ok(()) };
         let now = self.engine.io.now_ns();
@@ -181,6 +185,25 @@ impl<I: Io> Master<I> {
             Job::State { .. } => self.settings.state_timeout_ns,
             _ => self.settings.mailbox_timeout_ns,
         };
+        match self.step_of(&mut a, now, limit_ns) {
+            Ok(Some(answer)) => self.acyclic.answer(a.id, answer),
+            Ok(None) => self.acyclic.active = Some(a),
+            Err(e @ MasterError::Timeout { .. }) if now.saturating_sub(a.since_ns) > limit_ns => {
+                let waited_ms = now.saturating_sub(a.since_ns) / 1_000_000;
+                self.acyclic.answer(a.id, Err(RequestError::TimedOut { waited_ms }.into()));
+                return Err(e);
+            }
+            Err(e @ (MasterError::Timeout { .. } | MasterError::Io(_))) => {
+                self.acyclic.active = Some(a);
+                return Err(e);
+            }
+            Err(e) => self.acyclic.answer(a.id, Err(e)),
+        }
+        Ok(())
+    }
+
+    /// [`request_step`](Self::request_step)'s datagram: the request's answer once it has one.
+    fn step_of(&mut self, a: &mut Active, now: u64, limit_ns: u64) -> Result<Option<Result<Answer>>> {
         let station = self.slave(a.position)?.station;
         let device = |ado| Address::Device { adp: station, ado };
         // A write's next fragment, once the one before was taken (no reply comes between).
@@ -225,7 +248,7 @@ impl<I: Io> Master<I> {
                 }
             }
             Job::Sdo(..) | Job::Info(..) | Job::Foe(..) | Job::Soe(..) | Job::Mailbox(..) => {
-                self.await_reply(&mut a, now, limit_ns)?
+                self.await_reply(a, now, limit_ns)?
             }
             Job::RegisterRead { register, len } => {
                 let mut b = vec![0u8; *len as usize];
@@ -269,11 +292,7 @@ impl<I: Io> Master<I> {
         if let (Some(next), Job::Soe(_, slot, _)) = (soe_next, &mut a.job) {
             *slot = Some(self.mailboxes().message(a.position, MailboxType::SOE, &next)?);
         }
-        match done {
-            Some(answer) => self.acyclic.answer(a.id, answer),
-            None => self.acyclic.active = Some(a),
-        }
-        Ok(())
+        Ok(done)
     }
 
     /// One poll of the slave's send mailbox for the awaited reply.
@@ -465,6 +484,7 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
                 }
             }
             (self.m.engine.timeout_ns, self.m.engine.retries) = (until_ns - now, 0);
+            self.m.engine.wait_until_ns = Some(until_ns);
             sent += 1;
             self.m.acyclic.stats.datagrams += 1;
             match self.m.request_step() {
@@ -491,6 +511,7 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
             }
         }
         (self.m.engine.timeout_ns, self.m.engine.retries) = (timeout, retries);
+        self.m.engine.wait_until_ns = None;
         if no_room {
             self.m.starved(deadline_ns, step_ns);
         } else if sent > 0 {

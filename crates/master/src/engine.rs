@@ -141,6 +141,9 @@ pub struct Engine<I: Io> {
     /// [`Engine::one_timed`] asks for it.
     send_returned_ns: Option<u64>,
     pub timeout_ns: u64,
+    /// No frame is waited for past this (master clock), whatever `timeout_ns` says: the
+    /// acyclic side's deadline, for steps of more than one datagram.
+    pub wait_until_ns: Option<u64>,
     pub retries: u32,
     pub stats: EngineStats,
     next_idx: u8,
@@ -207,6 +210,7 @@ impl<I: Io> Engine<I> {
             io,
             send_returned_ns: None,
             timeout_ns: 20_000_000,
+            wait_until_ns: None,
             retries: 3,
             stats: EngineStats::default(),
             next_idx: 0,
@@ -329,7 +333,7 @@ impl<I: Io> Engine<I> {
         let now = self.io.now_ns();
         let slot = &mut self.slots[s];
         slot.tries += 1;
-        slot.deadline = now + self.timeout_ns;
+        slot.deadline = (now + self.timeout_ns).min(self.wait_until_ns.unwrap_or(u64::MAX));
         slot.held = None;
         slot.probe = None;
         slot.resent = false;
@@ -412,7 +416,7 @@ impl<I: Io> Engine<I> {
             }
             slot.resent = true;
             let now = self.io.now_ns();
-            slot.deadline = now + self.timeout_ns;
+            slot.deadline = (now + self.timeout_ns).min(self.wait_until_ns.unwrap_or(u64::MAX));
             self.io.send_secondary(&slot.held_buf[..n])?;
             // Its stamp now: other frames' second passes may follow before it is back.
             slot.resent_ns = self.io.last_tx_secondary_ns().unwrap_or(now);

@@ -151,14 +151,31 @@ impl<I: Io> Mailboxes<'_, I> {
         let (st, name, m) = self.mailbox_any(position)?;
         let mut buf = vec![0u8; m.inp.1 as usize];
         let retries = self.engine.stats.retries;
-        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf)? != 1 {
+        let wkc = match self.engine.one(Command::FPRD, Address::Device { adp: st, ado: m.inp.0 }, &mut buf) {
+            Ok(wkc) => wkc,
+            Err(e) => {
+                // Given up (the acyclic side sends once): the slave may have handed its
+                // message over to the frame lost, which the next read that finds the
+                // mailbox empty asks for again.
+                if matches!(e, MasterError::Timeout { .. }) {
+                    self.slaves[position as usize].mbx_read_lost = true;
+                }
+                return Err(e);
+            }
+        };
+        if wkc != 1 {
             // The read's frame was sent again and found the mailbox empty: the first may
             // have been lost after the slave handed its message over. Ask for it again.
             if self.engine.stats.retries > retries {
                 self.repeat(position)?;
+            } else if std::mem::take(&mut self.slaves[position as usize].mbx_read_lost) {
+                // In the cycle's spare time: the request only, its acknowledge not awaited
+                // (the message comes back to a later read).
+                self.request_repeat(position)?;
             }
             return Ok(Polled::Empty);
         }
+        self.slaves[position as usize].mbx_read_lost = false;
         let mbx = Mailbox::parse(&buf).map_err(|e| MasterError::of(position, &name, SlaveError::MalformedReply(e)))?;
         // After a repeat request the slave may put back a message that had reached us (the
         // lost frame had not got there): the same counter as the last one taken is that one.
@@ -215,21 +232,7 @@ impl<I: Io> Mailboxes<'_, I> {
     /// that does not acknowledge in time is polled on as before (not every firmware repeats).
     fn repeat(&mut self, position: u16) -> Result<()> {
         let st = self.slave(position)?.station;
-        let mut reg = [0u8; 2];
-        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut reg)? != 1 {
-            return Ok(());
-        }
-        // A slave whose acknowledge does not follow its request does not repeat.
-        if (reg[0] ^ reg[1]) & 0x02 != 0 {
-            return Ok(());
-        }
-        let request = reg[0] ^ 0x02;
-        if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut [request])? != 1 {
-            return Ok(());
-        }
-        let slave = &mut self.slaves[position as usize];
-        slave.mbx_repeated = Some(slave.mbx_in_counter);
-        slave.mbx_repeats += 1;
+        let Some(request) = self.request_repeat(position)? else { return Ok(()) };
         let deadline = self.engine.io.now_ns() + REPEAT_ACK_WAIT_NS.min(self.timeout_ns);
         loop {
             let mut ack = [0u8];
@@ -244,6 +247,28 @@ impl<I: Io> Mailboxes<'_, I> {
             }
             self.engine.io.sleep_until(now + 50_000);
         }
+    }
+
+    /// The first half of [`repeat`](Self::repeat): the repeat request toggled; the request
+    /// bit written, or `None` where the slave does not repeat or a datagram went unanswered.
+    fn request_repeat(&mut self, position: u16) -> Result<Option<u8>> {
+        let st = self.slave(position)?.station;
+        let mut reg = [0u8; 2];
+        if self.engine.one(Command::FPRD, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut reg)? != 1 {
+            return Ok(None);
+        }
+        // A slave whose acknowledge does not follow its request does not repeat.
+        if (reg[0] ^ reg[1]) & 0x02 != 0 {
+            return Ok(None);
+        }
+        let request = reg[0] ^ 0x02;
+        if self.engine.one(Command::FPWR, Address::Device { adp: st, ado: SM1_ACTIVATE }, &mut [request])? != 1 {
+            return Ok(None);
+        }
+        let slave = &mut self.slaves[position as usize];
+        slave.mbx_repeated = Some(slave.mbx_in_counter);
+        slave.mbx_repeats += 1;
+        Ok(Some(request))
     }
 
     /// Takes an EoE message met while reading a mailbox if it is a fragment: `true` if taken.

@@ -76,6 +76,8 @@ pub struct Slave {
     /// request, the counter then (a message with it again is the one already taken).
     pub(crate) mbx_in_counter: u8,
     pub(crate) mbx_repeated: Option<u8>,
+    /// A read of the send mailbox went unanswered and was not sent again.
+    pub(crate) mbx_read_lost: bool,
     pub(crate) mbx_repeats: u64,
     pub(crate) mapping: Mapping,
     pub(crate) state: AlState,

@@ -241,6 +241,7 @@ impl<I: Io> Master<I> {
             mbx_counter: 0,
             mbx_in_counter: 0,
             mbx_repeated: None,
+            mbx_read_lost: false,
             mbx_repeats: 0,
             mapping: Default::default(),
             state: AlState::Init,
