@@ -196,7 +196,29 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
     /// Checks every slave after a cycle came back short, reports what changed once per slave,
     /// and takes one step of bringing each fallen slave back to OP (so that the cyclic exchange
     /// keeps running meanwhile). Returns how many slaves are not operational.
+    ///
+    /// Its frames are waited for the cyclic timeout and not sent again (the acyclic timeout,
+    /// 20 ms, and its retries held the cycle up to 80 ms for one lost frame): one lost ends
+    /// the pass, and the next cycle takes the step again (each step's writes are absolute
+    /// values, written again as they were). The PDO assignment's SDO transfers keep the
+    /// mailbox's own timeouts.
     pub fn supervise(&mut self) -> Result<usize> {
+        let saved = (self.m.engine.timeout_ns, self.m.engine.retries);
+        (self.m.engine.timeout_ns, self.m.engine.retries) = (self.m.settings.cyclic_timeout_ns, 0);
+        let r = self.supervise_pass(saved);
+        (self.m.engine.timeout_ns, self.m.engine.retries) = saved;
+        match r {
+            Err(crate::MasterError::Timeout { .. }) => {
+                tracing::debug!("a recovery frame lost: the step is taken again at the next cycle");
+                self.m.cyc.recovering = true;
+                Ok(self.m.slaves.iter().filter(|s| s.health != crate::slave::Health::Operational).count())
+            }
+            r => r,
+        }
+    }
+
+    /// [`supervise`](Self::supervise)'s pass; `acyclic`: the engine's own timeout and retries.
+    fn supervise_pass(&mut self, acyclic: (u64, u32)) -> Result<usize> {
         // Only slaves the master has brought to OP can fall from it: one still on its way (a
         // frame lost while `start` walks it up) or put elsewhere on purpose is not "left OP",
         // and is not pushed back there.
@@ -294,11 +316,17 @@ impl<'a, I: Io> crate::master::part::States<'a, I> {
                 }
                 Some(AlState::PreOp) => {
                     if self.m.slaves[k].mailbox().is_some_and(|mb| mb.has_coe()) {
-                        for (i, outputs) in [(0usize, true), (1, false)] {
-                            if let Some(p) = self.m.slaves[k].assignment[i].clone() {
-                                self.m.write_assignment(pos, outputs, &p)?;
-                            }
-                        }
+                        let cyclic = (self.m.engine.timeout_ns, self.m.engine.retries);
+                        (self.m.engine.timeout_ns, self.m.engine.retries) = acyclic;
+                        let written: Result<()> =
+                            [(0usize, true), (1, false)].into_iter().try_for_each(|(i, outputs)| {
+                                match self.m.slaves[k].assignment[i].clone() {
+                                    Some(p) => self.m.write_assignment(pos, outputs, &p),
+                                    None => Ok(()),
+                                }
+                            });
+                        (self.m.engine.timeout_ns, self.m.engine.retries) = cyclic;
+                        written?;
                     }
                     self.m.write_process_config(pos)?;
                     self.m.engine.one(
