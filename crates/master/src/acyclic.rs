@@ -455,8 +455,9 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
     /// yet taken is written again at the next call under the same counter (a slave drops a
     /// repeated one, ETG.1000.4); a reply not yet there is polled for again. A request is
     /// answered with an error when it has made no progress for the mailbox timeout (the state
-    /// timeout for a state request). Errors of a request are its answer; only the link's
-    /// errors are returned. Returns the datagrams sent.
+    /// timeout for a state request); a datagram given up leaves its request for the next call,
+    /// until it has gone unanswered that long ([`RequestError::TimedOut`]). Errors of a request
+    /// are its answer; only the link's errors are returned. Returns the datagrams sent.
     pub fn serve_requests(&mut self, deadline_ns: u64) -> Result<u32> {
         let step_ns = self.m.cyc.stats.last_round_trip_ns.max(MIN_STEP_NS);
         let (timeout, retries) = (self.m.engine.timeout_ns, self.m.engine.retries);
@@ -494,16 +495,10 @@ impl<'a, I: Io> crate::master::part::Acyclic<'a, I> {
                     result = Ok(sent);
                     break;
                 }
-                Err(e @ MasterError::Io(_)) => {
+                // The link's (a request's own errors are its answer, given in the step).
+                Err(e) => {
                     result = Err(e);
                     break;
-                }
-                Err(e) => {
-                    let id = self.m.acyclic.active.take().map(|a| a.id);
-                    if let Some(id) = id {
-                        self.m.acyclic.answer(id, Err(e));
-                    }
-                    result = Ok(sent);
                 }
             }
             if until_ns != deadline_ns {
