@@ -252,6 +252,8 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
                 continue;
             }
             (self.m.engine.timeout_ns, self.m.engine.retries) = (deadline_ns - now, 0);
+            // A mailbox read's repeat request adds datagrams: none waited for past the deadline.
+            self.m.engine.wait_until_ns = Some(deadline_ns);
             let r = if counters {
                 self.m.read_counters_step(counters_period_ns)
             } else {
@@ -272,6 +274,7 @@ impl<'a, I: Io> crate::master::part::Diagnosis<'a, I> {
             }
         }
         (self.m.engine.timeout_ns, self.m.engine.retries) = (timeout, retries);
+        self.m.engine.wait_until_ns = None;
         result
     }
 
