@@ -25,12 +25,17 @@ fn copy_with(dir: &std::path::Path, name: &str, caps: Option<&str>) -> std::path
     path
 }
 
-/// `bin args…` in the master's namespace as the user nobody, with no supplementary groups.
-fn as_nobody(net: &VethPair, bin: &std::path::Path, args: &[&str]) -> Output {
+/// `bin args…` in the master's namespace as the user nobody, with no supplementary groups,
+/// its runtime directory (locks) in `dir/run`, which goes with `dir`.
+fn as_nobody(net: &VethPair, dir: &std::path::Path, bin: &std::path::Path, args: &[&str]) -> Output {
+    let run = dir.join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o777)).unwrap();
     VethPair::cmd(&net.master_ns, "setpriv")
         .args(["--reuid=65534", "--regid=65534", "--clear-groups", "--"])
         .arg(bin)
         .args(args)
+        .env("FERROCAT_RUN_DIR", &run)
         .output()
         .unwrap()
 }
@@ -44,11 +49,11 @@ fn an_unprivileged_user_with_three_capabilities_scans_and_runs_dc() {
     let with = copy_with(&dir, "ferrocat-caps", Some("cap_net_raw,cap_sys_nice,cap_ipc_lock+ep"));
     let without = copy_with(&dir, "ferrocat-plain", None);
     let sim = Sim::start(&net, &["--device", "EK1100", "--device", "EL2004", "--device", "SERVO"]);
-    let who = as_nobody(&net, std::path::Path::new("/usr/bin/id"), &["-u"]);
+    let who = as_nobody(&net, &dir, std::path::Path::new("/usr/bin/id"), &["-u"]);
     assert_eq!(String::from_utf8_lossy(&who.stdout).trim(), "65534");
-    let scan = as_nobody(&net, &with, &["scan", "--iface", &net.master_if]);
-    let run = as_nobody(&net, &with, &["run", "--iface", &net.master_if, "--dc", "--seconds", "1"]);
-    let plain = as_nobody(&net, &without, &["scan", "--iface", &net.master_if]);
+    let scan = as_nobody(&net, &dir, &with, &["scan", "--iface", &net.master_if]);
+    let run = as_nobody(&net, &dir, &with, &["run", "--iface", &net.master_if, "--dc", "--seconds", "1"]);
+    let plain = as_nobody(&net, &dir, &without, &["scan", "--iface", &net.master_if]);
     sim.stop();
     std::fs::remove_dir_all(&dir).ok();
     let text = |o: &Output| format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));

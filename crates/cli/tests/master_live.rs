@@ -298,13 +298,19 @@ fn an_interface_without_permission_is_one_line() {
     let bin = std::env::temp_dir().join(format!("ferrocat-np-{}", std::process::id()));
     std::fs::copy(env!("CARGO_BIN_EXE_ferrocat"), &bin).unwrap();
     std::fs::set_permissions(&bin, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    // Its runtime directory (the interface's lock) one of the test's own, removed after.
+    let run = std::env::temp_dir().join(format!("ferrocat-np-run-{}", std::process::id()));
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::set_permissions(&run, std::os::unix::fs::PermissionsExt::from_mode(0o777)).unwrap();
     let out = VethPair::cmd(&net.master_ns, "setpriv")
         .args(["--reuid=65534", "--regid=65534", "--clear-groups", "--inh-caps=-all", "--bounding-set=-all"])
         .arg(&bin)
         .args(["scan", "--iface", &net.master_if])
+        .env("FERROCAT_RUN_DIR", &run)
         .output()
         .unwrap();
     let _ = std::fs::remove_file(&bin);
+    let _ = std::fs::remove_dir_all(&run);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.lines().count() == 1, "{err}");
     assert!(err.contains(&net.master_if) && err.contains("CAP_NET_RAW"), "{err}");

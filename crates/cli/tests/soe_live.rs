@@ -12,12 +12,16 @@ fn soe_reads_and_writes_a_simulated_drive_s_idns_over_a_real_socket() {
     let esi = concat!(env!("CARGO_MANIFEST_DIR"), "/../esi/tests/data/ferrocat_soe_drive.xml");
     let device = format!("{esi}:FC-SOE-DRIVE");
     let sim = Sim::start(&net, &["--device", "EK1100", "--device", &device]);
+    // The runtime directory (the interface's lock, the running master's socket): the test's
+    // own, removed at its end.
+    let dir = std::env::temp_dir().join(format!("ferrocat-soe-live-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
     let soe = |args: &[&str]| {
         let out = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"))
             .arg("soe")
             .args(args)
             .args(["--iface", &net.master_if, "--force"])
-            .env("FERROCAT_RUN_DIR", std::env::temp_dir())
+            .env("FERROCAT_RUN_DIR", &dir)
             .output()
             .unwrap();
         (
@@ -38,8 +42,6 @@ fn soe_reads_and_writes_a_simulated_drive_s_idns_over_a_real_socket() {
     assert!(!ok && err.contains("SoE error 0x1001 (no IDN)"), "{err}");
 
     // Beside a running master: through its control socket, between its cycles.
-    let dir = std::env::temp_dir().join(format!("ferrocat-soe-live-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
     let mut run = VethPair::cmd(&net.master_ns, env!("CARGO_BIN_EXE_ferrocat"))
         .args(["run", "--iface", &net.master_if, "--seconds", "0"])
         .env("FERROCAT_RUN_DIR", &dir)
